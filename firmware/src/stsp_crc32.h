@@ -1,0 +1,16 @@
+/* Private: CRC-32 (IEEE 802.3, reflected polynomial 0xEDB88320, as zlib) over values fed as
+ * little-endian bytes, so the result does not depend on the target's byte order. */
+#ifndef STSP_CRC32_H
+#define STSP_CRC32_H
+
+#include <stdint.h>
+
+#include "stospline/stsp_controller.h"
+
+uint32_t stsp_crc32_begin(void);
+uint32_t stsp_crc32_u32(uint32_t crc, uint32_t value);
+/* Feed `count` binary32 values by their bit patterns. */
+uint32_t stsp_crc32_f32s(uint32_t crc, const stsp_f32_t *values, uint32_t count);
+uint32_t stsp_crc32_end(uint32_t crc);
+
+#endif /* STSP_CRC32_H */

@@ -1,0 +1,113 @@
+"""``stospline`` command line: a thin layer over `stospline.pipeline`.
+
+Exit status: 0 success, 2 bad problem file or infeasible problem (message names the field),
+1 anything else.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from .problem import ProblemError, load_problem
+
+__all__ = ["main"]
+
+
+def _design(args) -> int:
+    from .pipeline import design_problem, design_summary, generated_files, write_outputs
+    problem = load_problem(args.problem)
+    d = design_problem(problem, noise=not args.ignore_noise)
+    files = generated_files(d, Path(args.problem).name)
+    if args.out:
+        written = write_outputs(args.out, files)
+        if not args.json:
+            for path in written:
+                print(f"wrote {path}")
+    if args.json:
+        print(json.dumps(design_summary(d), indent=2, sort_keys=True))
+    elif not args.out:
+        print(f"J0 = {d.design.J0:.10g} (oracle, continuous law {d.continuous.J:.10g}; "
+              f"as implemented at {d.table.tick_hz} Hz {d.implemented.J:.10g})")
+    return 0
+
+
+def _simulate(args) -> int:
+    from .pipeline import design_problem, simulate_problem, simulation_summary
+    problem = load_problem(args.problem)
+    d = design_problem(problem, noise=not args.ignore_noise)
+    mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=args.substeps)
+    s = simulation_summary(d, mc, seed=args.seed, substeps=args.substeps)
+    if args.json:
+        print(json.dumps(s, indent=2, sort_keys=True))
+        return 0
+    c = s["cost"]
+    print(f"{s['name']}: {s['paths']} paths, seed {s['seed']}, compiled C controller at "
+          f"{s['tick_hz']} Hz, plant {s['substeps']} substeps/tick")
+    print(f"  cost  MC {c['mc_mean']:.6g}  95% CI [{c['ci95'][0]:.6g}, {c['ci95'][1]:.6g}]"
+          f"   oracle {c['oracle_implemented']:.6g}   predicted J0 {c['predicted_J0']:.6g}")
+    print(f"  plant-scheme bias in cost {s['simulation_bias']['cost']:.3g} "
+          f"= {s['simulation_bias']['cost_over_stderr']:.3g} MC standard errors")
+    for k, kn in enumerate(s["knots"]):
+        print(f"  knot {k} (t = {kn['t']:g}): MC mean {kn['mc_mean']}")
+        print(f"  {'':>17}  oracle  {kn['oracle_mean']}   z {kn['z']}")
+    return 0
+
+
+def _plot(args) -> int:
+    from .pipeline import design_problem, simulate_problem
+    from .plot import plot_corridor
+    problem = load_problem(args.problem)
+    d = design_problem(problem)
+    mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=args.substeps)
+    plot_corridor(d, mc, args.out)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="stospline", description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("design", help="solve the design, write C gain tables and a summary")
+    p.add_argument("problem", help="problem file (TOML)")
+    p.add_argument("--out", help="directory for <name>.c, <name>.h, <name>.json")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("--ignore-noise", action="store_true",
+                   help="design as if there were no noise (the paper's Remark 2)")
+    p.set_defaults(func=_design)
+
+    p = sub.add_parser("simulate", help="Monte Carlo with the compiled C controller in the loop")
+    p.add_argument("problem")
+    p.add_argument("--paths", type=int, default=10000)
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--substeps", type=int, default=2, help="plant steps per controller tick")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--ignore-noise", action="store_true")
+    p.set_defaults(func=_simulate)
+
+    p = sub.add_parser("plot", help="figure: corridor, one realisation, MC mean, controls")
+    p.add_argument("problem")
+    p.add_argument("--out", required=True, help="PNG file")
+    p.add_argument("--paths", type=int, default=100)
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--substeps", type=int, default=2)
+    p.set_defaults(func=_plot)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except ProblemError as exc:
+        print(f"stospline: error in {args.problem}: {exc}", file=sys.stderr)
+        return 2
+    except FileNotFoundError as exc:
+        print(f"stospline: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

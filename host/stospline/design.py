@@ -1,0 +1,228 @@
+"""Continuous-time stage-wise design (the paper's Proposition 3, corrected per docs/math.md).
+
+Backward on each stage ``[t_k, t_{k+1}]``, with ``K = R^-1 (P B + S)'`` and ``Acl = A - B K``::
+
+    -P' = A'P + PA + Q + Pi(P) - (PB+S) R^-1 (PB+S)'      Pi(P)_kl = tr(G_k' P G_l)
+    -p' = Acl' p + q - K' r
+    -c' = rho - (B'p + r)' R^-1 (B'p + r)
+    -N' = Acl' N                     N(t_{k+1}) = C2'
+     W' = -N' B R^-1 B' N            W(t_{k+1}) = 0
+     m' = N' B R^-1 (B'p + r)        m(t_{k+1}) = -zeta
+
+At the stage start the controller latches ``v = W^-1 (N' x + m)`` and applies
+``u = -K x - R^-1 (B'p + r) - R^-1 B' N v`` until the next stage start.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from .problem import Problem, ProblemError, Stage
+
+__all__ = ["DesignError", "StageSolution", "ContinuousDesign", "design_continuous",
+           "noise_operator"]
+
+
+class DesignError(ProblemError):
+    """The problem is well-formed but has no solution (infeasible constraint, finite escape)."""
+
+
+def noise_operator(G: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """``Pi(P)_kl = tr(G_k' P G_l)``: the Ito correction of ``x'Px`` under ``sum x_i G_i dZ``."""
+    return np.einsum("kai,ab,lbi->kl", G, P, G)
+
+
+@dataclass
+class StageSolution:
+    """Solution of the backward equations on one stage.
+
+    ``Lambda`` (p x n) and ``lambda0`` (p) form the latch map ``v = Lambda x + lambda0``.
+    """
+    index: int
+    t_start: float
+    t_end: float
+    n_constraints: int
+    stage: Stage
+    _sol: object
+    P0: np.ndarray
+    p0: np.ndarray
+    c0: float
+    N0: np.ndarray
+    W0: np.ndarray
+    m0: np.ndarray
+    Lambda: np.ndarray
+    lambda0: np.ndarray
+
+    def _unpack(self, y: np.ndarray):
+        n, p = self.stage.A.shape[0], self.n_constraints
+        i = 0
+        P = y[i:i + n * n].reshape((n, n) + y.shape[1:]); i += n * n
+        pv = y[i:i + n]; i += n
+        c = y[i]; i += 1
+        N = y[i:i + n * p].reshape((n, p) + y.shape[1:]); i += n * p
+        W = y[i:i + p * p].reshape((p, p) + y.shape[1:]); i += p * p
+        m = y[i:i + p]
+        return P, pv, c, N, W, m
+
+    def riccati(self, t: np.ndarray):
+        """P, p, c, N, W, m at times ``t`` (arrays with time as the last axis)."""
+        return self._unpack(self._sol(np.atleast_1d(t)))
+
+    def gains(self, t: np.ndarray):
+        """Feedback ``K`` (T, m, n), feed-forward ``k0`` (T, m) and multiplier gain ``L`` (T, m, p).
+
+        The control is ``u = -K x - k0 - L v``.
+        """
+        s = self.stage
+        P, pv, _, N, _, _ = self.riccati(t)
+        Rinv = np.linalg.inv(s.R)
+        PBS = np.einsum("abt,bj->taj", P, s.B) + s.S[None]          # (T, n, m)
+        K = np.einsum("ij,taj->tia", Rinv, PBS)
+        k0 = np.einsum("ij,tj->ti", Rinv, np.einsum("aj,at->tj", s.B, pv) + s.r[None])
+        L = np.einsum("ij,tjc->tic", Rinv, np.einsum("aj,act->tjc", s.B, N))
+        return K, k0, L
+
+
+@dataclass
+class ContinuousDesign:
+    """The optimal continuous-time law for a `Problem`, stage by stage."""
+    problem: Problem
+    stages: list[StageSolution]
+    noise_aware: bool
+
+    @property
+    def J0(self) -> float:
+        """Predicted optimal expected cost from ``(t0, x0)``."""
+        return self.cost_to_go(0, self.problem.x0)
+
+    def cost_to_go(self, k: int, x: np.ndarray) -> float:
+        """``J_k(x) = x'Px + 2p'x + c + (N'x + m)' W^-1 (N'x + m)`` at the start of stage k."""
+        st = self.stages[k]
+        x = np.asarray(x, dtype=float)
+        val = x @ st.P0 @ x + 2 * st.p0 @ x + st.c0
+        if st.n_constraints:
+            e = st.N0.T @ x + st.m0
+            val += e @ np.linalg.solve(st.W0, e)
+        return float(val)
+
+    def latch(self, k: int, x: np.ndarray) -> np.ndarray:
+        st = self.stages[k]
+        return st.Lambda @ x + st.lambda0
+
+    def gains(self, k: int, t):
+        return self.stages[k].gains(t)
+
+
+def _stage_rhs(stage: Stage, n: int, p: int, noise: bool):
+    A, B, G, Q, S, R, q, r, rho = (stage.A, stage.B, stage.G, stage.Q, stage.S, stage.R,
+                                   stage.q, stage.r, stage.rho)
+    Rinv = np.linalg.inv(R)
+    BRB = B @ Rinv @ B.T
+
+    def rhs(_t, y):
+        i = 0
+        P = y[i:i + n * n].reshape(n, n); i += n * n
+        pv = y[i:i + n]; i += n
+        i += 1
+        N = y[i:i + n * p].reshape(n, p); i += n * p
+        i += p * p
+        PBS = P @ B + S
+        K = Rinv @ PBS.T
+        Acl = A - B @ K
+        dP = A.T @ P + P @ A + Q - PBS @ K
+        if noise:
+            dP = dP + noise_operator(G, P)
+        dP = -0.5 * (dP + dP.T)
+        g = B.T @ pv + r
+        dp = -(Acl.T @ pv + q - K.T @ r)
+        dc = -(rho - g @ Rinv @ g)
+        dN = -(Acl.T @ N)
+        dW = -(N.T @ BRB @ N)
+        dm = N.T @ B @ Rinv @ g
+        return np.concatenate([dP.ravel(), dp, [dc], dN.ravel(), dW.ravel(), dm])
+
+    return rhs
+
+
+def _check_latch(W: np.ndarray, C2: np.ndarray, k: int) -> None:
+    """Reject a constraint that the stage cannot meet: W(t_k) singular or ill-conditioned."""
+    path = f"knots[{k}].constraint.C"
+    sv_c = np.linalg.svd(C2, compute_uv=False)
+    if sv_c.min() <= 1e-10 * sv_c.max():
+        _, _, vt = np.linalg.svd(C2.T)
+        rows = np.flatnonzero(np.abs(vt[-1]) > 1e-8).tolist()
+        raise DesignError(path, f"rows {rows} are linearly dependent; remove redundant rows")
+    w = np.linalg.eigvalsh(W)
+    if w.min() <= 1e-10 * max(w.max(), 1e-300):
+        vals, vecs = np.linalg.eigh(W)
+        rows = np.flatnonzero(np.abs(vecs[:, 0]) > 1e-8).tolist()
+        raise DesignError(path, f"cannot be met on stage {k}: W(t_{k}) is singular "
+                                f"(condition {w.max() / max(w.min(), 1e-300):.3g}); the "
+                                f"combination of rows {rows} is not controllable on this stage")
+
+
+def design_continuous(problem: Problem, *, noise: bool = True, rtol: float = 1e-12,
+                      atol: float = 1e-13) -> ContinuousDesign:
+    """Solve the stage-wise design by integrating the backward equations per stage.
+
+    Parameters
+    ----------
+    problem : Problem
+    noise : bool
+        False designs as if the diffusion were absent (the paper's Remark 2).
+    rtol, atol : float
+        Tolerances of the DOP853 integration of the backward equations.
+
+    Returns
+    -------
+    ContinuousDesign
+    """
+    n = problem.n
+    times = problem.times
+    N_st = len(problem.knots)
+    sols: list[StageSolution | None] = [None] * N_st
+    # Cost-to-go data after knot k+1 (before its penalty): quadratic, linear, constant.
+    P_next, p_next, c_next = np.zeros((n, n)), np.zeros(n), 0.0
+    for k in range(N_st - 1, -1, -1):
+        knot = problem.knots[k]
+        stage = problem.stages[k]
+        PT, pT, cT = P_next.copy(), p_next.copy(), c_next
+        if knot.penalty is not None:
+            pen = knot.penalty
+            PT += pen.weight * pen.C.T @ pen.C
+            pT -= pen.weight * pen.C.T @ pen.target
+            cT += pen.weight * pen.target @ pen.target
+        p = knot.n_constraints
+        if p:
+            NT, WT, mT = knot.constraint.C.T, np.zeros((p, p)), -knot.constraint.value
+        else:
+            NT, WT, mT = np.zeros((n, 0)), np.zeros((0, 0)), np.zeros(0)
+        y_end = np.concatenate([PT.ravel(), pT, [cT], NT.ravel(), WT.ravel(), mT])
+        res = solve_ivp(_stage_rhs(stage, n, p, noise), (times[k + 1], times[k]), y_end,
+                        method="DOP853", rtol=rtol, atol=atol, dense_output=True)
+        if res.status != 0 or not np.all(np.isfinite(res.y[:, -1])):
+            raise DesignError(f"knots[{k}].t", f"the Riccati equation of stage {k} has no "
+                                               f"bounded solution (finite escape): {res.message}")
+        st = StageSolution(k, times[k], times[k + 1], p, stage, res.sol,
+                           *([None] * 8))
+        P0, p0, c0, N0, W0, m0 = st._unpack(res.y[:, -1])
+        W0 = 0.5 * (W0 + W0.T)
+        if p:
+            _check_latch(W0, knot.constraint.C, k)
+            Lambda = np.linalg.solve(W0, N0.T)
+            lambda0 = np.linalg.solve(W0, m0)
+        else:
+            Lambda, lambda0 = np.zeros((0, n)), np.zeros(0)
+        st.P0, st.p0, st.c0, st.N0, st.W0, st.m0 = 0.5 * (P0 + P0.T), p0, float(c0), N0, W0, m0
+        st.Lambda, st.lambda0 = Lambda, lambda0
+        sols[k] = st
+        # Jump to the previous stage: add the maximised multiplier term.
+        P_next, p_next, c_next = st.P0.copy(), st.p0.copy(), st.c0
+        if p:
+            P_next += N0 @ Lambda
+            p_next += N0 @ lambda0
+            c_next += m0 @ lambda0
+            P_next = 0.5 * (P_next + P_next.T)
+    return ContinuousDesign(problem, sols, noise)

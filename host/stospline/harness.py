@@ -1,0 +1,209 @@
+"""Build the real firmware sources plus generated tables into a cffi module, and load it.
+
+Generate, build and load are separate steps: `generate_c` writes the table sources,
+`build_controller` compiles them with ``firmware/src/*.c`` (cached by a hash of everything
+that goes into the build), and the returned `CompiledController` steps C instances.
+"""
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .codegen import generate_c
+from .tables import GainTable
+
+__all__ = ["build_controller", "CompiledController", "firmware_dir", "STATUS"]
+
+STATUS = {
+    "OK": 0, "WARN_TICK_SKIPPED": 1, "WARN_TICK_REPEATED": 2, "ERR_NULL": -1,
+    "ERR_NOT_INITIALIZED": -2, "ERR_BAD_MAGIC": -3, "ERR_BAD_VERSION": -4, "ERR_BAD_DIMS": -5,
+    "ERR_BAD_CRC": -6, "ERR_TICK_RANGE": -7, "ERR_TICK_ORDER": -8,
+    "ERR_NONFINITE_STATE": -9, "ERR_NONFINITE_OUTPUT": -10,
+}
+
+_CDEF = """
+typedef float stsp_f32_t;
+typedef int... stsp_status_t;
+typedef struct {
+    uint32_t magic; uint16_t format_version; uint16_t scalar_kind;
+    uint16_t nx; uint16_t nu; uint16_t n_latch; uint16_t n_stages;
+    uint32_t n_ticks; uint32_t tick_hz;
+    const uint32_t *stage_start; const uint16_t *stage_np;
+    const stsp_f32_t *K; const stsp_f32_t *k0; const stsp_f32_t *L;
+    const stsp_f32_t *Lambda; const stsp_f32_t *lambda0;
+    uint32_t crc32; uint8_t problem_sha256[32];
+} stsp_table_t;
+typedef struct { ...; } stsp_ctrl_t;
+uint32_t stsp_table_crc32(const stsp_table_t *table);
+stsp_status_t stsp_init(stsp_ctrl_t *ctrl, const stsp_table_t *table);
+stsp_status_t stsp_reset(stsp_ctrl_t *ctrl);
+stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_t *x, stsp_f32_t *u);
+const char *stsp_status_str(stsp_status_t status);
+const stsp_table_t *harness_table(void);
+int harness_init_batch(stsp_ctrl_t *ctrls, size_t count, const stsp_table_t *table);
+int harness_step_batch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
+                       const stsp_f32_t *x, stsp_f32_t *u, int *status);
+void harness_plant_tick(size_t paths, size_t n, size_t m, size_t mz, size_t substeps,
+                        double dt, const double *Ad, const double *Bd,
+                        size_t g_count, const size_t *g_index, const double *g_value,
+                        const double *Q, const double *S, const double *q,
+                        const double *R, const double *r, double rho, int state_cost,
+                        const double *dZ, const float *U, double *X, double *cost);
+"""
+
+# Harness-only C: loops over instances so one Python call serves every Monte Carlo path.
+_BATCH = """
+const stsp_table_t *harness_table(void) { return &%(p)s_table; }
+void harness_plant_tick(size_t paths, size_t n, size_t m, size_t mz, size_t substeps,
+                        double dt, const double *Ad, const double *Bd,
+                        size_t g_count, const size_t *g_index, const double *g_value,
+                        const double *Q, const double *S, const double *q,
+                        const double *R, const double *r, double rho, int state_cost,
+                        const double *dZ, const float *U, double *X, double *cost);
+/* Verify the table once (the CRC covers every byte), then clone the fresh instance. */
+int harness_init_batch(stsp_ctrl_t *ctrls, size_t count, const stsp_table_t *table) {
+    size_t i; int s = (int)stsp_init(&ctrls[0], table);
+    for (i = 1; i < count; ++i) ctrls[i] = ctrls[0];
+    return s;
+}
+int harness_step_batch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
+                       const stsp_f32_t *x, stsp_f32_t *u, int *status) {
+    const stsp_table_t *t = ctrls[0].table;
+    size_t i, nx = t ? t->nx : 0u, nu = t ? t->nu : 0u; int worst = 0;
+    for (i = 0; i < count; ++i) {
+        status[i] = (int)stsp_step(&ctrls[i], tick, x + i * nx, u + i * nu);
+        if (status[i] < worst) worst = status[i];
+    }
+    return worst;
+}
+"""
+
+_CFLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-DSTSP_HOST_MESSAGES"]
+
+
+def firmware_dir() -> Path:
+    """The firmware source tree compiled by the harness (``STOSPLINE_FIRMWARE`` overrides)."""
+    env = os.environ.get("STOSPLINE_FIRMWARE")
+    return Path(env) if env else Path(__file__).resolve().parents[2] / "firmware"
+
+
+def _default_build_dir() -> Path:
+    env = os.environ.get("STOSPLINE_BUILD")
+    return Path(env) if env else Path(__file__).resolve().parents[2] / "build" / "cffi"
+
+
+@dataclass
+class CompiledController:
+    """A compiled firmware + table module, with helpers to run many instances at once."""
+    ffi: object
+    lib: object
+    table: GainTable
+
+    @property
+    def c_table(self):
+        return self.lib.harness_table()
+
+    def new_instances(self, count: int):
+        """`count` instances initialised on the compiled table (raises on a negative status)."""
+        ctrls = self.ffi.new("stsp_ctrl_t[]", count)
+        worst = self.lib.harness_init_batch(ctrls, count, self.c_table)
+        if worst < 0:
+            raise RuntimeError(f"stsp_init failed: {self.status_str(worst)}")
+        return ctrls
+
+    def status_str(self, status: int) -> str:
+        return self.ffi.string(self.lib.stsp_status_str(status)).decode()
+
+    def stepper(self, count: int):
+        """Return ``step(tick, X) -> (U, status)`` driving `count` fresh instances."""
+        n, m, _ = self.table.dims
+        ctrls = self.new_instances(count)
+        xbuf = np.zeros((count, n), dtype=np.float32)
+        ubuf = np.zeros((count, m), dtype=np.float32)
+        sbuf = np.zeros(count, dtype=np.intc)
+        ffi, lib = self.ffi, self.lib
+        px = ffi.cast("const stsp_f32_t *", ffi.from_buffer(xbuf))
+        pu = ffi.cast("stsp_f32_t *", ffi.from_buffer(ubuf))
+        ps = ffi.cast("int *", ffi.from_buffer(sbuf))
+
+        def step(tick: int, X: np.ndarray):
+            np.copyto(xbuf, X, casting="same_kind")
+            lib.harness_step_batch(ctrls, count, tick, px, pu, ps)
+            return ubuf, sbuf
+
+        step.instances = ctrls
+        return step
+
+    def plant_tick(self, stage, Ad, Bd, dt: float, substeps: int, dZ: np.ndarray,
+                   U: np.ndarray, X: np.ndarray, cost: np.ndarray) -> None:
+        """Advance X (paths, n) in place by one tick of the C plant integrator."""
+        ffi = self.ffi
+        # from_buffer("double[]", a) keeps `a` alive for the call; the arrays are contiguous.
+        nz = np.argwhere(stage.G != 0)                       # rows (i, a, k)
+        g_index = np.ascontiguousarray(nz, dtype=np.uintp)
+        g_value = np.ascontiguousarray(stage.G[tuple(nz.T)], dtype=float)
+        keep = [np.ascontiguousarray(a, dtype=float) for a in
+                (Ad, Bd, stage.Q, stage.S, stage.q, stage.R, stage.r, dZ)]
+        ptr = [ffi.from_buffer("double[]", a) for a in keep]
+        paths, n = X.shape
+        m, mz = stage.B.shape[1], stage.G.shape[2]
+        assert X.flags.c_contiguous and X.dtype == np.float64 and U.dtype == np.float32
+        self.lib.harness_plant_tick(
+            paths, n, m, mz, substeps, dt, ptr[0], ptr[1], len(g_value),
+            ffi.from_buffer("size_t[]", g_index), ffi.from_buffer("double[]", g_value),
+            *ptr[2:7], float(stage.rho),
+            int(bool(np.any(stage.Q) or np.any(stage.S) or np.any(stage.q))), ptr[7],
+            ffi.from_buffer("float[]", U), ffi.from_buffer("double[]", X),
+            ffi.from_buffer("double[]", cost))
+
+
+def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
+                     quiet: bool = True) -> CompiledController:
+    """Compile ``firmware/src/*.c`` with the table's generated C into a cffi module and load it.
+
+    Builds are cached in `build_dir` under a hash of every input (sources, flags, table).
+    """
+    import cffi
+
+    header, source = generate_c(table)
+    fw = firmware_dir()
+    fw_sources = sorted((fw / "src").glob("*.c"))
+    digest = hashlib.sha256()
+    for blob in [header, source, _CDEF, _BATCH, " ".join(_CFLAGS)]:
+        digest.update(blob.encode())
+    for path in sorted(fw.rglob("*.[ch]")) + [Path(__file__).with_name("plant.c")]:
+        digest.update(path.read_bytes())
+    key = digest.hexdigest()[:16]
+    modname = f"_stsp_{table.name}_{key}"
+    out = Path(build_dir) if build_dir else _default_build_dir()
+    out = out / key
+    out.mkdir(parents=True, exist_ok=True)
+    existing = list(out.glob(f"{modname}*.so"))
+    if not existing:
+        (out / f"{table.name}.h").write_text(header)
+        (out / f"{table.name}.c").write_text(source)
+        ffib = cffi.FFI()
+        ffib.cdef(_CDEF)
+        ffib.set_source(
+            modname,
+            f'#include "stospline/stsp_controller.h"\n#include "{table.name}.h"\n'
+            + _BATCH % {"p": table.name},
+            sources=[str(s) for s in fw_sources] + [str(out / f"{table.name}.c"),
+                                                    str(Path(__file__).with_name("plant.c"))],
+            include_dirs=[str(fw / "include"), str(fw / "src"), str(out)],
+            extra_compile_args=_CFLAGS)
+        so = ffib.compile(tmpdir=str(out), verbose=not quiet)
+        existing = [Path(so)]
+    spec = importlib.util.spec_from_file_location(modname, existing[0])
+    mod = sys.modules.get(modname)
+    if mod is None:
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        sys.modules[modname] = mod
+    return CompiledController(mod.ffi, mod.lib, table)

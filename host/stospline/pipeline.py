@@ -1,0 +1,163 @@
+"""The library calls behind the CLI: design a problem, evaluate it, simulate it, summarise.
+
+Everything the CLI does is one call here, so scripts and tests use the same path.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .codegen import GENERATOR, generate_c
+from .design import ContinuousDesign, design_continuous
+from .harness import build_controller
+from .montecarlo import MonteCarloResult, simulate, z_value
+from .oracle import Moments, evaluate_continuous, evaluate_table
+from .problem import Problem
+from .tables import GainTable, sample_design
+
+__all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
+           "simulation_summary", "write_outputs"]
+
+_SIG = 12  # significant digits in JSON summaries: stable across platforms' last-ulp noise
+
+
+def _r(x):
+    """Round floats (recursively) to _SIG significant digits for stable, readable JSON."""
+    if isinstance(x, dict):
+        return {k: _r(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_r(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _r(x.tolist())
+    if isinstance(x, (float, np.floating)):
+        v = float(f"{float(x):.{_SIG}g}")
+        return 0.0 if v == 0 else v
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
+
+
+@dataclass
+class Designed:
+    """A design and what the oracle says of it: the continuous law and the tick-rate table."""
+    problem: Problem
+    design: ContinuousDesign
+    table: GainTable
+    continuous: Moments
+    implemented: Moments
+
+
+def design_problem(problem: Problem, *, noise: bool = True) -> Designed:
+    """Design, sample at the problem's tick rate, and evaluate both laws with the oracle."""
+    design = design_continuous(problem, noise=noise)
+    table = sample_design(design)
+    return Designed(problem, design, table, evaluate_continuous(problem, design),
+                    evaluate_table(problem, table, path=False))
+
+
+def design_summary(d: Designed) -> dict:
+    """Machine-readable summary: predicted J0 and per-knot predicted moments."""
+    p = d.problem
+    knots = []
+    for k, kn in enumerate(p.knots):
+        entry = {
+            "t": kn.t,
+            "mean": d.continuous.knot_mean[k],
+            "cov": d.continuous.knot_cov[k],
+            "implemented_mean": d.implemented.knot_mean[k],
+            "implemented_cov": d.implemented.knot_cov[k],
+        }
+        if kn.constraint is not None:
+            entry["constraint"] = {
+                "target": kn.constraint.value,
+                "continuous_residual": d.continuous.knot_constraint[k] - kn.constraint.value,
+                "implemented_residual": d.implemented.knot_constraint[k] - kn.constraint.value,
+            }
+        knots.append(entry)
+    return _r({
+        "name": p.name,
+        "generator": GENERATOR,
+        "problem_sha256": p.source_sha256,
+        "design": "stagewise-continuous" + ("" if d.design.noise_aware else "-noise-ignoring"),
+        "tick_hz": d.table.tick_hz,
+        "n_ticks": d.table.n_ticks,
+        "J0": d.design.J0,
+        "oracle_J_continuous": d.continuous.J,
+        "oracle_J_implemented": d.implemented.J,
+        "knots": knots,
+    })
+
+
+def write_outputs(out_dir: str | Path, files: dict[str, str]) -> list[Path]:
+    """Write every file or none: each goes to a temporary name first, then all are renamed."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    staged = []
+    try:
+        for name, text in files.items():
+            fd, tmp = tempfile.mkstemp(dir=out, prefix=f".{name}.", suffix=".tmp")
+            with os.fdopen(fd, "w", newline="\n") as fh:
+                fh.write(text)
+            os.chmod(tmp, 0o644)
+            staged.append((Path(tmp), out / name))
+    except BaseException:
+        for tmp, _ in staged:
+            tmp.unlink(missing_ok=True)
+        raise
+    for tmp, final in staged:
+        os.replace(tmp, final)
+    return [final for _, final in staged]
+
+
+def generated_files(d: Designed, source_name: str) -> dict[str, str]:
+    import json
+    header, source = generate_c(d.table, source_name=source_name)
+    summary = json.dumps(design_summary(d), indent=2, sort_keys=True) + "\n"
+    n = d.problem.name
+    return {f"{n}.h": header, f"{n}.c": source, f"{n}.json": summary}
+
+
+def simulate_problem(d: Designed, *, paths: int, seed: int, substeps: int = 2,
+                     build_dir=None) -> MonteCarloResult:
+    """Monte Carlo of the compiled C controller built from `d.table`."""
+    ctl = build_controller(d.table, build_dir=build_dir)
+    return simulate(d.problem, ctl, paths=paths, seed=seed, substeps=substeps)
+
+
+def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int, substeps: int) -> dict:
+    """Monte Carlo statistics beside the oracle's exact numbers, and the plant scheme's bias."""
+    euler = evaluate_table(d.problem, d.table, propagator="euler", substeps=substeps,
+                           path=False)
+    mean, hw95 = mc.cost_mean_ci(0.95)
+    _, hw99 = mc.cost_mean_ci(0.99)
+    se = hw95 / z_value(0.95)
+    knots = []
+    for k, kn in enumerate(d.problem.knots):
+        m, s = mc.knot_mean_se(k)
+        knots.append({
+            "t": kn.t,
+            "mc_mean": m, "mc_mean_stderr": s, "mc_cov": mc.knot_cov(k),
+            "oracle_mean": d.implemented.knot_mean[k], "oracle_cov": d.implemented.knot_cov[k],
+            "z": (m - d.implemented.knot_mean[k]) / s,
+        })
+    return _r({
+        "name": d.problem.name, "paths": mc.paths, "seed": seed, "substeps": substeps,
+        "tick_hz": d.table.tick_hz, "worst_status": mc.worst_status,
+        "cost": {
+            "mc_mean": mean, "mc_stderr": se,
+            "ci95": [mean - hw95, mean + hw95], "ci99": [mean - hw99, mean + hw99],
+            "oracle_implemented": d.implemented.J, "predicted_J0": d.design.J0,
+            "z": (mean - d.implemented.J) / se,
+        },
+        "simulation_bias": {
+            "cost": euler.J - d.implemented.J,
+            "cost_over_stderr": (euler.J - d.implemented.J) / se,
+            "knot_cov_max_abs": [float(np.abs(euler.knot_cov[k] - d.implemented.knot_cov[k]).max())
+                                 for k in range(len(d.problem.knots))],
+        },
+        "knots": knots,
+    })

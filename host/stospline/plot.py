@@ -1,0 +1,62 @@
+"""Figures in the spirit of the paper's Figure 1."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["plot_corridor"]
+
+
+def _walls(ax, problem) -> None:
+    for wall in problem.plot.get("walls", []):
+        w = np.asarray(wall, dtype=float)
+        ax.plot(w[:, 0], w[:, 1], color="0.2", lw=2)
+
+
+def plot_corridor(d, mc, out: str | Path) -> None:
+    """Corridor with start and end, one realisation, the Monte Carlo mean path beside the
+    oracle's exact mean, and the control signals of the realisation."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from .oracle import evaluate_table
+
+    p = d.problem
+    ia, ib = p.plot.get("axes", [0, 1])
+    exact = evaluate_table(p, d.table)
+    end = p.knots[-1].constraint.value if p.knots[-1].constraint is not None else None
+    fig, axs = plt.subplots(2, 2, figsize=(10, 8.5))
+    (a_setup, a_real), (a_mean, a_u) = axs
+    for ax, title in ((a_setup, "start and goal"), (a_real, "one realisation"),
+                      (a_mean, f"mean path ({mc.paths} paths)")):
+        _walls(ax, p)
+        ax.plot(p.x0[ia], p.x0[ib], "o", color="tab:green", ms=8, label="start")
+        if end is not None and len(end) == p.n:
+            ax.plot(end[ia], end[ib], "s", color="tab:red", ms=8, label="goal")
+        ax.set_aspect("equal")
+        ax.set_title(title)
+        ax.grid(alpha=0.3)
+    a_setup.legend(loc="upper left")
+    a_real.plot(mc.sample_x[:, ia], mc.sample_x[:, ib], color="tab:blue", lw=1)
+    a_mean.plot(mc.mean_x[:, ia], mc.mean_x[:, ib], color="tab:blue", lw=2, label="Monte Carlo")
+    a_mean.plot(exact.path_mean[:, ia], exact.path_mean[:, ib], "--", color="tab:orange",
+                lw=1.5, label="oracle (exact)")
+    for k, kn in enumerate(p.knots):
+        a_mean.plot(exact.knot_mean[k][ia], exact.knot_mean[k][ib], "k+", ms=10)
+    a_mean.legend(loc="upper left", fontsize=8)
+    t = mc.sample_t[:-1]
+    styles = ["-", "--", ":", "-."]
+    for i in range(mc.sample_u.shape[1]):
+        a_u.plot(t, mc.sample_u[:, i], styles[i % 4], color="k", lw=1, label=f"u{i + 1}")
+    for kn in p.knots[:-1]:
+        a_u.axvline(kn.t, color="0.6", lw=0.8)
+    a_u.set_xlabel("t [s]")
+    a_u.set_title("control signals of the realisation")
+    a_u.legend()
+    a_u.grid(alpha=0.3)
+    fig.suptitle(f"{p.name}: J0 = {d.design.J0:.4g}, MC mean cost "
+                 f"{mc.cost.mean():.4g} ± {1.96 * mc.cost.std(ddof=1) / np.sqrt(mc.paths):.2g}")
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)

@@ -16,7 +16,7 @@ from scipy.stats import norm
 from .harness import CompiledController
 from .problem import Problem
 
-__all__ = ["MonteCarloResult", "simulate", "z_value"]
+__all__ = ["MonteCarloResult", "simulate", "z_value", "Agreement", "compare_to_oracle"]
 
 
 def z_value(confidence: float, comparisons: int = 1) -> float:
@@ -106,3 +106,42 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
     t = problem.t0 + np.arange(table.n_ticks + 1) * h
     return MonteCarloResult(cost, knots, t, np.array(sample_x), np.array(sample_u),
                             np.array(mean_x), worst)
+
+
+@dataclass
+class Agreement:
+    """Monte Carlo vs exact numbers: z-scores and the joint verdict at a confidence level."""
+    confidence: float
+    z_limit: float
+    cost_z: float
+    knot_mean_z: list[np.ndarray]
+
+    @property
+    def max_abs_z(self) -> float:
+        return max([abs(self.cost_z)] + [float(np.abs(z).max()) for z in self.knot_mean_z])
+
+    @property
+    def ok(self) -> bool:
+        return self.max_abs_z <= self.z_limit
+
+
+def compare_to_oracle(mc: MonteCarloResult, J: float, knot_means: list[np.ndarray], *,
+                      confidence: float = 0.99) -> Agreement:
+    """Compare the Monte Carlo cost and knot means with exact values.
+
+    The intervals are normal-approximation CIs from the sample's own standard errors,
+    Bonferroni-corrected so that the *joint* statement (cost and every knot-mean component)
+    holds at `confidence` when the controller is right. Components with zero spread (a
+    deterministic state) are compared to 1e-6 instead.
+    """
+    mean, _ = mc.cost_mean_ci()
+    se = mc.cost.std(ddof=1) / np.sqrt(mc.paths)
+    zs = []
+    count = 1
+    for k, exact in enumerate(knot_means):
+        m, s = mc.knot_mean_se(k)
+        z = np.where(s > 0, (m - exact) / np.where(s > 0, s, 1.0),
+                     np.where(np.abs(m - exact) <= 1e-6, 0.0, np.inf))
+        zs.append(z)
+        count += len(z)
+    return Agreement(confidence, z_value(confidence, count), float((mean - J) / se), zs)

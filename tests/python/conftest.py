@@ -1,0 +1,27 @@
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+EXAMPLES = REPO / "examples"
+GAINS = REPO / "gains"
+
+
+@pytest.fixture(scope="session")
+def robot_problem():
+    from stospline.problem import load_problem
+    return load_problem(EXAMPLES / "robot_corridor.toml")
+
+
+@pytest.fixture(scope="session")
+def robot(robot_problem):
+    """The robot designed, sampled at 1 kHz and evaluated by the oracle."""
+    from stospline.pipeline import design_problem
+    return design_problem(robot_problem)
+
+
+@pytest.fixture(scope="session")
+def robot_controller(robot, tmp_path_factory):
+    from stospline.harness import build_controller
+    return build_controller(robot.table)

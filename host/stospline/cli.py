@@ -18,7 +18,8 @@ __all__ = ["main"]
 def _design(args) -> int:
     from .pipeline import design_problem, design_summary, generated_files, write_outputs
     problem = load_problem(args.problem)
-    d = design_problem(problem, noise=not args.ignore_noise)
+    d = design_problem(problem, noise=not args.ignore_noise,
+                       discretization=args.discretization)
     files = generated_files(d, Path(args.problem).name)
     if args.out:
         written = write_outputs(args.out, files)
@@ -28,15 +29,17 @@ def _design(args) -> int:
     if args.json:
         print(json.dumps(design_summary(d), indent=2, sort_keys=True))
     elif not args.out:
-        print(f"J0 = {d.design.J0:.10g} (oracle, continuous law {d.continuous.J:.10g}; "
-              f"as implemented at {d.table.tick_hz} Hz {d.implemented.J:.10g})")
+        print(f"J0 = {d.design.J0:.10g} ({d.discretization} design; oracle of the law "
+              f"{d.law.J:.10g}, of the float32 table at {d.table.tick_hz} Hz "
+              f"{d.implemented.J:.10g})")
     return 0
 
 
 def _simulate(args) -> int:
     from .pipeline import design_problem, simulate_problem, simulation_summary
     problem = load_problem(args.problem)
-    d = design_problem(problem, noise=not args.ignore_noise)
+    d = design_problem(problem, noise=not args.ignore_noise,
+                       discretization=args.discretization)
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=args.substeps)
     s = simulation_summary(d, mc, seed=args.seed, substeps=args.substeps)
     if args.json:
@@ -59,7 +62,7 @@ def _plot(args) -> int:
     from .pipeline import design_problem, simulate_problem
     from .plot import plot_corridor
     problem = load_problem(args.problem)
-    d = design_problem(problem)
+    d = design_problem(problem, discretization=args.discretization)
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=args.substeps)
     plot_corridor(d, mc, args.out)
     print(f"wrote {args.out}")
@@ -94,6 +97,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--substeps", type=int, default=2)
     p.set_defaults(func=_plot)
+    for name, sp in sub.choices.items():
+        sp.add_argument("--discretization", choices=["exact-zoh", "continuous"],
+                        default="exact-zoh",
+                        help="exact-zoh (default): optimal for the held control at the tick "
+                             "rate; continuous: sample the continuous-time gains")
     return ap
 
 

@@ -147,20 +147,49 @@ def _stage_rhs(stage: Stage, n: int, p: int, noise: bool):
 
 
 def _check_latch(W: np.ndarray, C2: np.ndarray, k: int) -> None:
-    """Reject a constraint that the stage cannot meet: W(t_k) singular or ill-conditioned."""
+    """Reject a constraint that the stage cannot meet: W(t_k) singular or ill-conditioned.
+
+    Two causes, told apart: rows of ``C2`` that are linearly dependent (then ``W = C2 X C2'``
+    is singular whatever the dynamics), or a combination of the constrained outputs that the
+    input cannot steer over the stage (``B`` zero, or not reaching that direction).
+    """
     path = f"knots[{k}].constraint.C"
-    sv_c = np.linalg.svd(C2, compute_uv=False)
-    if sv_c.min() <= 1e-10 * sv_c.max():
-        _, _, vt = np.linalg.svd(C2.T)
-        rows = np.flatnonzero(np.abs(vt[-1]) > 1e-8).tolist()
-        raise DesignError(path, f"rows {rows} are linearly dependent; remove redundant rows")
-    w = np.linalg.eigvalsh(W)
-    if w.min() <= 1e-10 * max(w.max(), 1e-300):
-        vals, vecs = np.linalg.eigh(W)
-        rows = np.flatnonzero(np.abs(vecs[:, 0]) > 1e-8).tolist()
+    p, n = C2.shape
+    zero = np.flatnonzero(~C2.any(axis=1))
+    if zero.size:
+        raise DesignError(path, f"row {zero[0]} is zero, so it constrains nothing; remove it")
+    _, sv, vt = np.linalg.svd(C2.T)          # vt (p x p): its last rows span {c : c' C2 = 0}
+    if np.sum(sv > 1e-10 * sv.max()) < p:
+        c = vt[-1] / vt[-1][np.argmax(np.abs(vt[-1]))]
+        rows = np.flatnonzero(np.abs(c) > 1e-8).tolist()
+        combo = " ".join(f"{c[i]:+.4g}*row {i}" for i in rows)
+        more = f" ({p} rows but only n = {n} states)" if p > n else ""
+        raise DesignError(path, f"rows {rows} are linearly dependent{more}: {combo} = 0; "
+                                f"remove redundant rows")
+    w, vecs = np.linalg.eigh(W)
+    if w[-1] <= np.finfo(float).tiny:
+        raise DesignError(path, f"cannot be met on stage {k}: the input has no effect on "
+                                f"C x(t_{k + 1}) over this stage (W(t_{k}) = 0; is B zero on "
+                                f"this stage?)")
+    if w[0] <= 1e-10 * w[-1]:
+        d = vecs[:, 0] / vecs[:, 0][np.argmax(np.abs(vecs[:, 0]))]
+        rows = np.flatnonzero(np.abs(d) > 1e-8).tolist()
+        combo = " ".join(f"{d[i]:+.4g}*row {i}" for i in rows)
         raise DesignError(path, f"cannot be met on stage {k}: W(t_{k}) is singular "
-                                f"(condition {w.max() / max(w.min(), 1e-300):.3g}); the "
-                                f"combination of rows {rows} is not controllable on this stage")
+                                f"(eigenvalue ratio {max(w[0] / w[-1], 0.0) + 0.0:.3g}); the input "
+                                f"cannot steer the output combination {combo} of C x over "
+                                f"this stage (rows {rows}: not controllable)")
+
+
+def _knot_terminal(knot, P_next, p_next, c_next):
+    """Value just before knot k: the next stage's cost-to-go plus the knot penalty."""
+    PT, pT, cT = P_next.copy(), p_next.copy(), c_next
+    if knot.penalty is not None:
+        pen = knot.penalty
+        PT += pen.weight * pen.C.T @ pen.C
+        pT -= pen.weight * pen.C.T @ pen.target
+        cT += pen.weight * pen.target @ pen.target
+    return PT, pT, cT
 
 
 def design_continuous(problem: Problem, *, noise: bool = True, rtol: float = 1e-12,
@@ -188,23 +217,28 @@ def design_continuous(problem: Problem, *, noise: bool = True, rtol: float = 1e-
     for k in range(N_st - 1, -1, -1):
         knot = problem.knots[k]
         stage = problem.stages[k]
-        PT, pT, cT = P_next.copy(), p_next.copy(), c_next
-        if knot.penalty is not None:
-            pen = knot.penalty
-            PT += pen.weight * pen.C.T @ pen.C
-            pT -= pen.weight * pen.C.T @ pen.target
-            cT += pen.weight * pen.target @ pen.target
+        PT, pT, cT = _knot_terminal(knot, P_next, p_next, c_next)
         p = knot.n_constraints
         if p:
             NT, WT, mT = knot.constraint.C.T, np.zeros((p, p)), -knot.constraint.value
         else:
             NT, WT, mT = np.zeros((n, 0)), np.zeros((0, 0)), np.zeros(0)
         y_end = np.concatenate([PT.ravel(), pT, [cT], NT.ravel(), WT.ravel(), mT])
-        res = solve_ivp(_stage_rhs(stage, n, p, noise), (times[k + 1], times[k]), y_end,
-                        method="DOP853", rtol=rtol, atol=atol, dense_output=True)
+        with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported below
+            res = solve_ivp(_stage_rhs(stage, n, p, noise), (times[k + 1], times[k]), y_end,
+                            method="DOP853", rtol=rtol, atol=atol, dense_output=True)
         if res.status != 0 or not np.all(np.isfinite(res.y[:, -1])):
-            raise DesignError(f"knots[{k}].t", f"the Riccati equation of stage {k} has no "
-                                               f"bounded solution (finite escape): {res.message}")
+            # With [[Q, S], [S', R]] >= 0 (checked by the parser) P is squeezed between 0 and
+            # the cost of any fixed linear law, which solves a linear ODE: no true finite
+            # escape. What fails is float range: exponential growth the input cannot counter.
+            raise DesignError(f"knots[{k}].t", f"the Riccati equation of stage {k} (t = "
+                                               f"{times[k]:g} to {times[k + 1]:g}) has no "
+                                               f"bounded solution in floating point "
+                                               f"({res.message}): it grows beyond "
+                                               f"floating-point range through a mode the input "
+                                               f"cannot stabilise (unstable A that B does not "
+                                               f"reach, or too much noise) or huge weights; "
+                                               f"shorten the stage or reduce them")
         st = StageSolution(k, times[k], times[k + 1], p, stage, res.sol,
                            *([None] * 8))
         P0, p0, c0, N0, W0, m0 = st._unpack(res.y[:, -1])

@@ -16,14 +16,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.integrate import solve_ivp
-from scipy.linalg import expm
 
 from .design import ContinuousDesign
-from .problem import Problem, Stage
+from .moments import euler_tick, exact_tick, noise_columns, running_cost_matrix
+from .problem import Problem
 from .tables import GainTable
 
-__all__ = ["Moments", "TickPropagator", "evaluate_continuous", "evaluate_table",
-           "exact_tick", "euler_tick"]
+__all__ = ["Moments", "evaluate_continuous", "evaluate_table"]
 
 
 @dataclass
@@ -40,83 +39,6 @@ class Moments:
     knot_constraint: list[np.ndarray]
     path_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     path_mean: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-
-
-def _noise_columns(G: np.ndarray, d: int) -> np.ndarray:
-    """Matrix mapping vec(M) (row-major, d x d) to vec(sum_{i,j<n} M_ij Gbar_i Gbar_j')."""
-    n = G.shape[0]
-    Gbar = np.zeros((n, d, G.shape[2]))
-    Gbar[:, :n, :] = G
-    out = np.zeros((d * d, d * d))
-    for i in range(n):
-        for j in range(n):
-            out[:, i * d + j] = (Gbar[i] @ Gbar[j].T).ravel()
-    return out
-
-
-def _moment_generator(Ahat: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """Linear operator of d/dt vec(M) for ``dz = Ahat z dt + sum_i z_i Gbar_i dZ``."""
-    d = Ahat.shape[0]
-    eye = np.eye(d)
-    return np.kron(Ahat, eye) + np.kron(eye, Ahat) + _noise_columns(G, d)
-
-
-@dataclass(frozen=True)
-class TickPropagator:
-    """One tick of ``z = [x; c]`` with the constants ``c`` held: ``vec M(h) = Phi vec M(0)``,
-    ``vec ∫_0^h M dt = Psi vec M(0)``."""
-    Phi: np.ndarray
-    Psi: np.ndarray
-
-
-def _augmented(stage: Stage, n_const: int) -> np.ndarray:
-    n, m = stage.B.shape
-    d = n + n_const
-    Ahat = np.zeros((d, d))
-    Ahat[:n, :n] = stage.A
-    Ahat[:n, n:n + m] = stage.B   # u is the first block of the constants
-    return Ahat
-
-
-def exact_tick(stage: Stage, n_const: int, h: float) -> TickPropagator:
-    """The exact moment map of the SDE over one tick (Van Loan block exponential)."""
-    gen = _moment_generator(_augmented(stage, n_const), stage.G)
-    D = gen.shape[0]
-    big = np.zeros((2 * D, 2 * D))
-    big[:D, :D] = gen * h
-    big[:D, D:] = np.eye(D) * h
-    E = expm(big)
-    return TickPropagator(E[:D, :D], E[:D, D:])
-
-
-def euler_tick(stage: Stage, n_const: int, h: float, substeps: int) -> TickPropagator:
-    """The moment map of the Monte Carlo plant scheme: `substeps` exponential Euler–Maruyama
-    steps ``z+ = e^{Ahat dt} z + sum_i z_i Gbar_i dZ`` with a left-point cost rule."""
-    dt = h / substeps
-    Ahat = _augmented(stage, n_const)
-    Ad = expm(Ahat * dt)
-    d = Ahat.shape[0]
-    step = np.kron(Ad, Ad) + dt * _noise_columns(stage.G, d)
-    Phi = np.eye(d * d)
-    Psi = np.zeros((d * d, d * d))
-    for _ in range(substeps):
-        Psi += dt * Phi
-        Phi = step @ Phi
-    return TickPropagator(Phi, Psi)
-
-
-def _running_cost_matrix(stage: Stage, n: int, m: int, d: int, u_at: int) -> np.ndarray:
-    """Symmetric matrix Lbar with ``E L(x,u) = tr(Lbar E zz')``; 1 is the last component."""
-    Lb = np.zeros((d, d))
-    xs, us = slice(0, n), slice(u_at, u_at + m)
-    Lb[xs, xs] = stage.Q
-    Lb[xs, us] = stage.S
-    Lb[us, xs] = stage.S.T
-    Lb[us, us] = stage.R
-    Lb[xs, -1] = Lb[-1, xs] = stage.q
-    Lb[us, -1] = Lb[-1, us] = stage.r
-    Lb[-1, -1] = stage.rho
-    return Lb
 
 
 def _knot_terms(problem: Problem, k: int, M: np.ndarray, n: int):
@@ -172,7 +94,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         M = T @ M @ T.T
         prop = (exact_tick(stage, m + P + 1, h) if propagator == "exact"
                 else euler_tick(stage, m + P + 1, h, substeps))
-        cost_row = _running_cost_matrix(stage, n, m, d_z, n).ravel() @ prop.Psi
+        cost_row = running_cost_matrix(stage, n, m, d_z, n).ravel() @ prop.Psi
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             F = np.zeros((m, d_y))
             F[:, :n] = -table.K[j]
@@ -215,8 +137,8 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
         else:
             M_old, d_old = M, M.shape[0]
         M = (T := _latch_transform(n, p, st.Lambda, st.lambda0, d_old)) @ M_old @ T.T
-        noise = _noise_columns(stage.G, d)
-        Lb = _running_cost_matrix(stage, n, m, n + m + 1, n)
+        noise = noise_columns(stage.G, d)
+        Lb = running_cost_matrix(stage, n, m, n + m + 1, n)
         base = np.zeros((d, d))
         base[:n, :n] = stage.A
 

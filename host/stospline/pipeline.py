@@ -13,6 +13,7 @@ import numpy as np
 
 from .codegen import GENERATOR, generate_c
 from .design import ContinuousDesign, design_continuous
+from .design_zoh import ZohDesign, design_zoh
 from .harness import build_controller
 from .montecarlo import MonteCarloResult, simulate, z_value
 from .oracle import Moments, evaluate_continuous, evaluate_table
@@ -41,21 +42,46 @@ def _r(x):
     return x
 
 
+DISCRETIZATIONS = ("exact-zoh", "continuous")
+
+
 @dataclass
 class Designed:
-    """A design and what the oracle says of it: the continuous law and the tick-rate table."""
+    """A design and what the oracle says of it.
+
+    ``law`` is the exact outcome of the design's own law (the continuous-time law, or the
+    zero-order-hold law with unquantized gains); ``implemented`` that of the float32 table at
+    the tick rate, which is what the firmware runs.
+    """
     problem: Problem
-    design: ContinuousDesign
+    design: ContinuousDesign | ZohDesign
+    discretization: str
     table: GainTable
-    continuous: Moments
+    law: Moments
     implemented: Moments
 
 
-def design_problem(problem: Problem, *, noise: bool = True) -> Designed:
-    """Design, sample at the problem's tick rate, and evaluate both laws with the oracle."""
-    design = design_continuous(problem, noise=noise)
-    table = sample_design(design)
-    return Designed(problem, design, table, evaluate_continuous(problem, design),
+def design_problem(problem: Problem, *, noise: bool = True,
+                   discretization: str = "exact-zoh") -> Designed:
+    """Design at the problem's tick rate, quantize the table, evaluate both with the oracle.
+
+    Parameters
+    ----------
+    discretization : {"exact-zoh", "continuous"}
+        "exact-zoh" (default) is optimal for the controller as it runs (held at each tick);
+        "continuous" solves the continuous-time design and samples its gains at the ticks.
+    """
+    if discretization == "exact-zoh":
+        design = design_zoh(problem, noise=noise)
+        law = evaluate_table(problem, design.table(quantize=False), path=False)
+        table = design.table()
+    elif discretization == "continuous":
+        design = design_continuous(problem, noise=noise)
+        law = evaluate_continuous(problem, design)
+        table = sample_design(design)
+    else:
+        raise ValueError(f"discretization must be one of {DISCRETIZATIONS}")
+    return Designed(problem, design, discretization, table, law,
                     evaluate_table(problem, table, path=False))
 
 
@@ -66,15 +92,15 @@ def design_summary(d: Designed) -> dict:
     for k, kn in enumerate(p.knots):
         entry = {
             "t": kn.t,
-            "mean": d.continuous.knot_mean[k],
-            "cov": d.continuous.knot_cov[k],
+            "mean": d.law.knot_mean[k],
+            "cov": d.law.knot_cov[k],
             "implemented_mean": d.implemented.knot_mean[k],
             "implemented_cov": d.implemented.knot_cov[k],
         }
         if kn.constraint is not None:
             entry["constraint"] = {
                 "target": kn.constraint.value,
-                "continuous_residual": d.continuous.knot_constraint[k] - kn.constraint.value,
+                "design_residual": d.law.knot_constraint[k] - kn.constraint.value,
                 "implemented_residual": d.implemented.knot_constraint[k] - kn.constraint.value,
             }
         knots.append(entry)
@@ -82,11 +108,12 @@ def design_summary(d: Designed) -> dict:
         "name": p.name,
         "generator": GENERATOR,
         "problem_sha256": p.source_sha256,
-        "design": "stagewise-continuous" + ("" if d.design.noise_aware else "-noise-ignoring"),
+        "design": f"stagewise-{d.discretization}"
+                  + ("" if d.design.noise_aware else "-noise-ignoring"),
         "tick_hz": d.table.tick_hz,
         "n_ticks": d.table.n_ticks,
         "J0": d.design.J0,
-        "oracle_J_continuous": d.continuous.J,
+        "oracle_J_design": d.law.J,
         "oracle_J_implemented": d.implemented.J,
         "knots": knots,
     })

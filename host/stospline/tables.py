@@ -21,7 +21,8 @@ import numpy as np
 
 from .design import ContinuousDesign
 
-__all__ = ["GainTable", "sample_design", "table_crc32", "FORMAT_VERSION", "SCALAR_FLOAT32"]
+__all__ = ["GainTable", "build_table", "sample_design", "ticks_per_stage", "table_crc32",
+           "FORMAT_VERSION", "SCALAR_FLOAT32"]
 
 FORMAT_VERSION = 1
 SCALAR_FLOAT32 = 1
@@ -63,33 +64,57 @@ class GainTable:
         """A copy with some arrays replaced (re-quantized to float32); for fault planting."""
         return replace(self, **{k: np.asarray(v, dtype=np.float32) for k, v in arrays.items()})
 
+    def quantized(self) -> "GainTable":
+        """The table as the firmware stores it: every gain rounded to float32."""
+        return self.with_arrays(K=self.K, k0=self.k0, L=self.L, Lambda=self.Lambda,
+                                lambda0=self.lambda0)
 
-def sample_design(design: ContinuousDesign, tick_hz: int | None = None) -> GainTable:
-    """Sample a continuous design at the tick starts (zero-order hold) and quantize to float32."""
-    prob = design.problem
-    tick_hz = prob.tick_hz if tick_hz is None else int(tick_hz)
-    n, m = prob.n, prob.m
-    P = prob.max_constraints
-    times = prob.times
-    counts = np.rint(np.diff(times) * tick_hz).astype(int)
-    if np.any(np.abs(np.diff(times) * tick_hz - counts) > 1e-9 * np.maximum(counts, 1)):
-        raise ValueError(f"tick rate {tick_hz} Hz does not divide every stage length")
-    start = np.concatenate([[0], np.cumsum(counts)])
+
+def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = True) -> GainTable:
+    """Assemble a table from per-stage gains ``(K, k0, L, Lambda, lambda0)`` with shapes
+    (T_k, m, n), (T_k, m), (T_k, m, p_k), (p_k, n), (p_k,).
+
+    ``quantize=False`` keeps float64 values (for checking a design before quantization).
+    """
+    n, m = problem.n, problem.m
+    P = problem.max_constraints
+    counts = [g[0].shape[0] for g in stages]
+    start = np.concatenate([[0], np.cumsum(counts)]).astype(np.uint32)
     T = int(start[-1])
     K = np.zeros((T, m, n)); k0 = np.zeros((T, m)); L = np.zeros((T, m, P))
     Lam = np.zeros((len(counts), P, n)); lam0 = np.zeros((len(counts), P))
+    for k, (Kk, k0k, Lk, Lamk, lam0k) in enumerate(stages):
+        sl = slice(int(start[k]), int(start[k + 1]))
+        p = Lamk.shape[0]
+        K[sl], k0[sl], L[sl, :, :p] = Kk, k0k, Lk
+        Lam[k, :p], lam0[k, :p] = Lamk, lam0k
+    cast = (lambda a: np.asarray(a, dtype=np.float32)) if quantize else np.asarray
+    return GainTable(problem.name, int(tick_hz), problem.t0, start,
+                     np.array([g[3].shape[0] for g in stages], dtype=np.uint16),
+                     cast(K), cast(k0), cast(L), cast(Lam), cast(lam0), problem.source_sha256)
+
+
+def ticks_per_stage(problem, tick_hz: int) -> np.ndarray:
+    """Ticks in each stage; raises ValueError if the rate does not divide a stage length."""
+    lengths = np.diff(problem.times) * tick_hz
+    counts = np.rint(lengths).astype(int)
+    if np.any(np.abs(lengths - counts) > 1e-9 * np.maximum(counts, 1)) or np.any(counts < 1):
+        raise ValueError(f"tick rate {tick_hz} Hz does not divide every stage length")
+    return counts
+
+
+def sample_design(design: ContinuousDesign, tick_hz: int | None = None, *,
+                  quantize: bool = True) -> GainTable:
+    """Sample a continuous design at the tick starts (zero-order hold) and quantize to float32
+    (round to nearest, as a C compiler converts the literals)."""
+    prob = design.problem
+    tick_hz = prob.tick_hz if tick_hz is None else int(tick_hz)
+    counts = ticks_per_stage(prob, tick_hz)
+    stages = []
     for k, st in enumerate(design.stages):
-        t = times[k] + np.arange(counts[k]) / tick_hz
-        Kk, k0k, Lk = st.gains(t)
-        sl = slice(start[k], start[k + 1])
-        K[sl], k0[sl] = Kk, k0k
-        L[sl, :, :st.n_constraints] = Lk
-        Lam[k, :st.n_constraints] = st.Lambda
-        lam0[k, :st.n_constraints] = st.lambda0
-    f32 = lambda a: np.asarray(a, dtype=np.float32)  # noqa: E731 (round to nearest, as C does)
-    return GainTable(prob.name, tick_hz, prob.t0, start.astype(np.uint32),
-                     np.array([s.n_constraints for s in design.stages], dtype=np.uint16),
-                     f32(K), f32(k0), f32(L), f32(Lam), f32(lam0), prob.source_sha256)
+        t = prob.times[k] + np.arange(counts[k]) / tick_hz
+        stages.append((*st.gains(t), st.Lambda, st.lambda0))
+    return build_table(prob, tick_hz, stages, quantize=quantize)
 
 
 def table_crc32(table: GainTable) -> int:

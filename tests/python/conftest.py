@@ -16,7 +16,14 @@ def robot_problem():
 
 @pytest.fixture(scope="session")
 def robot(robot_problem):
-    """The robot designed, sampled at 1 kHz and evaluated by the oracle."""
+    """The continuous-time robot design, sampled at 1 kHz, evaluated by the oracle."""
+    from stospline.pipeline import design_problem
+    return design_problem(robot_problem, discretization="continuous")
+
+
+@pytest.fixture(scope="session")
+def robot_zoh(robot_problem):
+    """The default product: the exact zero-order-hold design at 1 kHz."""
     from stospline.pipeline import design_problem
     return design_problem(robot_problem)
 

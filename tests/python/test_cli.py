@@ -15,15 +15,17 @@ def run(*args):
                           capture_output=True, text=True)
 
 
-def test_design_json_summary(robot):
+def test_design_json_summary(robot_zoh):
     r = run("design", ROBOT, "--json")
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
-    assert s["J0"] == pytest.approx(robot.design.J0, rel=1e-11)
+    assert s["design"] == "stagewise-exact-zoh"
+    assert s["J0"] == pytest.approx(robot_zoh.design.J0, rel=1e-11)
+    assert s["oracle_J_design"] == pytest.approx(s["J0"], rel=1e-10)
     assert len(s["knots"]) == 2
     for k, kn in enumerate(s["knots"]):
         assert len(kn["mean"]) == 4 and len(kn["cov"]) == 4
-        assert max(abs(v) for v in kn["constraint"]["continuous_residual"]) < 1e-8
+        assert max(abs(v) for v in kn["constraint"]["design_residual"]) < 1e-9
 
 
 def test_simulate_json_reports_ci_and_bias():

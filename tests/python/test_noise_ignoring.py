@@ -9,7 +9,7 @@ from stospline.oracle import evaluate_continuous
 def test_stochastic_design_beats_noise_ignoring_design(robot_problem, robot):
     naive = design_continuous(robot_problem, noise=False)
     naive_on_noisy = evaluate_continuous(robot_problem, naive)
-    smart = robot.continuous
+    smart = robot.law
     # Both meet the expected-value constraints: the mean does not see the noise.
     for k, kn in enumerate(robot_problem.knots):
         np.testing.assert_allclose(naive_on_noisy.knot_constraint[k], kn.constraint.value,

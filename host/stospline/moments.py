@@ -1,0 +1,97 @@
+"""The exact moment map of one controller tick, shared by the oracle and the sampled-data
+designer.
+
+Over a tick the command is held, so ``z = [x; c]`` with constants ``c = [u; v; 1]`` obeys
+``dz = Ahat z dt + sum_i z_i Gbar_i dZ`` and its second moment ``M = E zz'`` the linear ODE
+``d/dt M = Ahat M + M Ahat' + sum_{i,j<n} M_ij Gbar_i Gbar_j'``. Vectorised row-major,
+``vec M(h) = Phi vec M(0)`` and ``vec of the integral of M over the tick = Psi vec M(0)``;
+expected running costs are linear functionals ``tr(Lbar M)``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import expm
+
+from .problem import Stage
+
+__all__ = ["TickPropagator", "noise_columns", "moment_generator", "augmented_drift",
+           "exact_tick", "euler_tick", "running_cost_matrix"]
+
+
+def noise_columns(G: np.ndarray, d: int) -> np.ndarray:
+    """Matrix mapping vec(M) (row-major, d x d) to vec(sum_{i,j<n} M_ij Gbar_i Gbar_j')."""
+    n = G.shape[0]
+    Gbar = np.zeros((n, d, G.shape[2]))
+    Gbar[:, :n, :] = G
+    out = np.zeros((d * d, d * d))
+    for i in range(n):
+        for j in range(n):
+            out[:, i * d + j] = (Gbar[i] @ Gbar[j].T).ravel()
+    return out
+
+
+def moment_generator(Ahat: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """Linear operator of d/dt vec(M) for ``dz = Ahat z dt + sum_i z_i Gbar_i dZ``."""
+    d = Ahat.shape[0]
+    eye = np.eye(d)
+    return np.kron(Ahat, eye) + np.kron(eye, Ahat) + noise_columns(G, d)
+
+
+@dataclass(frozen=True)
+class TickPropagator:
+    """One tick of ``z = [x; c]`` with the constants ``c`` held: ``vec M(h) = Phi vec M(0)``,
+    ``vec ∫_0^h M dt = Psi vec M(0)``."""
+    Phi: np.ndarray
+    Psi: np.ndarray
+
+
+def augmented_drift(stage: Stage, n_const: int) -> np.ndarray:
+    n, m = stage.B.shape
+    d = n + n_const
+    Ahat = np.zeros((d, d))
+    Ahat[:n, :n] = stage.A
+    Ahat[:n, n:n + m] = stage.B   # u is the first block of the constants
+    return Ahat
+
+
+def exact_tick(stage: Stage, n_const: int, h: float) -> TickPropagator:
+    """The exact moment map of the SDE over one tick (Van Loan block exponential)."""
+    gen = moment_generator(augmented_drift(stage, n_const), stage.G)
+    D = gen.shape[0]
+    big = np.zeros((2 * D, 2 * D))
+    big[:D, :D] = gen * h
+    big[:D, D:] = np.eye(D) * h
+    E = expm(big)
+    return TickPropagator(E[:D, :D], E[:D, D:])
+
+
+def euler_tick(stage: Stage, n_const: int, h: float, substeps: int) -> TickPropagator:
+    """The moment map of the Monte Carlo plant scheme: `substeps` exponential Euler–Maruyama
+    steps ``z+ = e^{Ahat dt} z + sum_i z_i Gbar_i dZ`` with a left-point cost rule."""
+    dt = h / substeps
+    Ahat = augmented_drift(stage, n_const)
+    Ad = expm(Ahat * dt)
+    d = Ahat.shape[0]
+    step = np.kron(Ad, Ad) + dt * noise_columns(stage.G, d)
+    Phi = np.eye(d * d)
+    Psi = np.zeros((d * d, d * d))
+    for _ in range(substeps):
+        Psi += dt * Phi
+        Phi = step @ Phi
+    return TickPropagator(Phi, Psi)
+
+
+def running_cost_matrix(stage: Stage, n: int, m: int, d: int, u_at: int) -> np.ndarray:
+    """Symmetric matrix Lbar with ``E L(x,u) = tr(Lbar E zz')``; 1 is the last component."""
+    Lb = np.zeros((d, d))
+    xs, us = slice(0, n), slice(u_at, u_at + m)
+    Lb[xs, xs] = stage.Q
+    Lb[xs, us] = stage.S
+    Lb[us, xs] = stage.S.T
+    Lb[us, us] = stage.R
+    Lb[xs, -1] = Lb[-1, xs] = stage.q
+    Lb[us, -1] = Lb[-1, us] = stage.r
+    Lb[-1, -1] = stage.rho
+    return Lb

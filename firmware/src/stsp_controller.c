@@ -171,18 +171,23 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_t *x, s
     }
 
     stage = stsp_stage_of(t, ctrl->stage, tick);
-    relatch = (ctrl->latched == 0u) || (stage != ctrl->stage);
+    /* A stage with stage_np > 0 latches a fresh v at its first tick; one with stage_np == 0
+     * keeps the v latched earlier (joint multipliers are latched once, at stage 0). */
     np = t->stage_np[stage];
+    relatch = (ctrl->latched == 0u) || (stage != ctrl->stage && np > 0u);
     if (relatch) {
         /* v = Lambda x + lambda0, into a scratch copy: the instance changes only on success. */
         const stsp_f32_t *lam = t->Lambda + (uint32_t)stage * t->n_latch * nx;
-        for (i = 0u; i < np; ++i) {
-            stsp_f32_t acc = t->lambda0[(uint32_t)stage * t->n_latch + i];
-            for (j = 0u; j < nx; ++j) {
-                acc += lam[i * nx + j] * x[j];
-            }
-            if (!stsp_isfinite_f32(acc)) {
-                return STSP_ERR_NONFINITE_OUTPUT;
+        for (i = 0u; i < t->n_latch; ++i) {
+            stsp_f32_t acc = 0.0f;
+            if (i < np) {
+                acc = t->lambda0[(uint32_t)stage * t->n_latch + i];
+                for (j = 0u; j < nx; ++j) {
+                    acc += lam[i * nx + j] * x[j];
+                }
+                if (!stsp_isfinite_f32(acc)) {
+                    return STSP_ERR_NONFINITE_OUTPUT;
+                }
             }
             v_new[i] = acc;
         }
@@ -194,13 +199,13 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_t *x, s
     {
         const stsp_f32_t *K = t->K + tick * nu * nx;
         const stsp_f32_t *k0 = t->k0 + tick * nu;
-        const stsp_f32_t *L = (np > 0u) ? t->L + tick * nu * t->n_latch : NULL;
+        const stsp_f32_t *L = t->L + tick * nu * t->n_latch;
         for (i = 0u; i < nu; ++i) {
             stsp_f32_t acc = k0[i];
             for (j = 0u; j < nx; ++j) {
                 acc += K[i * nx + j] * x[j];
             }
-            for (j = 0u; j < np; ++j) {
+            for (j = 0u; j < t->n_latch; ++j) {
                 acc += L[i * t->n_latch + j] * v[j];
             }
             if (!stsp_isfinite_f32(acc)) {
@@ -212,12 +217,12 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_t *x, s
     }
 
     if (relatch) {
-        for (i = 0u; i < STSP_MAX_LATCH; ++i) {
-            ctrl->v[i] = (i < np) ? v_new[i] : 0.0f;
+        for (i = 0u; i < t->n_latch; ++i) {
+            ctrl->v[i] = v_new[i];
         }
-        ctrl->stage = stage;
         ctrl->latched = 1u;
     }
+    ctrl->stage = stage;
     if (tick + 1u > ctrl->next_tick) {
         ctrl->next_tick = tick + 1u;
     }

@@ -19,7 +19,7 @@ def _design(args) -> int:
     from .pipeline import design_problem, design_summary, generated_files, write_outputs
     problem = load_problem(args.problem)
     d = design_problem(problem, noise=not args.ignore_noise,
-                       discretization=args.discretization)
+                       discretization=args.discretization, mode=args.mode)
     files = generated_files(d, Path(args.problem).name)
     if args.out:
         written = write_outputs(args.out, files)
@@ -39,7 +39,7 @@ def _simulate(args) -> int:
     from .pipeline import design_problem, simulate_problem, simulation_summary
     problem = load_problem(args.problem)
     d = design_problem(problem, noise=not args.ignore_noise,
-                       discretization=args.discretization)
+                       discretization=args.discretization, mode=args.mode)
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=args.substeps)
     s = simulation_summary(d, mc, seed=args.seed, substeps=args.substeps)
     if args.json:
@@ -62,7 +62,7 @@ def _plot(args) -> int:
     from .pipeline import design_problem, simulate_problem
     from .plot import plot_corridor
     problem = load_problem(args.problem)
-    d = design_problem(problem, discretization=args.discretization)
+    d = design_problem(problem, discretization=args.discretization, mode=args.mode)
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=args.substeps)
     plot_corridor(d, mc, args.out)
     print(f"wrote {args.out}")
@@ -102,6 +102,9 @@ def build_parser() -> argparse.ArgumentParser:
                         default="exact-zoh",
                         help="exact-zoh (default): optimal for the held control at the tick "
                              "rate; continuous: sample the continuous-time gains")
+        sp.add_argument("--mode", choices=["stagewise", "joint"], default="stagewise",
+                        help="stagewise (default): re-plan the multipliers at every stage "
+                             "start; joint: one multiplier vector for all knots, latched at t0")
     return ap
 
 

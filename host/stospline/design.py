@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from .multipliers import latch_groups
 from .problem import Problem, ProblemError, Stage
 
 __all__ = ["DesignError", "StageSolution", "ContinuousDesign", "design_continuous",
@@ -38,7 +39,9 @@ def noise_operator(G: np.ndarray, P: np.ndarray) -> np.ndarray:
 class StageSolution:
     """Solution of the backward equations on one stage.
 
-    ``Lambda`` (p x n) and ``lambda0`` (p) form the latch map ``v = Lambda x + lambda0``.
+    ``n_constraints`` is the width of the multiplier vector acting on this stage. If the stage
+    latches, ``Lambda`` (p x n) and ``lambda0`` (p) form the latch map
+    ``v = Lambda x + lambda0``; otherwise they are empty and the earlier latch is kept.
     """
     index: int
     t_start: float
@@ -54,6 +57,7 @@ class StageSolution:
     m0: np.ndarray
     Lambda: np.ndarray
     lambda0: np.ndarray
+    latches: bool = False
 
     def _unpack(self, y: np.ndarray):
         n, p = self.stage.A.shape[0], self.n_constraints
@@ -91,21 +95,21 @@ class ContinuousDesign:
     problem: Problem
     stages: list[StageSolution]
     noise_aware: bool
+    mode: str = "stagewise"
 
     @property
     def J0(self) -> float:
         """Predicted optimal expected cost from ``(t0, x0)``."""
         return self.cost_to_go(0, self.problem.x0)
 
-    def cost_to_go(self, k: int, x: np.ndarray) -> float:
-        """``J_k(x) = x'Px + 2p'x + c + (N'x + m)' W^-1 (N'x + m)`` at the start of stage k."""
+    def cost_to_go(self, k: int, x: np.ndarray, v: np.ndarray | None = None) -> float:
+        """Optimal expected cost from state `x` at the start of stage k.
+
+        At a latching stage ``J_k(x) = x'Px + 2p'x + c + (N'x + m)' W^-1 (N'x + m)``; on a
+        stage that keeps an earlier latch `v` it is ``x'Px + 2p'x + c + 2v'(N'x + m) - v'Wv``.
+        """
         st = self.stages[k]
-        x = np.asarray(x, dtype=float)
-        val = x @ st.P0 @ x + 2 * st.p0 @ x + st.c0
-        if st.n_constraints:
-            e = st.N0.T @ x + st.m0
-            val += e @ np.linalg.solve(st.W0, e)
-        return float(val)
+        return _value(st, np.asarray(x, dtype=float), v)
 
     def latch(self, k: int, x: np.ndarray) -> np.ndarray:
         st = self.stages[k]
@@ -113,6 +117,20 @@ class ContinuousDesign:
 
     def gains(self, k: int, t):
         return self.stages[k].gains(t)
+
+
+def _value(st, x: np.ndarray, v) -> float:
+    """Cost-to-go at a stage start from its P, p, c, N, W, m (shared by both designers)."""
+    val = x @ st.P0 @ x + 2 * st.p0 @ x + st.c0
+    if st.n_constraints:
+        e = st.N0.T @ x + st.m0
+        if st.Lambda.shape[0]:
+            val += e @ np.linalg.solve(st.W0, e)
+        elif v is None:
+            raise ValueError(f"stage {st.index} keeps an earlier latch: pass v")
+        else:
+            val += 2 * v @ e - v @ st.W0 @ v
+    return float(val)
 
 
 def _stage_rhs(stage: Stage, n: int, p: int, noise: bool):
@@ -169,16 +187,39 @@ def _check_latch(W: np.ndarray, C2: np.ndarray, k: int) -> None:
     w, vecs = np.linalg.eigh(W)
     if w[-1] <= np.finfo(float).tiny:
         raise DesignError(path, f"cannot be met on stage {k}: the input has no effect on "
-                                f"C x(t_{k + 1}) over this stage (W(t_{k}) = 0; is B zero on "
-                                f"this stage?)")
+                                f"C x at knots[{k}].t over this stage (W = 0 at the stage "
+                                f"start; is B zero on this stage?)")
     if w[0] <= 1e-10 * w[-1]:
         d = vecs[:, 0] / vecs[:, 0][np.argmax(np.abs(vecs[:, 0]))]
         rows = np.flatnonzero(np.abs(d) > 1e-8).tolist()
         combo = " ".join(f"{d[i]:+.4g}*row {i}" for i in rows)
-        raise DesignError(path, f"cannot be met on stage {k}: W(t_{k}) is singular "
-                                f"(eigenvalue ratio {max(w[0] / w[-1], 0.0) + 0.0:.3g}); the input "
-                                f"cannot steer the output combination {combo} of C x over "
-                                f"this stage (rows {rows}: not controllable)")
+        ratio = max(w[0] / w[-1], 0.0) + 0.0
+        raise DesignError(path, f"cannot be met on stage {k}: W at the stage start is "
+                                f"singular (eigenvalue ratio {ratio:.3g}); the input cannot "
+                                f"steer the output combination {combo} of C x over this "
+                                f"stage (rows {rows}: not controllable)")
+
+
+def _check_group(W: np.ndarray, problem: Problem, g) -> None:
+    """`_check_latch` for a latch group. A joint group stacks knots at different times, so
+    only each knot's own rows can be dependent; W's rank decides the rest."""
+    if len(g.knots) == 1:
+        _check_latch(W, problem.knots[g.knots[0]].constraint.C, g.knots[0])
+        return
+    for k in g.knots:   # each knot alone: dependent rows are a problem whatever the dynamics
+        C2 = problem.knots[k].constraint.C
+        _check_latch(C2 @ C2.T, C2, k)
+    w, vecs = np.linalg.eigh(W)
+    if w[0] <= 1e-10 * max(w[-1], np.finfo(float).tiny):
+        d = vecs[:, 0] / vecs[:, 0][np.argmax(np.abs(vecs[:, 0]))]
+        names = []
+        for k, o in zip(g.knots, g.offsets):
+            for i in range(problem.knots[k].n_constraints):
+                if abs(d[o + i]) > 1e-8:
+                    names.append(f"{d[o + i]:+.4g}*knots[{k}] row {i}")
+        raise DesignError("knots", f"the joint constraints cannot all be met from t0: W(t0) is "
+                                   f"singular; the input cannot steer the combination "
+                                   f"{' '.join(names)} of expected outputs")
 
 
 def _knot_terminal(knot, P_next, p_next, c_next):
@@ -192,15 +233,18 @@ def _knot_terminal(knot, P_next, p_next, c_next):
     return PT, pT, cT
 
 
-def design_continuous(problem: Problem, *, noise: bool = True, rtol: float = 1e-12,
-                      atol: float = 1e-13) -> ContinuousDesign:
-    """Solve the stage-wise design by integrating the backward equations per stage.
+def design_continuous(problem: Problem, *, noise: bool = True, mode: str = "stagewise",
+                      rtol: float = 1e-12, atol: float = 1e-13) -> ContinuousDesign:
+    """Solve the continuous-time design by integrating the backward equations per stage.
 
     Parameters
     ----------
     problem : Problem
     noise : bool
         False designs as if the diffusion were absent (the paper's Remark 2).
+    mode : {"stagewise", "joint"}
+        Stage-wise latched multipliers (re-planned at every stage start), or one multiplier
+        vector for all knots latched at t0 (the constraints exactly as problem (1) states).
     rtol, atol : float
         Tolerances of the DOP853 integration of the backward equations.
 
@@ -211,18 +255,29 @@ def design_continuous(problem: Problem, *, noise: bool = True, rtol: float = 1e-
     n = problem.n
     times = problem.times
     N_st = len(problem.knots)
+    _, group_of = latch_groups(problem, mode)
     sols: list[StageSolution | None] = [None] * N_st
-    # Cost-to-go data after knot k+1 (before its penalty): quadratic, linear, constant.
+    # Cost-to-go data after knot k+1 (before its penalty): quadratic, linear, constant, and
+    # the open group's multiplier terms N, W, m.
     P_next, p_next, c_next = np.zeros((n, n)), np.zeros(n), 0.0
+    N_open = W_open = m_open = None
     for k in range(N_st - 1, -1, -1):
         knot = problem.knots[k]
         stage = problem.stages[k]
         PT, pT, cT = _knot_terminal(knot, P_next, p_next, c_next)
-        p = knot.n_constraints
-        if p:
-            NT, WT, mT = knot.constraint.C.T, np.zeros((p, p)), -knot.constraint.value
-        else:
+        g = group_of[k]
+        p = 0 if g is None else g.size
+        if g is None:
             NT, WT, mT = np.zeros((n, 0)), np.zeros((0, 0)), np.zeros(0)
+        else:
+            if N_open is None:
+                N_open, W_open, m_open = np.zeros((n, p)), np.zeros((p, p)), np.zeros(p)
+            NT, WT, mT = N_open.copy(), W_open.copy(), m_open.copy()
+            if knot.n_constraints:
+                o = g.offset_of(k)
+                sl = slice(o, o + knot.n_constraints)
+                NT[:, sl] += knot.constraint.C.T
+                mT[sl] -= knot.constraint.value
         y_end = np.concatenate([PT.ravel(), pT, [cT], NT.ravel(), WT.ravel(), mT])
         with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported below
             res = solve_ivp(_stage_rhs(stage, n, p, noise), (times[k + 1], times[k]), y_end,
@@ -243,20 +298,22 @@ def design_continuous(problem: Problem, *, noise: bool = True, rtol: float = 1e-
                            *([None] * 8))
         P0, p0, c0, N0, W0, m0 = st._unpack(res.y[:, -1])
         W0 = 0.5 * (W0 + W0.T)
-        if p:
-            _check_latch(W0, knot.constraint.C, k)
-            Lambda = np.linalg.solve(W0, N0.T)
-            lambda0 = np.linalg.solve(W0, m0)
-        else:
-            Lambda, lambda0 = np.zeros((0, n)), np.zeros(0)
         st.P0, st.p0, st.c0, st.N0, st.W0, st.m0 = 0.5 * (P0 + P0.T), p0, float(c0), N0, W0, m0
-        st.Lambda, st.lambda0 = Lambda, lambda0
-        sols[k] = st
-        # Jump to the previous stage: add the maximised multiplier term.
         P_next, p_next, c_next = st.P0.copy(), st.p0.copy(), st.c0
-        if p:
-            P_next += N0 @ Lambda
-            p_next += N0 @ lambda0
-            c_next += m0 @ lambda0
-            P_next = 0.5 * (P_next + P_next.T)
-    return ContinuousDesign(problem, sols, noise)
+        if g is not None and g.latch_stage == k:
+            _check_group(W0, problem, g)
+            st.Lambda = np.linalg.solve(W0, N0.T)
+            st.lambda0 = np.linalg.solve(W0, m0)
+            # The maximised multiplier term joins the cost-to-go of the previous stage.
+            NL = N0 @ st.Lambda
+            P_next = P_next + 0.5 * (NL + NL.T)
+            p_next = p_next + N0 @ st.lambda0
+            c_next = c_next + m0 @ st.lambda0
+            N_open = W_open = m_open = None
+        else:
+            st.Lambda, st.lambda0 = np.zeros((0, n)), np.zeros(0)
+            if g is not None:
+                N_open, W_open, m_open = N0, W0, m0
+        st.latches = g is not None and g.latch_stage == k
+        sols[k] = st
+    return ContinuousDesign(problem, sols, noise, mode)

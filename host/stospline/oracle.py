@@ -88,10 +88,11 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     keep = np.r_[0:n, n + m:d_z]           # z -> y: drop u
     for k in range(table.n_stages):
         stage = problem.stages[k]
-        Lam = table.Lambda[k].astype(float)
-        lam0 = table.lambda0[k].astype(float)
-        T = _latch_transform(n, P, Lam, lam0, d_y)
-        M = T @ M @ T.T
+        if k == 0 or table.stage_np[k] > 0:      # else: v latched earlier is kept
+            Lam = table.Lambda[k].astype(float)
+            lam0 = table.lambda0[k].astype(float)
+            T = _latch_transform(n, P, Lam, lam0, d_y)
+            M = T @ M @ T.T
         prop = (exact_tick(stage, m + P + 1, h) if propagator == "exact"
                 else euler_tick(stage, m + P + 1, h, substeps))
         cost_row = running_cost_matrix(stage, n, m, d_z, n).ravel() @ prop.Psi
@@ -133,10 +134,13 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
         d = n + p + 1
         if M is None:
             y0 = np.concatenate([x0, np.zeros(p), [1.0]])
-            M_old, d_old = np.outer(y0, y0), d
-        else:
-            M_old, d_old = M, M.shape[0]
-        M = (T := _latch_transform(n, p, st.Lambda, st.lambda0, d_old)) @ M_old @ T.T
+            M = np.outer(y0, y0)
+        if st.Lambda.shape[0]:                 # latch; otherwise the earlier v is kept
+            T = _latch_transform(n, p, st.Lambda, st.lambda0, M.shape[0])
+            M = T @ M @ T.T
+        elif M.shape[0] != d:                  # no multipliers act here: drop v
+            keep = np.r_[0:n, M.shape[0] - 1]
+            M = M[np.ix_(keep, keep)]
         noise = noise_columns(stage.G, d)
         Lb = running_cost_matrix(stage, n, m, n + m + 1, n)
         base = np.zeros((d, d))

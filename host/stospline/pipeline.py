@@ -23,11 +23,13 @@ from .tables import GainTable, sample_design
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
            "simulation_summary", "write_outputs"]
 
-_SIG = 12  # significant digits in JSON summaries: stable across platforms' last-ulp noise
+# JSON summaries keep 12 significant digits and an absolute quantum of 1e-12, so round-off
+# (a residual of 1e-15, say) does not make regenerated files differ between machines.
+_SIG, _ABS = 12, 12
 
 
 def _r(x):
-    """Round floats (recursively) to _SIG significant digits for stable, readable JSON."""
+    """Round floats (recursively) for stable, readable JSON (see _SIG, _ABS)."""
     if isinstance(x, dict):
         return {k: _r(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
@@ -35,7 +37,7 @@ def _r(x):
     if isinstance(x, np.ndarray):
         return _r(x.tolist())
     if isinstance(x, (float, np.floating)):
-        v = float(f"{float(x):.{_SIG}g}")
+        v = float(f"{round(float(x), _ABS):.{_SIG}g}")
         return 0.0 if v == 0 else v
     if isinstance(x, np.integer):
         return int(x)
@@ -62,7 +64,7 @@ class Designed:
 
 
 def design_problem(problem: Problem, *, noise: bool = True,
-                   discretization: str = "exact-zoh") -> Designed:
+                   discretization: str = "exact-zoh", mode: str = "stagewise") -> Designed:
     """Design at the problem's tick rate, quantize the table, evaluate both with the oracle.
 
     Parameters
@@ -70,13 +72,15 @@ def design_problem(problem: Problem, *, noise: bool = True,
     discretization : {"exact-zoh", "continuous"}
         "exact-zoh" (default) is optimal for the controller as it runs (held at each tick);
         "continuous" solves the continuous-time design and samples its gains at the ticks.
+    mode : {"stagewise", "joint"}
+        Multipliers latched at every stage start, or once at t0 (see `multipliers`).
     """
     if discretization == "exact-zoh":
-        design = design_zoh(problem, noise=noise)
+        design = design_zoh(problem, noise=noise, mode=mode)
         law = evaluate_table(problem, design.table(quantize=False), path=False)
         table = design.table()
     elif discretization == "continuous":
-        design = design_continuous(problem, noise=noise)
+        design = design_continuous(problem, noise=noise, mode=mode)
         law = evaluate_continuous(problem, design)
         table = sample_design(design)
     else:
@@ -108,7 +112,7 @@ def design_summary(d: Designed) -> dict:
         "name": p.name,
         "generator": GENERATOR,
         "problem_sha256": p.source_sha256,
-        "design": f"stagewise-{d.discretization}"
+        "design": f"{d.design.mode}-{d.discretization}"
                   + ("" if d.design.noise_aware else "-noise-ignoring"),
         "tick_hz": d.table.tick_hz,
         "n_ticks": d.table.n_ticks,

@@ -77,7 +77,7 @@ def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = 
     ``quantize=False`` keeps float64 values (for checking a design before quantization).
     """
     n, m = problem.n, problem.m
-    P = problem.max_constraints
+    P = max([g[2].shape[2] for g in stages] + [g[3].shape[0] for g in stages])
     counts = [g[0].shape[0] for g in stages]
     start = np.concatenate([[0], np.cumsum(counts)]).astype(np.uint32)
     T = int(start[-1])
@@ -86,7 +86,7 @@ def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = 
     for k, (Kk, k0k, Lk, Lamk, lam0k) in enumerate(stages):
         sl = slice(int(start[k]), int(start[k + 1]))
         p = Lamk.shape[0]
-        K[sl], k0[sl], L[sl, :, :p] = Kk, k0k, Lk
+        K[sl], k0[sl], L[sl, :, :Lk.shape[2]] = Kk, k0k, Lk
         Lam[k, :p], lam0[k, :p] = Lamk, lam0k
     cast = (lambda a: np.asarray(a, dtype=np.float32)) if quantize else np.asarray
     return GainTable(problem.name, int(tick_hz), problem.t0, start,

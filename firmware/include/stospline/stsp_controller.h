@@ -7,8 +7,12 @@
  *
  * Law, at tick j of stage s (time t0 + j / tick_hz):
  *
- *     at the stage's first tick:  v = Lambda[s] x + lambda0[s]          (latch)
+ *     at the stage's first tick, if stage_np[s] > 0:
+ *                                 v = Lambda[s] x + lambda0[s]          (latch)
  *     every tick:                 u = -K[j] x - k0[j] - L[j] v
+ *
+ * Stage-wise designs latch at every constrained stage; joint designs latch once, at stage 0
+ * (stage_np[s] = 0 afterwards keeps v). Entries of v beyond stage_np[s] are set to zero.
  *
  * and the caller holds u until the next tick (zero-order hold).
  *
@@ -88,7 +92,8 @@ typedef struct {
     uint32_t n_ticks;        /**< ticks in the whole plan */
     uint32_t tick_hz;        /**< controller rate */
     const uint32_t *stage_start; /**< [n_stages + 1]: first tick of each stage, then n_ticks */
-    const uint16_t *stage_np;    /**< [n_stages]: multipliers used on each stage */
+    const uint16_t *stage_np;    /**< [n_stages]: multipliers latched at each stage start
+                                      (0: keep the v latched before) */
     const stsp_f32_t *K;
     const stsp_f32_t *k0;
     const stsp_f32_t *L;
@@ -103,7 +108,7 @@ typedef struct {
     const stsp_table_t *table;
     uint32_t ready;          /**< STSP_TABLE_MAGIC after a successful init */
     uint32_t next_tick;      /**< tick expected at the next step */
-    uint16_t stage;          /**< stage whose multipliers are latched */
+    uint16_t stage;          /**< stage of the last successful step */
     uint16_t latched;        /**< nonzero once v holds a latch for `stage` */
     stsp_f32_t v[STSP_MAX_LATCH];
 } stsp_ctrl_t;

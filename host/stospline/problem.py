@@ -5,8 +5,10 @@ and says why, so a user can fix the file without reading this code.
 """
 from __future__ import annotations
 
+import difflib
 import hashlib
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -130,13 +132,26 @@ class Problem:
 # ---------------------------------------------------------------------------------------
 # Parsing helpers: each takes the raw value and its field path, returns a checked value.
 
+_TOP_KEYS = {"name", "t0", "x0", "tick_hz", "dynamics", "cost", "knots", "stages", "plot"}
+_TOP_REQUIRED = {"name", "x0", "tick_hz", "dynamics", "cost", "knots"}
+_DYN_KEYS, _DYN_REQUIRED = {"A", "B", "noise"}, {"A", "B"}
+_COST_KEYS, _COST_REQUIRED = {"Q", "S", "R", "q", "r", "rho"}, {"R"}
+_C_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_U32_MAX = 2**32 - 1  # the C table stores tick counts and the tick rate as uint32_t
+_N_IS_LEN_X0 = " (n, the length of x0)"
+
+
 def _check_keys(table: Any, path: str, allowed: set[str], required: set[str]) -> dict:
     if not isinstance(table, dict):
-        raise ProblemError(path or "<file>", "must be a table")
+        raise ProblemError(path or "<file>", f"must be a table, got {_kind(table)}")
     for key in table:
         if key not in allowed:
-            hint = ", ".join(sorted(allowed))
-            raise ProblemError(_join(path, key), f"unknown key (allowed here: {hint})")
+            close = difflib.get_close_matches(key, allowed, n=1)
+            hint = f"did you mean '{close[0]}'? " if close else ""
+            if path and key in _TOP_KEYS:
+                hint += "top-level keys go before the first [table] header; "
+            raise ProblemError(_join(path, key), f"unknown key ({hint}allowed here: "
+                                                 f"{', '.join(sorted(allowed))})")
     for key in sorted(required):
         if key not in table:
             raise ProblemError(_join(path, key), "is required")
@@ -147,165 +162,330 @@ def _join(path: str, key: str) -> str:
     return f"{path}.{key}" if path else key
 
 
+def _kind(value: Any) -> str:
+    """The TOML name of a decoded value's type, for messages."""
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, (int, float)):
+        return "a number"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, list):
+        return "an array"
+    if isinstance(value, dict):
+        return "a table"
+    return "a date/time"  # the only other TOML type
+
+
 def _number(value: Any, path: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ProblemError(path, f"must be a number, got {type(value).__name__}")
+        raise ProblemError(path, f"must be a number, got {_kind(value)} ({value!r})")
     if not math.isfinite(value):
-        raise ProblemError(path, "must be finite (NaN and Inf are not allowed)")
+        raise ProblemError(path, f"must be finite, got {value} (NaN and Inf are not allowed)")
     return float(value)
 
 
-def _matrix(value: Any, path: str, shape: tuple[int | None, int | None]) -> np.ndarray:
-    if not isinstance(value, list) or not value or not all(isinstance(r, list) for r in value):
-        raise ProblemError(path, "must be a non-empty list of rows (a matrix)")
+def _int(value: Any, path: str, lo: int, hi: int, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise ProblemError(path, f"must be {what}, an integer in {lo}..{hi}, got {value!r}")
+    return value
+
+
+def _matrix(value: Any, path: str, shape: tuple[int | None, int | None],
+            why: tuple[str, str] = ("", "")) -> np.ndarray:
+    if (not isinstance(value, list) or not value
+            or not all(isinstance(r, list) and r for r in value)):
+        raise ProblemError(path, "must be a matrix: a non-empty array of non-empty rows, "
+                                 f"e.g. [[1, 0], [0, 1]]; got {value!r}")
     widths = {len(r) for r in value}
     if len(widths) != 1:
         raise ProblemError(path, f"rows have different lengths {sorted(widths)}")
     out = np.array([[_number(v, f"{path}[{i}][{j}]") for j, v in enumerate(row)]
                     for i, row in enumerate(value)])
-    _check_shape(out, path, shape)
-    return out
-
-
-def _vector(value: Any, path: str, length: int | None) -> np.ndarray:
-    if not isinstance(value, list) or not value:
-        raise ProblemError(path, "must be a non-empty list of numbers (a vector)")
-    out = np.array([_number(v, f"{path}[{i}]") for i, v in enumerate(value)])
-    if length is not None and out.shape[0] != length:
-        raise ProblemError(path, f"has length {out.shape[0]}, expected {length}")
-    return out
-
-
-def _check_shape(a: np.ndarray, path: str, shape: tuple[int | None, int | None]) -> None:
-    for axis, (got, want) in enumerate(zip(a.shape, shape)):
+    for axis, (got, want) in enumerate(zip(out.shape, shape)):
         if want is not None and got != want:
             what = "rows" if axis == 0 else "columns"
-            raise ProblemError(path, f"has {got} {what}, expected {want} "
-                                     f"(shape {a.shape[0]}x{a.shape[1]})")
+            raise ProblemError(path, f"has {got} {what}, expected {want}{why[axis]} "
+                                     f"(shape {out.shape[0]}x{out.shape[1]})")
+    return out
 
 
-def _parse_stage(dyn: dict, cost: dict, n: int, path_dyn: str, path_cost: str) -> Stage:
-    _check_keys(dyn, path_dyn, {"A", "B", "noise"}, {"A", "B"})
-    _check_keys(cost, path_cost, {"Q", "S", "R", "q", "r", "rho"}, {"R"})
-    A = _matrix(dyn["A"], _join(path_dyn, "A"), (n, n))
-    B = _matrix(dyn["B"], _join(path_dyn, "B"), (n, None))
+def _vector(value: Any, path: str, length: int | None, why: str = "") -> np.ndarray:
+    if not isinstance(value, list) or not value:
+        raise ProblemError(path, f"must be a non-empty array of numbers (a vector), "
+                                 f"got {value!r}")
+    out = np.array([_number(v, f"{path}[{i}]") for i, v in enumerate(value)])
+    if length is not None and out.shape[0] != length:
+        raise ProblemError(path, f"has length {out.shape[0]}, expected {length}{why}")
+    return out
+
+
+def _tol(M: np.ndarray) -> float:
+    return max(1.0, float(np.abs(M).max()))
+
+
+def _check_symmetric(M: np.ndarray, path: str) -> None:
+    asym = float(np.abs(M - M.T).max())
+    if asym > 1e-12 * _tol(M):
+        i, j = np.unravel_index(np.argmax(np.abs(M - M.T)), M.shape)
+        raise ProblemError(path, f"must be symmetric: [{i}][{j}] = {M[i, j]:g} but "
+                                 f"[{j}][{i}] = {M[j, i]:g}")
+
+
+# A stage's data is looked up key by key through "layers": the stage's own table first
+# (``stages[k].dynamics``), then the top-level one (``dynamics``).  Every value is checked
+# under the path of the table it came from.
+_Layers = list[tuple[dict, str]]
+
+
+def _pick(layers: _Layers, key: str) -> tuple[Any, str | None]:
+    for table, path in layers:
+        if key in table:
+            return table[key], _join(path, key)
+    return None, None
+
+
+def _parse_noise(value: Any, path: str, n: int) -> list[tuple[int, np.ndarray, str]]:
+    """``noise = [{state = i, G = (n x mz)}, ...]`` as ``(i, G, path of G)`` triples."""
+    if not isinstance(value, list):
+        raise ProblemError(path, f"must be an array of {{state = i, G = matrix}} tables, "
+                                 f"got {_kind(value)}")
+    items: list[tuple[int, np.ndarray, str]] = []
+    seen: dict[int, str] = {}
+    for j, item in enumerate(value):
+        ip = f"{path}[{j}]"
+        _check_keys(item, ip, {"state", "G"}, {"state", "G"})
+        i = _int(item["state"], f"{ip}.state", 0, n - 1, "a 0-based state index")
+        if i in seen:
+            raise ProblemError(f"{ip}.state", f"state {i} already has a noise entry "
+                                              f"({seen[i]}); give one entry per state")
+        seen[i] = ip
+        gp = f"{ip}.G"
+        want = items[0][1].shape[1] if items else None
+        why = f" (as {items[0][2]}: one column per Brownian component)" if items else ""
+        items.append((i, _matrix(item["G"], gp, (n, want), (_N_IS_LEN_X0, why)), gp))
+    return items
+
+
+@dataclass
+class _StageData:
+    """A parsed stage before the common noise width mz is known."""
+    fields: dict
+    B_path: str
+    noise: list[tuple[int, np.ndarray, str]]
+
+    def build(self, n: int, mz: int) -> Stage:
+        G = np.zeros((n, n, mz))
+        for i, g, _ in self.noise:
+            G[i] = g
+        return Stage(G=G, **self.fields)
+
+
+def _parse_stage(dyn: _Layers, cost: _Layers, n: int,
+                 m_ref: tuple[int, str] | None) -> _StageData:
+    """Check one stage's dynamics and cost, looked up through `dyn` and `cost` layers."""
+    value, path = _pick(dyn, "A")
+    A = _matrix(value, path, (None, None))
+    if A.shape[0] != A.shape[1]:
+        raise ProblemError(path, f"must be square, got shape {A.shape[0]}x{A.shape[1]}")
+    if A.shape[0] != n:
+        raise ProblemError(path, f"is {A.shape[0]}x{A.shape[1]} but x0 has {n} entries; "
+                                 f"A must be n x n with n = {n}, the length of x0")
+    value, B_path = _pick(dyn, "B")
+    B = _matrix(value, B_path, (n, None), (_N_IS_LEN_X0, ""))
     m = B.shape[1]
-    noise = dyn.get("noise", [])
-    npath = _join(path_dyn, "noise")
-    if not isinstance(noise, list):
-        raise ProblemError(npath, "must be a list of {state = i, G = matrix} tables")
-    mz = None
-    for j, item in enumerate(noise):
-        _check_keys(item, f"{npath}[{j}]", {"state", "G"}, {"state", "G"})
-        g = _matrix(item["G"], f"{npath}[{j}].G", (n, mz))
-        mz = g.shape[1]
-    G = np.zeros((n, n, mz or 1))
-    for j, item in enumerate(noise):
-        spath = f"{npath}[{j}].state"
-        i = item["state"]
-        if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < n:
-            raise ProblemError(spath, f"must be a state index 0..{n - 1}")
-        if np.any(G[i]):
-            raise ProblemError(spath, f"state {i} appears twice")
-        G[i] = np.array(item["G"], dtype=float)
+    if m_ref is not None and m != m_ref[0]:
+        raise ProblemError(B_path, f"has {m} columns (inputs) but {m_ref[1]} has {m_ref[0]}; "
+                                   f"every stage must have the same number of inputs m")
+    value, path = _pick(dyn, "noise")
+    noise = [] if path is None else _parse_noise(value, path, n)
 
-    R = _matrix(cost["R"], _join(path_cost, "R"), (m, m))
-    Q = _matrix(cost["Q"], _join(path_cost, "Q"), (n, n)) if "Q" in cost else np.zeros((n, n))
-    S = _matrix(cost["S"], _join(path_cost, "S"), (n, m)) if "S" in cost else np.zeros((n, m))
-    q = _vector(cost["q"], _join(path_cost, "q"), n) if "q" in cost else np.zeros(n)
-    r = _vector(cost["r"], _join(path_cost, "r"), m) if "r" in cost else np.zeros(m)
-    rho = _number(cost["rho"], _join(path_cost, "rho")) if "rho" in cost else 0.0
+    def optional(key, parse, default, *args):
+        value, path = _pick(cost, key)
+        return (default, "0 (default)") if path is None else (parse(value, path, *args), path)
 
-    if not np.allclose(R, R.T, rtol=0, atol=1e-12 * max(1.0, np.abs(R).max())):
-        raise ProblemError(_join(path_cost, "R"), "must be symmetric")
-    if np.linalg.eigvalsh(R).min() <= 1e-12 * max(1.0, np.abs(R).max()):
-        raise ProblemError(_join(path_cost, "R"), "must be positive definite")
-    if not np.allclose(Q, Q.T, rtol=0, atol=1e-12 * max(1.0, np.abs(Q).max())):
-        raise ProblemError(_join(path_cost, "Q"), "must be symmetric")
+    why_m = (f" (m, the number of columns of {B_path})",) * 2
+    R, R_path = optional("R", _matrix, None, (m, m), why_m)
+    Q, Q_path = optional("Q", _matrix, np.zeros((n, n)), (n, n), (_N_IS_LEN_X0,) * 2)
+    S, S_path = optional("S", _matrix, np.zeros((n, m)), (n, m), (_N_IS_LEN_X0, why_m[0]))
+    q, _ = optional("q", _vector, np.zeros(n), n, _N_IS_LEN_X0)
+    r, _ = optional("r", _vector, np.zeros(m), m, why_m[0])
+    rho, _ = optional("rho", _number, 0.0)
+
+    _check_symmetric(R, R_path)
+    w = np.linalg.eigvalsh(R)
+    if w.min() <= 1e-12 * _tol(R):
+        raise ProblemError(R_path, f"must be positive definite (smallest eigenvalue "
+                                   f"{w.min():.6g}); every input needs a positive cost")
+    _check_symmetric(Q, Q_path)
     H = np.block([[Q, S], [S.T, R]])
-    if np.linalg.eigvalsh(H).min() < -1e-10 * max(1.0, np.abs(H).max()):
-        raise ProblemError(path_cost, "[[Q, S], [S', R]] must be positive semidefinite "
-                                      "(the paper's condition (3))")
-    return Stage(A, B, G, Q, S, R, q, r, rho)
+    h = np.linalg.eigvalsh(H).min()
+    if h < -1e-10 * _tol(H):
+        # Name the innermost table that supplies any of Q, S, R.
+        where = next(p for t, p in cost if {"Q", "S", "R"} & set(t))
+        raise ProblemError(where, f"[[Q, S], [S', R]] must be positive semidefinite (the "
+                                  f"paper's condition (3)), smallest eigenvalue {h:.6g}; "
+                                  f"here Q is {Q_path}, S is {S_path}, R is {R_path}")
+    return _StageData(dict(A=A, B=B, Q=Q, S=S, R=R, q=q, r=r, rho=rho), B_path, noise)
 
 
-def _parse_knot(raw: dict, path: str, n: int) -> Knot:
+def _parse_knot(raw: Any, path: str, n: int) -> Knot:
     _check_keys(raw, path, {"t", "penalty", "constraint"}, {"t"})
     t = _number(raw["t"], _join(path, "t"))
+    rows = " (one entry per row of C)"
     penalty = constraint = None
     if "penalty" in raw:
         pp = _join(path, "penalty")
         pen = _check_keys(raw["penalty"], pp, {"C", "target", "weight"},
                           {"C", "target", "weight"})
-        C = _matrix(pen["C"], _join(pp, "C"), (None, n))
-        target = _vector(pen["target"], _join(pp, "target"), C.shape[0])
+        C = _matrix(pen["C"], _join(pp, "C"), (None, n), ("", _N_IS_LEN_X0))
+        target = _vector(pen["target"], _join(pp, "target"), C.shape[0], rows)
         weight = _number(pen["weight"], _join(pp, "weight"))
         if weight < 0:
-            raise ProblemError(_join(pp, "weight"), f"must be >= 0, got {weight}")
+            raise ProblemError(_join(pp, "weight"), f"must be >= 0, got {weight:g}")
         penalty = Penalty(C, target, weight)
     if "constraint" in raw:
         cp = _join(path, "constraint")
         con = _check_keys(raw["constraint"], cp, {"C", "value"}, {"C", "value"})
-        C = _matrix(con["C"], _join(cp, "C"), (None, n))
-        value = _vector(con["value"], _join(cp, "value"), C.shape[0])
+        C = _matrix(con["C"], _join(cp, "C"), (None, n), ("", _N_IS_LEN_X0))
+        value = _vector(con["value"], _join(cp, "value"), C.shape[0], rows)
         constraint = Constraint(C, value)
     return Knot(t, penalty, constraint)
+
+
+def _check_times(knots: tuple[Knot, ...], t0: float, tick_hz: int) -> None:
+    """Knot times increase strictly from t0 and every stage is a whole number of ticks."""
+    prev, prev_name, total = t0, "t0", 0
+    for i, kn in enumerate(knots):
+        path = f"knots[{i}].t"
+        if kn.t <= prev:
+            raise ProblemError(path, f"must be later than {prev_name} = {prev:g} (got "
+                                     f"{kn.t:g}); knot times must increase strictly")
+        ticks = (kn.t - prev) * tick_hz
+        whole = round(ticks)
+        if whole < 1 or abs(ticks - whole) > 1e-9 * max(1.0, ticks):
+            raise ProblemError(path, f"stage {i} ({prev_name} = {prev:g} to {kn.t:g}) lasts "
+                                     f"{kn.t - prev:g} s = {ticks:.9g} ticks at tick_hz = "
+                                     f"{tick_hz}; it must be a whole number of ticks")
+        total += whole
+        prev, prev_name = kn.t, path
+    if total > _U32_MAX:
+        raise ProblemError("tick_hz", f"gives {total} ticks in all; the gain table counts "
+                                      f"ticks in 32 bits (at most {_U32_MAX})")
+
+
+def _parse_stage_overrides(raw: Any, n_knots: int) -> list[tuple[dict, dict]]:
+    """``[[stages]]``: one entry per knot, each with optional dynamics/cost override tables."""
+    if not isinstance(raw, list) or not all(isinstance(s, dict) for s in raw):
+        raise ProblemError("stages", f"must be an array of tables ([[stages]]), "
+                                     f"got {_kind(raw)}")
+    if len(raw) != n_knots:
+        raise ProblemError("stages", f"has {len(raw)} entries but there are {n_knots} knots; "
+                                     f"give exactly one [[stages]] entry per knot (entry k "
+                                     f"is the stage that ends at knots[k].t)")
+    out = []
+    for k, entry in enumerate(raw):
+        sp = f"stages[{k}]"
+        for key in entry:
+            if key in _DYN_KEYS | _COST_KEYS:
+                table = "dynamics" if key in _DYN_KEYS else "cost"
+                raise ProblemError(_join(sp, key), f"unknown key; a stage's {key} goes in "
+                                                   f"its {table} table: [stages.{table}] "
+                                                   f"or {table} = {{ {key} = ... }}")
+        _check_keys(entry, sp, {"dynamics", "cost"}, set())
+        dyn = _check_keys(entry.get("dynamics", {}), f"{sp}.dynamics", _DYN_KEYS, set())
+        cost = _check_keys(entry.get("cost", {}), f"{sp}.cost", _COST_KEYS, set())
+        out.append((dyn, cost))
+    return out
+
+
+def _parse_plot(plot: Any, n: int) -> dict:
+    _check_keys(plot, "plot", {"walls", "axes"}, set())
+    walls = plot.get("walls", [])
+    if not isinstance(walls, list):
+        raise ProblemError("plot.walls", f"must be an array of polylines, got {_kind(walls)}")
+    for i, wall in enumerate(walls):
+        _matrix(wall, f"plot.walls[{i}]", (None, 2), ("", " (x, y points)"))
+    if "axes" in plot:
+        ax = plot["axes"]
+        if (not isinstance(ax, list) or len(ax) != 2
+                or not all(isinstance(a, int) and not isinstance(a, bool) and 0 <= a < n
+                           for a in ax)):
+            raise ProblemError("plot.axes", f"must be two state indices in 0..{n - 1}, "
+                                            f"got {ax!r}")
+    return plot
 
 
 def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     """Validate a decoded TOML document and return a `Problem`.
 
+    The key reference is ``docs/problem-file.md``.  With ``[[stages]]`` (one entry per knot),
+    stage ``k`` takes each key of ``[dynamics]``/``[cost]`` from ``stages[k].dynamics`` /
+    ``stages[k].cost`` when given there, else from the top-level table.
+
     Raises
     ------
     ProblemError
-        Naming the field and the reason.
+        Naming the field by its path in the file and the reason.
     """
-    _check_keys(doc, "", {"name", "t0", "x0", "tick_hz", "dynamics", "cost", "knots", "plot"},
-                {"name", "x0", "tick_hz", "dynamics", "cost", "knots"})
+    if not doc:
+        raise ProblemError("<file>", "is empty; a problem needs name, x0, tick_hz, "
+                                     "[dynamics], [cost] and [[knots]]")
+    _check_keys(doc, "", _TOP_KEYS, _TOP_REQUIRED)
     name = doc["name"]
-    if not isinstance(name, str) or not name.isidentifier():
-        raise ProblemError("name", "must be a C identifier (letters, digits, underscore)")
+    if not isinstance(name, str) or not _C_IDENTIFIER.fullmatch(name):
+        raise ProblemError("name", f"must be a C identifier (ASCII letters, digits, "
+                                   f"underscore; not starting with a digit), got {name!r}")
     x0 = _vector(doc["x0"], "x0", None)
     n = x0.shape[0]
     t0 = _number(doc.get("t0", 0.0), "t0")
-    tick_hz = doc["tick_hz"]
-    if isinstance(tick_hz, bool) or not isinstance(tick_hz, int) or tick_hz <= 0:
-        raise ProblemError("tick_hz", "must be a positive integer (ticks per second)")
+    tick_hz = _int(doc["tick_hz"], "tick_hz", 1, _U32_MAX, "the tick rate in Hz")
 
-    stage = _parse_stage(doc["dynamics"], doc["cost"], n, "dynamics", "cost")
+    dyn = _check_keys(doc["dynamics"], "dynamics", _DYN_KEYS, _DYN_REQUIRED)
+    cost = _check_keys(doc["cost"], "cost", _COST_KEYS, _COST_REQUIRED)
+    default = _parse_stage([(dyn, "dynamics")], [(cost, "cost")], n, None)
 
     raw_knots = doc["knots"]
     if not isinstance(raw_knots, list) or not raw_knots:
-        raise ProblemError("knots", "must be a non-empty array of tables ([[knots]])")
+        raise ProblemError("knots", f"must be a non-empty array of tables ([[knots]]), "
+                                    f"got {_kind(raw_knots)}")
     knots = tuple(_parse_knot(k, f"knots[{i}]", n) for i, k in enumerate(raw_knots))
-    prev = t0
-    for i, kn in enumerate(knots):
-        if kn.t <= prev:
-            raise ProblemError(f"knots[{i}].t", f"knot times must increase strictly "
-                                                f"(t = {kn.t} after {prev})")
-        ticks = (kn.t - prev) * tick_hz
-        if abs(ticks - round(ticks)) > 1e-9 * max(1.0, ticks):
-            raise ProblemError(f"knots[{i}].t", f"stage length {kn.t - prev} s is not a whole "
-                                                f"number of ticks at tick_hz = {tick_hz}")
-        prev = kn.t
+    _check_times(knots, t0, tick_hz)
 
-    plot = doc.get("plot", {})
-    _check_keys(plot, "plot", {"walls", "axes"}, set())
-    if "walls" in plot:
-        for i, wall in enumerate(plot["walls"]):
-            _matrix(wall, f"plot.walls[{i}]", (None, 2))
-    if "axes" in plot:
-        ax = plot["axes"]
-        if (not isinstance(ax, list) or len(ax) != 2
-                or not all(isinstance(a, int) and 0 <= a < n for a in ax)):
-            raise ProblemError("plot.axes", f"must be two state indices in 0..{n - 1}")
+    if "stages" in doc:
+        m_ref = (default.fields["B"].shape[1], default.B_path)
+        data = [_parse_stage([(sd, f"stages[{k}].dynamics"), (dyn, "dynamics")],
+                             [(sc, f"stages[{k}].cost"), (cost, "cost")], n, m_ref)
+                for k, (sd, sc) in enumerate(_parse_stage_overrides(doc["stages"], len(knots)))]
+    else:
+        data = [default] * len(knots)
+    # Every stage has the same number mz of Brownian components: the first noise matrix given
+    # sets it; a stage without noise gets zero matrices of that width.
+    first = next((g for d in [default, *data] for g in d.noise), None)
+    mz = 1 if first is None else first[1].shape[1]
+    for d in data:
+        for _, g, gp in d.noise:
+            if g.shape[1] != mz:
+                raise ProblemError(gp, f"has {g.shape[1]} columns but {first[2]} has {mz}; "
+                                       f"every stage must have the same number of Brownian "
+                                       f"components mz (columns of G)")
+    built = {id(d): d.build(n, mz) for d in data}
+    stages = tuple(built[id(d)] for d in data)
 
-    stages = tuple(stage for _ in knots)
-    return Problem(name, t0, x0, int(tick_hz), stages, knots, source_sha256, plot)
+    plot = _parse_plot(doc.get("plot", {}), n)
+    return Problem(name, t0, x0, tick_hz, stages, knots, source_sha256, plot)
 
 
 def load_problem(path: str | Path) -> Problem:
-    """Read and validate a TOML problem file."""
+    """Read and validate a TOML problem file (reference: ``docs/problem-file.md``).
+
+    Raises
+    ------
+    ProblemError
+        The file is not valid TOML or not a valid problem; names the field and the reason.
+    FileNotFoundError
+        The file does not exist.
+    """
     data = Path(path).read_bytes()
     try:
         doc = tomllib.loads(data.decode("utf-8"))

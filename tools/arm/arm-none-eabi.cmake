@@ -1,0 +1,40 @@
+# CMake toolchain file: arm-none-eabi-gcc for bare-metal Cortex-M (Debian's gcc-arm-none-eabi
+# + libnewlib-arm-none-eabi, installed by tools/setup.sh).
+#
+#   cmake -S tools/arm -B build/arm -G Ninja \
+#         -DCMAKE_TOOLCHAIN_FILE=$PWD/tools/arm/arm-none-eabi.cmake
+#   ... -DSTSP_ARM_CPU=cortex-m0plus      (soft-float ARMv6-M; default cortex-m4 with FPv4-SP)
+#
+# Only the CPU/ABI flags live here; warnings and -O2 are set by tools/arm/CMakeLists.txt.
+set(CMAKE_SYSTEM_NAME Generic)
+set(CMAKE_SYSTEM_PROCESSOR arm)
+
+set(STSP_ARM_CPU "cortex-m4" CACHE STRING
+    "Target core: cortex-m4 (hard-float FPv4-SP) or cortex-m0plus")
+set_property(CACHE STSP_ARM_CPU PROPERTY STRINGS cortex-m4 cortex-m0plus)
+# try_compile projects re-read this file and need the CPU too.
+list(APPEND CMAKE_TRY_COMPILE_PLATFORM_VARIABLES STSP_ARM_CPU)
+
+find_program(CMAKE_C_COMPILER arm-none-eabi-gcc REQUIRED)
+find_program(CMAKE_AR arm-none-eabi-ar REQUIRED)
+find_program(CMAKE_RANLIB arm-none-eabi-ranlib REQUIRED)
+find_program(CMAKE_OBJCOPY arm-none-eabi-objcopy)
+find_program(CMAKE_SIZE arm-none-eabi-size)
+find_program(CMAKE_NM arm-none-eabi-nm)
+
+if(STSP_ARM_CPU STREQUAL "cortex-m4")
+  set(_stsp_cpu_flags "-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard")
+elseif(STSP_ARM_CPU STREQUAL "cortex-m0plus")
+  set(_stsp_cpu_flags "-mcpu=cortex-m0plus -mthumb -mfloat-abi=soft")
+else()
+  message(FATAL_ERROR "STSP_ARM_CPU must be cortex-m4 or cortex-m0plus, not '${STSP_ARM_CPU}'")
+endif()
+set(CMAKE_C_FLAGS_INIT "${_stsp_cpu_flags}")
+set(CMAKE_ASM_FLAGS_INIT "${_stsp_cpu_flags}")
+# Images are linked by the project with its own script and --specs; the compiler check must not
+# try to link a hosted executable.
+set(CMAKE_TRY_COMPILE_TARGET_TYPE STATIC_LIBRARY)
+
+set(CMAKE_FIND_ROOT_PATH_MODE_PROGRAM NEVER)
+set(CMAKE_FIND_ROOT_PATH_MODE_LIBRARY ONLY)
+set(CMAKE_FIND_ROOT_PATH_MODE_INCLUDE ONLY)

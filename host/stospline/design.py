@@ -58,6 +58,7 @@ class StageSolution:
     Lambda: np.ndarray
     lambda0: np.ndarray
     latches: bool = False
+    noise: bool = True       # the design accounts for the diffusion (False: Remark 2)
 
     def _unpack(self, y: np.ndarray):
         n, p = self.stage.A.shape[0], self.n_constraints
@@ -81,11 +82,15 @@ class StageSolution:
         """
         s = self.stage
         P, pv, _, N, _, _ = self.riccati(t)
-        Rinv = np.linalg.inv(s.R)
-        PBS = np.einsum("abt,bj->taj", P, s.B) + s.S[None]          # (T, n, m)
-        K = np.einsum("ij,taj->tia", Rinv, PBS)
-        k0 = np.einsum("ij,tj->ti", Rinv, np.einsum("aj,at->tj", s.B, pv) + s.r[None])
-        L = np.einsum("ij,tjc->tic", Rinv, np.einsum("aj,act->tjc", s.B, N))
+        T = P.shape[-1]
+        m, p = s.B.shape[1], N.shape[1]
+        K, k0, L = np.empty((T, m, s.A.shape[0])), np.empty((T, m)), np.empty((T, m, p))
+        for j in range(T):
+            _, St, Rt = _effective_weights(s, P[..., j], self.noise)
+            Rinv = np.linalg.inv(Rt)
+            K[j] = Rinv @ (P[..., j] @ s.B + St).T
+            k0[j] = Rinv @ (s.B.T @ pv[:, j] + s.r)
+            L[j] = Rinv @ (s.B.T @ N[..., j])
         return K, k0, L
 
 
@@ -133,11 +138,18 @@ def _value(st, x: np.ndarray, v) -> float:
     return float(val)
 
 
+def _effective_weights(stage: Stage, P: np.ndarray, noise: bool):
+    """``Q + Pi_xx(P)``, ``S + Pi_xu(P)``, ``R + Pi_uu(P)`` with ``Pi_ab = tr(Gh_a' P Gh_b)`` over
+    the noise multipliers ``[x; u]``: the Ito term of ``x'Px`` under the full diffusion."""
+    if not noise:
+        return stage.Q, stage.S, stage.R
+    n = stage.A.shape[0]
+    Pi = noise_operator(stage.noise_tensor, P)
+    return stage.Q + Pi[:n, :n], stage.S + Pi[:n, n:], stage.R + Pi[n:, n:]
+
+
 def _stage_rhs(stage: Stage, n: int, p: int, noise: bool):
-    A, B, G, Q, S, R, q, r, rho = (stage.A, stage.B, stage.G, stage.Q, stage.S, stage.R,
-                                   stage.q, stage.r, stage.rho)
-    Rinv = np.linalg.inv(R)
-    BRB = B @ Rinv @ B.T
+    A, B, q, r, rho = stage.A, stage.B, stage.q, stage.r, stage.rho
 
     def rhs(_t, y):
         i = 0
@@ -146,19 +158,20 @@ def _stage_rhs(stage: Stage, n: int, p: int, noise: bool):
         i += 1
         N = y[i:i + n * p].reshape(n, p); i += n * p
         i += p * p
-        PBS = P @ B + S
+        Qt, St, Rt = _effective_weights(stage, P, noise)
+        Rinv = np.linalg.inv(Rt)
+        PBS = P @ B + St
         K = Rinv @ PBS.T
         Acl = A - B @ K
-        dP = A.T @ P + P @ A + Q - PBS @ K
-        if noise:
-            dP = dP + noise_operator(G, P)
+        dP = A.T @ P + P @ A + Qt - PBS @ K
         dP = -0.5 * (dP + dP.T)
         g = B.T @ pv + r
         dp = -(Acl.T @ pv + q - K.T @ r)
         dc = -(rho - g @ Rinv @ g)
         dN = -(Acl.T @ N)
-        dW = -(N.T @ BRB @ N)
-        dm = N.T @ B @ Rinv @ g
+        BtN = B.T @ N
+        dW = -(BtN.T @ Rinv @ BtN)
+        dm = BtN.T @ Rinv @ g
         return np.concatenate([dP.ravel(), dp, [dc], dN.ravel(), dW.ravel(), dm])
 
     return rhs
@@ -295,7 +308,7 @@ def design_continuous(problem: Problem, *, noise: bool = True, mode: str = "stag
                                                f"reach, or too much noise) or huge weights; "
                                                f"shorten the stage or reduce them")
         st = StageSolution(k, times[k], times[k + 1], p, stage, res.sol,
-                           *([None] * 8))
+                           *([None] * 8), noise=noise)
         P0, p0, c0, N0, W0, m0 = st._unpack(res.y[:, -1])
         W0 = 0.5 * (W0 + W0.T)
         st.P0, st.p0, st.c0, st.N0, st.W0, st.m0 = 0.5 * (P0 + P0.T), p0, float(c0), N0, W0, m0

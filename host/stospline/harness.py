@@ -145,9 +145,10 @@ class CompiledController:
         """Advance X (paths, n) in place by one tick of the C plant integrator."""
         ffi = self.ffi
         # from_buffer("double[]", a) keeps `a` alive for the call; the arrays are contiguous.
-        nz = np.argwhere(stage.G != 0)                       # rows (i, a, k)
+        GH = stage.noise_tensor                              # multipliers [x; u]
+        nz = np.argwhere(GH != 0)                            # rows (i, a, k)
         g_index = np.ascontiguousarray(nz, dtype=np.uintp)
-        g_value = np.ascontiguousarray(stage.G[tuple(nz.T)], dtype=float)
+        g_value = np.ascontiguousarray(GH[tuple(nz.T)], dtype=float)
         keep = [np.ascontiguousarray(a, dtype=float) for a in
                 (Ad, Bd, stage.Q, stage.S, stage.q, stage.R, stage.r, dZ)]
         ptr = [ffi.from_buffer("double[]", a) for a in keep]

@@ -21,13 +21,17 @@ __all__ = ["TickPropagator", "noise_columns", "moment_generator", "augmented_dri
 
 
 def noise_columns(G: np.ndarray, d: int) -> np.ndarray:
-    """Matrix mapping vec(M) (row-major, d x d) to vec(sum_{i,j<n} M_ij Gbar_i Gbar_j')."""
-    n = G.shape[0]
-    Gbar = np.zeros((n, d, G.shape[2]))
+    """Matrix mapping vec(M) (row-major, d x d) to vec(sum_{i,j} M_ij Gbar_i Gbar_j').
+
+    ``G`` (n_mult, n, mz): the diffusion is ``sum_i z_i G[i] dZ`` over the first n_mult
+    components of z and enters the first n rows; ``Gbar_i`` is ``G[i]`` padded to d rows.
+    """
+    n_mult, n = G.shape[0], G.shape[1]
+    Gbar = np.zeros((n_mult, d, G.shape[2]))
     Gbar[:, :n, :] = G
     out = np.zeros((d * d, d * d))
-    for i in range(n):
-        for j in range(n):
+    for i in range(n_mult):
+        for j in range(n_mult):
             out[:, i * d + j] = (Gbar[i] @ Gbar[j].T).ravel()
     return out
 
@@ -58,7 +62,8 @@ def augmented_drift(stage: Stage, n_const: int) -> np.ndarray:
 
 def exact_tick(stage: Stage, n_const: int, h: float) -> TickPropagator:
     """The exact moment map of the SDE over one tick (Van Loan block exponential)."""
-    gen = moment_generator(augmented_drift(stage, n_const), stage.G)
+    # z = [x; u; ...]: state and input noise multiply the first n + m components.
+    gen = moment_generator(augmented_drift(stage, n_const), stage.noise_tensor)
     D = gen.shape[0]
     big = np.zeros((2 * D, 2 * D))
     big[:D, :D] = gen * h
@@ -74,7 +79,7 @@ def euler_tick(stage: Stage, n_const: int, h: float, substeps: int) -> TickPropa
     Ahat = augmented_drift(stage, n_const)
     Ad = expm(Ahat * dt)
     d = Ahat.shape[0]
-    step = np.kron(Ad, Ad) + dt * noise_columns(stage.G, d)
+    step = np.kron(Ad, Ad) + dt * noise_columns(stage.noise_tensor, d)
     Phi = np.eye(d * d)
     Psi = np.zeros((d * d, d * d))
     for _ in range(substeps):

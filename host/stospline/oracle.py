@@ -146,14 +146,24 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
         base = np.zeros((d, d))
         base[:n, :n] = stage.A
 
-        def rhs(t, y, st=st, stage=stage, p=p, d=d, noise=noise, Lb=Lb, base=base):
+        H = stage.H if stage.has_control_noise else None
+
+        def rhs(t, y, st=st, stage=stage, p=p, d=d, noise=noise, Lb=Lb, base=base, H=H):
             Mt = y[:-1].reshape(d, d)
             K, k0, L = st.gains(np.array([t]))
             F = np.concatenate([-K[0], -L[0], -k0[0][:, None]], axis=1)   # u = F y
             Abar = base.copy()
             Abar[:n] += stage.B @ F
             AM = Abar @ Mt
-            dM = AM + AM.T + (noise @ y[:-1]).reshape(d, d)
+            if H is None:
+                dM = AM + AM.T + (noise @ y[:-1]).reshape(d, d)
+            else:
+                # u = F y turns the input noise into multipliers of y: the diffusion is
+                # sum_i y_i (G_i + sum_j F_ji H_j) dZ, entering the x rows.
+                Geff = np.einsum("ji,jak->iak", F, H)
+                Geff[:n] += stage.G
+                dM = AM + AM.T
+                dM[:n, :n] += np.einsum("ij,iak,jbk->ab", Mt, Geff, Geff)
             Tw = np.zeros((n + m + 1, d))
             Tw[:n, :n] = np.eye(n)
             Tw[n:n + m] = F

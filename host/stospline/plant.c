@@ -3,8 +3,9 @@
  * With u held over the tick, each of `substeps` steps is the exponential Euler–Maruyama step
  *     x+ = Ad x + Bd u + sum_i x_i G_i dZ,      dZ ~ N(0, dt I)  (supplied by the caller)
  * and the running cost accumulates the left-point rule dt * L(x, u). All in double.
- * The diffusion is passed as its nonzeros: entry e adds x[i] * g_value[e] * dZ[k] to
- * component a, with g_index[3e .. 3e+2] = (i, a, k). */
+ * The diffusion is passed as its nonzeros: entry e adds w[i] * g_value[e] * dZ[k] to
+ * component a, with g_index[3e .. 3e+2] = (i, a, k) and w = [x; u] (state noise i < n,
+ * input noise i >= n). */
 #include <stddef.h>
 
 void harness_plant_tick(size_t paths, size_t n, size_t m, size_t mz, size_t substeps,
@@ -63,7 +64,8 @@ void harness_plant_tick(size_t paths, size_t n, size_t m, size_t mz, size_t subs
             }
             for (k = 0; k < g_count; ++k) {
                 const size_t *e = g_index + 3u * k;
-                xn[e[1]] += x[e[0]] * g_value[k] * dz[e[2]];
+                const double w = (e[0] < n) ? x[e[0]] : u[e[0] - n];
+                xn[e[1]] += w * g_value[k] * dz[e[2]];
             }
             for (i = 0; i < n; ++i) {
                 x[i] = xn[i];

@@ -41,7 +41,8 @@ class ProblemError(ValueError):
 class Stage:
     """Data of one stage ``[t_k, t_{k+1}]`` (time-invariant within the stage).
 
-    ``G[i]`` (n x mz) multiplies the state component ``x_i`` in the diffusion term.
+    The diffusion is ``sum_i x_i G[i] dZ + sum_j u_j H[j] dZ``: ``G[i]`` (n x mz) multiplies
+    the state component ``x_i``, ``H[j]`` (n x mz) the input ``u_j`` (None: no such noise).
     The running cost is ``x'Qx + 2x'Su + u'Ru + 2q'x + 2r'u + rho``.
     """
     A: np.ndarray
@@ -53,10 +54,21 @@ class Stage:
     q: np.ndarray
     r: np.ndarray
     rho: float
+    H: np.ndarray | None = None   # shape (m, n, mz)
+
+    @property
+    def noise_tensor(self) -> np.ndarray:
+        """Diffusion multipliers of ``[x; u]``: shape (n + m, n, mz), ``[G; H]``."""
+        H = self.H if self.H is not None else np.zeros((self.B.shape[1],) + self.G.shape[1:])
+        return np.concatenate([self.G, H])
+
+    @property
+    def has_control_noise(self) -> bool:
+        return self.H is not None and bool(np.any(self.H))
 
     def without_noise(self) -> "Stage":
         return Stage(self.A, self.B, np.zeros_like(self.G), self.Q, self.S, self.R,
-                     self.q, self.r, self.rho)
+                     self.q, self.r, self.rho, None)
 
 
 @dataclass(frozen=True)
@@ -245,20 +257,27 @@ def _pick(layers: _Layers, key: str) -> tuple[Any, str | None]:
     return None, None
 
 
-def _parse_noise(value: Any, path: str, n: int) -> list[tuple[int, np.ndarray, str]]:
-    """``noise = [{state = i, G = (n x mz)}, ...]`` as ``(i, G, path of G)`` triples."""
+def _parse_noise(value: Any, path: str, n: int, m: int) -> list[tuple[int, np.ndarray, str]]:
+    """``noise = [{state = i, G = (n x mz)}, {input = j, G = (n x mz)}, ...]`` as
+    ``(multiplier index, G, path of G)`` triples; an input j has multiplier index n + j."""
     if not isinstance(value, list):
-        raise ProblemError(path, f"must be an array of {{state = i, G = matrix}} tables, "
-                                 f"got {_kind(value)}")
+        raise ProblemError(path, f"must be an array of {{state = i, G = matrix}} or "
+                                 f"{{input = j, G = matrix}} tables, got {_kind(value)}")
     items: list[tuple[int, np.ndarray, str]] = []
     seen: dict[int, str] = {}
     for j, item in enumerate(value):
         ip = f"{path}[{j}]"
-        _check_keys(item, ip, {"state", "G"}, {"state", "G"})
-        i = _int(item["state"], f"{ip}.state", 0, n - 1, "a 0-based state index")
+        if isinstance(item, dict) and "input" in item:
+            _check_keys(item, ip, {"input", "G"}, {"input", "G"})
+            i = n + _int(item["input"], f"{ip}.input", 0, m - 1, "a 0-based input index")
+            key, label = "input", f"input {i - n}"
+        else:
+            _check_keys(item, ip, {"state", "G"}, {"state", "G"})
+            i = _int(item["state"], f"{ip}.state", 0, n - 1, "a 0-based state index")
+            key, label = "state", f"state {i}"
         if i in seen:
-            raise ProblemError(f"{ip}.state", f"state {i} already has a noise entry "
-                                              f"({seen[i]}); give one entry per state")
+            raise ProblemError(f"{ip}.{key}", f"{label} already has a noise entry "
+                                              f"({seen[i]}); give one entry per {key}")
         seen[i] = ip
         gp = f"{ip}.G"
         want = items[0][1].shape[1] if items else None
@@ -275,10 +294,12 @@ class _StageData:
     noise: list[tuple[int, np.ndarray, str]]
 
     def build(self, n: int, mz: int) -> Stage:
-        G = np.zeros((n, n, mz))
+        m = self.fields["B"].shape[1]
+        GH = np.zeros((n + m, n, mz))
         for i, g, _ in self.noise:
-            G[i] = g
-        return Stage(G=G, **self.fields)
+            GH[i] = g
+        H = GH[n:] if np.any(GH[n:]) else None
+        return Stage(G=GH[:n], H=H, **self.fields)
 
 
 def _parse_stage(dyn: _Layers, cost: _Layers, n: int,
@@ -298,7 +319,7 @@ def _parse_stage(dyn: _Layers, cost: _Layers, n: int,
         raise ProblemError(B_path, f"has {m} columns (inputs) but {m_ref[1]} has {m_ref[0]}; "
                                    f"every stage must have the same number of inputs m")
     value, path = _pick(dyn, "noise")
-    noise = [] if path is None else _parse_noise(value, path, n)
+    noise = [] if path is None else _parse_noise(value, path, n, m)
 
     def optional(key, parse, default, *args):
         value, path = _pick(cost, key)

@@ -85,12 +85,13 @@ class StageSolution:
         T = P.shape[-1]
         m, p = s.B.shape[1], N.shape[1]
         K, k0, L = np.empty((T, m, s.A.shape[0])), np.empty((T, m)), np.empty((T, m, p))
-        for j in range(T):
-            _, St, Rt = _effective_weights(s, P[..., j], self.noise)
+        for j, tj in enumerate(np.atleast_1d(t)):
+            sj = s.at(tj)
+            _, St, Rt = _effective_weights(sj, P[..., j], self.noise)
             Rinv = np.linalg.inv(Rt)
-            K[j] = Rinv @ (P[..., j] @ s.B + St).T
-            k0[j] = Rinv @ (s.B.T @ pv[:, j] + s.r)
-            L[j] = Rinv @ (s.B.T @ N[..., j])
+            K[j] = Rinv @ (P[..., j] @ sj.B + St).T
+            k0[j] = Rinv @ (sj.B.T @ pv[:, j] + sj.r)
+            L[j] = Rinv @ (sj.B.T @ N[..., j])
         return K, k0, L
 
 
@@ -149,16 +150,16 @@ def _effective_weights(stage: Stage, P: np.ndarray, noise: bool):
 
 
 def _stage_rhs(stage: Stage, n: int, p: int, noise: bool):
-    A, B, q, r, rho = stage.A, stage.B, stage.q, stage.r, stage.rho
-
-    def rhs(_t, y):
+    def rhs(t, y):
+        st = stage.at(t)
+        A, B, q, r, rho = st.A, st.B, st.q, st.r, st.rho
         i = 0
         P = y[i:i + n * n].reshape(n, n); i += n * n
         pv = y[i:i + n]; i += n
         i += 1
         N = y[i:i + n * p].reshape(n, p); i += n * p
         i += p * p
-        Qt, St, Rt = _effective_weights(stage, P, noise)
+        Qt, St, Rt = _effective_weights(st, P, noise)
         Rinv = np.linalg.inv(Rt)
         PBS = P @ B + St
         K = Rinv @ PBS.T

@@ -65,6 +65,31 @@ def _latch_transform(n: int, P: int, Lam: np.ndarray, lam0: np.ndarray, d_old: i
     return T
 
 
+def _tick_varying(stage, Mz: np.ndarray, t0: float, h: float, n: int, m: int,
+                  rtol: float = 1e-12, atol: float = 1e-15):
+    """One tick of time-varying stage data: integrate the moment ODE of ``z = [x; u; ...; 1]``
+    (u held) and the expected running cost with DOP853. Independent of the designer's
+    per-tick maps."""
+    d = Mz.shape[0]
+
+    def rhs(t, y):
+        sd = stage.at(t)
+        M = y[:-1].reshape(d, d)
+        Ah = np.zeros((d, d))
+        Ah[:n, :n], Ah[:n, n:n + m] = sd.A, sd.B
+        AM = Ah @ M
+        G = sd.noise_tensor                                  # multipliers [x; u]
+        dM = AM + AM.T
+        dM[:n, :n] += np.einsum("ij,iak,jbk->ab", M[:n + m, :n + m], G, G)
+        Lb = running_cost_matrix(sd, n, m, d, n)
+        return np.concatenate([dM.ravel(), [np.sum(Lb * M)]])
+
+    res = solve_ivp(rhs, (t0, t0 + h), np.concatenate([Mz.ravel(), [0.0]]), method="DOP853",
+                    rtol=rtol, atol=atol)
+    M = res.y[:-1, -1].reshape(d, d)
+    return 0.5 * (M + M.T), float(res.y[-1, -1])
+
+
 def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
                    substeps: int = 4, path: bool = True) -> Moments:
     """Exact moments of the controller as implemented: ZOH at the table's tick rate, with the
@@ -93,9 +118,13 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             lam0 = table.lambda0[k].astype(float)
             T = _latch_transform(n, P, Lam, lam0, d_y)
             M = T @ M @ T.T
-        prop = (exact_tick(stage, m + P + 1, h) if propagator == "exact"
-                else euler_tick(stage, m + P + 1, h, substeps))
-        cost_row = running_cost_matrix(stage, n, m, d_z, n).ravel() @ prop.Psi
+        varying = stage.varying is not None
+        if varying and propagator != "exact":
+            raise ValueError("the Euler plant scheme is evaluated for time-invariant stages only")
+        if not varying:
+            prop = (exact_tick(stage, m + P + 1, h) if propagator == "exact"
+                    else euler_tick(stage, m + P + 1, h, substeps))
+            cost_row = running_cost_matrix(stage, n, m, d_z, n).ravel() @ prop.Psi
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             F = np.zeros((m, d_y))
             F[:, :n] = -table.K[j]
@@ -106,8 +135,12 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             Tz[n:n + m] = F
             Tz[n + m:, n:] = np.eye(P + 1)
             Mz = Tz @ M @ Tz.T
-            J += cost_row @ Mz.ravel()
-            Mz = (prop.Phi @ Mz.ravel()).reshape(d_z, d_z)
+            if varying:
+                Mz, dJ = _tick_varying(stage, Mz, table.t0 + j * h, h, n, m)
+                J += dJ
+            else:
+                J += cost_row @ Mz.ravel()
+                Mz = (prop.Phi @ Mz.ravel()).reshape(d_z, d_z)
             M = Mz[np.ix_(keep, keep)]
             if path:
                 path_mean.append(M[:n, -1].copy())
@@ -141,29 +174,24 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
         elif M.shape[0] != d:                  # no multipliers act here: drop v
             keep = np.r_[0:n, M.shape[0] - 1]
             M = M[np.ix_(keep, keep)]
-        noise = noise_columns(stage.G, d)
-        Lb = running_cost_matrix(stage, n, m, n + m + 1, n)
-        base = np.zeros((d, d))
-        base[:n, :n] = stage.A
 
-        H = stage.H if stage.has_control_noise else None
-
-        def rhs(t, y, st=st, stage=stage, p=p, d=d, noise=noise, Lb=Lb, base=base, H=H):
+        def rhs(t, y, st=st, stage=stage, d=d):
+            sd = stage.at(t)                     # the plant's data at t (may vary)
             Mt = y[:-1].reshape(d, d)
             K, k0, L = st.gains(np.array([t]))
             F = np.concatenate([-K[0], -L[0], -k0[0][:, None]], axis=1)   # u = F y
-            Abar = base.copy()
-            Abar[:n] += stage.B @ F
+            Abar = np.zeros((d, d))
+            Abar[:n, :n] = sd.A
+            Abar[:n] += sd.B @ F
             AM = Abar @ Mt
-            if H is None:
-                dM = AM + AM.T + (noise @ y[:-1]).reshape(d, d)
-            else:
-                # u = F y turns the input noise into multipliers of y: the diffusion is
-                # sum_i y_i (G_i + sum_j F_ji H_j) dZ, entering the x rows.
-                Geff = np.einsum("ji,jak->iak", F, H)
-                Geff[:n] += stage.G
-                dM = AM + AM.T
-                dM[:n, :n] += np.einsum("ij,iak,jbk->ab", Mt, Geff, Geff)
+            # The diffusion sum_i x_i G_i + sum_j u_j H_j with u = F y is sum_i y_i Geff_i dZ.
+            Geff = np.zeros((d,) + sd.G.shape[1:])
+            Geff[:n] = sd.G
+            if sd.H is not None:
+                Geff += np.einsum("ji,jak->iak", F, sd.H)
+            dM = AM + AM.T
+            dM[:n, :n] += np.einsum("ij,iak,jbk->ab", Mt, Geff, Geff)
+            Lb = running_cost_matrix(sd, n, m, n + m + 1, n)
             Tw = np.zeros((n + m + 1, d))
             Tw[:n, :n] = np.eye(n)
             Tw[n:n + m] = F

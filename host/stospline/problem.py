@@ -10,9 +10,9 @@ import hashlib
 import math
 import re
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -55,6 +55,12 @@ class Stage:
     r: np.ndarray
     rho: float
     H: np.ndarray | None = None   # shape (m, n, mz)
+    # Time-varying data: t -> {field: value at t} for the fields that vary (None: constant).
+    varying: Callable[[float], dict] | None = field(default=None, compare=False)
+
+    def at(self, t: float) -> "Stage":
+        """The stage's data frozen at time t (itself if nothing varies)."""
+        return self if self.varying is None else replace(self, varying=None, **self.varying(t))
 
     @property
     def noise_tensor(self) -> np.ndarray:
@@ -67,8 +73,13 @@ class Stage:
         return self.H is not None and bool(np.any(self.H))
 
     def without_noise(self) -> "Stage":
+        varying = None
+        if self.varying is not None:
+            outer = self.varying
+            varying = lambda t: {k: v for k, v in outer(t).items()  # noqa: E731
+                                 if k not in ("G", "H")}
         return Stage(self.A, self.B, np.zeros_like(self.G), self.Q, self.S, self.R,
-                     self.q, self.r, self.rho, None)
+                     self.q, self.r, self.rho, None, varying)
 
 
 @dataclass(frozen=True)
@@ -147,7 +158,7 @@ class Problem:
 _TOP_KEYS = {"name", "t0", "x0", "tick_hz", "dynamics", "cost", "knots", "stages", "plot"}
 _TOP_REQUIRED = {"name", "x0", "tick_hz", "dynamics", "cost", "knots"}
 _DYN_KEYS, _DYN_REQUIRED = {"A", "B", "noise"}, {"A", "B"}
-_COST_KEYS, _COST_REQUIRED = {"Q", "S", "R", "q", "r", "rho"}, {"R"}
+_COST_KEYS, _COST_REQUIRED = {"Q", "S", "R", "q", "r", "rho", "tracking"}, {"R"}
 _C_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _U32_MAX = 2**32 - 1  # the C table stores tick counts and the tick rate as uint32_t
 _N_IS_LEN_X0 = " (n, the length of x0)"
@@ -280,41 +291,139 @@ def _parse_noise(value: Any, path: str, n: int, m: int) -> list[tuple[int, np.nd
                                               f"({seen[i]}); give one entry per {key}")
         seen[i] = ip
         gp = f"{ip}.G"
-        want = items[0][1].shape[1] if items else None
+        want = _first(items[0][1]).shape[1] if items else None
         why = f" (as {items[0][2]}: one column per Brownian component)" if items else ""
-        items.append((i, _matrix(item["G"], gp, (n, want), (_N_IS_LEN_X0, why)), gp))
+        g = _series_or(item["G"], gp, _matrix, (n, want), (_N_IS_LEN_X0, why))
+        items.append((i, g, gp))
     return items
+
+
+@dataclass(frozen=True)
+class Series:
+    """Samples ``values[i]`` at times ``t[i]`` with "linear" or "zoh" (hold the last sample)
+    interpolation; times outside the samples take the nearest end value."""
+    t: np.ndarray
+    values: np.ndarray
+    interpolation: str
+    path: str
+
+    def __call__(self, t: float) -> np.ndarray:
+        ts = self.t
+        if t <= ts[0]:
+            return self.values[0]
+        if t >= ts[-1]:
+            return self.values[-1]
+        i = int(np.searchsorted(ts, t, side="right")) - 1
+        if self.interpolation == "zoh":
+            return self.values[i]
+        w = (t - ts[i]) / (ts[i + 1] - ts[i])
+        return (1 - w) * self.values[i] + w * self.values[i + 1]
+
+
+def _series_or(value: Any, path: str, parse, *args):
+    """A constant parsed by `parse`, or ``{t = [...], values = [...], interpolation = ...}``."""
+    if not isinstance(value, dict):
+        return parse(value, path, *args)
+    _check_keys(value, path, {"t", "values", "interpolation"}, {"t", "values"})
+    t = _vector(value["t"], _join(path, "t"), None)
+    if np.any(np.diff(t) <= 0):
+        raise ProblemError(_join(path, "t"), "sample times must increase strictly")
+    vals = value["values"]
+    if not isinstance(vals, list) or len(vals) != len(t):
+        raise ProblemError(_join(path, "values"), f"must be an array of {len(t)} samples, one "
+                                                  f"per entry of {_join(path, 't')}")
+    parsed = np.array([parse(v, f"{path}.values[{i}]", *args) for i, v in enumerate(vals)])
+    interp = value.get("interpolation", "linear")
+    if interp not in ("linear", "zoh"):
+        raise ProblemError(_join(path, "interpolation"), f"must be \"linear\" or \"zoh\", "
+                                                         f"got {interp!r}")
+    return Series(t, parsed, interp, path)
+
+
+def _each(value, path: str):
+    """(sample, path) pairs of a constant or a `Series`."""
+    if isinstance(value, Series):
+        return [(v, f"{path}.values[{i}]") for i, v in enumerate(value.values)]
+    return [(value, path)]
+
+
+def _first(value):
+    return value.values[0] if isinstance(value, Series) else value
 
 
 @dataclass
 class _StageData:
-    """A parsed stage before the common noise width mz is known."""
+    """A parsed stage before the common noise width mz is known; fields may be `Series`."""
     fields: dict
     B_path: str
-    noise: list[tuple[int, np.ndarray, str]]
+    noise: list[tuple[int, Any, str]]
+    tracking: tuple | None = None      # (C, Qy, y0 Series) of an integral tracking cost
 
-    def build(self, n: int, mz: int) -> Stage:
-        m = self.fields["B"].shape[1]
+    def series(self) -> list[Series]:
+        out = [v for v in self.fields.values() if isinstance(v, Series)]
+        out += [g for _, g, _ in self.noise if isinstance(g, Series)]
+        return out + ([self.tracking[2]] if self.tracking else [])
+
+    def _noise_at(self, n: int, m: int, mz: int, t: float | None) -> np.ndarray:
         GH = np.zeros((n + m, n, mz))
         for i, g, _ in self.noise:
-            GH[i] = g
-        H = GH[n:] if np.any(GH[n:]) else None
-        return Stage(G=GH[:n], H=H, **self.fields)
+            GH[i] = g(t) if isinstance(g, Series) and t is not None else _first(g)
+        return GH
+
+    def _fields_at(self, t: float | None) -> dict:
+        f = {k: (v(t) if isinstance(v, Series) and t is not None else _first(v))
+             for k, v in self.fields.items()}
+        if self.tracking is not None:
+            # E |C x - y0(t)|^2_Qy adds C'Qy C to Q, -C'Qy y0 to q and y0'Qy y0 to rho.
+            C, Qy, y0s = self.tracking
+            y0 = y0s(t) if t is not None else y0s.values[0]
+            f["Q"] = f["Q"] + C.T @ Qy @ C
+            f["q"] = f["q"] - C.T @ Qy @ y0
+            f["rho"] = f["rho"] + float(y0 @ Qy @ y0)
+        return f
+
+    def build(self, n: int, mz: int) -> Stage:
+        m = _first(self.fields["B"]).shape[1]
+        GH = self._noise_at(n, m, mz, None)
+        H = GH[n:] if any(i >= n for i, _, _ in self.noise) else None
+        varying = None
+        if self.series():
+            keys = [k for k, v in self.fields.items() if isinstance(v, Series)]
+            if self.tracking is not None:
+                keys += ["Q", "q", "rho"]
+            noisy = any(isinstance(g, Series) for _, g, _ in self.noise)
+
+            def varying(t, keys=tuple(set(keys)), noisy=noisy):
+                f = self._fields_at(t)
+                out = {k: f[k] for k in keys}
+                if noisy:
+                    GHt = self._noise_at(n, m, mz, t)
+                    out["G"] = GHt[:n]
+                    if H is not None:
+                        out["H"] = GHt[n:]
+                return out
+        base = self._fields_at(None)
+        return Stage(G=GH[:n], H=H, varying=varying, **base)
 
 
 def _parse_stage(dyn: _Layers, cost: _Layers, n: int,
                  m_ref: tuple[int, str] | None) -> _StageData:
     """Check one stage's dynamics and cost, looked up through `dyn` and `cost` layers."""
     value, path = _pick(dyn, "A")
-    A = _matrix(value, path, (None, None))
-    if A.shape[0] != A.shape[1]:
-        raise ProblemError(path, f"must be square, got shape {A.shape[0]}x{A.shape[1]}")
-    if A.shape[0] != n:
-        raise ProblemError(path, f"is {A.shape[0]}x{A.shape[1]} but x0 has {n} entries; "
+    A = _series_or(value, path, _matrix, (None, None))
+    A0 = _first(A)
+    if A0.shape[0] != A0.shape[1]:
+        raise ProblemError(path, f"must be square, got shape {A0.shape[0]}x{A0.shape[1]}")
+    if A0.shape[0] != n:
+        raise ProblemError(path, f"is {A0.shape[0]}x{A0.shape[1]} but x0 has {n} entries; "
                                  f"A must be n x n with n = {n}, the length of x0")
+    if isinstance(A, Series):
+        _series_or(value, path, _matrix, (n, n))          # every sample n x n
     value, B_path = _pick(dyn, "B")
-    B = _matrix(value, B_path, (n, None), (_N_IS_LEN_X0, ""))
-    m = B.shape[1]
+    B = _series_or(value, B_path, _matrix, (n, None), (_N_IS_LEN_X0, ""))
+    m = _first(B).shape[1]
+    if isinstance(B, Series):
+        _series_or(value, B_path, _matrix, (n, m), (_N_IS_LEN_X0, ""))
     if m_ref is not None and m != m_ref[0]:
         raise ProblemError(B_path, f"has {m} columns (inputs) but {m_ref[1]} has {m_ref[0]}; "
                                    f"every stage must have the same number of inputs m")
@@ -323,7 +432,9 @@ def _parse_stage(dyn: _Layers, cost: _Layers, n: int,
 
     def optional(key, parse, default, *args):
         value, path = _pick(cost, key)
-        return (default, "0 (default)") if path is None else (parse(value, path, *args), path)
+        if path is None:
+            return default, "0 (default)"
+        return _series_or(value, path, parse, *args), path
 
     why_m = (f" (m, the number of columns of {B_path})",) * 2
     R, R_path = optional("R", _matrix, None, (m, m), why_m)
@@ -333,21 +444,55 @@ def _parse_stage(dyn: _Layers, cost: _Layers, n: int,
     r, _ = optional("r", _vector, np.zeros(m), m, why_m[0])
     rho, _ = optional("rho", _number, 0.0)
 
-    _check_symmetric(R, R_path)
-    w = np.linalg.eigvalsh(R)
-    if w.min() <= 1e-12 * _tol(R):
-        raise ProblemError(R_path, f"must be positive definite (smallest eigenvalue "
+    for Ri, Rp in _each(R, R_path):
+        _check_symmetric(Ri, Rp)
+        w = np.linalg.eigvalsh(Ri)
+        if w.min() <= 1e-12 * _tol(Ri):
+            raise ProblemError(Rp, f"must be positive definite (smallest eigenvalue "
                                    f"{w.min():.6g}); every input needs a positive cost")
-    _check_symmetric(Q, Q_path)
-    H = np.block([[Q, S], [S.T, R]])
-    h = np.linalg.eigvalsh(H).min()
-    if h < -1e-10 * _tol(H):
-        # Name the innermost table that supplies any of Q, S, R.
-        where = next(p for t, p in cost if {"Q", "S", "R"} & set(t))
-        raise ProblemError(where, f"[[Q, S], [S', R]] must be positive semidefinite (the "
-                                  f"paper's condition (3)), smallest eigenvalue {h:.6g}; "
-                                  f"here Q is {Q_path}, S is {S_path}, R is {R_path}")
-    return _StageData(dict(A=A, B=B, Q=Q, S=S, R=R, q=q, r=r, rho=rho), B_path, noise)
+    for Qi, Qp in _each(Q, Q_path):
+        _check_symmetric(Qi, Qp)
+    # Condition (3) at every sample time of Q, S, R: between samples each is affine in t, so
+    # the block matrix is too, and positive semidefinite at both ends means in between.
+    grid = sorted({float(t) for x in (Q, S, R) if isinstance(x, Series) for t in x.t} or {0.0})
+    for t in grid:
+        Qt, St, Rt = (x(t) if isinstance(x, Series) else x for x in (Q, S, R))
+        H = np.block([[Qt, St], [St.T, Rt]])
+        h = np.linalg.eigvalsh(H).min()
+        if h < -1e-10 * _tol(H):
+            # Name the innermost table that supplies any of Q, S, R.
+            where = next(p for tb, p in cost if {"Q", "S", "R"} & set(tb))
+            at = f" at t = {t:g}" if len(grid) > 1 or isinstance(Q, Series) else ""
+            raise ProblemError(where, f"[[Q, S], [S', R]] must be positive semidefinite (the "
+                                      f"paper's condition (3)){at}, smallest eigenvalue "
+                                      f"{h:.6g}; here Q is {Q_path}, S is {S_path}, R is {R_path}")
+    tracking = None
+    value, tpath = _pick(cost, "tracking")
+    if tpath is not None:
+        tracking = _parse_tracking(value, tpath, n)
+    return _StageData(dict(A=A, B=B, Q=Q, S=S, R=R, q=q, r=r, rho=rho), B_path, noise, tracking)
+
+
+def _parse_tracking(value: Any, path: str, n: int) -> tuple:
+    """``tracking = {C = (ny x n), weight = Qy (ny x ny) or a number, t = [...], y0 = [[...]],
+    interpolation = "linear"}``: the integral cost ``E int |C x - y0(t)|^2_Qy dt``."""
+    _check_keys(value, path, {"C", "weight", "t", "y0", "interpolation"}, {"C", "t", "y0"})
+    C = _matrix(value["C"], _join(path, "C"), (None, n), (" (one row per tracked output)",
+                                                          _N_IS_LEN_X0))
+    ny = C.shape[0]
+    w = value.get("weight", 1.0)
+    if isinstance(w, list):
+        Qy = _matrix(w, _join(path, "weight"), (ny, ny))
+        _check_symmetric(Qy, _join(path, "weight"))
+    else:
+        Qy = _number(w, _join(path, "weight")) * np.eye(ny)
+    if np.linalg.eigvalsh(Qy).min() < -1e-12 * _tol(Qy):
+        raise ProblemError(_join(path, "weight"), "must be positive semidefinite")
+    raw = {"t": value["t"], "values": value["y0"],
+           "interpolation": value.get("interpolation", "linear")}
+    y0 = _series_or(raw, path, _vector, ny, " (one entry per row of C)")
+    y0 = Series(y0.t, y0.values, y0.interpolation, _join(path, "y0"))
+    return C, Qy, y0
 
 
 def _parse_knot(raw: Any, path: str, n: int) -> Knot:
@@ -474,7 +619,7 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     _check_times(knots, t0, tick_hz)
 
     if "stages" in doc:
-        m_ref = (default.fields["B"].shape[1], default.B_path)
+        m_ref = (_first(default.fields["B"]).shape[1], default.B_path)
         data = [_parse_stage([(sd, f"stages[{k}].dynamics"), (dyn, "dynamics")],
                              [(sc, f"stages[{k}].cost"), (cost, "cost")], n, m_ref)
                 for k, (sd, sc) in enumerate(_parse_stage_overrides(doc["stages"], len(knots)))]
@@ -483,13 +628,22 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     # Every stage has the same number mz of Brownian components: the first noise matrix given
     # sets it; a stage without noise gets zero matrices of that width.
     first = next((g for d in [default, *data] for g in d.noise), None)
-    mz = 1 if first is None else first[1].shape[1]
+    mz = 1 if first is None else _first(first[1]).shape[1]
     for d in data:
         for _, g, gp in d.noise:
-            if g.shape[1] != mz:
-                raise ProblemError(gp, f"has {g.shape[1]} columns but {first[2]} has {mz}; "
+            if _first(g).shape[1] != mz:
+                raise ProblemError(gp, f"has {_first(g).shape[1]} columns but {first[2]} has "
+                                       f"{mz}; "
                                        f"every stage must have the same number of Brownian "
                                        f"components mz (columns of G)")
+    times = [t0] + [kn.t for kn in knots]
+    for k, d in enumerate(data):
+        for ser in d.series():
+            if ser.t[0] > times[k] + 1e-12 or ser.t[-1] < times[k + 1] - 1e-12:
+                where = f"stages[{k}]" if "stages" in doc else "every stage"
+                raise ProblemError(_join(ser.path, "t"), f"samples cover [{ser.t[0]:g}, "
+                                   f"{ser.t[-1]:g}] but {where} needs [{times[k]:g}, "
+                                   f"{times[k + 1]:g}]")
     built = {id(d): d.build(n, mz) for d in data}
     stages = tuple(built[id(d)] for d in data)
 

@@ -38,6 +38,12 @@ def latch_groups(problem: Problem, mode: str) -> tuple[list[LatchGroup], list[La
     """Return the groups and, per stage, the group whose multipliers act on that stage."""
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    for k, kn in enumerate(problem.knots):
+        if kn.constraint is not None and kn.constraint.is_band:
+            from .design import DesignError
+            raise DesignError(f"knots[{k}].constraint", "a band (lower/upper) needs the joint "
+                                                        "band design (stospline.bands; CLI "
+                                                        "--mode joint)")
     constrained = [k for k, kn in enumerate(problem.knots) if kn.n_constraints]
     n_st = len(problem.knots)
     if mode == "stagewise":

@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from .codegen import GENERATOR, generate_c
-from .design import ContinuousDesign, design_continuous
+from .bands import BandDesign, design_bands, has_bands
+from .design import ContinuousDesign, DesignError, design_continuous
 from .design_zoh import ZohDesign, design_zoh
 from .harness import build_controller
 from .montecarlo import MonteCarloResult, simulate, z_value
@@ -56,7 +57,7 @@ class Designed:
     the tick rate, which is what the firmware runs.
     """
     problem: Problem
-    design: ContinuousDesign | ZohDesign
+    design: ContinuousDesign | ZohDesign | BandDesign
     discretization: str
     table: GainTable
     law: Moments
@@ -75,7 +76,20 @@ def design_problem(problem: Problem, *, noise: bool = True,
     mode : {"stagewise", "joint"}
         Multipliers latched at every stage start, or once at t0 (see `multipliers`).
     """
-    if discretization == "exact-zoh":
+    if has_bands(problem):
+        if mode != "joint":
+            raise DesignError("knots", "band constraints (lower/upper) are exact only with one "
+                                       "multiplier vector for all knots: use mode joint "
+                                       "(--mode joint)")
+        if discretization not in DISCRETIZATIONS:
+            raise ValueError(f"discretization must be one of {DISCRETIZATIONS}")
+        design = design_bands(problem, discretization=discretization, noise=noise)
+        if discretization == "exact-zoh":
+            law = evaluate_table(problem, design.table(quantize=False), path=False)
+        else:
+            law = evaluate_continuous(problem, design.base)
+        table = design.table()
+    elif discretization == "exact-zoh":
         design = design_zoh(problem, noise=noise, mode=mode)
         law = evaluate_table(problem, design.table(quantize=False), path=False)
         table = design.table()
@@ -87,6 +101,11 @@ def design_problem(problem: Problem, *, noise: bool = True,
         raise ValueError(f"discretization must be one of {DISCRETIZATIONS}")
     return Designed(problem, design, discretization, table, law,
                     evaluate_table(problem, table, path=False))
+
+
+def _violation(y: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Signed distance outside [lo, hi] per row (0 inside; for an equality, y - value)."""
+    return np.where(lo == hi, y - lo, np.maximum(y - hi, 0) - np.maximum(lo - y, 0))
 
 
 def design_summary(d: Designed) -> dict:
@@ -102,10 +121,11 @@ def design_summary(d: Designed) -> dict:
             "implemented_cov": d.implemented.knot_cov[k],
         }
         if kn.constraint is not None:
+            lo, hi = kn.constraint.bounds
             entry["constraint"] = {
-                "target": kn.constraint.value,
-                "design_residual": d.law.knot_constraint[k] - kn.constraint.value,
-                "implemented_residual": d.implemented.knot_constraint[k] - kn.constraint.value,
+                "lower": lo, "upper": hi,
+                "design_violation": _violation(d.law.knot_constraint[k], lo, hi),
+                "implemented_violation": _violation(d.implemented.knot_constraint[k], lo, hi),
             }
         knots.append(entry)
     return _r({
@@ -120,6 +140,7 @@ def design_summary(d: Designed) -> dict:
         "oracle_J_design": d.law.J,
         "oracle_J_implemented": d.implemented.J,
         "knots": knots,
+        **({"active_set": d.design.active_set()} if isinstance(d.design, BandDesign) else {}),
     })
 
 

@@ -25,7 +25,8 @@ def plot_corridor(d, mc, out: str | Path) -> None:
     p = d.problem
     ia, ib = p.plot.get("axes", [0, 1])
     exact = evaluate_table(p, d.table)
-    end = p.knots[-1].constraint.value if p.knots[-1].constraint is not None else None
+    last = p.knots[-1].constraint
+    end = None if last is None or last.is_band else last.value
     fig, axs = plt.subplots(2, 2, figsize=(10, 8.5))
     (a_setup, a_real), (a_mean, a_u) = axs
     for ax, title in ((a_setup, "start and goal"), (a_real, "one realisation"),

@@ -92,9 +92,23 @@ class Penalty:
 
 @dataclass(frozen=True)
 class Constraint:
-    """Knot constraint on the expected output ``E{C x} = value``."""
+    """Knot constraint on the expected output: ``E{C x} = value``, or a band
+    ``lower <= E{C x} <= upper`` (then `value` is None; the paper's Section 4)."""
     C: np.ndarray
-    value: np.ndarray
+    value: np.ndarray | None
+    lower: np.ndarray | None = None
+    upper: np.ndarray | None = None
+
+    @property
+    def is_band(self) -> bool:
+        return self.value is None
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(lower, upper)``; both equal `value` for an equality."""
+        if self.value is not None:
+            return self.value, self.value
+        return self.lower, self.upper
 
 
 @dataclass(frozen=True)
@@ -512,10 +526,28 @@ def _parse_knot(raw: Any, path: str, n: int) -> Knot:
         penalty = Penalty(C, target, weight)
     if "constraint" in raw:
         cp = _join(path, "constraint")
-        con = _check_keys(raw["constraint"], cp, {"C", "value"}, {"C", "value"})
+        con = _check_keys(raw["constraint"], cp, {"C", "value", "lower", "upper"}, {"C"})
         C = _matrix(con["C"], _join(cp, "C"), (None, n), ("", _N_IS_LEN_X0))
-        value = _vector(con["value"], _join(cp, "value"), C.shape[0], rows)
-        constraint = Constraint(C, value)
+        if "value" in con:
+            for key in ("lower", "upper"):
+                if key in con:
+                    raise ProblemError(_join(cp, key), "give either value (an equality) or "
+                                                       "lower and upper (a band), not both")
+            value = _vector(con["value"], _join(cp, "value"), C.shape[0], rows)
+            constraint = Constraint(C, value)
+        else:
+            for key in ("lower", "upper"):
+                if key not in con:
+                    raise ProblemError(_join(cp, key), "is required: a constraint needs value "
+                                                       "(an equality) or lower and upper (a band)")
+            lo = _vector(con["lower"], _join(cp, "lower"), C.shape[0], rows)
+            hi = _vector(con["upper"], _join(cp, "upper"), C.shape[0], rows)
+            bad = np.flatnonzero(lo > hi)
+            if bad.size:
+                i = int(bad[0])
+                raise ProblemError(_join(cp, "lower"), f"row {i}: lower {lo[i]:g} > upper "
+                                                       f"{hi[i]:g}; the band is empty")
+            constraint = Constraint(C, None, lo, hi)
     return Knot(t, penalty, constraint)
 
 

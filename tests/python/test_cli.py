@@ -25,7 +25,7 @@ def test_design_json_summary(robot_zoh):
     assert len(s["knots"]) == 2
     for k, kn in enumerate(s["knots"]):
         assert len(kn["mean"]) == 4 and len(kn["cov"]) == 4
-        assert max(abs(v) for v in kn["constraint"]["design_residual"]) < 1e-9
+        assert max(abs(v) for v in kn["constraint"]["design_violation"]) < 1e-9
 
 
 def test_simulate_json_reports_ci_and_bias():

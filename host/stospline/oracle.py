@@ -16,9 +16,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.integrate import solve_ivp
+from scipy.linalg import expm
 
 from .design import ContinuousDesign
-from .moments import euler_tick, exact_tick, noise_columns, running_cost_matrix
+from .moments import augmented_drift, euler_tick, exact_tick, running_cost_matrix
 from .problem import Problem
 from .tables import GainTable
 
@@ -65,16 +66,16 @@ def _latch_transform(n: int, P: int, Lam: np.ndarray, lam0: np.ndarray, d_old: i
     return T
 
 
-def _tick_varying(stage, Mz: np.ndarray, t0: float, h: float, n: int, m: int,
+def _tick_varying(stage, Mw: np.ndarray, t0: float, h: float, n: int, m: int,
                   rtol: float = 1e-12, atol: float = 1e-15):
-    """One tick of time-varying stage data: integrate the moment ODE of ``z = [x; u; ...; 1]``
-    (u held) and the expected running cost with DOP853. Independent of the designer's
-    per-tick maps."""
-    d = Mz.shape[0]
+    """One tick of time-varying stage data for ``w = [x; u; 1]`` (u held): integrate the
+    moment ODE, the expected running cost and the mean transition ``[Phi, Gamma]`` (x+ =
+    Phi x + Gamma u in expectation) with DOP853. Independent of the designer's tick maps."""
+    d = n + m + 1
 
     def rhs(t, y):
         sd = stage.at(t)
-        M = y[:-1].reshape(d, d)
+        M = y[:d * d].reshape(d, d)
         Ah = np.zeros((d, d))
         Ah[:n, :n], Ah[:n, n:n + m] = sd.A, sd.B
         AM = Ah @ M
@@ -82,18 +83,28 @@ def _tick_varying(stage, Mz: np.ndarray, t0: float, h: float, n: int, m: int,
         dM = AM + AM.T
         dM[:n, :n] += np.einsum("ij,iak,jbk->ab", M[:n + m, :n + m], G, G)
         Lb = running_cost_matrix(sd, n, m, d, n)
-        return np.concatenate([dM.ravel(), [np.sum(Lb * M)]])
+        F = y[d * d + 1:].reshape(n, n + m)
+        dF = sd.A @ F
+        dF[:, n:] += sd.B
+        return np.concatenate([dM.ravel(), [np.sum(Lb * M)], dF.ravel()])
 
-    res = solve_ivp(rhs, (t0, t0 + h), np.concatenate([Mz.ravel(), [0.0]]), method="DOP853",
-                    rtol=rtol, atol=atol)
-    M = res.y[:-1, -1].reshape(d, d)
-    return 0.5 * (M + M.T), float(res.y[-1, -1])
+    F0 = np.hstack([np.eye(n), np.zeros((n, m))])
+    res = solve_ivp(rhs, (t0, t0 + h), np.concatenate([Mw.ravel(), [0.0], F0.ravel()]),
+                    method="DOP853", rtol=rtol, atol=atol)
+    y = res.y[:, -1]
+    M = y[:d * d].reshape(d, d)
+    return 0.5 * (M + M.T), float(y[d * d]), y[d * d + 1:].reshape(n, n + m)
 
 
 def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
                    substeps: int = 4, path: bool = True) -> Moments:
     """Exact moments of the controller as implemented: ZOH at the table's tick rate, with the
     table's (quantized) values, latched at each stage's first tick.
+
+    The augmented state is ``y = [x; v; 1]``. Over a tick, ``E xx'`` depends only on the
+    moments of ``w = [x; u; 1]`` (u = F y is held; v enters neither the dynamics nor the
+    cost), and ``E x v'`` follows the mean map ``E x+ v' = [Ad, Bd] E [x; u] v'``; so each tick
+    costs a small fixed map however many multipliers are latched.
 
     Parameters
     ----------
@@ -103,14 +114,14 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     """
     n, m, P = table.dims
     h = 1.0 / table.tick_hz
-    d_y, d_z = n + P + 1, n + m + P + 1
+    d_y, d_w = n + P + 1, n + m + 1
     x0 = problem.x0
     y0 = np.concatenate([x0, np.zeros(P), [1.0]])
     M = np.outer(y0, y0)
     J = 0.0
     means, covs, cons = [], [], []
     path_mean = [x0.copy()] if path else []
-    keep = np.r_[0:n, n + m:d_z]           # z -> y: drop u
+    xs, vs = slice(0, n), slice(n, n + P)
     for k in range(table.n_stages):
         stage = problem.stages[k]
         if k == 0 or table.stage_np[k] > 0:      # else: v latched earlier is kept
@@ -122,26 +133,33 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         if varying and propagator != "exact":
             raise ValueError("the Euler plant scheme is evaluated for time-invariant stages only")
         if not varying:
-            prop = (exact_tick(stage, m + P + 1, h) if propagator == "exact"
-                    else euler_tick(stage, m + P + 1, h, substeps))
-            cost_row = running_cost_matrix(stage, n, m, d_z, n).ravel() @ prop.Psi
+            prop = (exact_tick(stage, m + 1, h) if propagator == "exact"
+                    else euler_tick(stage, m + 1, h, substeps))
+            cost_row = running_cost_matrix(stage, n, m, d_w, n).ravel() @ prop.Psi
+            # Mean map of one tick: E x+ = Ad x + Bd u (exact for both propagators).
+            Fmean = expm(augmented_drift(stage, m) * h)[:n]
+        Tw = np.zeros((d_w, d_y))
+        Tw[:n, :n] = np.eye(n)
+        Tw[-1, -1] = 1.0
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
-            F = np.zeros((m, d_y))
-            F[:, :n] = -table.K[j]
-            F[:, n:n + P] = -table.L[j]
-            F[:, -1] = -table.k0[j]
-            Tz = np.zeros((d_z, d_y))
-            Tz[:n, :n] = np.eye(n)
-            Tz[n:n + m] = F
-            Tz[n + m:, n:] = np.eye(P + 1)
-            Mz = Tz @ M @ Tz.T
+            Tw[n:n + m, :n] = -table.K[j]
+            Tw[n:n + m, n:n + P] = -table.L[j]
+            Tw[n:n + m, -1] = -table.k0[j]
+            TM = Tw @ M                               # E w y'
+            Mw = TM @ Tw.T
+            Mwv = TM[:n + m, vs]                      # E [x; u] v'
             if varying:
-                Mz, dJ = _tick_varying(stage, Mz, table.t0 + j * h, h, n, m)
+                Mw, dJ, Fmean = _tick_varying(stage, Mw, table.t0 + j * h, h, n, m)
                 J += dJ
             else:
-                J += cost_row @ Mz.ravel()
-                Mz = (prop.Phi @ Mz.ravel()).reshape(d_z, d_z)
-            M = Mz[np.ix_(keep, keep)]
+                J += cost_row @ Mw.ravel()
+                Mw = (prop.Phi @ Mw.ravel()).reshape(d_w, d_w)
+            Mxv = Fmean @ Mwv
+            M = M.copy()
+            M[xs, xs] = Mw[:n, :n]
+            M[xs, -1] = M[-1, xs] = Mw[:n, -1]
+            M[xs, vs] = Mxv
+            M[vs, xs] = Mxv.T
             if path:
                 path_mean.append(M[:n, -1].copy())
         pen, mean, cov, con = _knot_terms(problem, k, M, n)

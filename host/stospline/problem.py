@@ -169,7 +169,8 @@ class Problem:
 # ---------------------------------------------------------------------------------------
 # Parsing helpers: each takes the raw value and its field path, returns a checked value.
 
-_TOP_KEYS = {"name", "t0", "x0", "tick_hz", "dynamics", "cost", "knots", "stages", "plot"}
+_TOP_KEYS = {"name", "t0", "x0", "tick_hz", "dynamics", "cost", "knots", "stages", "plot",
+             "regions"}
 _TOP_REQUIRED = {"name", "x0", "tick_hz", "dynamics", "cost", "knots"}
 _DYN_KEYS, _DYN_REQUIRED = {"A", "B", "noise"}, {"A", "B"}
 _COST_KEYS, _COST_REQUIRED = {"Q", "S", "R", "q", "r", "rho", "tracking"}, {"R"}
@@ -614,6 +615,52 @@ def _parse_plot(plot: Any, n: int) -> dict:
     return plot
 
 
+def _merge_constraints(a: Constraint | None, b: Constraint) -> Constraint:
+    """Stack the rows of two constraints at one knot (equality rows keep lower = upper)."""
+    if a is None:
+        return b
+    (alo, ahi), (blo, bhi) = a.bounds, b.bounds
+    C = np.vstack([a.C, b.C])
+    lo, hi = np.concatenate([alo, blo]), np.concatenate([ahi, bhi])
+    return Constraint(C, lo.copy()) if np.array_equal(lo, hi) else Constraint(C, None, lo, hi)
+
+
+def _parse_regions(raw: Any, n: int, t0: float, t_end: float,
+                   tick_hz: int) -> list[tuple[float, Constraint]]:
+    """``[[regions]]``: keep ``lower <= E{C x(t)} <= upper`` on the open interval ``t = [a, b]``,
+    imposed as bands at ``a + every, a + 2 every, ...`` strictly before b (the paper's open
+    problem f(t) <= E y(t) <= g(t), approximated on a dense grid)."""
+    if not isinstance(raw, list):
+        raise ProblemError("regions", f"must be an array of tables ([[regions]]), got {_kind(raw)}")
+    out = []
+    for i, reg in enumerate(raw):
+        rp = f"regions[{i}]"
+        _check_keys(reg, rp, {"t", "every", "C", "lower", "upper"},
+                    {"t", "every", "C", "lower", "upper"})
+        a, b = _vector(reg["t"], _join(rp, "t"), 2)
+        if not t0 <= a < b <= t_end:
+            raise ProblemError(_join(rp, "t"), f"must be [start, end] with {t0:g} <= start < "
+                                               f"end <= {t_end:g} (the last knot)")
+        every = _number(reg["every"], _join(rp, "every"))
+        if every <= 0:
+            raise ProblemError(_join(rp, "every"), "must be positive")
+        for key, val in (("t", a - t0), ("every", every)):
+            ticks = val * tick_hz
+            if abs(ticks - round(ticks)) > 1e-9 * max(1.0, ticks):
+                raise ProblemError(_join(rp, key), f"{val:g} s is not a whole number of ticks "
+                                                   f"at tick_hz = {tick_hz}: the bands must "
+                                                   f"fall on ticks")
+        C = _matrix(reg["C"], _join(rp, "C"), (None, n), ("", _N_IS_LEN_X0))
+        lo = _vector(reg["lower"], _join(rp, "lower"), C.shape[0], " (one entry per row of C)")
+        hi = _vector(reg["upper"], _join(rp, "upper"), C.shape[0], " (one entry per row of C)")
+        if np.any(lo > hi):
+            raise ProblemError(_join(rp, "lower"), "lower > upper: the band is empty")
+        count = int(np.floor((b - a) / every - 1e-9))
+        for j in range(1, count + 1):
+            out.append((a + j * every, Constraint(C, None, lo, hi)))
+    return out
+
+
 def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     """Validate a decoded TOML document and return a `Problem`.
 
@@ -657,6 +704,24 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
                 for k, (sd, sc) in enumerate(_parse_stage_overrides(doc["stages"], len(knots)))]
     else:
         data = [default] * len(knots)
+    if "regions" in doc:
+        # Region bands become extra knots; each splits the stage it falls in, whose data the
+        # pieces share. A band at an existing knot adds rows to that knot's constraint.
+        merged = {kn.t: (kn, d) for kn, d in zip(knots, data)}
+        user_t = np.array([kn.t for kn in knots])
+        for t, con in _parse_regions(doc["regions"], n, t0, knots[-1].t, tick_hz):
+            hit = next((tk for tk in merged if abs(tk - t) <= 1e-9 * max(1.0, abs(t))), None)
+            if hit is None:
+                stage_data = data[int(np.searchsorted(user_t, t - 1e-12))]
+                merged[t] = (Knot(t, None, con), stage_data)
+            else:
+                kn, stage_data = merged[hit]
+                merged[hit] = (Knot(kn.t, kn.penalty, _merge_constraints(kn.constraint, con)),
+                               stage_data)
+        order = sorted(merged)
+        knots = tuple(merged[t][0] for t in order)
+        data = [merged[t][1] for t in order]
+        _check_times(knots, t0, tick_hz)
     # Every stage has the same number mz of Brownian components: the first noise matrix given
     # sets it; a stage without noise gets zero matrices of that width.
     first = next((g for d in [default, *data] for g in d.noise), None)

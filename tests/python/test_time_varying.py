@@ -58,7 +58,7 @@ def test_magnus_tick_is_fourth_order_and_exact_when_constant():
     errs = []
     for h in (0.1, 0.05):
         Phi, row = varying_tick(st, 2, 0.3, h)
-        M1, J1 = _tick_varying(st, M0, 0.3, h, 2, 1)
+        M1, J1, _ = _tick_varying(st, M0, 0.3, h, 2, 1)
         errs.append(np.abs((Phi @ M0.ravel()).reshape(4, 4) - M1).max())
         assert abs(row @ M0.ravel() - J1) < 1e-5 * h
     assert 25 < errs[0] / errs[1] < 40          # local error O(h^5): ratio ~32

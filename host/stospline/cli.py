@@ -15,11 +15,17 @@ from .problem import ProblemError, load_problem
 __all__ = ["main"]
 
 
+def _options(args, problem) -> dict:
+    """Design options: command line first, then the file's [design] table, then defaults."""
+    return {"mode": args.mode or problem.options.get("mode", "stagewise"),
+            "discretization": args.discretization
+            or problem.options.get("discretization", "exact-zoh")}
+
+
 def _design(args) -> int:
     from .pipeline import design_problem, design_summary, generated_files, write_outputs
     problem = load_problem(args.problem)
-    d = design_problem(problem, noise=not args.ignore_noise,
-                       discretization=args.discretization, mode=args.mode)
+    d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem))
     files = generated_files(d, Path(args.problem).name)
     if args.out:
         written = write_outputs(args.out, files)
@@ -38,8 +44,7 @@ def _design(args) -> int:
 def _simulate(args) -> int:
     from .pipeline import design_problem, simulate_problem, simulation_summary
     problem = load_problem(args.problem)
-    d = design_problem(problem, noise=not args.ignore_noise,
-                       discretization=args.discretization, mode=args.mode)
+    d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem))
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=args.substeps)
     s = simulation_summary(d, mc, seed=args.seed, substeps=args.substeps)
     if args.json:
@@ -62,7 +67,7 @@ def _plot(args) -> int:
     from .pipeline import design_problem, simulate_problem
     from .plot import plot_corridor
     problem = load_problem(args.problem)
-    d = design_problem(problem, discretization=args.discretization, mode=args.mode)
+    d = design_problem(problem, **_options(args, problem))
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=args.substeps)
     plot_corridor(d, mc, args.out)
     print(f"wrote {args.out}")
@@ -99,12 +104,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_plot)
     for name, sp in sub.choices.items():
         sp.add_argument("--discretization", choices=["exact-zoh", "continuous"],
-                        default="exact-zoh",
+                        default=None,
                         help="exact-zoh (default): optimal for the held control at the tick "
-                             "rate; continuous: sample the continuous-time gains")
-        sp.add_argument("--mode", choices=["stagewise", "joint"], default="stagewise",
+                             "rate; continuous: sample the continuous-time gains. Default: "
+                             "the file's [design] discretization")
+        sp.add_argument("--mode", choices=["stagewise", "joint"], default=None,
                         help="stagewise (default): re-plan the multipliers at every stage "
-                             "start; joint: one multiplier vector for all knots, latched at t0")
+                             "start; joint: one multiplier vector for all knots, latched at t0 "
+                             "(needed for bands). Default: the file's [design] mode")
     return ap
 
 

@@ -133,6 +133,7 @@ class Problem:
     knots: tuple[Knot, ...]
     source_sha256: str = ""
     plot: dict = field(default_factory=dict)
+    options: dict = field(default_factory=dict)   # [design]: mode, discretization
 
     @property
     def n(self) -> int:
@@ -163,14 +164,15 @@ class Problem:
         """The same problem with every diffusion term removed (the paper's Remark 2)."""
         return Problem(self.name, self.t0, self.x0, self.tick_hz,
                        tuple(s.without_noise() for s in self.stages), self.knots,
-                       self.source_sha256, self.plot)
+                       self.source_sha256, self.plot, self.options)
 
 
 # ---------------------------------------------------------------------------------------
 # Parsing helpers: each takes the raw value and its field path, returns a checked value.
 
 _TOP_KEYS = {"name", "t0", "x0", "tick_hz", "dynamics", "cost", "knots", "stages", "plot",
-             "regions"}
+             "regions", "design"}
+_DESIGN_OPTIONS = {"mode": ("stagewise", "joint"), "discretization": ("exact-zoh", "continuous")}
 _TOP_REQUIRED = {"name", "x0", "tick_hz", "dynamics", "cost", "knots"}
 _DYN_KEYS, _DYN_REQUIRED = {"A", "B", "noise"}, {"A", "B"}
 _COST_KEYS, _COST_REQUIRED = {"Q", "S", "R", "q", "r", "rho", "tracking"}, {"R"}
@@ -745,7 +747,12 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     stages = tuple(built[id(d)] for d in data)
 
     plot = _parse_plot(doc.get("plot", {}), n)
-    return Problem(name, t0, x0, tick_hz, stages, knots, source_sha256, plot)
+    options = _check_keys(doc.get("design", {}), "design", set(_DESIGN_OPTIONS), set())
+    for key, value in options.items():
+        if value not in _DESIGN_OPTIONS[key]:
+            raise ProblemError(f"design.{key}", f"must be one of {list(_DESIGN_OPTIONS[key])}, "
+                                                f"got {value!r}")
+    return Problem(name, t0, x0, tick_hz, stages, knots, source_sha256, plot, dict(options))
 
 
 def load_problem(path: str | Path) -> Problem:

@@ -75,9 +75,16 @@ def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = 
     (T_k, m, n), (T_k, m), (T_k, m, p_k), (p_k, n), (p_k,).
 
     ``quantize=False`` keeps float64 values (for checking a design before quantization).
+
+    When more multipliers are latched than there are states (joint or band designs with many
+    knots), the table latches the state instead: ``L v = (L Lambda) x_latch + L lambda0``, so
+    ``L <- L Lambda``, ``k0 <- k0 + L lambda0``, ``Lambda <- I``, ``lambda0 <- 0``. The same
+    law, with n latched values and n multiply-accumulates per input instead of p.
     """
     n, m = problem.n, problem.m
     P = max([g[2].shape[2] for g in stages] + [g[3].shape[0] for g in stages])
+    if P > n:
+        stages, P = _latch_state(stages, n), n
     counts = [g[0].shape[0] for g in stages]
     start = np.concatenate([[0], np.cumsum(counts)]).astype(np.uint32)
     T = int(start[-1])
@@ -92,6 +99,23 @@ def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = 
     return GainTable(problem.name, int(tick_hz), problem.t0, start,
                      np.array([g[3].shape[0] for g in stages], dtype=np.uint16),
                      cast(K), cast(k0), cast(L), cast(Lam), cast(lam0), problem.source_sha256)
+
+
+def _latch_state(stages: list[tuple], n: int) -> list[tuple]:
+    """Rewrite per-stage gains so that the latched vector is the state at the latch tick."""
+    out, cur = [], None
+    for Kk, k0k, Lk, Lamk, lam0k in stages:
+        if Lamk.shape[0]:
+            cur = (Lamk, lam0k)
+        latches = Lamk.shape[0] > 0
+        if Lk.shape[2] and cur is not None:
+            L2 = np.einsum("tip,pj->tij", Lk, cur[0])
+            k02 = k0k + np.einsum("tip,p->ti", Lk, cur[1])
+        else:
+            L2, k02 = np.zeros(Kk.shape[:2] + (n,)), k0k
+        out.append((Kk, k02, L2, np.eye(n) if latches else np.zeros((0, n)),
+                    np.zeros(n if latches else 0)))
+    return out
 
 
 def ticks_per_stage(problem, tick_hz: int) -> np.ndarray:

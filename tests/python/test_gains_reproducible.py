@@ -6,10 +6,14 @@ from stospline.cli import main
 from conftest import EXAMPLES, GAINS
 
 
-def test_regenerating_robot_gains_changes_no_byte(tmp_path):
-    assert main(["design", str(EXAMPLES / "robot_corridor.toml"), "--out", str(tmp_path)]) == 0
+import pytest
+
+
+@pytest.mark.parametrize("example", sorted(p.stem for p in EXAMPLES.glob("*.toml")))
+def test_regenerating_gains_changes_no_byte(tmp_path, example):
+    assert main(["design", str(EXAMPLES / f"{example}.toml"), "--out", str(tmp_path)]) == 0
     for suffix in ("c", "h", "json"):
-        name = f"robot_corridor.{suffix}"
+        name = f"{example}.{suffix}"
         assert filecmp.cmp(tmp_path / name, GAINS / name, shallow=False), \
             f"gains/{name} differs from a fresh `stospline design` (regenerate with tools/regen_gains.sh)"
 

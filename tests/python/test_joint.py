@@ -28,9 +28,11 @@ def test_zoh_joint_design_predicts_oracle(robot_problem, hz):
     for k, kn in enumerate(robot_problem.knots):
         np.testing.assert_allclose(m.knot_constraint[k], kn.constraint.value, atol=1e-9)
     assert joint.J0 < stagewise.J0
-    # The table latches once: stage 0 carries all five multipliers, stage 1 keeps them.
+    # The table latches once, at stage 0; stage 1 keeps the latch. Five multipliers exceed
+    # n = 4 states, so the table latches the state itself (tables.build_table).
     t = joint.table()
-    assert list(t.stage_np) == [5, 0] and t.dims[2] == 5
+    assert list(t.stage_np) == [4, 0] and t.dims[2] == 4
+    np.testing.assert_array_equal(t.Lambda[0], np.eye(4, dtype=np.float32))
 
 
 def test_mc_through_c_joint_agrees_with_oracle(robot_problem):

@@ -57,9 +57,11 @@ def _simulate(args) -> int:
           f"   oracle {c['oracle_implemented']:.6g}   predicted J0 {c['predicted_J0']:.6g}")
     print(f"  plant-scheme bias in cost {s['simulation_bias']['cost']:.3g} "
           f"= {s['simulation_bias']['cost_over_stderr']:.3g} MC standard errors")
+    fmt = lambda v: "[" + ", ".join(f"{x:+.5f}" for x in v) + "]"  # noqa: E731
     for k, kn in enumerate(s["knots"]):
-        print(f"  knot {k} (t = {kn['t']:g}): MC mean {kn['mc_mean']}")
-        print(f"  {'':>17}  oracle  {kn['oracle_mean']}   z {kn['z']}")
+        print(f"  knot {k} (t = {kn['t']:g}): state mean, MC     {fmt(kn['mc_mean'])}")
+        print(f"  {'':>15}state mean, oracle {fmt(kn['oracle_mean'])}   "
+              f"z {'[' + ', '.join(f'{z:+.2f}' for z in kn['z']) + ']'}")
     return 0
 
 

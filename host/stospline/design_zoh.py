@@ -143,7 +143,8 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
         V = np.block([[PT, pT[:, None]], [pT[None, :], np.array([[cT]])]])
         q = 0 if g is None else g.size
         if g is not None:
-            if N is None:
+            if N is None or N.shape[1] != q:     # a new group (an unconstrained stage
+                # after it leaves zero-width arrays behind)
                 N, W, mv = np.zeros((n, q)), np.zeros((q, q)), np.zeros(q)
             if knot.n_constraints:
                 o = g.offset_of(k)

@@ -1,0 +1,76 @@
+/**
+ * @file stsp_bandqp.h
+ * @brief Exact on-target solver of the band dual: the joint multipliers for a measured x0.
+ *
+ * With band constraints lo <= E{C2 x(t_k)} <= hi and joint multipliers, the expected outputs
+ * of the law with multiplier vector lam are y = e - W lam, e = Nt x0 + mt (Nt = N(t0)',
+ * mt = m~(t0) of the design for zero targets), and the optimal lam solves the concave dual
+ *
+ *     max  2 lam'e - lam'W lam - 2 sum_i (lam_i > 0 ? lam_i hi_i : lam_i lo_i).
+ *
+ * W > 0, so the optimum is unique and is the one active set A (rows at a bound, value b_A)
+ * whose solution lam_A = W_AA^-1 (e_A - b_A), lam = 0 elsewhere, satisfies the KKT conditions:
+ * lam_i >= 0 at an upper bound, <= 0 at a lower bound, and lo <= y <= hi on the other rows.
+ *
+ * Method: enumerate the active sets of the band rows (equality rows, lo == hi, are always
+ * active), each a Cholesky solve in double precision, and stop at the first that satisfies
+ * the KKT conditions. Proven bound: at most 3^(band rows) candidate sets, each O(q^3); the
+ * solver refuses more than STSP_BANDQP_MAX rows. No allocation, no recursion; the caller
+ * provides the work buffer.
+ */
+#ifndef STSP_BANDQP_H
+#define STSP_BANDQP_H
+
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** Rows the solver accepts (3^8 = 6561 candidate active sets at most). */
+#ifndef STSP_BANDQP_MAX
+#define STSP_BANDQP_MAX 8u
+#endif
+
+/** Status of the solver (0 success, negative errors). */
+typedef enum {
+    STSP_BANDQP_OK = 0,
+    STSP_BANDQP_ERR_NULL = -1,        /**< a pointer argument is NULL */
+    STSP_BANDQP_ERR_DIMS = -2,        /**< q == 0, q > STSP_BANDQP_MAX or nx == 0 */
+    STSP_BANDQP_ERR_NONFINITE = -3,   /**< x0 holds NaN or +-Inf */
+    STSP_BANDQP_ERR_INFEASIBLE = -4   /**< no active set meets the conditions (W not > 0) */
+} stsp_bandqp_status_t;
+
+/** Const problem data, generated with the design (row-major). */
+typedef struct {
+    uint16_t q;              /**< stacked constraint rows */
+    uint16_t nx;             /**< states */
+    const double *Nt;        /**< [q][nx]: e = Nt x0 + mt */
+    const double *mt;        /**< [q] */
+    const double *W;         /**< [q][q], symmetric positive definite */
+    const double *lo;        /**< [q] lower bounds (lo == hi: an equality row) */
+    const double *hi;        /**< [q] upper bounds */
+} stsp_bandqp_t;
+
+/** Caller-owned scratch: q*q + 3*q doubles and q bytes at most. */
+typedef struct {
+    double chol[STSP_BANDQP_MAX * STSP_BANDQP_MAX];
+    double e[STSP_BANDQP_MAX];
+    double rhs[STSP_BANDQP_MAX];
+    double y[STSP_BANDQP_MAX];
+    int8_t state[STSP_BANDQP_MAX];
+} stsp_bandqp_work_t;
+
+/**
+ * Multipliers lam[q] for the measured state x0[nx]; `candidates` (may be NULL) receives the
+ * number of active sets tried (<= 3^(band rows)).
+ * On an error lam is all zeros (when lam is not NULL).
+ */
+stsp_bandqp_status_t stsp_bandqp_solve(const stsp_bandqp_t *qp, const float *x0, double *lam,
+                                       stsp_bandqp_work_t *work, uint32_t *candidates);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* STSP_BANDQP_H */

@@ -1,0 +1,101 @@
+"""The firmware's exact band-dual solver (firmware/src/stsp_bandqp.c), compiled through cffi,
+against the host's OSQP solution: from perturbed start states the target recomputes the
+multipliers so that a started trajectory still meets its bands."""
+import hashlib
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from stospline.bands import design_bands, solve_band_dual
+from test_bands import random_band_problem, robot_with_bands
+
+ROOT = Path(__file__).resolve().parents[2]
+SRC = ROOT / "firmware" / "src" / "stsp_bandqp.c"
+
+CDEF = """
+typedef int... stsp_bandqp_status_t;
+typedef struct { uint16_t q; uint16_t nx; const double *Nt; const double *mt; const double *W;
+                 const double *lo; const double *hi; } stsp_bandqp_t;
+typedef struct { ...; } stsp_bandqp_work_t;
+stsp_bandqp_status_t stsp_bandqp_solve(const stsp_bandqp_t *qp, const float *x0, double *lam,
+                                       stsp_bandqp_work_t *work, uint32_t *candidates);
+"""
+
+
+@pytest.fixture(scope="module")
+def bandqp():
+    import cffi
+    key = hashlib.sha256(SRC.read_bytes() + CDEF.encode()
+                         + (ROOT / "firmware/include/stospline/stsp_bandqp.h").read_bytes()
+                         ).hexdigest()[:16]
+    out = ROOT / "build" / "cffi" / f"bandqp_{key}"
+    out.mkdir(parents=True, exist_ok=True)
+    name = f"_stsp_bandqp_{key}"
+    so = list(out.glob(f"{name}*.so"))
+    if not so:
+        ffib = cffi.FFI()
+        ffib.cdef(CDEF)
+        ffib.set_source(name, '#include "stospline/stsp_bandqp.h"', sources=[str(SRC)],
+                        include_dirs=[str(ROOT / "firmware" / "include")],
+                        extra_compile_args=["-std=c99", "-O2"])
+        so = [Path(ffib.compile(tmpdir=str(out)))]
+    spec = importlib.util.spec_from_file_location(name, so[0])
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    sys.modules[name] = mod
+    return mod
+
+
+def solve_c(mod, base_stage0, lo, hi, x0):
+    ffi, lib = mod.ffi, mod.lib
+    q, n = base_stage0.N0.shape[1], base_stage0.N0.shape[0]
+    arrays = [np.ascontiguousarray(a, dtype=float) for a in
+              (base_stage0.N0.T, base_stage0.m0, base_stage0.W0, lo, hi)]
+    qp = ffi.new("stsp_bandqp_t *", {"q": q, "nx": n})
+    ptrs = [ffi.from_buffer("double[]", a) for a in arrays]
+    qp.Nt, qp.mt, qp.W, qp.lo, qp.hi = ptrs
+    lam = np.zeros(q)
+    cand = ffi.new("uint32_t *")
+    work = ffi.new("stsp_bandqp_work_t *")
+    x = np.ascontiguousarray(x0, dtype=np.float32)
+    status = lib.stsp_bandqp_solve(qp, ffi.from_buffer("float[]", x),
+                                   ffi.from_buffer("double[]", lam), work, cand)
+    return status, lam, cand[0]
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_target_solver_matches_host_from_perturbed_x0(bandqp, seed):
+    problem = random_band_problem(seed)
+    b = design_bands(problem)
+    st0 = b.base.stages[0]
+    if st0.N0.shape[1] > 8:
+        pytest.skip("more rows than the target solver takes")
+    band_rows = int(np.sum(b.lower != b.upper))
+    rng = np.random.default_rng(100 + seed)
+    for trial in range(5):
+        x0 = (problem.x0 + 0.5 * rng.normal(size=problem.n)).astype(np.float32)
+        e = st0.N0.T @ x0.astype(float) + st0.m0
+        host = solve_band_dual(e, st0.W0, b.lower, b.upper)
+        status, lam, cand = solve_c(bandqp, st0, b.lower, b.upper, x0)
+        assert status == 0
+        assert cand <= 3 ** band_rows                     # the proven bound
+        scale = max(1.0, np.abs(host.lam).max())
+        np.testing.assert_allclose(lam, host.lam, rtol=0, atol=1e-7 * scale)
+        y = e - st0.W0 @ lam
+        assert np.all(y >= b.lower - 1e-9) and np.all(y <= b.upper + 1e-9)
+
+
+def test_target_solver_on_robot_bands_and_bad_inputs(bandqp):
+    problem = robot_with_bands()
+    b = design_bands(problem)
+    st0 = b.base.stages[0]
+    status, lam, cand = solve_c(bandqp, st0, b.lower, b.upper, problem.x0)
+    assert status == 0 and cand <= 3 ** 2
+    np.testing.assert_allclose(lam, b.solution.lam, atol=1e-7 * np.abs(lam).max())
+    bad = problem.x0.copy()
+    bad[1] = np.nan
+    status, lam, _ = solve_c(bandqp, st0, b.lower, b.upper, bad)
+    assert status == -3 and not np.any(lam)

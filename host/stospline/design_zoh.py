@@ -15,6 +15,8 @@ the problem is convex in the policy and Lagrangian duality is exact.
 """
 from __future__ import annotations
 
+import os
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,7 +24,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from .design import DesignError, _check_group, _knot_terminal, _value
-from .moments import augmented_drift, exact_tick, running_cost_matrix
+from .moments import augmented_drift, moment_generator, running_cost_matrix, varying_tick
 from .multipliers import latch_groups
 from .problem import Problem, Stage
 from .tables import GainTable, build_table, ticks_per_stage
@@ -81,31 +83,138 @@ def _sym(a: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _TickData:
-    """Per-stage constants of the tick recursion (d = n + m + 1)."""
+    """Per-stage constants of the tick recursion (d = n + m + 1). "Packed": the upper
+    triangle of a symmetric matrix, row by row (`numpy.triu_indices` order)."""
     A2: np.ndarray      # (d*d, (n+1)^2): vec([[P, p], [p', c]]) -> vec(H) before the tick
     Hc: np.ndarray      # (d, d): expected running cost over the tick, as a quadratic in z
     F: np.ndarray       # (n, d): E x+ = F z
+    A2sT: np.ndarray    # ((n+1)(n+2)/2, d(d+1)/2): packed V -> packed H, transposed (C kernel)
+    Hcs: np.ndarray     # (d(d+1)/2,): Hc packed
 
 
 def _tick_data(stage: Stage, h: float) -> _TickData:
+    """The tick map on symmetric matrices only, from one exponential of size d(d+1)/2 + 1.
+
+    ``H = mat(Phi' vec Vbar)`` and ``Hc = mat(Psi' vec Lbar)`` are the adjoint moment map
+    ``e^{gen' h}`` and its integral. ``gen'`` maps symmetric matrices to symmetric matrices,
+    so on packed matrices it is ``Gs = E gen' U`` (U duplicates, E picks the upper triangle),
+    and ``expm([[Gs h, vech(Lbar) h], [0, 0]])`` holds ``e^{Gs h}`` and ``vech(Hc)``: a
+    ``(d(d+1)/2 + 1)``-square exponential instead of Van Loan's ``2 d^2`` (`exact_tick`),
+    about 20x faster at n = 12, m = 4 and equal to it to rounding.
+    """
     n, m = stage.B.shape
     d = n + m + 1
-    prop = exact_tick(stage, m + 1, h)
-    Hc = _sym((prop.Psi.T @ running_cost_matrix(stage, n, m, d, n).ravel()).reshape(d, d))
-    xs1 = np.r_[0:n, d - 1]
-    idx = (xs1[:, None] * d + xs1[None, :]).ravel()
+    iu, ju = np.triu_indices(d)
+    ds = iu.size
+    pos = np.empty((d, d), dtype=np.intp)
+    pos[iu, ju] = pos[ju, iu] = np.arange(ds)
+    rows = moment_generator(augmented_drift(stage, m + 1), stage.noise_tensor).T[iu * d + ju]
+    big = np.zeros((ds + 1, ds + 1))
+    big[:ds, :ds] = (rows[:, iu * d + ju] + (iu != ju) * rows[:, ju * d + iu]) * h
+    big[:ds, ds] = running_cost_matrix(stage, n, m, d, n)[iu, ju] * h
+    E = expm(big)
+    rs = np.r_[0:n, d - 1]
+    ia, ib = np.triu_indices(n + 1)
+    A2s = E[:ds, pos[rs[ia], rs[ib]]]                 # packed V (on x,1) -> packed H
+    Hcs = E[:ds, ds].copy()
+    # Full forms for the numpy reference: A2 vec(V) for symmetric V (off-diagonal pairs
+    # split evenly between V[a, b] and V[b, a]).
+    vpos = np.empty((n + 1, n + 1), dtype=np.intp)
+    vpos[ia, ib] = vpos[ib, ia] = np.arange(ia.size)
+    half = np.where(np.eye(n + 1, dtype=bool), 1.0, 0.5).ravel()
+    A2 = np.ascontiguousarray(A2s[pos.ravel()][:, vpos.ravel()] * half)
     F = expm(augmented_drift(stage, m + 1) * h)[:n]
-    return _TickData(np.ascontiguousarray(prop.Phi.T[:, idx]), Hc, F)
+    return _TickData(A2, Hcs[pos], F, np.ascontiguousarray(A2s.T), Hcs)
 
 
 def _stage_key(stage: Stage, h: float) -> bytes:
     return b"".join(np.ascontiguousarray(a, float).tobytes() for a in
-                    (stage.A, stage.B, stage.G, stage.Q, stage.S, stage.R, stage.q, stage.r,
-                     np.array([stage.rho, h])))
+                    (stage.A, stage.B, stage.noise_tensor, stage.Q, stage.S, stage.R,
+                     stage.q, stage.r, np.array([stage.rho, h])))
+
+
+def _stage_ticks_numpy(td: _TickData, V, N, W, mv, T: int, m: int):
+    """The reference implementation of one stage's ticks (backward): gains K, k0, L per tick
+    and the value V, N, W, mv before the first tick. Raises `numpy.linalg.LinAlgError`."""
+    n, q = N.shape
+    d = n + m + 1
+    us, rs = np.arange(n, n + m), np.r_[0:n, d - 1]
+    K = np.empty((T, m, n)); k0 = np.empty((T, m)); L = np.empty((T, m, q))
+    for j in range(T - 1, -1, -1):
+        H = (td.A2 @ V.ravel()).reshape(d, d)
+        H = 0.5 * (H + H.T) + td.Hc
+        Hl = N.T @ td.F                                  # (q, d)
+        Hl[:, -1] += mv
+        Huu = H[np.ix_(us, us)]
+        Hur = H[np.ix_(us, rs)]
+        Hlu = Hl[:, us]
+        G = np.linalg.solve(Huu, np.hstack([Hur, Hlu.T]))
+        Gr, Gl = G[:, :n + 1], G[:, n + 1:]
+        K[j], k0[j], L[j] = Gr[:, :n], Gr[:, n], Gl
+        V = _sym(H[np.ix_(rs, rs)] - Hur.T @ Gr)
+        Hlr = Hl[:, rs] - Hlu @ Gr
+        N, mv = Hlr[:, :n].T, Hlr[:, n]
+        W = _sym(W + Hlu @ Gl)
+    return K, k0, L, V, N, W, mv
+
+
+def _stage_ticks_c(td: _TickData, V, N, W, mv, T: int, m: int):
+    """`_stage_ticks_numpy` in C (`kernels.zoh_stage_ticks`); equal to it to rounding."""
+    from .kernels import zoh_stage_ticks
+    return zoh_stage_ticks(td.A2sT, td.Hcs, td.F, V, N, W, mv, T, m)
+
+
+def _varying_tick_data(stage: Stage, t: float, h: float) -> _TickData:
+    """Tick data of time-varying stage data over ``[t, t + h]`` from the fourth-order Magnus
+    map (`moments.varying_tick`; the numpy loop uses only A2, Hc and F)."""
+    n, m = stage.B.shape
+    d = n + m + 1
+    Phi, cost_row = varying_tick(stage, m + 1, t, h)
+    rs = np.r_[0:n, d - 1]
+    idx = (rs[:, None] * d + rs[None, :]).ravel()
+    ones = np.arange(d) * d + d - 1                   # vec positions of z_b * 1
+    F = Phi[np.ix_(ones[:n], ones)]                   # E x+ = F z: the mean rows of Phi
+    return _TickData(np.ascontiguousarray(Phi.T[:, idx]), _sym(cost_row.reshape(d, d)), F,
+                     np.zeros((0, 0)), np.zeros(0))
+
+
+def _varying_stage_ticks(stage: Stage, t_start: float, h: float, V, N, W, mv, T: int, m: int):
+    """`_stage_ticks_numpy` with a fresh tick map at every tick (time-varying data)."""
+    n, q = N.shape
+    K = np.empty((T, m, n)); k0 = np.empty((T, m)); L = np.empty((T, m, q))
+    for j in range(T - 1, -1, -1):
+        td = _varying_tick_data(stage, t_start + j * h, h)
+        Kj, k0j, Lj, V, N, W, mv = _stage_ticks_numpy(td, V, N, W, mv, 1, m)
+        K[j], k0[j], L[j] = Kj[0], k0j[0], Lj[0]
+    return K, k0, L, V, N, W, mv
+
+
+KERNELS = ("c", "numpy")
+
+
+def _pick_kernel(kernel: str | None):
+    """The tick-loop implementation: `kernel`, else ``STOSPLINE_ZOH_KERNEL``, else "c"; a
+    default "c" that cannot be built falls back to numpy with a warning."""
+    explicit = kernel is not None
+    kernel = kernel or os.environ.get("STOSPLINE_ZOH_KERNEL") or "c"
+    if kernel not in KERNELS:
+        raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
+    if kernel == "numpy":
+        return _stage_ticks_numpy
+    from .kernels import KernelBuildError, load_kernels
+    try:
+        load_kernels()
+    except KernelBuildError as exc:
+        if explicit:
+            raise
+        warnings.warn(f"{exc}; using the numpy tick loop (much slower)", RuntimeWarning,
+                      stacklevel=3)
+        return _stage_ticks_numpy
+    return _stage_ticks_c
 
 
 def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = True,
-               mode: str = "stagewise") -> ZohDesign:
+               mode: str = "stagewise", kernel: str | None = None) -> ZohDesign:
     """Solve the exact sampled-data design at `tick_hz` (default: the problem's).
 
     Parameters
@@ -117,6 +226,9 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
         False designs as if the diffusion were absent (the paper's Remark 2).
     mode : {"stagewise", "joint"}
         See `multipliers`.
+    kernel : {"c", "numpy"}, optional
+        The per-tick loop: compiled C (`kernels`, the default) or the numpy reference
+        (``STOSPLINE_ZOH_KERNEL=numpy`` sets the default). They agree to rounding.
 
     Returns
     -------
@@ -129,8 +241,7 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
         raise DesignError("tick_hz", str(exc)) from None
     h = 1.0 / tick_hz
     n, m = problem.n, problem.m
-    d = n + m + 1
-    us, rs = np.arange(n, n + m), np.r_[0:n, d - 1]
+    stage_ticks = _pick_kernel(kernel)
     _, group_of = latch_groups(problem, mode)
     cache: dict[bytes, _TickData] = {}
     V = np.zeros((n + 1, n + 1))          # [[P, p], [p', c]] after the current point
@@ -153,29 +264,17 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
                 mv[o:o + knot.n_constraints] -= knot.constraint.value
         else:
             N, W, mv = np.zeros((n, 0)), np.zeros((0, 0)), np.zeros(0)
-        key = _stage_key(stage, h)
-        td = cache.get(key) or cache.setdefault(key, _tick_data(stage, h))
-        T = int(counts[k])
-        K = np.empty((T, m, n)); k0 = np.empty((T, m)); L = np.empty((T, m, q))
-        for j in range(T - 1, -1, -1):
-            H = (td.A2 @ V.ravel()).reshape(d, d)
-            H = 0.5 * (H + H.T) + td.Hc
-            Hl = N.T @ td.F                                  # (q, d)
-            Hl[:, -1] += mv
-            Huu = H[np.ix_(us, us)]
-            Hur = H[np.ix_(us, rs)]
-            Hlu = Hl[:, us]
-            try:
-                G = np.linalg.solve(Huu, np.hstack([Hur, Hlu.T]))
-            except np.linalg.LinAlgError:
-                raise DesignError(f"knots[{k}].t", f"the tick Riccati recursion of stage {k} "
-                                                   f"lost positive definiteness") from None
-            Gr, Gl = G[:, :n + 1], G[:, n + 1:]
-            K[j], k0[j], L[j] = Gr[:, :n], Gr[:, n], Gl
-            V = _sym(H[np.ix_(rs, rs)] - Hur.T @ Gr)
-            Hlr = Hl[:, rs] - Hlu @ Gr
-            N, mv = Hlr[:, :n].T, Hlr[:, n]
-            W = _sym(W + Hlu @ Gl)
+        try:
+            if stage.varying is None:
+                key = _stage_key(stage, h)
+                td = cache.get(key) or cache.setdefault(key, _tick_data(stage, h))
+                K, k0, L, V, N, W, mv = stage_ticks(td, V, N, W, mv, int(counts[k]), m)
+            else:
+                K, k0, L, V, N, W, mv = _varying_stage_ticks(
+                    stage, problem.times[k], h, V, N, W, mv, int(counts[k]), m)
+        except np.linalg.LinAlgError:
+            raise DesignError(f"knots[{k}].t", f"the tick Riccati recursion of stage {k} "
+                                               f"lost positive definiteness") from None
         if not (np.all(np.isfinite(V)) and np.all(np.isfinite(W))):
             raise DesignError(f"knots[{k}].t", f"the tick Riccati recursion of stage {k} has "
                                                f"no bounded solution in floating point")

@@ -1,0 +1,150 @@
+"""Compiled host kernels of the designers (double precision C, loaded through cffi).
+
+Build and load are separate steps, as in `harness`: `build_kernels` compiles ``tick_kernel.c``
+into a cffi API-mode module cached under ``build/`` by a hash of the source, the declarations
+and the flags (``STOSPLINE_BUILD`` overrides the directory), and `load_kernels` returns the
+loaded module, building it on first use. `zoh_stage_ticks` runs the per-tick loop of one stage
+of the exact zero-order-hold design (`design_zoh`) in C.
+"""
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["build_kernels", "load_kernels", "zoh_stage_ticks", "KernelBuildError"]
+
+_SOURCE = Path(__file__).with_name("tick_kernel.c")
+_CDEF = """
+size_t stsp_zoh_work_size(int n, int m, int q);
+int stsp_zoh_stage_ticks(int n, int m, int q, long T,
+                         const double *A2sT, const double *Hcs, const double *F,
+                         double *V, double *N, double *W, double *mv,
+                         double *K, double *k0, double *L, double *work, long *bad_tick);
+"""
+_CFLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra"]
+_ERR_NOT_PD, _ERR_DIMS = -1, -2
+_loaded = None
+
+
+class KernelBuildError(RuntimeError):
+    """The C kernels could not be compiled or loaded (no C compiler, no cffi)."""
+
+
+def _build_dir() -> Path:
+    env = os.environ.get("STOSPLINE_BUILD")
+    return Path(env) if env else Path(__file__).resolve().parents[2] / "build" / "cffi"
+
+
+def build_kernels(build_dir: str | Path | None = None, *, quiet: bool = True) -> Path:
+    """Compile the kernels (if not cached) and return the path of the extension module."""
+    source = _SOURCE.read_bytes()
+    digest = hashlib.sha256()
+    for blob in (source, _CDEF.encode(), " ".join(_CFLAGS).encode()):
+        digest.update(blob)
+    key = digest.hexdigest()[:16]
+    modname = f"_stsp_kernels_{key}"
+    out = (Path(build_dir) if build_dir else _build_dir()) / key
+    existing = sorted(out.glob(f"{modname}*.so")) + sorted(out.glob(f"{modname}*.pyd"))
+    if existing:
+        return existing[0]
+    try:
+        import cffi
+        out.mkdir(parents=True, exist_ok=True)
+        ffib = cffi.FFI()
+        ffib.cdef(_CDEF)
+        ffib.set_source(modname, source.decode(), extra_compile_args=_CFLAGS)
+        # Compile in a private directory, then move into place: concurrent builders (pytest
+        # workers) never load a half-written file.
+        tmp = tempfile.mkdtemp(prefix="tmp-", dir=out)
+        try:
+            so = Path(ffib.compile(tmpdir=tmp, verbose=not quiet))
+            final = out / so.name
+            os.replace(so, final)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+        return final
+    except Exception as exc:  # noqa: BLE001 - any failure here means "no compiled kernel"
+        raise KernelBuildError(f"cannot build {_SOURCE.name}: {exc}") from exc
+
+
+def load_kernels():
+    """The loaded cffi module (``.ffi``, ``.lib``), built on first use."""
+    global _loaded
+    if _loaded is None:
+        path = build_kernels()
+        modname = path.name.split(".")[0]
+        mod = sys.modules.get(modname)
+        if mod is None:
+            spec = importlib.util.spec_from_file_location(modname, path)
+            mod = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(mod)
+            sys.modules[modname] = mod
+        _loaded = mod
+    return _loaded
+
+
+def _c(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def zoh_stage_ticks(A2sT: np.ndarray, Hcs: np.ndarray, F: np.ndarray, V: np.ndarray,
+                    N: np.ndarray, W: np.ndarray, mv: np.ndarray, T: int, m: int):
+    """Run the `T` ticks of one stage of the exact ZOH Riccati recursion in C.
+
+    Parameters
+    ----------
+    A2sT : ndarray, shape (vs, ds)
+        Transposed packed tick map (``vs = (n+1)(n+2)/2``, ``ds = d(d+1)/2``, ``d = n+m+1``;
+        packed = upper triangle row by row).
+    Hcs : ndarray, shape (ds,)
+        Packed expected running cost over one tick.
+    F : ndarray, shape (n, d)
+    V, N, W, mv : ndarray
+        Value after the stage's last tick: ``(n+1, n+1)``, ``(n, q)``, ``(q, q)``, ``(q,)``.
+    T, m : int
+        Number of ticks and inputs.
+
+    Returns
+    -------
+    K, k0, L, V, N, W, mv
+        Gains per tick ``(T, m, n)``, ``(T, m)``, ``(T, m, q)`` and the value before the
+        stage's first tick (new arrays; the inputs are not modified).
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        ``Huu`` is not positive definite at some tick (a finite Cholesky pivot <= 0), as the
+        numpy reference raises for a singular one.
+    """
+    mod = load_kernels()
+    ffi, lib = mod.ffi, mod.lib
+    n = F.shape[0]
+    q = N.shape[1]
+    T = int(T)
+    A2sT, Hcs, F = _c(A2sT), _c(Hcs), _c(F)
+    V, N, W, mv = (np.array(a, dtype=np.float64, order="C") for a in (V, N, W, mv))
+    d = n + m + 1
+    ds, vs = d * (d + 1) // 2, (n + 1) * (n + 2) // 2
+    want = {"A2sT": (A2sT, (vs, ds)), "Hcs": (Hcs, (ds,)), "F": (F, (n, d)),
+            "V": (V, (n + 1, n + 1)), "N": (N, (n, q)), "W": (W, (q, q)), "mv": (mv, (q,))}
+    for name, (a, shape) in want.items():
+        if a.shape != shape:
+            raise ValueError(f"{name} has shape {a.shape}, expected {shape}")
+    K, k0, L = np.empty((T, m, n)), np.empty((T, m)), np.empty((T, m, q))
+    work = np.empty(max(int(lib.stsp_zoh_work_size(n, m, q)), 1))
+    bad = ffi.new("long *", -1)
+    # from_buffer keeps each array alive for the call; every array is C-contiguous float64.
+    p = [ffi.from_buffer("double[]", a) for a in (A2sT, Hcs, F, V, N, W, mv, K, k0, L, work)]
+    status = lib.stsp_zoh_stage_ticks(n, m, q, T, *p, bad)
+    if status == _ERR_NOT_PD:
+        raise np.linalg.LinAlgError(f"Huu is not positive definite at tick {bad[0]}")
+    if status != 0:
+        raise ValueError(f"stsp_zoh_stage_ticks: bad dimensions (status {status})")
+    return K, k0, L, V, N, W, mv

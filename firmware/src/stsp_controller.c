@@ -1,17 +1,55 @@
-/* Latched time-varying affine controller: see stospline/stsp_controller.h for the contract. */
+/* Latched time-varying affine controller: see stospline/stsp_controller.h for the contract
+ * and docs/firmware.md for the response to every fault and the MISRA deviations.
+ *
+ * Hot path. An ordinary tick (the expected tick, inside the stage already latched) runs
+ * straight through stsp_step(): two compares select it, the law is evaluated from the tick's
+ * rows of K, k0, L and the latched v, and one check says whether the command needs the cold
+ * path. With limits, that check is a compare pair per input against [u_min, u_max], false
+ * for NaN and for +-Inf (the limits are finite); without, it is whether the sum of the inputs
+ * is finite. Either also serves as the finiteness check of the state: a NaN or infinite x[j]
+ * reaches every input (each input sums K[i][j] x[j] over all j, and 0 * Inf is NaN), as does
+ * a non-finite latch (each input sums L[i][c] v[c] over all columns). So x itself is read for
+ * finiteness only on the cold path, to tell a bad state from an overflow. Everything else
+ * (tick range, order, repeats, skips, stage changes, latching, clamping, errors) is on cold
+ * paths in functions of their own. */
 #include "stospline/stsp_controller.h"
 
+#include <float.h>
 #include <string.h>
 
 #include "stsp_crc32.h"
 
-/* A binary32 is finite unless its exponent bits are all ones (NaN, +-Inf). Checked on the bit
- * pattern so that -ffast-math cannot optimise the test away. */
+/* The fast finiteness check relies on IEEE NaN and infinity semantics. */
+#if defined(__FAST_MATH__) || (defined(__FINITE_MATH_ONLY__) && (__FINITE_MATH_ONLY__ != 0))
+#error "stsp_controller.c must not be compiled with -ffast-math or -ffinite-math-only"
+#endif
+
+/* Compiler hints, empty where unknown: keep the cold paths out of stsp_step() (so that the
+ * ordinary tick needs few registers), inline the law into it, and unroll the law's
+ * constant-bound loops in an STSP_FIXED_* build (GCC's -O2 does not unroll loops that grow
+ * the code; GCC and clang both read `#pragma GCC unroll`). */
+#if defined(__GNUC__) || defined(__clang__)
+#define STSP_NOINLINE __attribute__((noinline))
+#define STSP_ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define STSP_NOINLINE
+#define STSP_ALWAYS_INLINE inline
+#endif
+#if defined(STSP_FIXED_NX) && (defined(__GNUC__) || defined(__clang__))
+#define STSP_UNROLL _Pragma("GCC unroll 16")
+#else
+#define STSP_UNROLL
+#endif
+
+/* Binary32 exponent field: all ones for NaN and +-Inf. */
+#define STSP_F32_EXP_MASK 0x7F800000u
+
+/* A binary32 is finite unless its exponent bits are all ones (NaN, +-Inf). */
 static inline int stsp_isfinite_f32(stsp_f32_t value)
 {
     uint32_t bits;
     (void)memcpy(&bits, &value, sizeof bits);
-    return (bits & 0x7F800000u) != 0x7F800000u;
+    return ((bits & STSP_F32_EXP_MASK) != STSP_F32_EXP_MASK) ? 1 : 0;
 }
 
 static inline void stsp_zero(stsp_f32_t *u, uint32_t count)
@@ -22,57 +60,153 @@ static inline void stsp_zero(stsp_f32_t *u, uint32_t count)
     }
 }
 
+/* Dimensions as the law uses them: compile-time constants in an STSP_FIXED_* build. */
+static inline uint32_t stsp_nx(const stsp_table_t *t)
+{
+#ifdef STSP_FIXED_NX
+    (void)t;
+    return (uint32_t)STSP_FIXED_NX;
+#else
+    return (uint32_t)t->nx;
+#endif
+}
+
+static inline uint32_t stsp_nu(const stsp_table_t *t)
+{
+#ifdef STSP_FIXED_NU
+    (void)t;
+    return (uint32_t)STSP_FIXED_NU;
+#else
+    return (uint32_t)t->nu;
+#endif
+}
+
+static inline uint32_t stsp_nl(const stsp_table_t *t)
+{
+#ifdef STSP_FIXED_N_LATCH
+    (void)t;
+    return (uint32_t)STSP_FIXED_N_LATCH;
+#else
+    return (uint32_t)t->n_latch;
+#endif
+}
+
 static stsp_status_t stsp_check_dims(const stsp_table_t *t)
 {
     uint32_t s;
-    if (t->nx == 0u || t->nx > STSP_MAX_NX || t->nu == 0u || t->nu > STSP_MAX_NU ||
-        t->n_latch > STSP_MAX_LATCH || t->n_stages == 0u || t->n_stages > STSP_MAX_STAGES ||
-        t->n_ticks == 0u || t->tick_hz == 0u) {
+    if ((t->nx == 0u) || (t->nx > STSP_MAX_NX) || (t->nu == 0u) || (t->nu > STSP_MAX_NU) ||
+        (t->n_latch > STSP_MAX_LATCH) || (t->n_stages == 0u) ||
+        (t->n_stages > STSP_MAX_STAGES) || (t->n_ticks == 0u) || (t->tick_hz == 0u)) {
         return STSP_ERR_BAD_DIMS;
     }
+#ifdef STSP_FIXED_NX
+    if ((t->nx != STSP_FIXED_NX) || (t->nu != STSP_FIXED_NU) ||
+        (t->n_latch != STSP_FIXED_N_LATCH)) {
+        return STSP_ERR_BAD_DIMS;
+    }
+#endif
     /* Every table offset is computed in uint32_t: the largest array must stay addressable. */
-    if (t->n_ticks > UINT32_MAX / ((uint32_t)t->nu * (uint32_t)(t->nx + t->n_latch))) {
+    if (t->n_ticks > (UINT32_MAX / ((uint32_t)t->nu * ((uint32_t)t->nx + t->n_latch)))) {
         return STSP_ERR_BAD_DIMS;
     }
-    if (t->stage_start == NULL || t->stage_np == NULL || t->K == NULL || t->k0 == NULL ||
-        (t->n_latch > 0u && (t->L == NULL || t->Lambda == NULL || t->lambda0 == NULL))) {
+    if ((t->stage_start == NULL) || (t->stage_np == NULL) || (t->K == NULL) ||
+        (t->k0 == NULL) || (t->u_min == NULL) || (t->u_max == NULL) ||
+        ((t->n_latch > 0u) && ((t->L == NULL) || (t->Lambda == NULL) || (t->lambda0 == NULL)))) {
         return STSP_ERR_NULL;
     }
-    if (t->stage_start[0] != 0u || t->stage_start[t->n_stages] != t->n_ticks) {
+    if ((t->stage_start[0] != 0u) || (t->stage_start[t->n_stages] != t->n_ticks)) {
         return STSP_ERR_BAD_DIMS;
     }
     for (s = 0u; s < t->n_stages; ++s) {
-        if (t->stage_start[s + 1u] <= t->stage_start[s] || t->stage_np[s] > t->n_latch) {
+        if ((t->stage_start[s + 1u] <= t->stage_start[s]) || (t->stage_np[s] > t->n_latch)) {
             return STSP_ERR_BAD_DIMS;
         }
     }
     return STSP_OK;
 }
 
-uint32_t stsp_table_crc32(const stsp_table_t *t)
+/* 1 when every one of values[0..count) is finite, else 0. */
+static int stsp_all_finite(const stsp_f32_t *values, uint32_t count)
 {
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        if (stsp_isfinite_f32(values[i]) == 0) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* Gains finite; limits finite, ordered, and containing the safe hold value 0. */
+static stsp_status_t stsp_check_values(const stsp_table_t *t)
+{
+    const uint32_t nx = t->nx;
+    const uint32_t nu = t->nu;
+    const uint32_t np = t->n_latch;
+    const uint32_t ns = t->n_stages;
+    const uint32_t nt = t->n_ticks;
+    uint32_t i;
+    if ((stsp_all_finite(t->K, nt * nu * nx) == 0) || (stsp_all_finite(t->k0, nt * nu) == 0)) {
+        return STSP_ERR_BAD_VALUES;
+    }
+    if ((np > 0u) && ((stsp_all_finite(t->L, nt * nu * np) == 0) ||
+                      (stsp_all_finite(t->Lambda, ns * np * nx) == 0) ||
+                      (stsp_all_finite(t->lambda0, ns * np) == 0))) {
+        return STSP_ERR_BAD_VALUES;
+    }
+    for (i = 0u; i < nu; ++i) {
+        const stsp_f32_t lo = t->u_min[i];
+        const stsp_f32_t hi = t->u_max[i];
+        if ((stsp_isfinite_f32(lo) == 0) || (stsp_isfinite_f32(hi) == 0) || !(lo <= 0.0f) ||
+            !(hi >= 0.0f)) {
+            return STSP_ERR_BAD_VALUES;
+        }
+    }
+    return STSP_OK;
+}
+
+/* 1 if some input has a limit other than -FLT_MAX/FLT_MAX (selects the fast-path check). */
+static uint16_t stsp_has_limits(const stsp_table_t *t)
+{
+    uint32_t i;
+    for (i = 0u; i < t->nu; ++i) {
+        if ((t->u_min[i] > -FLT_MAX) || (t->u_max[i] < FLT_MAX)) {
+            return 1u;
+        }
+    }
+    return 0u;
+}
+
+uint32_t stsp_table_crc32(const stsp_table_t *table)
+{
+    const uint32_t nx = table->nx;
+    const uint32_t nu = table->nu;
+    const uint32_t np = table->n_latch;
+    const uint32_t ns = table->n_stages;
+    const uint32_t nt = table->n_ticks;
     uint32_t crc = stsp_crc32_begin();
-    const uint32_t nx = t->nx, nu = t->nu, np = t->n_latch, ns = t->n_stages, nt = t->n_ticks;
     uint32_t s;
     crc = stsp_crc32_u32(crc, nx);
     crc = stsp_crc32_u32(crc, nu);
     crc = stsp_crc32_u32(crc, np);
     crc = stsp_crc32_u32(crc, ns);
     crc = stsp_crc32_u32(crc, nt);
-    crc = stsp_crc32_u32(crc, t->tick_hz);
+    crc = stsp_crc32_u32(crc, table->tick_hz);
     for (s = 0u; s <= ns; ++s) {
-        crc = stsp_crc32_u32(crc, t->stage_start[s]);
+        crc = stsp_crc32_u32(crc, table->stage_start[s]);
     }
     for (s = 0u; s < ns; ++s) {
-        crc = stsp_crc32_u32(crc, (uint32_t)t->stage_np[s]);
+        crc = stsp_crc32_u32(crc, (uint32_t)table->stage_np[s]);
     }
-    crc = stsp_crc32_f32s(crc, t->K, nt * nu * nx);
-    crc = stsp_crc32_f32s(crc, t->k0, nt * nu);
+    crc = stsp_crc32_f32s(crc, table->K, nt * nu * nx);
+    crc = stsp_crc32_f32s(crc, table->k0, nt * nu);
     if (np > 0u) {
-        crc = stsp_crc32_f32s(crc, t->L, nt * nu * np);
-        crc = stsp_crc32_f32s(crc, t->Lambda, ns * np * nx);
-        crc = stsp_crc32_f32s(crc, t->lambda0, ns * np);
+        crc = stsp_crc32_f32s(crc, table->L, nt * nu * np);
+        crc = stsp_crc32_f32s(crc, table->Lambda, ns * np * nx);
+        crc = stsp_crc32_f32s(crc, table->lambda0, ns * np);
     }
+    crc = stsp_crc32_f32s(crc, table->u_min, nu);
+    crc = stsp_crc32_f32s(crc, table->u_max, nu);
     return stsp_crc32_end(crc);
 }
 
@@ -89,8 +223,8 @@ stsp_status_t stsp_init(stsp_ctrl_t *ctrl, const stsp_table_t *table)
     if (table->magic != STSP_TABLE_MAGIC) {
         return STSP_ERR_BAD_MAGIC;
     }
-    if (table->format_version != STSP_FORMAT_VERSION ||
-        table->scalar_kind != STSP_SCALAR_FLOAT32) {
+    if ((table->format_version != STSP_FORMAT_VERSION) ||
+        (table->scalar_kind != STSP_SCALAR_FLOAT32)) {
         return STSP_ERR_BAD_VERSION;
     }
     st = stsp_check_dims(table);
@@ -100,9 +234,26 @@ stsp_status_t stsp_init(stsp_ctrl_t *ctrl, const stsp_table_t *table)
     if (stsp_table_crc32(table) != table->crc32) {
         return STSP_ERR_BAD_CRC;
     }
+    st = stsp_check_values(table);
+    if (st != STSP_OK) {
+        return st;
+    }
     ctrl->table = table;
-    ctrl->ready = STSP_TABLE_MAGIC;
+    ctrl->limited = stsp_has_limits(table);
+    ctrl->ready = STSP_CTRL_READY;
     return STSP_OK;
+}
+
+stsp_status_t stsp_init_expect(stsp_ctrl_t *ctrl, const stsp_table_t *table, uint32_t nx,
+                               uint32_t nu)
+{
+    stsp_status_t st = stsp_init(ctrl, table);
+    if ((st == STSP_OK) && ((table->nx != nx) || (table->nu != nu))) {
+        ctrl->ready = 0u;
+        ctrl->table = NULL;
+        st = STSP_ERR_BAD_DIMS;
+    }
+    return st;
 }
 
 stsp_status_t stsp_reset(stsp_ctrl_t *ctrl)
@@ -110,143 +261,318 @@ stsp_status_t stsp_reset(stsp_ctrl_t *ctrl)
     if (ctrl == NULL) {
         return STSP_ERR_NULL;
     }
-    if (ctrl->ready != STSP_TABLE_MAGIC) {
+    if (ctrl->ready != STSP_CTRL_READY) {
         return STSP_ERR_NOT_INITIALIZED;
     }
     ctrl->next_tick = 0u;
+    ctrl->stage_end = 0u;
     ctrl->stage = 0u;
     ctrl->latched = 0u;
+    ctrl->sat_mask = 0u;
     stsp_zero(ctrl->v, STSP_MAX_LATCH);
+    return STSP_OK;
+}
+
+stsp_status_t stsp_verify(stsp_ctrl_t *ctrl)
+{
+    if (ctrl == NULL) {
+        return STSP_ERR_NULL;
+    }
+    if (ctrl->ready != STSP_CTRL_READY) {
+        return STSP_ERR_NOT_INITIALIZED;
+    }
+    if (stsp_table_crc32(ctrl->table) != ctrl->table->crc32) {
+        ctrl->ready = 0u;
+        return STSP_ERR_BAD_CRC;
+    }
     return STSP_OK;
 }
 
 /* Stage containing `tick`, searching forward from `from` (ticks only move forward). */
 static uint16_t stsp_stage_of(const stsp_table_t *t, uint16_t from, uint32_t tick)
 {
-    uint16_t s = from;
-    while (s + 1u < t->n_stages && t->stage_start[s + 1u] <= tick) {
+    uint32_t s = from;
+    while (((s + 1u) < t->n_stages) && (t->stage_start[s + 1u] <= tick)) {
         ++s;
     }
-    return s;
+    return (uint16_t)s;
 }
 
-stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_t *x, stsp_f32_t *u)
-{
-    const stsp_table_t *t;
-    stsp_status_t status = STSP_OK;
-    stsp_f32_t v_new[STSP_MAX_LATCH];
-    const stsp_f32_t *v = NULL;
-    uint32_t i, j, nx, nu, np;
-    uint16_t stage;
-    int relatch;
+/* What a tick other than the ordinary one does: decided before anything is written. */
+typedef struct {
+    uint16_t stage;   /* stage of the tick */
+    uint16_t relatch; /* nonzero: v_new holds a fresh latch for `stage` */
+} stsp_plan_t;
 
-    if (u == NULL || ctrl == NULL) {
-        return STSP_ERR_NULL;
-    }
-    if (ctrl->ready != STSP_TABLE_MAGIC || ctrl->table == NULL) {
-        return STSP_ERR_NOT_INITIALIZED; /* nu is unknown without a table: u is not written */
-    }
-    t = ctrl->table;
-    nx = t->nx;
-    nu = t->nu;
-    stsp_zero(u, nu);
-    if (x == NULL) {
-        return STSP_ERR_NULL;
-    }
+/* Cold path, part 1: range and order checks, stage search, and the latch v_new = Lambda x +
+ * lambda0 (or a copy of the v kept) into the caller's scratch: the instance changes only on
+ * success, in stsp_commit(). Returns a negative error, or the tick warning (or STSP_OK). */
+static stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick, const stsp_f32_t *x,
+                               stsp_f32_t *v_new, stsp_plan_t *plan)
+{
+    const stsp_table_t *t = c->table;
+    const uint32_t nx = stsp_nx(t);
+    const uint32_t nl = stsp_nl(t);
+    stsp_status_t status = STSP_OK;
+    uint32_t i;
+    uint32_t np;
+    uint16_t stage;
+
     if (tick >= t->n_ticks) {
         return STSP_ERR_TICK_RANGE;
     }
-    if (ctrl->next_tick > 0u && tick + 1u < ctrl->next_tick) {
-        return STSP_ERR_TICK_ORDER;
-    }
-    for (j = 0u; j < nx; ++j) {
-        if (!stsp_isfinite_f32(x[j])) {
-            return STSP_ERR_NONFINITE_STATE;
+    if (c->next_tick > 0u) {
+        if ((tick + 1u) < c->next_tick) {
+            return STSP_ERR_TICK_ORDER;
+        }
+        if ((tick + 1u) == c->next_tick) {
+            status = STSP_WARN_TICK_REPEATED;
         }
     }
-    if (ctrl->next_tick > 0u && tick + 1u == ctrl->next_tick) {
-        status = STSP_WARN_TICK_REPEATED;
-    } else if (tick > ctrl->next_tick) {
+    if (tick > c->next_tick) {
         status = STSP_WARN_TICK_SKIPPED;
     }
-
-    stage = stsp_stage_of(t, ctrl->stage, tick);
+    stage = stsp_stage_of(t, c->stage, tick);
     /* A stage with stage_np > 0 latches a fresh v at its first tick; one with stage_np == 0
      * keeps the v latched earlier (joint multipliers are latched once, at stage 0). */
     np = t->stage_np[stage];
-    relatch = (ctrl->latched == 0u) || (stage != ctrl->stage && np > 0u);
-    if (relatch) {
-        /* v = Lambda x + lambda0, into a scratch copy: the instance changes only on success. */
-        const stsp_f32_t *lam = t->Lambda + (uint32_t)stage * t->n_latch * nx;
-        for (i = 0u; i < t->n_latch; ++i) {
+    plan->stage = stage;
+    plan->relatch = 0u;
+    if ((c->latched == 0u) || ((stage != c->stage) && (np > 0u))) {
+        plan->relatch = 1u;
+    }
+    if (plan->relatch != 0u) {
+        for (i = 0u; i < nl; ++i) {
             stsp_f32_t acc = 0.0f;
             if (i < np) {
-                acc = t->lambda0[(uint32_t)stage * t->n_latch + i];
+                const uint32_t row = ((uint32_t)stage * nl) + i;
+                const stsp_f32_t *lam = &t->Lambda[row * nx];
+                uint32_t j;
+                acc = t->lambda0[row];
                 for (j = 0u; j < nx; ++j) {
-                    acc += lam[i * nx + j] * x[j];
-                }
-                if (!stsp_isfinite_f32(acc)) {
-                    return STSP_ERR_NONFINITE_OUTPUT;
+                    acc += lam[j] * x[j];
                 }
             }
             v_new[i] = acc;
         }
-        v = v_new;
     } else {
-        v = ctrl->v;
-    }
-
-    {
-        const stsp_f32_t *K = t->K + tick * nu * nx;
-        const stsp_f32_t *k0 = t->k0 + tick * nu;
-        const stsp_f32_t *L = t->L + tick * nu * t->n_latch;
-        for (i = 0u; i < nu; ++i) {
-            stsp_f32_t acc = k0[i];
-            for (j = 0u; j < nx; ++j) {
-                acc += K[i * nx + j] * x[j];
-            }
-            for (j = 0u; j < t->n_latch; ++j) {
-                acc += L[i * t->n_latch + j] * v[j];
-            }
-            if (!stsp_isfinite_f32(acc)) {
-                stsp_zero(u, nu);
-                return STSP_ERR_NONFINITE_OUTPUT;
-            }
-            u[i] = -acc;
+        for (i = 0u; i < nl; ++i) {
+            v_new[i] = c->v[i];
         }
-    }
-
-    if (relatch) {
-        for (i = 0u; i < t->n_latch; ++i) {
-            ctrl->v[i] = v_new[i];
-        }
-        ctrl->latched = 1u;
-    }
-    ctrl->stage = stage;
-    if (tick + 1u > ctrl->next_tick) {
-        ctrl->next_tick = tick + 1u;
     }
     return status;
+}
+
+/* Cold path, part 2: the step succeeded; record the stage, the latch and the tick. */
+static void stsp_commit(stsp_ctrl_t *c, uint32_t tick, const stsp_plan_t *plan,
+                        const stsp_f32_t *v_new)
+{
+    const stsp_table_t *t = c->table;
+    if (plan->relatch != 0u) {
+        uint32_t i;
+        for (i = 0u; i < stsp_nl(t); ++i) {
+            c->v[i] = v_new[i];
+        }
+        c->latched = 1u;
+    }
+    c->stage = plan->stage;
+    c->stage_end = t->stage_start[(uint32_t)plan->stage + 1u];
+    if ((tick + 1u) > c->next_tick) {
+        c->next_tick = tick + 1u;
+    }
+}
+
+/* Cold path, part 3: some u[i] may be outside [u_min[i], u_max[i]] or not finite. If any is
+ * NaN/Inf, returns the error that says why: the state was not finite, or it was and the law
+ * (or the latch) overflowed. Otherwise clamps (bits of *mask) and returns
+ * STSP_WARN_SATURATED, or STSP_OK if nothing needed clamping (a false alarm of the fast
+ * check). */
+static STSP_NOINLINE stsp_status_t stsp_limit(const stsp_table_t *t, const stsp_f32_t *x,
+                                              stsp_f32_t *u, uint16_t *mask)
+{
+    const uint32_t nu = stsp_nu(t);
+    uint32_t i;
+    uint32_t m = 0u;
+    for (i = 0u; i < nu; ++i) {
+        if (stsp_isfinite_f32(u[i]) == 0) {
+            return (stsp_all_finite(x, stsp_nx(t)) == 0) ? STSP_ERR_NONFINITE_STATE
+                                                         : STSP_ERR_NONFINITE_OUTPUT;
+        }
+    }
+    for (i = 0u; i < nu; ++i) {
+        if (u[i] > t->u_max[i]) {
+            u[i] = t->u_max[i];
+            m |= (uint32_t)1u << i;
+        } else if (u[i] < t->u_min[i]) {
+            u[i] = t->u_min[i];
+            m |= (uint32_t)1u << i;
+        } else {
+            /* within the limits */
+        }
+    }
+    *mask = (uint16_t)m;
+    return (m != 0u) ? STSP_WARN_SATURATED : STSP_OK;
+}
+
+/* The law at `tick` with multipliers v, in the documented order:
+ *     u[i] = (((-(K[i][0] x[0]) - k0[i]) - K[i][1] x[1]) - ... ) - L[i][0] v[0] - ...
+ * which is -(k0[i] + K[i][0] x[0] + ... + L[i][c] v[c] ...) exactly (IEEE rounding is
+ * symmetric; a+b = b+a), up to the sign of an exactly zero result; vnmul folds the final
+ * negation away. Returns nonzero when the command needs the cold path: with limits, some
+ * u[i] outside [u_min[i], u_max[i]] (false for NaN, and for one of +-Inf since the limits are
+ * finite); without, the sum of the u[i] is not finite (any NaN or Inf makes it NaN or Inf; a
+ * finite sum that overflows is a false alarm that stsp_limit() clears). The sums stay in
+ * locals until every load is done, so x and v can stay in registers (u may alias them as far
+ * as the compiler knows). */
+static STSP_ALWAYS_INLINE uint32_t stsp_law(const stsp_table_t *t, uint32_t tick,
+                                            const stsp_f32_t *x, const stsp_f32_t *v,
+                                            stsp_f32_t *u, uint32_t limited)
+{
+    const uint32_t nx = stsp_nx(t);
+    const uint32_t nu = stsp_nu(t);
+    const uint32_t nl = stsp_nl(t);
+    const stsp_f32_t *K = &t->K[tick * (nu * nx)];
+    const stsp_f32_t *k0 = &t->k0[tick * nu];
+    /* L may be NULL when nl == 0: no pointer arithmetic on it then. */
+    const stsp_f32_t *L = (nl > 0u) ? &t->L[tick * (nu * nl)] : t->L;
+    stsp_f32_t y[STSP_MAX_NU];
+    uint32_t i;
+    uint32_t out = 0u;
+    STSP_UNROLL
+    for (i = 0u; i < nu; ++i) {
+        stsp_f32_t acc = -(K[0] * x[0]);
+        uint32_t j;
+        acc -= k0[i];
+        STSP_UNROLL
+        for (j = 1u; j < nx; ++j) {
+            acc -= K[j] * x[j];
+        }
+        K = &K[nx];
+        if (nl > 0u) {
+            STSP_UNROLL
+            for (j = 0u; j < nl; ++j) {
+                acc -= L[j] * v[j];
+            }
+            L = &L[nl];
+        }
+        y[i] = acc;
+    }
+    if (limited != 0u) {
+        const stsp_f32_t *lo = t->u_min;
+        const stsp_f32_t *hi = t->u_max;
+        STSP_UNROLL
+        for (i = 0u; i < nu; ++i) {
+            if (!((y[i] >= lo[i]) && (y[i] <= hi[i]))) {
+                out = 1u;
+            }
+        }
+    } else {
+        stsp_f32_t sum = -0.0f; /* -0 + a = a for every a: the compiler drops this add */
+        STSP_UNROLL
+        for (i = 0u; i < nu; ++i) {
+            sum += y[i];
+        }
+        /* sum - sum is +0 for a finite sum, NaN for NaN and +-Inf. */
+        if (!((sum - sum) == 0.0f)) {
+            out = 1u;
+        }
+    }
+    STSP_UNROLL
+    for (i = 0u; i < nu; ++i) {
+        u[i] = y[i];
+    }
+    return out;
+}
+
+/* Every tick but the ordinary one: range, order, repeat, skip, stage change, latch. */
+static STSP_NOINLINE stsp_status_t stsp_step_cold(stsp_ctrl_t *ctrl, uint32_t tick,
+                                                  const stsp_f32_t *x, stsp_f32_t *u)
+{
+    const stsp_table_t *t = ctrl->table;
+    stsp_f32_t v_new[STSP_MAX_LATCH];
+    stsp_plan_t plan = {0u, 0u};
+    stsp_status_t status;
+    uint16_t mask = 0u;
+    stsp_zero(v_new, STSP_MAX_LATCH);
+    status = stsp_plan(ctrl, tick, x, v_new, &plan);
+    if (status >= STSP_OK) {
+        if (stsp_law(t, tick, x, v_new, u, ctrl->limited) != 0u) {
+            const stsp_status_t st = stsp_limit(t, x, u, &mask);
+            if (st != STSP_OK) {
+                status = st; /* an error, or STSP_WARN_SATURATED over a tick warning */
+            }
+        }
+    }
+    if (status < STSP_OK) {
+        stsp_zero(u, stsp_nu(t));
+        return status;
+    }
+    ctrl->sat_mask = mask;
+    stsp_commit(ctrl, tick, &plan, v_new);
+    return status;
+}
+
+/* An ordinary tick whose command is out of range or not finite. */
+static STSP_NOINLINE stsp_status_t stsp_step_fixup(stsp_ctrl_t *ctrl, uint32_t tick,
+                                                   const stsp_f32_t *x, stsp_f32_t *u)
+{
+    uint16_t mask = 0u;
+    const stsp_status_t st = stsp_limit(ctrl->table, x, u, &mask);
+    if (st < STSP_OK) {
+        stsp_zero(u, stsp_nu(ctrl->table));
+        return st;
+    }
+    ctrl->sat_mask = mask;
+    ctrl->next_tick = tick + 1u;
+    return st;
+}
+
+stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_t *x, stsp_f32_t *u)
+{
+    if ((u == NULL) || (ctrl == NULL)) {
+        return STSP_ERR_NULL;
+    }
+    if (ctrl->ready != STSP_CTRL_READY) {
+        return STSP_ERR_NOT_INITIALIZED; /* nu is unknown without a table: u is not written */
+    }
+    if (x == NULL) {
+        stsp_zero(u, stsp_nu(ctrl->table));
+        return STSP_ERR_NULL;
+    }
+    /* Ordinary tick: the expected one, inside the latched stage (stage_end is 0 until the
+     * first latch, and never above n_ticks). Anything else takes the cold path. */
+    if ((tick != ctrl->next_tick) || (tick >= ctrl->stage_end)) {
+        return stsp_step_cold(ctrl, tick, x, u);
+    }
+    if (stsp_law(ctrl->table, tick, x, ctrl->v, u, ctrl->limited) != 0u) {
+        return stsp_step_fixup(ctrl, tick, x, u);
+    }
+    ctrl->next_tick = tick + 1u;
+    return STSP_OK;
 }
 
 #ifdef STSP_HOST_MESSAGES
 const char *stsp_status_str(stsp_status_t status)
 {
+    const char *text;
     switch (status) {
-    case STSP_OK: return "ok";
-    case STSP_WARN_TICK_SKIPPED: return "tick skipped: evaluated at the given tick";
-    case STSP_WARN_TICK_REPEATED: return "tick repeated: recomputed without a new latch";
-    case STSP_ERR_NULL: return "null pointer argument";
-    case STSP_ERR_NOT_INITIALIZED: return "controller not initialized";
-    case STSP_ERR_BAD_MAGIC: return "table magic mismatch";
-    case STSP_ERR_BAD_VERSION: return "table format or scalar variant not supported";
-    case STSP_ERR_BAD_DIMS: return "table dimensions invalid";
-    case STSP_ERR_BAD_CRC: return "table CRC mismatch";
-    case STSP_ERR_TICK_RANGE: return "tick beyond the end of the table";
-    case STSP_ERR_TICK_ORDER: return "tick went backwards";
-    case STSP_ERR_NONFINITE_STATE: return "state not finite";
-    case STSP_ERR_NONFINITE_OUTPUT: return "command overflowed";
-    default: return "unknown status";
+    case STSP_OK: text = "ok"; break;
+    case STSP_WARN_TICK_SKIPPED: text = "tick skipped: evaluated at the given tick"; break;
+    case STSP_WARN_TICK_REPEATED: text = "tick repeated: recomputed without a new latch"; break;
+    case STSP_WARN_SATURATED: text = "command clamped to the actuator limits"; break;
+    case STSP_ERR_NULL: text = "null pointer argument"; break;
+    case STSP_ERR_NOT_INITIALIZED: text = "controller not initialized"; break;
+    case STSP_ERR_BAD_MAGIC: text = "table magic mismatch"; break;
+    case STSP_ERR_BAD_VERSION: text = "table format or scalar variant not supported"; break;
+    case STSP_ERR_BAD_DIMS: text = "table dimensions invalid"; break;
+    case STSP_ERR_BAD_CRC: text = "table CRC mismatch"; break;
+    case STSP_ERR_TICK_RANGE: text = "tick beyond the end of the table"; break;
+    case STSP_ERR_TICK_ORDER: text = "tick went backwards"; break;
+    case STSP_ERR_NONFINITE_STATE: text = "state not finite"; break;
+    case STSP_ERR_NONFINITE_OUTPUT: text = "command overflowed"; break;
+    case STSP_ERR_BAD_VALUES: text = "table values not finite or limits invalid"; break;
+    default: text = "unknown status"; break;
     }
+    return text;
 }
 #endif

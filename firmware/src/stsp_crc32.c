@@ -3,17 +3,16 @@
 
 #include <string.h>
 
-static const uint32_t stsp_crc_nibble[16] = {
-    0x00000000u, 0x1DB71064u, 0x3B6E20C8u, 0x26D930ACu, 0x76DC4190u, 0x6B6B51F4u,
-    0x4DB26158u, 0x5005713Cu, 0xEDB88320u, 0xF00F9344u, 0xD6D6A3E8u, 0xCB61B38Cu,
-    0x9B64C2B0u, 0x86D3D2D4u, 0xA00AE278u, 0xBDBDF21Cu};
-
 static inline uint32_t stsp_crc32_byte(uint32_t crc, uint32_t byte)
 {
-    crc ^= byte & 0xFFu;
-    crc = (crc >> 4) ^ stsp_crc_nibble[crc & 0x0Fu];
-    crc = (crc >> 4) ^ stsp_crc_nibble[crc & 0x0Fu];
-    return crc;
+    static const uint32_t stsp_crc_nibble[16] = {
+        0x00000000u, 0x1DB71064u, 0x3B6E20C8u, 0x26D930ACu, 0x76DC4190u, 0x6B6B51F4u,
+        0x4DB26158u, 0x5005713Cu, 0xEDB88320u, 0xF00F9344u, 0xD6D6A3E8u, 0xCB61B38Cu,
+        0x9B64C2B0u, 0x86D3D2D4u, 0xA00AE278u, 0xBDBDF21Cu};
+    uint32_t c = crc ^ (byte & 0xFFu);
+    c = (c >> 4) ^ stsp_crc_nibble[c & 0x0Fu];
+    c = (c >> 4) ^ stsp_crc_nibble[c & 0x0Fu];
+    return c;
 }
 
 uint32_t stsp_crc32_begin(void)
@@ -23,21 +22,22 @@ uint32_t stsp_crc32_begin(void)
 
 uint32_t stsp_crc32_u32(uint32_t crc, uint32_t value)
 {
-    crc = stsp_crc32_byte(crc, value);
-    crc = stsp_crc32_byte(crc, value >> 8);
-    crc = stsp_crc32_byte(crc, value >> 16);
-    return stsp_crc32_byte(crc, value >> 24);
+    uint32_t c = stsp_crc32_byte(crc, value);
+    c = stsp_crc32_byte(c, value >> 8);
+    c = stsp_crc32_byte(c, value >> 16);
+    return stsp_crc32_byte(c, value >> 24);
 }
 
 uint32_t stsp_crc32_f32s(uint32_t crc, const stsp_f32_t *values, uint32_t count)
 {
+    uint32_t c = crc;
     uint32_t i;
     for (i = 0u; i < count; ++i) {
         uint32_t bits;
         (void)memcpy(&bits, &values[i], sizeof bits);
-        crc = stsp_crc32_u32(crc, bits);
+        c = stsp_crc32_u32(c, bits);
     }
-    return crc;
+    return c;
 }
 
 uint32_t stsp_crc32_end(uint32_t crc)

@@ -67,7 +67,8 @@ def generate_c(table: GainTable, *, prefix: str | None = None,
 #define {P}_TICK_HZ {table.tick_hz}u
 
 /* Tables in flash; layout K[tick][i*NX + j], k0[tick][i], L[tick][i*N_LATCH + c],
- * Lambda[stage][c*NX + j], lambda0[stage][c] (see stsp_controller.h). */
+ * Lambda[stage][c*NX + j], lambda0[stage][c], u_min[i], u_max[i] (see stsp_controller.h;
+ * +-3.4028235e+38f = +-FLT_MAX: unlimited). */
 extern const stsp_table_t {p}_table;
 
 #endif /* {P}_GAINS_H */
@@ -82,6 +83,8 @@ extern const stsp_table_t {p}_table;
         _array("stsp_f32_t", f"{p}_L", table.L, f32, f"[n_ticks][nu][n_latch] = [{table.n_ticks}][{m}][{L}]"),
         _array("stsp_f32_t", f"{p}_Lambda", table.Lambda, f32, f"[n_stages][n_latch][nx]"),
         _array("stsp_f32_t", f"{p}_lambda0", table.lambda0, f32, f"[n_stages][n_latch]"),
+        _array("stsp_f32_t", f"{p}_u_min", table.u_min, f32, f"[nu] lower actuator limits"),
+        _array("stsp_f32_t", f"{p}_u_max", table.u_max, f32, f"[nu] upper actuator limits"),
     ]
     sha_bytes = ", ".join(f"0x{sha[i:i + 2]}u" for i in range(0, 64, 2))
     source = banner + f'#include "{p}.h"\n\n' + "\n".join(arrays) + f"""
@@ -90,6 +93,7 @@ const stsp_table_t {p}_table = {{
     {n}u, {m}u, {L}u, {table.n_stages}u, {table.n_ticks}u, {table.tick_hz}u,
     {p}_stage_start, {p}_stage_np,
     {p}_K, {p}_k0, {p}_L, {p}_Lambda, {p}_lambda0,
+    {p}_u_min, {p}_u_max,
     0x{table_crc32(table):08X}u,
     {{{sha_bytes}}}
 }};

@@ -24,7 +24,8 @@ STATUS = {
     "OK": 0, "WARN_TICK_SKIPPED": 1, "WARN_TICK_REPEATED": 2, "ERR_NULL": -1,
     "ERR_NOT_INITIALIZED": -2, "ERR_BAD_MAGIC": -3, "ERR_BAD_VERSION": -4, "ERR_BAD_DIMS": -5,
     "ERR_BAD_CRC": -6, "ERR_TICK_RANGE": -7, "ERR_TICK_ORDER": -8,
-    "ERR_NONFINITE_STATE": -9, "ERR_NONFINITE_OUTPUT": -10,
+    "WARN_SATURATED": 3, "ERR_NONFINITE_STATE": -9, "ERR_NONFINITE_OUTPUT": -10,
+    "ERR_BAD_VALUES": -11,
 }
 
 _CDEF = """
@@ -37,12 +38,19 @@ typedef struct {
     const uint32_t *stage_start; const uint16_t *stage_np;
     const stsp_f32_t *K; const stsp_f32_t *k0; const stsp_f32_t *L;
     const stsp_f32_t *Lambda; const stsp_f32_t *lambda0;
+    const stsp_f32_t *u_min; const stsp_f32_t *u_max;
     uint32_t crc32; uint8_t problem_sha256[32];
 } stsp_table_t;
-typedef struct { ...; } stsp_ctrl_t;
+typedef struct {
+    const stsp_table_t *table; uint32_t next_tick; uint16_t stage; uint16_t latched;
+    uint16_t sat_mask; ...;
+} stsp_ctrl_t;
 uint32_t stsp_table_crc32(const stsp_table_t *table);
 stsp_status_t stsp_init(stsp_ctrl_t *ctrl, const stsp_table_t *table);
+stsp_status_t stsp_init_expect(stsp_ctrl_t *ctrl, const stsp_table_t *table, uint32_t nx,
+                               uint32_t nu);
 stsp_status_t stsp_reset(stsp_ctrl_t *ctrl);
+stsp_status_t stsp_verify(stsp_ctrl_t *ctrl);
 stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_t *x, stsp_f32_t *u);
 const char *stsp_status_str(stsp_status_t status);
 const stsp_table_t *harness_table(void);

@@ -7,9 +7,11 @@ Layout (all row-major, float32, padded to ``n_latch`` multipliers with zeros)::
     L[tick][i][c]        (n_ticks, m, P)    gain of the latched multiplier v
     Lambda[stage][c][j]  (n_stages, P, n)   latch map  v = Lambda x + lambda0
     lambda0[stage][c]    (n_stages, P)
+    u_min[i], u_max[i]   (m,)               actuator limits (+-FLT_MAX: unlimited)
 
-At tick ``j`` (time ``t0 + j / tick_hz``) the controller applies ``u = -K x - k0 - L v``
-and holds it for one tick; at a stage's first tick it first latches ``v`` from the state.
+At tick ``j`` (time ``t0 + j / tick_hz``) the controller applies
+``u = clip(-K x - k0 - L v, u_min, u_max)`` and holds it for one tick; at a stage's first
+tick it first latches ``v`` from the state.
 """
 from __future__ import annotations
 
@@ -22,16 +24,22 @@ import numpy as np
 from .design import ContinuousDesign
 
 __all__ = ["GainTable", "build_table", "sample_design", "ticks_per_stage", "table_crc32",
-           "FORMAT_VERSION", "SCALAR_FLOAT32"]
+           "FORMAT_VERSION", "SCALAR_FLOAT32", "F32_MAX"]
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 SCALAR_FLOAT32 = 1
 MAGIC = 0x53545350  # "STSP"
+F32_MAX = float(np.finfo(np.float32).max)  # the firmware's "unlimited" (FLT_MAX)
 
 
 @dataclass(frozen=True)
 class GainTable:
-    """Quantized, per-tick gains of one design (see the module docstring for the layout)."""
+    """Quantized, per-tick gains of one design (see the module docstring for the layout).
+
+    ``u_min``/``u_max`` are optional: ``None`` (the default) means unlimited, stored as
+    -FLT_MAX/FLT_MAX. Given limits must satisfy ``u_min <= 0 <= u_max`` (the firmware's safe
+    hold value, all zeros, has to be a valid command); the firmware refuses other tables.
+    """
     name: str
     tick_hz: int
     t0: float
@@ -43,6 +51,22 @@ class GainTable:
     Lambda: np.ndarray
     lambda0: np.ndarray
     problem_sha256: str
+    u_min: np.ndarray | None = None
+    u_max: np.ndarray | None = None
+
+    def __post_init__(self):
+        m = self.K.shape[1]
+        for name, default in (("u_min", -F32_MAX), ("u_max", F32_MAX)):
+            val = getattr(self, name)
+            arr = (np.full(m, default, dtype=np.float32) if val is None
+                   else np.asarray(val, dtype=np.float32).reshape(-1))
+            if arr.shape != (m,):
+                raise ValueError(f"{name} must have one entry per input ({m}), not {arr.shape}")
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"{name} must be finite (use +-FLT_MAX for unlimited)")
+            object.__setattr__(self, name, arr)
+        if np.any(self.u_min > 0) or np.any(self.u_max < 0):
+            raise ValueError("actuator limits must satisfy u_min <= 0 <= u_max")
 
     @property
     def n_ticks(self) -> int:
@@ -67,14 +91,30 @@ class GainTable:
     def quantized(self) -> "GainTable":
         """The table as the firmware stores it: every gain rounded to float32."""
         return self.with_arrays(K=self.K, k0=self.k0, L=self.L, Lambda=self.Lambda,
-                                lambda0=self.lambda0)
+                                lambda0=self.lambda0, u_min=self.u_min, u_max=self.u_max)
+
+    @property
+    def limited(self) -> bool:
+        """True when some input has a finite limit (not +-FLT_MAX)."""
+        return bool(np.any(self.u_min > -F32_MAX) or np.any(self.u_max < F32_MAX))
 
 
-def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = True) -> GainTable:
+def _to_float32(a: np.ndarray) -> np.ndarray:
+    """Round to float32 (nearest, as a C compiler converts the literals), after flushing to
+    zero the entries below 1e-12 of the array's largest: those are round-off of exact zeros
+    (2e-18, say), which would otherwise make regenerated tables differ between machines."""
+    a = np.asarray(a, dtype=float)
+    scale = float(np.abs(a).max()) if a.size else 0.0
+    return np.where(np.abs(a) < 1e-12 * scale, 0.0, a).astype(np.float32)
+
+
+def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = True,
+                u_min=None, u_max=None) -> GainTable:
     """Assemble a table from per-stage gains ``(K, k0, L, Lambda, lambda0)`` with shapes
     (T_k, m, n), (T_k, m), (T_k, m, p_k), (p_k, n), (p_k,).
 
     ``quantize=False`` keeps float64 values (for checking a design before quantization).
+    ``u_min``/``u_max`` (m,) are the actuator limits; ``None`` means unlimited.
 
     When more multipliers are latched than there are states (joint or band designs with many
     knots), the table latches the state instead: ``L v = (L Lambda) x_latch + L lambda0``, so
@@ -95,10 +135,11 @@ def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = 
         p = Lamk.shape[0]
         K[sl], k0[sl], L[sl, :, :Lk.shape[2]] = Kk, k0k, Lk
         Lam[k, :p], lam0[k, :p] = Lamk, lam0k
-    cast = (lambda a: np.asarray(a, dtype=np.float32)) if quantize else np.asarray
+    cast = _to_float32 if quantize else np.asarray
     return GainTable(problem.name, int(tick_hz), problem.t0, start,
                      np.array([g[3].shape[0] for g in stages], dtype=np.uint16),
-                     cast(K), cast(k0), cast(L), cast(Lam), cast(lam0), problem.source_sha256)
+                     cast(K), cast(k0), cast(L), cast(Lam), cast(lam0), problem.source_sha256,
+                     u_min, u_max)
 
 
 def _latch_state(stages: list[tuple], n: int) -> list[tuple]:
@@ -145,15 +186,16 @@ def table_crc32(table: GainTable) -> int:
     """CRC-32 (IEEE 802.3, as zlib) over the table's canonical little-endian serialization.
 
     The firmware computes the same value in ``stsp_table_crc32``: the dimensions and tick rate
-    as u32, ``stage_start`` as u32, ``stage_np`` as u32, then K, k0, L, Lambda, lambda0 as
-    IEEE-754 binary32 bit patterns, each little-endian.
+    as u32, ``stage_start`` as u32, ``stage_np`` as u32, then K, k0, L, Lambda, lambda0 (these
+    three only when P > 0), u_min, u_max as IEEE-754 binary32 bit patterns, each little-endian.
     """
     n, m, P = table.dims
     head = struct.pack("<6I", n, m, P, table.n_stages, table.n_ticks, table.tick_hz)
     parts = [head, np.asarray(table.stage_start, "<u4").tobytes(),
              np.asarray(table.stage_np, "<u4").tobytes()]
     parts += [np.asarray(a, "<f4").tobytes()
-              for a in (table.K, table.k0, table.L, table.Lambda, table.lambda0)]
+              for a in (table.K, table.k0, table.L, table.Lambda, table.lambda0,
+                        table.u_min, table.u_max)]
     crc = 0
     for part in parts:
         crc = zlib.crc32(part, crc)

@@ -1,5 +1,7 @@
-/* Unit tests of the controller on a small hand-made table whose law is checked against a
- * double-precision reference evaluation written out here. */
+/* Unit tests of the controller on small hand-made tables whose law is checked against a
+ * double-precision reference evaluation written out here. Built several times (CMakeLists.txt):
+ * generic dimensions, STSP_FIXED_NX/NU/N_LATCH = 2/1/2 (the main table's shape), and each under
+ * ASan + UBSan. Every documented response of docs/firmware.md has a test here. */
 #include <float.h>
 #include <math.h>
 #include <setjmp.h>
@@ -13,7 +15,8 @@
 #include "stospline/stsp_controller.h"
 #include "stsp_crc32.h"
 
-/* nx = 2, nu = 1, n_latch = 2; stage 0 = ticks 0..2 (one multiplier), stage 1 = ticks 3..4. */
+/* Table A: nx = 2, nu = 1, n_latch = 2; stage 0 = ticks 0..2 (one multiplier), stage 1 =
+ * ticks 3..4 (two). */
 #define NX 2u
 #define NU 1u
 #define NL 2u
@@ -30,8 +33,16 @@ static const float L[NT * NU * NL] = {2.0f, 0.0f, 2.5f, 0.0f, 3.0f, 0.0f,
 static const float Lambda[NS * NL * NX] = {1.0f, 2.0f, 0.0f, 0.0f,
                                            -1.0f, 0.5f, 0.25f, 3.0f};
 static const float lambda0[NS * NL] = {-0.5f, 0.0f, 1.0f, -2.0f};
+static const float no_min[NU] = {-FLT_MAX}, no_max[NU] = {FLT_MAX};
+static const float tight_min[NU] = {-0.25f}, tight_max[NU] = {0.5f};
+static const float wide_min[NU] = {-1000.0f}, wide_max[NU] = {1000.0f};
 
-static stsp_table_t make_table(void)
+/* CRC-32 of table A (unlimited) as host/stospline/tables.py table_crc32 computes it
+ * (tests/python/test_firmware_limits.py builds the same table): the serialization order of
+ * both implementations, limits included, is pinned here. */
+#define TABLE_A_CRC32 0x45411496u
+
+static stsp_table_t make_table_limited(const float *lo, const float *hi)
 {
     stsp_table_t t;
     memset(&t, 0, sizeof t);
@@ -41,19 +52,54 @@ static stsp_table_t make_table(void)
     t.nx = NX; t.nu = NU; t.n_latch = NL; t.n_stages = NS; t.n_ticks = NT; t.tick_hz = 10u;
     t.stage_start = stage_start; t.stage_np = stage_np;
     t.K = K; t.k0 = k0; t.L = L; t.Lambda = Lambda; t.lambda0 = lambda0;
+    t.u_min = lo; t.u_max = hi;
     t.crc32 = stsp_table_crc32(&t);
     return t;
 }
 
-/* Reference law in double: u = -K x - k0 - L v with v latched at `latch_x`. */
-static double reference_u(uint32_t tick, const float *x, const float *latch_x)
+static stsp_table_t make_table(void)
 {
-    uint32_t s = (tick >= stage_start[1]) ? 1u : 0u, i, j;
+    return make_table_limited(no_min, no_max);
+}
+
+/* Table B: nx = 1, nu = 2, no multipliers (n_latch = 0, L/Lambda/lambda0 NULL), one stage of
+ * 3 ticks, u = -(x, x). A different shape: a fixed 2/1/2 build must refuse it. */
+static const uint32_t b_start[2] = {0u, 3u};
+static const uint16_t b_np[1] = {0u};
+static const float b_K[3 * 2] = {1.0f, 1.0f, 1.0f, 1.0f, 1.0f, 1.0f};
+static const float b_k0[3 * 2] = {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
+static const float b_min[2] = {-FLT_MAX, -FLT_MAX}, b_max[2] = {FLT_MAX, FLT_MAX};
+
+static stsp_table_t make_table_b(void)
+{
+    stsp_table_t t;
+    memset(&t, 0, sizeof t);
+    t.magic = STSP_TABLE_MAGIC;
+    t.format_version = STSP_FORMAT_VERSION;
+    t.scalar_kind = STSP_SCALAR_FLOAT32;
+    t.nx = 1u; t.nu = 2u; t.n_latch = 0u; t.n_stages = 1u; t.n_ticks = 3u; t.tick_hz = 1u;
+    t.stage_start = b_start; t.stage_np = b_np; t.K = b_K; t.k0 = b_k0;
+    t.u_min = b_min; t.u_max = b_max;
+    t.crc32 = stsp_table_crc32(&t);
+    return t;
+}
+
+#ifdef STSP_FIXED_NX
+#define EXPECT_TABLE_B STSP_ERR_BAD_DIMS /* another shape than the build's */
+#else
+#define EXPECT_TABLE_B STSP_OK
+#endif
+
+/* Reference law in double: u = -K x - k0 - L v with v latched at `latch_x` in `latch_stage`. */
+static double reference_u_latched(uint32_t tick, const float *x, const float *latch_x,
+                                  uint32_t latch_stage)
+{
+    uint32_t i, j;
     double v[NL] = {0.0, 0.0}, acc = k0[tick];
-    for (i = 0u; i < stage_np[s]; ++i) {
-        v[i] = lambda0[s * NL + i];
+    for (i = 0u; i < stage_np[latch_stage]; ++i) {
+        v[i] = lambda0[latch_stage * NL + i];
         for (j = 0u; j < NX; ++j) {
-            v[i] += (double)Lambda[(s * NL + i) * NX + j] * latch_x[j];
+            v[i] += (double)Lambda[(latch_stage * NL + i) * NX + j] * latch_x[j];
         }
     }
     for (j = 0u; j < NX; ++j) {
@@ -65,13 +111,32 @@ static double reference_u(uint32_t tick, const float *x, const float *latch_x)
     return -acc;
 }
 
-static stsp_table_t table;
+static double reference_u(uint32_t tick, const float *x, const float *latch_x)
+{
+    return reference_u_latched(tick, x, latch_x, (tick >= stage_start[1]) ? 1u : 0u);
+}
+
+static double clamp(double u, float lo, float hi)
+{
+    return (u < lo) ? lo : ((u > hi) ? hi : u);
+}
+
+static uint32_t f32_bits(float value)
+{
+    uint32_t bits;
+    memcpy(&bits, &value, sizeof bits);
+    return bits;
+}
+
+static stsp_table_t table, table_tight, table_wide;
 static stsp_ctrl_t ctrl;
 
 static int setup(void **state)
 {
     (void)state;
     table = make_table();
+    table_tight = make_table_limited(tight_min, tight_max);
+    table_wide = make_table_limited(wide_min, wide_max);
     return stsp_init(&ctrl, &table) == STSP_OK ? 0 : -1;
 }
 
@@ -85,6 +150,14 @@ static void test_crc_known_answer(void **state)
     assert_int_equal(stsp_crc32_end(crc), 0x9AE0DAAFu);
 }
 
+static void test_crc_matches_python_and_covers_limits(void **state)
+{
+    (void)state;
+    assert_int_equal(table.crc32, TABLE_A_CRC32);
+    assert_int_not_equal(table_tight.crc32, table.crc32);
+    assert_int_not_equal(table_wide.crc32, table_tight.crc32);
+}
+
 static void test_law_and_latching(void **state)
 {
     const float xs[NT][NX] = {{1.0f, -2.0f}, {0.5f, 0.25f}, {-1.0f, 3.0f},
@@ -96,50 +169,190 @@ static void test_law_and_latching(void **state)
         const float *latch = (tick < 3u) ? xs[0] : xs[3];
         assert_int_equal(stsp_step(&ctrl, tick, xs[tick], u), STSP_OK);
         assert_float_equal(u[0], reference_u(tick, xs[tick], latch), 1e-5);
+        assert_int_equal(ctrl.next_tick, tick + 1u);
+        assert_int_equal(ctrl.stage, (tick < 3u) ? 0u : 1u);
     }
 }
 
+/* Inactive limits take the compare path, no limits the sum check: the same commands. */
+static void test_inactive_limits_change_nothing(void **state)
+{
+    const float xs[NT][NX] = {{1.0f, -2.0f}, {0.5f, 0.25f}, {-1.0f, 3.0f},
+                              {2.0f, 1.0f}, {-0.5f, -0.75f}};
+    stsp_ctrl_t wide;
+    float u[NU], uw[NU];
+    uint32_t tick;
+    (void)state;
+    assert_int_equal(stsp_init(&wide, &table_wide), STSP_OK);
+    for (tick = 0u; tick < NT; ++tick) {
+        assert_int_equal(stsp_step(&ctrl, tick, xs[tick], u), STSP_OK);
+        assert_int_equal(stsp_step(&wide, tick, xs[tick], uw), STSP_OK);
+        assert_int_equal(f32_bits(u[0]), f32_bits(uw[0]));
+    }
+}
+
+/* NaN and +-Inf in any state entry, on every kind of tick, with and without limits: status
+ * STSP_ERR_NONFINITE_STATE, u all zeros, the instance unchanged. */
 static void test_nonfinite_state(void **state)
 {
+    const float specials[4] = {NAN, -NAN, INFINITY, -INFINITY};
     const float good[NX] = {1.0f, 2.0f};
-    float bad[NX] = {1.0f, 0.0f};
-    float u[NU] = {42.0f};
-    const float specials[3] = {NAN, INFINITY, -INFINITY};
-    int i;
+    const stsp_table_t *tables[3] = {&table, &table_tight, &table_wide};
+    /* Ticks reached from a controller stepped through `prefix` ticks 0..prefix-1:
+     * 0 = first step (latch), 1 = ordinary, 2 = ordinary, 3 = stage switch (latch). */
+    const uint32_t prefixes[4] = {0u, 1u, 2u, 3u};
+    uint32_t tb, s, j, p, t;
     (void)state;
-    for (i = 0; i < 3; ++i) {
-        bad[1] = specials[i];
-        u[0] = 42.0f;
-        assert_int_equal(stsp_step(&ctrl, 0u, bad, u), STSP_ERR_NONFINITE_STATE);
-        assert_true(u[0] == 0.0f);
+    for (tb = 0u; tb < 3u; ++tb) {
+        for (p = 0u; p < 4u; ++p) {
+            for (s = 0u; s < 4u; ++s) {
+                for (j = 0u; j < NX; ++j) {
+                    stsp_ctrl_t c, fresh;
+                    float bad[NX] = {1.0f, 2.0f}, u[NU] = {42.0f}, u_ref[NU];
+                    assert_int_equal(stsp_init(&c, tables[tb]), STSP_OK);
+                    for (t = 0u; t < prefixes[p]; ++t) {
+                        assert_true(stsp_step(&c, t, good, u) >= STSP_OK);
+                    }
+                    memcpy(&fresh, &c, sizeof c);
+                    bad[j] = specials[s];
+                    u[0] = 42.0f;
+                    assert_int_equal(stsp_step(&c, prefixes[p], bad, u),
+                                     STSP_ERR_NONFINITE_STATE);
+                    assert_true(f32_bits(u[0]) == 0u);
+                    assert_memory_equal(&c, &fresh, sizeof c);
+                    /* A skip onto the same tick (cold path without latch) too. */
+                    if (prefixes[p] > 0u && prefixes[p] < 3u) {
+                        assert_int_equal(stsp_step(&c, prefixes[p] + 1u, bad, u),
+                                         STSP_ERR_NONFINITE_STATE);
+                        assert_true(f32_bits(u[0]) == 0u);
+                    }
+                    assert_true(stsp_step(&c, prefixes[p], good, u) >= STSP_OK);
+                    assert_true(stsp_step(&fresh, prefixes[p], good, u_ref) >= STSP_OK);
+                    assert_int_equal(f32_bits(u[0]), f32_bits(u_ref[0]));
+                }
+            }
+        }
     }
-    /* The failed steps changed nothing: tick 0 is still the next one and still latches. */
-    assert_int_equal(stsp_step(&ctrl, 0u, good, u), STSP_OK);
-    assert_float_equal(u[0], reference_u(0u, good, good), 1e-5);
 }
 
 static void test_subnormal_state_is_finite(void **state)
 {
     const float x[NX] = {FLT_MIN / 4.0f, -FLT_MIN / 8.0f};
+    const float z[NX] = {-0.0f, 0.0f};
     float u[NU];
     (void)state;
     assert_int_equal(stsp_step(&ctrl, 0u, x, u), STSP_OK);
     assert_float_equal(u[0], reference_u(0u, x, x), 1e-6);
+    assert_int_equal(stsp_step(&ctrl, 1u, z, u), STSP_OK);
+    assert_float_equal(u[0], reference_u(1u, z, x), 1e-6);
 }
 
 static void test_overflow_gives_zero_and_error(void **state)
 {
     const float huge[NX] = {FLT_MAX, -FLT_MAX};
+    const float big_ok[NX] = {1e30f, -1e30f};
+    const float good[NX] = {1.0f, 1.0f};
     float u[NU] = {7.0f};
+    stsp_ctrl_t c;
     (void)state;
+    /* The latch itself overflows (Lambda x at tick 0). */
     assert_int_equal(stsp_step(&ctrl, 0u, huge, u), STSP_ERR_NONFINITE_OUTPUT);
     assert_true(u[0] == 0.0f);
+    assert_int_equal(ctrl.next_tick, 0u);
+    /* Large but representable: a finite command. */
+    assert_int_equal(stsp_step(&ctrl, 0u, big_ok, u), STSP_OK);
+    assert_true(isfinite(u[0]));
+    /* An ordinary (fast-path) tick overflows, with and without limits. */
+    assert_int_equal(stsp_init(&c, &table), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, good, u), STSP_OK);
+    u[0] = 7.0f;
+    assert_int_equal(stsp_step(&c, 1u, huge, u), STSP_ERR_NONFINITE_OUTPUT);
+    assert_true(u[0] == 0.0f);
+    assert_int_equal(stsp_init(&c, &table_tight), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, good, u), STSP_WARN_SATURATED);
+    assert_int_equal(stsp_step(&c, 1u, huge, u), STSP_ERR_NONFINITE_OUTPUT);
+    assert_true(u[0] == 0.0f);
+}
+
+static void test_saturation(void **state)
+{
+    /* Table A: u0 = 0.9 - 2.5 x0 - 3 x1 at tick 0 (latching there); with v latched at
+     * x_mid, u1 = 0.15 - 0.6 x0 + 1.1 x1 and u2 = 0.12 - 0.7 x0 + 1.2 x1. */
+    const float x_mid[NX] = {0.36f, 0.0f}, x_low[NX] = {1.0f, 0.0f};
+    const float x_high[NX] = {-1.0f, 0.0f}, x3[NX] = {0.0f, 0.9f};
+    float u[NU];
+    stsp_ctrl_t c;
+    (void)state;
+    assert_int_equal(stsp_init(&c, &table_tight), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x_mid, u), STSP_OK);         /* latch, inside */
+    assert_float_equal(u[0], reference_u(0u, x_mid, x_mid), 1e-6);
+    assert_int_equal(stsp_step(&c, 1u, x_low, u), STSP_WARN_SATURATED); /* -0.45 < u_min */
+    assert_true(u[0] == tight_min[0]);
+    assert_int_equal(c.sat_mask, 1u);
+    assert_int_equal(c.next_tick, 2u);                               /* the tick counted */
+    assert_int_equal(stsp_step(&c, 2u, x_high, u), STSP_WARN_SATURATED); /* 0.82 > u_max */
+    assert_true(u[0] == tight_max[0]);
+    assert_int_equal(c.sat_mask, 1u);
+    /* Saturation wins over a tick warning; a latch tick (cold path) saturates too. */
+    assert_int_equal(stsp_reset(&c), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x_low, u), STSP_WARN_SATURATED);  /* -1.6 */
+    assert_true(u[0] == tight_min[0]);
+    assert_int_equal(stsp_step(&c, 2u, x_low, u), STSP_WARN_SATURATED);  /* skipped tick 1 */
+    assert_true(u[0] == tight_min[0]);
+    assert_int_equal(c.next_tick, 3u);
+    assert_int_equal(stsp_step(&c, 2u, x_low, u), STSP_WARN_SATURATED);  /* repeated */
+    assert_int_equal(stsp_step(&c, 3u, x3, u), STSP_OK);                 /* stage 1 latch */
+    assert_float_equal(u[0], reference_u(3u, x3, x3), 1e-5);
+    assert_true(u[0] > tight_min[0] && u[0] < tight_max[0]);
+}
+
+/* No limits, nu = 2: each command finite but their sum overflows. The fast check raises a
+ * false alarm; the cold path finds nothing to clamp and returns the commands untouched. */
+static void test_sum_overflow_is_not_an_error(void **state)
+{
+    const stsp_table_t tb = make_table_b();
+    const float x[1] = {-2.0e38f};
+    float u[2] = {0.0f, 0.0f};
+    stsp_ctrl_t c;
+    (void)state;
+    assert_int_equal(stsp_init(&c, &tb), EXPECT_TABLE_B);
+    if (EXPECT_TABLE_B != STSP_OK) {
+        return;
+    }
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
+    assert_true(u[0] == 2.0e38f && u[1] == 2.0e38f);
+    assert_int_equal(stsp_step(&c, 1u, x, u), STSP_OK);
+    assert_true(u[0] == 2.0e38f && u[1] == 2.0e38f);
+    assert_int_equal(c.next_tick, 2u);
+}
+
+/* A table without multipliers may leave L, Lambda and lambda0 NULL. */
+static void test_table_without_multipliers(void **state)
+{
+    const stsp_table_t tb = make_table_b();
+    const float x[1] = {1.5f};
+    float u[2];
+    stsp_ctrl_t c;
+    uint32_t tick;
+    (void)state;
+    assert_int_equal(stsp_init(&c, &tb), EXPECT_TABLE_B);
+    if (EXPECT_TABLE_B != STSP_OK) {
+        assert_int_equal(stsp_step(&c, 0u, x, u), STSP_ERR_NOT_INITIALIZED);
+        return;
+    }
+    for (tick = 0u; tick < 3u; ++tick) {
+        assert_int_equal(stsp_step(&c, tick, x, u), STSP_OK);
+        assert_true(u[0] == -1.5f && u[1] == -1.5f);
+    }
+    assert_int_equal(stsp_step(&c, 3u, x, u), STSP_ERR_TICK_RANGE);
+    assert_true(u[0] == 0.0f && u[1] == 0.0f);
 }
 
 static void test_tick_range_and_order(void **state)
 {
     const float x[NX] = {0.1f, 0.2f};
     float u[NU] = {3.0f};
+    uint32_t tick;
     (void)state;
     assert_int_equal(stsp_step(&ctrl, NT, x, u), STSP_ERR_TICK_RANGE);
     assert_true(u[0] == 0.0f);
@@ -150,26 +363,56 @@ static void test_tick_range_and_order(void **state)
     u[0] = 5.0f;
     assert_int_equal(stsp_step(&ctrl, 0u, x, u), STSP_ERR_TICK_ORDER);
     assert_true(u[0] == 0.0f);
+    assert_int_equal(ctrl.next_tick, 3u);
+    /* Run to the end: a step after the last tick is an error, the last one may repeat. */
+    for (tick = 3u; tick < NT; ++tick) {
+        assert_int_equal(stsp_step(&ctrl, tick, x, u), STSP_OK);
+    }
+    u[0] = 5.0f;
+    assert_int_equal(stsp_step(&ctrl, NT, x, u), STSP_ERR_TICK_RANGE);
+    assert_true(u[0] == 0.0f);
+    assert_int_equal(stsp_step(&ctrl, NT + 1u, x, u), STSP_ERR_TICK_RANGE);
+    assert_int_equal(stsp_step(&ctrl, NT - 1u, x, u), STSP_WARN_TICK_REPEATED);
+    assert_float_equal(u[0], reference_u(NT - 1u, x, x), 1e-5);
 }
 
 static void test_repeated_tick_keeps_latch(void **state)
 {
-    const float x0[NX] = {1.0f, 1.0f}, x1[NX] = {-3.0f, 2.0f};
+    const float x0[NX] = {1.0f, 1.0f}, x1[NX] = {-3.0f, 2.0f}, x3[NX] = {0.5f, 0.5f};
     float u1[NU], u2[NU];
     (void)state;
     assert_int_equal(stsp_step(&ctrl, 0u, x0, u1), STSP_OK);
     assert_int_equal(stsp_step(&ctrl, 0u, x1, u2), STSP_WARN_TICK_REPEATED);
     assert_float_equal(u2[0], reference_u(0u, x1, x0), 1e-5); /* latch from the first call */
+    assert_int_equal(stsp_step(&ctrl, 1u, x1, u2), STSP_OK);
+    assert_int_equal(stsp_step(&ctrl, 1u, x1, u2), STSP_WARN_TICK_REPEATED);
+    assert_int_equal(stsp_step(&ctrl, 2u, x1, u2), STSP_OK);
+    assert_int_equal(stsp_step(&ctrl, 3u, x3, u2), STSP_OK);    /* stage 1 latches at x3 */
+    assert_int_equal(stsp_step(&ctrl, 3u, x1, u2), STSP_WARN_TICK_REPEATED);
+    assert_float_equal(u2[0], reference_u(3u, x1, x3), 1e-5);
+    assert_int_equal(stsp_step(&ctrl, 4u, x1, u2), STSP_OK);
+    assert_float_equal(u2[0], reference_u(4u, x1, x3), 1e-5);
 }
 
 static void test_skipped_stage_start_latches_late(void **state)
 {
     const float x0[NX] = {1.0f, 1.0f}, x4[NX] = {0.5f, -2.0f};
     float u[NU];
+    stsp_ctrl_t c;
     (void)state;
     assert_int_equal(stsp_step(&ctrl, 0u, x0, u), STSP_OK);
     assert_int_equal(stsp_step(&ctrl, 4u, x4, u), STSP_WARN_TICK_SKIPPED);
     assert_float_equal(u[0], reference_u(4u, x4, x4), 1e-5); /* stage 1 latched at tick 4 */
+    /* Skipped within a stage: no latch, the stage's v stays. */
+    assert_int_equal(stsp_init(&c, &table), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x0, u), STSP_OK);
+    assert_int_equal(stsp_step(&c, 2u, x4, u), STSP_WARN_TICK_SKIPPED);
+    assert_float_equal(u[0], reference_u(2u, x4, x0), 1e-5);
+    assert_int_equal(stsp_step(&c, 3u, x4, u), STSP_OK);
+    /* The first step of a plan at a later tick latches that tick's stage. */
+    assert_int_equal(stsp_init(&c, &table), STSP_OK);
+    assert_int_equal(stsp_step(&c, 1u, x4, u), STSP_WARN_TICK_SKIPPED);
+    assert_float_equal(u[0], reference_u(1u, x4, x4), 1e-5);
 }
 
 static void test_reset_restarts(void **state)
@@ -201,29 +444,52 @@ static void test_instances_are_independent(void **state)
 
 static void test_not_initialized_and_null(void **state)
 {
+    static const unsigned char fills[5] = {0x00u, 0xFFu, 0xA5u, 0xCCu, 0x53u};
     stsp_ctrl_t fresh;
+    stsp_table_t bad;
     const float x[NX] = {0.0f, 0.0f};
     float u[NU] = {9.0f};
+    unsigned i;
     (void)state;
-    memset(&fresh, 0, sizeof fresh);
+    /* Stepping before init, whatever the uninitialised memory holds: u is not written. */
+    for (i = 0u; i < 5u; ++i) {
+        memset(&fresh, fills[i], sizeof fresh);
+        u[0] = 9.0f;
+        assert_int_equal(stsp_step(&fresh, 0u, x, u), STSP_ERR_NOT_INITIALIZED);
+        assert_int_equal(stsp_reset(&fresh), STSP_ERR_NOT_INITIALIZED);
+        assert_int_equal(stsp_verify(&fresh), STSP_ERR_NOT_INITIALIZED);
+        assert_true(u[0] == 9.0f);
+    }
+    /* A failed init leaves a previously good instance not ready. */
+    assert_int_equal(stsp_init(&fresh, &table), STSP_OK);
+    bad = make_table();
+    bad.magic = 0u;
+    assert_int_equal(stsp_init(&fresh, &bad), STSP_ERR_BAD_MAGIC);
     assert_int_equal(stsp_step(&fresh, 0u, x, u), STSP_ERR_NOT_INITIALIZED);
-    assert_int_equal(stsp_reset(&fresh), STSP_ERR_NOT_INITIALIZED);
     assert_int_equal(stsp_step(NULL, 0u, x, u), STSP_ERR_NULL);
     assert_int_equal(stsp_step(&ctrl, 0u, NULL, u), STSP_ERR_NULL);
     assert_true(u[0] == 0.0f);
     assert_int_equal(stsp_step(&ctrl, 0u, x, NULL), STSP_ERR_NULL);
     assert_int_equal(stsp_init(NULL, &table), STSP_ERR_NULL);
     assert_int_equal(stsp_init(&fresh, NULL), STSP_ERR_NULL);
+    assert_int_equal(stsp_init_expect(NULL, &table, NX, NU), STSP_ERR_NULL);
     assert_int_equal(stsp_reset(NULL), STSP_ERR_NULL);
+    assert_int_equal(stsp_verify(NULL), STSP_ERR_NULL);
+    /* The NULL errors changed nothing: tick 0 still latches. */
+    assert_int_equal(stsp_step(&ctrl, 0u, x, u), STSP_OK);
+    assert_int_equal(ctrl.next_tick, 1u);
 }
 
 static void test_corrupt_tables_are_refused(void **state)
 {
     stsp_table_t t;
     stsp_ctrl_t c;
-    float Kbad[NT * NU * NX];
+    float Kbad[NT * NU * NX], Lnan[NT * NU * NL], lam0inf[NS * NL];
     const uint32_t bad_start[NS + 1u] = {0u, 3u, 3u};
+    const uint32_t bad_first[NS + 1u] = {1u, 3u, 5u};
     const uint16_t bad_np[NS] = {1u, 3u};
+    const float pos_min[NU] = {0.5f}, neg_max[NU] = {-0.5f}, nan_lim[NU] = {NAN};
+    const float inf_max[NU] = {INFINITY}, swapped_min[NU] = {1.0f}, swapped_max[NU] = {-1.0f};
     const float x[NX] = {0.0f, 0.0f};
     float u[NU];
     (void)state;
@@ -236,17 +502,39 @@ static void test_corrupt_tables_are_refused(void **state)
 
     t = make_table(); t.crc32 ^= 1u;
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_CRC);
+    t = make_table(); t.u_max = wide_max; /* limits are covered by the CRC */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_CRC);
     t = make_table(); t.magic = 0u;
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_MAGIC);
+    t = make_table(); t.format_version = 1u;  /* format 1 had no limits */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VERSION);
     t = make_table(); t.format_version = 99u;
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VERSION);
     t = make_table(); t.scalar_kind = 7u;
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VERSION);
     t = make_table(); t.nx = 0u;
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    t = make_table(); t.nu = 0u;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    t = make_table(); t.nu = STSP_MAX_NU + 1u;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    t = make_table(); t.nx = STSP_MAX_NX + 1u;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
     t = make_table(); t.n_latch = STSP_MAX_LATCH + 1u;
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    t = make_table(); t.n_stages = 0u;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    t = make_table(); t.n_stages = STSP_MAX_STAGES + 1u;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    t = make_table(); t.tick_hz = 0u;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    t = make_table(); t.n_ticks = 0u;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    t = make_table(); t.n_ticks = UINT32_MAX; /* offsets would overflow 32 bits */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
     t = make_table(); t.stage_start = bad_start;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    t = make_table(); t.stage_start = bad_first;
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
     t = make_table(); t.stage_np = bad_np;
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
@@ -254,6 +542,200 @@ static void test_corrupt_tables_are_refused(void **state)
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
     t = make_table(); t.K = NULL;
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_NULL);
+    t = make_table(); t.L = NULL;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_NULL);
+    t = make_table(); t.u_min = NULL;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_NULL);
+    t = make_table(); t.u_max = NULL;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_NULL);
+    t = make_table(); t.stage_start = NULL;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_NULL);
+
+    /* Bad values behind a valid CRC (a broken generator rather than a broken flash). */
+    memcpy(Lnan, L, sizeof L);
+    Lnan[3] = NAN;
+    t = make_table(); t.L = Lnan; t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    memcpy(lam0inf, lambda0, sizeof lambda0);
+    lam0inf[2] = -INFINITY;
+    t = make_table(); t.lambda0 = lam0inf; t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    t = make_table_limited(pos_min, no_max);       /* 0 below u_min */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    t = make_table_limited(no_min, neg_max);       /* 0 above u_max */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    t = make_table_limited(swapped_min, swapped_max);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    t = make_table_limited(nan_lim, no_max);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    t = make_table_limited(no_min, inf_max);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_ERR_NOT_INITIALIZED);
+}
+
+static void test_wrong_dimensions(void **state)
+{
+    const stsp_table_t tb = make_table_b();
+    const float x[NX] = {0.0f, 0.0f};
+    float u[NU];
+    stsp_ctrl_t c;
+    (void)state;
+    assert_int_equal(stsp_init_expect(&c, &table, NX, NU), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
+    assert_int_equal(stsp_init_expect(&c, &table, NX + 1u, NU), STSP_ERR_BAD_DIMS);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_ERR_NOT_INITIALIZED);
+    assert_int_equal(stsp_init_expect(&c, &table, NX, NU + 1u), STSP_ERR_BAD_DIMS);
+    assert_int_equal(stsp_init_expect(&c, &tb, NX, NU),
+                     (EXPECT_TABLE_B == STSP_OK) ? STSP_ERR_BAD_DIMS : EXPECT_TABLE_B);
+    assert_int_equal(stsp_init(&c, &tb), EXPECT_TABLE_B);
+}
+
+static void test_verify_detects_a_changed_table(void **state)
+{
+    float Kram[NT * NU * NX];
+    stsp_table_t t;
+    stsp_ctrl_t c;
+    const float x[NX] = {1.0f, 0.0f};
+    float u[NU] = {1.0f};
+    (void)state;
+    memcpy(Kram, K, sizeof K);
+    t = make_table();
+    t.K = Kram;
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    assert_int_equal(stsp_verify(&c), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
+    Kram[2] = -Kram[2];                 /* a bit flipped after init */
+    assert_int_equal(stsp_verify(&c), STSP_ERR_BAD_CRC);
+    u[0] = 1.0f;
+    assert_int_equal(stsp_step(&c, 1u, x, u), STSP_ERR_NOT_INITIALIZED);
+    assert_true(u[0] == 1.0f);
+}
+
+/* Seeded random walk over ticks, states (with NaN, Inf, huge and subnormal entries), resets
+ * and both limit settings, against a model of the documented contract: the status, the
+ * command (double-precision reference, clamped), zeros on errors, the instance untouched by
+ * errors. */
+static uint32_t lcg(uint32_t *s)
+{
+    *s = *s * 1664525u + 1013904223u;
+    return *s >> 8;
+}
+
+static float random_x(uint32_t *s)
+{
+    const uint32_t r = lcg(s) % 100u;
+    if (r == 0u) {
+        return NAN;
+    }
+    if (r == 1u) {
+        return (lcg(s) & 1u) ? INFINITY : -INFINITY;
+    }
+    if (r == 2u) {
+        return (lcg(s) & 1u) ? FLT_MAX : -FLT_MAX;
+    }
+    if (r == 3u) {
+        return FLT_MIN / 16.0f;
+    }
+    return ((float)(lcg(s) % 20001u) - 10000.0f) / 2500.0f;
+}
+
+static void test_random_walk_against_model(void **state)
+{
+    const stsp_table_t *tables[2] = {&table, &table_tight};
+    uint32_t seed = 12345u, tb, n;
+    (void)state;
+    for (tb = 0u; tb < 2u; ++tb) {
+        const stsp_table_t *t = tables[tb];
+        const double lo = t->u_min[0], hi = t->u_max[0];
+        stsp_ctrl_t c;
+        /* the model: next tick, stage, latch */
+        uint32_t m_next = 0u, m_stage = 0u, m_latched = 0u, m_latch_stage = 0u;
+        int m_latch_huge = 0;
+        float m_latch_x[NX] = {0.0f, 0.0f};
+        assert_int_equal(stsp_init(&c, t), STSP_OK);
+        for (n = 0u; n < 20000u; ++n) {
+            const uint32_t r = lcg(&seed) % 100u;
+            uint32_t tick, j, stage;
+            float x[NX], u[NU] = {123.0f};
+            stsp_ctrl_t before;
+            stsp_status_t st, tick_status = STSP_OK;
+            int finite = 1, huge = 0, huge_now, relatch;
+            double ref, tol;
+            if (r < 3u) {
+                assert_int_equal(stsp_reset(&c), STSP_OK);
+                m_next = 0u; m_stage = 0u; m_latched = 0u;
+                continue;
+            }
+            tick = (r < 70u) ? m_next : (r < 80u) ? m_next + 1u + lcg(&seed) % 3u
+                 : (r < 88u) ? m_next - 1u : (r < 94u) ? lcg(&seed) % (NT + 2u)
+                 : NT + lcg(&seed) % 3u;
+            for (j = 0u; j < NX; ++j) {
+                x[j] = random_x(&seed);
+                finite = finite && isfinite(x[j]);
+                huge = huge || !(fabsf(x[j]) < 1e30f);
+            }
+            memcpy(&before, &c, sizeof c);
+            st = stsp_step(&c, tick, x, u);
+            if (st < STSP_OK) {
+                /* every error: zeros, and the instance as it was */
+                assert_true(f32_bits(u[0]) == 0u);
+                assert_memory_equal(&c, &before, sizeof c);
+            }
+            if (tick >= NT) {
+                assert_int_equal(st, STSP_ERR_TICK_RANGE);
+                continue;
+            }
+            if (m_next > 0u && tick + 1u < m_next) {
+                assert_int_equal(st, STSP_ERR_TICK_ORDER);
+                continue;
+            }
+            if (!finite) {
+                assert_int_equal(st, STSP_ERR_NONFINITE_STATE);
+                continue;
+            }
+            stage = (tick >= stage_start[1]) ? 1u : 0u;
+            relatch = !m_latched || (stage != m_stage && stage_np[stage] > 0u);
+            /* a v latched from a huge state stays huge until the next latch */
+            huge_now = huge || (!relatch && m_latch_huge);
+            if (huge_now && st == STSP_ERR_NONFINITE_OUTPUT) {
+                continue;                 /* float32 overflow: the documented error */
+            }
+            assert_true(st >= STSP_OK);   /* a command: finite, within the limits */
+            assert_true(isfinite(u[0]));
+            assert_true(u[0] >= t->u_min[0] && u[0] <= t->u_max[0]);
+            if (m_next > 0u && tick + 1u == m_next) {
+                tick_status = STSP_WARN_TICK_REPEATED;
+            } else if (tick > m_next) {
+                tick_status = STSP_WARN_TICK_SKIPPED;
+            }
+            if (!huge_now) {
+                ref = relatch ? reference_u_latched(tick, x, x, stage)
+                              : reference_u_latched(tick, x, m_latch_x, m_latch_stage);
+                tol = 1e-5 + 1e-5 * fabs(ref);
+                if (st == STSP_WARN_SATURATED) {
+                    assert_true(ref <= lo + tol || ref >= hi - tol);
+                } else {
+                    assert_int_equal(st, tick_status);
+                    assert_true(ref >= lo - tol && ref <= hi + tol);
+                }
+                assert_float_equal(u[0], clamp(ref, t->u_min[0], t->u_max[0]), tol);
+            } else if (st != STSP_WARN_SATURATED) {
+                assert_int_equal(st, tick_status);
+            }
+            if (relatch) {
+                m_latch_huge = huge;
+                memcpy(m_latch_x, x, sizeof x);
+                m_latch_stage = stage;
+                m_latched = 1u;
+            }
+            m_stage = stage;
+            if (tick + 1u > m_next) {
+                m_next = tick + 1u;
+            }
+            assert_int_equal(c.next_tick, m_next);
+            assert_int_equal(c.stage, m_stage);
+        }
+    }
 }
 
 static void test_status_strings(void **state)
@@ -261,6 +743,10 @@ static void test_status_strings(void **state)
     (void)state;
     assert_string_equal(stsp_status_str(STSP_OK), "ok");
     assert_string_equal(stsp_status_str(STSP_ERR_BAD_CRC), "table CRC mismatch");
+    assert_string_equal(stsp_status_str(STSP_WARN_SATURATED),
+                        "command clamped to the actuator limits");
+    assert_string_equal(stsp_status_str(STSP_ERR_BAD_VALUES),
+                        "table values not finite or limits invalid");
     assert_string_equal(stsp_status_str((stsp_status_t)123), "unknown status");
 }
 
@@ -268,10 +754,15 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_crc_known_answer),
+        cmocka_unit_test_setup(test_crc_matches_python_and_covers_limits, setup),
         cmocka_unit_test_setup(test_law_and_latching, setup),
+        cmocka_unit_test_setup(test_inactive_limits_change_nothing, setup),
         cmocka_unit_test_setup(test_nonfinite_state, setup),
         cmocka_unit_test_setup(test_subnormal_state_is_finite, setup),
         cmocka_unit_test_setup(test_overflow_gives_zero_and_error, setup),
+        cmocka_unit_test_setup(test_saturation, setup),
+        cmocka_unit_test_setup(test_sum_overflow_is_not_an_error, setup),
+        cmocka_unit_test_setup(test_table_without_multipliers, setup),
         cmocka_unit_test_setup(test_tick_range_and_order, setup),
         cmocka_unit_test_setup(test_repeated_tick_keeps_latch, setup),
         cmocka_unit_test_setup(test_skipped_stage_start_latches_late, setup),
@@ -279,6 +770,9 @@ int main(void)
         cmocka_unit_test_setup(test_instances_are_independent, setup),
         cmocka_unit_test_setup(test_not_initialized_and_null, setup),
         cmocka_unit_test_setup(test_corrupt_tables_are_refused, setup),
+        cmocka_unit_test_setup(test_wrong_dimensions, setup),
+        cmocka_unit_test_setup(test_verify_detects_a_changed_table, setup),
+        cmocka_unit_test_setup(test_random_walk_against_model, setup),
         cmocka_unit_test_setup(test_status_strings, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

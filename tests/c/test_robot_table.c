@@ -1,6 +1,7 @@
 /* The generated robot tables: header macros agree with the table, init verifies it, and the
  * controller steers the noise-free plant (exact zero-order-hold double integrator) to the
- * planned final state. */
+ * planned final state. Built against the generic controller and against the one compiled for
+ * the robot's dimensions (STSP_FIXED_NX/NU/N_LATCH = 4/2/4), each also under ASan + UBSan. */
 #include <math.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -14,6 +15,7 @@
 static void test_header_matches_table(void **state)
 {
     (void)state;
+    assert_int_equal(robot_corridor_table.format_version, STSP_FORMAT_VERSION);
     assert_int_equal(robot_corridor_table.nx, ROBOT_CORRIDOR_NX);
     assert_int_equal(robot_corridor_table.nu, ROBOT_CORRIDOR_NU);
     assert_int_equal(robot_corridor_table.n_ticks, ROBOT_CORRIDOR_N_TICKS);
@@ -28,7 +30,8 @@ static void test_noise_free_closed_loop_reaches_goal(void **state)
     const double h = 1.0 / (double)ROBOT_CORRIDOR_TICK_HZ;
     uint32_t tick;
     (void)state;
-    assert_int_equal(stsp_init(&c, &robot_corridor_table), STSP_OK);
+    assert_int_equal(stsp_init_expect(&c, &robot_corridor_table, 4u, 2u), STSP_OK);
+    assert_int_equal(stsp_verify(&c), STSP_OK);
     for (tick = 0u; tick < ROBOT_CORRIDOR_N_TICKS; ++tick) {
         float xf[4], u[2];
         int i;
@@ -52,10 +55,39 @@ static void test_noise_free_closed_loop_reaches_goal(void **state)
     assert_true(fabs(x[2] - 5.0) < 1e-5);
     assert_true(fabs(x[3]) < 1e-5);
     {
-        float u[2];
+        float u[2] = {1.0f, 1.0f};
         const float xf[4] = {0.0f, 0.0f, 0.0f, 0.0f};
         assert_int_equal(stsp_step(&c, ROBOT_CORRIDOR_N_TICKS, xf, u), STSP_ERR_TICK_RANGE);
+        assert_true(u[0] == 0.0f && u[1] == 0.0f);
     }
+}
+
+/* The same table with actuator limits (a RAM copy of the header with its CRC recomputed):
+ * commands are clamped, the status says so, and the plan still runs to its end. */
+static void test_limited_copy_saturates(void **state)
+{
+    static const float lo[2] = {-1.0f, -1.0f}, hi[2] = {1.0f, 1.0f};
+    stsp_table_t t = robot_corridor_table;
+    stsp_ctrl_t c;
+    const float xf[4] = {-5.0f, 0.0f, 1.0f, 0.0f};
+    float u[2];
+    uint32_t tick, saturated = 0u;
+    (void)state;
+    t.u_min = lo;
+    t.u_max = hi;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_CRC);
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    for (tick = 0u; tick < ROBOT_CORRIDOR_N_TICKS; ++tick) {
+        const stsp_status_t st = stsp_step(&c, tick, xf, u);
+        assert_true(st == STSP_OK || st == STSP_WARN_SATURATED);
+        assert_true(u[0] >= -1.0f && u[0] <= 1.0f && u[1] >= -1.0f && u[1] <= 1.0f);
+        if (st == STSP_WARN_SATURATED) {
+            assert_true(c.sat_mask != 0u && c.sat_mask < 4u);
+            ++saturated;
+        }
+    }
+    assert_true(saturated > 0u);
 }
 
 int main(void)
@@ -63,6 +95,7 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_header_matches_table),
         cmocka_unit_test(test_noise_free_closed_loop_reaches_goal),
+        cmocka_unit_test(test_limited_copy_saturates),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -1,12 +1,17 @@
 /* Instruction-count bench for tools/arm/count_instructions.sh (QEMU mps2-an386, Cortex-M4F).
  *
- * Repeats BENCH_REPS times: reset, then tick 0 (latch of stage 0), ticks 1..BENCH_RUN-1,
- * the stage-0 tick just before the switch (reached by a skip: STSP_WARN_TICK_SKIPPED), the
- * switch tick (latch of stage 1), and BENCH_RUN-1 more stage-1 ticks. The x values do not
- * change the executed path (the law has no data-dependent branches for finite x). After the
- * loop it prints one line per stsp_step call, in call order, which the script pairs with the
- * calls it finds in QEMU's execution trace, and the table's dimensions:
- *     call <index> tick <tick> stage <stage> latch <0|1> status <status>
+ * For each of three tables, repeats BENCH_REPS times: reset, then tick 0 (latch of stage 0),
+ * ticks 1..BENCH_RUN-1, the stage-0 tick just before the switch (reached by a skip:
+ * STSP_WARN_TICK_SKIPPED), the switch tick (latch of stage 1), and BENCH_RUN-1 more stage-1
+ * ticks. The tables: 0 = the robot table as generated (no actuator limits: +-FLT_MAX),
+ * 1 = a RAM copy with limits +-1000 (never reached: the cost of the limit check alone),
+ * 2 = a RAM copy with limits +-0.5 (the commands exceed them: the cost of clamping, status
+ * STSP_WARN_SATURATED). Copies 1 and 2 share the flash gain arrays; only the header, the two
+ * limit arrays and the CRC (stsp_table_crc32) differ. The x values do not change the executed
+ * path (no data-dependent branches for finite x, except the clamping in table 2).
+ * After the loop it prints one line per stsp_step call, in call order, which the script
+ * pairs with the calls it finds in QEMU's execution trace, and the table's dimensions:
+ *     call <index> table <0|1|2> tick <tick> stage <stage> latch <0|1> status <status>
  *     table nx <nx> nu <nu> n_latch <n_latch> stage_np <np0> <np1> ... */
 #include <stdint.h>
 #include <stdio.h>
@@ -16,19 +21,21 @@
 
 #define BENCH_REPS 10u
 #define BENCH_RUN 10u
-#define BENCH_CALLS (BENCH_REPS * 2u * (BENCH_RUN + 1u))
+#define BENCH_TABLES 3u
+#define BENCH_CALLS (BENCH_TABLES * BENCH_REPS * 2u * (BENCH_RUN + 1u))
 
 typedef struct {
     uint32_t tick;
     int16_t status;
     uint8_t stage;
     uint8_t latch;
+    uint8_t table;
 } bench_call_t;
 
 static bench_call_t calls[BENCH_CALLS];
 static uint32_t n_calls;
 
-static void bench_step(stsp_ctrl_t *c, uint32_t tick, const stsp_f32_t *x)
+static void bench_step(stsp_ctrl_t *c, uint32_t tick, const stsp_f32_t *x, uint8_t table)
 {
     stsp_f32_t u[ROBOT_CORRIDOR_NU];
     uint16_t stage_before = c->stage, latched_before = c->latched;
@@ -38,6 +45,7 @@ static void bench_step(stsp_ctrl_t *c, uint32_t tick, const stsp_f32_t *x)
         rec->tick = tick;
         rec->status = (int16_t)st;
         rec->stage = (uint8_t)c->stage;
+        rec->table = table;
         rec->latch = (uint8_t)((latched_before == 0u ||
                                 (c->stage != stage_before && c->table->stage_np[c->stage] > 0u))
                                    ? 1u
@@ -45,16 +53,16 @@ static void bench_step(stsp_ctrl_t *c, uint32_t tick, const stsp_f32_t *x)
     }
 }
 
-int main(void)
+static int bench_table(const stsp_table_t *table, uint8_t label)
 {
     static const stsp_f32_t x0[ROBOT_CORRIDOR_NX] = {-5.0f, 0.0f, 1.0f, 0.0f};
     stsp_f32_t x[ROBOT_CORRIDOR_NX];
     stsp_ctrl_t ctrl;
-    const uint32_t sw = robot_corridor_table.stage_start[1]; /* first tick of stage 1 */
+    const uint32_t sw = table->stage_start[1]; /* first tick of stage 1 */
     uint32_t rep, k, i;
-    stsp_status_t st = stsp_init(&ctrl, &robot_corridor_table);
+    stsp_status_t st = stsp_init(&ctrl, table);
     if (st != STSP_OK) {
-        printf("bench: stsp_init returned %d\n", (int)st);
+        printf("bench: stsp_init of table %u returned %d\n", (unsigned)label, (int)st);
         return 1;
     }
     for (rep = 0u; rep < BENCH_REPS; ++rep) {
@@ -63,16 +71,37 @@ int main(void)
             x[i] = x0[i] + 0.01f * (stsp_f32_t)rep;
         }
         for (k = 0u; k < BENCH_RUN; ++k) {
-            bench_step(&ctrl, k, x);
+            bench_step(&ctrl, k, x, label);
         }
         for (k = 0u; k < BENCH_RUN + 2u; ++k) {
-            bench_step(&ctrl, sw - 1u + k, x);
+            bench_step(&ctrl, sw - 1u + k, x, label);
         }
     }
+    return 0;
+}
+
+int main(void)
+{
+    static const stsp_f32_t wide_lo[ROBOT_CORRIDOR_NU] = {-1000.0f, -1000.0f};
+    static const stsp_f32_t wide_hi[ROBOT_CORRIDOR_NU] = {1000.0f, 1000.0f};
+    static const stsp_f32_t tight_lo[ROBOT_CORRIDOR_NU] = {-0.5f, -0.5f};
+    static const stsp_f32_t tight_hi[ROBOT_CORRIDOR_NU] = {0.5f, 0.5f};
+    stsp_table_t wide = robot_corridor_table, tight = robot_corridor_table;
+    uint32_t i;
+    wide.u_min = wide_lo;
+    wide.u_max = wide_hi;
+    wide.crc32 = stsp_table_crc32(&wide);
+    tight.u_min = tight_lo;
+    tight.u_max = tight_hi;
+    tight.crc32 = stsp_table_crc32(&tight);
+    if (bench_table(&robot_corridor_table, 0u) != 0 || bench_table(&wide, 1u) != 0 ||
+        bench_table(&tight, 2u) != 0) {
+        return 1;
+    }
     for (i = 0u; i < n_calls; ++i) {
-        printf("call %lu tick %lu stage %u latch %u status %d\n", (unsigned long)i,
-               (unsigned long)calls[i].tick, (unsigned)calls[i].stage, (unsigned)calls[i].latch,
-               (int)calls[i].status);
+        printf("call %lu table %u tick %lu stage %u latch %u status %d\n", (unsigned long)i,
+               (unsigned)calls[i].table, (unsigned long)calls[i].tick, (unsigned)calls[i].stage,
+               (unsigned)calls[i].latch, (int)calls[i].status);
     }
     printf("bench: %lu calls, sizeof(stsp_ctrl_t) %lu\n", (unsigned long)n_calls,
            (unsigned long)sizeof(stsp_ctrl_t));

@@ -85,11 +85,19 @@ def callees(elf: Path, syms: dict, root: str) -> list[str]:
                 if target is None:
                     raise SystemExit(f"count: {name} calls an unknown address {m.group(1)}")
                 todo.append(target)
+                continue
+            # Tail calls: a plain branch to the first instruction of another function.
+            m = re.match(r"b(\.[nw])?\s+([0-9a-f]+)\b", insn)
+            if m:
+                dest = int(m.group(2), 16)
+                if not a <= dest < a + s and dest in by_addr:
+                    todo.append(by_addr[dest])
     return seen
 
 
-def trace_calls(build: Path, trace: Path) -> tuple[list[dict], list[str], dict]:
-    elf = build / "bench.elf"
+def trace_calls(build: Path, image: str) -> tuple[list[dict], list[str], dict]:
+    elf = build / image
+    trace = build / f"trace_{Path(image).stem}.log"
     syms = symbols(elf)
     funcs = callees(elf, syms, "stsp_step")
     ranges = {n: syms[n] for n in funcs + ["bench_step"]}
@@ -105,10 +113,12 @@ def trace_calls(build: Path, trace: Path) -> tuple[list[dict], list[str], dict]:
                "-dfilter", dfilter])
     calls = []
     for line in out.splitlines():
-        m = re.match(r"call (\d+) tick (\d+) stage (\d+) latch (\d) status (-?\d+)", line)
+        m = re.match(r"call (\d+) table (\d) tick (\d+) stage (\d+) latch (\d) status (-?\d+)",
+                     line)
         if m:
-            calls.append({"tick": int(m.group(2)), "stage": int(m.group(3)),
-                          "latch": m.group(4) == "1", "status": int(m.group(5))})
+            calls.append({"table": int(m.group(2)), "tick": int(m.group(3)),
+                          "stage": int(m.group(4)), "latch": m.group(5) == "1",
+                          "status": int(m.group(6))})
     entry = syms["stsp_step"][0]
     in_caller = lambda pc: ranges["bench_step"][0] <= pc < sum(ranges["bench_step"])  # noqa: E731
     counts, current, lines, prev = [], None, 0, None
@@ -152,24 +162,34 @@ def trace_calls(build: Path, trace: Path) -> tuple[list[dict], list[str], dict]:
                           "stage_np": [int(v) for v in dims.group(4).split()]}
 
 
-def size_rows(build: Path, cpu: str) -> list[tuple[str, int, int, int]]:
-    """(what, text, data, bss) for compiled objects and API-only links."""
+def size_rows(build: Path, cpu: str, controller: str) -> list[tuple[str, int, int, int]]:
+    """(what, text, data, bss) for compiled objects and API-only links of one controller
+    library (libstsp.a or libstsp_fixed_robot_corridor.a)."""
     rows = []
-    ctl = build / "libstsp.a"
+    ctl = build / controller
     tables = build / "libstsp_gains_robot_corridor.a"
 
     def totals(files):
-        last = run(["arm-none-eabi-size", "-t", *map(str, files)]).strip().splitlines()[-1]
-        t, d, b = (int(v) for v in last.split()[:3])
+        """text, data, bss summed over the controller's objects (stsp_controller, stsp_crc32:
+        the libraries also hold other firmware modules, e.g. stsp_bandqp, which the
+        controller does not use) and every object of the other archives."""
+        t = d = b = 0
+        for line in run(["arm-none-eabi-size", *map(str, files)]).strip().splitlines()[1:]:
+            parts = line.split()
+            obj = parts[5] if len(parts) > 5 else ""
+            if f"ex {ctl}" in line and not obj.startswith(("stsp_controller.", "stsp_crc32.")):
+                continue
+            t, d, b = t + int(parts[0]), d + int(parts[1]), b + int(parts[2])
         return t, d, b
 
-    rows.append(("controller objects (libstsp.a)", *totals([ctl])))
+    rows.append(("controller objects (stsp_controller.o + stsp_crc32.o)",
+                 *totals([ctl])))
     rows.append(("controller + robot tables objects", *totals([ctl, tables])))
     roots = ["stsp_init", "stsp_reset", "stsp_step"]
     for what, extra_roots, libs in (("controller linked (API roots)", [], [ctl]),
                                     ("controller + tables linked", ["robot_corridor_table"],
                                      [tables, ctl])):
-        elf = build / f"footprint_{'tables' if extra_roots else 'ctl'}.elf"
+        elf = build / f"footprint_{Path(controller).stem}_{'tables' if extra_roots else 'ctl'}.elf"
         cmd = (["arm-none-eabi-gcc", *CPU_FLAGS[cpu], "-nostdlib", "-nostartfiles",
                 "-Wl,--gc-sections", "-Wl,-e,stsp_step", "-o", str(elf)]
                + [f"-Wl,-u,{r}" for r in roots + extra_roots] + [str(p) for p in libs]
@@ -182,73 +202,101 @@ def size_rows(build: Path, cpu: str) -> list[tuple[str, int, int, int]]:
             lib = {n: sz for n, (_, sz) in symbols(elf).items()
                    if sz and not n.startswith(("stsp_", "robot_corridor_"))}
             rows.append(("  pulled from newlib/libgcc: "
-                         + ", ".join(f"{n} {sz} B" for n, sz in sorted(lib.items())), -1, -1, -1))
+                         + (", ".join(f"{n} {sz} B" for n, sz in sorted(lib.items())) or "none"),
+                         -1, -1, -1))
     return rows
 
 
-def stack_usage(build: Path) -> dict[str, int]:
+def stack_usage(build: Path, target: str) -> dict[str, int]:
     out = {}
-    for su in build.glob("CMakeFiles/stsp.dir/**/*.su"):
+    for su in build.glob(f"CMakeFiles/{target}.dir/**/*.su"):
         for line in su.read_text().splitlines():
             parts = line.split("\t")
             out[parts[0].rsplit(":", 1)[-1]] = int(parts[1])
     return out
 
 
+TABLES = {0: "no limits", 1: "limits +-1000 (inactive)", 2: "limits +-0.5 (clamping)"}
+IMAGES = (("bench.elf", "generic dimensions (libstsp.a)"),
+          ("bench_fixed.elf", "STSP_FIXED_NX/NU/N_LATCH = 4/2/4 (libstsp_fixed_robot_corridor.a)"))
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--m4", type=Path, default=ROOT / "build" / "arm")
     ap.add_argument("--m0plus", type=Path, default=ROOT / "build" / "arm-m0plus")
+    ap.add_argument("--json", type=Path, help="also write the figures as JSON here")
     args = ap.parse_args()
+    report: dict = {"instructions": {}, "sizes": {}}
 
-    calls, funcs, info = trace_calls(args.m4, args.m4 / "trace.log")
-    nx, nu, np_of_stage = info["nx"], info["nu"], info["stage_np"]
-    print("== Instructions per stsp_step call, Cortex-M4F (QEMU 7.2 mps2-an386, -singlestep "
-          "-d exec,nochain)")
-    print(f"   counted functions: {', '.join(funcs)}; {len(calls)} calls, "
-          f"{info['trace_lines']} trace lines; -dfilter {info['dfilter']}")
-    print(f"   {'ticks':26s} {'calls':>5s} {'median':>6s} {'max':>5s} {'min':>5s} "
-          f"{'MACs':>5s} {'median/MAC':>10s} {'FP muls run':>11s}")
+    for image, variant in IMAGES:
+        calls, funcs, info = trace_calls(args.m4, image)
+        nx, nu, np_of_stage, nl = info["nx"], info["nu"], info["stage_np"], info["n_latch"]
+        print(f"== Instructions per stsp_step call, Cortex-M4F, {variant}")
+        print(f"   QEMU mps2-an386 -singlestep -d exec,nochain; {image}; counted functions: "
+              f"{', '.join(funcs)}; {len(calls)} calls, {info['trace_lines']} trace lines")
+        print(f"   {'table':26s} {'ticks':20s} {'calls':>5s} {'median':>6s} {'max':>5s} "
+              f"{'min':>5s} {'MACs':>5s} {'median/MAC':>10s} {'FP muls run':>11s}")
+        rows = report["instructions"].setdefault(image, [])
 
-    def row(label, sel, macs):
-        n = [c["insns"] for c in sel]
-        med = statistics.median(n)
-        ratio = f"{med / macs:10.1f}" if macs else f"{'-':>10s}"
-        muls = sorted({c["fmuls"] for c in sel})
-        mul_text = "/".join(str(m) for m in muls)
-        print(f"   {label:26s} {len(n):5d} {med:6.0f} {max(n):5d} {min(n):5d} "
-              f"{macs if macs else '-':>5} {ratio} {mul_text:>11s}")
+        def row(tlabel, label, sel, macs):
+            n = [c["insns"] for c in sel]
+            med = statistics.median(n)
+            ratio = f"{med / macs:10.1f}" if macs else f"{'-':>10s}"
+            muls = sorted({c["fmuls"] for c in sel})
+            mul_text = "/".join(str(m) for m in muls)
+            print(f"   {tlabel:26s} {label:20s} {len(n):5d} {med:6.0f} {max(n):5d} {min(n):5d} "
+                  f"{macs if macs else '-':>5} {ratio} {mul_text:>11s}")
+            rows.append({"table": tlabel, "ticks": label, "calls": len(n), "median": med,
+                         "max": max(n), "min": min(n), "macs": macs,
+                         "statuses": sorted({c["status"] for c in sel})})
 
-    for latch in (False, True):
-        kind = "latch" if latch else "ordinary"
-        for s in range(len(np_of_stage)):
-            p = np_of_stage[s]
-            macs = nu * nx + nu * p + (p * nx if latch else 0)
-            sel = [c for c in calls if c["latch"] == latch and c["stage"] == s]
-            row(f"{kind}, stage {s} (np={p})", sel, macs)
-        row(f"{kind}, both stages", [c for c in calls if c["latch"] == latch], 0)
-    skipped = [c["insns"] for c in calls if c["status"] == 1]
-    print("   MACs = nu*nx + nu*np (+ np*nx on a latch tick): multiply-adds the law needs;")
-    print("   FP muls run = vmul/vmla/vfma instructions the firmware executed in those calls.")
-    print(f"   Ordinary stage 0 includes {len(skipped)} calls reached by a skip (status WARN_TICK_"
-          f"SKIPPED), {min(skipped)}..{max(skipped)} instructions.")
+        for tab, tlabel in TABLES.items():
+            for latch in (False, True):
+                kind = "latch" if latch else "ordinary"
+                for s in range(len(np_of_stage)):
+                    p = np_of_stage[s]
+                    macs = nu * nx + nu * p + (p * nx if latch else 0)
+                    sel = [c for c in calls
+                           if c["table"] == tab and c["latch"] == latch and c["stage"] == s]
+                    row(tlabel, f"{kind}, stage {s} (np={p})", sel, macs)
+        skipped = [c["insns"] for c in calls if c["status"] == 1 and c["table"] == 0]
+        print("   MACs = nu*nx + nu*np (+ np*nx on a latch tick): the multiply-adds the law "
+              f"needs; the firmware runs nu*(nx + n_latch) = {nu * (nx + nl)} on every tick "
+              "(L over all n_latch columns)")
+        print("   FP muls run = vmul/vmla/vfma instructions executed in those calls.")
+        print(f"   Ordinary stage 0 (no limits) includes {len(skipped)} calls reached by a skip "
+              f"(WARN_TICK_SKIPPED), {min(skipped)}..{max(skipped)} instructions.\n")
+        report["sizeof_ctrl"] = info["sizeof_ctrl"]
 
-    print("\n== Flash / RAM (arm-none-eabi-size; flash = text + data, static RAM = data + bss)")
-    su_m4, su_m0 = stack_usage(args.m4), stack_usage(args.m0plus)
-    for cpu, build, su in (("cortex-m4 (FPv4-SP, hard float)", args.m4, su_m4),
-                           ("cortex-m0plus (soft float)", args.m0plus, su_m0)):
-        print(f"   {cpu}:")
-        for what, t, d, b in size_rows(build, "cortex-m4" if "m4" in cpu else "cortex-m0plus"):
-            if t < 0:
-                print(f"     {what}")
-                continue
-            print(f"     {what:36s} flash {t + d:7d} B  static RAM {d + b:4d} B  "
-                  f"(text {t}, data {d}, bss {b})")
-        print(f"     stack (-fstack-usage, own frame): stsp_step {su.get('stsp_step')} B, "
-              f"stsp_init {su.get('stsp_init')} B + stsp_table_crc32 "
-              f"{su.get('stsp_table_crc32')} B + stsp_crc32_f32s {su.get('stsp_crc32_f32s')} B")
-    print(f"   per instance: sizeof(stsp_ctrl_t) = {info['sizeof_ctrl']} B on the M4F "
+    print("== Flash / RAM (arm-none-eabi-size; flash = text + data, static RAM = data + bss)")
+    for cpu, build in (("cortex-m4 (FPv4-SP, hard float)", args.m4),
+                       ("cortex-m0plus (soft float)", args.m0plus)):
+        arch = "cortex-m4" if "m4" in cpu else "cortex-m0plus"
+        for controller, target in (("libstsp.a", "stsp"),
+                                   ("libstsp_fixed_robot_corridor.a",
+                                    "stsp_fixed_robot_corridor")):
+            su = stack_usage(build, target)
+            print(f"   {cpu}, {controller}:")
+            rows = size_rows(build, arch, controller)
+            report["sizes"][f"{arch}/{controller}"] = {
+                what.strip(): {"flash": t + d, "ram": d + b} for what, t, d, b in rows if t >= 0}
+            for what, t, d, b in rows:
+                if t < 0:
+                    print(f"     {what}")
+                    continue
+                print(f"     {what:52.52s} flash {t + d:7d} B  static RAM {d + b:4d} B  "
+                      f"(text {t}, data {d}, bss {b})")
+            stack = {k: su.get(k) for k in ("stsp_step", "stsp_step_cold", "stsp_step_fixup",
+                                            "stsp_limit", "stsp_init", "stsp_table_crc32")}
+            report["sizes"][f"{arch}/{controller}"]["stack"] = stack
+            print("     stack (-fstack-usage, own frame): "
+                  + ", ".join(f"{k} {v} B" for k, v in stack.items() if v is not None))
+    print(f"   per instance: sizeof(stsp_ctrl_t) = {report['sizeof_ctrl']} B on the M4F "
           "(caller-owned, STSP_MAX_LATCH = 16; same AAPCS layout on the M0+)")
+    if args.json:
+        import json
+        args.json.write_text(json.dumps(report, indent=1) + "\n")
     return 0
 
 

@@ -1,15 +1,26 @@
 #!/usr/bin/env bash
 # Report (not a test): instructions executed per stsp_step call on Cortex-M4F under QEMU, and
-# flash/RAM of the controller alone and with the robot tables, for Cortex-M4F and Cortex-M0+.
-#   tools/arm/count_instructions.sh [--no-setup]
+# flash/RAM of the controller alone and with the robot tables, for Cortex-M4F and Cortex-M0+,
+# each for the generic build (libstsp.a) and the build for the robot's dimensions
+# (libstsp_fixed_robot_corridor.a: STSP_FIXED_NX/NU/N_LATCH).
+#   tools/arm/count_instructions.sh [--no-setup] [--json FILE]
 # Builds build/arm (cortex-m4) and build/arm-m0plus (compile-only), then runs
 # tools/arm/count_instructions.py (standard library only); see that file for the method.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
-[ "${1:-}" = "--no-setup" ] || "$root/tools/setup.sh"
+setup=1
+extra=()
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --no-setup) setup=0; shift ;;
+    --json) extra+=(--json "$2"); shift 2 ;;
+    *) echo "count_instructions: unknown argument $1" >&2; exit 2 ;;
+  esac
+done
+[ "$setup" -eq 0 ] || "$root/tools/setup.sh"
 "$root/tools/arm/build.sh" --cpu cortex-m4 --build-dir "$root/build/arm" \
   -DSTSP_ARM_FP_CONTRACT=off >/dev/null
 "$root/tools/arm/build.sh" --cpu cortex-m0plus --build-dir "$root/build/arm-m0plus" \
   -DSTSP_ARM_FP_CONTRACT=off >/dev/null
 exec python3 "$root/tools/arm/count_instructions.py" --m4 "$root/build/arm" \
-  --m0plus "$root/build/arm-m0plus"
+  --m0plus "$root/build/arm-m0plus" "${extra[@]}"

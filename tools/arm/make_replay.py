@@ -51,7 +51,11 @@ def select_ticks(stage_start: np.ndarray, head: int, tail: int, stride: int) -> 
 
 
 def committed_crc(gains_c: Path, prefix: str) -> int | None:
-    m = re.search(rf"{prefix}_lambda0,\s*0x([0-9A-Fa-f]{{8}})u", gains_c.read_text())
+    """The crc32 field of ``<prefix>_table`` in generated C: the hex literal that precedes the
+    problem_sha256 byte array (format 2 puts u_min/u_max before it)."""
+    text = gains_c.read_text()
+    start = text.find(f"const stsp_table_t {prefix}_table")
+    m = re.search(r"0x([0-9A-Fa-f]{8})u,\s*\{", text[start:]) if start >= 0 else None
     return int(m.group(1), 16) if m else None
 
 

@@ -6,8 +6,9 @@
 #                           [--fp-contract off|fast]
 #
 # 1. tools/arm/make_replay.py writes DIR/replay_records.c (host x, u per recorded tick);
-# 2. tools/arm/build.sh builds DIR/replay.elf (firmware + gains/robot_corridor.c + records);
-# 3. qemu-system-arm -M mps2-an386 runs it; semihosting prints the summary and returns the
+# 2. tools/arm/build.sh builds DIR/replay.elf (generic firmware + gains/robot_corridor.c +
+#    records) and DIR/replay_fixed.elf (the firmware built for the robot's dimensions);
+# 3. qemu-system-arm -M mps2-an386 runs each; semihosting prints the summary and returns the
 #    exit status, 0 only if every command matched.
 # --perturb moves one recorded u by one ulp (the test must then fail); --fp-contract fast
 # lets GCC fuse multiply-adds on the target (the test then fails too). Without --no-setup,
@@ -37,17 +38,23 @@ records="$build/replay_records.c"
 "$root/tools/arm/build.sh" --cpu cortex-m4 --build-dir "$build" \
   -DSTSP_REPLAY_RECORDS="$records" -DSTSP_ARM_FP_CONTRACT="$contract" >/dev/null
 
-log="$build/replay.log"
-status=0
-timeout 60 qemu-system-arm -M mps2-an386 -nographic -monitor none \
-  -semihosting-config enable=on,target=native -kernel "$build/replay.elf" >"$log" 2>&1 || status=$?
-cat "$log"
-if [ "$status" -eq 124 ]; then
-  echo "run_replay: FAIL: QEMU timed out" >&2
-  exit 1
-fi
-if [ "$status" -ne 0 ] || ! grep -q '^replay: PASS' "$log"; then
-  echo "run_replay: FAIL (exit status $status)" >&2
-  exit 1
-fi
+# Both Cortex-M4F builds: the generic controller and the one compiled for the robot's
+# dimensions (STSP_FIXED_NX/NU/N_LATCH, unrolled): each must match the host bit for bit.
+fail=0
+for image in replay replay_fixed; do
+  log="$build/$image.log"
+  status=0
+  timeout 60 qemu-system-arm -M mps2-an386 -nographic -monitor none \
+    -semihosting-config enable=on,target=native -kernel "$build/$image.elf" >"$log" 2>&1 || status=$?
+  echo "== $image.elf"
+  cat "$log"
+  if [ "$status" -eq 124 ]; then
+    echo "run_replay: FAIL: QEMU timed out ($image.elf)" >&2
+    fail=1
+  elif [ "$status" -ne 0 ] || ! grep -q '^replay: PASS' "$log"; then
+    echo "run_replay: FAIL ($image.elf, exit status $status)" >&2
+    fail=1
+  fi
+done
+[ "$fail" -eq 0 ] || exit 1
 echo "run_replay: OK"

@@ -3,21 +3,40 @@
  * @brief Latched time-varying affine controller evaluated from const gain tables.
  *
  * The whole flashable API. Does not use malloc, recursion or VLAs; every loop is bounded by
- * the table's dimensions, which stsp_init() checks against the STSP_MAX_* limits below.
+ * the table's dimensions, which stsp_init() checks against the STSP_MAX_* limits below. No
+ * static or global mutable data: every function is re-entrant, and any number of instances
+ * may run at once (one instance must not be stepped from two contexts at the same time).
  *
  * Law, at tick j of stage s (time t0 + j / tick_hz):
  *
  *     at the stage's first tick, if stage_np[s] > 0:
  *                                 v = Lambda[s] x + lambda0[s]          (latch)
- *     every tick:                 u = -K[j] x - k0[j] - L[j] v
+ *     every tick:                 u = sat(-K[j] x - k0[j] - L[j] v)
  *
+ * where sat() clamps input i to [u_min[i], u_max[i]] (STSP_WARN_SATURATED says it did).
  * Stage-wise designs latch at every constrained stage; joint designs latch once, at stage 0
  * (stage_np[s] = 0 afterwards keeps v). Entries of v beyond stage_np[s] are set to zero.
+ * The caller holds u until the next tick (zero-order hold).
  *
- * and the caller holds u until the next tick (zero-order hold).
+ * Evaluation order (fixed: the QEMU replay test checks the Cortex-M builds against the host
+ * build bit for bit): for each input i,
+ *     u[i] = ((((-(K[i][0] x[0])) - k0[i]) - K[i][1] x[1]) - ... - K[i][nx-1] x[nx-1])
+ *            - L[i][0] v[0] - ... - L[i][n_latch-1] v[n_latch-1]
+ * over all n_latch columns (zero padded, so every tick costs the same), binary32 throughout,
+ * no fused multiply-add (compile with -ffp-contract=off). This is -(k0 + K x + L v) summed
+ * left to right, exactly (IEEE rounding is sign-symmetric), up to the sign of a zero result.
  *
- * Buffers: stsp_ctrl_t holds STSP_MAX_LATCH scalars for v plus a few words; the tables stay
- * where the caller put them (const, normally flash) and are never copied.
+ * Buffers: stsp_ctrl_t holds STSP_MAX_LATCH scalars for v plus 24 bytes (32-bit targets:
+ * 88 bytes with the default STSP_MAX_LATCH = 16); stsp_step() uses
+ * STSP_MAX_LATCH + STSP_MAX_NU scalars of stack. The tables stay where the caller put them
+ * (const, normally flash) and are never copied.
+ *
+ * Compile-time dimensions (optional): define STSP_FIXED_NX, STSP_FIXED_NU and
+ * STSP_FIXED_N_LATCH (all three, for the library and every file that includes this header)
+ * to build a controller for one table shape. The loops then have constant bounds and the
+ * compiler unrolls them (the Cortex-M4F figures in docs/firmware.md); stsp_init() refuses a
+ * table of any other shape with STSP_ERR_BAD_DIMS. The arithmetic is the same operation for
+ * operation, so both builds give bit-identical commands.
  */
 #ifndef STSP_CONTROLLER_H
 #define STSP_CONTROLLER_H
@@ -34,8 +53,8 @@ typedef float stsp_f32_t;
 
 /** Table magic, "STSP" as a little-endian u32. */
 #define STSP_TABLE_MAGIC 0x53545350u
-/** Table format understood by this firmware. */
-#define STSP_FORMAT_VERSION 1u
+/** Table format understood by this firmware (2: actuator limits u_min/u_max). */
+#define STSP_FORMAT_VERSION 2u
 /** Arithmetic variant tag stored in the table: float32 tables. */
 #define STSP_SCALAR_FLOAT32 1u
 
@@ -53,33 +72,54 @@ typedef float stsp_f32_t;
 #define STSP_MAX_STAGES 256u
 #endif
 
+#if (STSP_MAX_NU > 16u) || (STSP_MAX_NU < 1u)
+#error "STSP_MAX_NU must be 1..16: stsp_ctrl_t.sat_mask has one bit per input"
+#endif
+#if defined(STSP_FIXED_NX) || defined(STSP_FIXED_NU) || defined(STSP_FIXED_N_LATCH)
+#if !defined(STSP_FIXED_NX) || !defined(STSP_FIXED_NU) || !defined(STSP_FIXED_N_LATCH)
+#error "define all of STSP_FIXED_NX, STSP_FIXED_NU, STSP_FIXED_N_LATCH, or none"
+#endif
+#if (STSP_FIXED_NX < 1u) || (STSP_FIXED_NX > STSP_MAX_NX) || (STSP_FIXED_NU < 1u) || \
+    (STSP_FIXED_NU > STSP_MAX_NU) || (STSP_FIXED_N_LATCH > STSP_MAX_LATCH)
+#error "STSP_FIXED_* dimensions outside the STSP_MAX_* limits"
+#endif
+#endif
+
 /**
- * Status codes: 0 success, positive = the command is valid but something is worth logging,
- * negative = the command is the safe hold value (all zeros) and the error says why.
+ * Status codes: 0 success, positive = the command is valid (finite, within the limits) but
+ * something is worth logging, negative = the command is the safe hold value (all zeros,
+ * which stsp_init() requires to lie within the limits) and the error says why.
+ * When several warnings apply, STSP_WARN_SATURATED wins (the caller knows which tick it
+ * passed, but not whether the table's law was clamped).
  */
 typedef enum {
     STSP_OK = 0,
     STSP_WARN_TICK_SKIPPED = 1,     /**< tick > expected; evaluated at the given tick (a stage
                                          entered late latches at that tick) */
     STSP_WARN_TICK_REPEATED = 2,    /**< same tick again; recomputed, no new latch */
+    STSP_WARN_SATURATED = 3,        /**< at least one input was clamped to u_min/u_max; which
+                                         ones: stsp_ctrl_t.sat_mask */
     STSP_ERR_NULL = -1,             /**< a pointer argument is NULL */
     STSP_ERR_NOT_INITIALIZED = -2,  /**< step/reset before a successful init */
     STSP_ERR_BAD_MAGIC = -3,        /**< the table header's magic is wrong */
     STSP_ERR_BAD_VERSION = -4,      /**< table format or scalar variant not supported */
-    STSP_ERR_BAD_DIMS = -5,         /**< dimensions zero, above the STSP_MAX_* limits, or the
-                                         stage index arrays inconsistent */
+    STSP_ERR_BAD_DIMS = -5,         /**< dimensions zero, above the STSP_MAX_* limits, not the
+                                         STSP_FIXED_* ones or the expected ones, or the stage
+                                         index arrays inconsistent */
     STSP_ERR_BAD_CRC = -6,          /**< the tables do not match their CRC-32 */
     STSP_ERR_TICK_RANGE = -7,       /**< tick >= n_ticks: the plan is over */
     STSP_ERR_TICK_ORDER = -8,       /**< tick went backwards by more than one repeat */
     STSP_ERR_NONFINITE_STATE = -9,  /**< x holds NaN or +-Inf */
-    STSP_ERR_NONFINITE_OUTPUT = -10 /**< the state is finite but u (or the latch) overflowed */
+    STSP_ERR_NONFINITE_OUTPUT = -10,/**< the state is finite but u (or the latch) overflowed */
+    STSP_ERR_BAD_VALUES = -11       /**< a table value is NaN or +-Inf, u_min > u_max, or 0
+                                         lies outside [u_min, u_max] */
 } stsp_status_t;
 
 /**
  * Generated gain tables plus the header that stsp_init() verifies.
  * Layouts (row-major): K[tick][i*nx + j], k0[tick][i], L[tick][i*n_latch + c],
- * Lambda[stage][c*nx + j], lambda0[stage][c]; multiplier columns beyond a stage's
- * stage_np are zero.
+ * Lambda[stage][c*nx + j], lambda0[stage][c], u_min[i], u_max[i]; multiplier columns beyond a
+ * stage's stage_np are zero. u_min[i] = -FLT_MAX and u_max[i] = FLT_MAX mean unlimited.
  */
 typedef struct {
     uint32_t magic;          /**< STSP_TABLE_MAGIC */
@@ -99,43 +139,74 @@ typedef struct {
     const stsp_f32_t *L;
     const stsp_f32_t *Lambda;
     const stsp_f32_t *lambda0;
+    const stsp_f32_t *u_min;     /**< [nu]: lower actuator limits */
+    const stsp_f32_t *u_max;     /**< [nu]: upper actuator limits */
     uint32_t crc32;              /**< CRC-32 of dims and arrays, see stsp_table_crc32() */
     uint8_t problem_sha256[32];  /**< hash of the problem file the tables came from */
 } stsp_table_t;
 
-/** One controller instance; caller-owned, several may run at once (re-entrant). */
+/**
+ * One controller instance; caller-owned (stack, static or a struct of the application).
+ * Read-only for the caller: `sat_mask`, `stage`, `next_tick`, `latched`; the rest is private.
+ */
 typedef struct {
     const stsp_table_t *table;
-    uint32_t ready;          /**< STSP_TABLE_MAGIC after a successful init */
+    uint32_t ready;          /**< STSP_CTRL_READY after a successful init (private) */
     uint32_t next_tick;      /**< tick expected at the next step */
+    uint32_t stage_end;      /**< first tick after `stage` once latched, else 0 (private) */
     uint16_t stage;          /**< stage of the last successful step */
     uint16_t latched;        /**< nonzero once v holds a latch for `stage` */
+    uint16_t sat_mask;       /**< after STSP_WARN_SATURATED: bit i set if u[i] was clamped
+                                  (not updated by other statuses) */
+    uint16_t limited;        /**< nonzero if the table has a finite limit (private) */
     stsp_f32_t v[STSP_MAX_LATCH];
 } stsp_ctrl_t;
+
+/** Value of stsp_ctrl_t.ready after a successful stsp_init(): a Thumb-2 immediate that no
+ * byte-fill pattern of uninitialised memory (0x00, 0xFF, 0xA5, 0xCC, ...) matches. */
+#define STSP_CTRL_READY 0x53005300u
 
 /**
  * CRC-32 (IEEE 802.3 polynomial, reflected, as zlib) of the table's canonical serialization:
  * nx, nu, n_latch, n_stages, n_ticks, tick_hz as little-endian u32; stage_start and stage_np
- * as little-endian u32 each; then K, k0, L, Lambda, lambda0 as little-endian binary32 bit
- * patterns. Independent of the target's byte order. The table's dimensions must already be
- * valid (stsp_init() checks them first).
+ * as little-endian u32 each; then K, k0, L, Lambda, lambda0, u_min, u_max as little-endian
+ * binary32 bit patterns (L, Lambda, lambda0 only when n_latch > 0). Independent of the
+ * target's byte order. The table's dimensions and pointers must already be valid (stsp_init()
+ * checks them first).
  */
 uint32_t stsp_table_crc32(const stsp_table_t *table);
 
 /**
- * Bind a table to an instance after verifying its header, dimensions and CRC.
+ * Bind a table to an instance after verifying its header, dimensions, CRC and values.
  * On any error the instance is left not ready (every step returns STSP_ERR_NOT_INITIALIZED).
+ * Cost: one pass over every table entry for the CRC and one for the finiteness check.
  */
 stsp_status_t stsp_init(stsp_ctrl_t *ctrl, const stsp_table_t *table);
+
+/**
+ * stsp_init(), and STSP_ERR_BAD_DIMS (instance not ready) unless the table has exactly nx
+ * states and nu inputs: the lengths of the caller's x and u buffers. Refuses a table flashed
+ * for another plant before it can index past those buffers.
+ */
+stsp_status_t stsp_init_expect(stsp_ctrl_t *ctrl, const stsp_table_t *table, uint32_t nx,
+                               uint32_t nu);
 
 /** Restart the plan at tick 0 (the next step latches stage 0 again). */
 stsp_status_t stsp_reset(stsp_ctrl_t *ctrl);
 
 /**
+ * Recompute the bound table's CRC-32 (e.g. from a background task, to detect flash that
+ * changed after init). STSP_ERR_BAD_CRC also makes the instance not ready, so that every later
+ * step returns STSP_ERR_NOT_INITIALIZED (safe hold) until a new init.
+ */
+stsp_status_t stsp_verify(stsp_ctrl_t *ctrl);
+
+/**
  * Compute the command for tick `tick` from the measured state x[nx]; writes u[nu].
  * On a negative status u is all zeros (the documented safe hold value) and the instance is
- * unchanged; otherwise u is finite. Exceptions: with u == NULL nothing is written, and before
- * a successful init (STSP_ERR_NOT_INITIALIZED) u is not written because nu is unknown.
+ * unchanged; otherwise u is finite and u_min[i] <= u[i] <= u_max[i]. Exceptions: with
+ * u == NULL nothing is written, and before a successful init (STSP_ERR_NOT_INITIALIZED) u is
+ * not written because nu is unknown. See docs/firmware.md for every status's response.
  */
 stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_t *x, stsp_f32_t *u);
 

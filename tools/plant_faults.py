@@ -1,0 +1,229 @@
+#!/usr/bin/env python3
+"""Plant plausible bugs in the firmware, one at a time, and show that the tests catch each.
+
+For every fault below the script copies the C sources (``CMakeLists.txt``, ``firmware/``,
+``tests/c/``, ``gains/``) into a temporary directory, applies the one edit there, rebuilds
+that copy, and runs
+
+* the C tests of the copy: ``ctest`` without the clang, ARM and MISRA tests (controller,
+  controller_fixed_2_1_2, robot_table, robot_table_fixed and their ASan + UBSan builds), and
+* a fast subset of the Python tests that drive the C code through the cffi harness
+  (``tests/python/test_harness.py``, ``test_montecarlo.py``, ``test_firmware_limits.py``),
+  pointed at the faulty copy with ``STOSPLINE_FIRMWARE`` and a private ``STOSPLINE_BUILD``.
+
+The working tree is never modified: the edits happen in the copy only, pytest runs with
+``-p no:cacheprovider`` and ``PYTHONDONTWRITEBYTECODE=1``, and the script checks at the end
+that the hashes of ``firmware/`` and ``tests/c/`` are what they were at the start. A run
+without any fault comes first and must pass. Exit status 0 only if every fault is caught.
+
+    .venv/bin/python tools/plant_faults.py            # all faults (about 10 minutes)
+    .venv/bin/python tools/plant_faults.py --list
+    .venv/bin/python tools/plant_faults.py --only F3 F5 --no-python
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CTL = "firmware/src/stsp_controller.c"
+CRC = "firmware/src/stsp_controller.c"
+PY_TESTS = ["tests/python/test_harness.py", "tests/python/test_montecarlo.py",
+            "tests/python/test_firmware_limits.py"]
+CTEST_EXCLUDE = r"^(clang_|arm_|misra)"
+
+
+@dataclass(frozen=True)
+class Fault:
+    key: str
+    title: str
+    path: str
+    old: str
+    new: str
+
+
+FAULTS = [
+    Fault("F1", "fast finiteness check only catches NaN (Inf passes)", CTL,
+          "if (!((sum - sum) == 0.0f)) {", "if (!(sum == sum)) {"),
+    Fault("F2", "NaN check of the state looks at x[0] only (a bad x[1] reported as overflow)",
+          CTL, "return (stsp_all_finite(x, stsp_nx(t)) == 0) ? STSP_ERR_NONFINITE_STATE",
+          "return (stsp_all_finite(x, 1u) == 0) ? STSP_ERR_NONFINITE_STATE"),
+    Fault("F3", "off-by-one tick range: the tick after the last is accepted", CTL,
+          "if (tick >= t->n_ticks) {", "if (tick > t->n_ticks) {"),
+    Fault("F4", "wrong latch time: stage search switches one tick late", CTL,
+          "(t->stage_start[s + 1u] <= tick)", "(t->stage_start[s + 1u] < tick)"),
+    Fault("F5", "sign flip in a gain: L v added instead of subtracted", CTL,
+          "acc -= L[j] * v[j];", "acc += L[j] * v[j];"),
+    Fault("F6", "missing saturation at the upper limit", CTL,
+          "            u[i] = t->u_max[i];\n", "            /* clamp dropped */\n"),
+    Fault("F7", "latch offset lambda0 dropped", CTL,
+          "acc = t->lambda0[row];", "acc = 0.0f;"),
+    Fault("F8", "a repeated first tick of a stage latches again", CTL,
+          "if ((c->latched == 0u) || ((stage != c->stage) && (np > 0u))) {",
+          "if ((c->latched == 0u) || ((tick == t->stage_start[stage]) && (np > 0u))) {"),
+    Fault("F9", "the tick is consumed before the overflow check (instance changed on error)",
+          CTL,
+          "    uint16_t mask = 0u;\n    const stsp_status_t st = stsp_limit(ctrl->table, x, u, &mask);",
+          "    uint16_t mask = 0u;\n    stsp_status_t st;\n    ctrl->next_tick = tick + 1u;\n"
+          "    st = stsp_limit(ctrl->table, x, u, &mask);"),
+    Fault("F10", "command not zeroed on an error of an ordinary tick", CTL,
+          "    if (st < STSP_OK) {\n        stsp_zero(u, stsp_nu(ctrl->table));\n        return st;",
+          "    if (st < STSP_OK) {\n        return st;"),
+    Fault("F11", "CRC does not cover u_max", CRC,
+          "    crc = stsp_crc32_f32s(crc, table->u_max, nu);\n", ""),
+    Fault("F12", "off-by-one tick order: a repeated tick is refused as going backwards", CTL,
+          "if ((tick + 1u) < c->next_tick) {", "if (tick < c->next_tick) {"),
+    Fault("F13", "feed-forward k0 of the next tick (off-by-one row)", CTL,
+          "const stsp_f32_t *k0 = &t->k0[tick * nu];",
+          "const stsp_f32_t *k0 = &t->k0[((tick + 1u) % t->n_ticks) * nu];"),
+]
+
+
+def tree_hash(paths: list[str]) -> str:
+    h = hashlib.sha256()
+    for top in paths:
+        for p in sorted((ROOT / top).rglob("*")):
+            if p.is_file():
+                h.update(str(p.relative_to(ROOT)).encode())
+                h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def run(cmd: list[str], **kw) -> subprocess.CompletedProcess:
+    return subprocess.run(cmd, capture_output=True, text=True, **kw)
+
+
+class Sandbox:
+    """A copy of the C sources with its own CMake build and cffi build cache."""
+
+    def __init__(self, base: Path):
+        self.src = base / "src"
+        self.build = base / "build"
+        self.cffi = base / "cffi"
+        self.src.mkdir()
+        shutil.copy2(ROOT / "CMakeLists.txt", self.src)
+        for d in ("firmware", "tests/c", "gains"):
+            shutil.copytree(ROOT / d, self.src / d)
+        self.pristine = {}
+
+    def configure(self) -> None:
+        r = run(["cmake", "-S", str(self.src), "-B", str(self.build), "-G", "Ninja",
+                 "-DCMAKE_BUILD_TYPE=Release"])
+        if r.returncode:
+            raise SystemExit(f"plant_faults: configure failed\n{r.stdout}\n{r.stderr}")
+
+    def apply(self, fault: Fault) -> None:
+        path = self.src / fault.path
+        text = self.pristine.setdefault(fault.path, path.read_text())
+        if text.count(fault.old) != 1:
+            raise SystemExit(f"plant_faults: {fault.key}: the text to replace occurs "
+                             f"{text.count(fault.old)} times in {fault.path} (expected once)")
+        path.write_text(text.replace(fault.old, fault.new))
+
+    def restore(self) -> None:
+        for rel, text in self.pristine.items():
+            (self.src / rel).write_text(text)
+
+    def ctest(self) -> tuple[str, list[str]]:
+        """('ok' | 'build failed' | 'failed', [summary of the failures])."""
+        r = run(["cmake", "--build", str(self.build)])
+        if r.returncode:
+            return "build failed", ["(build: " + first_error(r.stdout + r.stderr) + ")"]
+        r = run(["ctest", "--test-dir", str(self.build), "-E", CTEST_EXCLUDE,
+                 "--output-on-failure", "--timeout", "120"])
+        if r.returncode == 0:
+            return "ok", []
+        failed = re.findall(r"^\s*\d+ - (\S+) \(", r.stdout, re.M)
+        total = re.search(r"tests failed out of (\d+)", r.stdout)
+        cases = sorted(set(re.findall(r"\[  FAILED  \] (test_\w+)", r.stdout)))
+        if "runtime error" in r.stdout or "AddressSanitizer" in r.stdout:
+            cases.append("(sanitizer report)")
+        summary = [f"{len(failed)}/{total.group(1) if total else '?'} ctest tests "
+                   f"({', '.join(failed)})", "cases: " + (", ".join(cases) or "-")]
+        return "failed", summary
+
+    def pytest(self, fail_fast: bool) -> tuple[str, list[str]]:
+        env = dict(os.environ, STOSPLINE_FIRMWARE=str(self.src / "firmware"),
+                   STOSPLINE_BUILD=str(self.cffi), PYTHONDONTWRITEBYTECODE="1")
+        cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-rf",
+               *(["-x"] if fail_fast else []), *PY_TESTS]
+        r = run(cmd, cwd=ROOT, env=env)
+        failed = re.findall(r"^FAILED (.+?)(?: - .*)?$", r.stdout, re.M)
+        errors = re.findall(r"^ERROR (.+?)(?: - .*)?$", r.stdout, re.M)
+        if r.returncode == 0:
+            return "ok", []
+        return "failed", [f.replace("tests/python/", "") for f in failed + errors] or \
+            [f"(pytest exit {r.returncode})"]
+
+
+def first_error(text: str) -> str:
+    m = re.search(r"error: (.*)", text)
+    return m.group(1)[:80] if m else "see log"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", nargs="*", metavar="KEY", help="faults to plant (default: all)")
+    ap.add_argument("--list", action="store_true", help="list the faults and exit")
+    ap.add_argument("--no-python", action="store_true", help="C tests only")
+    ap.add_argument("--fail-fast", action="store_true",
+                    help="stop pytest at the first failure (faster; names fewer tests)")
+    args = ap.parse_args()
+    faults = [f for f in FAULTS if not args.only or f.key in args.only]
+    if args.list:
+        for f in FAULTS:
+            print(f"{f.key:4s} {f.title}  ({f.path})")
+        return 0
+
+    watched = ["firmware", "tests/c"]
+    before = tree_hash(watched)
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="stsp_faults_") as tmp:
+        box = Sandbox(Path(tmp))
+        box.configure()
+        t0 = time.time()
+        c_status, c_failed = box.ctest()
+        p_status, p_failed = ("skipped", []) if args.no_python else box.pytest(False)
+        print(f"baseline (no fault): ctest {c_status}, pytest {p_status} "
+              f"({time.time() - t0:.0f} s)", flush=True)
+        if c_status != "ok" or p_status not in ("ok", "skipped"):
+            print("plant_faults: the unmodified sources fail: " + "; ".join(c_failed + p_failed))
+            return 2
+        for f in faults:
+            t0 = time.time()
+            box.apply(f)
+            try:
+                c_status, c_failed = box.ctest()
+                if args.no_python:
+                    p_status, p_failed = "skipped", []
+                else:
+                    p_status, p_failed = box.pytest(args.fail_fast)
+            finally:
+                box.restore()
+            caught = c_status != "ok" or p_status == "failed"
+            rows.append((f, caught, c_status, c_failed, p_status, p_failed))
+            print(f"{f.key:4s} {'CAUGHT' if caught else 'MISSED'}  {f.title}  "
+                  f"({time.time() - t0:.0f} s)", flush=True)
+            print(f"       ctest:  {c_status}: {'; '.join(c_failed) or '-'}", flush=True)
+            print(f"       pytest: {p_status}: {', '.join(p_failed) or '-'}", flush=True)
+    after = tree_hash(watched)
+    missed = [f.key for f, caught, *_ in rows if not caught]
+    print(f"\n{len(rows) - len(missed)} of {len(rows)} planted faults caught"
+          + (f"; MISSED: {', '.join(missed)}" if missed else ""))
+    print(f"working tree untouched (firmware/, tests/c/ hashes equal): {before == after}")
+    if before != after:
+        print("plant_faults: firmware/ or tests/c/ changed during the run (another process?)")
+    return 0 if not missed and before == after else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -11,6 +11,7 @@
 #define ROBOT_CORRIDOR_N_STAGES 2u
 #define ROBOT_CORRIDOR_N_TICKS 6000u
 #define ROBOT_CORRIDOR_TICK_HZ 1000u
+#define ROBOT_CORRIDOR_BAND_ROWS 0u
 
 /* Tables in flash; layout K[tick][i*NX + j], k0[tick][i], L[tick][i*N_LATCH + c],
  * Lambda[stage][c*NX + j], lambda0[stage][c], u_min[i], u_max[i] (see stsp_controller.h;

@@ -43,6 +43,8 @@
 
 /* Binary32 exponent field: all ones for NaN and +-Inf. */
 #define STSP_F32_EXP_MASK 0x7F800000u
+/* Binary64 exponent field. */
+#define STSP_F64_EXP_MASK 0x7FF0000000000000u
 
 /* A binary32 is finite unless its exponent bits are all ones (NaN, +-Inf). */
 static inline int stsp_isfinite_f32(stsp_f32_t value)
@@ -91,6 +93,27 @@ static inline uint32_t stsp_nl(const stsp_table_t *t)
 #endif
 }
 
+/* A band dual belongs to a joint design: q rows, all latched once at stage 0. */
+static stsp_status_t stsp_check_band_dims(const stsp_table_t *t)
+{
+    const stsp_bandqp_t *b = t->band_qp;
+    uint32_t s;
+    if ((b->Nt == NULL) || (b->mt == NULL) || (b->W == NULL) || (b->lo == NULL) ||
+        (b->hi == NULL)) {
+        return STSP_ERR_NULL;
+    }
+    if ((b->q == 0u) || (b->q > STSP_BANDQP_MAX) || (b->nx != t->nx) ||
+        (b->q != t->stage_np[0])) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    for (s = 1u; s < t->n_stages; ++s) {
+        if (t->stage_np[s] != 0u) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    return STSP_OK;
+}
+
 static stsp_status_t stsp_check_dims(const stsp_table_t *t)
 {
     uint32_t s;
@@ -122,7 +145,7 @@ static stsp_status_t stsp_check_dims(const stsp_table_t *t)
             return STSP_ERR_BAD_DIMS;
         }
     }
-    return STSP_OK;
+    return (t->band_qp != NULL) ? stsp_check_band_dims(t) : STSP_OK;
 }
 
 /* 1 when every one of values[0..count) is finite, else 0. */
@@ -137,7 +160,40 @@ static int stsp_all_finite(const stsp_f32_t *values, uint32_t count)
     return 1;
 }
 
-/* Gains finite; limits finite, ordered, and containing the safe hold value 0. */
+/* 1 when every one of values[0..count) (binary64) is finite, else 0. */
+static int stsp_all_finite_f64(const double *values, uint32_t count)
+{
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        uint64_t bits;
+        (void)memcpy(&bits, &values[i], sizeof bits);
+        if ((bits & STSP_F64_EXP_MASK) == STSP_F64_EXP_MASK) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* Band dual data finite and every band ordered (lo <= hi; lo == hi is an equality row). */
+static stsp_status_t stsp_check_band_values(const stsp_bandqp_t *b)
+{
+    const uint32_t q = b->q;
+    uint32_t i;
+    if ((stsp_all_finite_f64(b->Nt, q * (uint32_t)b->nx) == 0) ||
+        (stsp_all_finite_f64(b->mt, q) == 0) || (stsp_all_finite_f64(b->W, q * q) == 0) ||
+        (stsp_all_finite_f64(b->lo, q) == 0) || (stsp_all_finite_f64(b->hi, q) == 0)) {
+        return STSP_ERR_BAD_VALUES;
+    }
+    for (i = 0u; i < q; ++i) {
+        if (!(b->lo[i] <= b->hi[i])) {
+            return STSP_ERR_BAD_VALUES;
+        }
+    }
+    return STSP_OK;
+}
+
+/* Gains finite; limits finite, ordered, and containing the safe hold value 0; band data
+ * finite and ordered. */
 static stsp_status_t stsp_check_values(const stsp_table_t *t)
 {
     const uint32_t nx = t->nx;
@@ -162,7 +218,7 @@ static stsp_status_t stsp_check_values(const stsp_table_t *t)
             return STSP_ERR_BAD_VALUES;
         }
     }
-    return STSP_OK;
+    return (t->band_qp != NULL) ? stsp_check_band_values(t->band_qp) : STSP_OK;
 }
 
 /* 1 if some input has a limit other than -FLT_MAX/FLT_MAX (selects the fast-path check). */
@@ -207,6 +263,17 @@ uint32_t stsp_table_crc32(const stsp_table_t *table)
     }
     crc = stsp_crc32_f32s(crc, table->u_min, nu);
     crc = stsp_crc32_f32s(crc, table->u_max, nu);
+    if (table->band_qp != NULL) {
+        const stsp_bandqp_t *b = table->band_qp;
+        const uint32_t q = b->q;
+        crc = stsp_crc32_u32(crc, q);
+        crc = stsp_crc32_u32(crc, (uint32_t)b->nx);
+        crc = stsp_crc32_f64s(crc, b->Nt, q * (uint32_t)b->nx);
+        crc = stsp_crc32_f64s(crc, b->mt, q);
+        crc = stsp_crc32_f64s(crc, b->W, q * q);
+        crc = stsp_crc32_f64s(crc, b->lo, q);
+        crc = stsp_crc32_f64s(crc, b->hi, q);
+    }
     return stsp_crc32_end(crc);
 }
 
@@ -298,6 +365,28 @@ static uint16_t stsp_stage_of(const stsp_table_t *t, uint16_t from, uint32_t tic
     return (uint16_t)s;
 }
 
+/* The stage-0 latch of a band table: v = the band dual's multipliers for the measured x,
+ * rounded to binary32, zero beyond q. Returns 1 on success; 0 if the solver failed (v_new
+ * untouched): x not finite (the affine fallback then propagates the NaN/Inf, and the step
+ * fails with STSP_ERR_NONFINITE_STATE as for any table) or no active set met the optimality
+ * conditions (W not positive definite in double precision). Out of line: its ~0.8 KB of
+ * stack (solver work area) is used on this tick only. */
+static STSP_NOINLINE int stsp_band_latch(const stsp_table_t *t, const stsp_f32_t *x,
+                                         stsp_f32_t *v_new)
+{
+    stsp_bandqp_work_t work;
+    double lam[STSP_BANDQP_MAX];
+    const uint32_t q = t->band_qp->q;
+    uint32_t i;
+    if (stsp_bandqp_solve(t->band_qp, x, lam, &work, NULL) != STSP_BANDQP_OK) {
+        return 0;
+    }
+    for (i = 0u; i < stsp_nl(t); ++i) {
+        v_new[i] = (i < q) ? (stsp_f32_t)lam[i] : 0.0f;
+    }
+    return 1;
+}
+
 /* What a tick other than the ordinary one does: decided before anything is written. */
 typedef struct {
     uint16_t stage;   /* stage of the tick */
@@ -340,6 +429,12 @@ static stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick, const stsp_f
     plan->relatch = 0u;
     if ((c->latched == 0u) || ((stage != c->stage) && (np > 0u))) {
         plan->relatch = 1u;
+    }
+    if ((plan->relatch != 0u) && (stage == 0u) && (t->band_qp != NULL)) {
+        if (stsp_band_latch(t, x, v_new) != 0) {
+            return status;
+        }
+        status = STSP_WARN_BAND_FALLBACK; /* the affine map below, from the design's x0 */
     }
     if (plan->relatch != 0u) {
         for (i = 0u; i < nl; ++i) {
@@ -560,6 +655,7 @@ const char *stsp_status_str(stsp_status_t status)
     case STSP_WARN_TICK_SKIPPED: text = "tick skipped: evaluated at the given tick"; break;
     case STSP_WARN_TICK_REPEATED: text = "tick repeated: recomputed without a new latch"; break;
     case STSP_WARN_SATURATED: text = "command clamped to the actuator limits"; break;
+    case STSP_WARN_BAND_FALLBACK: text = "band QP failed: latched the design's affine map"; break;
     case STSP_ERR_NULL: text = "null pointer argument"; break;
     case STSP_ERR_NOT_INITIALIZED: text = "controller not initialized"; break;
     case STSP_ERR_BAD_MAGIC: text = "table magic mismatch"; break;

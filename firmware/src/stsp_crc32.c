@@ -40,6 +40,19 @@ uint32_t stsp_crc32_f32s(uint32_t crc, const stsp_f32_t *values, uint32_t count)
     return c;
 }
 
+uint32_t stsp_crc32_f64s(uint32_t crc, const double *values, uint32_t count)
+{
+    uint32_t c = crc;
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        uint64_t bits;
+        (void)memcpy(&bits, &values[i], sizeof bits);
+        c = stsp_crc32_u32(c, (uint32_t)(bits & 0xFFFFFFFFu));
+        c = stsp_crc32_u32(c, (uint32_t)(bits >> 32));
+    }
+    return c;
+}
+
 uint32_t stsp_crc32_end(uint32_t crc)
 {
     return crc ^ 0xFFFFFFFFu;

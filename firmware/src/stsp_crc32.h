@@ -11,6 +11,8 @@ uint32_t stsp_crc32_begin(void);
 uint32_t stsp_crc32_u32(uint32_t crc, uint32_t value);
 /* Feed `count` binary32 values by their bit patterns. */
 uint32_t stsp_crc32_f32s(uint32_t crc, const stsp_f32_t *values, uint32_t count);
+/* Feed `count` binary64 values by their bit patterns (low word first: little-endian bytes). */
+uint32_t stsp_crc32_f64s(uint32_t crc, const double *values, uint32_t count);
 uint32_t stsp_crc32_end(uint32_t crc);
 
 #endif /* STSP_CRC32_H */

@@ -13,8 +13,11 @@ is a concave quadratic; its maximum is the optimal cost (the primal problem is a
 the policy), and the expected outputs of the optimal law are ``y = e - W lam``. The dual is
 solved with OSQP and then refined exactly on its active set.
 
-The firmware latches ``v = Lambda x0 + lambda0``: the affine map of the optimal active set,
-exact for the design's x0 and for every x0 with the same active set.
+With at most ``BANDQP_MAX`` rows the table carries the dual (`BandQP`) and the firmware solves
+it for the measured x0 at the t0 latch (``stsp_bandqp.c``), so a trajectory started from
+another state still meets its bands. Otherwise it latches ``v = Lambda x0 + lambda0``, the
+affine map of the optimal active set: exact for the design's x0 and for every x0 with the same
+active set.
 """
 from __future__ import annotations
 
@@ -26,10 +29,10 @@ import numpy as np
 from .design import ContinuousDesign, DesignError, design_continuous
 from .design_zoh import ZohDesign, design_zoh
 from .problem import Constraint, Problem
-from .tables import GainTable, sample_design
+from .tables import BANDQP_MAX, BandQP, GainTable, sample_design
 
 __all__ = ["BandSolution", "BandDesign", "solve_band_dual", "enumerate_active_sets",
-           "design_bands", "has_bands"]
+           "design_bands", "has_bands", "target_latch"]
 
 
 def has_bands(problem: Problem) -> bool:
@@ -154,11 +157,22 @@ class BandDesign:
     def stages(self):
         return self.base.stages
 
-    def table(self, *, quantize: bool = True) -> GainTable:
-        """Per-tick table: the ZOH design's own, or the continuous gains sampled at the ticks."""
+    def band_qp(self) -> BandQP | None:
+        """The dual the firmware re-solves from the measured x0 at the t0 latch, when it has
+        at most BANDQP_MAX rows (else None: the table latches the affine map of the design's
+        active set, exact only while that set stays optimal)."""
+        if len(self.lower) > BANDQP_MAX:
+            return None
+        st0 = self.base.stages[0]
+        return BandQP(st0.N0.T, st0.m0, st0.W0, self.lower, self.upper)
+
+    def table(self, *, quantize: bool = True, on_target_qp: bool = True) -> GainTable:
+        """Per-tick table: the ZOH design's own, or the continuous gains sampled at the ticks;
+        with the band dual for the firmware when it fits (``on_target_qp=False``: without)."""
+        qp = self.band_qp() if on_target_qp else None
         if isinstance(self.base, ContinuousDesign):
-            return sample_design(self.base, quantize=quantize)
-        return self.base.table(quantize=quantize)
+            return sample_design(self.base, quantize=quantize, band_qp=qp)
+        return self.base.table(quantize=quantize, band_qp=qp)
 
     def active_set(self) -> list[dict]:
         """Per constraint row: knot, row, where it sits and its multiplier."""
@@ -211,3 +225,13 @@ def design_bands(problem: Problem, *, discretization: str = "exact-zoh", noise: 
     stages[0] = replace(st0, Lambda=Lam, lambda0=lam0)
     base = replace(base, stages=stages, problem=problem)
     return BandDesign(problem, base, sol, J0, rows, lo, hi)
+
+
+def target_latch(qp: BandQP, x0: np.ndarray, *, float32: bool = True) -> np.ndarray:
+    """The multipliers the firmware latches at t0 from the measured state: the optimum of the
+    band dual at ``float32(x0)`` (what ``stsp_step`` hands to ``stsp_bandqp_solve``), rounded
+    to float32 as the controller stores them. ``float32=False``: in double precision (for an
+    unquantized table)."""
+    x = np.asarray(x0, dtype=np.float32 if float32 else float).astype(float)
+    lam = solve_band_dual(qp.e(x), qp.W, qp.lo, qp.hi).lam
+    return lam.astype(np.float32) if float32 else lam

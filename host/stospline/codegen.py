@@ -65,6 +65,7 @@ def generate_c(table: GainTable, *, prefix: str | None = None,
 #define {P}_N_STAGES {table.n_stages}u
 #define {P}_N_TICKS {table.n_ticks}u
 #define {P}_TICK_HZ {table.tick_hz}u
+#define {P}_BAND_ROWS {0 if table.band_qp is None else table.band_qp.q}u
 
 /* Tables in flash; layout K[tick][i*NX + j], k0[tick][i], L[tick][i*N_LATCH + c],
  * Lambda[stage][c*NX + j], lambda0[stage][c], u_min[i], u_max[i] (see stsp_controller.h;
@@ -86,6 +87,21 @@ extern const stsp_table_t {p}_table;
         _array("stsp_f32_t", f"{p}_u_min", table.u_min, f32, f"[nu] lower actuator limits"),
         _array("stsp_f32_t", f"{p}_u_max", table.u_max, f32, f"[nu] upper actuator limits"),
     ]
+    band = "NULL"
+    if table.band_qp is not None:
+        b = table.band_qp
+        f64 = lambda v: repr(float(v))  # noqa: E731  shortest round-trip double
+        arrays += [
+            _array("double", f"{p}_band_Nt", b.Nt, f64, f"[q][nx] = [{b.q}][{n}]: e = Nt x0 + mt"),
+            _array("double", f"{p}_band_mt", b.mt, f64, "[q]"),
+            _array("double", f"{p}_band_W", b.W, f64, "[q][q]"),
+            _array("double", f"{p}_band_lo", b.lo, f64, "[q] lower bounds"),
+            _array("double", f"{p}_band_hi", b.hi, f64, "[q] upper bounds"),
+            f"/* Band dual, re-solved from the measured x0 at the t0 latch (stsp_bandqp.h). */\n"
+            f"static const stsp_bandqp_t {p}_band_qp = {{\n    {b.q}u, {n}u, {p}_band_Nt, "
+            f"{p}_band_mt, {p}_band_W, {p}_band_lo, {p}_band_hi\n}};\n",
+        ]
+        band = f"&{p}_band_qp"
     sha_bytes = ", ".join(f"0x{sha[i:i + 2]}u" for i in range(0, 64, 2))
     source = banner + f'#include "{p}.h"\n\n' + "\n".join(arrays) + f"""
 const stsp_table_t {p}_table = {{
@@ -93,7 +109,7 @@ const stsp_table_t {p}_table = {{
     {n}u, {m}u, {L}u, {table.n_stages}u, {table.n_ticks}u, {table.tick_hz}u,
     {p}_stage_start, {p}_stage_np,
     {p}_K, {p}_k0, {p}_L, {p}_Lambda, {p}_lambda0,
-    {p}_u_min, {p}_u_max,
+    {p}_u_min, {p}_u_max, {band},
     0x{table_crc32(table):08X}u,
     {{{sha_bytes}}}
 }};

@@ -71,10 +71,10 @@ class ZohDesign:
         """Optimal expected cost from `x` at the start of stage k (`v`: an earlier latch)."""
         return _value(self.stages[k], np.asarray(x, dtype=float), v)
 
-    def table(self, *, quantize: bool = True) -> GainTable:
+    def table(self, *, quantize: bool = True, band_qp=None) -> GainTable:
         return build_table(self.problem, self.tick_hz,
                            [(s.K, s.k0, s.L, s.Lambda, s.lambda0) for s in self.stages],
-                           quantize=quantize)
+                           quantize=quantize, band_qp=band_qp)
 
 
 def _sym(a: np.ndarray) -> np.ndarray:

@@ -25,12 +25,16 @@ STATUS = {
     "ERR_NOT_INITIALIZED": -2, "ERR_BAD_MAGIC": -3, "ERR_BAD_VERSION": -4, "ERR_BAD_DIMS": -5,
     "ERR_BAD_CRC": -6, "ERR_TICK_RANGE": -7, "ERR_TICK_ORDER": -8,
     "WARN_SATURATED": 3, "ERR_NONFINITE_STATE": -9, "ERR_NONFINITE_OUTPUT": -10,
-    "ERR_BAD_VALUES": -11,
+    "ERR_BAD_VALUES": -11, "WARN_BAND_FALLBACK": 4,
 }
 
 _CDEF = """
 typedef float stsp_f32_t;
 typedef int... stsp_status_t;
+typedef struct {
+    uint16_t q; uint16_t nx; const double *Nt; const double *mt; const double *W;
+    const double *lo; const double *hi;
+} stsp_bandqp_t;
 typedef struct {
     uint32_t magic; uint16_t format_version; uint16_t scalar_kind;
     uint16_t nx; uint16_t nu; uint16_t n_latch; uint16_t n_stages;
@@ -39,6 +43,7 @@ typedef struct {
     const stsp_f32_t *K; const stsp_f32_t *k0; const stsp_f32_t *L;
     const stsp_f32_t *Lambda; const stsp_f32_t *lambda0;
     const stsp_f32_t *u_min; const stsp_f32_t *u_max;
+    const stsp_bandqp_t *band_qp;
     uint32_t crc32; uint8_t problem_sha256[32];
 } stsp_table_t;
 typedef struct {

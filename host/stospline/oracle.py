@@ -127,6 +127,14 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         if k == 0 or table.stage_np[k] > 0:      # else: v latched earlier is kept
             Lam = table.Lambda[k].astype(float)
             lam0 = table.lambda0[k].astype(float)
+            if k == 0 and table.band_qp is not None:
+                # The firmware solves the band dual for the (deterministic) start state, in
+                # float32 for a quantized table.
+                from .bands import target_latch
+                Lam = np.zeros_like(Lam)
+                lam0 = np.zeros(P)
+                lam0[:table.band_qp.q] = target_latch(table.band_qp, x0,
+                                                      float32=table.K.dtype == np.float32)
             T = _latch_transform(n, P, Lam, lam0, d_y)
             M = T @ M @ T.T
         varying = stage.varying is not None

@@ -8,6 +8,7 @@ Layout (all row-major, float32, padded to ``n_latch`` multipliers with zeros)::
     Lambda[stage][c][j]  (n_stages, P, n)   latch map  v = Lambda x + lambda0
     lambda0[stage][c]    (n_stages, P)
     u_min[i], u_max[i]   (m,)               actuator limits (+-FLT_MAX: unlimited)
+    band_qp (optional)                      the band dual re-solved at the t0 latch (BandQP)
 
 At tick ``j`` (time ``t0 + j / tick_hz``) the controller applies
 ``u = clip(-K x - k0 - L v, u_min, u_max)`` and holds it for one tick; at a stage's first
@@ -23,13 +24,41 @@ import numpy as np
 
 from .design import ContinuousDesign
 
-__all__ = ["GainTable", "build_table", "sample_design", "ticks_per_stage", "table_crc32",
-           "FORMAT_VERSION", "SCALAR_FLOAT32", "F32_MAX"]
+__all__ = ["GainTable", "BandQP", "build_table", "sample_design", "ticks_per_stage",
+           "table_crc32", "FORMAT_VERSION", "SCALAR_FLOAT32", "F32_MAX", "BANDQP_MAX"]
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
+BANDQP_MAX = 8  # STSP_BANDQP_MAX: rows the firmware's band solver takes (3^8 active sets)
 SCALAR_FLOAT32 = 1
 MAGIC = 0x53545350  # "STSP"
 F32_MAX = float(np.finfo(np.float32).max)  # the firmware's "unlimited" (FLT_MAX)
+
+
+@dataclass(frozen=True)
+class BandQP:
+    """The band dual of a joint design, as the firmware solves it at the t0 latch
+    (``stsp_bandqp.h``): multipliers ``lam`` maximising
+    ``2 lam'e - lam'W lam - 2 sum(lam_i > 0 ? lam_i hi_i : lam_i lo_i)``, ``e = Nt x0 + mt``.
+    Stored in float64 (the solver works in double precision)."""
+    Nt: np.ndarray   # (q, n)
+    mt: np.ndarray   # (q,)
+    W: np.ndarray    # (q, q), symmetric positive definite
+    lo: np.ndarray   # (q,) lower bounds (lo == hi: an equality row)
+    hi: np.ndarray   # (q,)
+
+    def __post_init__(self):
+        for name in ("Nt", "mt", "W", "lo", "hi"):
+            object.__setattr__(self, name, np.ascontiguousarray(getattr(self, name), float))
+        q = self.mt.shape[0]
+        if not 1 <= q <= BANDQP_MAX:
+            raise ValueError(f"the firmware's band solver takes 1..{BANDQP_MAX} rows, not {q}")
+
+    @property
+    def q(self) -> int:
+        return int(self.mt.shape[0])
+
+    def e(self, x0: np.ndarray) -> np.ndarray:
+        return self.Nt @ np.asarray(x0, dtype=float) + self.mt
 
 
 @dataclass(frozen=True)
@@ -53,6 +82,7 @@ class GainTable:
     problem_sha256: str
     u_min: np.ndarray | None = None
     u_max: np.ndarray | None = None
+    band_qp: BandQP | None = None
 
     def __post_init__(self):
         m = self.K.shape[1]
@@ -109,7 +139,7 @@ def _to_float32(a: np.ndarray) -> np.ndarray:
 
 
 def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = True,
-                u_min=None, u_max=None) -> GainTable:
+                u_min=None, u_max=None, band_qp: BandQP | None = None) -> GainTable:
     """Assemble a table from per-stage gains ``(K, k0, L, Lambda, lambda0)`` with shapes
     (T_k, m, n), (T_k, m), (T_k, m, p_k), (p_k, n), (p_k,).
 
@@ -120,10 +150,12 @@ def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = 
     knots), the table latches the state instead: ``L v = (L Lambda) x_latch + L lambda0``, so
     ``L <- L Lambda``, ``k0 <- k0 + L lambda0``, ``Lambda <- I``, ``lambda0 <- 0``. The same
     law, with n latched values and n multiply-accumulates per input instead of p.
+    Not with ``band_qp``: the firmware then latches the multipliers themselves (the band
+    dual's solution is not affine in the state), so the table keeps all p columns.
     """
     n, m = problem.n, problem.m
     P = max([g[2].shape[2] for g in stages] + [g[3].shape[0] for g in stages])
-    if P > n:
+    if P > n and band_qp is None:
         stages, P = _latch_state(stages, n), n
     counts = [g[0].shape[0] for g in stages]
     start = np.concatenate([[0], np.cumsum(counts)]).astype(np.uint32)
@@ -139,7 +171,7 @@ def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = 
     return GainTable(problem.name, int(tick_hz), problem.t0, start,
                      np.array([g[3].shape[0] for g in stages], dtype=np.uint16),
                      cast(K), cast(k0), cast(L), cast(Lam), cast(lam0), problem.source_sha256,
-                     u_min, u_max)
+                     u_min, u_max, band_qp)
 
 
 def _latch_state(stages: list[tuple], n: int) -> list[tuple]:
@@ -169,7 +201,7 @@ def ticks_per_stage(problem, tick_hz: int) -> np.ndarray:
 
 
 def sample_design(design: ContinuousDesign, tick_hz: int | None = None, *,
-                  quantize: bool = True) -> GainTable:
+                  quantize: bool = True, band_qp: BandQP | None = None) -> GainTable:
     """Sample a continuous design at the tick starts (zero-order hold) and quantize to float32
     (round to nearest, as a C compiler converts the literals)."""
     prob = design.problem
@@ -179,7 +211,7 @@ def sample_design(design: ContinuousDesign, tick_hz: int | None = None, *,
     for k, st in enumerate(design.stages):
         t = prob.times[k] + np.arange(counts[k]) / tick_hz
         stages.append((*st.gains(t), st.Lambda, st.lambda0))
-    return build_table(prob, tick_hz, stages, quantize=quantize)
+    return build_table(prob, tick_hz, stages, quantize=quantize, band_qp=band_qp)
 
 
 def table_crc32(table: GainTable) -> int:
@@ -187,7 +219,8 @@ def table_crc32(table: GainTable) -> int:
 
     The firmware computes the same value in ``stsp_table_crc32``: the dimensions and tick rate
     as u32, ``stage_start`` as u32, ``stage_np`` as u32, then K, k0, L, Lambda, lambda0 (these
-    three only when P > 0), u_min, u_max as IEEE-754 binary32 bit patterns, each little-endian.
+    three only when P > 0), u_min, u_max as IEEE-754 binary32 bit patterns, each little-endian;
+    then, with a band QP, its q and n as u32 and Nt, mt, W, lo, hi as binary64 bit patterns.
     """
     n, m, P = table.dims
     head = struct.pack("<6I", n, m, P, table.n_stages, table.n_ticks, table.tick_hz)
@@ -196,6 +229,10 @@ def table_crc32(table: GainTable) -> int:
     parts += [np.asarray(a, "<f4").tobytes()
               for a in (table.K, table.k0, table.L, table.Lambda, table.lambda0,
                         table.u_min, table.u_max)]
+    b = table.band_qp
+    if b is not None:
+        parts.append(struct.pack("<2I", b.q, b.Nt.shape[1]))
+        parts += [np.asarray(a, "<f8").tobytes() for a in (b.Nt, b.mt, b.W, b.lo, b.hi)]
     crc = 0
     for part in parts:
         crc = zlib.crc32(part, crc)

@@ -738,6 +738,135 @@ static void test_random_walk_against_model(void **state)
     }
 }
 
+/* Table D: a joint band table, nx = 2, nu = 1, n_latch = 2; stage 0 = ticks 0..1 latches both
+ * multipliers through the band dual, stage 1 = ticks 2..3 keeps them. Dual: e = x0, W =
+ * [[2, 0.5], [0.5, 1]], row 0 an equality (0.5), row 1 a band [-1, 1]. Solutions by hand:
+ * x0 = (1.5, 0.25): row 1 inactive, lam = ((1.5 - 0.5) / 2, 0) = (0.5, 0);
+ * x0 = (0.5, 3):    row 1 at its upper bound, W lam = (0, 2): lam = (-1, 4) / 1.75. */
+static const uint32_t d_start[3] = {0u, 2u, 4u};
+static const uint16_t d_np[2] = {2u, 0u};
+static const float d_K[4 * 2] = {0.25f, 0.25f, 0.25f, 0.25f, 0.25f, 0.25f, 0.25f, 0.25f};
+static const float d_k0[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+static const float d_L[4 * 2] = {1.0f, 10.0f, 1.0f, 10.0f, 1.0f, 10.0f, 1.0f, 10.0f};
+static const float d_Lambda[2 * 2 * 2] = {1.0f, 0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 0.0f, 0.0f};
+static const float d_lambda0[2 * 2] = {0.125f, -0.25f, 0.0f, 0.0f};
+static const double d_Nt[2 * 2] = {1.0, 0.0, 0.0, 1.0};
+static const double d_mt[2] = {0.0, 0.0};
+static const double d_W[2 * 2] = {2.0, 0.5, 0.5, 1.0};
+static const double d_lo[2] = {0.5, -1.0};
+static const double d_hi[2] = {0.5, 1.0};
+/* CRC-32 of table D as host/stospline/tables.py table_crc32 computes it
+ * (tests/python/test_band_latch.py builds the same table). */
+#define TABLE_D_CRC32 0x3BD9F008u
+
+static stsp_table_t make_table_d(const stsp_bandqp_t *qp)
+{
+    stsp_table_t t;
+    memset(&t, 0, sizeof t);
+    t.magic = STSP_TABLE_MAGIC;
+    t.format_version = STSP_FORMAT_VERSION;
+    t.scalar_kind = STSP_SCALAR_FLOAT32;
+    t.nx = 2u; t.nu = 1u; t.n_latch = 2u; t.n_stages = 2u; t.n_ticks = 4u; t.tick_hz = 1u;
+    t.stage_start = d_start; t.stage_np = d_np;
+    t.K = d_K; t.k0 = d_k0; t.L = d_L; t.Lambda = d_Lambda; t.lambda0 = d_lambda0;
+    t.u_min = no_min; t.u_max = no_max;
+    t.band_qp = qp;
+    t.crc32 = stsp_table_crc32(&t);
+    return t;
+}
+
+static stsp_bandqp_t make_band_d(void)
+{
+    stsp_bandqp_t b = {2u, 2u, d_Nt, d_mt, d_W, d_lo, d_hi};
+    return b;
+}
+
+static void test_band_latch_solves_the_dual(void **state)
+{
+    const stsp_bandqp_t qp = make_band_d();
+    const stsp_table_t t = make_table_d(&qp);
+    const float inside[2] = {1.5f, 0.25f}, upper[2] = {0.5f, 3.0f}, later[2] = {9.0f, -9.0f};
+    stsp_ctrl_t c;
+    float u[1];
+    uint32_t tick;
+    (void)state;
+    assert_int_equal(t.crc32, TABLE_D_CRC32);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+
+    assert_int_equal(stsp_step(&c, 0u, inside, u), STSP_OK);
+    assert_true(fabs(c.v[0] - 0.5) < 1e-7 && c.v[1] == 0.0f);
+    assert_true(fabs(u[0] - (-(0.25 * (1.5 + 0.25)) - 0.5)) < 1e-6);
+
+    assert_int_equal(stsp_reset(&c), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, upper, u), STSP_OK);
+    assert_int_equal(c.v[0], (float)(-1.0 / 1.75));
+    assert_int_equal(c.v[1], (float)(4.0 / 1.75));
+    /* The multipliers stay for the rest of the plan: stage 1 (stage_np 0) does not relatch. */
+    for (tick = 1u; tick < 4u; ++tick) {
+        assert_int_equal(stsp_step(&c, tick, later, u), STSP_OK);
+        assert_true(fabs(u[0] - (-(0.25 * 0.0) - (-1.0 / 1.75) - 10.0 * (4.0 / 1.75))) < 1e-5);
+    }
+}
+
+static void test_band_fallback_and_nonfinite(void **state)
+{
+    static const double not_pd[2 * 2] = {-1.0, 0.0, 0.0, -1.0};
+    stsp_bandqp_t qp = make_band_d();
+    stsp_table_t t;
+    stsp_ctrl_t c;
+    const float x[2] = {0.5f, 3.0f}, bad[2] = {NAN, 0.0f};
+    float u[1] = {1.0f};
+    (void)state;
+    qp.W = not_pd; /* no active set meets the conditions: latch the design's affine map */
+    t = make_table_d(&qp);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_WARN_BAND_FALLBACK);
+    assert_int_equal(c.v[0], 0.5f + 0.125f);
+    assert_int_equal(c.v[1], 3.0f - 0.25f);
+    assert_true(fabs(u[0] - (-(0.25 * 3.5) - 0.625 - 10.0 * 2.75)) < 1e-5);
+
+    qp = make_band_d();
+    t = make_table_d(&qp);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, bad, u), STSP_ERR_NONFINITE_STATE);
+    assert_true(u[0] == 0.0f && c.latched == 0u);
+}
+
+static void test_band_tables_are_checked(void **state)
+{
+    static const double nan_W[2 * 2] = {2.0, 0.5, 0.5, NAN};
+    static const double swapped_lo[2] = {0.5, 2.0};
+    static const double W_changed[2 * 2] = {2.0, 0.5, 0.5, 1.0000000000000002};
+    static const uint16_t np_later[2] = {2u, 1u};
+    static const uint16_t np_one[2] = {1u, 0u};
+    const stsp_bandqp_t good = make_band_d();
+    stsp_bandqp_t qp;
+    stsp_table_t t;
+    stsp_ctrl_t c;
+    (void)state;
+
+    qp = good; qp.W = NULL; t = make_table_d(&good); t.band_qp = &qp;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_NULL);
+    qp = good; qp.q = 1u; t = make_table_d(&qp);           /* q != stage_np[0] */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    qp = good; qp.nx = 3u; t = make_table_d(&qp);          /* another state size */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    qp = good; qp.q = (uint16_t)(STSP_BANDQP_MAX + 1u); t = make_table_d(&qp);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    qp = good; t = make_table_d(&qp); t.stage_np = np_later; /* a second latch */
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    qp = good; t = make_table_d(&qp); t.stage_np = np_one;
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    qp = good; qp.W = nan_W; t = make_table_d(&qp);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    qp = good; qp.lo = swapped_lo; t = make_table_d(&qp);  /* lo > hi on row 1 */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    qp = good; t = make_table_d(&qp); qp.W = W_changed;    /* one ulp after the CRC */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_CRC);
+}
+
 static void test_status_strings(void **state)
 {
     (void)state;
@@ -747,6 +876,8 @@ static void test_status_strings(void **state)
                         "command clamped to the actuator limits");
     assert_string_equal(stsp_status_str(STSP_ERR_BAD_VALUES),
                         "table values not finite or limits invalid");
+    assert_string_equal(stsp_status_str(STSP_WARN_BAND_FALLBACK),
+                        "band QP failed: latched the design's affine map");
     assert_string_equal(stsp_status_str((stsp_status_t)123), "unknown status");
 }
 
@@ -773,6 +904,9 @@ int main(void)
         cmocka_unit_test_setup(test_wrong_dimensions, setup),
         cmocka_unit_test_setup(test_verify_detects_a_changed_table, setup),
         cmocka_unit_test_setup(test_random_walk_against_model, setup),
+        cmocka_unit_test(test_band_latch_solves_the_dual),
+        cmocka_unit_test(test_band_fallback_and_nonfinite),
+        cmocka_unit_test(test_band_tables_are_checked),
         cmocka_unit_test_setup(test_status_strings, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

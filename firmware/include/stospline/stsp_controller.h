@@ -11,6 +11,8 @@
  *
  *     at the stage's first tick, if stage_np[s] > 0:
  *                                 v = Lambda[s] x + lambda0[s]          (latch)
+ *       or, at stage 0 of a table with band_qp (band constraints lo <= E{C2 x(t_k)} <= hi):
+ *                                 v = argmax of the band dual at x      (stsp_bandqp.h)
  *     every tick:                 u = sat(-K[j] x - k0[j] - L[j] v)
  *
  * where sat() clamps input i to [u_min[i], u_max[i]] (STSP_WARN_SATURATED says it did).
@@ -28,7 +30,9 @@
  *
  * Buffers: stsp_ctrl_t holds STSP_MAX_LATCH scalars for v plus 24 bytes (32-bit targets:
  * 88 bytes with the default STSP_MAX_LATCH = 16); stsp_step() uses
- * STSP_MAX_LATCH + STSP_MAX_NU scalars of stack. The tables stay where the caller put them
+ * STSP_MAX_LATCH + STSP_MAX_NU scalars of stack, plus, on the stage-0 latch of a band table
+ * only, the band solver's work area and multipliers (sizeof(stsp_bandqp_work_t) +
+ * STSP_BANDQP_MAX doubles, about 0.8 KB with STSP_BANDQP_MAX = 8; docs/firmware.md). The tables stay where the caller put them
  * (const, normally flash) and are never copied.
  *
  * Compile-time dimensions (optional): define STSP_FIXED_NX, STSP_FIXED_NU and
@@ -44,6 +48,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "stospline/stsp_bandqp.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -53,8 +59,9 @@ typedef float stsp_f32_t;
 
 /** Table magic, "STSP" as a little-endian u32. */
 #define STSP_TABLE_MAGIC 0x53545350u
-/** Table format understood by this firmware (2: actuator limits u_min/u_max). */
-#define STSP_FORMAT_VERSION 2u
+/** Table format understood by this firmware (2: actuator limits u_min/u_max; 3: optional
+ * band dual QP re-solved at the t0 latch). */
+#define STSP_FORMAT_VERSION 3u
 /** Arithmetic variant tag stored in the table: float32 tables. */
 #define STSP_SCALAR_FLOAT32 1u
 
@@ -89,8 +96,8 @@ typedef float stsp_f32_t;
  * Status codes: 0 success, positive = the command is valid (finite, within the limits) but
  * something is worth logging, negative = the command is the safe hold value (all zeros,
  * which stsp_init() requires to lie within the limits) and the error says why.
- * When several warnings apply, STSP_WARN_SATURATED wins (the caller knows which tick it
- * passed, but not whether the table's law was clamped).
+ * When several warnings apply, STSP_WARN_SATURATED wins, then STSP_WARN_BAND_FALLBACK, then
+ * the tick warnings (the caller knows which tick it passed, but not what the law did).
  */
 typedef enum {
     STSP_OK = 0,
@@ -99,6 +106,10 @@ typedef enum {
     STSP_WARN_TICK_REPEATED = 2,    /**< same tick again; recomputed, no new latch */
     STSP_WARN_SATURATED = 3,        /**< at least one input was clamped to u_min/u_max; which
                                          ones: stsp_ctrl_t.sat_mask */
+    STSP_WARN_BAND_FALLBACK = 4,    /**< the band dual QP found no optimal active set for this
+                                         x0 (W not positive definite in double precision):
+                                         latched the design's affine map Lambda x + lambda0
+                                         instead */
     STSP_ERR_NULL = -1,             /**< a pointer argument is NULL */
     STSP_ERR_NOT_INITIALIZED = -2,  /**< step/reset before a successful init */
     STSP_ERR_BAD_MAGIC = -3,        /**< the table header's magic is wrong */
@@ -141,6 +152,11 @@ typedef struct {
     const stsp_f32_t *lambda0;
     const stsp_f32_t *u_min;     /**< [nu]: lower actuator limits */
     const stsp_f32_t *u_max;     /**< [nu]: upper actuator limits */
+    const stsp_bandqp_t *band_qp; /**< NULL, or the band dual of a joint design: the stage-0
+                                      latch then solves it for the measured x0 (v[c] =
+                                      (float)lam[c], c < q) instead of Lambda x + lambda0;
+                                      requires q == stage_np[0] and stage_np[s] == 0 for
+                                      s > 0 (one latch, at t0) */
     uint32_t crc32;              /**< CRC-32 of dims and arrays, see stsp_table_crc32() */
     uint8_t problem_sha256[32];  /**< hash of the problem file the tables came from */
 } stsp_table_t;
@@ -170,7 +186,8 @@ typedef struct {
  * CRC-32 (IEEE 802.3 polynomial, reflected, as zlib) of the table's canonical serialization:
  * nx, nu, n_latch, n_stages, n_ticks, tick_hz as little-endian u32; stage_start and stage_np
  * as little-endian u32 each; then K, k0, L, Lambda, lambda0, u_min, u_max as little-endian
- * binary32 bit patterns (L, Lambda, lambda0 only when n_latch > 0). Independent of the
+ * binary32 bit patterns (L, Lambda, lambda0 only when n_latch > 0); then, when band_qp is not
+ * NULL, its q and nx as u32 and Nt, mt, W, lo, hi as little-endian binary64 bit patterns. Independent of the
  * target's byte order. The table's dimensions and pointers must already be valid (stsp_init()
  * checks them first).
  */

@@ -95,17 +95,15 @@ class StageSolution:
         return K, k0, L
 
 
-@dataclass
-class ContinuousDesign:
-    """The optimal continuous-time law for a `Problem`, stage by stage."""
+class StageValues:
+    """Cost-to-go and latch of a design whose ``stages`` carry the stage-start terms
+    ``P0, p0, c0, N0, W0, m0, Lambda, lambda0`` (shared by the continuous and ZOH designs)."""
     problem: Problem
-    stages: list[StageSolution]
-    noise_aware: bool
-    mode: str = "stagewise"
+    stages: list
 
     @property
     def J0(self) -> float:
-        """Predicted optimal expected cost from ``(t0, x0)``."""
+        """Predicted optimal expected cost from ``(t0, x0)`` (of the law at the design's rate)."""
         return self.cost_to_go(0, self.problem.x0)
 
     def cost_to_go(self, k: int, x: np.ndarray, v: np.ndarray | None = None) -> float:
@@ -114,12 +112,21 @@ class ContinuousDesign:
         At a latching stage ``J_k(x) = x'Px + 2p'x + c + (N'x + m)' W^-1 (N'x + m)``; on a
         stage that keeps an earlier latch `v` it is ``x'Px + 2p'x + c + 2v'(N'x + m) - v'Wv``.
         """
-        st = self.stages[k]
-        return _value(st, np.asarray(x, dtype=float), v)
+        return _value(self.stages[k], np.asarray(x, dtype=float), v)
 
     def latch(self, k: int, x: np.ndarray) -> np.ndarray:
+        """The multipliers latched at the start of stage k from state `x`."""
         st = self.stages[k]
         return st.Lambda @ x + st.lambda0
+
+
+@dataclass
+class ContinuousDesign(StageValues):
+    """The optimal continuous-time law for a `Problem`, stage by stage."""
+    problem: Problem
+    stages: list[StageSolution]
+    noise_aware: bool
+    mode: str = "stagewise"
 
     def gains(self, k: int, t):
         return self.stages[k].gains(t)

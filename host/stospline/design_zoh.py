@@ -23,7 +23,7 @@ import numpy as np
 
 from scipy.linalg import expm
 
-from .design import DesignError, _check_group, _knot_terminal, _value
+from .design import DesignError, StageValues, _check_group, _knot_terminal
 from .moments import augmented_drift, moment_generator, running_cost_matrix, varying_tick
 from .multipliers import latch_groups
 from .problem import Problem, Stage
@@ -54,22 +54,13 @@ class ZohStage:
 
 
 @dataclass
-class ZohDesign:
+class ZohDesign(StageValues):
     """The optimal zero-order-hold law at `tick_hz` for a `Problem`."""
     problem: Problem
     tick_hz: int
     stages: list[ZohStage]
     noise_aware: bool
     mode: str = "stagewise"
-
-    @property
-    def J0(self) -> float:
-        """Predicted optimal expected cost from ``(t0, x0)`` of the law at this tick rate."""
-        return self.cost_to_go(0, self.problem.x0)
-
-    def cost_to_go(self, k: int, x: np.ndarray, v: np.ndarray | None = None) -> float:
-        """Optimal expected cost from `x` at the start of stage k (`v`: an earlier latch)."""
-        return _value(self.stages[k], np.asarray(x, dtype=float), v)
 
     def table(self, *, quantize: bool = True, band_qp=None) -> GainTable:
         return build_table(self.problem, self.tick_hz,
@@ -265,13 +256,16 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
         else:
             N, W, mv = np.zeros((n, 0)), np.zeros((0, 0)), np.zeros(0)
         try:
-            if stage.varying is None:
-                key = _stage_key(stage, h)
-                td = cache.get(key) or cache.setdefault(key, _tick_data(stage, h))
-                K, k0, L, V, N, W, mv = stage_ticks(td, V, N, W, mv, int(counts[k]), m)
-            else:
-                K, k0, L, V, N, W, mv = _varying_stage_ticks(
-                    stage, problem.times[k], h, V, N, W, mv, int(counts[k]), m)
+            # A finite escape overflows to Inf/NaN: the check below reports it as an error,
+            # so numpy's overflow warnings would only repeat it.
+            with np.errstate(over="ignore", invalid="ignore"):
+                if stage.varying is None:
+                    key = _stage_key(stage, h)
+                    td = cache.get(key) or cache.setdefault(key, _tick_data(stage, h))
+                    K, k0, L, V, N, W, mv = stage_ticks(td, V, N, W, mv, int(counts[k]), m)
+                else:
+                    K, k0, L, V, N, W, mv = _varying_stage_ticks(
+                        stage, problem.times[k], h, V, N, W, mv, int(counts[k]), m)
         except np.linalg.LinAlgError:
             raise DesignError(f"knots[{k}].t", f"the tick Riccati recursion of stage {k} "
                                                f"lost positive definiteness") from None

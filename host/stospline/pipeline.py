@@ -141,7 +141,11 @@ def design_summary(d: Designed) -> dict:
         "oracle_J_design": d.law.J,
         "oracle_J_implemented": d.implemented.J,
         "knots": knots,
-        **({"active_set": d.design.active_set()} if isinstance(d.design, BandDesign) else {}),
+        **({"active_set": d.design.active_set(),
+            # rows of the dual the firmware re-solves from the measured x0 (0: it latches the
+            # affine map of the design's active set, see docs/math-notes.md)
+            "band_qp_rows": 0 if d.table.band_qp is None else d.table.band_qp.q}
+           if isinstance(d.design, BandDesign) else {}),
     })
 
 

@@ -41,6 +41,55 @@
 #define STSP_UNROLL
 #endif
 
+/* Non-fused multiply-accumulate on a single-precision VFP (Cortex-M4F, M7, M33 with FPU; GCC
+ * or clang). VMLS.F32 and VNMLA.F32 round the product to binary32 and then round the sum
+ * (ARMv7-M ARM, DDI 0403E, A7.7.238 VMLA, VMLS and A7.7.250 VNMLA, VNMLS, VNMUL: the
+ * pseudocode is product = FPMul(n, m) followed by FPAdd()), so each gives the bits of the
+ * VMUL + VSUB pair it replaces in one instruction; GCC does not emit them itself under
+ * -ffp-contract=off. Elsewhere (the host, the Cortex-M0+, other compilers) the helpers are plain
+ * C with the same operations. STSP_NO_VFP_MAC selects the plain C on the M4F too (same bits;
+ * fewer instructions is not fewer cycles: the Cortex-M4 TRM lists 3 cycles for VMLS/VNMLA,
+ * 1 each for VMUL and VSUB). The asm is volatile only to make each one a scheduling barrier:
+ * GCC 12 then loads each gain next to its use instead of hoisting all 16 loads of the unrolled
+ * STSP_FIXED_* law, which ran out of caller-saved registers (vpush/vpop {d8} on every tick). */
+#if (defined(__GNUC__) || defined(__clang__)) && defined(__arm__) && defined(__ARM_FP) && \
+    !defined(STSP_NO_VFP_MAC)
+#if (__ARM_FP & 4) != 0
+#define STSP_VFP_MAC 1
+#endif
+#endif
+#ifndef STSP_VFP_MAC
+#define STSP_VFP_MAC 0
+#endif
+
+/* acc - (a b): the product rounded first (VMLS.F32 on a single-precision VFP). */
+/* cppcheck-suppress misra-c2012-2.7 ; deviation D5: the parameters are asm operands */
+static STSP_ALWAYS_INLINE stsp_f32_t stsp_mls(stsp_f32_t acc, stsp_f32_t a, stsp_f32_t b)
+{
+#if STSP_VFP_MAC
+    stsp_f32_t r = acc;
+    __asm__ volatile("vmls.f32 %0, %1, %2" : "+t"(r) : "t"(a), "t"(b));
+    return r;
+#else
+    return acc - (a * b);
+#endif
+}
+
+/* (-(a b)) - c: the product rounded first. VNMLA.F32 computes (-c) + (-(a b)), the same value
+ * (x - y is x + (-y), and binary32 addition is commutative, signs of zero included); only the
+ * payload of a NaN result may differ, and a NaN command never leaves the controller. */
+/* cppcheck-suppress misra-c2012-2.7 ; deviation D5: the parameters are asm operands */
+static STSP_ALWAYS_INLINE stsp_f32_t stsp_nmla(stsp_f32_t a, stsp_f32_t b, stsp_f32_t c)
+{
+#if STSP_VFP_MAC
+    stsp_f32_t r = c;
+    __asm__ volatile("vnmla.f32 %0, %1, %2" : "+t"(r) : "t"(a), "t"(b));
+    return r;
+#else
+    return (-(a * b)) - c;
+#endif
+}
+
 /* Binary32 exponent field: all ones for NaN and +-Inf. */
 #define STSP_F32_EXP_MASK 0x7F800000u
 /* Binary64 exponent field. */
@@ -512,8 +561,9 @@ static STSP_NOINLINE stsp_status_t stsp_limit(const stsp_table_t *t, const stsp_
 /* The law at `tick` with multipliers v, in the documented order:
  *     u[i] = (((-(K[i][0] x[0]) - k0[i]) - K[i][1] x[1]) - ... ) - L[i][0] v[0] - ...
  * which is -(k0[i] + K[i][0] x[0] + ... + L[i][c] v[c] ...) exactly (IEEE rounding is
- * symmetric; a+b = b+a), up to the sign of an exactly zero result; vnmul folds the final
- * negation away. Returns nonzero when the command needs the cold path: with limits, some
+ * symmetric; a+b = b+a), up to the sign of an exactly zero result; starting from -(K x)
+ * folds the final negation away, and each step is one stsp_nmla()/stsp_mls() (one VNMLA or
+ * VMLS on the M4F, same bits). Returns nonzero when the command needs the cold path: with limits, some
  * u[i] outside [u_min[i], u_max[i]] (false for NaN, and for one of +-Inf since the limits are
  * finite); without, the sum of the u[i] is not finite (any NaN or Inf makes it NaN or Inf; a
  * finite sum that overflows is a false alarm that stsp_limit() clears). The sums stay in
@@ -535,18 +585,17 @@ static STSP_ALWAYS_INLINE uint32_t stsp_law(const stsp_table_t *t, uint32_t tick
     uint32_t out = 0u;
     STSP_UNROLL
     for (i = 0u; i < nu; ++i) {
-        stsp_f32_t acc = -(K[0] * x[0]);
+        stsp_f32_t acc = stsp_nmla(K[0], x[0], k0[i]);
         uint32_t j;
-        acc -= k0[i];
         STSP_UNROLL
         for (j = 1u; j < nx; ++j) {
-            acc -= K[j] * x[j];
+            acc = stsp_mls(acc, K[j], x[j]);
         }
         K = &K[nx];
         if (nl > 0u) {
             STSP_UNROLL
             for (j = 0u; j < nl; ++j) {
-                acc -= L[j] * v[j];
+                acc = stsp_mls(acc, L[j], v[j]);
             }
             L = &L[nl];
         }

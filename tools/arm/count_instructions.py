@@ -122,7 +122,7 @@ def trace_calls(build: Path, image: str) -> tuple[list[dict], list[str], dict]:
     entry = syms["stsp_step"][0]
     in_caller = lambda pc: ranges["bench_step"][0] <= pc < sum(ranges["bench_step"])  # noqa: E731
     counts, current, lines, prev = [], None, 0, None
-    fmul = re.compile(r"v(n?mul|mla|mls|fma|fms|fnma|fnms)\.f32")
+    fmul = re.compile(r"v(n?mul|n?mla|n?mls|fma|fms|fnma|fnms)\.f32")
     pat = re.compile(r"Trace \d+: 0x[0-9a-f]+ \[[0-9a-f]+/([0-9a-f]+)/")
     with trace.open() as fh:
         for line in fh:
@@ -264,7 +264,8 @@ def main() -> int:
         print("   MACs = nu*nx + nu*np (+ np*nx on a latch tick): the multiply-adds the law "
               f"needs; the firmware runs nu*(nx + n_latch) = {nu * (nx + nl)} on every tick "
               "(L over all n_latch columns)")
-        print("   FP muls run = vmul/vmla/vfma instructions executed in those calls.")
+        print("   FP muls run = vmul/vnmul/vmla/vmls/vnmla/vnmls/vfma... instructions executed in "
+              "those calls (one per multiply).")
         print(f"   Ordinary stage 0 (no limits) includes {len(skipped)} calls reached by a skip "
               f"(WARN_TICK_SKIPPED), {min(skipped)}..{max(skipped)} instructions.\n")
         report["sizeof_ctrl"] = info["sizeof_ctrl"]

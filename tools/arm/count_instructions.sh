@@ -19,8 +19,8 @@ while [ $# -gt 0 ]; do
 done
 [ "$setup" -eq 0 ] || "$root/tools/setup.sh"
 "$root/tools/arm/build.sh" --cpu cortex-m4 --build-dir "$root/build/arm" \
-  -DSTSP_ARM_FP_CONTRACT=off >/dev/null
+  -DSTSP_ARM_FP_CONTRACT=off -DSTSP_ARM_NO_VFP_MAC=OFF >/dev/null
 "$root/tools/arm/build.sh" --cpu cortex-m0plus --build-dir "$root/build/arm-m0plus" \
-  -DSTSP_ARM_FP_CONTRACT=off >/dev/null
+  -DSTSP_ARM_FP_CONTRACT=off -DSTSP_ARM_NO_VFP_MAC=OFF >/dev/null
 exec python3 "$root/tools/arm/count_instructions.py" --m4 "$root/build/arm" \
   --m0plus "$root/build/arm-m0plus" "${extra[@]}"

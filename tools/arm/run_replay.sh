@@ -11,8 +11,10 @@
 # 3. qemu-system-arm -M mps2-an386 runs each; semihosting prints the summary and returns the
 #    exit status, 0 only if every command matched.
 # --perturb moves one recorded u by one ulp (the test must then fail); --fp-contract fast
-# lets GCC fuse multiply-adds on the target (the test then fails too). Without --no-setup,
-# tools/setup.sh runs first (ctest passes --no-setup: it runs inside a configured build).
+# lets GCC fuse multiply-adds on the target, with the law compiled as plain C instead of the
+# VMLS/VNMLA asm that contraction cannot fuse (STSP_ARM_NO_VFP_MAC): the test then fails too.
+# Without --no-setup, tools/setup.sh runs first (ctest passes --no-setup: it runs inside a
+# configured build).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 build="$root/build/arm"
@@ -36,7 +38,8 @@ mkdir -p "$build"
 records="$build/replay_records.c"
 "$py" "$root/tools/arm/make_replay.py" --out "$records" "${perturb[@]}"
 "$root/tools/arm/build.sh" --cpu cortex-m4 --build-dir "$build" \
-  -DSTSP_REPLAY_RECORDS="$records" -DSTSP_ARM_FP_CONTRACT="$contract" >/dev/null
+  -DSTSP_REPLAY_RECORDS="$records" -DSTSP_ARM_FP_CONTRACT="$contract" \
+  -DSTSP_ARM_NO_VFP_MAC="$([ "$contract" = off ] && echo OFF || echo ON)" >/dev/null
 
 # Both Cortex-M4F builds: the generic controller and the one compiled for the robot's
 # dimensions (STSP_FIXED_NX/NU/N_LATCH, unrolled): each must match the host bit for bit.

@@ -27,6 +27,9 @@
  * over all n_latch columns (zero padded, so every tick costs the same), binary32 throughout,
  * no fused multiply-add (compile with -ffp-contract=off). This is -(k0 + K x + L v) summed
  * left to right, exactly (IEEE rounding is sign-symmetric), up to the sign of a zero result.
+ * On a single-precision VFP (Cortex-M4F) each step is one VNMLA.F32 (the first two terms) or
+ * VMLS.F32: chained, not fused (the product is rounded, then the difference), so the same
+ * operations in the same order; define STSP_NO_VFP_MAC for separate VMUL and VSUB.
  *
  * Buffers: stsp_ctrl_t holds STSP_MAX_LATCH scalars for v plus 24 bytes (32-bit targets:
  * 88 bytes with the default STSP_MAX_LATCH = 16); stsp_step() uses

@@ -47,9 +47,21 @@ def _simulate(args) -> int:
     d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem))
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=args.substeps)
     s = simulation_summary(d, mc, seed=args.seed, substeps=args.substeps)
-    if args.json:
-        print(json.dumps(s, indent=2, sort_keys=True))
-        return 0
+    _report_simulation(s, args.json)
+    sat = s["saturation"]
+    if sat["tick_fraction"] > 0:
+        print(f"stospline: warning: the controller saturated (STSP_WARN_SATURATED) on "
+              f"{100 * sat['tick_fraction']:.4g}% of ticks, on {100 * sat['path_fraction']:.4g}% "
+              f"of paths; the oracle and predicted numbers assume no saturation (the design "
+              f"ignores the actuator limits), so they do not predict this run", file=sys.stderr)
+    return 0
+
+
+def _report_simulation(s: dict, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(s, indent=2, sort_keys=True), flush=True)
+        return
+    sat = s["saturation"]
     c = s["cost"]
     print(f"{s['name']}: {s['paths']} paths, seed {s['seed']}, compiled C controller at "
           f"{s['tick_hz']} Hz, plant {s['substeps']} substeps/tick")
@@ -57,12 +69,17 @@ def _simulate(args) -> int:
           f"   oracle {c['oracle_implemented']:.6g}   predicted J0 {c['predicted_J0']:.6g}")
     print(f"  plant-scheme bias in cost {s['simulation_bias']['cost']:.3g} "
           f"= {s['simulation_bias']['cost_over_stderr']:.3g} MC standard errors")
+    if sat["limited"]:
+        print(f"  actuator limits: saturated on {100 * sat['tick_fraction']:.4g}% of ticks "
+              f"({100 * sat['path_fraction']:.4g}% of paths); commands issued within "
+              f"[{', '.join(f'{v:.6g}' for v in sat['u_low'])}] .. "
+              f"[{', '.join(f'{v:.6g}' for v in sat['u_high'])}]")
     fmt = lambda v: "[" + ", ".join(f"{x:+.5f}" for x in v) + "]"  # noqa: E731
     for k, kn in enumerate(s["knots"]):
         print(f"  knot {k} (t = {kn['t']:g}): state mean, MC     {fmt(kn['mc_mean'])}")
         print(f"  {'':>15}state mean, oracle {fmt(kn['oracle_mean'])}   "
               f"z {'[' + ', '.join(f'{z:+.2f}' for z in kn['z']) + ']'}")
-    return 0
+    sys.stdout.flush()   # the saturation warning (stderr) comes after the numbers it qualifies
 
 
 def _plot(args) -> int:

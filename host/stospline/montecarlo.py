@@ -13,7 +13,7 @@ import numpy as np
 from scipy.linalg import expm
 from scipy.stats import norm
 
-from .harness import CompiledController
+from .harness import STATUS, CompiledController
 from .problem import Problem
 
 __all__ = ["MonteCarloResult", "simulate", "z_value", "Agreement", "compare_to_oracle"]
@@ -33,10 +33,23 @@ class MonteCarloResult:
     sample_u: np.ndarray             # its commands (ticks, m)
     mean_x: np.ndarray               # Monte Carlo mean path (ticks + 1, n)
     worst_status: int
+    # Ticks on which the C controller returned STSP_WARN_SATURATED, per path (paths,), and
+    # the smallest and largest command it issued per input over all paths and ticks (m,).
+    saturated_ticks: np.ndarray | None = None
+    u_low: np.ndarray | None = None
+    u_high: np.ndarray | None = None
 
     @property
     def paths(self) -> int:
         return self.cost.shape[0]
+
+    @property
+    def saturated_fraction(self) -> float:
+        """Fraction of all (path, tick) steps on which the controller clamped a command."""
+        ticks = self.sample_u.shape[0]
+        if self.saturated_ticks is None or ticks == 0:
+            return 0.0
+        return float(self.saturated_ticks.sum()) / (self.paths * ticks)
 
     def cost_mean_ci(self, confidence: float = 0.95) -> tuple[float, float]:
         """Mean cost and the half-width of its normal-approximation confidence interval."""
@@ -84,6 +97,8 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
     cost = np.zeros(paths)
     step = controller.stepper(paths)
     knots, worst = [], 0
+    saturated = np.zeros(paths, dtype=np.int64)
+    u_low, u_high = np.full(m, np.inf), np.full(m, -np.inf)
     sample_x = [X[0].copy()]
     sample_u = []
     mean_x = [X.mean(axis=0)]
@@ -94,6 +109,9 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             U, status = step(j, X)
             worst = min(worst, int(status.min()))
+            saturated += status == STATUS["WARN_SATURATED"]
+            np.minimum(u_low, U.min(axis=0), out=u_low)
+            np.maximum(u_high, U.max(axis=0), out=u_high)
             dZ = rng.standard_normal((paths, substeps, mz)) * sq
             if st.varying is None:
                 controller.plant_tick(st, Ad, Bd, dt, substeps, dZ, U, X, cost)
@@ -114,7 +132,7 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
         knots.append(X.copy())
     t = problem.t0 + np.arange(table.n_ticks + 1) * h
     return MonteCarloResult(cost, knots, t, np.array(sample_x), np.array(sample_u),
-                            np.array(mean_x), worst)
+                            np.array(mean_x), worst, saturated, u_low, u_high)
 
 
 @dataclass

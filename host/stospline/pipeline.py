@@ -109,8 +109,23 @@ def _violation(y: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return np.where(lo == hi, y - lo, np.maximum(y - hi, 0) - np.maximum(lo - y, 0))
 
 
+def _limits(d: Designed) -> dict:
+    """``{"actuator_limits": {"u_min": [...] | None, "u_max": ...}}`` as the table stores them
+    (float32), when the problem sets limits; ``{}`` otherwise (summaries stay unchanged)."""
+    p = d.problem
+    if p.u_min is None and p.u_max is None:
+        return {}
+    return {"actuator_limits": {
+        "u_min": None if p.u_min is None else d.table.u_min.astype(float),
+        "u_max": None if p.u_max is None else d.table.u_max.astype(float),
+        "note": "the design ignores the limits: the firmware clips the unconstrained law, "
+                "and the oracle's numbers assume no command is clipped",
+    }}
+
+
 def design_summary(d: Designed) -> dict:
-    """Machine-readable summary: predicted J0 and per-knot predicted moments."""
+    """Machine-readable summary: predicted J0 and per-knot predicted moments (and the
+    actuator limits, when the problem sets them)."""
     p = d.problem
     knots = []
     for k, kn in enumerate(p.knots):
@@ -146,6 +161,7 @@ def design_summary(d: Designed) -> dict:
             # affine map of the design's active set, see docs/math-notes.md)
             "band_qp_rows": 0 if d.table.band_qp is None else d.table.band_qp.q}
            if isinstance(d.design, BandDesign) else {}),
+        **_limits(d),
     })
 
 
@@ -186,7 +202,11 @@ def simulate_problem(d: Designed, *, paths: int, seed: int, substeps: int = 2,
 
 
 def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int, substeps: int) -> dict:
-    """Monte Carlo statistics beside the oracle's exact numbers, and the plant scheme's bias."""
+    """Monte Carlo statistics beside the oracle's exact numbers, and the plant scheme's bias.
+
+    ``saturation.tick_fraction`` is the fraction of (path, tick) steps on which the C controller
+    returned STSP_WARN_SATURATED; when it is nonzero the oracle's numbers (which assume the
+    law is never clipped) do not describe the simulated controller."""
     euler = evaluate_table(d.problem, d.table, propagator="euler", substeps=substeps,
                            path=False)
     mean, hw95 = mc.cost_mean_ci(0.95)
@@ -217,4 +237,12 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int, substeps
                                  for k in range(len(d.problem.knots))],
         },
         "knots": knots,
+        "saturation": {
+            "limited": d.table.limited,
+            "tick_fraction": mc.saturated_fraction,
+            "path_fraction": (float(np.mean(mc.saturated_ticks > 0))
+                              if mc.saturated_ticks is not None else 0.0),
+            "u_low": mc.u_low, "u_high": mc.u_high,
+        },
+        **_limits(d),
     })

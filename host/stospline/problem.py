@@ -134,6 +134,10 @@ class Problem:
     source_sha256: str = ""
     plot: dict = field(default_factory=dict)
     options: dict = field(default_factory=dict)   # [design]: mode, discretization
+    # Actuator limits (m,) written into the gain table; None: unlimited on that side. The
+    # design ignores them: the firmware clips the unconstrained optimal law.
+    u_min: np.ndarray | None = None
+    u_max: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -164,20 +168,21 @@ class Problem:
         """The same problem with every diffusion term removed (the paper's Remark 2)."""
         return Problem(self.name, self.t0, self.x0, self.tick_hz,
                        tuple(s.without_noise() for s in self.stages), self.knots,
-                       self.source_sha256, self.plot, self.options)
+                       self.source_sha256, self.plot, self.options, self.u_min, self.u_max)
 
 
 # ---------------------------------------------------------------------------------------
 # Parsing helpers: each takes the raw value and its field path, returns a checked value.
 
-_TOP_KEYS = {"name", "t0", "x0", "tick_hz", "dynamics", "cost", "knots", "stages", "plot",
-             "regions", "design"}
+_TOP_KEYS = {"name", "t0", "x0", "tick_hz", "u_min", "u_max", "dynamics", "cost", "knots",
+             "stages", "plot", "regions", "design"}
 _DESIGN_OPTIONS = {"mode": ("stagewise", "joint"), "discretization": ("exact-zoh", "continuous")}
 _TOP_REQUIRED = {"name", "x0", "tick_hz", "dynamics", "cost", "knots"}
 _DYN_KEYS, _DYN_REQUIRED = {"A", "B", "noise"}, {"A", "B"}
 _COST_KEYS, _COST_REQUIRED = {"Q", "S", "R", "q", "r", "rho", "tracking"}, {"R"}
 _C_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _U32_MAX = 2**32 - 1  # the C table stores tick counts and the tick rate as uint32_t
+_F32_MAX = float(np.finfo(np.float32).max)  # the table stores limits as float32 (FLT_MAX)
 _N_IS_LEN_X0 = " (n, the length of x0)"
 
 
@@ -617,6 +622,78 @@ def _parse_plot(plot: Any, n: int) -> dict:
     return plot
 
 
+def _fits_float32(v: float) -> bool:
+    """True when v rounds to a finite float32 (3.4028235e38 does: it rounds to FLT_MAX)."""
+    with np.errstate(over="ignore"):
+        return bool(np.isfinite(np.float32(v)))
+
+
+def _input(path: str, i: int) -> str:
+    """Message prefix naming input i, unless the value is one number for every input."""
+    return f"input {i}: " if path.endswith("]") else ""
+
+
+def _parse_limits(doc: dict, m: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """``u_min``/``u_max``: a number (every input) or one number per input, with
+    ``u_min <= 0 <= u_max`` (the firmware's safe-hold command u = 0 must be within them)."""
+    out = {}
+    for key in ("u_min", "u_max"):
+        if key not in doc:
+            out[key] = None
+            continue
+        raw = doc[key]
+        if isinstance(raw, list):
+            if not raw:
+                raise ProblemError(key, f"must be a number (the same limit for every input) "
+                                        f"or an array with one number per input (m = {m}), "
+                                        f"got an empty array")
+            paths = [f"{key}[{i}]" for i in range(len(raw))]
+            items = raw
+        elif isinstance(raw, (int, float)) and not isinstance(raw, bool):
+            paths, items = [key] * m, [raw] * m
+        else:
+            raise ProblemError(key, f"must be a number (the same limit for every input) or "
+                                    f"an array with one number per input (m = {m}), got "
+                                    f"{_kind(raw)} ({raw!r})")
+        vals = []
+        for v, vp in zip(items, paths):
+            if (isinstance(v, (int, float)) and not isinstance(v, bool)
+                    and not math.isnan(v) and not _fits_float32(v)):   # Inf or too large
+                raise ProblemError(vp, f"must be finite and within the float32 range of the "
+                                       f"gain table (|value| <= {_F32_MAX:.8g}), got {v!r}; "
+                                       f"omit {key} for no limit on any input, or give "
+                                       f"{'-' if key == 'u_min' else ''}{_F32_MAX:.8g} "
+                                       f"(FLT_MAX, which the firmware treats as unlimited) "
+                                       f"for one input")
+            vals.append(_number(v, vp))
+        if len(vals) != m:
+            raise ProblemError(key, f"has length {len(vals)}, expected {m} (m, one entry per "
+                                    f"input: the columns of dynamics.B); or give one number "
+                                    f"for every input")
+        out[key] = (np.array(vals), paths)
+    if out["u_min"] is not None and out["u_max"] is not None:
+        (lo, lp), (hi, hp) = out["u_min"], out["u_max"]
+        bad = np.flatnonzero(lo > hi)
+        if bad.size:
+            i = int(bad[0])
+            raise ProblemError(lp[i], f"{_input(lp[i] + hp[i], i)}u_min = {lo[i]:g} > u_max = "
+                                      f"{hi[i]:g}; the range of commands is empty")
+    why = ("the firmware commands the safe-hold value u = 0 when it refuses a tick or a "
+           "state (any error status), so 0 must be a valid command: u_min <= 0 <= u_max")
+    for key, sign in (("u_min", 1), ("u_max", -1)):
+        if out[key] is None:
+            continue
+        vals, paths = out[key]
+        bad = np.flatnonzero(sign * vals > 0)
+        if bad.size:
+            i = int(bad[0])
+            rel = "<=" if key == "u_min" else ">="
+            raise ProblemError(paths[i], f"{_input(paths[i], i)}must be {rel} 0, got "
+                                         f"{vals[i]:g}; {why}")
+        out[key] = vals
+    return out["u_min"], out["u_max"]
+
+
 def _merge_constraints(a: Constraint | None, b: Constraint) -> Constraint:
     """Stack the rows of two constraints at one knot (equality rows keep lower = upper)."""
     if a is None:
@@ -746,13 +823,15 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     built = {id(d): d.build(n, mz) for d in data}
     stages = tuple(built[id(d)] for d in data)
 
+    u_min, u_max = _parse_limits(doc, stages[0].B.shape[1])
     plot = _parse_plot(doc.get("plot", {}), n)
     options = _check_keys(doc.get("design", {}), "design", set(_DESIGN_OPTIONS), set())
     for key, value in options.items():
         if value not in _DESIGN_OPTIONS[key]:
             raise ProblemError(f"design.{key}", f"must be one of {list(_DESIGN_OPTIONS[key])}, "
                                                 f"got {value!r}")
-    return Problem(name, t0, x0, tick_hz, stages, knots, source_sha256, plot, dict(options))
+    return Problem(name, t0, x0, tick_hz, stages, knots, source_sha256, plot, dict(options),
+                   u_min, u_max)
 
 
 def load_problem(path: str | Path) -> Problem:

@@ -144,7 +144,8 @@ def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = 
     (T_k, m, n), (T_k, m), (T_k, m, p_k), (p_k, n), (p_k,).
 
     ``quantize=False`` keeps float64 values (for checking a design before quantization).
-    ``u_min``/``u_max`` (m,) are the actuator limits; ``None`` means unlimited.
+    ``u_min``/``u_max`` (m,) are the actuator limits; ``None`` takes the problem's (its
+    ``u_min``/``u_max`` keys), unlimited when the problem has none.
 
     When more multipliers are latched than there are states (joint or band designs with many
     knots), the table latches the state instead: ``L v = (L Lambda) x_latch + L lambda0``, so
@@ -168,6 +169,8 @@ def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = 
         K[sl], k0[sl], L[sl, :, :Lk.shape[2]] = Kk, k0k, Lk
         Lam[k, :p], lam0[k, :p] = Lamk, lam0k
     cast = _to_float32 if quantize else np.asarray
+    u_min = getattr(problem, "u_min", None) if u_min is None else u_min
+    u_max = getattr(problem, "u_max", None) if u_max is None else u_max
     return GainTable(problem.name, int(tick_hz), problem.t0, start,
                      np.array([g[3].shape[0] for g in stages], dtype=np.uint16),
                      cast(K), cast(k0), cast(L), cast(Lam), cast(lam0), problem.source_sha256,

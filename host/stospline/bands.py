@@ -174,6 +174,14 @@ class BandDesign:
             return sample_design(self.base, quantize=quantize, band_qp=qp)
         return self.base.table(quantize=quantize, band_qp=qp)
 
+    def cost_from(self, x0: np.ndarray) -> float:
+        """Optimal expected cost from another start state: the same zero-target design, the
+        band dual solved at that state (what the firmware's t0 re-solve achieves)."""
+        st0 = self.base.stages[0]
+        x = np.asarray(x0, dtype=float)
+        sol = solve_band_dual(st0.N0.T @ x + st0.m0, st0.W0, self.lower, self.upper)
+        return float(x @ st0.P0 @ x + 2 * st0.p0 @ x + st0.c0) + sol.value
+
     def active_set(self) -> list[dict]:
         """Per constraint row: knot, row, where it sits and its multiplier."""
         names = {-1: "lower", 0: "inactive", 1: "upper"}

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import os
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -18,11 +18,11 @@ from .design_zoh import ZohDesign, design_zoh
 from .harness import build_controller
 from .montecarlo import MonteCarloResult, simulate, z_value
 from .oracle import Moments, evaluate_continuous, evaluate_table
-from .problem import Problem
+from .problem import Problem, ProblemError
 from .tables import GainTable, sample_design
 
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
-           "simulation_summary", "write_outputs"]
+           "simulation_summary", "write_outputs", "start_from"]
 
 # JSON summaries keep 10 significant digits and an absolute quantum of 1e-10: the designs
 # agree to ~1e-14 however the arithmetic is ordered, so regenerated files stay byte-identical
@@ -102,6 +102,29 @@ def design_problem(problem: Problem, *, noise: bool = True,
         raise ValueError(f"discretization must be one of {DISCRETIZATIONS}")
     return Designed(problem, design, discretization, table, law,
                     evaluate_table(problem, table, path=False))
+
+
+def start_from(d: Designed, x0) -> Designed:
+    """The same design and table, run from another start state (a measured x0 on the target).
+
+    The tables do not change: the firmware latches its multipliers from the state it measures
+    at t0 (re-solving the band dual when the table carries one), so the law is optimal for the
+    new start too. ``implemented`` is re-evaluated from there; ``law`` is the design's, from its
+    own x0. Raises ProblemError (field ``x0``) if x0 is not n finite numbers."""
+    x = np.asarray(x0, dtype=float).reshape(-1)
+    if x.shape != (d.problem.n,) or not np.all(np.isfinite(x)):
+        raise ProblemError("x0", f"a start state needs {d.problem.n} finite numbers, got "
+                                 f"{np.asarray(x0).tolist()}")
+    moved = replace(d.problem, x0=x)
+    return replace(d, problem=moved, implemented=evaluate_table(moved, d.table, path=False))
+
+
+def predicted_cost(d: Designed) -> float:
+    """The designer's optimal expected cost from ``d.problem.x0`` (which `start_from` may have
+    moved away from the design's own start)."""
+    if isinstance(d.design, BandDesign):
+        return d.design.cost_from(d.problem.x0)
+    return d.design.cost_to_go(0, d.problem.x0)
 
 
 def _violation(y: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -223,11 +246,12 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int, substeps
         })
     return _r({
         "name": d.problem.name, "paths": mc.paths, "seed": seed, "substeps": substeps,
+        "x0": d.problem.x0,
         "tick_hz": d.table.tick_hz, "worst_status": mc.worst_status,
         "cost": {
             "mc_mean": mean, "mc_stderr": se,
             "ci95": [mean - hw95, mean + hw95], "ci99": [mean - hw99, mean + hw99],
-            "oracle_implemented": d.implemented.J, "predicted_J0": d.design.J0,
+            "oracle_implemented": d.implemented.J, "predicted_J0": predicted_cost(d),
             "z": (mean - d.implemented.J) / se,
         },
         "simulation_bias": {

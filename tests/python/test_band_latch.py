@@ -2,6 +2,7 @@
 x0 at the t0 latch (firmware/src/stsp_controller.c -> stsp_bandqp.c): a trajectory started
 from another state than the design's still meets its bands, at the optimal cost for that
 state. Checked with the exact oracle and Monte Carlo through the compiled C controller."""
+import json
 import tomllib
 from dataclasses import replace
 
@@ -12,7 +13,7 @@ from stospline.bands import design_bands, target_latch
 from stospline.harness import STATUS, build_controller
 from stospline.montecarlo import compare_to_oracle, simulate
 from stospline.oracle import evaluate_table
-from stospline.problem import parse_problem
+from stospline.problem import load_problem, parse_problem
 from stospline.tables import BandQP, GainTable, table_crc32
 
 from conftest import EXAMPLES
@@ -119,3 +120,39 @@ def test_monte_carlo_from_moved_start_meets_bands(robot):
     mc = simulate(moved, build_controller(table), paths=3000, seed=31, substeps=50)
     agree = compare_to_oracle(mc, oracle.J, oracle.knot_mean)
     assert agree.ok, (agree.cost_z, agree.knot_mean_z)
+
+
+def _cli(*args):
+    import subprocess
+    import sys
+    return subprocess.run([sys.executable, "-m", "stospline.cli", *args], capture_output=True,
+                          text=True)
+
+
+def test_cli_simulates_from_a_measured_start():
+    """`stospline simulate --x0`: same tables, the plant and the t0 latch from another state;
+    the prediction is the optimum for that state, and the float32 table's oracle matches it."""
+    bands = str(EXAMPLES / "robot_bands.toml")
+    r = _cli("simulate", bands, "--x0=-5.4,0.1,2.0,0.4", "--paths", "400", "--seed", "2",
+             "--json")
+    assert r.returncode == 0, r.stderr
+    s = json.loads(r.stdout)
+    assert s["x0"] == [-5.4, 0.1, 2.0, 0.4] and s["worst_status"] == 0
+    moved = replace(load_problem(bands), x0=np.array(s["x0"]))
+    assert s["cost"]["predicted_J0"] == pytest.approx(design_bands(moved).J0, rel=1e-9)
+    assert s["cost"]["oracle_implemented"] == pytest.approx(s["cost"]["predicted_J0"],
+                                                            rel=1e-6)
+    # A stage-wise design from another start: the latched law is optimal from any state.
+    r = _cli("simulate", str(EXAMPLES / "robot_corridor.toml"), "--x0=-4.5,0.2,1.5,0",
+             "--paths", "50", "--json")
+    assert r.returncode == 0, r.stderr
+    c = json.loads(r.stdout)["cost"]
+    assert c["oracle_implemented"] == pytest.approx(c["predicted_J0"], rel=1e-6)
+
+
+@pytest.mark.parametrize("x0, reason", [("1,2,3", "4 finite numbers"),
+                                        ("1,2,nan,4", "4 finite numbers"),
+                                        ("1,2,x,4", "comma-separated numbers")])
+def test_cli_rejects_a_bad_start(x0, reason, tmp_path):
+    r = _cli("simulate", str(EXAMPLES / "robot_bands.toml"), f"--x0={x0}", "--paths", "10")
+    assert r.returncode == 2 and "x0" in r.stderr and reason in r.stderr, r.stderr

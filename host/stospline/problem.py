@@ -181,6 +181,10 @@ _TOP_REQUIRED = {"name", "x0", "tick_hz", "dynamics", "cost", "knots"}
 _DYN_KEYS, _DYN_REQUIRED = {"A", "B", "noise"}, {"A", "B"}
 _COST_KEYS, _COST_REQUIRED = {"Q", "S", "R", "q", "r", "rho", "tracking"}, {"R"}
 _C_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_C_KEYWORDS = frozenset(
+    "auto break case char const continue default do double else enum extern float for goto "
+    "if inline int long register restrict return short signed sizeof static struct switch "
+    "typedef union unsigned void volatile while _Bool _Complex _Imaginary".split())
 _U32_MAX = 2**32 - 1  # the C table stores tick counts and the tick rate as uint32_t
 _F32_MAX = float(np.finfo(np.float32).max)  # the table stores limits as float32 (FLT_MAX)
 _N_IS_LEN_X0 = " (n, the length of x0)"
@@ -354,7 +358,13 @@ def _series_or(value: Any, path: str, parse, *args):
     if not isinstance(vals, list) or len(vals) != len(t):
         raise ProblemError(_join(path, "values"), f"must be an array of {len(t)} samples, one "
                                                   f"per entry of {_join(path, 't')}")
-    parsed = np.array([parse(v, f"{path}.values[{i}]", *args) for i, v in enumerate(vals)])
+    samples = [parse(v, f"{path}.values[{i}]", *args) for i, v in enumerate(vals)]
+    for i, sample in enumerate(samples[1:], start=1):
+        if np.shape(sample) != np.shape(samples[0]):
+            raise ProblemError(f"{path}.values[{i}]", f"has shape {np.shape(sample)} but "
+                                                      f"values[0] has {np.shape(samples[0])}: "
+                                                      f"every sample must have the same shape")
+    parsed = np.array(samples)
     interp = value.get("interpolation", "linear")
     if interp not in ("linear", "zoh"):
         raise ProblemError(_join(path, "interpolation"), f"must be \"linear\" or \"zoh\", "
@@ -512,8 +522,14 @@ def _parse_tracking(value: Any, path: str, n: int) -> tuple:
         raise ProblemError(_join(path, "weight"), "must be positive semidefinite")
     raw = {"t": value["t"], "values": value["y0"],
            "interpolation": value.get("interpolation", "linear")}
-    y0 = _series_or(raw, path, _vector, ny, " (one entry per row of C)")
-    y0 = Series(y0.t, y0.values, y0.interpolation, _join(path, "y0"))
+    try:
+        y0 = _series_or(raw, path, _vector, ny, " (one entry per row of C)")
+    except ProblemError as exc:          # the file's key is y0, not values
+        raise ProblemError(exc.field.replace(_join(path, "values"), _join(path, "y0")),
+                           exc.reason.replace(_join(path, "values"), _join(path, "y0"))
+                           ) from None
+    # Path of the sample times: a coverage error names cost.tracking.t.
+    y0 = Series(y0.t, y0.values, y0.interpolation, path)
     return C, Qy, y0
 
 
@@ -760,6 +776,9 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     if not isinstance(name, str) or not _C_IDENTIFIER.fullmatch(name):
         raise ProblemError("name", f"must be a C identifier (ASCII letters, digits, "
                                    f"underscore; not starting with a digit), got {name!r}")
+    if name in _C_KEYWORDS or name.startswith("__") or re.match(r"_[A-Z]", name):
+        raise ProblemError("name", f"{name!r} is a C keyword or reserved identifier; the "
+                                   f"generated tables are named after it")
     x0 = _vector(doc["x0"], "x0", None)
     n = x0.shape[0]
     t0 = _number(doc.get("t0", 0.0), "t0")

@@ -95,6 +95,8 @@ CASES = [
      "tickhz", "did you mean 'tick_hz'"),
     ("name_not_c_identifier", edit(BASE, ('name = "di"', 'name = "double-integrator"')),
      "name", "C identifier"),
+    ("name_c_keyword", edit(BASE, ('name = "di"', 'name = "double"')), "name", "C keyword"),
+    ("name_reserved", edit(BASE, ('name = "di"', 'name = "__di"')), "name", "reserved"),
     # --- knot times and the tick rate ----------------------------------------------------
     ("knot_times_not_increasing", edit(BASE, (T2, "[[knots]]\nt = 0.5\n")), "knots[1].t",
      "must be later than knots[0].t"),

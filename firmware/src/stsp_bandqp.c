@@ -1,180 +1,261 @@
-/* Exact band-dual solver by bounded active-set enumeration: see stospline/stsp_bandqp.h. */
+/* Exact band-dual solver by bounded active-set enumeration: see stospline/stsp_bandqp.h.
+ *
+ * Every loop has a constant or checked bound: rows q <= STSP_BANDQP_MAX (checked on entry),
+ * states nx <= UINT16_MAX (the type of stsp_bandqp_t.nx), candidates 3^(band rows) <= 3^8
+ * (counted before the enumeration starts), Newton steps STSP_BANDQP_SQRT_STEPS. No allocation,
+ * no recursion, no VLAs; the work area is the caller's. MISRA C:2012: only the project-wide
+ * deviations D1 (15.5, guard clauses) and D2 (21.15, binary32 bit pattern) of
+ * docs/firmware.md apply. */
 #include "stospline/stsp_bandqp.h"
 
 #include <stddef.h>
 #include <string.h>
 
-static inline int stsp_isfinite_f32_bits(float value)
+/* Newton steps of stsp_bandqp_sqrt(), a bound that reaches the root for every positive
+ * finite double (the proof is at the function). */
+#define STSP_BANDQP_SQRT_STEPS 1100u
+
+/* 1 when the binary32 value is finite (the exponent field is not all ones), else 0. */
+static inline uint32_t stsp_bandqp_isfinite_f32(float value)
 {
     uint32_t bits;
     (void)memcpy(&bits, &value, sizeof bits);
-    return (bits & 0x7F800000u) != 0x7F800000u;
+    return ((bits & 0x7F800000u) != 0x7F800000u) ? 1u : 0u;
 }
 
-/* Cholesky of W restricted to the rows with state != 0, in place in `chol` (packed by the
- * active index order). Returns 0 if that submatrix is not positive definite. */
-static int stsp_chol_active(const double *W, uint32_t q, const int8_t *state, double *chol,
-                            uint32_t *idx, uint32_t *na)
+/* 1 when row i is an equality row (lo == hi: always active, at its bound), else 0. A row
+ * with a NaN bound is a band row, as everywhere in this file. */
+static inline uint32_t stsp_bandqp_is_eq(const stsp_bandqp_t *qp, uint32_t i)
 {
-    uint32_t i, j, k, n = 0u;
+    return (qp->lo[i] == qp->hi[i]) ? 1u : 0u;
+}
+
+/* sqrt(s) for a positive finite s, by Newton's method, which keeps the solver free of libm.
+ * From r0 = max(s, 1) >= sqrt(s) the iterates stay >= sqrt(s) and decrease: while
+ * r > 2 sqrt(s), s/r < r/4 and the next iterate is below 5r/8; r0/sqrt(s) <= 2^537 for any
+ * positive finite double (s = DBL_MAX: 2^512; the least subnormal: 2^537), so at most
+ * 537 / log2(8/5) < 793 steps reach r <= 2 sqrt(s), and from there the error squares on every
+ * step (about six more); the loop stops at the first step that no longer decreases r. The
+ * 1100-step cap is thus never reached for a positive finite s, and it bounds the loop for
+ * any input. The sum r + s/r stays finite: it is s + 1 at r0 = s > 1, and afterwards
+ * r <= (s + 1) / 2 and s/r <= sqrt(s) <= r. */
+static double stsp_bandqp_sqrt(double s)
+{
+    double r = (s > 1.0) ? s : 1.0;
+    uint32_t done = 0u;
+    uint32_t it;
+    for (it = 0u; (it < STSP_BANDQP_SQRT_STEPS) && (done == 0u); ++it) {
+        const double next = 0.5 * (r + (s / r));
+        if (next >= r) {
+            done = 1u;
+        } else {
+            r = next;
+        }
+    }
+    return r;
+}
+
+/* The active rows (state != 0) in increasing order into idx; returns their number. */
+static uint32_t stsp_bandqp_active(const int8_t *state, uint32_t q, uint32_t *idx)
+{
+    uint32_t i;
+    uint32_t n = 0u;
     for (i = 0u; i < q; ++i) {
         if (state[i] != 0) {
-            idx[n++] = i;
+            idx[n] = i;
+            ++n;
         }
     }
-    *na = n;
-    for (i = 0u; i < n; ++i) {
-        for (j = 0u; j <= i; ++j) {
-            double s = W[idx[i] * q + idx[j]];
+    return n;
+}
+
+/* Cholesky factor of W restricted to the rows idx[0..n), packed n x n row-major (lower
+ * triangle) into chol. Returns 1, or 0 as soon as a pivot is not positive (or NaN): that
+ * submatrix is not positive definite in double precision. */
+static uint32_t stsp_bandqp_chol(const double *W, uint32_t q, const uint32_t *idx, uint32_t n,
+                                 double *chol)
+{
+    uint32_t pd = 1u;
+    uint32_t i;
+    for (i = 0u; (i < n) && (pd != 0u); ++i) {
+        uint32_t j;
+        for (j = 0u; (j <= i) && (pd != 0u); ++j) {
+            double s = W[(idx[i] * q) + idx[j]];
+            uint32_t k;
             for (k = 0u; k < j; ++k) {
-                s -= chol[i * n + k] * chol[j * n + k];
+                s -= chol[(i * n) + k] * chol[(j * n) + k];
             }
-            if (i == j) {
-                if (!(s > 0.0)) {
-                    return 0;
-                }
-                /* Newton's method for sqrt keeps the solver free of libm: from above it
-                 * decreases monotonically, at least halving while r > 2 sqrt(s), so 1100
-                 * steps reach the root for any double; near 1 it takes about six. */
-                {
-                    double r = (s > 1.0) ? s : 1.0;
-                    uint32_t it;
-                    for (it = 0u; it < 1100u; ++it) {
-                        double next = 0.5 * (r + s / r);
-                        if (next >= r) {
-                            break;
-                        }
-                        r = next;
-                    }
-                    chol[i * n + i] = r;
-                }
+            if (i != j) {
+                chol[(i * n) + j] = s / chol[(j * n) + j];
+            } else if (s > 0.0) {
+                chol[(i * n) + i] = stsp_bandqp_sqrt(s);
             } else {
-                chol[i * n + j] = s / chol[j * n + j];
+                pd = 0u;
             }
         }
     }
-    return 1;
+    return pd;
+}
+
+/* lam_A = W_AA^-1 (e_A - b_A) in work->rhs[0..na) (forward then backward substitution with
+ * the factor in work->chol); b_A is hi at an upper bound (and on equality rows), lo at a
+ * lower one. */
+static void stsp_bandqp_subst(const stsp_bandqp_t *qp, const uint32_t *idx, uint32_t na,
+                              stsp_bandqp_work_t *work)
+{
+    uint32_t a;
+    for (a = 0u; a < na; ++a) {
+        const uint32_t r = idx[a];
+        const double bound = (work->state[r] > 0) ? qp->hi[r] : qp->lo[r];
+        double s = work->e[r] - bound;
+        uint32_t b;
+        for (b = 0u; b < a; ++b) {
+            s -= work->chol[(a * na) + b] * work->rhs[b];
+        }
+        work->rhs[a] = s / work->chol[(a * na) + a];
+    }
+    for (a = 0u; a < na; ++a) {
+        const uint32_t row = na - 1u - a;
+        double s = work->rhs[row];
+        uint32_t b;
+        for (b = row + 1u; b < na; ++b) {
+            s -= work->chol[(b * na) + row] * work->rhs[b];
+        }
+        work->rhs[row] = s / work->chol[(row * na) + row];
+    }
+}
+
+/* The KKT conditions of the candidate whose multipliers are lam: lam_i >= 0 at an upper
+ * bound, lam_i <= 0 at a lower bound, lo_i - tol <= y_i <= hi_i + tol on inactive rows, with
+ * y = e - W lam (into work->y, up to the first row that fails). Returns 1 when all hold. */
+static uint32_t stsp_bandqp_kkt(const stsp_bandqp_t *qp, uint32_t q, const double *lam,
+                                stsp_bandqp_work_t *work)
+{
+    uint32_t ok = 1u;
+    uint32_t i;
+    for (i = 0u; (i < q) && (ok != 0u); ++i) {
+        double y = work->e[i];
+        uint32_t j;
+        for (j = 0u; j < q; ++j) {
+            y -= qp->W[(i * q) + j] * lam[j];
+        }
+        work->y[i] = y;
+        if (stsp_bandqp_is_eq(qp, i) != 0u) {
+            /* equality row: no sign condition */
+        } else if (work->state[i] > 0) {
+            if (lam[i] < 0.0) {
+                ok = 0u;
+            }
+        } else if (work->state[i] < 0) {
+            if (lam[i] > 0.0) {
+                ok = 0u;
+            }
+        } else {
+            const double hi = qp->hi[i];
+            const double tol = 1e-12 * (1.0 + ((hi > 0.0) ? hi : -hi));
+            if ((y > (hi + tol)) || (y < (qp->lo[i] - tol))) {
+                ok = 0u;
+            }
+        }
+    }
+    return ok;
+}
+
+/* The next candidate: the band rows' states as a ternary counter (digit 0 inactive, then -1
+ * at the lower bound, then +1 at the upper bound; row 0 the least significant digit);
+ * equality rows stay at +1. After the last candidate every band row is back to 0. */
+static void stsp_bandqp_next(const stsp_bandqp_t *qp, uint32_t q, int8_t *state)
+{
+    uint32_t carry = 1u;
+    uint32_t i;
+    for (i = 0u; (i < q) && (carry != 0u); ++i) {
+        if (stsp_bandqp_is_eq(qp, i) == 0u) {
+            if (state[i] == 0) {
+                state[i] = -1;
+                carry = 0u;
+            } else if (state[i] < 0) {
+                state[i] = 1;
+                carry = 0u;
+            } else {
+                state[i] = 0; /* carry into the next band row */
+            }
+        }
+    }
 }
 
 stsp_bandqp_status_t stsp_bandqp_solve(const stsp_bandqp_t *qp, const float *x0, double *lam,
                                        stsp_bandqp_work_t *work, uint32_t *candidates)
 {
-    uint32_t q, nx, i, j, tried = 0u, na = 0u;
+    uint32_t q;
+    uint32_t nx;
+    uint32_t i;
+    uint32_t n_cand = 1u;
+    uint32_t tried = 0u;
+    uint32_t found = 0u;
     uint32_t idx[STSP_BANDQP_MAX];
-    int done = 0;
 
     if (candidates != NULL) {
         *candidates = 0u;
     }
-    if (qp == NULL || x0 == NULL || lam == NULL || work == NULL || qp->Nt == NULL ||
-        qp->mt == NULL || qp->W == NULL || qp->lo == NULL || qp->hi == NULL) {
+    if ((qp == NULL) || (x0 == NULL) || (lam == NULL) || (work == NULL) || (qp->Nt == NULL) ||
+        (qp->mt == NULL) || (qp->W == NULL) || (qp->lo == NULL) || (qp->hi == NULL)) {
         return STSP_BANDQP_ERR_NULL;
     }
     q = qp->q;
     nx = qp->nx;
-    if (q == 0u || q > STSP_BANDQP_MAX || nx == 0u) {
+    if ((q == 0u) || (q > STSP_BANDQP_MAX) || (nx == 0u)) {
         return STSP_BANDQP_ERR_DIMS;
     }
     for (i = 0u; i < q; ++i) {
         lam[i] = 0.0;
     }
-    for (j = 0u; j < nx; ++j) {
-        if (!stsp_isfinite_f32_bits(x0[j])) {
+    for (i = 0u; i < nx; ++i) {
+        if (stsp_bandqp_isfinite_f32(x0[i]) == 0u) {
             return STSP_BANDQP_ERR_NONFINITE;
         }
     }
+    /* e = Nt x0 + mt; equality rows start (and stay) active at +1, band rows inactive; the
+     * number of candidates is 3^(band rows) <= 3^STSP_BANDQP_MAX. */
     for (i = 0u; i < q; ++i) {
         double acc = qp->mt[i];
+        uint32_t j;
         for (j = 0u; j < nx; ++j) {
-            acc += qp->Nt[i * nx + j] * (double)x0[j];
+            acc += qp->Nt[(i * nx) + j] * (double)x0[j];
         }
         work->e[i] = acc;
-        /* Equality rows are always active (+1); band rows start inactive. */
-        work->state[i] = (qp->lo[i] == qp->hi[i]) ? (int8_t)1 : (int8_t)0;
+        if (stsp_bandqp_is_eq(qp, i) != 0u) {
+            work->state[i] = 1;
+        } else {
+            work->state[i] = 0;
+            n_cand *= 3u;
+        }
     }
 
-    /* Ternary counter over the band rows: 0 inactive, -1 at lower, +1 at upper. Each
-     * candidate is visited once, so the loop runs at most 3^(band rows) times. */
-    while (!done) {
-        ++tried;
-        if (stsp_chol_active(qp->W, q, work->state, work->chol, idx, &na)) {
-            uint32_t a, b;
-            int ok = 1;
-            /* lam_A = W_AA^-1 (e_A - b_A): forward then backward substitution. */
-            for (a = 0u; a < na; ++a) {
-                uint32_t r = idx[a];
-                double s = work->e[r] - ((work->state[r] > 0) ? qp->hi[r] : qp->lo[r]);
-                for (b = 0u; b < a; ++b) {
-                    s -= work->chol[a * na + b] * work->rhs[b];
-                }
-                work->rhs[a] = s / work->chol[a * na + a];
-            }
-            for (a = na; a-- > 0u;) {
-                double s = work->rhs[a];
-                for (b = a + 1u; b < na; ++b) {
-                    s -= work->chol[b * na + a] * work->rhs[b];
-                }
-                work->rhs[a] = s / work->chol[a * na + a];
-            }
+    /* Each candidate active set once, in counter order, until one meets the conditions. */
+    for (tried = 0u; (tried < n_cand) && (found == 0u); ++tried) {
+        const uint32_t na = stsp_bandqp_active(work->state, q, idx);
+        if (stsp_bandqp_chol(qp->W, q, idx, na, work->chol) != 0u) {
+            uint32_t a;
+            stsp_bandqp_subst(qp, idx, na, work);
             for (i = 0u; i < q; ++i) {
                 lam[i] = 0.0;
             }
             for (a = 0u; a < na; ++a) {
                 lam[idx[a]] = work->rhs[a];
             }
-            /* KKT: signs on active band rows, bands on inactive rows. */
-            for (i = 0u; i < q && ok; ++i) {
-                const int eq = (qp->lo[i] == qp->hi[i]);
-                double y = work->e[i];
-                for (j = 0u; j < q; ++j) {
-                    y -= qp->W[i * q + j] * lam[j];
-                }
-                work->y[i] = y;
-                if (eq) {
-                    continue;
-                }
-                if (work->state[i] > 0 && lam[i] < 0.0) {
-                    ok = 0;
-                } else if (work->state[i] < 0 && lam[i] > 0.0) {
-                    ok = 0;
-                } else if (work->state[i] == 0) {
-                    const double tol = 1e-12 * (1.0 + ((qp->hi[i] > 0.0) ? qp->hi[i] : -qp->hi[i]));
-                    if (y > qp->hi[i] + tol || y < qp->lo[i] - tol) {
-                        ok = 0;
-                    }
-                }
-            }
-            if (ok) {
-                if (candidates != NULL) {
-                    *candidates = tried;
-                }
-                return STSP_BANDQP_OK;
-            }
+            found = stsp_bandqp_kkt(qp, q, lam, work);
         }
-        /* Next candidate: increment the ternary digits of the band rows (0 -> -1 -> +1). */
-        done = 1;
-        for (i = 0u; i < q; ++i) {
-            if (qp->lo[i] == qp->hi[i]) {
-                continue;
-            }
-            if (work->state[i] == 0) {
-                work->state[i] = -1;
-                done = 0;
-                break;
-            }
-            if (work->state[i] < 0) {
-                work->state[i] = 1;
-                done = 0;
-                break;
-            }
-            work->state[i] = 0; /* carry */
+        if (found == 0u) {
+            stsp_bandqp_next(qp, q, work->state);
         }
-    }
-    for (i = 0u; i < q; ++i) {
-        lam[i] = 0.0;
     }
     if (candidates != NULL) {
         *candidates = tried;
     }
-    return STSP_BANDQP_ERR_INFEASIBLE;
+    if (found == 0u) {
+        for (i = 0u; i < q; ++i) {
+            lam[i] = 0.0;
+        }
+    }
+    return (found != 0u) ? STSP_BANDQP_OK : STSP_BANDQP_ERR_INFEASIBLE;
 }

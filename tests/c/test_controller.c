@@ -867,6 +867,66 @@ static void test_band_tables_are_checked(void **state)
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_CRC);
 }
 
+/* The solver's proven bound, 3^(band rows) candidate active sets, pinned on its worst cases.
+ * W = I, e = Nt x0 + mt = 2 + i/8 on row i, bands [-1, 0.5 + i/16]: every row is above its
+ * band, so the only optimal active set has every row at its upper bound, lam = e - hi > 0,
+ * the last candidate of the enumeration (digits 0, -1, +1 per band row); the solver must try
+ * exactly 3^8 = 6561 sets. With rows 2 and 5 equality rows (always active, not enumerated)
+ * the bound is 3^6 = 729. With W = -I no set but the empty one factors and the empty one
+ * leaves every row outside its band: infeasible after exactly 3^8 sets (3^6 with the two
+ * equality rows), lam all zeros. */
+static void test_bandqp_candidate_bound(void **state)
+{
+    double Nt[STSP_BANDQP_MAX * 1u], mt[STSP_BANDQP_MAX], W[STSP_BANDQP_MAX * STSP_BANDQP_MAX];
+    double neg_W[STSP_BANDQP_MAX * STSP_BANDQP_MAX], lo[STSP_BANDQP_MAX], hi[STSP_BANDQP_MAX];
+    double lam[STSP_BANDQP_MAX];
+    const float x0[1] = {1.0f};
+    stsp_bandqp_t qp = {(uint16_t)STSP_BANDQP_MAX, 1u, Nt, mt, W, lo, hi};
+    stsp_bandqp_work_t work;
+    uint32_t i, j, cand = 0u;
+    (void)state;
+    assert_int_equal(STSP_BANDQP_MAX, 8u);
+    for (i = 0u; i < STSP_BANDQP_MAX; ++i) {
+        Nt[i] = 1.0;
+        mt[i] = 1.0 + (double)i / 8.0;
+        lo[i] = -1.0;
+        hi[i] = 0.5 + (double)i / 16.0;
+        for (j = 0u; j < STSP_BANDQP_MAX; ++j) {
+            W[i * STSP_BANDQP_MAX + j] = (i == j) ? 1.0 : 0.0;
+            neg_W[i * STSP_BANDQP_MAX + j] = (i == j) ? -1.0 : 0.0;
+        }
+    }
+    assert_int_equal(stsp_bandqp_solve(&qp, x0, lam, &work, &cand), STSP_BANDQP_OK);
+    assert_int_equal(cand, 6561u);
+    for (i = 0u; i < STSP_BANDQP_MAX; ++i) {
+        assert_true(lam[i] == (2.0 + (double)i / 8.0) - (0.5 + (double)i / 16.0));
+    }
+
+    lo[2] = hi[2];  /* equality rows: lam there is e - b as well, the rest unchanged */
+    lo[5] = hi[5];
+    assert_int_equal(stsp_bandqp_solve(&qp, x0, lam, &work, &cand), STSP_BANDQP_OK);
+    assert_int_equal(cand, 729u);
+    for (i = 0u; i < STSP_BANDQP_MAX; ++i) {
+        assert_true(lam[i] == (2.0 + (double)i / 8.0) - (0.5 + (double)i / 16.0));
+    }
+
+    lo[2] = -1.0;
+    lo[5] = -1.0;
+    qp.W = neg_W;
+    lam[0] = 1.0;
+    assert_int_equal(stsp_bandqp_solve(&qp, x0, lam, &work, &cand),
+                     STSP_BANDQP_ERR_INFEASIBLE);
+    assert_int_equal(cand, 6561u);
+    for (i = 0u; i < STSP_BANDQP_MAX; ++i) {
+        assert_true(lam[i] == 0.0);
+    }
+    lo[2] = hi[2];  /* and infeasible with equality rows: 3^6 sets, not more */
+    lo[5] = hi[5];
+    assert_int_equal(stsp_bandqp_solve(&qp, x0, lam, &work, &cand),
+                     STSP_BANDQP_ERR_INFEASIBLE);
+    assert_int_equal(cand, 729u);
+}
+
 static void test_status_strings(void **state)
 {
     (void)state;
@@ -907,6 +967,7 @@ int main(void)
         cmocka_unit_test(test_band_latch_solves_the_dual),
         cmocka_unit_test(test_band_fallback_and_nonfinite),
         cmocka_unit_test(test_band_tables_are_checked),
+        cmocka_unit_test(test_bandqp_candidate_bound),
         cmocka_unit_test_setup(test_status_strings, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -222,6 +222,10 @@ stsp_bandqp_status_t stsp_bandqp_solve(const stsp_bandqp_t *qp, const float *x0,
         for (j = 0u; j < nx; ++j) {
             acc += qp->Nt[(i * nx) + j] * (double)x0[j];
         }
+        /* Finite data and state can still overflow here: then there is nothing to solve. */
+        if ((acc - acc) != 0.0) {
+            return STSP_BANDQP_ERR_NONFINITE;
+        }
         work->e[i] = acc;
         if (stsp_bandqp_is_eq(qp, i) != 0u) {
             work->state[i] = 1;

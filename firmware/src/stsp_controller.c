@@ -417,8 +417,9 @@ static uint16_t stsp_stage_of(const stsp_table_t *t, uint16_t from, uint32_t tic
 /* The stage-0 latch of a band table: v = the band dual's multipliers for the measured x,
  * rounded to binary32, zero beyond q. Returns 1 on success; 0 if the solver failed (v_new
  * untouched): x not finite (the affine fallback then propagates the NaN/Inf, and the step
- * fails with STSP_ERR_NONFINITE_STATE as for any table) or no active set met the optimality
- * conditions (W not positive definite in double precision). Out of line: its ~0.8 KB of
+ * fails with STSP_ERR_NONFINITE_STATE as for any table), Nt x + mt overflowed, no active set
+ * met the optimality conditions (W not positive definite in double precision), or a
+ * multiplier lies outside the binary32 range. Out of line: its ~0.8 KB of
  * stack (solver work area) is used on this tick only. */
 static STSP_NOINLINE int stsp_band_latch(const stsp_table_t *t, const stsp_f32_t *x,
                                          stsp_f32_t *v_new)
@@ -429,6 +430,13 @@ static STSP_NOINLINE int stsp_band_latch(const stsp_table_t *t, const stsp_f32_t
     uint32_t i;
     if (stsp_bandqp_solve(t->band_qp, x, lam, &work, NULL) != STSP_BANDQP_OK) {
         return 0;
+    }
+    /* A multiplier beyond the binary32 range has no float value (the conversion would be
+     * undefined): fall back as for a failed solve. */
+    for (i = 0u; i < q; ++i) {
+        if (!((lam[i] <= (double)FLT_MAX) && (lam[i] >= -(double)FLT_MAX))) {
+            return 0;
+        }
     }
     for (i = 0u; i < stsp_nl(t); ++i) {
         v_new[i] = (i < q) ? (stsp_f32_t)lam[i] : 0.0f;

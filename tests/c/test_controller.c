@@ -799,8 +799,8 @@ static void test_band_latch_solves_the_dual(void **state)
 
     assert_int_equal(stsp_reset(&c), STSP_OK);
     assert_int_equal(stsp_step(&c, 0u, upper, u), STSP_OK);
-    assert_int_equal(c.v[0], (float)(-1.0 / 1.75));
-    assert_int_equal(c.v[1], (float)(4.0 / 1.75));
+    assert_true(c.v[0] == (float)(-1.0 / 1.75));
+    assert_true(c.v[1] == (float)(4.0 / 1.75));
     /* The multipliers stay for the rest of the plan: stage 1 (stage_np 0) does not relatch. */
     for (tick = 1u; tick < 4u; ++tick) {
         assert_int_equal(stsp_step(&c, tick, later, u), STSP_OK);
@@ -811,6 +811,9 @@ static void test_band_latch_solves_the_dual(void **state)
 static void test_band_fallback_and_nonfinite(void **state)
 {
     static const double not_pd[2 * 2] = {-1.0, 0.0, 0.0, -1.0};
+    static const double tiny[2 * 2] = {1e-300, 0.0, 0.0, 1e-300};
+    static const double huge[2 * 2] = {1e300, 0.0, 0.0, 1e300};
+    const float far[2] = {0.0f, 1e30f};
     stsp_bandqp_t qp = make_band_d();
     stsp_table_t t;
     stsp_ctrl_t c;
@@ -821,9 +824,24 @@ static void test_band_fallback_and_nonfinite(void **state)
     t = make_table_d(&qp);
     assert_int_equal(stsp_init(&c, &t), STSP_OK);
     assert_int_equal(stsp_step(&c, 0u, x, u), STSP_WARN_BAND_FALLBACK);
-    assert_int_equal(c.v[0], 0.5f + 0.125f);
-    assert_int_equal(c.v[1], 3.0f - 0.25f);
+    assert_true(c.v[0] == 0.5f + 0.125f);
+    assert_true(c.v[1] == 3.0f - 0.25f);
     assert_true(fabs(u[0] - (-(0.25 * 3.5) - 0.625 - 10.0 * 2.75)) < 1e-5);
+
+    /* Multipliers beyond FLT_MAX (W = 1e-300 I: lam_0 = 1e300) have no float value. */
+    qp = make_band_d();
+    qp.W = tiny;
+    t = make_table_d(&qp);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_WARN_BAND_FALLBACK);
+    assert_true(c.v[0] == 0.5f + 0.125f);
+    /* Nt x0 overflows a double although both are finite: nothing to solve. */
+    qp = make_band_d();
+    qp.Nt = huge;
+    t = make_table_d(&qp);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, far, u), STSP_WARN_BAND_FALLBACK);
+    assert_true(c.v[1] == 1e30f - 0.25f);
 
     qp = make_band_d();
     t = make_table_d(&qp);

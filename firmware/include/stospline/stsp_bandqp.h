@@ -37,7 +37,7 @@ typedef enum {
     STSP_BANDQP_OK = 0,
     STSP_BANDQP_ERR_NULL = -1,        /**< a pointer argument is NULL */
     STSP_BANDQP_ERR_DIMS = -2,        /**< q == 0, q > STSP_BANDQP_MAX or nx == 0 */
-    STSP_BANDQP_ERR_NONFINITE = -3,   /**< x0 holds NaN or +-Inf */
+    STSP_BANDQP_ERR_NONFINITE = -3,   /**< x0 holds NaN or +-Inf, or Nt x0 + mt overflowed */
     STSP_BANDQP_ERR_INFEASIBLE = -4   /**< no active set meets the conditions (W not > 0) */
 } stsp_bandqp_status_t;
 
@@ -64,7 +64,9 @@ typedef struct {
 /**
  * Multipliers lam[q] for the measured state x0[nx]; `candidates` (may be NULL) receives the
  * number of active sets tried (<= 3^(band rows)).
- * On an error lam is all zeros (when lam is not NULL).
+ * On STSP_BANDQP_ERR_NONFINITE (x0 not finite, or e = Nt x0 + mt overflowed) and
+ * STSP_BANDQP_ERR_INFEASIBLE lam[0..q) is all zeros; on STSP_BANDQP_ERR_NULL and
+ * STSP_BANDQP_ERR_DIMS lam is not written.
  */
 stsp_bandqp_status_t stsp_bandqp_solve(const stsp_bandqp_t *qp, const float *x0, double *lam,
                                        stsp_bandqp_work_t *work, uint32_t *candidates);

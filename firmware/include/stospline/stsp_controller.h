@@ -110,9 +110,10 @@ typedef enum {
     STSP_WARN_SATURATED = 3,        /**< at least one input was clamped to u_min/u_max; which
                                          ones: stsp_ctrl_t.sat_mask */
     STSP_WARN_BAND_FALLBACK = 4,    /**< the band dual QP found no optimal active set for this
-                                         x0 (W not positive definite in double precision):
-                                         latched the design's affine map Lambda x + lambda0
-                                         instead */
+                                         x0 (W not positive definite in double precision), its
+                                         data times x0 overflowed, or a multiplier is beyond
+                                         FLT_MAX: latched the design's affine map
+                                         Lambda x + lambda0 instead */
     STSP_ERR_NULL = -1,             /**< a pointer argument is NULL */
     STSP_ERR_NOT_INITIALIZED = -2,  /**< step/reset before a successful init */
     STSP_ERR_BAD_MAGIC = -3,        /**< the table header's magic is wrong */

@@ -155,6 +155,16 @@ static const stsp_acc_t stsp_q_one = INT64_C(2147483648);
 static const stsp_acc_t stsp_q_bias = INT64_C(4611686019501129728);
 #endif
 
+/* The exact product a b in the accumulator type: |a b| <= 2^(2F), no overflow. One
+ * multiply(-accumulate) instruction on the Cortex-M4 (mla for Q15, smlal for Q31). ARMv6-M
+ * (Cortex-M0/M0+) has no 32x32->64 multiply: there a Q31 product is a libgcc __aeabi_lmul
+ * call (see docs/firmware.md for its cost, and for the 16-bit-halves alternative measured and
+ * not kept); Q15 is the variant for those cores. */
+static inline stsp_acc_t stsp_q_mul(stsp_scalar_t a, stsp_scalar_t b)
+{
+    return (stsp_acc_t)a * (stsp_acc_t)b;
+}
+
 /* floor(sum / 2^F + 1/2) for acc = 2^(2F) + 2^(F-1) + sum: round half up, by a shift of a
  * non-negative value (no implementation-defined shift of a negative one). With
  * |sum| <= (2^F - 1) 2^F the result lies in [-(2^F - 1), 2^F - 1]: no saturation needed. */
@@ -478,7 +488,7 @@ static stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick, const stsp_s
                  * and within +-(2^F - 1) (the row bound of stsp_check_values). */
                 stsp_acc_t sum = stsp_q_bias + ((stsp_acc_t)t->lambda0[row] * stsp_q_one);
                 for (j = 0u; j < nx; ++j) {
-                    sum += (stsp_acc_t)lam[j] * x[j];
+                    sum += stsp_q_mul(lam[j], x[j]);
                 }
                 acc = stsp_q_round(sum);
 #else
@@ -577,13 +587,13 @@ static STSP_ALWAYS_INLINE uint32_t stsp_law(const stsp_table_t *t, uint32_t tick
         uint32_t j;
         STSP_UNROLL
         for (j = 0u; j < nx; ++j) {
-            acc += (stsp_acc_t)K[j] * x[j];
+            acc += stsp_q_mul(K[j], x[j]);
         }
         K = &K[nx];
         if (nl > 0u) {
             STSP_UNROLL
             for (j = 0u; j < nl; ++j) {
-                acc += (stsp_acc_t)L[j] * v[j];
+                acc += stsp_q_mul(L[j], v[j]);
             }
             L = &L[nl];
         }

@@ -156,7 +156,7 @@ static const stsp_acc_t stsp_q_bias = INT64_C(4611686019501129728);
 #endif
 
 /* The exact product a b in the accumulator type: |a b| <= 2^(2F), no overflow. One
- * multiply(-accumulate) instruction on the Cortex-M4 (mla for Q15, smlal for Q31). ARMv6-M
+ * multiply-accumulate instruction on the Cortex-M4 (smlabb for Q15, smlal for Q31). ARMv6-M
  * (Cortex-M0/M0+) has no 32x32->64 multiply: there a Q31 product is a libgcc __aeabi_lmul
  * call (see docs/firmware.md for its cost, and for the 16-bit-halves alternative measured and
  * not kept); Q15 is the variant for those cores. */
@@ -242,7 +242,8 @@ static uint16_t stsp_has_limits(const stsp_table_t *t)
 {
     uint32_t i;
     for (i = 0u; i < t->nu; ++i) {
-        if (((stsp_acc_t)t->u_min[i] > -stsp_q_one) || ((stsp_acc_t)t->u_max[i] < (stsp_q_one - 1))) {
+        if (((stsp_acc_t)t->u_min[i] > -stsp_q_one) ||
+            ((stsp_acc_t)t->u_max[i] < (stsp_q_one - 1))) {
             return 1u;
         }
     }

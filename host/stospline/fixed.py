@@ -7,7 +7,7 @@ integers ``x_q[j]`` with a per-state power-of-two scale and return integer comma
 
 with ``F`` = 15 (Q15, int16) or 31 (Q31, int32) fractional bits and every integer in
 ``[-2^F, 2^F - 1]``. The gains carry the scales and are stored negated (so that a tick is a
-plain sum of products)::
+plain sum of products: one multiply-accumulate instruction per term)::
 
     K_q[t][i][j] = rhu(-K_ij(t) 2^(x_exp[j] - u_exp[i] + F))   k0_q[t][i] = rhu(-k0_i(t) 2^(F - u_exp[i]))
     L_q[t][i][c] = rhu(-L_ic(t) 2^(v_exp[c] - u_exp[i] + F))

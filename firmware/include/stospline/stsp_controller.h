@@ -166,7 +166,8 @@ typedef enum {
  * [-2^F, 2^F - 1] that carry the scales, and the law's gains are stored negated:
  *     K[t][i][j] = -K_ij(t) 2^(x_exp[j] - u_exp[i]) 2^F,  k0[t][i] = -k0_i(t) 2^(F - u_exp[i]),
  *     L[t][i][c] = -L_ic(t) 2^(v_exp[c] - u_exp[i]) 2^F,
- *     Lambda[s][c][j] = Lambda_cj 2^(x_exp[j] - v_exp[c]) 2^F, lambda0[s][c] = lambda0_c 2^(F - v_exp[c])
+ *     Lambda[s][c][j] = Lambda_cj 2^(x_exp[j] - v_exp[c]) 2^F,
+ *     lambda0[s][c] = lambda0_c 2^(F - v_exp[c])
  * (rounded half up), so that x[j] = x_q[j] 2^(x_exp[j] - F), v[c] = v_q[c] 2^(v_exp[c] - F),
  * u[i] = u_q[i] 2^(u_exp[i] - F). u_min/u_max are in u_q units; -2^F and 2^F - 1 mean unlimited.
  */

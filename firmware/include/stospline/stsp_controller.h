@@ -27,7 +27,7 @@
  * left to right, exactly (IEEE rounding is sign-symmetric), up to the sign of a zero result.
  *
  * Buffers: stsp_ctrl_t holds STSP_MAX_LATCH scalars for v plus 24 bytes (32-bit targets:
- * 88 bytes with the default STSP_MAX_LATCH = 16); stsp_step() uses
+ * 88 bytes with the default STSP_MAX_LATCH = 16; 56 bytes in the Q15 build); stsp_step() uses
  * STSP_MAX_LATCH + STSP_MAX_NU scalars of stack. The tables stay where the caller put them
  * (const, normally flash) and are never copied.
  *

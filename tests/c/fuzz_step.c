@@ -13,7 +13,12 @@
  * the contract of stsp_controller.h: a known status; before init u untouched; on an error u
  * all +0.0 and the instance byte-for-byte unchanged; otherwise u finite, within
  * [u_min, u_max], and saturated inputs exactly at a limit; nothing written past u[nu]; the
- * tick bookkeeping as documented (range, order, non-finite state detected first). */
+ * tick bookkeeping as documented (range, order, non-finite state detected first).
+ *
+ * Built once per arithmetic variant (fuzz_step, fuzz_step_q15, fuzz_step_q31): in the Q15/Q31
+ * builds the tables, states and commands are integers (gains small enough for valid row sums,
+ * or full-range ones that break the row bound), the scale exponents are fuzzed as well, and
+ * there is no non-finite value. */
 #include <float.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -30,6 +35,15 @@
 #define FZ_MAX_STAGE_TICKS 8u
 #define FZ_MAX_NT (FZ_MAX_NS * FZ_MAX_STAGE_TICKS)
 #define FZ_MAX_CALLS 64u
+
+#ifdef STSP_ARITH_FIXED
+typedef stsp_scalar_t fz_val_t;
+#define FZ_Q_ONE ((int64_t)1 << STSP_Q_FRAC_BITS)
+#define FZ_SENTINEL ((stsp_scalar_t)12345)
+#else
+typedef float fz_val_t;
+#define FZ_SENTINEL 1234.5f
+#endif
 
 typedef struct {
     const uint8_t *p;
@@ -56,6 +70,33 @@ static uint32_t fz_u32(fz_in_t *in)
     return v;
 }
 
+#ifdef STSP_ARITH_FIXED
+static int fz_finite(fz_val_t v)
+{
+    (void)v;
+    return 1;
+}
+
+static int fz_is_zero(fz_val_t v)
+{
+    return v == 0;
+}
+
+/* Mostly modest values; a selector byte picks the range ends, 0 or a raw bit pattern. */
+static fz_val_t fz_value(fz_in_t *in)
+{
+    const uint32_t sel = fz_u8(in);
+    if (sel < 200u) {
+        return (fz_val_t)(((int64_t)fz_u8(in) - 128) * (FZ_Q_ONE / 256));
+    }
+    switch (sel % 4u) {
+    case 0u: return (fz_val_t)(-FZ_Q_ONE);
+    case 1u: return (fz_val_t)(FZ_Q_ONE - 1);
+    case 2u: return 0;
+    default: return (fz_val_t)(int64_t)(((int64_t)fz_u32(in) % (2 * FZ_Q_ONE)) - FZ_Q_ONE);
+    }
+}
+#else
 static float fz_bits_f32(uint32_t bits)
 {
     float f;
@@ -73,6 +114,11 @@ static uint32_t fz_f32_bits(float f)
 static int fz_finite(float f)
 {
     return (fz_f32_bits(f) & 0x7F800000u) != 0x7F800000u;
+}
+
+static int fz_is_zero(float f)
+{
+    return fz_f32_bits(f) == 0u;
 }
 
 /* Mostly modest values; a selector byte picks specials or a raw bit pattern. */
@@ -93,6 +139,7 @@ static float fz_value(fz_in_t *in)
     default: return fz_bits_f32(fz_u32(in));           /* anything */
     }
 }
+#endif
 
 static void fz_check_at(int ok, int line)
 {
@@ -111,16 +158,35 @@ static int fz_known_status(stsp_status_t st)
 /* Storage with room for every dimension the input can declare. */
 static uint32_t g_start[FZ_MAX_NS + 1u];
 static uint16_t g_np[FZ_MAX_NS];
-static float g_K[FZ_MAX_NT * FZ_MAX_NU * FZ_MAX_NX];
-static float g_k0[FZ_MAX_NT * FZ_MAX_NU];
-static float g_L[FZ_MAX_NT * FZ_MAX_NU * FZ_MAX_NL];
-static float g_Lambda[FZ_MAX_NS * FZ_MAX_NL * FZ_MAX_NX];
-static float g_lambda0[FZ_MAX_NS * FZ_MAX_NL];
-static float g_lo[FZ_MAX_NU], g_hi[FZ_MAX_NU];
+static fz_val_t g_K[FZ_MAX_NT * FZ_MAX_NU * FZ_MAX_NX];
+static fz_val_t g_k0[FZ_MAX_NT * FZ_MAX_NU];
+static fz_val_t g_L[FZ_MAX_NT * FZ_MAX_NU * FZ_MAX_NL];
+static fz_val_t g_Lambda[FZ_MAX_NS * FZ_MAX_NL * FZ_MAX_NX];
+static fz_val_t g_lambda0[FZ_MAX_NS * FZ_MAX_NL];
+static fz_val_t g_lo[FZ_MAX_NU], g_hi[FZ_MAX_NU];
+#ifdef STSP_ARITH_FIXED
+static int8_t g_xe[FZ_MAX_NX], g_ue[FZ_MAX_NU], g_ve[FZ_MAX_NL];
+#endif
 
 /* Gains from a generator seeded by the input (so that a short input describes a whole table
  * and most bytes drive calls); `special` in 1..255 makes about one value in `special` a
  * special one (NaN, Inf, FLT_MAX, subnormal, -0), 0 none. */
+#ifdef STSP_ARITH_FIXED
+/* Fixed point: values within +-2^F/16 (a row of at most 13 of them stays below 2^F - 1);
+ * `special` makes about one in `special` a full-range value, which breaks the row bound. */
+static void fz_fill(uint32_t *seed, fz_val_t *a, size_t count, uint32_t special)
+{
+    size_t i;
+    for (i = 0u; i < count; ++i) {
+        *seed = *seed * 1664525u + 1013904223u;
+        if ((special != 0u) && (((*seed >> 8) % special) == 0u)) {
+            a[i] = (fz_val_t)((int64_t)(*seed % 65536u) * (FZ_Q_ONE / 32768) - FZ_Q_ONE);
+        } else {
+            a[i] = (fz_val_t)(((int64_t)((*seed >> 12) % 4096u) - 2048) * (FZ_Q_ONE / 32768));
+        }
+    }
+}
+#else
 static void fz_fill(uint32_t *seed, float *a, size_t count, uint32_t special)
 {
     static const uint32_t specials[6] = {0x7FC00000u, 0x7F800000u, 0xFF800000u, 0x7F7FFFFFu,
@@ -135,6 +201,7 @@ static void fz_fill(uint32_t *seed, float *a, size_t count, uint32_t special)
         }
     }
 }
+#endif
 
 /* A table from the input: valid most of the time (so that the calls reach the law), with at
  * most one corruption chosen by a selector byte. */
@@ -146,7 +213,7 @@ static void fz_build_table(fz_in_t *in, stsp_table_t *t)
     memset(t, 0, sizeof *t);
     t->magic = STSP_TABLE_MAGIC;
     t->format_version = STSP_FORMAT_VERSION;
-    t->scalar_kind = STSP_SCALAR_FLOAT32;
+    t->scalar_kind = STSP_SCALAR_KIND;
     t->nx = (uint16_t)(1u + shape % FZ_MAX_NX);
     t->nu = (uint16_t)(1u + (shape / 8u) % FZ_MAX_NU);
     t->n_latch = (uint16_t)(fz_u8(in) % (FZ_MAX_NL + 1u));
@@ -175,6 +242,33 @@ static void fz_build_table(fz_in_t *in, stsp_table_t *t)
     t->L = g_L;
     t->Lambda = g_Lambda;
     t->lambda0 = g_lambda0;
+#ifdef STSP_ARITH_FIXED
+    for (i = 0u; i < FZ_MAX_NX; ++i) {
+        g_xe[i] = (int8_t)((int32_t)(fz_u8(in) % 21u) - 10);
+    }
+    for (i = 0u; i < FZ_MAX_NU; ++i) {
+        g_ue[i] = (int8_t)((int32_t)(fz_u8(in) % 21u) - 10);
+    }
+    for (i = 0u; i < FZ_MAX_NL; ++i) {
+        g_ve[i] = (int8_t)((int32_t)(fz_u8(in) % 21u) - 10);
+    }
+    if (corrupt == 5u) {
+        g_ue[fz_u8(in) % FZ_MAX_NU] = (int8_t)(int32_t)fz_u8(in); /* maybe beyond +-60 */
+    }
+    t->x_exp = g_xe;
+    t->u_exp = g_ue;
+    t->v_exp = g_ve;
+    for (i = 0u; i < FZ_MAX_NU; ++i) {
+        switch (lim % 4u) {
+        case 0u: g_lo[i] = (fz_val_t)(-FZ_Q_ONE); g_hi[i] = (fz_val_t)(FZ_Q_ONE - 1); break;
+        case 1u: g_lo[i] = (fz_val_t)(-(int64_t)(1u + fz_u8(in)) * (FZ_Q_ONE / 4096));
+                 g_hi[i] = (fz_val_t)((int64_t)(1u + fz_u8(in)) * (FZ_Q_ONE / 4096)); break;
+        case 2u: g_lo[i] = (fz_val_t)(-(int32_t)(fz_u8(in) % 3u)); g_hi[i] = (fz_val_t)(FZ_Q_ONE - 1);
+                 break;
+        default: g_lo[i] = fz_value(in); g_hi[i] = fz_value(in); break; /* maybe invalid */
+        }
+    }
+#else
     for (i = 0u; i < FZ_MAX_NU; ++i) {
         switch (lim % 4u) {
         case 0u: g_lo[i] = -FLT_MAX; g_hi[i] = FLT_MAX; break;
@@ -184,6 +278,7 @@ static void fz_build_table(fz_in_t *in, stsp_table_t *t)
         default: g_lo[i] = -fz_value(in); g_hi[i] = fz_value(in); break; /* maybe invalid */
         }
     }
+#endif
     t->u_min = g_lo;
     t->u_max = g_hi;
     switch (corrupt) {
@@ -203,6 +298,9 @@ static void fz_build_table(fz_in_t *in, stsp_table_t *t)
         case 0u: t->K = NULL; break;
         case 1u: t->u_max = NULL; break;
         case 2u: t->L = NULL; break;
+#ifdef STSP_ARITH_FIXED
+        case 3u: t->v_exp = NULL; break;
+#endif
         default: t->stage_np = NULL; break;
         }
         break;
@@ -211,6 +309,9 @@ static void fz_build_table(fz_in_t *in, stsp_table_t *t)
     /* The CRC needs valid pointers and dimensions inside the storage; compute it when it can
      * be computed, then perhaps corrupt it. */
     if ((t->K != NULL) && (t->u_max != NULL) && (t->L != NULL) && (t->stage_np != NULL) &&
+#ifdef STSP_ARITH_FIXED
+        (t->v_exp != NULL) &&
+#endif
         (t->n_ticks <= FZ_MAX_NT)) {
         t->crc32 = stsp_table_crc32(t);
     }
@@ -252,7 +353,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             fz_check(st == (ready ? STSP_OK : STSP_ERR_NOT_INITIALIZED));
         } else {                                                  /* step */
             const uint32_t how = fz_u8(&in) % 8u;
-            float x[FZ_MAX_NX + 1u], u[STSP_MAX_NU + 1u];
+            fz_val_t x[FZ_MAX_NX + 1u], u[STSP_MAX_NU + 1u];
             const uint32_t nx = ready ? t.nx : FZ_MAX_NX, nu = ready ? t.nu : FZ_MAX_NU;
             uint32_t tick, i;
             int finite = 1;
@@ -270,7 +371,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 finite = finite && fz_finite(x[i]);
             }
             for (i = 0u; i <= STSP_MAX_NU; ++i) {
-                u[i] = 1234.5f;                                   /* sentinel */
+                u[i] = FZ_SENTINEL;
             }
             memcpy(&before, &c, sizeof c);
             if (((op & 0xF0u) == 0xF0u) && ((op & 7u) != 7u)) {     /* NULL arguments */
@@ -282,19 +383,19 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             }
             st = stsp_step(&c, tick, x, u);
             fz_check(fz_known_status(st));
-            fz_check(u[STSP_MAX_NU] == 1234.5f);                  /* nothing past the buffer */
+            fz_check(u[STSP_MAX_NU] == FZ_SENTINEL);                  /* nothing past the buffer */
             if (!ready) {
                 fz_check(st == STSP_ERR_NOT_INITIALIZED);
-                fz_check(u[0] == 1234.5f);                        /* u not written */
+                fz_check(u[0] == FZ_SENTINEL);                        /* u not written */
                 continue;
             }
             fz_check(nu <= STSP_MAX_NU);
             for (i = nu; i < STSP_MAX_NU; ++i) {
-                fz_check(u[i] == 1234.5f);
+                fz_check(u[i] == FZ_SENTINEL);
             }
             if (st < STSP_OK) {
                 for (i = 0u; i < nu; ++i) {
-                    fz_check(fz_f32_bits(u[i]) == 0u);
+                    fz_check(fz_is_zero(u[i]));
                 }
                 fz_check(memcmp(&c, &before, sizeof c) == 0);
             } else {

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
-# Firmware report (not a test): for each target (Cortex-M4F, Cortex-M0+) and variant (generic
-# dimensions, built for the robot's dimensions 4/2/4):
+# Firmware report (not a test): for each target (Cortex-M4F, Cortex-M0+), arithmetic (float32,
+# Q15, Q31) and build (generic dimensions, built for the robot's dimensions 4/2/4):
 #   * flash and RAM (arm-none-eabi-size; controller alone and with the robot tables),
-#   * instructions per stsp_step call on Cortex-M4F under QEMU, and the ratio to the
-#     multiply-accumulates the law needs (tools/arm/count_instructions.sh),
+#   * instructions per stsp_step call under QEMU (Cortex-M4F: mps2-an386; the Cortex-M0+ code
+#     on mps2-an385, a Cortex-M3, as QEMU has no M0+ board; float32 on the M4F only), and the
+#     ratio to the multiply-accumulates the law needs (tools/arm/count_instructions.sh),
 #   * host nanoseconds per tick, median over whole 6000-tick plans, against a naive
 #     generic-loop controller (tests/c/bench_host.c, built by the host CMake project).
 #   tools/firmware_report.sh [--no-setup]
@@ -36,12 +37,17 @@ import json, re, sys
 from pathlib import Path
 out = Path(sys.argv[1])
 counts = json.loads((out / "counts.json").read_text())
-names = {"bench.elf": "generic", "bench_fixed.elf": "fixed 4/2/4"}
-print("   Cortex-M4F instructions per stsp_step (median; MACs needed; instructions per MAC):")
+def name(key):
+    cpu, image = key.split("/")
+    arith = "q15" if "_q15" in image else "q31" if "_q31" in image else "float32"
+    dims = "fixed 4/2/4" if "bench_fixed" in image else "generic"
+    return f"{'M4F' if cpu == 'cortex-m4' else 'M0+':3s} {arith:7s} {dims:11s}"
+print("   Instructions per stsp_step (median; MACs needed; instructions per MAC); M0+ code run "
+      "on mps2-an385:")
 for image, rows in counts["instructions"].items():
     for r in rows:
         if r["table"] in ("no limits", "limits +-1000 (inactive)"):
-            print(f"     {names[image]:12s} {r['table']:26s} {r['ticks']:26s} {r['median']:5.0f}"
+            print(f"     {name(image)} {r['table']:26s} {r['ticks']:26s} {r['median']:5.0f}"
                   f"  MACs {r['macs']:2d}  {r['median'] / r['macs']:5.1f}/MAC")
 print("   Flash / static RAM (bytes):")
 for key, rows in counts["sizes"].items():
@@ -51,7 +57,11 @@ for key, rows in counts["sizes"].items():
     print(f"     {key:46s} controller {ctl['flash']:5d} B flash, {ctl['ram']} B RAM;"
           f" with robot tables {tab['flash']} B flash; stack stsp_step {st.get('stsp_step')} B,"
           f" cold path {st.get('stsp_step_cold')} B")
-print(f"     per instance: sizeof(stsp_ctrl_t) = {counts['sizeof_ctrl']} B")
+sizes = {}
+for key, v in counts.get("sizeof_ctrl_by_image", {}).items():
+    sizes.setdefault(v, []).append(name(key).split()[1])
+print("     per instance: sizeof(stsp_ctrl_t) = "
+      + "; ".join(f"{v} B ({', '.join(sorted(set(a)))})" for v, a in sizes.items()))
 print("   Host ns per tick (median over plans; the naive controller timed in the same binary):")
 for f in ("bench_host.txt", "bench_host_fixed.txt"):
     res = {}

@@ -6,9 +6,11 @@ For every fault below the script copies the C sources (``CMakeLists.txt``, ``fir
 that copy, and runs
 
 * the C tests of the copy: ``ctest`` without the clang, ARM and MISRA tests (controller,
-  controller_fixed_2_1_2, robot_table, robot_table_fixed and their ASan + UBSan builds), and
+  controller_fixed_2_1_2, robot_table, robot_table_fixed, the fixed-point (Q15/Q31) tests and
+  their ASan + UBSan builds), and
 * a fast subset of the Python tests that drive the C code through the cffi harness
-  (``tests/python/test_harness.py``, ``test_montecarlo.py``, ``test_firmware_limits.py``),
+  (``tests/python/test_harness.py``, ``test_montecarlo.py``, ``test_firmware_limits.py``,
+  ``test_fixedpoint.py``),
   pointed at the faulty copy with ``STOSPLINE_FIRMWARE`` and a private ``STOSPLINE_BUILD``.
 
 The working tree is never modified: the edits happen in the copy only, pytest runs with
@@ -38,7 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CTL = "firmware/src/stsp_controller.c"
 CRC = "firmware/src/stsp_controller.c"
 PY_TESTS = ["tests/python/test_harness.py", "tests/python/test_montecarlo.py",
-            "tests/python/test_firmware_limits.py"]
+            "tests/python/test_firmware_limits.py", "tests/python/test_fixedpoint.py"]
 CTEST_EXCLUDE = r"^(clang_|arm_|misra)"
 
 
@@ -79,12 +81,26 @@ FAULTS = [
           "    if (st < STSP_OK) {\n        stsp_zero(u, stsp_nu(ctrl->table));\n        return st;",
           "    if (st < STSP_OK) {\n        return st;"),
     Fault("F11", "CRC does not cover u_max", CRC,
-          "    crc = stsp_crc32_f32s(crc, table->u_max, nu);\n", ""),
+          "    crc = stsp_crc32_scalars(crc, table->u_max, nu);\n", ""),
     Fault("F12", "off-by-one tick order: a repeated tick is refused as going backwards", CTL,
           "if ((tick + 1u) < c->next_tick) {", "if (tick < c->next_tick) {"),
     Fault("F13", "feed-forward k0 of the next tick (off-by-one row)", CTL,
           "const stsp_f32_t *k0 = &t->k0[tick * nu];",
           "const stsp_f32_t *k0 = &t->k0[((tick + 1u) % t->n_ticks) * nu];"),
+    # Fixed-point (Q15/Q31) code paths.
+    Fault("F14", "Q15 rounding: the half-LSB bias dropped (rounds down)", CTL,
+          "stsp_q_bias = 1073758208;", "stsp_q_bias = 1073741824;"),
+    Fault("F15", "Q: law row-sum check off by one (a row summing to 2^F is accepted)", CTL,
+          "        if (sum > row_max) {", "        if (sum > (row_max + 1u)) {"),
+    Fault("F16", "Q: CRC does not cover v_exp", CTL,
+          "        crc = stsp_crc32_i8s(crc, table->v_exp, np);\n", ""),
+    Fault("F17", "Q: latch rows not checked at init", CTL,
+          "stsp_q_abs_sum(&t->Lambda[r * nx], nx)) >\n            row_max) {",
+          "stsp_q_abs_sum(&t->Lambda[r * nx], nx)) >\n            (row_max + row_max)) {"),
+    Fault("F18", "Q: state conversion truncates instead of rounding half up",
+          "firmware/src/stsp_qconv.c", "const stsp_f32_t r = s + 0.5f;", "const stsp_f32_t r = s;"),
+    Fault("F19", "Q: sign flip of the L v term", CTL,
+          "acc += stsp_q_mul(L[j], v[j]);", "acc -= stsp_q_mul(L[j], v[j]);"),
 ]
 
 

@@ -11,7 +11,12 @@
  * a non-finite latch (each input sums L[i][c] v[c] over all columns). So x itself is read for
  * finiteness only on the cold path, to tell a bad state from an overflow. Everything else
  * (tick range, order, repeats, skips, stage changes, latching, clamping, errors) is on cold
- * paths in functions of their own. */
+ * paths in functions of their own.
+ *
+ * Arithmetic variants (stsp_controller.h): the float32 code below is the default; with
+ * STSP_ARITH_Q15/Q31 the blocks under STSP_ARITH_FIXED replace the law, the latch, the limit
+ * check, the value check and the CRC serialization of the arrays, each documented where it
+ * is. Everything else (ticks, stages, latching order, statuses) is the same code. */
 #include "stospline/stsp_controller.h"
 
 #include <float.h>
@@ -41,6 +46,7 @@
 #define STSP_UNROLL
 #endif
 
+#ifndef STSP_ARITH_FIXED
 /* Non-fused multiply-accumulate on a single-precision VFP (Cortex-M4F, M7, M33 with FPU; GCC
  * or clang). VMLS.F32 and VNMLA.F32 round the product to binary32 and then round the sum
  * (ARMv7-M ARM, DDI 0403E, A7.7.238 VMLA, VMLS and A7.7.250 VNMLA, VNMLS, VNMUL: the
@@ -90,6 +96,7 @@ static STSP_ALWAYS_INLINE stsp_f32_t stsp_nmla(stsp_f32_t a, stsp_f32_t b, stsp_
 #endif
 }
 
+
 /* Binary32 exponent field: all ones for NaN and +-Inf. */
 #define STSP_F32_EXP_MASK 0x7F800000u
 /* Binary64 exponent field. */
@@ -102,12 +109,13 @@ static inline int stsp_isfinite_f32(stsp_f32_t value)
     (void)memcpy(&bits, &value, sizeof bits);
     return ((bits & STSP_F32_EXP_MASK) != STSP_F32_EXP_MASK) ? 1 : 0;
 }
+#endif
 
-static inline void stsp_zero(stsp_f32_t *u, uint32_t count)
+static inline void stsp_zero(stsp_scalar_t *u, uint32_t count)
 {
     uint32_t i;
     for (i = 0u; i < count; ++i) {
-        u[i] = 0.0f;
+        u[i] = (stsp_scalar_t)0;
     }
 }
 
@@ -142,6 +150,7 @@ static inline uint32_t stsp_nl(const stsp_table_t *t)
 #endif
 }
 
+#ifndef STSP_ARITH_FIXED
 /* A band dual belongs to a joint design: q rows, all latched once at stage 0. */
 static stsp_status_t stsp_check_band_dims(const stsp_table_t *t)
 {
@@ -162,6 +171,7 @@ static stsp_status_t stsp_check_band_dims(const stsp_table_t *t)
     }
     return STSP_OK;
 }
+#endif
 
 static stsp_status_t stsp_check_dims(const stsp_table_t *t)
 {
@@ -186,6 +196,11 @@ static stsp_status_t stsp_check_dims(const stsp_table_t *t)
         ((t->n_latch > 0u) && ((t->L == NULL) || (t->Lambda == NULL) || (t->lambda0 == NULL)))) {
         return STSP_ERR_NULL;
     }
+#ifdef STSP_ARITH_FIXED
+    if ((t->x_exp == NULL) || (t->u_exp == NULL) || ((t->n_latch > 0u) && (t->v_exp == NULL))) {
+        return STSP_ERR_NULL;
+    }
+#endif
     if ((t->stage_start[0] != 0u) || (t->stage_start[t->n_stages] != t->n_ticks)) {
         return STSP_ERR_BAD_DIMS;
     }
@@ -194,9 +209,126 @@ static stsp_status_t stsp_check_dims(const stsp_table_t *t)
             return STSP_ERR_BAD_DIMS;
         }
     }
+#ifdef STSP_ARITH_FIXED
+    /* The band solver latches binary32 multipliers: float32 tables only. */
+    return (t->band_qp != NULL) ? STSP_ERR_BAD_DIMS : STSP_OK;
+#else
     return (t->band_qp != NULL) ? stsp_check_band_dims(t) : STSP_OK;
+#endif
 }
 
+#ifdef STSP_ARITH_FIXED
+/* Fixed-point accumulator. It holds the bias 2^(2F) + 2^(F-1) plus a row's sum of products,
+ * which stsp_check_values() bounds by (2^F - 1) 2^F in magnitude: so it stays in
+ * [2^(F-1) + 2^F, 2^(2F+1)), inside int32 for Q15 (2^31) and int64 for Q31 (2^63), and is
+ * never negative (see stsp_q_round). */
+#if defined(STSP_ARITH_Q15)
+typedef int32_t stsp_acc_t;
+typedef uint32_t stsp_uacc_t;
+static const stsp_acc_t stsp_q_one = 32768;          /* 2^F */
+static const stsp_acc_t stsp_q_bias = 1073758208;    /* 2^(2F) + 2^(F-1) */
+#else
+typedef int64_t stsp_acc_t;
+typedef uint64_t stsp_uacc_t;
+static const stsp_acc_t stsp_q_one = INT64_C(2147483648);
+static const stsp_acc_t stsp_q_bias = INT64_C(4611686019501129728);
+#endif
+
+/* The exact product a b in the accumulator type: |a b| <= 2^(2F), no overflow. One
+ * multiply-accumulate instruction on the Cortex-M4 (smlabb for Q15, smlal for Q31). ARMv6-M
+ * (Cortex-M0/M0+) has no 32x32->64 multiply: there a Q31 product is a libgcc __aeabi_lmul
+ * call (see docs/firmware.md for its cost, and for the 16-bit-halves alternative measured and
+ * not kept); Q15 is the variant for those cores. */
+static inline stsp_acc_t stsp_q_mul(stsp_scalar_t a, stsp_scalar_t b)
+{
+    return (stsp_acc_t)a * (stsp_acc_t)b;
+}
+
+/* floor(sum / 2^F + 1/2) for acc = 2^(2F) + 2^(F-1) + sum: round half up, by a shift of a
+ * non-negative value (no implementation-defined shift of a negative one). With
+ * |sum| <= (2^F - 1) 2^F the result lies in [-(2^F - 1), 2^F - 1]: no saturation needed. */
+static inline stsp_scalar_t stsp_q_round(stsp_acc_t acc)
+{
+    const stsp_uacc_t shifted = (stsp_uacc_t)acc >> STSP_Q_FRAC_BITS;
+    const stsp_acc_t rounded = (stsp_acc_t)shifted - stsp_q_one;
+    return (stsp_scalar_t)rounded;
+}
+
+/* Sum of |values[0..count)| (count <= STSP_MAX_NX + STSP_MAX_LATCH: no wrap-around). */
+static stsp_uacc_t stsp_q_abs_sum(const stsp_scalar_t *values, uint32_t count)
+{
+    stsp_uacc_t sum = 0u;
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        const stsp_acc_t a = values[i];
+        sum += (stsp_uacc_t)((a < 0) ? -a : a);
+    }
+    return sum;
+}
+
+/* Exponents within +-STSP_Q_EXP_MAX (stsp_state_to_q builds 2^(F - x_exp) as a binary32). */
+static int stsp_q_exps_ok(const int8_t *e, uint32_t count)
+{
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        if ((e[i] > STSP_Q_EXP_MAX) || (e[i] < -STSP_Q_EXP_MAX)) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* Fixed point: exponents in range; every law row (tick, input) with
+ * |k0| + sum_j |K| + sum_c |L| <= 2^F - 1 and every latch row with |lambda0| + sum_j |Lambda|
+ * <= 2^F - 1, the condition under which stsp_law and the latch cannot overflow or leave the
+ * Q range (stsp_step); limits with u_min <= 0 <= u_max. */
+static stsp_status_t stsp_check_values(const stsp_table_t *t)
+{
+    const stsp_uacc_t row_max = (stsp_uacc_t)stsp_q_one - 1u;
+    const uint32_t nx = t->nx;
+    const uint32_t nu = t->nu;
+    const uint32_t np = t->n_latch;
+    uint32_t r;
+    if ((stsp_q_exps_ok(t->x_exp, nx) == 0) || (stsp_q_exps_ok(t->u_exp, nu) == 0) ||
+        ((np > 0u) && (stsp_q_exps_ok(t->v_exp, np) == 0))) {
+        return STSP_ERR_BAD_VALUES;
+    }
+    for (r = 0u; r < (t->n_ticks * nu); ++r) {
+        stsp_uacc_t sum = stsp_q_abs_sum(&t->k0[r], 1u) + stsp_q_abs_sum(&t->K[r * nx], nx);
+        if (np > 0u) {
+            sum += stsp_q_abs_sum(&t->L[r * np], np);
+        }
+        if (sum > row_max) {
+            return STSP_ERR_BAD_VALUES;
+        }
+    }
+    for (r = 0u; r < ((uint32_t)t->n_stages * np); ++r) {
+        if ((stsp_q_abs_sum(&t->lambda0[r], 1u) + stsp_q_abs_sum(&t->Lambda[r * nx], nx)) >
+            row_max) {
+            return STSP_ERR_BAD_VALUES;
+        }
+    }
+    for (r = 0u; r < nu; ++r) {
+        if ((t->u_min[r] > 0) || (t->u_max[r] < 0)) {
+            return STSP_ERR_BAD_VALUES;
+        }
+    }
+    return STSP_OK;
+}
+
+/* 1 if some input has a limit narrower than the Q range [-2^F, 2^F - 1]. */
+static uint16_t stsp_has_limits(const stsp_table_t *t)
+{
+    uint32_t i;
+    for (i = 0u; i < t->nu; ++i) {
+        if (((stsp_acc_t)t->u_min[i] > -stsp_q_one) ||
+            ((stsp_acc_t)t->u_max[i] < (stsp_q_one - 1))) {
+            return 1u;
+        }
+    }
+    return 0u;
+}
+#else
 /* 1 when every one of values[0..count) is finite, else 0. */
 static int stsp_all_finite(const stsp_f32_t *values, uint32_t count)
 {
@@ -281,6 +413,7 @@ static uint16_t stsp_has_limits(const stsp_table_t *t)
     }
     return 0u;
 }
+#endif /* STSP_ARITH_FIXED */
 
 uint32_t stsp_table_crc32(const stsp_table_t *table)
 {
@@ -297,21 +430,31 @@ uint32_t stsp_table_crc32(const stsp_table_t *table)
     crc = stsp_crc32_u32(crc, ns);
     crc = stsp_crc32_u32(crc, nt);
     crc = stsp_crc32_u32(crc, table->tick_hz);
+#ifdef STSP_ARITH_FIXED
+    crc = stsp_crc32_u32(crc, (uint32_t)table->scalar_kind);
+#endif
     for (s = 0u; s <= ns; ++s) {
         crc = stsp_crc32_u32(crc, table->stage_start[s]);
     }
     for (s = 0u; s < ns; ++s) {
         crc = stsp_crc32_u32(crc, (uint32_t)table->stage_np[s]);
     }
-    crc = stsp_crc32_f32s(crc, table->K, nt * nu * nx);
-    crc = stsp_crc32_f32s(crc, table->k0, nt * nu);
+    crc = stsp_crc32_scalars(crc, table->K, nt * nu * nx);
+    crc = stsp_crc32_scalars(crc, table->k0, nt * nu);
     if (np > 0u) {
-        crc = stsp_crc32_f32s(crc, table->L, nt * nu * np);
-        crc = stsp_crc32_f32s(crc, table->Lambda, ns * np * nx);
-        crc = stsp_crc32_f32s(crc, table->lambda0, ns * np);
+        crc = stsp_crc32_scalars(crc, table->L, nt * nu * np);
+        crc = stsp_crc32_scalars(crc, table->Lambda, ns * np * nx);
+        crc = stsp_crc32_scalars(crc, table->lambda0, ns * np);
     }
-    crc = stsp_crc32_f32s(crc, table->u_min, nu);
-    crc = stsp_crc32_f32s(crc, table->u_max, nu);
+    crc = stsp_crc32_scalars(crc, table->u_min, nu);
+    crc = stsp_crc32_scalars(crc, table->u_max, nu);
+#ifdef STSP_ARITH_FIXED
+    crc = stsp_crc32_i8s(crc, table->x_exp, nx);
+    crc = stsp_crc32_i8s(crc, table->u_exp, nu);
+    if (np > 0u) {
+        crc = stsp_crc32_i8s(crc, table->v_exp, np);
+    }
+#endif
     if (table->band_qp != NULL) {
         const stsp_bandqp_t *b = table->band_qp;
         const uint32_t q = b->q;
@@ -340,7 +483,7 @@ stsp_status_t stsp_init(stsp_ctrl_t *ctrl, const stsp_table_t *table)
         return STSP_ERR_BAD_MAGIC;
     }
     if ((table->format_version != STSP_FORMAT_VERSION) ||
-        (table->scalar_kind != STSP_SCALAR_FLOAT32)) {
+        (table->scalar_kind != STSP_SCALAR_KIND)) {
         return STSP_ERR_BAD_VERSION;
     }
     st = stsp_check_dims(table);
@@ -414,6 +557,7 @@ static uint16_t stsp_stage_of(const stsp_table_t *t, uint16_t from, uint32_t tic
     return (uint16_t)s;
 }
 
+#ifndef STSP_ARITH_FIXED
 /* The stage-0 latch of a band table: v = the band dual's multipliers for the measured x,
  * rounded to binary32, zero beyond q. Returns 1 on success; 0 if the solver failed (v_new
  * untouched): x not finite (the affine fallback then propagates the NaN/Inf, and the step
@@ -443,6 +587,7 @@ static STSP_NOINLINE int stsp_band_latch(const stsp_table_t *t, const stsp_f32_t
     }
     return 1;
 }
+#endif
 
 /* What a tick other than the ordinary one does: decided before anything is written. */
 typedef struct {
@@ -453,8 +598,8 @@ typedef struct {
 /* Cold path, part 1: range and order checks, stage search, and the latch v_new = Lambda x +
  * lambda0 (or a copy of the v kept) into the caller's scratch: the instance changes only on
  * success, in stsp_commit(). Returns a negative error, or the tick warning (or STSP_OK). */
-static stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick, const stsp_f32_t *x,
-                               stsp_f32_t *v_new, stsp_plan_t *plan)
+static stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick, const stsp_scalar_t *x,
+                               stsp_scalar_t *v_new, stsp_plan_t *plan)
 {
     const stsp_table_t *t = c->table;
     const uint32_t nx = stsp_nx(t);
@@ -487,23 +632,35 @@ static stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick, const stsp_f
     if ((c->latched == 0u) || ((stage != c->stage) && (np > 0u))) {
         plan->relatch = 1u;
     }
+#ifndef STSP_ARITH_FIXED
     if ((plan->relatch != 0u) && (stage == 0u) && (t->band_qp != NULL)) {
         if (stsp_band_latch(t, x, v_new) != 0) {
             return status;
         }
         status = STSP_WARN_BAND_FALLBACK; /* the affine map below, from the design's x0 */
     }
+#endif
     if (plan->relatch != 0u) {
         for (i = 0u; i < nl; ++i) {
-            stsp_f32_t acc = 0.0f;
+            stsp_scalar_t acc = (stsp_scalar_t)0;
             if (i < np) {
                 const uint32_t row = ((uint32_t)stage * nl) + i;
-                const stsp_f32_t *lam = &t->Lambda[row * nx];
+                const stsp_scalar_t *lam = &t->Lambda[row * nx];
                 uint32_t j;
+#ifdef STSP_ARITH_FIXED
+                /* v_q = round half up of lambda0 + sum_j Lambda x_q / 2^F, exact in stsp_acc_t
+                 * and within +-(2^F - 1) (the row bound of stsp_check_values). */
+                stsp_acc_t sum = stsp_q_bias + ((stsp_acc_t)t->lambda0[row] * stsp_q_one);
+                for (j = 0u; j < nx; ++j) {
+                    sum += stsp_q_mul(lam[j], x[j]);
+                }
+                acc = stsp_q_round(sum);
+#else
                 acc = t->lambda0[row];
                 for (j = 0u; j < nx; ++j) {
                     acc += lam[j] * x[j];
                 }
+#endif
             }
             v_new[i] = acc;
         }
@@ -517,7 +674,7 @@ static stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick, const stsp_f
 
 /* Cold path, part 2: the step succeeded; record the stage, the latch and the tick. */
 static void stsp_commit(stsp_ctrl_t *c, uint32_t tick, const stsp_plan_t *plan,
-                        const stsp_f32_t *v_new)
+                        const stsp_scalar_t *v_new)
 {
     const stsp_table_t *t = c->table;
     if (plan->relatch != 0u) {
@@ -534,23 +691,13 @@ static void stsp_commit(stsp_ctrl_t *c, uint32_t tick, const stsp_plan_t *plan,
     }
 }
 
-/* Cold path, part 3: some u[i] may be outside [u_min[i], u_max[i]] or not finite. If any is
- * NaN/Inf, returns the error that says why: the state was not finite, or it was and the law
- * (or the latch) overflowed. Otherwise clamps (bits of *mask) and returns
- * STSP_WARN_SATURATED, or STSP_OK if nothing needed clamping (a false alarm of the fast
- * check). */
-static STSP_NOINLINE stsp_status_t stsp_limit(const stsp_table_t *t, const stsp_f32_t *x,
-                                              stsp_f32_t *u, uint16_t *mask)
+/* Clamps u[i] to [u_min[i], u_max[i]] (bits of *mask); STSP_WARN_SATURATED if any was, else
+ * STSP_OK. */
+static stsp_status_t stsp_clamp(const stsp_table_t *t, stsp_scalar_t *u, uint16_t *mask)
 {
     const uint32_t nu = stsp_nu(t);
     uint32_t i;
     uint32_t m = 0u;
-    for (i = 0u; i < nu; ++i) {
-        if (stsp_isfinite_f32(u[i]) == 0) {
-            return (stsp_all_finite(x, stsp_nx(t)) == 0) ? STSP_ERR_NONFINITE_STATE
-                                                         : STSP_ERR_NONFINITE_OUTPUT;
-        }
-    }
     for (i = 0u; i < nu; ++i) {
         if (u[i] > t->u_max[i]) {
             u[i] = t->u_max[i];
@@ -564,6 +711,90 @@ static STSP_NOINLINE stsp_status_t stsp_limit(const stsp_table_t *t, const stsp_
     }
     *mask = (uint16_t)m;
     return (m != 0u) ? STSP_WARN_SATURATED : STSP_OK;
+}
+
+#ifdef STSP_ARITH_FIXED
+/* Cold path, part 3, fixed point: some u[i] is outside [u_min[i], u_max[i]]; clamp it (the
+ * law's u_q is always a valid integer: there is no non-finite case). */
+static STSP_NOINLINE stsp_status_t stsp_limit(const stsp_table_t *t, const stsp_scalar_t *x,
+                                              stsp_scalar_t *u, uint16_t *mask)
+{
+    (void)x;
+    return stsp_clamp(t, u, mask);
+}
+
+/* The law at `tick` with multipliers v, fixed point (Q15: int32 accumulator, Q31: int64):
+ *     u_q[i] = floor((k0[i] 2^F + sum_j K[i][j] x_q[j] + sum_c L[i][c] v_q[c]) / 2^F + 1/2)
+ * (the table stores -K, -k0, -L: one multiply-accumulate per term). Scaling: every term of
+ * row i is in units of 2^(u_exp[i] - 2F) (the gains carry x_exp, v_exp and u_exp), so the
+ * only shift is the final one by F. Overflow: none; the sum is exact (integer, any order
+ * gives the same bits) and bounded by (2^F - 1) 2^F, the accumulator by 2^(2F+1) (see
+ * stsp_acc_t); u_q is within +-(2^F - 1) without saturation. Returns nonzero when some u_q[i]
+ * lies outside [u_min[i], u_max[i]] (only checked when the table is limited). */
+static STSP_ALWAYS_INLINE uint32_t stsp_law(const stsp_table_t *t, uint32_t tick,
+                                            const stsp_scalar_t *x, const stsp_scalar_t *v,
+                                            stsp_scalar_t *u, uint32_t limited)
+{
+    const uint32_t nx = stsp_nx(t);
+    const uint32_t nu = stsp_nu(t);
+    const uint32_t nl = stsp_nl(t);
+    const stsp_scalar_t *K = &t->K[tick * (nu * nx)];
+    const stsp_scalar_t *k0 = &t->k0[tick * nu];
+    /* L may be NULL when nl == 0: no pointer arithmetic on it then. */
+    const stsp_scalar_t *L = (nl > 0u) ? &t->L[tick * (nu * nl)] : t->L;
+    stsp_scalar_t y[STSP_MAX_NU];
+    uint32_t i;
+    uint32_t out = 0u;
+    STSP_UNROLL
+    for (i = 0u; i < nu; ++i) {
+        stsp_acc_t acc = stsp_q_bias + ((stsp_acc_t)k0[i] * stsp_q_one);
+        uint32_t j;
+        STSP_UNROLL
+        for (j = 0u; j < nx; ++j) {
+            acc += stsp_q_mul(K[j], x[j]);
+        }
+        K = &K[nx];
+        if (nl > 0u) {
+            STSP_UNROLL
+            for (j = 0u; j < nl; ++j) {
+                acc += stsp_q_mul(L[j], v[j]);
+            }
+            L = &L[nl];
+        }
+        y[i] = stsp_q_round(acc);
+    }
+    if (limited != 0u) {
+        STSP_UNROLL
+        for (i = 0u; i < nu; ++i) {
+            if ((y[i] < t->u_min[i]) || (y[i] > t->u_max[i])) {
+                out = 1u;
+            }
+        }
+    }
+    STSP_UNROLL
+    for (i = 0u; i < nu; ++i) {
+        u[i] = y[i];
+    }
+    return out;
+}
+#else
+/* Cold path, part 3: some u[i] may be outside [u_min[i], u_max[i]] or not finite. If any is
+ * NaN/Inf, returns the error that says why: the state was not finite, or it was and the law
+ * (or the latch) overflowed. Otherwise clamps (bits of *mask) and returns
+ * STSP_WARN_SATURATED, or STSP_OK if nothing needed clamping (a false alarm of the fast
+ * check). */
+static STSP_NOINLINE stsp_status_t stsp_limit(const stsp_table_t *t, const stsp_f32_t *x,
+                                              stsp_f32_t *u, uint16_t *mask)
+{
+    const uint32_t nu = stsp_nu(t);
+    uint32_t i;
+    for (i = 0u; i < nu; ++i) {
+        if (stsp_isfinite_f32(u[i]) == 0) {
+            return (stsp_all_finite(x, stsp_nx(t)) == 0) ? STSP_ERR_NONFINITE_STATE
+                                                         : STSP_ERR_NONFINITE_OUTPUT;
+        }
+    }
+    return stsp_clamp(t, u, mask);
 }
 
 /* The law at `tick` with multipliers v, in the documented order:
@@ -635,13 +866,14 @@ static STSP_ALWAYS_INLINE uint32_t stsp_law(const stsp_table_t *t, uint32_t tick
     }
     return out;
 }
+#endif /* STSP_ARITH_FIXED */
 
 /* Every tick but the ordinary one: range, order, repeat, skip, stage change, latch. */
 static STSP_NOINLINE stsp_status_t stsp_step_cold(stsp_ctrl_t *ctrl, uint32_t tick,
-                                                  const stsp_f32_t *x, stsp_f32_t *u)
+                                                  const stsp_scalar_t *x, stsp_scalar_t *u)
 {
     const stsp_table_t *t = ctrl->table;
-    stsp_f32_t v_new[STSP_MAX_LATCH];
+    stsp_scalar_t v_new[STSP_MAX_LATCH];
     stsp_plan_t plan = {0u, 0u};
     stsp_status_t status;
     uint16_t mask = 0u;
@@ -666,7 +898,7 @@ static STSP_NOINLINE stsp_status_t stsp_step_cold(stsp_ctrl_t *ctrl, uint32_t ti
 
 /* An ordinary tick whose command is out of range or not finite. */
 static STSP_NOINLINE stsp_status_t stsp_step_fixup(stsp_ctrl_t *ctrl, uint32_t tick,
-                                                   const stsp_f32_t *x, stsp_f32_t *u)
+                                                   const stsp_scalar_t *x, stsp_scalar_t *u)
 {
     uint16_t mask = 0u;
     const stsp_status_t st = stsp_limit(ctrl->table, x, u, &mask);
@@ -679,7 +911,8 @@ static STSP_NOINLINE stsp_status_t stsp_step_fixup(stsp_ctrl_t *ctrl, uint32_t t
     return st;
 }
 
-stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_t *x, stsp_f32_t *u)
+stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
+                        stsp_scalar_t *u)
 {
     if ((u == NULL) || (ctrl == NULL)) {
         return STSP_ERR_NULL;
@@ -712,6 +945,7 @@ const char *stsp_status_str(stsp_status_t status)
     case STSP_WARN_TICK_SKIPPED: text = "tick skipped: evaluated at the given tick"; break;
     case STSP_WARN_TICK_REPEATED: text = "tick repeated: recomputed without a new latch"; break;
     case STSP_WARN_SATURATED: text = "command clamped to the actuator limits"; break;
+    case STSP_WARN_STATE_CLAMPED: text = "state outside the fixed-point range, saturated"; break;
     case STSP_WARN_BAND_FALLBACK: text = "band QP failed: latched the design's affine map"; break;
     case STSP_ERR_NULL: text = "null pointer argument"; break;
     case STSP_ERR_NOT_INITIALIZED: text = "controller not initialized"; break;

@@ -53,6 +53,39 @@ uint32_t stsp_crc32_f64s(uint32_t crc, const double *values, uint32_t count)
     return c;
 }
 
+#ifdef STSP_ARITH_FIXED
+uint32_t stsp_crc32_i8s(uint32_t crc, const int8_t *values, uint32_t count)
+{
+    uint32_t c = crc;
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        c = stsp_crc32_byte(c, (uint32_t)(uint8_t)values[i]);
+    }
+    return c;
+}
+
+uint32_t stsp_crc32_q15s(uint32_t crc, const stsp_q15_t *values, uint32_t count)
+{
+    uint32_t c = crc;
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        const uint32_t bits = (uint32_t)(uint16_t)values[i];
+        c = stsp_crc32_byte(stsp_crc32_byte(c, bits), bits >> 8);
+    }
+    return c;
+}
+
+uint32_t stsp_crc32_q31s(uint32_t crc, const stsp_q31_t *values, uint32_t count)
+{
+    uint32_t c = crc;
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        c = stsp_crc32_u32(c, (uint32_t)values[i]);
+    }
+    return c;
+}
+#endif
+
 uint32_t stsp_crc32_end(uint32_t crc)
 {
     return crc ^ 0xFFFFFFFFu;

@@ -26,14 +26,15 @@ def _design(args) -> int:
     from .pipeline import design_problem, design_summary, generated_files, write_outputs
     problem = load_problem(args.problem)
     d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem))
-    files = generated_files(d, Path(args.problem).name)
+    arith = args.arith or problem.options.get("arith", "float32")
+    files = generated_files(d, Path(args.problem).name, arith)
     if args.out:
         written = write_outputs(args.out, files)
         if not args.json:
             for path in written:
                 print(f"wrote {path}")
     if args.json:
-        print(json.dumps(design_summary(d), indent=2, sort_keys=True))
+        print(files[next(k for k in files if k.endswith(".json"))], end="")
     elif not args.out:
         print(f"J0 = {d.design.J0:.10g} ({d.discretization} design; oracle of the law "
               f"{d.law.J:.10g}, of the float32 table at {d.table.tick_hz} Hz "
@@ -116,6 +117,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--ignore-noise", action="store_true",
                    help="design as if there were no noise (the paper's Remark 2)")
+    p.add_argument("--arith", default=None, metavar="{float32,q15,q31}",
+                   help="arithmetic of the generated tables: float32 (default), or fixed-point "
+                        "Q15/Q31 written as <name>_<arith>.{c,h,json} (docs/firmware.md). "
+                        "Default: the file's [design] arith")
     p.set_defaults(func=_design)
 
     p = sub.add_parser("simulate", help="Monte Carlo with the compiled C controller in the loop")
@@ -152,6 +157,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if getattr(args, "arith", None) not in (None, "float32", "q15", "q31"):
+        print(f"stospline: error: --arith must be one of ['float32', 'q15', 'q31'], "
+              f"got {args.arith!r}", file=sys.stderr)
+        return 2
     try:
         return args.func(args)
     except ProblemError as exc:

@@ -25,11 +25,12 @@ STATUS = {
     "ERR_NOT_INITIALIZED": -2, "ERR_BAD_MAGIC": -3, "ERR_BAD_VERSION": -4, "ERR_BAD_DIMS": -5,
     "ERR_BAD_CRC": -6, "ERR_TICK_RANGE": -7, "ERR_TICK_ORDER": -8,
     "WARN_SATURATED": 3, "ERR_NONFINITE_STATE": -9, "ERR_NONFINITE_OUTPUT": -10,
-    "ERR_BAD_VALUES": -11, "WARN_BAND_FALLBACK": 4,
+    "ERR_BAD_VALUES": -11, "WARN_STATE_CLAMPED": 4, "WARN_BAND_FALLBACK": 5,
 }
 
 _CDEF = """
 typedef float stsp_f32_t;
+typedef %(scalar)s stsp_scalar_t;
 typedef int... stsp_status_t;
 typedef struct {
     uint16_t q; uint16_t nx; const double *Nt; const double *mt; const double *W;
@@ -40,9 +41,9 @@ typedef struct {
     uint16_t nx; uint16_t nu; uint16_t n_latch; uint16_t n_stages;
     uint32_t n_ticks; uint32_t tick_hz;
     const uint32_t *stage_start; const uint16_t *stage_np;
-    const stsp_f32_t *K; const stsp_f32_t *k0; const stsp_f32_t *L;
-    const stsp_f32_t *Lambda; const stsp_f32_t *lambda0;
-    const stsp_f32_t *u_min; const stsp_f32_t *u_max;
+    const stsp_scalar_t *K; const stsp_scalar_t *k0; const stsp_scalar_t *L;
+    const stsp_scalar_t *Lambda; const stsp_scalar_t *lambda0;
+    const stsp_scalar_t *u_min; const stsp_scalar_t *u_max;%(exps)s
     const stsp_bandqp_t *band_qp;
     uint32_t crc32; uint8_t problem_sha256[32];
 } stsp_table_t;
@@ -56,12 +57,16 @@ stsp_status_t stsp_init_expect(stsp_ctrl_t *ctrl, const stsp_table_t *table, uin
                                uint32_t nu);
 stsp_status_t stsp_reset(stsp_ctrl_t *ctrl);
 stsp_status_t stsp_verify(stsp_ctrl_t *ctrl);
-stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_t *x, stsp_f32_t *u);
-const char *stsp_status_str(stsp_status_t status);
+stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
+                        stsp_scalar_t *u);
+const char *stsp_status_str(stsp_status_t status);%(conv)s
 const stsp_table_t *harness_table(void);
 int harness_init_batch(stsp_ctrl_t *ctrls, size_t count, const stsp_table_t *table);
 int harness_step_batch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
-                       const stsp_f32_t *x, stsp_f32_t *u, int *status);
+                       const stsp_scalar_t *x, stsp_scalar_t *u, int *status);
+int harness_pair_batch(const stsp_ctrl_t *proto, size_t count, const uint32_t *t_latch,
+                       const stsp_scalar_t *x_latch, const uint32_t *tick,
+                       const stsp_scalar_t *x, stsp_scalar_t *u, int *status);
 void harness_plant_tick(size_t paths, size_t n, size_t m, size_t mz, size_t substeps,
                         double dt, const double *Ad, const double *Bd,
                         size_t g_count, const size_t *g_index, const double *g_value,
@@ -86,7 +91,7 @@ int harness_init_batch(stsp_ctrl_t *ctrls, size_t count, const stsp_table_t *tab
     return s;
 }
 int harness_step_batch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
-                       const stsp_f32_t *x, stsp_f32_t *u, int *status) {
+                       const stsp_scalar_t *x, stsp_scalar_t *u, int *status) {
     const stsp_table_t *t = ctrls[0].table;
     size_t i, nx = t ? t->nx : 0u, nu = t ? t->nu : 0u; int worst = 0;
     for (i = 0; i < count; ++i) {
@@ -95,7 +100,38 @@ int harness_step_batch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
     }
     return worst;
 }
+/* Sample k: a copy of the fresh instance `proto` latches at t_latch[k] from x_latch[k], then
+ * steps tick[k] with x[k]; u[k] and the worse of the two statuses are kept. */
+int harness_pair_batch(const stsp_ctrl_t *proto, size_t count, const uint32_t *t_latch,
+                       const stsp_scalar_t *x_latch, const uint32_t *tick,
+                       const stsp_scalar_t *x, stsp_scalar_t *u, int *status) {
+    size_t k, nx = proto->table->nx, nu = proto->table->nu; int worst = 0;
+    for (k = 0; k < count; ++k) {
+        stsp_ctrl_t c = *proto;
+        int s1 = (int)stsp_step(&c, t_latch[k], x_latch + k * nx, u + k * nu);
+        int s2 = (int)stsp_step(&c, tick[k], x + k * nx, u + k * nu);
+        status[k] = (s1 < 0) ? s1 : s2;
+        if (status[k] < worst) worst = status[k];
+    }
+    return worst;
+}
 """
+
+# Per variant: C type of stsp_scalar_t, numpy dtype, compile definition.
+VARIANTS = {"float32": ("float", np.float32, []),
+            "q15": ("int16_t", np.int16, ["-DSTSP_ARITH_Q15"]),
+            "q31": ("int32_t", np.int32, ["-DSTSP_ARITH_Q31"])}
+_EXPS = "\n    const int8_t *x_exp; const int8_t *u_exp; const int8_t *v_exp;"
+_CONV = """
+stsp_status_t stsp_state_to_q(const stsp_ctrl_t *ctrl, const stsp_f32_t *x, stsp_scalar_t *x_q);
+stsp_status_t stsp_command_to_f32(const stsp_ctrl_t *ctrl, const stsp_scalar_t *u_q,
+                                  stsp_f32_t *u);"""
+
+
+def _cdef(arith: str) -> str:
+    fixed = arith != "float32"
+    return _CDEF % {"scalar": VARIANTS[arith][0], "exps": _EXPS if fixed else "",
+                    "conv": _CONV if fixed else ""}
 
 _CFLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-DSTSP_HOST_MESSAGES"]
 
@@ -119,6 +155,15 @@ class CompiledController:
     table: GainTable
 
     @property
+    def arith(self) -> str:
+        return getattr(self.table, "arith", "float32")
+
+    @property
+    def dtype(self):
+        """numpy type of x, u and the tables: float32, int16 (Q15) or int32 (Q31)."""
+        return VARIANTS[self.arith][1]
+
+    @property
     def c_table(self):
         return self.lib.harness_table()
 
@@ -137,12 +182,12 @@ class CompiledController:
         """Return ``step(tick, X) -> (U, status)`` driving `count` fresh instances."""
         n, m, _ = self.table.dims
         ctrls = self.new_instances(count)
-        xbuf = np.zeros((count, n), dtype=np.float32)
-        ubuf = np.zeros((count, m), dtype=np.float32)
+        xbuf = np.zeros((count, n), dtype=self.dtype)
+        ubuf = np.zeros((count, m), dtype=self.dtype)
         sbuf = np.zeros(count, dtype=np.intc)
         ffi, lib = self.ffi, self.lib
-        px = ffi.cast("const stsp_f32_t *", ffi.from_buffer(xbuf))
-        pu = ffi.cast("stsp_f32_t *", ffi.from_buffer(ubuf))
+        px = ffi.cast("const stsp_scalar_t *", ffi.from_buffer(xbuf))
+        pu = ffi.cast("stsp_scalar_t *", ffi.from_buffer(ubuf))
         ps = ffi.cast("int *", ffi.from_buffer(sbuf))
 
         def step(tick: int, X: np.ndarray):
@@ -152,6 +197,28 @@ class CompiledController:
 
         step.instances = ctrls
         return step
+
+    def pair_steps(self, t_latch, x_latch, tick, x):
+        """For each sample k, a fresh instance latches at ``t_latch[k]`` from ``x_latch[k]``
+        and is then stepped at ``tick[k]`` with ``x[k]``: returns ``(U, status)``."""
+        n, m, _ = self.table.dims
+        ffi = self.ffi
+        proto = self.new_instances(1)
+        arrs = [np.ascontiguousarray(t_latch, np.uint32),
+                np.ascontiguousarray(x_latch, self.dtype).reshape(-1, n),
+                np.ascontiguousarray(tick, np.uint32),
+                np.ascontiguousarray(x, self.dtype).reshape(-1, n)]
+        count = len(arrs[0])
+        U = np.zeros((count, m), dtype=self.dtype)
+        status = np.zeros(count, dtype=np.intc)
+        self.lib.harness_pair_batch(
+            proto, count, ffi.cast("const uint32_t *", ffi.from_buffer(arrs[0])),
+            ffi.cast("const stsp_scalar_t *", ffi.from_buffer(arrs[1])),
+            ffi.cast("const uint32_t *", ffi.from_buffer(arrs[2])),
+            ffi.cast("const stsp_scalar_t *", ffi.from_buffer(arrs[3])),
+            ffi.cast("stsp_scalar_t *", ffi.from_buffer(U)),
+            ffi.cast("int *", ffi.from_buffer(status)))
+        return U, status
 
     def plant_tick(self, stage, Ad, Bd, dt: float, substeps: int, dZ: np.ndarray,
                    U: np.ndarray, X: np.ndarray, cost: np.ndarray) -> None:
@@ -186,10 +253,12 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     import cffi
 
     header, source = generate_c(table)
+    arith = getattr(table, "arith", "float32")
+    cdef, cflags = _cdef(arith), _CFLAGS + VARIANTS[arith][2]
     fw = firmware_dir()
     fw_sources = sorted((fw / "src").glob("*.c"))
     digest = hashlib.sha256()
-    for blob in [header, source, _CDEF, _BATCH, " ".join(_CFLAGS)]:
+    for blob in [header, source, cdef, _BATCH, " ".join(cflags)]:
         digest.update(blob.encode())
     for path in sorted(fw.rglob("*.[ch]")) + [Path(__file__).with_name("plant.c")]:
         digest.update(path.read_bytes())
@@ -203,7 +272,7 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
         (out / f"{table.name}.h").write_text(header)
         (out / f"{table.name}.c").write_text(source)
         ffib = cffi.FFI()
-        ffib.cdef(_CDEF)
+        ffib.cdef(cdef)
         ffib.set_source(
             modname,
             f'#include "stospline/stsp_controller.h"\n#include "{table.name}.h"\n'
@@ -211,7 +280,7 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
             sources=[str(s) for s in fw_sources] + [str(out / f"{table.name}.c"),
                                                     str(Path(__file__).with_name("plant.c"))],
             include_dirs=[str(fw / "include"), str(fw / "src"), str(out)],
-            extra_compile_args=_CFLAGS)
+            extra_compile_args=cflags)
         so = ffib.compile(tmpdir=str(out), verbose=not quiet)
         existing = [Path(so)]
     spec = importlib.util.spec_from_file_location(modname, existing[0])

@@ -40,6 +40,7 @@ class Moments:
     knot_constraint: list[np.ndarray]
     path_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     path_mean: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    path_var: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # state variances
 
 
 def _knot_terms(problem: Problem, k: int, M: np.ndarray, n: int):
@@ -121,6 +122,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     J = 0.0
     means, covs, cons = [], [], []
     path_mean = [x0.copy()] if path else []
+    path_var = [np.zeros(n)] if path else []
     xs, vs = slice(0, n), slice(n, n + P)
     for k in range(table.n_stages):
         stage = problem.stages[k]
@@ -170,11 +172,13 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             M[vs, xs] = Mxv.T
             if path:
                 path_mean.append(M[:n, -1].copy())
+                path_var.append(np.diag(M[xs, xs]) - M[:n, -1] ** 2)
         pen, mean, cov, con = _knot_terms(problem, k, M, n)
         J += pen
         means.append(mean); covs.append(cov); cons.append(con)
     path_t = problem.t0 + np.arange(table.n_ticks + 1) * h if path else np.zeros(0)
-    return Moments(float(J), means, covs, cons, path_t, np.array(path_mean))
+    return Moments(float(J), means, covs, cons, path_t, np.array(path_mean),
+                   np.maximum(np.array(path_var), 0.0))
 
 
 def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: float = 1e-12,

@@ -20,9 +20,10 @@ from .montecarlo import MonteCarloResult, simulate, z_value
 from .oracle import Moments, evaluate_continuous, evaluate_table
 from .problem import Problem, ProblemError
 from .tables import GainTable, sample_design
+from .fixed import DEFAULT_SIGMAS, FixedTable, quantize_table, state_range
 
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
-           "simulation_summary", "write_outputs", "start_from"]
+           "simulation_summary", "write_outputs", "start_from", "double_table", "fixed_table"]
 
 # JSON summaries keep 10 significant digits and an absolute quantum of 1e-10: the designs
 # agree to ~1e-14 however the arithmetic is ordered, so regenerated files stay byte-identical
@@ -209,12 +210,36 @@ def write_outputs(out_dir: str | Path, files: dict[str, str]) -> list[Path]:
     return [final for _, final in staged]
 
 
-def generated_files(d: Designed, source_name: str) -> dict[str, str]:
+def double_table(d: Designed) -> GainTable:
+    """The design's per-tick table before float32 rounding (double precision)."""
+    if isinstance(d.design, ContinuousDesign):
+        return sample_design(d.design, quantize=False)
+    return d.design.table(quantize=False)
+
+
+def fixed_table(d: Designed, arith: str, *, sigmas: float = DEFAULT_SIGMAS,
+                x_range=None) -> FixedTable:
+    """Q15/Q31 tables of a design (`stospline.fixed`): state scales from `x_range`, or else
+    from the oracle's predicted range ``max_t |mean| + sigmas * std`` of the float32 law."""
+    if x_range is None:
+        x_range = state_range(d.problem, d.table, sigmas=sigmas)
+    return quantize_table(double_table(d), arith, x_range)
+
+
+def generated_files(d: Designed, source_name: str, arith: str = "float32") -> dict[str, str]:
+    """``<name>.{h,c,json}`` for float32; ``<name>_<arith>.{h,c,json}`` for Q15/Q31, whose
+    summary adds the scales and the error bound (``fixed``)."""
     import json
-    header, source = generate_c(d.table, source_name=source_name)
-    summary = json.dumps(design_summary(d), indent=2, sort_keys=True) + "\n"
-    n = d.problem.name
-    return {f"{n}.h": header, f"{n}.c": source, f"{n}.json": summary}
+    summary = design_summary(d)
+    if arith == "float32":
+        table, n = d.table, d.problem.name
+    else:
+        table = fixed_table(d, arith)
+        n = table.name
+        summary["fixed"] = _r({**table.summary(), "state_sigmas": DEFAULT_SIGMAS})
+    header, source = generate_c(table, source_name=source_name)
+    text = json.dumps(summary, indent=2, sort_keys=True) + "\n"
+    return {f"{n}.h": header, f"{n}.c": source, f"{n}.json": text}
 
 
 def simulate_problem(d: Designed, *, paths: int, seed: int, substeps: int = 2,

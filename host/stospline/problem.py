@@ -176,7 +176,8 @@ class Problem:
 
 _TOP_KEYS = {"name", "t0", "x0", "tick_hz", "u_min", "u_max", "dynamics", "cost", "knots",
              "stages", "plot", "regions", "design"}
-_DESIGN_OPTIONS = {"mode": ("stagewise", "joint"), "discretization": ("exact-zoh", "continuous")}
+_DESIGN_OPTIONS = {"mode": ("stagewise", "joint"), "discretization": ("exact-zoh", "continuous"),
+                   "arith": ("float32", "q15", "q31")}
 _TOP_REQUIRED = {"name", "x0", "tick_hz", "dynamics", "cost", "knots"}
 _DYN_KEYS, _DYN_REQUIRED = {"A", "B", "noise"}, {"A", "B"}
 _COST_KEYS, _COST_REQUIRED = {"Q", "S", "R", "q", "r", "rho", "tracking"}, {"R"}

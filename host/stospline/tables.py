@@ -222,17 +222,28 @@ def table_crc32(table: GainTable) -> int:
 
     The firmware computes the same value in ``stsp_table_crc32``: the dimensions and tick rate
     as u32, ``stage_start`` as u32, ``stage_np`` as u32, then K, k0, L, Lambda, lambda0 (these
-    three only when P > 0), u_min, u_max as IEEE-754 binary32 bit patterns, each little-endian;
-    then, with a band QP, its q and n as u32 and Nt, mt, W, lo, hi as binary64 bit patterns.
+    three only when P > 0), u_min, u_max as IEEE-754 binary32 bit patterns, each little-endian.
+    A fixed-point table (`stospline.fixed.FixedTable`) adds its scalar kind as u32 after the
+    tick rate, stores the arrays as little-endian int16 (Q15) or int32 (Q31), and ends with
+    x_exp, u_exp and v_exp (when P > 0) as one signed byte each. Then, with a band QP (float32
+    tables only), its q and n as u32 and Nt, mt, W, lo, hi as binary64 bit patterns.
     """
     n, m, P = table.dims
+    arith = getattr(table, "arith", "float32")
     head = struct.pack("<6I", n, m, P, table.n_stages, table.n_ticks, table.tick_hz)
+    if arith != "float32":
+        head += struct.pack("<I", table.scalar_kind)
     parts = [head, np.asarray(table.stage_start, "<u4").tobytes(),
              np.asarray(table.stage_np, "<u4").tobytes()]
-    parts += [np.asarray(a, "<f4").tobytes()
-              for a in (table.K, table.k0, table.L, table.Lambda, table.lambda0,
-                        table.u_min, table.u_max)]
-    b = table.band_qp
+    arrays = [table.K, table.k0, table.L, table.Lambda, table.lambda0, table.u_min, table.u_max]
+    if arith == "float32":
+        parts += [np.asarray(a, "<f4").tobytes() for a in arrays]
+    else:
+        dtype = {"q15": "<i2", "q31": "<i4"}[arith]
+        parts += [np.asarray(a).astype(dtype).tobytes() for a in arrays]
+        parts += [np.asarray(e).astype("i1").tobytes()
+                  for e in (table.x_exp, table.u_exp, table.v_exp)]
+    b = getattr(table, "band_qp", None)
     if b is not None:
         parts.append(struct.pack("<2I", b.q, b.Nt.shape[1]))
         parts += [np.asarray(a, "<f8").tobytes() for a in (b.Nt, b.mt, b.W, b.lo, b.hi)]

@@ -1,5 +1,6 @@
 /* QEMU replay test: step a fresh controller on the target through the host build's recorded
- * closed-loop states and require the same float32 commands.
+ * closed-loop states and require the same commands: float32 (bit patterns, tolerance in ulp)
+ * or Q15/Q31 (integers, tolerance in command units), whichever variant the image is built for.
  *
  * The records (tools/arm/make_replay.py) are a subset of the 6000 ticks in increasing order;
  * they include the first tick of every stage (0 and 3000), where the controller latches, so
@@ -12,7 +13,6 @@
 #include <string.h>
 
 #include "replay_records.h"
-#include "robot_corridor.h"
 #include "stospline/stsp_controller.h"
 
 #ifndef REPLAY_MAX_ULP
@@ -20,6 +20,19 @@
 #endif
 #define REPLAY_MAX_REPORTS 10u
 
+#ifdef STSP_ARITH_FIXED
+/* Fixed point: the integer's two's complement bits, and the distance in command units. */
+static uint32_t f32_bits(stsp_scalar_t value)
+{
+    return (uint32_t)(int32_t)value;
+}
+
+static uint32_t ulp_distance(stsp_scalar_t a, stsp_scalar_t b)
+{
+    int64_t d = (int64_t)a - (int64_t)b;
+    return (uint32_t)((d < 0) ? -d : d);
+}
+#else
 static uint32_t f32_bits(stsp_f32_t value)
 {
     uint32_t bits;
@@ -36,6 +49,7 @@ static uint32_t ulp_distance(stsp_f32_t a, stsp_f32_t b)
     uint32_t kb = (bb & 0x80000000u) ? 0x80000000u - (bb & 0x7FFFFFFFu) : 0x80000000u + bb;
     return (ka > kb) ? ka - kb : kb - ka;
 }
+#endif
 
 int main(void)
 {
@@ -46,23 +60,23 @@ int main(void)
     uint32_t latches = 0u, order_errors = 0u, expect_latches = 1u;
 
     printf("replay: %lu records, table crc32 0x%08lX (host 0x%08lX), tolerance %u ulp\n",
-           (unsigned long)replay_record_count, (unsigned long)robot_corridor_table.crc32,
+           (unsigned long)replay_record_count, (unsigned long)REPLAY_TABLE.crc32,
            (unsigned long)replay_table_crc32, (unsigned)REPLAY_MAX_ULP);
-    if (replay_table_crc32 != robot_corridor_table.crc32) {
+    if (replay_table_crc32 != REPLAY_TABLE.crc32) {
         printf("replay: FAIL: records come from a different table\n");
         return 1;
     }
-    for (i = 1u; i < robot_corridor_table.n_stages; ++i) {
-        expect_latches += (robot_corridor_table.stage_np[i] > 0u) ? 1u : 0u;
+    for (i = 1u; i < REPLAY_TABLE.n_stages; ++i) {
+        expect_latches += (REPLAY_TABLE.stage_np[i] > 0u) ? 1u : 0u;
     }
-    st = stsp_init(&ctrl, &robot_corridor_table);
+    st = stsp_init(&ctrl, &REPLAY_TABLE);
     if (st != STSP_OK) {
         printf("replay: FAIL: stsp_init returned %d\n", (int)st);
         return 1;
     }
     for (r = 0u; r < replay_record_count; ++r) {
         const replay_record_t *rec = &replay_records[r];
-        stsp_f32_t u[ROBOT_CORRIDOR_NU];
+        stsp_scalar_t u[REPLAY_NU];
         stsp_status_t expect;
         uint16_t stage_before = ctrl.stage, latched_before = ctrl.latched;
         if (r > 0u && rec->tick <= prev_tick) {
@@ -79,12 +93,12 @@ int main(void)
         }
         /* A latch: the first step, or entering a stage that latches (stage_np > 0). */
         if (latched_before == 0u ||
-            (ctrl.stage != stage_before && robot_corridor_table.stage_np[ctrl.stage] > 0u)) {
+            (ctrl.stage != stage_before && REPLAY_TABLE.stage_np[ctrl.stage] > 0u)) {
             ++latches;
             printf("replay: tick %lu latched stage %u\n", (unsigned long)rec->tick,
                    (unsigned)ctrl.stage);
         }
-        for (i = 0u; i < ROBOT_CORRIDOR_NU; ++i) {
+        for (i = 0u; i < REPLAY_NU; ++i) {
             uint32_t d = ulp_distance(u[i], rec->u[i]);
             int same = f32_bits(u[i]) == f32_bits(rec->u[i]);
 #if REPLAY_MAX_ULP == 0

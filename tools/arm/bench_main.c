@@ -9,6 +9,8 @@
  * STSP_WARN_SATURATED). Copies 1 and 2 share the flash gain arrays; only the header, the two
  * limit arrays and the CRC (stsp_table_crc32) differ. The x values do not change the executed
  * path (no data-dependent branches for finite x, except the clamping in table 2).
+ * Fixed-point builds (STSP_ARITH_Q15/Q31) use the robot's Q tables, the same states converted
+ * to Q units, and the limits in command units: +-(2^F - 2) (inactive) and +-0.5 converted.
  * After the loop it prints one line per stsp_step call, in call order, which the script
  * pairs with the calls it finds in QEMU's execution trace, and the table's dimensions:
  *     call <index> table <0|1|2> tick <tick> stage <stage> latch <0|1> status <status>
@@ -16,7 +18,7 @@
 #include <stdint.h>
 #include <stdio.h>
 
-#include "robot_corridor.h"
+#include "robot_variant.h"
 #include "stospline/stsp_controller.h"
 
 #define BENCH_REPS 10u
@@ -35,9 +37,9 @@ typedef struct {
 static bench_call_t calls[BENCH_CALLS];
 static uint32_t n_calls;
 
-static void bench_step(stsp_ctrl_t *c, uint32_t tick, const stsp_f32_t *x, uint8_t table)
+static void bench_step(stsp_ctrl_t *c, uint32_t tick, const stsp_scalar_t *x, uint8_t table)
 {
-    stsp_f32_t u[ROBOT_CORRIDOR_NU];
+    stsp_scalar_t u[ROBOT_NU];
     uint16_t stage_before = c->stage, latched_before = c->latched;
     stsp_status_t st = stsp_step(c, tick, x, u);
     if (n_calls < BENCH_CALLS) {
@@ -53,10 +55,23 @@ static void bench_step(stsp_ctrl_t *c, uint32_t tick, const stsp_f32_t *x, uint8
     }
 }
 
+/* State j = milli / 1000 in the build's arithmetic (Q: x_q = x 2^(F - x_exp[j]), integers). */
+static stsp_scalar_t bench_state(const stsp_table_t *t, uint32_t j, int32_t milli)
+{
+#ifdef STSP_ARITH_FIXED
+    return (stsp_scalar_t)(((int64_t)milli * ((int64_t)1 << (STSP_Q_FRAC_BITS - t->x_exp[j]))) /
+                           1000);
+#else
+    (void)t;
+    (void)j;
+    return (stsp_f32_t)milli / 1000.0f;
+#endif
+}
+
 static int bench_table(const stsp_table_t *table, uint8_t label)
 {
-    static const stsp_f32_t x0[ROBOT_CORRIDOR_NX] = {-5.0f, 0.0f, 1.0f, 0.0f};
-    stsp_f32_t x[ROBOT_CORRIDOR_NX];
+    static const int32_t x0_milli[ROBOT_NX] = {-5000, 0, 1000, 0};
+    stsp_scalar_t x[ROBOT_NX];
     stsp_ctrl_t ctrl;
     const uint32_t sw = table->stage_start[1]; /* first tick of stage 1 */
     uint32_t rep, k, i;
@@ -67,8 +82,8 @@ static int bench_table(const stsp_table_t *table, uint8_t label)
     }
     for (rep = 0u; rep < BENCH_REPS; ++rep) {
         (void)stsp_reset(&ctrl);
-        for (i = 0u; i < ROBOT_CORRIDOR_NX; ++i) {
-            x[i] = x0[i] + 0.01f * (stsp_f32_t)rep;
+        for (i = 0u; i < ROBOT_NX; ++i) {
+            x[i] = bench_state(table, i, x0_milli[i] + 10 * (int32_t)rep);
         }
         for (k = 0u; k < BENCH_RUN; ++k) {
             bench_step(&ctrl, k, x, label);
@@ -82,19 +97,33 @@ static int bench_table(const stsp_table_t *table, uint8_t label)
 
 int main(void)
 {
-    static const stsp_f32_t wide_lo[ROBOT_CORRIDOR_NU] = {-1000.0f, -1000.0f};
-    static const stsp_f32_t wide_hi[ROBOT_CORRIDOR_NU] = {1000.0f, 1000.0f};
-    static const stsp_f32_t tight_lo[ROBOT_CORRIDOR_NU] = {-0.5f, -0.5f};
-    static const stsp_f32_t tight_hi[ROBOT_CORRIDOR_NU] = {0.5f, 0.5f};
-    stsp_table_t wide = robot_corridor_table, tight = robot_corridor_table;
+#ifdef STSP_ARITH_FIXED
+    static stsp_scalar_t wide_lo[ROBOT_NU], wide_hi[ROBOT_NU], tight_lo[ROBOT_NU],
+        tight_hi[ROBOT_NU];
+#else
+    static const stsp_f32_t wide_lo[ROBOT_NU] = {-1000.0f, -1000.0f};
+    static const stsp_f32_t wide_hi[ROBOT_NU] = {1000.0f, 1000.0f};
+    static const stsp_f32_t tight_lo[ROBOT_NU] = {-0.5f, -0.5f};
+    static const stsp_f32_t tight_hi[ROBOT_NU] = {0.5f, 0.5f};
+#endif
+    stsp_table_t wide = ROBOT_TABLE, tight = ROBOT_TABLE;
     uint32_t i;
+#ifdef STSP_ARITH_FIXED
+    for (i = 0u; i < ROBOT_NU; ++i) {
+        const int64_t one = (int64_t)1 << STSP_Q_FRAC_BITS;
+        wide_hi[i] = (stsp_scalar_t)(one - 2);
+        wide_lo[i] = (stsp_scalar_t)(2 - one);
+        tight_hi[i] = (stsp_scalar_t)(one >> (ROBOT_TABLE.u_exp[i] + 1)); /* 0.5 */
+        tight_lo[i] = (stsp_scalar_t)-tight_hi[i];
+    }
+#endif
     wide.u_min = wide_lo;
     wide.u_max = wide_hi;
     wide.crc32 = stsp_table_crc32(&wide);
     tight.u_min = tight_lo;
     tight.u_max = tight_hi;
     tight.crc32 = stsp_table_crc32(&tight);
-    if (bench_table(&robot_corridor_table, 0u) != 0 || bench_table(&wide, 1u) != 0 ||
+    if (bench_table(&ROBOT_TABLE, 0u) != 0 || bench_table(&wide, 1u) != 0 ||
         bench_table(&tight, 2u) != 0) {
         return 1;
     }
@@ -105,10 +134,10 @@ int main(void)
     }
     printf("bench: %lu calls, sizeof(stsp_ctrl_t) %lu\n", (unsigned long)n_calls,
            (unsigned long)sizeof(stsp_ctrl_t));
-    printf("table nx %u nu %u n_latch %u stage_np", (unsigned)robot_corridor_table.nx,
-           (unsigned)robot_corridor_table.nu, (unsigned)robot_corridor_table.n_latch);
-    for (i = 0u; i < robot_corridor_table.n_stages; ++i) {
-        printf(" %u", (unsigned)robot_corridor_table.stage_np[i]);
+    printf("table nx %u nu %u n_latch %u stage_np", (unsigned)ROBOT_TABLE.nx,
+           (unsigned)ROBOT_TABLE.nu, (unsigned)ROBOT_TABLE.n_latch);
+    for (i = 0u; i < ROBOT_TABLE.n_stages; ++i) {
+        printf(" %u", (unsigned)ROBOT_TABLE.stage_np[i]);
     }
     printf("\n");
     return 0;

@@ -80,6 +80,8 @@ def callees(elf: Path, syms: dict, root: str) -> list[str]:
         a, s = syms[name]
         for insn in disassemble(elf, a, s).values():
             m = re.match(r"blx?\s+([0-9a-f]+)\b", insn)
+            if m and a <= int(m.group(1), 16) < a + s:
+                continue  # ARMv6-M: GCC uses bl as a far jump inside a large function
             if m:
                 target = by_addr.get(int(m.group(1), 16))
                 if target is None:
@@ -95,7 +97,8 @@ def callees(elf: Path, syms: dict, root: str) -> list[str]:
     return seen
 
 
-def trace_calls(build: Path, image: str) -> tuple[list[dict], list[str], dict]:
+def trace_calls(build: Path, image: str, machine: str = "mps2-an386"
+                ) -> tuple[list[dict], list[str], dict]:
     elf = build / image
     trace = build / f"trace_{Path(image).stem}.log"
     syms = symbols(elf)
@@ -107,7 +110,7 @@ def trace_calls(build: Path, image: str) -> tuple[list[dict], list[str], dict]:
     addrs = sorted(insns)
     following = dict(zip(addrs, addrs[1:]))
     dfilter = ",".join(f"{a:#x}+{s:#x}" for a, s in ranges.values())
-    out = run(["timeout", "120", "qemu-system-arm", "-M", "mps2-an386", "-nographic",
+    out = run(["timeout", "300", "qemu-system-arm", "-M", machine, "-nographic",
                "-monitor", "none", "-semihosting-config", "enable=on,target=native",
                "-kernel", str(elf), "-singlestep", "-d", "exec,nochain", "-D", str(trace),
                "-dfilter", dfilter])
@@ -122,7 +125,9 @@ def trace_calls(build: Path, image: str) -> tuple[list[dict], list[str], dict]:
     entry = syms["stsp_step"][0]
     in_caller = lambda pc: ranges["bench_step"][0] <= pc < sum(ranges["bench_step"])  # noqa: E731
     counts, current, lines, prev = [], None, 0, None
-    fmul = re.compile(r"v(n?mul|n?mla|n?mls|fma|fms|fnma|fnms)\.f32")
+    # Multiplies: FP (vmul/vmla/vnmla/vfma...) and integer (mul/mla/mls, smull/smlal, smulxy/smlaxy).
+    fmul = re.compile(r"(v(n?mul|n?mla|n?mls|fma|fms|fnma|fnms)\.f32|muls?|mla|mls|[su]mull|[su]mlal"
+                      r"|smla[bt][bt]|smul[bt][bt]|smlaw[bt]|smulw[bt])(\.[nw])?\b")
     pat = re.compile(r"Trace \d+: 0x[0-9a-f]+ \[[0-9a-f]+/([0-9a-f]+)/")
     with trace.open() as fh:
         for line in fh:
@@ -162,12 +167,14 @@ def trace_calls(build: Path, image: str) -> tuple[list[dict], list[str], dict]:
                           "stage_np": [int(v) for v in dims.group(4).split()]}
 
 
-def size_rows(build: Path, cpu: str, controller: str) -> list[tuple[str, int, int, int]]:
+def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
+              ) -> list[tuple[str, int, int, int]]:
     """(what, text, data, bss) for compiled objects and API-only links of one controller
-    library (libstsp.a or libstsp_fixed_robot_corridor.a)."""
+    library (libstsp<sfx>.a or libstsp_fixed_robot_corridor<sfx>.a) with the robot tables of
+    the same variant (sfx "", "_q15", "_q31")."""
     rows = []
     ctl = build / controller
-    tables = build / "libstsp_gains_robot_corridor.a"
+    tables = build / f"libstsp_gains_robot_corridor{sfx}.a"
 
     def totals(files):
         """text, data, bss summed over the controller's objects (stsp_controller, stsp_crc32:
@@ -177,17 +184,19 @@ def size_rows(build: Path, cpu: str, controller: str) -> list[tuple[str, int, in
         for line in run(["arm-none-eabi-size", *map(str, files)]).strip().splitlines()[1:]:
             parts = line.split()
             obj = parts[5] if len(parts) > 5 else ""
-            if f"ex {ctl}" in line and not obj.startswith(("stsp_controller.", "stsp_crc32.")):
+            if f"ex {ctl}" in line and not obj.startswith(("stsp_controller.", "stsp_crc32.",
+                                                          "stsp_qconv.")):
                 continue
             t, d, b = t + int(parts[0]), d + int(parts[1]), b + int(parts[2])
         return t, d, b
 
-    rows.append(("controller objects (stsp_controller.o + stsp_crc32.o)",
+    rows.append(("controller objects (stsp_controller, stsp_crc32, stsp_qconv)",
                  *totals([ctl])))
     rows.append(("controller + robot tables objects", *totals([ctl, tables])))
     roots = ["stsp_init", "stsp_reset", "stsp_step"]
     for what, extra_roots, libs in (("controller linked (API roots)", [], [ctl]),
-                                    ("controller + tables linked", ["robot_corridor_table"],
+                                    ("controller + tables linked",
+                                     [f"robot_corridor{sfx}_table"],
                                      [tables, ctl])):
         elf = build / f"footprint_{Path(controller).stem}_{'tables' if extra_roots else 'ctl'}.elf"
         cmd = (["arm-none-eabi-gcc", *CPU_FLAGS[cpu], "-nostdlib", "-nostartfiles",
@@ -200,7 +209,7 @@ def size_rows(build: Path, cpu: str, controller: str) -> list[tuple[str, int, in
         rows.append((what, t, d, b))
         if not extra_roots:
             lib = {n: sz for n, (_, sz) in symbols(elf).items()
-                   if sz and not n.startswith(("stsp_", "robot_corridor_"))}
+                   if sz and not n.startswith(("stsp_", "robot_corridor"))}
             rows.append(("  pulled from newlib/libgcc: "
                          + (", ".join(f"{n} {sz} B" for n, sz in sorted(lib.items())) or "none"),
                          -1, -1, -1))
@@ -217,8 +226,20 @@ def stack_usage(build: Path, target: str) -> dict[str, int]:
 
 
 TABLES = {0: "no limits", 1: "limits +-1000 (inactive)", 2: "limits +-0.5 (clamping)"}
-IMAGES = (("bench.elf", "generic dimensions (libstsp.a)"),
-          ("bench_fixed.elf", "STSP_FIXED_NX/NU/N_LATCH = 4/2/4 (libstsp_fixed_robot_corridor.a)"))
+# (cpu, image, what): float32 on the M4F only; Q15/Q31 on both. The cortex-m0plus code runs on
+# QEMU's mps2-an385 (a Cortex-M3: QEMU has no M0+ board; ARMv6-M code runs unchanged on it, and
+# every instruction counted is an ARMv6-M one).
+VARIANTS = (("", "float32"), ("_q15", "Q15"), ("_q31", "Q31"))
+MACHINE = {"cortex-m4": "mps2-an386", "cortex-m0plus": "mps2-an385"}
+
+
+def images(cpu: str):
+    for sfx, arith in VARIANTS:
+        if cpu != "cortex-m4" and not sfx:
+            continue
+        yield (f"bench{sfx}.elf", f"{arith}, generic dimensions (libstsp{sfx}.a)")
+        yield (f"bench_fixed{sfx}.elf",
+               f"{arith}, STSP_FIXED 4/2/4 (libstsp_fixed_robot_corridor{sfx}.a)")
 
 
 def main() -> int:
@@ -226,75 +247,87 @@ def main() -> int:
     ap.add_argument("--m4", type=Path, default=ROOT / "build" / "arm")
     ap.add_argument("--m0plus", type=Path, default=ROOT / "build" / "arm-m0plus")
     ap.add_argument("--json", type=Path, help="also write the figures as JSON here")
+    ap.add_argument("--only", default="", help="comma-separated image names (default: all)")
     args = ap.parse_args()
     report: dict = {"instructions": {}, "sizes": {}}
+    builds = {"cortex-m4": args.m4, "cortex-m0plus": args.m0plus}
+    only = set(filter(None, args.only.split(",")))
 
-    for image, variant in IMAGES:
-        calls, funcs, info = trace_calls(args.m4, image)
-        nx, nu, np_of_stage, nl = info["nx"], info["nu"], info["stage_np"], info["n_latch"]
-        print(f"== Instructions per stsp_step call, Cortex-M4F, {variant}")
-        print(f"   QEMU mps2-an386 -singlestep -d exec,nochain; {image}; counted functions: "
-              f"{', '.join(funcs)}; {len(calls)} calls, {info['trace_lines']} trace lines")
-        print(f"   {'table':26s} {'ticks':20s} {'calls':>5s} {'median':>6s} {'max':>5s} "
-              f"{'min':>5s} {'MACs':>5s} {'median/MAC':>10s} {'FP muls run':>11s}")
-        rows = report["instructions"].setdefault(image, [])
+    for cpu, build in builds.items():
+        for image, variant in images(cpu):
+            if only and image not in only:
+                continue
+            calls, funcs, info = trace_calls(build, image, MACHINE[cpu])
+            nx, nu, np_of_stage, nl = info["nx"], info["nu"], info["stage_np"], info["n_latch"]
+            where = ("Cortex-M4F, QEMU mps2-an386" if cpu == "cortex-m4" else
+                     "Cortex-M0+ code (-mcpu=cortex-m0plus) on QEMU mps2-an385 (Cortex-M3)")
+            print(f"== Instructions per stsp_step call, {where}, {variant}")
+            print(f"   -singlestep -d exec,nochain; {image}; counted functions: "
+                  f"{', '.join(funcs)}; {len(calls)} calls, {info['trace_lines']} trace lines")
+            print(f"   {'table':26s} {'ticks':20s} {'calls':>5s} {'median':>6s} {'max':>5s} "
+                  f"{'min':>5s} {'MACs':>5s} {'median/MAC':>10s} {'muls run':>9s}")
+            rows = report["instructions"].setdefault(f"{cpu}/{image}", [])
 
-        def row(tlabel, label, sel, macs):
-            n = [c["insns"] for c in sel]
-            med = statistics.median(n)
-            ratio = f"{med / macs:10.1f}" if macs else f"{'-':>10s}"
-            muls = sorted({c["fmuls"] for c in sel})
-            mul_text = "/".join(str(m) for m in muls)
-            print(f"   {tlabel:26s} {label:20s} {len(n):5d} {med:6.0f} {max(n):5d} {min(n):5d} "
-                  f"{macs if macs else '-':>5} {ratio} {mul_text:>11s}")
-            rows.append({"table": tlabel, "ticks": label, "calls": len(n), "median": med,
-                         "max": max(n), "min": min(n), "macs": macs,
-                         "statuses": sorted({c["status"] for c in sel})})
+            def row(tlabel, label, sel, macs):
+                n = [c["insns"] for c in sel]
+                med = statistics.median(n)
+                ratio = f"{med / macs:10.1f}" if macs else f"{'-':>10s}"
+                muls = sorted({c["fmuls"] for c in sel})
+                mul_text = "/".join(str(m) for m in muls)
+                print(f"   {tlabel:26s} {label:20s} {len(n):5d} {med:6.0f} {max(n):5d} "
+                      f"{min(n):5d} {macs if macs else '-':>5} {ratio} {mul_text:>9s}")
+                rows.append({"table": tlabel, "ticks": label, "calls": len(n), "median": med,
+                             "max": max(n), "min": min(n), "macs": macs,
+                             "statuses": sorted({c["status"] for c in sel})})
 
-        for tab, tlabel in TABLES.items():
-            for latch in (False, True):
-                kind = "latch" if latch else "ordinary"
-                for s in range(len(np_of_stage)):
-                    p = np_of_stage[s]
-                    macs = nu * nx + nu * p + (p * nx if latch else 0)
-                    sel = [c for c in calls
-                           if c["table"] == tab and c["latch"] == latch and c["stage"] == s]
-                    row(tlabel, f"{kind}, stage {s} (np={p})", sel, macs)
-        skipped = [c["insns"] for c in calls if c["status"] == 1 and c["table"] == 0]
-        print("   MACs = nu*nx + nu*np (+ np*nx on a latch tick): the multiply-adds the law "
-              f"needs; the firmware runs nu*(nx + n_latch) = {nu * (nx + nl)} on every tick "
-              "(L over all n_latch columns)")
-        print("   FP muls run = vmul/vnmul/vmla/vmls/vnmla/vnmls/vfma... instructions executed in "
-              "those calls (one per multiply).")
-        print(f"   Ordinary stage 0 (no limits) includes {len(skipped)} calls reached by a skip "
-              f"(WARN_TICK_SKIPPED), {min(skipped)}..{max(skipped)} instructions.\n")
-        report["sizeof_ctrl"] = info["sizeof_ctrl"]
+            for tab, tlabel in TABLES.items():
+                for latch in (False, True):
+                    kind = "latch" if latch else "ordinary"
+                    for st in range(len(np_of_stage)):
+                        p = np_of_stage[st]
+                        macs = nu * nx + nu * p + (p * nx if latch else 0)
+                        sel = [c for c in calls
+                               if c["table"] == tab and c["latch"] == latch and c["stage"] == st]
+                        row(tlabel, f"{kind}, stage {st} (np={p})", sel, macs)
+            skipped = [c["insns"] for c in calls if c["status"] == 1 and c["table"] == 0]
+            print("   MACs = nu*nx + nu*np (+ np*nx on a latch tick): the multiply-adds the law "
+                  f"needs; the firmware runs nu*(nx + n_latch) = {nu * (nx + nl)} on every tick "
+                  "(L over all n_latch columns)")
+            print("   muls run = multiply instructions executed (FP vmul/vnmul/vmls/vnmla/...; integer mul/mla/"
+                  "smlal/...; on the M0+, Q31's 64-bit products are libgcc __aeabi_lmul calls).")
+            print(f"   Ordinary stage 0 (no limits) includes {len(skipped)} calls reached by a "
+                  f"skip (WARN_TICK_SKIPPED), {min(skipped)}..{max(skipped)} instructions.\n")
+            report["sizeof_ctrl"] = info["sizeof_ctrl"]
+            report.setdefault("sizeof_ctrl_by_image", {})[f"{cpu}/{image}"] = info["sizeof_ctrl"]
 
     print("== Flash / RAM (arm-none-eabi-size; flash = text + data, static RAM = data + bss)")
-    for cpu, build in (("cortex-m4 (FPv4-SP, hard float)", args.m4),
-                       ("cortex-m0plus (soft float)", args.m0plus)):
-        arch = "cortex-m4" if "m4" in cpu else "cortex-m0plus"
-        for controller, target in (("libstsp.a", "stsp"),
-                                   ("libstsp_fixed_robot_corridor.a",
-                                    "stsp_fixed_robot_corridor")):
-            su = stack_usage(build, target)
-            print(f"   {cpu}, {controller}:")
-            rows = size_rows(build, arch, controller)
-            report["sizes"][f"{arch}/{controller}"] = {
-                what.strip(): {"flash": t + d, "ram": d + b} for what, t, d, b in rows if t >= 0}
-            for what, t, d, b in rows:
-                if t < 0:
-                    print(f"     {what}")
-                    continue
-                print(f"     {what:52.52s} flash {t + d:7d} B  static RAM {d + b:4d} B  "
-                      f"(text {t}, data {d}, bss {b})")
-            stack = {k: su.get(k) for k in ("stsp_step", "stsp_step_cold", "stsp_step_fixup",
-                                            "stsp_limit", "stsp_init", "stsp_table_crc32")}
-            report["sizes"][f"{arch}/{controller}"]["stack"] = stack
-            print("     stack (-fstack-usage, own frame): "
-                  + ", ".join(f"{k} {v} B" for k, v in stack.items() if v is not None))
-    print(f"   per instance: sizeof(stsp_ctrl_t) = {report['sizeof_ctrl']} B on the M4F "
-          "(caller-owned, STSP_MAX_LATCH = 16; same AAPCS layout on the M0+)")
+    for cpu, build in builds.items():
+        label = {"cortex-m4": "cortex-m4 (FPv4-SP, hard float)",
+                 "cortex-m0plus": "cortex-m0plus (soft float)"}[cpu]
+        for sfx, arith in VARIANTS:
+            for controller, target in ((f"libstsp{sfx}.a", f"stsp{sfx}"),
+                                       (f"libstsp_fixed_robot_corridor{sfx}.a",
+                                        f"stsp_fixed_robot_corridor{sfx}")):
+                su = stack_usage(build, target)
+                print(f"   {label}, {arith}, {controller}:")
+                rows = size_rows(build, cpu, controller, sfx)
+                report["sizes"][f"{cpu}/{controller}"] = {
+                    what.strip(): {"flash": t + d, "ram": d + b}
+                    for what, t, d, b in rows if t >= 0}
+                for what, t, d, b in rows:
+                    if t < 0:
+                        print(f"     {what}")
+                        continue
+                    print(f"     {what:60.60s} flash {t + d:7d} B  static RAM {d + b:4d} B  "
+                          f"(text {t}, data {d}, bss {b})")
+                stack = {k: su.get(k) for k in ("stsp_step", "stsp_step_cold", "stsp_step_fixup",
+                                                "stsp_limit", "stsp_init", "stsp_table_crc32")}
+                report["sizes"][f"{cpu}/{controller}"]["stack"] = stack
+                print("     stack (-fstack-usage, own frame): "
+                      + ", ".join(f"{k} {v} B" for k, v in stack.items() if v is not None))
+    print("   per instance (caller-owned, STSP_MAX_LATCH = 16), sizeof(stsp_ctrl_t) printed by "
+          "each bench image: " + ", ".join(f"{k} {v} B" for k, v in
+                                           report.get("sizeof_ctrl_by_image", {}).items()))
     if args.json:
         import json
         args.json.write_text(json.dumps(report, indent=1) + "\n")

@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# Report (not a test): instructions executed per stsp_step call on Cortex-M4F under QEMU, and
+# Report (not a test): instructions executed per stsp_step call under QEMU (Cortex-M4F on
+# mps2-an386; the Cortex-M0+ code on mps2-an385, a Cortex-M3, as QEMU has no M0+ board), and
 # flash/RAM of the controller alone and with the robot tables, for Cortex-M4F and Cortex-M0+,
-# each for the generic build (libstsp.a) and the build for the robot's dimensions
-# (libstsp_fixed_robot_corridor.a: STSP_FIXED_NX/NU/N_LATCH).
+# each for float32 (M4F images only), Q15 and Q31, generic (libstsp<_q15|_q31>.a) and built for
+# the robot's dimensions (libstsp_fixed_robot_corridor<_q15|_q31>.a: STSP_FIXED_NX/NU/N_LATCH).
 #   tools/arm/count_instructions.sh [--no-setup] [--json FILE]
-# Builds build/arm (cortex-m4) and build/arm-m0plus (compile-only), then runs
+# Builds build/arm (cortex-m4) and build/arm-m0plus, then runs
 # tools/arm/count_instructions.py (standard library only); see that file for the method.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"

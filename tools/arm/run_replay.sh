@@ -1,55 +1,82 @@
 #!/usr/bin/env bash
-# QEMU replay test: the Cortex-M4F build of the firmware must reproduce, bit for bit, the
-# commands the host build (cffi harness) computed on a closed-loop run of the robot example.
+# QEMU replay test: the Cortex-M builds of the firmware must reproduce, bit for bit, the
+# commands the host build (cffi harness) of the same arithmetic variant computed on a
+# closed-loop run of the robot example.
 #
-#   tools/arm/run_replay.sh [--no-setup] [--build-dir DIR] [--perturb RECORD]
-#                           [--fp-contract off|fast]
+#   tools/arm/run_replay.sh [--no-setup] [--cpu cortex-m4|cortex-m0plus] [--build-dir DIR]
+#                           [--arith LIST] [--perturb RECORD] [--fp-contract off|fast]
 #
-# 1. tools/arm/make_replay.py writes DIR/replay_records.c (host x, u per recorded tick);
-# 2. tools/arm/build.sh builds DIR/replay.elf (generic firmware + gains/robot_corridor.c +
-#    records) and DIR/replay_fixed.elf (the firmware built for the robot's dimensions);
-# 3. qemu-system-arm -M mps2-an386 runs each; semihosting prints the summary and returns the
+# 1. tools/arm/make_replay.py writes DIR/replay_records[_q15|_q31].c (host x, u per recorded
+#    tick) for each variant of LIST (default: float32,q15,q31 on cortex-m4; q15,q31 on
+#    cortex-m0plus, which has no float32 images);
+# 2. tools/arm/build.sh builds DIR/replay<sfx>.elf (generic firmware + gains/robot_corridor<sfx>.c
+#    + records) and DIR/replay_fixed<sfx>.elf (the firmware built for the robot's dimensions);
+# 3. qemu-system-arm runs each: -M mps2-an386 (Cortex-M4F) for cortex-m4; for cortex-m0plus
+#    -M mps2-an385, a Cortex-M3 (QEMU has no Cortex-M0+ board; the -mcpu=cortex-m0plus code is
+#    ARMv6-M, a subset of what the M3 runs). Semihosting prints the summary and returns the
 #    exit status, 0 only if every command matched.
-# --perturb moves one recorded u by one ulp (the test must then fail); --fp-contract fast
-# lets GCC fuse multiply-adds on the target, with the law compiled as plain C instead of the
-# VMLS/VNMLA asm that contraction cannot fuse (STSP_ARM_NO_VFP_MAC): the test then fails too.
-# Without --no-setup, tools/setup.sh runs first (ctest passes --no-setup: it runs inside a
-# configured build).
+# --perturb moves one recorded u by one ulp / one unit (the test must then fail); --fp-contract
+# fast lets GCC fuse multiply-adds on the target, with the float law compiled as plain C
+# instead of the VMLS/VNMLA asm that contraction cannot fuse (STSP_ARM_NO_VFP_MAC): the
+# float32 test then fails too. Without --no-setup, tools/setup.sh runs first (ctest passes
+# --no-setup: it runs inside a configured build).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
-build="$root/build/arm"
+build=""
+cpu=cortex-m4
 setup=1
 perturb=()
 contract=off
+ariths=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --no-setup) setup=0; shift ;;
+    --cpu) cpu="$2"; shift 2 ;;
     --build-dir) build="$2"; shift 2 ;;
+    --arith) ariths="$2"; shift 2 ;;
     --perturb) perturb=(--perturb "$2"); shift 2 ;;
     --fp-contract) contract="$2"; shift 2 ;;
     *) echo "run_replay: unknown argument $1" >&2; exit 2 ;;
   esac
 done
+case "$cpu" in
+  cortex-m4) machine=mps2-an386; : "${build:=$root/build/arm}"; : "${ariths:=float32,q15,q31}" ;;
+  cortex-m0plus) machine=mps2-an385; : "${build:=$root/build/arm-m0plus}"; : "${ariths:=q15,q31}" ;;
+  *) echo "run_replay: --cpu must be cortex-m4 or cortex-m0plus" >&2; exit 2 ;;
+esac
 [ "$setup" -eq 0 ] || "$root/tools/setup.sh"
 py="$root/.venv/bin/python"
 [ -x "$py" ] || { echo "run_replay: $py missing: run tools/setup.sh" >&2; exit 2; }
 
 mkdir -p "$build"
-records="$build/replay_records.c"
-"$py" "$root/tools/arm/make_replay.py" --out "$records" "${perturb[@]}"
-"$root/tools/arm/build.sh" --cpu cortex-m4 --build-dir "$build" \
-  -DSTSP_REPLAY_RECORDS="$records" -DSTSP_ARM_FP_CONTRACT="$contract" \
+defs=()
+images=()
+for arith in ${ariths//,/ }; do
+  case "$arith" in
+    float32) sfx=""; var=STSP_REPLAY_RECORDS ;;
+    q15|q31) sfx="_$arith"; var="STSP_REPLAY_RECORDS_${arith^^}" ;;
+    *) echo "run_replay: unknown variant $arith" >&2; exit 2 ;;
+  esac
+  [ "$cpu" = cortex-m4 ] || [ "$arith" != float32 ] || {
+    echo "run_replay: no float32 images for $cpu" >&2; exit 2; }
+  records="$build/replay_records$sfx.c"
+  "$py" "$root/tools/arm/make_replay.py" --arith "$arith" --out "$records" "${perturb[@]}"
+  defs+=("-D$var=$records")
+  images+=("replay$sfx" "replay_fixed$sfx")
+done
+"$root/tools/arm/build.sh" --cpu "$cpu" --build-dir "$build" \
+  "${defs[@]}" -DSTSP_ARM_FP_CONTRACT="$contract" \
   -DSTSP_ARM_NO_VFP_MAC="$([ "$contract" = off ] && echo OFF || echo ON)" >/dev/null
 
-# Both Cortex-M4F builds: the generic controller and the one compiled for the robot's
+# Both builds of each variant: the generic controller and the one compiled for the robot's
 # dimensions (STSP_FIXED_NX/NU/N_LATCH, unrolled): each must match the host bit for bit.
 fail=0
-for image in replay replay_fixed; do
+for image in "${images[@]}"; do
   log="$build/$image.log"
   status=0
-  timeout 60 qemu-system-arm -M mps2-an386 -nographic -monitor none \
+  timeout 60 qemu-system-arm -M "$machine" -nographic -monitor none \
     -semihosting-config enable=on,target=native -kernel "$build/$image.elf" >"$log" 2>&1 || status=$?
-  echo "== $image.elf"
+  echo "== $image.elf ($cpu code on $machine)"
   cat "$log"
   if [ "$status" -eq 124 ]; then
     echo "run_replay: FAIL: QEMU timed out ($image.elf)" >&2

@@ -58,8 +58,11 @@ void Reset_Handler(void)
         bss[i] = 0u;
     }
 #if defined(__ARM_FP)
+#if defined(__ARM_FP)
+    /* Only with an FPU (cortex-m4 build); the cortex-m0plus build has none to enable. */
     STSP_SCB_CPACR |= STSP_CPACR_CP10_CP11_FULL;
     __asm__ volatile("dsb\n\tisb" ::: "memory");
+#endif
 #endif
     initialise_monitor_handles();
     __libc_init_array();

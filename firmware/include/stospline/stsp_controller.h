@@ -32,10 +32,11 @@
  * operations in the same order; define STSP_NO_VFP_MAC for separate VMUL and VSUB.
  *
  * Buffers: stsp_ctrl_t holds STSP_MAX_LATCH scalars for v plus 24 bytes (32-bit targets:
- * 88 bytes with the default STSP_MAX_LATCH = 16); stsp_step() uses
+ * 88 bytes with the default STSP_MAX_LATCH = 16; 56 bytes in the Q15 build); stsp_step() uses
  * STSP_MAX_LATCH + STSP_MAX_NU scalars of stack, plus, on the stage-0 latch of a band table
  * only, the band solver's work area and multipliers (sizeof(stsp_bandqp_work_t) +
- * STSP_BANDQP_MAX doubles, about 0.8 KB with STSP_BANDQP_MAX = 8; docs/firmware.md). The tables stay where the caller put them
+ * STSP_BANDQP_MAX doubles, about 0.8 KB with STSP_BANDQP_MAX = 8; docs/firmware.md). The
+ * tables stay where the caller put them
  * (const, normally flash) and are never copied.
  *
  * Compile-time dimensions (optional): define STSP_FIXED_NX, STSP_FIXED_NU and
@@ -59,14 +60,51 @@ extern "C" {
 
 /** Scalar type of the float32 variant: IEEE-754 binary32. */
 typedef float stsp_f32_t;
+/** 16-bit fractional data type in 1.15 format: value = q / 2^15, in [-1, 1 - 2^-15]. */
+typedef int16_t stsp_q15_t;
+/** 32-bit fractional data type in 1.31 format: value = q / 2^31, in [-1, 1 - 2^-31]. */
+typedef int32_t stsp_q31_t;
+
+/*
+ * Arithmetic variant, chosen at configure time (CMake: -DSTSP_ARITH=float32|q15|q31), by
+ * defining STSP_ARITH_Q15 or STSP_ARITH_Q31 (or neither: float32) for the library and every
+ * file that includes this header. stsp_scalar_t is the type of the state x, the command u, the
+ * latched v and every table entry; the fixed-point variants and their scaling are described in
+ * docs/firmware.md ("Fixed-point variants") and on stsp_step().
+ */
+#if defined(STSP_ARITH_Q15) && defined(STSP_ARITH_Q31)
+#error "define at most one of STSP_ARITH_Q15, STSP_ARITH_Q31"
+#endif
+#if defined(STSP_ARITH_Q15)
+typedef stsp_q15_t stsp_scalar_t;
+#define STSP_ARITH_FIXED 1
+#define STSP_Q_FRAC_BITS 15 /**< F: x = x_q 2^(x_exp - F), u = u_q 2^(u_exp - F) */
+#elif defined(STSP_ARITH_Q31)
+typedef stsp_q31_t stsp_scalar_t;
+#define STSP_ARITH_FIXED 1
+#define STSP_Q_FRAC_BITS 31
+#else
+typedef stsp_f32_t stsp_scalar_t;
+#endif
 
 /** Table magic, "STSP" as a little-endian u32. */
 #define STSP_TABLE_MAGIC 0x53545350u
 /** Table format understood by this firmware (2: actuator limits u_min/u_max; 3: optional
  * band dual QP re-solved at the t0 latch). */
 #define STSP_FORMAT_VERSION 3u
-/** Arithmetic variant tag stored in the table: float32 tables. */
+/** Arithmetic variant tag stored in the table (scalar_kind): float32, Q15 or Q31 tables. */
 #define STSP_SCALAR_FLOAT32 1u
+#define STSP_SCALAR_Q15 2u
+#define STSP_SCALAR_Q31 3u
+#if defined(STSP_ARITH_Q15)
+#define STSP_SCALAR_KIND STSP_SCALAR_Q15
+#elif defined(STSP_ARITH_Q31)
+#define STSP_SCALAR_KIND STSP_SCALAR_Q31
+#else
+#define STSP_SCALAR_KIND STSP_SCALAR_FLOAT32
+#endif
+/** Fixed point: stsp_init() refuses scale exponents (x_exp, u_exp, v_exp) outside +-this. */
+#define STSP_Q_EXP_MAX 60
 
 /** Upper bounds checked by stsp_init(); they size stsp_ctrl_t and bound every loop. */
 #ifndef STSP_MAX_NX
@@ -109,7 +147,9 @@ typedef enum {
     STSP_WARN_TICK_REPEATED = 2,    /**< same tick again; recomputed, no new latch */
     STSP_WARN_SATURATED = 3,        /**< at least one input was clamped to u_min/u_max; which
                                          ones: stsp_ctrl_t.sat_mask */
-    STSP_WARN_BAND_FALLBACK = 4,    /**< the band dual QP found no optimal active set for this
+    STSP_WARN_STATE_CLAMPED = 4,    /**< fixed point, stsp_state_to_q(): a state entry was
+                                         outside the Q range and was saturated to its end */
+    STSP_WARN_BAND_FALLBACK = 5,    /**< the band dual QP found no optimal active set for this
                                          x0 (W not positive definite in double precision), its
                                          data times x0 overflowed, or a multiplier is beyond
                                          FLT_MAX: latched the design's affine map
@@ -127,7 +167,9 @@ typedef enum {
     STSP_ERR_NONFINITE_STATE = -9,  /**< x holds NaN or +-Inf */
     STSP_ERR_NONFINITE_OUTPUT = -10,/**< the state is finite but u (or the latch) overflowed */
     STSP_ERR_BAD_VALUES = -11       /**< a table value is NaN or +-Inf, u_min > u_max, or 0
-                                         lies outside [u_min, u_max] */
+                                         lies outside [u_min, u_max]; fixed point: a scale
+                                         exponent beyond +-STSP_Q_EXP_MAX, or a row whose
+                                         absolute sum exceeds 2^F - 1 (see stsp_step) */
 } stsp_status_t;
 
 /**
@@ -135,11 +177,20 @@ typedef enum {
  * Layouts (row-major): K[tick][i*nx + j], k0[tick][i], L[tick][i*n_latch + c],
  * Lambda[stage][c*nx + j], lambda0[stage][c], u_min[i], u_max[i]; multiplier columns beyond a
  * stage's stage_np are zero. u_min[i] = -FLT_MAX and u_max[i] = FLT_MAX mean unlimited.
+ *
+ * Fixed point (scalar_kind Q15/Q31, F = STSP_Q_FRAC_BITS): the entries are integers in
+ * [-2^F, 2^F - 1] that carry the scales, and the law's gains are stored negated:
+ *     K[t][i][j] = -K_ij(t) 2^(x_exp[j] - u_exp[i]) 2^F,  k0[t][i] = -k0_i(t) 2^(F - u_exp[i]),
+ *     L[t][i][c] = -L_ic(t) 2^(v_exp[c] - u_exp[i]) 2^F,
+ *     Lambda[s][c][j] = Lambda_cj 2^(x_exp[j] - v_exp[c]) 2^F,
+ *     lambda0[s][c] = lambda0_c 2^(F - v_exp[c])
+ * (rounded half up), so that x[j] = x_q[j] 2^(x_exp[j] - F), v[c] = v_q[c] 2^(v_exp[c] - F),
+ * u[i] = u_q[i] 2^(u_exp[i] - F). u_min/u_max are in u_q units; -2^F and 2^F - 1 mean unlimited.
  */
 typedef struct {
     uint32_t magic;          /**< STSP_TABLE_MAGIC */
     uint16_t format_version; /**< STSP_FORMAT_VERSION */
-    uint16_t scalar_kind;    /**< STSP_SCALAR_FLOAT32 */
+    uint16_t scalar_kind;    /**< STSP_SCALAR_KIND of the build (float32, Q15 or Q31) */
     uint16_t nx;             /**< states */
     uint16_t nu;             /**< inputs */
     uint16_t n_latch;        /**< latched multipliers per stage (padded width) */
@@ -149,18 +200,25 @@ typedef struct {
     const uint32_t *stage_start; /**< [n_stages + 1]: first tick of each stage, then n_ticks */
     const uint16_t *stage_np;    /**< [n_stages]: multipliers latched at each stage start
                                       (0: keep the v latched before) */
-    const stsp_f32_t *K;
-    const stsp_f32_t *k0;
-    const stsp_f32_t *L;
-    const stsp_f32_t *Lambda;
-    const stsp_f32_t *lambda0;
-    const stsp_f32_t *u_min;     /**< [nu]: lower actuator limits */
-    const stsp_f32_t *u_max;     /**< [nu]: upper actuator limits */
+    const stsp_scalar_t *K;
+    const stsp_scalar_t *k0;
+    const stsp_scalar_t *L;
+    const stsp_scalar_t *Lambda;
+    const stsp_scalar_t *lambda0;
+    const stsp_scalar_t *u_min;  /**< [nu]: lower actuator limits */
+    const stsp_scalar_t *u_max;  /**< [nu]: upper actuator limits */
+#ifdef STSP_ARITH_FIXED
+    const int8_t *x_exp;         /**< [nx]: state scale exponents */
+    const int8_t *u_exp;         /**< [nu]: command scale exponents */
+    const int8_t *v_exp;         /**< [n_latch]: latched multiplier scale exponents (may be NULL
+                                      when n_latch == 0) */
+#endif
     const stsp_bandqp_t *band_qp; /**< NULL, or the band dual of a joint design: the stage-0
                                       latch then solves it for the measured x0 (v[c] =
                                       (float)lam[c], c < q) instead of Lambda x + lambda0;
                                       requires q == stage_np[0] and stage_np[s] == 0 for
-                                      s > 0 (one latch, at t0) */
+                                      s > 0 (one latch, at t0). float32 only: a fixed-point
+                                      build refuses a table with one (STSP_ERR_BAD_DIMS) */
     uint32_t crc32;              /**< CRC-32 of dims and arrays, see stsp_table_crc32() */
     uint8_t problem_sha256[32];  /**< hash of the problem file the tables came from */
 } stsp_table_t;
@@ -179,7 +237,7 @@ typedef struct {
     uint16_t sat_mask;       /**< after STSP_WARN_SATURATED: bit i set if u[i] was clamped
                                   (not updated by other statuses) */
     uint16_t limited;        /**< nonzero if the table has a finite limit (private) */
-    stsp_f32_t v[STSP_MAX_LATCH];
+    stsp_scalar_t v[STSP_MAX_LATCH];
 } stsp_ctrl_t;
 
 /** Value of stsp_ctrl_t.ready after a successful stsp_init(): a Thumb-2 immediate that no
@@ -190,8 +248,11 @@ typedef struct {
  * CRC-32 (IEEE 802.3 polynomial, reflected, as zlib) of the table's canonical serialization:
  * nx, nu, n_latch, n_stages, n_ticks, tick_hz as little-endian u32; stage_start and stage_np
  * as little-endian u32 each; then K, k0, L, Lambda, lambda0, u_min, u_max as little-endian
- * binary32 bit patterns (L, Lambda, lambda0 only when n_latch > 0); then, when band_qp is not
- * NULL, its q and nx as u32 and Nt, mt, W, lo, hi as little-endian binary64 bit patterns. Independent of the
+ * binary32 bit patterns (L, Lambda, lambda0 only when n_latch > 0). Fixed point: scalar_kind
+ * as a u32 after tick_hz, the same arrays as little-endian int16 (Q15) or int32 (Q31), then
+ * x_exp, u_exp and v_exp (when n_latch > 0) one byte each. Then, when band_qp is not NULL,
+ * its q and nx as u32 and Nt, mt, W, lo, hi as little-endian binary64 bit patterns.
+ * Independent of the
  * target's byte order. The table's dimensions and pointers must already be valid (stsp_init()
  * checks them first).
  */
@@ -229,7 +290,41 @@ stsp_status_t stsp_verify(stsp_ctrl_t *ctrl);
  * u == NULL nothing is written, and before a successful init (STSP_ERR_NOT_INITIALIZED) u is
  * not written because nu is unknown. See docs/firmware.md for every status's response.
  */
-stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_t *x, stsp_f32_t *u);
+stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
+                        stsp_scalar_t *u);
+
+#ifdef STSP_ARITH_FIXED
+/*
+ * Fixed point, per tick (integers only, no floating point; F = STSP_Q_FRAC_BITS): for each
+ * input i, with the accumulator stsp_acc (int32 for Q15, int64 for Q31),
+ *     acc  = 2^(2F) + 2^(F-1) + k0[i] 2^F + sum_j K[i][j] x_q[j] + sum_c L[i][c] v_q[c]
+ *     u_q[i] = (acc >> F) - 2^F   = floor((sum + 2^(F-1)) / 2^F): rounded half up
+ * and the latch v_q[c] the same way from lambda0 and Lambda. No overflow, no saturation of u_q
+ * or v_q: stsp_init() accepts a table only if every row has |k0| + sum|K| + sum|L| <= 2^F - 1
+ * (and |lambda0| + sum|Lambda| <= 2^F - 1), so with |x_q|, |v_q| <= 2^F the sum stays within
+ * +-(2^F - 1) 2^F, acc within [0, 2^(2F+1)) (Q15: < 2^31, Q31: < 2^63), and u_q, v_q within
+ * +-(2^F - 1). Then u_q is clamped to [u_min, u_max] (STSP_WARN_SATURATED, sat_mask). Every
+ * x_q is a valid state: the representable range is the table's (x_exp); a state beyond it must
+ * be saturated when it is converted, which stsp_state_to_q() does and reports.
+ */
+
+/**
+ * Convert a float32 state to the table's Q format (for FPU targets; stsp_step() itself needs
+ * no floating point): x_q[j] = sat(floor(x[j] 2^(F - x_exp[j]) + 1/2)), saturated to
+ * [-2^F, 2^F - 1]. Returns STSP_OK, STSP_WARN_STATE_CLAMPED if some x[j] was outside the Q
+ * range (those x_q[j] are -2^F or 2^F - 1, the others converted), STSP_ERR_NONFINITE_STATE if
+ * some x[j] is NaN or +-Inf (x_q all zeros), STSP_ERR_NULL, STSP_ERR_NOT_INITIALIZED (x_q not
+ * written).
+ */
+stsp_status_t stsp_state_to_q(const stsp_ctrl_t *ctrl, const stsp_f32_t *x, stsp_scalar_t *x_q);
+
+/**
+ * Convert a Q command to float32: u[i] = u_q[i] 2^(u_exp[i] - F) (exact for Q15; Q31 rounds
+ * to nearest binary32). Returns STSP_OK, STSP_ERR_NULL or STSP_ERR_NOT_INITIALIZED.
+ */
+stsp_status_t stsp_command_to_f32(const stsp_ctrl_t *ctrl, const stsp_scalar_t *u_q,
+                                  stsp_f32_t *u);
+#endif
 
 #ifdef STSP_HOST_MESSAGES
 /** Human-readable text of a status (host builds only). */

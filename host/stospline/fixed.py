@@ -1,0 +1,293 @@
+"""Fixed-point (Q15/Q31) gain tables: scaling, quantization, error bound, reference law.
+
+The firmware's fixed-point variants (``STSP_ARITH_Q15``/``STSP_ARITH_Q31``) take the state as
+integers ``x_q[j]`` with a per-state power-of-two scale and return integer commands::
+
+    x[j] = x_q[j] 2^(x_exp[j] - F),   u[i] = u_q[i] 2^(u_exp[i] - F),   v[c] = v_q[c] 2^(v_exp[c] - F)
+
+with ``F`` = 15 (Q15, int16) or 31 (Q31, int32) fractional bits and every integer in
+``[-2^F, 2^F - 1]``. The gains carry the scales and are stored negated (so that a tick is a
+plain sum of products: one multiply-accumulate instruction per term)::
+
+    K_q[t][i][j] = rhu(-K_ij(t) 2^(x_exp[j] - u_exp[i] + F))   k0_q[t][i] = rhu(-k0_i(t) 2^(F - u_exp[i]))
+    L_q[t][i][c] = rhu(-L_ic(t) 2^(v_exp[c] - u_exp[i] + F))
+    Lambda_q[s][c][j] = rhu(Lambda_cj 2^(x_exp[j] - v_exp[c] + F))   lambda0_q[s][c] = rhu(lambda0_c 2^(F - v_exp[c]))
+
+where ``rhu(y) = floor(y + 1/2)`` (round half up). Per tick the firmware computes, exactly in a
+wide accumulator, ``u_q[i] = rhu((k0_q 2^F + sum K_q x_q + sum L_q v_q) / 2^F)`` and the latch
+``v_q[c] = rhu((lambda0_q 2^F + sum Lambda_q x_q) / 2^F)`` (`law_q`, `latch_q` reproduce it bit
+for bit).
+
+Scales (`quantize_table`). ``x_exp[j] = ceil(log2(range_j))`` from the state range the caller
+gives (`state_range`: ``max_t |E x_j(t)| + sigmas * std x_j(t)`` over the plan, from the exact
+moment oracle, ``sigmas`` = 6 by default). ``v_exp[c]`` and ``u_exp[i]`` are the smallest
+exponents for which every row's absolute sum, after rounding, is at most ``2^F - 1``::
+
+    |lambda0_q| + sum_j |Lambda_q|  <= 2^F - 1     (every stage, every latched c)
+    |k0_q| + sum_j |K_q| + sum_c |L_q| <= 2^F - 1  (every tick, every input)
+
+which is exactly what the firmware's ``stsp_init`` requires: then no sum overflows its
+accumulator and no ``u_q``/``v_q`` leaves the Q range for any integer state, and the command
+range covers the worst corner of the state box (no saturation for in-range states).
+
+Error bound (`FixedTable.bound`, derived in docs/firmware.md). For every integer state (any
+``x_q``, i.e. every state within the range) and latch state, in units of the command's LSB
+``2^(u_exp[i] - F)``::
+
+    |u_fixed - u_double| <= 1/2 + dk0 + sum_j dK_j + sum_c (dL_c + |L~_c| / 2^F * eps_c)
+    eps_c = 1/2 + dlambda0_c + sum_j dLambda_cj               (latch error, v's LSB units)
+
+with ``d*`` the actual rounding error of each stored entry (at most 1/2) and ``L~`` the
+unrounded scaled gain; ``u_double`` is the design's law in double precision at the same real
+state (``x = x_q 2^(x_exp - F)``) and the same latch state.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .tables import F32_MAX, GainTable
+
+__all__ = ["FixedTable", "quantize_table", "state_range", "law_q", "latch_q", "law_double",
+           "ARITHS", "FRAC_BITS", "SCALAR_KIND", "EXP_MAX", "DEFAULT_SIGMAS"]
+
+ARITHS = ("float32", "q15", "q31")
+FRAC_BITS = {"q15": 15, "q31": 31}
+SCALAR_KIND = {"float32": 1, "q15": 2, "q31": 3}
+EXP_MAX = 60            # the firmware refuses scale exponents beyond +-60 (STSP_Q_EXP_MAX)
+DEFAULT_SIGMAS = 6.0    # state range: mean +- 6 standard deviations over the plan
+_EXP_SPAN = 24          # a state whose range is tiny gets at least 2^-24 of the largest one
+
+
+def _rhu(y: np.ndarray) -> np.ndarray:
+    """Round half up to int64 (exact: y is a float64 times a power of two, |y| < 2^52)."""
+    return np.floor(np.asarray(y, dtype=float) + 0.5).astype(np.int64)
+
+
+@dataclass(frozen=True)
+class FixedTable:
+    """A Q15/Q31 table as the firmware stores it (integers in int64 arrays), with its scales,
+    the double-precision table it came from, and the per-tick error bound.
+
+    Same shapes and layout as `GainTable` (the law's gains stored negated, see the module
+    docstring). ``bound[t, i]`` is the bound on ``|u_fixed - u_double|`` of input i at tick t,
+    in the command's real units; ``bound_lsb`` the same in units of ``2^(u_exp[i] - F)``.
+    """
+    name: str
+    arith: str
+    tick_hz: int
+    t0: float
+    stage_start: np.ndarray
+    stage_np: np.ndarray
+    K: np.ndarray
+    k0: np.ndarray
+    L: np.ndarray
+    Lambda: np.ndarray
+    lambda0: np.ndarray
+    u_min: np.ndarray
+    u_max: np.ndarray
+    x_exp: np.ndarray
+    u_exp: np.ndarray
+    v_exp: np.ndarray
+    problem_sha256: str
+    source: GainTable = field(repr=False)
+    x_range: np.ndarray = field(repr=False)
+    bound_lsb: np.ndarray = field(repr=False)
+
+    @property
+    def frac_bits(self) -> int:
+        return FRAC_BITS[self.arith]
+
+    @property
+    def scalar_kind(self) -> int:
+        return SCALAR_KIND[self.arith]
+
+    @property
+    def n_ticks(self) -> int:
+        return int(self.stage_start[-1])
+
+    @property
+    def n_stages(self) -> int:
+        return len(self.stage_np)
+
+    @property
+    def dims(self) -> tuple[int, int, int]:
+        return self.K.shape[2], self.K.shape[1], self.L.shape[2]
+
+    @property
+    def u_lsb(self) -> np.ndarray:
+        """Real value of one command unit, per input: 2^(u_exp - F)."""
+        return np.ldexp(1.0, self.u_exp.astype(int) - self.frac_bits)
+
+    @property
+    def x_lsb(self) -> np.ndarray:
+        return np.ldexp(1.0, self.x_exp.astype(int) - self.frac_bits)
+
+    @property
+    def bound(self) -> np.ndarray:
+        return self.bound_lsb * self.u_lsb
+
+    @property
+    def limited(self) -> bool:
+        one = 1 << self.frac_bits
+        return bool(np.any(self.u_min > -one) or np.any(self.u_max < one - 1))
+
+    def stage_of_tick(self, j) -> np.ndarray:
+        return np.searchsorted(self.stage_start, j, side="right") - 1
+
+    def latch_stage(self, stage) -> np.ndarray:
+        """The stage whose latch a tick of `stage` uses: the last one at or before it that
+        latches (stage_np > 0); -1 when none does (v = 0)."""
+        latching = np.where(self.stage_np > 0, np.arange(self.n_stages), -1)
+        return np.maximum.accumulate(latching)[np.asarray(stage)]
+
+    def summary(self) -> dict:
+        """The scales and the error bound, for the JSON summary."""
+        return {
+            "arith": self.arith, "frac_bits": self.frac_bits,
+            "x_exp": self.x_exp.tolist(), "u_exp": self.u_exp.tolist(),
+            "v_exp": self.v_exp.tolist(),
+            "x_range": np.ldexp(1.0, self.x_exp.astype(int)).tolist(),
+            "x_range_predicted": self.x_range.tolist(),
+            "u_lsb": self.u_lsb.tolist(),
+            "u_error_bound": self.bound.max(axis=0).tolist(),
+            "u_error_bound_lsb": self.bound_lsb.max(axis=0).tolist(),
+        }
+
+
+def state_range(problem, table: GainTable, *, sigmas: float = DEFAULT_SIGMAS) -> np.ndarray:
+    """``max_t |E x_j(t)| + sigmas * std x_j(t)`` over every tick of the plan (exact moments of
+    the float32 table's law from `oracle.evaluate_table`)."""
+    from .oracle import evaluate_table
+    mom = evaluate_table(problem, table, path=True)
+    return np.max(np.abs(mom.path_mean) + sigmas * np.sqrt(mom.path_var), axis=0)
+
+
+def _exponent(r: np.ndarray, terms: int, F: int) -> np.ndarray:
+    """Smallest e with r 2^(F - e) + terms / 2 <= 2^F - 1 (rounding of `terms` entries can add
+    1/2 each); 0 where r = 0."""
+    room = (2.0 ** F - 1) - terms / 2.0
+    with np.errstate(divide="ignore"):
+        e = np.ceil(np.log2(np.where(r > 0, r, 1.0) * 2.0 ** F / room))
+    return np.where(r > 0, e, 0).astype(int)
+
+
+def quantize_table(table: GainTable, arith: str, x_range, *, name: str | None = None
+                   ) -> FixedTable:
+    """Quantize a double-precision table (``build_table(..., quantize=False)``) to Q15/Q31.
+
+    Parameters
+    ----------
+    table : GainTable
+        The design's gains in double precision.
+    arith : {"q15", "q31"}
+    x_range : array_like, shape (n,)
+        Positive state magnitudes the scales must cover (e.g. `state_range`); the
+        representable range of state j is ``[-2^x_exp[j], 2^x_exp[j])`` with
+        ``x_exp[j] = ceil(log2(x_range[j]))``.
+    name : str, optional
+        C prefix of the generated tables (default ``<table name>_<arith>``).
+
+    Raises
+    ------
+    ValueError
+        Unknown `arith`, a non-positive or non-finite range, or a scale exponent beyond
+        +-EXP_MAX (gains or ranges too extreme for the format).
+    """
+    if arith not in FRAC_BITS:
+        raise ValueError(f"arith must be one of {list(FRAC_BITS)}, got {arith!r}")
+    F = FRAC_BITS[arith]
+    one, qmax = 1 << F, (1 << F) - 1
+    n, m, P = table.dims
+    x_range = np.asarray(x_range, dtype=float).reshape(-1)
+    if x_range.shape != (n,) or not np.all(np.isfinite(x_range)) or np.any(x_range <= 0):
+        raise ValueError(f"x_range must hold {n} positive finite magnitudes")
+    x_exp = np.ceil(np.log2(x_range)).astype(int)
+    x_exp = np.maximum(x_exp, x_exp.max() - _EXP_SPAN)
+    K, k0, L = (np.asarray(a, dtype=float) for a in (table.K, table.k0, table.L))
+    Lam, lam0 = np.asarray(table.Lambda, dtype=float), np.asarray(table.lambda0, dtype=float)
+    sx = np.ldexp(1.0, x_exp)
+
+    # v scale: one exponent per column over the whole plan (v keeps its meaning across stages).
+    r_v = (np.abs(lam0) + np.abs(Lam) @ sx).max(axis=0) if P else np.zeros(0)
+    v_exp = _exponent(r_v, n + 1, F)
+    sv = np.ldexp(1.0, v_exp)
+    r_u = (np.abs(k0) + np.abs(K) @ sx + (np.abs(L) @ sv if P else 0.0)).max(axis=0)
+    u_exp = _exponent(r_u, n + P + 1, F)
+    for e in (x_exp, u_exp, v_exp):
+        if e.size and np.abs(e).max() > EXP_MAX:
+            raise ValueError(f"scale exponent {int(np.abs(e).max())} beyond +-{EXP_MAX}: "
+                             "gains or state range too extreme for the fixed-point format")
+
+    # Unrounded scaled entries (signs as stored), then round half up.
+    Ks = -K * np.ldexp(1.0, x_exp[None, None, :] - u_exp[None, :, None] + F)
+    k0s = -k0 * np.ldexp(1.0, F - u_exp[None, :])
+    Ls = -L * np.ldexp(1.0, v_exp[None, None, :] - u_exp[None, :, None] + F)
+    Lams = Lam * np.ldexp(1.0, x_exp[None, None, :] - v_exp[None, :, None] + F)
+    lam0s = lam0 * np.ldexp(1.0, F - v_exp[None, :])
+    Kq, k0q, Lq, Lamq, lam0q = (_rhu(a) for a in (Ks, k0s, Ls, Lams, lam0s))
+    law_rows = np.abs(k0q) + np.abs(Kq).sum(axis=2) + np.abs(Lq).sum(axis=2)
+    latch_rows = np.abs(lam0q) + np.abs(Lamq).sum(axis=2)
+    assert law_rows.max(initial=0) <= qmax and latch_rows.max(initial=0) <= qmax, \
+        "exponent choice must keep every row sum within 2^F - 1"
+
+    # Limits in command units, rounded inwards so the clamp never passes the real limit.
+    lo, hi = np.asarray(table.u_min, float), np.asarray(table.u_max, float)
+    scale_u = np.ldexp(1.0, F - u_exp)
+    u_min = np.where(lo <= -F32_MAX, -one, np.maximum(-one, np.ceil(lo * scale_u))).astype(np.int64)
+    u_max = np.where(hi >= F32_MAX, qmax, np.minimum(qmax, np.floor(hi * scale_u))).astype(np.int64)
+
+    # Error bound (module docstring): per tick and input, in command LSBs.
+    stage_of = np.searchsorted(table.stage_start, np.arange(table.n_ticks), side="right") - 1
+    ft = FixedTable(name or f"{table.name}_{arith}", arith, table.tick_hz, table.t0,
+                    np.asarray(table.stage_start, np.uint32), np.asarray(table.stage_np, np.uint16),
+                    Kq, k0q, Lq, Lamq, lam0q, u_min, u_max, x_exp.astype(np.int8),
+                    u_exp.astype(np.int8), v_exp.astype(np.int8), table.problem_sha256,
+                    table, x_range, np.zeros((table.n_ticks, m)))
+    eps = 0.5 + np.abs(lam0q - lam0s) + np.abs(Lamq - Lams).sum(axis=2)        # (S, P)
+    eps = np.where(np.arange(P)[None, :] < np.asarray(table.stage_np)[:, None], eps, 0.0)
+    ls = ft.latch_stage(stage_of)
+    eps_t = np.where((ls >= 0)[:, None], eps[np.maximum(ls, 0)], 0.0)            # (T, P)
+    bound = (0.5 + np.abs(k0q - k0s) + np.abs(Kq - Ks).sum(axis=2)
+             + np.abs(Lq - Ls).sum(axis=2)
+             + np.einsum("tic,tc->ti", np.abs(Ls), eps_t) / one)
+    object.__setattr__(ft, "bound_lsb", bound)
+    return ft
+
+
+def latch_q(ft: FixedTable, stage: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """v_q latched at `stage` (per row) from integer states X (N, n), bit-exact with the C."""
+    F = ft.frac_bits
+    P = ft.dims[2]
+    stage = np.asarray(stage)
+    acc = (ft.lambda0[stage] << F) + np.einsum("ncj,nj->nc", ft.Lambda[stage], X)
+    V = (acc + (1 << (F - 1))) >> F
+    return np.where(np.arange(P)[None, :] < ft.stage_np[stage][:, None], V, 0)
+
+
+def law_q(ft: FixedTable, tick: np.ndarray, X: np.ndarray, V: np.ndarray) -> np.ndarray:
+    """u_q at ticks `tick` (N,) from X (N, n) and V (N, P), bit-exact with the C (unclamped;
+    int64 is exact: every row sum is at most (2^F - 1) 2^F in magnitude)."""
+    F = ft.frac_bits
+    tick = np.asarray(tick)
+    acc = ((ft.k0[tick] << F) + np.einsum("nij,nj->ni", ft.K[tick], X)
+           + np.einsum("nic,nc->ni", ft.L[tick], V))
+    return (acc + (1 << (F - 1))) >> F
+
+
+def law_double(ft: FixedTable, tick: np.ndarray, x: np.ndarray, x_latch: np.ndarray
+               ) -> np.ndarray:
+    """The design's law in double precision: u = -K x - k0 - L v, v latched from x_latch at the
+    tick's latch stage (rows beyond stage_np zero), from the unquantized source table."""
+    src = ft.source
+    tick = np.asarray(tick)
+    ls = ft.latch_stage(ft.stage_of_tick(tick))
+    P = ft.dims[2]
+    lsc = np.maximum(ls, 0)
+    v = np.asarray(src.lambda0, float)[lsc] + np.einsum(
+        "ncj,nj->nc", np.asarray(src.Lambda, float)[lsc], x_latch)
+    keep = (np.arange(P)[None, :] < ft.stage_np[lsc][:, None]) & (ls >= 0)[:, None]
+    v = np.where(keep, v, 0.0)
+    K, k0, L = (np.asarray(a, float)[tick] for a in (src.K, src.k0, src.L))
+    return -(np.einsum("nij,nj->ni", K, x) + k0 + np.einsum("nic,nc->ni", L, v))

@@ -1,0 +1,25 @@
+/* The robot example's tables in the build's arithmetic (STSP_ARITH_Q15, STSP_ARITH_Q31 or
+ * float32), for the Cortex-M test and bench images: ROBOT_TABLE, ROBOT_NX, ROBOT_NU. */
+#ifndef STSP_ROBOT_VARIANT_H
+#define STSP_ROBOT_VARIANT_H
+
+#include "stospline/stsp_controller.h"
+
+#if defined(STSP_ARITH_Q15)
+#include "robot_corridor_q15.h"
+#define ROBOT_TABLE robot_corridor_q15_table
+#define ROBOT_NX ROBOT_CORRIDOR_Q15_NX
+#define ROBOT_NU ROBOT_CORRIDOR_Q15_NU
+#elif defined(STSP_ARITH_Q31)
+#include "robot_corridor_q31.h"
+#define ROBOT_TABLE robot_corridor_q31_table
+#define ROBOT_NX ROBOT_CORRIDOR_Q31_NX
+#define ROBOT_NU ROBOT_CORRIDOR_Q31_NU
+#else
+#include "robot_corridor.h"
+#define ROBOT_TABLE robot_corridor_table
+#define ROBOT_NX ROBOT_CORRIDOR_NX
+#define ROBOT_NU ROBOT_CORRIDOR_NU
+#endif
+
+#endif /* STSP_ROBOT_VARIANT_H */

@@ -1,0 +1,465 @@
+/* Unit tests of the fixed-point (Q15/Q31) controller variants on hand-made tables, checked
+ * against a reference written here in int64 with floor division (not the firmware's biased
+ * shift). Built for STSP_ARITH_Q15 and STSP_ARITH_Q31, the Q15 build fixed to 2/1/2, and under
+ * ASan + UBSan (CMakeLists.txt), where a signed overflow in the law or the latch aborts: the
+ * extreme-value test drives every row to its largest allowed sum with states at +-2^F. */
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+#include "stospline/stsp_controller.h"
+
+#ifndef STSP_ARITH_FIXED
+#error "test_fixedpoint.c tests the STSP_ARITH_Q15/Q31 builds"
+#endif
+
+#define F STSP_Q_FRAC_BITS
+#define ONE ((int64_t)1 << F)
+#define QMAX ((stsp_scalar_t)(ONE - 1))
+#define QMIN ((stsp_scalar_t)(-ONE))
+#define NX 2u
+#define NU 1u
+#define NL 2u
+#define NT 5u
+#define NS 2u
+
+static const uint32_t stage_start[NS + 1u] = {0u, 3u, 5u};
+static const uint16_t stage_np[NS] = {1u, 2u};
+static const int8_t x_exp[NX] = {2, -3};
+static const int8_t u_exp[NU] = {4};
+static const int8_t v_exp[NL] = {1, 0};
+
+/* Gains as fractions of 2^F so that both variants use the same table shape. Tick 0: K = (1, 0)
+ * units, nothing else: the rounding test. Row sums stay well below 2^F - 1. */
+static stsp_scalar_t K[NT * NU * NX], k0[NT * NU], L[NT * NU * NL];
+static stsp_scalar_t Lambda[NS * NL * NX], lambda0[NS * NL];
+static stsp_scalar_t no_min[NU], no_max[NU];
+
+static stsp_scalar_t frac(double f)
+{
+    return (stsp_scalar_t)(int64_t)(f * (double)ONE + ((f >= 0.0) ? 0.5 : -0.5));
+}
+
+static void fill_gains(void)
+{
+    static const double kf[NT * NX] = {0.0, 0.0, 0.11, -0.21, 0.12, -0.22, 0.13, -0.23,
+                                       0.14, -0.24};
+    static const double k0f[NT] = {0.0, 0.05, -0.06, 0.07, -0.08};
+    static const double lf[NT * NL] = {0.0, 0.0, 0.2, 0.0, 0.25, 0.0, 0.1, -0.1, 0.15, -0.15};
+    static const double lamf[NS * NL * NX] = {0.3, 0.4, 0.0, 0.0, -0.35, 0.15, 0.05, 0.3};
+    static const double lam0f[NS * NL] = {-0.1, 0.0, 0.2, -0.25};
+    uint32_t i;
+    for (i = 0u; i < NT * NX; ++i) {
+        K[i] = frac(kf[i]);
+    }
+    K[0] = 1; /* tick 0: u = rhu(x0 / 2^F) */
+    for (i = 0u; i < NT; ++i) {
+        k0[i] = frac(k0f[i]);
+    }
+    for (i = 0u; i < NT * NL; ++i) {
+        L[i] = frac(lf[i]);
+    }
+    for (i = 0u; i < NS * NL * NX; ++i) {
+        Lambda[i] = frac(lamf[i]);
+    }
+    for (i = 0u; i < NS * NL; ++i) {
+        lambda0[i] = frac(lam0f[i]);
+    }
+    no_min[0] = QMIN;
+    no_max[0] = QMAX;
+}
+
+static stsp_table_t make_table_limited(const stsp_scalar_t *lo, const stsp_scalar_t *hi)
+{
+    stsp_table_t t;
+    memset(&t, 0, sizeof t);
+    t.magic = STSP_TABLE_MAGIC;
+    t.format_version = STSP_FORMAT_VERSION;
+    t.scalar_kind = STSP_SCALAR_KIND;
+    t.nx = NX; t.nu = NU; t.n_latch = NL; t.n_stages = NS; t.n_ticks = NT; t.tick_hz = 10u;
+    t.stage_start = stage_start; t.stage_np = stage_np;
+    t.K = K; t.k0 = k0; t.L = L; t.Lambda = Lambda; t.lambda0 = lambda0;
+    t.u_min = lo; t.u_max = hi;
+    t.x_exp = x_exp; t.u_exp = u_exp; t.v_exp = v_exp;
+    t.crc32 = stsp_table_crc32(&t);
+    return t;
+}
+
+static stsp_table_t make_table(void)
+{
+    return make_table_limited(no_min, no_max);
+}
+
+static int setup(void **state)
+{
+    (void)state;
+    fill_gains();
+    return 0;
+}
+
+/* floor(a / 2^F + 1/2) by integer division (C truncates toward zero; step down if negative). */
+static int64_t ref_round(int64_t sum)
+{
+    const int64_t a = sum + ONE / 2;
+    int64_t q = a / ONE;
+    if ((a % ONE) != 0 && a < 0) {
+        q -= 1;
+    }
+    return q;
+}
+
+static void ref_latch(const stsp_table_t *t, uint32_t s, const stsp_scalar_t *x, int64_t *v)
+{
+    uint32_t c, j;
+    for (c = 0u; c < NL; ++c) {
+        int64_t sum = (int64_t)t->lambda0[s * NL + c] * ONE;
+        for (j = 0u; j < NX; ++j) {
+            sum += (int64_t)t->Lambda[(s * NL + c) * NX + j] * x[j];
+        }
+        v[c] = (c < t->stage_np[s]) ? ref_round(sum) : 0;
+    }
+}
+
+static int64_t ref_law(const stsp_table_t *t, uint32_t tick, const stsp_scalar_t *x,
+                       const int64_t *v)
+{
+    int64_t sum = (int64_t)t->k0[tick] * ONE;
+    uint32_t j;
+    for (j = 0u; j < NX; ++j) {
+        sum += (int64_t)t->K[tick * NX + j] * x[j];
+    }
+    for (j = 0u; j < NL; ++j) {
+        sum += (int64_t)t->L[tick * NL + j] * v[j];
+    }
+    return ref_round(sum);
+}
+
+/* Seeded LCG: states over the whole Q range, the ends included now and then. */
+static uint64_t lcg_state = 12345u;
+static stsp_scalar_t random_q(void)
+{
+    uint32_t r;
+    lcg_state = lcg_state * 6364136223846793005ull + 1442695040888963407ull;
+    r = (uint32_t)(lcg_state >> 32);
+    if ((r & 15u) == 0u) {
+        return ((r & 16u) != 0u) ? QMAX : QMIN;
+    }
+#if F == 15
+    return (stsp_scalar_t)(int16_t)(uint16_t)(r >> 8);
+#else
+    return (stsp_scalar_t)r;
+#endif
+}
+
+static void test_law_matches_reference(void **state)
+{
+    stsp_table_t t = make_table();
+    uint32_t trial;
+    (void)state;
+    for (trial = 0u; trial < 2000u; ++trial) {
+        stsp_ctrl_t c;
+        stsp_scalar_t xl[NX], x[NX], u[NU];
+        int64_t v[NL];
+        uint32_t tick;
+        assert_int_equal(stsp_init(&c, &t), STSP_OK);
+        for (tick = 0u; tick < NT; ++tick) {
+            x[0] = random_q();
+            x[1] = random_q();
+            if (tick == 0u || tick == stage_start[1]) {
+                memcpy(xl, x, sizeof xl);
+                ref_latch(&t, (tick == 0u) ? 0u : 1u, xl, v);
+            }
+            assert_int_equal(stsp_step(&c, tick, x, u), STSP_OK);
+            assert_true((int64_t)u[0] == ref_law(&t, tick, x, v));
+        }
+    }
+}
+
+static void test_rounding_is_half_up(void **state)
+{
+    stsp_table_t t = make_table();
+    stsp_ctrl_t c;
+    /* tick 0: u = rhu(x0 / 2^F); x0 = +-2^(F-1) is a tie: up for both signs. */
+    stsp_scalar_t x[NX], u[NU];
+    (void)state;
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    x[1] = 0;
+    x[0] = (stsp_scalar_t)(ONE / 2);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
+    assert_int_equal(u[0], 1);
+    x[0] = (stsp_scalar_t)(-ONE / 2);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_WARN_TICK_REPEATED);
+    assert_int_equal(u[0], 0);
+    x[0] = (stsp_scalar_t)(-ONE / 2 - 1);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_WARN_TICK_REPEATED);
+    assert_int_equal(u[0], -1);
+    x[0] = QMIN;
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_WARN_TICK_REPEATED);
+    assert_int_equal(u[0], -1);
+}
+
+/* Extreme table: every law row and latch row at the largest allowed absolute sum 2^F - 1,
+ * states at the Q range ends in every sign pattern: the result matches the reference and
+ * stays within +-(2^F - 1); under UBSan an accumulator overflow would abort. */
+static stsp_scalar_t xk[NT * NU * NX], xk0[NT * NU], xl_[NT * NU * NL];
+static stsp_scalar_t xlam[NS * NL * NX], xlam0[NS * NL];
+
+static stsp_table_t make_extreme(int sign)
+{
+    stsp_table_t t = make_table();
+    const stsp_scalar_t q4 = (stsp_scalar_t)(sign * (ONE / 4));
+    const stsp_scalar_t q8 = (stsp_scalar_t)(sign * (ONE / 8));
+    const stsp_scalar_t q2 = (stsp_scalar_t)(sign * (ONE / 2));
+    uint32_t i;
+    for (i = 0u; i < NT; ++i) {
+        xk[i * NX] = q4;
+        xk[i * NX + 1u] = (stsp_scalar_t)-q4;
+        xk0[i] = q4;
+        xl_[i * NL] = q8;
+        xl_[i * NL + 1u] = (stsp_scalar_t)(-(q8 - sign)); /* 3/4 + 1/8 + 1/8 - 1 LSB */
+    }
+    for (i = 0u; i < NS * NL; ++i) {
+        xlam0[i] = q2;
+        xlam[i * NX] = (stsp_scalar_t)-q4;
+        xlam[i * NX + 1u] = (stsp_scalar_t)(q4 - sign); /* 1/2 + 1/4 + 1/4 - 1 LSB */
+    }
+    t.K = xk; t.k0 = xk0; t.L = xl_; t.Lambda = xlam; t.lambda0 = xlam0;
+    t.crc32 = stsp_table_crc32(&t);
+    return t;
+}
+
+static void test_extreme_rows_do_not_overflow(void **state)
+{
+    int sign;
+    (void)state;
+    for (sign = -1; sign <= 1; sign += 2) {
+        stsp_table_t t = make_extreme(sign);
+        uint32_t pattern;
+        for (pattern = 0u; pattern < 16u; ++pattern) {
+            stsp_ctrl_t c;
+            stsp_scalar_t x[NX], xl[NX], u[NU];
+            int64_t v[NL];
+            uint32_t tick;
+            xl[0] = (pattern & 1u) ? QMAX : QMIN;
+            xl[1] = (pattern & 2u) ? QMAX : QMIN;
+            x[0] = (pattern & 4u) ? QMAX : QMIN;
+            x[1] = (pattern & 8u) ? QMAX : QMIN;
+            assert_int_equal(stsp_init(&c, &t), STSP_OK);
+            for (tick = 0u; tick < NT; ++tick) {
+                const stsp_scalar_t *xs = (tick == 0u || tick == 3u) ? xl : x;
+                if (tick == 0u || tick == 3u) {
+                    ref_latch(&t, (tick == 0u) ? 0u : 1u, xl, v);
+                }
+                assert_int_equal(stsp_step(&c, tick, xs, u), STSP_OK);
+                assert_true((int64_t)u[0] == ref_law(&t, tick, xs, v));
+                assert_true((int64_t)u[0] <= (int64_t)QMAX && (int64_t)u[0] >= -(int64_t)QMAX);
+            }
+            /* The largest latch magnitude is reached: |v| = 2^F - 1 for some pattern. */
+            if ((pattern & 3u) == 2u) {
+                assert_true(v[0] == (int64_t)QMAX || v[0] == -(int64_t)QMAX);
+            }
+        }
+    }
+}
+
+static void test_row_sum_over_limit_is_refused(void **state)
+{
+    stsp_ctrl_t c;
+    stsp_table_t t = make_extreme(1);
+    (void)state;
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    xk0[2] = (stsp_scalar_t)(xk0[2] + 1); /* law row at tick 2: 2^F */
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    {
+        stsp_scalar_t x[NX] = {0, 0}, u[NU] = {7};
+        assert_int_equal(stsp_step(&c, 0u, x, u), STSP_ERR_NOT_INITIALIZED);
+        assert_int_equal(u[0], 7);
+    }
+    t = make_extreme(-1);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    xlam0[3] = (stsp_scalar_t)(xlam0[3] - 1); /* latch row (stage 1, c = 1): 2^F */
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    t = make_extreme(-1);
+    xl_[NT * NL - 1u] = QMIN; /* one huge entry */
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+}
+
+static void test_wrong_variant_and_scales_are_refused(void **state)
+{
+    stsp_ctrl_t c;
+    stsp_table_t t = make_table();
+    int8_t bad_exp[NX] = {2, -3};
+    (void)state;
+    t.scalar_kind = STSP_SCALAR_FLOAT32;
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VERSION);
+    t.scalar_kind = (STSP_SCALAR_KIND == STSP_SCALAR_Q15) ? STSP_SCALAR_Q31 : STSP_SCALAR_Q15;
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VERSION);
+
+    t = make_table();
+    t.x_exp = bad_exp;
+    bad_exp[1] = (int8_t)(STSP_Q_EXP_MAX + 1);
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    bad_exp[1] = (int8_t)(-STSP_Q_EXP_MAX);
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+
+    t = make_table();
+    t.u_exp = NULL;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_NULL);
+    t = make_table();
+    t.v_exp = NULL;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_NULL);
+}
+
+static void test_crc_covers_scales_and_kind(void **state)
+{
+    stsp_ctrl_t c;
+    stsp_table_t t = make_table();
+    const uint32_t crc = t.crc32;
+    int8_t exps[NL] = {1, 0};
+    stsp_table_t k = t;
+    (void)state;
+    t.v_exp = exps;
+    assert_int_equal(stsp_table_crc32(&t), crc);
+    exps[1] = 1;
+    assert_int_not_equal(stsp_table_crc32(&t), crc);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_CRC);
+    k.scalar_kind = STSP_SCALAR_FLOAT32;
+    assert_int_not_equal(stsp_table_crc32(&k), crc);
+}
+
+static void test_saturation_in_command_units(void **state)
+{
+    const stsp_scalar_t lo[NU] = {(stsp_scalar_t)-3}, hi[NU] = {(stsp_scalar_t)2};
+    const stsp_scalar_t bad_lo[NU] = {(stsp_scalar_t)1};
+    stsp_table_t t = make_table_limited(lo, hi);
+    stsp_ctrl_t c;
+    stsp_scalar_t x[NX] = {0, 0}, u[NU];
+    (void)state;
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    x[0] = (stsp_scalar_t)(ONE / 2); /* u = 1: inside */
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
+    assert_int_equal(u[0], 1);
+    assert_int_equal(c.sat_mask, 0u);
+    /* tick 1: about (0.05 + 0.11 + 0.2 * 0.05) 2^F units, far above 2: clamped */
+    x[0] = QMAX;
+    assert_int_equal(stsp_step(&c, 1u, x, u), STSP_WARN_SATURATED);
+    assert_int_equal(u[0], hi[0]);
+    assert_int_equal(c.sat_mask, 1u);
+    /* tick 2: about (-0.06 - 0.12 + 0.25 * 0.05) 2^F units, far below -3 */
+    x[0] = QMIN;
+    assert_int_equal(stsp_step(&c, 2u, x, u), STSP_WARN_SATURATED);
+    assert_int_equal(u[0], lo[0]);
+    /* saturation wins over a tick warning, as in float32 */
+    assert_int_equal(stsp_step(&c, 2u, x, u), STSP_WARN_SATURATED);
+    x[0] = 0;
+    assert_int_equal(stsp_step(&c, 2u, x, u), STSP_WARN_SATURATED); /* -0.06 + 0.0125 */
+    t = make_table_limited(bad_lo, hi);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+}
+
+static void test_ticks_as_float(void **state)
+{
+    stsp_table_t t = make_table();
+    stsp_ctrl_t c, before;
+    stsp_scalar_t x[NX] = {100, -200}, u[NU] = {7};
+    (void)state;
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_WARN_TICK_REPEATED);
+    assert_int_equal(stsp_step(&c, 4u, x, u), STSP_WARN_TICK_SKIPPED); /* stage 1, latches */
+    assert_int_equal(c.stage, 1u);
+    memcpy(&before, &c, sizeof c);
+    u[0] = 7;
+    assert_int_equal(stsp_step(&c, 2u, x, u), STSP_ERR_TICK_ORDER);
+    assert_int_equal(u[0], 0);
+    assert_memory_equal(&before, &c, sizeof c);
+    u[0] = 7;
+    assert_int_equal(stsp_step(&c, NT, x, u), STSP_ERR_TICK_RANGE);
+    assert_int_equal(u[0], 0);
+    assert_int_equal(stsp_step(&c, 4u, NULL, u), STSP_ERR_NULL);
+    assert_int_equal(stsp_reset(&c), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
+}
+
+static void test_state_conversion(void **state)
+{
+    stsp_table_t t = make_table();
+    stsp_ctrl_t c, idle;
+    stsp_scalar_t xq[NX];
+    stsp_f32_t x[NX], u[NU];
+    const stsp_scalar_t uq[NU] = {(stsp_scalar_t)-3};
+    (void)state;
+    memset(&idle, 0, sizeof idle);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    /* x_exp = {2, -3}: x0 in [-4, 4), x1 in [-1/8, 1/8); LSBs 2^(2-F), 2^(-3-F). */
+    x[0] = 1.0f;
+    x[1] = -0.0625f;
+    assert_int_equal(stsp_state_to_q(&c, x, xq), STSP_OK);
+    assert_true((int64_t)xq[0] == ONE / 4);
+    assert_true((int64_t)xq[1] == -ONE / 2);
+#if F == 15
+    /* Ties round up: half an LSB of x0 is 2^(1-F) = 2^-14. */
+    x[0] = 0.00006103515625f;         /* 2^-14 = 1/2 LSB of x0 */
+    x[1] = -0.00006103515625f / 32.0f; /* -2^-19 = -1/2 LSB of x1 */
+    assert_int_equal(stsp_state_to_q(&c, x, xq), STSP_OK);
+    assert_int_equal(xq[0], 1);
+    assert_int_equal(xq[1], 0);
+#endif
+    x[0] = 4.0f; /* the range end is not representable: clamped */
+    x[1] = -1.0f;
+    assert_int_equal(stsp_state_to_q(&c, x, xq), STSP_WARN_STATE_CLAMPED);
+    assert_int_equal(xq[0], QMAX);
+    assert_int_equal(xq[1], QMIN);
+    x[0] = 3.0e38f;
+    x[1] = -0.125f; /* exactly -2^F LSBs: in range */
+    assert_int_equal(stsp_state_to_q(&c, x, xq), STSP_WARN_STATE_CLAMPED);
+    assert_int_equal(xq[0], QMAX);
+    assert_int_equal(xq[1], QMIN);
+    x[1] = 0.0f;
+    assert_int_equal(stsp_state_to_q(&c, x, xq), STSP_WARN_STATE_CLAMPED);
+    x[0] = NAN;
+    xq[0] = 5; xq[1] = 5;
+    assert_int_equal(stsp_state_to_q(&c, x, xq), STSP_ERR_NONFINITE_STATE);
+    assert_int_equal(xq[0], 0);
+    assert_int_equal(xq[1], 0);
+    x[0] = 0.0f;
+    x[1] = -INFINITY;
+    assert_int_equal(stsp_state_to_q(&c, x, xq), STSP_ERR_NONFINITE_STATE);
+    assert_int_equal(stsp_state_to_q(NULL, x, xq), STSP_ERR_NULL);
+    assert_int_equal(stsp_state_to_q(&c, NULL, xq), STSP_ERR_NULL);
+    assert_int_equal(stsp_state_to_q(&idle, x, xq), STSP_ERR_NOT_INITIALIZED);
+
+    /* u_exp = 4: one unit is 2^(4-F). */
+    assert_int_equal(stsp_command_to_f32(&c, uq, u), STSP_OK);
+    assert_true(u[0] == -3.0f / (stsp_f32_t)(ONE >> 4));
+    assert_int_equal(stsp_command_to_f32(&idle, uq, u), STSP_ERR_NOT_INITIALIZED);
+    assert_int_equal(stsp_command_to_f32(&c, NULL, u), STSP_ERR_NULL);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test_setup(test_law_matches_reference, setup),
+        cmocka_unit_test_setup(test_rounding_is_half_up, setup),
+        cmocka_unit_test_setup(test_extreme_rows_do_not_overflow, setup),
+        cmocka_unit_test_setup(test_row_sum_over_limit_is_refused, setup),
+        cmocka_unit_test_setup(test_wrong_variant_and_scales_are_refused, setup),
+        cmocka_unit_test_setup(test_crc_covers_scales_and_kind, setup),
+        cmocka_unit_test_setup(test_saturation_in_command_units, setup),
+        cmocka_unit_test_setup(test_ticks_as_float, setup),
+        cmocka_unit_test_setup(test_state_conversion, setup),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}

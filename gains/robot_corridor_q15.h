@@ -15,6 +15,8 @@
 #define ROBOT_CORRIDOR_Q15_N_STAGES 2u
 #define ROBOT_CORRIDOR_Q15_N_TICKS 6000u
 #define ROBOT_CORRIDOR_Q15_TICK_HZ 1000u
+/* SHA-256 of the problem file, for stsp_init_problem(): uint8_t want[32] = ROBOT_CORRIDOR_Q15_PROBLEM_SHA256; */
+#define ROBOT_CORRIDOR_Q15_PROBLEM_SHA256 {0x26u, 0x51u, 0x69u, 0x29u, 0xecu, 0x32u, 0xd8u, 0x01u, 0xe2u, 0x16u, 0x81u, 0xc9u, 0x1fu, 0xe7u, 0xecu, 0xf8u, 0x52u, 0x88u, 0x5du, 0x9du, 0xfau, 0x19u, 0x72u, 0xe4u, 0x24u, 0x10u, 0x0fu, 0x51u, 0xc0u, 0x32u, 0x90u, 0x19u}
 #define ROBOT_CORRIDOR_Q15_ARITH_Q15 1
 
 /* Q15 tables in flash (F = 15); layout as in stsp_controller.h, gains stored negated and

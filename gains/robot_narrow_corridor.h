@@ -11,6 +11,8 @@
 #define ROBOT_NARROW_CORRIDOR_N_STAGES 60u
 #define ROBOT_NARROW_CORRIDOR_N_TICKS 120u
 #define ROBOT_NARROW_CORRIDOR_TICK_HZ 20u
+/* SHA-256 of the problem file, for stsp_init_problem(): uint8_t want[32] = ROBOT_NARROW_CORRIDOR_PROBLEM_SHA256; */
+#define ROBOT_NARROW_CORRIDOR_PROBLEM_SHA256 {0x98u, 0xcau, 0xbeu, 0x24u, 0x3eu, 0x9bu, 0x74u, 0x34u, 0x10u, 0xe1u, 0x29u, 0xe7u, 0x86u, 0x8au, 0xb4u, 0xe5u, 0xb2u, 0xfau, 0x34u, 0xfeu, 0x79u, 0x0fu, 0xeau, 0x95u, 0xffu, 0xc7u, 0xd3u, 0x8bu, 0x83u, 0x6cu, 0xe6u, 0x4cu}
 #define ROBOT_NARROW_CORRIDOR_BAND_ROWS 0u
 
 /* Tables in flash; layout K[tick][i*NX + j], k0[tick][i], L[tick][i*N_LATCH + c],

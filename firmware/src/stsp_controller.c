@@ -466,6 +466,7 @@ uint32_t stsp_table_crc32(const stsp_table_t *table)
         crc = stsp_crc32_f64s(crc, b->lo, q);
         crc = stsp_crc32_f64s(crc, b->hi, q);
     }
+    crc = stsp_crc32_bytes(crc, table->problem_sha256, (uint32_t)sizeof table->problem_sha256);
     return stsp_crc32_end(crc);
 }
 
@@ -511,6 +512,26 @@ stsp_status_t stsp_init_expect(stsp_ctrl_t *ctrl, const stsp_table_t *table, uin
         ctrl->ready = 0u;
         ctrl->table = NULL;
         st = STSP_ERR_BAD_DIMS;
+    }
+    return st;
+}
+
+stsp_status_t stsp_init_problem(stsp_ctrl_t *ctrl, const stsp_table_t *table, uint32_t nx,
+                                uint32_t nu, const uint8_t *problem_sha256)
+{
+    stsp_status_t st;
+    if (problem_sha256 == NULL) {
+        if (ctrl != NULL) {
+            (void)memset(ctrl, 0, sizeof *ctrl);
+        }
+        return STSP_ERR_NULL;
+    }
+    st = stsp_init_expect(ctrl, table, nx, nu);
+    if ((st == STSP_OK) &&
+        (memcmp(table->problem_sha256, problem_sha256, sizeof table->problem_sha256) != 0)) {
+        ctrl->ready = 0u;
+        ctrl->table = NULL;
+        st = STSP_ERR_BAD_PROBLEM;
     }
     return st;
 }
@@ -957,6 +978,7 @@ const char *stsp_status_str(stsp_status_t status)
     case STSP_ERR_TICK_ORDER: text = "tick went backwards"; break;
     case STSP_ERR_NONFINITE_STATE: text = "state not finite"; break;
     case STSP_ERR_NONFINITE_OUTPUT: text = "command overflowed"; break;
+    case STSP_ERR_BAD_PROBLEM: text = "table made from another problem file"; break;
     case STSP_ERR_BAD_VALUES: text = "table values not finite or limits invalid"; break;
     default: text = "unknown status"; break;
     }

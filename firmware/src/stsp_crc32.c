@@ -40,6 +40,16 @@ uint32_t stsp_crc32_f32s(uint32_t crc, const stsp_f32_t *values, uint32_t count)
     return c;
 }
 
+uint32_t stsp_crc32_bytes(uint32_t crc, const uint8_t *values, uint32_t count)
+{
+    uint32_t c = crc;
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        c = stsp_crc32_byte(c, (uint32_t)values[i]);
+    }
+    return c;
+}
+
 uint32_t stsp_crc32_f64s(uint32_t crc, const double *values, uint32_t count)
 {
     uint32_t c = crc;

@@ -13,6 +13,8 @@ uint32_t stsp_crc32_u32(uint32_t crc, uint32_t value);
 uint32_t stsp_crc32_f32s(uint32_t crc, const stsp_f32_t *values, uint32_t count);
 /* Feed `count` binary64 values by their bit patterns (low word first: little-endian bytes). */
 uint32_t stsp_crc32_f64s(uint32_t crc, const double *values, uint32_t count);
+/* Feed `count` bytes. */
+uint32_t stsp_crc32_bytes(uint32_t crc, const uint8_t *values, uint32_t count);
 uint32_t stsp_crc32_end(uint32_t crc);
 #ifdef STSP_ARITH_FIXED
 /* Feed `count` signed integers as little-endian two's complement, 1, 2 or 4 bytes each. */

@@ -36,6 +36,11 @@ def _array(ctype: str, name: str, values: np.ndarray, fmt, dims: str) -> str:
     return f"/* {dims} */\nstatic const {ctype} {name}[{count}] = {{\n{body}\n}};\n"
 
 
+def _sha_initializer(sha: str) -> str:
+    """The problem file's SHA-256 as a C initializer of 32 uint8_t."""
+    return "{" + ", ".join(f"0x{sha[i:i + 2]}u" for i in range(0, 64, 2)) + "}"
+
+
 def generate_c(table: GainTable, *, prefix: str | None = None,
                source_name: str = "") -> tuple[str, str]:
     """Return ``(header, source)`` text defining ``const stsp_table_t <prefix>_table``.
@@ -67,6 +72,8 @@ def generate_c(table: GainTable, *, prefix: str | None = None,
 #define {P}_N_STAGES {table.n_stages}u
 #define {P}_N_TICKS {table.n_ticks}u
 #define {P}_TICK_HZ {table.tick_hz}u
+/* SHA-256 of the problem file, for stsp_init_problem(): uint8_t want[32] = {P}_PROBLEM_SHA256; */
+#define {P}_PROBLEM_SHA256 {_sha_initializer(sha)}
 #define {P}_BAND_ROWS {0 if table.band_qp is None else table.band_qp.q}u
 
 /* Tables in flash; layout K[tick][i*NX + j], k0[tick][i], L[tick][i*N_LATCH + c],
@@ -104,7 +111,6 @@ extern const stsp_table_t {p}_table;
             f"{p}_band_mt, {p}_band_W, {p}_band_lo, {p}_band_hi\n}};\n",
         ]
         band = f"&{p}_band_qp"
-    sha_bytes = ", ".join(f"0x{sha[i:i + 2]}u" for i in range(0, 64, 2))
     source = banner + f'#include "{p}.h"\n\n' + "\n".join(arrays) + f"""
 const stsp_table_t {p}_table = {{
     0x{0x53545350:08X}u, {FORMAT_VERSION}u, {SCALAR_FLOAT32}u,
@@ -113,7 +119,7 @@ const stsp_table_t {p}_table = {{
     {p}_K, {p}_k0, {p}_L, {p}_Lambda, {p}_lambda0,
     {p}_u_min, {p}_u_max, {band},
     0x{table_crc32(table):08X}u,
-    {{{sha_bytes}}}
+    {_sha_initializer(sha)}
 }};
 """
     return header, source
@@ -144,6 +150,8 @@ def _generate_fixed(table, p: str, banner: str) -> tuple[str, str]:
 #define {P}_N_STAGES {table.n_stages}u
 #define {P}_N_TICKS {table.n_ticks}u
 #define {P}_TICK_HZ {table.tick_hz}u
+/* SHA-256 of the problem file, for stsp_init_problem(): uint8_t want[32] = {P}_PROBLEM_SHA256; */
+#define {P}_PROBLEM_SHA256 {_sha_initializer(sha)}
 #define {P}_ARITH_{kind} 1
 
 /* {kind} tables in flash (F = {F}); layout as in stsp_controller.h, gains stored negated and
@@ -174,7 +182,6 @@ extern const stsp_table_t {p}_table;
         _array("int8_t", f"{p}_u_exp", table.u_exp, d, "[nu] command scale exponents"),
         _array("int8_t", f"{p}_v_exp", table.v_exp, d, "[n_latch] multiplier scale exponents"),
     ]
-    sha_bytes = ", ".join(f"0x{sha[i:i + 2]}u" for i in range(0, 64, 2))
     source = banner + f'#include "{p}.h"\n\n' + "\n".join(arrays) + f"""
 const stsp_table_t {p}_table = {{
     0x{0x53545350:08X}u, {FORMAT_VERSION}u, {table.scalar_kind}u,
@@ -185,7 +192,7 @@ const stsp_table_t {p}_table = {{
     {p}_x_exp, {p}_u_exp, {p}_v_exp,
     NULL, /* band_qp: the band re-solve is float32 only */
     0x{table_crc32(table):08X}u,
-    {{{sha_bytes}}}
+    {_sha_initializer(sha)}
 }};
 """
     return header, source

@@ -226,7 +226,8 @@ def table_crc32(table: GainTable) -> int:
     A fixed-point table (`stospline.fixed.FixedTable`) adds its scalar kind as u32 after the
     tick rate, stores the arrays as little-endian int16 (Q15) or int32 (Q31), and ends with
     x_exp, u_exp and v_exp (when P > 0) as one signed byte each. Then, with a band QP (float32
-    tables only), its q and n as u32 and Nt, mt, W, lo, hi as binary64 bit patterns.
+    tables only), its q and n as u32 and Nt, mt, W, lo, hi as binary64 bit patterns. Last, the
+    32 bytes of the problem file's SHA-256 (zeros when unknown).
     """
     n, m, P = table.dims
     arith = getattr(table, "arith", "float32")
@@ -247,6 +248,7 @@ def table_crc32(table: GainTable) -> int:
     if b is not None:
         parts.append(struct.pack("<2I", b.q, b.Nt.shape[1]))
         parts += [np.asarray(a, "<f8").tobytes() for a in (b.Nt, b.mt, b.W, b.lo, b.hi)]
+    parts.append(bytes.fromhex(table.problem_sha256 or "0" * 64))
     crc = 0
     for part in parts:
         crc = zlib.crc32(part, crc)

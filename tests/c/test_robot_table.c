@@ -7,6 +7,7 @@
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 #include <cmocka.h>
 
@@ -21,6 +22,30 @@ static void test_header_matches_table(void **state)
     assert_int_equal(robot_corridor_table.n_ticks, ROBOT_CORRIDOR_N_TICKS);
     assert_int_equal(robot_corridor_table.tick_hz, ROBOT_CORRIDOR_TICK_HZ);
     assert_int_equal(stsp_table_crc32(&robot_corridor_table), robot_corridor_table.crc32);
+}
+
+/* The table carries the problem file's SHA-256; an application built for that problem refuses
+ * tables from another one, and the CRC covers the stored hash. */
+static void test_init_problem_checks_the_hash(void **state)
+{
+    static const uint8_t want[32] = ROBOT_CORRIDOR_PROBLEM_SHA256;
+    uint8_t other[32];
+    stsp_table_t copy = robot_corridor_table;
+    stsp_ctrl_t c;
+    float x[4] = {-5.0f, 0.0f, 1.0f, 0.0f}, u[2];
+    (void)state;
+    assert_int_equal(stsp_init_problem(&c, &robot_corridor_table, 4u, 2u, want), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
+    memcpy(other, want, sizeof other);
+    other[31] ^= 1u;
+    assert_int_equal(stsp_init_problem(&c, &robot_corridor_table, 4u, 2u, other),
+                     STSP_ERR_BAD_PROBLEM);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_ERR_NOT_INITIALIZED);
+    assert_int_equal(stsp_init_problem(&c, &robot_corridor_table, 4u, 2u, NULL), STSP_ERR_NULL);
+    assert_int_equal(stsp_init_problem(&c, &robot_corridor_table, 4u, 3u, want),
+                     STSP_ERR_BAD_DIMS);
+    copy.problem_sha256[0] ^= 0x80u; /* a flipped bit in the stored hash */
+    assert_int_equal(stsp_init_problem(&c, &copy, 4u, 2u, want), STSP_ERR_BAD_CRC);
 }
 
 static void test_noise_free_closed_loop_reaches_goal(void **state)
@@ -94,6 +119,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_header_matches_table),
+        cmocka_unit_test(test_init_problem_checks_the_hash),
         cmocka_unit_test(test_noise_free_closed_loop_reaches_goal),
         cmocka_unit_test(test_limited_copy_saturates),
     };

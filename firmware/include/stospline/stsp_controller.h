@@ -166,10 +166,12 @@ typedef enum {
     STSP_ERR_TICK_ORDER = -8,       /**< tick went backwards by more than one repeat */
     STSP_ERR_NONFINITE_STATE = -9,  /**< x holds NaN or +-Inf */
     STSP_ERR_NONFINITE_OUTPUT = -10,/**< the state is finite but u (or the latch) overflowed */
-    STSP_ERR_BAD_VALUES = -11       /**< a table value is NaN or +-Inf, u_min > u_max, or 0
+    STSP_ERR_BAD_VALUES = -11,      /**< a table value is NaN or +-Inf, u_min > u_max, or 0
                                          lies outside [u_min, u_max]; fixed point: a scale
                                          exponent beyond +-STSP_Q_EXP_MAX, or a row whose
                                          absolute sum exceeds 2^F - 1 (see stsp_step) */
+    STSP_ERR_BAD_PROBLEM = -12      /**< stsp_init_problem(): the table's problem_sha256 is not
+                                         the expected one (tables from another problem file) */
 } stsp_status_t;
 
 /**
@@ -251,8 +253,8 @@ typedef struct {
  * binary32 bit patterns (L, Lambda, lambda0 only when n_latch > 0). Fixed point: scalar_kind
  * as a u32 after tick_hz, the same arrays as little-endian int16 (Q15) or int32 (Q31), then
  * x_exp, u_exp and v_exp (when n_latch > 0) one byte each. Then, when band_qp is not NULL,
- * its q and nx as u32 and Nt, mt, W, lo, hi as little-endian binary64 bit patterns.
- * Independent of the
+ * its q and nx as u32 and Nt, mt, W, lo, hi as little-endian binary64 bit patterns. Last,
+ * the 32 bytes of problem_sha256. Independent of the
  * target's byte order. The table's dimensions and pointers must already be valid (stsp_init()
  * checks them first).
  */
@@ -272,6 +274,15 @@ stsp_status_t stsp_init(stsp_ctrl_t *ctrl, const stsp_table_t *table);
  */
 stsp_status_t stsp_init_expect(stsp_ctrl_t *ctrl, const stsp_table_t *table, uint32_t nx,
                                uint32_t nu);
+
+/**
+ * stsp_init_expect(), and STSP_ERR_BAD_PROBLEM (instance not ready) unless the table was made
+ * from the problem file with SHA-256 `problem_sha256` (32 bytes; the generated header's
+ * <NAME>_PROBLEM_SHA256 initializer): refuses tables flashed from another version of the
+ * problem. The CRC-32 covers the stored hash, so a corrupted hash is STSP_ERR_BAD_CRC.
+ */
+stsp_status_t stsp_init_problem(stsp_ctrl_t *ctrl, const stsp_table_t *table, uint32_t nx,
+                                uint32_t nu, const uint8_t *problem_sha256);
 
 /** Restart the plan at tick 0 (the next step latches stage 0 again). */
 stsp_status_t stsp_reset(stsp_ctrl_t *ctrl);

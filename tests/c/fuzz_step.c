@@ -3,22 +3,40 @@
  *
  * Each input describes a table and a sequence of calls. The table: dimensions (some invalid),
  * stage layout, gains (small values or raw bit patterns, so NaN/Inf/subnormal appear), limits
- * (none, finite, or invalid), the CRC (correct, or flipped), and NULL pointers now and then.
- * Its arrays always have room for the dimensions it declares: that is the documented
- * precondition of stsp_init() (the generated tables satisfy it by construction). The calls:
- * init, init_expect, reset, verify and step, with ticks in order, repeated, skipped, backwards
- * or past the end, states with NaN/Inf/huge/subnormal entries, and NULL arguments.
+ * (none, finite, or invalid), the CRC (correct, or flipped), and NULL pointers now and then;
+ * about one table in three carries a band dual (band_qp, format 3): q = 1..8 rows or an
+ * invalid count, nx the table's or not, W positive definite, diagonal, indefinite, negative
+ * definite, singular or raw bits (NaN/Inf), bands, equality rows, lo > hi, huge or
+ * non-finite bounds, NULL arrays, stage_np as the contract requires (q at stage 0, 0 after)
+ * or not, and the CRC right or wrong. The arrays always have room for the dimensions the
+ * table declares: that is the documented precondition of stsp_init() (the generated tables
+ * satisfy it by construction). The calls: init, init_expect, reset, verify and step, with
+ * ticks in order, repeated, skipped, backwards or past the end, states with
+ * NaN/Inf/huge/subnormal entries, and NULL arguments.
  *
  * Any sanitizer report, crash, or broken invariant (abort) is a finding. The invariants are
- * the contract of stsp_controller.h: a known status; before init u untouched; on an error u
- * all +0.0 and the instance byte-for-byte unchanged; otherwise u finite, within
+ * the contract of stsp_controller.h: a known status; init returns exactly the status its
+ * checks prescribe for a table without a main-table corruption (band checks included), and
+ * never STSP_OK for a table with an invalid band dual; before init u untouched; on an error
+ * u all +0.0 and the instance byte-for-byte unchanged; otherwise u finite, within
  * [u_min, u_max], and saturated inputs exactly at a limit; nothing written past u[nu]; the
- * tick bookkeeping as documented (range, order, non-finite state detected first).
+ * tick bookkeeping as documented (range, order, non-finite state detected first); at the
+ * stage-0 latch of a band table STSP_WARN_BAND_FALLBACK exactly when stsp_bandqp_solve()
+ * fails for that state (no optimal active set, or Nt x0 + mt overflowed, which the target
+ * recomputes in the solver's order) or some multiplier lies beyond +-FLT_MAX (unless
+ * saturation wins); else v = (float)lam bit for bit, on a fallback v = Lambda x + lambda0 in
+ * the firmware's order, and u the law with that v, clamped, bit for bit (or, if it overflows,
+ * STSP_ERR_NONFINITE_OUTPUT); and the solver's own contract: at most 3^(band rows)
+ * candidates, exactly that many when it finds none, none on an overflow, lam all zeros on a
+ * failure.
  *
  * Built once per arithmetic variant (fuzz_step, fuzz_step_q15, fuzz_step_q31): in the Q15/Q31
  * builds the tables, states and commands are integers (gains small enough for valid row sums,
  * or full-range ones that break the row bound), the scale exponents are fuzzed as well, and
- * there is no non-finite value. */
+ * there is no non-finite value. A fixed-point build has no band solver: about one table in
+ * eight carries a band dual all the same (the generator above), and init must never return
+ * STSP_OK for it, and return exactly STSP_ERR_BAD_DIMS when the rest of the table is valid
+ * (or has any main-table corruption but magic, version and NULL arrays, which come first). */
 #include <float.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -30,19 +48,24 @@
 
 #define FZ_MAX_NX 7u
 #define FZ_MAX_NU 4u
-#define FZ_MAX_NL 5u
+#define FZ_MAX_NL 8u   /* storage; >= STSP_BANDQP_MAX: a band table needs n_latch >= q */
 #define FZ_MAX_NS 5u
 #define FZ_MAX_STAGE_TICKS 8u
 #define FZ_MAX_NT (FZ_MAX_NS * FZ_MAX_STAGE_TICKS)
 #define FZ_MAX_CALLS 64u
+#define FZ_BAND_STORE 16u /* band rows/states the storage holds (invalid counts up to 16) */
 
 #ifdef STSP_ARITH_FIXED
 typedef stsp_scalar_t fz_val_t;
 #define FZ_Q_ONE ((int64_t)1 << STSP_Q_FRAC_BITS)
 #define FZ_SENTINEL ((stsp_scalar_t)12345)
+#define FZ_GEN_NL 5u   /* n_latch of a table without bands: a row of 1 + 7 + 5 small gains */
+#define FZ_BAND_PICK(sel) (((sel) % 8u) == 7u) /* not an exhausted input's 0: refused */
 #else
 typedef float fz_val_t;
 #define FZ_SENTINEL 1234.5f
+#define FZ_GEN_NL FZ_MAX_NL
+#define FZ_BAND_PICK(sel) (((sel) % 3u) == 0u)
 #endif
 
 typedef struct {
@@ -121,6 +144,13 @@ static int fz_is_zero(float f)
     return fz_f32_bits(f) == 0u;
 }
 
+static int fz_f64_is_pos_zero(double d)
+{
+    uint64_t bits;
+    memcpy(&bits, &d, sizeof bits);
+    return bits == 0u;
+}
+
 /* Mostly modest values; a selector byte picks specials or a raw bit pattern. */
 static float fz_value(fz_in_t *in)
 {
@@ -141,6 +171,31 @@ static float fz_value(fz_in_t *in)
 }
 #endif
 
+/* -DFZ_STATS: count what the inputs reached and print it at exit (to see that the generator
+ * reaches the band paths; not part of the ctest build). */
+#ifdef FZ_STATS
+enum { FZS_TABLES, FZS_BAND_TABLES, FZS_INIT_MODELLED, FZS_INIT_OK, FZS_BAND_INIT_OK,
+       FZS_BAND_NULL, FZS_BAND_DIMS, FZS_BAND_CRC, FZS_BAND_VALUES, FZS_LATCH, FZS_LATCH_OK,
+       FZS_LATCH_INFEASIBLE, FZS_LATCH_OVERFLOW, FZS_LATCH_BEYOND_FLT, FZS_FALLBACK,
+       FZS_LATCH_Q8, FZS_LATCH_ERR, FZS_N };
+static const char *const fzs_names[FZS_N] = {
+    "tables", "band tables", "init modelled", "init ok", "band init ok", "band init ERR_NULL",
+    "band init BAD_DIMS", "band init BAD_CRC", "band init BAD_VALUES", "band latch steps",
+    "  solver ok", "  solver infeasible", "  solver e overflow", "  |lam| > FLT_MAX",
+    "  status BAND_FALLBACK", "  q = 8", "  step error"};
+static unsigned long fzs[FZS_N];
+static void fzs_print(void)
+{
+    int i;
+    for (i = 0; i < FZS_N; ++i) {
+        (void)fprintf(stderr, "FZ_STATS %-22s %lu\n", fzs_names[i], fzs[i]);
+    }
+}
+#define FZS(k) (++fzs[(k)])
+#else
+#define FZS(k) ((void)0)
+#endif
+
 static void fz_check_at(int ok, int line)
 {
     if (!ok) {
@@ -150,9 +205,15 @@ static void fz_check_at(int ok, int line)
 }
 #define fz_check(ok) fz_check_at((ok), __LINE__)
 
+/* The statuses init/reset/verify/step can return: STSP_WARN_STATE_CLAMPED only comes from the
+ * fixed-point conversion, STSP_WARN_BAND_FALLBACK only from a float32 band table. */
 static int fz_known_status(stsp_status_t st)
 {
-    return (st >= STSP_ERR_BAD_VALUES) && (st <= STSP_WARN_SATURATED);
+    return ((st >= STSP_ERR_BAD_VALUES) && (st <= STSP_WARN_SATURATED))
+#ifndef STSP_ARITH_FIXED
+        || (st == STSP_WARN_BAND_FALLBACK)
+#endif
+        ;
 }
 
 /* Storage with room for every dimension the input can declare. */
@@ -167,6 +228,20 @@ static fz_val_t g_lo[FZ_MAX_NU], g_hi[FZ_MAX_NU];
 #ifdef STSP_ARITH_FIXED
 static int8_t g_xe[FZ_MAX_NX], g_ue[FZ_MAX_NU], g_ve[FZ_MAX_NL];
 #endif
+static stsp_bandqp_t g_band;
+static double g_bNt[FZ_BAND_STORE * FZ_BAND_STORE];
+static double g_bmt[FZ_BAND_STORE];
+static double g_bW[FZ_BAND_STORE * FZ_BAND_STORE];
+static double g_blo[FZ_BAND_STORE];
+static double g_bhi[FZ_BAND_STORE];
+
+/* What the input asked of the table, for the init model. */
+typedef struct {
+    uint32_t main_corrupt; /* nonzero: 1 + the main-table corruption (float32: init's status
+                              not modelled) */
+    uint32_t band;         /* the table carries band_qp */
+    uint32_t band_crc_ok;  /* the CRC covers the band data as it is now */
+} fz_table_info_t;
 
 /* Gains from a generator seeded by the input (so that a short input describes a whole table
  * and most bytes drive calls); `special` in 1..255 makes about one value in `special` a
@@ -203,11 +278,180 @@ static void fz_fill(uint32_t *seed, float *a, size_t count, uint32_t special)
 }
 #endif
 
+static uint32_t fz_lcg(uint32_t *seed)
+{
+    *seed = *seed * 1664525u + 1013904223u;
+    return *seed >> 8;
+}
+
+/* A double in [-scale, scale). */
+static double fz_lcg_f64(uint32_t *seed, double scale)
+{
+    return scale * (((double)(fz_lcg(seed) % 65536u) - 32768.0) / 32768.0);
+}
+
+static double fz_bits_f64(uint64_t bits)
+{
+    double d;
+    memcpy(&d, &bits, sizeof d);
+    return d;
+}
+
+#ifndef STSP_ARITH_FIXED
+static int fz_finite_f64(double d)
+{
+    uint64_t bits;
+    memcpy(&bits, &d, sizeof bits);
+    return (bits & 0x7FF0000000000000ull) != 0x7FF0000000000000ull;
+}
+#endif
+
+static double fz_special_f64(uint32_t *seed)
+{
+    switch (fz_lcg(seed) % 8u) {
+    case 0u: return fz_bits_f64(0x7FF8000000000000ull);    /* NaN */
+    case 1u: return fz_bits_f64(0x7FF0000000000000ull);    /* +Inf */
+    case 2u: return fz_bits_f64(0xFFF0000000000000ull);    /* -Inf */
+    case 3u: return fz_bits_f64(0x7FEFFFFFFFFFFFFFull);    /* DBL_MAX */
+    case 4u: return -1e300;
+    case 5u: return fz_bits_f64(0x0000000000000001ull);    /* least subnormal */
+    case 6u: return fz_bits_f64(0x8000000000000000ull);    /* -0 */
+    default: return fz_bits_f64(((uint64_t)fz_lcg(seed) << 40) ^ ((uint64_t)fz_lcg(seed) << 16) ^
+                                (uint64_t)fz_lcg(seed));   /* anything */
+    }
+}
+
+/* The band dual of a table (format 3): shape, data and contract violations from the input
+ * (the same in every build: a fixed-point build must refuse whatever it is). Called with the
+ * main table built; sets t->band_qp (and stage_np, n_latch), and the CRC afterwards must
+ * cover it. Returns the band corruption applied after the CRC (1: flip a CRC bit, 2: change a
+ * band value), else 0. */
+static uint32_t fz_build_band(fz_in_t *in, stsp_table_t *t)
+{
+    const uint32_t qsel = fz_u8(in), nxsel = fz_u8(in), wsel = fz_u8(in), rsel = fz_u8(in);
+    const uint32_t npsel = fz_u8(in), nullsel = fz_u8(in), crcsel = fz_u8(in);
+    uint32_t seed = fz_u32(in);
+    uint32_t q, bnx, i, j;
+    /* Rows: 1..8 mostly, else an invalid count (0, 9..16, or beyond the storage). */
+    if (qsel < 224u) {
+        q = 1u + qsel % STSP_BANDQP_MAX;
+    } else if (qsel < 248u) {
+        q = (qsel % 2u == 0u) ? 0u : STSP_BANDQP_MAX + 1u + qsel % (FZ_BAND_STORE - STSP_BANDQP_MAX);
+    } else {
+        q = 17u + 1000u * (qsel % 66u);
+    }
+    if (nxsel < 232u) {
+        bnx = t->nx;
+    } else {
+        bnx = nxsel % (FZ_BAND_STORE + 1u);                    /* maybe t->nx anyway */
+    }
+    g_band.q = (uint16_t)q;
+    g_band.nx = (uint16_t)bnx;
+    g_band.Nt = g_bNt;
+    g_band.mt = g_bmt;
+    g_band.W = g_bW;
+    g_band.lo = g_blo;
+    g_band.hi = g_bhi;
+    /* Fill the whole storage, so that every size the table may declare reads set values. */
+    {
+        const uint32_t nt_special = ((wsel & 0xC0u) == 0xC0u) ? 1u + fz_lcg(&seed) % 32u : 0u;
+        for (i = 0u; i < FZ_BAND_STORE * FZ_BAND_STORE; ++i) {
+            g_bNt[i] = ((nt_special != 0u) && (fz_lcg(&seed) % nt_special == 0u))
+                ? fz_special_f64(&seed) : fz_lcg_f64(&seed, 1.0);
+        }
+        for (i = 0u; i < FZ_BAND_STORE; ++i) {
+            g_bmt[i] = ((nt_special != 0u) && (fz_lcg(&seed) % nt_special == 0u))
+                ? fz_special_f64(&seed) : fz_lcg_f64(&seed, 2.0);
+        }
+    }
+    {
+        /* W over the storage's leading q x q block (stride q, as the solver reads it). */
+        const uint32_t n = (q <= FZ_BAND_STORE) ? q : FZ_BAND_STORE;
+        double G[FZ_BAND_STORE * FZ_BAND_STORE];
+        for (i = 0u; i < FZ_BAND_STORE * FZ_BAND_STORE; ++i) {
+            G[i] = fz_lcg_f64(&seed, 1.0);
+            g_bW[i] = 0.0;
+        }
+        for (i = 0u; i < n; ++i) {
+            for (j = 0u; j < n; ++j) {
+                double w = 0.0;
+                uint32_t k;
+                switch (wsel % 8u) {
+                case 0u: case 1u: case 2u:                     /* G G' + d I: positive definite */
+                    for (k = 0u; k < n; ++k) {
+                        w += G[i * n + k] * G[j * n + k];
+                    }
+                    w += (i == j) ? 0.01 + (double)(wsel % 16u) / 16.0 : 0.0;
+                    break;
+                case 3u: w = (i == j) ? 0.1 + G[i * n + i] * G[i * n + i] : 0.0; break;
+                case 4u: w = (i <= j) ? G[i * n + j] : G[j * n + i]; break;  /* indefinite */
+                case 5u: w = (i == j) ? -1.0 - G[i] * G[i] : 0.0; break;  /* negative definite */
+                case 6u: w = G[i] * G[j]; break;                 /* rank one (or zero) */
+                default: w = fz_bits_f64(((uint64_t)fz_lcg(&seed) << 40) ^
+                                         ((uint64_t)fz_lcg(&seed) << 16));
+                         break;
+                }
+                g_bW[i * n + j] = w;
+            }
+        }
+        if (((wsel & 0x30u) == 0x30u) && (n > 0u)) {            /* one special entry */
+            g_bW[fz_lcg(&seed) % (n * n)] = fz_special_f64(&seed);
+        }
+    }
+    /* Bounds: bands around 0 (some rows active at the optimum), equality rows, and, unless
+     * the table is meant to be valid (rsel < 192), lo > hi, huge or non-finite bounds. */
+    for (i = 0u; i < FZ_BAND_STORE; ++i) {
+        const uint32_t kind = fz_lcg(&seed) % ((rsel < 192u) ? 6u : 9u);
+        const double a = fz_lcg_f64(&seed, 3.0), b = fz_lcg_f64(&seed, 3.0);
+        const double lo = (a < b) ? a : b, hi = (a < b) ? b : a;
+        switch (kind) {
+        case 0u: case 1u: case 2u: g_blo[i] = lo; g_bhi[i] = hi; break;
+        case 3u: g_blo[i] = a; g_bhi[i] = a; break;           /* equality row */
+        case 4u: g_blo[i] = -1e300; g_bhi[i] = hi; break;     /* one-sided in effect */
+        case 5u: g_blo[i] = -fz_bits_f64(0x7FEFFFFFFFFFFFFFull);
+                 g_bhi[i] = fz_bits_f64(0x7FEFFFFFFFFFFFFFull); break;
+        case 6u: g_blo[i] = hi; g_bhi[i] = lo - 1e-3; break;  /* lo > hi */
+        case 7u: g_blo[i] = fz_special_f64(&seed); g_bhi[i] = hi; break;
+        default: g_blo[i] = lo; g_bhi[i] = fz_special_f64(&seed); break;
+        }
+    }
+    /* stage_np: q at stage 0 and 0 after, as the contract requires, unless npsel >= 224. */
+    if (q <= STSP_BANDQP_MAX) {
+        if (t->n_latch < q) {
+            t->n_latch = (uint16_t)q;
+        }
+    }
+    g_np[0] = (uint16_t)q;
+    for (i = 1u; i < FZ_MAX_NS; ++i) {
+        g_np[i] = 0u;
+    }
+    if (npsel >= 224u) {
+        switch (npsel % 3u) {
+        case 0u: g_np[0] = (uint16_t)(q + 1u); break;
+        case 1u: g_np[0] = (uint16_t)((q > 0u) ? q - 1u : 0u); break;
+        default: g_np[1u + npsel % (FZ_MAX_NS - 1u)] = (uint16_t)(1u + npsel % 4u); break;
+        }
+    }
+    if (nullsel >= 240u) {
+        switch (nullsel % 5u) {
+        case 0u: g_band.Nt = NULL; break;
+        case 1u: g_band.mt = NULL; break;
+        case 2u: g_band.W = NULL; break;
+        case 3u: g_band.lo = NULL; break;
+        default: g_band.hi = NULL; break;
+        }
+    }
+    t->band_qp = &g_band;
+    return (crcsel >= 232u) ? 1u + crcsel % 2u : 0u;
+}
+
+
 /* A table from the input: valid most of the time (so that the calls reach the law), with at
  * most one corruption chosen by a selector byte. */
-static void fz_build_table(fz_in_t *in, stsp_table_t *t)
+static void fz_build_table(fz_in_t *in, stsp_table_t *t, fz_table_info_t *info)
 {
-    const uint32_t shape = fz_u8(in), lim = fz_u8(in), sel = fz_u8(in);
+    const uint32_t shape = fz_u8(in), lim = fz_u8(in), sel = fz_u8(in), bsel = fz_u8(in);
+    uint32_t band_corrupt = 0u;
     const uint32_t corrupt = (sel >= 160u) ? (sel % 10u) : 10u;  /* 10: none */
     uint32_t s, nt = 0u, i;
     memset(t, 0, sizeof *t);
@@ -216,7 +460,7 @@ static void fz_build_table(fz_in_t *in, stsp_table_t *t)
     t->scalar_kind = STSP_SCALAR_KIND;
     t->nx = (uint16_t)(1u + shape % FZ_MAX_NX);
     t->nu = (uint16_t)(1u + (shape / 8u) % FZ_MAX_NU);
-    t->n_latch = (uint16_t)(fz_u8(in) % (FZ_MAX_NL + 1u));
+    t->n_latch = (uint16_t)(fz_u8(in) % (FZ_GEN_NL + 1u));
     t->n_stages = (uint16_t)(1u + fz_u8(in) % FZ_MAX_NS);
     t->tick_hz = 1u + fz_u8(in);
     g_start[0] = 0u;
@@ -281,6 +525,12 @@ static void fz_build_table(fz_in_t *in, stsp_table_t *t)
 #endif
     t->u_min = g_lo;
     t->u_max = g_hi;
+    memset(info, 0, sizeof *info);
+    if (FZ_BAND_PICK(bsel)) {
+        band_corrupt = fz_build_band(in, t);
+        info->band = 1u;
+    }
+    info->main_corrupt = (corrupt != 10u) ? 1u + corrupt : 0u; /* which one, for the Q model */
     switch (corrupt) {
     case 0u: t->magic = fz_u32(in); break;
     case 1u: t->format_version = (uint16_t)fz_u8(in); break;
@@ -312,33 +562,356 @@ static void fz_build_table(fz_in_t *in, stsp_table_t *t)
 #ifdef STSP_ARITH_FIXED
         (t->v_exp != NULL) &&
 #endif
-        (t->n_ticks <= FZ_MAX_NT)) {
+        (t->n_ticks <= FZ_MAX_NT) &&
+        ((t->band_qp == NULL) ||
+         ((g_band.Nt != NULL) && (g_band.mt != NULL) && (g_band.W != NULL) &&
+          (g_band.lo != NULL) && (g_band.hi != NULL) && (g_band.q <= FZ_BAND_STORE) &&
+          (g_band.nx <= FZ_BAND_STORE)))) {
         t->crc32 = stsp_table_crc32(t);
+        info->band_crc_ok = 1u;
     }
     if (corrupt == 9u) {
         t->crc32 ^= 1u << (fz_u8(in) % 32u);
     }
+    if (band_corrupt == 1u) {
+        t->crc32 ^= 1u << (fz_u8(in) % 32u);
+        info->band_crc_ok = 0u;
+    } else if (band_corrupt == 2u) {
+        const uint32_t k = fz_u8(in) % FZ_BAND_STORE;
+        double *arr[5] = {g_bNt, g_bmt, g_bW, g_blo, g_bhi};
+        double *a = arr[fz_u8(in) % 5u];
+        uint64_t bits;
+        memcpy(&bits, &a[k], sizeof bits);
+        bits ^= 1ull << (fz_u8(in) % 64u);
+        memcpy(&a[k], &bits, sizeof bits);
+        /* Covered by the CRC only if k is within the declared sizes. */
+        info->band_crc_ok = 0u;
+    } else {
+        /* CRC as computed */
+    }
 }
 
+#ifndef STSP_ARITH_FIXED
+/* The status stsp_init() must return for a table without a main-table corruption, from the
+ * documented order of its checks: dimensions and layout (stage_np within n_latch), band
+ * arrays NULL, band dimensions and stage_np, CRC, values (limits, band data). Returns 1 and
+ * the status in *st when the table is modelled. */
+static int fz_expected_init(const stsp_table_t *t, const fz_table_info_t *info,
+                            stsp_status_t *st)
+{
+    const stsp_bandqp_t *b = t->band_qp;
+    uint32_t s, i;
+    if (info->main_corrupt != 0u) {
+        return 0;
+    }
+    for (s = 0u; s < t->n_stages; ++s) {
+        if (t->stage_np[s] > t->n_latch) {
+            *st = STSP_ERR_BAD_DIMS;
+            return 1;
+        }
+    }
+    if (b != NULL) {
+        if ((b->Nt == NULL) || (b->mt == NULL) || (b->W == NULL) || (b->lo == NULL) ||
+            (b->hi == NULL)) {
+            *st = STSP_ERR_NULL;
+            return 1;
+        }
+        if ((b->q == 0u) || (b->q > STSP_BANDQP_MAX) || (b->nx != t->nx) ||
+            (b->q != t->stage_np[0])) {
+            *st = STSP_ERR_BAD_DIMS;
+            return 1;
+        }
+        for (s = 1u; s < t->n_stages; ++s) {
+            if (t->stage_np[s] != 0u) {
+                *st = STSP_ERR_BAD_DIMS;
+                return 1;
+            }
+        }
+    }
+    if (info->band_crc_ok == 0u) {
+        /* A flipped CRC bit is a mismatch; a changed band value outside the declared sizes
+         * is not covered: only "not OK unless the CRC still matches" can be said. */
+        if (stsp_table_crc32(t) != t->crc32) {
+            *st = STSP_ERR_BAD_CRC;
+            return 1;
+        }
+    }
+    *st = STSP_OK;
+    for (i = 0u; i < t->nu; ++i) {
+        if (!fz_finite(t->u_min[i]) || !fz_finite(t->u_max[i]) || !(t->u_min[i] <= 0.0f) ||
+            !(t->u_max[i] >= 0.0f)) {
+            *st = STSP_ERR_BAD_VALUES;
+        }
+    }
+    if (b != NULL) {
+        const uint32_t q = b->q, nx = b->nx;
+        for (i = 0u; i < q * nx; ++i) {
+            if (!fz_finite_f64(b->Nt[i])) {
+                *st = STSP_ERR_BAD_VALUES;
+            }
+        }
+        for (i = 0u; i < q * q; ++i) {
+            if (!fz_finite_f64(b->W[i])) {
+                *st = STSP_ERR_BAD_VALUES;
+            }
+        }
+        for (i = 0u; i < q; ++i) {
+            if (!fz_finite_f64(b->mt[i]) || !fz_finite_f64(b->lo[i]) ||
+                !fz_finite_f64(b->hi[i]) || !(b->lo[i] <= b->hi[i])) {
+                *st = STSP_ERR_BAD_VALUES;
+            }
+        }
+    }
+    return 1;
+}
+
+/* 1 if the band dual is invalid by the contract (any of init's band checks fails). */
+static int fz_band_invalid(const stsp_table_t *t)
+{
+    const stsp_bandqp_t *b = t->band_qp;
+    uint32_t s, i;
+    if (b == NULL) {
+        return 0;
+    }
+    if ((b->Nt == NULL) || (b->mt == NULL) || (b->W == NULL) || (b->lo == NULL) ||
+        (b->hi == NULL) || (b->q == 0u) || (b->q > STSP_BANDQP_MAX) || (b->nx != t->nx) ||
+        (t->stage_np == NULL) || (t->n_stages == 0u) || (t->n_stages > FZ_MAX_NS) ||
+        (b->q != t->stage_np[0])) {
+        return 1;
+    }
+    for (s = 1u; s < t->n_stages; ++s) {
+        if (t->stage_np[s] != 0u) {
+            return 1;
+        }
+    }
+    for (i = 0u; i < (uint32_t)b->q * b->nx; ++i) {
+        if (!fz_finite_f64(b->Nt[i])) {
+            return 1;
+        }
+    }
+    for (i = 0u; i < (uint32_t)b->q * b->q; ++i) {
+        if (!fz_finite_f64(b->W[i])) {
+            return 1;
+        }
+    }
+    for (i = 0u; i < b->q; ++i) {
+        if (!fz_finite_f64(b->mt[i]) || !fz_finite_f64(b->lo[i]) || !fz_finite_f64(b->hi[i]) ||
+            !(b->lo[i] <= b->hi[i])) {
+            return 1;
+        }
+    }
+    return 0;
+}
+#else
+/* Fixed point: the layout check refuses any band_qp with STSP_ERR_BAD_DIMS, after magic,
+ * version, dimensions, NULL main arrays and the stage layout, and before the CRC and the
+ * values. So a band table gets exactly that status when its main part is valid, and also with
+ * a broken dimension or layout (BAD_DIMS either way), special gains or exponents, or a flipped
+ * CRC bit: every main corruption but magic (0), version (1) and NULL arrays (8), which may
+ * come first. Tables without bands are not modelled. */
+static int fz_expected_init(const stsp_table_t *t, const fz_table_info_t *info,
+                            stsp_status_t *st)
+{
+    if ((t->band_qp == NULL) || (info->main_corrupt == 1u + 0u) ||
+        (info->main_corrupt == 1u + 1u) || (info->main_corrupt == 1u + 8u)) {
+        return 0;
+    }
+    *st = STSP_ERR_BAD_DIMS;
+    return 1;
+}
+
+/* Every band dual is invalid in a fixed-point build. */
+static int fz_band_invalid(const stsp_table_t *t)
+{
+    return t->band_qp != NULL;
+}
+#endif
+
+
+
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+
+#ifndef STSP_ARITH_FIXED
+/* What the stage-0 latch of a band table must do for the finite state x at `tick`: the
+ * solver's result (checked against its own contract), whether the controller falls back, the
+ * latch v and the law's unclamped commands y. v and y are computed as the firmware computes
+ * them on the host (no VFP: products rounded, then subtracted, in its order; the fuzzer runs
+ * on x86-64, where clang has no fused multiply-add to contract into), so they are exact. */
+typedef struct {
+    stsp_bandqp_status_t solve_st;
+    int fallback;
+    int y_finite;
+    double lam[STSP_BANDQP_MAX];
+    float v[FZ_MAX_NL];
+    float y[FZ_MAX_NU];
+} fz_latch_t;
+
+static void fz_band_latch_model(const stsp_table_t *t, uint32_t tick, const float *x,
+                                fz_latch_t *m)
+{
+    const stsp_bandqp_t *b = t->band_qp;
+    const uint32_t nx = t->nx, nu = t->nu, nl = t->n_latch;
+    stsp_bandqp_work_t work;
+    uint32_t cand = 0u, nband = 1u, i, j;
+    int overflow = 0;
+    /* e = Nt x + mt in the solver's order: finite data and state can still overflow. */
+    for (i = 0u; i < b->q; ++i) {
+        double acc = b->mt[i];
+        for (j = 0u; j < b->nx; ++j) {
+            acc += b->Nt[(i * b->nx) + j] * (double)x[j];
+        }
+        overflow = overflow || !fz_finite_f64(acc);
+        if (!(b->lo[i] == b->hi[i])) {
+            nband *= 3u;
+        }
+    }
+    m->solve_st = stsp_bandqp_solve(b, x, m->lam, &work, &cand);
+    if (overflow) {
+        fz_check(m->solve_st == STSP_BANDQP_ERR_NONFINITE);
+        fz_check(cand == 0u);
+    } else {
+        fz_check((m->solve_st == STSP_BANDQP_OK) || (m->solve_st == STSP_BANDQP_ERR_INFEASIBLE));
+        fz_check((cand >= 1u) && (cand <= nband));
+        if (m->solve_st != STSP_BANDQP_OK) {
+            fz_check(cand == nband);
+        }
+    }
+    m->fallback = (m->solve_st != STSP_BANDQP_OK);
+    for (i = 0u; i < b->q; ++i) {
+        if (m->solve_st != STSP_BANDQP_OK) {
+            fz_check(fz_f64_is_pos_zero(m->lam[i]));
+        } else if (!((m->lam[i] <= (double)FLT_MAX) && (m->lam[i] >= -(double)FLT_MAX))) {
+            m->fallback = 1;                              /* no binary32 value */
+        } else {
+            /* within range */
+        }
+    }
+    /* The latch: (float)lam, or on a fallback the design's affine map Lambda x + lambda0 of
+     * stage 0; zero beyond q (= stage_np[0]). */
+    for (i = 0u; i < nl; ++i) {
+        float v = 0.0f;
+        if (i < b->q) {
+            if (!m->fallback) {
+                v = (float)m->lam[i];
+            } else {
+                v = t->lambda0[i];
+                for (j = 0u; j < nx; ++j) {
+                    v += t->Lambda[(i * nx) + j] * x[j];
+                }
+            }
+        }
+        m->v[i] = v;
+    }
+    /* The law with that v (the table stores -K, -k0, -L). */
+    m->y_finite = 1;
+    for (i = 0u; i < nu; ++i) {
+        const float *K = &t->K[(tick * nu + i) * nx];
+        float acc = (-(K[0] * x[0])) - t->k0[(tick * nu) + i];
+        for (j = 1u; j < nx; ++j) {
+            acc = acc - (K[j] * x[j]);
+        }
+        for (j = 0u; j < nl; ++j) {
+            acc = acc - (t->L[((tick * nu + i) * nl) + j] * m->v[j]);
+        }
+        m->y[i] = acc;
+        m->y_finite = m->y_finite && fz_finite(acc);
+    }
+}
+
+/* A band table's stage-0 latch step: the status, the commands (the law clamped to the
+ * limits, bit for bit) and the latch, all as the model says. */
+static void fz_check_band_step(const stsp_table_t *t, const stsp_ctrl_t *c, stsp_status_t st,
+                               stsp_status_t tick_st, const float *u, const fz_latch_t *m)
+{
+    uint32_t i, sat = 0u;
+    if (!m->y_finite) {
+        fz_check(st == STSP_ERR_NONFINITE_OUTPUT);
+        return;
+    }
+    for (i = 0u; i < t->nu; ++i) {
+        float want = m->y[i];
+        if (want > t->u_max[i]) {
+            want = t->u_max[i];
+            sat |= 1u << i;
+        } else if (want < t->u_min[i]) {
+            want = t->u_min[i];
+            sat |= 1u << i;
+        } else {
+            /* within the limits */
+        }
+        fz_check(fz_f32_bits(u[i]) == fz_f32_bits(want));
+    }
+    fz_check(st == ((sat != 0u) ? STSP_WARN_SATURATED
+                    : m->fallback ? STSP_WARN_BAND_FALLBACK : tick_st));
+    fz_check(c->sat_mask == sat);
+    fz_check((c->latched != 0u) && (c->stage == 0u));
+    for (i = 0u; i < t->n_latch; ++i) {
+        fz_check(fz_f32_bits(c->v[i]) == fz_f32_bits(m->v[i]));
+    }
+}
+#endif
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     fz_in_t in = {data, size};
     stsp_table_t t;
     stsp_ctrl_t c, before;
+    fz_table_info_t info;
+    stsp_status_t init_expected = STSP_OK;
     uint32_t call, model_next = 0u;
-    int ready;
-    fz_build_table(&in, &t);
+    int ready, modelled, band_invalid;
+    fz_build_table(&in, &t, &info);
+    modelled = fz_expected_init(&t, &info, &init_expected);
+    band_invalid = fz_band_invalid(&t);
+#ifdef FZ_STATS
+    {
+        static int registered = 0;
+        if (!registered) {
+            registered = 1;
+            (void)atexit(fzs_print);
+        }
+        FZS(FZS_TABLES);
+        if (info.band) {
+            FZS(FZS_BAND_TABLES);
+        }
+        if (modelled) {
+            FZS(FZS_INIT_MODELLED);
+            if (init_expected == STSP_OK) {
+                FZS(FZS_INIT_OK);
+            }
+            if (info.band) {
+                switch (init_expected) {
+                case STSP_OK: FZS(FZS_BAND_INIT_OK); break;
+                case STSP_ERR_NULL: FZS(FZS_BAND_NULL); break;
+                case STSP_ERR_BAD_DIMS: FZS(FZS_BAND_DIMS); break;
+                case STSP_ERR_BAD_CRC: FZS(FZS_BAND_CRC); break;
+                default: FZS(FZS_BAND_VALUES); break;
+                }
+            }
+        }
+    }
+#endif
     memset(&c, 0xA5, sizeof c);                                   /* garbage before init */
     ready = 0;
     for (call = 0u; (call < FZ_MAX_CALLS) && (in.n > 0u); ++call) {
         const uint32_t op = fz_u8(&in);
         if (op < 12u) {                                           /* (re)init */
+            const uint32_t want_nx = fz_u8(&in) % 8u, want_nu = fz_u8(&in) % 5u;
             const stsp_status_t st = ((op & 1u) != 0u)
-                ? stsp_init_expect(&c, &t, fz_u8(&in) % 8u, fz_u8(&in) % 5u)
+                ? stsp_init_expect(&c, &t, want_nx, want_nu)
                 : stsp_init(&c, &t);
             fz_check(fz_known_status(st) && (st <= STSP_OK));
+            if (modelled) {
+                stsp_status_t want = init_expected;
+                if (((op & 1u) != 0u) && (want == STSP_OK) &&
+                    ((t.nx != want_nx) || (t.nu != want_nu))) {
+                    want = STSP_ERR_BAD_DIMS;
+                }
+                fz_check(st == want);
+            }
+            if (band_invalid) {
+                fz_check(st != STSP_OK);
+            }
             ready = (st == STSP_OK);
             model_next = 0u;
             if (ready) {
@@ -357,7 +930,11 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             const uint32_t nx = ready ? t.nx : FZ_MAX_NX, nu = ready ? t.nu : FZ_MAX_NU;
             uint32_t tick, i;
             int finite = 1;
-            stsp_status_t st;
+            stsp_status_t st, tick_st;
+#ifndef STSP_ARITH_FIXED
+            int band_latch = 0;
+            fz_latch_t latch;
+#endif
             switch (how) {
             case 0u: case 1u: case 2u: tick = model_next; break;
             case 3u: tick = model_next - 1u; break;               /* repeat (or wrap) */
@@ -381,8 +958,38 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 fz_check(memcmp(&c, &before, sizeof c) == 0);
                 continue;
             }
+#ifndef STSP_ARITH_FIXED
+            /* A stage-0 latch of a band table (tick in range and order, x finite): what the
+             * solver says for this x decides between its multipliers and the fallback. */
+            if (ready && (t.band_qp != NULL) && finite && (tick < t.stage_start[1]) &&
+                !((model_next > 0u) && (tick + 1u < model_next)) &&
+                ((before.latched == 0u) || (before.stage != 0u))) {
+                band_latch = 1;
+                fz_band_latch_model(&t, tick, x, &latch);
+            }
+#endif
             st = stsp_step(&c, tick, x, u);
             fz_check(fz_known_status(st));
+#ifndef STSP_ARITH_FIXED
+            if (band_latch) {
+                FZS(FZS_LATCH);
+                FZS((latch.solve_st == STSP_BANDQP_OK) ? FZS_LATCH_OK
+                    : (latch.solve_st == STSP_BANDQP_ERR_NONFINITE) ? FZS_LATCH_OVERFLOW
+                    : FZS_LATCH_INFEASIBLE);
+                if ((latch.solve_st == STSP_BANDQP_OK) && latch.fallback) {
+                    FZS(FZS_LATCH_BEYOND_FLT);
+                }
+                if (st == STSP_WARN_BAND_FALLBACK) {
+                    FZS(FZS_FALLBACK);
+                }
+                if (st < STSP_OK) {
+                    FZS(FZS_LATCH_ERR);
+                }
+                if (t.band_qp->q == 8u) {
+                    FZS(FZS_LATCH_Q8);
+                }
+            }
+#endif
             fz_check(u[STSP_MAX_NU] == FZ_SENTINEL);                  /* nothing past the buffer */
             if (!ready) {
                 fz_check(st == STSP_ERR_NOT_INITIALIZED);
@@ -411,6 +1018,13 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 }
             }
             /* The tick bookkeeping, in the documented order of checks. */
+            tick_st = ((model_next > 0u) && (tick + 1u == model_next)) ? STSP_WARN_TICK_REPEATED
+                      : (tick > model_next) ? STSP_WARN_TICK_SKIPPED : STSP_OK;
+#ifndef STSP_ARITH_FIXED
+            if (band_latch) {
+                fz_check_band_step(&t, &c, st, tick_st, u, &latch);
+            }
+#endif
             if (tick >= t.n_ticks) {
                 fz_check(st == STSP_ERR_TICK_RANGE);
             } else if ((model_next > 0u) && (tick + 1u < model_next)) {
@@ -419,10 +1033,12 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 fz_check(st == STSP_ERR_NONFINITE_STATE);
             } else if (st >= STSP_OK) {
                 if (st != STSP_WARN_SATURATED) {
-                    const stsp_status_t tick_st =
-                        ((model_next > 0u) && (tick + 1u == model_next)) ? STSP_WARN_TICK_REPEATED
-                        : (tick > model_next) ? STSP_WARN_TICK_SKIPPED : STSP_OK;
+#ifndef STSP_ARITH_FIXED
+                    fz_check(st == ((band_latch && latch.fallback) ? STSP_WARN_BAND_FALLBACK
+                                                                   : tick_st));
+#else
                     fz_check(st == tick_st);
+#endif
                 }
                 if (tick + 1u > model_next) {
                     model_next = tick + 1u;

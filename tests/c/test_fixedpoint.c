@@ -322,6 +322,44 @@ static void test_wrong_variant_and_scales_are_refused(void **state)
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_NULL);
 }
 
+/* The band dual is a float32 feature (binary32 multipliers from a double solver): a fixed-point
+ * build refuses a table with band_qp, even one that is valid in every other respect and whose
+ * band dual meets the float32 contract (q = stage_np[0], no later latch, nx the table's,
+ * W > 0, lo <= hi), with STSP_ERR_BAD_DIMS and the CRC recomputed over the band data, so that
+ * the refusal is not a CRC failure; the instance stays not ready. */
+static void test_band_table_is_refused(void **state)
+{
+    static const uint16_t joint_np[NS] = {2u, 0u};
+    static const double Nt[2 * NX] = {1.0, 0.0, 0.0, 1.0};
+    static const double mt[2] = {0.0, 0.0};
+    static const double W[2 * 2] = {2.0, 0.5, 0.5, 1.0};
+    static const double lo[2] = {0.5, -1.0};
+    static const double hi[2] = {0.5, 1.0};
+    const stsp_bandqp_t qp = {2u, (uint16_t)NX, Nt, mt, W, lo, hi};
+    const stsp_scalar_t x[NX] = {0, 0};
+    stsp_scalar_t u[NU] = {7};
+    stsp_ctrl_t c;
+    stsp_table_t t = make_table();
+    (void)state;
+    t.stage_np = joint_np;
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK); /* the joint layout alone is valid */
+
+    t.band_qp = &qp;
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_ERR_NOT_INITIALIZED);
+    assert_int_equal(u[0], 7);
+    assert_int_equal(stsp_init_expect(&c, &t, NX, NU), STSP_ERR_BAD_DIMS);
+    /* Without the CRC update as well: the dimension check comes first. */
+    t.crc32 ^= 1u;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+
+    t.band_qp = NULL;
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+}
+
 static void test_crc_covers_scales_and_kind(void **state)
 {
     stsp_ctrl_t c;
@@ -456,6 +494,7 @@ int main(void)
         cmocka_unit_test_setup(test_extreme_rows_do_not_overflow, setup),
         cmocka_unit_test_setup(test_row_sum_over_limit_is_refused, setup),
         cmocka_unit_test_setup(test_wrong_variant_and_scales_are_refused, setup),
+        cmocka_unit_test_setup(test_band_table_is_refused, setup),
         cmocka_unit_test_setup(test_crc_covers_scales_and_kind, setup),
         cmocka_unit_test_setup(test_saturation_in_command_units, setup),
         cmocka_unit_test_setup(test_ticks_as_float, setup),

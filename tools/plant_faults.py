@@ -40,7 +40,8 @@ ROOT = Path(__file__).resolve().parents[1]
 CTL = "firmware/src/stsp_controller.c"
 CRC = "firmware/src/stsp_controller.c"
 PY_TESTS = ["tests/python/test_harness.py", "tests/python/test_montecarlo.py",
-            "tests/python/test_firmware_limits.py", "tests/python/test_fixedpoint.py"]
+            "tests/python/test_firmware_limits.py", "tests/python/test_fixedpoint.py",
+            "tests/python/test_band_latch.py"]
 CTEST_EXCLUDE = r"^(clang_|arm_|misra)"
 
 
@@ -64,7 +65,7 @@ FAULTS = [
     Fault("F4", "wrong latch time: stage search switches one tick late", CTL,
           "(t->stage_start[s + 1u] <= tick)", "(t->stage_start[s + 1u] < tick)"),
     Fault("F5", "sign flip in a gain: L v added instead of subtracted", CTL,
-          "acc -= L[j] * v[j];", "acc += L[j] * v[j];"),
+          "acc = stsp_mls(acc, L[j], v[j]);", "acc = stsp_mls(acc, -L[j], v[j]);"),
     Fault("F6", "missing saturation at the upper limit", CTL,
           "            u[i] = t->u_max[i];\n", "            /* clamp dropped */\n"),
     Fault("F7", "latch offset lambda0 dropped", CTL,
@@ -87,6 +88,17 @@ FAULTS = [
     Fault("F13", "feed-forward k0 of the next tick (off-by-one row)", CTL,
           "const stsp_f32_t *k0 = &t->k0[tick * nu];",
           "const stsp_f32_t *k0 = &t->k0[((tick + 1u) % t->n_ticks) * nu];"),
+    # Band tables: the t0 latch re-solves the band dual (float32).
+    Fault("F20", "band table: the t0 latch ignores the band dual (affine map only)", CTL,
+          "    if ((plan->relatch != 0u) && (stage == 0u) && (t->band_qp != NULL)) {",
+          "    if ((plan->relatch != 0u) && (stage == 0u) && (t->band_qp == NULL)) {"),
+    Fault("F21", "band table: a failed solve latches zeros instead of the affine map",
+          CTL, "        status = STSP_WARN_BAND_FALLBACK; /* the affine map below, from the "
+               "design's x0 */\n    }",
+          "        status = STSP_WARN_BAND_FALLBACK; /* the affine map below, from the "
+          "design's x0 */\n        stsp_zero(v_new, nl);\n        return status;\n    }"),
+    Fault("F22", "band table: CRC does not cover the band bounds", CTL,
+          "        crc = stsp_crc32_f64s(crc, b->hi, q);\n", ""),
     # Fixed-point (Q15/Q31) code paths.
     Fault("F14", "Q15 rounding: the half-LSB bias dropped (rounds down)", CTL,
           "stsp_q_bias = 1073758208;", "stsp_q_bias = 1073741824;"),

@@ -91,7 +91,7 @@ FAULTS = [
     # Band tables: the t0 latch re-solves the band dual (float32).
     Fault("F20", "band table: the t0 latch ignores the band dual (affine map only)", CTL,
           "    if ((plan->relatch != 0u) && (stage == 0u) && (t->band_qp != NULL)) {",
-          "    if ((plan->relatch != 0u) && (stage == 0u) && (t->band_qp == NULL)) {"),
+          "    if ((plan->relatch != 0u) && (stage == 1u) && (t->band_qp != NULL)) {"),
     Fault("F21", "band table: a failed solve latches zeros instead of the affine map",
           CTL, "        status = STSP_WARN_BAND_FALLBACK; /* the affine map below, from the "
                "design's x0 */\n    }",

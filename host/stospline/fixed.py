@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .tables import F32_MAX, GainTable
+from .tables import F32_MAX, GainTable, TableShape
 
 __all__ = ["FixedTable", "quantize_table", "state_range", "law_q", "latch_q", "law_double",
            "ARITHS", "FRAC_BITS", "SCALAR_KIND", "EXP_MAX", "DEFAULT_SIGMAS"]
@@ -66,7 +66,7 @@ def _rhu(y: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class FixedTable:
+class FixedTable(TableShape):
     """A Q15/Q31 table as the firmware stores it (integers in int64 arrays), with its scales,
     the double-precision table it came from, and the per-tick error bound.
 
@@ -102,18 +102,6 @@ class FixedTable:
     @property
     def scalar_kind(self) -> int:
         return SCALAR_KIND[self.arith]
-
-    @property
-    def n_ticks(self) -> int:
-        return int(self.stage_start[-1])
-
-    @property
-    def n_stages(self) -> int:
-        return len(self.stage_np)
-
-    @property
-    def dims(self) -> tuple[int, int, int]:
-        return self.K.shape[2], self.K.shape[1], self.L.shape[2]
 
     @property
     def u_lsb(self) -> np.ndarray:

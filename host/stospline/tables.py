@@ -24,7 +24,7 @@ import numpy as np
 
 from .design import ContinuousDesign
 
-__all__ = ["GainTable", "BandQP", "build_table", "sample_design", "ticks_per_stage",
+__all__ = ["GainTable", "TableShape", "BandQP", "build_table", "sample_design", "ticks_per_stage",
            "table_crc32", "FORMAT_VERSION", "SCALAR_FLOAT32", "F32_MAX", "BANDQP_MAX"]
 
 FORMAT_VERSION = 3
@@ -61,8 +61,33 @@ class BandQP:
         return self.Nt @ np.asarray(x0, dtype=float) + self.mt
 
 
+class TableShape:
+    """Shape of a per-tick table (float32 or fixed point) from its ``stage_start``,
+    ``stage_np``, ``K`` and ``L`` arrays."""
+    stage_start: np.ndarray
+    stage_np: np.ndarray
+    K: np.ndarray
+    L: np.ndarray
+
+    @property
+    def n_ticks(self) -> int:
+        return int(self.stage_start[-1])
+
+    @property
+    def n_stages(self) -> int:
+        return len(self.stage_np)
+
+    @property
+    def dims(self) -> tuple[int, int, int]:
+        """``(n, m, P)``: states, inputs, latched multipliers (padded width)."""
+        return self.K.shape[2], self.K.shape[1], self.L.shape[2]
+
+    def stage_of_tick(self, j: int) -> int:
+        return int(np.searchsorted(self.stage_start, j, side="right") - 1)
+
+
 @dataclass(frozen=True)
-class GainTable:
+class GainTable(TableShape):
     """Quantized, per-tick gains of one design (see the module docstring for the layout).
 
     ``u_min``/``u_max`` are optional: ``None`` (the default) means unlimited, stored as
@@ -97,22 +122,6 @@ class GainTable:
             object.__setattr__(self, name, arr)
         if np.any(self.u_min > 0) or np.any(self.u_max < 0):
             raise ValueError("actuator limits must satisfy u_min <= 0 <= u_max")
-
-    @property
-    def n_ticks(self) -> int:
-        return int(self.stage_start[-1])
-
-    @property
-    def n_stages(self) -> int:
-        return len(self.stage_np)
-
-    @property
-    def dims(self) -> tuple[int, int, int]:
-        """``(n, m, P)``: states, inputs, latched multipliers (padded width)."""
-        return self.K.shape[2], self.K.shape[1], self.L.shape[2]
-
-    def stage_of_tick(self, j: int) -> int:
-        return int(np.searchsorted(self.stage_start, j, side="right") - 1)
 
     def with_arrays(self, **arrays) -> "GainTable":
         """A copy with some arrays replaced (re-quantized to float32); for fault planting."""

@@ -28,11 +28,17 @@ import numpy as np
 
 from .design import ContinuousDesign, DesignError, design_continuous
 from .design_zoh import ZohDesign, design_zoh
+from .precision import round_to_scale
 from .problem import Constraint, Problem
 from .tables import BANDQP_MAX, BandQP, GainTable, sample_design
 
 __all__ = ["BandSolution", "BandDesign", "solve_band_dual", "enumerate_active_sets",
            "design_bands", "has_bands", "target_latch"]
+
+# Significant digits, of each array's largest entry, of the band dual (Nt, mt, W) in the tables:
+# between machines those arrays agree to ~1e-15 of that entry, and the firmware solves the dual
+# for a float32 latch, so 10 digits keep all it resolves and none that differ.
+BANDQP_DIGITS = 10
 
 
 def has_bands(problem: Problem) -> bool:
@@ -157,19 +163,25 @@ class BandDesign:
     def stages(self):
         return self.base.stages
 
-    def band_qp(self) -> BandQP | None:
+    def band_qp(self, *, exact: bool = False) -> BandQP | None:
         """The dual the firmware re-solves from the measured x0 at the t0 latch, when it has
         at most BANDQP_MAX rows (else None: the table latches the affine map of the design's
-        active set, exact only while that set stays optimal)."""
+        active set, exact only while that set stays optimal). As the tables store it, at
+        BANDQP_DIGITS (the digits beyond differ between machines); ``exact=True``: the design's
+        own doubles."""
         if len(self.lower) > BANDQP_MAX:
             return None
         st0 = self.base.stages[0]
-        return BandQP(st0.N0.T, st0.m0, st0.W0, self.lower, self.upper)
+        Nt, mt, W = st0.N0.T, st0.m0, st0.W0
+        if not exact:
+            Nt, mt, W = (round_to_scale(a, BANDQP_DIGITS) for a in (Nt, mt, 0.5 * (W + W.T)))
+        return BandQP(Nt, mt, W, self.lower, self.upper)
 
     def table(self, *, quantize: bool = True, on_target_qp: bool = True) -> GainTable:
         """Per-tick table: the ZOH design's own, or the continuous gains sampled at the ticks;
-        with the band dual for the firmware when it fits (``on_target_qp=False``: without)."""
-        qp = self.band_qp() if on_target_qp else None
+        with the band dual for the firmware when it fits (``on_target_qp=False``: without).
+        ``quantize=False``: the design's own law, in double precision, with the exact dual."""
+        qp = self.band_qp(exact=not quantize) if on_target_qp else None
         if isinstance(self.base, ContinuousDesign):
             return sample_design(self.base, quantize=quantize, band_qp=qp)
         return self.base.table(quantize=quantize, band_qp=qp)

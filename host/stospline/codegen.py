@@ -133,7 +133,7 @@ def _generate_fixed(table, p: str, banner: str) -> tuple[str, str]:
     F, kind = table.frac_bits, table.arith.upper()
     sha = table.problem_sha256 or "0" * 64
     ctype = {"q15": "stsp_q15_t", "q31": "stsp_q31_t"}[table.arith]
-    bound = ", ".join(f"{b:.3e}" for b in table.bound.max(axis=0))
+    bound = ", ".join(f"{b:.3g}" for b in table.written_bound())  # as in the JSON: rounded up
     lsb = ", ".join(f"{b:.3e}" for b in table.u_lsb)
     header = banner + f"""#ifndef {P}_GAINS_H
 #define {P}_GAINS_H

@@ -44,9 +44,11 @@ state (``x = x_q 2^(x_exp - F)``) and the same latch state.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from decimal import Decimal, localcontext
 
 import numpy as np
 
+from .precision import RoundedUp, ceil_significant
 from .tables import F32_MAX, GainTable, TableShape
 
 __all__ = ["FixedTable", "quantize_table", "state_range", "law_q", "latch_q", "law_double",
@@ -58,6 +60,18 @@ SCALAR_KIND = {"float32": 1, "q15": 2, "q31": 3}
 EXP_MAX = 60            # the firmware refuses scale exponents beyond +-60 (STSP_Q_EXP_MAX)
 DEFAULT_SIGMAS = 6.0    # state range: mean +- 6 standard deviations over the plan
 _EXP_SPAN = 24          # a state whose range is tiny gets at least 2^-24 of the largest one
+# The bound as written (summary JSON, generated header): rounded UP to BOUND_DIGITS significant
+# digits after adding a margin of 3 GAIN_AGREEMENT 2^F LSB. Why: the bound adds the rounding
+# residuals |G_q - G~| of gains scaled by up to 2^F, and the last bits of the double gains differ
+# between machines by a relative d (measured: 1.5e-14). A residual moves by at most |dG~| (also
+# when G~ crosses a rounding boundary: it is 1/2 on both sides), so a row's bound moves by at most
+# d times its sums of |G~| (law and latch rows, each at most 2^F - 1 + terms / 2): below
+# d (2 2^F + 2n + 2P + 4) (docs/firmware.md, "Error bound"). GAIN_AGREEMENT = 1e-12 is 70 times
+# the measured d: a margin of 6.4e-3 LSB in Q31, 1e-7 LSB in Q15, so the written bound holds for
+# every machine's double law. At 3 digits a new design's written bound differs between machines
+# with a probability below 1e-3 per input (the robot's moved by 2.5e-7 LSB in Q31).
+BOUND_DIGITS = 3
+GAIN_AGREEMENT = 1e-12
 
 
 def _rhu(y: np.ndarray) -> np.ndarray:
@@ -139,9 +153,23 @@ class FixedTable(TableShape):
             "x_range": np.ldexp(1.0, self.x_exp.astype(int)).tolist(),
             "x_range_predicted": self.x_range.tolist(),
             "u_lsb": self.u_lsb.tolist(),
-            "u_error_bound": self.bound.max(axis=0).tolist(),
-            "u_error_bound_lsb": self.bound_lsb.max(axis=0).tolist(),
+            "u_error_bound": self.written_bound(),
+            "u_error_bound_lsb": self.written_bound_lsb(),
         }
+
+    def written_bound_lsb(self) -> list[RoundedUp]:
+        """Per input, the bound (max over ticks) in LSBs as written: at most 3 significant
+        digits, rounded up with a margin over the last bits of the gains (see BOUND_DIGITS)."""
+        margin = Decimal(3 * GAIN_AGREEMENT * 2.0 ** self.frac_bits)
+        with localcontext(prec=100):  # exact: no sum or product below is rounded
+            return [ceil_significant(Decimal(b) + margin, BOUND_DIGITS)
+                    for b in self.bound_lsb.max(axis=0)]
+
+    def written_bound(self) -> list[RoundedUp]:
+        """`written_bound_lsb` in the command's units, rounded up again to 3 digits."""
+        with localcontext(prec=100):
+            return [ceil_significant(Decimal(repr(b)) * Decimal(lsb), BOUND_DIGITS)
+                    for b, lsb in zip(self.written_bound_lsb(), self.u_lsb)]
 
 
 def state_range(problem, table: GainTable, *, sigmas: float = DEFAULT_SIGMAS) -> np.ndarray:
@@ -149,7 +177,9 @@ def state_range(problem, table: GainTable, *, sigmas: float = DEFAULT_SIGMAS) ->
     the float32 table's law from `oracle.evaluate_table`)."""
     from .oracle import evaluate_table
     mom = evaluate_table(problem, table, path=True)
-    return np.max(np.abs(mom.path_mean) + sigmas * np.sqrt(mom.path_var), axis=0)
+    # max(., 0): a zero variance may come out as -1e-18 on another machine (NaN from sqrt).
+    return np.max(np.abs(mom.path_mean) + sigmas * np.sqrt(np.maximum(mom.path_var, 0.0)),
+                  axis=0)
 
 
 def _exponent(r: np.ndarray, terms: int, F: int) -> np.ndarray:

@@ -21,6 +21,7 @@ from .oracle import Moments, evaluate_continuous, evaluate_table
 from .problem import Problem, ProblemError
 from .tables import GainTable, sample_design
 from .fixed import DEFAULT_SIGMAS, FixedTable, quantize_table, state_range
+from .precision import RoundedUp
 
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
            "simulation_summary", "write_outputs", "start_from", "double_table", "fixed_table"]
@@ -39,6 +40,8 @@ def _r(x):
         return [_r(v) for v in x]
     if isinstance(x, np.ndarray):
         return _r(x.tolist())
+    if isinstance(x, RoundedUp):  # a bound at its own precision, rounded up: rounding it to
+        return float(x)           # nearest here could lower it (fixed.BOUND_DIGITS)
     if isinstance(x, (float, np.floating)):
         v = float(f"{round(float(x), _ABS):.{_SIG}g}")
         return 0.0 if v == 0 else v

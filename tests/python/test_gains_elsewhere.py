@@ -1,0 +1,158 @@
+"""gains/ regenerates byte for byte on another machine, not only on this one.
+
+Another CPU, BLAS kernel, thread count or library build changes the last bits of the design's
+doubles (measured here: the numpy tick loop against the C one moves the robot's gains by up to
+1.5e-14 relative). Every number written to gains/ must be printed at a precision those bits do
+not reach (docs/firmware.md, "Reproducible tables"). These tests regenerate every shipped file
+(`tools/regen_gains.sh`) with the last bits changed in three ways and compare byte for byte:
+
+* every double the design and the oracle hand on is multiplied by ``1 + r``, ``|r|`` drawn
+  log-uniformly in [1e-15, 1e-14] (5 to 45 ulps), with a random sign (seeded);
+* the numpy reference tick loop instead of the compiled one (another summation order);
+* one BLAS thread instead of the default (a subprocess: OpenBLAS reads it at load time).
+
+`test_no_table_entry_is_near_a_rounding_boundary` makes the first one a proof for the tables:
+no entry of a shipped table is within reach of such a perturbation of its rounding boundary.
+"""
+import dataclasses
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from stospline import oracle, pipeline
+from stospline.cli import main
+from stospline.problem import load_problem
+
+from conftest import EXAMPLES, GAINS
+
+# Relative size of the perturbation, and an absolute part relative to each array's largest
+# entry (a structural zero may come out as 1e-18 elsewhere, a small entry with a larger
+# relative error than a large one).
+REL = (1e-15, 1e-14)
+ABS = 1e-16
+# Computed from the problem file, not by floating-point arithmetic: left exact.
+_GIVEN = {"problem", "stage", "lower", "upper", "_sol"}
+
+
+def _regenerate(out) -> None:
+    """What tools/regen_gains.sh does, into `out`."""
+    for toml in sorted(EXAMPLES.glob("*.toml")):
+        assert main(["design", str(toml), "--out", str(out)]) == 0
+    for arith in ("q15", "q31"):
+        assert main(["design", str(EXAMPLES / "robot_corridor.toml"), "--arith", arith,
+                     "--out", str(out)]) == 0
+
+
+def _assert_same_as_gains(out) -> None:
+    names = sorted(p.name for p in GAINS.iterdir())
+    assert sorted(p.name for p in out.iterdir()) == names
+    differ = [n for n in names if (out / n).read_bytes() != (GAINS / n).read_bytes()]
+    assert not differ, f"regenerated with other last bits, these differ from gains/: {differ}"
+
+
+def _jiggle(x, rng):
+    """`x` with every computed double perturbed (dataclasses, lists and tuples walked)."""
+    if isinstance(x, np.ndarray) and x.dtype.kind == "f" and x.size:
+        rel = rng.choice([-1.0, 1.0], x.shape) * 10.0 ** rng.uniform(*np.log10(REL), x.shape)
+        return x * (1.0 + rel) + ABS * np.abs(x).max() * rng.uniform(-1.0, 1.0, x.shape)
+    if isinstance(x, float):
+        return float(x * (1.0 + rng.choice([-1.0, 1.0]) * 10.0 ** rng.uniform(*np.log10(REL))))
+    if isinstance(x, list):
+        return [_jiggle(v, rng) for v in x]
+    if isinstance(x, tuple):
+        return tuple(_jiggle(v, rng) for v in x)
+    if dataclasses.is_dataclass(x) and not isinstance(x, type):
+        return dataclasses.replace(x, **{f.name: _jiggle(getattr(x, f.name), rng)
+                                         for f in dataclasses.fields(x)
+                                         if f.init and f.name not in _GIVEN})
+    return x
+
+
+def _perturbing(fn, rng):
+    def wrapped(*args, **kwargs):
+        return _jiggle(fn(*args, **kwargs), rng)
+    return wrapped
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_design_doubles_perturbed_by_ulps_change_no_byte(tmp_path, monkeypatch, seed):
+    rng = np.random.default_rng(seed)
+    # Where the designs hand their results to the tables and the summary, and the oracle's
+    # moments (also computed by `fixed.state_range` for the fixed-point scales).
+    for name in ("design_zoh", "design_continuous", "design_bands", "evaluate_table",
+                 "evaluate_continuous"):
+        monkeypatch.setattr(pipeline, name, _perturbing(getattr(pipeline, name), rng))
+    monkeypatch.setattr(oracle, "evaluate_table", _perturbing(oracle.evaluate_table, rng))
+    _regenerate(tmp_path)
+    _assert_same_as_gains(tmp_path)
+
+
+def test_numpy_tick_loop_changes_no_byte(tmp_path, monkeypatch):
+    monkeypatch.setenv("STOSPLINE_ZOH_KERNEL", "numpy")
+    _regenerate(tmp_path)
+    _assert_same_as_gains(tmp_path)
+
+
+def test_one_blas_thread_changes_no_byte(tmp_path):
+    code = ("import sys; from pathlib import Path; sys.path.insert(0, sys.argv[1]); "
+            "import test_gains_elsewhere as t; t._regenerate(Path(sys.argv[2]))")
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run([sys.executable, "-c", code, os.path.dirname(__file__), str(tmp_path)],
+                          env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    _assert_same_as_gains(tmp_path)
+
+
+def _reach(a: np.ndarray) -> np.ndarray:
+    """How far the test's perturbation can move each entry of `a` (its largest: REL[1])."""
+    return REL[1] * np.abs(a) + ABS * np.abs(a).max()
+
+
+def _f32_boundary_distance(a: np.ndarray) -> np.ndarray:
+    """Distance of each double to the nearest midpoint between two float32 neighbours."""
+    f = a.astype(np.float32)
+    up = np.nextafter(f, np.float32(np.inf)).astype(float)
+    down = np.nextafter(f, np.float32(-np.inf)).astype(float)
+    return np.minimum(np.abs((f + up) / 2 - a), np.abs(a - (f + down) / 2))
+
+
+@pytest.mark.parametrize("example", sorted(p.stem for p in EXAMPLES.glob("*.toml")))
+def test_no_table_entry_is_near_a_rounding_boundary(monkeypatch, example):
+    """Every number a shipped table stores is rounded from a double (float32, Q15/Q31 integers,
+    the band dual's 10 digits); none lies within `_reach` of where its rounding changes, so no
+    perturbation of the size used above (nor the float32 flush of round-off zeros) changes it.
+    Found here: the nearest is a Q31 gain 2.1e-5 LSB (5.9 times its reach) from a boundary."""
+    from stospline import bands, fixed, tables
+    rounded = {"float32": [], "q": [], "band": []}
+
+    def capture(kind, fn):
+        def wrapped(a, *args):
+            rounded[kind].append(np.array(a, dtype=float))
+            return fn(a, *args)
+        return wrapped
+    monkeypatch.setattr(tables, "_to_float32", capture("float32", tables._to_float32))
+    monkeypatch.setattr(fixed, "_rhu", capture("q", fixed._rhu))
+    monkeypatch.setattr(bands, "round_to_scale", capture("band", bands.round_to_scale))
+    problem = load_problem(EXAMPLES / f"{example}.toml")
+    d = pipeline.design_problem(problem, mode=problem.options.get("mode", "stagewise"))
+    if example == "robot_corridor":
+        for arith in ("q15", "q31"):
+            pipeline.fixed_table(d, arith)
+    assert rounded["float32"] and (rounded["q"] or example != "robot_corridor")
+
+    def assert_clear(distance, a, what):
+        near = int(np.sum(distance <= _reach(a)))
+        assert near == 0, f"{near} {what} entries within reach of a rounding boundary"
+    for a in (a for a in rounded["float32"] if np.any(a)):
+        flush = 1e-12 * np.abs(a).max()          # tables._to_float32: below it, 0
+        kept = np.abs(a) >= flush
+        assert_clear(np.where(kept, _f32_boundary_distance(a), np.inf), a, "float32")
+        assert_clear(np.abs(np.abs(a) - flush), a, "flushed")
+    for a in (a for a in rounded["q"] if np.any(a)):
+        assert_clear(np.abs(a - np.floor(a) - 0.5), a, "Q")
+    for a in (a for a in rounded["band"] if np.any(a)):
+        q = 10.0 ** (np.floor(np.log10(np.abs(a).max())) - bands.BANDQP_DIGITS + 1)
+        assert_clear(np.abs(a / q - np.floor(a / q) - 0.5) * q, a, "band dual")

@@ -23,8 +23,9 @@ class RoundedUp(float):
 
 
 def ceil_significant(x: float | Decimal, digits: int) -> RoundedUp:
-    """The smallest decimal with `digits` significant digits that is >= `x` (x > 0), exactly:
-    ``ceil_significant(2.928018756, 3)`` is 2.93, ``ceil_significant(2.93, 3)`` is 2.93."""
+    """The smallest decimal with `digits` significant digits that is >= `x` (x > 0), exactly
+    (of the binary value: ``ceil_significant(2.928018756, 3)`` is 2.93, of 2.5 is 2.5, of 2.93,
+    whose double is 2.93000000000000016, 2.94)."""
     d = Decimal(x)  # exact: a float converts without rounding
     if not d.is_finite() or d <= 0:
         raise ValueError(f"a bound must be positive and finite, got {x}")

@@ -156,3 +156,26 @@ def test_no_table_entry_is_near_a_rounding_boundary(monkeypatch, example):
     for a in (a for a in rounded["band"] if np.any(a)):
         q = 10.0 ** (np.floor(np.log10(np.abs(a).max())) - bands.BANDQP_DIGITS + 1)
         assert_clear(np.abs(a / q - np.floor(a / q) - 0.5) * q, a, "band dual")
+
+
+def test_written_bound_is_rounded_up_never_down(robot_zoh):
+    """The bound in gains/ (JSON, and the header comment) is at least the exact bound plus the
+    margin for other machines' last bits, and has at most 3 significant digits."""
+    import json
+    from decimal import Decimal
+    from stospline.fixed import GAIN_AGREEMENT
+    from stospline.precision import ceil_significant
+    assert ceil_significant(2.928018756, 3) == 2.93 and ceil_significant(2.5, 3) == 2.5
+    assert ceil_significant(9.991, 3) == 10.0 and ceil_significant(1.23e-12, 2) == 1.3e-12
+    for arith in ("q15", "q31"):
+        ft = pipeline.fixed_table(robot_zoh, arith)
+        written = json.loads((GAINS / f"robot_corridor_{arith}.json").read_text())["fixed"]
+        header = (GAINS / f"robot_corridor_{arith}.h").read_text()
+        margin = 3 * GAIN_AGREEMENT * 2.0 ** ft.frac_bits
+        exact = ft.bound_lsb.max(axis=0)
+        for w, w_real, b, lsb in zip(written["u_error_bound_lsb"], written["u_error_bound"],
+                                     exact, ft.u_lsb):
+            assert Decimal(repr(w)) >= Decimal(b) + Decimal(margin)
+            assert Decimal(repr(w_real)) >= Decimal(repr(w)) * Decimal(lsb)
+            assert len(Decimal(repr(w)).as_tuple().digits) <= 3
+            assert f"{w_real:.3g}" in header.split("|u_fixed - u_double| <=")[1].split("]")[0]

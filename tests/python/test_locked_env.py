@@ -1,6 +1,7 @@
 """The venv is host/requirements.lock, exactly (tools/setup.sh builds it from the lock), and the
 lock covers every dependency host/pyproject.toml declares: two machines run the same versions."""
 import re
+import sysconfig
 import tomllib
 from importlib import metadata
 
@@ -33,7 +34,9 @@ def test_every_locked_package_has_hashes():
 
 def test_installed_packages_are_exactly_the_locked_ones():
     locked = {n: v for n, (v, _) in _locked().items()}
-    installed = {_name(d.metadata["Name"]): d.version for d in metadata.distributions()}
+    # The venv's own site-packages only (setuptools puts its vendored packages on sys.path).
+    site = [sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]]
+    installed = {_name(d.metadata["Name"]): d.version for d in metadata.distributions(path=site)}
     installed.pop("stospline")
     assert installed == locked, "the venv is not host/requirements.lock: run tools/setup.sh"
 

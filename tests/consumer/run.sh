@@ -20,7 +20,8 @@
 #                     configure time, the generated header and stsp_controller.h at compile time
 #   presets           CMakePresets.json: the host presets configure; the Cortex-M4F and M0+
 #                     presets build and install the library for the right core and float ABI,
-#                     the same machine code as tools/arm's build of that arithmetic
+#                     the same machine code as tools/arm's build of that arithmetic, and a
+#                     cross-compiled consumer finds the installed package and toolchain file
 #
 # Every mode that runs main.c compares its output with the cffi harness bit for bit
 # (tests/consumer/compare_harness.py). Exit status 0 on success.
@@ -183,9 +184,11 @@ case "$mode" in
         echo "preset $preset: $compiler not installed, not configured"
       fi
     done
-    # name : Tag_CPU_arch : hard float? : tools/arm CPU : tools/arm library of the same arithmetic
-    for preset in cortex-m4f:v7E-M:VFP:cortex-m4:stsp cortex-m0plus:v6S-M::cortex-m0plus:stsp_q15; do
-      IFS=: read -r name arch vfp cpu armlib <<<"$preset"
+    # name : Tag_CPU_arch : hard float? : tools/arm CPU : tools/arm library of the same
+    # arithmetic : table of that arithmetic : FIXED_SHAPE
+    for preset in cortex-m4f:v7E-M:VFP:cortex-m4:stsp:robot_corridor:ON \
+                  cortex-m0plus:v6S-M::cortex-m0plus:stsp_q15:robot_corridor_q15:OFF; do
+      IFS=: read -r name arch vfp cpu armlib gains fixed <<<"$preset"
       "$cmake" -S "$src" --preset "$name" -B "$work/$name" >/dev/null
       "$cmake" --build "$work/$name"
       # The same machine code as the library tools/arm builds, which the QEMU replay test and
@@ -210,8 +213,18 @@ case "$mode" in
       if grep -q STSP_HOST_MESSAGES "$work/$name-prefix/lib/pkgconfig/stospline.pc"; then
         fail "$name: host messages in a target build"
       fi
+      # A cross-compiled firmware project: find_package and the installed toolchain file; the
+      # table library only (an image needs the project's own startup code and linker script).
+      "$cmake" -S "$here" -B "$work/$name-consumer" -G "$generator" \
+        -DCMAKE_TOOLCHAIN_FILE="$work/$name-prefix/share/stospline/toolchains/arm-none-eabi.cmake" \
+        -DSTSP_ARM_CPU="$cpu" -DCMAKE_PREFIX_PATH="$work/$name-prefix" \
+        -DCONSUMER_TABLE="$src/gains/$gains.c" -DCONSUMER_FIXED_SHAPE="$fixed" >/dev/null
+      "$cmake" --build "$work/$name-consumer" --target robot_gains >/dev/null
+      arm-none-eabi-readelf -A "$work/$name-consumer/librobot_gains.a" | grep -q "Tag_CPU_arch: $arch\$" \
+        || fail "$name: the consumer's table library is not $arch code"
       echo "preset $name: libstsp.a is $arch code$([ -n "$vfp" ] && echo ", hard float")," \
-           "$(wc -l <"$work/$name/libstsp.a.dis") lines of disassembly identical to tools/arm's"
+           "$(wc -l <"$work/$name/libstsp.a.dis") lines of disassembly identical to tools/arm's;" \
+           "$gains.c built against it by find_package (FIXED_SHAPE $fixed)"
     done
     ;;
   *)

@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
 """Plant plausible bugs in the firmware, one at a time, and show that the tests catch each.
 
-For every fault below the script copies the C sources (``CMakeLists.txt``, ``firmware/``,
-``tests/c/``, ``gains/``) into a temporary directory, applies the one edit there, rebuilds
-that copy, and runs
+For every fault below the script copies the C sources (``CMakeLists.txt``, ``cmake/``,
+``firmware/``, ``tests/c/``, ``tests/consumer/``, ``gains/``) into a temporary directory,
+applies the one edit there, rebuilds that copy, and runs
 
-* the C tests of the copy: ``ctest`` without the clang, ARM and MISRA tests (controller,
+* the C tests of the copy: ``ctest`` without the clang, ARM, MISRA and consumer tests (controller,
   controller_fixed_2_1_2, robot_table, robot_table_fixed, the fixed-point (Q15/Q31) tests and
   their ASan + UBSan builds), and
 * a fast subset of the Python tests that drive the C code through the cffi harness
@@ -42,7 +42,7 @@ CRC = "firmware/src/stsp_controller.c"
 PY_TESTS = ["tests/python/test_harness.py", "tests/python/test_montecarlo.py",
             "tests/python/test_firmware_limits.py", "tests/python/test_fixedpoint.py",
             "tests/python/test_band_latch.py"]
-CTEST_EXCLUDE = r"^(clang_|arm_|misra)"
+CTEST_EXCLUDE = r"^(clang_|arm_|misra|consumer_)"
 
 
 @dataclass(frozen=True)
@@ -139,7 +139,7 @@ class Sandbox:
         self.cffi = base / "cffi"
         self.src.mkdir()
         shutil.copy2(ROOT / "CMakeLists.txt", self.src)
-        for d in ("firmware", "tests/c", "gains"):
+        for d in ("firmware", "tests/c", "tests/consumer", "gains", "cmake"):
             shutil.copytree(ROOT / d, self.src / d)
         self.pristine = {}
 

@@ -67,13 +67,19 @@ typedef int32_t stsp_q31_t;
 
 /*
  * Arithmetic variant, chosen at configure time (CMake: -DSTSP_ARITH=float32|q15|q31), by
- * defining STSP_ARITH_Q15 or STSP_ARITH_Q31 (or neither: float32) for the library and every
- * file that includes this header. stsp_scalar_t is the type of the state x, the command u, the
- * latched v and every table entry; the fixed-point variants and their scaling are described in
- * docs/firmware.md ("Fixed-point variants") and on stsp_step().
+ * defining STSP_ARITH_Q15 or STSP_ARITH_Q31 (or neither, or STSP_ARITH_FLOAT32: float32) for
+ * the library and every file that includes this header. stsp_scalar_t is the type of the
+ * state x, the command u, the latched v and every table entry; the fixed-point variants and
+ * their scaling are described in docs/firmware.md ("Fixed-point variants") and on stsp_step().
  */
 #if defined(STSP_ARITH_Q15) && defined(STSP_ARITH_Q31)
 #error "define at most one of STSP_ARITH_Q15, STSP_ARITH_Q31"
+#endif
+/* STSP_ARITH_FLOAT32 (optional; the CMake package and stospline.pc define it for a float32
+ * library) states float32 explicitly, so that code built against that library cannot add a
+ * fixed-point definition unnoticed. */
+#if defined(STSP_ARITH_FLOAT32) && (defined(STSP_ARITH_Q15) || defined(STSP_ARITH_Q31))
+#error "STSP_ARITH_FLOAT32 (a float32 library) with STSP_ARITH_Q15/Q31: one arithmetic per build"
 #endif
 #if defined(STSP_ARITH_Q15)
 typedef stsp_q15_t stsp_scalar_t;

@@ -1,0 +1,235 @@
+#!/usr/bin/env bash
+# Builds and runs the consumer project (tests/consumer) as a user outside the repository would;
+# the ctest tests consumer_* (tests/consumer/tests.cmake) call it, one mode each:
+#
+#   tests/consumer/run.sh MODE WORK [--cmake CMAKE] [--cc CC] [--python PY] [--generator G]
+#
+#   install           configure stospline with STSP_BUILD_TESTS=OFF in WORK/build, build it,
+#                     `cmake --install --prefix WORK/prefix`; checks what was built, that cmocka
+#                     was not looked for, and what was installed
+#   find_package      the consumer with find_package(stospline) from WORK/../install/prefix
+#   find_package_fixed      the same with stospline_add_gains(... FIXED_SHAPE)
+#   add_subdirectory  the consumer with add_subdirectory(<this checkout>); checks that only the
+#                     library was built and cmocka was not looked for, and that a parent
+#                     project can call stsp_add_controller()
+#   fetchcontent_fixed      FetchContent (FETCHCONTENT_SOURCE_DIR_STOSPLINE = this checkout),
+#                     FIXED_SHAPE
+#   pkg_config        cc main.c robot_corridor.c $(pkg-config --cflags --libs stospline), with
+#                     PKG_CONFIG_PATH into the installed prefix
+#   wrong_arith       a Q15 table against the float32 package must fail: stospline_add_gains at
+#                     configure time, the generated header and stsp_controller.h at compile time
+#   presets           CMakePresets.json: the host presets configure; the Cortex-M4F and M0+
+#                     presets build and install the library for the right core and float ABI,
+#                     the same machine code as tools/arm's build of that arithmetic, and a
+#                     cross-compiled consumer finds the installed package and toolchain file
+#
+# Every mode that runs main.c compares its output with the cffi harness bit for bit
+# (tests/consumer/compare_harness.py). Exit status 0 on success.
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+src="$(cd "$here/../.." && pwd)"
+mode="$1"
+work="$2"
+shift 2
+cmake=cmake
+cc=cc
+python="$src/.venv/bin/python"
+generator=Ninja
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --cmake) cmake="$2"; shift 2 ;;
+    --cc) cc="$2"; shift 2 ;;
+    --python) python="$2"; shift 2 ;;
+    --generator) generator="$2"; shift 2 ;;
+    *) echo "run.sh: unknown argument $1" >&2; exit 2 ;;
+  esac
+done
+prefix="$(dirname "$work")/install/prefix"
+table="$src/gains/robot_corridor.c"
+
+fail() { echo "run.sh ($mode): FAIL: $*" >&2; exit 1; }
+
+# configure_consumer ARGS...: configure tests/consumer in WORK/build.
+configure_consumer() {
+  "$cmake" -S "$here" -B "$work/build" -G "$generator" -DCMAKE_C_COMPILER="$cc" \
+    -DCMAKE_BUILD_TYPE=Release "$@"
+}
+
+# build_run_compare: build the consumer, run it, compare with the harness.
+build_run_compare() {
+  "$cmake" --build "$work/build"
+  run_compare "$work/build/robot"
+}
+
+run_compare() {
+  "$1" >"$work/commands.txt"
+  echo "main.c: $(wc -l <"$work/commands.txt") lines; last: $(tail -n 1 "$work/commands.txt")"
+  "$python" "$here/compare_harness.py" "$work/commands.txt"
+}
+
+# no_tests_built DIR: stospline's build directory DIR holds the library only, and the
+# configuration did not look for cmocka.
+no_tests_built() {
+  local libs
+  libs="$(cd "$1" && find . -name '*.a' -printf '%f\n' | sort | tr '\n' ' ')"
+  [ "$libs" = "libstsp.a " ] || fail "built in $1: $libs(expected libstsp.a only)"
+  if find "$1" -maxdepth 1 -name CTestTestfile.cmake | grep -q .; then
+    fail "$1 registers tests"
+  fi
+  if grep -q '^CMOCKA' "$2/CMakeCache.txt"; then
+    fail "cmocka was looked for ($2/CMakeCache.txt)"
+  fi
+}
+
+rm -rf "$work"
+mkdir -p "$work"
+case "$mode" in
+  install)
+    "$cmake" -S "$src" -B "$work/build" -G "$generator" -DCMAKE_C_COMPILER="$cc" \
+      -DCMAKE_BUILD_TYPE=Release -DSTSP_BUILD_TESTS=OFF
+    "$cmake" --build "$work/build"
+    no_tests_built "$work/build" "$work/build"
+    "$cmake" --install "$work/build" --prefix "$prefix"
+    (cd "$prefix" && find . -type f | sort) | tee "$work/installed.txt"
+    for f in include/stospline/stsp_controller.h include/stospline/stsp_bandqp.h lib/libstsp.a \
+             lib/cmake/stospline/stosplineConfig.cmake \
+             lib/cmake/stospline/stosplineConfigVersion.cmake \
+             lib/cmake/stospline/stosplineTargets.cmake lib/cmake/stospline/stosplineGains.cmake \
+             lib/pkgconfig/stospline.pc share/stospline/toolchains/arm-none-eabi.cmake \
+             share/stospline/src/stsp_controller.c share/stospline/src/stsp_crc32.h; do
+      [ -f "$prefix/$f" ] || fail "not installed: $f"
+    done
+    grep -q 'set(STOSPLINE_ARITH "float32")' "$prefix/lib/cmake/stospline/stosplineConfig.cmake" \
+      || fail "stosplineConfig.cmake does not record the arithmetic"
+    grep -q 'INTERFACE_COMPILE_DEFINITIONS "STSP_HOST_MESSAGES;STSP_ARITH_FLOAT32"' \
+      "$prefix/lib/cmake/stospline/stosplineTargets.cmake" \
+      || fail "stospline::stsp does not carry STSP_ARITH_FLOAT32"
+    ;;
+  find_package|find_package_fixed)
+    fixed=OFF
+    [ "$mode" = find_package ] || fixed=ON
+    configure_consumer -DCMAKE_PREFIX_PATH="$prefix" -DCONSUMER_TABLE="$table" \
+      -DCONSUMER_FIXED_SHAPE="$fixed"
+    build_run_compare
+    ;;
+  add_subdirectory)
+    configure_consumer -DSTOSPLINE_FROM=subdirectory -DSTOSPLINE_SOURCE_DIR="$src" \
+      -DCONSUMER_TABLE="$table"
+    build_run_compare
+    no_tests_built "$work/build/stospline" "$work/build"
+    # The repository's internal helper also works from a parent (it used to find no sources).
+    mkdir -p "$work/parent"
+    printf '%s\n' 'cmake_minimum_required(VERSION 3.21)' 'project(parent C)' \
+      "add_subdirectory(\"$src\" stospline)" \
+      'stsp_add_controller(ctrl_4_2_4 DEFINES STSP_FIXED_NX=4u STSP_FIXED_NU=2u STSP_FIXED_N_LATCH=4u)' \
+      >"$work/parent/CMakeLists.txt"
+    "$cmake" -S "$work/parent" -B "$work/parent/build" -G "$generator" -DCMAKE_C_COMPILER="$cc" \
+      >/dev/null
+    "$cmake" --build "$work/parent/build" --target ctrl_4_2_4
+    ;;
+  fetchcontent_fixed)
+    # The override is FetchContent's documented way to use a local checkout; the URL below
+    # would fail if anything tried to download it.
+    configure_consumer -DSTOSPLINE_FROM=fetchcontent \
+      -DSTOSPLINE_GIT_REPOSITORY="file:///nonexistent/stospline.git" \
+      -DFETCHCONTENT_SOURCE_DIR_STOSPLINE="$src" -DCONSUMER_TABLE="$table" \
+      -DCONSUMER_FIXED_SHAPE=ON
+    build_run_compare
+    no_tests_built "$work/build/_deps/stospline-build" "$work/build"
+    ;;
+  pkg_config)
+    export PKG_CONFIG_PATH="$prefix/lib/pkgconfig"
+    [ "$(pkg-config --variable=arith stospline)" = float32 ] || fail "arith variable"
+    flags="$(pkg-config --cflags --libs stospline)"
+    echo "pkg-config --cflags --libs stospline: $flags"
+    # shellcheck disable=SC2086 # the flags are words
+    "$cc" -std=c99 -O2 -Wall -Wextra -Werror -I"$src/gains" "$here/main.c" "$table" $flags \
+      -o "$work/robot"
+    run_compare "$work/robot"
+    ;;
+  wrong_arith)
+    q15="$src/gains/robot_corridor_q15.c"
+    if configure_consumer -DCMAKE_PREFIX_PATH="$prefix" -DCONSUMER_TABLE="$q15" \
+         >"$work/configure.log" 2>&1; then
+      fail "a Q15 table configured against the float32 package"
+    fi
+    # CMake wraps the message: compare with the line breaks and indentation folded.
+    tr -s ' \n' ' ' <"$work/configure.log" | grep -q "holds q15 tables, but stospline::stsp is" \
+      || { cat "$work/configure.log"; fail "configure failed, but not on the arithmetic"; }
+    echo "stospline_add_gains refused the Q15 table against the float32 library"
+    export PKG_CONFIG_PATH="$prefix/lib/pkgconfig"
+    read -r -a flags <<<"$(pkg-config --cflags stospline)"
+    # The generated Q15 header under the float32 flags.
+    if "$cc" -std=c99 -c "$q15" "${flags[@]}" -o "$work/q15.o" 2>"$work/q15.log"; then
+      fail "the Q15 table compiled with the float32 library's flags"
+    fi
+    grep -q "holds Q15 tables" "$work/q15.log" || { cat "$work/q15.log"; fail "wrong error"; }
+    # A fixed-point definition added to the float32 library's flags.
+    if "$cc" -std=c99 -c "$here/main.c" -I"$src/gains" "${flags[@]}" -DSTSP_ARITH_Q15 \
+         -o "$work/main.o" 2>"$work/main.log"; then
+      fail "main.c compiled with STSP_ARITH_Q15 added to the float32 library's flags"
+    fi
+    grep -q "one arithmetic per build" "$work/main.log" || { cat "$work/main.log"; fail "wrong error"; }
+    echo "the compiler refused both mixes"
+    ;;
+  presets)
+    (cd "$src" && "$cmake" --list-presets=all)
+    for preset in host-gcc host-clang; do
+      compiler="$(sed -n "/\"name\": \"$preset\"/,/}/s/.*\"CMAKE_C_COMPILER\": \"\([^\"]*\)\".*/\1/p" \
+                  "$src/CMakePresets.json")"
+      if command -v "$compiler" >/dev/null; then
+        "$cmake" -S "$src" --preset "$preset" -B "$work/$preset" -DSTSP_BUILD_TESTS=OFF >/dev/null
+        echo "preset $preset: configured"
+      else
+        echo "preset $preset: $compiler not installed, not configured"
+      fi
+    done
+    # name : Tag_CPU_arch : hard float? : tools/arm CPU : tools/arm library of the same
+    # arithmetic : table of that arithmetic : FIXED_SHAPE
+    for preset in cortex-m4f:v7E-M:VFP:cortex-m4:stsp:robot_corridor:ON \
+                  cortex-m0plus:v6S-M::cortex-m0plus:stsp_q15:robot_corridor_q15:OFF; do
+      IFS=: read -r name arch vfp cpu armlib gains fixed <<<"$preset"
+      "$cmake" -S "$src" --preset "$name" -B "$work/$name" >/dev/null
+      "$cmake" --build "$work/$name"
+      # The same machine code as the library tools/arm builds, which the QEMU replay test and
+      # the instruction counts of docs/firmware.md measure.
+      "$cmake" -S "$src/tools/arm" -B "$work/$name-tools-arm" -G "$generator" \
+        -DCMAKE_TOOLCHAIN_FILE="$src/tools/arm/arm-none-eabi.cmake" -DSTSP_ARM_CPU="$cpu" >/dev/null
+      "$cmake" --build "$work/$name-tools-arm" --target "$armlib" >/dev/null
+      for lib in "$work/$name/libstsp.a" "$work/$name-tools-arm/lib$armlib.a"; do
+        arm-none-eabi-objdump -d "$lib" | grep -v "file format\|^In archive" >"$lib.dis"
+      done
+      cmp "$work/$name/libstsp.a.dis" "$work/$name-tools-arm/lib$armlib.a.dis" \
+        || fail "$name: the preset's libstsp.a differs from tools/arm's lib$armlib.a"
+      no_tests_built "$work/$name" "$work/$name"
+      "$cmake" --install "$work/$name" --prefix "$work/$name-prefix" >/dev/null
+      attrs="$(arm-none-eabi-readelf -A "$work/$name-prefix/lib/libstsp.a")"
+      grep -q "Tag_CPU_arch: $arch\$" <<<"$attrs" || fail "$name: not $arch code"
+      if [ -n "$vfp" ]; then
+        grep -q "Tag_ABI_VFP_args: VFP registers" <<<"$attrs" || fail "$name: not hard float"
+      elif grep -q "Tag_ABI_VFP_args" <<<"$attrs"; then
+        fail "$name: not soft float"
+      fi
+      if grep -q STSP_HOST_MESSAGES "$work/$name-prefix/lib/pkgconfig/stospline.pc"; then
+        fail "$name: host messages in a target build"
+      fi
+      # A cross-compiled firmware project: find_package and the installed toolchain file; the
+      # table library only (an image needs the project's own startup code and linker script).
+      "$cmake" -S "$here" -B "$work/$name-consumer" -G "$generator" \
+        -DCMAKE_TOOLCHAIN_FILE="$work/$name-prefix/share/stospline/toolchains/arm-none-eabi.cmake" \
+        -DSTSP_ARM_CPU="$cpu" -DCMAKE_PREFIX_PATH="$work/$name-prefix" \
+        -DCONSUMER_TABLE="$src/gains/$gains.c" -DCONSUMER_FIXED_SHAPE="$fixed" >/dev/null
+      "$cmake" --build "$work/$name-consumer" --target robot_gains >/dev/null
+      arm-none-eabi-readelf -A "$work/$name-consumer/librobot_gains.a" | grep -q "Tag_CPU_arch: $arch\$" \
+        || fail "$name: the consumer's table library is not $arch code"
+      echo "preset $name: libstsp.a is $arch code$([ -n "$vfp" ] && echo ", hard float")," \
+           "$(wc -l <"$work/$name/libstsp.a.dis") lines of disassembly identical to tools/arm's;" \
+           "$gains.c built against it by find_package (FIXED_SHAPE $fixed)"
+    done
+    ;;
+  *)
+    echo "run.sh: unknown mode $mode" >&2
+    exit 2
+    ;;
+esac
+echo "run.sh ($mode): OK"

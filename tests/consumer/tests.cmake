@@ -1,0 +1,27 @@
+# The consumer tests (included by CMakeLists.txt on the host, top-level, tests on): the project
+# in tests/consumer built against stospline as a user would, through tests/consumer/run.sh, each
+# run compared with the cffi harness bit for bit. consumer_install installs stospline to a
+# temporary prefix (build/consumer/install/prefix) for the tests that need the package.
+set(STSP_VENV_PYTHON ${CMAKE_CURRENT_SOURCE_DIR}/.venv/bin/python)
+find_program(STSP_PKG_CONFIG pkg-config)
+if(NOT EXISTS ${STSP_VENV_PYTHON} OR NOT STSP_PKG_CONFIG)
+  message(STATUS "consumer tests skipped: .venv or pkg-config missing (tools/setup.sh makes them)")
+  return()
+endif()
+set(consumer_dir ${CMAKE_CURRENT_BINARY_DIR}/consumer)
+set(consumer_modes install find_package find_package_fixed add_subdirectory fetchcontent_fixed
+    pkg_config wrong_arith)
+find_program(STSP_ARM_READELF arm-none-eabi-readelf)
+if(STSP_ARM_GCC AND STSP_ARM_READELF)
+  list(APPEND consumer_modes presets)
+endif()
+foreach(mode ${consumer_modes})
+  add_test(NAME consumer_${mode}
+           COMMAND ${CMAKE_CURRENT_SOURCE_DIR}/tests/consumer/run.sh ${mode} ${consumer_dir}/${mode}
+                   --cmake ${CMAKE_COMMAND} --cc ${CMAKE_C_COMPILER} --python ${STSP_VENV_PYTHON}
+                   --generator ${CMAKE_GENERATOR})
+  set_tests_properties(consumer_${mode} PROPERTIES LABELS consumer TIMEOUT 180)
+endforeach()
+set_tests_properties(consumer_install PROPERTIES FIXTURES_SETUP stsp_prefix)
+set_tests_properties(consumer_find_package consumer_find_package_fixed consumer_pkg_config
+                     consumer_wrong_arith PROPERTIES FIXTURES_REQUIRED stsp_prefix)

@@ -1,22 +1,20 @@
 """Compiled host kernels of the designers (double precision C, loaded through cffi).
 
 Build and load are separate steps, as in `harness`: `build_kernels` compiles ``tick_kernel.c``
-into a cffi API-mode module cached under ``build/`` by a hash of the source, the declarations
-and the flags (``STOSPLINE_BUILD`` overrides the directory), and `load_kernels` returns the
-loaded module, building it on first use. `zoh_stage_ticks` runs the per-tick loop of one stage
+into a cffi API-mode module cached (`stospline.cache`: the user cache directory,
+``STOSPLINE_CACHE_DIR`` overrides) by a hash of the source, the declarations and the flags,
+and `load_kernels` returns the loaded module, building it on first use. `zoh_stage_ticks` runs the per-tick loop of one stage
 of the exact zero-order-hold design (`design_zoh`) in C.
 """
 from __future__ import annotations
 
-import hashlib
 import importlib.util
-import os
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from .cache import cached_build, source_key
 
 __all__ = ["build_kernels", "load_kernels", "zoh_stage_ticks", "KernelBuildError"]
 
@@ -37,39 +35,21 @@ class KernelBuildError(RuntimeError):
     """The C kernels could not be compiled or loaded (no C compiler, no cffi)."""
 
 
-def _build_dir() -> Path:
-    env = os.environ.get("STOSPLINE_BUILD")
-    return Path(env) if env else Path(__file__).resolve().parents[2] / "build" / "cffi"
-
-
 def build_kernels(build_dir: str | Path | None = None, *, quiet: bool = True) -> Path:
     """Compile the kernels (if not cached) and return the path of the extension module."""
     source = _SOURCE.read_bytes()
-    digest = hashlib.sha256()
-    for blob in (source, _CDEF.encode(), " ".join(_CFLAGS).encode()):
-        digest.update(blob)
-    key = digest.hexdigest()[:16]
+    key = source_key([source, _CDEF, " ".join(_CFLAGS)])
     modname = f"_stsp_kernels_{key}"
-    out = (Path(build_dir) if build_dir else _build_dir()) / key
-    existing = sorted(out.glob(f"{modname}*.so")) + sorted(out.glob(f"{modname}*.pyd"))
-    if existing:
-        return existing[0]
-    try:
+
+    def build(out: Path) -> Path:
         import cffi
-        out.mkdir(parents=True, exist_ok=True)
         ffib = cffi.FFI()
         ffib.cdef(_CDEF)
         ffib.set_source(modname, source.decode(), extra_compile_args=_CFLAGS)
-        # Compile in a private directory, then move into place: concurrent builders (pytest
-        # workers) never load a half-written file.
-        tmp = tempfile.mkdtemp(prefix="tmp-", dir=out)
-        try:
-            so = Path(ffib.compile(tmpdir=tmp, verbose=not quiet))
-            final = out / so.name
-            os.replace(so, final)
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
-        return final
+        return Path(ffib.compile(tmpdir=str(out), verbose=not quiet))
+
+    try:
+        return cached_build(key, modname, build, root=build_dir)
     except Exception as exc:  # noqa: BLE001 - any failure here means "no compiled kernel"
         raise KernelBuildError(f"cannot build {_SOURCE.name}: {exc}") from exc
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
 from .design import ContinuousDesign
@@ -90,6 +89,7 @@ def _tick_varying(stage, Mw: np.ndarray, t0: float, h: float, n: int, m: int,
         return np.concatenate([dM.ravel(), [np.sum(Lb * M)], dF.ravel()])
 
     F0 = np.hstack([np.eye(n), np.zeros((n, m))])
+    from scipy.integrate import solve_ivp   # lazy: a slow import the CLI rarely needs
     res = solve_ivp(rhs, (t0, t0 + h), np.concatenate([Mw.ravel(), [0.0], F0.ravel()]),
                     method="DOP853", rtol=rtol, atol=atol)
     y = res.y[:, -1]
@@ -231,6 +231,7 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
 
         t_eval = (np.linspace(st.t_start, st.t_end, points_per_stage)
                   if points_per_stage else None)
+        from scipy.integrate import solve_ivp
         res = solve_ivp(rhs, (st.t_start, st.t_end), np.concatenate([M.ravel(), [0.0]]),
                         method="DOP853", rtol=rtol, atol=atol, t_eval=t_eval)
         if res.status != 0:

@@ -14,12 +14,6 @@ Names are loaded on first use, so ``import stospline`` stays cheap (no scipy, no
 from __future__ import annotations
 
 from importlib import import_module
-from importlib.metadata import PackageNotFoundError, version as _version
-
-try:
-    __version__ = _version("stospline")
-except PackageNotFoundError:     # a source tree on sys.path without installation
-    __version__ = "0+unknown"
 
 # public name -> module that defines it
 _EXPORTS = {
@@ -41,7 +35,19 @@ _EXPORTS = {
 __all__ = ["__version__", *_EXPORTS]
 
 
+def _version() -> str:
+    """The installed distribution's version: the package metadata is the single source."""
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        return version("stospline")
+    except PackageNotFoundError:     # a source tree on sys.path without installation
+        return "0+unknown"
+
+
 def __getattr__(name: str):
+    if name == "__version__":        # read on first use: importlib.metadata is slow to import
+        globals()["__version__"] = value = _version()
+        return value
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module 'stospline' has no attribute {name!r}")

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm
+from .expm import expm
 
 from .harness import STATUS, CompiledController
 from .problem import Problem

@@ -50,6 +50,31 @@ def test_key_depends_on_every_input():
     assert cache.source_key([b"x"]) == cache.source_key(["x"])
 
 
+@pytest.mark.parametrize("what", ["kernels", "controller"])
+def test_nothing_appears_in_place_before_the_build_is_complete(what, tmp_path, monkeypatch,
+                                                               robot_zoh):
+    """While the compiler runs, the cache holds nothing under a final name: a reader (another
+    process) either finds the whole module or nothing."""
+    import cffi
+    seen = []
+    compile_ = cffi.FFI.compile
+
+    def spy(self, *args, **kwargs):
+        seen.append(sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith(".")))
+        return compile_(self, *args, **kwargs)
+
+    monkeypatch.setattr(cffi.FFI, "compile", spy)
+    if what == "kernels":
+        from stospline.kernels import build_kernels
+        path = build_kernels(tmp_path)
+    else:
+        from stospline.harness import build_controller
+        build_controller(robot_zoh.table, build_dir=tmp_path)
+        (path,) = tmp_path.glob("*/_stsp_robot_corridor_*.so")
+    assert seen == [[]]
+    assert path.is_file() and path.parent.parent == tmp_path
+
+
 RACE = textwrap.dedent("""
     import sys, time
     from pathlib import Path

@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import shutil
-import tempfile
 from pathlib import Path
 from typing import Callable, Iterable
 
@@ -60,6 +58,8 @@ def cached_build(key: str, modname: str, build: Callable[[Path], Path], *,
     hit = _find(final, modname) if final.is_dir() else None
     if hit is not None:
         return hit
+    import shutil
+    import tempfile
     base.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{key}.tmp-", dir=base))
     try:

@@ -128,8 +128,8 @@ def problem_to_toml(problem: Problem) -> str:
         The problem has time-varying data given as a Python callable.
     """
     p = problem
-    lines = [f"# Problem file written by stospline (problem_to_toml); reference: "
-             f"docs/problem-file.md",
+    lines = ["# Problem file written by stospline (problem_to_toml); reference: "
+             "docs/problem-file.md",
              f"name = {_value(p.name)}", f"t0 = {_value(float(p.t0))}",
              f"x0 = {_value(p.x0)}", f"tick_hz = {_value(int(p.tick_hz))}"]
     for key in ("u_min", "u_max"):

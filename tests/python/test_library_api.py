@@ -14,7 +14,7 @@ import stospline
 from stospline.problem import ProblemError, load_problem, parse_problem
 from stospline.toml_writer import ProblemTomlError, problem_to_toml
 
-from conftest import EXAMPLES, REPO
+from conftest import EXAMPLES
 import test_docs_snippets as doc_snippets
 
 

@@ -14,7 +14,6 @@ wall time on a loaded one measures the other processes too (the CPU column does 
 from __future__ import annotations
 
 import argparse
-import os
 import re
 import resource
 import statistics
@@ -81,8 +80,9 @@ def main() -> int:
     print(f"  wall   median {statistics.median(walls):.3f} s   min {min(walls):.3f} s   "
           f"({args.runs} runs)")
     print(f"  cpu    median {statistics.median(cpus):.3f} s   (user + sys)")
-    base, _ = timed_runs([python, "-c", "import numpy"], max(3, args.runs // 2))
-    print(f"  floor  python + import numpy: median {statistics.median(base):.3f} s wall")
+    base, base_cpu = timed_runs([python, "-c", "import numpy"], max(3, args.runs // 2))
+    print(f"  floor  python + import numpy: median {statistics.median(base):.3f} s wall, "
+          f"{statistics.median(base_cpu):.3f} s cpu")
     phases = [subprocess.run([python, "-c", PHASES, args.problem], capture_output=True,
                              text=True, check=True).stdout.split() for _ in range(3)]
     med = [statistics.median(float(p[i]) for p in phases) for i in range(4)]

@@ -389,7 +389,7 @@ def main() -> None:
     t_start = time.perf_counter()
     t = time.perf_counter()
     load_kernels()
-    print(f"C kernel ready ({time.perf_counter() - t:.2f} s: build or load from build/cffi)")
+    print(f"C kernel ready ({time.perf_counter() - t:.2f} s: build, or load from the cffi cache)")
     robot = load_problem(ROOT / "examples" / "robot_corridor.toml")
     chain = chain12()
 

@@ -27,18 +27,16 @@ def _design(args) -> int:
     problem = load_problem(args.problem)
     d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem))
     arith = args.arith or problem.options.get("arith", "float32")
-    files = generated_files(d, Path(args.problem).name, arith)
+    files = generated_files(d, Path(args.problem).name, arith, with_c=bool(args.out))
     if args.out:
         written = write_outputs(args.out, files)
-        if not args.json:
-            for path in written:
-                print(f"wrote {path}")
     if args.json:
         print(files[next(k for k in files if k.endswith(".json"))], end="")
-    elif not args.out:
-        print(f"J0 = {d.design.J0:.10g} ({d.discretization} design; oracle of the law "
-              f"{d.law.J:.10g}, of the float32 table at {d.table.tick_hz} Hz "
-              f"{d.implemented.J:.10g})")
+    else:
+        from .summary_text import design_summary_text
+        print(design_summary_text(d, arith), end="")
+        for path in written if args.out else []:
+            print(f"wrote {path}")
     return 0
 
 
@@ -107,8 +105,14 @@ def _plot(args) -> int:
     return 0
 
 
+def _version() -> str:
+    from . import __version__
+    return __version__
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="stospline", description=__doc__.splitlines()[0])
+    ap.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = ap.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("design", help="solve the design, write C gain tables and a summary")

@@ -17,7 +17,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from .multipliers import latch_groups
 from .problem import Problem, ProblemError, Stage
@@ -301,6 +300,7 @@ def design_continuous(problem: Problem, *, noise: bool = True, mode: str = "stag
                 mT[sl] -= knot.constraint.value
         y_end = np.concatenate([PT.ravel(), pT, [cT], NT.ravel(), WT.ravel(), mT])
         with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported below
+            from scipy.integrate import solve_ivp   # lazy: a slow import the CLI rarely needs
             res = solve_ivp(_stage_rhs(stage, n, p, noise), (times[k + 1], times[k]), y_end,
                             method="DOP853", rtol=rtol, atol=atol, dense_output=True)
         if res.status != 0 or not np.all(np.isfinite(res.y[:, -1])):

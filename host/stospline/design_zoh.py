@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scipy.linalg import expm
+from .expm import expm
 
 from .design import DesignError, StageValues, _check_group, _knot_terminal
 from .moments import augmented_drift, moment_generator, running_cost_matrix, varying_tick

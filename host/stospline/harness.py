@@ -6,15 +6,14 @@ that goes into the build), and the returned `CompiledController` steps C instanc
 """
 from __future__ import annotations
 
-import hashlib
 import importlib.util
-import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from .cache import cached_build, source_key
 from .codegen import generate_c
 from .tables import GainTable
 
@@ -138,14 +137,10 @@ _CFLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-DSTSP_HOST_MESSAGES"]
 
 
 def firmware_dir() -> Path:
-    """The firmware source tree compiled by the harness (``STOSPLINE_FIRMWARE`` overrides)."""
-    env = os.environ.get("STOSPLINE_FIRMWARE")
-    return Path(env) if env else Path(__file__).resolve().parents[2] / "firmware"
-
-
-def _default_build_dir() -> Path:
-    env = os.environ.get("STOSPLINE_BUILD")
-    return Path(env) if env else Path(__file__).resolve().parents[2] / "build" / "cffi"
+    """The firmware source tree compiled by the harness (``STOSPLINE_FIRMWARE`` overrides;
+    `stospline.firmware_files`)."""
+    from .firmware_files import firmware_dir as find
+    return find()
 
 
 @dataclass
@@ -249,7 +244,8 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
                      quiet: bool = True) -> CompiledController:
     """Compile ``firmware/src/*.c`` with the table's generated C into a cffi module and load it.
 
-    Builds are cached in `build_dir` under a hash of every input (sources, flags, table).
+    Builds are cached in `build_dir` (default: `stospline.cache.cache_root`) under a hash of
+    every input (sources, flags, table), built atomically (`stospline.cache.cached_build`).
     """
     import cffi
 
@@ -258,18 +254,12 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     cdef, cflags = _cdef(arith), _CFLAGS + VARIANTS[arith][2]
     fw = firmware_dir()
     fw_sources = sorted((fw / "src").glob("*.c"))
-    digest = hashlib.sha256()
-    for blob in [header, source, cdef, _BATCH, " ".join(cflags)]:
-        digest.update(blob.encode())
-    for path in sorted(fw.rglob("*.[ch]")) + [Path(__file__).with_name("plant.c")]:
-        digest.update(path.read_bytes())
-    key = digest.hexdigest()[:16]
+    plant = Path(__file__).with_name("plant.c")
+    key = source_key([header, source, cdef, _BATCH, " ".join(cflags)]
+                     + [p.read_bytes() for p in sorted(fw.rglob("*.[ch]")) + [plant]])
     modname = f"_stsp_{table.name}_{key}"
-    out = Path(build_dir) if build_dir else _default_build_dir()
-    out = out / key
-    out.mkdir(parents=True, exist_ok=True)
-    existing = list(out.glob(f"{modname}*.so"))
-    if not existing:
+
+    def build(out: Path) -> Path:
         (out / f"{table.name}.h").write_text(header)
         (out / f"{table.name}.c").write_text(source)
         ffib = cffi.FFI()
@@ -278,12 +268,12 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
             modname,
             f'#include "stospline/stsp_controller.h"\n#include "{table.name}.h"\n'
             + _BATCH % {"p": table.name},
-            sources=[str(s) for s in fw_sources] + [str(out / f"{table.name}.c"),
-                                                    str(Path(__file__).with_name("plant.c"))],
+            sources=[str(s) for s in fw_sources] + [str(out / f"{table.name}.c"), str(plant)],
             include_dirs=[str(fw / "include"), str(fw / "src"), str(out)],
             extra_compile_args=cflags)
-        so = ffib.compile(tmpdir=str(out), verbose=not quiet)
-        existing = [Path(so)]
+        return Path(ffib.compile(tmpdir=str(out), verbose=not quiet))
+
+    existing = [cached_build(key, modname, build, root=build_dir)]
     spec = importlib.util.spec_from_file_location(modname, existing[0])
     mod = sys.modules.get(modname)
     if mod is None:

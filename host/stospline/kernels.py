@@ -1,32 +1,36 @@
 """Compiled host kernels of the designers (double precision C, loaded through cffi).
 
 Build and load are separate steps, as in `harness`: `build_kernels` compiles ``tick_kernel.c``
-into a cffi API-mode module cached under ``build/`` by a hash of the source, the declarations
-and the flags (``STOSPLINE_BUILD`` overrides the directory), and `load_kernels` returns the
-loaded module, building it on first use. `zoh_stage_ticks` runs the per-tick loop of one stage
+into a cffi API-mode module cached (`stospline.cache`: the user cache directory,
+``STOSPLINE_CACHE_DIR`` overrides) by a hash of the source, the declarations and the flags,
+and `load_kernels` returns the loaded module, building it on first use. `zoh_stage_ticks` runs the per-tick loop of one stage
 of the exact zero-order-hold design (`design_zoh`) in C.
 """
 from __future__ import annotations
 
-import hashlib
 import importlib.util
-import os
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["build_kernels", "load_kernels", "zoh_stage_ticks", "KernelBuildError"]
+from .cache import cached_build, source_key
+
+__all__ = ["build_kernels", "load_kernels", "zoh_stage_ticks", "oracle_stage_ticks",
+           "pack_oracle_maps", "KernelBuildError"]
 
 _SOURCE = Path(__file__).with_name("tick_kernel.c")
+_ORACLE_SOURCE = Path(__file__).with_name("oracle_kernel.c")
 _CDEF = """
 size_t stsp_zoh_work_size(int n, int m, int q);
 int stsp_zoh_stage_ticks(int n, int m, int q, long T,
                          const double *A2sT, const double *Hcs, const double *F,
                          double *V, double *N, double *W, double *mv,
                          double *K, double *k0, double *L, double *work, long *bad_tick);
+size_t stsp_oracle_work_size(int n, int m, int P);
+int stsp_oracle_stage_ticks(int n, int m, int P, long T, const double *K, const double *L,
+                            const double *k0, const double *Phi_x, const double *cost,
+                            const double *Fmean, double *M, double *J, double *work);
 """
 _CFLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra"]
 _ERR_NOT_PD, _ERR_DIMS = -1, -2
@@ -37,41 +41,24 @@ class KernelBuildError(RuntimeError):
     """The C kernels could not be compiled or loaded (no C compiler, no cffi)."""
 
 
-def _build_dir() -> Path:
-    env = os.environ.get("STOSPLINE_BUILD")
-    return Path(env) if env else Path(__file__).resolve().parents[2] / "build" / "cffi"
-
-
 def build_kernels(build_dir: str | Path | None = None, *, quiet: bool = True) -> Path:
     """Compile the kernels (if not cached) and return the path of the extension module."""
-    source = _SOURCE.read_bytes()
-    digest = hashlib.sha256()
-    for blob in (source, _CDEF.encode(), " ".join(_CFLAGS).encode()):
-        digest.update(blob)
-    key = digest.hexdigest()[:16]
+    source = _SOURCE.read_bytes() + b"\n" + _ORACLE_SOURCE.read_bytes()
+    key = source_key([source, _CDEF, " ".join(_CFLAGS)])
     modname = f"_stsp_kernels_{key}"
-    out = (Path(build_dir) if build_dir else _build_dir()) / key
-    existing = sorted(out.glob(f"{modname}*.so")) + sorted(out.glob(f"{modname}*.pyd"))
-    if existing:
-        return existing[0]
-    try:
+
+    def build(out: Path) -> Path:
         import cffi
-        out.mkdir(parents=True, exist_ok=True)
         ffib = cffi.FFI()
         ffib.cdef(_CDEF)
         ffib.set_source(modname, source.decode(), extra_compile_args=_CFLAGS)
-        # Compile in a private directory, then move into place: concurrent builders (pytest
-        # workers) never load a half-written file.
-        tmp = tempfile.mkdtemp(prefix="tmp-", dir=out)
-        try:
-            so = Path(ffib.compile(tmpdir=tmp, verbose=not quiet))
-            final = out / so.name
-            os.replace(so, final)
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
-        return final
+        return Path(ffib.compile(tmpdir=str(out), verbose=not quiet))
+
+    try:
+        return cached_build(key, modname, build, root=build_dir)
     except Exception as exc:  # noqa: BLE001 - any failure here means "no compiled kernel"
-        raise KernelBuildError(f"cannot build {_SOURCE.name}: {exc}") from exc
+        raise KernelBuildError(f"cannot build {_SOURCE.name}, {_ORACLE_SOURCE.name}: {exc}"
+                               ) from exc
 
 
 def load_kernels():
@@ -148,3 +135,46 @@ def zoh_stage_ticks(A2sT: np.ndarray, Hcs: np.ndarray, F: np.ndarray, V: np.ndar
     if status != 0:
         raise ValueError(f"stsp_zoh_stage_ticks: bad dimensions (status {status})")
     return K, k0, L, V, N, W, mv
+
+
+def pack_oracle_maps(Phi: np.ndarray, cost_row: np.ndarray, n: int):
+    """The tick's moment map and cost row on the upper triangle of the symmetric ``E w w'``
+    (``w = [x; u; 1]``), keeping only the rows the oracle's update reads: ``(Phi_x, cost)``
+    for `oracle_stage_ticks` (layout in ``oracle_kernel.c``)."""
+    dw = int(round(np.sqrt(cost_row.shape[0])))
+    p, q = np.triu_indices(dw)
+    upper, lower = p * dw + q, q * dw + p
+    off = (p != q).astype(float)
+    rows = [a * dw + b for a in range(n) for b in [*range(n), dw - 1]]
+    Phi_x = Phi[rows][:, upper] + Phi[rows][:, lower] * off
+    cost = cost_row[upper] + cost_row[lower] * off
+    return np.ascontiguousarray(Phi_x), np.ascontiguousarray(cost)
+
+
+def oracle_stage_ticks(K: np.ndarray, L: np.ndarray, k0: np.ndarray, Phi_x: np.ndarray,
+                       cost: np.ndarray, Fmean: np.ndarray, M: np.ndarray, J: float):
+    """The tick loop of `oracle.evaluate_table` over one time-invariant stage, in C
+    (``oracle_kernel.c``): gains ``K`` (T, m, n), ``L`` (T, m, P), ``k0`` (T, m), the tick's
+    moment map and cost row packed by `pack_oracle_maps`, the mean map ``Fmean`` (n, n + m),
+    the second moment ``M`` of ``[x; v; 1]`` before the stage; returns ``(M, J)`` after it
+    (a new array)."""
+    mod = load_kernels()
+    ffi, lib = mod.ffi, mod.lib
+    T, m, n = K.shape
+    P = L.shape[2]
+    K, L, k0, Phi_x, cost, Fmean = (_c(a) for a in (K, L, k0, Phi_x, cost, Fmean))
+    M = np.array(M, dtype=np.float64, order="C")
+    dw, dy = n + m + 1, n + P + 1
+    nv = dw * (dw + 1) // 2
+    want = {"L": (L, (T, m, P)), "k0": (k0, (T, m)), "Phi_x": (Phi_x, (n * (n + 1), nv)),
+            "cost": (cost, (nv,)), "Fmean": (Fmean, (n, n + m)), "M": (M, (dy, dy))}
+    for name, (a, shape) in want.items():
+        if a.shape != shape:
+            raise ValueError(f"{name} has shape {a.shape}, expected {shape}")
+    work = np.empty(int(lib.stsp_oracle_work_size(n, m, P)))
+    Jp = ffi.new("double *", float(J))
+    p = [ffi.from_buffer("double[]", a) for a in (K, L, k0, Phi_x, cost, Fmean, M)]
+    status = lib.stsp_oracle_stage_ticks(n, m, P, T, *p, Jp, ffi.from_buffer("double[]", work))
+    if status != 0:
+        raise ValueError(f"stsp_oracle_stage_ticks: bad dimensions (status {status})")
+    return M, float(Jp[0])

@@ -10,8 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm
-from scipy.stats import norm
+from .expm import expm
 
 from .harness import STATUS, CompiledController
 from .problem import Problem
@@ -21,6 +20,7 @@ __all__ = ["MonteCarloResult", "simulate", "z_value", "Agreement", "compare_to_o
 
 def z_value(confidence: float, comparisons: int = 1) -> float:
     """Two-sided normal quantile; Bonferroni-corrected for `comparisons` joint intervals."""
+    from scipy.stats import norm   # lazy: importing scipy.stats takes longer than a design
     return float(norm.ppf(1 - (1 - confidence) / (2 * comparisons)))
 
 

@@ -12,11 +12,11 @@ moments of ``z = [x; u; v; 1]`` (computed once per stage with a block matrix exp
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.integrate import solve_ivp
-from scipy.linalg import expm
+from .expm import expm
 
 from .design import ContinuousDesign
 from .moments import augmented_drift, euler_tick, exact_tick, running_cost_matrix
@@ -90,11 +90,59 @@ def _tick_varying(stage, Mw: np.ndarray, t0: float, h: float, n: int, m: int,
         return np.concatenate([dM.ravel(), [np.sum(Lb * M)], dF.ravel()])
 
     F0 = np.hstack([np.eye(n), np.zeros((n, m))])
+    from scipy.integrate import solve_ivp   # lazy: a slow import the CLI rarely needs
     res = solve_ivp(rhs, (t0, t0 + h), np.concatenate([Mw.ravel(), [0.0], F0.ravel()]),
                     method="DOP853", rtol=rtol, atol=atol)
     y = res.y[:, -1]
     M = y[:d * d].reshape(d, d)
     return 0.5 * (M + M.T), float(y[d * d]), y[d * d + 1:].reshape(n, n + m)
+
+
+# Tick maps of recent stages: the design's law and its float32 table are evaluated on the
+# same stages, and consecutive stages often share one Stage object. Keyed by the object's id;
+# the entry holds the stage itself, so the id cannot be reused while it is cached.
+_MAPS: dict = {}
+_MAPS_MAX = 16
+
+
+def _tick_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int):
+    """``(prop, cost_row, Fmean)`` of one tick of a time-invariant stage (cached)."""
+    key = (id(stage), m, h, propagator, substeps)
+    hit = _MAPS.get(key)
+    if hit is not None and hit[0] is stage:
+        return hit[1]
+    prop = (exact_tick(stage, m + 1, h) if propagator == "exact"
+            else euler_tick(stage, m + 1, h, substeps))
+    cost_row = running_cost_matrix(stage, n, m, n + m + 1, n).ravel() @ prop.Psi
+    # Mean map of one tick: E x+ = Ad x + Bd u (exact for both propagators).
+    Fmean = expm(augmented_drift(stage, m) * h)[:n]
+    if len(_MAPS) >= _MAPS_MAX:
+        _MAPS.clear()
+    _MAPS[key] = (stage, (prop, cost_row, Fmean), {})
+    return prop, cost_row, Fmean
+
+
+def _packed_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int):
+    """`kernels.pack_oracle_maps` of `_tick_maps` (cached alongside it)."""
+    prop, cost_row, _ = _tick_maps(stage, n, m, h, propagator, substeps)
+    extra = _MAPS[(id(stage), m, h, propagator, substeps)][2]
+    if "packed" not in extra:
+        from .kernels import pack_oracle_maps
+        extra["packed"] = pack_oracle_maps(prop.Phi, cost_row, n)
+    return extra["packed"]
+
+
+def _c_kernel():
+    """`kernels.oracle_stage_ticks`, or None: ``STOSPLINE_ORACLE_KERNEL=numpy`` asks for the
+    numpy loop (the reference), and so does a host where the kernel cannot be built."""
+    if os.environ.get("STOSPLINE_ORACLE_KERNEL", "c") == "numpy":
+        return None
+    from .kernels import KernelBuildError, load_kernels, oracle_stage_ticks
+    try:
+        load_kernels()
+    except KernelBuildError:
+        return None
+    return oracle_stage_ticks
 
 
 def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
@@ -143,15 +191,18 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         if varying and propagator != "exact":
             raise ValueError("the Euler plant scheme is evaluated for time-invariant stages only")
         if not varying:
-            prop = (exact_tick(stage, m + 1, h) if propagator == "exact"
-                    else euler_tick(stage, m + 1, h, substeps))
-            cost_row = running_cost_matrix(stage, n, m, d_w, n).ravel() @ prop.Psi
-            # Mean map of one tick: E x+ = Ad x + Bd u (exact for both propagators).
-            Fmean = expm(augmented_drift(stage, m) * h)[:n]
+            prop, cost_row, Fmean = _tick_maps(stage, n, m, h, propagator, substeps)
         Tw = np.zeros((d_w, d_y))
         Tw[:n, :n] = np.eye(n)
         Tw[-1, -1] = 1.0
-        for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
+        ticks = range(int(table.stage_start[k]), int(table.stage_start[k + 1]))
+        kernel = None if varying or path else _c_kernel()
+        if kernel is not None:             # the same loop in C (oracle_kernel.c)
+            sl = slice(ticks.start, ticks.stop)
+            Phi_x, cost = _packed_maps(stage, n, m, h, propagator, substeps)
+            M, J = kernel(table.K[sl], table.L[sl], table.k0[sl], Phi_x, cost, Fmean, M, J)
+            ticks = range(0)
+        for j in ticks:
             Tw[n:n + m, :n] = -table.K[j]
             Tw[n:n + m, n:n + P] = -table.L[j]
             Tw[n:n + m, -1] = -table.k0[j]
@@ -231,6 +282,7 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
 
         t_eval = (np.linspace(st.t_start, st.t_end, points_per_stage)
                   if points_per_stage else None)
+        from scipy.integrate import solve_ivp
         res = solve_ivp(rhs, (st.t_start, st.t_end), np.concatenate([M.ravel(), [0.0]]),
                         method="DOP853", rtol=rtol, atol=atol, t_eval=t_eval)
         if res.status != 0:

@@ -68,6 +68,14 @@ class Designed:
     law: Moments
     implemented: Moments
 
+    def gains(self, *, quantized: bool = True):
+        """``Gains(t, K, k0, L, Lambda, lambda0, stage_start)`` as numpy arrays: K is
+        (n_ticks, m, n), k0 (n_ticks, m), L (n_ticks, m, P), t (n_ticks,) the tick times
+        (`stospline.gains`); float32 table values by default, ``quantized=False`` for the
+        design's double-precision gains."""
+        from .gains import gains_of
+        return gains_of(self, quantized=quantized)
+
 
 def design_problem(problem: Problem, *, noise: bool = True,
                    discretization: str = "exact-zoh", mode: str = "stagewise") -> Designed:
@@ -229,9 +237,11 @@ def fixed_table(d: Designed, arith: str, *, sigmas: float = DEFAULT_SIGMAS,
     return quantize_table(double_table(d), arith, x_range)
 
 
-def generated_files(d: Designed, source_name: str, arith: str = "float32") -> dict[str, str]:
+def generated_files(d: Designed, source_name: str, arith: str = "float32", *,
+                    with_c: bool = True) -> dict[str, str]:
     """``<name>.{h,c,json}`` for float32; ``<name>_<arith>.{h,c,json}`` for Q15/Q31, whose
-    summary adds the scales and the error bound (``fixed``)."""
+    summary adds the scales and the error bound (``fixed``). ``with_c=False``: only the
+    ``.json`` (formatting the C text is most of the time of a small design)."""
     import json
     summary = design_summary(d)
     if arith == "float32":
@@ -240,8 +250,10 @@ def generated_files(d: Designed, source_name: str, arith: str = "float32") -> di
         table = fixed_table(d, arith)
         n = table.name
         summary["fixed"] = _r({**table.summary(), "state_sigmas": DEFAULT_SIGMAS})
-    header, source = generate_c(table, source_name=source_name)
     text = json.dumps(summary, indent=2, sort_keys=True) + "\n"
+    if not with_c:
+        return {f"{n}.json": text}
+    header, source = generate_c(table, source_name=source_name)
     return {f"{n}.h": header, f"{n}.c": source, f"{n}.json": text}
 
 

@@ -57,6 +57,9 @@ class Stage:
     H: np.ndarray | None = None   # shape (m, n, mz)
     # Time-varying data: t -> {field: value at t} for the fields that vary (None: constant).
     varying: Callable[[float], dict] | None = field(default=None, compare=False)
+    # What the stage was parsed from (samples of time-varying data, tracking), so that
+    # `stospline.toml_writer` can write it back; None for stages built directly in Python.
+    origin: Any = field(default=None, compare=False, repr=False)
 
     def at(self, t: float) -> "Stage":
         """The stage's data frozen at time t (itself if nothing varies)."""
@@ -164,6 +167,11 @@ class Problem:
     def max_constraints(self) -> int:
         return max(kn.n_constraints for kn in self.knots)
 
+    def to_toml(self) -> str:
+        """The problem as a TOML problem file (`stospline.toml_writer.problem_to_toml`)."""
+        from .toml_writer import problem_to_toml
+        return problem_to_toml(self)
+
     def without_noise(self) -> "Problem":
         """The same problem with every diffusion term removed (the paper's Remark 2)."""
         return Problem(self.name, self.t0, self.x0, self.tick_hz,
@@ -225,6 +233,21 @@ def _kind(value: Any) -> str:
     if isinstance(value, dict):
         return "a table"
     return "a date/time"  # the only other TOML type
+
+
+def _plain(value: Any) -> Any:
+    """A document built in Python as TOML would decode it: numpy arrays and tuples become
+    lists, numpy scalars Python numbers (np.bool_ a bool, refused where a number is due), so
+    arrays from numpy meet exactly the checks and messages that a file's values meet."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
 
 
 def _number(value: Any, path: str) -> float:
@@ -436,7 +459,7 @@ class _StageData:
                         out["H"] = GHt[n:]
                 return out
         base = self._fields_at(None)
-        return Stage(G=GH[:n], H=H, varying=varying, **base)
+        return Stage(G=GH[:n], H=H, varying=varying, origin=self, **base)
 
 
 def _parse_stage(dyn: _Layers, cost: _Layers, n: int,
@@ -758,7 +781,9 @@ def _parse_regions(raw: Any, n: int, t0: float, t_end: float,
 
 
 def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
-    """Validate a decoded TOML document and return a `Problem`.
+    """Validate a decoded TOML document (or the same structure built in Python: any numpy
+    array, numpy scalar or tuple is taken as the list or number it holds) and return a
+    `Problem`.
 
     The key reference is ``docs/problem-file.md``.  With ``[[stages]]`` (one entry per knot),
     stage ``k`` takes each key of ``[dynamics]``/``[cost]`` from ``stages[k].dynamics`` /
@@ -769,6 +794,7 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     ProblemError
         Naming the field by its path in the file and the reason.
     """
+    doc = _plain(doc)   # numpy arrays, numpy scalars and tuples from Python callers
     if not doc:
         raise ProblemError("<file>", "is empty; a problem needs name, x0, tick_hz, "
                                      "[dynamics], [cost] and [[knots]]")

@@ -1,3 +1,4 @@
+import os
 import sys
 from pathlib import Path
 
@@ -6,6 +7,10 @@ import pytest
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLES = REPO / "examples"
 GAINS = REPO / "gains"
+
+# cffi builds go to the repository's build tree, never to the user's cache (~/.cache), also in
+# the CLI subprocesses the tests start (they inherit the environment).
+os.environ.setdefault("STOSPLINE_CACHE_DIR", str(REPO / "build" / "cffi"))
 
 
 @pytest.fixture(scope="session")

@@ -10,7 +10,7 @@ from stospline.design import DesignError
 from stospline.kernels import build_kernels, zoh_stage_ticks
 from stospline.moments import augmented_drift, exact_tick, running_cost_matrix
 from stospline.problem import parse_problem
-from scipy.linalg import expm
+from stospline.expm import expm   # the designer's exponential (test_fast_paths: = scipy's to rounding)
 
 RTOL = 1e-12     # C vs numpy: the same recursion, rounded differently
 

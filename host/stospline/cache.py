@@ -1,0 +1,80 @@
+"""Where compiled cffi modules are cached, and how one is built into the cache safely.
+
+Builds live in ``<cache root>/<key>/`` where `key` is a hash of every input of the build, so
+a changed source never loads a stale module. The root is, in order: ``STOSPLINE_CACHE_DIR``,
+``STOSPLINE_BUILD`` (older name, same meaning), else the user cache directory
+(``platformdirs.user_cache_dir("stospline")/cffi``, e.g. ``~/.cache/stospline/cffi``).
+
+A build happens in a private temporary directory beside its final place and is then renamed
+into place in one step, so a reader never sees a half-written module, and two processes that
+build the same key at once both succeed: the second rename fails, and that process uses the
+winner's module (identical, as the inputs are).
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+from typing import Callable, Iterable
+
+__all__ = ["cache_root", "source_key", "cached_build"]
+
+
+def cache_root() -> Path:
+    """The directory under which every cffi build is cached (see the module docstring)."""
+    for var in ("STOSPLINE_CACHE_DIR", "STOSPLINE_BUILD"):
+        env = os.environ.get(var)
+        if env:
+            return Path(env)
+    from platformdirs import user_cache_dir
+    return Path(user_cache_dir("stospline")) / "cffi"
+
+
+def source_key(blobs: Iterable[bytes | str]) -> str:
+    """A 16-hex-digit SHA-256 of the build inputs, in order."""
+    digest = hashlib.sha256()
+    for blob in blobs:
+        data = blob.encode() if isinstance(blob, str) else blob
+        digest.update(len(data).to_bytes(8, "little"))   # "ab"+"c" differs from "a"+"bc"
+        digest.update(data)
+    return digest.hexdigest()[:16]
+
+
+def _find(directory: Path, modname: str) -> Path | None:
+    found = sorted(directory.glob(f"{modname}*.so")) + sorted(directory.glob(f"{modname}*.pyd"))
+    return found[0] if found else None
+
+
+def cached_build(key: str, modname: str, build: Callable[[Path], Path], *,
+                 root: str | Path | None = None) -> Path:
+    """The path of the extension module `modname` cached under `key`, built on first use.
+
+    `build(tmpdir)` compiles into the empty directory `tmpdir` and returns the module's path
+    (inside `tmpdir`). It runs only when the key is not cached yet; its directory is renamed
+    to ``<root>/<key>`` afterwards, or discarded if another process got there first.
+    """
+    base = Path(root) if root is not None else cache_root()
+    final = base / key
+    hit = _find(final, modname) if final.is_dir() else None
+    if hit is not None:
+        return hit
+    import shutil
+    import tempfile
+    base.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{key}.tmp-", dir=base))
+    try:
+        built = Path(build(tmp))
+        name = built.relative_to(tmp)
+        for _ in range(2):
+            try:
+                os.rename(tmp, final)      # atomic; fails if `final` exists (not empty)
+                return final / name
+            except OSError:
+                hit = _find(final, modname) if final.is_dir() else None
+                if hit is not None:        # another process built the same key first
+                    return hit
+                shutil.rmtree(final, ignore_errors=True)   # a leftover without a module
+        os.rename(tmp, final)
+        return final / name
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)

@@ -1,0 +1,44 @@
+"""Flash a design's tables take, per arithmetic, computed from the dimensions the way
+`stospline.codegen` lays them out (one ``static const`` array per field, at least one
+element each, plus the ``stsp_table_t`` header) on a 32-bit target (4-byte pointers, as on
+Cortex-M). A test checks the numbers against the symbol sizes of the compiled C.
+"""
+from __future__ import annotations
+
+__all__ = ["flash_bytes", "ARITH_ELEMENT_BYTES"]
+
+ARITH_ELEMENT_BYTES = {"float32": 4, "q15": 2, "q31": 4}
+_PTR = 4                               # pointer size on the 32-bit targets
+_HEADER_FIELDS = 4 + 6 * 2 + 2 * 4     # magic; version, kind, nx, nu, n_latch, n_stages; ticks, hz
+_HEADER_TAIL = 4 + 32                  # crc32, problem_sha256
+_TABLE_POINTERS = 9 + 1                # stage_start .. u_max, band_qp
+_FIXED_POINTERS = 3                    # x_exp, u_exp, v_exp
+_BANDQP_HEADER = 2 * 2 + 5 * _PTR      # q, nx; Nt, mt, W, lo, hi
+
+
+def _count(k: int) -> int:
+    return max(int(k), 1)              # codegen writes an empty array as one zero
+
+
+def flash_bytes(table, arith: str = "float32") -> int:
+    """Bytes of flash for `table` (a `GainTable`, or anything with ``dims``, ``n_ticks``,
+    ``n_stages`` and ``band_qp``) written in arithmetic `arith` (float32, q15 or q31).
+    A band table's dual (``band_qp``, float64) is counted for float32, the only arithmetic
+    that re-solves it."""
+    if arith not in ARITH_ELEMENT_BYTES:
+        raise ValueError(f"arith must be one of {sorted(ARITH_ELEMENT_BYTES)}, got {arith!r}")
+    n, m, P = table.dims
+    T, S = table.n_ticks, table.n_stages
+    e = ARITH_ELEMENT_BYTES[arith]
+    total = 4 * _count(S + 1) + 2 * _count(S)                       # stage_start, stage_np
+    total += e * (_count(T * m * n) + _count(T * m) + _count(T * m * P)    # K, k0, L
+                  + _count(S * P * n) + _count(S * P) + 2 * _count(m))     # Lambda, lambda0, limits
+    total += _HEADER_FIELDS + _PTR * _TABLE_POINTERS + _HEADER_TAIL
+    if arith == "float32":
+        band = getattr(table, "band_qp", None)
+        if band is not None:
+            q = band.q
+            total += 8 * (_count(q * n) + 3 * _count(q) + _count(q * q)) + _BANDQP_HEADER
+    else:
+        total += _count(n) + _count(m) + _count(P) + _PTR * _FIXED_POINTERS   # int8 exponents
+    return total

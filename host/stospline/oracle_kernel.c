@@ -1,0 +1,110 @@
+/* Host-side kernel of the exact moment oracle (stospline.oracle.evaluate_table): the forward
+ * second-moment recursion over the controller ticks of one time-invariant stage.  Not
+ * firmware: it runs on the design host, in double precision, called through cffi
+ * (stospline.kernels), and equals the numpy loop of evaluate_table to rounding.
+ *
+ * Notation (oracle.py): n states, m inputs, P latched multipliers, y = [x; v; 1] (d_y =
+ * n+P+1), w = [x; u; 1] (d_w = n+m+1), u = -K x - L v - k0 held over the tick.  Per tick j:
+ *
+ *     Tw   = [[I, 0, 0], [-K_j, -L_j, -k0_j], [0, 0, 1]]     (d_w x d_y)
+ *     TM   = Tw M,  Mw = TM Tw'                                E w y', E w w'
+ *     J   += cost . vech(Mw)
+ *     out  = Phi_x vech(Mw)                                    E x+ x+', E x+ after the tick
+ *     Mxv  = Fmean TM[0:n+m, n:n+P]                            E x+ v'
+ *     M[x,x] = out[x,x], M[x,1] = M[1,x] = out[x,1], M[x,v] = Mxv, M[v,x] = Mxv'
+ *
+ * Mw is symmetric, so the caller packs the tick's moment map and cost row on its upper
+ * triangle (vech: p <= q, row by row, as numpy.triu_indices) and keeps only the rows the
+ * update reads (Phi_x: row a*(n+1)+b is E x+_a x+_b for b < n, and E x+_a for b = n).
+ *
+ * Row-major, caller-owned arrays: K (T x m x n), L (T x m x P), k0 (T x m), Phi_x
+ * (n(n+1) x d_w(d_w+1)/2), cost (d_w(d_w+1)/2), Fmean (n x (n+m)), M (d_y x d_y, in/out),
+ * J (in/out), work (stsp_oracle_work_size doubles).
+ */
+#include <stddef.h>
+
+size_t stsp_oracle_work_size(int n, int m, int P)
+{
+    size_t dy = (size_t)n + (size_t)P + 1u, dw = (size_t)n + (size_t)m + 1u;
+    return 2u * dw * dy + dw * (dw + 1u) / 2u + (size_t)n * ((size_t)n + 1u);
+}
+
+int stsp_oracle_stage_ticks(int n, int m, int P, long T, const double *K, const double *L,
+                            const double *k0, const double *Phi_x, const double *cost,
+                            const double *Fmean, double *M, double *J, double *work)
+{
+    const int dy = n + P + 1, dw = n + m + 1, nv = dw * (dw + 1) / 2, nout = n * (n + 1);
+    double *Tw = work, *TM = Tw + dw * dy, *vw = TM + dw * dy, *out = vw + nv;
+    double acc = *J;
+    long j;
+    int a, b, c, k;
+    if (n < 1 || m < 1 || P < 0 || T < 0) {
+        return -2;
+    }
+    for (a = 0; a < dw * dy; ++a) {
+        Tw[a] = 0.0;
+    }
+    for (a = 0; a < n; ++a) {
+        Tw[a * dy + a] = 1.0;
+    }
+    Tw[(dw - 1) * dy + (dy - 1)] = 1.0;
+    for (j = 0; j < T; ++j) {
+        for (a = 0; a < m; ++a) {
+            double *row = Tw + (n + a) * dy;
+            for (b = 0; b < n; ++b) {
+                row[b] = -K[(j * m + a) * n + b];
+            }
+            for (b = 0; b < P; ++b) {
+                row[n + b] = -L[(j * m + a) * P + b];
+            }
+            row[dy - 1] = -k0[j * m + a];
+        }
+        for (a = 0; a < dw; ++a) {                 /* TM = Tw M */
+            for (b = 0; b < dy; ++b) {
+                double s = 0.0;
+                for (c = 0; c < dy; ++c) {
+                    s += Tw[a * dy + c] * M[c * dy + b];
+                }
+                TM[a * dy + b] = s;
+            }
+        }
+        k = 0;
+        for (a = 0; a < dw; ++a) {                 /* vech(TM Tw') */
+            for (b = a; b < dw; ++b) {
+                double s = 0.0;
+                for (c = 0; c < dy; ++c) {
+                    s += TM[a * dy + c] * Tw[b * dy + c];
+                }
+                vw[k] = s;
+                acc += cost[k] * s;
+                ++k;
+            }
+        }
+        for (a = 0; a < nout; ++a) {               /* the x rows of the moment map */
+            double s = 0.0;
+            for (c = 0; c < nv; ++c) {
+                s += Phi_x[a * nv + c] * vw[c];
+            }
+            out[a] = s;
+        }
+        for (a = 0; a < n; ++a) {                  /* E x+ v' = Fmean E [x; u] v' */
+            for (b = 0; b < P; ++b) {
+                double s = 0.0;
+                for (c = 0; c < n + m; ++c) {
+                    s += Fmean[a * (n + m) + c] * TM[c * dy + n + b];
+                }
+                M[a * dy + n + b] = s;
+                M[(n + b) * dy + a] = s;
+            }
+        }
+        for (a = 0; a < n; ++a) {
+            for (b = 0; b < n; ++b) {
+                M[a * dy + b] = out[a * (n + 1) + b];
+            }
+            M[a * dy + dy - 1] = out[a * (n + 1) + n];
+            M[(dy - 1) * dy + a] = out[a * (n + 1) + n];
+        }
+    }
+    *J = acc;
+    return 0;
+}

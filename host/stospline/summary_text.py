@@ -1,0 +1,52 @@
+"""The short human summary `stospline design` prints (``--json`` prints the full one)."""
+from __future__ import annotations
+
+import numpy as np
+
+from .flash import ARITH_ELEMENT_BYTES, flash_bytes
+
+__all__ = ["worst_constraint_residual", "design_summary_text"]
+
+
+def worst_constraint_residual(d) -> tuple[float, int, int] | None:
+    """``(residual, knot, row)`` of the constraint row the float32 table, as the oracle
+    evaluates it, misses most (distance outside a band; ``E{Cx} - value`` for an equality);
+    None when no knot has a constraint."""
+    worst = None
+    for k, kn in enumerate(d.problem.knots):
+        if kn.constraint is None:
+            continue
+        lo, hi = kn.constraint.bounds
+        y = np.asarray(d.implemented.knot_constraint[k], dtype=float)
+        r = np.where(lo == hi, y - lo, np.maximum(y - hi, 0) - np.maximum(lo - y, 0))
+        i = int(np.argmax(np.abs(r)))
+        if worst is None or abs(r[i]) > abs(worst[0]):
+            worst = (float(r[i]), k, i)
+    return worst
+
+
+def design_summary_text(d, arith: str = "float32") -> str:
+    """A few lines: J0, the oracle's cost of the implemented (float32) table, ticks, stages,
+    the flash the tables take in each arithmetic, and the worst constraint residual."""
+    t, p = d.table, d.problem
+    n, m, _ = t.dims
+    lines = [f"{p.name}: {d.design.mode} {d.discretization} design"
+             f"{'' if d.design.noise_aware else ' (noise ignored)'}, n = {n} states, "
+             f"m = {m} inputs",
+             f"  J0 (designed)                  {d.design.J0:.10g}",
+             f"  J of the float32 table         {d.implemented.J:.10g}   (exact moment oracle, "
+             f"held per tick)",
+             f"  ticks                          {t.n_ticks} at {t.tick_hz} Hz "
+             f"({t.n_ticks / t.tick_hz:g} s), {t.n_stages} stage"
+             f"{'' if t.n_stages == 1 else 's'}"]
+    sizes = "   ".join(f"{a}{'*' if a == arith else ''} {flash_bytes(t, a):,} B"
+                       for a in ARITH_ELEMENT_BYTES)
+    lines.append(f"  flash of the tables            {sizes}   (* this run's arithmetic)")
+    worst = worst_constraint_residual(d)
+    if worst is None:
+        lines.append("  worst constraint residual      - (no constraints)")
+    else:
+        r, k, i = worst
+        lines.append(f"  worst constraint residual      {r:.3g}   (knot {k}, row {i}; "
+                     f"E{{Cx}} of the float32 table, oracle)")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,156 @@
+"""Write a `Problem` back as a TOML problem file: ``parse(problem_to_toml(p))`` equals ``p``.
+
+What is written (``docs/library.md``, "Writing a problem back"):
+
+* every stage's data as constant arrays; time-varying data read from a file (samples with
+  their interpolation, a tracking cost) as the same samples. Time-varying data given as a
+  Python callable (``Stage.varying`` set by hand) has no TOML form: `ProblemTomlError`.
+* a tracking cost on a constant stage is written folded into ``Q``, ``q`` and ``rho`` (what it
+  adds to them), which is the same problem;
+* ``[[regions]]`` are written as the band knots they expand to, which is the same problem;
+* equal stages once as ``[dynamics]``/``[cost]``, different ones as ``[[stages]]``;
+* ``x0``, ``t0``, ``tick_hz``, actuator limits, ``[design]`` and ``[plot]`` as they are.
+
+Floats are written as Python's shortest repr, which reads back to the same double.
+"""
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import numpy as np
+
+from .problem import Problem, Series, Stage
+
+__all__ = ["problem_to_toml", "ProblemTomlError"]
+
+
+class ProblemTomlError(ValueError):
+    """The problem holds something a problem file cannot say (a Python callable)."""
+
+
+def _value(v: Any) -> str:
+    """One TOML value on one line."""
+    if isinstance(v, np.ndarray):
+        v = v.tolist()
+    if isinstance(v, np.generic):
+        v = v.item()
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if not math.isfinite(v):
+            raise ProblemTomlError(f"{v} is not a valid problem-file number")
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v)           # a JSON string is a valid TOML basic string
+    if isinstance(v, Series):
+        return _value({"t": v.t, "values": v.values, "interpolation": v.interpolation})
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{k} = {_value(x)}" for k, x in v.items()) + " }"
+    raise ProblemTomlError(f"cannot write a {type(v).__name__} to a problem file")
+
+
+def _table(header: str, items: dict) -> list[str]:
+    return ["", header] + [f"{k} = {_value(v)}" for k, v in items.items()]
+
+
+def _noise_of_arrays(stage: Stage, mz: int) -> list[dict]:
+    n = stage.A.shape[0]
+    out: list[dict] = [{"state": i, "G": stage.G[i]} for i in range(n) if np.any(stage.G[i])]
+    if stage.H is not None:
+        inputs = [j for j in range(stage.H.shape[0]) if np.any(stage.H[j])]
+        # An all-zero H still makes the stage carry input noise terms: keep one entry.
+        out += [{"input": j, "G": stage.H[j]} for j in inputs or [0]]
+    if not out and mz != 1:
+        out = [{"state": 0, "G": np.zeros((n, mz))}]   # keeps the number of components mz
+    return out
+
+
+def _stage_tables(stage: Stage, k: int, mz: int) -> tuple[dict, dict]:
+    """``(dynamics, cost)`` tables of one stage."""
+    if stage.varying is None:
+        dyn = {"A": stage.A, "B": stage.B, "noise": _noise_of_arrays(stage, mz)}
+        cost = {"Q": stage.Q, "S": stage.S, "R": stage.R, "q": stage.q, "r": stage.r,
+                "rho": float(stage.rho)}
+        return dyn, cost
+    origin = stage.origin
+    if origin is None:
+        raise ProblemTomlError(f"stage {k} has time-varying data given as a Python callable, "
+                               f"which a problem file cannot hold; give samples instead")
+    n = stage.A.shape[0]
+    f = origin.fields
+    dyn = {"A": f["A"], "B": f["B"],
+           "noise": [{"state": i, "G": g} if i < n else {"input": i - n, "G": g}
+                     for i, g, _ in origin.noise]}
+    cost = {key: f[key] for key in ("Q", "S", "R", "q", "r", "rho")}
+    if origin.tracking is not None:
+        C, Qy, y0 = origin.tracking
+        cost["tracking"] = {"C": C, "weight": Qy, "t": y0.t, "y0": y0.values,
+                            "interpolation": y0.interpolation}
+    return dyn, cost
+
+
+def _same(a: Stage, b: Stage) -> bool:
+    if a is b:
+        return True
+    if a.varying is not None or b.varying is not None:
+        return False
+    if (a.H is None) != (b.H is None):
+        return False
+    return all(np.array_equal(getattr(a, f), getattr(b, f))
+               for f in ("A", "B", "G", "Q", "S", "R", "q", "r", "rho")) and (
+        a.H is None or np.array_equal(a.H, b.H))
+
+
+def _knot(kn) -> dict:
+    out: dict = {"t": float(kn.t)}
+    if kn.penalty is not None:
+        p = kn.penalty
+        out["penalty"] = {"C": p.C, "target": p.target, "weight": float(p.weight)}
+    if kn.constraint is not None:
+        c = kn.constraint
+        out["constraint"] = ({"C": c.C, "value": c.value} if c.value is not None
+                             else {"C": c.C, "lower": c.lower, "upper": c.upper})
+    return out
+
+
+def problem_to_toml(problem: Problem) -> str:
+    """The problem file of `problem` (see the module docstring for what is written how).
+
+    Raises
+    ------
+    ProblemTomlError
+        The problem has time-varying data given as a Python callable.
+    """
+    p = problem
+    lines = ["# Problem file written by stospline (problem_to_toml); reference: "
+             "docs/problem-file.md",
+             f"name = {_value(p.name)}", f"t0 = {_value(float(p.t0))}",
+             f"x0 = {_value(p.x0)}", f"tick_hz = {_value(int(p.tick_hz))}"]
+    for key in ("u_min", "u_max"):
+        limit = getattr(p, key)
+        if limit is not None:
+            lines.append(f"{key} = {_value(np.asarray(limit, dtype=float))}")
+    if p.options:
+        lines += _table("[design]", dict(p.options))
+    tables = [_stage_tables(s, k, p.mz) for k, s in enumerate(p.stages)]
+    if all(_same(s, p.stages[0]) for s in p.stages):
+        dyn, cost = tables[0]
+        lines += _table("[dynamics]", dyn) + _table("[cost]", cost)
+    else:
+        # Top level: only the required keys, so no stage inherits a key it does not have.
+        lines += _table("[dynamics]", {"A": tables[0][0]["A"], "B": tables[0][0]["B"]})
+        lines += _table("[cost]", {"R": tables[0][1]["R"]})
+        for dyn, cost in tables:
+            lines += ["", "[[stages]]"] + _table("[stages.dynamics]", dyn)[1:]
+            lines += _table("[stages.cost]", cost)[1:]
+    for kn in p.knots:
+        lines += _table("[[knots]]", _knot(kn))
+    if p.plot:
+        lines += _table("[plot]", dict(p.plot))
+    return "\n".join(lines) + "\n"

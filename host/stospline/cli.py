@@ -6,11 +6,11 @@ Exit status: 0 success, 2 bad problem file or infeasible problem (message names 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 from .problem import ProblemError, load_problem
+from .strict import dumps, quiet_numerics
 
 __all__ = ["main"]
 
@@ -22,6 +22,7 @@ def _options(args, problem) -> dict:
             or problem.options.get("discretization", "exact-zoh")}
 
 
+@quiet_numerics
 def _design(args) -> int:
     from .pipeline import design_problem, design_summary, generated_files, write_outputs
     problem = load_problem(args.problem)
@@ -50,6 +51,7 @@ def _start(arg: str | None):
         raise ProblemError("--x0", f"expected comma-separated numbers, got {arg!r}") from None
 
 
+@quiet_numerics
 def _simulate(args) -> int:
     from .pipeline import design_problem, simulate_problem, simulation_summary, start_from
     problem = load_problem(args.problem)
@@ -71,7 +73,7 @@ def _simulate(args) -> int:
 
 def _report_simulation(s: dict, as_json: bool) -> None:
     if as_json:
-        print(json.dumps(s, indent=2, sort_keys=True), flush=True)
+        print(dumps(s), flush=True)
         return
     sat = s["saturation"]
     c = s["cost"]
@@ -79,8 +81,10 @@ def _report_simulation(s: dict, as_json: bool) -> None:
           f"{s['tick_hz']} Hz, plant {s['substeps']} substeps/tick, from x0 = {s['x0']}")
     print(f"  cost  MC {c['mc_mean']:.6g}  95% CI [{c['ci95'][0]:.6g}, {c['ci95'][1]:.6g}]"
           f"   oracle {c['oracle_implemented']:.6g}   predicted J0 {c['predicted_J0']:.6g}")
-    print(f"  plant-scheme bias in cost {s['simulation_bias']['cost']:.3g} "
-          f"= {s['simulation_bias']['cost_over_stderr']:.3g} MC standard errors")
+    bias = s["simulation_bias"]
+    ratio = ("n/a MC standard errors (all paths alike)" if bias["cost_over_stderr"] is None
+             else f"{bias['cost_over_stderr']:.3g} MC standard errors")
+    print(f"  plant-scheme bias in cost {bias['cost']:.3g} = {ratio}")
     if sat["limited"]:
         print(f"  actuator limits: saturated on {100 * sat['tick_fraction']:.4g}% of ticks "
               f"({100 * sat['path_fraction']:.4g}% of paths); commands issued within "
@@ -90,10 +94,16 @@ def _report_simulation(s: dict, as_json: bool) -> None:
     for k, kn in enumerate(s["knots"]):
         print(f"  knot {k} (t = {kn['t']:g}): state mean, MC     {fmt(kn['mc_mean'])}")
         print(f"  {'':>15}state mean, oracle {fmt(kn['oracle_mean'])}   "
-              f"z {'[' + ', '.join(f'{z:+.2f}' for z in kn['z']) + ']'}")
+              f"z {'[' + ', '.join(_z_text(z) for z in kn['z']) + ']'}")
     sys.stdout.flush()   # the saturation warning (stderr) comes after the numbers it qualifies
 
 
+def _z_text(z) -> str:
+    """A z-score, or "n/a" when it is undefined (zero standard error; JSON null)."""
+    return "n/a" if z is None else f"{z:+.2f}"
+
+
+@quiet_numerics
 def _plot(args) -> int:
     from .pipeline import design_problem, simulate_problem
     from .plot import plot_corridor

@@ -22,8 +22,19 @@ _PER_LINE = 6
 
 
 def _f32_literal(x: np.float32) -> str:
-    s = np.format_float_scientific(np.float32(x), unique=True, trim="0", exp_digits=2)
+    x = np.float32(x)
+    if not np.isfinite(x):   # `inff`/`nanf` do not compile; the pipeline refuses these earlier
+        raise ValueError(f"a table entry is {x}: generated C holds finite numbers only")
+    s = np.format_float_scientific(x, unique=True, trim="0", exp_digits=2)
     return f"{s}f"
+
+
+def _f64_literal(v) -> str:
+    """Shortest round-trip double (band dual data), finite only (see _f32_literal)."""
+    v = float(v)
+    if not np.isfinite(v):
+        raise ValueError(f"a table entry is {v}: generated C holds finite numbers only")
+    return repr(v)
 
 
 def _array(ctype: str, name: str, values: np.ndarray, fmt, dims: str) -> str:
@@ -99,7 +110,7 @@ extern const stsp_table_t {p}_table;
     band = "NULL"
     if table.band_qp is not None:
         b = table.band_qp
-        f64 = lambda v: repr(float(v))  # noqa: E731  shortest round-trip double
+        f64 = _f64_literal
         arrays += [
             _array("double", f"{p}_band_Nt", b.Nt, f64, f"[q][nx] = [{b.q}][{n}]: e = Nt x0 + mt"),
             _array("double", f"{p}_band_mt", b.mt, f64, "[q]"),

@@ -267,8 +267,8 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
                     K, k0, L, V, N, W, mv = _varying_stage_ticks(
                         stage, problem.times[k], h, V, N, W, mv, int(counts[k]), m)
         except np.linalg.LinAlgError:
-            raise DesignError(f"knots[{k}].t", f"the tick Riccati recursion of stage {k} "
-                                               f"lost positive definiteness") from None
+            from .strict import riccati_failure
+            raise DesignError(*riccati_failure(problem, k)) from None
         if not (np.all(np.isfinite(V)) and np.all(np.isfinite(W))):
             raise DesignError(f"knots[{k}].t", f"the tick Riccati recursion of stage {k} has "
                                                f"no bounded solution in floating point")

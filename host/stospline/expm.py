@@ -24,6 +24,9 @@ _B = {3: (120., 60., 12., 1.),
            40840800., 960960., 16380., 182., 1.)}
 
 
+_MAX_SQUARINGS = 8   # beyond: scipy.linalg.expm (a norm above ~1400)
+
+
 def _pade(A: np.ndarray, m: int, powers: dict) -> tuple[np.ndarray, np.ndarray]:
     """``(U, V)`` of the [m/m] Padé approximant: ``exp(A) ~ (V - U)^-1 (V + U)``."""
     b = _B[m]
@@ -62,8 +65,17 @@ def expm(A) -> np.ndarray:
             U, V = _pade(A, m, powers)
             return np.linalg.solve(V - U, V + U)
     s = max(0, int(np.ceil(np.log2(norm / _THETA[13])))) if norm > 0 else 0
-    As = A / 2.0 ** s
-    scaled = {2: powers[2] / 4.0 ** s}
+    if s > _MAX_SQUARINGS:
+        # Plain scaling and squaring over-scales a matrix whose norm comes from a huge
+        # off-diagonal block (Van Loan's block matrices of a large Q): many squarings amplify
+        # rounding. scipy's expm bounds s with the norms of A^k (Al-Mohy and Higham 2009);
+        # loading it only here keeps its import off the ordinary path.
+        from scipy.linalg import expm as scipy_expm
+        return scipy_expm(A)
+    # ldexp and a fresh square: 4.0 ** s overflows a Python float (OverflowError) for s > 511,
+    # and A @ A itself may already be inf for a huge A, where (A / 2^s)^2 is finite.
+    As = np.ldexp(A, -s)
+    scaled = {2: As @ As}
     scaled[4] = scaled[2] @ scaled[2]
     scaled[6] = scaled[4] @ scaled[2]
     U, V = _pade(As, 13, scaled)

@@ -48,6 +48,7 @@ from decimal import Decimal, localcontext
 
 import numpy as np
 
+from . import limits
 from .precision import RoundedUp, ceil_significant
 from .tables import F32_MAX, GainTable, TableShape
 
@@ -57,7 +58,7 @@ __all__ = ["FixedTable", "quantize_table", "state_range", "law_q", "latch_q", "l
 ARITHS = ("float32", "q15", "q31")
 FRAC_BITS = {"q15": 15, "q31": 31}
 SCALAR_KIND = {"float32": 1, "q15": 2, "q31": 3}
-EXP_MAX = 60            # the firmware refuses scale exponents beyond +-60 (STSP_Q_EXP_MAX)
+EXP_MAX = limits.Q_EXP_MAX  # the firmware refuses scale exponents beyond +-60
 DEFAULT_SIGMAS = 6.0    # state range: mean +- 6 standard deviations over the plan
 _EXP_SPAN = 24          # a state whose range is tiny gets at least 2^-24 of the largest one
 # The bound as written (summary JSON, generated header): rounded UP to BOUND_DIGITS significant
@@ -178,8 +179,11 @@ def state_range(problem, table: GainTable, *, sigmas: float = DEFAULT_SIGMAS) ->
     from .oracle import evaluate_table
     mom = evaluate_table(problem, table, path=True)
     # max(., 0): a zero variance may come out as -1e-18 on another machine (NaN from sqrt).
-    return np.max(np.abs(mom.path_mean) + sigmas * np.sqrt(np.maximum(mom.path_var, 0.0)),
-                  axis=0)
+    r = np.max(np.abs(mom.path_mean) + sigmas * np.sqrt(np.maximum(mom.path_var, 0.0)), axis=0)
+    # A state that stays exactly 0 (never driven, no noise) still needs a scale: the smallest
+    # that quantize_table allows (2^-_EXP_SPAN of the largest range).
+    top = float(r.max()) if r.size and r.max() > 0 else 1.0
+    return np.where(r > 0, r, top * 2.0 ** -_EXP_SPAN)
 
 
 def _exponent(r: np.ndarray, terms: int, F: int) -> np.ndarray:
@@ -233,10 +237,12 @@ def quantize_table(table: GainTable, arith: str, x_range, *, name: str | None = 
     sv = np.ldexp(1.0, v_exp)
     r_u = (np.abs(k0) + np.abs(K) @ sx + (np.abs(L) @ sv if P else 0.0)).max(axis=0)
     u_exp = _exponent(r_u, n + P + 1, F)
-    for e in (x_exp, u_exp, v_exp):
+    for what, e in (("state", x_exp), ("command", u_exp), ("multiplier", v_exp)):
         if e.size and np.abs(e).max() > EXP_MAX:
-            raise ValueError(f"scale exponent {int(np.abs(e).max())} beyond +-{EXP_MAX}: "
-                             "gains or state range too extreme for the fixed-point format")
+            worst = int(e[np.argmax(np.abs(e))])
+            raise ValueError(f"a {what} scale exponent would be {worst}, beyond the firmware's "
+                             f"+-{EXP_MAX} (STSP_Q_EXP_MAX): gains or state range too extreme "
+                             f"for the fixed-point format")
 
     # Unrounded scaled entries (signs as stored), then round half up.
     Ks = -K * np.ldexp(1.0, x_exp[None, None, :] - u_exp[None, :, None] + F)

@@ -21,10 +21,12 @@ from .oracle import Moments, evaluate_continuous, evaluate_table
 from .problem import Problem, ProblemError
 from .tables import GainTable, sample_design
 from .fixed import DEFAULT_SIGMAS, FixedTable, quantize_table, state_range
+from . import limits, strict
 from .precision import RoundedUp
 
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
-           "simulation_summary", "write_outputs", "start_from", "double_table", "fixed_table"]
+           "simulation_summary", "write_outputs", "start_from", "double_table", "fixed_table",
+           "check_implementable"]
 
 # JSON summaries keep 10 significant digits and an absolute quantum of 1e-10: the designs
 # agree to ~1e-14 however the arithmetic is ordered, so regenerated files stay byte-identical
@@ -89,6 +91,7 @@ def design_problem(problem: Problem, *, noise: bool = True,
     mode : {"stagewise", "joint"}
         Multipliers latched at every stage start, or once at t0 (see `multipliers`).
     """
+    limits.check_mode(problem, mode)   # before the work: the firmware's STSP_MAX_LATCH
     if has_bands(problem):
         if mode != "joint":
             raise DesignError("knots", "band constraints (lower/upper) are exact only with one "
@@ -127,6 +130,7 @@ def start_from(d: Designed, x0) -> Designed:
     if x.shape != (d.problem.n,) or not np.all(np.isfinite(x)):
         raise ProblemError("x0", f"a start state needs {d.problem.n} finite numbers, got "
                                  f"{np.asarray(x0).tolist()}")
+    limits.check_state(x)   # the controller measures it in float32
     moved = replace(d.problem, x0=x)
     return replace(d, problem=moved, implemented=evaluate_table(moved, d.table, path=False))
 
@@ -241,25 +245,42 @@ def generated_files(d: Designed, source_name: str, arith: str = "float32", *,
                     with_c: bool = True) -> dict[str, str]:
     """``<name>.{h,c,json}`` for float32; ``<name>_<arith>.{h,c,json}`` for Q15/Q31, whose
     summary adds the scales and the error bound (``fixed``). ``with_c=False``: only the
-    ``.json`` (formatting the C text is most of the time of a small design)."""
-    import json
+    ``.json`` (formatting the C text is most of the time of a small design).
+
+    Raises ProblemError, before any text exists, if the table exceeds the firmware's limits or
+    holds a number that overflows its format, or the summary a non-finite number."""
+    check_implementable(d)
     summary = design_summary(d)
     if arith == "float32":
         table, n = d.table, d.problem.name
     else:
-        table = fixed_table(d, arith)
+        try:
+            table = fixed_table(d, arith)
+        except ValueError as exc:            # scale exponents beyond STSP_Q_EXP_MAX
+            raise strict.fixed_scale_error(d.problem, arith, exc) from None
+        limits.check_table(table)
         n = table.name
         summary["fixed"] = _r({**table.summary(), "state_sigmas": DEFAULT_SIGMAS})
-    text = json.dumps(summary, indent=2, sort_keys=True) + "\n"
+    strict.check_summary_finite(d.problem, summary)
+    text = strict.dumps(summary) + "\n"
     if not with_c:
         return {f"{n}.json": text}
     header, source = generate_c(table, source_name=source_name)
     return {f"{n}.h": header, f"{n}.c": source, f"{n}.json": text}
 
 
+def check_implementable(d: Designed) -> None:
+    """Raise ProblemError unless the firmware accepts `d.table`: dimensions within its limits
+    (`limits.check_table`) and every entry finite (`strict.check_table_finite`)."""
+    limits.check_table(d.table)
+    strict.check_table_finite(d.problem, d.table, exact=lambda: double_table(d))
+
+
 def simulate_problem(d: Designed, *, paths: int, seed: int, substeps: int = 2,
                      build_dir=None) -> MonteCarloResult:
-    """Monte Carlo of the compiled C controller built from `d.table`."""
+    """Monte Carlo of the compiled C controller built from `d.table` (raises ProblemError if
+    the firmware would refuse the table, see `check_implementable`)."""
+    check_implementable(d)
     ctl = build_controller(d.table, build_dir=build_dir)
     return simulate(d.problem, ctl, paths=paths, seed=seed, substeps=substeps)
 
@@ -269,7 +290,11 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int, substeps
 
     ``saturation.tick_fraction`` is the fraction of (path, tick) steps on which the C controller
     returned STSP_WARN_SATURATED; when it is nonzero the oracle's numbers (which assume the
-    law is never clipped) do not describe the simulated controller."""
+    law is never clipped) do not describe the simulated controller.
+
+    A ratio to a Monte Carlo standard error that is 0 (every path alike, as without noise) is
+    undefined: it is None (JSON null) and a sibling ``<key>_undefined`` says why. Raises
+    ProblemError if some other number is not finite."""
     euler = evaluate_table(d.problem, d.table, propagator="euler", substeps=substeps,
                            path=False)
     mean, hw95 = mc.cost_mean_ci(0.95)
@@ -278,13 +303,19 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int, substeps
     knots = []
     for k, kn in enumerate(d.problem.knots):
         m, s = mc.knot_mean_se(k)
+        alike = np.ptp(mc.knot_states[k], axis=0) == 0   # s is then 0 or rounding error
+        z, why = strict.ratio_or_null(m - d.implemented.knot_mean[k], np.where(alike, 0.0, s),
+                                      _ZERO_SE)
         knots.append({
             "t": kn.t,
             "mc_mean": m, "mc_mean_stderr": s, "mc_cov": mc.knot_cov(k),
             "oracle_mean": d.implemented.knot_mean[k], "oracle_cov": d.implemented.knot_cov[k],
-            "z": (m - d.implemented.knot_mean[k]) / s,
+            "z": z, **({"z_undefined": why} if why else {}),
         })
-    return _r({
+    se_z = 0.0 if np.ptp(mc.cost) == 0 else se
+    cost_z, cost_why = strict.ratio_or_null(mean - d.implemented.J, se_z, _ZERO_SE)
+    bias_z, bias_why = strict.ratio_or_null(euler.J - d.implemented.J, se_z, _ZERO_SE)
+    summary = _r({
         "name": d.problem.name, "paths": mc.paths, "seed": seed, "substeps": substeps,
         "x0": d.problem.x0,
         "tick_hz": d.table.tick_hz, "worst_status": mc.worst_status,
@@ -292,11 +323,12 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int, substeps
             "mc_mean": mean, "mc_stderr": se,
             "ci95": [mean - hw95, mean + hw95], "ci99": [mean - hw99, mean + hw99],
             "oracle_implemented": d.implemented.J, "predicted_J0": predicted_cost(d),
-            "z": (mean - d.implemented.J) / se,
+            "z": cost_z, **({"z_undefined": cost_why} if cost_why else {}),
         },
         "simulation_bias": {
             "cost": euler.J - d.implemented.J,
-            "cost_over_stderr": (euler.J - d.implemented.J) / se,
+            "cost_over_stderr": bias_z,
+            **({"cost_over_stderr_undefined": bias_why} if bias_why else {}),
             "knot_cov_max_abs": [float(np.abs(euler.knot_cov[k] - d.implemented.knot_cov[k]).max())
                                  for k in range(len(d.problem.knots))],
         },
@@ -310,3 +342,11 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int, substeps
         },
         **_limits(d),
     })
+    strict.check_summary_finite(d.problem, summary, "simulated numbers")
+    return summary
+
+
+# Why a z-score (or another ratio to a Monte Carlo standard error) is null.
+_ZERO_SE = ("every path gave the same value (a problem without noise, or a deterministic "
+            "quantity): the Monte Carlo standard error is 0 up to rounding, so the ratio is "
+            "undefined")

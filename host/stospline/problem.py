@@ -16,6 +16,9 @@ from typing import Any, Callable
 
 import numpy as np
 
+from .cnames import check_name
+from .limits import check_problem, check_stage_count, check_state
+
 __all__ = ["ProblemError", "Stage", "Penalty", "Constraint", "Knot", "Problem",
            "load_problem", "parse_problem"]
 
@@ -806,7 +809,9 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     if name in _C_KEYWORDS or name.startswith("__") or re.match(r"_[A-Z]", name):
         raise ProblemError("name", f"{name!r} is a C keyword or reserved identifier; the "
                                    f"generated tables are named after it")
+    check_name(name)
     x0 = _vector(doc["x0"], "x0", None)
+    check_state(x0)
     n = x0.shape[0]
     t0 = _number(doc.get("t0", 0.0), "t0")
     tick_hz = _int(doc["tick_hz"], "tick_hz", 1, _U32_MAX, "the tick rate in Hz")
@@ -834,7 +839,9 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
         # pieces share. A band at an existing knot adds rows to that knot's constraint.
         merged = {kn.t: (kn, d) for kn, d in zip(knots, data)}
         user_t = np.array([kn.t for kn in knots])
-        for t, con in _parse_regions(doc["regions"], n, t0, knots[-1].t, tick_hz):
+        bands = _parse_regions(doc["regions"], n, t0, knots[-1].t, tick_hz)
+        check_stage_count([kn.t for kn in knots], [t for t, _ in bands])
+        for t, con in bands:
             hit = next((tk for tk in merged if abs(tk - t) <= 1e-9 * max(1.0, abs(t))), None)
             if hit is None:
                 stage_data = data[int(np.searchsorted(user_t, t - 1e-12))]
@@ -876,8 +883,10 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
         if value not in _DESIGN_OPTIONS[key]:
             raise ProblemError(f"design.{key}", f"must be one of {list(_DESIGN_OPTIONS[key])}, "
                                                 f"got {value!r}")
-    return Problem(name, t0, x0, tick_hz, stages, knots, source_sha256, plot, dict(options),
-                   u_min, u_max)
+    problem = Problem(name, t0, x0, tick_hz, stages, knots, source_sha256, plot, dict(options),
+                      u_min, u_max)
+    check_problem(problem, B_path=default.B_path)   # the firmware's limits (limits.py)
+    return problem
 
 
 def load_problem(path: str | Path) -> Problem:

@@ -22,13 +22,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from . import limits
 from .design import ContinuousDesign
 
 __all__ = ["GainTable", "TableShape", "BandQP", "build_table", "sample_design", "ticks_per_stage",
            "table_crc32", "FORMAT_VERSION", "SCALAR_FLOAT32", "F32_MAX", "BANDQP_MAX"]
 
 FORMAT_VERSION = 3
-BANDQP_MAX = 8  # STSP_BANDQP_MAX: rows the firmware's band solver takes (3^8 active sets)
+BANDQP_MAX = limits.BANDQP_MAX  # rows the firmware's band solver takes (3^8 active sets)
 SCALAR_FLOAT32 = 1
 MAGIC = 0x53545350  # "STSP"
 F32_MAX = float(np.finfo(np.float32).max)  # the firmware's "unlimited" (FLT_MAX)

@@ -1,0 +1,264 @@
+"""Strict output: every number the tool writes or prints is finite, or the run is refused.
+
+* `dumps`: JSON with ``allow_nan=False``, so a NaN or an infinity can never reach a file or
+  stdout (strict JSON parsers reject them); callers null undefined statistics first.
+* `check_table_finite`: every entry of a generated table (float32 gains, feed-forwards, latch
+  maps, limits, the band dual in double precision) is finite; a design whose numbers overflow
+  float32 is refused naming the input that drives them (`culprit`) and the worst entry.
+* `check_summary_finite`: the same for the numbers of a JSON summary.
+* `quiet_numerics`: numpy's RuntimeWarnings (overflow, invalid value, division by zero) become
+  at most one line on stderr, and only when the run succeeds: when it fails, the one-line
+  error already says why.
+
+Errors are `ProblemError`s (exit status 2 from the CLI) raised before anything is written.
+"""
+from __future__ import annotations
+
+import functools
+import json
+import math
+import sys
+import warnings
+
+import numpy as np
+
+from .limits import F32_MAX
+from .problem import ProblemError
+
+__all__ = ["dumps", "first_nonfinite", "culprit", "check_table_finite", "check_summary_finite",
+           "quiet_numerics", "ratio_or_null", "fixed_scale_error"]
+
+
+def dumps(obj) -> str:
+    """``json.dumps(obj, indent=2, sort_keys=True)`` that raises instead of writing NaN or
+    Infinity (which ``json.dumps`` writes by default, and strict parsers reject)."""
+    return json.dumps(obj, indent=2, sort_keys=True, allow_nan=False)
+
+
+def first_nonfinite(obj, path: str = ""):
+    """``(path, value)`` of the first non-finite number in nested dicts, lists and arrays
+    (``"knots[0].cov[1][1]"``), or None."""
+    if isinstance(obj, dict):
+        for key, val in obj.items():
+            hit = first_nonfinite(val, f"{path}.{key}" if path else str(key))
+            if hit:
+                return hit
+    elif isinstance(obj, (list, tuple)):
+        for i, val in enumerate(obj):
+            hit = first_nonfinite(val, f"{path}[{i}]")
+            if hit:
+                return hit
+    elif isinstance(obj, np.ndarray):
+        if obj.dtype.kind in "fc" and not np.all(np.isfinite(obj)):
+            idx = np.unravel_index(int(np.argmin(np.isfinite(obj).ravel())), obj.shape)
+            return path + "".join(f"[{i}]" for i in idx), float(obj[idx])
+    elif isinstance(obj, (float, np.floating)) and not math.isfinite(float(obj)):
+        return path, float(obj)
+    return None
+
+
+def ratio_or_null(num, den, reason: str):
+    """``num / den`` elementwise, with None where ``den == 0`` (the statistic is undefined),
+    and the `reason` to report beside it, or None when every entry is defined."""
+    num, den = np.asarray(num, dtype=float), np.asarray(den, dtype=float)
+    defined = den != 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        val = np.where(defined, num / np.where(defined, den, 1.0), 0.0)
+    out = [float(v) if ok else None for v, ok in zip(val.ravel(), defined.ravel())]
+    value = out[0] if val.ndim == 0 else out
+    return value, (None if defined.all() else reason)
+
+
+# ---------------------------------------------------------------------------------------
+# Which input of the problem file drives an overflow.
+
+# Quantity -> the inputs that can make it large. Gains depend on the dynamics and weights
+# (B, C, R also when small); feed-forwards and latch offsets also on targets and constraint
+# values; predicted moments and costs also on x0 and rho.
+_GAIN = ("dynamics.A", "dynamics.B", "dynamics.noise", "cost.Q", "cost.S", "cost.R",
+         "penalty.weight", "penalty.C", "constraint.C")
+_OFFSET = _GAIN + ("cost.q", "cost.r", "penalty.target", "constraint.value")
+_MOMENTS = _OFFSET + ("x0", "cost.rho")
+_SMALL_MATTERS = ("dynamics.B", "cost.R", "constraint.C")  # gains scale with their inverse
+_EXTREME = 8.0   # orders of magnitude from 1 that make an input the likely cause
+
+
+def _orders(values, small: bool) -> float:
+    """How many orders of magnitude the entries reach away from 1 (large, or small nonzero
+    when `small`)."""
+    a = np.abs(np.asarray(values, dtype=float)).ravel()
+    a = a[np.isfinite(a) & (a > 0)]
+    if not a.size:
+        return 0.0
+    out = math.log10(a.max())
+    if small:
+        out = max(out, -math.log10(a.min()))
+    return out
+
+
+def _candidates(problem):
+    """``(field, kind, values)`` for every numeric input of the problem."""
+    multi = len({id(s) for s in problem.stages}) > 1
+    for k, st in enumerate(problem.stages):
+        samples = [st] if st.varying is None else [st.at(t) for t in problem.times[k:k + 2]]
+        pre = f"stages[{k}]." if multi else ""
+        for s in samples:
+            for key in ("A", "B"):
+                yield f"{pre}dynamics.{key}", f"dynamics.{key}", getattr(s, key)
+            yield f"{pre}dynamics.noise", "dynamics.noise", s.noise_tensor
+            for key in ("Q", "S", "R", "q", "r"):
+                yield f"{pre}cost.{key}", f"cost.{key}", getattr(s, key)
+            yield f"{pre}cost.rho", "cost.rho", [s.rho]
+    for k, kn in enumerate(problem.knots):
+        if kn.penalty is not None:
+            p = kn.penalty
+            yield f"knots[{k}].penalty.weight", "penalty.weight", [p.weight]
+            yield f"knots[{k}].penalty.C", "penalty.C", p.C
+            yield f"knots[{k}].penalty.target", "penalty.target", p.target
+        if kn.constraint is not None:
+            c = kn.constraint
+            yield f"knots[{k}].constraint.C", "constraint.C", c.C
+            lo, hi = c.bounds
+            key = "value" if c.value is not None else "lower"
+            yield f"knots[{k}].constraint.{key}", "constraint.value", np.concatenate([lo, hi])
+    yield "x0", "x0", problem.x0
+
+
+def culprit(problem, kinds=_MOMENTS) -> str | None:
+    """The field of the input (of `kinds`) whose entries lie furthest from 1 in orders of
+    magnitude, if some lie at least 1e8 away (else None: no single extreme input)."""
+    best, field = _EXTREME, None
+    for name, kind, values in _candidates(problem):
+        if kind in kinds:
+            score = _orders(values, kind in _SMALL_MATTERS)
+            if score >= best + 1e-12 or (field is None and score >= best):
+                best, field = score, name
+    return field
+
+
+def _cause(problem, kinds, stage: int | None) -> tuple[str, str]:
+    """(field, advice) for a refusal."""
+    field = culprit(problem, kinds)
+    if field is not None:
+        return field, (f"{field} has entries {_extreme_text(problem, field)}; give the "
+                       f"problem in units that keep its numbers moderate")
+    where = "knots[0].t" if stage is None else f"knots[{stage}].t"
+    return where, ("no single input is extreme, so the growth comes from the dynamics over "
+                   "the plan (an unstable mode over a long stage): shorten the stage or "
+                   "change the dynamics or weights")
+
+
+def riccati_failure(problem, stage: int) -> tuple[str, str]:
+    """(field, reason) for a Riccati recursion that broke down (lost positive definiteness,
+    or its numbers left the double range) on `stage`: the most extreme input when there is one,
+    else the knot that ends the stage."""
+    field, advice = _cause(problem, _MOMENTS, stage)
+    return field, (f"the design's numbers overflow (the tick Riccati recursion of stage {stage} "
+                   f"lost positive definiteness): {advice}")
+
+
+def _extreme_text(problem, field: str) -> str:
+    for name, kind, values in _candidates(problem):
+        if name == field:
+            a = np.abs(np.asarray(values, float)).ravel()
+            a = a[np.isfinite(a) & (a > 0)]
+            if a.size:
+                return f"up to {a.max():.3g}" if kind not in _SMALL_MATTERS or \
+                    math.log10(a.max()) >= -math.log10(a.min()) else f"as small as {a.min():.3g}"
+    return "of extreme size"
+
+
+def _table_arrays(table):
+    """``(name, per-tick?, array, kinds)`` of the arrays stored in a table."""
+    yield "K", True, table.K, _GAIN
+    yield "k0", True, table.k0, _OFFSET
+    yield "L", True, table.L, _GAIN
+    yield "Lambda", False, table.Lambda, _GAIN
+    yield "lambda0", False, table.lambda0, _OFFSET
+    b = getattr(table, "band_qp", None)
+    if b is not None:
+        yield "band Nt", False, b.Nt, _GAIN
+        yield "band W", False, b.W, _GAIN
+        yield "band mt", False, b.mt, _OFFSET
+        yield "band lo/hi", False, np.concatenate([b.lo, b.hi]), _OFFSET
+
+
+def check_table_finite(problem, table, exact=None) -> None:
+    """Refuse a float32 table with a non-finite entry: the firmware would refuse it
+    (STSP_ERR_BAD_VALUES) and its C source would not compile (``inff``). `exact` (optional, a
+    callable: only called on failure) gives the same table before float32 rounding, for the
+    size of the overflowing entry."""
+    for name, per_tick, arr, kinds in _table_arrays(table):
+        arr = np.asarray(arr)
+        if np.all(np.isfinite(arr)):
+            continue
+        bad = np.argwhere(~np.isfinite(arr))[0]
+        at, stage = "", None
+        if per_tick:
+            stage = table.stage_of_tick(int(bad[0]))
+            at = f" at tick {int(bad[0])}"
+        elif name in ("Lambda", "lambda0"):
+            stage = int(bad[0])
+            at = f" at stage {stage}"
+        src = None if exact is None else {n: a for n, _, a, _ in _table_arrays(exact())}[name]
+        if src is not None and np.all(np.isfinite(src)):
+            big = np.abs(np.asarray(src, float))
+            size = f"|{name}| up to {big.max():.3g}{at}, beyond float32's {F32_MAX:.3g}"
+            what = "overflow float32"
+        else:
+            size = f"{name}{at} is {float(arr[tuple(bad)])}"
+            what = "are not finite even in double precision"
+        field, advice = _cause(problem, kinds, stage)
+        raise ProblemError(field, f"the design's {_NOUN[name]} {what} ({size}); {advice}")
+
+
+_NOUN = {"K": "feedback gains K", "k0": "feed-forward terms k0", "L": "multiplier gains L",
+         "Lambda": "latch maps Lambda", "lambda0": "latch offsets lambda0",
+         "band Nt": "band dual data Nt", "band W": "band dual matrix W",
+         "band mt": "band dual offsets mt", "band lo/hi": "band bounds"}
+
+
+def check_summary_finite(problem, summary: dict, what: str = "predicted numbers") -> None:
+    """Refuse a summary holding a non-finite number (it could not be written as JSON)."""
+    hit = first_nonfinite(summary)
+    if hit is None:
+        return
+    path, value = hit
+    stage = None
+    if path.startswith("knots["):
+        stage = int(path[6:path.index("]")])
+    field, advice = _cause(problem, _MOMENTS, stage)
+    raise ProblemError(field, f"the {what} overflow double precision ({path} is {value}); "
+                              f"{advice}")
+
+
+def quiet_numerics(func):
+    """Run `func` with numpy's floating-point RuntimeWarnings collected: nothing when it
+    raises (its error explains the failure), one summary line on stderr when it succeeds."""
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RuntimeWarning)
+            result = func(*args, **kwargs)
+        numeric = [w for w in caught if issubclass(w.category, RuntimeWarning)]
+        for w in caught:
+            if w not in numeric:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        if numeric:
+            first = str(numeric[0].message).splitlines()[0]
+            print(f"stospline: warning: {len(numeric)} floating-point warning(s) during the "
+                  f"computation (first: {first}); every number written was checked finite",
+                  file=sys.stderr)
+        return result
+    return wrapper
+
+
+def fixed_scale_error(problem, arith: str, exc: ValueError) -> ProblemError:
+    """A `fixed.quantize_table` refusal (scale exponents beyond the firmware's
+    +-STSP_Q_EXP_MAX) as a ProblemError naming the most extreme input, else design.arith."""
+    field = culprit(problem, _MOMENTS)
+    advice = ("use float32 tables" if field is None else
+              f"{field} has entries {_extreme_text(problem, field)}; give the problem in units "
+              f"that keep its numbers moderate, or use float32 tables")
+    return ProblemError(field or "design.arith",
+                        f"no {arith.upper()} table can hold this design: {exc}; {advice}")

@@ -29,7 +29,10 @@ def start(label: str, total: int, unit: str = "tick"):
     """Open a bar of `total` units (a token for `finish`; None when disabled)."""
     if not _enabled:
         return None
-    from tqdm import tqdm
+    try:
+        from tqdm import tqdm
+    except ImportError:          # a declared dependency; without it, no bars (not an error)
+        return None
     bar = tqdm(total=int(total), desc=label, unit=unit, file=sys.stderr, delay=DELAY,
                leave=False, mininterval=0.5, dynamic_ncols=True, unit_scale=True)
     _bars.append(bar)

@@ -38,6 +38,7 @@ def _design(args) -> int:
         check_target(args.out, [f"{stem}{ext}" for ext in (".h", ".c", ".json")])
     _check_budget(args, problem, "design", arith=arith)
     d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem))
+    _note_tables(d, "formatting")
     files = generated_files(d, Path(args.problem).name, arith)
     if args.out:
         written = write_outputs(args.out, files)
@@ -76,6 +77,16 @@ def _check_budget(args, problem, command: str, **options) -> None:
                       f" and ~{format_bytes(est.bytes)} of memory")
 
 
+def _note_tables(d, doing: str) -> None:
+    """Announce a long step without a progress bar (formatting or compiling big tables)."""
+    from .budget import CODEGEN_NUMBER, COMPILE_NUMBER, format_seconds
+    numbers = d.table.K.size + d.table.k0.size + d.table.L.size
+    per = CODEGEN_NUMBER + (COMPILE_NUMBER if doing == "compiling" else 0.0)
+    if numbers * per > 5:
+        progress.note(f"{doing} the C tables ({numbers} numbers, estimated "
+                      f"~{format_seconds(numbers * per)})")
+
+
 def _simulate(args) -> int:
     from .pipeline import design_problem, simulate_problem, simulation_summary, start_from
     problem = load_problem(args.problem)
@@ -84,6 +95,7 @@ def _simulate(args) -> int:
     d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem))
     if x0 is not None:
         d = start_from(d, x0)
+    _note_tables(d, "compiling")
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=args.substeps)
     s = simulation_summary(d, mc, seed=args.seed, substeps=args.substeps)
     _report_simulation(s, args.json)
@@ -129,6 +141,7 @@ def _plot(args) -> int:
     problem = load_problem(args.problem)
     _check_budget(args, problem, "plot")
     d = design_problem(problem, **_options(args, problem))
+    _note_tables(d, "compiling")
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=args.substeps)
     write_file(args.out, lambda tmp: plot_corridor(d, mc, tmp))
     print(f"wrote {args.out}")

@@ -1,14 +1,17 @@
 """``stospline`` command line: a thin layer over `stospline.pipeline`.
 
-Exit status: 0 success, 2 bad problem file or infeasible problem (message names the field),
-1 anything else.
+Exit status: 0 success, 2 bad problem file, bad command-line value, unwritable output, a run
+beyond the memory/time limits, or an infeasible problem (one line on stderr naming the field
+or option), 128 + N when signal N interrupted it, 1 anything else.
 """
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
+from . import progress
 from .problem import ProblemError, load_problem
 from .strict import dumps, quiet_numerics
 
@@ -24,10 +27,18 @@ def _options(args, problem) -> dict:
 
 @quiet_numerics
 def _design(args) -> int:
+    from .atomic import check_target
     from .pipeline import design_problem, design_summary, generated_files, write_outputs
+    if args.out:
+        check_target(args.out)                  # before any work: nothing is created
     problem = load_problem(args.problem)
-    d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem))
     arith = args.arith or problem.options.get("arith", "float32")
+    if args.out:
+        stem = problem.name if arith == "float32" else f"{problem.name}_{arith}"
+        check_target(args.out, [f"{stem}{ext}" for ext in (".h", ".c", ".json")])
+    _check_budget(args, problem, "design", arith=arith)
+    d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem))
+    _note_tables(d, "formatting")
     files = generated_files(d, Path(args.problem).name, arith, with_c=bool(args.out))
     if args.out:
         written = write_outputs(args.out, files)
@@ -51,14 +62,39 @@ def _start(arg: str | None):
         raise ProblemError("--x0", f"expected comma-separated numbers, got {arg!r}") from None
 
 
+def _check_budget(args, problem, command: str, **options) -> None:
+    """Refuse (BudgetError, exit 2) a run beyond the limits before any work; announce a long
+    one (when progress is shown)."""
+    from .budget import check, format_bytes, format_seconds
+    est = check(problem, command=command, max_seconds=args.max_time,
+                max_bytes=args.max_memory * 1024 ** 3, **_options(args, problem),
+                paths=getattr(args, "paths", 0), substeps=getattr(args, "substeps", 2),
+                **options)
+    if est.seconds > 5:
+        progress.note(f"{command} of {problem.name}: estimated ~{format_seconds(est.seconds)}"
+                      f" and ~{format_bytes(est.bytes)} of memory")
+
+
+def _note_tables(d, doing: str) -> None:
+    """Announce a long step without a progress bar (formatting or compiling big tables)."""
+    from .budget import CODEGEN_NUMBER, COMPILE_NUMBER, format_seconds
+    numbers = d.table.K.size + d.table.k0.size + d.table.L.size
+    per = CODEGEN_NUMBER + (COMPILE_NUMBER if doing == "compiling" else 0.0)
+    if numbers * per > 5:
+        progress.note(f"{doing} the C tables ({numbers} numbers, estimated "
+                      f"~{format_seconds(numbers * per)})")
+
+
 @quiet_numerics
 def _simulate(args) -> int:
     from .pipeline import design_problem, simulate_problem, simulation_summary, start_from
     problem = load_problem(args.problem)
-    x0 = _start(args.x0)
+    x0 = args.x0
+    _check_budget(args, problem, "simulate")
     d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem))
     if x0 is not None:
         d = start_from(d, x0)
+    _note_tables(d, "compiling")
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=args.substeps)
     s = simulation_summary(d, mc, seed=args.seed, substeps=args.substeps)
     _report_simulation(s, args.json)
@@ -105,12 +141,16 @@ def _z_text(z) -> str:
 
 @quiet_numerics
 def _plot(args) -> int:
+    from .atomic import check_file_target, write_file
     from .pipeline import design_problem, simulate_problem
     from .plot import plot_corridor
+    check_file_target(args.out)
     problem = load_problem(args.problem)
+    _check_budget(args, problem, "plot")
     d = design_problem(problem, **_options(args, problem))
+    _note_tables(d, "compiling")
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=args.substeps)
-    plot_corridor(d, mc, args.out)
+    write_file(args.out, lambda tmp: plot_corridor(d, mc, tmp))
     print(f"wrote {args.out}")
     return 0
 
@@ -120,14 +160,94 @@ def _version() -> str:
     return __version__
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line: ``stospline: error: --paths: REASON``."""
+
+    def error(self, message: str):
+        if message.startswith("argument "):
+            message = message[len("argument "):]
+            option, sep, reason = message.partition(": ")
+            message = f"{option.split('/')[-1]}{sep}{reason}"
+        self.exit(2, f"stospline: error: {message} (see {self.prog} --help)\n")
+
+
+def _integer(lo: int, hi: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text, 10)
+        except ValueError:
+            value = None
+        if value is None or not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be an integer in {lo}..{hi}, got {text!r}")
+        return value
+    return parse
+
+
+def _positive(hi: float, unit: str):
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not 0 < value <= hi:
+            raise argparse.ArgumentTypeError(f"must be a number of {unit} in (0, {hi:g}], "
+                                             f"got {text!r}")
+        return value
+    return parse
+
+
+def _x0(text: str) -> list[float]:
+    try:
+        return _start(text)
+    except ProblemError as exc:
+        raise argparse.ArgumentTypeError(exc.reason) from None
+
+
+def _out_file(text: str) -> str:
+    if Path(text).suffix.lower() not in PLOT_FORMATS:
+        raise argparse.ArgumentTypeError(f"must name a {', '.join(PLOT_FORMATS)} file (the "
+                                         f"suffix sets the format), got {text!r}")
+    return text
+
+
+def _out_dir(text: str) -> str:
+    if not text or "\0" in text:
+        raise argparse.ArgumentTypeError(f"must be a directory path, got {text!r}")
+    return text
+
+
+PLOT_FORMATS = (".png", ".pdf", ".svg")
+MAX_PATHS = 10 ** 9          # the memory/time budget usually refuses far fewer
+MAX_SUBSTEPS = 10_000
+SEED_MAX = 2 ** 63 - 1
+
+
+def _common(sp) -> None:
+    """Options of every command: limits and progress."""
+    from .budget import DEFAULT_MAX_BYTES, DEFAULT_MAX_SECONDS
+    sp.add_argument("--quiet", action="store_true",
+                    help="no progress bars or estimates on stderr (they are shown only when "
+                         "stderr is a terminal and a run is long)")
+    sp.add_argument("--max-time", type=_positive(1e9, "seconds"), default=DEFAULT_MAX_SECONDS,
+                    metavar="SECONDS",
+                    help=f"refuse a run estimated to take longer (default "
+                         f"{DEFAULT_MAX_SECONDS:g} s; docs/problem-file.md, Limits)")
+    sp.add_argument("--max-memory", type=_positive(1e6, "GiB"),
+                    default=DEFAULT_MAX_BYTES / 1024 ** 3, metavar="GIB",
+                    help=f"refuse a run estimated to need more memory (default "
+                         f"{DEFAULT_MAX_BYTES / 1024 ** 3:g} GiB, at most the machine's RAM)")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="stospline", description=__doc__.splitlines()[0])
+    ap = _Parser(prog="stospline", description=__doc__.splitlines()[0])
     ap.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = ap.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("design", help="solve the design, write C gain tables and a summary")
     p.add_argument("problem", help="problem file (TOML)")
-    p.add_argument("--out", help="directory for <name>.c, <name>.h, <name>.json")
+    p.add_argument("--out", type=_out_dir,
+                   help="directory for <name>.c, <name>.h, <name>.json (created if missing; "
+                        "all three are replaced together or not at all)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--ignore-noise", action="store_true",
                    help="design as if there were no noise (the paper's Remark 2)")
@@ -139,24 +259,29 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("simulate", help="Monte Carlo with the compiled C controller in the loop")
     p.add_argument("problem")
-    p.add_argument("--paths", type=int, default=10000)
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--substeps", type=int, default=2, help="plant steps per controller tick")
+    p.add_argument("--paths", type=_integer(2, MAX_PATHS), default=10000,
+                   help=f"Monte Carlo paths, 2..{MAX_PATHS}")
+    p.add_argument("--seed", type=_integer(0, SEED_MAX), default=1,
+                   help="seed of the random numbers, 0..2^63-1")
+    p.add_argument("--substeps", type=_integer(1, MAX_SUBSTEPS), default=2,
+                   help=f"plant steps per controller tick, 1..{MAX_SUBSTEPS}")
     p.add_argument("--json", action="store_true")
     p.add_argument("--ignore-noise", action="store_true")
-    p.add_argument("--x0", help="start the plant from this state instead of the problem's "
+    p.add_argument("--x0", type=_x0, help="start the plant from this state instead of the problem's "
                                 "(comma-separated; write --x0=-5,0,1,0 when it starts with a minus); the tables stay the design's and the "
                                 "controller latches from what it measures")
     p.set_defaults(func=_simulate)
 
     p = sub.add_parser("plot", help="figure: corridor, one realisation, MC mean, controls")
     p.add_argument("problem")
-    p.add_argument("--out", required=True, help="PNG file")
-    p.add_argument("--paths", type=int, default=100)
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--substeps", type=int, default=2)
+    p.add_argument("--out", required=True, type=_out_file,
+                   help="figure file: .png, .pdf or .svg (its directory must exist)")
+    p.add_argument("--paths", type=_integer(2, MAX_PATHS), default=100)
+    p.add_argument("--seed", type=_integer(0, SEED_MAX), default=1)
+    p.add_argument("--substeps", type=_integer(1, MAX_SUBSTEPS), default=2)
     p.set_defaults(func=_plot)
     for name, sp in sub.choices.items():
+        _common(sp)
         sp.add_argument("--discretization", choices=["exact-zoh", "continuous"],
                         default=None,
                         help="exact-zoh (default): optimal for the held control at the tick "
@@ -170,19 +295,38 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from .atomic import Interrupted, OutputError
     args = build_parser().parse_args(argv)
     if getattr(args, "arith", None) not in (None, "float32", "q15", "q31"):
         print(f"stospline: error: --arith must be one of ['float32', 'q15', 'q31'], "
               f"got {args.arith!r}", file=sys.stderr)
         return 2
+    progress.enable(not args.quiet and sys.stderr.isatty())
     try:
         return args.func(args)
     except ProblemError as exc:
-        print(f"stospline: error in {args.problem}: {exc}", file=sys.stderr)
+        where = "" if exc.field.startswith("--") else f" in {args.problem}"
+        print(f"stospline: error{where}: {exc}", file=sys.stderr)
+        return 2
+    except OutputError as exc:
+        print(f"stospline: error: --out: {exc.reason}", file=sys.stderr)
         return 2
     except FileNotFoundError as exc:
-        print(f"stospline: {exc}", file=sys.stderr)
+        print(f"stospline: error: {exc}", file=sys.stderr)
         return 2
+    except Interrupted as exc:
+        print(f"stospline: {exc}; nothing was written", file=sys.stderr)
+        return 128 + exc.signum
+    except KeyboardInterrupt:
+        print("stospline: interrupted", file=sys.stderr)
+        return 130
+    except MemoryError:
+        print("stospline: error: out of memory (the estimate of docs/problem-file.md, "
+              "Limits, was too low for this machine; try --max-memory lower or a smaller "
+              "problem)", file=sys.stderr)
+        return 1
+    finally:
+        progress.close_all()
 
 
 if __name__ == "__main__":

@@ -23,6 +23,7 @@ import numpy as np
 
 from .expm import expm
 
+from . import progress
 from .design import DesignError, StageValues, _check_group, _knot_terminal
 from .moments import augmented_drift, moment_generator, running_cost_matrix, varying_tick
 from .multipliers import latch_groups
@@ -238,6 +239,7 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
     V = np.zeros((n + 1, n + 1))          # [[P, p], [p', c]] after the current point
     N = W = mv = None                      # open multiplier group
     out: list[ZohStage | None] = [None] * len(problem.knots)
+    bar = progress.start("design", int(np.sum(counts)))
     for k in range(len(problem.knots) - 1, -1, -1):
         knot, g = problem.knots[k], group_of[k]
         stage = problem.stages[k] if noise else problem.stages[k].without_noise()
@@ -285,4 +287,6 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
             V[n, n] += mv @ st.lambda0
             N = W = mv = None
         out[k] = st
+        progress.advance(int(counts[k]))
+    progress.finish(bar)
     return ZohDesign(problem, tick_hz, out, noise, mode)

@@ -84,16 +84,23 @@ void harness_plant_tick(size_t paths, size_t n, size_t m, size_t mz, size_t subs
                         const double *Q, const double *S, const double *q,
                         const double *R, const double *r, double rho, int state_cost,
                         const double *dZ, const float *U, double *X, double *cost);
-/* Verify the table once (the CRC covers every byte), then clone the fresh instance. */
+/* Verify the table once (the CRC covers every byte), then clone the fresh instance.
+ * count == 0 (or NULL ctrls) touches no memory and returns STSP_ERR_NULL: there is no
+ * ctrls[0] to initialise. */
 int harness_init_batch(stsp_ctrl_t *ctrls, size_t count, const stsp_table_t *table) {
-    size_t i; int s = (int)stsp_init(&ctrls[0], table);
+    size_t i; int s;
+    if (ctrls == NULL || count == 0u) return (int)STSP_ERR_NULL;
+    s = (int)stsp_init(&ctrls[0], table);
     for (i = 1; i < count; ++i) ctrls[i] = ctrls[0];
     return s;
 }
 int harness_step_batch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
                        const stsp_scalar_t *x, stsp_scalar_t *u, int *status) {
-    const stsp_table_t *t = ctrls[0].table;
-    size_t i, nx = t ? t->nx : 0u, nu = t ? t->nu : 0u; int worst = 0;
+    const stsp_table_t *t;
+    size_t i, nx, nu; int worst = 0;
+    if (ctrls == NULL || count == 0u) return (int)STSP_ERR_NULL;   /* no ctrls[0] to read */
+    t = ctrls[0].table;
+    nx = t ? t->nx : 0u; nu = t ? t->nu : 0u;
     for (i = 0; i < count; ++i) {
         status[i] = (int)stsp_step(&ctrls[i], tick, x + i * nx, u + i * nu);
         if (status[i] < worst) worst = status[i];
@@ -105,7 +112,9 @@ int harness_step_batch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
 int harness_pair_batch(const stsp_ctrl_t *proto, size_t count, const uint32_t *t_latch,
                        const stsp_scalar_t *x_latch, const uint32_t *tick,
                        const stsp_scalar_t *x, stsp_scalar_t *u, int *status) {
-    size_t k, nx = proto->table->nx, nu = proto->table->nu; int worst = 0;
+    size_t k, nx, nu; int worst = 0;
+    if (proto == NULL || proto->table == NULL) return (int)STSP_ERR_NULL;
+    nx = proto->table->nx; nu = proto->table->nu;
     for (k = 0; k < count; ++k) {
         stsp_ctrl_t c = *proto;
         int s1 = (int)stsp_step(&c, t_latch[k], x_latch + k * nx, u + k * nu);
@@ -143,6 +152,14 @@ def firmware_dir() -> Path:
     return find()
 
 
+def _positive_count(count) -> int:
+    """`count` as an int >= 1 (instances to allocate); ValueError otherwise."""
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+        raise ValueError(f"the number of controller instances must be an integer >= 1, "
+                         f"got {count!r}")
+    return int(count)
+
+
 @dataclass
 class CompiledController:
     """A compiled firmware + table module, with helpers to run many instances at once."""
@@ -164,7 +181,11 @@ class CompiledController:
         return self.lib.harness_table()
 
     def new_instances(self, count: int):
-        """`count` instances initialised on the compiled table (raises on a negative status)."""
+        """`count` instances initialised on the compiled table (raises on a negative status).
+
+        Raises ValueError unless ``count >= 1``: the C helper clones instance 0, and a
+        zero-length array has none."""
+        count = _positive_count(count)
         ctrls = self.ffi.new("stsp_ctrl_t[]", count)
         worst = self.lib.harness_init_batch(ctrls, count, self.c_table)
         if worst < 0:
@@ -175,7 +196,8 @@ class CompiledController:
         return self.ffi.string(self.lib.stsp_status_str(status)).decode()
 
     def stepper(self, count: int):
-        """Return ``step(tick, X) -> (U, status)`` driving `count` fresh instances."""
+        """Return ``step(tick, X) -> (U, status)`` driving `count` (>= 1) fresh instances."""
+        count = _positive_count(count)
         n, m, _ = self.table.dims
         ctrls = self.new_instances(count)
         xbuf = np.zeros((count, n), dtype=self.dtype)
@@ -205,6 +227,9 @@ class CompiledController:
                 np.ascontiguousarray(tick, np.uint32),
                 np.ascontiguousarray(x, self.dtype).reshape(-1, n)]
         count = len(arrs[0])
+        for name, a in zip(("x_latch", "tick", "x"), arrs[1:]):
+            if len(a) != count:
+                raise ValueError(f"pair_steps: {name} has {len(a)} samples, t_latch {count}")
         U = np.zeros((count, m), dtype=self.dtype)
         status = np.zeros(count, dtype=np.intc)
         self.lib.harness_pair_batch(

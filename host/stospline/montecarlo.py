@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from .expm import expm
 
+from . import progress
 from .harness import STATUS, CompiledController
 from .problem import Problem
 
@@ -82,11 +83,15 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
         The plant (dynamics, noise, cost) and x0; the controller's table is what is tested.
     controller : CompiledController
     paths, seed : int
-        Number of paths; seed of ``numpy.random.default_rng``.
+        Number of paths (>= 1; ValueError otherwise, before anything is allocated); seed of
+        ``numpy.random.default_rng``.
     substeps : int
-        Plant steps per controller tick (time-varying data are frozen at each step's
+        Plant steps per controller tick (>= 1) (time-varying data are frozen at each step's
         midpoint, a second-order error in the step).
     """
+    for name, value in (("paths", paths), ("substeps", substeps)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
     table = controller.table
     rng = np.random.default_rng(seed)
     n, m = problem.n, problem.m
@@ -102,6 +107,7 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
     sample_x = [X[0].copy()]
     sample_u = []
     mean_x = [X.mean(axis=0)]
+    bar = progress.start(f"simulate ({paths} paths)", table.n_ticks)
     for k in range(table.n_stages):
         st = problem.stages[k]
         Ad, Bd = _zoh(st.A, st.B, dt)
@@ -125,11 +131,13 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
             sample_x.append(X[0].copy())
             sample_u.append(U[0].astype(float))
             mean_x.append(X.mean(axis=0))
+            progress.advance()
         knot = problem.knots[k]
         if knot.penalty is not None:
             r = X @ knot.penalty.C.T - knot.penalty.target
             cost += knot.penalty.weight * np.einsum("pi,pi->p", r, r)
         knots.append(X.copy())
+    progress.finish(bar)
     t = problem.t0 + np.arange(table.n_ticks + 1) * h
     return MonteCarloResult(cost, knots, t, np.array(sample_x), np.array(sample_u),
                             np.array(mean_x), worst, saturated, u_low, u_high)

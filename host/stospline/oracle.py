@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from .expm import expm
 
+from . import progress
 from .design import ContinuousDesign
 from .moments import augmented_drift, euler_tick, exact_tick, running_cost_matrix
 from .problem import Problem
@@ -172,6 +173,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     path_mean = [x0.copy()] if path else []
     path_var = [np.zeros(n)] if path else []
     xs, vs = slice(0, n), slice(n, n + P)
+    bar = progress.start("oracle", table.n_ticks)
     for k in range(table.n_stages):
         stage = problem.stages[k]
         if k == 0 or table.stage_np[k] > 0:      # else: v latched earlier is kept
@@ -224,9 +226,11 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             if path:
                 path_mean.append(M[:n, -1].copy())
                 path_var.append(np.diag(M[xs, xs]) - M[:n, -1] ** 2)
+            progress.advance()
         pen, mean, cov, con = _knot_terms(problem, k, M, n)
         J += pen
         means.append(mean); covs.append(cov); cons.append(con)
+    progress.finish(bar)
     path_t = problem.t0 + np.arange(table.n_ticks + 1) * h if path else np.zeros(0)
     return Moments(float(J), means, covs, cons, path_t, np.array(path_mean),
                    np.maximum(np.array(path_var), 0.0))

@@ -4,8 +4,6 @@ Everything the CLI does is one call here, so scripts and tests use the same path
 """
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -205,24 +203,13 @@ def design_summary(d: Designed) -> dict:
 
 
 def write_outputs(out_dir: str | Path, files: dict[str, str]) -> list[Path]:
-    """Write every file or none: each goes to a temporary name first, then all are renamed."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    staged = []
-    try:
-        for name, text in files.items():
-            fd, tmp = tempfile.mkstemp(dir=out, prefix=f".{name}.", suffix=".tmp")
-            with os.fdopen(fd, "w", newline="\n") as fh:
-                fh.write(text)
-            os.chmod(tmp, 0o644)
-            staged.append((Path(tmp), out / name))
-    except BaseException:
-        for tmp, _ in staged:
-            tmp.unlink(missing_ok=True)
-        raise
-    for tmp, final in staged:
-        os.replace(tmp, final)
-    return [final for _, final in staged]
+    """Write every file or none, as one set (`stospline.atomic.write_set`): staged and fsynced
+    in a directory inside `out_dir`, committed by a journal, then renamed into place with
+    SIGINT/SIGTERM deferred; a writer killed with SIGKILL is completed or undone by the next
+    write into `out_dir`. Raises `stospline.atomic.OutputError` (nothing changed) when the
+    directory cannot take the files, e.g. a target is a directory."""
+    from .atomic import write_set
+    return write_set(out_dir, files)
 
 
 def double_table(d: Designed) -> GainTable:

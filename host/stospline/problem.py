@@ -200,6 +200,7 @@ _C_KEYWORDS = frozenset(
 _U32_MAX = 2**32 - 1  # the C table stores tick counts and the tick rate as uint32_t
 _F32_MAX = float(np.finfo(np.float32).max)  # the table stores limits as float32 (FLT_MAX)
 _N_IS_LEN_X0 = " (n, the length of x0)"
+_MAX_GRID_POINTS = 100_000  # [[regions]] band points over all regions (parse-time work bound)
 
 
 def _check_keys(table: Any, path: str, allowed: set[str], required: set[str]) -> dict:
@@ -611,6 +612,10 @@ def _check_times(knots: tuple[Knot, ...], t0: float, tick_hz: int) -> None:
             raise ProblemError(path, f"must be later than {prev_name} = {prev:g} (got "
                                      f"{kn.t:g}); knot times must increase strictly")
         ticks = (kn.t - prev) * tick_hz
+        if not ticks <= _U32_MAX:    # also Inf (t = 1e308): round() would overflow
+            raise ProblemError(path, f"stage {i} ({prev_name} = {prev:g} to {kn.t:g}) lasts "
+                                     f"{ticks:.9g} ticks at tick_hz = {tick_hz}; the gain "
+                                     f"table counts ticks in 32 bits (at most {_U32_MAX})")
         whole = round(ticks)
         if whole < 1 or abs(ticks - whole) > 1e-9 * max(1.0, ticks):
             raise ProblemError(path, f"stage {i} ({prev_name} = {prev:g} to {kn.t:g}) lasts "
@@ -778,6 +783,9 @@ def _parse_regions(raw: Any, n: int, t0: float, t_end: float,
         if np.any(lo > hi):
             raise ProblemError(_join(rp, "lower"), "lower > upper: the band is empty")
         count = int(np.floor((b - a) / every - 1e-9))
+        if len(out) + count > _MAX_GRID_POINTS:   # bound the work before building them
+            raise ProblemError(_join(rp, "every"), f"gives {len(out) + count} band points in "
+                                                   f"all regions; at most {_MAX_GRID_POINTS}")
         for j in range(1, count + 1):
             out.append((a + j * every, Constraint(C, None, lo, hi)))
     return out
@@ -841,11 +849,15 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
         user_t = np.array([kn.t for kn in knots])
         bands = _parse_regions(doc["regions"], n, t0, knots[-1].t, tick_hz)
         check_stage_count([kn.t for kn in knots], [t for t, _ in bands])
+        # Every knot and band time falls on a tick: look times up by tick index (a scan of
+        # all knots per band point made a grid of 10^5 points take hours).
+        at_tick = {round((tk - t0) * tick_hz): tk for tk in merged}
         for t, con in bands:
-            hit = next((tk for tk in merged if abs(tk - t) <= 1e-9 * max(1.0, abs(t))), None)
+            hit = at_tick.get(round((t - t0) * tick_hz))
             if hit is None:
                 stage_data = data[int(np.searchsorted(user_t, t - 1e-12))]
                 merged[t] = (Knot(t, None, con), stage_data)
+                at_tick[round((t - t0) * tick_hz)] = t
             else:
                 kn, stage_data = merged[hit]
                 merged[hit] = (Knot(kn.t, kn.penalty, _merge_constraints(kn.constraint, con)),
@@ -892,16 +904,21 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
 def load_problem(path: str | Path) -> Problem:
     """Read and validate a TOML problem file (reference: ``docs/problem-file.md``).
 
+    The file is read with bounds (`stospline.inputfile`): a regular file (or a symlink to
+    one) of at most 16 MiB, UTF-8, arrays and tables nested at most 32 deep.
+
     Raises
     ------
     ProblemError
         The file is not valid TOML or not a valid problem; names the field and the reason.
-    FileNotFoundError
-        The file does not exist.
+        A file that cannot be read is field ``<file>``; when it does not exist the error is
+        also a FileNotFoundError.
     """
-    data = Path(path).read_bytes()
+    from .inputfile import decode_problem, read_problem_file
+    data = read_problem_file(path)
+    doc = decode_problem(data)
     try:
-        doc = tomllib.loads(data.decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ProblemError("<file>", f"not valid TOML: {exc}") from None
-    return parse_problem(doc, source_sha256=hashlib.sha256(data).hexdigest())
+        return parse_problem(doc, source_sha256=hashlib.sha256(data).hexdigest())
+    except (OverflowError, MemoryError, RecursionError) as exc:   # last resort: no traceback
+        raise ProblemError("<file>", f"a value is too large or too deeply nested to handle "
+                                     f"({type(exc).__name__}: {exc})") from None

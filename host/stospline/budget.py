@@ -1,0 +1,268 @@
+"""Memory and time a command will need, estimated from the problem's sizes before any work.
+
+`estimate` adds up the costs that grow with the problem (per tick, per stage, per matrix
+exponential, per generated number, per Monte Carlo path and tick); `check` refuses a run whose
+estimate exceeds the limits with a `BudgetError` naming the key that causes the largest part,
+e.g. ``tick_hz: ~15.2 GiB of memory needed (limit 4 GiB): 1000000000 ticks x 18 numbers of
+per-tick gain tables ...``. Nothing is allocated before the check.
+
+The constants were measured on the development machine (2 shared x86-64 cores, OpenBLAS) with
+``tools/calibrate_budget.py``, which prints them and the estimate beside the measured time and
+peak memory of a set of designs and simulations. They are estimates: expect the real figures
+within a factor of about 3 (more on a loaded or much slower machine). Limits (documented in
+docs/problem-file.md, "Limits"): `DEFAULT_MAX_SECONDS` and `DEFAULT_MAX_BYTES`, raised with
+``--max-time``/``--max-memory``; the memory limit is never above the machine's RAM.
+
+What grows (n states, m inputs, d = n + m + 1, D = d^2, T ticks, S stages, q multipliers):
+
+* the oracle's exact tick map per stage, a (2D)-square matrix exponential (n = 24, m = 8:
+  about 10 s and 300 MiB each; n = 200: 53 GiB), evaluated twice per design;
+* the oracle's per-tick propagation, a D x D product per tick, twice per design;
+* the designer's tick map per distinct stage data, a (d(d+1)/2 + 1)-square exponential, and
+  its per-tick recursion (with q^2 m terms for q joint multipliers);
+* the per-tick tables (several double copies) and their C text (about 14 bytes a number,
+  formatted at about 2 us a number, and compiled by ``simulate``/``plot``);
+* Monte Carlo: per tick a Python step, per path and tick the C controller and plant.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .problem import Problem, ProblemError
+
+__all__ = ["BudgetError", "Term", "Estimate", "estimate", "check", "DEFAULT_MAX_SECONDS",
+           "DEFAULT_MAX_BYTES", "machine_memory", "format_bytes", "format_seconds"]
+
+DEFAULT_MAX_SECONDS = 600.0          # 10 minutes
+DEFAULT_MAX_BYTES = 4 * 1024 ** 3    # 4 GiB
+
+# --- measured constants (tools/calibrate_budget.py) ----------------------------------------
+BASE_BYTES = 100e6          # interpreter, numpy, scipy, cffi modules
+BASE_SECONDS = 3.0          # start-up: imports, the cached C kernel
+STAGE_SECONDS = 4e-3        # Python work per stage and oracle pass (maps, latches, knots)
+EXPM_S3 = 1.0e-9            # s: scipy expm of an s-square matrix ~ EXPM_S3 s^3 + EXPM_S2 s^2
+EXPM_S2 = 1.5e-6
+EXPM_COPIES = 8             # expm workspace: ~8 s-square double arrays
+ORACLE_TICK = 15e-6         # s per tick and oracle pass: Python overhead ...
+ORACLE_TICK_D2 = 1.5e-9     # ... + per entry of the D x D tick map
+KERNEL_FLOP = 1.0e-9        # s per multiply-add of the designer's C tick recursion
+VARYING_TICK = 60e-6        # s per tick of time-varying data (numpy loop) + its exponential
+IVP_TICK = 2.5e-3           # s per tick and oracle pass of time-varying data (DOP853)
+TABLE_COPIES = 5            # double copies of the per-tick gains (design, law, table, ...)
+CODEGEN_NUMBER = 2.0e-6     # s to format one table number as C
+CODEGEN_BYTES = 48          # peak bytes per number while the C text is built (~14 in the file)
+COMPILE_NUMBER = 4.0e-6     # s for the C compiler per table number (simulate, plot)
+COMPILE_BYTES = 400         # compiler memory per table number
+SIM_TICK = 150e-6           # s per Monte Carlo tick: Python step, controller and plant calls
+SIM_PATH_TICK = 0.005e-6    # s per path, tick and unit of work (below)
+SIM_PATH_BYTES = 64         # bytes per path besides states (instances, buffers)
+CONTINUOUS_STAGE = 0.5      # s per stage of the continuous-time design and its oracle
+CONTINUOUS_TICK = 20e-6     # s per tick to sample continuous gains
+BAND_Q3 = 5e-8              # s per q^3 of the band dual (OSQP on dense W)
+
+
+class BudgetError(ProblemError):
+    """The run would exceed the memory or time limit; `field` is the problem-file key (or
+    command-line option) whose value causes the largest part of the estimate."""
+
+
+@dataclass(frozen=True)
+class Term:
+    """One cost: what it is, the key that drives it, its time (s) and peak memory (bytes)."""
+    what: str
+    key: str
+    seconds: float = 0.0
+    bytes: float = 0.0
+
+
+@dataclass
+class Estimate:
+    """Estimated seconds and peak bytes of a command, with the terms they come from."""
+    command: str
+    terms: list[Term] = field(default_factory=list)
+
+    @property
+    def seconds(self) -> float:
+        return sum(t.seconds for t in self.terms)
+
+    @property
+    def bytes(self) -> float:
+        # Tables and text stay resident; one exponential's workspace at a time on top.
+        resident = sum(t.bytes for t in self.terms if not t.what.startswith("tick map"))
+        transient = max([t.bytes for t in self.terms if t.what.startswith("tick map")] + [0])
+        return BASE_BYTES + resident + transient
+
+    def top(self, by: str) -> Term:
+        return max(self.terms, key=lambda t: getattr(t, by))
+
+    def summary(self) -> str:
+        return (f"estimated ~{format_seconds(self.seconds)} and ~{format_bytes(self.bytes)} "
+                f"(mostly {self.top('seconds').what})")
+
+
+def format_bytes(b: float) -> str:
+    for unit, size in (("GiB", 1024 ** 3), ("MiB", 1024 ** 2), ("KiB", 1024)):
+        if b >= size:
+            return f"{b / size:.3g} {unit}"
+    return f"{b:.0f} B"
+
+
+def format_seconds(s: float) -> str:
+    if s >= 86400:
+        return f"{s / 86400:.3g} days"
+    if s >= 3600:
+        return f"{s / 3600:.3g} h"
+    if s >= 60:
+        return f"{s / 60:.3g} min"
+    return f"{s:.2g} s"
+
+
+def machine_memory() -> float:
+    """Physical memory of this machine in bytes (inf when unknown)."""
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return math.inf
+
+
+def _expm(s: float) -> tuple[float, float]:
+    return EXPM_S3 * s ** 3 + EXPM_S2 * s ** 2, EXPM_COPIES * 8.0 * s * s
+
+
+def _dims_key(problem: Problem) -> str:
+    """The key that sets the matrix sizes: x0 (n) unless the inputs (dynamics.B) dominate."""
+    return "x0" if problem.n >= problem.m else "dynamics.B"
+
+
+def _widths(problem: Problem, mode: str) -> tuple[list[int], int]:
+    """Per stage the width q of the multiplier vector the design carries, and the table's P."""
+    from .bands import has_bands
+    from .multipliers import latch_groups
+    from .tables import BANDQP_MAX
+    rows = sum(kn.n_constraints for kn in problem.knots)
+    if has_bands(problem):
+        q = [rows] * len(problem.knots)         # joint: one vector over every stage
+        return q, rows if rows <= BANDQP_MAX else min(rows, problem.n)
+    try:
+        _, group_of = latch_groups(problem, mode)
+    except ValueError:
+        group_of = [None] * len(problem.knots)
+    q = [0 if g is None else g.size for g in group_of]
+    return q, min(max(q + [0]), problem.n)
+
+
+def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewise",
+             discretization: str = "exact-zoh", arith: str = "float32", paths: int = 0,
+             substeps: int = 2) -> Estimate:
+    """Estimate the time and peak memory of ``stospline COMMAND`` on `problem`.
+
+    Parameters
+    ----------
+    command : {"design", "simulate", "plot"}
+    paths, substeps : int
+        The Monte Carlo run of simulate and plot.
+    """
+    n, m, mz = problem.n, problem.m, problem.mz
+    d = n + m + 1
+    D = d * d
+    ds, vs = d * (d + 1) // 2, (n + 1) * (n + 2) // 2
+    ticks = [int(t) for t in problem.ticks_per_stage]
+    T, S = sum(ticks), len(ticks)
+    q, P = _widths(problem, mode)
+    qmax = max(q + [0])
+    dims, stages = _dims_key(problem), "knots"
+    varying = [st.varying is not None for st in problem.stages]
+    T_var = sum(t for t, v in zip(ticks, varying) if v)
+    distinct = len({id(st) for st, v in zip(problem.stages, varying) if not v})
+    est = Estimate(command)
+    add = est.terms.append
+    passes = 2 + (arith != "float32") + (command == "plot")     # oracle passes over the ticks
+
+    add(Term("start-up (imports, compiled kernels)", "--max-time", seconds=BASE_SECONDS))
+    add(Term("per-stage work (tick maps, latches, knots)", stages,
+             seconds=STAGE_SECONDS * S * (passes + 1)))
+    # The design's per-tick gains (several double copies) and the table.
+    numbers = T * m * (n + 1 + P)
+    add(Term("per-tick gain tables", "tick_hz",
+             bytes=TABLE_COPIES * 8.0 * sum(t * m * (n + 1 + max(qk, P))
+                                            for t, qk in zip(ticks, q))))
+    if discretization == "continuous":
+        add(Term("continuous-time design and its oracle", stages,
+                 seconds=CONTINUOUS_STAGE * S * (1 + (n * n + n * qmax + qmax * qmax) / 64)))
+        add(Term("sampling the continuous gains at the ticks", "tick_hz",
+                 seconds=CONTINUOUS_TICK * T * (1 + (n + qmax) / 8),
+                 bytes=8.0 * T * (n * n + n + 1 + n * qmax + qmax * qmax)))
+    else:
+        sec, byt = _expm(ds + 1)
+        add(Term("tick map of the design (matrix exponential per distinct stage data)", dims,
+                 seconds=distinct * sec, bytes=byt + 4 * 8.0 * D * D))
+        flops = ds * vs + 2 * qmax * n * d + qmax * qmax * m + m * m * (n + 1 + qmax)
+        add(Term("the design's tick recursion", "tick_hz",
+                 seconds=KERNEL_FLOP * flops * (T - T_var) + VARYING_TICK * T_var
+                 * (1 + (D + 1) ** 3 / 1e5)))
+    sec, byt = _expm(2 * D)
+    add(Term("tick map of the oracle (matrix exponential per stage and pass)", dims,
+             seconds=passes * sec * (S - sum(varying)), bytes=byt + 4 * 8.0 * D * D))
+    add(Term("the oracle's propagation over the ticks", "tick_hz",
+             seconds=passes * ((ORACLE_TICK + ORACLE_TICK_D2 * D * D) * (T - T_var)
+                               + IVP_TICK * (1 + D / 50) * T_var),
+             bytes=(command == "plot") * T * 2 * (8 * n + 112.0)))
+    if qmax:
+        add(Term("joint multipliers (W is q x q)", stages,
+                 seconds=BAND_Q3 * qmax ** 3, bytes=6 * 8.0 * qmax * qmax))
+    if command == "design":
+        add(Term("C text of the tables", "tick_hz", seconds=CODEGEN_NUMBER * numbers,
+                 bytes=CODEGEN_BYTES * numbers))
+    else:
+        add(Term("C text of the tables, compiled", "tick_hz",
+                 seconds=(CODEGEN_NUMBER + COMPILE_NUMBER) * numbers,
+                 bytes=(CODEGEN_BYTES + COMPILE_BYTES) * numbers))
+        work = n * (m + P) + substeps * (n * n + n * m + n * mz) + 8
+        add(Term(f"Monte Carlo ({paths} paths)", "--paths",
+                 seconds=SIM_TICK * T + SIM_PATH_TICK * paths * T * work,
+                 bytes=paths * (8.0 * n * (S + 6) + 16.0 * substeps * mz + 16.0 * m
+                                + SIM_PATH_BYTES) + T * 3 * (8 * n + 112.0)))
+        sec, _ = _expm(D)
+        add(Term("the oracle of the plant scheme", "tick_hz",
+                 seconds=(ORACLE_TICK + ORACLE_TICK_D2 * D * D) * T
+                 + S * (substeps * 2e-9 * D ** 3 + sec)))
+    return est
+
+
+def check(problem: Problem, *, max_seconds: float = DEFAULT_MAX_SECONDS,
+          max_bytes: float = DEFAULT_MAX_BYTES, **options) -> Estimate:
+    """`estimate` and refuse (BudgetError) what exceeds `max_bytes` (capped at the machine's
+    memory) or `max_seconds`. Returns the estimate."""
+    est = estimate(problem, **options)
+    limit = min(float(max_bytes), machine_memory())
+    if est.bytes > limit:
+        top = est.top("bytes")
+        raise BudgetError(top.key, f"the {est.command} needs ~{format_bytes(est.bytes)} of "
+                                   f"memory (limit {format_bytes(limit)}; --max-memory "
+                                   f"raises it up to this machine's RAM), mostly for "
+                                   f"{top.what} (~{format_bytes(top.bytes)}) "
+                                   f"{_sizes(problem, top.key, options)}")
+    if est.seconds > max_seconds:
+        top = est.top("seconds")
+        raise BudgetError(top.key, f"the {est.command} would take ~"
+                                   f"{format_seconds(est.seconds)} (limit "
+                                   f"{format_seconds(max_seconds)}; --max-time raises it), "
+                                   f"mostly for {top.what} (~{format_seconds(top.seconds)}) "
+                                   f"{_sizes(problem, top.key, options)}")
+    return est
+
+
+def _sizes(problem: Problem, key: str, options: dict) -> str:
+    """The sizes behind a key, for the message."""
+    T = int(np.sum(problem.ticks_per_stage))
+    if key == "tick_hz":
+        return f"with {T} ticks (tick_hz = {problem.tick_hz})"
+    if key in ("x0", "dynamics.B"):
+        return f"with n = {problem.n} states and m = {problem.m} inputs"
+    if key == "--paths":
+        return f"with {options.get('paths')} paths over {T} ticks"
+    return f"with {len(problem.knots)} stages (knots and region band points)"

@@ -1,0 +1,162 @@
+"""Issue 10, item 8 (and the MemoryError cases of item 7): work is bounded and announced.
+
+Before: ``tick_hz = 10^9`` over 1 s or n = 200 died in MemoryError asking for 15-193 GiB;
+10^7 ticks, 20 000 knots and a region grid of 200 000 points ran past 120 s with no progress
+and no way to know how long. Now `stospline.budget` estimates memory and time from the sizes
+before anything is allocated, refuses what exceeds the limits with one line naming the key
+and the estimate, and long runs show progress bars on a terminal.
+"""
+import dataclasses
+import io
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from conftest import EXAMPLES
+from stospline import budget, progress
+from stospline.cli import main
+
+
+def cart(n=2, hz=10, knots=((1.0, True),), mode="stagewise", regions="") -> str:
+    """A chain of n integrators (one input) with the given knots (t, constrained?)."""
+    A = np.eye(n, k=1).tolist()
+    B = np.zeros((n, 1))
+    B[-1] = 1
+    C = np.eye(n)[:1].tolist()
+    lines = ['name = "big"', f"x0 = {[0.0] * n}", f"tick_hz = {hz}", f'[design]\nmode = "{mode}"',
+             f"[dynamics]\nA = {A}\nB = {B.tolist()}", "[cost]\nR = [[1]]"]
+    for t, con in knots:
+        what = (f"constraint = {{ C = {C}, value = [1.0] }}" if con else
+                f"penalty = {{ C = {C}, target = [1.0], weight = 1.0 }}")
+        lines.append(f"[[knots]]\nt = {t!r}\n{what}")
+    return "\n".join(lines) + "\n" + regions
+
+
+def refuse(tmp_path, text, *extra, command="design"):
+    """Run the CLI on `text`: it must refuse within seconds with one line, writing nothing."""
+    src = tmp_path / "big.toml"
+    src.write_text(text)
+    out = tmp_path / "o"
+    args = [command, str(src), *extra] + (["--out", str(out)] if command == "design" else [])
+    t = time.perf_counter()
+    r = subprocess.run([sys.executable, "-m", "stospline.cli", *args], capture_output=True,
+                       text=True, timeout=300)
+    elapsed = time.perf_counter() - t
+    assert r.returncode == 2 and r.stdout == "", r.stderr
+    assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr, r.stderr
+    assert elapsed < 60, elapsed
+    assert not out.exists()
+    return r.stderr
+
+
+def test_a_billion_ticks_is_refused_by_memory(tmp_path):
+    err = refuse(tmp_path, cart(hz=10 ** 9))
+    assert "tick_hz: the design needs ~" in err and "GiB of memory (limit 4 GiB" in err
+    assert "1000000000 ticks" in err
+
+
+def test_n_200_is_refused_naming_x0(tmp_path):
+    err = refuse(tmp_path, cart(n=200))
+    assert "error in" in err and ": x0: the design needs ~" in err and "n = 200 states" in err
+
+
+def test_ten_million_ticks_is_refused_beyond_the_time_limit(tmp_path):
+    """10^7 ticks fit in 4 GiB but take minutes: estimated beyond --max-time 60."""
+    err = refuse(tmp_path, cart(hz=5 * 10 ** 6, knots=((1.0, True), (2.0, True))),
+                 "--max-time", "60")
+    assert ": tick_hz: the design would take ~" in err and "(limit 1 min;" in err
+
+
+def test_too_many_paths_is_refused_naming_the_option(tmp_path):
+    err = refuse(tmp_path, cart(), "--paths", str(10 ** 9), command="simulate")
+    assert err.startswith("stospline: error: --paths: the simulate needs ~")
+
+
+def test_region_grid_is_bounded_at_parse_time(tmp_path):
+    """200 000 band points: refused while parsing (the old parser scanned every knot for
+    every point: hours), naming the region's grid spacing."""
+    grid = ("[[regions]]\nt = [0.0, 1.0]\nevery = 5e-6\nC = [[0, 1]]\nlower = [-10.0]\n"
+            "upper = [10.0]\n")
+    err = refuse(tmp_path, cart(hz=200000, mode="joint", regions=grid))
+    assert "regions[0].every: gives 199999 band points" in err
+
+
+def test_region_grid_parse_is_not_quadratic():
+    """10 000 band points parse in seconds (the old lookup took ~6 min)."""
+    import tomllib
+    from stospline.problem import parse_problem
+    grid = ("[[regions]]\nt = [0.0, 1.0]\nevery = 1e-4\nC = [[0, 1]]\nlower = [-10.0]\n"
+            "upper = [10.0]\n")
+    t = time.perf_counter()
+    p = parse_problem(tomllib.loads(cart(hz=10000, mode="joint", regions=grid)))
+    assert len(p.knots) == 10000 and time.perf_counter() - t < 20
+
+
+@pytest.fixture(scope="module")
+def small():
+    import tomllib
+    from stospline.problem import parse_problem
+    return parse_problem(tomllib.loads(cart(knots=((1.0, True), (2.0, False)))))
+
+
+def test_estimate_names_the_key_that_grows(small):
+    """Stretch one size at a time (without the parser's limits): the largest term follows it."""
+    many_knots = dataclasses.replace(small, knots=small.knots * 10000,
+                                     stages=small.stages * 10000)
+    many_knots = dataclasses.replace(many_knots, knots=tuple(
+        dataclasses.replace(kn, t=0.1 * (i + 1)) for i, kn in enumerate(many_knots.knots)))
+    est = budget.estimate(many_knots)
+    assert est.top("seconds").key == "knots" and est.seconds > 120
+    with pytest.raises(budget.BudgetError) as info:
+        budget.check(many_knots, max_seconds=60)
+    assert info.value.field == "knots" and "20000 stages" in info.value.reason
+    fast = budget.estimate(dataclasses.replace(small, tick_hz=10 ** 6))
+    assert fast.top("seconds").key == "tick_hz"
+
+
+def test_estimate_grows_with_each_size(small):
+    base = budget.estimate(small)
+    for bigger, key in [(dataclasses.replace(small, tick_hz=1000), "tick_hz")]:
+        est = budget.estimate(bigger)
+        assert est.seconds > base.seconds and est.bytes > base.bytes, key
+    sim = budget.estimate(small, command="simulate", paths=10 ** 6)
+    assert sim.top("bytes").key == "--paths" and sim.seconds > base.seconds
+
+
+def test_robot_estimate_is_plausible():
+    """The robot (6000 ticks) designs in seconds and ~100 MiB here
+    (tools/calibrate_budget.py): the estimate must be of that order."""
+    from stospline.problem import load_problem
+    est = budget.estimate(load_problem(EXAMPLES / "robot_corridor.toml"))
+    assert 1 < est.seconds < 30 and 50e6 < est.bytes < 1e9
+
+
+class _Tty(io.StringIO):
+    def isatty(self):
+        return True
+
+
+@pytest.mark.parametrize("quiet", [False, True])
+def test_progress_on_a_terminal_unless_quiet(tmp_path, monkeypatch, quiet):
+    monkeypatch.setattr(progress, "DELAY", 0.0)
+    err = _Tty()
+    monkeypatch.setattr(sys, "stderr", err)
+    argv = ["design", str(EXAMPLES / "robot_corridor.toml"), "--out", str(tmp_path)]
+    assert main(argv + (["--quiet"] if quiet else [])) == 0
+    text = err.getvalue()
+    if quiet:
+        assert text == ""
+    else:
+        assert "design" in text and "oracle" in text and "tick" in text
+    assert not progress.enabled() or not quiet
+
+
+def test_no_progress_when_stderr_is_not_a_terminal(tmp_path, monkeypatch):
+    monkeypatch.setattr(progress, "DELAY", 0.0)
+    err = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", err)
+    assert main(["design", str(EXAMPLES / "robot_corridor.toml"), "--out", str(tmp_path)]) == 0
+    assert err.getvalue() == ""

@@ -7,11 +7,14 @@
 
 #ifdef STSP_ARITH_FIXED
 
-/* 2^e as a binary32, for |e| <= STSP_Q_EXP_MAX + STSP_Q_FRAC_BITS = 91 (a normal number:
- * stsp_init() checked the exponents). Built from its bits: no libm, exact. */
+/* 2^e as a binary32, exact for |e| <= STSP_Q_EXP_MAX + STSP_Q_FRAC_BITS = 91 (stsp_init()
+ * checked the exponents). Built from its bits: no libm. e is clamped to the normal range
+ * [-126, 127] first, so that exponents changed in memory after init give a wrong but finite
+ * scale (never a NaN, whose conversion to an integer would be undefined). */
 static stsp_f32_t stsp_pow2f(int32_t e)
 {
-    const uint32_t biased = (uint32_t)e + 127u; /* in [1, 254]: a normal number */
+    const int32_t normal = (e > 127) ? 127 : ((e < -126) ? -126 : e);
+    const uint32_t biased = (uint32_t)normal + 127u; /* in [1, 254]: a normal number */
     const uint32_t bits = biased << 23;
     stsp_f32_t value;
     (void)memcpy(&value, &bits, sizeof value);
@@ -55,7 +58,7 @@ static stsp_scalar_t stsp_q_from_f32(stsp_f32_t s, uint32_t *clamped)
 
 stsp_status_t stsp_state_to_q(const stsp_ctrl_t *ctrl, const stsp_f32_t *x, stsp_scalar_t *x_q)
 {
-    const stsp_table_t *t;
+    const stsp_header_t *t;
     uint32_t j;
     uint32_t clamped = 0u;
     if ((ctrl == NULL) || (x == NULL) || (x_q == NULL)) {
@@ -64,7 +67,7 @@ stsp_status_t stsp_state_to_q(const stsp_ctrl_t *ctrl, const stsp_f32_t *x, stsp
     if (ctrl->ready != STSP_CTRL_READY) {
         return STSP_ERR_NOT_INITIALIZED;
     }
-    t = ctrl->table;
+    t = &ctrl->checked; /* the dimensions and exponents init validated */
     for (j = 0u; j < t->nx; ++j) {
         /* NaN fails both compares; +-Inf exceeds FLT_MAX in magnitude. */
         if (!((x[j] <= 3.40282347e+38f) && (x[j] >= -3.40282347e+38f))) {
@@ -87,7 +90,7 @@ stsp_status_t stsp_state_to_q(const stsp_ctrl_t *ctrl, const stsp_f32_t *x, stsp
 stsp_status_t stsp_command_to_f32(const stsp_ctrl_t *ctrl, const stsp_scalar_t *u_q,
                                   stsp_f32_t *u)
 {
-    const stsp_table_t *t;
+    const stsp_header_t *t;
     uint32_t i;
     if ((ctrl == NULL) || (u_q == NULL) || (u == NULL)) {
         return STSP_ERR_NULL;
@@ -95,7 +98,7 @@ stsp_status_t stsp_command_to_f32(const stsp_ctrl_t *ctrl, const stsp_scalar_t *
     if (ctrl->ready != STSP_CTRL_READY) {
         return STSP_ERR_NOT_INITIALIZED;
     }
-    t = ctrl->table;
+    t = &ctrl->checked; /* the dimensions and exponents init validated */
     for (i = 0u; i < t->nu; ++i) {
         u[i] = (stsp_f32_t)u_q[i] * stsp_pow2f((int32_t)t->u_exp[i] - (int32_t)STSP_Q_FRAC_BITS);
     }

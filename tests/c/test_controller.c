@@ -606,9 +606,184 @@ static void test_verify_detects_a_changed_table(void **state)
     assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
     Kram[2] = -Kram[2];                 /* a bit flipped after init */
     assert_int_equal(stsp_verify(&c), STSP_ERR_BAD_CRC);
-    u[0] = 1.0f;
+    u[0] = 1.0f;                        /* stopped: zeros in the validated u[nu] */
     assert_int_equal(stsp_step(&c, 1u, x, u), STSP_ERR_NOT_INITIALIZED);
-    assert_true(u[0] == 1.0f);
+    assert_true(f32_bits(u[0]) == 0u);
+}
+
+/* The table header changes after init (a table in RAM overwritten, flash rewritten): the case
+ * stsp_verify() exists for. Until verify runs, stsp_step() keeps to what init validated (the
+ * same commands as the unchanged table; nothing read or written outside the arrays and u[nu]);
+ * verify then returns STSP_ERR_TABLE_CHANGED without following the changed header, and every
+ * later step holds zeros. The arrays are exactly as long as table A needs, so under ASan
+ * (controller_san) any access beyond them aborts; u is exactly NU long. */
+enum { HDR_NX, HDR_NU, HDR_NL, HDR_NS, HDR_NT, HDR_K, HDR_START, HDR_L_NULL, HDR_MAGIC,
+       HDR_VERSION, HDR_KIND, HDR_BAND, HDR_CHANGES };
+
+static const uint32_t short_start[2] = {0u, 5u};
+
+static void change_header(stsp_table_t *t, int which, const stsp_bandqp_t *band)
+{
+    switch (which) {
+    case HDR_NX: t->nx = NX + 1u; break;
+    case HDR_NU: t->nu = NU + 1u; break;          /* the nu 2 -> 3, here 1 -> 2 */
+    case HDR_NL: t->n_latch = NL + 1u; break;
+    case HDR_NS: t->n_stages = NS + 1u; break;
+    case HDR_NT: t->n_ticks = NT + 1u; break;
+    case HDR_K: t->K = k0; break;                 /* an array half as long */
+    case HDR_START: t->stage_start = short_start; break;
+    case HDR_L_NULL: t->L = NULL; break;
+    case HDR_MAGIC: t->magic = 0u; break;
+    case HDR_VERSION: t->format_version = STSP_FORMAT_VERSION + 1u; break;
+    case HDR_KIND: t->scalar_kind = STSP_SCALAR_Q15; break;
+    default: t->band_qp = band; break;            /* a band dual appears */
+    }
+}
+
+static void test_step_and_verify_after_a_header_change(void **state)
+{
+    static const double nt[2 * 3] = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0}, m3[3] = {0.0, 0.0, 0.0};
+    static const double w3[3 * 3] = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+    const stsp_bandqp_t band = {3u, 3u, nt, m3, w3, m3, m3};
+    const float xs[NT][NX] = {{1.0f, -2.0f}, {0.5f, 0.25f}, {-1.0f, 3.0f},
+                              {2.0f, 1.0f}, {-0.5f, -0.75f}};
+    int which;
+    (void)state;
+    for (which = 0; which < HDR_CHANGES; ++which) {
+        stsp_table_t t = make_table();
+        stsp_ctrl_t c, ref;
+        float u[NU], u_ref[NU];
+        uint32_t tick;
+        assert_int_equal(stsp_init(&c, &t), STSP_OK);
+        assert_int_equal(stsp_init(&ref, &table), STSP_OK);
+        assert_int_equal(stsp_step(&c, 0u, xs[0], u), STSP_OK);
+        assert_int_equal(stsp_step(&ref, 0u, xs[0], u_ref), STSP_OK);
+        change_header(&t, which, &band);
+        /* Ordinary ticks, the stage-1 latch and the end of the plan, as validated. */
+        for (tick = 1u; tick <= NT; ++tick) {
+            const float *x = xs[tick % NT];
+            const stsp_status_t st = stsp_step(&c, tick, x, u);
+            assert_int_equal(st, stsp_step(&ref, tick, x, u_ref));
+            assert_int_equal(f32_bits(u[0]), f32_bits(u_ref[0]));
+        }
+        assert_int_equal(stsp_reset(&c), STSP_OK);
+        assert_int_equal(stsp_step(&c, 0u, xs[1], u), STSP_OK);
+        assert_int_equal(stsp_verify(&c), STSP_ERR_TABLE_CHANGED);
+        /* Stopped: every later call refuses, and step holds zeros in the validated u[nu]. */
+        u[0] = 5.0f;
+        assert_int_equal(stsp_step(&c, 1u, xs[1], u), STSP_ERR_NOT_INITIALIZED);
+        assert_true(f32_bits(u[0]) == 0u);
+        assert_int_equal(stsp_reset(&c), STSP_ERR_NOT_INITIALIZED);
+        assert_int_equal(stsp_verify(&c), STSP_ERR_NOT_INITIALIZED);
+        assert_int_equal(stsp_step(&c, 1u, xs[1], u), STSP_ERR_NOT_INITIALIZED);
+    }
+}
+
+/* The case: table B (nu = 2) changed to nu = 3 after init, u exactly 2 long. */
+static void test_step_writes_only_the_validated_inputs(void **state)
+{
+    stsp_table_t tb = make_table_b();
+    const float x[1] = {1.5f};
+    float u[2];
+    stsp_ctrl_t c;
+    (void)state;
+    if (stsp_init(&c, &tb) != STSP_OK) {
+        assert_int_equal(EXPECT_TABLE_B, STSP_ERR_BAD_DIMS); /* fixed 2/1/2 build */
+        return;
+    }
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
+    tb.nu = 3u;
+    assert_int_equal(stsp_step(&c, 1u, x, u), STSP_OK);
+    assert_true(u[0] == -1.5f && u[1] == -1.5f);
+    assert_int_equal(stsp_step(&c, 5u, x, u), STSP_ERR_TICK_RANGE);
+    assert_true(u[0] == 0.0f && u[1] == 0.0f);
+    assert_int_equal(stsp_verify(&c), STSP_ERR_TABLE_CHANGED);
+    u[0] = u[1] = 5.0f;
+    assert_int_equal(stsp_step(&c, 2u, x, u), STSP_ERR_NOT_INITIALIZED);
+    assert_true(u[0] == 0.0f && u[1] == 0.0f);
+}
+
+/* stage_start changed in RAM after init (a data change: the CRC covers it). The stage end the
+ * hot path compares with stays within the validated n_ticks, so a stage "longer" than the
+ * table never reads K beyond its last tick; verify then reports the CRC. */
+static void test_changed_stage_starts_stay_in_bounds(void **state)
+{
+    uint32_t starts[NS + 1u];
+    const float x[NX] = {0.5f, -0.25f};
+    stsp_table_t t;
+    stsp_ctrl_t c;
+    float u[NU];
+    uint32_t tick, which;
+    (void)state;
+    for (which = 1u; which <= NS; ++which) {
+        memcpy(starts, stage_start, sizeof starts);
+        t = make_table();
+        t.stage_start = starts;
+        assert_int_equal(stsp_init(&c, &t), STSP_OK);
+        starts[which] = 100u;
+        for (tick = 0u; tick < NT; ++tick) {
+            assert_true(stsp_step(&c, tick, x, u) >= STSP_OK);
+        }
+        assert_int_equal(stsp_step(&c, NT, x, u), STSP_ERR_TICK_RANGE);
+        assert_int_equal(stsp_verify(&c), STSP_ERR_BAD_CRC);
+        u[0] = 5.0f;
+        assert_int_equal(stsp_step(&c, 0u, x, u), STSP_ERR_NOT_INITIALIZED);
+        assert_true(f32_bits(u[0]) == 0u);
+    }
+}
+
+/* x and u may be the same buffer or overlap: every read of x happens before the first write
+ * of u, so the statuses and commands are those of separate buffers. In particular a finite
+ * state whose command overflows is STSP_ERR_NONFINITE_OUTPUT (it was reported as
+ * STSP_ERR_NONFINITE_STATE when u overwrote x before the cold path looked at x). */
+static void test_state_and_command_may_share_a_buffer(void **state)
+{
+    const stsp_table_t *tables[3] = {&table, &table_tight, &table_wide};
+    const float xs[8][NX] = {{0.36f, 0.0f}, {1.0f, 0.0f}, {-1.0f, 0.0f}, {FLT_MAX, -FLT_MAX},
+                             {0.0f, 0.9f}, {NAN, 1.0f}, {0.5f, -INFINITY}, {2.0f, 1.0f}};
+    const uint32_t ticks[10] = {0u, 1u, 1u, 2u, 3u, 3u, 4u, 4u, 2u, 4u};
+    uint32_t tb, off, n, k;
+    (void)state;
+    for (tb = 0u; tb < 3u; ++tb) {
+        for (off = 0u; off < NX; ++off) {        /* u = &buf[0] (same buffer), &buf[1] */
+            for (k = 0u; k < 8u; ++k) {          /* the state of the checked call */
+                stsp_ctrl_t a, b;
+                assert_int_equal(stsp_init(&a, tables[tb]), STSP_OK);
+                assert_int_equal(stsp_init(&b, tables[tb]), STSP_OK);
+                for (n = 0u; n < 10u; ++n) {
+                    const float *x = xs[(n == k % 10u) ? k : n % 3u];
+                    float buf[NX], u[NU];
+                    stsp_status_t st_a, st_b;
+                    memcpy(buf, x, sizeof buf);
+                    st_a = stsp_step(&a, ticks[n], x, u);
+                    st_b = stsp_step(&b, ticks[n], buf, &buf[off]);
+                    assert_int_equal(st_b, st_a);
+                    assert_int_equal(f32_bits(buf[off]), f32_bits(u[0]));
+                    assert_memory_equal(&a, &b, sizeof a);
+                }
+            }
+        }
+    }
+}
+
+/* The overflow itself, on an ordinary tick and on a latch, with one shared buffer. */
+static void test_shared_buffer_overflow_is_an_output_error(void **state)
+{
+    float buf[NX] = {1.0f, 1.0f};
+    stsp_ctrl_t c;
+    (void)state;
+    assert_int_equal(stsp_init(&c, &table), STSP_OK);
+    buf[0] = FLT_MAX; buf[1] = -FLT_MAX;          /* the latch overflows (cold path) */
+    assert_int_equal(stsp_step(&c, 0u, buf, buf), STSP_ERR_NONFINITE_OUTPUT);
+    assert_true(f32_bits(buf[0]) == 0u && buf[1] == -FLT_MAX);
+    buf[0] = 1.0f; buf[1] = 1.0f;
+    assert_int_equal(stsp_step(&c, 0u, buf, buf), STSP_OK);
+    buf[0] = FLT_MAX; buf[1] = -FLT_MAX;          /* the law overflows (ordinary tick) */
+    assert_int_equal(stsp_step(&c, 1u, buf, buf), STSP_ERR_NONFINITE_OUTPUT);
+    assert_true(f32_bits(buf[0]) == 0u);
+    buf[0] = INFINITY; buf[1] = 1.0f;             /* a non-finite state stays a state error */
+    assert_int_equal(stsp_step(&c, 1u, buf, buf), STSP_ERR_NONFINITE_STATE);
+    assert_true(f32_bits(buf[0]) == 0u);
 }
 
 /* Seeded random walk over ticks, states (with NaN, Inf, huge and subnormal entries), resets
@@ -885,6 +1060,37 @@ static void test_band_tables_are_checked(void **state)
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_CRC);
 }
 
+/* The band dual's header (a struct of its own) changed after init: the stage-0 latch solves
+ * the dual init validated (its copy of q, nx and the array addresses), and verify reports
+ * STSP_ERR_TABLE_CHANGED. Under ASan a solve through the changed header (more rows, a longer
+ * state, a shorter array) aborts. */
+static void test_band_header_change_after_init(void **state)
+{
+    const float upper[2] = {0.5f, 3.0f};
+    int which;
+    (void)state;
+    for (which = 0; which < 4; ++which) {
+        stsp_bandqp_t qp = make_band_d();
+        const stsp_bandqp_t ref_qp = make_band_d();
+        const stsp_table_t t = make_table_d(&qp), tr = make_table_d(&ref_qp);
+        stsp_ctrl_t c, r;
+        float u[1], u_ref[1];
+        assert_int_equal(stsp_init(&c, &t), STSP_OK);
+        assert_int_equal(stsp_init(&r, &tr), STSP_OK);
+        switch (which) {
+        case 0: qp.q = 3u; break;
+        case 1: qp.nx = 3u; break;
+        case 2: qp.Nt = d_mt; break;            /* 2 doubles where 4 were */
+        default: qp.q = 1u; break;
+        }
+        assert_int_equal(stsp_step(&c, 0u, upper, u), stsp_step(&r, 0u, upper, u_ref));
+        assert_int_equal(f32_bits(u[0]), f32_bits(u_ref[0]));
+        assert_memory_equal(c.v, r.v, sizeof c.v);
+        assert_int_equal(stsp_verify(&c), STSP_ERR_TABLE_CHANGED);
+        assert_int_equal(stsp_verify(&r), STSP_OK);
+    }
+}
+
 /* The solver's proven bound, 3^(band rows) candidate active sets, pinned on its worst cases.
  * W = I, e = Nt x0 + mt = 2 + i/8 on row i, bands [-1, 0.5 + i/16]: every row is above its
  * band, so the only optimal active set has every row at its upper bound, lam = e - hi > 0,
@@ -981,10 +1187,16 @@ int main(void)
         cmocka_unit_test_setup(test_corrupt_tables_are_refused, setup),
         cmocka_unit_test_setup(test_wrong_dimensions, setup),
         cmocka_unit_test_setup(test_verify_detects_a_changed_table, setup),
+        cmocka_unit_test_setup(test_step_and_verify_after_a_header_change, setup),
+        cmocka_unit_test_setup(test_step_writes_only_the_validated_inputs, setup),
+        cmocka_unit_test_setup(test_changed_stage_starts_stay_in_bounds, setup),
+        cmocka_unit_test_setup(test_state_and_command_may_share_a_buffer, setup),
+        cmocka_unit_test_setup(test_shared_buffer_overflow_is_an_output_error, setup),
         cmocka_unit_test_setup(test_random_walk_against_model, setup),
         cmocka_unit_test(test_band_latch_solves_the_dual),
         cmocka_unit_test(test_band_fallback_and_nonfinite),
         cmocka_unit_test(test_band_tables_are_checked),
+        cmocka_unit_test(test_band_header_change_after_init),
         cmocka_unit_test(test_bandqp_candidate_bound),
         cmocka_unit_test_setup(test_status_strings, setup),
     };

@@ -486,6 +486,113 @@ static void test_state_conversion(void **state)
     assert_int_equal(stsp_command_to_f32(&c, NULL, u), STSP_ERR_NULL);
 }
 
+/* The table changed after init (as in test_controller.c for float32). Header: the steps and
+ * the conversions keep to what init validated (the commands of the unchanged table, nothing
+ * read or written past the arrays, x and u), verify reports STSP_ERR_TABLE_CHANGED and the
+ * stopped instance holds zeros. Data (the next test): gains overwritten far beyond the row
+ * bound init checked give wrong commands until verify reports the CRC, but never a signed
+ * overflow (the law and the latch add modulo 2^32 for Q15, 2^64 for Q31; UBSan aborts the
+ * _san builds on one). */
+static void test_table_changed_after_init(void **state)
+{
+    const stsp_scalar_t x[NX] = {QMAX, QMIN};
+    const stsp_f32_t xf[NX] = {1.0f, -0.0625f};
+    const stsp_scalar_t uq[NU] = {(stsp_scalar_t)-3};
+    stsp_table_t t;
+    stsp_ctrl_t c, ref;
+    stsp_scalar_t u[NU], u_ref[NU], xq[NX], xq_ref[NX];
+    stsp_f32_t uf[NU], uf_ref[NU];
+    uint32_t which, tick;
+    (void)state;
+    for (which = 0u; which < 6u; ++which) {
+        t = make_table();
+        assert_int_equal(stsp_init(&c, &t), STSP_OK);
+        assert_int_equal(stsp_init(&ref, &t), STSP_OK);
+        assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
+        assert_int_equal(stsp_step(&ref, 0u, x, u_ref), STSP_OK);
+        switch (which) {
+        case 0u: t.nx = NX + 1u; break;
+        case 1u: t.nu = NU + 1u; break;
+        case 2u: t.n_ticks = NT + 1u; break;
+        case 3u: t.K = k0; break;               /* an array half as long */
+        case 4u: t.x_exp = u_exp; break;        /* one exponent where two were */
+        default: t.n_latch = NL + 1u; break;
+        }
+        for (tick = 1u; tick <= NT; ++tick) {
+            assert_int_equal(stsp_step(&c, tick, x, u), stsp_step(&ref, tick, x, u_ref));
+            assert_int_equal(u[0], u_ref[0]);
+        }
+        assert_int_equal(stsp_state_to_q(&c, xf, xq), stsp_state_to_q(&ref, xf, xq_ref));
+        assert_memory_equal(xq, xq_ref, sizeof xq);
+        assert_int_equal(stsp_command_to_f32(&c, uq, uf), stsp_command_to_f32(&ref, uq, uf_ref));
+        assert_memory_equal(uf, uf_ref, sizeof uf);
+        assert_int_equal(stsp_verify(&c), STSP_ERR_TABLE_CHANGED);
+        u[0] = 7;
+        assert_int_equal(stsp_step(&c, 1u, x, u), STSP_ERR_NOT_INITIALIZED);
+        assert_int_equal(u[0], 0);
+        assert_int_equal(stsp_state_to_q(&c, xf, xq), STSP_ERR_NOT_INITIALIZED);
+    }
+}
+
+static void test_gains_changed_after_init_do_not_overflow(void **state)
+{
+    const stsp_scalar_t x[NX] = {QMIN, QMIN};
+    stsp_table_t t = make_table();
+    stsp_ctrl_t c;
+    stsp_scalar_t u[NU];
+    uint32_t tick, i;
+    (void)state;
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
+    for (i = 0u; i < NT * NU * NX; ++i) {
+        K[i] = QMIN;                            /* K x alone: 2 * 2^(2F) per row */
+    }
+    for (i = 0u; i < NT * NU * NL; ++i) {
+        L[i] = QMIN;
+    }
+    for (i = 0u; i < NS * NL * NX; ++i) {
+        Lambda[i] = QMIN;
+    }
+    k0[1] = QMAX;
+    lambda0[0] = QMAX;
+    for (tick = 1u; tick < NT; ++tick) {
+        assert_int_equal(stsp_step(&c, tick, x, u), STSP_OK); /* no limits: no error path */
+    }
+    assert_int_equal(stsp_reset(&c), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);    /* the latch as well */
+    assert_int_equal(stsp_verify(&c), STSP_ERR_BAD_CRC);
+}
+
+/* x and u may be the same buffer or overlap: the same statuses and commands as separate
+ * buffers (every read of x happens before the first write of u), with and without limits. */
+static void test_state_and_command_may_share_a_buffer(void **state)
+{
+    const stsp_scalar_t lo[NU] = {(stsp_scalar_t)-3}, hi[NU] = {(stsp_scalar_t)2};
+    const uint32_t ticks[9] = {0u, 1u, 1u, 2u, 3u, 3u, 4u, 2u, 4u};
+    uint32_t lim, off, trial, n;
+    (void)state;
+    for (lim = 0u; lim < 2u; ++lim) {
+        const stsp_table_t t = (lim != 0u) ? make_table_limited(lo, hi) : make_table();
+        for (off = 0u; off < NX; ++off) {
+            for (trial = 0u; trial < 50u; ++trial) {
+                stsp_ctrl_t a, b;
+                assert_int_equal(stsp_init(&a, &t), STSP_OK);
+                assert_int_equal(stsp_init(&b, &t), STSP_OK);
+                for (n = 0u; n < 9u; ++n) {
+                    stsp_scalar_t x[NX], buf[NX], u[NU];
+                    x[0] = random_q();
+                    x[1] = random_q();
+                    memcpy(buf, x, sizeof buf);
+                    assert_int_equal(stsp_step(&b, ticks[n], buf, &buf[off]),
+                                     stsp_step(&a, ticks[n], x, u));
+                    assert_int_equal(buf[off], u[0]);
+                    assert_memory_equal(&a, &b, sizeof a);
+                }
+            }
+        }
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -499,6 +606,9 @@ int main(void)
         cmocka_unit_test_setup(test_saturation_in_command_units, setup),
         cmocka_unit_test_setup(test_ticks_as_float, setup),
         cmocka_unit_test_setup(test_state_conversion, setup),
+        cmocka_unit_test_setup(test_table_changed_after_init, setup),
+        cmocka_unit_test_setup(test_gains_changed_after_init_do_not_overflow, setup),
+        cmocka_unit_test_setup(test_state_and_command_may_share_a_buffer, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -31,13 +31,16 @@
  * VMLS.F32: chained, not fused (the product is rounded, then the difference), so the same
  * operations in the same order; define STSP_NO_VFP_MAC for separate VMUL and VSUB.
  *
- * Buffers: stsp_ctrl_t holds STSP_MAX_LATCH scalars for v plus 24 bytes (32-bit targets:
- * 88 bytes with the default STSP_MAX_LATCH = 16; 56 bytes in the Q15 build); stsp_step() uses
+ * Buffers: stsp_ctrl_t holds STSP_MAX_LATCH scalars for v, 24 bytes of state and the
+ * validated copy of the table header (stsp_header_t); on 32-bit targets 164 bytes with the
+ * default STSP_MAX_LATCH = 16 (float32), 116 (Q15), 148 (Q31). stsp_step() uses
  * STSP_MAX_LATCH + STSP_MAX_NU scalars of stack, plus, on the stage-0 latch of a band table
  * only, the band solver's work area and multipliers (sizeof(stsp_bandqp_work_t) +
  * STSP_BANDQP_MAX doubles, about 0.8 KB with STSP_BANDQP_MAX = 8; docs/firmware.md). The
- * tables stay where the caller put them
- * (const, normally flash) and are never copied.
+ * tables stay where the caller put them (const, normally flash) and are never copied; their
+ * header (dimensions, array addresses) is: after stsp_init() every call works from the
+ * instance's copy, so a header changed later cannot move an access outside the arrays init
+ * checked (stsp_verify() reports the change).
  *
  * Compile-time dimensions (optional): define STSP_FIXED_NX, STSP_FIXED_NU and
  * STSP_FIXED_N_LATCH (all three, for the library and every file that includes this header)
@@ -161,7 +164,8 @@ typedef enum {
                                          FLT_MAX: latched the design's affine map
                                          Lambda x + lambda0 instead */
     STSP_ERR_NULL = -1,             /**< a pointer argument is NULL */
-    STSP_ERR_NOT_INITIALIZED = -2,  /**< step/reset before a successful init */
+    STSP_ERR_NOT_INITIALIZED = -2,  /**< step/reset before a successful init, or after
+                                         stsp_verify() stopped the instance */
     STSP_ERR_BAD_MAGIC = -3,        /**< the table header's magic is wrong */
     STSP_ERR_BAD_VERSION = -4,      /**< table format or scalar variant not supported */
     STSP_ERR_BAD_DIMS = -5,         /**< dimensions zero, above the STSP_MAX_* limits, not the
@@ -176,8 +180,11 @@ typedef enum {
                                          lies outside [u_min, u_max]; fixed point: a scale
                                          exponent beyond +-STSP_Q_EXP_MAX, or a row whose
                                          absolute sum exceeds 2^F - 1 (see stsp_step) */
-    STSP_ERR_BAD_PROBLEM = -12      /**< stsp_init_problem(): the table's problem_sha256 is not
+    STSP_ERR_BAD_PROBLEM = -12,     /**< stsp_init_problem(): the table's problem_sha256 is not
                                          the expected one (tables from another problem file) */
+    STSP_ERR_TABLE_CHANGED = -13    /**< stsp_verify(): the table header (magic, version, kind,
+                                         a dimension, an array address, the band dual's
+                                         header) is not the one stsp_init() validated */
 } stsp_status_t;
 
 /**
@@ -232,6 +239,38 @@ typedef struct {
 } stsp_table_t;
 
 /**
+ * Private to the controller: the table header as stsp_init() validated it. stsp_step(),
+ * stsp_reset() and the conversions use only this copy, never the header again: every loop
+ * bound and index comes from here, so a header changed after init (or a band dual's header)
+ * cannot move an access outside the arrays init checked. stsp_verify() compares the header
+ * with it before it reads any array.
+ */
+typedef struct {
+    const stsp_scalar_t *K;
+    const stsp_scalar_t *k0;
+    const stsp_scalar_t *L;
+    const stsp_scalar_t *u_min;
+    const stsp_scalar_t *u_max;
+    const stsp_scalar_t *Lambda;
+    const stsp_scalar_t *lambda0;
+    const uint32_t *stage_start;
+    const uint16_t *stage_np;
+#ifdef STSP_ARITH_FIXED
+    const int8_t *x_exp;
+    const int8_t *u_exp;
+    const int8_t *v_exp;
+#else
+    const stsp_bandqp_t *band_qp; /**< the table's pointer (NULL: no band dual) */
+    stsp_bandqp_t band;           /**< copy of *band_qp (all zero without one) */
+#endif
+    uint32_t n_ticks;
+    uint16_t nx;
+    uint16_t nu;
+    uint16_t n_latch;
+    uint16_t n_stages;
+} stsp_header_t;
+
+/**
  * One controller instance; caller-owned (stack, static or a struct of the application).
  * Read-only for the caller: `sat_mask`, `stage`, `next_tick`, `latched`; the rest is private.
  */
@@ -246,11 +285,15 @@ typedef struct {
                                   (not updated by other statuses) */
     uint16_t limited;        /**< nonzero if the table has a finite limit (private) */
     stsp_scalar_t v[STSP_MAX_LATCH];
+    stsp_header_t checked;   /**< the validated table header (private) */
 } stsp_ctrl_t;
 
 /** Value of stsp_ctrl_t.ready after a successful stsp_init(): a Thumb-2 immediate that no
  * byte-fill pattern of uninitialised memory (0x00, 0xFF, 0xA5, 0xCC, ...) matches. */
 #define STSP_CTRL_READY 0x53005300u
+/** Value of stsp_ctrl_t.ready after stsp_verify() found the table changed (private): the
+ * instance is stopped, and stsp_step() holds zeros in the validated u[nu]. */
+#define STSP_CTRL_STOPPED 0x53015301u
 
 /**
  * CRC-32 (IEEE 802.3 polynomial, reflected, as zlib) of the table's canonical serialization:
@@ -262,12 +305,14 @@ typedef struct {
  * its q and nx as u32 and Nt, mt, W, lo, hi as little-endian binary64 bit patterns. Last,
  * the 32 bytes of problem_sha256. Independent of the
  * target's byte order. The table's dimensions and pointers must already be valid (stsp_init()
- * checks them first).
+ * checks them first): the arrays are read as long as the header says.
  */
 uint32_t stsp_table_crc32(const stsp_table_t *table);
 
 /**
- * Bind a table to an instance after verifying its header, dimensions, CRC and values.
+ * Bind a table to an instance after verifying its header, dimensions, CRC and values; the
+ * instance keeps a copy of the validated header (stsp_header_t) and works from it from then on.
+ * Precondition (as for stsp_table_crc32()): each array is as long as the header says.
  * On any error the instance is left not ready (every step returns STSP_ERR_NOT_INITIALIZED).
  * Cost: one pass over every table entry for the CRC and one for the finiteness check.
  */
@@ -294,9 +339,15 @@ stsp_status_t stsp_init_problem(stsp_ctrl_t *ctrl, const stsp_table_t *table, ui
 stsp_status_t stsp_reset(stsp_ctrl_t *ctrl);
 
 /**
- * Recompute the bound table's CRC-32 (e.g. from a background task, to detect flash that
- * changed after init). STSP_ERR_BAD_CRC also makes the instance not ready, so that every later
- * step returns STSP_ERR_NOT_INITIALIZED (safe hold) until a new init.
+ * Check that the bound table is still the one stsp_init() validated (e.g. from a background
+ * task, to detect flash or RAM that changed after init). First the header: magic, version and
+ * scalar kind, every dimension and array address, and the band dual's header, against the
+ * instance's copy: a difference is STSP_ERR_TABLE_CHANGED, and no array is read through the
+ * changed header. Then the CRC-32, recomputed over the arrays init validated (and tick_hz,
+ * problem_sha256 and the crc32 field of the header): a difference is STSP_ERR_BAD_CRC. Either
+ * error stops the instance: every later stsp_step() returns STSP_ERR_NOT_INITIALIZED with u
+ * all zeros (the safe hold value, written to the validated u[nu]), reset and verify return
+ * STSP_ERR_NOT_INITIALIZED, until a new init.
  */
 stsp_status_t stsp_verify(stsp_ctrl_t *ctrl);
 
@@ -305,7 +356,12 @@ stsp_status_t stsp_verify(stsp_ctrl_t *ctrl);
  * On a negative status u is all zeros (the documented safe hold value) and the instance is
  * unchanged; otherwise u is finite and u_min[i] <= u[i] <= u_max[i]. Exceptions: with
  * u == NULL nothing is written, and before a successful init (STSP_ERR_NOT_INITIALIZED) u is
- * not written because nu is unknown. See docs/firmware.md for every status's response.
+ * not written because nu is unknown (after stsp_verify() stopped the instance it is zeroed).
+ * nx and nu are the dimensions init validated, whatever the table header says later.
+ * x and u may be the same buffer or overlap: every read of x happens before the first write
+ * of u, so the status and the command are those of separate buffers (the overlapping entries
+ * of x then hold the command). u must not overlap the instance or the table.
+ * See docs/firmware.md for every status's response.
  */
 stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
                         stsp_scalar_t *u);

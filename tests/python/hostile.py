@@ -1,0 +1,325 @@
+"""Generators of hostile inputs for the CLI contract test (`test_hostile_inputs.py`).
+
+A case is a problem document (a dict, written as TOML by `to_toml`) or raw file bytes, plus a
+command line. Problem cases start from one of a few small valid problems (`BASES`) and apply
+one or more mutations, each from a named class (`MUTATIONS`), so a failure says which class of
+input broke the contract. Nothing here runs the tool; the test does.
+"""
+from __future__ import annotations
+
+import copy
+import math
+from typing import Any, Callable
+
+from hypothesis import strategies as st
+
+# ---------------------------------------------------------------------------------------
+# Valid starting points: small (few ticks) so that a mutation that is accepted designs fast.
+
+CART = {  # the docs' minimal file (noise-free)
+    "name": "cart", "x0": [0.0, 0.0], "tick_hz": 10,
+    "dynamics": {"A": [[0, 1], [0, 0]], "B": [[0], [1]]},
+    "cost": {"R": [[1]]},
+    "knots": [{"t": 1.0, "constraint": {"C": [[1, 0]], "value": [1.0]}},
+              {"t": 2.0, "constraint": {"C": [[1, 0], [0, 1]], "value": [0.0, 0.0]}}],
+}
+
+NOISY = {  # state- and input-multiplicative noise, penalty and constraint, limits, stages
+    "name": "di", "t0": 0.0, "x0": [0.5, 0.0], "tick_hz": 20, "u_min": -50.0, "u_max": [50.0],
+    "dynamics": {"A": [[0, 1], [0, 0]], "B": [[0], [1]],
+                 "noise": [{"state": 1, "G": [[0], [0.3]]}, {"input": 0, "G": [[0], [0.1]]}]},
+    "cost": {"Q": [[0.1, 0], [0, 0]], "R": [[1]], "q": [0.0, 0.0], "rho": 0.0},
+    "knots": [{"t": 1.0, "penalty": {"C": [[1, 0]], "target": [1.0], "weight": 2.0},
+               "constraint": {"C": [[1, 0]], "value": [1.0]}},
+              {"t": 2.0, "constraint": {"C": [[1, 0], [0, 1]], "value": [0.0, 0.0]}}],
+    "stages": [{"cost": {"R": [[2]]}}, {"dynamics": {"A": [[0, 1], [0, -1]]}}],
+}
+
+BANDS = {  # joint mode, band constraints, a region, fixed-point arithmetic
+    "name": "band", "x0": [0.0, 0.0], "tick_hz": 10,
+    "design": {"mode": "joint", "arith": "q15"},
+    "dynamics": {"A": [[0, 1], [0, 0]], "B": [[0], [1]],
+                 "noise": [{"state": 0, "G": [[0.1], [0]]}]},
+    "cost": {"R": [[1]]},
+    "knots": [{"t": 1.0, "constraint": {"C": [[1, 0]], "lower": [0.5], "upper": [1.5]}},
+              {"t": 2.0, "constraint": {"C": [[1, 0], [0, 1]], "value": [0.0, 0.0]}}],
+    "regions": [{"t": [0.2, 0.8], "every": 0.2, "C": [[0, 1]], "lower": [-3.0], "upper": [3.0]}],
+}
+
+VARYING = {  # time-varying samples, tracking
+    "name": "tv", "x0": [0.0], "tick_hz": 10,
+    "dynamics": {"A": {"t": [0.0, 2.0], "values": [[[0.1]], [[0.3]]]}, "B": [[1]],
+                 "noise": [{"state": 0, "G": [[0.2]]}]},
+    "cost": {"R": [[1]], "tracking": {"C": [[1]], "weight": [[1]],
+                                      "t": [0.0, 2.0], "y0": [[0.0], [1.0]]}},
+    "knots": [{"t": 1.0, "constraint": {"C": [[1]], "value": [1.0]}},
+              {"t": 2.0, "penalty": {"C": [[1]], "target": [2.0], "weight": 1.0}}],
+}
+
+BASES = {"cart": CART, "noisy": NOISY, "bands": BANDS, "varying": VARYING}
+
+
+# ---------------------------------------------------------------------------------------
+# TOML writer: inline tables and arrays only, so any dict/list tree is one valid document.
+
+def _key(k: str) -> str:
+    bare = k and all(c.isalnum() and c.isascii() or c in "_-" for c in k)
+    return k if bare else _string(k)
+
+
+def _string(s: str) -> str:
+    out = []
+    for c in s:
+        if c in '"\\':
+            out.append("\\" + c)
+        elif ord(c) < 0x20 or ord(c) == 0x7F:
+            out.append(f"\\u{ord(c):04x}")
+        else:
+            out.append(c)
+    return '"' + "".join(out) + '"'
+
+
+def _value(v: Any) -> str:
+    # Iterative for lists nested thousands deep (a recursive writer would overflow first).
+    if isinstance(v, list) and v and isinstance(v[0], list) and _depth(v) > 50:
+        d = _depth(v)
+        inner = v
+        for _ in range(d - 1):
+            inner = inner[0]
+        return "[" * (d - 1) + _value(inner) + "]" * (d - 1)
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, str):
+        return _string(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + "}"
+    raise TypeError(type(v))
+
+
+def _depth(v: Any) -> int:
+    d = 0
+    while isinstance(v, list) and len(v) == 1:
+        d, v = d + 1, v[0]
+    return d
+
+
+def to_toml(doc: dict) -> str:
+    """A TOML document for `doc`: one ``key = value`` line per top-level key."""
+    return "".join(f"{_key(k)} = {_value(v)}\n" for k, v in doc.items())
+
+
+# ---------------------------------------------------------------------------------------
+# Mutations. Each takes (doc, draw) and edits doc in place; `draw` draws from hypothesis.
+
+def _paths(node: Any, prefix=()) -> list[tuple]:
+    """Every path to a value in the document (dict keys and list indices)."""
+    out, stack = [], [(node, prefix)]
+    while stack:
+        cur, p = stack.pop()
+        if p:
+            out.append(p)
+        if isinstance(cur, dict):
+            stack.extend((v, p + (k,)) for k, v in cur.items())
+        elif isinstance(cur, list) and len(p) < 12:
+            stack.extend((v, p + (i,)) for i, v in enumerate(cur))
+    return sorted(out, key=repr)
+
+
+def _get(doc, path):
+    for k in path:
+        doc = doc[k]
+    return doc
+
+
+def _set(doc, path, value):
+    _get(doc, path[:-1])[path[-1]] = value
+
+
+def _pick_path(doc, draw, want: Callable[[Any], bool] = lambda v: True):
+    paths = [p for p in _paths(doc) if want(_get(doc, p))]
+    return draw(st.sampled_from(paths)) if paths else None
+
+
+EXTREME_NUMBERS = [0, -0.0, 1, -1, 1e308, -1e308, 1.7976931348623157e308, 1e300, 1e-300,
+                   5e-324, 3.5e38, -3.5e38, 1e39, 2**31, 2**32, 2**63 - 1, -2**63, 10**30,
+                   float("nan"), float("inf"), float("-inf"), 0.1, 1e-9]
+ODD_VALUES = ["", "1.0", "nan", True, False, {}, [], [[]], [[[1.0]]], {"a": 1}, [1, "x"],
+              [None] if False else [1.0, [2.0]]]
+
+
+def m_extreme_number(doc, draw):
+    p = _pick_path(doc, draw, lambda v: isinstance(v, (int, float)) and not isinstance(v, bool))
+    if p:
+        _set(doc, p, draw(st.sampled_from(EXTREME_NUMBERS)))
+
+
+def m_wrong_type(doc, draw):
+    p = _pick_path(doc, draw)
+    if p:
+        _set(doc, p, copy.deepcopy(draw(st.sampled_from(ODD_VALUES))))
+
+
+def m_delete_key(doc, draw):
+    p = _pick_path(doc, draw)
+    if p:
+        parent = _get(doc, p[:-1])
+        if isinstance(parent, dict):
+            del parent[p[-1]]
+        elif len(parent) > 0:
+            parent.pop(p[-1])
+
+
+def m_unknown_key(doc, draw):
+    p = _pick_path(doc, draw, lambda v: isinstance(v, dict))
+    target = _get(doc, p) if p else doc
+    target[draw(st.sampled_from(["Aa", "tick", "weight ", "x0", "é", "constraint", "G"]))] = 1.0
+
+
+def m_shape(doc, draw):
+    """Drop, duplicate or append an element, or wrap/unwrap a value in a list."""
+    p = _pick_path(doc, draw, lambda v: isinstance(v, list))
+    if not p:
+        return
+    v = _get(doc, p)
+    how = draw(st.sampled_from(["drop", "dup", "append", "wrap", "unwrap", "empty"]))
+    if how == "drop" and v:
+        v.pop(draw(st.integers(0, len(v) - 1)))
+    elif how == "dup" and v:
+        v.append(copy.deepcopy(v[-1]))
+    elif how == "append":
+        v.append(0.0)
+    elif how == "wrap":
+        _set(doc, p, [v])
+    elif how == "unwrap" and v:
+        _set(doc, p, v[0])
+    elif how == "empty":
+        _set(doc, p, [])
+
+
+def m_deep_nesting(doc, draw):
+    p = _pick_path(doc, draw)
+    if p:
+        v = _get(doc, p)
+        for _ in range(draw(st.sampled_from([40, 300, 1000, 5000]))):
+            v = [v]
+        _set(doc, p, v)
+
+
+def m_name(doc, draw):
+    doc["name"] = draw(st.sampled_from([
+        "", "1abc", "a-b", "double", "int", "main", "harness", "harness_table", "stsp_max",
+        "stsp_fixed", "STSP_MAX_NX", "stsp", "stsp_ctrl_t", "_Foo", "__x", "a" * 250, "a" * 64,
+        "é", "con", "nul", "x/y", "../evil", ".hidden", "memcpy", "NULL", "errno", "float",
+        "uint32_t", "ok_name",
+    ]))
+
+
+def m_dimensions(doc, draw):
+    """Sizes at and beyond the firmware's limits: n (x0), m (B columns), stages (knots)."""
+    which = draw(st.sampled_from(["n", "m", "stages", "latch"]))
+    size = draw(st.sampled_from([16, 17, 32, 33, 64, 200, 300]))
+    if which == "n":
+        n = size
+        doc.clear()
+        doc.update({"name": "big", "x0": [0.0] * n, "tick_hz": 10,
+                    "dynamics": {"A": [[0.0] * n for _ in range(n)],
+                                 "B": [[1.0] if i == 0 else [0.0] for i in range(n)]},
+                    "cost": {"R": [[1]]},
+                    "knots": [{"t": 1.0, "penalty": {"C": [[1.0] + [0.0] * (n - 1)],
+                                                     "target": [1.0], "weight": 1.0}}]})
+    elif which == "m":
+        doc.clear()
+        doc.update({"name": "wide", "x0": [0.0], "tick_hz": 10,
+                    "dynamics": {"A": [[0.0]], "B": [[1.0] * size]},
+                    "cost": {"R": [[1.0 if i == j else 0.0 for j in range(size)]
+                                   for i in range(size)]},
+                    "knots": [{"t": 1.0, "constraint": {"C": [[1.0]], "value": [1.0]}}]})
+    elif which == "stages":
+        doc.pop("stages", None)
+        doc.pop("regions", None)
+        doc["tick_hz"] = 10
+        doc["knots"] = [{"t": 0.1 * (k + 1), "penalty": {"C": [[1] + [0] * (len(doc["x0"]) - 1)],
+                                                        "target": [0.0], "weight": 1.0}}
+                        for k in range(size)]
+    else:  # many constraint rows at one knot: the multiplier width
+        n = len(doc["x0"])
+        doc["knots"][-1]["constraint"] = {"C": [[1.0] + [0.0] * (n - 1)] * size,
+                                          "value": [0.0] * size}
+
+
+def m_work(doc, draw):
+    """Inputs that ask for much work: a high tick rate, long horizons, dense region grids."""
+    how = draw(st.sampled_from(["tick_hz", "horizon", "region_grid", "knot_time"]))
+    if how == "tick_hz":
+        doc["tick_hz"] = draw(st.sampled_from([10**6, 10**8, 10**9, 2**32 - 1, 2**32]))
+    elif how == "horizon":
+        doc["knots"][-1]["t"] = draw(st.sampled_from([1e5, 1e7, 1e12]))
+    elif how == "region_grid":
+        doc.setdefault("design", {})["mode"] = "joint"
+        doc["tick_hz"] = 100000
+        doc["regions"] = [{"t": [0.0, 1.0], "every": 1e-5, "C": [[1] + [0] * (len(doc["x0"]) - 1)],
+                           "lower": [-10.0], "upper": [10.0]}]
+    else:
+        doc["knots"][-1]["t"] = draw(st.sampled_from([1e308, 1e300, 1.7e308, 2.0 ** 70]))
+
+
+def m_scale(doc, draw):
+    """Well-formed numbers that overflow the design or float32: huge weights, states, A."""
+    how = draw(st.sampled_from(["Q", "x0", "value", "A", "weight", "R_tiny", "limits"]))
+    n = len(doc["x0"])
+    big = draw(st.sampled_from([1e30, 1e39, 1e100, 1e300, 1e308]))
+    if how == "Q":
+        doc["cost"]["Q"] = [[big if i == j else 0.0 for j in range(n)] for i in range(n)]
+    elif how == "x0":
+        doc["x0"] = [big] + doc["x0"][1:]
+    elif how == "value":
+        for kn in doc["knots"]:
+            if "constraint" in kn and "value" in kn["constraint"]:
+                kn["constraint"]["value"] = [big] * len(kn["constraint"]["value"])
+    elif how == "A":
+        doc["dynamics"]["A"] = [[draw(st.sampled_from([50.0, 800.0, 1e5])) if i == j else 0.0
+                                 for j in range(n)] for i in range(n)]
+    elif how == "weight":
+        for kn in doc["knots"]:
+            if "penalty" in kn:
+                kn["penalty"]["weight"] = big
+    elif how == "R_tiny":
+        m = len(doc["dynamics"]["B"][0]) if isinstance(doc["dynamics"]["B"], list) else 1
+        doc["cost"]["R"] = [[1e-300 if i == j else 0.0 for j in range(m)] for i in range(m)]
+    else:
+        doc["u_min"], doc["u_max"] = -big, big
+
+
+MUTATIONS: dict[str, Callable] = {
+    "extreme_number": m_extreme_number,
+    "wrong_type": m_wrong_type,
+    "delete_key": m_delete_key,
+    "unknown_key": m_unknown_key,
+    "shape": m_shape,
+    "deep_nesting": m_deep_nesting,
+    "name": m_name,
+    "dimensions": m_dimensions,
+    "work": m_work,
+    "scale": m_scale,
+}
+
+
+@st.composite
+def problem_cases(draw):
+    """(classes, base name, TOML text): a base problem with 1-2 mutations applied."""
+    base = draw(st.sampled_from(sorted(BASES)))
+    doc = copy.deepcopy(BASES[base])
+    classes = draw(st.lists(st.sampled_from(sorted(MUTATIONS)), min_size=1, max_size=2))
+    for cls in classes:
+        MUTATIONS[cls](doc, draw)
+    return tuple(classes), base, to_toml(doc)

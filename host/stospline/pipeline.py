@@ -113,6 +113,11 @@ def design_problem(problem: Problem, *, noise: bool = True,
         table = sample_design(design)
     else:
         raise ValueError(f"discretization must be one of {DISCRETIZATIONS}")
+    # A float32 entry that overflowed would make the oracle's moments non-finite: refuse it
+    # here, naming the cause, before evaluating the table as implemented.
+    strict.check_table_finite(problem, table, exact=lambda: (
+        sample_design(design, quantize=False) if isinstance(design, ContinuousDesign)
+        else design.table(quantize=False)))
     return Designed(problem, design, discretization, table, law,
                     evaluate_table(problem, table, path=False))
 

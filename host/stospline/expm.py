@@ -9,7 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["expm"]
+__all__ = ["expm", "NonFiniteMatrix"]
+
+
+class NonFiniteMatrix(FloatingPointError, ValueError):
+    """The matrix holds NaN or Inf (products of the problem's data overflowed)."""
 
 # Padé degree m -> the largest 1-norm for which [m/m] is accurate to unit roundoff (Table 2.3)
 _THETA = {3: 1.495585217958292e-2, 5: 2.539398330063230e-1, 7: 9.504178996162932e-1,
@@ -55,7 +59,7 @@ def expm(A) -> np.ndarray:
     if A.shape[0] == 0:
         return A.copy()
     if not np.all(np.isfinite(A)):
-        raise ValueError("expm needs a finite matrix")
+        raise NonFiniteMatrix("expm needs a finite matrix")
     norm = float(np.abs(A).sum(axis=0).max())
     powers = {2: A @ A}
     for m in (3, 5, 7, 9):

@@ -90,6 +90,15 @@ def design_problem(problem: Problem, *, noise: bool = True,
         Multipliers latched at every stage start, or once at t0 (see `multipliers`).
     """
     limits.check_mode(problem, mode)   # before the work: the firmware's STSP_MAX_LATCH
+    try:
+        return _design_problem(problem, noise=noise, discretization=discretization, mode=mode)
+    except FloatingPointError:
+        # Products of extreme data (B = 1e308, C'C of 1e300) overflowed to Inf or NaN.
+        raise DesignError(*strict.overflow_failure(problem)) from None
+
+
+def _design_problem(problem: Problem, *, noise: bool, discretization: str,
+                    mode: str) -> Designed:
     if has_bands(problem):
         if mode != "joint":
             raise DesignError("knots", "band constraints (lower/upper) are exact only with one "

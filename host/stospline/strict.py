@@ -148,6 +148,13 @@ def _cause(problem, kinds, stage: int | None) -> tuple[str, str]:
                    "change the dynamics or weights")
 
 
+def overflow_failure(problem) -> tuple[str, str]:
+    """(field, reason) for a design whose intermediate numbers left the double range (a
+    matrix exponential of non-finite data): the most extreme input when there is one."""
+    field, advice = _cause(problem, _MOMENTS, None)
+    return field, f"the design's numbers overflow the double range: {advice}"
+
+
 def riccati_failure(problem, stage: int) -> tuple[str, str]:
     """(field, reason) for a Riccati recursion that broke down (lost positive definiteness,
     or its numbers left the double range) on `stage`: the most extreme input when there is one,

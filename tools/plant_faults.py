@@ -59,7 +59,7 @@ FAULTS = [
           "if (!((sum - sum) == 0.0f)) {", "if (!(sum == sum)) {"),
     Fault("F2", "NaN check of the state looks at x[0] only (a bad x[1] reported as overflow)",
           CTL, "return (stsp_all_finite(x, stsp_nx(h)) == 0) ? STSP_ERR_NONFINITE_STATE",
-          "return (stsp_all_finite(x, 1u) == 0) ? STSP_ERR_NONFINITE_STATE"),
+          "(void)h;\n    return (stsp_all_finite(x, 1u) == 0) ? STSP_ERR_NONFINITE_STATE"),
     Fault("F3", "off-by-one tick range: the tick after the last is accepted", CTL,
           "if (tick >= h->n_ticks) {", "if (tick > h->n_ticks) {"),
     Fault("F4", "wrong latch time: stage search switches one tick late", CTL,
@@ -80,7 +80,8 @@ FAULTS = [
     Fault("F10", "command not zeroed on an error of an ordinary tick", CTL,
           "    const stsp_status_t st = stsp_nonfinite_status(&ctrl->checked, x);\n"
           "    stsp_zero(u, stsp_nu(&ctrl->checked));\n",
-          "    const stsp_status_t st = stsp_nonfinite_status(&ctrl->checked, x);\n"),
+          "    const stsp_status_t st = stsp_nonfinite_status(&ctrl->checked, x);\n"
+          "    (void)u;\n"),
     Fault("F11", "CRC does not cover u_max", CRC,
           "    crc = stsp_crc32_scalars(crc, table->u_max, nu);\n", ""),
     Fault("F12", "off-by-one tick order: a repeated tick is refused as going backwards", CTL,

@@ -672,6 +672,12 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         fv_check(x && u);
         st = stsp_verify(&c);
         fv_check(st == expect);
+#ifdef FV_STATS
+        if (!stopped) {
+            FVS((st == STSP_OK) ? FVS_VERIFY_OK : (st == STSP_ERR_TABLE_CHANGED)
+                                                      ? FVS_VERIFY_CHANGED : FVS_VERIFY_CRC);
+        }
+#endif
         stopped = stopped || (st != STSP_OK);
         st = stsp_step(&c, c.next_tick, x, u);
         fv_check(stopped ? ((st == STSP_ERR_NOT_INITIALIZED) && fv_all_zero(u, nu))

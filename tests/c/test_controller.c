@@ -8,6 +8,7 @@
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include <cmocka.h>
@@ -611,18 +612,59 @@ static void test_verify_detects_a_changed_table(void **state)
     assert_true(f32_bits(u[0]) == 0u);
 }
 
+/* Heap blocks of exactly the size asked. The unit tests are compiled without ASan (only the
+ * controller of the _san builds is instrumented), so their own stack and static arrays have no
+ * red zones; a block from ASan's malloc has, so a read or write by the controller beyond one
+ * of these aborts the _san builds. */
+static void *heap_copy(const void *src, size_t size)
+{
+    void *p = malloc(size);
+    assert_non_null(p);
+    memcpy(p, src, size);
+    return p;
+}
+
+/* Table A with each array in its own heap block of exactly its size. */
+static stsp_table_t make_heap_table(void)
+{
+    stsp_table_t t = make_table();
+    t.stage_start = heap_copy(stage_start, sizeof stage_start);
+    t.stage_np = heap_copy(stage_np, sizeof stage_np);
+    t.K = heap_copy(K, sizeof K);
+    t.k0 = heap_copy(k0, sizeof k0);
+    t.L = heap_copy(L, sizeof L);
+    t.Lambda = heap_copy(Lambda, sizeof Lambda);
+    t.lambda0 = heap_copy(lambda0, sizeof lambda0);
+    t.u_min = heap_copy(no_min, sizeof no_min);
+    t.u_max = heap_copy(no_max, sizeof no_max);
+    return t;
+}
+
+static void free_heap_table(const stsp_table_t *t)
+{
+    free((void *)t->stage_start);
+    free((void *)t->stage_np);
+    free((void *)t->K);
+    free((void *)t->k0);
+    free((void *)t->L);
+    free((void *)t->Lambda);
+    free((void *)t->lambda0);
+    free((void *)t->u_min);
+    free((void *)t->u_max);
+}
+
 /* The table header changes after init (a table in RAM overwritten, flash rewritten): the case
  * stsp_verify() exists for. Until verify runs, stsp_step() keeps to what init validated (the
- * same commands as the unchanged table; nothing read or written outside the arrays and u[nu]);
- * verify then returns STSP_ERR_TABLE_CHANGED without following the changed header, and every
- * later step holds zeros. The arrays are exactly as long as table A needs, so under ASan
- * (controller_san) any access beyond them aborts; u is exactly NU long. */
+ * same commands as the unchanged table; nothing read or written outside the arrays, x[nx] and
+ * u[nu]); verify then returns STSP_ERR_TABLE_CHANGED without following the changed header,
+ * and every later step holds zeros. Arrays, x and u are exact heap blocks (ASan in the _san
+ * builds); each tick is also stepped again (a repeat) into a guarded u, so that a write past
+ * u[nu] fails every build. */
 enum { HDR_NX, HDR_NU, HDR_NL, HDR_NS, HDR_NT, HDR_K, HDR_START, HDR_L_NULL, HDR_MAGIC,
        HDR_VERSION, HDR_KIND, HDR_BAND, HDR_CHANGES };
 
-static const uint32_t short_start[2] = {0u, 5u};
-
-static void change_header(stsp_table_t *t, int which, const stsp_bandqp_t *band)
+static void change_header(stsp_table_t *t, int which, const stsp_bandqp_t *band,
+                          const uint32_t *short_start)
 {
     switch (which) {
     case HDR_NX: t->nx = NX + 1u; break;
@@ -630,7 +672,7 @@ static void change_header(stsp_table_t *t, int which, const stsp_bandqp_t *band)
     case HDR_NL: t->n_latch = NL + 1u; break;
     case HDR_NS: t->n_stages = NS + 1u; break;
     case HDR_NT: t->n_ticks = NT + 1u; break;
-    case HDR_K: t->K = k0; break;                 /* an array half as long */
+    case HDR_K: t->K = t->k0; break;              /* an array half as long */
     case HDR_START: t->stage_start = short_start; break;
     case HDR_L_NULL: t->L = NULL; break;
     case HDR_MAGIC: t->magic = 0u; break;
@@ -644,81 +686,102 @@ static void test_step_and_verify_after_a_header_change(void **state)
 {
     static const double nt[2 * 3] = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0}, m3[3] = {0.0, 0.0, 0.0};
     static const double w3[3 * 3] = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+    static const uint32_t two_starts[2] = {0u, 5u};
     const stsp_bandqp_t band = {3u, 3u, nt, m3, w3, m3, m3};
     const float xs[NT][NX] = {{1.0f, -2.0f}, {0.5f, 0.25f}, {-1.0f, 3.0f},
                               {2.0f, 1.0f}, {-0.5f, -0.75f}};
     int which;
     (void)state;
     for (which = 0; which < HDR_CHANGES; ++which) {
-        stsp_table_t t = make_table();
+        const stsp_table_t orig = make_heap_table();
+        stsp_table_t t = orig;
+        uint32_t *short_start = heap_copy(two_starts, sizeof two_starts);
+        float *x = malloc(sizeof(float) * NX), *u = malloc(sizeof(float) * NU);
+        float guard[NU + 1u], u_ref[NU];
         stsp_ctrl_t c, ref;
-        float u[NU], u_ref[NU];
         uint32_t tick;
+        assert_non_null(x);
+        assert_non_null(u);
         assert_int_equal(stsp_init(&c, &t), STSP_OK);
         assert_int_equal(stsp_init(&ref, &table), STSP_OK);
-        assert_int_equal(stsp_step(&c, 0u, xs[0], u), STSP_OK);
+        memcpy(x, xs[0], sizeof xs[0]);
+        assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
         assert_int_equal(stsp_step(&ref, 0u, xs[0], u_ref), STSP_OK);
-        change_header(&t, which, &band);
+        change_header(&t, which, &band, short_start);
         /* Ordinary ticks, the stage-1 latch and the end of the plan, as validated. */
         for (tick = 1u; tick <= NT; ++tick) {
-            const float *x = xs[tick % NT];
-            const stsp_status_t st = stsp_step(&c, tick, x, u);
-            assert_int_equal(st, stsp_step(&ref, tick, x, u_ref));
+            memcpy(x, xs[tick % NT], sizeof xs[0]);
+            assert_int_equal(stsp_step(&c, tick, x, u), stsp_step(&ref, tick, x, u_ref));
             assert_int_equal(f32_bits(u[0]), f32_bits(u_ref[0]));
+            guard[NU] = 77.0f;
+            assert_int_equal(stsp_step(&c, tick, x, guard), stsp_step(&ref, tick, x, u_ref));
+            assert_int_equal(f32_bits(guard[0]), f32_bits(u_ref[0]));
+            assert_true(guard[NU] == 77.0f);
         }
         assert_int_equal(stsp_reset(&c), STSP_OK);
-        assert_int_equal(stsp_step(&c, 0u, xs[1], u), STSP_OK);
+        assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
         assert_int_equal(stsp_verify(&c), STSP_ERR_TABLE_CHANGED);
         /* Stopped: every later call refuses, and step holds zeros in the validated u[nu]. */
         u[0] = 5.0f;
-        assert_int_equal(stsp_step(&c, 1u, xs[1], u), STSP_ERR_NOT_INITIALIZED);
+        guard[NU] = 77.0f;
+        assert_int_equal(stsp_step(&c, 1u, x, u), STSP_ERR_NOT_INITIALIZED);
         assert_true(f32_bits(u[0]) == 0u);
+        assert_int_equal(stsp_step(&c, 1u, x, guard), STSP_ERR_NOT_INITIALIZED);
+        assert_true(guard[NU] == 77.0f);
         assert_int_equal(stsp_reset(&c), STSP_ERR_NOT_INITIALIZED);
         assert_int_equal(stsp_verify(&c), STSP_ERR_NOT_INITIALIZED);
-        assert_int_equal(stsp_step(&c, 1u, xs[1], u), STSP_ERR_NOT_INITIALIZED);
+        free(x);
+        free(u);
+        free(short_start);
+        free_heap_table(&orig);
     }
 }
 
-/* The case: table B (nu = 2) changed to nu = 3 after init, u exactly 2 long. */
+/* The issue's case: table B (nu = 2) changed to nu = 3 after init; u exactly 2 long (a heap
+ * block: ASan), then a guarded u (every build). */
 static void test_step_writes_only_the_validated_inputs(void **state)
 {
     stsp_table_t tb = make_table_b();
     const float x[1] = {1.5f};
-    float u[2];
+    float *u = malloc(2u * sizeof(float));
+    float guard[3];
     stsp_ctrl_t c;
     (void)state;
+    assert_non_null(u);
     if (stsp_init(&c, &tb) != STSP_OK) {
         assert_int_equal(EXPECT_TABLE_B, STSP_ERR_BAD_DIMS); /* fixed 2/1/2 build */
+        free(u);
         return;
     }
     assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
     tb.nu = 3u;
     assert_int_equal(stsp_step(&c, 1u, x, u), STSP_OK);
     assert_true(u[0] == -1.5f && u[1] == -1.5f);
-    assert_int_equal(stsp_step(&c, 5u, x, u), STSP_ERR_TICK_RANGE);
-    assert_true(u[0] == 0.0f && u[1] == 0.0f);
+    guard[2] = 77.0f;
+    assert_int_equal(stsp_step(&c, 2u, x, guard), STSP_OK);
+    assert_true(guard[0] == -1.5f && guard[1] == -1.5f && guard[2] == 77.0f);
+    assert_int_equal(stsp_step(&c, 5u, x, guard), STSP_ERR_TICK_RANGE);
+    assert_true(guard[0] == 0.0f && guard[1] == 0.0f && guard[2] == 77.0f);
     assert_int_equal(stsp_verify(&c), STSP_ERR_TABLE_CHANGED);
     u[0] = u[1] = 5.0f;
     assert_int_equal(stsp_step(&c, 2u, x, u), STSP_ERR_NOT_INITIALIZED);
     assert_true(u[0] == 0.0f && u[1] == 0.0f);
+    free(u);
 }
 
 /* stage_start changed in RAM after init (a data change: the CRC covers it). The stage end the
  * hot path compares with stays within the validated n_ticks, so a stage "longer" than the
- * table never reads K beyond its last tick; verify then reports the CRC. */
+ * table never reads K beyond its last tick (a heap block: ASan); verify then reports the CRC. */
 static void test_changed_stage_starts_stay_in_bounds(void **state)
 {
-    uint32_t starts[NS + 1u];
     const float x[NX] = {0.5f, -0.25f};
-    stsp_table_t t;
-    stsp_ctrl_t c;
     float u[NU];
     uint32_t tick, which;
     (void)state;
     for (which = 1u; which <= NS; ++which) {
-        memcpy(starts, stage_start, sizeof starts);
-        t = make_table();
-        t.stage_start = starts;
+        const stsp_table_t t = make_heap_table();
+        uint32_t *starts = (uint32_t *)t.stage_start;
+        stsp_ctrl_t c;
         assert_int_equal(stsp_init(&c, &t), STSP_OK);
         starts[which] = 100u;
         for (tick = 0u; tick < NT; ++tick) {
@@ -729,6 +792,7 @@ static void test_changed_stage_starts_stay_in_bounds(void **state)
         u[0] = 5.0f;
         assert_int_equal(stsp_step(&c, 0u, x, u), STSP_ERR_NOT_INITIALIZED);
         assert_true(f32_bits(u[0]) == 0u);
+        free_heap_table(&t);
     }
 }
 
@@ -1062,17 +1126,20 @@ static void test_band_tables_are_checked(void **state)
 
 /* The band dual's header (a struct of its own) changed after init: the stage-0 latch solves
  * the dual init validated (its copy of q, nx and the array addresses), and verify reports
- * STSP_ERR_TABLE_CHANGED. Under ASan a solve through the changed header (more rows, a longer
- * state, a shorter array) aborts. */
+ * STSP_ERR_TABLE_CHANGED. The band arrays and x are exact heap blocks: under ASan a solve
+ * through the changed header (more rows, a longer state, a shorter array) aborts. */
 static void test_band_header_change_after_init(void **state)
 {
     const float upper[2] = {0.5f, 3.0f};
     int which;
     (void)state;
     for (which = 0; which < 4; ++which) {
-        stsp_bandqp_t qp = make_band_d();
-        const stsp_bandqp_t ref_qp = make_band_d();
+        stsp_bandqp_t qp = {2u, 2u, heap_copy(d_Nt, sizeof d_Nt), heap_copy(d_mt, sizeof d_mt),
+                            heap_copy(d_W, sizeof d_W), heap_copy(d_lo, sizeof d_lo),
+                            heap_copy(d_hi, sizeof d_hi)};
+        const stsp_bandqp_t heap = qp, ref_qp = make_band_d();
         const stsp_table_t t = make_table_d(&qp), tr = make_table_d(&ref_qp);
+        float *x = heap_copy(upper, sizeof upper);
         stsp_ctrl_t c, r;
         float u[1], u_ref[1];
         assert_int_equal(stsp_init(&c, &t), STSP_OK);
@@ -1080,14 +1147,20 @@ static void test_band_header_change_after_init(void **state)
         switch (which) {
         case 0: qp.q = 3u; break;
         case 1: qp.nx = 3u; break;
-        case 2: qp.Nt = d_mt; break;            /* 2 doubles where 4 were */
+        case 2: qp.Nt = qp.mt; break;           /* 2 doubles where 4 were */
         default: qp.q = 1u; break;
         }
-        assert_int_equal(stsp_step(&c, 0u, upper, u), stsp_step(&r, 0u, upper, u_ref));
+        assert_int_equal(stsp_step(&c, 0u, x, u), stsp_step(&r, 0u, upper, u_ref));
         assert_int_equal(f32_bits(u[0]), f32_bits(u_ref[0]));
         assert_memory_equal(c.v, r.v, sizeof c.v);
         assert_int_equal(stsp_verify(&c), STSP_ERR_TABLE_CHANGED);
         assert_int_equal(stsp_verify(&r), STSP_OK);
+        free(x);
+        free((void *)heap.Nt);
+        free((void *)heap.mt);
+        free((void *)heap.W);
+        free((void *)heap.lo);
+        free((void *)heap.hi);
     }
 }
 

@@ -8,6 +8,7 @@
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include <cmocka.h>
@@ -493,44 +494,102 @@ static void test_state_conversion(void **state)
  * bound init checked give wrong commands until verify reports the CRC, but never a signed
  * overflow (the law and the latch add modulo 2^32 for Q15, 2^64 for Q31; UBSan aborts the
  * _san builds on one). */
+/* Heap blocks of exactly the size asked: the test is compiled without ASan, the controller of
+ * the _san builds with it, and ASan's malloc puts red zones around these (not around the
+ * test's own stack or static arrays). */
+static void *heap_copy(const void *src, size_t size)
+{
+    void *p = malloc(size);
+    assert_non_null(p);
+    memcpy(p, src, size);
+    return p;
+}
+
+static stsp_table_t make_heap_table(void)
+{
+    stsp_table_t t = make_table();
+    t.stage_start = heap_copy(stage_start, sizeof stage_start);
+    t.stage_np = heap_copy(stage_np, sizeof stage_np);
+    t.K = heap_copy(K, sizeof K);
+    t.k0 = heap_copy(k0, sizeof k0);
+    t.L = heap_copy(L, sizeof L);
+    t.Lambda = heap_copy(Lambda, sizeof Lambda);
+    t.lambda0 = heap_copy(lambda0, sizeof lambda0);
+    t.u_min = heap_copy(no_min, sizeof no_min);
+    t.u_max = heap_copy(no_max, sizeof no_max);
+    t.x_exp = heap_copy(x_exp, sizeof x_exp);
+    t.u_exp = heap_copy(u_exp, sizeof u_exp);
+    t.v_exp = heap_copy(v_exp, sizeof v_exp);
+    return t;
+}
+
+static void free_heap_table(const stsp_table_t *t)
+{
+    free((void *)t->stage_start);
+    free((void *)t->stage_np);
+    free((void *)t->K);
+    free((void *)t->k0);
+    free((void *)t->L);
+    free((void *)t->Lambda);
+    free((void *)t->lambda0);
+    free((void *)t->u_min);
+    free((void *)t->u_max);
+    free((void *)t->x_exp);
+    free((void *)t->u_exp);
+    free((void *)t->v_exp);
+}
+
 static void test_table_changed_after_init(void **state)
 {
-    const stsp_scalar_t x[NX] = {QMAX, QMIN};
-    const stsp_f32_t xf[NX] = {1.0f, -0.0625f};
+    const stsp_scalar_t xs[NX] = {QMAX, QMIN};
+    const stsp_f32_t xfs[NX] = {1.0f, -0.0625f};
     const stsp_scalar_t uq[NU] = {(stsp_scalar_t)-3};
-    stsp_table_t t;
-    stsp_ctrl_t c, ref;
-    stsp_scalar_t u[NU], u_ref[NU], xq[NX], xq_ref[NX];
-    stsp_f32_t uf[NU], uf_ref[NU];
     uint32_t which, tick;
     (void)state;
     for (which = 0u; which < 6u; ++which) {
-        t = make_table();
+        const stsp_table_t orig = make_heap_table();
+        stsp_table_t t = orig;
+        stsp_ctrl_t c, ref;
+        stsp_scalar_t *x = heap_copy(xs, sizeof xs), *u = heap_copy(uq, sizeof uq);
+        stsp_scalar_t *xq = heap_copy(xs, sizeof xs);
+        stsp_f32_t *xf = heap_copy(xfs, sizeof xfs), *uf = heap_copy(xfs, sizeof(stsp_f32_t) * NU);
+        stsp_scalar_t u_ref[NU], xq_ref[NX], guard[NU + 1u];
+        stsp_f32_t uf_ref[NU];
         assert_int_equal(stsp_init(&c, &t), STSP_OK);
-        assert_int_equal(stsp_init(&ref, &t), STSP_OK);
+        assert_int_equal(stsp_init(&ref, &orig), STSP_OK);
         assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
         assert_int_equal(stsp_step(&ref, 0u, x, u_ref), STSP_OK);
         switch (which) {
         case 0u: t.nx = NX + 1u; break;
         case 1u: t.nu = NU + 1u; break;
         case 2u: t.n_ticks = NT + 1u; break;
-        case 3u: t.K = k0; break;               /* an array half as long */
-        case 4u: t.x_exp = u_exp; break;        /* one exponent where two were */
+        case 3u: t.K = t.k0; break;             /* an array half as long */
+        case 4u: t.x_exp = t.u_exp; break;      /* one exponent where two were */
         default: t.n_latch = NL + 1u; break;
         }
         for (tick = 1u; tick <= NT; ++tick) {
             assert_int_equal(stsp_step(&c, tick, x, u), stsp_step(&ref, tick, x, u_ref));
             assert_int_equal(u[0], u_ref[0]);
+            guard[NU] = 77;                     /* a write past u[nu] fails every build */
+            assert_int_equal(stsp_step(&c, tick, x, guard), stsp_step(&ref, tick, x, u_ref));
+            assert_int_equal(guard[0], u_ref[0]);
+            assert_int_equal(guard[NU], 77);
         }
         assert_int_equal(stsp_state_to_q(&c, xf, xq), stsp_state_to_q(&ref, xf, xq_ref));
-        assert_memory_equal(xq, xq_ref, sizeof xq);
+        assert_memory_equal(xq, xq_ref, sizeof xq_ref);
         assert_int_equal(stsp_command_to_f32(&c, uq, uf), stsp_command_to_f32(&ref, uq, uf_ref));
-        assert_memory_equal(uf, uf_ref, sizeof uf);
+        assert_memory_equal(uf, uf_ref, sizeof uf_ref);
         assert_int_equal(stsp_verify(&c), STSP_ERR_TABLE_CHANGED);
         u[0] = 7;
         assert_int_equal(stsp_step(&c, 1u, x, u), STSP_ERR_NOT_INITIALIZED);
         assert_int_equal(u[0], 0);
         assert_int_equal(stsp_state_to_q(&c, xf, xq), STSP_ERR_NOT_INITIALIZED);
+        free(x);
+        free(u);
+        free(xq);
+        free(xf);
+        free(uf);
+        free_heap_table(&orig);
     }
 }
 

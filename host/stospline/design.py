@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .expm import require_finite
 from .multipliers import latch_groups
 from .problem import Problem, ProblemError, Stage
 
@@ -301,7 +302,8 @@ def design_continuous(problem: Problem, *, noise: bool = True, mode: str = "stag
         y_end = np.concatenate([PT.ravel(), pT, [cT], NT.ravel(), WT.ravel(), mT])
         with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported below
             from scipy.integrate import solve_ivp   # lazy: a slow import the CLI rarely needs
-            res = solve_ivp(_stage_rhs(stage, n, p, noise), (times[k + 1], times[k]), y_end,
+            res = solve_ivp(_stage_rhs(stage, n, p, noise), (times[k + 1], times[k]),
+                            require_finite(y_end),
                             method="DOP853", rtol=rtol, atol=atol, dense_output=True)
         if res.status != 0 or not np.all(np.isfinite(res.y[:, -1])):
             # With [[Q, S], [S', R]] >= 0 (checked by the parser) P is squeezed between 0 and

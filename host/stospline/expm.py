@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["expm", "NonFiniteMatrix"]
+__all__ = ["expm", "NonFiniteMatrix", "require_finite"]
 
 
 class NonFiniteMatrix(FloatingPointError, ValueError):
@@ -29,6 +29,14 @@ _B = {3: (120., 60., 12., 1.),
 
 
 _MAX_SQUARINGS = 8   # beyond: scipy.linalg.expm (a norm above ~1400)
+
+
+def require_finite(values: np.ndarray) -> np.ndarray:
+    """`values` itself, or NonFiniteMatrix when an entry is NaN or Inf (an ODE start state or
+    a matrix built from data whose products overflowed)."""
+    if not np.all(np.isfinite(values)):
+        raise NonFiniteMatrix("the design's intermediate numbers are not finite")
+    return values
 
 
 def _pade(A: np.ndarray, m: int, powers: dict) -> tuple[np.ndarray, np.ndarray]:

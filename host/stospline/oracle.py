@@ -16,7 +16,7 @@ import os
 from dataclasses import dataclass, field
 
 import numpy as np
-from .expm import expm
+from .expm import expm, require_finite
 
 from . import progress
 from .design import ContinuousDesign
@@ -92,7 +92,8 @@ def _tick_varying(stage, Mw: np.ndarray, t0: float, h: float, n: int, m: int,
 
     F0 = np.hstack([np.eye(n), np.zeros((n, m))])
     from scipy.integrate import solve_ivp   # lazy: a slow import the CLI rarely needs
-    res = solve_ivp(rhs, (t0, t0 + h), np.concatenate([Mw.ravel(), [0.0], F0.ravel()]),
+    res = solve_ivp(rhs, (t0, t0 + h),
+                    require_finite(np.concatenate([Mw.ravel(), [0.0], F0.ravel()])),
                     method="DOP853", rtol=rtol, atol=atol)
     y = res.y[:, -1]
     M = y[:d * d].reshape(d, d)
@@ -287,7 +288,8 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
         t_eval = (np.linspace(st.t_start, st.t_end, points_per_stage)
                   if points_per_stage else None)
         from scipy.integrate import solve_ivp
-        res = solve_ivp(rhs, (st.t_start, st.t_end), np.concatenate([M.ravel(), [0.0]]),
+        res = solve_ivp(rhs, (st.t_start, st.t_end),
+                        require_finite(np.concatenate([M.ravel(), [0.0]])),
                         method="DOP853", rtol=rtol, atol=atol, t_eval=t_eval)
         if res.status != 0:
             raise RuntimeError(f"moment integration failed on stage {k}: {res.message}")

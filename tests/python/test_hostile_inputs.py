@@ -209,7 +209,10 @@ def check_contract(argv, cwd: Path, libs, what: str, *, out_dir: Path | None = N
     if rc != 0:
         check_refusal(rc, out, err, before, after, what)
         return rc
-    assert err.strip() == "" or argv[0] != "design", f"{what}: exit 0 with stderr:\n{err}"
+    # A success may add one summary line of floating-point warnings (every number written
+    # was checked finite); nothing else, no raw numpy warning.
+    extra = [ln for ln in err.splitlines() if not ln.startswith("stospline: warning: ")]
+    assert not extra or argv[0] != "design", f"{what}: exit 0 with stderr:\n{err}"
     if argv[0] == "design" and out_dir is not None:
         check_design_outputs(out_dir, libs, what)
     if "--json" in argv:

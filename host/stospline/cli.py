@@ -28,7 +28,7 @@ def _options(args, problem) -> dict:
 @quiet_numerics
 def _design(args) -> int:
     from .atomic import check_target
-    from .pipeline import design_problem, design_summary, generated_files, write_outputs
+    from .pipeline import design_problem, generated_files, write_outputs
     if args.out:
         check_target(args.out)                  # before any work: nothing is created
     problem = load_problem(args.problem)

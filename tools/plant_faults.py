@@ -9,8 +9,8 @@ applies the one edit there, rebuilds that copy, and runs
   controller_fixed_2_1_2, robot_table, robot_table_fixed, the fixed-point (Q15/Q31) tests and
   their ASan + UBSan builds), and
 * a fast subset of the Python tests that drive the C code through the cffi harness
-  (``tests/python/test_harness.py``, ``test_montecarlo.py``, ``test_firmware_limits.py``,
-  ``test_fixedpoint.py``),
+  (``tests/python/firmware/test_c_step_equals_law.py``, ``sim/test_monte_carlo_vs_oracle.py``,
+  ``firmware/test_table_limits.py``, ``firmware/test_fixed_point.py``),
   pointed at the faulty copy with ``STOSPLINE_FIRMWARE`` and a private ``STOSPLINE_BUILD``.
 
 The working tree is never modified: the edits happen in the copy only, pytest runs with
@@ -39,9 +39,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 CTL = "firmware/src/stsp_controller.c"
 CRC = "firmware/src/stsp_controller.c"
-PY_TESTS = ["tests/python/test_harness.py", "tests/python/test_montecarlo.py",
-            "tests/python/test_firmware_limits.py", "tests/python/test_fixedpoint.py",
-            "tests/python/test_band_latch.py"]
+PY_TESTS = ["tests/python/firmware/test_c_step_equals_law.py",
+            "tests/python/sim/test_monte_carlo_vs_oracle.py",
+            "tests/python/firmware/test_table_limits.py", "tests/python/firmware/test_fixed_point.py",
+            "tests/python/firmware/test_band_relatch.py"]
 CTEST_EXCLUDE = r"^(clang_|arm_|misra|consumer_)"
 
 

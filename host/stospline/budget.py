@@ -7,7 +7,7 @@ e.g. ``tick_hz: ~15.2 GiB of memory needed (limit 4 GiB): 1000000000 ticks x 18 
 per-tick gain tables ...``. Nothing is allocated before the check.
 
 The constants were measured on the development machine (2 shared x86-64 cores, OpenBLAS) with
-``tools/calibrate_budget.py``, which prints them and the estimate beside the measured time and
+``tools/bench/calibrate_budget.py``, which prints them and the estimate beside the measured time and
 peak memory of a set of designs and simulations. They are estimates: expect the real figures
 within a factor of about 3 (more on a loaded or much slower machine). Limits (documented in
 docs/problem-file.md, "Limits"): `DEFAULT_MAX_SECONDS` and `DEFAULT_MAX_BYTES`, raised with
@@ -40,7 +40,7 @@ __all__ = ["BudgetError", "Term", "Estimate", "estimate", "check", "DEFAULT_MAX_
 DEFAULT_MAX_SECONDS = 600.0          # 10 minutes
 DEFAULT_MAX_BYTES = 4 * 1024 ** 3    # 4 GiB
 
-# --- measured constants (tools/calibrate_budget.py) ----------------------------------------
+# --- measured constants (tools/bench/calibrate_budget.py) --------------------------------------
 BASE_BYTES = 100e6          # interpreter, numpy, scipy, cffi modules
 BASE_SECONDS = 3.0          # start-up: imports, the cached C kernel
 STAGE_SECONDS = 4e-3        # Python work per stage and oracle pass (maps, latches, knots)

@@ -3,7 +3,7 @@
 
 Why not ``scipy.linalg.expm``: importing scipy.linalg costs about 0.3 s of CPU, more than the
 whole robot design, and the exponential is all the designer and the oracle take from it. The
-two agree to rounding (``tests/python/test_expm.py``).
+two agree to rounding (``tests/python/sim/test_fast_paths.py``).
 """
 from __future__ import annotations
 

@@ -8,7 +8,7 @@ checks the finished table once more before anything is written or compiled (`che
 because the latched width depends on the design mode.
 
 The constants below are the header's defaults; ``read_header_limits`` parses the header, and
-``tests/python/test_firmware_limits.py`` checks that the two agree, so a header change cannot
+``tests/python/firmware/test_table_limits.py`` checks that the two agree, so a header change cannot
 silently diverge from the designer.
 """
 from __future__ import annotations

@@ -1,5 +1,5 @@
 /* Host timing of stsp_step on the robot table against a naive generic-loop controller
- * (tools/firmware_report.sh runs it; not a test). Built twice by CMakeLists.txt: bench_host
+ * (tools/reports/firmware_report.sh runs it; not a test). Built twice by CMakeLists.txt: bench_host
  * (the generic controller) and bench_host_fixed (STSP_FIXED_NX/NU/N_LATCH = 4/2/4); the naive
  * implementation below is the same in both.
  *

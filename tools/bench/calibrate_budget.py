@@ -1,6 +1,6 @@
 """Check the memory/time estimates of `stospline.budget` against real runs on this machine.
 
-Usage: .venv/bin/python tools/calibrate_budget.py [--quick]
+Usage: .venv/bin/python tools/bench/calibrate_budget.py [--quick]
 
 Runs each case below as the CLI runs it (``stospline design|simulate FILE --quiet``, a fresh
 process, so the times include start-up) and prints, per case, the estimate beside the measured
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 STOSPLINE = [sys.executable, "-m", "stospline.cli"]
 
 

@@ -1,6 +1,6 @@
 """Design-time benchmark and accuracy check of the exact zero-order-hold designer.
 
-Usage: .venv/bin/python tools/bench_design.py [--repeat 5]
+Usage: .venv/bin/python tools/bench/zoh_design.py [--repeat 5]
 
 Every time is the median of `--repeat` runs (3 for the runs that take seconds) measured with
 ``time.perf_counter`` after one warm-up run (which also builds the cached C kernel), on one
@@ -76,7 +76,7 @@ from stospline.oracle import evaluate_table         # noqa: E402
 from stospline.problem import load_problem, parse_problem   # noqa: E402
 from stospline.tables import ticks_per_stage        # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 LD = np.longdouble
 TOL = 1e-12
 EQUAL = 2.0      # "equal accuracy": errors within this factor of ours (rounding varies so much)

@@ -7,7 +7,7 @@ their worst distance outside the bands with the on-target re-solve and with the 
 affine latch map (the table without the dual), the cost of each, and the optimal cost of a
 design made from scratch for that start. For the last start it also runs Monte Carlo through
 the compiled C controller (cffi) and compares it with the oracle.
-Usage: .venv/bin/python tools/band_replan.py [--paths N] [--seed S]
+Usage: .venv/bin/python tools/reports/band_replan.py [--paths N] [--seed S]
 """
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from stospline.montecarlo import compare_to_oracle, simulate
 from stospline.oracle import evaluate_table
 from stospline.problem import load_problem
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FILE = ROOT / "examples" / "robot_bands.toml"
 STARTS = ([-5.0, 0.0, 1.0, 0.0], [-4.5, 0.3, 1.8, 0.2], [-5.0, 0.5, 1.0, -0.5],
           [-5.4, 0.1, 2.0, 0.4])

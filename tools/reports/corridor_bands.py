@@ -4,7 +4,7 @@ Designs examples/robot_narrow_corridor.toml twice at its tick rate (exact zero-o
 joint multipliers): with its [[regions]] bands and without them (same knots otherwise), then
 asks the oracle for the expected path at every tick and measures how far it leaves the
 corridor. Prints the figures and writes docs/figures/corridor_bands.png.
-Usage: .venv/bin/python tools/corridor_bands.py
+Usage: .venv/bin/python tools/reports/corridor_bands.py
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from stospline.oracle import evaluate_table
 from stospline.pipeline import design_problem
 from stospline.problem import load_problem, parse_problem
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FILE = ROOT / "examples" / "robot_narrow_corridor.toml"
 
 

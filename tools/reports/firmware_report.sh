@@ -7,10 +7,10 @@
 #     ratio to the multiply-accumulates the law needs (tools/arm/count_instructions.sh),
 #   * host nanoseconds per tick, median over whole 6000-tick plans, against a naive
 #     generic-loop controller (tests/c/bench_host.c, built by the host CMake project).
-#   tools/firmware_report.sh [--no-setup]
+#   tools/reports/firmware_report.sh [--no-setup]
 # Writes build/firmware_report/counts.json and prints everything to stdout.
 set -euo pipefail
-root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 setup=1
 [ "${1:-}" = "--no-setup" ] && setup=0
 [ "$setup" -eq 0 ] || "$root/tools/setup.sh"

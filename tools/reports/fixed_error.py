@@ -3,12 +3,13 @@
 compiled Q15/Q31 controllers over 10^6 random in-range states of the robot design, next to
 the table's documented bound, and the closed-loop distance to the float32 controller.
 
-    .venv/bin/python tools/fixed_error.py [--samples N] [--seed S]
+    .venv/bin/python tools/reports/fixed_error.py [--samples N] [--seed S]
 
-The same computation as tests/python/test_fixedpoint.py (which asserts on it): for each
-sample a random tick, a random latch state and a random state over the whole Q range; a fresh
-C instance latches at the tick's latch stage and is stepped at the tick; u_double is the
-design's law in double precision at the same real states.
+The same computation as tests/python/firmware/test_fixed_point.py (which asserts on it),
+both through `stospline.fixed_point_error`: for each sample a random tick, a random latch
+state and a random state over the whole Q range; a fresh C instance latches at the tick's
+latch stage and is stepped at the tick; u_double is the design's law in double precision at
+the same real states.
 """
 from __future__ import annotations
 
@@ -18,14 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests" / "python"))
+from stospline.fixed import latch_q, law_double, law_q
+from stospline.fixed_point_error import noise_free_closed_loop, random_q_samples
+from stospline.harness import build_controller
+from stospline.pipeline import design_problem, fixed_table
+from stospline.problem import load_problem
 
-from stospline.fixed import latch_q, law_double, law_q  # noqa: E402
-from stospline.harness import build_controller  # noqa: E402
-from stospline.pipeline import design_problem, fixed_table  # noqa: E402
-from stospline.problem import load_problem  # noqa: E402
-from test_fixedpoint import _closed_loop, random_samples  # noqa: E402
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def main() -> int:
@@ -36,22 +36,22 @@ def main() -> int:
     problem = load_problem(ROOT / "examples" / "robot_corridor.toml")
     d = design_problem(problem)
     f32 = build_controller(d.table)
-    xf, _, _ = _closed_loop(problem, f32, lambda x: x.astype(np.float32),
-                            lambda U: U.astype(float))
+    xf, _, _ = noise_free_closed_loop(problem, f32, lambda x: x.astype(np.float32),
+                                      lambda U: U.astype(float))
     print(f"robot_corridor (exact-ZOH design, {d.table.n_ticks} ticks), {args.samples} samples, "
           f"seed {args.seed}")
     for arith in ("q15", "q31"):
         ft = fixed_table(d, arith)
         ctl = build_controller(ft)
         rng = np.random.default_rng(args.seed)
-        tick, ls, t_latch, X, XL = random_samples(ft, args.samples, rng)
+        tick, ls, t_latch, X, XL = random_q_samples(ft, args.samples, rng)
         U, status = ctl.pair_steps(t_latch, XL, tick, X)
         V = latch_q(ft, np.maximum(ls, 0), XL)
         exact = np.array_equal(U.astype(np.int64), law_q(ft, tick, X, V))
         err = np.abs(U * ft.u_lsb - law_double(ft, tick, X * ft.x_lsb, XL * ft.x_lsb))
         ratio = err / ft.bound[tick]
         F = ft.frac_bits
-        xq, _, _ = _closed_loop(
+        xq, _, _ = noise_free_closed_loop(
             problem, ctl,
             lambda x: np.clip(np.floor(x / ft.x_lsb + 0.5), -(1 << F), (1 << F) - 1
                               ).astype(ctl.dtype),

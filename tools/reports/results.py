@@ -1,6 +1,6 @@
 """Headline numbers of the robot corridor example, each recomputed here (docs/results.md).
 
-Usage: .venv/bin/python tools/results.py [--paths 10000] [--seed 1]
+Usage: .venv/bin/python tools/reports/results.py [--paths 10000] [--seed 1]
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from stospline.oracle import evaluate_continuous, evaluate_table
 from stospline.pipeline import design_problem, simulate_problem
 from stospline.problem import load_problem
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def main() -> None:

@@ -1,7 +1,7 @@
 """Exact sampled-data design vs sampled continuous-time gains on the robot, per tick rate.
 
 Prints a Markdown table (predicted and oracle cost, constraint residuals) and writes
-docs/figures/zoh_rates.png. Usage: .venv/bin/python tools/zoh_rates.py [--mode joint]
+docs/figures/zoh_rates.png. Usage: .venv/bin/python tools/reports/zoh_rates.py [--mode joint]
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from stospline.oracle import evaluate_table
 from stospline.problem import load_problem
 from stospline.tables import sample_design
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 RATES = [10, 20, 50, 100, 1000]
 
 

@@ -18,21 +18,9 @@ import pytest
 from conftest import EXAMPLES
 from stospline.cli import main
 from stospline.inputfile import MAX_BYTES, MAX_DEPTH
+from support.problems import cart
 
 ROBOT = str(EXAMPLES / "robot_corridor.toml")
-CART = """\
-name = "cart"
-x0 = [0.0, 0.0]
-tick_hz = 10
-[dynamics]
-A = [[0, 1], [0, 0]]
-B = [[0], [1]]
-[cost]
-R = [[1]]
-[[knots]]
-t = {t}
-constraint = {{ C = [[1, 0]], value = [1.0] }}
-"""
 
 
 def run_main(capsys, argv):
@@ -145,7 +133,7 @@ def _file_cases(tmp):
     latin = tmp / "latin1.toml"
     latin.write_bytes('name = "caf\u00e9"\n'.encode("latin-1"))
     huge_t = tmp / "t1e308.toml"
-    huge_t.write_text(CART.format(t="1e308"))
+    huge_t.write_text(cart(t="1e308", noise=False))
     return [
         (tmp / "missing.toml", "<file>", "cannot read: no such file"),
         (tmp, "<file>", "is a directory"),

@@ -37,7 +37,7 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hostile import BASES, NOISY, problem_cases, to_toml
 from stospline.cli import main
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 FIRMWARE = REPO / "firmware"
 EXAMPLES_N = int(os.environ.get("STOSPLINE_HOSTILE_EXAMPLES", "120"))
 TIME_LIMIT_S = int(os.environ.get("STOSPLINE_HOSTILE_SECONDS", "60"))

@@ -137,7 +137,7 @@ def test_estimate_grows_with_each_size(small):
 
 def test_robot_estimate_is_plausible():
     """The robot (6000 ticks) designs in seconds and ~100 MiB here
-    (tools/calibrate_budget.py): the estimate must be of that order."""
+    (tools/bench/calibrate_budget.py): the estimate must be of that order."""
     from stospline.problem import load_problem
     est = budget.estimate(load_problem(EXAMPLES / "robot_corridor.toml"))
     assert 1 < est.seconds < 30 and 50e6 < est.bytes < 1e9

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from stospline.bands import design_bands, solve_band_dual
-from test_bands import random_band_problem, robot_with_bands
+from support.band_problems import random_band_problem, robot_with_bands
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 SRC = ROOT / "firmware" / "src" / "stsp_bandqp.c"
 
 CDEF = """

@@ -7,9 +7,9 @@ import sys
 
 import numpy as np
 import pytest
-from scipy.linalg import expm
 
 from stospline.fixed import latch_q, law_double, law_q, quantize_table
+from stospline.fixed_point_error import noise_free_closed_loop, random_q_samples
 from stospline.harness import STATUS, build_controller
 from stospline.pipeline import double_table, fixed_table
 from stospline.tables import table_crc32
@@ -30,18 +30,6 @@ def compiled(fixed):
     return {a: build_controller(ft) for a, ft in fixed.items()}
 
 
-def random_samples(ft, count, rng):
-    """Random ticks, and latch and tick states over the whole Q range (ends included)."""
-    F = ft.frac_bits
-    n = ft.dims[0]
-    tick = rng.integers(0, ft.n_ticks, count)
-    ls = ft.latch_stage(ft.stage_of_tick(tick))
-    t_latch = ft.stage_start[np.maximum(ls, 0)].astype(np.int64)
-    X = rng.integers(-(1 << F), (1 << F) - 1, (count, n), endpoint=True)
-    XL = rng.integers(-(1 << F), (1 << F) - 1, (count, n), endpoint=True)
-    return tick, ls, t_latch, X, XL
-
-
 @pytest.mark.parametrize("arith", ARITHS)
 def test_error_bound_over_a_million_states(fixed, compiled, arith):
     """|u_fixed - u_double| <= the table's bound for 10^6 random in-range (tick, latch state,
@@ -49,7 +37,7 @@ def test_error_bound_over_a_million_states(fixed, compiled, arith):
     bound is not loose: the worst sample reaches more than half of it."""
     ft, ctl = fixed[arith], compiled[arith]
     rng = np.random.default_rng(20260601)
-    tick, ls, t_latch, X, XL = random_samples(ft, SAMPLES, rng)
+    tick, ls, t_latch, X, XL = random_q_samples(ft, SAMPLES, rng)
     U, status = ctl.pair_steps(t_latch, XL, tick, X)
     assert status.min() >= 0 and set(np.unique(status)) <= {0, 1, 2}
     V = latch_q(ft, np.maximum(ls, 0), XL)
@@ -96,43 +84,14 @@ def test_state_conversion_saturates_and_reports(fixed, compiled, arith):
         assert st == STATUS["ERR_NONFINITE_STATE"] and [xq[j] for j in range(n)] == [0] * n
 
 
-def _zoh(A, B, dt):
-    n, m = B.shape
-    big = np.zeros((n + m, n + m))
-    big[:n, :n], big[:n, n:] = A, B
-    E = expm(big * dt)
-    return E[:n, :n], E[:n, n:]
-
-
-def _closed_loop(problem, ctl, to_input, to_command):
-    """Noise-free plant (exact ZOH) with the C controller in the loop: states, commands, and
-    the values handed to stsp_step."""
-    step = ctl.stepper(1)
-    tab = ctl.table
-    x = np.array(problem.x0, dtype=float)
-    xs, us, given = [x.copy()], [], []
-    for k in range(tab.n_stages):
-        Ad, Bd = _zoh(problem.stages[k].A, problem.stages[k].B, 1.0 / tab.tick_hz)
-        for j in range(int(tab.stage_start[k]), int(tab.stage_start[k + 1])):
-            xin = to_input(x)
-            U, st = step(j, xin[None, :])
-            assert st[0] == 0
-            given.append(xin.copy())
-            u = to_command(U[0])
-            x = Ad @ x + Bd @ u
-            xs.append(x.copy())
-            us.append(u)
-    return np.array(xs), np.array(us), np.array(given)
-
-
 def test_q31_tracks_float32_in_closed_loop(robot_zoh, robot_problem, fixed, compiled):
     """Noise-free closed loop of the robot (no Monte Carlo): every Q31 command is within the
     table's bound of the double-precision law at the state it was given, and the Q31 path stays
     within 1e-6 of the float32 controller's path (whose own float32 rounding is ~1e-7 here) and
     ends on the same goal. Q15 obeys its bound too and ends within 1e-3 of the float32 path."""
     f32 = build_controller(robot_zoh.table)
-    xf, uf, _ = _closed_loop(robot_problem, f32, lambda x: x.astype(np.float32),
-                             lambda U: U.astype(float))
+    xf, uf, _ = noise_free_closed_loop(robot_problem, f32, lambda x: x.astype(np.float32),
+                                       lambda U: U.astype(float))
     for arith, tol in (("q31", 1e-6), ("q15", 1e-3)):
         ft, ctl = fixed[arith], compiled[arith]
         F = ft.frac_bits
@@ -141,7 +100,8 @@ def test_q31_tracks_float32_in_closed_loop(robot_zoh, robot_problem, fixed, comp
             q = np.clip(np.floor(x / ft.x_lsb + 0.5), -(1 << F), (1 << F) - 1)
             return q.astype(ctl.dtype)
 
-        xq, uq, given = _closed_loop(robot_problem, ctl, to_q, lambda U, ft=ft: U * ft.u_lsb)
+        xq, uq, given = noise_free_closed_loop(robot_problem, ctl, to_q,
+                                               lambda U, ft=ft: U * ft.u_lsb)
         ticks = np.arange(ft.n_ticks)
         ls = ft.latch_stage(ft.stage_of_tick(ticks))
         x_latch = given[ft.stage_start[np.maximum(ls, 0)]] * ft.x_lsb

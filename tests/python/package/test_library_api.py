@@ -15,7 +15,7 @@ from stospline.problem import ProblemError, load_problem, parse_problem
 from stospline.toml_writer import ProblemTomlError, problem_to_toml
 
 from conftest import EXAMPLES
-import test_docs_snippets as doc_snippets
+import test_problem_file_doc as doc_snippets
 
 
 def test_import_is_cheap_and_versioned():

@@ -16,7 +16,7 @@ from stospline.problem import load_problem, parse_problem
 from stospline.tables import F32_MAX, sample_design
 from stospline.design import design_continuous
 
-from test_problem_errors import BASE, edit
+from support.problems import BASE, edit
 
 # Two inputs, so per-input vectors and the scalar broadcast can be told apart.
 TWO_INPUTS = edit(BASE, ("B = [[0], [1]]", "B = [[0, 0], [1, 0.5]]"),

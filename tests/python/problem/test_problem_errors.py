@@ -30,47 +30,7 @@ import pytest
 
 from stospline.cli import main
 
-BASE = """\
-name = "di"
-t0 = 0.0
-x0 = [0.0, 0.0]
-tick_hz = 10
-
-[dynamics]
-A = [[0, 1], [0, 0]]
-B = [[0], [1]]
-noise = [{ state = 1, G = [[0], [0.3]] }]
-
-[cost]
-Q = [[0, 0], [0, 0]]
-R = [[1]]
-
-[[knots]]
-t = 1.0
-penalty = { C = [[1, 0]], target = [1.0], weight = 2.0 }
-constraint = { C = [[1, 0]], value = [1.0] }
-
-[[knots]]
-t = 2.0
-constraint = { C = [[1, 0], [0, 1]], value = [0.0, 0.0] }
-"""
-
-STAGES = BASE + """
-[[stages]]
-cost = { R = [[2]] }
-
-[[stages]]
-dynamics = { A = [[0, 1], [0, -1]] }
-"""
-
-
-def edit(base: str, *pairs: tuple[str, str]) -> str:
-    """`base` with each ``(old, new)`` replaced; `old` must occur exactly once."""
-    for old, new in pairs:
-        assert base.count(old) == 1, f"{old!r} occurs {base.count(old)} times"
-        base = base.replace(old, new)
-    return base
-
+from support.problems import BASE, STAGES, edit
 
 T1 = "[[knots]]\nt = 1.0\n"
 T2 = "[[knots]]\nt = 2.0\n"

@@ -8,7 +8,7 @@ from stospline.design import design_continuous
 from stospline.pipeline import design_problem
 from stospline.problem import parse_problem
 
-from test_problem_errors import BASE, STAGES
+from support.problems import BASE, STAGES
 
 
 def parse(text):

@@ -96,10 +96,9 @@ def test_two_processes_build_the_same_module_at_once(tmp_path):
     root, go = tmp_path / "cache", tmp_path / "go"
     script = tmp_path / "race.py"
     script.write_text(RACE)
-    import test_docs_snippets as snippets     # any problem: the docs' minimal one
+    from support.problems import cart          # any problem: the smallest one
     toml = tmp_path / "cart.toml"
-    (block,) = [b for b in snippets.BLOCKS if "the minimal file (the fragments" in b]
-    toml.write_text(block)
+    toml.write_text(cart(t="2.0"))            # 20 ticks at 10 Hz
     env = dict(os.environ, STOSPLINE_CACHE_DIR=str(tmp_path / "kernels"))
     procs = [subprocess.Popen([sys.executable, str(script), str(root), str(go), str(toml)],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)

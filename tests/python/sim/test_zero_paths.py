@@ -11,26 +11,13 @@ import sys
 
 import pytest
 
-CART = """\
-name = "cart0"
-x0 = [0.0, 0.0]
-tick_hz = 10
-[dynamics]
-A = [[0, 1], [0, 0]]
-B = [[0], [1]]
-noise = [{ state = 1, G = [[0], [0.3]] }]
-[cost]
-R = [[1]]
-[[knots]]
-t = 1.0
-constraint = { C = [[1, 0]], value = [1.0] }
-"""
+from support.problems import cart as cart_problem
 
 
 @pytest.fixture(scope="module")
 def cart(tmp_path_factory):
     path = tmp_path_factory.mktemp("cart") / "cart0.toml"
-    path.write_text(CART)
+    path.write_text(cart_problem(name="cart0"))
     return path
 
 

@@ -97,10 +97,11 @@ def test_numpy_tick_loop_changes_no_byte(tmp_path, monkeypatch):
 
 
 def test_one_blas_thread_changes_no_byte(tmp_path):
-    code = ("import sys; from pathlib import Path; sys.path.insert(0, sys.argv[1]); "
-            "import test_gains_elsewhere as t; t._regenerate(Path(sys.argv[2]))")
+    code = ("import sys; from pathlib import Path; sys.path[:0] = sys.argv[1:3]; "
+            "import test_gains_regenerate_elsewhere as t; t._regenerate(Path(sys.argv[3]))")
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    proc = subprocess.run([sys.executable, "-c", code, os.path.dirname(__file__), str(tmp_path)],
+    here = os.path.dirname(os.path.abspath(__file__))   # this file's folder and conftest.py's
+    proc = subprocess.run([sys.executable, "-c", code, here, os.path.dirname(here), str(tmp_path)],
                           env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     _assert_same_as_gains(tmp_path)

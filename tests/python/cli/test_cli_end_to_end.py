@@ -2,7 +2,9 @@
 import json
 import subprocess
 import sys
+from statistics import NormalDist
 
+import numpy as np
 import pytest
 
 from conftest import EXAMPLES
@@ -28,13 +30,24 @@ def test_design_json_summary(robot_zoh):
         assert max(abs(v) for v in kn["constraint"]["design_violation"]) < 1e-9
 
 
-def test_simulate_json_reports_ci_and_bias():
-    r = run("simulate", ROBOT, "--paths", "300", "--seed", "3", "--json")
+def test_simulate_agrees_with_the_oracle_of_the_table(robot_zoh):
+    """`simulate` runs the compiled C controller in Monte Carlo. Its mean cost and knot means
+    must match the exact oracle of the same float32 table, computed here through the library
+    (not read back from the JSON), within 99.9 % jointly (Bonferroni over the cost and the 8
+    knot-mean components) at a fixed seed: the cost against the sample's standard error, each
+    knot mean against the oracle's own covariance over the number of paths."""
+    paths = 2000
+    r = run("simulate", ROBOT, "--paths", str(paths), "--seed", "3", "--json")
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
-    lo, hi = s["cost"]["ci95"]
-    assert lo < s["cost"]["mc_mean"] < hi
-    assert s["worst_status"] == 0 and s["paths"] == 300
+    assert s["worst_status"] == 0 and s["paths"] == paths
+    oracle = robot_zoh.implemented
+    z = NormalDist().inv_cdf(1 - 0.001 / 2 / (1 + 2 * 4))
+    assert abs(s["cost"]["mc_mean"] - oracle.J) <= z * s["cost"]["mc_stderr"], (s["cost"], oracle.J)
+    for k, kn in enumerate(s["knots"]):
+        stderr = np.sqrt(np.diag(oracle.knot_cov[k]) / paths)
+        assert np.all(np.abs(np.array(kn["mc_mean"]) - oracle.knot_mean[k]) <= z * stderr), \
+            (k, kn["mc_mean"], oracle.knot_mean[k], stderr)
     assert abs(s["simulation_bias"]["cost_over_stderr"]) < 0.05
     assert len(s["knots"][1]["mc_cov"]) == 4
 

@@ -1,5 +1,10 @@
 """The designer's prediction against the exact moment oracle on the paper's robot example."""
+from dataclasses import replace
+
 import numpy as np
+import pytest
+
+from stospline.oracle import evaluate_continuous
 
 
 def test_predicted_cost_equals_oracle_of_continuous_law(robot):
@@ -11,8 +16,17 @@ def test_oracle_meets_every_constraint(robot):
         np.testing.assert_allclose(achieved, kn.constraint.value, rtol=0, atol=1e-8)
 
 
-def test_cost_to_go_at_start_is_J0(robot):
-    assert robot.design.cost_to_go(0, robot.problem.x0) == robot.design.J0
+@pytest.mark.parametrize("shift", [[0.5, 0.2, -0.3, 0.1], [-1.0, 0.0, 0.8, -0.4]])
+def test_cost_to_go_from_other_starts_is_the_oracle_cost(robot_problem, robot, shift):
+    """J0 is the cost-to-go at x0, a quadratic form of the start state built backwards from the
+    Riccati terms. From another start the law latches other multipliers; the oracle integrates
+    that latched law's moments forwards, and its exact cost and knot constraints must be what
+    the backward value function and the latch promise."""
+    x = robot_problem.x0 + np.array(shift)
+    oracle = evaluate_continuous(replace(robot_problem, x0=x), robot.design)
+    assert robot.design.cost_to_go(0, x) == pytest.approx(oracle.J, rel=1e-8)
+    for kn, achieved in zip(robot_problem.knots, oracle.knot_constraint):
+        np.testing.assert_allclose(achieved, kn.constraint.value, rtol=0, atol=1e-8)
 
 
 def test_implemented_table_is_close_but_not_equal(robot):

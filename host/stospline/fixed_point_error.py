@@ -5,7 +5,8 @@ these, so the report prints what the test asserts)."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg import expm
+
+from stospline.discretize import zoh
 
 
 def random_q_samples(ft, count: int, rng: np.random.Generator):
@@ -26,15 +27,6 @@ def random_q_samples(ft, count: int, rng: np.random.Generator):
     return tick, ls, t_latch, X, XL
 
 
-def _zoh(A: np.ndarray, B: np.ndarray, dt: float):
-    """Exact zero-order-hold discretisation ``(Ad, Bd)`` of ``dx = (A x + B u) dt``."""
-    n, m = B.shape
-    big = np.zeros((n + m, n + m))
-    big[:n, :n], big[:n, n:] = A, B
-    E = expm(big * dt)
-    return E[:n, :n], E[:n, n:]
-
-
 def noise_free_closed_loop(problem, controller, to_input, to_command):
     """The noise-free plant (exact zero-order hold) of `problem` with the compiled `controller`
     in the loop over the whole horizon.
@@ -49,7 +41,7 @@ def noise_free_closed_loop(problem, controller, to_input, to_command):
     x = np.array(problem.x0, dtype=float)
     xs, us, given = [x.copy()], [], []
     for k in range(tab.n_stages):
-        Ad, Bd = _zoh(problem.stages[k].A, problem.stages[k].B, 1.0 / tab.tick_hz)
+        Ad, Bd = zoh(problem.stages[k].A, problem.stages[k].B, 1.0 / tab.tick_hz)
         for j in range(int(tab.stage_start[k]), int(tab.stage_start[k + 1])):
             xin = to_input(x)
             U, st = step(j, xin[None, :])

@@ -25,23 +25,14 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from scipy.linalg import expm
 
+from stospline.discretize import zoh
 from stospline.harness import build_controller
 from stospline.pipeline import design_problem, fixed_table
 from stospline.problem import load_problem
 from stospline.tables import table_crc32
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def zoh(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """Exact zero-order-hold discretisation of ``x' = A x + B u`` over `dt`."""
-    n, m = B.shape
-    big = np.zeros((n + m, n + m))
-    big[:n, :n], big[:n, n:] = A, B
-    E = expm(big * dt)
-    return E[:n, :n], E[:n, n:]
 
 
 def select_ticks(stage_start: np.ndarray, head: int, tail: int, stride: int) -> list[int]:

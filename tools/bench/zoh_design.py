@@ -64,12 +64,12 @@ from pathlib import Path                            # noqa: E402
 
 import numpy as np                                  # noqa: E402
 from scipy.integrate import solve_ivp               # noqa: E402
-from scipy.linalg import expm                       # noqa: E402
 
 from stospline import design_zoh as dz              # noqa: E402
+from stospline import tick_reference                # noqa: E402
 from stospline.design import _knot_terminal, design_continuous   # noqa: E402
 from stospline.kernels import load_kernels          # noqa: E402
-from stospline.moments import (augmented_drift, exact_tick, moment_generator,  # noqa: E402
+from stospline.moments import (augmented_drift, moment_generator,  # noqa: E402
                                running_cost_matrix)
 from stospline.multipliers import latch_groups      # noqa: E402
 from stospline.oracle import evaluate_table         # noqa: E402
@@ -136,15 +136,8 @@ def median_time(fn, repeat: int) -> float:
 
 def van_loan_tick_data(stage, h):
     """The tick data as the package computed them before the packed exponential."""
-    n, m = stage.B.shape
-    d = n + m + 1
-    prop = exact_tick(stage, m + 1, h)
-    Hc = (prop.Psi.T @ running_cost_matrix(stage, n, m, d, n).ravel()).reshape(d, d)
-    rs = np.r_[0:n, d - 1]
-    idx = (rs[:, None] * d + rs[None, :]).ravel()
-    F = expm(augmented_drift(stage, m + 1) * h)[:n]
-    return dz._TickData(np.ascontiguousarray(prop.Phi.T[:, idx]), 0.5 * (Hc + Hc.T), F,
-                        np.zeros((0, 0)), np.zeros(0))
+    A2, Hc, F = tick_reference.van_loan_tick_data(stage, h)
+    return dz._TickData(np.ascontiguousarray(A2), Hc, F, np.zeros((0, 0)), np.zeros(0))
 
 
 def previous(problem, hz, mode="stagewise"):

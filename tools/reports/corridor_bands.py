@@ -16,21 +16,14 @@ import numpy as np
 from stospline.oracle import evaluate_table
 from stospline.pipeline import design_problem
 from stospline.problem import load_problem, parse_problem
+from stospline.region_distance import distance_outside
 
 ROOT = Path(__file__).resolve().parents[2]
 FILE = ROOT / "examples" / "robot_narrow_corridor.toml"
 
 
-def outside(path_t: np.ndarray, xy: np.ndarray) -> np.ndarray:
-    """Distance outside the corridor's leg for each time (first leg before t = 3)."""
-    x, y = xy[:, 0], xy[:, 1]
-    first = path_t < 3.0
-    d1 = np.maximum.reduce([0.5 - y, y - 1.5, x + 0.5])
-    d2 = np.maximum.reduce([-1.5 - x, x + 0.5, 0.5 - y])
-    at3 = np.isclose(path_t, 3.0)
-    d = np.where(first, d1, d2)
-    d = np.where(at3, np.minimum(d1, d2), d)
-    return np.maximum(d, 0.0)
+# The corridor's legs (its walls, as bounds on (x, y)); the file's bands keep 0.05 inside them.
+LEGS = [(0.0, 3.0, [-np.inf, 0.5], [-0.5, 1.5]), (3.0, 6.0, [-1.5, 0.5], [-0.5, np.inf])]
 
 
 def main() -> None:
@@ -44,7 +37,7 @@ def main() -> None:
         d = design_problem(prob, mode="joint")
         m = evaluate_table(prob, d.table)
         xy = m.path_mean[:, [0, 2]]
-        dist = outside(m.path_t, xy)
+        dist = distance_outside(m.path_t, xy, LEGS)
         out[label] = (m, xy, d)
         n_bands = sum(kn.constraint.is_band for kn in prob.knots if kn.constraint is not None)
         print(f"{label:>17}: {len(prob.knots)} knots ({n_bands} with bands), J0 = "

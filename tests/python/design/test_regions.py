@@ -8,18 +8,15 @@ import pytest
 from stospline.oracle import evaluate_table
 from stospline.pipeline import design_problem
 from stospline.problem import ProblemError, load_problem, parse_problem
+from stospline.region_distance import distance_outside
 
 from conftest import EXAMPLES
 
 FILE = EXAMPLES / "robot_narrow_corridor.toml"
 
 
-def distance_outside(t, x, y):
-    """How far the point is outside the corridor leg it should be in (first leg before 3 s)."""
-    first = np.maximum.reduce([0.5 - y, y - 1.5, x + 0.5])
-    second = np.maximum.reduce([-1.5 - x, x + 0.5, 0.5 - y])
-    d = np.where(t < 3.0, first, second)
-    return np.maximum(np.where(np.isclose(t, 3.0), np.minimum(first, second), d), 0.0)
+# The corridor's legs (its walls, as bounds on (x, y)); the file's bands keep 0.05 inside them.
+LEGS = [(0.0, 3.0, [-np.inf, 0.5], [-0.5, 1.5]), (3.0, 6.0, [-1.5, 0.5], [-0.5, np.inf])]
 
 
 def test_regions_expand_into_band_knots_merged_with_user_knots():
@@ -44,7 +41,7 @@ def test_dense_bands_keep_expected_path_inside_at_every_tick():
         d = design_problem(prob, mode="joint")
         m = evaluate_table(prob, d.table)
         assert m.J == pytest.approx(d.design.J0, rel=1e-6)       # float32 table
-        worst[name] = distance_outside(m.path_t, m.path_mean[:, 0], m.path_mean[:, 2]).max()
+        worst[name] = distance_outside(m.path_t, m.path_mean[:, [0, 2]], LEGS).max()
     assert worst["banded"] == 0.0
     assert worst["free"] > 0.01       # the unconstrained design cuts the corner
 

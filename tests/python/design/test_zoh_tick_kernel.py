@@ -8,9 +8,8 @@ import pytest
 from stospline import design_zoh as dz
 from stospline.design import DesignError
 from stospline.kernels import build_kernels, zoh_stage_ticks
-from stospline.moments import augmented_drift, exact_tick, running_cost_matrix
 from stospline.problem import parse_problem
-from stospline.expm import expm   # the designer's exponential (test_fast_paths: = scipy's to rounding)
+from stospline.tick_reference import van_loan_tick_data
 
 RTOL = 1e-12     # C vs numpy: the same recursion, rounded differently
 
@@ -79,24 +78,12 @@ def test_random_6_state_c_kernel_matches_numpy_reference(seed, mode):
     assert [s.L.shape[2] for s in c.stages] == [s.L.shape[2] for s in ref.stages]
 
 
-def _tick_data_van_loan(stage, h):
-    """The tick data as first implemented: Van Loan's 2 d^2 exponential (`exact_tick`)."""
-    n, m = stage.B.shape
-    d = n + m + 1
-    prop = exact_tick(stage, m + 1, h)
-    Hc = (prop.Psi.T @ running_cost_matrix(stage, n, m, d, n).ravel()).reshape(d, d)
-    xs1 = np.r_[0:n, d - 1]
-    idx = (xs1[:, None] * d + xs1[None, :]).ravel()
-    F = expm(augmented_drift(stage, m + 1) * h)[:n]
-    return prop.Phi.T[:, idx], 0.5 * (Hc + Hc.T), F
-
-
 @pytest.mark.parametrize("h", [1e-3, 0.05, 0.5])
 @pytest.mark.parametrize("which", ["robot", "random"])
 def test_packed_tick_map_equals_van_loan(robot_problem, which, h):
     stage = robot_problem.stages[0] if which == "robot" else random_problem(3).stages[0]
     td = dz._tick_data(stage, h)
-    A2, Hc, F = _tick_data_van_loan(stage, h)
+    A2, Hc, F = van_loan_tick_data(stage, h)
     n = stage.A.shape[0]
     rng = np.random.default_rng(4)
     Z = rng.normal(size=(n + 1, n + 1))

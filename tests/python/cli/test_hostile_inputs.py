@@ -14,7 +14,7 @@ what it estimates beyond that, and finish what it accepts within 60 s). Problem 
 named classes); file kinds and command-line values are listed below. The number of generated
 problem cases is ``STOSPLINE_HOSTILE_EXAMPLES`` (default 120, derandomized, so CI always runs
 the same cases); a longer run: ``STOSPLINE_HOSTILE_EXAMPLES=3000 .venv/bin/python -m pytest
-tests/python/test_hostile_inputs.py``.
+tests/python/cli/test_hostile_inputs.py``.
 """
 from __future__ import annotations
 

@@ -18,18 +18,18 @@ from importlib import import_module
 # public name -> module that defines it
 _EXPORTS = {
     # problems
-    "Problem": "problem", "ProblemError": "problem", "load_problem": "problem",
-    "parse_problem": "problem",
-    "problem_from_arrays": "build_problem", "problem_from_statespace": "build_problem",
-    "problem_to_toml": "toml_writer",
+    "Problem": "problem.model", "ProblemError": "errors", "load_problem": "problem.reader",
+    "parse_problem": "problem.reader",
+    "problem_from_arrays": "problem.build", "problem_from_statespace": "problem.build",
+    "problem_to_toml": "problem.toml_writer",
     # design and evaluation
     "Designed": "pipeline", "design_problem": "pipeline", "design_summary": "pipeline",
     "generated_files": "pipeline", "write_outputs": "pipeline", "start_from": "pipeline",
-    "fixed_table": "pipeline", "DesignError": "design", "Gains": "gains",
-    "flash_bytes": "flash",
+    "fixed_table": "pipeline", "DesignError": "errors", "Gains": "gains",
+    "flash_bytes": "table.flash",
     # running the compiled firmware
     "simulate_problem": "pipeline", "simulation_summary": "pipeline",
-    "build_controller": "harness", "generate_c": "codegen", "plot_corridor": "plot",
+    "build_controller": "sim.controller", "generate_c": "table.codegen", "plot_corridor": "report.plot",
 }
 
 __all__ = ["__version__", *_EXPORTS]

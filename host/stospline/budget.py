@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .problem import Problem, ProblemError
+from stospline.problem.model import Problem, ProblemError
 
 __all__ = ["BudgetError", "Term", "Estimate", "estimate", "check", "DEFAULT_MAX_SECONDS",
            "DEFAULT_MAX_BYTES", "machine_memory", "format_bytes", "format_seconds"]
@@ -140,9 +140,9 @@ def _dims_key(problem: Problem) -> str:
 
 def _widths(problem: Problem, mode: str) -> tuple[list[int], int]:
     """Per stage the width q of the multiplier vector the design carries, and the table's P."""
-    from .bands import has_bands
-    from .multipliers import latch_groups
-    from .tables import BANDQP_MAX
+    from stospline.design.bands import has_bands
+    from stospline.design.latch import latch_groups
+    from stospline.table.format import BANDQP_MAX
     rows = sum(kn.n_constraints for kn in problem.knots)
     if has_bands(problem):
         q = [rows] * len(problem.knots)         # joint: one vector over every stage

@@ -11,9 +11,10 @@ import math
 import sys
 from pathlib import Path
 
-from . import progress
-from .problem import ProblemError, load_problem
-from .strict import dumps, quiet_numerics
+from stospline import progress
+from stospline.errors import ProblemError
+from stospline.problem.reader import load_problem
+from stospline.strict import dumps, quiet_numerics
 
 __all__ = ["main"]
 
@@ -27,8 +28,8 @@ def _options(args, problem) -> dict:
 
 @quiet_numerics
 def _design(args) -> int:
-    from .atomic import check_target
-    from .pipeline import design_problem, generated_files, write_outputs
+    from stospline.atomic import check_target
+    from stospline.pipeline import design_problem, generated_files, write_outputs
     if args.out:
         check_target(args.out)                  # before any work: nothing is created
     problem = load_problem(args.problem)
@@ -45,7 +46,7 @@ def _design(args) -> int:
     if args.json:
         print(files[next(k for k in files if k.endswith(".json"))], end="")
     else:
-        from .summary_text import design_summary_text
+        from stospline.report.summary_text import design_summary_text
         print(design_summary_text(d, arith), end="")
         for path in written if args.out else []:
             print(f"wrote {path}")
@@ -65,7 +66,7 @@ def _start(arg: str | None):
 def _check_budget(args, problem, command: str, **options) -> None:
     """Refuse (BudgetError, exit 2) a run beyond the limits before any work; announce a long
     one (when progress is shown)."""
-    from .budget import check, format_bytes, format_seconds
+    from stospline.budget import check, format_bytes, format_seconds
     est = check(problem, command=command, max_seconds=args.max_time,
                 max_bytes=args.max_memory * 1024 ** 3, **_options(args, problem),
                 paths=getattr(args, "paths", 0), substeps=getattr(args, "substeps", 2),
@@ -77,7 +78,7 @@ def _check_budget(args, problem, command: str, **options) -> None:
 
 def _note_tables(d, doing: str) -> None:
     """Announce a long step without a progress bar (formatting or compiling big tables)."""
-    from .budget import CODEGEN_NUMBER, COMPILE_NUMBER, format_seconds
+    from stospline.budget import CODEGEN_NUMBER, COMPILE_NUMBER, format_seconds
     numbers = d.table.K.size + d.table.k0.size + d.table.L.size
     per = CODEGEN_NUMBER + (COMPILE_NUMBER if doing == "compiling" else 0.0)
     if numbers * per > 5:
@@ -87,7 +88,7 @@ def _note_tables(d, doing: str) -> None:
 
 @quiet_numerics
 def _simulate(args) -> int:
-    from .pipeline import design_problem, simulate_problem, simulation_summary, start_from
+    from stospline.pipeline import design_problem, simulate_problem, simulation_summary, start_from
     problem = load_problem(args.problem)
     x0 = args.x0
     _check_budget(args, problem, "simulate")
@@ -141,9 +142,9 @@ def _z_text(z) -> str:
 
 @quiet_numerics
 def _plot(args) -> int:
-    from .atomic import check_file_target, write_file
-    from .pipeline import design_problem, simulate_problem
-    from .plot import plot_corridor
+    from stospline.atomic import check_file_target, write_file
+    from stospline.pipeline import design_problem, simulate_problem
+    from stospline.report.plot import plot_corridor
     check_file_target(args.out)
     problem = load_problem(args.problem)
     _check_budget(args, problem, "plot")
@@ -156,7 +157,7 @@ def _plot(args) -> int:
 
 
 def _version() -> str:
-    from . import __version__
+    from stospline import __version__
     return __version__
 
 
@@ -224,7 +225,7 @@ SEED_MAX = 2 ** 63 - 1
 
 def _common(sp) -> None:
     """Options of every command: limits and progress."""
-    from .budget import DEFAULT_MAX_BYTES, DEFAULT_MAX_SECONDS
+    from stospline.budget import DEFAULT_MAX_BYTES, DEFAULT_MAX_SECONDS
     sp.add_argument("--quiet", action="store_true",
                     help="no progress bars or estimates on stderr (they are shown only when "
                          "stderr is a terminal and a run is long)")
@@ -295,7 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .atomic import Interrupted, OutputError
+    from stospline.atomic import Interrupted, OutputError
     args = build_parser().parse_args(argv)
     if getattr(args, "arith", None) not in (None, "float32", "q15", "q31"):
         print(f"stospline: error: --arith must be one of ['float32', 'q15', 'q31'], "

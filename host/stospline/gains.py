@@ -37,7 +37,7 @@ class Gains(NamedTuple):
 def gains_of(designed, *, quantized: bool = True) -> Gains:
     """The gains of a `stospline.pipeline.Designed`: the float32 values the firmware's table
     holds (``quantized=True``, the default), or the design's double-precision values."""
-    from .pipeline import double_table
+    from stospline.pipeline import double_table
     table = designed.table if quantized else double_table(designed)
     t = table.t0 + np.arange(table.n_ticks) / table.tick_hz
     arrays = [np.array(a, dtype=np.float64) for a in

@@ -54,7 +54,7 @@ def read_header_limits(include_dir: str | Path) -> dict[str, int]:
 
 
 def _error(field: str, reason: str):
-    from .problem import ProblemError   # problem.py imports this module
+    from stospline.errors import ProblemError
     return ProblemError(field, reason)
 
 

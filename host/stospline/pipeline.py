@@ -9,18 +9,18 @@ from pathlib import Path
 
 import numpy as np
 
-from .codegen import GENERATOR, generate_c
-from .bands import BandDesign, design_bands, has_bands
-from .design import ContinuousDesign, DesignError, design_continuous
-from .design_zoh import ZohDesign, design_zoh
-from .harness import build_controller
-from .montecarlo import MonteCarloResult, simulate, z_value
-from .oracle import Moments, evaluate_continuous, evaluate_table
-from .problem import Problem, ProblemError
-from .tables import GainTable, sample_design
-from .fixed import DEFAULT_SIGMAS, FixedTable, quantize_table, state_range
-from . import limits, strict
-from .precision import RoundedUp
+from stospline.table.codegen import GENERATOR, generate_c
+from stospline.design.bands import BandDesign, design_bands, has_bands
+from stospline.design.continuous import ContinuousDesign, DesignError, design_continuous
+from stospline.design.zoh import ZohDesign, design_zoh
+from stospline.sim.controller import build_controller
+from stospline.sim.montecarlo import MonteCarloResult, simulate, z_value
+from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table
+from stospline.problem.model import Problem, ProblemError
+from stospline.table.format import GainTable, sample_design
+from stospline.table.qformat import DEFAULT_SIGMAS, FixedTable, quantize_table, state_range
+from stospline import limits, strict
+from stospline.precision import RoundedUp
 
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
            "simulation_summary", "write_outputs", "start_from", "double_table", "fixed_table",
@@ -73,7 +73,7 @@ class Designed:
         (n_ticks, m, n), k0 (n_ticks, m), L (n_ticks, m, P), t (n_ticks,) the tick times
         (`stospline.gains`); float32 table values by default, ``quantized=False`` for the
         design's double-precision gains."""
-        from .gains import gains_of
+        from stospline.gains import gains_of
         return gains_of(self, quantized=quantized)
 
 
@@ -222,7 +222,7 @@ def write_outputs(out_dir: str | Path, files: dict[str, str]) -> list[Path]:
     SIGINT/SIGTERM deferred; a writer killed with SIGKILL is completed or undone by the next
     write into `out_dir`. Raises `stospline.atomic.OutputError` (nothing changed) when the
     directory cannot take the files, e.g. a target is a directory."""
-    from .atomic import write_set
+    from stospline.atomic import write_set
     return write_set(out_dir, files)
 
 
@@ -235,7 +235,7 @@ def double_table(d: Designed) -> GainTable:
 
 def fixed_table(d: Designed, arith: str, *, sigmas: float = DEFAULT_SIGMAS,
                 x_range=None) -> FixedTable:
-    """Q15/Q31 tables of a design (`stospline.fixed`): state scales from `x_range`, or else
+    """Q15/Q31 tables of a design (`stospline.table.qformat`): state scales from `x_range`, or else
     from the oracle's predicted range ``max_t |mean| + sigmas * std`` of the float32 law."""
     if x_range is None:
         x_range = state_range(d.problem, d.table, sigmas=sigmas)

@@ -22,8 +22,8 @@ import warnings
 
 import numpy as np
 
-from .limits import F32_MAX
-from .problem import ProblemError
+from stospline.limits import F32_MAX
+from stospline.errors import ProblemError
 
 __all__ = ["dumps", "first_nonfinite", "culprit", "check_table_finite", "check_summary_finite",
            "quiet_numerics", "ratio_or_null", "fixed_scale_error"]

@@ -38,7 +38,7 @@ static const float no_min[NU] = {-FLT_MAX}, no_max[NU] = {FLT_MAX};
 static const float tight_min[NU] = {-0.25f}, tight_max[NU] = {0.5f};
 static const float wide_min[NU] = {-1000.0f}, wide_max[NU] = {1000.0f};
 
-/* CRC-32 of table A (unlimited) as host/stospline/tables.py table_crc32 computes it
+/* CRC-32 of table A (unlimited) as host/stospline/table/format.py table_crc32 computes it
  * (tests/python/firmware/test_table_limits.py builds the same table): the serialization order of
  * both implementations, limits included, is pinned here. */
 #define TABLE_A_CRC32 0x144FE504u
@@ -994,7 +994,7 @@ static const double d_mt[2] = {0.0, 0.0};
 static const double d_W[2 * 2] = {2.0, 0.5, 0.5, 1.0};
 static const double d_lo[2] = {0.5, -1.0};
 static const double d_hi[2] = {0.5, 1.0};
-/* CRC-32 of table D as host/stospline/tables.py table_crc32 computes it
+/* CRC-32 of table D as host/stospline/table/format.py table_crc32 computes it
  * (tests/python/firmware/test_band_relatch.py builds the same table). */
 #define TABLE_D_CRC32 0x04805D9Eu
 

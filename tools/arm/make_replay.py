@@ -26,11 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-from stospline.discretize import zoh
-from stospline.harness import build_controller
+from stospline.design.discretize import zoh
+from stospline.sim.controller import build_controller
 from stospline.pipeline import design_problem, fixed_table
 from stospline.problem import load_problem
-from stospline.tables import table_crc32
+from stospline.table.format import table_crc32
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -65,16 +65,16 @@ from pathlib import Path                            # noqa: E402
 import numpy as np                                  # noqa: E402
 from scipy.integrate import solve_ivp               # noqa: E402
 
-from stospline import design_zoh as dz              # noqa: E402
-from stospline import tick_reference                # noqa: E402
-from stospline.design import _knot_terminal, design_continuous   # noqa: E402
-from stospline.kernels import load_kernels          # noqa: E402
-from stospline.moments import (augmented_drift, moment_generator,  # noqa: E402
+from stospline.design import zoh as dz              # noqa: E402
+from stospline.design import tick_reference                # noqa: E402
+from stospline.design.continuous import _knot_terminal, design_continuous   # noqa: E402
+from stospline.design.kernels import load_kernels          # noqa: E402
+from stospline.design.moments import (augmented_drift, moment_generator,  # noqa: E402
                                running_cost_matrix)
-from stospline.multipliers import latch_groups      # noqa: E402
-from stospline.oracle import evaluate_table         # noqa: E402
+from stospline.design.latch import latch_groups      # noqa: E402
+from stospline.sim.oracle import evaluate_table         # noqa: E402
 from stospline.problem import load_problem, parse_problem   # noqa: E402
-from stospline.tables import ticks_per_stage        # noqa: E402
+from stospline.table.format import ticks_per_stage        # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 LD = np.longdouble

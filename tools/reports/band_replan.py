@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from stospline.bands import design_bands
-from stospline.harness import build_controller
-from stospline.montecarlo import compare_to_oracle, simulate
-from stospline.oracle import evaluate_table
+from stospline.design.bands import design_bands
+from stospline.sim.controller import build_controller
+from stospline.sim.montecarlo import compare_to_oracle, simulate
+from stospline.sim.oracle import evaluate_table
 from stospline.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[2]

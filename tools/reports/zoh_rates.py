@@ -10,11 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
-from stospline.design import design_continuous
-from stospline.design_zoh import design_zoh
-from stospline.oracle import evaluate_table
+from stospline.design.continuous import design_continuous
+from stospline.design.zoh import design_zoh
+from stospline.sim.oracle import evaluate_table
 from stospline.problem import load_problem
-from stospline.tables import sample_design
+from stospline.table.format import sample_design
 
 ROOT = Path(__file__).resolve().parents[2]
 RATES = [10, 20, 50, 100, 1000]

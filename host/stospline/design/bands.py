@@ -26,11 +26,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .design import ContinuousDesign, DesignError, design_continuous
-from .design_zoh import ZohDesign, design_zoh
-from .precision import round_to_scale
-from .problem import Constraint, Problem
-from .tables import BANDQP_MAX, BandQP, GainTable, sample_design
+from stospline.design.continuous import ContinuousDesign, DesignError, design_continuous
+from stospline.design.zoh import ZohDesign, design_zoh
+from stospline.precision import round_to_scale
+from stospline.problem.model import Constraint, Problem
+from stospline.table.format import BANDQP_MAX, BandQP, GainTable, sample_design
 
 __all__ = ["BandSolution", "BandDesign", "solve_band_dual", "enumerate_active_sets",
            "design_bands", "has_bands", "target_latch"]

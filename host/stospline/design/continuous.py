@@ -18,16 +18,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .expm import require_finite
-from .multipliers import latch_groups
-from .problem import Problem, ProblemError, Stage
+from stospline.expm import require_finite
+from stospline.design.latch import latch_groups
+from stospline.errors import DesignError, ProblemError
+from stospline.problem.model import Problem, Stage
 
 __all__ = ["DesignError", "StageSolution", "ContinuousDesign", "design_continuous",
            "noise_operator"]
-
-
-class DesignError(ProblemError):
-    """The problem is well-formed but has no solution (infeasible constraint, finite escape)."""
 
 
 def noise_operator(G: np.ndarray, P: np.ndarray) -> np.ndarray:

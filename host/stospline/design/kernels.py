@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .cache import cached_build, source_key
+from stospline.cache import cached_build, source_key
 
 __all__ = ["build_kernels", "load_kernels", "zoh_stage_ticks", "oracle_stage_ticks",
            "pack_oracle_maps", "KernelBuildError"]

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .problem import Problem
+from stospline.problem.model import Problem
 
 __all__ = ["MODES", "LatchGroup", "latch_groups"]
 
@@ -40,9 +40,9 @@ def latch_groups(problem: Problem, mode: str) -> tuple[list[LatchGroup], list[La
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     for k, kn in enumerate(problem.knots):
         if kn.constraint is not None and kn.constraint.is_band:
-            from .design import DesignError
+            from stospline.errors import DesignError
             raise DesignError(f"knots[{k}].constraint", "a band (lower/upper) needs the joint "
-                                                        "band design (stospline.bands; CLI "
+                                                        "band design (stospline.design.bands; CLI "
                                                         "--mode joint)")
     constrained = [k for k, kn in enumerate(problem.knots) if kn.n_constraints]
     n_st = len(problem.knots)

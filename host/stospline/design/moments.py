@@ -12,9 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from .expm import expm
+from stospline.expm import expm
 
-from .problem import Stage
+from stospline.problem.model import Stage
 
 __all__ = ["TickPropagator", "noise_columns", "moment_generator", "augmented_drift",
            "exact_tick", "euler_tick", "running_cost_matrix"]

@@ -1,6 +1,6 @@
-/* Host-side kernel of the exact zero-order-hold designer (stospline.design_zoh): the backward
+/* Host-side kernel of the exact zero-order-hold designer (stospline.design.zoh): the backward
  * Riccati recursion over the controller ticks of one stage.  Not firmware: it runs on the
- * design host, in double precision, called from Python through cffi (stospline.kernels).
+ * design host, in double precision, called from Python through cffi (stospline.design.kernels).
  *
  * Notation (design_zoh.py): n states, m inputs, q multipliers acting on the stage, d = n+m+1,
  * z = [x; u; 1], r = n+1 ("x,1" rows: indices 0..n-1 and d-1 of z).  A symmetric matrix is

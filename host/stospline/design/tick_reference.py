@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from stospline.expm import expm
-from stospline.moments import augmented_drift, exact_tick, running_cost_matrix
+from stospline.design.moments import augmented_drift, exact_tick, running_cost_matrix
 
 
 def van_loan_tick_data(stage, h: float):

@@ -21,14 +21,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .expm import expm
+from stospline.expm import expm
 
-from . import progress
-from .design import DesignError, StageValues, _check_group, _knot_terminal
-from .moments import augmented_drift, moment_generator, running_cost_matrix, varying_tick
-from .multipliers import latch_groups
-from .problem import Problem, Stage
-from .tables import GainTable, build_table, ticks_per_stage
+from stospline import progress
+from stospline.design.continuous import DesignError, StageValues, _check_group, _knot_terminal
+from stospline.design.moments import augmented_drift, moment_generator, running_cost_matrix, varying_tick
+from stospline.design.latch import latch_groups
+from stospline.problem.model import Problem, Stage
+from stospline.table.format import GainTable, build_table, ticks_per_stage
 
 __all__ = ["ZohStage", "ZohDesign", "design_zoh"]
 
@@ -152,7 +152,7 @@ def _stage_ticks_numpy(td: _TickData, V, N, W, mv, T: int, m: int):
 
 def _stage_ticks_c(td: _TickData, V, N, W, mv, T: int, m: int):
     """`_stage_ticks_numpy` in C (`kernels.zoh_stage_ticks`); equal to it to rounding."""
-    from .kernels import zoh_stage_ticks
+    from stospline.design.kernels import zoh_stage_ticks
     return zoh_stage_ticks(td.A2sT, td.Hcs, td.F, V, N, W, mv, T, m)
 
 
@@ -193,7 +193,7 @@ def _pick_kernel(kernel: str | None):
         raise ValueError(f"kernel must be one of {KERNELS}, got {kernel!r}")
     if kernel == "numpy":
         return _stage_ticks_numpy
-    from .kernels import KernelBuildError, load_kernels
+    from stospline.design.kernels import KernelBuildError, load_kernels
     try:
         load_kernels()
     except KernelBuildError as exc:
@@ -269,7 +269,7 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
                     K, k0, L, V, N, W, mv = _varying_stage_ticks(
                         stage, problem.times[k], h, V, N, W, mv, int(counts[k]), m)
         except np.linalg.LinAlgError:
-            from .strict import riccati_failure
+            from stospline.strict import riccati_failure
             raise DesignError(*riccati_failure(problem, k)) from None
         if not (np.all(np.isfinite(V)) and np.all(np.isfinite(W))):
             raise DesignError(f"knots[{k}].t", f"the tick Riccati recursion of stage {k} has "

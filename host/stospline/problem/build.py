@@ -13,8 +13,10 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from .problem import Problem, ProblemError, parse_problem
-from .toml_writer import problem_to_toml
+from stospline.errors import ProblemError
+from stospline.problem.model import Problem
+from stospline.problem.reader import parse_problem
+from stospline.problem.toml_writer import problem_to_toml
 
 __all__ = ["problem_from_arrays", "problem_from_statespace", "noise_entries"]
 

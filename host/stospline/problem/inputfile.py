@@ -19,7 +19,7 @@ import stat
 import tomllib
 from pathlib import Path
 
-from .problem import ProblemError
+from stospline.errors import ProblemError
 
 __all__ = ["MAX_BYTES", "MAX_DEPTH", "ProblemFileNotFound", "read_problem_file",
            "decode_problem", "check_depth"]

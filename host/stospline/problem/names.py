@@ -44,7 +44,7 @@ _DEVICES = frozenset(["con", "prn", "aux", "nul"] + [f"com{i}" for i in range(1,
 def check_name(name: str) -> None:
     """Raise ProblemError (field ``name``) unless `name` (already a C identifier that is not a
     keyword) is a safe prefix for the generated code and file names."""
-    from .problem import ProblemError   # problem.py imports this module
+    from stospline.errors import ProblemError
 
     def refuse(reason: str):
         raise ProblemError("name", f"{name[:48]!r}{'...' if len(name) > 48 else ''}: {reason}")

@@ -17,11 +17,14 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .problem import Problem, Series, Stage
+from stospline.problem.series import Series
+
+if TYPE_CHECKING:   # the model calls this module (Problem.to_toml): no import at run time
+    from stospline.problem.model import Problem, Stage
 
 __all__ = ["problem_to_toml", "ProblemTomlError"]
 

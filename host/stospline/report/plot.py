@@ -20,7 +20,7 @@ def plot_corridor(d, mc, out: str | Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from .oracle import evaluate_table
+    from stospline.sim.oracle import evaluate_table
 
     p = d.problem
     ia, ib = p.plot.get("axes", [0, 1])

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .flash import ARITH_ELEMENT_BYTES, flash_bytes
+from stospline.table.flash import ARITH_ELEMENT_BYTES, flash_bytes
 
 __all__ = ["worst_constraint_residual", "design_summary_text"]
 

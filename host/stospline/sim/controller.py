@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .cache import cached_build, source_key
-from .codegen import generate_c
-from .tables import GainTable
+from stospline.cache import cached_build, source_key
+from stospline.table.codegen import generate_c
+from stospline.table.format import GainTable
 
 __all__ = ["build_controller", "CompiledController", "firmware_dir", "STATUS"]
 
@@ -148,7 +148,7 @@ _CFLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-DSTSP_HOST_MESSAGES"]
 def firmware_dir() -> Path:
     """The firmware source tree compiled by the harness (``STOSPLINE_FIRMWARE`` overrides;
     `stospline.firmware_files`)."""
-    from .firmware_files import firmware_dir as find
+    from stospline.firmware_files import firmware_dir as find
     return find()
 
 

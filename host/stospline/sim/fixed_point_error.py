@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stospline.discretize import zoh
+from stospline.design.discretize import zoh
 
 
 def random_q_samples(ft, count: int, rng: np.random.Generator):

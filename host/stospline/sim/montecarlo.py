@@ -10,11 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from .expm import expm
+from stospline.expm import expm
 
-from . import progress
-from .harness import STATUS, CompiledController
-from .problem import Problem
+from stospline import progress
+from stospline.sim.controller import STATUS, CompiledController
+from stospline.problem.model import Problem
 
 __all__ = ["MonteCarloResult", "simulate", "z_value", "Agreement", "compare_to_oracle"]
 

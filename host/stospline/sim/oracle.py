@@ -16,13 +16,13 @@ import os
 from dataclasses import dataclass, field
 
 import numpy as np
-from .expm import expm, require_finite
+from stospline.expm import expm, require_finite
 
-from . import progress
-from .design import ContinuousDesign
-from .moments import augmented_drift, euler_tick, exact_tick, running_cost_matrix
-from .problem import Problem
-from .tables import GainTable
+from stospline import progress
+from stospline.design.continuous import ContinuousDesign
+from stospline.design.moments import augmented_drift, euler_tick, exact_tick, running_cost_matrix
+from stospline.problem.model import Problem
+from stospline.table.format import GainTable
 
 __all__ = ["Moments", "evaluate_continuous", "evaluate_table"]
 
@@ -129,7 +129,7 @@ def _packed_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int
     prop, cost_row, _ = _tick_maps(stage, n, m, h, propagator, substeps)
     extra = _MAPS[(id(stage), m, h, propagator, substeps)][2]
     if "packed" not in extra:
-        from .kernels import pack_oracle_maps
+        from stospline.design.kernels import pack_oracle_maps
         extra["packed"] = pack_oracle_maps(prop.Phi, cost_row, n)
     return extra["packed"]
 
@@ -139,7 +139,7 @@ def _c_kernel():
     numpy loop (the reference), and so does a host where the kernel cannot be built."""
     if os.environ.get("STOSPLINE_ORACLE_KERNEL", "c") == "numpy":
         return None
-    from .kernels import KernelBuildError, load_kernels, oracle_stage_ticks
+    from stospline.design.kernels import KernelBuildError, load_kernels, oracle_stage_ticks
     try:
         load_kernels()
     except KernelBuildError:
@@ -183,7 +183,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             if k == 0 and table.band_qp is not None:
                 # The firmware solves the band dual for the (deterministic) start state, in
                 # float32 for a quantized table.
-                from .bands import target_latch
+                from stospline.design.bands import target_latch
                 Lam = np.zeros_like(Lam)
                 lam0 = np.zeros(P)
                 lam0[:table.band_qp.q] = target_latch(table.band_qp, x0,

@@ -9,7 +9,7 @@ from importlib.metadata import PackageNotFoundError, version
 
 import numpy as np
 
-from .tables import FORMAT_VERSION, SCALAR_FLOAT32, GainTable, table_crc32
+from stospline.table.format import FORMAT_VERSION, SCALAR_FLOAT32, GainTable, table_crc32
 
 __all__ = ["generate_c", "GENERATOR"]
 
@@ -137,7 +137,7 @@ const stsp_table_t {p}_table = {{
 
 
 def _generate_fixed(table, p: str, banner: str) -> tuple[str, str]:
-    """Header and source of a `stospline.fixed.FixedTable` (Q15/Q31): integer arrays, the scale
+    """Header and source of a `stospline.table.qformat.FixedTable` (Q15/Q31): integer arrays, the scale
     exponents, and a guard that the including build is the same variant."""
     P = p.upper()
     n, m, L = table.dims

@@ -1,5 +1,5 @@
 """Flash a design's tables take, per arithmetic, computed from the dimensions the way
-`stospline.codegen` lays them out (one ``static const`` array per field, at least one
+`stospline.table.codegen` lays them out (one ``static const`` array per field, at least one
 element each, plus the ``stsp_table_t`` header) on a 32-bit target (4-byte pointers, as on
 Cortex-M). A test checks the numbers against the symbol sizes of the compiled C.
 """

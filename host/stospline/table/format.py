@@ -22,8 +22,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import limits
-from .design import ContinuousDesign
+from stospline import limits
+from stospline.design.continuous import ContinuousDesign
 
 __all__ = ["GainTable", "TableShape", "BandQP", "build_table", "sample_design", "ticks_per_stage",
            "table_crc32", "FORMAT_VERSION", "SCALAR_FLOAT32", "F32_MAX", "BANDQP_MAX"]
@@ -233,7 +233,7 @@ def table_crc32(table: GainTable) -> int:
     The firmware computes the same value in ``stsp_table_crc32``: the dimensions and tick rate
     as u32, ``stage_start`` as u32, ``stage_np`` as u32, then K, k0, L, Lambda, lambda0 (these
     three only when P > 0), u_min, u_max as IEEE-754 binary32 bit patterns, each little-endian.
-    A fixed-point table (`stospline.fixed.FixedTable`) adds its scalar kind as u32 after the
+    A fixed-point table (`stospline.table.qformat.FixedTable`) adds its scalar kind as u32 after the
     tick rate, stores the arrays as little-endian int16 (Q15) or int32 (Q31), and ends with
     x_exp, u_exp and v_exp (when P > 0) as one signed byte each. Then, with a band QP (float32
     tables only), its q and n as u32 and Nt, mt, W, lo, hi as binary64 bit patterns. Last, the

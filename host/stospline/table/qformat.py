@@ -48,9 +48,9 @@ from decimal import Decimal, localcontext
 
 import numpy as np
 
-from . import limits
-from .precision import RoundedUp, ceil_significant
-from .tables import F32_MAX, GainTable, TableShape
+from stospline import limits
+from stospline.precision import RoundedUp, ceil_significant
+from stospline.table.format import F32_MAX, GainTable, TableShape
 
 __all__ = ["FixedTable", "quantize_table", "state_range", "law_q", "latch_q", "law_double",
            "ARITHS", "FRAC_BITS", "SCALAR_KIND", "EXP_MAX", "DEFAULT_SIGMAS"]
@@ -176,7 +176,7 @@ class FixedTable(TableShape):
 def state_range(problem, table: GainTable, *, sigmas: float = DEFAULT_SIGMAS) -> np.ndarray:
     """``max_t |E x_j(t)| + sigmas * std x_j(t)`` over every tick of the plan (exact moments of
     the float32 table's law from `oracle.evaluate_table`)."""
-    from .oracle import evaluate_table
+    from stospline.sim.oracle import evaluate_table
     mom = evaluate_table(problem, table, path=True)
     # max(., 0): a zero variance may come out as -1e-18 on another machine (NaN from sqrt).
     r = np.max(np.abs(mom.path_mean) + sigmas * np.sqrt(np.maximum(mom.path_var, 0.0)), axis=0)

@@ -17,7 +17,7 @@ import pytest
 
 from conftest import EXAMPLES
 from stospline.cli import main
-from stospline.inputfile import MAX_BYTES, MAX_DEPTH
+from stospline.problem.inputfile import MAX_BYTES, MAX_DEPTH
 from support.problems import cart
 
 ROBOT = str(EXAMPLES / "robot_corridor.toml")

@@ -9,8 +9,8 @@ import pytest
 
 import stospline
 from stospline.cli import main
-from stospline.flash import flash_bytes
-from stospline.summary_text import worst_constraint_residual
+from stospline.table.flash import flash_bytes
+from stospline.report.summary_text import worst_constraint_residual
 
 from conftest import EXAMPLES, GAINS, REPO
 

@@ -164,7 +164,7 @@ def test_minimal_file_parses():
 
 def test_codegen_never_writes_a_non_finite_literal(robot_zoh):
     """Last line of defence behind the pipeline's check: `inff` never reaches a .c file."""
-    from stospline.codegen import generate_c
+    from stospline.table.codegen import generate_c
     k0 = robot_zoh.table.k0.copy()
     k0[3, 0] = np.nan
     with pytest.raises(ValueError, match="finite"):

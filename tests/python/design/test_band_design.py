@@ -5,11 +5,11 @@ import tomllib
 import numpy as np
 import pytest
 
-from stospline.bands import design_bands, enumerate_active_sets, solve_band_dual
-from stospline.design import DesignError
-from stospline.harness import build_controller
-from stospline.montecarlo import compare_to_oracle, simulate
-from stospline.oracle import evaluate_continuous, evaluate_table
+from stospline.design.bands import design_bands, enumerate_active_sets, solve_band_dual
+from stospline.design.continuous import DesignError
+from stospline.sim.controller import build_controller
+from stospline.sim.montecarlo import compare_to_oracle, simulate
+from stospline.sim.oracle import evaluate_continuous, evaluate_table
 from stospline.pipeline import design_problem
 from stospline.problem import ProblemError, parse_problem
 

@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 from scipy.special import hyp2f1
 
-from stospline.design import design_continuous
-from stospline.oracle import evaluate_continuous
+from stospline.design.continuous import design_continuous
+from stospline.sim.oracle import evaluate_continuous
 from stospline.problem import parse_problem
 
 B, R = 1.3, 0.8

@@ -3,11 +3,11 @@ investment problems): the designers' extra Riccati terms against the oracle and 
 import numpy as np
 import pytest
 
-from stospline.design import design_continuous
-from stospline.design_zoh import design_zoh
-from stospline.harness import build_controller
-from stospline.montecarlo import compare_to_oracle, simulate
-from stospline.oracle import evaluate_continuous, evaluate_table
+from stospline.design.continuous import design_continuous
+from stospline.design.zoh import design_zoh
+from stospline.sim.controller import build_controller
+from stospline.sim.montecarlo import compare_to_oracle, simulate
+from stospline.sim.oracle import evaluate_continuous, evaluate_table
 from stospline.problem import parse_problem
 
 

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
 
-from stospline.design import design_continuous
-from stospline.oracle import evaluate_continuous
+from stospline.design.continuous import design_continuous
+from stospline.sim.oracle import evaluate_continuous
 from stospline.problem import parse_problem
 
 

@@ -5,9 +5,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from stospline.design import DesignError, design_continuous
-from stospline.design_zoh import design_zoh
-from stospline.oracle import evaluate_continuous, evaluate_table
+from stospline.design.continuous import DesignError, design_continuous
+from stospline.design.zoh import design_zoh
+from stospline.sim.oracle import evaluate_continuous, evaluate_table
 from stospline.problem import Knot, Problem, parse_problem
 
 

@@ -2,11 +2,11 @@
 import numpy as np
 import pytest
 
-from stospline.design import design_continuous
-from stospline.design_zoh import design_zoh
-from stospline.harness import build_controller
-from stospline.montecarlo import compare_to_oracle, simulate
-from stospline.oracle import evaluate_continuous, evaluate_table
+from stospline.design.continuous import design_continuous
+from stospline.design.zoh import design_zoh
+from stospline.sim.controller import build_controller
+from stospline.sim.montecarlo import compare_to_oracle, simulate
+from stospline.sim.oracle import evaluate_continuous, evaluate_table
 
 
 def test_continuous_joint_design_predicts_oracle_and_beats_stagewise(robot_problem, robot):

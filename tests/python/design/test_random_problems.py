@@ -24,9 +24,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.linalg import expm
 
-from stospline.design import design_continuous
-from stospline.design_zoh import design_zoh
-from stospline.oracle import evaluate_continuous, evaluate_table
+from stospline.design.continuous import design_continuous
+from stospline.design.zoh import design_zoh
+from stospline.sim.oracle import evaluate_continuous, evaluate_table
 from stospline.problem import parse_problem
 
 MODES = ("stagewise", "joint")

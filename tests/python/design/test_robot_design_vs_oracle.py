@@ -4,7 +4,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from stospline.oracle import evaluate_continuous
+from stospline.sim.oracle import evaluate_continuous
 
 
 def test_predicted_cost_equals_oracle_of_continuous_law(robot):
@@ -40,8 +40,8 @@ def test_implemented_table_is_close_but_not_equal(robot):
 
 def test_oracle_of_the_table_converges_to_the_continuous_law(robot_problem, robot):
     """Halving h roughly halves the excess cost (first-order sampling error)."""
-    from stospline.oracle import evaluate_table
-    from stospline.tables import sample_design
+    from stospline.sim.oracle import evaluate_table
+    from stospline.table.format import sample_design
     excess = []
     for hz in (250, 500):
         t = sample_design(robot.design, hz)

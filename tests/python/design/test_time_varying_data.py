@@ -4,13 +4,13 @@ integration, and Monte Carlo through the compiled controller."""
 import numpy as np
 import pytest
 
-from stospline.design import design_continuous
-from stospline.harness import build_controller
-from stospline.moments import exact_tick, running_cost_matrix, varying_tick
-from stospline.montecarlo import compare_to_oracle, simulate
-from stospline.oracle import _tick_varying, evaluate_continuous, evaluate_table
+from stospline.design.continuous import design_continuous
+from stospline.sim.controller import build_controller
+from stospline.design.moments import exact_tick, running_cost_matrix, varying_tick
+from stospline.sim.montecarlo import compare_to_oracle, simulate
+from stospline.sim.oracle import _tick_varying, evaluate_continuous, evaluate_table
 from stospline.problem import ProblemError, parse_problem
-from stospline.tables import sample_design
+from stospline.table.format import sample_design
 
 
 def tv_doc(interpolation="linear"):
@@ -109,7 +109,7 @@ def test_exact_zoh_design_with_varying_data(mode):
     prediction matches to the Magnus error (O(h^5) per tick, here < 1e-8 relative at 20 Hz)
     and constraints are met to the same order; with zoh-interpolated data on the tick grid
     the data are constant per tick and both are exact."""
-    from stospline.design_zoh import design_zoh
+    from stospline.design.zoh import design_zoh
     for interp, tol in (("linear", 1e-7), ("zoh", 1e-10)):
         doc = tv_doc(interp)
         if interp == "zoh":   # every series held between samples on the tick grid

@@ -3,14 +3,14 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from stospline.design import design_continuous
-from stospline.design_zoh import design_zoh
-from stospline.harness import build_controller
-from stospline.moments import exact_tick, moment_generator, augmented_drift
-from stospline.montecarlo import compare_to_oracle, simulate
-from stospline.oracle import evaluate_table
+from stospline.design.continuous import design_continuous
+from stospline.design.zoh import design_zoh
+from stospline.sim.controller import build_controller
+from stospline.design.moments import exact_tick, moment_generator, augmented_drift
+from stospline.sim.montecarlo import compare_to_oracle, simulate
+from stospline.sim.oracle import evaluate_table
 from stospline.problem import parse_problem
-from stospline.tables import sample_design
+from stospline.table.format import sample_design
 
 RATES = [10, 20, 50, 100, 1000]
 

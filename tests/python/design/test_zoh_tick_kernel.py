@@ -5,11 +5,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from stospline import design_zoh as dz
-from stospline.design import DesignError
-from stospline.kernels import build_kernels, zoh_stage_ticks
+from stospline.design import zoh as dz
+from stospline.design.continuous import DesignError
+from stospline.design.kernels import build_kernels, zoh_stage_ticks
 from stospline.problem import parse_problem
-from stospline.tick_reference import van_loan_tick_data
+from stospline.design.tick_reference import van_loan_tick_data
 
 RTOL = 1e-12     # C vs numpy: the same recursion, rounded differently
 

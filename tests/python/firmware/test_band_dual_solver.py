@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stospline.bands import design_bands, solve_band_dual
+from stospline.design.bands import design_bands, solve_band_dual
 from support.band_problems import random_band_problem, robot_with_bands
 
 ROOT = Path(__file__).resolve().parents[3]

@@ -9,12 +9,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from stospline.bands import design_bands, target_latch
-from stospline.harness import STATUS, build_controller
-from stospline.montecarlo import compare_to_oracle, simulate
-from stospline.oracle import evaluate_table
+from stospline.design.bands import design_bands, target_latch
+from stospline.sim.controller import STATUS, build_controller
+from stospline.sim.montecarlo import compare_to_oracle, simulate
+from stospline.sim.oracle import evaluate_table
 from stospline.problem import load_problem, parse_problem
-from stospline.tables import BandQP, GainTable, table_crc32
+from stospline.table.format import BandQP, GainTable, table_crc32
 
 from conftest import EXAMPLES
 

@@ -1,7 +1,7 @@
 """The compiled firmware evaluates exactly the table's law; Python and C agree on the CRC."""
 import numpy as np
 
-from stospline.tables import table_crc32
+from stospline.table.format import table_crc32
 
 
 def test_crc_python_equals_c(robot, robot_controller):

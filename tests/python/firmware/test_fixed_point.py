@@ -8,11 +8,11 @@ import sys
 import numpy as np
 import pytest
 
-from stospline.fixed import latch_q, law_double, law_q, quantize_table
-from stospline.fixed_point_error import noise_free_closed_loop, random_q_samples
-from stospline.harness import STATUS, build_controller
+from stospline.table.qformat import latch_q, law_double, law_q, quantize_table
+from stospline.sim.fixed_point_error import noise_free_closed_loop, random_q_samples
+from stospline.sim.controller import STATUS, build_controller
 from stospline.pipeline import double_table, fixed_table
-from stospline.tables import table_crc32
+from stospline.table.format import table_crc32
 
 from conftest import EXAMPLES
 

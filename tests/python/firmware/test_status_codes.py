@@ -3,7 +3,7 @@ added to or renumbered in the header cannot silently diverge from Python."""
 import re
 
 from conftest import REPO
-from stospline.harness import STATUS
+from stospline.sim.controller import STATUS
 
 
 def header_statuses() -> dict[str, int]:

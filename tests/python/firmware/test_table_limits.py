@@ -5,8 +5,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from stospline.harness import STATUS, build_controller
-from stospline.tables import F32_MAX, FORMAT_VERSION, GainTable, table_crc32
+from stospline.sim.controller import STATUS, build_controller
+from stospline.table.format import F32_MAX, FORMAT_VERSION, GainTable, table_crc32
 
 
 def _table_a(**limits) -> GainTable:
@@ -81,7 +81,9 @@ def test_limited_robot_table_saturates_in_c(robot):
 # refuses, naming the key that causes it; limits.py agrees with the firmware's header.
 
 from conftest import REPO  # noqa: E402
-from stospline import fixed, limits, tables  # noqa: E402
+from stospline import limits  # noqa: E402
+from stospline.table import qformat as fixed
+from stospline.table import format as tables
 from stospline.pipeline import design_problem  # noqa: E402
 from stospline.problem import ProblemError, parse_problem  # noqa: E402
 

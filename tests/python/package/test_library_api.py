@@ -12,7 +12,7 @@ import pytest
 
 import stospline
 from stospline.problem import ProblemError, load_problem, parse_problem
-from stospline.toml_writer import ProblemTomlError, problem_to_toml
+from stospline.problem.toml_writer import ProblemTomlError, problem_to_toml
 
 from conftest import EXAMPLES
 import test_problem_file_doc as doc_snippets

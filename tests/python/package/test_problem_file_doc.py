@@ -11,7 +11,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from stospline import problem as problem_module
+from stospline.problem import reader as problem_module
 from stospline.cli import build_parser
 from stospline.problem import load_problem, parse_problem
 

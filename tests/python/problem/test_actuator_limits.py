@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from stospline.cli import main
-from stospline.codegen import generate_c
-from stospline.design_zoh import design_zoh
+from stospline.table.codegen import generate_c
+from stospline.design.zoh import design_zoh
 from stospline.pipeline import design_problem, design_summary
 from stospline.problem import load_problem, parse_problem
-from stospline.tables import F32_MAX, sample_design
-from stospline.design import design_continuous
+from stospline.table.format import F32_MAX, sample_design
+from stospline.design.continuous import design_continuous
 
 from support.problems import BASE, edit
 

@@ -4,7 +4,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from stospline.design import design_continuous
+from stospline.design.continuous import design_continuous
 from stospline.pipeline import design_problem
 from stospline.problem import parse_problem
 

@@ -28,7 +28,7 @@ def test_default_root_is_the_user_cache_dir(monkeypatch, tmp_path):
 
 
 def test_kernels_are_built_under_the_override(monkeypatch, tmp_path):
-    from stospline.kernels import build_kernels
+    from stospline.design.kernels import build_kernels
     monkeypatch.setenv("STOSPLINE_CACHE_DIR", str(tmp_path))
     path = build_kernels()
     assert path.is_relative_to(tmp_path) and path.parent.parent == tmp_path
@@ -65,10 +65,10 @@ def test_nothing_appears_in_place_before_the_build_is_complete(what, tmp_path, m
 
     monkeypatch.setattr(cffi.FFI, "compile", spy)
     if what == "kernels":
-        from stospline.kernels import build_kernels
+        from stospline.design.kernels import build_kernels
         path = build_kernels(tmp_path)
     else:
-        from stospline.harness import build_controller
+        from stospline.sim.controller import build_controller
         build_controller(robot_zoh.table, build_dir=tmp_path)
         (path,) = tmp_path.glob("*/_stsp_robot_corridor_*.so")
     assert seen == [[]]
@@ -80,7 +80,7 @@ RACE = textwrap.dedent("""
     from pathlib import Path
     from stospline.pipeline import design_problem
     from stospline.problem import load_problem
-    from stospline.harness import build_controller
+    from stospline.sim.controller import build_controller
     root, go = Path(sys.argv[1]), Path(sys.argv[2])
     d = design_problem(load_problem(sys.argv[3]))
     while not go.exists():

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from stospline import oracle
+from stospline.sim import oracle
 from stospline.expm import expm
 from stospline.pipeline import design_problem
 from stospline.problem import load_problem

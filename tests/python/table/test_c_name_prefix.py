@@ -8,8 +8,8 @@ import sys
 import pytest
 
 from conftest import EXAMPLES
-from stospline.cnames import MAX_NAME_LENGTH
-from stospline.codegen import generate_c
+from stospline.problem.names import MAX_NAME_LENGTH
+from stospline.table.codegen import generate_c
 from stospline.pipeline import fixed_table
 from stospline.problem import ProblemError, parse_problem
 

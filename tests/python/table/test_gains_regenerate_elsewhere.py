@@ -22,7 +22,9 @@ import sys
 import numpy as np
 import pytest
 
-from stospline import oracle, pipeline
+from stospline import pipeline
+
+from stospline.sim import oracle
 from stospline.cli import main
 from stospline.problem import load_problem
 
@@ -126,7 +128,9 @@ def test_no_table_entry_is_near_a_rounding_boundary(monkeypatch, example):
     the band dual's 10 digits); none lies within `_reach` of where its rounding changes, so no
     perturbation of the size used above (nor the float32 flush of round-off zeros) changes it.
     Found here: the nearest is a Q31 gain 2.1e-5 LSB (5.9 times its reach) from a boundary."""
-    from stospline import bands, fixed, tables
+    from stospline.design import bands
+    from stospline.table import qformat as fixed
+    from stospline.table import format as tables
     rounded = {"float32": [], "q": [], "band": []}
 
     def capture(kind, fn):
@@ -164,7 +168,7 @@ def test_written_bound_is_rounded_up_never_down(robot_zoh):
     margin for other machines' last bits, and has at most 3 significant digits."""
     import json
     from decimal import Decimal
-    from stospline.fixed import GAIN_AGREEMENT
+    from stospline.table.qformat import GAIN_AGREEMENT
     from stospline.precision import ceil_significant
     assert ceil_significant(2.928018756, 3) == 2.93 and ceil_significant(2.5, 3) == 2.5
     assert ceil_significant(9.991, 3) == 10.0 and ceil_significant(1.23e-12, 2) == 1.3e-12

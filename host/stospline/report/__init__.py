@@ -1,0 +1,1 @@
+"""What a person reads: the design summary text (`summary_text`) and figures (`plot`)."""

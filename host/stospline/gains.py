@@ -11,6 +11,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from stospline.table.format import table_of
+
 __all__ = ["Gains", "gains_of"]
 
 
@@ -37,8 +39,7 @@ class Gains(NamedTuple):
 def gains_of(designed, *, quantized: bool = True) -> Gains:
     """The gains of a `stospline.pipeline.Designed`: the float32 values the firmware's table
     holds (``quantized=True``, the default), or the design's double-precision values."""
-    from stospline.pipeline import double_table
-    table = designed.table if quantized else double_table(designed)
+    table = designed.table if quantized else table_of(designed.design, quantize=False)
     t = table.t0 + np.arange(table.n_ticks) / table.tick_hz
     arrays = [np.array(a, dtype=np.float64) for a in
               (table.K, table.k0, table.L, table.Lambda, table.lambda0)]

@@ -10,15 +10,15 @@ from pathlib import Path
 import numpy as np
 
 from stospline.table.codegen import GENERATOR, generate_c
-from stospline.design.bands import BandDesign, design_bands, has_bands
-from stospline.design.continuous import ContinuousDesign, DesignError, design_continuous
-from stospline.design.zoh import ZohDesign, design_zoh
+from stospline.design.bands import design_bands, has_bands
+from stospline.design.continuous import DesignError, design_continuous
+from stospline.design.zoh import design_zoh
 from stospline.sim.controller import build_controller
 from stospline.sim.montecarlo import MonteCarloResult, simulate, z_value
-from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table
+from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table, state_range
 from stospline.problem.model import Problem, ProblemError
-from stospline.table.format import GainTable, sample_design
-from stospline.table.qformat import DEFAULT_SIGMAS, FixedTable, quantize_table, state_range
+from stospline.table.format import GainTable, TickGains, table_of
+from stospline.table.qformat import DEFAULT_SIGMAS, FixedTable, quantize_table
 from stospline import limits, strict
 from stospline.precision import RoundedUp
 
@@ -62,7 +62,7 @@ class Designed:
     the tick rate, which is what the firmware runs.
     """
     problem: Problem
-    design: ContinuousDesign | ZohDesign | BandDesign
+    design: TickGains   # a continuous, zero-order-hold or band design
     discretization: str
     table: GainTable
     law: Moments
@@ -107,26 +107,21 @@ def _design_problem(problem: Problem, *, noise: bool, discretization: str,
         if discretization not in DISCRETIZATIONS:
             raise ValueError(f"discretization must be one of {DISCRETIZATIONS}")
         design = design_bands(problem, discretization=discretization, noise=noise)
-        if discretization == "exact-zoh":
-            law = evaluate_table(problem, design.table(quantize=False), path=False)
-        else:
-            law = evaluate_continuous(problem, design.base)
-        table = design.table()
+        continuous_law = design.base
     elif discretization == "exact-zoh":
-        design = design_zoh(problem, noise=noise, mode=mode)
-        law = evaluate_table(problem, design.table(quantize=False), path=False)
-        table = design.table()
+        design = continuous_law = design_zoh(problem, noise=noise, mode=mode)
     elif discretization == "continuous":
-        design = design_continuous(problem, noise=noise, mode=mode)
-        law = evaluate_continuous(problem, design)
-        table = sample_design(design)
+        design = continuous_law = design_continuous(problem, noise=noise, mode=mode)
     else:
         raise ValueError(f"discretization must be one of {DISCRETIZATIONS}")
+    if discretization == "continuous":
+        law = evaluate_continuous(problem, continuous_law)
+    else:
+        law = evaluate_table(problem, table_of(design, quantize=False), path=False)
+    table = table_of(design)
     # A float32 entry that overflowed would make the oracle's moments non-finite: refuse it
     # here, naming the cause, before evaluating the table as implemented.
-    strict.check_table_finite(problem, table, exact=lambda: (
-        sample_design(design, quantize=False) if isinstance(design, ContinuousDesign)
-        else design.table(quantize=False)))
+    strict.check_table_finite(problem, table, exact=lambda: table_of(design, quantize=False))
     return Designed(problem, design, discretization, table, law,
                     evaluate_table(problem, table, path=False))
 
@@ -150,9 +145,7 @@ def start_from(d: Designed, x0) -> Designed:
 def predicted_cost(d: Designed) -> float:
     """The designer's optimal expected cost from ``d.problem.x0`` (which `start_from` may have
     moved away from the design's own start)."""
-    if isinstance(d.design, BandDesign):
-        return d.design.cost_from(d.problem.x0)
-    return d.design.cost_to_go(0, d.problem.x0)
+    return d.design.cost_from(d.problem.x0)
 
 
 def _violation(y: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -207,13 +200,19 @@ def design_summary(d: Designed) -> dict:
         "oracle_J_design": d.law.J,
         "oracle_J_implemented": d.implemented.J,
         "knots": knots,
-        **({"active_set": d.design.active_set(),
-            # rows of the dual the firmware re-solves from the measured x0 (0: it latches the
-            # affine map of the design's active set, see docs/math-notes.md)
-            "band_qp_rows": 0 if d.table.band_qp is None else d.table.band_qp.q}
-           if isinstance(d.design, BandDesign) else {}),
+        **_band_terms(d),
         **_limits(d),
     })
+
+
+def _band_terms(d: Designed) -> dict:
+    """The design's own summary entries; with bands also the rows of the dual the firmware
+    re-solves from the measured x0 (0: it latches the affine map of the design's active set,
+    see docs/math-notes.md)."""
+    terms = d.design.summary_terms()
+    if has_bands(d.problem):
+        terms["band_qp_rows"] = 0 if d.table.band_qp is None else d.table.band_qp.q
+    return terms
 
 
 def write_outputs(out_dir: str | Path, files: dict[str, str]) -> list[Path]:
@@ -228,9 +227,7 @@ def write_outputs(out_dir: str | Path, files: dict[str, str]) -> list[Path]:
 
 def double_table(d: Designed) -> GainTable:
     """The design's per-tick table before float32 rounding (double precision)."""
-    if isinstance(d.design, ContinuousDesign):
-        return sample_design(d.design, quantize=False)
-    return d.design.table(quantize=False)
+    return table_of(d.design, quantize=False)
 
 
 def fixed_table(d: Designed, arith: str, *, sigmas: float = DEFAULT_SIGMAS,

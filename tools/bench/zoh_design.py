@@ -74,7 +74,8 @@ from stospline.design.moments import (augmented_drift, moment_generator,  # noqa
 from stospline.design.latch import latch_groups      # noqa: E402
 from stospline.sim.oracle import evaluate_table         # noqa: E402
 from stospline.problem import load_problem, parse_problem   # noqa: E402
-from stospline.table.format import ticks_per_stage        # noqa: E402
+from stospline.problem.model import ticks_per_stage        # noqa: E402
+from stospline.table.format import table_of                # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 LD = np.longdouble
@@ -423,7 +424,7 @@ def main() -> None:
         print(f"{name:<8}{mode:<10} J0 {float(refs[name, mode][0]):.12f}  "
               f"J0 rel. error {e_j:.1e}  gains rel. error {e_g:.1e}  {verdict}")
     z = dz.design_zoh(robot, 1000)
-    oracle = evaluate_table(robot, z.table(quantize=False), path=False)
+    oracle = evaluate_table(robot, table_of(z, quantize=False), path=False)
     print(f"robot   predicted J0 vs exact oracle of the designed law: "
           f"{abs(oracle.J - z.J0) / z.J0:.1e} relative")
     cont, tight = design_continuous(robot), design_continuous(robot, rtol=3e-14, atol=1e-18)

@@ -21,6 +21,7 @@ from stospline.design.bands import design_bands
 from stospline.sim.controller import build_controller
 from stospline.sim.montecarlo import compare_to_oracle, simulate
 from stospline.sim.oracle import evaluate_table
+from stospline.table.format import table_of
 from stospline.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -43,7 +44,7 @@ def main() -> None:
     args = ap.parse_args()
     problem = load_problem(FILE)
     b = design_bands(problem, tick_hz=problem.tick_hz)
-    resolved, affine = b.table(), b.table(on_target_qp=False)
+    resolved, affine = table_of(b), table_of(b, on_target_qp=False)
     print(f"robot_bands: {problem.tick_hz} Hz, {len(b.lower)} dual rows "
           f"({int(np.sum(b.lower != b.upper))} bands), bands at t = 3: x + y in [-0.1, 0.1], "
           f"y in [0.5, 1.5]")

@@ -14,7 +14,7 @@ from stospline.design.continuous import design_continuous
 from stospline.design.zoh import design_zoh
 from stospline.sim.oracle import evaluate_table
 from stospline.problem import load_problem
-from stospline.table.format import sample_design
+from stospline.table.format import table_of
 
 ROOT = Path(__file__).resolve().parents[2]
 RATES = [10, 20, 50, 100, 1000]
@@ -39,8 +39,8 @@ def main() -> None:
     print("|---:|---:|---:|---:|---:|---:|---:|")
     for hz in RATES:
         z = design_zoh(problem, hz, mode=args.mode)
-        ex = evaluate_table(problem, z.table(quantize=False), path=False)
-        sm = evaluate_table(problem, sample_design(cont, hz, quantize=False), path=False)
+        ex = evaluate_table(problem, table_of(z, quantize=False), path=False)
+        sm = evaluate_table(problem, table_of(cont, hz, quantize=False), path=False)
         rows.append((hz, z.J0, ex.J, residual(problem, ex), sm.J, residual(problem, sm)))
         print(f"| {hz} | {z.J0:.10g} | {ex.J:.10g} | {abs(ex.J - z.J0) / z.J0:.1e} | "
               f"{residual(problem, ex):.1e} | {sm.J:.10g} | {residual(problem, sm):.2e} |")

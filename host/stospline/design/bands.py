@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,7 +31,10 @@ from stospline.design.continuous import ContinuousDesign, DesignError, design_co
 from stospline.design.zoh import ZohDesign, design_zoh
 from stospline.precision import round_to_scale
 from stospline.problem.model import Constraint, Problem
-from stospline.table.format import BANDQP_MAX, BandQP, GainTable, sample_design
+from stospline.limits import BANDQP_MAX
+
+if TYPE_CHECKING:
+    from stospline.table.format import BandQP
 
 __all__ = ["BandSolution", "BandDesign", "solve_band_dual", "enumerate_active_sets",
            "design_bands", "has_bands", "target_latch"]
@@ -163,28 +167,23 @@ class BandDesign:
     def stages(self):
         return self.base.stages
 
-    def band_qp(self, *, exact: bool = False) -> BandQP | None:
-        """The dual the firmware re-solves from the measured x0 at the t0 latch, when it has
-        at most BANDQP_MAX rows (else None: the table latches the affine map of the design's
-        active set, exact only while that set stays optimal). As the tables store it, at
-        BANDQP_DIGITS (the digits beyond differ between machines); ``exact=True``: the design's
-        own doubles."""
+    def band_dual(self, *, exact: bool = False) -> tuple | None:
+        """``(Nt, mt, W, lower, upper)``: the dual the firmware re-solves from the measured x0
+        at the t0 latch (`stospline.table.format.BandQP`), when it has at most BANDQP_MAX rows
+        (else None: the table latches the affine map of the design's active set, exact only
+        while that set stays optimal). As the tables store it, at BANDQP_DIGITS (the digits
+        beyond differ between machines); ``exact=True``: the design's own doubles."""
         if len(self.lower) > BANDQP_MAX:
             return None
         st0 = self.base.stages[0]
         Nt, mt, W = st0.N0.T, st0.m0, st0.W0
         if not exact:
             Nt, mt, W = (round_to_scale(a, BANDQP_DIGITS) for a in (Nt, mt, 0.5 * (W + W.T)))
-        return BandQP(Nt, mt, W, self.lower, self.upper)
+        return Nt, mt, W, self.lower, self.upper
 
-    def table(self, *, quantize: bool = True, on_target_qp: bool = True) -> GainTable:
-        """Per-tick table: the ZOH design's own, or the continuous gains sampled at the ticks;
-        with the band dual for the firmware when it fits (``on_target_qp=False``: without).
-        ``quantize=False``: the design's own law, in double precision, with the exact dual."""
-        qp = self.band_qp(exact=not quantize) if on_target_qp else None
-        if isinstance(self.base, ContinuousDesign):
-            return sample_design(self.base, quantize=quantize, band_qp=qp)
-        return self.base.table(quantize=quantize, band_qp=qp)
+    def tick_gains(self, tick_hz: int | None = None) -> tuple[int, list[tuple]]:
+        """The base design's per-stage tick gains (`stospline.table.format.TickGains`)."""
+        return self.base.tick_gains(tick_hz)
 
     def cost_from(self, x0: np.ndarray) -> float:
         """Optimal expected cost from another start state: the same zero-target design, the
@@ -193,6 +192,10 @@ class BandDesign:
         x = np.asarray(x0, dtype=float)
         sol = solve_band_dual(st0.N0.T @ x + st0.m0, st0.W0, self.lower, self.upper)
         return float(x @ st0.P0 @ x + 2 * st0.p0 @ x + st0.c0) + sol.value
+
+    def summary_terms(self) -> dict:
+        """The JSON summary's band entries: where each row sits and its multiplier."""
+        return {"active_set": self.active_set()}
 
     def active_set(self) -> list[dict]:
         """Per constraint row: knot, row, where it sits and its multiplier."""

@@ -21,7 +21,7 @@ import numpy as np
 from stospline.expm import require_finite
 from stospline.design.latch import latch_groups
 from stospline.errors import DesignError, ProblemError
-from stospline.problem.model import Problem, Stage
+from stospline.problem.model import Problem, Stage, ticks_per_stage
 
 __all__ = ["DesignError", "StageSolution", "ContinuousDesign", "design_continuous",
            "noise_operator"]
@@ -116,6 +116,18 @@ class StageValues:
         st = self.stages[k]
         return st.Lambda @ x + st.lambda0
 
+    def cost_from(self, x0: np.ndarray) -> float:
+        """Optimal expected cost from a start state (the t0 latch re-plans from it)."""
+        return self.cost_to_go(0, x0)
+
+    def band_dual(self, *, exact: bool = False) -> None:
+        """No band constraints: nothing for the firmware to re-solve at t0."""
+        return None
+
+    def summary_terms(self) -> dict:
+        """Design-specific entries of the JSON summary (none without bands)."""
+        return {}
+
 
 @dataclass
 class ContinuousDesign(StageValues):
@@ -127,6 +139,16 @@ class ContinuousDesign(StageValues):
 
     def gains(self, k: int, t):
         return self.stages[k].gains(t)
+
+    def tick_gains(self, tick_hz: int | None = None) -> tuple[int, list[tuple]]:
+        """Per-stage ``(K, k0, L, Lambda, lambda0)`` sampled at the tick starts (the table
+        holds each for one tick), at `tick_hz` (None: the problem's): the
+        `stospline.table.format.TickGains` interface."""
+        prob = self.problem
+        tick_hz = prob.tick_hz if tick_hz is None else int(tick_hz)
+        counts = ticks_per_stage(prob, tick_hz)
+        return tick_hz, [(*st.gains(prob.times[k] + np.arange(counts[k]) / tick_hz),
+                          st.Lambda, st.lambda0) for k, st in enumerate(self.stages)]
 
 
 def _value(st, x: np.ndarray, v) -> float:

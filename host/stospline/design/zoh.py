@@ -27,8 +27,7 @@ from stospline import progress
 from stospline.design.continuous import DesignError, StageValues, _check_group, _knot_terminal
 from stospline.design.moments import augmented_drift, moment_generator, running_cost_matrix, varying_tick
 from stospline.design.latch import latch_groups
-from stospline.problem.model import Problem, Stage
-from stospline.table.format import GainTable, build_table, ticks_per_stage
+from stospline.problem.model import Problem, Stage, ticks_per_stage
 
 __all__ = ["ZohStage", "ZohDesign", "design_zoh"]
 
@@ -63,10 +62,13 @@ class ZohDesign(StageValues):
     noise_aware: bool
     mode: str = "stagewise"
 
-    def table(self, *, quantize: bool = True, band_qp=None) -> GainTable:
-        return build_table(self.problem, self.tick_hz,
-                           [(s.K, s.k0, s.L, s.Lambda, s.lambda0) for s in self.stages],
-                           quantize=quantize, band_qp=band_qp)
+    def tick_gains(self, tick_hz: int | None = None) -> tuple[int, list[tuple]]:
+        """Per-stage ``(K, k0, L, Lambda, lambda0)`` of the law, exact at its own tick rate
+        only (None: that rate): the `stospline.table.format.TickGains` interface."""
+        if tick_hz is not None and int(tick_hz) != self.tick_hz:
+            raise ValueError(f"a zero-order-hold design for {self.tick_hz} Hz has no gains "
+                             f"at {tick_hz} Hz: design it again at that rate")
+        return self.tick_hz, [(s.K, s.k0, s.L, s.Lambda, s.lambda0) for s in self.stages]
 
 
 def _sym(a: np.ndarray) -> np.ndarray:

@@ -12,7 +12,9 @@ from stospline.errors import ProblemError
 
 from stospline.problem.series import Series
 
-__all__ = ["ProblemError", "Stage", "Penalty", "Constraint", "Knot", "Problem", "Series"]
+__all__ = ["ProblemError", "Stage", "Penalty", "Constraint", "Knot", "Problem", "Series",
+           "ticks_per_stage"]
+
 
 @dataclass(frozen=True)
 class Stage:
@@ -154,3 +156,12 @@ class Problem:
         return Problem(self.name, self.t0, self.x0, self.tick_hz,
                        tuple(s.without_noise() for s in self.stages), self.knots,
                        self.source_sha256, self.plot, self.options, self.u_min, self.u_max)
+
+
+def ticks_per_stage(problem, tick_hz: int) -> np.ndarray:
+    """Ticks in each stage; raises ValueError if the rate does not divide a stage length."""
+    lengths = np.diff(problem.times) * tick_hz
+    counts = np.rint(lengths).astype(int)
+    if np.any(np.abs(lengths - counts) > 1e-9 * np.maximum(counts, 1)) or np.any(counts < 1):
+        raise ValueError(f"tick rate {tick_hz} Hz does not divide every stage length")
+    return counts

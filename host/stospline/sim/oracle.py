@@ -23,6 +23,7 @@ from stospline.design.continuous import ContinuousDesign
 from stospline.design.moments import augmented_drift, euler_tick, exact_tick, running_cost_matrix
 from stospline.problem.model import Problem
 from stospline.table.format import GainTable
+from stospline.table.qformat import DEFAULT_SIGMAS, scalable_ranges
 
 __all__ = ["Moments", "evaluate_continuous", "evaluate_table"]
 
@@ -305,3 +306,13 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
     path_t = np.concatenate(pts_t) if pts_t else np.zeros(0)
     path_mean = np.concatenate(pts_m) if pts_m else np.zeros((0, n))
     return Moments(float(J), means, covs, cons, path_t, path_mean)
+
+
+def state_range(problem: Problem, table: GainTable, *, sigmas: float = DEFAULT_SIGMAS
+                ) -> np.ndarray:
+    """``max_t |E x_j(t)| + sigmas * std x_j(t)`` over every tick of the plan (exact moments of
+    the table's law, `evaluate_table`): the state scales of a Q15/Q31 table."""
+    mom = evaluate_table(problem, table, path=True)
+    # max(., 0): a zero variance may come out as -1e-18 on another machine (NaN from sqrt).
+    r = np.max(np.abs(mom.path_mean) + sigmas * np.sqrt(np.maximum(mom.path_var, 0.0)), axis=0)
+    return scalable_ranges(r)

@@ -19,13 +19,13 @@ from __future__ import annotations
 import struct
 import zlib
 from dataclasses import dataclass, replace
+from typing import Protocol
 
 import numpy as np
 
 from stospline import limits
-from stospline.design.continuous import ContinuousDesign
 
-__all__ = ["GainTable", "TableShape", "BandQP", "build_table", "sample_design", "ticks_per_stage",
+__all__ = ["GainTable", "TableShape", "BandQP", "build_table", "table_of", "TickGains",
            "table_crc32", "FORMAT_VERSION", "SCALAR_FLOAT32", "F32_MAX", "BANDQP_MAX"]
 
 FORMAT_VERSION = 3
@@ -204,27 +204,33 @@ def _latch_state(stages: list[tuple], n: int) -> list[tuple]:
     return out
 
 
-def ticks_per_stage(problem, tick_hz: int) -> np.ndarray:
-    """Ticks in each stage; raises ValueError if the rate does not divide a stage length."""
-    lengths = np.diff(problem.times) * tick_hz
-    counts = np.rint(lengths).astype(int)
-    if np.any(np.abs(lengths - counts) > 1e-9 * np.maximum(counts, 1)) or np.any(counts < 1):
-        raise ValueError(f"tick rate {tick_hz} Hz does not divide every stage length")
-    return counts
+class TickGains(Protocol):
+    """What `table_of` needs of a design: the problem, per-stage gains at the ticks, and the
+    band dual the firmware re-solves (None without bands). Every designer provides it."""
+    problem: object
+
+    def tick_gains(self, tick_hz: int | None = None) -> tuple[int, list[tuple]]:
+        """``(tick_hz, stages)``: the rate (None: the design's own) and per stage
+        ``(K, k0, L, Lambda, lambda0)``, shapes (T_k, m, n), (T_k, m), (T_k, m, p_k),
+        (p_k, n), (p_k,)."""
+
+    def band_dual(self, *, exact: bool) -> tuple | None:
+        """``(Nt, mt, W, lower, upper)`` of the band dual, or None."""
 
 
-def sample_design(design: ContinuousDesign, tick_hz: int | None = None, *,
-                  quantize: bool = True, band_qp: BandQP | None = None) -> GainTable:
-    """Sample a continuous design at the tick starts (zero-order hold) and quantize to float32
-    (round to nearest, as a C compiler converts the literals)."""
-    prob = design.problem
-    tick_hz = prob.tick_hz if tick_hz is None else int(tick_hz)
-    counts = ticks_per_stage(prob, tick_hz)
-    stages = []
-    for k, st in enumerate(design.stages):
-        t = prob.times[k] + np.arange(counts[k]) / tick_hz
-        stages.append((*st.gains(t), st.Lambda, st.lambda0))
-    return build_table(prob, tick_hz, stages, quantize=quantize, band_qp=band_qp)
+def table_of(design: TickGains, tick_hz: int | None = None, *, quantize: bool = True,
+             on_target_qp: bool = True) -> GainTable:
+    """The per-tick table of any design (continuous designs are sampled at the tick starts
+    and held; zero-order-hold designs give their own tick gains), quantized to float32 (round
+    to nearest, as a C compiler converts the literals) unless ``quantize=False``.
+
+    With band constraints the table carries the band dual for the firmware's re-solve at the
+    t0 latch when it fits (``on_target_qp=False``: the affine latch of the design's active set
+    instead). ``quantize=False`` is the design's own law, in double precision, exact dual."""
+    tick_hz, stages = design.tick_gains(tick_hz)
+    dual = design.band_dual(exact=not quantize) if on_target_qp else None
+    return build_table(design.problem, tick_hz, stages, quantize=quantize,
+                       band_qp=None if dual is None else BandQP(*dual))
 
 
 def table_crc32(table: GainTable) -> int:

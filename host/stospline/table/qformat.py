@@ -173,15 +173,11 @@ class FixedTable(TableShape):
                     for b, lsb in zip(self.written_bound_lsb(), self.u_lsb)]
 
 
-def state_range(problem, table: GainTable, *, sigmas: float = DEFAULT_SIGMAS) -> np.ndarray:
-    """``max_t |E x_j(t)| + sigmas * std x_j(t)`` over every tick of the plan (exact moments of
-    the float32 table's law from `oracle.evaluate_table`)."""
-    from stospline.sim.oracle import evaluate_table
-    mom = evaluate_table(problem, table, path=True)
-    # max(., 0): a zero variance may come out as -1e-18 on another machine (NaN from sqrt).
-    r = np.max(np.abs(mom.path_mean) + sigmas * np.sqrt(np.maximum(mom.path_var, 0.0)), axis=0)
-    # A state that stays exactly 0 (never driven, no noise) still needs a scale: the smallest
-    # that quantize_table allows (2^-_EXP_SPAN of the largest range).
+def scalable_ranges(r: np.ndarray) -> np.ndarray:
+    """State ranges with each zero (a state never driven, without noise) replaced by the
+    smallest range `quantize_table` allows (2^-_EXP_SPAN of the largest): it still needs a
+    scale."""
+    r = np.asarray(r, dtype=float)
     top = float(r.max()) if r.size and r.max() > 0 else 1.0
     return np.where(r > 0, r, top * 2.0 ** -_EXP_SPAN)
 

@@ -10,6 +10,7 @@ from stospline.design.continuous import DesignError
 from stospline.sim.controller import build_controller
 from stospline.sim.montecarlo import compare_to_oracle, simulate
 from stospline.sim.oracle import evaluate_continuous, evaluate_table
+from stospline.table.format import table_of
 from stospline.pipeline import design_problem
 from stospline.problem import ProblemError, parse_problem
 
@@ -35,7 +36,7 @@ def test_dual_qp_equals_best_active_set(seed):
     assert np.all(y[free & (lam < -1e-9)] == pytest.approx(b.lower[free & (lam < -1e-9)],
                                                            abs=1e-9))
     # The design's table, evaluated exactly, costs what the dual predicts.
-    m = evaluate_table(problem, b.table(quantize=False), path=False)
+    m = evaluate_table(problem, table_of(b, quantize=False), path=False)
     assert m.J == pytest.approx(b.J0, rel=1e-8)
     for k, kn in enumerate(problem.knots):
         lo, hi = kn.constraint.bounds

@@ -8,6 +8,7 @@ from stospline.design.zoh import design_zoh
 from stospline.sim.controller import build_controller
 from stospline.sim.montecarlo import compare_to_oracle, simulate
 from stospline.sim.oracle import evaluate_continuous, evaluate_table
+from stospline.table.format import table_of
 from stospline.problem import parse_problem
 
 
@@ -57,7 +58,7 @@ def test_continuous_design_with_input_noise_predicts_oracle(make, mode):
 def test_zoh_design_with_input_noise_predicts_oracle(make, mode):
     problem = make()
     d = design_zoh(problem, mode=mode)
-    m = evaluate_table(problem, d.table(quantize=False), path=False)
+    m = evaluate_table(problem, table_of(d, quantize=False), path=False)
     assert abs(m.J - d.J0) <= 1e-8 * abs(d.J0)
     for k, kn in enumerate(problem.knots):
         np.testing.assert_allclose(m.knot_constraint[k], kn.constraint.value, atol=1e-9)
@@ -72,7 +73,7 @@ def test_ignoring_input_noise_costs_more():
 
 def test_input_noise_monte_carlo_through_c():
     problem = two_state()
-    table = design_zoh(problem).table()
+    table = table_of(design_zoh(problem))
     exact = evaluate_table(problem, table, path=False)
     mc = simulate(problem, build_controller(table), paths=4000, seed=11, substeps=100)
     agree = compare_to_oracle(mc, exact.J, exact.knot_mean)

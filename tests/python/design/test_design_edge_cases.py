@@ -8,6 +8,7 @@ import pytest
 from stospline.design.continuous import DesignError, design_continuous
 from stospline.design.zoh import design_zoh
 from stospline.sim.oracle import evaluate_continuous, evaluate_table
+from stospline.table.format import table_of
 from stospline.problem import Knot, Problem, parse_problem
 
 
@@ -59,6 +60,6 @@ def test_exact_design_at_a_few_ticks_per_stage(hz):
             design_zoh(p)
         return
     d = design_zoh(p)
-    m = evaluate_table(p, d.table(quantize=False), path=False)
+    m = evaluate_table(p, table_of(d, quantize=False), path=False)
     assert abs(m.J - d.J0) <= 1e-8 * d.J0
     np.testing.assert_allclose(m.knot_constraint[2], [0.0, 0.0], atol=1e-9)

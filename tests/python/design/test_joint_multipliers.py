@@ -7,6 +7,7 @@ from stospline.design.zoh import design_zoh
 from stospline.sim.controller import build_controller
 from stospline.sim.montecarlo import compare_to_oracle, simulate
 from stospline.sim.oracle import evaluate_continuous, evaluate_table
+from stospline.table.format import table_of
 
 
 def test_continuous_joint_design_predicts_oracle_and_beats_stagewise(robot_problem, robot):
@@ -23,21 +24,21 @@ def test_continuous_joint_design_predicts_oracle_and_beats_stagewise(robot_probl
 def test_zoh_joint_design_predicts_oracle(robot_problem, hz):
     joint = design_zoh(robot_problem, hz, mode="joint")
     stagewise = design_zoh(robot_problem, hz)
-    m = evaluate_table(robot_problem, joint.table(quantize=False), path=False)
+    m = evaluate_table(robot_problem, table_of(joint, quantize=False), path=False)
     assert abs(m.J - joint.J0) <= 1e-8 * joint.J0
     for k, kn in enumerate(robot_problem.knots):
         np.testing.assert_allclose(m.knot_constraint[k], kn.constraint.value, atol=1e-9)
     assert joint.J0 < stagewise.J0
     # The table latches once, at stage 0; stage 1 keeps the latch. Five multipliers exceed
     # n = 4 states, so the table latches the state itself (tables.build_table).
-    t = joint.table()
+    t = table_of(joint)
     assert list(t.stage_np) == [4, 0] and t.dims[2] == 4
     np.testing.assert_array_equal(t.Lambda[0], np.eye(4, dtype=np.float32))
 
 
 def test_mc_through_c_joint_agrees_with_oracle(robot_problem):
     joint = design_zoh(robot_problem, 50, mode="joint")
-    table = joint.table()
+    table = table_of(joint)
     exact = evaluate_table(robot_problem, table, path=False)
     mc = simulate(robot_problem, build_controller(table), paths=3000, seed=5, substeps=40)
     agree = compare_to_oracle(mc, exact.J, exact.knot_mean)

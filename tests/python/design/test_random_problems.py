@@ -27,6 +27,7 @@ from scipy.linalg import expm
 from stospline.design.continuous import design_continuous
 from stospline.design.zoh import design_zoh
 from stospline.sim.oracle import evaluate_continuous, evaluate_table
+from stospline.table.format import table_of
 from stospline.problem import parse_problem
 
 MODES = ("stagewise", "joint")
@@ -152,7 +153,7 @@ def test_zoh_design_predicts_table_oracle_and_meets_constraints(hz, seed, n, m, 
     problem = parse_problem(random_doc(seed, n, m, mz, n_stages, per_stage=per_stage))
     for mode in MODES:
         design = design_zoh(problem, hz, mode=mode)
-        moments = evaluate_table(problem, design.table(quantize=False), path=False)
+        moments = evaluate_table(problem, table_of(design, quantize=False), path=False)
         assert abs(moments.J - design.J0) <= 1e-8 * abs(design.J0), mode
         assert _constraint_residual(problem, moments) <= 1e-9, mode
 
@@ -167,7 +168,7 @@ def test_zoh_design_with_an_unconstrained_knot_after_a_constrained_one():
     for mode in MODES:
         design = design_zoh(problem, 10, mode=mode)
         assert design.J0 == pytest.approx(1.0, rel=1e-12)   # u = 1 on stage 0, 0 after
-        moments = evaluate_table(problem, design.table(quantize=False), path=False)
+        moments = evaluate_table(problem, table_of(design, quantize=False), path=False)
         assert abs(moments.J - design.J0) <= 1e-8
         assert _constraint_residual(problem, moments) <= 1e-9
 

@@ -41,10 +41,10 @@ def test_implemented_table_is_close_but_not_equal(robot):
 def test_oracle_of_the_table_converges_to_the_continuous_law(robot_problem, robot):
     """Halving h roughly halves the excess cost (first-order sampling error)."""
     from stospline.sim.oracle import evaluate_table
-    from stospline.table.format import sample_design
+    from stospline.table.format import table_of
     excess = []
     for hz in (250, 500):
-        t = sample_design(robot.design, hz)
+        t = table_of(robot.design, hz)
         excess.append(evaluate_table(robot_problem, t, path=False).J - robot.law.J)
     excess.append(robot.implemented.J - robot.law.J)
     ratios = np.array(excess[:-1]) / np.array(excess[1:])

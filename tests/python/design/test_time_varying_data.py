@@ -10,7 +10,7 @@ from stospline.design.moments import exact_tick, running_cost_matrix, varying_ti
 from stospline.sim.montecarlo import compare_to_oracle, simulate
 from stospline.sim.oracle import _tick_varying, evaluate_continuous, evaluate_table
 from stospline.problem import ProblemError, parse_problem
-from stospline.table.format import sample_design
+from stospline.table.format import table_of
 
 
 def tv_doc(interpolation="linear"):
@@ -72,7 +72,7 @@ def test_magnus_tick_is_fourth_order_and_exact_when_constant():
 
 def test_sampled_varying_design_monte_carlo_through_c():
     problem = parse_problem(tv_doc())
-    table = sample_design(design_continuous(problem))
+    table = table_of(design_continuous(problem))
     exact = evaluate_table(problem, table, path=False)
     mc = simulate(problem, build_controller(table), paths=3000, seed=4, substeps=20)
     agree = compare_to_oracle(mc, exact.J, exact.knot_mean)
@@ -118,7 +118,7 @@ def test_exact_zoh_design_with_varying_data(mode):
                 series["interpolation"] = "zoh"
         problem = parse_problem(doc)
         d = design_zoh(problem, mode=mode)
-        m = evaluate_table(problem, d.table(quantize=False), path=False)
+        m = evaluate_table(problem, table_of(d, quantize=False), path=False)
         assert abs(m.J - d.J0) <= tol * d.J0, (interp, m.J, d.J0)
         for k, kn in enumerate(problem.knots):
             np.testing.assert_allclose(m.knot_constraint[k], kn.constraint.value, atol=tol)

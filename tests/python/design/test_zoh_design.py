@@ -10,7 +10,7 @@ from stospline.design.moments import exact_tick, moment_generator, augmented_dri
 from stospline.sim.montecarlo import compare_to_oracle, simulate
 from stospline.sim.oracle import evaluate_table
 from stospline.problem import parse_problem
-from stospline.table.format import sample_design
+from stospline.table.format import table_of
 
 RATES = [10, 20, 50, 100, 1000]
 
@@ -26,8 +26,8 @@ def rate_sweep(robot_problem):
     rows = {}
     for hz in RATES:
         zoh = design_zoh(robot_problem, hz)
-        exact = evaluate_table(robot_problem, zoh.table(quantize=False), path=False)
-        sampled = evaluate_table(robot_problem, sample_design(cont, hz, quantize=False),
+        exact = evaluate_table(robot_problem, table_of(zoh, quantize=False), path=False)
+        sampled = evaluate_table(robot_problem, table_of(cont, hz, quantize=False),
                                  path=False)
         rows[hz] = (zoh.J0, exact, sampled)
     return cont, rows
@@ -83,7 +83,7 @@ def test_noise_free_path_is_best_piecewise_constant_acceleration():
     path_v = v0 + vel @ a
 
     zoh = design_zoh(problem)
-    m = evaluate_table(problem, zoh.table(quantize=False))
+    m = evaluate_table(problem, table_of(zoh, quantize=False))
     np.testing.assert_allclose(m.path_mean[:, 0], path_y, rtol=0, atol=1e-9)
     np.testing.assert_allclose(m.path_mean[:, 1], path_v, rtol=0, atol=1e-9)
     assert zoh.J0 == pytest.approx(h * a @ a, rel=1e-9)
@@ -107,7 +107,7 @@ def test_tick_map_matches_direct_integration_of_moment_ode(robot_problem):
 
 def test_mc_through_c_at_10hz_agrees_with_oracle(robot_problem):
     zoh = design_zoh(robot_problem, 10)
-    table = zoh.table()
+    table = table_of(zoh)
     exact = evaluate_table(robot_problem, table, path=False)
     assert exact.J == pytest.approx(zoh.J0, rel=1e-6)        # float32 quantization only
     mc = simulate(robot_problem, build_controller(table), paths=4000, seed=10, substeps=200)

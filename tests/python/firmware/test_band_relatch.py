@@ -14,7 +14,7 @@ from stospline.sim.controller import STATUS, build_controller
 from stospline.sim.montecarlo import compare_to_oracle, simulate
 from stospline.sim.oracle import evaluate_table
 from stospline.problem import load_problem, parse_problem
-from stospline.table.format import BandQP, GainTable, table_crc32
+from stospline.table.format import BandQP, GainTable, table_crc32, table_of
 
 from conftest import EXAMPLES
 
@@ -50,7 +50,7 @@ def robot():
     problem = robot_with_loose_band()
     b = design_bands(problem)
     assert [a["at"] for a in b.active_set()][:2] == ["inactive", "inactive"]
-    qp, st0 = b.band_qp(), b.base.stages[0]
+    qp, st0 = BandQP(*b.band_dual()), b.base.stages[0]
     rng = np.random.default_rng(5)
     for _ in range(500):
         x0 = (problem.x0 + rng.normal(scale=[0.6, 0.3, 0.6, 0.3])).astype(np.float32)
@@ -73,31 +73,31 @@ def _band_violation(problem, moments):
 
 def test_table_carries_the_dual_unfolded(robot):
     problem, b, _ = robot
-    t = b.table()
+    t = table_of(b)
     assert t.band_qp is not None and t.band_qp.q == 6
     assert t.dims[2] == 6 and list(t.stage_np) == [6, 0]   # one latch, not folded into x
-    assert b.table(on_target_qp=False).dims[2] == 4          # affine map: folded to n
+    assert table_of(b, on_target_qp=False).dims[2] == 4          # affine map: folded to n
 
 
 def test_relatched_multipliers_meet_bands_at_optimal_cost(robot):
     problem, b, x0 = robot
     moved = replace(problem, x0=x0)
-    affine = evaluate_table(moved, b.table(on_target_qp=False), path=False)
-    resolved = evaluate_table(moved, b.table(), path=False)
+    affine = evaluate_table(moved, table_of(b, on_target_qp=False), path=False)
+    resolved = evaluate_table(moved, table_of(b), path=False)
     # The design's affine latch map is wrong for this x0: a band is missed...
     assert _band_violation(moved, affine) > 1e-2
     # ...the on-target re-solve meets every band (float32 tables: 1e-5) at the cost of the
     # design made for this x0 from scratch.
     assert _band_violation(moved, resolved) < 1e-5
     assert resolved.J == pytest.approx(design_bands(moved).J0, rel=1e-6)
-    exact = evaluate_table(moved, b.table(quantize=False), path=False)
+    exact = evaluate_table(moved, table_of(b, quantize=False), path=False)
     assert _band_violation(moved, exact) < 1e-9
     assert exact.J == pytest.approx(design_bands(moved).J0, rel=1e-9)
 
 
 def test_compiled_controller_latches_the_host_multipliers(robot):
     problem, b, x0 = robot
-    table = b.table()
+    table = table_of(b)
     ctl = build_controller(table)
     step = ctl.stepper(1)
     x = x0.astype(np.float32)[None, :]
@@ -108,14 +108,14 @@ def test_compiled_controller_latches_the_host_multipliers(robot):
     ref = -(table.K[0].astype(float) @ x[0] + table.k0[0] + table.L[0].astype(float) @ v)
     np.testing.assert_allclose(u[0], ref, rtol=1e-6, atol=1e-6 * np.abs(ref).max())
     # Without the re-solve the command differs (the affine map's multipliers are wrong here).
-    u_aff, _ = build_controller(b.table(on_target_qp=False)).stepper(1)(0, x)
+    u_aff, _ = build_controller(table_of(b, on_target_qp=False)).stepper(1)(0, x)
     assert np.abs(u_aff[0] - u[0]).max() > 1e-3
 
 
 def test_monte_carlo_from_moved_start_meets_bands(robot):
     problem, b, x0 = robot
     moved = replace(problem, x0=x0)
-    table = b.table()
+    table = table_of(b)
     oracle = evaluate_table(moved, table, path=False)
     mc = simulate(moved, build_controller(table), paths=3000, seed=31, substeps=50)
     agree = compare_to_oracle(mc, oracle.J, oracle.knot_mean)

@@ -13,7 +13,7 @@ from stospline.table.codegen import generate_c
 from stospline.design.zoh import design_zoh
 from stospline.pipeline import design_problem, design_summary
 from stospline.problem import load_problem, parse_problem
-from stospline.table.format import F32_MAX, sample_design
+from stospline.table.format import F32_MAX, table_of
 from stospline.design.continuous import design_continuous
 
 from support.problems import BASE, edit
@@ -60,8 +60,8 @@ def test_limits_parse(limits, lo, hi):
 def test_every_table_of_the_problem_carries_its_limits():
     p = parse(with_limits(TWO_INPUTS, "u_min = [-1.5, -0.25]\nu_max = 0.1"))
     lo, hi = np.float32([-1.5, -0.25]), np.float32([0.1, 0.1])
-    tables = [design_zoh(p).table(), design_zoh(p).table(quantize=False),
-              sample_design(design_continuous(p)), design_problem(p).table,
+    tables = [table_of(design_zoh(p)), table_of(design_zoh(p), quantize=False),
+              table_of(design_continuous(p)), design_problem(p).table,
               design_problem(p, discretization="continuous", mode="joint").table]
     for t in tables:
         assert t.limited

@@ -83,7 +83,7 @@ def _perturbing(fn, rng):
 def test_design_doubles_perturbed_by_ulps_change_no_byte(tmp_path, monkeypatch, seed):
     rng = np.random.default_rng(seed)
     # Where the designs hand their results to the tables and the summary, and the oracle's
-    # moments (also computed by `fixed.state_range` for the fixed-point scales).
+    # moments (also computed by `oracle.state_range` for the fixed-point scales).
     for name in ("design_zoh", "design_continuous", "design_bands", "evaluate_table",
                  "evaluate_continuous"):
         monkeypatch.setattr(pipeline, name, _perturbing(getattr(pipeline, name), rng))

@@ -62,7 +62,7 @@ endfunction()
 # Fails at configure time when the table's arithmetic is not the library's (STSP_ARITH of
 # stospline::stsp). FIXED_SHAPE: instead of stospline::stsp, link a controller compiled here from
 # stospline's sources for this table's dimensions only (STSP_FIXED_NX/NU/N_LATCH, unrolled
-# loops; the 78-instruction Cortex-M4F tick, docs/firmware.md) as the library <target>_stsp;
+# loops; the 78-instruction Cortex-M4F tick, docs/guide/firmware.md) as the library <target>_stsp;
 # stsp_init() then refuses any other shape.
 function(stospline_add_gains target source)
   cmake_parse_arguments(PARSE_ARGV 2 ARG "FIXED_SHAPE" "" "")
@@ -105,7 +105,7 @@ function(stospline_add_gains target source)
     target_compile_definitions(${controller}
       PUBLIC $<TARGET_PROPERTY:stospline::stsp,INTERFACE_COMPILE_DEFINITIONS> ${table_FIXED_DEFS})
     # ISO C99: also keeps GCC from contracting a*b+c into a fused multiply-add, which would
-    # change the commands' bits (docs/firmware.md).
+    # change the commands' bits (docs/guide/firmware.md).
     set_target_properties(${controller} PROPERTIES C_STANDARD 99 C_STANDARD_REQUIRED ON
                           C_EXTENSIONS OFF STSP_ARITH "${lib_arith}")
   endif()

@@ -26,7 +26,7 @@
  *   [5.87, 5.553, 11.98, 6.933]);
  * u_exp = {6, 7}: command LSB [1.953e-03, 3.906e-03];
  * v_exp = {5, 4, 5, 5}.
- * |u_fixed - u_double| <= [0.00598, 0.0114] for every state within the range (docs/firmware.md). */
+ * |u_fixed - u_double| <= [0.00598, 0.0114] for every state within the range (docs/guide/firmware.md). */
 extern const stsp_table_t robot_corridor_q15_table;
 
 #endif /* ROBOT_CORRIDOR_Q15_GAINS_H */

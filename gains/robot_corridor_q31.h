@@ -26,7 +26,7 @@
  *   [5.87, 5.553, 11.98, 6.933]);
  * u_exp = {6, 7}: command LSB [2.980e-08, 5.960e-08];
  * v_exp = {5, 4, 5, 5}.
- * |u_fixed - u_double| <= [8.77e-08, 1.7e-07] for every state within the range (docs/firmware.md). */
+ * |u_fixed - u_double| <= [8.77e-08, 1.7e-07] for every state within the range (docs/guide/firmware.md). */
 extern const stsp_table_t robot_corridor_q31_table;
 
 #endif /* ROBOT_CORRIDOR_Q31_GAINS_H */

@@ -5,7 +5,7 @@
  * (counted before the enumeration starts), Newton steps STSP_BANDQP_SQRT_STEPS. No allocation,
  * no recursion, no VLAs; the work area is the caller's. MISRA C:2012: only the project-wide
  * deviations D1 (15.5, guard clauses) and D2 (21.15, binary32 bit pattern) of
- * docs/firmware.md apply. */
+ * docs/guide/firmware.md apply. */
 #include "stospline/stsp_bandqp.h"
 
 #include <stddef.h>

@@ -1,5 +1,5 @@
 /* Latched time-varying affine controller: see stospline/stsp_controller.h for the contract
- * and docs/firmware.md for the response to every fault and the MISRA deviations.
+ * and docs/guide/firmware.md for the response to every fault and the MISRA deviations.
  *
  * Hot path. An ordinary tick (the expected tick, inside the stage already latched) runs
  * straight through stsp_step(): two compares select it, the law is evaluated from the tick's
@@ -321,7 +321,7 @@ static const stsp_acc_t stsp_q_one = INT64_C(2147483648);
 /* acc + a b, with the exact product (|a b| <= 2^(2F): no overflow) added modulo the
  * accumulator's range. One multiply-accumulate instruction on the Cortex-M4 (smlabb for Q15,
  * smlal for Q31: their addition wraps). ARMv6-M (Cortex-M0/M0+) has no 32x32->64 multiply:
- * there a Q31 product is a libgcc __aeabi_lmul call (see docs/firmware.md for its cost, and
+ * there a Q31 product is a libgcc __aeabi_lmul call (see docs/guide/firmware.md for its cost, and
  * for the 16-bit-halves alternative measured and not kept); Q15 is the variant for those
  * cores. */
 static inline stsp_uacc_t stsp_q_mac(stsp_uacc_t acc, stsp_scalar_t a, stsp_scalar_t b)

@@ -1,6 +1,6 @@
 """stospline: control-theoretic splines for linear systems with multiplicative noise.
 
-The public API (``docs/library.md`` shows the design -> table -> simulate path)::
+The public API (``docs/guide/library.md`` shows the design -> table -> simulate path)::
 
     import stospline as ss
     problem = ss.load_problem("robot.toml")            # or ss.problem_from_arrays(A, B, Q, R, ...)

@@ -10,7 +10,7 @@ The constants were measured on the development machine (2 shared x86-64 cores, O
 ``tools/bench/calibrate_budget.py``, which prints them and the estimate beside the measured time and
 peak memory of a set of designs and simulations. They are estimates: expect the real figures
 within a factor of about 3 (more on a loaded or much slower machine). Limits (documented in
-docs/problem-file.md, "Limits"): `DEFAULT_MAX_SECONDS` and `DEFAULT_MAX_BYTES`, raised with
+docs/guide/problem-file.md, "Limits"): `DEFAULT_MAX_SECONDS` and `DEFAULT_MAX_BYTES`, raised with
 ``--max-time``/``--max-memory``; the memory limit is never above the machine's RAM.
 
 What grows (n states, m inputs, d = n + m + 1, D = d^2, T ticks, S stages, q multipliers):

@@ -232,7 +232,7 @@ def _common(sp) -> None:
     sp.add_argument("--max-time", type=_positive(1e9, "seconds"), default=DEFAULT_MAX_SECONDS,
                     metavar="SECONDS",
                     help=f"refuse a run estimated to take longer (default "
-                         f"{DEFAULT_MAX_SECONDS:g} s; docs/problem-file.md, Limits)")
+                         f"{DEFAULT_MAX_SECONDS:g} s; docs/guide/problem-file.md, Limits)")
     sp.add_argument("--max-memory", type=_positive(1e6, "GiB"),
                     default=DEFAULT_MAX_BYTES / 1024 ** 3, metavar="GIB",
                     help=f"refuse a run estimated to need more memory (default "
@@ -254,7 +254,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="design as if there were no noise (the paper's Remark 2)")
     p.add_argument("--arith", default=None, metavar="{float32,q15,q31}",
                    help="arithmetic of the generated tables: float32 (default), or fixed-point "
-                        "Q15/Q31 written as <name>_<arith>.{c,h,json} (docs/firmware.md). "
+                        "Q15/Q31 written as <name>_<arith>.{c,h,json} (docs/guide/firmware.md). "
                         "Default: the file's [design] arith")
     p.set_defaults(func=_design)
 
@@ -322,7 +322,7 @@ def main(argv: list[str] | None = None) -> int:
         print("stospline: interrupted", file=sys.stderr)
         return 130
     except MemoryError:
-        print("stospline: error: out of memory (the estimate of docs/problem-file.md, "
+        print("stospline: error: out of memory (the estimate of docs/guide/problem-file.md, "
               "Limits, was too low for this machine; try --max-memory lower or a smaller "
               "problem)", file=sys.stderr)
         return 1

@@ -3,7 +3,7 @@
 At tick ``j`` (time ``t[j] = t0 + j / tick_hz``) the controller applies, and holds for one
 tick, ``u = -K[j] x - k0[j] - L[j] v``; at the first tick of stage ``s``
 (``stage_start[s]``) it first latches ``v = Lambda[s] x + lambda0[s]`` from the measured x
-(a band table re-solves its band dual there instead: see docs/firmware.md).
+(a band table re-solves its band dual there instead: see docs/guide/firmware.md).
 """
 from __future__ import annotations
 

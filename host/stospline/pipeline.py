@@ -208,7 +208,7 @@ def design_summary(d: Designed) -> dict:
 def _band_terms(d: Designed) -> dict:
     """The design's own summary entries; with bands also the rows of the dual the firmware
     re-solves from the measured x0 (0: it latches the affine map of the design's active set,
-    see docs/math-notes.md)."""
+    see docs/theory/math-notes.md)."""
     terms = d.design.summary_terms()
     if has_bands(d.problem):
         terms["band_qp_rows"] = 0 if d.table.band_qp is None else d.table.band_qp.q

@@ -1,5 +1,5 @@
 """Numbers written at the precision they really have, so that regenerated files agree between
-machines (docs/firmware.md, "Reproducible tables").
+machines (docs/guide/firmware.md, "Reproducible tables").
 
 Another CPU, BLAS kernel or library build changes the last bits of every double the design
 computes: measured here, up to 1.5e-14 relative on the gains (the numpy tick loop against the

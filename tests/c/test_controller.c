@@ -1,7 +1,7 @@
 /* Unit tests of the controller on small hand-made tables whose law is checked against a
  * double-precision reference evaluation written out here. Built several times (CMakeLists.txt):
  * generic dimensions, STSP_FIXED_NX/NU/N_LATCH = 2/1/2 (the main table's shape), and each under
- * ASan + UBSan. Every documented response of docs/firmware.md has a test here. */
+ * ASan + UBSan. Every documented response of docs/guide/firmware.md has a test here. */
 #include <float.h>
 #include <math.h>
 #include <setjmp.h>

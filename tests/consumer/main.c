@@ -4,7 +4,7 @@
  * on_tick() runs from the timer interrupt at ROBOT_CORRIDOR_TICK_HZ; here the plant is the
  * noise-free robot (a double integrator per axis, held command, exact) so that the run is
  * deterministic. Prints one line per tick: tick, status, the state x given to stsp_step and
- * the command u, as C99 hex floats (exact). docs/integration.md explains each step. */
+ * the command u, as C99 hex floats (exact). docs/guide/integration.md explains each step. */
 #include <stdint.h>
 #include <stdio.h>
 

@@ -192,7 +192,7 @@ case "$mode" in
       "$cmake" -S "$src" --preset "$name" -B "$work/$name" >/dev/null
       "$cmake" --build "$work/$name"
       # The same machine code as the library tools/arm builds, which the QEMU replay test and
-      # the instruction counts of docs/firmware.md measure.
+      # the instruction counts of docs/guide/firmware.md measure.
       "$cmake" -S "$src/tools/arm" -B "$work/$name-tools-arm" -G "$generator" \
         -DCMAKE_TOOLCHAIN_FILE="$src/tools/arm/arm-none-eabi.cmake" -DSTSP_ARM_CPU="$cpu" >/dev/null
       "$cmake" --build "$work/$name-tools-arm" --target "$armlib" >/dev/null

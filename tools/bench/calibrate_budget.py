@@ -6,7 +6,7 @@ Runs each case below as the CLI runs it (``stospline design|simulate FILE --quie
 process, so the times include start-up) and prints, per case, the estimate beside the measured
 wall time and peak resident memory (``ru_maxrss`` of the child), with their ratios. The
 constants in ``host/stospline/budget.py`` were set from these runs so that the estimate is
-within a factor of about 3 of every case (docs/problem-file.md, "Limits"). Cases: the robot
+within a factor of about 3 of every case (docs/guide/problem-file.md, "Limits"). Cases: the robot
 at 1 and 20 kHz, float32, Q15 and continuous; a 12-state, 4-input chain; 2000 short stages;
 a joint design with 32 constrained knots; a simulation with 2000 paths.
 """

@@ -4,7 +4,7 @@ Usage: .venv/bin/python tools/bench/zoh_design.py [--repeat 5]
 
 Every time is the median of `--repeat` runs (3 for the runs that take seconds) measured with
 ``time.perf_counter`` after one warm-up run (which also builds the cached C kernel), on one
-core: BLAS threads are pinned to 1 before numpy is imported. Figures are in docs/performance.md.
+core: BLAS threads are pinned to 1 before numpy is imported. Figures are in docs/evidence/performance.md.
 
 Problems
 --------

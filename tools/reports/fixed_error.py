@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Report (docs/firmware.md, "Fixed-point variants"): the largest |u_fixed - u_double| of the
+"""Report (docs/guide/firmware.md, "Fixed-point variants"): the largest |u_fixed - u_double| of the
 compiled Q15/Q31 controllers over 10^6 random in-range states of the robot design, next to
 the table's documented bound, and the closed-loop distance to the float32 controller.
 

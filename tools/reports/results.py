@@ -1,4 +1,4 @@
-"""Headline numbers of the robot corridor example, each recomputed here (docs/results.md).
+"""Headline numbers of the robot corridor example, each recomputed here (docs/evidence/results.md).
 
 Usage: .venv/bin/python tools/reports/results.py [--paths 10000] [--seed 1]
 """

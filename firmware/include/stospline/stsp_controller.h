@@ -36,7 +36,7 @@
  * default STSP_MAX_LATCH = 16 (float32), 116 (Q15), 148 (Q31). stsp_step() uses
  * STSP_MAX_LATCH + STSP_MAX_NU scalars of stack, plus, on the stage-0 latch of a band table
  * only, the band solver's work area and multipliers (sizeof(stsp_bandqp_work_t) +
- * STSP_BANDQP_MAX doubles, about 0.8 KB with STSP_BANDQP_MAX = 8; docs/firmware.md). The
+ * STSP_BANDQP_MAX doubles, about 0.8 KB with STSP_BANDQP_MAX = 8; docs/guide/firmware.md). The
  * tables stay where the caller put them (const, normally flash) and are never copied; their
  * header (dimensions, array addresses) is: after stsp_init() every call works from the
  * instance's copy, so a header changed later cannot move an access outside the arrays init
@@ -45,7 +45,7 @@
  * Compile-time dimensions (optional): define STSP_FIXED_NX, STSP_FIXED_NU and
  * STSP_FIXED_N_LATCH (all three, for the library and every file that includes this header)
  * to build a controller for one table shape. The loops then have constant bounds and the
- * compiler unrolls them (the Cortex-M4F figures in docs/firmware.md); stsp_init() refuses a
+ * compiler unrolls them (the Cortex-M4F figures in docs/guide/firmware.md); stsp_init() refuses a
  * table of any other shape with STSP_ERR_BAD_DIMS. The arithmetic is the same operation for
  * operation, so both builds give bit-identical commands.
  */
@@ -73,7 +73,7 @@ typedef int32_t stsp_q31_t;
  * defining STSP_ARITH_Q15 or STSP_ARITH_Q31 (or neither, or STSP_ARITH_FLOAT32: float32) for
  * the library and every file that includes this header. stsp_scalar_t is the type of the
  * state x, the command u, the latched v and every table entry; the fixed-point variants and
- * their scaling are described in docs/firmware.md ("Fixed-point variants") and on stsp_step().
+ * their scaling are described in docs/guide/firmware.md ("Fixed-point variants") and on stsp_step().
  */
 #if defined(STSP_ARITH_Q15) && defined(STSP_ARITH_Q31)
 #error "define at most one of STSP_ARITH_Q15, STSP_ARITH_Q31"
@@ -361,7 +361,7 @@ stsp_status_t stsp_verify(stsp_ctrl_t *ctrl);
  * x and u may be the same buffer or overlap: every read of x happens before the first write
  * of u, so the status and the command are those of separate buffers (the overlapping entries
  * of x then hold the command). u must not overlap the instance or the table.
- * See docs/firmware.md for every status's response.
+ * See docs/guide/firmware.md for every status's response.
  */
 stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
                         stsp_scalar_t *u);

@@ -1,4 +1,4 @@
-"""Continuous-time stage-wise design (the paper's Proposition 3, corrected per docs/math.md).
+"""Continuous-time stage-wise design (the paper's Proposition 3, corrected per docs/theory/math.md).
 
 Backward on each stage ``[t_k, t_{k+1}]``, with ``K = R^-1 (P B + S)'`` and ``Acl = A - B K``::
 

@@ -40,7 +40,7 @@ def problem_from_arrays(A: Any, B: Any, Q: Any = None, R: Any = None, *, x0: Any
                         stages: Iterable[Mapping] | None = None,
                         regions: Iterable[Mapping] | None = None) -> Problem:
     """A validated `Problem` from arrays, with the same meaning as the problem file's keys
-    (``docs/problem-file.md``).
+    (``docs/guide/problem-file.md``).
 
     Parameters
     ----------

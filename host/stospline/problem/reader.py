@@ -615,7 +615,7 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     array, numpy scalar or tuple is taken as the list or number it holds) and return a
     `Problem`.
 
-    The key reference is ``docs/problem-file.md``.  With ``[[stages]]`` (one entry per knot),
+    The key reference is ``docs/guide/problem-file.md``.  With ``[[stages]]`` (one entry per knot),
     stage ``k`` takes each key of ``[dynamics]``/``[cost]`` from ``stages[k].dynamics`` /
     ``stages[k].cost`` when given there, else from the top-level table.
 
@@ -721,7 +721,7 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
 
 
 def load_problem(path: str | Path) -> Problem:
-    """Read and validate a TOML problem file (reference: ``docs/problem-file.md``).
+    """Read and validate a TOML problem file (reference: ``docs/guide/problem-file.md``).
 
     The file is read with bounds (`stospline.problem.inputfile`): a regular file (or a symlink to
     one) of at most 16 MiB, UTF-8, arrays and tables nested at most 32 deep.

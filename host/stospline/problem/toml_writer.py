@@ -1,6 +1,6 @@
 """Write a `Problem` back as a TOML problem file: ``parse(problem_to_toml(p))`` equals ``p``.
 
-What is written (``docs/library.md``, "Writing a problem back"):
+What is written (``docs/guide/library.md``, "Writing a problem back"):
 
 * every stage's data as constant arrays; time-varying data read from a file (samples with
   their interpolation, a tracking cost) as the same samples. Time-varying data given as a
@@ -132,7 +132,7 @@ def problem_to_toml(problem: Problem) -> str:
     """
     p = problem
     lines = ["# Problem file written by stospline (problem_to_toml); reference: "
-             "docs/problem-file.md",
+             "docs/guide/problem-file.md",
              f"name = {_value(p.name)}", f"t0 = {_value(float(p.t0))}",
              f"x0 = {_value(p.x0)}", f"tick_hz = {_value(int(p.tick_hz))}"]
     for key in ("u_min", "u_max"):

@@ -172,7 +172,7 @@ def _generate_fixed(table, p: str, banner: str) -> tuple[str, str]:
  *   [{", ".join(f"{r:.4g}" for r in table.x_range)}]);
  * u_exp = {{{", ".join(str(int(e)) for e in table.u_exp)}}}: command LSB [{lsb}];
  * v_exp = {{{", ".join(str(int(e)) for e in table.v_exp)}}}.
- * |u_fixed - u_double| <= [{bound}] for every state within the range (docs/firmware.md). */
+ * |u_fixed - u_double| <= [{bound}] for every state within the range (docs/guide/firmware.md). */
 extern const stsp_table_t {p}_table;
 
 #endif /* {P}_GAINS_H */

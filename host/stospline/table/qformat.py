@@ -30,7 +30,7 @@ which is exactly what the firmware's ``stsp_init`` requires: then no sum overflo
 accumulator and no ``u_q``/``v_q`` leaves the Q range for any integer state, and the command
 range covers the worst corner of the state box (no saturation for in-range states).
 
-Error bound (`FixedTable.bound`, derived in docs/firmware.md). For every integer state (any
+Error bound (`FixedTable.bound`, derived in docs/guide/firmware.md). For every integer state (any
 ``x_q``, i.e. every state within the range) and latch state, in units of the command's LSB
 ``2^(u_exp[i] - F)``::
 
@@ -67,7 +67,7 @@ _EXP_SPAN = 24          # a state whose range is tiny gets at least 2^-24 of the
 # between machines by a relative d (measured: 1.5e-14). A residual moves by at most |dG~| (also
 # when G~ crosses a rounding boundary: it is 1/2 on both sides), so a row's bound moves by at most
 # d times its sums of |G~| (law and latch rows, each at most 2^F - 1 + terms / 2): below
-# d (2 2^F + 2n + 2P + 4) (docs/firmware.md, "Error bound"). GAIN_AGREEMENT = 1e-12 is 70 times
+# d (2 2^F + 2n + 2P + 4) (docs/guide/firmware.md, "Error bound"). GAIN_AGREEMENT = 1e-12 is 70 times
 # the measured d: a margin of 6.4e-3 LSB in Q31, 1e-7 LSB in Q15, so the written bound holds for
 # every machine's double law. At 3 digits a new design's written bound differs between machines
 # with a probability below 1e-3 per input (the robot's moved by 2.5e-7 LSB in Q31).

@@ -43,7 +43,7 @@ EXAMPLES_N = int(os.environ.get("STOSPLINE_HOSTILE_EXAMPLES", "120"))
 TIME_LIMIT_S = int(os.environ.get("STOSPLINE_HOSTILE_SECONDS", "60"))
 ADDRESS_SPACE = 8 << 30
 # The tool refuses up front what it estimates beyond --max-time; its estimates hold within a
-# factor of ~3 (docs/problem-file.md, Limits), so a case it accepts must end within
+# factor of ~3 (docs/guide/problem-file.md, Limits), so a case it accepts must end within
 # TIME_LIMIT_S = 6 x MAX_TIME_S.
 MAX_TIME_S = 10
 WARNINGS = ["-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"]

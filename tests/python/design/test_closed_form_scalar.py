@@ -1,4 +1,4 @@
-"""A scalar problem with a closed-form solution (derivation: docs/closed-form.md).
+"""A scalar problem with a closed-form solution (derivation: docs/theory/closed-form.md).
 
     dX = a X dt + b u dt + g X dZ   on [t0, T],
     minimise E{ w (X(T) - rho)^2 + int r u^2 dt }   subject to   E X(T) = zeta.
@@ -30,7 +30,7 @@ TIMES = [0.5, 2.5]             # t0, T
 
 
 def closed_form(a, g, w, rho, zeta, t, *, b=B, r=R, T=TIMES[1]):
-    """P, p, c, N, W, m of the backward equations at time t (see docs/closed-form.md);
+    """P, p, c, N, W, m of the backward equations at time t (see docs/theory/closed-form.md);
     ``zeta=None``: no constraint (then W and m are not needed, nor is I(s) if rho = 0)."""
     al, be = 2 * a + g * g, b * b / r
     s = T - t

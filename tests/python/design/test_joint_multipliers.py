@@ -16,7 +16,7 @@ def test_continuous_joint_design_predicts_oracle_and_beats_stagewise(robot_probl
     assert abs(m.J - joint.J0) <= 1e-8 * joint.J0
     for k, kn in enumerate(robot_problem.knots):
         np.testing.assert_allclose(m.knot_constraint[k], kn.constraint.value, atol=1e-8)
-    # Reported in docs/results.md: 27.392 (joint) < 27.751 (stage-wise).
+    # Reported in docs/evidence/results.md: 27.392 (joint) < 27.751 (stage-wise).
     assert joint.J0 < robot.design.J0 - 0.1
 
 

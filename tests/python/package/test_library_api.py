@@ -191,7 +191,7 @@ DOC_PROBLEMS = doc_problems()
 
 @pytest.mark.parametrize("label", sorted(DOC_PROBLEMS))
 def test_toml_round_trip(label):
-    """parse(to_toml(p)) == p for every example and every snippet of docs/problem-file.md:
+    """parse(to_toml(p)) == p for every example and every snippet of docs/guide/problem-file.md:
     time-varying samples, tracking, [[stages]], regions, bands, limits, noise, [design]."""
     p = DOC_PROBLEMS[label]
     text = problem_to_toml(p)

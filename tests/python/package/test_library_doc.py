@@ -1,4 +1,4 @@
-"""docs/library.md cannot drift from the library: its ```python blocks run, in order, in one
+"""docs/guide/library.md cannot drift from the library: its ```python blocks run, in order, in one
 namespace, from a temporary directory holding a copy of examples/."""
 import re
 import shutil

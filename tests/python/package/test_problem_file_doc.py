@@ -1,4 +1,4 @@
-"""docs/problem-file.md cannot drift from the parser: every ```toml block in it parses, and
+"""docs/guide/problem-file.md cannot drift from the parser: every ```toml block in it parses, and
 every key the parser accepts is documented.
 
 Each block's first line says what it is: ``# complete file`` (a whole problem file; when it
@@ -125,7 +125,7 @@ NESTED = ["state", "input", "G", "C", "target", "weight", "value", "lower", "upp
                                        | problem_module._COST_KEYS
                                        | set(problem_module._DESIGN_OPTIONS)) + NESTED)
 def test_every_accepted_key_is_documented(key):
-    assert documented(key), f"docs/problem-file.md does not mention `{key}`"
+    assert documented(key), f"docs/guide/problem-file.md does not mention `{key}`"
 
 
 @pytest.mark.parametrize("key, values", list(problem_module._DESIGN_OPTIONS.items()))

@@ -3,7 +3,7 @@
 Another CPU, BLAS kernel, thread count or library build changes the last bits of the design's
 doubles (measured here: the numpy tick loop against the C one moves the robot's gains by up to
 1.5e-14 relative). Every number written to gains/ must be printed at a precision those bits do
-not reach (docs/firmware.md, "Reproducible tables"). These tests regenerate every shipped file
+not reach (docs/guide/firmware.md, "Reproducible tables"). These tests regenerate every shipped file
 (`tools/regen_gains.sh`) with the last bits changed in three ways and compare byte for byte:
 
 * every double the design and the oracle hand on is multiplied by ``1 + r``, ``|r|`` drawn

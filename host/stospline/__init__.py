@@ -1,14 +1,18 @@
 """stospline: control-theoretic splines for linear systems with multiplicative noise.
 
-The public API (``docs/guide/library.md`` shows the design -> table -> simulate path)::
+The public API, in the order a script uses it (``docs/guide/library.md`` walks through it)::
 
     import stospline as ss
-    problem = ss.load_problem("robot.toml")            # or ss.problem_from_arrays(A, B, Q, R, ...)
-    d = ss.design_problem(problem)                     # design, float32 table, oracle
-    g = d.gains()                                      # t, K (n_ticks, m, n), k0, L as numpy
-    files = ss.generated_files(d, "robot.toml")        # C tables + JSON summary, as text
-    mc = ss.simulate_problem(d, paths=1000, seed=1)    # Monte Carlo of the compiled C
+    problem = ss.load_problem("robot.toml")          # or ss.problem_from_arrays(A, B, ...)
+    d = ss.design_problem(problem)                   # design, float32 table, oracle
+    exact = ss.table_of(d.design, quantize=False)    # the design's own per-tick law
+    q15 = ss.fixed_table(d, "q15")                   # fixed-point table with error bound
+    header, source = ss.generate_c(d.table)          # the C text the firmware compiles
+    ctl = ss.build_controller(d.table)               # the real firmware, through cffi
+    mc = ss.simulate_problem(d, paths=1000, seed=1)  # Monte Carlo of the compiled C
+    m = ss.evaluate_table(problem, q15)              # exact moments of a table as implemented
 
+Each of these has a numpydoc docstring with Examples that the test command runs.
 Names are loaded on first use, so ``import stospline`` stays cheap (no scipy, no compiler).
 """
 from __future__ import annotations
@@ -29,6 +33,7 @@ _EXPORTS = {
     "flash_bytes": "table.flash",
     # running the compiled firmware
     "simulate_problem": "pipeline", "simulation_summary": "pipeline",
+    "table_of": "table.format", "evaluate_table": "sim.oracle",
     "build_controller": "sim.controller", "generate_c": "table.codegen", "plot_corridor": "report.plot",
 }
 

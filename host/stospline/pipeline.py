@@ -83,11 +83,37 @@ def design_problem(problem: Problem, *, noise: bool = True,
 
     Parameters
     ----------
+    problem : Problem
+        From `load_problem`, `parse_problem` or `problem_from_arrays`.
+    noise : bool
+        False designs as if there were no noise (the paper's Remark 2); the oracle still
+        evaluates the law under the problem's noise.
     discretization : {"exact-zoh", "continuous"}
         "exact-zoh" (default) is optimal for the controller as it runs (held at each tick);
         "continuous" solves the continuous-time design and samples its gains at the ticks.
     mode : {"stagewise", "joint"}
-        Multipliers latched at every stage start, or once at t0 (see `multipliers`).
+        Multipliers latched at every stage start, or once at t0 (`stospline.design.latch`).
+
+    Returns
+    -------
+    Designed
+        ``design`` (predicted cost ``design.J0``), ``table`` (the float32 per-tick table the
+        firmware runs), ``law`` and ``implemented`` (the oracle's exact moments and cost of
+        the design's own law and of the table as implemented).
+
+    Raises
+    ------
+    DesignError
+        The problem has no solution (an infeasible constraint, no bounded solution).
+
+    Examples
+    --------
+    >>> import stospline
+    >>> d = stospline.design_problem(stospline.load_problem("examples/robot_corridor.toml"))
+    >>> print(f"{d.design.J0:.4f} {d.implemented.J:.4f}")   # predicted, and as implemented
+    27.7745 27.7745
+    >>> d.table.n_ticks, d.table.dims                        # ticks; (n, m, multipliers)
+    (6000, (4, 2, 4))
     """
     limits.check_mode(problem, mode)   # before the work: the firmware's STSP_MAX_LATCH
     try:
@@ -232,8 +258,32 @@ def double_table(d: Designed) -> GainTable:
 
 def fixed_table(d: Designed, arith: str, *, sigmas: float = DEFAULT_SIGMAS,
                 x_range=None) -> FixedTable:
-    """Q15/Q31 tables of a design (`stospline.table.qformat`): state scales from `x_range`, or else
-    from the oracle's predicted range ``max_t |mean| + sigmas * std`` of the float32 law."""
+    """Quantize a design to a Q15/Q31 table (`stospline.table.qformat`).
+
+    Parameters
+    ----------
+    d : Designed
+    arith : {"q15", "q31"}
+    sigmas : float
+        State range ``max_t |mean| + sigmas * std`` of the float32 law (the oracle's exact
+        moments), from which each state's power-of-two scale is chosen.
+    x_range : array-like (n,), optional
+        The state ranges to use instead.
+
+    Returns
+    -------
+    FixedTable
+        Integer tables with per-entry scales and the bound on ``|u_fixed - u_double|``
+        (``summary()``).
+
+    Examples
+    --------
+    >>> import stospline
+    >>> d = stospline.design_problem(stospline.load_problem("examples/robot_corridor.toml"))
+    >>> q = stospline.fixed_table(d, "q15")
+    >>> q.name, q.arith, q.K.shape
+    ('robot_corridor_q15', 'q15', (6000, 2, 4))
+    """
     if x_range is None:
         x_range = state_range(d.problem, d.table, sigmas=sigmas)
     return quantize_table(double_table(d), arith, x_range)
@@ -276,8 +326,40 @@ def check_implementable(d: Designed) -> None:
 
 def simulate_problem(d: Designed, *, paths: int, seed: int, substeps: int = 2,
                      build_dir=None) -> MonteCarloResult:
-    """Monte Carlo of the compiled C controller built from `d.table` (raises ProblemError if
-    the firmware would refuse the table, see `check_implementable`)."""
+    """Monte Carlo of the compiled C controller built from `d.table` in closed loop with the
+    stochastic plant (Euler-Maruyama with `substeps` steps per tick).
+
+    Parameters
+    ----------
+    d : Designed
+    paths : int
+        Number of sample paths (at least 1).
+    seed : int
+        Seed of the plant's noise: the same seed gives the same result.
+    substeps : int
+        Plant steps per controller tick.
+    build_dir : str or Path, optional
+        Where the compiled module is cached (default: the user cache directory).
+
+    Returns
+    -------
+    MonteCarloResult
+        Per-path costs (``cost``, ``cost_mean_ci()``), knot states, saturation counts.
+
+    Raises
+    ------
+    ProblemError
+        The firmware would refuse the table (`check_implementable`).
+
+    Examples
+    --------
+    >>> import stospline
+    >>> d = stospline.design_problem(stospline.load_problem("examples/robot_corridor.toml"))
+    >>> mc = stospline.simulate_problem(d, paths=200, seed=1)
+    >>> mean, half_width = mc.cost_mean_ci()          # 95 % confidence interval
+    >>> abs(mean - d.implemented.J) <= half_width      # the oracle's exact cost inside it
+    True
+    """
     check_implementable(d)
     ctl = build_controller(d.table, build_dir=build_dir)
     return simulate(d.problem, ctl, paths=paths, seed=seed, substeps=substeps)

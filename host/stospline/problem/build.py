@@ -63,10 +63,28 @@ def problem_from_arrays(A: Any, B: Any, Q: Any = None, R: Any = None, *, x0: Any
     The problem's ``source_sha256`` is that of its TOML form (`problem_to_toml`), so the
     tables designed from it carry the hash of the file that ``problem.to_toml()`` writes.
 
+    Returns
+    -------
+    Problem
+
     Raises
     ------
     ProblemError
         Naming the field by its key in the problem file, and the reason.
+
+    Examples
+    --------
+    Steer ``dX = u dt + 0.3 X dZ`` from 1 so that ``E X(1) = 2``, with least effort and least
+    variance at t = 1 (weight 10):
+
+    >>> import stospline
+    >>> p = stospline.problem_from_arrays(
+    ...     [[0.0]], [[1.0]], R=[[1.0]], x0=[1.0], tick_hz=10, name="growth",
+    ...     noise=[{"state": 0, "G": [[0.3]]}],
+    ...     knots=[{"t": 1.0, "constraint": {"C": [[1.0]], "value": [2.0]},
+    ...             "penalty": {"C": [[1.0]], "target": [2.0], "weight": 10.0}}])
+    >>> p.n, p.m, len(p.knots)
+    (1, 1, 1)
     """
     dynamics: dict = {"A": A, "B": B}
     if noise is not None:

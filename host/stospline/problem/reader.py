@@ -723,8 +723,19 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
 def load_problem(path: str | Path) -> Problem:
     """Read and validate a TOML problem file (reference: ``docs/guide/problem-file.md``).
 
-    The file is read with bounds (`stospline.problem.inputfile`): a regular file (or a symlink to
-    one) of at most 16 MiB, UTF-8, arrays and tables nested at most 32 deep.
+    The file is read with bounds (`stospline.problem.inputfile`): a regular file (or a symlink
+    to one) of at most 16 MiB, UTF-8, arrays and tables nested at most 32 deep.
+
+    Parameters
+    ----------
+    path : str or Path
+        The problem file.
+
+    Returns
+    -------
+    Problem
+        Validated data; ``source_sha256`` is the SHA-256 of the file's bytes, which the
+        generated tables carry.
 
     Raises
     ------
@@ -732,6 +743,13 @@ def load_problem(path: str | Path) -> Problem:
         The file is not valid TOML or not a valid problem; names the field and the reason.
         A file that cannot be read is field ``<file>``; when it does not exist the error is
         also a FileNotFoundError.
+
+    Examples
+    --------
+    >>> import stospline
+    >>> p = stospline.load_problem("examples/robot_corridor.toml")
+    >>> p.n, p.m, p.tick_hz, [knot.t for knot in p.knots]
+    (4, 2, 1000, [3.0, 6.0])
     """
     data = read_problem_file(path)
     doc = decode_problem(data)

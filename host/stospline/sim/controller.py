@@ -271,6 +271,30 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
 
     Builds are cached in `build_dir` (default: `stospline.cache.cache_root`) under a hash of
     every input (sources, flags, table), built atomically (`stospline.cache.cached_build`).
+
+    Parameters
+    ----------
+    table : GainTable or FixedTable
+        The firmware is compiled for the table's arithmetic.
+    build_dir : str or Path, optional
+    quiet : bool
+        Hide the compiler's output.
+
+    Returns
+    -------
+    CompiledController
+        ``stepper(count)`` gives ``step(tick, X) -> (U, status)`` over `count` instances of
+        the real ``stsp_step``.
+
+    Examples
+    --------
+    >>> import numpy as np, stospline
+    >>> p = stospline.load_problem("examples/robot_corridor.toml")
+    >>> ctl = stospline.build_controller(stospline.design_problem(p).table)
+    >>> step = ctl.stepper(1)                      # one controller instance
+    >>> u, status = step(0, p.x0[None, :].astype(np.float32))
+    >>> u.shape, ctl.status_str(int(status[0]))    # the t0 tick latches and commands
+    ((1, 2), 'ok')
     """
     import cffi
 

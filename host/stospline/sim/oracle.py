@@ -160,9 +160,28 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
 
     Parameters
     ----------
+    problem : Problem
+        The plant, cost, knots and start state.
+    table : GainTable or FixedTable
+        The law as the firmware runs it.
     propagator : {"exact", "euler"}
         "exact" propagates the SDE exactly; "euler" reproduces the Monte Carlo plant scheme
         with `substeps` steps per tick, so the difference is the simulation bias.
+    path : bool
+        Also keep the mean and variance at every tick (``path_mean``, ``path_var``).
+
+    Returns
+    -------
+    Moments
+        The expected cost ``J``, knot means, covariances and constrained outputs.
+
+    Examples
+    --------
+    >>> import numpy as np, stospline
+    >>> p = stospline.load_problem("examples/robot_corridor.toml")
+    >>> m = stospline.evaluate_table(p, stospline.design_problem(p).table, path=False)
+    >>> print(f"{m.J:.4f}", np.round(m.knot_mean[-1], 6) + 0.0)   # cost; mean state at t = 6
+    27.7745 [-1.  0.  5.  0.]
     """
     n, m, P = table.dims
     h = 1.0 / table.tick_hz

@@ -63,6 +63,20 @@ def generate_c(table: GainTable, *, prefix: str | None = None,
         C identifier prefix (default: the table's name) so several designs link together.
     source_name : str
         Name of the problem file, recorded in the banner.
+
+    Returns
+    -------
+    (str, str)
+        The header (declarations, dimensions, the problem's SHA-256) and the source (the
+        arrays and the table header with its CRC-32).
+
+    Examples
+    --------
+    >>> import stospline
+    >>> d = stospline.design_problem(stospline.load_problem("examples/robot_corridor.toml"))
+    >>> header, source = stospline.generate_c(d.table)
+    >>> [line for line in header.splitlines() if line.startswith("extern")]
+    ['extern const stsp_table_t robot_corridor_table;']
     """
     p = prefix or table.name
     P = p.upper()

@@ -226,7 +226,31 @@ def table_of(design: TickGains, tick_hz: int | None = None, *, quantize: bool = 
 
     With band constraints the table carries the band dual for the firmware's re-solve at the
     t0 latch when it fits (``on_target_qp=False``: the affine latch of the design's active set
-    instead). ``quantize=False`` is the design's own law, in double precision, exact dual."""
+    instead). ``quantize=False`` is the design's own law, in double precision, exact dual.
+
+    Parameters
+    ----------
+    design : TickGains
+        Any design (``Designed.design``, or `stospline.design` functions' results).
+    tick_hz : int, optional
+        The tick rate (default: the design's own; a zero-order-hold design has only that one).
+    quantize : bool
+        Round to float32 as the firmware stores the gains.
+    on_target_qp : bool
+        With bands: carry the band dual for the firmware's re-solve when it fits.
+
+    Returns
+    -------
+    GainTable
+
+    Examples
+    --------
+    >>> import stospline
+    >>> d = stospline.design_problem(stospline.load_problem("examples/robot_corridor.toml"))
+    >>> exact = stospline.table_of(d.design, quantize=False)    # the design's own law
+    >>> exact.K.dtype, exact.n_ticks, d.table.K.dtype
+    (dtype('float64'), 6000, dtype('float32'))
+    """
     tick_hz, stages = design.tick_gains(tick_hz)
     dual = design.band_dual(exact=not quantize) if on_target_qp else None
     return build_table(design.problem, tick_hz, stages, quantize=quantize,

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from stospline import progress
 from stospline.errors import ProblemError
+from stospline.firmware_interface import ARITHS
 from stospline.problem.reader import load_problem
 from stospline.strict import dumps, quiet_numerics
 
@@ -298,8 +299,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     from stospline.atomic import Interrupted, OutputError
     args = build_parser().parse_args(argv)
-    if getattr(args, "arith", None) not in (None, "float32", "q15", "q31"):
-        print(f"stospline: error: --arith must be one of ['float32', 'q15', 'q31'], "
+    if getattr(args, "arith", None) not in (None, *ARITHS):
+        print(f"stospline: error: --arith must be one of {list(ARITHS)}, "
               f"got {args.arith!r}", file=sys.stderr)
         return 2
     progress.enable(not args.quiet and sys.stderr.isatty())

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import re
 
+from stospline.firmware_interface import FIXED_POINT
+
 __all__ = ["MAX_NAME_LENGTH", "RESERVED_PREFIXES", "check_name"]
 
 # The longest generated macro, <NAME>_Q31_PROBLEM_SHA256, then has 60 characters: within the
@@ -25,7 +27,7 @@ RESERVED_PREFIXES = {
     "harness": "the Monte Carlo harness's C functions (harness_table, harness_step_batch, ...)",
 }
 
-_VARIANT_SUFFIX = re.compile(r"_(q15|q31)$", re.IGNORECASE)
+_VARIANT_SUFFIX = re.compile(rf"_({'|'.join(FIXED_POINT)})$", re.IGNORECASE)
 
 # <name>.h would shadow <name.h> for every build that puts the output directory on the include
 # path (this repository's CMake does, and so does the harness): the C11/C23 headers, the POSIX

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from stospline.errors import ProblemError
+from stospline.firmware_interface import ARITHS
 from stospline.limits import check_problem, check_stage_count, check_state
 from stospline.problem.inputfile import decode_problem, read_problem_file
 from stospline.problem.model import Constraint, Knot, Penalty, Problem, Series, Stage
@@ -26,7 +27,7 @@ __all__ = ["load_problem", "parse_problem"]
 _TOP_KEYS = {"name", "t0", "x0", "tick_hz", "u_min", "u_max", "dynamics", "cost", "knots",
              "stages", "plot", "regions", "design"}
 _DESIGN_OPTIONS = {"mode": ("stagewise", "joint"), "discretization": ("exact-zoh", "continuous"),
-                   "arith": ("float32", "q15", "q31")}
+                   "arith": ARITHS}
 _TOP_REQUIRED = {"name", "x0", "tick_hz", "dynamics", "cost", "knots"}
 _DYN_KEYS, _DYN_REQUIRED = {"A", "B", "noise"}, {"A", "B"}
 _COST_KEYS, _COST_REQUIRED = {"Q", "S", "R", "q", "r", "rho", "tracking"}, {"R"}

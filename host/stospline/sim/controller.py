@@ -14,19 +14,21 @@ from pathlib import Path
 import numpy as np
 
 from stospline.cache import cached_build, source_key
+from stospline.firmware_interface import STATUS, check_header
 from stospline.table.codegen import generate_c
 from stospline.table.format import GainTable
 
 __all__ = ["build_controller", "CompiledController", "firmware_dir", "STATUS"]
 
-STATUS = {
-    "OK": 0, "WARN_TICK_SKIPPED": 1, "WARN_TICK_REPEATED": 2, "ERR_NULL": -1,
-    "ERR_NOT_INITIALIZED": -2, "ERR_BAD_MAGIC": -3, "ERR_BAD_VERSION": -4, "ERR_BAD_DIMS": -5,
-    "ERR_BAD_CRC": -6, "ERR_TICK_RANGE": -7, "ERR_TICK_ORDER": -8,
-    "WARN_SATURATED": 3, "ERR_NONFINITE_STATE": -9, "ERR_NONFINITE_OUTPUT": -10,
-    "ERR_BAD_VALUES": -11, "WARN_STATE_CLAMPED": 4, "WARN_BAND_FALLBACK": 5,
-    "ERR_BAD_PROBLEM": -12, "ERR_TABLE_CHANGED": -13,
-}
+
+# The plant's entry point (plant.c), declared to cffi and to the generated source alike.
+_PLANT_PROTOTYPE = """void harness_plant_tick(size_t paths, size_t n, size_t m, size_t mz, size_t substeps,
+                        double dt, const double *Ad, const double *Bd,
+                        size_t g_count, const size_t *g_index, const double *g_value,
+                        const double *Q, const double *S, const double *q,
+                        const double *R, const double *r, double rho, int state_cost,
+                        const double *dZ, const float *U, double *X, double *cost);
+"""
 
 _CDEF = """
 typedef float stsp_f32_t;
@@ -67,24 +69,12 @@ int harness_step_batch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
 int harness_pair_batch(const stsp_ctrl_t *proto, size_t count, const uint32_t *t_latch,
                        const stsp_scalar_t *x_latch, const uint32_t *tick,
                        const stsp_scalar_t *x, stsp_scalar_t *u, int *status);
-void harness_plant_tick(size_t paths, size_t n, size_t m, size_t mz, size_t substeps,
-                        double dt, const double *Ad, const double *Bd,
-                        size_t g_count, const size_t *g_index, const double *g_value,
-                        const double *Q, const double *S, const double *q,
-                        const double *R, const double *r, double rho, int state_cost,
-                        const double *dZ, const float *U, double *X, double *cost);
-"""
+%(plant)s"""
 
 # Harness-only C: loops over instances so one Python call serves every Monte Carlo path.
 _BATCH = """
 const stsp_table_t *harness_table(void) { return &%(p)s_table; }
-void harness_plant_tick(size_t paths, size_t n, size_t m, size_t mz, size_t substeps,
-                        double dt, const double *Ad, const double *Bd,
-                        size_t g_count, const size_t *g_index, const double *g_value,
-                        const double *Q, const double *S, const double *q,
-                        const double *R, const double *r, double rho, int state_cost,
-                        const double *dZ, const float *U, double *X, double *cost);
-/* Verify the table once (the CRC covers every byte), then clone the fresh instance.
+%(plant)s/* Verify the table once (the CRC covers every byte), then clone the fresh instance.
  * count == 0 (or NULL ctrls) touches no memory and returns STSP_ERR_NULL: there is no
  * ctrls[0] to initialise. */
 int harness_init_batch(stsp_ctrl_t *ctrls, size_t count, const stsp_table_t *table) {
@@ -140,6 +130,7 @@ stsp_status_t stsp_command_to_f32(const stsp_ctrl_t *ctrl, const stsp_scalar_t *
 def _cdef(arith: str) -> str:
     fixed = arith != "float32"
     return _CDEF % {"scalar": VARIANTS[arith][0], "exps": _EXPS if fixed else "",
+                    "plant": _PLANT_PROTOTYPE,
                     "conv": _CONV if fixed else ""}
 
 _CFLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-DSTSP_HOST_MESSAGES"]
@@ -302,6 +293,7 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     arith = getattr(table, "arith", "float32")
     cdef, cflags = _cdef(arith), _CFLAGS + VARIANTS[arith][2]
     fw = firmware_dir()
+    check_header(fw / "include")   # the shared constants are still the header's
     fw_sources = sorted((fw / "src").glob("*.c"))
     plant = Path(__file__).with_name("plant.c")
     key = source_key([header, source, cdef, _BATCH, " ".join(cflags)]
@@ -316,7 +308,7 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
         ffib.set_source(
             modname,
             f'#include "stospline/stsp_controller.h"\n#include "{table.name}.h"\n'
-            + _BATCH % {"p": table.name},
+            + _BATCH % {"p": table.name, "plant": _PLANT_PROTOTYPE},
             sources=[str(s) for s in fw_sources] + [str(out / f"{table.name}.c"), str(plant)],
             include_dirs=[str(fw / "include"), str(fw / "src"), str(out)],
             extra_compile_args=cflags)

@@ -9,7 +9,7 @@ from importlib.metadata import PackageNotFoundError, version
 
 import numpy as np
 
-from stospline.table.format import FORMAT_VERSION, SCALAR_FLOAT32, GainTable, table_crc32
+from stospline.table.format import FORMAT_VERSION, MAGIC, SCALAR_FLOAT32, GainTable, table_crc32
 
 __all__ = ["generate_c", "GENERATOR"]
 
@@ -138,7 +138,7 @@ extern const stsp_table_t {p}_table;
         band = f"&{p}_band_qp"
     source = banner + f'#include "{p}.h"\n\n' + "\n".join(arrays) + f"""
 const stsp_table_t {p}_table = {{
-    0x{0x53545350:08X}u, {FORMAT_VERSION}u, {SCALAR_FLOAT32}u,
+    0x{MAGIC:08X}u, {FORMAT_VERSION}u, {SCALAR_FLOAT32}u,
     {n}u, {m}u, {L}u, {table.n_stages}u, {table.n_ticks}u, {table.tick_hz}u,
     {p}_stage_start, {p}_stage_np,
     {p}_K, {p}_k0, {p}_L, {p}_Lambda, {p}_lambda0,
@@ -209,7 +209,7 @@ extern const stsp_table_t {p}_table;
     ]
     source = banner + f'#include "{p}.h"\n\n' + "\n".join(arrays) + f"""
 const stsp_table_t {p}_table = {{
-    0x{0x53545350:08X}u, {FORMAT_VERSION}u, {table.scalar_kind}u,
+    0x{MAGIC:08X}u, {FORMAT_VERSION}u, {table.scalar_kind}u,
     {n}u, {m}u, {L}u, {table.n_stages}u, {table.n_ticks}u, {table.tick_hz}u,
     {p}_stage_start, {p}_stage_np,
     {p}_K, {p}_k0, {p}_L, {p}_Lambda, {p}_lambda0,

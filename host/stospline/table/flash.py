@@ -5,9 +5,11 @@ Cortex-M). A test checks the numbers against the symbol sizes of the compiled C.
 """
 from __future__ import annotations
 
+from stospline.firmware_interface import ELEMENT_BYTES
+
 __all__ = ["flash_bytes", "ARITH_ELEMENT_BYTES"]
 
-ARITH_ELEMENT_BYTES = {"float32": 4, "q15": 2, "q31": 4}
+ARITH_ELEMENT_BYTES = ELEMENT_BYTES
 _PTR = 4                               # pointer size on the 32-bit targets
 _HEADER_FIELDS = 4 + 6 * 2 + 2 * 4     # magic; version, kind, nx, nu, n_latch, n_stages; ticks, hz
 _HEADER_TAIL = 4 + 32                  # crc32, problem_sha256

@@ -24,14 +24,13 @@ from typing import Protocol
 import numpy as np
 
 from stospline import limits
+from stospline.firmware_interface import ELEMENT_BYTES, FORMAT_VERSION, MAGIC, SCALAR_KIND
 
 __all__ = ["GainTable", "TableShape", "BandQP", "build_table", "table_of", "TickGains",
-           "table_crc32", "FORMAT_VERSION", "SCALAR_FLOAT32", "F32_MAX", "BANDQP_MAX"]
+           "table_crc32", "FORMAT_VERSION", "MAGIC", "SCALAR_FLOAT32", "F32_MAX", "BANDQP_MAX"]
 
-FORMAT_VERSION = 3
 BANDQP_MAX = limits.BANDQP_MAX  # rows the firmware's band solver takes (3^8 active sets)
-SCALAR_FLOAT32 = 1
-MAGIC = 0x53545350  # "STSP"
+SCALAR_FLOAT32 = SCALAR_KIND["float32"]
 F32_MAX = float(np.finfo(np.float32).max)  # the firmware's "unlimited" (FLT_MAX)
 
 
@@ -280,7 +279,7 @@ def table_crc32(table: GainTable) -> int:
     if arith == "float32":
         parts += [np.asarray(a, "<f4").tobytes() for a in arrays]
     else:
-        dtype = {"q15": "<i2", "q31": "<i4"}[arith]
+        dtype = f"<i{ELEMENT_BYTES[arith]}"
         parts += [np.asarray(a).astype(dtype).tobytes() for a in arrays]
         parts += [np.asarray(e).astype("i1").tobytes()
                   for e in (table.x_exp, table.u_exp, table.v_exp)]

@@ -49,15 +49,13 @@ from decimal import Decimal, localcontext
 import numpy as np
 
 from stospline import limits
+from stospline.firmware_interface import ARITHS, FRAC_BITS, SCALAR_KIND
 from stospline.precision import RoundedUp, ceil_significant
 from stospline.table.format import F32_MAX, GainTable, TableShape
 
 __all__ = ["FixedTable", "quantize_table", "state_range", "law_q", "latch_q", "law_double",
            "ARITHS", "FRAC_BITS", "SCALAR_KIND", "EXP_MAX", "DEFAULT_SIGMAS"]
 
-ARITHS = ("float32", "q15", "q31")
-FRAC_BITS = {"q15": 15, "q31": 31}
-SCALAR_KIND = {"float32": 1, "q15": 2, "q31": 3}
 EXP_MAX = limits.Q_EXP_MAX  # the firmware refuses scale exponents beyond +-60
 DEFAULT_SIGMAS = 6.0    # state range: mean +- 6 standard deviations over the plan
 _EXP_SPAN = 24          # a state whose range is tiny gets at least 2^-24 of the largest one

@@ -239,20 +239,18 @@ def check(problem: Problem, *, max_seconds: float = DEFAULT_MAX_SECONDS,
     memory) or `max_seconds`. Returns the estimate."""
     est = estimate(problem, **options)
     limit = min(float(max_bytes), machine_memory())
-    if est.bytes > limit:
-        top = est.top("bytes")
-        raise BudgetError(top.key, f"the {est.command} needs ~{format_bytes(est.bytes)} of "
-                                   f"memory (limit {format_bytes(limit)}; --max-memory "
-                                   f"raises it up to this machine's RAM), mostly for "
-                                   f"{top.what} (~{format_bytes(top.bytes)}) "
-                                   f"{_sizes(problem, top.key, options)}")
-    if est.seconds > max_seconds:
-        top = est.top("seconds")
-        raise BudgetError(top.key, f"the {est.command} would take ~"
-                                   f"{format_seconds(est.seconds)} (limit "
-                                   f"{format_seconds(max_seconds)}; --max-time raises it), "
-                                   f"mostly for {top.what} (~{format_seconds(top.seconds)}) "
-                                   f"{_sizes(problem, top.key, options)}")
+    for kind, need, cap, fmt, what in (
+            ("bytes", est.bytes, limit, format_bytes,
+             "needs ~{need} of memory (limit {cap}; --max-memory raises it up to this "
+             "machine's RAM)"),
+            ("seconds", est.seconds, max_seconds, format_seconds,
+             "would take ~{need} (limit {cap}; --max-time raises it)")):
+        if need > cap:
+            top = est.top(kind)
+            raise BudgetError(top.key, f"the {est.command} "
+                                       + what.format(need=fmt(need), cap=fmt(cap))
+                                       + f", mostly for {top.what} (~{fmt(getattr(top, kind))}) "
+                                       f"{_sizes(problem, top.key, options)}")
     return est
 
 

@@ -67,7 +67,8 @@ from scipy.integrate import solve_ivp               # noqa: E402
 
 from stospline.design import zoh as dz              # noqa: E402
 from stospline.design import tick_reference                # noqa: E402
-from stospline.design.continuous import _knot_terminal, design_continuous   # noqa: E402
+from stospline.design.continuous import design_continuous   # noqa: E402
+from stospline.design.stage_values import knot_terminal      # noqa: E402
 from stospline.design.kernels import load_kernels          # noqa: E402
 from stospline.design.moments import (augmented_drift, moment_generator,  # noqa: E402
                                running_cost_matrix)
@@ -222,7 +223,7 @@ def reference_design(problem, hz: int, mode: str):
     gains = [None] * len(problem.knots)
     for k in range(len(problem.knots) - 1, -1, -1):
         knot, g, stage = problem.knots[k], group_of[k], problem.stages[k]
-        PT, pT, cT = _knot_terminal(knot, V[:n, :n], V[:n, n], V[n, n])
+        PT, pT, cT = knot_terminal(knot, V[:n, :n], V[:n, n], V[n, n])
         V = np.zeros((n + 1, n + 1), dtype=LD)
         V[:n, :n], V[:n, n], V[n, :n], V[n, n] = PT, pT, pT, cT
         q = 0 if g is None else g.size

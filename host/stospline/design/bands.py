@@ -191,7 +191,7 @@ class BandDesign:
         st0 = self.base.stages[0]
         x = np.asarray(x0, dtype=float)
         sol = solve_band_dual(st0.N0.T @ x + st0.m0, st0.W0, self.lower, self.upper)
-        return float(x @ st0.P0 @ x + 2 * st0.p0 @ x + st0.c0) + sol.value
+        return st0.quadratic_value(x) + sol.value
 
     def summary_terms(self) -> dict:
         """The JSON summary's band entries: where each row sits and its multiplier."""
@@ -234,7 +234,7 @@ def design_bands(problem: Problem, *, discretization: str = "exact-zoh", noise: 
     hi = np.concatenate([problem.knots[k].constraint.bounds[1] for k in
                          sorted({k for k, _ in rows})])
     sol = solve_band_dual(e, st0.W0, lo, hi)
-    J0 = float(x0 @ st0.P0 @ x0 + 2 * st0.p0 @ x0 + st0.c0) + sol.value
+    J0 = st0.quadratic_value(x0) + sol.value
     # Latch map of the optimal active set (exact at x0 and wherever that set stays optimal).
     Lam = np.zeros_like(st0.Lambda)
     lam0 = np.zeros_like(st0.lambda0)

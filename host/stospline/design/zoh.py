@@ -24,7 +24,8 @@ import numpy as np
 from stospline.expm import expm
 
 from stospline import progress
-from stospline.design.continuous import DesignError, StageValues, _check_group, _knot_terminal
+from stospline.design.stage_values import StageStart, StageValues, check_group, knot_terminal
+from stospline.errors import DesignError
 from stospline.design.moments import augmented_drift, moment_generator, running_cost_matrix, varying_tick
 from stospline.design.latch import latch_groups
 from stospline.problem.model import Problem, Stage, ticks_per_stage
@@ -33,20 +34,12 @@ __all__ = ["ZohStage", "ZohDesign", "design_zoh"]
 
 
 @dataclass
-class ZohStage:
-    """Per-tick gains of one stage and its start-of-stage value data (see `design._value`)."""
+class ZohStage(StageStart):
+    """Per-tick gains of one stage and its start-of-stage value data (`StageStart`)."""
     index: int
     K: np.ndarray        # (T, m, n)
     k0: np.ndarray       # (T, m)
     L: np.ndarray        # (T, m, p): p = width of the multiplier vector acting on the stage
-    P0: np.ndarray
-    p0: np.ndarray
-    c0: float
-    N0: np.ndarray
-    W0: np.ndarray
-    m0: np.ndarray
-    Lambda: np.ndarray   # (p, n) if the stage latches, else (0, n)
-    lambda0: np.ndarray
 
     @property
     def n_constraints(self) -> int:
@@ -245,7 +238,7 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
     for k in range(len(problem.knots) - 1, -1, -1):
         knot, g = problem.knots[k], group_of[k]
         stage = problem.stages[k] if noise else problem.stages[k].without_noise()
-        PT, pT, cT = _knot_terminal(knot, V[:n, :n], V[:n, n], V[n, n])
+        PT, pT, cT = knot_terminal(knot, V[:n, :n], V[:n, n], V[n, n])
         V = np.block([[PT, pT[:, None]], [pT[None, :], np.array([[cT]])]])
         q = 0 if g is None else g.size
         if g is not None:
@@ -276,10 +269,10 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
         if not (np.all(np.isfinite(V)) and np.all(np.isfinite(W))):
             raise DesignError(f"knots[{k}].t", f"the tick Riccati recursion of stage {k} has "
                                                f"no bounded solution in floating point")
-        st = ZohStage(k, K, k0, L, V[:n, :n].copy(), V[:n, n].copy(), float(V[n, n]),
-                      N, W, mv, np.zeros((0, n)), np.zeros(0))
+        st = ZohStage(k, K, k0, L, P0=V[:n, :n].copy(), p0=V[:n, n].copy(), c0=float(V[n, n]),
+                      N0=N, W0=W, m0=mv, Lambda=np.zeros((0, n)), lambda0=np.zeros(0))
         if g is not None and g.latch_stage == k:
-            _check_group(W, problem, g)
+            check_group(W, problem, g)
             st.Lambda, st.lambda0 = np.linalg.solve(W, N.T), np.linalg.solve(W, mv)
             NL = N @ st.Lambda
             V = V.copy()

@@ -11,7 +11,7 @@ Finite escape
 not stay bounded. A true finite escape cannot be reached from a file the parser accepts: the
 parser enforces R > 0 and ``[[Q, S], [S', R]] >= 0`` (the paper's condition (3)), and every
 terminal value and jump adds a positive semidefinite term (penalty weights are >= 0, and
-``N W^-1 N'`` with W > 0, which `_check_latch` enforces). Then on each stage ``P(t)`` is the
+``N W^-1 N'`` with W > 0, which `stospline.design.stage_values.check_latch` enforces). Then on each stage ``P(t)`` is the
 optimal cost-to-go of a stochastic LQ problem with a nonnegative running cost, so
 ``0 <= P(t) <= P_F(t)`` for any fixed feedback ``u = -F x``, where ``P_F`` solves the
 *linear* equation
@@ -178,7 +178,7 @@ CASES = [
      "u_max[0]", "must be a number, got an array"),
     ("limits_after_a_table", edit(BASE, ("R = [[1]]", "R = [[1]]\nu_max = [1.0]")),
      "cost.u_max", "top-level keys go before the first [table] header"),
-    # --- infeasible designs: DesignError from design.py's _check_latch and Riccati checks,
+    # --- infeasible designs: DesignError from stage_values.check_latch and Riccati checks,
     # through the default exact sampled-data design and through the continuous one ---------
     ("constraint_rows_dependent", edit(BASE, (CON1, "constraint = { C = [[1, 0], [2, 0]], "
                                                     "value = [0.0, 0.0] }")),

@@ -37,8 +37,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-CTL = "firmware/src/stsp_controller.c"
-CRC = "firmware/src/stsp_controller.c"
+# A fault names a file, or the firmware source directory: then the one file under it that holds
+# the text to replace (the controller is split into files of one job each).
+CTL = "firmware/src"
+CRC = "firmware/src"
 PY_TESTS = ["tests/python/firmware/test_c_step_equals_law.py",
             "tests/python/sim/test_monte_carlo_vs_oracle.py",
             "tests/python/firmware/test_table_limits.py", "tests/python/firmware/test_fixed_point.py",
@@ -165,12 +167,24 @@ class Sandbox:
         if r.returncode:
             raise SystemExit(f"plant_faults: configure failed\n{r.stdout}\n{r.stderr}")
 
+    def locate(self, fault: Fault) -> str:
+        """The file the fault edits: `fault.path`, or under a directory the one holding `old`."""
+        where = self.src / fault.path
+        if where.is_file():
+            return fault.path
+        holders = [p for p in sorted(where.glob("*.[ch]")) if fault.old in p.read_text()]
+        if len(holders) != 1:
+            raise SystemExit(f"plant_faults: {fault.key}: the text to replace is in "
+                             f"{len(holders)} files under {fault.path} (expected one)")
+        return str(holders[0].relative_to(self.src))
+
     def apply(self, fault: Fault) -> None:
-        path = self.src / fault.path
-        text = self.pristine.setdefault(fault.path, path.read_text())
+        rel = self.locate(fault)
+        path = self.src / rel
+        text = self.pristine.setdefault(rel, path.read_text())
         if text.count(fault.old) != 1:
             raise SystemExit(f"plant_faults: {fault.key}: the text to replace occurs "
-                             f"{text.count(fault.old)} times in {fault.path} (expected once)")
+                             f"{text.count(fault.old)} times in {rel} (expected once)")
         path.write_text(text.replace(fault.old, fault.new))
 
     def restore(self) -> None:

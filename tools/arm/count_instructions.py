@@ -177,20 +177,21 @@ def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
     tables = build / f"libstsp_gains_robot_corridor{sfx}.a"
 
     def totals(files):
-        """text, data, bss summed over the controller's objects (stsp_controller, stsp_crc32:
+        """text, data, bss summed over the controller's objects (stsp_controller, stsp_table,
+        stsp_crc32, stsp_qconv:
         the libraries also hold other firmware modules, e.g. stsp_bandqp, which the
         controller does not use) and every object of the other archives."""
         t = d = b = 0
         for line in run(["arm-none-eabi-size", *map(str, files)]).strip().splitlines()[1:]:
             parts = line.split()
             obj = parts[5] if len(parts) > 5 else ""
-            if f"ex {ctl}" in line and not obj.startswith(("stsp_controller.", "stsp_crc32.",
-                                                          "stsp_qconv.")):
+            if f"ex {ctl}" in line and not obj.startswith(("stsp_controller.", "stsp_table.",
+                                                          "stsp_crc32.", "stsp_qconv.")):
                 continue
             t, d, b = t + int(parts[0]), d + int(parts[1]), b + int(parts[2])
         return t, d, b
 
-    rows.append(("controller objects (stsp_controller, stsp_crc32, stsp_qconv)",
+    rows.append(("controller objects (stsp_controller, stsp_table, stsp_crc32, stsp_qconv)",
                  *totals([ctl])))
     rows.append(("controller + robot tables objects", *totals([ctl, tables])))
     roots = ["stsp_init", "stsp_reset", "stsp_step"]

@@ -96,7 +96,7 @@ def test_limits_module_agrees_with_the_header():
     assert found == {name: getattr(limits, name) for name in limits.HEADER_MACROS}
     assert tables.BANDQP_MAX == limits.BANDQP_MAX and fixed.EXP_MAX == limits.Q_EXP_MAX
     # The 32-bit offset bound limits.py applies is the one stsp_check_dims applies.
-    src = (REPO / "firmware" / "src" / "stsp_controller.c").read_text()
+    src = (REPO / "firmware" / "src" / "stsp_table.c").read_text()   # stsp_check_dims
     assert ("t->n_ticks > (UINT32_MAX / ((uint32_t)t->nu * ((uint32_t)t->nx + t->n_latch)))"
             in src)
 

@@ -1,0 +1,30 @@
+/* Clamping to the actuator limits, shared by the law's limit check and the cold paths of
+ * stsp_controller.c (which includes it through the law header). Private: not installed. */
+#ifndef STSP_CLAMP_H
+#define STSP_CLAMP_H
+
+#include "stsp_internal.h"
+
+/* Clamps u[i] to [u_min[i], u_max[i]] (bits of *mask); STSP_WARN_SATURATED if any was, else
+ * STSP_OK. */
+static stsp_status_t stsp_clamp(const stsp_header_t *h, stsp_scalar_t *u, uint16_t *mask)
+{
+    const uint32_t nu = stsp_nu(h);
+    uint32_t i;
+    uint32_t m = 0u;
+    for (i = 0u; i < nu; ++i) {
+        if (u[i] > h->u_max[i]) {
+            u[i] = h->u_max[i];
+            m |= (uint32_t)1u << i;
+        } else if (u[i] < h->u_min[i]) {
+            u[i] = h->u_min[i];
+            m |= (uint32_t)1u << i;
+        } else {
+            /* within the limits */
+        }
+    }
+    *mask = (uint16_t)m;
+    return (m != 0u) ? STSP_WARN_SATURATED : STSP_OK;
+}
+
+#endif /* STSP_CLAMP_H */

@@ -1,0 +1,119 @@
+/* The float32 law, its limit and finiteness checks, included once by stsp_controller.c
+ * (static, inlined into stsp_step). Private: not installed. */
+#ifndef STSP_LAW_F32_H
+#define STSP_LAW_F32_H
+
+#include "stsp_clamp.h"
+
+/* The error of a non-finite command: the state was not finite, or it was and the law (or the
+ * latch) overflowed. Reads x: called before u is written (x and u may overlap). */
+static stsp_status_t stsp_nonfinite_status(const stsp_header_t *h, const stsp_f32_t *x)
+{
+    return (stsp_all_finite(x, stsp_nx(h)) == 0) ? STSP_ERR_NONFINITE_STATE
+                                                 : STSP_ERR_NONFINITE_OUTPUT;
+}
+
+/* Cold path, part 3: some y[i] may be outside [u_min[i], u_max[i]] or not finite. If any is
+ * NaN/Inf, returns the error that says why. Otherwise clamps y (bits of *mask) and returns
+ * STSP_WARN_SATURATED, or STSP_OK if nothing needed clamping (a false alarm of the fast
+ * check). */
+static stsp_status_t stsp_limit(const stsp_header_t *h, const stsp_f32_t *x, stsp_f32_t *y,
+                                uint16_t *mask)
+{
+    if (stsp_all_finite(y, stsp_nu(h)) == 0) {
+        return stsp_nonfinite_status(h, x);
+    }
+    return stsp_clamp(h, y, mask);
+}
+
+/* The law at `tick` with multipliers v, into y (never the caller's u: x and u may overlap),
+ * in the documented order:
+ *     u[i] = (((-(K[i][0] x[0]) - k0[i]) - K[i][1] x[1]) - ... ) - L[i][0] v[0] - ...
+ * which is -(k0[i] + K[i][0] x[0] + ... + L[i][c] v[c] ...) exactly (IEEE rounding is
+ * symmetric; a+b = b+a), up to the sign of an exactly zero result; starting from -(K x)
+ * folds the final negation away, and each step is one stsp_nmla()/stsp_mls() (one VNMLA or
+ * VMLS on the M4F, same bits). Returns nonzero when the command needs the cold path: with limits, some
+ * u[i] outside [u_min[i], u_max[i]] (false for NaN, and for one of +-Inf since the limits are
+ * finite); without, the sum of the u[i] is not finite (any NaN or Inf makes it NaN or Inf; a
+ * finite sum that overflows is a false alarm that stsp_limit() clears). Inlined into callers
+ * whose y is a local array, so that in an STSP_FIXED_* build x, v and y stay in registers. */
+static STSP_ALWAYS_INLINE uint32_t stsp_law(const stsp_header_t *h, uint32_t tick,
+                                            const stsp_f32_t *x, const stsp_f32_t *v,
+                                            stsp_f32_t *y, uint32_t limited)
+{
+    const uint32_t nx = stsp_nx(h);
+    const uint32_t nu = stsp_nu(h);
+    const uint32_t nl = stsp_nl(h);
+    const stsp_f32_t *K = &h->K[tick * (nu * nx)];
+    const stsp_f32_t *k0 = &h->k0[tick * nu];
+    /* L may be NULL when nl == 0: no pointer arithmetic on it then. */
+    const stsp_f32_t *L = (nl > 0u) ? &h->L[tick * (nu * nl)] : h->L;
+    uint32_t i;
+    uint32_t out = 0u;
+    STSP_UNROLL
+    for (i = 0u; i < nu; ++i) {
+        stsp_f32_t acc = stsp_nmla(K[0], x[0], k0[i]);
+        uint32_t j;
+        STSP_UNROLL
+        for (j = 1u; j < nx; ++j) {
+            acc = stsp_mls(acc, K[j], x[j]);
+        }
+        K = &K[nx];
+        if (nl > 0u) {
+            STSP_UNROLL
+            for (j = 0u; j < nl; ++j) {
+                acc = stsp_mls(acc, L[j], v[j]);
+            }
+            L = &L[nl];
+        }
+        y[i] = acc;
+    }
+    if (limited != 0u) {
+        const stsp_f32_t *lo = h->u_min;
+        const stsp_f32_t *hi = h->u_max;
+        STSP_UNROLL
+        for (i = 0u; i < nu; ++i) {
+            if (!((y[i] >= lo[i]) && (y[i] <= hi[i]))) {
+                out = 1u;
+            }
+        }
+    } else {
+        stsp_f32_t sum = -0.0f; /* -0 + a = a for every a: the compiler drops this add */
+        STSP_UNROLL
+        for (i = 0u; i < nu; ++i) {
+            sum += y[i];
+        }
+        /* sum - sum is +0 for a finite sum, NaN for NaN and +-Inf. */
+        if (!((sum - sum) == 0.0f)) {
+            out = 1u;
+        }
+    }
+    return out;
+}
+
+/* 1 when every y[0..nu) is finite: the ordinary tick's test, inlined so that y can stay in
+ * registers. */
+static STSP_ALWAYS_INLINE int stsp_command_finite(const stsp_header_t *h, const stsp_f32_t *y)
+{
+    const uint32_t nu = stsp_nu(h);
+    uint32_t i;
+    int finite = 1;
+    STSP_UNROLL
+    for (i = 0u; i < nu; ++i) {
+        if (stsp_isfinite_f32(y[i]) == 0) {
+            finite = 0;
+        }
+    }
+    return finite;
+}
+
+/* An ordinary tick whose command is not finite: the error, u zeroed (x not yet overwritten). */
+static STSP_NOINLINE stsp_status_t stsp_step_nonfinite(const stsp_ctrl_t *ctrl,
+                                                       const stsp_f32_t *x, stsp_f32_t *u)
+{
+    const stsp_status_t st = stsp_nonfinite_status(&ctrl->checked, x);
+    stsp_zero(u, stsp_nu(&ctrl->checked));
+    return st;
+}
+
+#endif /* STSP_LAW_F32_H */

@@ -139,7 +139,8 @@ def _dims_key(problem: Problem) -> str:
 
 
 def _widths(problem: Problem, mode: str) -> tuple[list[int], int]:
-    """Per stage the width q of the multiplier vector the design carries, and the table's P."""
+    """Per stage the width q of the multiplier vector the design carries, and the table's
+    n_latch."""
     from stospline.design.bands import has_bands
     from stospline.design.latch import latch_groups
     from stospline.table.format import BANDQP_MAX
@@ -172,7 +173,7 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
     ds, vs = d * (d + 1) // 2, (n + 1) * (n + 2) // 2
     ticks = [int(t) for t in problem.ticks_per_stage]
     T, S = sum(ticks), len(ticks)
-    q, P = _widths(problem, mode)
+    q, n_latch = _widths(problem, mode)
     qmax = max(q + [0])
     dims, stages = _dims_key(problem), "knots"
     varying = [st.varying is not None for st in problem.stages]
@@ -186,9 +187,9 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
     add(Term("per-stage work (tick maps, latches, knots)", stages,
              seconds=STAGE_SECONDS * S * (passes + 1)))
     # The design's per-tick gains (several double copies) and the table.
-    numbers = T * m * (n + 1 + P)
+    numbers = T * m * (n + 1 + n_latch)
     add(Term("per-tick gain tables", "tick_hz",
-             bytes=TABLE_COPIES * 8.0 * sum(t * m * (n + 1 + max(qk, P))
+             bytes=TABLE_COPIES * 8.0 * sum(t * m * (n + 1 + max(qk, n_latch))
                                             for t, qk in zip(ticks, q))))
     if discretization == "continuous":
         add(Term("continuous-time design and its oracle", stages,
@@ -221,7 +222,7 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
         add(Term("C text of the tables, compiled", "tick_hz",
                  seconds=(CODEGEN_NUMBER + COMPILE_NUMBER) * numbers,
                  bytes=(CODEGEN_BYTES + COMPILE_BYTES) * numbers))
-        work = n * (m + P) + substeps * (n * n + n * m + n * mz) + 8
+        work = n * (m + n_latch) + substeps * (n * n + n * m + n * mz) + 8
         add(Term(f"Monte Carlo ({paths} paths)", "--paths",
                  seconds=SIM_TICK * T + SIM_PATH_TICK * paths * T * work,
                  bytes=paths * (8.0 * n * (S + 6) + 16.0 * substeps * mz + 16.0 * m

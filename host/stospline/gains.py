@@ -17,14 +17,14 @@ __all__ = ["Gains", "gains_of"]
 
 
 class Gains(NamedTuple):
-    """Per-tick gains (float64 arrays; ``P`` = latched multipliers, padded with zeros).
+    """Per-tick gains (float64 arrays; ``n_latch`` = the latched multiplier width, padded with zeros).
 
     t : (n_ticks,)            time of each tick, ``t0 + j / tick_hz``
     K : (n_ticks, m, n)       feedback
     k0 : (n_ticks, m)         feed-forward
-    L : (n_ticks, m, P)       gain of the latched multipliers v
-    Lambda : (n_stages, P, n) latch map ``v = Lambda[s] x + lambda0[s]``
-    lambda0 : (n_stages, P)
+    L : (n_ticks, m, n_latch)       gain of the latched multipliers v
+    Lambda : (n_stages, n_latch, n) latch map ``v = Lambda[s] x + lambda0[s]``
+    lambda0 : (n_stages, n_latch)
     stage_start : (n_stages + 1,) first tick of each stage, then n_ticks
     """
     t: np.ndarray

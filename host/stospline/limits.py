@@ -154,7 +154,7 @@ def _check_sizes(ticks: int, n: int, m: int, p: int, scalar_bytes: int, field: s
 
 
 def check_table(table, *, mode_field: str = "design.mode") -> None:
-    """Refuse a finished table (float32 `GainTable` or `fixed.FixedTable`) that `stsp_init`
+    """Refuse a finished table (float32 `GainTable` or `fixed.FixedPointTable`) that `stsp_init`
     would refuse for its dimensions; `mode_field` names where the design mode came from."""
     n, m, p = table.dims
     if n > MAX_NX or m > MAX_NU or n < 1 or m < 1:   # parse_problem refuses these first

@@ -18,12 +18,12 @@ from stospline.sim.montecarlo import MonteCarloResult, simulate, z_value
 from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table, state_range
 from stospline.problem.model import Problem, ProblemError
 from stospline.table.format import GainTable, TickGains, table_of
-from stospline.table.qformat import DEFAULT_SIGMAS, FixedTable, quantize_table
+from stospline.table.qformat import DEFAULT_SIGMAS, FixedPointTable, quantize_table
 from stospline import limits, strict
 from stospline.precision import RoundedUp
 
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
-           "simulation_summary", "write_outputs", "start_from", "double_table", "fixed_table",
+           "simulation_summary", "write_outputs", "start_from", "double_table", "fixed_point_table",
            "check_implementable"]
 
 # JSON summaries keep 10 significant digits and an absolute quantum of 1e-10: the designs
@@ -70,7 +70,7 @@ class Designed:
 
     def gains(self, *, quantized: bool = True):
         """``Gains(t, K, k0, L, Lambda, lambda0, stage_start)`` as numpy arrays: K is
-        (n_ticks, m, n), k0 (n_ticks, m), L (n_ticks, m, P), t (n_ticks,) the tick times
+        (n_ticks, m, n), k0 (n_ticks, m), L (n_ticks, m, n_latch), t (n_ticks,) the tick times
         (`stospline.gains`); float32 table values by default, ``quantized=False`` for the
         design's double-precision gains."""
         from stospline.gains import gains_of
@@ -256,8 +256,8 @@ def double_table(d: Designed) -> GainTable:
     return table_of(d.design, quantize=False)
 
 
-def fixed_table(d: Designed, arith: str, *, sigmas: float = DEFAULT_SIGMAS,
-                x_range=None) -> FixedTable:
+def fixed_point_table(d: Designed, arith: str, *, sigmas: float = DEFAULT_SIGMAS,
+                x_range=None) -> FixedPointTable:
     """Quantize a design to a Q15/Q31 table (`stospline.table.qformat`).
 
     Parameters
@@ -272,7 +272,7 @@ def fixed_table(d: Designed, arith: str, *, sigmas: float = DEFAULT_SIGMAS,
 
     Returns
     -------
-    FixedTable
+    FixedPointTable
         Integer tables with per-entry scales and the bound on ``|u_fixed - u_double|``
         (``summary()``).
 
@@ -280,7 +280,7 @@ def fixed_table(d: Designed, arith: str, *, sigmas: float = DEFAULT_SIGMAS,
     --------
     >>> import stospline
     >>> d = stospline.design_problem(stospline.load_problem("examples/robot_corridor.toml"))
-    >>> q = stospline.fixed_table(d, "q15")
+    >>> q = stospline.fixed_point_table(d, "q15")
     >>> q.name, q.arith, q.K.shape
     ('robot_corridor_q15', 'q15', (6000, 2, 4))
     """
@@ -303,7 +303,7 @@ def generated_files(d: Designed, source_name: str, arith: str = "float32", *,
         table, n = d.table, d.problem.name
     else:
         try:
-            table = fixed_table(d, arith)
+            table = fixed_point_table(d, arith)
         except ValueError as exc:            # scale exponents beyond STSP_Q_EXP_MAX
             raise strict.fixed_scale_error(d.problem, arith, exc) from None
         limits.check_table(table)

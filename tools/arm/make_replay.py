@@ -7,7 +7,7 @@ Euler-Maruyama simulation of the noisy plant. For a subset of ticks (the first a
 of every stage, which include both latch ticks, plus every ``--stride``-th tick) the float32
 state given to ``stsp_step`` and the float32 command it returned are written as exact
 hexadecimal float literals into a C file that ``tests/arm/replay_main.c`` links against.
-With ``--arith q15|q31`` the fixed-point tables (``stospline.pipeline.fixed_table``, the same
+With ``--arith q15|q31`` the fixed-point tables (``stospline.pipeline.fixed_point_table``, the same
 as the committed ``gains/robot_corridor_<arith>.c``) are used instead: the plant state is
 converted to the Q format (round half up, saturated) before each step, the integer command is
 scaled back for the plant, and the records hold the integers.
@@ -28,7 +28,7 @@ import numpy as np
 
 from stospline.design.discretize import zoh
 from stospline.sim.controller import build_controller
-from stospline.pipeline import design_problem, fixed_table
+from stospline.pipeline import design_problem, fixed_point_table
 from stospline.problem import load_problem
 from stospline.table.format import table_crc32
 
@@ -149,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
 
     problem = load_problem(args.problem)
     designed = design_problem(problem)
-    table = designed.table if args.arith == "float32" else fixed_table(designed, args.arith)
+    table = designed.table if args.arith == "float32" else fixed_point_table(designed, args.arith)
     if args.gains is None:
         suffix = "" if args.arith == "float32" else f"_{args.arith}"
         args.gains = ROOT / "gains" / f"robot_corridor{suffix}.c"

@@ -22,7 +22,7 @@ import numpy as np
 from stospline.table.qformat import latch_q, law_double, law_q
 from stospline.sim.fixed_point_error import noise_free_closed_loop, random_q_samples
 from stospline.sim.controller import build_controller
-from stospline.pipeline import design_problem, fixed_table
+from stospline.pipeline import design_problem, fixed_point_table
 from stospline.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -41,7 +41,7 @@ def main() -> int:
     print(f"robot_corridor (exact-ZOH design, {d.table.n_ticks} ticks), {args.samples} samples, "
           f"seed {args.seed}")
     for arith in ("q15", "q31"):
-        ft = fixed_table(d, arith)
+        ft = fixed_point_table(d, arith)
         ctl = build_controller(ft)
         rng = np.random.default_rng(args.seed)
         tick, ls, t_latch, X, XL = random_q_samples(ft, args.samples, rng)

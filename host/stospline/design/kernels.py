@@ -27,8 +27,8 @@ int stsp_zoh_stage_ticks(int n, int m, int q, long T,
                          const double *A2sT, const double *Hcs, const double *F,
                          double *V, double *N, double *W, double *mv,
                          double *K, double *k0, double *L, double *work, long *bad_tick);
-size_t stsp_oracle_work_size(int n, int m, int P);
-int stsp_oracle_stage_ticks(int n, int m, int P, long T, const double *K, const double *L,
+size_t stsp_oracle_work_size(int n, int m, int n_latch);
+int stsp_oracle_stage_ticks(int n, int m, int n_latch, long T, const double *K, const double *L,
                             const double *k0, const double *Phi_x, const double *cost,
                             const double *Fmean, double *M, double *J, double *work);
 """
@@ -154,27 +154,27 @@ def pack_oracle_maps(Phi: np.ndarray, cost_row: np.ndarray, n: int):
 def oracle_stage_ticks(K: np.ndarray, L: np.ndarray, k0: np.ndarray, Phi_x: np.ndarray,
                        cost: np.ndarray, Fmean: np.ndarray, M: np.ndarray, J: float):
     """The tick loop of `oracle.evaluate_table` over one time-invariant stage, in C
-    (``oracle_kernel.c``): gains ``K`` (T, m, n), ``L`` (T, m, P), ``k0`` (T, m), the tick's
+    (``oracle_kernel.c``): gains ``K`` (T, m, n), ``L`` (T, m, n_latch), ``k0`` (T, m), the tick's
     moment map and cost row packed by `pack_oracle_maps`, the mean map ``Fmean`` (n, n + m),
     the second moment ``M`` of ``[x; v; 1]`` before the stage; returns ``(M, J)`` after it
     (a new array)."""
     mod = load_kernels()
     ffi, lib = mod.ffi, mod.lib
     T, m, n = K.shape
-    P = L.shape[2]
+    n_latch = L.shape[2]
     K, L, k0, Phi_x, cost, Fmean = (_c(a) for a in (K, L, k0, Phi_x, cost, Fmean))
     M = np.array(M, dtype=np.float64, order="C")
-    dw, dy = n + m + 1, n + P + 1
+    dw, dy = n + m + 1, n + n_latch + 1
     nv = dw * (dw + 1) // 2
-    want = {"L": (L, (T, m, P)), "k0": (k0, (T, m)), "Phi_x": (Phi_x, (n * (n + 1), nv)),
+    want = {"L": (L, (T, m, n_latch)), "k0": (k0, (T, m)), "Phi_x": (Phi_x, (n * (n + 1), nv)),
             "cost": (cost, (nv,)), "Fmean": (Fmean, (n, n + m)), "M": (M, (dy, dy))}
     for name, (a, shape) in want.items():
         if a.shape != shape:
             raise ValueError(f"{name} has shape {a.shape}, expected {shape}")
-    work = np.empty(int(lib.stsp_oracle_work_size(n, m, P)))
+    work = np.empty(int(lib.stsp_oracle_work_size(n, m, n_latch)))
     Jp = ffi.new("double *", float(J))
     p = [ffi.from_buffer("double[]", a) for a in (K, L, k0, Phi_x, cost, Fmean, M)]
-    status = lib.stsp_oracle_stage_ticks(n, m, P, T, *p, Jp, ffi.from_buffer("double[]", work))
+    status = lib.stsp_oracle_stage_ticks(n, m, n_latch, T, *p, Jp, ffi.from_buffer("double[]", work))
     if status != 0:
         raise ValueError(f"stsp_oracle_stage_ticks: bad dimensions (status {status})")
     return M, float(Jp[0])

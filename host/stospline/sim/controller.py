@@ -265,7 +265,7 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
 
     Parameters
     ----------
-    table : GainTable or FixedTable
+    table : GainTable or FixedPointTable
         The firmware is compiled for the table's arithmetic.
     build_dir : str or Path, optional
     quiet : bool

@@ -59,12 +59,12 @@ def _knot_terms(problem: Problem, k: int, M: np.ndarray, n: int):
     return pen, mean, 0.5 * (cov + cov.T), con
 
 
-def _latch_transform(n: int, P: int, Lam: np.ndarray, lam0: np.ndarray, d_old: int) -> np.ndarray:
+def _latch_transform(n: int, n_latch: int, Lam: np.ndarray, lam0: np.ndarray, d_old: int) -> np.ndarray:
     """Map ``y_old = [x; v_old; 1]`` to ``[x; Lam x + lam0; 1]``."""
-    T = np.zeros((n + P + 1, d_old))
+    T = np.zeros((n + n_latch + 1, d_old))
     T[:n, :n] = np.eye(n)
-    T[n:n + P, :n] = Lam
-    T[n:n + P, -1] = lam0
+    T[n:n + n_latch, :n] = Lam
+    T[n:n + n_latch, -1] = lam0
     T[-1, -1] = 1.0
     return T
 
@@ -162,7 +162,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     ----------
     problem : Problem
         The plant, cost, knots and start state.
-    table : GainTable or FixedTable
+    table : GainTable or FixedPointTable
         The law as the firmware runs it.
     propagator : {"exact", "euler"}
         "exact" propagates the SDE exactly; "euler" reproduces the Monte Carlo plant scheme
@@ -183,17 +183,17 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     >>> print(f"{m.J:.4f}", np.round(m.knot_mean[-1], 6) + 0.0)   # cost; mean state at t = 6
     27.7745 [-1.  0.  5.  0.]
     """
-    n, m, P = table.dims
+    n, m, n_latch = table.dims
     h = 1.0 / table.tick_hz
-    d_y, d_w = n + P + 1, n + m + 1
+    d_y, d_w = n + n_latch + 1, n + m + 1
     x0 = problem.x0
-    y0 = np.concatenate([x0, np.zeros(P), [1.0]])
+    y0 = np.concatenate([x0, np.zeros(n_latch), [1.0]])
     M = np.outer(y0, y0)
     J = 0.0
     means, covs, cons = [], [], []
     path_mean = [x0.copy()] if path else []
     path_var = [np.zeros(n)] if path else []
-    xs, vs = slice(0, n), slice(n, n + P)
+    xs, vs = slice(0, n), slice(n, n + n_latch)
     bar = progress.start("oracle", table.n_ticks)
     for k in range(table.n_stages):
         stage = problem.stages[k]
@@ -205,10 +205,10 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
                 # float32 for a quantized table.
                 from stospline.design.bands import target_latch
                 Lam = np.zeros_like(Lam)
-                lam0 = np.zeros(P)
+                lam0 = np.zeros(n_latch)
                 lam0[:table.band_qp.q] = target_latch(table.band_qp, x0,
                                                       float32=table.K.dtype == np.float32)
-            T = _latch_transform(n, P, Lam, lam0, d_y)
+            T = _latch_transform(n, n_latch, Lam, lam0, d_y)
             M = T @ M @ T.T
         varying = stage.varying is not None
         if varying and propagator != "exact":
@@ -227,7 +227,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             ticks = range(0)
         for j in ticks:
             Tw[n:n + m, :n] = -table.K[j]
-            Tw[n:n + m, n:n + P] = -table.L[j]
+            Tw[n:n + m, n:n + n_latch] = -table.L[j]
             Tw[n:n + m, -1] = -table.k0[j]
             TM = Tw @ M                               # E w y'
             Mw = TM @ Tw.T

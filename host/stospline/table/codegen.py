@@ -151,7 +151,7 @@ const stsp_table_t {p}_table = {{
 
 
 def _generate_fixed(table, p: str, banner: str) -> tuple[str, str]:
-    """Header and source of a `stospline.table.qformat.FixedTable` (Q15/Q31): integer arrays, the scale
+    """Header and source of a `stospline.table.qformat.FixedPointTable` (Q15/Q31): integer arrays, the scale
     exponents, and a guard that the including build is the same variant."""
     P = p.upper()
     n, m, L = table.dims

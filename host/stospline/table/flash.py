@@ -29,12 +29,12 @@ def flash_bytes(table, arith: str = "float32") -> int:
     that re-solves it."""
     if arith not in ARITH_ELEMENT_BYTES:
         raise ValueError(f"arith must be one of {sorted(ARITH_ELEMENT_BYTES)}, got {arith!r}")
-    n, m, P = table.dims
+    n, m, n_latch = table.dims
     T, S = table.n_ticks, table.n_stages
     e = ARITH_ELEMENT_BYTES[arith]
     total = 4 * _count(S + 1) + 2 * _count(S)                       # stage_start, stage_np
-    total += e * (_count(T * m * n) + _count(T * m) + _count(T * m * P)    # K, k0, L
-                  + _count(S * P * n) + _count(S * P) + 2 * _count(m))     # Lambda, lambda0, limits
+    total += e * (_count(T * m * n) + _count(T * m) + _count(T * m * n_latch)    # K, k0, L
+                  + _count(S * n_latch * n) + _count(S * n_latch) + 2 * _count(m))     # Lambda, lambda0, limits
     total += _HEADER_FIELDS + _PTR * _TABLE_POINTERS + _HEADER_TAIL
     if arith == "float32":
         band = getattr(table, "band_qp", None)
@@ -42,5 +42,5 @@ def flash_bytes(table, arith: str = "float32") -> int:
             q = band.q
             total += 8 * (_count(q * n) + 3 * _count(q) + _count(q * q)) + _BANDQP_HEADER
     else:
-        total += _count(n) + _count(m) + _count(P) + _PTR * _FIXED_POINTERS   # int8 exponents
+        total += _count(n) + _count(m) + _count(n_latch) + _PTR * _FIXED_POINTERS   # int8 exponents
     return total

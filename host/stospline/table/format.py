@@ -4,9 +4,9 @@ Layout (all row-major, float32, padded to ``n_latch`` multipliers with zeros)::
 
     K[tick][i][j]        (n_ticks, m, n)    feedback
     k0[tick][i]          (n_ticks, m)       feed-forward
-    L[tick][i][c]        (n_ticks, m, P)    gain of the latched multiplier v
-    Lambda[stage][c][j]  (n_stages, P, n)   latch map  v = Lambda x + lambda0
-    lambda0[stage][c]    (n_stages, P)
+    L[tick][i][c]        (n_ticks, m, n_latch)    gain of the latched multiplier v
+    Lambda[stage][c][j]  (n_stages, n_latch, n)   latch map  v = Lambda x + lambda0
+    lambda0[stage][c]    (n_stages, n_latch)
     u_min[i], u_max[i]   (m,)               actuator limits (+-FLT_MAX: unlimited)
     band_qp (optional)                      the band dual re-solved at the t0 latch (BandQP)
 
@@ -79,7 +79,7 @@ class TableShape:
 
     @property
     def dims(self) -> tuple[int, int, int]:
-        """``(n, m, P)``: states, inputs, latched multipliers (padded width)."""
+        """``(n, m, n_latch)``: states, inputs, latched multipliers (padded width)."""
         return self.K.shape[2], self.K.shape[1], self.L.shape[2]
 
     def stage_of_tick(self, j: int) -> int:
@@ -164,14 +164,14 @@ def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = 
     dual's solution is not affine in the state), so the table keeps all p columns.
     """
     n, m = problem.n, problem.m
-    P = max([g[2].shape[2] for g in stages] + [g[3].shape[0] for g in stages])
-    if P > n and band_qp is None:
-        stages, P = _latch_state(stages, n), n
+    n_latch = max([g[2].shape[2] for g in stages] + [g[3].shape[0] for g in stages])
+    if n_latch > n and band_qp is None:
+        stages, n_latch = _latch_state(stages, n), n
     counts = [g[0].shape[0] for g in stages]
     start = np.concatenate([[0], np.cumsum(counts)]).astype(np.uint32)
     T = int(start[-1])
-    K = np.zeros((T, m, n)); k0 = np.zeros((T, m)); L = np.zeros((T, m, P))
-    Lam = np.zeros((len(counts), P, n)); lam0 = np.zeros((len(counts), P))
+    K = np.zeros((T, m, n)); k0 = np.zeros((T, m)); L = np.zeros((T, m, n_latch))
+    Lam = np.zeros((len(counts), n_latch, n)); lam0 = np.zeros((len(counts), n_latch))
     for k, (Kk, k0k, Lk, Lamk, lam0k) in enumerate(stages):
         sl = slice(int(start[k]), int(start[k + 1]))
         p = Lamk.shape[0]
@@ -261,16 +261,16 @@ def table_crc32(table: GainTable) -> int:
 
     The firmware computes the same value in ``stsp_table_crc32``: the dimensions and tick rate
     as u32, ``stage_start`` as u32, ``stage_np`` as u32, then K, k0, L, Lambda, lambda0 (these
-    three only when P > 0), u_min, u_max as IEEE-754 binary32 bit patterns, each little-endian.
-    A fixed-point table (`stospline.table.qformat.FixedTable`) adds its scalar kind as u32 after the
+    three only when n_latch > 0), u_min, u_max as IEEE-754 binary32 bit patterns, each little-endian.
+    A fixed-point table (`stospline.table.qformat.FixedPointTable`) adds its scalar kind as u32 after the
     tick rate, stores the arrays as little-endian int16 (Q15) or int32 (Q31), and ends with
-    x_exp, u_exp and v_exp (when P > 0) as one signed byte each. Then, with a band QP (float32
+    x_exp, u_exp and v_exp (when n_latch > 0) as one signed byte each. Then, with a band QP (float32
     tables only), its q and n as u32 and Nt, mt, W, lo, hi as binary64 bit patterns. Last, the
     32 bytes of the problem file's SHA-256 (zeros when unknown).
     """
-    n, m, P = table.dims
+    n, m, n_latch = table.dims
     arith = getattr(table, "arith", "float32")
-    head = struct.pack("<6I", n, m, P, table.n_stages, table.n_ticks, table.tick_hz)
+    head = struct.pack("<6I", n, m, n_latch, table.n_stages, table.n_ticks, table.tick_hz)
     if arith != "float32":
         head += struct.pack("<I", table.scalar_kind)
     parts = [head, np.asarray(table.stage_start, "<u4").tobytes(),

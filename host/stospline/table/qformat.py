@@ -30,7 +30,7 @@ which is exactly what the firmware's ``stsp_init`` requires: then no sum overflo
 accumulator and no ``u_q``/``v_q`` leaves the Q range for any integer state, and the command
 range covers the worst corner of the state box (no saturation for in-range states).
 
-Error bound (`FixedTable.bound`, derived in docs/guide/firmware.md). For every integer state (any
+Error bound (`FixedPointTable.bound`, derived in docs/guide/firmware.md). For every integer state (any
 ``x_q``, i.e. every state within the range) and latch state, in units of the command's LSB
 ``2^(u_exp[i] - F)``::
 
@@ -53,7 +53,7 @@ from stospline.firmware_interface import ARITHS, FRAC_BITS, SCALAR_KIND
 from stospline.precision import RoundedUp, ceil_significant
 from stospline.table.format import F32_MAX, GainTable, TableShape
 
-__all__ = ["FixedTable", "quantize_table", "state_range", "law_q", "latch_q", "law_double",
+__all__ = ["FixedPointTable", "quantize_table", "state_range", "law_q", "latch_q", "law_double",
            "ARITHS", "FRAC_BITS", "SCALAR_KIND", "EXP_MAX", "DEFAULT_SIGMAS"]
 
 EXP_MAX = limits.Q_EXP_MAX  # the firmware refuses scale exponents beyond +-60
@@ -79,7 +79,7 @@ def _rhu(y: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class FixedTable(TableShape):
+class FixedPointTable(TableShape):
     """A Q15/Q31 table as the firmware stores it (integers in int64 arrays), with its scales,
     the double-precision table it came from, and the per-tick error bound.
 
@@ -190,7 +190,7 @@ def _exponent(r: np.ndarray, terms: int, F: int) -> np.ndarray:
 
 
 def quantize_table(table: GainTable, arith: str, x_range, *, name: str | None = None
-                   ) -> FixedTable:
+                   ) -> FixedPointTable:
     """Quantize a double-precision table (``build_table(..., quantize=False)``) to Q15/Q31.
 
     Parameters
@@ -215,7 +215,7 @@ def quantize_table(table: GainTable, arith: str, x_range, *, name: str | None = 
         raise ValueError(f"arith must be one of {list(FRAC_BITS)}, got {arith!r}")
     F = FRAC_BITS[arith]
     one, qmax = 1 << F, (1 << F) - 1
-    n, m, P = table.dims
+    n, m, n_latch = table.dims
     x_range = np.asarray(x_range, dtype=float).reshape(-1)
     if x_range.shape != (n,) or not np.all(np.isfinite(x_range)) or np.any(x_range <= 0):
         raise ValueError(f"x_range must hold {n} positive finite magnitudes")
@@ -226,11 +226,11 @@ def quantize_table(table: GainTable, arith: str, x_range, *, name: str | None = 
     sx = np.ldexp(1.0, x_exp)
 
     # v scale: one exponent per column over the whole plan (v keeps its meaning across stages).
-    r_v = (np.abs(lam0) + np.abs(Lam) @ sx).max(axis=0) if P else np.zeros(0)
+    r_v = (np.abs(lam0) + np.abs(Lam) @ sx).max(axis=0) if n_latch else np.zeros(0)
     v_exp = _exponent(r_v, n + 1, F)
     sv = np.ldexp(1.0, v_exp)
-    r_u = (np.abs(k0) + np.abs(K) @ sx + (np.abs(L) @ sv if P else 0.0)).max(axis=0)
-    u_exp = _exponent(r_u, n + P + 1, F)
+    r_u = (np.abs(k0) + np.abs(K) @ sx + (np.abs(L) @ sv if n_latch else 0.0)).max(axis=0)
+    u_exp = _exponent(r_u, n + n_latch + 1, F)
     for what, e in (("state", x_exp), ("command", u_exp), ("multiplier", v_exp)):
         if e.size and np.abs(e).max() > EXP_MAX:
             worst = int(e[np.argmax(np.abs(e))])
@@ -258,15 +258,15 @@ def quantize_table(table: GainTable, arith: str, x_range, *, name: str | None = 
 
     # Error bound (module docstring): per tick and input, in command LSBs.
     stage_of = np.searchsorted(table.stage_start, np.arange(table.n_ticks), side="right") - 1
-    ft = FixedTable(name or f"{table.name}_{arith}", arith, table.tick_hz, table.t0,
+    ft = FixedPointTable(name or f"{table.name}_{arith}", arith, table.tick_hz, table.t0,
                     np.asarray(table.stage_start, np.uint32), np.asarray(table.stage_np, np.uint16),
                     Kq, k0q, Lq, Lamq, lam0q, u_min, u_max, x_exp.astype(np.int8),
                     u_exp.astype(np.int8), v_exp.astype(np.int8), table.problem_sha256,
                     table, x_range, np.zeros((table.n_ticks, m)))
-    eps = 0.5 + np.abs(lam0q - lam0s) + np.abs(Lamq - Lams).sum(axis=2)        # (S, P)
-    eps = np.where(np.arange(P)[None, :] < np.asarray(table.stage_np)[:, None], eps, 0.0)
+    eps = 0.5 + np.abs(lam0q - lam0s) + np.abs(Lamq - Lams).sum(axis=2)        # (S, n_latch)
+    eps = np.where(np.arange(n_latch)[None, :] < np.asarray(table.stage_np)[:, None], eps, 0.0)
     ls = ft.latch_stage(stage_of)
-    eps_t = np.where((ls >= 0)[:, None], eps[np.maximum(ls, 0)], 0.0)            # (T, P)
+    eps_t = np.where((ls >= 0)[:, None], eps[np.maximum(ls, 0)], 0.0)            # (T, n_latch)
     bound = (0.5 + np.abs(k0q - k0s) + np.abs(Kq - Ks).sum(axis=2)
              + np.abs(Lq - Ls).sum(axis=2)
              + np.einsum("tic,tc->ti", np.abs(Ls), eps_t) / one)
@@ -274,18 +274,18 @@ def quantize_table(table: GainTable, arith: str, x_range, *, name: str | None = 
     return ft
 
 
-def latch_q(ft: FixedTable, stage: np.ndarray, X: np.ndarray) -> np.ndarray:
+def latch_q(ft: FixedPointTable, stage: np.ndarray, X: np.ndarray) -> np.ndarray:
     """v_q latched at `stage` (per row) from integer states X (N, n), bit-exact with the C."""
     F = ft.frac_bits
-    P = ft.dims[2]
+    n_latch = ft.dims[2]
     stage = np.asarray(stage)
     acc = (ft.lambda0[stage] << F) + np.einsum("ncj,nj->nc", ft.Lambda[stage], X)
     V = (acc + (1 << (F - 1))) >> F
-    return np.where(np.arange(P)[None, :] < ft.stage_np[stage][:, None], V, 0)
+    return np.where(np.arange(n_latch)[None, :] < ft.stage_np[stage][:, None], V, 0)
 
 
-def law_q(ft: FixedTable, tick: np.ndarray, X: np.ndarray, V: np.ndarray) -> np.ndarray:
-    """u_q at ticks `tick` (N,) from X (N, n) and V (N, P), bit-exact with the C (unclamped;
+def law_q(ft: FixedPointTable, tick: np.ndarray, X: np.ndarray, V: np.ndarray) -> np.ndarray:
+    """u_q at ticks `tick` (N,) from X (N, n) and V (N, n_latch), bit-exact with the C (unclamped;
     int64 is exact: every row sum is at most (2^F - 1) 2^F in magnitude)."""
     F = ft.frac_bits
     tick = np.asarray(tick)
@@ -294,18 +294,18 @@ def law_q(ft: FixedTable, tick: np.ndarray, X: np.ndarray, V: np.ndarray) -> np.
     return (acc + (1 << (F - 1))) >> F
 
 
-def law_double(ft: FixedTable, tick: np.ndarray, x: np.ndarray, x_latch: np.ndarray
+def law_double(ft: FixedPointTable, tick: np.ndarray, x: np.ndarray, x_latch: np.ndarray
                ) -> np.ndarray:
     """The design's law in double precision: u = -K x - k0 - L v, v latched from x_latch at the
     tick's latch stage (rows beyond stage_np zero), from the unquantized source table."""
     src = ft.source
     tick = np.asarray(tick)
     ls = ft.latch_stage(ft.stage_of_tick(tick))
-    P = ft.dims[2]
+    n_latch = ft.dims[2]
     lsc = np.maximum(ls, 0)
     v = np.asarray(src.lambda0, float)[lsc] + np.einsum(
         "ncj,nj->nc", np.asarray(src.Lambda, float)[lsc], x_latch)
-    keep = (np.arange(P)[None, :] < ft.stage_np[lsc][:, None]) & (ls >= 0)[:, None]
+    keep = (np.arange(n_latch)[None, :] < ft.stage_np[lsc][:, None]) & (ls >= 0)[:, None]
     v = np.where(keep, v, 0.0)
     K, k0, L = (np.asarray(a, float)[tick] for a in (src.K, src.k0, src.L))
     return -(np.einsum("nij,nj->ni", K, x) + k0 + np.einsum("nic,nc->ni", L, v))

@@ -17,7 +17,7 @@ from stospline.strict import check_table_finite, dumps, ratio_or_null
 
 def minimal_file() -> str:
     """The docs' own minimal file (docs/guide/problem-file.md): a cart without noise."""
-    text = (REPO / "docs" / "problem-file.md").read_text()
+    text = (REPO / "docs" / "guide" / "problem-file.md").read_text()
     m = re.search(r"```toml\n(# complete file: the minimal file.*?)```", text, re.S)
     return m.group(1)
 

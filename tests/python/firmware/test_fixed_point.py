@@ -11,7 +11,7 @@ import pytest
 from stospline.table.qformat import latch_q, law_double, law_q, quantize_table
 from stospline.sim.fixed_point_error import noise_free_closed_loop, random_q_samples
 from stospline.sim.controller import STATUS, build_controller
-from stospline.pipeline import double_table, fixed_table
+from stospline.pipeline import double_table, fixed_point_table
 from stospline.table.format import table_crc32
 
 from conftest import EXAMPLES
@@ -22,7 +22,7 @@ SAMPLES = 1_000_000
 
 @pytest.fixture(scope="module")
 def fixed(robot_zoh):
-    return {a: fixed_table(robot_zoh, a) for a in ARITHS}
+    return {a: fixed_point_table(robot_zoh, a) for a in ARITHS}
 
 
 @pytest.fixture(scope="module")

@@ -4,7 +4,7 @@ import re
 
 from conftest import REPO
 
-GUIDE = (REPO / "docs" / "integration.md").read_text(encoding="utf-8")
+GUIDE = (REPO / "docs" / "guide" / "integration.md").read_text(encoding="utf-8")
 
 
 def test_guide_main_c_is_the_tested_file():

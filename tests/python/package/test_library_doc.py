@@ -7,7 +7,7 @@ import pytest
 
 from conftest import EXAMPLES, REPO
 
-DOC = REPO / "docs" / "library.md"
+DOC = REPO / "docs" / "guide" / "library.md"
 BLOCKS = re.findall(r"^```python\n(.*?)^```", DOC.read_text(encoding="utf-8"),
                     flags=re.DOTALL | re.MULTILINE)
 

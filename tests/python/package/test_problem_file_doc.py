@@ -17,7 +17,7 @@ from stospline.problem import load_problem, parse_problem
 
 from conftest import REPO
 
-DOC = REPO / "docs" / "problem-file.md"
+DOC = REPO / "docs" / "guide" / "problem-file.md"
 TEXT = DOC.read_text(encoding="utf-8")
 BLOCKS = re.findall(r"^```toml\n(.*?)^```", TEXT, flags=re.DOTALL | re.MULTILINE)
 COMPLETE = re.compile(r"# complete file(?::.*?(?P<example>examples/\S+\.toml))?")

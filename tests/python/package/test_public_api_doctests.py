@@ -10,7 +10,7 @@ import stospline
 ROOT = Path(__file__).resolve().parents[3]
 # load/parse a problem, design, build the table, quantize, generate C, build the controller,
 # simulate, evaluate with the oracle
-WORKFLOW = ["load_problem", "problem_from_arrays", "design_problem", "table_of", "fixed_table",
+WORKFLOW = ["load_problem", "problem_from_arrays", "design_problem", "table_of", "fixed_point_table",
             "generate_c", "build_controller", "simulate_problem", "evaluate_table"]
 
 

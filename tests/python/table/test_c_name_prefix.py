@@ -10,7 +10,7 @@ import pytest
 from conftest import EXAMPLES
 from stospline.problem.names import MAX_NAME_LENGTH
 from stospline.table.codegen import generate_c
-from stospline.pipeline import fixed_table
+from stospline.pipeline import fixed_point_table
 from stospline.problem import ProblemError, parse_problem
 
 
@@ -69,7 +69,7 @@ def test_longest_name_keeps_generated_identifiers_within_c99(robot_zoh):
     distinct on every conforming compiler."""
     name = "n" * MAX_NAME_LENGTH
     texts = list(generate_c(robot_zoh.table, prefix=name))
-    q31 = fixed_table(robot_zoh, "q31")
+    q31 = fixed_point_table(robot_zoh, "q31")
     texts += generate_c(q31, prefix=f"{name}_q31")
     idents = {w for t in texts for w in re.findall(r"\b[A-Za-z_]\w*\b", t)
               if w.lower().startswith(name)}

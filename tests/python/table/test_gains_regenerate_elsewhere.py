@@ -145,7 +145,7 @@ def test_no_table_entry_is_near_a_rounding_boundary(monkeypatch, example):
     d = pipeline.design_problem(problem, mode=problem.options.get("mode", "stagewise"))
     if example == "robot_corridor":
         for arith in ("q15", "q31"):
-            pipeline.fixed_table(d, arith)
+            pipeline.fixed_point_table(d, arith)
     assert rounded["float32"] and (rounded["q"] or example != "robot_corridor")
 
     def assert_clear(distance, a, what):
@@ -173,7 +173,7 @@ def test_written_bound_is_rounded_up_never_down(robot_zoh):
     assert ceil_significant(2.928018756, 3) == 2.93 and ceil_significant(2.5, 3) == 2.5
     assert ceil_significant(9.991, 3) == 10.0 and ceil_significant(1.23e-12, 2) == 1.3e-12
     for arith in ("q15", "q31"):
-        ft = pipeline.fixed_table(robot_zoh, arith)
+        ft = pipeline.fixed_point_table(robot_zoh, arith)
         written = json.loads((GAINS / f"robot_corridor_{arith}.json").read_text())["fixed"]
         header = (GAINS / f"robot_corridor_{arith}.h").read_text()
         margin = 3 * GAIN_AGREEMENT * 2.0 ** ft.frac_bits

@@ -17,7 +17,7 @@ import os
 from pathlib import Path
 from typing import Callable, Iterable
 
-__all__ = ["cache_root", "source_key", "cached_build"]
+__all__ = ["cache_root", "source_key", "cached_build", "compile_cffi", "load_module"]
 
 
 def cache_root() -> Path:
@@ -78,3 +78,31 @@ def cached_build(key: str, modname: str, build: Callable[[Path], Path], *,
         return final / name
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def compile_cffi(out: Path, modname: str, cdef: str, source: str, *, sources=(),
+                 include_dirs=(), cflags=(), quiet: bool = True) -> Path:
+    """Build step of `cached_build`: compile a cffi API-mode module in `out` and return its
+    path. `cdef` declares what Python calls, `source` is the C text cffi wraps (its includes),
+    `sources` further C files compiled into the module."""
+    import cffi
+    ffib = cffi.FFI()
+    ffib.cdef(cdef)
+    ffib.set_source(modname, source, sources=[str(s) for s in sources],
+                    include_dirs=[str(d) for d in include_dirs], extra_compile_args=list(cflags))
+    return Path(ffib.compile(tmpdir=str(out), verbose=not quiet))
+
+
+def load_module(path: Path):
+    """Load step: the extension module at `path` (once per process; later calls return the
+    loaded module)."""
+    import importlib.util
+    import sys
+    modname = Path(path).name.split(".")[0]
+    mod = sys.modules.get(modname)
+    if mod is None:
+        spec = importlib.util.spec_from_file_location(modname, path)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        sys.modules[modname] = mod
+    return mod

@@ -8,13 +8,11 @@ of the exact zero-order-hold design (`design_zoh`) in C.
 """
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
 
-from stospline.cache import cached_build, source_key
+from stospline.cache import cached_build, compile_cffi, load_module, source_key
 
 __all__ = ["build_kernels", "load_kernels", "zoh_stage_ticks", "oracle_stage_ticks",
            "pack_oracle_maps", "KernelBuildError"]
@@ -48,11 +46,7 @@ def build_kernels(build_dir: str | Path | None = None, *, quiet: bool = True) ->
     modname = f"_stsp_kernels_{key}"
 
     def build(out: Path) -> Path:
-        import cffi
-        ffib = cffi.FFI()
-        ffib.cdef(_CDEF)
-        ffib.set_source(modname, source.decode(), extra_compile_args=_CFLAGS)
-        return Path(ffib.compile(tmpdir=str(out), verbose=not quiet))
+        return compile_cffi(out, modname, _CDEF, source.decode(), cflags=_CFLAGS, quiet=quiet)
 
     try:
         return cached_build(key, modname, build, root=build_dir)
@@ -65,15 +59,7 @@ def load_kernels():
     """The loaded cffi module (``.ffi``, ``.lib``), built on first use."""
     global _loaded
     if _loaded is None:
-        path = build_kernels()
-        modname = path.name.split(".")[0]
-        mod = sys.modules.get(modname)
-        if mod is None:
-            spec = importlib.util.spec_from_file_location(modname, path)
-            mod = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(mod)
-            sys.modules[modname] = mod
-        _loaded = mod
+        _loaded = load_module(build_kernels())
     return _loaded
 
 

@@ -6,14 +6,12 @@ that goes into the build), and the returned `CompiledController` steps C instanc
 """
 from __future__ import annotations
 
-import importlib.util
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from stospline.cache import cached_build, source_key
+from stospline.cache import cached_build, compile_cffi, load_module, source_key
 from stospline.firmware_interface import STATUS, check_header
 from stospline.table.codegen import generate_c
 from stospline.table.format import GainTable
@@ -287,8 +285,6 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     >>> u.shape, ctl.status_str(int(status[0]))    # the t0 tick latches and commands
     ((1, 2), 'ok')
     """
-    import cffi
-
     header, source = generate_c(table)
     arith = getattr(table, "arith", "float32")
     cdef, cflags = _cdef(arith), _CFLAGS + VARIANTS[arith][2]
@@ -303,22 +299,12 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     def build(out: Path) -> Path:
         (out / f"{table.name}.h").write_text(header)
         (out / f"{table.name}.c").write_text(source)
-        ffib = cffi.FFI()
-        ffib.cdef(cdef)
-        ffib.set_source(
-            modname,
+        return compile_cffi(
+            out, modname, cdef,
             f'#include "stospline/stsp_controller.h"\n#include "{table.name}.h"\n'
             + _BATCH % {"p": table.name, "plant": _PLANT_PROTOTYPE},
-            sources=[str(s) for s in fw_sources] + [str(out / f"{table.name}.c"), str(plant)],
-            include_dirs=[str(fw / "include"), str(fw / "src"), str(out)],
-            extra_compile_args=cflags)
-        return Path(ffib.compile(tmpdir=str(out), verbose=not quiet))
+            sources=[*fw_sources, out / f"{table.name}.c", plant],
+            include_dirs=[fw / "include", fw / "src", out], cflags=cflags, quiet=quiet)
 
-    existing = [cached_build(key, modname, build, root=build_dir)]
-    spec = importlib.util.spec_from_file_location(modname, existing[0])
-    mod = sys.modules.get(modname)
-    if mod is None:
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-        sys.modules[modname] = mod
+    mod = load_module(cached_build(key, modname, build, root=build_dir))
     return CompiledController(mod.ffi, mod.lib, table)

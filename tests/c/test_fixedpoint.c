@@ -14,6 +14,7 @@
 #include <cmocka.h>
 
 #include "stospline/stsp_controller.h"
+#include "test_support.h"
 
 #ifndef STSP_ARITH_FIXED
 #error "test_fixedpoint.c tests the STSP_ARITH_Q15/Q31 builds"
@@ -487,58 +488,6 @@ static void test_state_conversion(void **state)
     assert_int_equal(stsp_command_to_f32(&c, NULL, u), STSP_ERR_NULL);
 }
 
-/* The table changed after init (as in test_controller.c for float32). Header: the steps and
- * the conversions keep to what init validated (the commands of the unchanged table, nothing
- * read or written past the arrays, x and u), verify reports STSP_ERR_TABLE_CHANGED and the
- * stopped instance holds zeros. Data (the next test): gains overwritten far beyond the row
- * bound init checked give wrong commands until verify reports the CRC, but never a signed
- * overflow (the law and the latch add modulo 2^32 for Q15, 2^64 for Q31; UBSan aborts the
- * _san builds on one). */
-/* Heap blocks of exactly the size asked: the test is compiled without ASan, the controller of
- * the _san builds with it, and ASan's malloc puts red zones around these (not around the
- * test's own stack or static arrays). */
-static void *heap_copy(const void *src, size_t size)
-{
-    void *p = malloc(size);
-    assert_non_null(p);
-    memcpy(p, src, size);
-    return p;
-}
-
-static stsp_table_t make_heap_table(void)
-{
-    stsp_table_t t = make_table();
-    t.stage_start = heap_copy(stage_start, sizeof stage_start);
-    t.stage_np = heap_copy(stage_np, sizeof stage_np);
-    t.K = heap_copy(K, sizeof K);
-    t.k0 = heap_copy(k0, sizeof k0);
-    t.L = heap_copy(L, sizeof L);
-    t.Lambda = heap_copy(Lambda, sizeof Lambda);
-    t.lambda0 = heap_copy(lambda0, sizeof lambda0);
-    t.u_min = heap_copy(no_min, sizeof no_min);
-    t.u_max = heap_copy(no_max, sizeof no_max);
-    t.x_exp = heap_copy(x_exp, sizeof x_exp);
-    t.u_exp = heap_copy(u_exp, sizeof u_exp);
-    t.v_exp = heap_copy(v_exp, sizeof v_exp);
-    return t;
-}
-
-static void free_heap_table(const stsp_table_t *t)
-{
-    free((void *)t->stage_start);
-    free((void *)t->stage_np);
-    free((void *)t->K);
-    free((void *)t->k0);
-    free((void *)t->L);
-    free((void *)t->Lambda);
-    free((void *)t->lambda0);
-    free((void *)t->u_min);
-    free((void *)t->u_max);
-    free((void *)t->x_exp);
-    free((void *)t->u_exp);
-    free((void *)t->v_exp);
-}
-
 static void test_table_changed_after_init(void **state)
 {
     const stsp_scalar_t xs[NX] = {QMAX, QMIN};
@@ -547,7 +496,7 @@ static void test_table_changed_after_init(void **state)
     uint32_t which, tick;
     (void)state;
     for (which = 0u; which < 6u; ++which) {
-        const stsp_table_t orig = make_heap_table();
+        const stsp_table_t orig = heap_table(make_table());
         stsp_table_t t = orig;
         stsp_ctrl_t c, ref;
         stsp_scalar_t *x = heap_copy(xs, sizeof xs), *u = heap_copy(uq, sizeof uq);

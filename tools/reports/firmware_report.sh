@@ -6,7 +6,7 @@
 #     on mps2-an385, a Cortex-M3, as QEMU has no M0+ board; float32 on the M4F only), and the
 #     ratio to the multiply-accumulates the law needs (tools/arm/count_instructions.sh),
 #   * host nanoseconds per tick, median over whole 6000-tick plans, against a naive
-#     generic-loop controller (tests/c/bench_host.c, built by the host CMake project).
+#     generic-loop controller (tools/bench/bench_host.c, built by the host CMake project).
 #   tools/reports/firmware_report.sh [--no-setup]
 # Writes build/firmware_report/counts.json and prints everything to stdout.
 set -euo pipefail

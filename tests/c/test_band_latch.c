@@ -1,0 +1,279 @@
+/* The band table (format 3): the t0 latch re-solves the band dual from the measured state
+ * (stsp_bandqp_solve), falls back to the design's affine map when it has no optimal active set,
+ * and init checks the band dual; the solver's candidate bound. Table D: nx = 2, nu = 1,
+ * n_latch = 2, the shape of the controller_fixed_2_1_2 builds. */
+#include <float.h>
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+#include "stospline/stsp_bandqp.h"
+#include "stospline/stsp_controller.h"
+#include "test_support.h"
+
+static const float no_min[1] = {-FLT_MAX}, no_max[1] = {FLT_MAX};
+
+/* Table D: a joint band table, nx = 2, nu = 1, n_latch = 2; stage 0 = ticks 0..1 latches both
+ * multipliers through the band dual, stage 1 = ticks 2..3 keeps them. Dual: e = x0, W =
+ * [[2, 0.5], [0.5, 1]], row 0 an equality (0.5), row 1 a band [-1, 1]. Solutions by hand:
+ * x0 = (1.5, 0.25): row 1 inactive, lam = ((1.5 - 0.5) / 2, 0) = (0.5, 0);
+ * x0 = (0.5, 3):    row 1 at its upper bound, W lam = (0, 2): lam = (-1, 4) / 1.75. */
+static const uint32_t d_start[3] = {0u, 2u, 4u};
+static const uint16_t d_np[2] = {2u, 0u};
+static const float d_K[4 * 2] = {0.25f, 0.25f, 0.25f, 0.25f, 0.25f, 0.25f, 0.25f, 0.25f};
+static const float d_k0[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+static const float d_L[4 * 2] = {1.0f, 10.0f, 1.0f, 10.0f, 1.0f, 10.0f, 1.0f, 10.0f};
+static const float d_Lambda[2 * 2 * 2] = {1.0f, 0.0f, 0.0f, 1.0f, 0.0f, 0.0f, 0.0f, 0.0f};
+static const float d_lambda0[2 * 2] = {0.125f, -0.25f, 0.0f, 0.0f};
+static const double d_Nt[2 * 2] = {1.0, 0.0, 0.0, 1.0};
+static const double d_mt[2] = {0.0, 0.0};
+static const double d_W[2 * 2] = {2.0, 0.5, 0.5, 1.0};
+static const double d_lo[2] = {0.5, -1.0};
+static const double d_hi[2] = {0.5, 1.0};
+/* CRC-32 of table D as host/stospline/table/format.py table_crc32 computes it
+ * (tests/python/firmware/test_band_relatch.py builds the same table). */
+#define TABLE_D_CRC32 0x04805D9Eu
+
+static stsp_table_t make_table_d(const stsp_bandqp_t *qp)
+{
+    stsp_table_t t;
+    memset(&t, 0, sizeof t);
+    t.magic = STSP_TABLE_MAGIC;
+    t.format_version = STSP_FORMAT_VERSION;
+    t.scalar_kind = STSP_SCALAR_FLOAT32;
+    t.nx = 2u; t.nu = 1u; t.n_latch = 2u; t.n_stages = 2u; t.n_ticks = 4u; t.tick_hz = 1u;
+    t.stage_start = d_start; t.stage_np = d_np;
+    t.K = d_K; t.k0 = d_k0; t.L = d_L; t.Lambda = d_Lambda; t.lambda0 = d_lambda0;
+    t.u_min = no_min; t.u_max = no_max;
+    t.band_qp = qp;
+    t.crc32 = stsp_table_crc32(&t);
+    return t;
+}
+
+static stsp_bandqp_t make_band_d(void)
+{
+    stsp_bandqp_t b = {2u, 2u, d_Nt, d_mt, d_W, d_lo, d_hi};
+    return b;
+}
+
+static void test_band_latch_solves_the_dual(void **state)
+{
+    const stsp_bandqp_t qp = make_band_d();
+    const stsp_table_t t = make_table_d(&qp);
+    const float inside[2] = {1.5f, 0.25f}, upper[2] = {0.5f, 3.0f}, later[2] = {9.0f, -9.0f};
+    stsp_ctrl_t c;
+    float u[1];
+    uint32_t tick;
+    (void)state;
+    assert_int_equal(t.crc32, TABLE_D_CRC32);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+
+    assert_int_equal(stsp_step(&c, 0u, inside, u), STSP_OK);
+    assert_true(fabs(c.v[0] - 0.5) < 1e-7 && c.v[1] == 0.0f);
+    assert_true(fabs(u[0] - (-(0.25 * (1.5 + 0.25)) - 0.5)) < 1e-6);
+
+    assert_int_equal(stsp_reset(&c), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, upper, u), STSP_OK);
+    assert_true(c.v[0] == (float)(-1.0 / 1.75));
+    assert_true(c.v[1] == (float)(4.0 / 1.75));
+    /* The multipliers stay for the rest of the plan: stage 1 (stage_np 0) does not relatch. */
+    for (tick = 1u; tick < 4u; ++tick) {
+        assert_int_equal(stsp_step(&c, tick, later, u), STSP_OK);
+        assert_true(fabs(u[0] - (-(0.25 * 0.0) - (-1.0 / 1.75) - 10.0 * (4.0 / 1.75))) < 1e-5);
+    }
+}
+
+static void test_band_fallback_and_nonfinite(void **state)
+{
+    static const double not_pd[2 * 2] = {-1.0, 0.0, 0.0, -1.0};
+    static const double tiny[2 * 2] = {1e-300, 0.0, 0.0, 1e-300};
+    static const double huge[2 * 2] = {1e300, 0.0, 0.0, 1e300};
+    const float far[2] = {0.0f, 1e30f};
+    stsp_bandqp_t qp = make_band_d();
+    stsp_table_t t;
+    stsp_ctrl_t c;
+    const float x[2] = {0.5f, 3.0f}, bad[2] = {NAN, 0.0f};
+    float u[1] = {1.0f};
+    (void)state;
+    qp.W = not_pd; /* no active set meets the conditions: latch the design's affine map */
+    t = make_table_d(&qp);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_WARN_BAND_FALLBACK);
+    assert_true(c.v[0] == 0.5f + 0.125f);
+    assert_true(c.v[1] == 3.0f - 0.25f);
+    assert_true(fabs(u[0] - (-(0.25 * 3.5) - 0.625 - 10.0 * 2.75)) < 1e-5);
+
+    /* Multipliers beyond FLT_MAX (W = 1e-300 I: lam_0 = 1e300) have no float value. */
+    qp = make_band_d();
+    qp.W = tiny;
+    t = make_table_d(&qp);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_WARN_BAND_FALLBACK);
+    assert_true(c.v[0] == 0.5f + 0.125f);
+    /* Nt x0 overflows a double although both are finite: nothing to solve. */
+    qp = make_band_d();
+    qp.Nt = huge;
+    t = make_table_d(&qp);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, far, u), STSP_WARN_BAND_FALLBACK);
+    assert_true(c.v[1] == 1e30f - 0.25f);
+
+    qp = make_band_d();
+    t = make_table_d(&qp);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, bad, u), STSP_ERR_NONFINITE_STATE);
+    assert_true(u[0] == 0.0f && c.latched == 0u);
+}
+
+static void test_band_tables_are_checked(void **state)
+{
+    static const double nan_W[2 * 2] = {2.0, 0.5, 0.5, NAN};
+    static const double swapped_lo[2] = {0.5, 2.0};
+    static const double W_changed[2 * 2] = {2.0, 0.5, 0.5, 1.0000000000000002};
+    static const uint16_t np_later[2] = {2u, 1u};
+    static const uint16_t np_one[2] = {1u, 0u};
+    const stsp_bandqp_t good = make_band_d();
+    stsp_bandqp_t qp;
+    stsp_table_t t;
+    stsp_ctrl_t c;
+    (void)state;
+
+    qp = good; qp.W = NULL; t = make_table_d(&good); t.band_qp = &qp;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_NULL);
+    qp = good; qp.q = 1u; t = make_table_d(&qp);           /* q != stage_np[0] */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    qp = good; qp.nx = 3u; t = make_table_d(&qp);          /* another state size */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    qp = good; qp.q = (uint16_t)(STSP_BANDQP_MAX + 1u); t = make_table_d(&qp);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    qp = good; t = make_table_d(&qp); t.stage_np = np_later; /* a second latch */
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    qp = good; t = make_table_d(&qp); t.stage_np = np_one;
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    qp = good; qp.W = nan_W; t = make_table_d(&qp);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    qp = good; qp.lo = swapped_lo; t = make_table_d(&qp);  /* lo > hi on row 1 */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    qp = good; t = make_table_d(&qp); qp.W = W_changed;    /* one ulp after the CRC */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_CRC);
+}
+
+/* The band dual's header (a struct of its own) changed after init: the stage-0 latch solves
+ * the dual init validated (its copy of q, nx and the array addresses), and verify reports
+ * STSP_ERR_TABLE_CHANGED. The band arrays and x are exact heap blocks: under ASan a solve
+ * through the changed header (more rows, a longer state, a shorter array) aborts. */
+static void test_band_header_change_after_init(void **state)
+{
+    const float upper[2] = {0.5f, 3.0f};
+    int which;
+    (void)state;
+    for (which = 0; which < 4; ++which) {
+        stsp_bandqp_t qp = {2u, 2u, heap_copy(d_Nt, sizeof d_Nt), heap_copy(d_mt, sizeof d_mt),
+                            heap_copy(d_W, sizeof d_W), heap_copy(d_lo, sizeof d_lo),
+                            heap_copy(d_hi, sizeof d_hi)};
+        const stsp_bandqp_t heap = qp, ref_qp = make_band_d();
+        const stsp_table_t t = make_table_d(&qp), tr = make_table_d(&ref_qp);
+        float *x = heap_copy(upper, sizeof upper);
+        stsp_ctrl_t c, r;
+        float u[1], u_ref[1];
+        assert_int_equal(stsp_init(&c, &t), STSP_OK);
+        assert_int_equal(stsp_init(&r, &tr), STSP_OK);
+        switch (which) {
+        case 0: qp.q = 3u; break;
+        case 1: qp.nx = 3u; break;
+        case 2: qp.Nt = qp.mt; break;           /* 2 doubles where 4 were */
+        default: qp.q = 1u; break;
+        }
+        assert_int_equal(stsp_step(&c, 0u, x, u), stsp_step(&r, 0u, upper, u_ref));
+        assert_int_equal(f32_bits(u[0]), f32_bits(u_ref[0]));
+        assert_memory_equal(c.v, r.v, sizeof c.v);
+        assert_int_equal(stsp_verify(&c), STSP_ERR_TABLE_CHANGED);
+        assert_int_equal(stsp_verify(&r), STSP_OK);
+        free(x);
+        free((void *)heap.Nt);
+        free((void *)heap.mt);
+        free((void *)heap.W);
+        free((void *)heap.lo);
+        free((void *)heap.hi);
+    }
+}
+
+/* The solver's proven bound, 3^(band rows) candidate active sets, pinned on its worst cases.
+ * W = I, e = Nt x0 + mt = 2 + i/8 on row i, bands [-1, 0.5 + i/16]: every row is above its
+ * band, so the only optimal active set has every row at its upper bound, lam = e - hi > 0,
+ * the last candidate of the enumeration (digits 0, -1, +1 per band row); the solver must try
+ * exactly 3^8 = 6561 sets. With rows 2 and 5 equality rows (always active, not enumerated)
+ * the bound is 3^6 = 729. With W = -I no set but the empty one factors and the empty one
+ * leaves every row outside its band: infeasible after exactly 3^8 sets (3^6 with the two
+ * equality rows), lam all zeros. */
+static void test_bandqp_candidate_bound(void **state)
+{
+    double Nt[STSP_BANDQP_MAX * 1u], mt[STSP_BANDQP_MAX], W[STSP_BANDQP_MAX * STSP_BANDQP_MAX];
+    double neg_W[STSP_BANDQP_MAX * STSP_BANDQP_MAX], lo[STSP_BANDQP_MAX], hi[STSP_BANDQP_MAX];
+    double lam[STSP_BANDQP_MAX];
+    const float x0[1] = {1.0f};
+    stsp_bandqp_t qp = {(uint16_t)STSP_BANDQP_MAX, 1u, Nt, mt, W, lo, hi};
+    stsp_bandqp_work_t work;
+    uint32_t i, j, cand = 0u;
+    (void)state;
+    assert_int_equal(STSP_BANDQP_MAX, 8u);
+    for (i = 0u; i < STSP_BANDQP_MAX; ++i) {
+        Nt[i] = 1.0;
+        mt[i] = 1.0 + (double)i / 8.0;
+        lo[i] = -1.0;
+        hi[i] = 0.5 + (double)i / 16.0;
+        for (j = 0u; j < STSP_BANDQP_MAX; ++j) {
+            W[i * STSP_BANDQP_MAX + j] = (i == j) ? 1.0 : 0.0;
+            neg_W[i * STSP_BANDQP_MAX + j] = (i == j) ? -1.0 : 0.0;
+        }
+    }
+    assert_int_equal(stsp_bandqp_solve(&qp, x0, lam, &work, &cand), STSP_BANDQP_OK);
+    assert_int_equal(cand, 6561u);
+    for (i = 0u; i < STSP_BANDQP_MAX; ++i) {
+        assert_true(lam[i] == (2.0 + (double)i / 8.0) - (0.5 + (double)i / 16.0));
+    }
+
+    lo[2] = hi[2];  /* equality rows: lam there is e - b as well, the rest unchanged */
+    lo[5] = hi[5];
+    assert_int_equal(stsp_bandqp_solve(&qp, x0, lam, &work, &cand), STSP_BANDQP_OK);
+    assert_int_equal(cand, 729u);
+    for (i = 0u; i < STSP_BANDQP_MAX; ++i) {
+        assert_true(lam[i] == (2.0 + (double)i / 8.0) - (0.5 + (double)i / 16.0));
+    }
+
+    lo[2] = -1.0;
+    lo[5] = -1.0;
+    qp.W = neg_W;
+    lam[0] = 1.0;
+    assert_int_equal(stsp_bandqp_solve(&qp, x0, lam, &work, &cand),
+                     STSP_BANDQP_ERR_INFEASIBLE);
+    assert_int_equal(cand, 6561u);
+    for (i = 0u; i < STSP_BANDQP_MAX; ++i) {
+        assert_true(lam[i] == 0.0);
+    }
+    lo[2] = hi[2];  /* and infeasible with equality rows: 3^6 sets, not more */
+    lo[5] = hi[5];
+    assert_int_equal(stsp_bandqp_solve(&qp, x0, lam, &work, &cand),
+                     STSP_BANDQP_ERR_INFEASIBLE);
+    assert_int_equal(cand, 729u);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_band_latch_solves_the_dual),
+        cmocka_unit_test(test_band_fallback_and_nonfinite),
+        cmocka_unit_test(test_band_tables_are_checked),
+        cmocka_unit_test(test_band_header_change_after_init),
+        cmocka_unit_test(test_bandqp_candidate_bound),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}

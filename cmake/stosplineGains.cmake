@@ -1,7 +1,7 @@
 # CMake functions for generated gain tables (`stospline design` writes <name>.c and <name>.h).
 # Loaded by stospline's own CMakeLists.txt (so add_subdirectory/FetchContent users have them) and
 # by the installed package config (find_package(stospline)). The one place that reads a
-# generated header: the repository's builds (CMakeLists.txt, tools/arm/CMakeLists.txt) call
+# generated header: the repository's builds (CMakeLists.txt, also cross-built) call
 # stospline_read_gains_header() too.
 include_guard(GLOBAL)
 

@@ -20,7 +20,7 @@
 #                     configure time, the generated header and stsp_controller.h at compile time
 #   presets           CMakePresets.json: the host presets configure; the Cortex-M4F and M0+
 #                     presets build and install the library for the right core and float ABI,
-#                     the same machine code as tools/arm's build of that arithmetic, and a
+#                     the same machine code as the preset's full build of that arithmetic, and a
 #                     cross-compiled consumer finds the installed package and toolchain file
 #
 # Every mode that runs main.c compares its output with the cffi harness bit for bit
@@ -184,23 +184,22 @@ case "$mode" in
         echo "preset $preset: $compiler not installed, not configured"
       fi
     done
-    # name : Tag_CPU_arch : hard float? : tools/arm CPU : tools/arm library of the same
-    # arithmetic : table of that arithmetic : FIXED_SHAPE
-    for preset in cortex-m4f:v7E-M:VFP:cortex-m4:stsp:robot_corridor:ON \
-                  cortex-m0plus:v6S-M::cortex-m0plus:stsp_q15:robot_corridor_q15:OFF; do
-      IFS=: read -r name arch vfp cpu armlib gains fixed <<<"$preset"
+    # name : Tag_CPU_arch : hard float? : toolchain CPU : arithmetic of the preset's library :
+    # table of that arithmetic : FIXED_SHAPE
+    for preset in arm-m4f:v7E-M:VFP:cortex-m4:float32:robot_corridor:ON \
+                  arm-m0plus:v6S-M::cortex-m0plus:q15:robot_corridor_q15:OFF; do
+      IFS=: read -r name arch vfp cpu arith gains fixed <<<"$preset"
       "$cmake" -S "$src" --preset "$name" -B "$work/$name" >/dev/null
       "$cmake" --build "$work/$name"
-      # The same machine code as the library tools/arm builds, which the QEMU replay test and
-      # the instruction counts of docs/guide/firmware.md measure.
-      "$cmake" -S "$src/tools/arm" -B "$work/$name-tools-arm" -G "$generator" \
-        -DCMAKE_TOOLCHAIN_FILE="$src/tools/arm/arm-none-eabi.cmake" -DSTSP_ARM_CPU="$cpu" >/dev/null
-      "$cmake" --build "$work/$name-tools-arm" --target "$armlib" >/dev/null
-      for lib in "$work/$name/libstsp.a" "$work/$name-tools-arm/lib$armlib.a"; do
+      # The same machine code as that arithmetic's library in the preset's full build
+      # (tools/arm/build.sh: STSP_BUILD_TESTS=ON), which the QEMU replay test and the
+      # instruction counts of docs/guide/firmware.md measure.
+      "$src/tools/arm/build.sh" --preset "$name" --build-dir "$work/$name-full" >/dev/null
+      for lib in "$work/$name/libstsp.a" "$work/$name-full/libstsp_$arith.a"; do
         arm-none-eabi-objdump -d "$lib" | grep -v "file format\|^In archive" >"$lib.dis"
       done
-      cmp "$work/$name/libstsp.a.dis" "$work/$name-tools-arm/lib$armlib.a.dis" \
-        || fail "$name: the preset's libstsp.a differs from tools/arm's lib$armlib.a"
+      cmp "$work/$name/libstsp.a.dis" "$work/$name-full/libstsp_$arith.a.dis" \
+        || fail "$name: the preset's libstsp.a differs from the full build's libstsp_$arith.a"
       no_tests_built "$work/$name" "$work/$name"
       "$cmake" --install "$work/$name" --prefix "$work/$name-prefix" >/dev/null
       attrs="$(arm-none-eabi-readelf -A "$work/$name-prefix/lib/libstsp.a")"
@@ -223,7 +222,7 @@ case "$mode" in
       arm-none-eabi-readelf -A "$work/$name-consumer/librobot_gains.a" | grep -q "Tag_CPU_arch: $arch\$" \
         || fail "$name: the consumer's table library is not $arch code"
       echo "preset $name: libstsp.a is $arch code$([ -n "$vfp" ] && echo ", hard float")," \
-           "$(wc -l <"$work/$name/libstsp.a.dis") lines of disassembly identical to tools/arm's;" \
+           "$(wc -l <"$work/$name/libstsp.a.dis") lines of disassembly identical to the full build's;" \
            "$gains.c built against it by find_package (FIXED_SHAPE $fixed)"
     done
     ;;

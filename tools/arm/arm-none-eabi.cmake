@@ -1,11 +1,11 @@
 # CMake toolchain file: arm-none-eabi-gcc for bare-metal Cortex-M (Debian's gcc-arm-none-eabi
 # + libnewlib-arm-none-eabi, installed by tools/setup.sh).
 #
-#   cmake -S tools/arm -B build/arm -G Ninja \
-#         -DCMAKE_TOOLCHAIN_FILE=$PWD/tools/arm/arm-none-eabi.cmake
-#   ... -DSTSP_ARM_CPU=cortex-m0plus      (soft-float ARMv6-M; default cortex-m4 with FPv4-SP)
+#   cmake --preset arm-m4f       (CMakePresets.json: this file, -O2, STSP_ARM_CPU=cortex-m4)
+#   cmake --preset arm-m0plus    (soft-float ARMv6-M)
+# or, in a firmware project: -DCMAKE_TOOLCHAIN_FILE=<this file> [-DSTSP_ARM_CPU=cortex-m0plus]
 #
-# Only the CPU/ABI flags live here; warnings and -O2 are set by tools/arm/CMakeLists.txt.
+# Only the CPU/ABI flags live here; warnings and -ffp-contract=off are set by CMakeLists.txt.
 set(CMAKE_SYSTEM_NAME Generic)
 set(CMAKE_SYSTEM_PROCESSOR arm)
 

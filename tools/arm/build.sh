@@ -1,25 +1,24 @@
 #!/usr/bin/env bash
-# Configure and build the Cortex-M cross project (tools/arm/CMakeLists.txt).
-#   tools/arm/build.sh [--cpu cortex-m4|cortex-m0plus] [--build-dir DIR] [CMAKE_ARGS...]
-# Defaults: cortex-m4 in build/arm (cortex-m0plus: build/arm-m0plus). Needs the packages that
+# Cross-build the top-level project for a Cortex-M preset, with the tables and QEMU images
+# (STSP_BUILD_TESTS=ON: gains/*.c, tools/arm/images.cmake).
+#   tools/arm/build.sh [--preset arm-m4f|arm-m0plus] [--build-dir DIR] [CMAKE_ARGS...]
+# Defaults: arm-m4f in build/arm-m4f (arm-m0plus: build/arm-m0plus). Needs the packages that
 # tools/setup.sh installs (gcc-arm-none-eabi, libnewlib-arm-none-eabi, cmake, ninja-build).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
-cpu=cortex-m4
+preset=arm-m4f
 build=""
 while [ $# -gt 0 ]; do
   case "$1" in
-    --cpu) cpu="$2"; shift 2 ;;
+    --preset) preset="$2"; shift 2 ;;
     --build-dir) build="$2"; shift 2 ;;
     *) break ;;
   esac
 done
-if [ -z "$build" ]; then
-  case "$cpu" in
-    cortex-m4) build="$root/build/arm" ;;
-    *) build="$root/build/arm-${cpu#cortex-}" ;;
-  esac
-fi
-cmake -S "$root/tools/arm" -B "$build" -G Ninja \
-  -DCMAKE_TOOLCHAIN_FILE="$root/tools/arm/arm-none-eabi.cmake" -DSTSP_ARM_CPU="$cpu" "$@" >/dev/null
+case "$preset" in
+  arm-m4f|arm-m0plus) ;;
+  *) echo "build.sh: --preset must be arm-m4f or arm-m0plus, not '$preset'" >&2; exit 2 ;;
+esac
+: "${build:=$root/build/$preset}"
+cmake -S "$root" --preset "$preset" -B "$build" -DSTSP_BUILD_TESTS=ON "$@" >/dev/null
 cmake --build "$build"

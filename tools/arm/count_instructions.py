@@ -170,7 +170,7 @@ def trace_calls(build: Path, image: str, machine: str = "mps2-an386"
 def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
               ) -> list[tuple[str, int, int, int]]:
     """(what, text, data, bss) for compiled objects and API-only links of one controller
-    library (libstsp<sfx>.a or libstsp_fixed_robot_corridor<sfx>.a) with the robot tables of
+    library (libstsp_<arith>.a or libstsp_fixed_robot_corridor<sfx>.a) with the robot tables of
     the same variant (sfx "", "_q15", "_q31")."""
     rows = []
     ctl = build / controller
@@ -238,14 +238,14 @@ def images(cpu: str):
     for sfx, arith in VARIANTS:
         if cpu != "cortex-m4" and not sfx:
             continue
-        yield (f"bench{sfx}.elf", f"{arith}, generic dimensions (libstsp{sfx}.a)")
+        yield (f"bench{sfx}.elf", f"{arith}, generic dimensions (libstsp_{arith.lower()}.a)")
         yield (f"bench_fixed{sfx}.elf",
                f"{arith}, STSP_FIXED 4/2/4 (libstsp_fixed_robot_corridor{sfx}.a)")
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--m4", type=Path, default=ROOT / "build" / "arm")
+    ap.add_argument("--m4", type=Path, default=ROOT / "build" / "arm-m4f")
     ap.add_argument("--m0plus", type=Path, default=ROOT / "build" / "arm-m0plus")
     ap.add_argument("--json", type=Path, help="also write the figures as JSON here")
     ap.add_argument("--only", default="", help="comma-separated image names (default: all)")
@@ -306,7 +306,7 @@ def main() -> int:
         label = {"cortex-m4": "cortex-m4 (FPv4-SP, hard float)",
                  "cortex-m0plus": "cortex-m0plus (soft float)"}[cpu]
         for sfx, arith in VARIANTS:
-            for controller, target in ((f"libstsp{sfx}.a", f"stsp{sfx}"),
+            for controller, target in ((f"libstsp_{arith.lower()}.a", f"stsp_{arith.lower()}"),
                                        (f"libstsp_fixed_robot_corridor{sfx}.a",
                                         f"stsp_fixed_robot_corridor{sfx}")):
                 su = stack_usage(build, target)

@@ -5,7 +5,7 @@
 # each for float32 (M4F images only), Q15 and Q31, generic (libstsp<_q15|_q31>.a) and built for
 # the robot's dimensions (libstsp_fixed_robot_corridor<_q15|_q31>.a: STSP_FIXED_NX/NU/N_LATCH).
 #   tools/arm/count_instructions.sh [--no-setup] [--json FILE]
-# Builds build/arm (cortex-m4) and build/arm-m0plus, then runs
+# Builds build/arm-m4f and build/arm-m0plus (tools/arm/build.sh), then runs
 # tools/arm/count_instructions.py (standard library only); see that file for the method.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
@@ -19,9 +19,9 @@ while [ $# -gt 0 ]; do
   esac
 done
 [ "$setup" -eq 0 ] || "$root/tools/setup.sh"
-"$root/tools/arm/build.sh" --cpu cortex-m4 --build-dir "$root/build/arm" \
+"$root/tools/arm/build.sh" --preset arm-m4f \
   -DSTSP_ARM_FP_CONTRACT=off -DSTSP_ARM_NO_VFP_MAC=OFF >/dev/null
-"$root/tools/arm/build.sh" --cpu cortex-m0plus --build-dir "$root/build/arm-m0plus" \
+"$root/tools/arm/build.sh" --preset arm-m0plus \
   -DSTSP_ARM_FP_CONTRACT=off -DSTSP_ARM_NO_VFP_MAC=OFF >/dev/null
-exec python3 "$root/tools/arm/count_instructions.py" --m4 "$root/build/arm" \
+exec python3 "$root/tools/arm/count_instructions.py" --m4 "$root/build/arm-m4f" \
   --m0plus "$root/build/arm-m0plus" "${extra[@]}"

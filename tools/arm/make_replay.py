@@ -15,7 +15,7 @@ scaled back for the plant, and the records hold the integers.
 The output is deterministic (no time stamps) and is only rewritten when its content changes,
 so an unchanged ARM build is not relinked. It belongs in the build directory, not in git.
 
-    .venv/bin/python tools/arm/make_replay.py --out build/arm/replay_records.c
+    .venv/bin/python tools/arm/make_replay.py --out build/arm-m4f/replay_records.c
 """
 from __future__ import annotations
 

@@ -3,15 +3,15 @@
 # commands the host build (cffi harness) of the same arithmetic variant computed on a
 # closed-loop run of the robot example.
 #
-#   tools/arm/run_replay.sh [--no-setup] [--cpu cortex-m4|cortex-m0plus] [--build-dir DIR]
+#   tools/arm/run_replay.sh [--no-setup] [--preset arm-m4f|arm-m0plus] [--build-dir DIR]
 #                           [--arith LIST] [--perturb RECORD] [--fp-contract off|fast]
 #
 # 1. tools/arm/make_replay.py writes DIR/replay_records[_q15|_q31].c (host x, u per recorded
-#    tick) for each variant of LIST (default: float32,q15,q31 on cortex-m4; q15,q31 on
-#    cortex-m0plus, which has no float32 images);
+#    tick) for each variant of LIST (default: float32,q15,q31 on arm-m4f; q15,q31 on
+#    arm-m0plus, which has no float32 images);
 # 2. tools/arm/build.sh builds DIR/replay<sfx>.elf (generic firmware + gains/robot_corridor<sfx>.c
 #    + records) and DIR/replay_fixed<sfx>.elf (the firmware built for the robot's dimensions);
-# 3. qemu-system-arm runs each: -M mps2-an386 (Cortex-M4F) for cortex-m4; for cortex-m0plus
+# 3. qemu-system-arm runs each: -M mps2-an386 (Cortex-M4F) for arm-m4f; for arm-m0plus
 #    -M mps2-an385, a Cortex-M3 (QEMU has no Cortex-M0+ board; the -mcpu=cortex-m0plus code is
 #    ARMv6-M, a subset of what the M3 runs). Semihosting prints the summary and returns the
 #    exit status, 0 only if every command matched.
@@ -23,7 +23,7 @@
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 build=""
-cpu=cortex-m4
+preset=arm-m4f
 setup=1
 perturb=()
 contract=off
@@ -31,7 +31,7 @@ ariths=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --no-setup) setup=0; shift ;;
-    --cpu) cpu="$2"; shift 2 ;;
+    --preset) preset="$2"; shift 2 ;;
     --build-dir) build="$2"; shift 2 ;;
     --arith) ariths="$2"; shift 2 ;;
     --perturb) perturb=(--perturb "$2"); shift 2 ;;
@@ -39,11 +39,12 @@ while [ $# -gt 0 ]; do
     *) echo "run_replay: unknown argument $1" >&2; exit 2 ;;
   esac
 done
-case "$cpu" in
-  cortex-m4) machine=mps2-an386; : "${build:=$root/build/arm}"; : "${ariths:=float32,q15,q31}" ;;
-  cortex-m0plus) machine=mps2-an385; : "${build:=$root/build/arm-m0plus}"; : "${ariths:=q15,q31}" ;;
-  *) echo "run_replay: --cpu must be cortex-m4 or cortex-m0plus" >&2; exit 2 ;;
+case "$preset" in
+  arm-m4f) machine=mps2-an386; : "${ariths:=float32,q15,q31}" ;;
+  arm-m0plus) machine=mps2-an385; : "${ariths:=q15,q31}" ;;
+  *) echo "run_replay: --preset must be arm-m4f or arm-m0plus" >&2; exit 2 ;;
 esac
+: "${build:=$root/build/$preset}"
 [ "$setup" -eq 0 ] || "$root/tools/setup.sh"
 py="$root/.venv/bin/python"
 [ -x "$py" ] || { echo "run_replay: $py missing: run tools/setup.sh" >&2; exit 2; }
@@ -57,14 +58,14 @@ for arith in ${ariths//,/ }; do
     q15|q31) sfx="_$arith"; var="STSP_REPLAY_RECORDS_${arith^^}" ;;
     *) echo "run_replay: unknown variant $arith" >&2; exit 2 ;;
   esac
-  [ "$cpu" = cortex-m4 ] || [ "$arith" != float32 ] || {
-    echo "run_replay: no float32 images for $cpu" >&2; exit 2; }
+  [ "$preset" = arm-m4f ] || [ "$arith" != float32 ] || {
+    echo "run_replay: no float32 images for $preset" >&2; exit 2; }
   records="$build/replay_records$sfx.c"
   "$py" "$root/tools/arm/make_replay.py" --arith "$arith" --out "$records" "${perturb[@]}"
   defs+=("-D$var=$records")
   images+=("replay$sfx" "replay_fixed$sfx")
 done
-"$root/tools/arm/build.sh" --cpu "$cpu" --build-dir "$build" \
+"$root/tools/arm/build.sh" --preset "$preset" --build-dir "$build" \
   "${defs[@]}" -DSTSP_ARM_FP_CONTRACT="$contract" \
   -DSTSP_ARM_NO_VFP_MAC="$([ "$contract" = off ] && echo OFF || echo ON)" >/dev/null
 
@@ -76,7 +77,7 @@ for image in "${images[@]}"; do
   status=0
   timeout 60 qemu-system-arm -M "$machine" -nographic -monitor none \
     -semihosting-config enable=on,target=native -kernel "$build/$image.elf" >"$log" 2>&1 || status=$?
-  echo "== $image.elf ($cpu code on $machine)"
+  echo "== $image.elf ($preset code on $machine)"
   cat "$log"
   if [ "$status" -eq 124 ]; then
     echo "run_replay: FAIL: QEMU timed out ($image.elf)" >&2

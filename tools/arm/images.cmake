@@ -1,0 +1,59 @@
+# Runnable Cortex-M images of the top-level project's cross build (presets arm-m4f, arm-m0plus
+# with STSP_BUILD_TESTS=ON; tools/arm/build.sh). Included by CMakeLists.txt: the controller
+# variants (stsp_float32, stsp_q15, stsp_q31), the table libraries (stsp_gains_<name>) and the
+# builds for each table's shape (stsp_fixed_<name>) are the ones defined there, the same
+# firmware definition as the host build.
+#
+# Semihosting for output and exit status: QEMU mps2-an386 (Cortex-M4F) runs the cortex-m4 build;
+# the cortex-m0plus build runs on mps2-an385 (a Cortex-M3: QEMU has no M0+ board; ARMv6-M code
+# is a subset of ARMv7-M, and the two boards share the memory map the linker script uses).
+# Float32 images on cortex-m4 only; Q15/Q31 images on both.
+#   bench<sfx>.elf, bench_fixed<sfx>.elf    tools/arm/bench_main.c (count_instructions.sh)
+#   replay<sfx>.elf, replay_fixed<sfx>.elf  tests/arm/replay_main.c with the records file given
+#                                           as STSP_REPLAY_RECORDS<_Q15|_Q31> (run_replay.sh)
+if(NOT TARGET stsp_gains_robot_corridor)
+  return()
+endif()
+set(arm_dir ${CMAKE_CURRENT_LIST_DIR})
+set(STSP_LINKER_SCRIPT "${arm_dir}/mps2-an386.ld")
+add_library(stsp_startup OBJECT ${arm_dir}/startup.c)
+target_compile_options(stsp_startup PRIVATE ${STSP_WARNINGS})
+
+# stsp_add_image(<name> <controller library> <tables library> <sources...>)
+function(stsp_add_image name controller tables)
+  add_executable(${name} ${ARGN} $<TARGET_OBJECTS:stsp_startup>)
+  set_target_properties(${name} PROPERTIES SUFFIX ".elf" LINK_DEPENDS "${STSP_LINKER_SCRIPT}")
+  target_link_libraries(${name} PRIVATE ${controller} ${tables})
+  target_compile_options(${name} PRIVATE ${STSP_WARNINGS})
+  target_include_directories(${name} PRIVATE "${PROJECT_SOURCE_DIR}/tests/arm")  # robot_variant.h
+  target_link_options(${name} PRIVATE --specs=rdimon.specs -T "${STSP_LINKER_SCRIPT}"
+                      -Wl,--gc-sections -Wl,-Map=$<TARGET_FILE_DIR:${name}>/${name}.map)
+endfunction()
+
+set(STSP_REPLAY_RECORDS "" CACHE FILEPATH "float32 records (tools/arm/make_replay.py)")
+set(STSP_REPLAY_RECORDS_Q15 "" CACHE FILEPATH "Q15 records (make_replay.py --arith q15)")
+set(STSP_REPLAY_RECORDS_Q31 "" CACHE FILEPATH "Q31 records (make_replay.py --arith q31)")
+foreach(arith float32 q15 q31)
+  set(sfx "_${arith}")
+  if(arith STREQUAL "float32")
+    set(sfx "")
+    if(NOT STSP_ARM_CPU STREQUAL "cortex-m4")
+      continue()
+    endif()
+  endif()
+  set(tables stsp_gains_robot_corridor${sfx})
+  set(shaped stsp_fixed_robot_corridor${sfx})
+  if(NOT TARGET ${tables})
+    continue()
+  endif()
+  stsp_add_image(bench${sfx} stsp_${arith} ${tables} ${arm_dir}/bench_main.c)
+  stsp_add_image(bench_fixed${sfx} ${shaped} ${tables} ${arm_dir}/bench_main.c)
+  string(TOUPPER "STSP_REPLAY_RECORDS${sfx}" records_var)
+  set(records "${${records_var}}")
+  if(records)
+    stsp_add_image(replay${sfx} stsp_${arith} ${tables} "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c"
+                   "${records}")
+    stsp_add_image(replay_fixed${sfx} ${shaped} ${tables}
+                   "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c" "${records}")
+  endif()
+endforeach()

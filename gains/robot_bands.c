@@ -8,7 +8,7 @@ static const uint32_t robot_bands_stage_start[3] = {
 };
 
 /* [n_stages] */
-static const uint16_t robot_bands_stage_np[2] = {
+static const uint16_t robot_bands_stage_n_latch[2] = {
     6u, 0u,
 };
 
@@ -2293,7 +2293,7 @@ static const stsp_bandqp_t robot_bands_band_qp = {
 const stsp_table_t robot_bands_table = {
     0x53545350u, 3u, 1u,
     4u, 2u, 6u, 2u, 600u, 100u,
-    robot_bands_stage_start, robot_bands_stage_np,
+    robot_bands_stage_start, robot_bands_stage_n_latch,
     robot_bands_K, robot_bands_k0, robot_bands_L, robot_bands_Lambda, robot_bands_lambda0,
     robot_bands_u_min, robot_bands_u_max, &robot_bands_band_qp,
     0xE7DE921Cu,

@@ -8,7 +8,7 @@ static const uint32_t robot_corridor_stage_start[3] = {
 };
 
 /* [n_stages] */
-static const uint16_t robot_corridor_stage_np[2] = {
+static const uint16_t robot_corridor_stage_n_latch[2] = {
     1u, 4u,
 };
 
@@ -18053,7 +18053,7 @@ static const stsp_f32_t robot_corridor_u_max[2] = {
 const stsp_table_t robot_corridor_table = {
     0x53545350u, 3u, 1u,
     4u, 2u, 4u, 2u, 6000u, 1000u,
-    robot_corridor_stage_start, robot_corridor_stage_np,
+    robot_corridor_stage_start, robot_corridor_stage_n_latch,
     robot_corridor_K, robot_corridor_k0, robot_corridor_L, robot_corridor_Lambda, robot_corridor_lambda0,
     robot_corridor_u_min, robot_corridor_u_max, NULL,
     0xBEE1ACC9u,

@@ -8,7 +8,7 @@ static const uint32_t robot_corridor_q15_stage_start[3] = {
 };
 
 /* [n_stages] */
-static const uint16_t robot_corridor_q15_stage_np[2] = {
+static const uint16_t robot_corridor_q15_stage_n_latch[2] = {
     1u, 4u,
 };
 
@@ -18068,7 +18068,7 @@ static const int8_t robot_corridor_q15_v_exp[4] = {
 const stsp_table_t robot_corridor_q15_table = {
     0x53545350u, 3u, 2u,
     4u, 2u, 4u, 2u, 6000u, 1000u,
-    robot_corridor_q15_stage_start, robot_corridor_q15_stage_np,
+    robot_corridor_q15_stage_start, robot_corridor_q15_stage_n_latch,
     robot_corridor_q15_K, robot_corridor_q15_k0, robot_corridor_q15_L, robot_corridor_q15_Lambda, robot_corridor_q15_lambda0,
     robot_corridor_q15_u_min, robot_corridor_q15_u_max,
     robot_corridor_q15_x_exp, robot_corridor_q15_u_exp, robot_corridor_q15_v_exp,

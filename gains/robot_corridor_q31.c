@@ -8,7 +8,7 @@ static const uint32_t robot_corridor_q31_stage_start[3] = {
 };
 
 /* [n_stages] */
-static const uint16_t robot_corridor_q31_stage_np[2] = {
+static const uint16_t robot_corridor_q31_stage_n_latch[2] = {
     1u, 4u,
 };
 
@@ -18068,7 +18068,7 @@ static const int8_t robot_corridor_q31_v_exp[4] = {
 const stsp_table_t robot_corridor_q31_table = {
     0x53545350u, 3u, 3u,
     4u, 2u, 4u, 2u, 6000u, 1000u,
-    robot_corridor_q31_stage_start, robot_corridor_q31_stage_np,
+    robot_corridor_q31_stage_start, robot_corridor_q31_stage_n_latch,
     robot_corridor_q31_K, robot_corridor_q31_k0, robot_corridor_q31_L, robot_corridor_q31_Lambda, robot_corridor_q31_lambda0,
     robot_corridor_q31_u_min, robot_corridor_q31_u_max,
     robot_corridor_q31_x_exp, robot_corridor_q31_u_exp, robot_corridor_q31_v_exp,

@@ -18,7 +18,7 @@ static const uint32_t robot_narrow_corridor_stage_start[61] = {
 };
 
 /* [n_stages] */
-static const uint16_t robot_narrow_corridor_stage_np[60] = {
+static const uint16_t robot_narrow_corridor_stage_n_latch[60] = {
     4u, 0u, 0u, 0u, 0u, 0u,
     0u, 0u, 0u, 0u, 0u, 0u,
     0u, 0u, 0u, 0u, 0u, 0u,
@@ -624,7 +624,7 @@ static const stsp_f32_t robot_narrow_corridor_u_max[2] = {
 const stsp_table_t robot_narrow_corridor_table = {
     0x53545350u, 3u, 1u,
     4u, 2u, 4u, 60u, 120u, 20u,
-    robot_narrow_corridor_stage_start, robot_narrow_corridor_stage_np,
+    robot_narrow_corridor_stage_start, robot_narrow_corridor_stage_n_latch,
     robot_narrow_corridor_K, robot_narrow_corridor_k0, robot_narrow_corridor_L, robot_narrow_corridor_Lambda, robot_narrow_corridor_lambda0,
     robot_narrow_corridor_u_min, robot_narrow_corridor_u_max, NULL,
     0x5F2CF756u,

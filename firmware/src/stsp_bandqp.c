@@ -7,21 +7,13 @@
  * deviations D1 (15.5, guard clauses) and D2 (21.15, binary32 bit pattern) of
  * docs/guide/firmware.md apply. */
 #include "stospline/stsp_bandqp.h"
+#include "stsp_f32bits.h"
 
 #include <stddef.h>
-#include <string.h>
 
 /* Newton steps of stsp_bandqp_sqrt(), a bound that reaches the root for every positive
  * finite double (the proof is at the function). */
 #define STSP_BANDQP_SQRT_STEPS 1100u
-
-/* 1 when the binary32 value is finite (the exponent field is not all ones), else 0. */
-static inline uint32_t stsp_bandqp_isfinite_f32(float value)
-{
-    uint32_t bits;
-    (void)memcpy(&bits, &value, sizeof bits);
-    return ((bits & 0x7F800000u) != 0x7F800000u) ? 1u : 0u;
-}
 
 /* 1 when row i is an equality row (lo == hi: always active, at its bound), else 0. A row
  * with a NaN bound is a band row, as everywhere in this file. */
@@ -210,7 +202,7 @@ stsp_bandqp_status_t stsp_bandqp_solve(const stsp_bandqp_t *qp, const float *x0,
         lam[i] = 0.0;
     }
     for (i = 0u; i < nx; ++i) {
-        if (stsp_bandqp_isfinite_f32(x0[i]) == 0u) {
+        if (stsp_isfinite_f32(x0[i]) == 0) {
             return STSP_BANDQP_ERR_NONFINITE;
         }
     }

@@ -20,19 +20,22 @@
  * local array and writes u last, after every read of x.
  *
  * The sources, one job each: this file is the tick/latch state machine (init, reset, verify,
- * step); stsp_table.c validates and serialises the table (CRC-32); stsp_law_f32.h or
- * stsp_law_q.h (one, by STSP_ARITH_FIXED) is the law, inlined into stsp_step(); stsp_clamp.h
+ * step); stsp_table.c validates and serialises the table (CRC-32); stsp_law.h is the law,
+ * inlined into stsp_step(), on the row primitives and latch row of stsp_law_f32.h or
+ * stsp_law_q.h (one, by STSP_ARITH_FIXED); stsp_clamp.h
  * the actuator clamp; stsp_internal.h the compiler and VFP helpers, the dimensions the law
  * uses and the fixed-point accumulator; stsp_crc32.c, stsp_qconv.c (Q state/command
  * conversions) and stsp_bandqp.c (the band dual) as named. Everything else here (ticks,
  * stages, latching order, statuses) is the same code in every arithmetic. */
 #include "stsp_internal.h"
-/* The law of the configured arithmetic, inlined into stsp_step(). */
+/* The law (stsp_law.h) on the row primitives of the configured arithmetic, inlined into
+ * stsp_step(). */
 #ifdef STSP_ARITH_FIXED
 #include "stsp_law_q.h"
 #else
 #include "stsp_law_f32.h"
 #endif
+#include "stsp_law.h"
 
 #include <float.h>
 #include <string.h>
@@ -103,11 +106,9 @@ stsp_status_t stsp_init_problem(stsp_ctrl_t *ctrl, const stsp_table_t *table, ui
 
 stsp_status_t stsp_reset(stsp_ctrl_t *ctrl)
 {
-    if (ctrl == NULL) {
-        return STSP_ERR_NULL;
-    }
-    if (ctrl->ready != STSP_CTRL_READY) {
-        return STSP_ERR_NOT_INITIALIZED;
+    const stsp_status_t st = stsp_check_ready(ctrl);
+    if (st != STSP_OK) {
+        return st;
     }
     ctrl->next_tick = 0u;
     ctrl->stage_end = 0u;
@@ -120,11 +121,9 @@ stsp_status_t stsp_reset(stsp_ctrl_t *ctrl)
 
 stsp_status_t stsp_verify(stsp_ctrl_t *ctrl)
 {
-    if (ctrl == NULL) {
-        return STSP_ERR_NULL;
-    }
-    if (ctrl->ready != STSP_CTRL_READY) {
-        return STSP_ERR_NOT_INITIALIZED;
+    const stsp_status_t st = stsp_check_ready(ctrl);
+    if (st != STSP_OK) {
+        return st;
     }
     /* The header first: the CRC below reads the arrays only as the copy describes them. */
     if (stsp_header_changed(&ctrl->checked, ctrl->table) != 0) {
@@ -175,7 +174,7 @@ static STSP_NOINLINE int stsp_band_latch(const stsp_header_t *h, const stsp_f32_
             return 0;
         }
     }
-    for (i = 0u; i < stsp_nl(h); ++i) {
+    for (i = 0u; i < stsp_n_latch(h); ++i) {
         v_new[i] = (i < q) ? (stsp_f32_t)lam[i] : 0.0f;
     }
     return 1;
@@ -196,10 +195,10 @@ static stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick, const stsp_s
 {
     const stsp_header_t *h = &c->checked;
     const uint32_t nx = stsp_nx(h);
-    const uint32_t nl = stsp_nl(h);
+    const uint32_t n_latch = stsp_n_latch(h);
     stsp_status_t status = STSP_OK;
     uint32_t i;
-    uint32_t np;
+    uint32_t n_stage;
     uint16_t stage;
 
     if (tick >= h->n_ticks) {
@@ -217,13 +216,13 @@ static stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick, const stsp_s
         status = STSP_WARN_TICK_SKIPPED;
     }
     stage = stsp_stage_of(h, c->stage, tick);
-    /* A stage with stage_np > 0 latches a fresh v at its first tick; one with stage_np == 0
-     * keeps the v latched earlier (joint multipliers are latched once, at stage 0). Only
-     * columns below nl are ever touched, whatever stage_np holds. */
-    np = h->stage_np[stage];
+    /* A stage with stage_n_latch > 0 latches a fresh v at its first tick; one with
+     * stage_n_latch == 0 keeps the v latched earlier (joint multipliers are latched once, at
+     * stage 0). Only columns below n_latch are ever touched, whatever stage_n_latch holds. */
+    n_stage = h->stage_n_latch[stage];
     plan->stage = stage;
     plan->relatch = 0u;
-    if ((c->latched == 0u) || ((stage != c->stage) && (np > 0u))) {
+    if ((c->latched == 0u) || ((stage != c->stage) && (n_stage > 0u))) {
         plan->relatch = 1u;
     }
 #ifndef STSP_ARITH_FIXED
@@ -235,31 +234,16 @@ static stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick, const stsp_s
     }
 #endif
     if (plan->relatch != 0u) {
-        for (i = 0u; i < nl; ++i) {
+        for (i = 0u; i < n_latch; ++i) {
             stsp_scalar_t acc = (stsp_scalar_t)0;
-            if (i < np) {
-                const uint32_t row = ((uint32_t)stage * nl) + i;
-                const stsp_scalar_t *lam = &h->Lambda[row * nx];
-                uint32_t j;
-#ifdef STSP_ARITH_FIXED
-                /* v_q = round half up of lambda0 + sum_j Lambda x_q / 2^F, exact in stsp_uacc_t
-                 * and within +-(2^F - 1) (the row bound of stsp_check_values). */
-                stsp_uacc_t sum = stsp_q_start();
-                for (j = 0u; j < nx; ++j) {
-                    sum = stsp_q_mac(sum, lam[j], x[j]);
-                }
-                acc = stsp_q_round(sum, h->lambda0[row]);
-#else
-                acc = h->lambda0[row];
-                for (j = 0u; j < nx; ++j) {
-                    acc += lam[j] * x[j];
-                }
-#endif
+            if (i < n_stage) {
+                const uint32_t row = ((uint32_t)stage * n_latch) + i;
+                acc = stsp_latch_row(&h->Lambda[row * nx], h->lambda0[row], x, nx);
             }
             v_new[i] = acc;
         }
     } else {
-        for (i = 0u; i < nl; ++i) {
+        for (i = 0u; i < n_latch; ++i) {
             v_new[i] = c->v[i];
         }
     }
@@ -276,7 +260,7 @@ static void stsp_commit(stsp_ctrl_t *c, uint32_t tick, const stsp_plan_t *plan,
     const uint32_t end = h->stage_start[(uint32_t)plan->stage + 1u];
     if (plan->relatch != 0u) {
         uint32_t i;
-        for (i = 0u; i < stsp_nl(h); ++i) {
+        for (i = 0u; i < stsp_n_latch(h); ++i) {
             c->v[i] = v_new[i];
         }
         c->latched = 1u;

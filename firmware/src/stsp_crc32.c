@@ -28,14 +28,28 @@ uint32_t stsp_crc32_u32(uint32_t crc, uint32_t value)
     return stsp_crc32_byte(c, value >> 24);
 }
 
-uint32_t stsp_crc32_f32s(uint32_t crc, const stsp_f32_t *values, uint32_t count)
+/* One table entry of the build's variant, little-endian: the binary32 bit pattern, or the
+ * Q15/Q31 integer's two's complement (2 or 4 bytes). */
+static inline uint32_t stsp_crc32_scalar(uint32_t crc, stsp_scalar_t value)
+{
+#if defined(STSP_ARITH_Q15)
+    const uint32_t bits = (uint32_t)(uint16_t)value;
+    return stsp_crc32_byte(stsp_crc32_byte(crc, bits), bits >> 8);
+#elif defined(STSP_ARITH_Q31)
+    return stsp_crc32_u32(crc, (uint32_t)value);
+#else
+    uint32_t bits;
+    (void)memcpy(&bits, &value, sizeof bits);
+    return stsp_crc32_u32(crc, bits);
+#endif
+}
+
+uint32_t stsp_crc32_scalars(uint32_t crc, const stsp_scalar_t *values, uint32_t count)
 {
     uint32_t c = crc;
     uint32_t i;
     for (i = 0u; i < count; ++i) {
-        uint32_t bits;
-        (void)memcpy(&bits, &values[i], sizeof bits);
-        c = stsp_crc32_u32(c, bits);
+        c = stsp_crc32_scalar(c, values[i]);
     }
     return c;
 }
@@ -70,27 +84,6 @@ uint32_t stsp_crc32_i8s(uint32_t crc, const int8_t *values, uint32_t count)
     uint32_t i;
     for (i = 0u; i < count; ++i) {
         c = stsp_crc32_byte(c, (uint32_t)(uint8_t)values[i]);
-    }
-    return c;
-}
-
-uint32_t stsp_crc32_q15s(uint32_t crc, const stsp_q15_t *values, uint32_t count)
-{
-    uint32_t c = crc;
-    uint32_t i;
-    for (i = 0u; i < count; ++i) {
-        const uint32_t bits = (uint32_t)(uint16_t)values[i];
-        c = stsp_crc32_byte(stsp_crc32_byte(c, bits), bits >> 8);
-    }
-    return c;
-}
-
-uint32_t stsp_crc32_q31s(uint32_t crc, const stsp_q31_t *values, uint32_t count)
-{
-    uint32_t c = crc;
-    uint32_t i;
-    for (i = 0u; i < count; ++i) {
-        c = stsp_crc32_u32(c, (uint32_t)values[i]);
     }
     return c;
 }

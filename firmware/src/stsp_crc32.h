@@ -9,31 +9,17 @@
 
 uint32_t stsp_crc32_begin(void);
 uint32_t stsp_crc32_u32(uint32_t crc, uint32_t value);
-/* Feed `count` binary32 values by their bit patterns. */
-uint32_t stsp_crc32_f32s(uint32_t crc, const stsp_f32_t *values, uint32_t count);
+/* Feed `count` table entries of the build's variant (stsp_table_crc32's serialization):
+ * binary32 bit patterns, or Q15/Q31 integers as little-endian two's complement. */
+uint32_t stsp_crc32_scalars(uint32_t crc, const stsp_scalar_t *values, uint32_t count);
 /* Feed `count` binary64 values by their bit patterns (low word first: little-endian bytes). */
 uint32_t stsp_crc32_f64s(uint32_t crc, const double *values, uint32_t count);
 /* Feed `count` bytes. */
 uint32_t stsp_crc32_bytes(uint32_t crc, const uint8_t *values, uint32_t count);
 uint32_t stsp_crc32_end(uint32_t crc);
 #ifdef STSP_ARITH_FIXED
-/* Feed `count` signed integers as little-endian two's complement, 1, 2 or 4 bytes each. */
+/* Feed `count` signed bytes (the scale exponents) as two's complement. */
 uint32_t stsp_crc32_i8s(uint32_t crc, const int8_t *values, uint32_t count);
-uint32_t stsp_crc32_q15s(uint32_t crc, const stsp_q15_t *values, uint32_t count);
-uint32_t stsp_crc32_q31s(uint32_t crc, const stsp_q31_t *values, uint32_t count);
 #endif
-
-/* Feed `count` table entries of the build's variant (stsp_table_crc32's serialization). */
-static inline uint32_t stsp_crc32_scalars(uint32_t crc, const stsp_scalar_t *values,
-                                          uint32_t count)
-{
-#if defined(STSP_ARITH_Q15)
-    return stsp_crc32_q15s(crc, values, count);
-#elif defined(STSP_ARITH_Q31)
-    return stsp_crc32_q31s(crc, values, count);
-#else
-    return stsp_crc32_f32s(crc, values, count);
-#endif
-}
 
 #endif /* STSP_CRC32_H */

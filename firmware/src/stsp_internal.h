@@ -5,6 +5,7 @@
 #define STSP_INTERNAL_H
 
 #include "stospline/stsp_controller.h"
+#include "stsp_f32bits.h"
 
 #include <string.h>
 
@@ -81,16 +82,6 @@ static STSP_ALWAYS_INLINE stsp_f32_t stsp_nmla(stsp_f32_t a, stsp_f32_t b, stsp_
 #endif
 }
 
-
-/* A binary32 is finite unless its exponent bits are all ones (NaN, +-Inf). */
-static inline int stsp_isfinite_f32(stsp_f32_t value)
-{
-    const uint32_t exp_mask = 0x7F800000u; /* the exponent field */
-    uint32_t bits;
-    (void)memcpy(&bits, &value, sizeof bits);
-    return ((bits & exp_mask) != exp_mask) ? 1 : 0;
-}
-
 /* 1 when every one of values[0..count) is finite, else 0. */
 static inline int stsp_all_finite(const stsp_f32_t *values, uint32_t count)
 {
@@ -103,6 +94,23 @@ static inline int stsp_all_finite(const stsp_f32_t *values, uint32_t count)
     return 1;
 }
 #endif
+
+/* Value of stsp_ctrl_t.ready after a successful stsp_init(): a Thumb-2 immediate that no
+ * byte-fill pattern of uninitialised memory (0x00, 0xFF, 0xA5, 0xCC, ...) matches. */
+#define STSP_CTRL_READY 0x53005300u
+/* Value of stsp_ctrl_t.ready after stsp_verify() found the table changed (private): the
+ * instance is stopped, and stsp_step() holds zeros in the validated u[nu]. */
+#define STSP_CTRL_STOPPED 0x53015301u
+
+/* STSP_OK when ctrl is an instance stsp_init() accepted (and stsp_verify() did not stop),
+ * else STSP_ERR_NULL or STSP_ERR_NOT_INITIALIZED: the entry check of every call after init. */
+static inline stsp_status_t stsp_check_ready(const stsp_ctrl_t *ctrl)
+{
+    if (ctrl == NULL) {
+        return STSP_ERR_NULL;
+    }
+    return (ctrl->ready == STSP_CTRL_READY) ? STSP_OK : STSP_ERR_NOT_INITIALIZED;
+}
 
 static inline void stsp_zero(stsp_scalar_t *u, uint32_t count)
 {
@@ -121,37 +129,22 @@ static inline void stsp_copy(stsp_scalar_t *u, const stsp_scalar_t *y, uint32_t 
     }
 }
 
-/* Dimensions as the law uses them: compile-time constants in an STSP_FIXED_* build, else the
- * validated copy (never the table header: it may have changed since init). */
-static inline uint32_t stsp_nx(const stsp_header_t *h)
-{
+/* Dimensions as the law uses them: compile-time constants in an STSP_FIXED_* build (the
+ * public header requires all three macros or none), else the validated copy (never the table
+ * header: it may have changed since init). */
 #ifdef STSP_FIXED_NX
-    (void)h;
-    return (uint32_t)STSP_FIXED_NX;
-#else
-    return (uint32_t)h->nx;
-#endif
-}
-
-static inline uint32_t stsp_nu(const stsp_header_t *h)
+static inline uint32_t stsp_nx(const stsp_header_t *h) { (void)h; return (uint32_t)STSP_FIXED_NX; }
+static inline uint32_t stsp_nu(const stsp_header_t *h) { (void)h; return (uint32_t)STSP_FIXED_NU; }
+static inline uint32_t stsp_n_latch(const stsp_header_t *h)
 {
-#ifdef STSP_FIXED_NU
-    (void)h;
-    return (uint32_t)STSP_FIXED_NU;
-#else
-    return (uint32_t)h->nu;
-#endif
-}
-
-static inline uint32_t stsp_nl(const stsp_header_t *h)
-{
-#ifdef STSP_FIXED_N_LATCH
     (void)h;
     return (uint32_t)STSP_FIXED_N_LATCH;
-#else
-    return (uint32_t)h->n_latch;
-#endif
 }
+#else
+static inline uint32_t stsp_nx(const stsp_header_t *h) { return (uint32_t)h->nx; }
+static inline uint32_t stsp_nu(const stsp_header_t *h) { return (uint32_t)h->nu; }
+static inline uint32_t stsp_n_latch(const stsp_header_t *h) { return (uint32_t)h->n_latch; }
+#endif
 
 #ifdef STSP_ARITH_FIXED
 /* Fixed-point accumulator. It holds the bias 2^(2F) + 2^(F-1) plus a row's sum of products

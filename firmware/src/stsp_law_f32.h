@@ -26,69 +26,51 @@ static stsp_status_t stsp_limit(const stsp_header_t *h, const stsp_f32_t *x, sts
     return stsp_clamp(h, y, mask);
 }
 
-/* The law at `tick` with multipliers v, into y (never the caller's u: x and u may overlap),
- * in the documented order:
+/* The float32 row of the law (stsp_law.h), in the documented order:
  *     u[i] = (((-(K[i][0] x[0]) - k0[i]) - K[i][1] x[1]) - ... ) - L[i][0] v[0] - ...
  * which is -(k0[i] + K[i][0] x[0] + ... + L[i][c] v[c] ...) exactly (IEEE rounding is
  * symmetric; a+b = b+a), up to the sign of an exactly zero result; starting from -(K x)
  * folds the final negation away, and each step is one stsp_nmla()/stsp_mls() (one VNMLA or
- * VMLS on the M4F, same bits). Returns nonzero when the command needs the cold path: with limits, some
- * u[i] outside [u_min[i], u_max[i]] (false for NaN, and for one of +-Inf since the limits are
- * finite); without, the sum of the u[i] is not finite (any NaN or Inf makes it NaN or Inf; a
- * finite sum that overflows is a false alarm that stsp_limit() clears). Inlined into callers
- * whose y is a local array, so that in an STSP_FIXED_* build x, v and y stay in registers. */
-static STSP_ALWAYS_INLINE uint32_t stsp_law(const stsp_header_t *h, uint32_t tick,
-                                            const stsp_f32_t *x, const stsp_f32_t *v,
-                                            stsp_f32_t *y, uint32_t limited)
+ * VMLS on the M4F, same bits). */
+typedef stsp_f32_t stsp_row_acc_t;
+/* Aliases, not wrappers: GCC schedules the law through inline wrappers differently (one
+ * more load on the M4F ordinary tick), so the law calls the VFP helpers by these names
+ * directly, and the end of a row is the accumulator itself (k0 was folded in first). */
+#define stsp_row_first stsp_nmla
+#define stsp_row_mac stsp_mls
+#define stsp_row_end(acc, k0) (acc)
+
+/* Without limits, the cold-path alarm is whether the sum of the u[i] is not finite (any NaN
+ * or Inf makes it NaN or Inf; a finite sum that overflows is a false alarm that stsp_limit()
+ * clears). */
+static STSP_ALWAYS_INLINE uint32_t stsp_unlimited_alarm(const stsp_header_t *h,
+                                                        const stsp_f32_t *y)
 {
-    const uint32_t nx = stsp_nx(h);
     const uint32_t nu = stsp_nu(h);
-    const uint32_t nl = stsp_nl(h);
-    const stsp_f32_t *K = &h->K[tick * (nu * nx)];
-    const stsp_f32_t *k0 = &h->k0[tick * nu];
-    /* L may be NULL when nl == 0: no pointer arithmetic on it then. */
-    const stsp_f32_t *L = (nl > 0u) ? &h->L[tick * (nu * nl)] : h->L;
+    stsp_f32_t sum = -0.0f; /* -0 + a = a for every a: the compiler drops this add */
     uint32_t i;
     uint32_t out = 0u;
     STSP_UNROLL
     for (i = 0u; i < nu; ++i) {
-        stsp_f32_t acc = stsp_nmla(K[0], x[0], k0[i]);
-        uint32_t j;
-        STSP_UNROLL
-        for (j = 1u; j < nx; ++j) {
-            acc = stsp_mls(acc, K[j], x[j]);
-        }
-        K = &K[nx];
-        if (nl > 0u) {
-            STSP_UNROLL
-            for (j = 0u; j < nl; ++j) {
-                acc = stsp_mls(acc, L[j], v[j]);
-            }
-            L = &L[nl];
-        }
-        y[i] = acc;
+        sum += y[i];
     }
-    if (limited != 0u) {
-        const stsp_f32_t *lo = h->u_min;
-        const stsp_f32_t *hi = h->u_max;
-        STSP_UNROLL
-        for (i = 0u; i < nu; ++i) {
-            if (!((y[i] >= lo[i]) && (y[i] <= hi[i]))) {
-                out = 1u;
-            }
-        }
-    } else {
-        stsp_f32_t sum = -0.0f; /* -0 + a = a for every a: the compiler drops this add */
-        STSP_UNROLL
-        for (i = 0u; i < nu; ++i) {
-            sum += y[i];
-        }
-        /* sum - sum is +0 for a finite sum, NaN for NaN and +-Inf. */
-        if (!((sum - sum) == 0.0f)) {
-            out = 1u;
-        }
+    /* sum - sum is +0 for a finite sum, NaN for NaN and +-Inf. */
+    if (!((sum - sum) == 0.0f)) {
+        out = 1u;
     }
     return out;
+}
+
+/* One latched multiplier: lambda0 + sum_j Lambda[j] x[j], in that order. */
+static STSP_ALWAYS_INLINE stsp_f32_t stsp_latch_row(const stsp_f32_t *lam, stsp_f32_t lambda0,
+                                                    const stsp_f32_t *x, uint32_t nx)
+{
+    stsp_f32_t acc = lambda0;
+    uint32_t j;
+    for (j = 0u; j < nx; ++j) {
+        acc += lam[j] * x[j];
+    }
+    return acc;
 }
 
 /* 1 when every y[0..nu) is finite: the ordinary tick's test, inlined so that y can stay in

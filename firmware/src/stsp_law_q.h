@@ -1,5 +1,5 @@
-/* The fixed-point (Q15/Q31) law and its limit check, included once by stsp_controller.c
- * (static, inlined into stsp_step). Private: not installed. */
+/* The fixed-point (Q15/Q31) arithmetic of the law (stsp_law.h) and its limit check, included
+ * once by stsp_controller.c (static, inlined into stsp_step). Private: not installed. */
 #ifndef STSP_LAW_Q_H
 #define STSP_LAW_Q_H
 
@@ -14,55 +14,41 @@ static stsp_status_t stsp_limit(const stsp_header_t *h, const stsp_scalar_t *x,
     return stsp_clamp(h, y, mask);
 }
 
-/* The law at `tick` with multipliers v, fixed point (Q15: 32-bit accumulator, Q31: 64-bit),
- * into y (never the caller's u: x and u may overlap):
+/* The fixed-point (Q15: 32-bit accumulator, Q31: 64-bit) row of the law (stsp_law.h):
  *     u_q[i] = floor((k0[i] 2^F + sum_j K[i][j] x_q[j] + sum_c L[i][c] v_q[c]) / 2^F + 1/2)
  * (the table stores -K, -k0, -L: one multiply-accumulate per term). Scaling: every term of
  * row i is in units of 2^(u_exp[i] - 2F) (the gains carry x_exp, v_exp and u_exp), so the
  * only shift is the final one by F. Overflow: none; the sum is exact (integer, any order
  * gives the same bits) and bounded by (2^F - 1) 2^F, the accumulator by 2^(2F+1) (see
- * stsp_uacc_t); u_q is within +-(2^F - 1) without saturation. Returns nonzero when some u_q[i]
- * lies outside [u_min[i], u_max[i]] (only checked when the table is limited). */
-static STSP_ALWAYS_INLINE uint32_t stsp_law(const stsp_header_t *h, uint32_t tick,
-                                            const stsp_scalar_t *x, const stsp_scalar_t *v,
-                                            stsp_scalar_t *y, uint32_t limited)
+ * stsp_uacc_t); u_q is within +-(2^F - 1) without saturation. */
+typedef stsp_uacc_t stsp_row_acc_t;
+/* Aliases, as in stsp_law_f32.h (inline wrappers change GCC's schedule of the law): the row
+ * starts from the accumulator's bias, and k0 is added after the shift. */
+#define stsp_row_first(a, b, k0) stsp_q_mac(stsp_q_start(), (a), (b))
+#define stsp_row_mac stsp_q_mac
+#define stsp_row_end stsp_q_round
+
+/* Without limits there is nothing to check: u_q is always a valid integer. */
+static STSP_ALWAYS_INLINE uint32_t stsp_unlimited_alarm(const stsp_header_t *h,
+                                                        const stsp_scalar_t *y)
 {
-    const uint32_t nx = stsp_nx(h);
-    const uint32_t nu = stsp_nu(h);
-    const uint32_t nl = stsp_nl(h);
-    const stsp_scalar_t *K = &h->K[tick * (nu * nx)];
-    const stsp_scalar_t *k0 = &h->k0[tick * nu];
-    /* L may be NULL when nl == 0: no pointer arithmetic on it then. */
-    const stsp_scalar_t *L = (nl > 0u) ? &h->L[tick * (nu * nl)] : h->L;
-    uint32_t i;
-    uint32_t out = 0u;
-    STSP_UNROLL
-    for (i = 0u; i < nu; ++i) {
-        stsp_uacc_t acc = stsp_q_start();
-        uint32_t j;
-        STSP_UNROLL
-        for (j = 0u; j < nx; ++j) {
-            acc = stsp_q_mac(acc, K[j], x[j]);
-        }
-        K = &K[nx];
-        if (nl > 0u) {
-            STSP_UNROLL
-            for (j = 0u; j < nl; ++j) {
-                acc = stsp_q_mac(acc, L[j], v[j]);
-            }
-            L = &L[nl];
-        }
-        y[i] = stsp_q_round(acc, k0[i]);
+    (void)h;
+    (void)y;
+    return 0u;
+}
+
+/* One latched multiplier: v_q = round half up of lambda0 + sum_j Lambda x_q / 2^F, exact in
+ * stsp_uacc_t and within +-(2^F - 1) (the row bound of stsp_check_values). */
+static STSP_ALWAYS_INLINE stsp_scalar_t stsp_latch_row(const stsp_scalar_t *lam,
+                                                       stsp_scalar_t lambda0,
+                                                       const stsp_scalar_t *x, uint32_t nx)
+{
+    stsp_uacc_t sum = stsp_q_start();
+    uint32_t j;
+    for (j = 0u; j < nx; ++j) {
+        sum = stsp_q_mac(sum, lam[j], x[j]);
     }
-    if (limited != 0u) {
-        STSP_UNROLL
-        for (i = 0u; i < nu; ++i) {
-            if ((y[i] < h->u_min[i]) || (y[i] > h->u_max[i])) {
-                out = 1u;
-            }
-        }
-    }
-    return out;
+    return stsp_q_round(sum, lambda0);
 }
 
 #endif /* STSP_LAW_Q_H */

@@ -1,7 +1,7 @@
 /* Fixed-point variants only: conversions between float32 values and the table's Q formats,
  * for applications on an FPU target (stsp_step() itself needs no floating point). The
  * contract is on the prototypes in stospline/stsp_controller.h. */
-#include "stospline/stsp_controller.h"
+#include "stsp_internal.h"
 
 #include <string.h>
 
@@ -58,14 +58,15 @@ static stsp_scalar_t stsp_q_from_f32(stsp_f32_t s, uint32_t *clamped)
 
 stsp_status_t stsp_state_to_q(const stsp_ctrl_t *ctrl, const stsp_f32_t *x, stsp_scalar_t *x_q)
 {
+    const stsp_status_t st = stsp_check_ready(ctrl);
     const stsp_header_t *t;
     uint32_t j;
     uint32_t clamped = 0u;
-    if ((ctrl == NULL) || (x == NULL) || (x_q == NULL)) {
+    if ((x == NULL) || (x_q == NULL)) {
         return STSP_ERR_NULL;
     }
-    if (ctrl->ready != STSP_CTRL_READY) {
-        return STSP_ERR_NOT_INITIALIZED;
+    if (st != STSP_OK) {
+        return st;
     }
     t = &ctrl->checked; /* the dimensions and exponents init validated */
     for (j = 0u; j < t->nx; ++j) {
@@ -90,13 +91,14 @@ stsp_status_t stsp_state_to_q(const stsp_ctrl_t *ctrl, const stsp_f32_t *x, stsp
 stsp_status_t stsp_command_to_f32(const stsp_ctrl_t *ctrl, const stsp_scalar_t *u_q,
                                   stsp_f32_t *u)
 {
+    const stsp_status_t st = stsp_check_ready(ctrl);
     const stsp_header_t *t;
     uint32_t i;
-    if ((ctrl == NULL) || (u_q == NULL) || (u == NULL)) {
+    if ((u_q == NULL) || (u == NULL)) {
         return STSP_ERR_NULL;
     }
-    if (ctrl->ready != STSP_CTRL_READY) {
-        return STSP_ERR_NOT_INITIALIZED;
+    if (st != STSP_OK) {
+        return st;
     }
     t = &ctrl->checked; /* the dimensions and exponents init validated */
     for (i = 0u; i < t->nu; ++i) {

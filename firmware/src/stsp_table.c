@@ -20,7 +20,7 @@ void stsp_copy_header(stsp_header_t *h, const stsp_table_t *t)
     h->Lambda = t->Lambda;
     h->lambda0 = t->lambda0;
     h->stage_start = t->stage_start;
-    h->stage_np = t->stage_np;
+    h->stage_n_latch = t->stage_n_latch;
 #ifdef STSP_ARITH_FIXED
     h->x_exp = t->x_exp;
     h->u_exp = t->u_exp;
@@ -51,7 +51,7 @@ int stsp_header_changed(const stsp_header_t *h, const stsp_table_t *t)
     }
     if ((t->K != h->K) || (t->k0 != h->k0) || (t->L != h->L) || (t->u_min != h->u_min) ||
         (t->u_max != h->u_max) || (t->Lambda != h->Lambda) || (t->lambda0 != h->lambda0) ||
-        (t->stage_start != h->stage_start) || (t->stage_np != h->stage_np)) {
+        (t->stage_start != h->stage_start) || (t->stage_n_latch != h->stage_n_latch)) {
         changed = 1;
     }
 #ifdef STSP_ARITH_FIXED
@@ -87,11 +87,11 @@ static stsp_status_t stsp_check_band_dims(const stsp_header_t *h)
         return STSP_ERR_NULL;
     }
     if ((b->q == 0u) || (b->q > STSP_BANDQP_MAX) || (b->nx != h->nx) ||
-        (b->q != h->stage_np[0])) {
+        (b->q != h->stage_n_latch[0])) {
         return STSP_ERR_BAD_DIMS;
     }
     for (s = 1u; s < h->n_stages; ++s) {
-        if (h->stage_np[s] != 0u) {
+        if (h->stage_n_latch[s] != 0u) {
             return STSP_ERR_BAD_DIMS;
         }
     }
@@ -119,7 +119,7 @@ static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, i
     if (t->n_ticks > (UINT32_MAX / ((uint32_t)t->nu * ((uint32_t)t->nx + t->n_latch)))) {
         return STSP_ERR_BAD_DIMS;
     }
-    if ((t->stage_start == NULL) || (t->stage_np == NULL) || (t->K == NULL) ||
+    if ((t->stage_start == NULL) || (t->stage_n_latch == NULL) || (t->K == NULL) ||
         (t->k0 == NULL) || (t->u_min == NULL) || (t->u_max == NULL) ||
         ((t->n_latch > 0u) && ((t->L == NULL) || (t->Lambda == NULL) || (t->lambda0 == NULL)))) {
         return STSP_ERR_NULL;
@@ -133,7 +133,7 @@ static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, i
         return STSP_ERR_BAD_DIMS;
     }
     for (s = 0u; s < t->n_stages; ++s) {
-        if ((t->stage_start[s + 1u] <= t->stage_start[s]) || (t->stage_np[s] > t->n_latch)) {
+        if ((t->stage_start[s + 1u] <= t->stage_start[s]) || (t->stage_n_latch[s] > t->n_latch)) {
             return STSP_ERR_BAD_DIMS;
         }
     }
@@ -179,22 +179,22 @@ static stsp_status_t stsp_check_values(const stsp_header_t *t)
     const stsp_uacc_t row_max = (stsp_uacc_t)STSP_Q_ONE - 1u;
     const uint32_t nx = t->nx;
     const uint32_t nu = t->nu;
-    const uint32_t np = t->n_latch;
+    const uint32_t n_latch = t->n_latch;
     uint32_t r;
     if ((stsp_q_exps_ok(t->x_exp, nx) == 0) || (stsp_q_exps_ok(t->u_exp, nu) == 0) ||
-        ((np > 0u) && (stsp_q_exps_ok(t->v_exp, np) == 0))) {
+        ((n_latch > 0u) && (stsp_q_exps_ok(t->v_exp, n_latch) == 0))) {
         return STSP_ERR_BAD_VALUES;
     }
     for (r = 0u; r < (t->n_ticks * nu); ++r) {
         stsp_uacc_t sum = stsp_q_abs_sum(&t->k0[r], 1u) + stsp_q_abs_sum(&t->K[r * nx], nx);
-        if (np > 0u) {
-            sum += stsp_q_abs_sum(&t->L[r * np], np);
+        if (n_latch > 0u) {
+            sum += stsp_q_abs_sum(&t->L[r * n_latch], n_latch);
         }
         if (sum > row_max) {
             return STSP_ERR_BAD_VALUES;
         }
     }
-    for (r = 0u; r < ((uint32_t)t->n_stages * np); ++r) {
+    for (r = 0u; r < ((uint32_t)t->n_stages * n_latch); ++r) {
         if ((stsp_q_abs_sum(&t->lambda0[r], 1u) + stsp_q_abs_sum(&t->Lambda[r * nx], nx)) >
             row_max) {
             return STSP_ERR_BAD_VALUES;
@@ -260,16 +260,16 @@ static stsp_status_t stsp_check_values(const stsp_header_t *t)
 {
     const uint32_t nx = t->nx;
     const uint32_t nu = t->nu;
-    const uint32_t np = t->n_latch;
+    const uint32_t n_latch = t->n_latch;
     const uint32_t ns = t->n_stages;
     const uint32_t nt = t->n_ticks;
     uint32_t i;
     if ((stsp_all_finite(t->K, nt * nu * nx) == 0) || (stsp_all_finite(t->k0, nt * nu) == 0)) {
         return STSP_ERR_BAD_VALUES;
     }
-    if ((np > 0u) && ((stsp_all_finite(t->L, nt * nu * np) == 0) ||
-                      (stsp_all_finite(t->Lambda, ns * np * nx) == 0) ||
-                      (stsp_all_finite(t->lambda0, ns * np) == 0))) {
+    if ((n_latch > 0u) && ((stsp_all_finite(t->L, nt * nu * n_latch) == 0) ||
+                      (stsp_all_finite(t->Lambda, ns * n_latch * nx) == 0) ||
+                      (stsp_all_finite(t->lambda0, ns * n_latch) == 0))) {
         return STSP_ERR_BAD_VALUES;
     }
     for (i = 0u; i < nu; ++i) {
@@ -308,14 +308,14 @@ uint32_t stsp_crc_of(const stsp_header_t *table, const stsp_table_t *scalars)
 #endif
     const uint32_t nx = table->nx;
     const uint32_t nu = table->nu;
-    const uint32_t np = table->n_latch;
+    const uint32_t n_latch = table->n_latch;
     const uint32_t ns = table->n_stages;
     const uint32_t nt = table->n_ticks;
     uint32_t crc = stsp_crc32_begin();
     uint32_t s;
     crc = stsp_crc32_u32(crc, nx);
     crc = stsp_crc32_u32(crc, nu);
-    crc = stsp_crc32_u32(crc, np);
+    crc = stsp_crc32_u32(crc, n_latch);
     crc = stsp_crc32_u32(crc, ns);
     crc = stsp_crc32_u32(crc, nt);
     crc = stsp_crc32_u32(crc, scalars->tick_hz);
@@ -326,22 +326,22 @@ uint32_t stsp_crc_of(const stsp_header_t *table, const stsp_table_t *scalars)
         crc = stsp_crc32_u32(crc, table->stage_start[s]);
     }
     for (s = 0u; s < ns; ++s) {
-        crc = stsp_crc32_u32(crc, (uint32_t)table->stage_np[s]);
+        crc = stsp_crc32_u32(crc, (uint32_t)table->stage_n_latch[s]);
     }
     crc = stsp_crc32_scalars(crc, table->K, nt * nu * nx);
     crc = stsp_crc32_scalars(crc, table->k0, nt * nu);
-    if (np > 0u) {
-        crc = stsp_crc32_scalars(crc, table->L, nt * nu * np);
-        crc = stsp_crc32_scalars(crc, table->Lambda, ns * np * nx);
-        crc = stsp_crc32_scalars(crc, table->lambda0, ns * np);
+    if (n_latch > 0u) {
+        crc = stsp_crc32_scalars(crc, table->L, nt * nu * n_latch);
+        crc = stsp_crc32_scalars(crc, table->Lambda, ns * n_latch * nx);
+        crc = stsp_crc32_scalars(crc, table->lambda0, ns * n_latch);
     }
     crc = stsp_crc32_scalars(crc, table->u_min, nu);
     crc = stsp_crc32_scalars(crc, table->u_max, nu);
 #ifdef STSP_ARITH_FIXED
     crc = stsp_crc32_i8s(crc, table->x_exp, nx);
     crc = stsp_crc32_i8s(crc, table->u_exp, nu);
-    if (np > 0u) {
-        crc = stsp_crc32_i8s(crc, table->v_exp, np);
+    if (n_latch > 0u) {
+        crc = stsp_crc32_i8s(crc, table->v_exp, n_latch);
     }
 #endif
     if (b != NULL) {

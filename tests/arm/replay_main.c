@@ -67,7 +67,7 @@ int main(void)
         return 1;
     }
     for (i = 1u; i < REPLAY_TABLE.n_stages; ++i) {
-        expect_latches += (REPLAY_TABLE.stage_np[i] > 0u) ? 1u : 0u;
+        expect_latches += (REPLAY_TABLE.stage_n_latch[i] > 0u) ? 1u : 0u;
     }
     st = stsp_init(&ctrl, &REPLAY_TABLE);
     if (st != STSP_OK) {
@@ -91,9 +91,9 @@ int main(void)
             printf("replay: tick %lu: status %d, expected %d\n", (unsigned long)rec->tick,
                    (int)st, (int)expect);
         }
-        /* A latch: the first step, or entering a stage that latches (stage_np > 0). */
+        /* A latch: the first step, or entering a stage that latches (stage_n_latch > 0). */
         if (latched_before == 0u ||
-            (ctrl.stage != stage_before && REPLAY_TABLE.stage_np[ctrl.stage] > 0u)) {
+            (ctrl.stage != stage_before && REPLAY_TABLE.stage_n_latch[ctrl.stage] > 0u)) {
             ++latches;
             printf("replay: tick %lu latched stage %u\n", (unsigned long)rec->tick,
                    (unsigned)ctrl.stage);

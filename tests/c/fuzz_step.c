@@ -7,7 +7,7 @@
  * about one table in three carries a band dual (band_qp, format 3): q = 1..8 rows or an
  * invalid count, nx the table's or not, W positive definite, diagonal, indefinite, negative
  * definite, singular or raw bits (NaN/Inf), bands, equality rows, lo > hi, huge or
- * non-finite bounds, NULL arrays, stage_np as the contract requires (q at stage 0, 0 after)
+ * non-finite bounds, NULL arrays, stage_n_latch as the contract requires (q at stage 0, 0 after)
  * or not, and the CRC right or wrong. The arrays always have room for the dimensions the
  * table declares: that is the documented precondition of stsp_init() (the generated tables
  * satisfy it by construction). The calls: init, init_expect, reset, verify and step, with
@@ -44,6 +44,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "fuzz_input.h"
 #include "stospline/stsp_controller.h"
 
 #define FZ_MAX_NX 7u
@@ -68,31 +69,6 @@ typedef float fz_val_t;
 #define FZ_BAND_PICK(sel) (((sel) % 3u) == 0u)
 #endif
 
-typedef struct {
-    const uint8_t *p;
-    size_t n;
-} fz_in_t;
-
-static uint32_t fz_u8(fz_in_t *in)
-{
-    uint32_t v = 0u;
-    if (in->n > 0u) {
-        v = in->p[0];
-        ++in->p;
-        --in->n;
-    }
-    return v;
-}
-
-static uint32_t fz_u32(fz_in_t *in)
-{
-    uint32_t v = fz_u8(in);
-    v |= fz_u8(in) << 8;
-    v |= fz_u8(in) << 16;
-    v |= fz_u8(in) << 24;
-    return v;
-}
-
 #ifdef STSP_ARITH_FIXED
 static int fz_finite(fz_val_t v)
 {
@@ -106,17 +82,17 @@ static int fz_is_zero(fz_val_t v)
 }
 
 /* Mostly modest values; a selector byte picks the range ends, 0 or a raw bit pattern. */
-static fz_val_t fz_value(fz_in_t *in)
+static fz_val_t fz_value(fuzz_in_t *in)
 {
-    const uint32_t sel = fz_u8(in);
+    const uint32_t sel = fuzz_u8(in);
     if (sel < 200u) {
-        return (fz_val_t)(((int64_t)fz_u8(in) - 128) * (FZ_Q_ONE / 256));
+        return (fz_val_t)(((int64_t)fuzz_u8(in) - 128) * (FZ_Q_ONE / 256));
     }
     switch (sel % 4u) {
     case 0u: return (fz_val_t)(-FZ_Q_ONE);
     case 1u: return (fz_val_t)(FZ_Q_ONE - 1);
     case 2u: return 0;
-    default: return (fz_val_t)(int64_t)(((int64_t)fz_u32(in) % (2 * FZ_Q_ONE)) - FZ_Q_ONE);
+    default: return (fz_val_t)(int64_t)(((int64_t)fuzz_u32(in) % (2 * FZ_Q_ONE)) - FZ_Q_ONE);
     }
 }
 #else
@@ -152,11 +128,11 @@ static int fz_f64_is_pos_zero(double d)
 }
 
 /* Mostly modest values; a selector byte picks specials or a raw bit pattern. */
-static float fz_value(fz_in_t *in)
+static float fz_value(fuzz_in_t *in)
 {
-    const uint32_t sel = fz_u8(in);
+    const uint32_t sel = fuzz_u8(in);
     if (sel < 200u) {
-        return ((float)(int32_t)fz_u8(in) - 128.0f) / 16.0f;
+        return ((float)(int32_t)fuzz_u8(in) - 128.0f) / 16.0f;
     }
     switch (sel % 8u) {
     case 0u: return fz_bits_f32(0x7FC00000u);          /* NaN */
@@ -166,7 +142,7 @@ static float fz_value(fz_in_t *in)
     case 4u: return fz_bits_f32(0xFF7FFFFFu);          /* -FLT_MAX */
     case 5u: return fz_bits_f32(0x00000001u);          /* smallest subnormal */
     case 6u: return fz_bits_f32(0x80000000u);          /* -0 */
-    default: return fz_bits_f32(fz_u32(in));           /* anything */
+    default: return fz_bits_f32(fuzz_u32(in));           /* anything */
     }
 }
 #endif
@@ -196,15 +172,6 @@ static void fzs_print(void)
 #define FZS(k) ((void)0)
 #endif
 
-static void fz_check_at(int ok, int line)
-{
-    if (!ok) {
-        (void)fprintf(stderr, "fuzz_step: invariant broken at tests/c/fuzz_step.c:%d\n", line);
-        abort();
-    }
-}
-#define fz_check(ok) fz_check_at((ok), __LINE__)
-
 /* The statuses init/reset/verify/step can return: STSP_WARN_STATE_CLAMPED only comes from the
  * fixed-point conversion, STSP_WARN_BAND_FALLBACK only from a float32 band table. */
 static int fz_known_status(stsp_status_t st)
@@ -218,7 +185,7 @@ static int fz_known_status(stsp_status_t st)
 
 /* Storage with room for every dimension the input can declare. */
 static uint32_t g_start[FZ_MAX_NS + 1u];
-static uint16_t g_np[FZ_MAX_NS];
+static uint16_t g_stage_n_latch[FZ_MAX_NS];
 static fz_val_t g_K[FZ_MAX_NT * FZ_MAX_NU * FZ_MAX_NX];
 static fz_val_t g_k0[FZ_MAX_NT * FZ_MAX_NU];
 static fz_val_t g_L[FZ_MAX_NT * FZ_MAX_NU * FZ_MAX_NL];
@@ -323,14 +290,14 @@ static double fz_special_f64(uint32_t *seed)
 
 /* The band dual of a table (format 3): shape, data and contract violations from the input
  * (the same in every build: a fixed-point build must refuse whatever it is). Called with the
- * main table built; sets t->band_qp (and stage_np, n_latch), and the CRC afterwards must
+ * main table built; sets t->band_qp (and stage_n_latch, n_latch), and the CRC afterwards must
  * cover it. Returns the band corruption applied after the CRC (1: flip a CRC bit, 2: change a
  * band value), else 0. */
-static uint32_t fz_build_band(fz_in_t *in, stsp_table_t *t)
+static uint32_t fz_build_band(fuzz_in_t *in, stsp_table_t *t)
 {
-    const uint32_t qsel = fz_u8(in), nxsel = fz_u8(in), wsel = fz_u8(in), rsel = fz_u8(in);
-    const uint32_t npsel = fz_u8(in), nullsel = fz_u8(in), crcsel = fz_u8(in);
-    uint32_t seed = fz_u32(in);
+    const uint32_t qsel = fuzz_u8(in), nxsel = fuzz_u8(in), wsel = fuzz_u8(in), rsel = fuzz_u8(in);
+    const uint32_t npsel = fuzz_u8(in), nullsel = fuzz_u8(in), crcsel = fuzz_u8(in);
+    uint32_t seed = fuzz_u32(in);
     uint32_t q, bnx, i, j;
     /* Rows: 1..8 mostly, else an invalid count (0, 9..16, or beyond the storage). */
     if (qsel < 224u) {
@@ -415,21 +382,21 @@ static uint32_t fz_build_band(fz_in_t *in, stsp_table_t *t)
         default: g_blo[i] = lo; g_bhi[i] = fz_special_f64(&seed); break;
         }
     }
-    /* stage_np: q at stage 0 and 0 after, as the contract requires, unless npsel >= 224. */
+    /* stage_n_latch: q at stage 0 and 0 after, as the contract requires, unless npsel >= 224. */
     if (q <= STSP_BANDQP_MAX) {
         if (t->n_latch < q) {
             t->n_latch = (uint16_t)q;
         }
     }
-    g_np[0] = (uint16_t)q;
+    g_stage_n_latch[0] = (uint16_t)q;
     for (i = 1u; i < FZ_MAX_NS; ++i) {
-        g_np[i] = 0u;
+        g_stage_n_latch[i] = 0u;
     }
     if (npsel >= 224u) {
         switch (npsel % 3u) {
-        case 0u: g_np[0] = (uint16_t)(q + 1u); break;
-        case 1u: g_np[0] = (uint16_t)((q > 0u) ? q - 1u : 0u); break;
-        default: g_np[1u + npsel % (FZ_MAX_NS - 1u)] = (uint16_t)(1u + npsel % 4u); break;
+        case 0u: g_stage_n_latch[0] = (uint16_t)(q + 1u); break;
+        case 1u: g_stage_n_latch[0] = (uint16_t)((q > 0u) ? q - 1u : 0u); break;
+        default: g_stage_n_latch[1u + npsel % (FZ_MAX_NS - 1u)] = (uint16_t)(1u + npsel % 4u); break;
         }
     }
     if (nullsel >= 240u) {
@@ -448,9 +415,9 @@ static uint32_t fz_build_band(fz_in_t *in, stsp_table_t *t)
 
 /* A table from the input: valid most of the time (so that the calls reach the law), with at
  * most one corruption chosen by a selector byte. */
-static void fz_build_table(fz_in_t *in, stsp_table_t *t, fz_table_info_t *info)
+static void fz_build_table(fuzz_in_t *in, stsp_table_t *t, fz_table_info_t *info)
 {
-    const uint32_t shape = fz_u8(in), lim = fz_u8(in), sel = fz_u8(in), bsel = fz_u8(in);
+    const uint32_t shape = fuzz_u8(in), lim = fuzz_u8(in), sel = fuzz_u8(in), bsel = fuzz_u8(in);
     uint32_t band_corrupt = 0u;
     const uint32_t corrupt = (sel >= 160u) ? (sel % 10u) : 10u;  /* 10: none */
     uint32_t s, nt = 0u, i;
@@ -460,21 +427,21 @@ static void fz_build_table(fz_in_t *in, stsp_table_t *t, fz_table_info_t *info)
     t->scalar_kind = STSP_SCALAR_KIND;
     t->nx = (uint16_t)(1u + shape % FZ_MAX_NX);
     t->nu = (uint16_t)(1u + (shape / 8u) % FZ_MAX_NU);
-    t->n_latch = (uint16_t)(fz_u8(in) % (FZ_GEN_NL + 1u));
-    t->n_stages = (uint16_t)(1u + fz_u8(in) % FZ_MAX_NS);
-    t->tick_hz = 1u + fz_u8(in);
+    t->n_latch = (uint16_t)(fuzz_u8(in) % (FZ_GEN_NL + 1u));
+    t->n_stages = (uint16_t)(1u + fuzz_u8(in) % FZ_MAX_NS);
+    t->tick_hz = 1u + fuzz_u8(in);
     g_start[0] = 0u;
     for (s = 0u; s < FZ_MAX_NS; ++s) {
-        nt += 1u + fz_u8(in) % FZ_MAX_STAGE_TICKS;
+        nt += 1u + fuzz_u8(in) % FZ_MAX_STAGE_TICKS;
         g_start[s + 1u] = nt;
-        g_np[s] = (uint16_t)(fz_u8(in) % (t->n_latch + 1u));
+        g_stage_n_latch[s] = (uint16_t)(fuzz_u8(in) % (t->n_latch + 1u));
     }
     t->n_ticks = g_start[t->n_stages];
     t->stage_start = g_start;
-    t->stage_np = g_np;
+    t->stage_n_latch = g_stage_n_latch;
     {
-        uint32_t seed = fz_u32(in);
-        const uint32_t special = (corrupt == 5u) ? 1u + fz_u8(in) : 0u;
+        uint32_t seed = fuzz_u32(in);
+        const uint32_t special = (corrupt == 5u) ? 1u + fuzz_u8(in) : 0u;
         fz_fill(&seed, g_K, sizeof g_K / sizeof g_K[0], special);
         fz_fill(&seed, g_k0, sizeof g_k0 / sizeof g_k0[0], special);
         fz_fill(&seed, g_L, sizeof g_L / sizeof g_L[0], special);
@@ -488,16 +455,16 @@ static void fz_build_table(fz_in_t *in, stsp_table_t *t, fz_table_info_t *info)
     t->lambda0 = g_lambda0;
 #ifdef STSP_ARITH_FIXED
     for (i = 0u; i < FZ_MAX_NX; ++i) {
-        g_xe[i] = (int8_t)((int32_t)(fz_u8(in) % 21u) - 10);
+        g_xe[i] = (int8_t)((int32_t)(fuzz_u8(in) % 21u) - 10);
     }
     for (i = 0u; i < FZ_MAX_NU; ++i) {
-        g_ue[i] = (int8_t)((int32_t)(fz_u8(in) % 21u) - 10);
+        g_ue[i] = (int8_t)((int32_t)(fuzz_u8(in) % 21u) - 10);
     }
     for (i = 0u; i < FZ_MAX_NL; ++i) {
-        g_ve[i] = (int8_t)((int32_t)(fz_u8(in) % 21u) - 10);
+        g_ve[i] = (int8_t)((int32_t)(fuzz_u8(in) % 21u) - 10);
     }
     if (corrupt == 5u) {
-        g_ue[fz_u8(in) % FZ_MAX_NU] = (int8_t)(int32_t)fz_u8(in); /* maybe beyond +-60 */
+        g_ue[fuzz_u8(in) % FZ_MAX_NU] = (int8_t)(int32_t)fuzz_u8(in); /* maybe beyond +-60 */
     }
     t->x_exp = g_xe;
     t->u_exp = g_ue;
@@ -505,9 +472,9 @@ static void fz_build_table(fz_in_t *in, stsp_table_t *t, fz_table_info_t *info)
     for (i = 0u; i < FZ_MAX_NU; ++i) {
         switch (lim % 4u) {
         case 0u: g_lo[i] = (fz_val_t)(-FZ_Q_ONE); g_hi[i] = (fz_val_t)(FZ_Q_ONE - 1); break;
-        case 1u: g_lo[i] = (fz_val_t)(-(int64_t)(1u + fz_u8(in)) * (FZ_Q_ONE / 4096));
-                 g_hi[i] = (fz_val_t)((int64_t)(1u + fz_u8(in)) * (FZ_Q_ONE / 4096)); break;
-        case 2u: g_lo[i] = (fz_val_t)(-(int32_t)(fz_u8(in) % 3u)); g_hi[i] = (fz_val_t)(FZ_Q_ONE - 1);
+        case 1u: g_lo[i] = (fz_val_t)(-(int64_t)(1u + fuzz_u8(in)) * (FZ_Q_ONE / 4096));
+                 g_hi[i] = (fz_val_t)((int64_t)(1u + fuzz_u8(in)) * (FZ_Q_ONE / 4096)); break;
+        case 2u: g_lo[i] = (fz_val_t)(-(int32_t)(fuzz_u8(in) % 3u)); g_hi[i] = (fz_val_t)(FZ_Q_ONE - 1);
                  break;
         default: g_lo[i] = fz_value(in); g_hi[i] = fz_value(in); break; /* maybe invalid */
         }
@@ -516,9 +483,9 @@ static void fz_build_table(fz_in_t *in, stsp_table_t *t, fz_table_info_t *info)
     for (i = 0u; i < FZ_MAX_NU; ++i) {
         switch (lim % 4u) {
         case 0u: g_lo[i] = -FLT_MAX; g_hi[i] = FLT_MAX; break;
-        case 1u: g_lo[i] = -(float)(1u + fz_u8(in)) / 64.0f;
-                 g_hi[i] = (float)(1u + fz_u8(in)) / 64.0f; break;
-        case 2u: g_lo[i] = -(float)(fz_u8(in) % 3u); g_hi[i] = FLT_MAX; break;
+        case 1u: g_lo[i] = -(float)(1u + fuzz_u8(in)) / 64.0f;
+                 g_hi[i] = (float)(1u + fuzz_u8(in)) / 64.0f; break;
+        case 2u: g_lo[i] = -(float)(fuzz_u8(in) % 3u); g_hi[i] = FLT_MAX; break;
         default: g_lo[i] = -fz_value(in); g_hi[i] = fz_value(in); break; /* maybe invalid */
         }
     }
@@ -532,33 +499,33 @@ static void fz_build_table(fz_in_t *in, stsp_table_t *t, fz_table_info_t *info)
     }
     info->main_corrupt = (corrupt != 10u) ? 1u + corrupt : 0u; /* which one, for the Q model */
     switch (corrupt) {
-    case 0u: t->magic = fz_u32(in); break;
-    case 1u: t->format_version = (uint16_t)fz_u8(in); break;
-    case 2u: t->nx = (uint16_t)(fz_u8(in) % (FZ_MAX_NX + 1u)); break;   /* maybe 0 */
-    case 3u: t->nu = (uint16_t)(fz_u8(in) % (FZ_MAX_NU + 1u)); break;
+    case 0u: t->magic = fuzz_u32(in); break;
+    case 1u: t->format_version = (uint16_t)fuzz_u8(in); break;
+    case 2u: t->nx = (uint16_t)(fuzz_u8(in) % (FZ_MAX_NX + 1u)); break;   /* maybe 0 */
+    case 3u: t->nu = (uint16_t)(fuzz_u8(in) % (FZ_MAX_NU + 1u)); break;
     case 4u: /* break the layout, within the storage: n_ticks never exceeds FZ_MAX_NT */
-        g_start[fz_u8(in) % (FZ_MAX_NS + 1u)] = fz_u8(in) % (FZ_MAX_NT + 1u);
-        t->n_ticks = (fz_u8(in) & 1u) ? g_start[t->n_stages] : fz_u8(in) % (FZ_MAX_NT + 1u);
+        g_start[fuzz_u8(in) % (FZ_MAX_NS + 1u)] = fuzz_u8(in) % (FZ_MAX_NT + 1u);
+        t->n_ticks = (fuzz_u8(in) & 1u) ? g_start[t->n_stages] : fuzz_u8(in) % (FZ_MAX_NT + 1u);
         break;
     case 5u: break;                                              /* special gains, above */
-    case 6u: g_np[fz_u8(in) % FZ_MAX_NS] = (uint16_t)fz_u8(in); break;
-    case 7u: t->n_stages = (uint16_t)(fz_u8(in) % (FZ_MAX_NS + 1u)); break;
+    case 6u: g_stage_n_latch[fuzz_u8(in) % FZ_MAX_NS] = (uint16_t)fuzz_u8(in); break;
+    case 7u: t->n_stages = (uint16_t)(fuzz_u8(in) % (FZ_MAX_NS + 1u)); break;
     case 8u:
-        switch (fz_u8(in) % 4u) {
+        switch (fuzz_u8(in) % 4u) {
         case 0u: t->K = NULL; break;
         case 1u: t->u_max = NULL; break;
         case 2u: t->L = NULL; break;
 #ifdef STSP_ARITH_FIXED
         case 3u: t->v_exp = NULL; break;
 #endif
-        default: t->stage_np = NULL; break;
+        default: t->stage_n_latch = NULL; break;
         }
         break;
     default: break;
     }
     /* The CRC needs valid pointers and dimensions inside the storage; compute it when it can
      * be computed, then perhaps corrupt it. */
-    if ((t->K != NULL) && (t->u_max != NULL) && (t->L != NULL) && (t->stage_np != NULL) &&
+    if ((t->K != NULL) && (t->u_max != NULL) && (t->L != NULL) && (t->stage_n_latch != NULL) &&
 #ifdef STSP_ARITH_FIXED
         (t->v_exp != NULL) &&
 #endif
@@ -571,18 +538,18 @@ static void fz_build_table(fz_in_t *in, stsp_table_t *t, fz_table_info_t *info)
         info->band_crc_ok = 1u;
     }
     if (corrupt == 9u) {
-        t->crc32 ^= 1u << (fz_u8(in) % 32u);
+        t->crc32 ^= 1u << (fuzz_u8(in) % 32u);
     }
     if (band_corrupt == 1u) {
-        t->crc32 ^= 1u << (fz_u8(in) % 32u);
+        t->crc32 ^= 1u << (fuzz_u8(in) % 32u);
         info->band_crc_ok = 0u;
     } else if (band_corrupt == 2u) {
-        const uint32_t k = fz_u8(in) % FZ_BAND_STORE;
+        const uint32_t k = fuzz_u8(in) % FZ_BAND_STORE;
         double *arr[5] = {g_bNt, g_bmt, g_bW, g_blo, g_bhi};
-        double *a = arr[fz_u8(in) % 5u];
+        double *a = arr[fuzz_u8(in) % 5u];
         uint64_t bits;
         memcpy(&bits, &a[k], sizeof bits);
-        bits ^= 1ull << (fz_u8(in) % 64u);
+        bits ^= 1ull << (fuzz_u8(in) % 64u);
         memcpy(&a[k], &bits, sizeof bits);
         /* Covered by the CRC only if k is within the declared sizes. */
         info->band_crc_ok = 0u;
@@ -593,8 +560,8 @@ static void fz_build_table(fz_in_t *in, stsp_table_t *t, fz_table_info_t *info)
 
 #ifndef STSP_ARITH_FIXED
 /* The status stsp_init() must return for a table without a main-table corruption, from the
- * documented order of its checks: dimensions and layout (stage_np within n_latch), band
- * arrays NULL, band dimensions and stage_np, CRC, values (limits, band data). Returns 1 and
+ * documented order of its checks: dimensions and layout (stage_n_latch within n_latch), band
+ * arrays NULL, band dimensions and stage_n_latch, CRC, values (limits, band data). Returns 1 and
  * the status in *st when the table is modelled. */
 static int fz_expected_init(const stsp_table_t *t, const fz_table_info_t *info,
                             stsp_status_t *st)
@@ -605,7 +572,7 @@ static int fz_expected_init(const stsp_table_t *t, const fz_table_info_t *info,
         return 0;
     }
     for (s = 0u; s < t->n_stages; ++s) {
-        if (t->stage_np[s] > t->n_latch) {
+        if (t->stage_n_latch[s] > t->n_latch) {
             *st = STSP_ERR_BAD_DIMS;
             return 1;
         }
@@ -617,12 +584,12 @@ static int fz_expected_init(const stsp_table_t *t, const fz_table_info_t *info,
             return 1;
         }
         if ((b->q == 0u) || (b->q > STSP_BANDQP_MAX) || (b->nx != t->nx) ||
-            (b->q != t->stage_np[0])) {
+            (b->q != t->stage_n_latch[0])) {
             *st = STSP_ERR_BAD_DIMS;
             return 1;
         }
         for (s = 1u; s < t->n_stages; ++s) {
-            if (t->stage_np[s] != 0u) {
+            if (t->stage_n_latch[s] != 0u) {
                 *st = STSP_ERR_BAD_DIMS;
                 return 1;
             }
@@ -675,12 +642,12 @@ static int fz_band_invalid(const stsp_table_t *t)
     }
     if ((b->Nt == NULL) || (b->mt == NULL) || (b->W == NULL) || (b->lo == NULL) ||
         (b->hi == NULL) || (b->q == 0u) || (b->q > STSP_BANDQP_MAX) || (b->nx != t->nx) ||
-        (t->stage_np == NULL) || (t->n_stages == 0u) || (t->n_stages > FZ_MAX_NS) ||
-        (b->q != t->stage_np[0])) {
+        (t->stage_n_latch == NULL) || (t->n_stages == 0u) || (t->n_stages > FZ_MAX_NS) ||
+        (b->q != t->stage_n_latch[0])) {
         return 1;
     }
     for (s = 1u; s < t->n_stages; ++s) {
-        if (t->stage_np[s] != 0u) {
+        if (t->stage_n_latch[s] != 0u) {
             return 1;
         }
     }
@@ -750,7 +717,7 @@ static void fz_band_latch_model(const stsp_table_t *t, uint32_t tick, const floa
                                 fz_latch_t *m)
 {
     const stsp_bandqp_t *b = t->band_qp;
-    const uint32_t nx = t->nx, nu = t->nu, nl = t->n_latch;
+    const uint32_t nx = t->nx, nu = t->nu, n_latch = t->n_latch;
     stsp_bandqp_work_t work;
     uint32_t cand = 0u, nband = 1u, i, j;
     int overflow = 0;
@@ -767,19 +734,19 @@ static void fz_band_latch_model(const stsp_table_t *t, uint32_t tick, const floa
     }
     m->solve_st = stsp_bandqp_solve(b, x, m->lam, &work, &cand);
     if (overflow) {
-        fz_check(m->solve_st == STSP_BANDQP_ERR_NONFINITE);
-        fz_check(cand == 0u);
+        fuzz_check(m->solve_st == STSP_BANDQP_ERR_NONFINITE);
+        fuzz_check(cand == 0u);
     } else {
-        fz_check((m->solve_st == STSP_BANDQP_OK) || (m->solve_st == STSP_BANDQP_ERR_INFEASIBLE));
-        fz_check((cand >= 1u) && (cand <= nband));
+        fuzz_check((m->solve_st == STSP_BANDQP_OK) || (m->solve_st == STSP_BANDQP_ERR_INFEASIBLE));
+        fuzz_check((cand >= 1u) && (cand <= nband));
         if (m->solve_st != STSP_BANDQP_OK) {
-            fz_check(cand == nband);
+            fuzz_check(cand == nband);
         }
     }
     m->fallback = (m->solve_st != STSP_BANDQP_OK);
     for (i = 0u; i < b->q; ++i) {
         if (m->solve_st != STSP_BANDQP_OK) {
-            fz_check(fz_f64_is_pos_zero(m->lam[i]));
+            fuzz_check(fz_f64_is_pos_zero(m->lam[i]));
         } else if (!((m->lam[i] <= (double)FLT_MAX) && (m->lam[i] >= -(double)FLT_MAX))) {
             m->fallback = 1;                              /* no binary32 value */
         } else {
@@ -787,8 +754,8 @@ static void fz_band_latch_model(const stsp_table_t *t, uint32_t tick, const floa
         }
     }
     /* The latch: (float)lam, or on a fallback the design's affine map Lambda x + lambda0 of
-     * stage 0; zero beyond q (= stage_np[0]). */
-    for (i = 0u; i < nl; ++i) {
+     * stage 0; zero beyond q (= stage_n_latch[0]). */
+    for (i = 0u; i < n_latch; ++i) {
         float v = 0.0f;
         if (i < b->q) {
             if (!m->fallback) {
@@ -810,8 +777,8 @@ static void fz_band_latch_model(const stsp_table_t *t, uint32_t tick, const floa
         for (j = 1u; j < nx; ++j) {
             acc = acc - (K[j] * x[j]);
         }
-        for (j = 0u; j < nl; ++j) {
-            acc = acc - (t->L[((tick * nu + i) * nl) + j] * m->v[j]);
+        for (j = 0u; j < n_latch; ++j) {
+            acc = acc - (t->L[((tick * nu + i) * n_latch) + j] * m->v[j]);
         }
         m->y[i] = acc;
         m->y_finite = m->y_finite && fz_finite(acc);
@@ -825,7 +792,7 @@ static void fz_check_band_step(const stsp_table_t *t, const stsp_ctrl_t *c, stsp
 {
     uint32_t i, sat = 0u;
     if (!m->y_finite) {
-        fz_check(st == STSP_ERR_NONFINITE_OUTPUT);
+        fuzz_check(st == STSP_ERR_NONFINITE_OUTPUT);
         return;
     }
     for (i = 0u; i < t->nu; ++i) {
@@ -839,21 +806,21 @@ static void fz_check_band_step(const stsp_table_t *t, const stsp_ctrl_t *c, stsp
         } else {
             /* within the limits */
         }
-        fz_check(fz_f32_bits(u[i]) == fz_f32_bits(want));
+        fuzz_check(fz_f32_bits(u[i]) == fz_f32_bits(want));
     }
-    fz_check(st == ((sat != 0u) ? STSP_WARN_SATURATED
+    fuzz_check(st == ((sat != 0u) ? STSP_WARN_SATURATED
                     : m->fallback ? STSP_WARN_BAND_FALLBACK : tick_st));
-    fz_check(c->sat_mask == sat);
-    fz_check((c->latched != 0u) && (c->stage == 0u));
+    fuzz_check(c->sat_mask == sat);
+    fuzz_check((c->latched != 0u) && (c->stage == 0u));
     for (i = 0u; i < t->n_latch; ++i) {
-        fz_check(fz_f32_bits(c->v[i]) == fz_f32_bits(m->v[i]));
+        fuzz_check(fz_f32_bits(c->v[i]) == fz_f32_bits(m->v[i]));
     }
 }
 #endif
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
-    fz_in_t in = {data, size};
+    fuzz_in_t in = {data, size};
     stsp_table_t t;
     stsp_ctrl_t c, before;
     fz_table_info_t info;
@@ -894,38 +861,38 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     memset(&c, 0xA5, sizeof c);                                   /* garbage before init */
     ready = 0;
     for (call = 0u; (call < FZ_MAX_CALLS) && (in.n > 0u); ++call) {
-        const uint32_t op = fz_u8(&in);
+        const uint32_t op = fuzz_u8(&in);
         if (op < 12u) {                                           /* (re)init */
-            const uint32_t want_nx = fz_u8(&in) % 8u, want_nu = fz_u8(&in) % 5u;
+            const uint32_t want_nx = fuzz_u8(&in) % 8u, want_nu = fuzz_u8(&in) % 5u;
             const stsp_status_t st = ((op & 1u) != 0u)
                 ? stsp_init_expect(&c, &t, want_nx, want_nu)
                 : stsp_init(&c, &t);
-            fz_check(fz_known_status(st) && (st <= STSP_OK));
+            fuzz_check(fz_known_status(st) && (st <= STSP_OK));
             if (modelled) {
                 stsp_status_t want = init_expected;
                 if (((op & 1u) != 0u) && (want == STSP_OK) &&
                     ((t.nx != want_nx) || (t.nu != want_nu))) {
                     want = STSP_ERR_BAD_DIMS;
                 }
-                fz_check(st == want);
+                fuzz_check(st == want);
             }
             if (band_invalid) {
-                fz_check(st != STSP_OK);
+                fuzz_check(st != STSP_OK);
             }
             ready = (st == STSP_OK);
             model_next = 0u;
             if (ready) {
-                fz_check(c.next_tick == 0u);
+                fuzz_check(c.next_tick == 0u);
             }
         } else if (op < 18u) {
             const stsp_status_t st = stsp_reset(&c);
-            fz_check(st == (ready ? STSP_OK : STSP_ERR_NOT_INITIALIZED));
+            fuzz_check(st == (ready ? STSP_OK : STSP_ERR_NOT_INITIALIZED));
             model_next = 0u;
         } else if (op < 20u) {
             const stsp_status_t st = stsp_verify(&c);
-            fz_check(st == (ready ? STSP_OK : STSP_ERR_NOT_INITIALIZED));
+            fuzz_check(st == (ready ? STSP_OK : STSP_ERR_NOT_INITIALIZED));
         } else {                                                  /* step */
-            const uint32_t how = fz_u8(&in) % 8u;
+            const uint32_t how = fuzz_u8(&in) % 8u;
             fz_val_t x[FZ_MAX_NX + 1u], u[STSP_MAX_NU + 1u];
             const uint32_t nx = ready ? t.nx : FZ_MAX_NX, nu = ready ? t.nu : FZ_MAX_NU;
             uint32_t tick, i;
@@ -938,10 +905,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             switch (how) {
             case 0u: case 1u: case 2u: tick = model_next; break;
             case 3u: tick = model_next - 1u; break;               /* repeat (or wrap) */
-            case 4u: tick = model_next + 1u + fz_u8(&in) % 4u; break;
-            case 5u: tick = fz_u8(&in); break;
-            case 6u: tick = ready ? t.n_ticks + fz_u8(&in) % 2u : 0u; break;
-            default: tick = fz_u32(&in); break;
+            case 4u: tick = model_next + 1u + fuzz_u8(&in) % 4u; break;
+            case 5u: tick = fuzz_u8(&in); break;
+            case 6u: tick = ready ? t.n_ticks + fuzz_u8(&in) % 2u : 0u; break;
+            default: tick = fuzz_u32(&in); break;
             }
             for (i = 0u; i < nx; ++i) {
                 x[i] = fz_value(&in);
@@ -954,8 +921,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             if (((op & 0xF0u) == 0xF0u) && ((op & 7u) != 7u)) {     /* NULL arguments */
                 st = stsp_step((op & 1u) ? &c : NULL, tick, (op & 2u) ? x : NULL,
                                (op & 4u) ? u : NULL);
-                fz_check(fz_known_status(st) && (st < STSP_OK));
-                fz_check(memcmp(&c, &before, sizeof c) == 0);
+                fuzz_check(fz_known_status(st) && (st < STSP_OK));
+                fuzz_check(memcmp(&c, &before, sizeof c) == 0);
                 continue;
             }
 #ifndef STSP_ARITH_FIXED
@@ -969,7 +936,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             }
 #endif
             st = stsp_step(&c, tick, x, u);
-            fz_check(fz_known_status(st));
+            fuzz_check(fz_known_status(st));
 #ifndef STSP_ARITH_FIXED
             if (band_latch) {
                 FZS(FZS_LATCH);
@@ -990,31 +957,31 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 }
             }
 #endif
-            fz_check(u[STSP_MAX_NU] == FZ_SENTINEL);                  /* nothing past the buffer */
+            fuzz_check(u[STSP_MAX_NU] == FZ_SENTINEL);                  /* nothing past the buffer */
             if (!ready) {
-                fz_check(st == STSP_ERR_NOT_INITIALIZED);
-                fz_check(u[0] == FZ_SENTINEL);                        /* u not written */
+                fuzz_check(st == STSP_ERR_NOT_INITIALIZED);
+                fuzz_check(u[0] == FZ_SENTINEL);                        /* u not written */
                 continue;
             }
-            fz_check(nu <= STSP_MAX_NU);
+            fuzz_check(nu <= STSP_MAX_NU);
             for (i = nu; i < STSP_MAX_NU; ++i) {
-                fz_check(u[i] == FZ_SENTINEL);
+                fuzz_check(u[i] == FZ_SENTINEL);
             }
             if (st < STSP_OK) {
                 for (i = 0u; i < nu; ++i) {
-                    fz_check(fz_is_zero(u[i]));
+                    fuzz_check(fz_is_zero(u[i]));
                 }
-                fz_check(memcmp(&c, &before, sizeof c) == 0);
+                fuzz_check(memcmp(&c, &before, sizeof c) == 0);
             } else {
                 for (i = 0u; i < nu; ++i) {
-                    fz_check(fz_finite(u[i]));
-                    fz_check((u[i] >= t.u_min[i]) && (u[i] <= t.u_max[i]));
+                    fuzz_check(fz_finite(u[i]));
+                    fuzz_check((u[i] >= t.u_min[i]) && (u[i] <= t.u_max[i]));
                     if ((st == STSP_WARN_SATURATED) && ((c.sat_mask >> i) & 1u)) {
-                        fz_check((u[i] == t.u_min[i]) || (u[i] == t.u_max[i]));
+                        fuzz_check((u[i] == t.u_min[i]) || (u[i] == t.u_max[i]));
                     }
                 }
                 if (st == STSP_WARN_SATURATED) {
-                    fz_check(c.sat_mask != 0u);
+                    fuzz_check(c.sat_mask != 0u);
                 }
             }
             /* The tick bookkeeping, in the documented order of checks. */
@@ -1026,27 +993,27 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             }
 #endif
             if (tick >= t.n_ticks) {
-                fz_check(st == STSP_ERR_TICK_RANGE);
+                fuzz_check(st == STSP_ERR_TICK_RANGE);
             } else if ((model_next > 0u) && (tick + 1u < model_next)) {
-                fz_check(st == STSP_ERR_TICK_ORDER);
+                fuzz_check(st == STSP_ERR_TICK_ORDER);
             } else if (!finite) {
-                fz_check(st == STSP_ERR_NONFINITE_STATE);
+                fuzz_check(st == STSP_ERR_NONFINITE_STATE);
             } else if (st >= STSP_OK) {
                 if (st != STSP_WARN_SATURATED) {
 #ifndef STSP_ARITH_FIXED
-                    fz_check(st == ((band_latch && latch.fallback) ? STSP_WARN_BAND_FALLBACK
+                    fuzz_check(st == ((band_latch && latch.fallback) ? STSP_WARN_BAND_FALLBACK
                                                                    : tick_st));
 #else
-                    fz_check(st == tick_st);
+                    fuzz_check(st == tick_st);
 #endif
                 }
                 if (tick + 1u > model_next) {
                     model_next = tick + 1u;
                 }
             } else {
-                fz_check(st == STSP_ERR_NONFINITE_OUTPUT);
+                fuzz_check(st == STSP_ERR_NONFINITE_OUTPUT);
             }
-            fz_check(c.next_tick == model_next);
+            fuzz_check(c.next_tick == model_next);
         }
     }
     return 0;

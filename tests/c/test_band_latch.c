@@ -25,7 +25,7 @@ static const float no_min[1] = {-FLT_MAX}, no_max[1] = {FLT_MAX};
  * x0 = (1.5, 0.25): row 1 inactive, lam = ((1.5 - 0.5) / 2, 0) = (0.5, 0);
  * x0 = (0.5, 3):    row 1 at its upper bound, W lam = (0, 2): lam = (-1, 4) / 1.75. */
 static const uint32_t d_start[3] = {0u, 2u, 4u};
-static const uint16_t d_np[2] = {2u, 0u};
+static const uint16_t d_stage_n_latch[2] = {2u, 0u};
 static const float d_K[4 * 2] = {0.25f, 0.25f, 0.25f, 0.25f, 0.25f, 0.25f, 0.25f, 0.25f};
 static const float d_k0[4] = {0.0f, 0.0f, 0.0f, 0.0f};
 static const float d_L[4 * 2] = {1.0f, 10.0f, 1.0f, 10.0f, 1.0f, 10.0f, 1.0f, 10.0f};
@@ -42,13 +42,8 @@ static const double d_hi[2] = {0.5, 1.0};
 
 static stsp_table_t make_table_d(const stsp_bandqp_t *qp)
 {
-    stsp_table_t t;
-    memset(&t, 0, sizeof t);
-    t.magic = STSP_TABLE_MAGIC;
-    t.format_version = STSP_FORMAT_VERSION;
-    t.scalar_kind = STSP_SCALAR_FLOAT32;
-    t.nx = 2u; t.nu = 1u; t.n_latch = 2u; t.n_stages = 2u; t.n_ticks = 4u; t.tick_hz = 1u;
-    t.stage_start = d_start; t.stage_np = d_np;
+    stsp_table_t t = table_header(2u, 1u, 2u, 2u, 4u, 1u);
+    t.stage_start = d_start; t.stage_n_latch = d_stage_n_latch;
     t.K = d_K; t.k0 = d_k0; t.L = d_L; t.Lambda = d_Lambda; t.lambda0 = d_lambda0;
     t.u_min = no_min; t.u_max = no_max;
     t.band_qp = qp;
@@ -82,7 +77,7 @@ static void test_band_latch_solves_the_dual(void **state)
     assert_int_equal(stsp_step(&c, 0u, upper, u), STSP_OK);
     assert_true(c.v[0] == (float)(-1.0 / 1.75));
     assert_true(c.v[1] == (float)(4.0 / 1.75));
-    /* The multipliers stay for the rest of the plan: stage 1 (stage_np 0) does not relatch. */
+    /* The multipliers stay for the rest of the plan: stage 1 (stage_n_latch 0) does not relatch. */
     for (tick = 1u; tick < 4u; ++tick) {
         assert_int_equal(stsp_step(&c, tick, later, u), STSP_OK);
         assert_true(fabs(u[0] - (-(0.25 * 0.0) - (-1.0 / 1.75) - 10.0 * (4.0 / 1.75))) < 1e-5);
@@ -146,16 +141,16 @@ static void test_band_tables_are_checked(void **state)
 
     qp = good; qp.W = NULL; t = make_table_d(&good); t.band_qp = &qp;
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_NULL);
-    qp = good; qp.q = 1u; t = make_table_d(&qp);           /* q != stage_np[0] */
+    qp = good; qp.q = 1u; t = make_table_d(&qp);           /* q != stage_n_latch[0] */
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
     qp = good; qp.nx = 3u; t = make_table_d(&qp);          /* another state size */
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
     qp = good; qp.q = (uint16_t)(STSP_BANDQP_MAX + 1u); t = make_table_d(&qp);
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
-    qp = good; t = make_table_d(&qp); t.stage_np = np_later; /* a second latch */
+    qp = good; t = make_table_d(&qp); t.stage_n_latch = np_later; /* a second latch */
     t.crc32 = stsp_table_crc32(&t);
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
-    qp = good; t = make_table_d(&qp); t.stage_np = np_one;
+    qp = good; t = make_table_d(&qp); t.stage_n_latch = np_one;
     t.crc32 = stsp_table_crc32(&t);
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
     qp = good; qp.W = nan_W; t = make_table_d(&qp);

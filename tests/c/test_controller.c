@@ -21,20 +21,20 @@
  * ticks 3..4 (two). */
 #define NX 2u
 #define NU 1u
-#define NL 2u
+#define N_LATCH 2u
 #define NT 5u
 #define NS 2u
 
 static const uint32_t stage_start[NS + 1u] = {0u, 3u, 5u};
-static const uint16_t stage_np[NS] = {1u, 2u};
+static const uint16_t stage_n_latch[NS] = {1u, 2u};
 static const float K[NT * NU * NX] = {0.5f, -1.0f, 0.6f, -1.1f, 0.7f, -1.2f,
                                       0.8f, -1.3f, 0.9f, -1.4f};
 static const float k0[NT * NU] = {0.1f, 0.2f, 0.3f, 0.4f, 0.5f};
-static const float L[NT * NU * NL] = {2.0f, 0.0f, 2.5f, 0.0f, 3.0f, 0.0f,
+static const float L[NT * NU * N_LATCH] = {2.0f, 0.0f, 2.5f, 0.0f, 3.0f, 0.0f,
                                       1.0f, -1.0f, 1.5f, -1.5f};
-static const float Lambda[NS * NL * NX] = {1.0f, 2.0f, 0.0f, 0.0f,
+static const float Lambda[NS * N_LATCH * NX] = {1.0f, 2.0f, 0.0f, 0.0f,
                                            -1.0f, 0.5f, 0.25f, 3.0f};
-static const float lambda0[NS * NL] = {-0.5f, 0.0f, 1.0f, -2.0f};
+static const float lambda0[NS * N_LATCH] = {-0.5f, 0.0f, 1.0f, -2.0f};
 static const float no_min[NU] = {-FLT_MAX}, no_max[NU] = {FLT_MAX};
 static const float tight_min[NU] = {-0.25f}, tight_max[NU] = {0.5f};
 static const float wide_min[NU] = {-1000.0f}, wide_max[NU] = {1000.0f};
@@ -46,13 +46,8 @@ static const float wide_min[NU] = {-1000.0f}, wide_max[NU] = {1000.0f};
 
 static stsp_table_t make_table_limited(const float *lo, const float *hi)
 {
-    stsp_table_t t;
-    memset(&t, 0, sizeof t);
-    t.magic = STSP_TABLE_MAGIC;
-    t.format_version = STSP_FORMAT_VERSION;
-    t.scalar_kind = STSP_SCALAR_FLOAT32;
-    t.nx = NX; t.nu = NU; t.n_latch = NL; t.n_stages = NS; t.n_ticks = NT; t.tick_hz = 10u;
-    t.stage_start = stage_start; t.stage_np = stage_np;
+    stsp_table_t t = table_header(NX, NU, N_LATCH, NS, NT, 10u);
+    t.stage_start = stage_start; t.stage_n_latch = stage_n_latch;
     t.K = K; t.k0 = k0; t.L = L; t.Lambda = Lambda; t.lambda0 = lambda0;
     t.u_min = lo; t.u_max = hi;
     t.crc32 = stsp_table_crc32(&t);
@@ -67,20 +62,15 @@ static stsp_table_t make_table(void)
 /* Table B: nx = 1, nu = 2, no multipliers (n_latch = 0, L/Lambda/lambda0 NULL), one stage of
  * 3 ticks, u = -(x, x). A different shape: a fixed 2/1/2 build must refuse it. */
 static const uint32_t b_start[2] = {0u, 3u};
-static const uint16_t b_np[1] = {0u};
+static const uint16_t b_stage_n_latch[1] = {0u};
 static const float b_K[3 * 2] = {1.0f, 1.0f, 1.0f, 1.0f, 1.0f, 1.0f};
 static const float b_k0[3 * 2] = {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
 static const float b_min[2] = {-FLT_MAX, -FLT_MAX}, b_max[2] = {FLT_MAX, FLT_MAX};
 
 static stsp_table_t make_table_b(void)
 {
-    stsp_table_t t;
-    memset(&t, 0, sizeof t);
-    t.magic = STSP_TABLE_MAGIC;
-    t.format_version = STSP_FORMAT_VERSION;
-    t.scalar_kind = STSP_SCALAR_FLOAT32;
-    t.nx = 1u; t.nu = 2u; t.n_latch = 0u; t.n_stages = 1u; t.n_ticks = 3u; t.tick_hz = 1u;
-    t.stage_start = b_start; t.stage_np = b_np; t.K = b_K; t.k0 = b_k0;
+    stsp_table_t t = table_header(1u, 2u, 0u, 1u, 3u, 1u);
+    t.stage_start = b_start; t.stage_n_latch = b_stage_n_latch; t.K = b_K; t.k0 = b_k0;
     t.u_min = b_min; t.u_max = b_max;
     t.crc32 = stsp_table_crc32(&t);
     return t;
@@ -97,18 +87,18 @@ static double reference_u_latched(uint32_t tick, const float *x, const float *la
                                   uint32_t latch_stage)
 {
     uint32_t i, j;
-    double v[NL] = {0.0, 0.0}, acc = k0[tick];
-    for (i = 0u; i < stage_np[latch_stage]; ++i) {
-        v[i] = lambda0[latch_stage * NL + i];
+    double v[N_LATCH] = {0.0, 0.0}, acc = k0[tick];
+    for (i = 0u; i < stage_n_latch[latch_stage]; ++i) {
+        v[i] = lambda0[latch_stage * N_LATCH + i];
         for (j = 0u; j < NX; ++j) {
-            v[i] += (double)Lambda[(latch_stage * NL + i) * NX + j] * latch_x[j];
+            v[i] += (double)Lambda[(latch_stage * N_LATCH + i) * NX + j] * latch_x[j];
         }
     }
     for (j = 0u; j < NX; ++j) {
         acc += (double)K[tick * NX + j] * x[j];
     }
-    for (i = 0u; i < NL; ++i) {
-        acc += (double)L[tick * NL + i] * v[i];
+    for (i = 0u; i < N_LATCH; ++i) {
+        acc += (double)L[tick * N_LATCH + i] * v[i];
     }
     return -acc;
 }
@@ -479,10 +469,10 @@ static void test_corrupt_tables_are_refused(void **state)
 {
     stsp_table_t t;
     stsp_ctrl_t c;
-    float Kbad[NT * NU * NX], Lnan[NT * NU * NL], lam0inf[NS * NL];
+    float Kbad[NT * NU * NX], Lnan[NT * NU * N_LATCH], lam0inf[NS * N_LATCH];
     const uint32_t bad_start[NS + 1u] = {0u, 3u, 3u};
     const uint32_t bad_first[NS + 1u] = {1u, 3u, 5u};
-    const uint16_t bad_np[NS] = {1u, 3u};
+    const uint16_t bad_stage_n_latch[NS] = {1u, 3u};
     const float pos_min[NU] = {0.5f}, neg_max[NU] = {-0.5f}, nan_lim[NU] = {NAN};
     const float inf_max[NU] = {INFINITY}, swapped_min[NU] = {1.0f}, swapped_max[NU] = {-1.0f};
     const float x[NX] = {0.0f, 0.0f};
@@ -531,7 +521,7 @@ static void test_corrupt_tables_are_refused(void **state)
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
     t = make_table(); t.stage_start = bad_first;
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
-    t = make_table(); t.stage_np = bad_np;
+    t = make_table(); t.stage_n_latch = bad_stage_n_latch;
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
     t = make_table(); t.n_ticks = 6u;    /* disagrees with stage_start[n_stages] */
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
@@ -622,7 +612,7 @@ static void change_header(stsp_table_t *t, int which, const stsp_bandqp_t *band,
     switch (which) {
     case HDR_NX: t->nx = NX + 1u; break;
     case HDR_NU: t->nu = NU + 1u; break;          /* the nu 2 -> 3, here 1 -> 2 */
-    case HDR_NL: t->n_latch = NL + 1u; break;
+    case HDR_NL: t->n_latch = N_LATCH + 1u; break;
     case HDR_NS: t->n_stages = NS + 1u; break;
     case HDR_NT: t->n_ticks = NT + 1u; break;
     case HDR_K: t->K = t->k0; break;              /* an array half as long */
@@ -886,7 +876,7 @@ static void test_random_walk_against_model(void **state)
                 continue;
             }
             stage = (tick >= stage_start[1]) ? 1u : 0u;
-            relatch = !m_latched || (stage != m_stage && stage_np[stage] > 0u);
+            relatch = !m_latched || (stage != m_stage && stage_n_latch[stage] > 0u);
             /* a v latched from a huge state stays huge until the next latch */
             huge_now = huge || (!relatch && m_latch_huge);
             if (huge_now && st == STSP_ERR_NONFINITE_OUTPUT) {

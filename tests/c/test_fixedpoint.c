@@ -26,20 +26,20 @@
 #define QMIN ((stsp_scalar_t)(-ONE))
 #define NX 2u
 #define NU 1u
-#define NL 2u
+#define N_LATCH 2u
 #define NT 5u
 #define NS 2u
 
 static const uint32_t stage_start[NS + 1u] = {0u, 3u, 5u};
-static const uint16_t stage_np[NS] = {1u, 2u};
+static const uint16_t stage_n_latch[NS] = {1u, 2u};
 static const int8_t x_exp[NX] = {2, -3};
 static const int8_t u_exp[NU] = {4};
-static const int8_t v_exp[NL] = {1, 0};
+static const int8_t v_exp[N_LATCH] = {1, 0};
 
 /* Gains as fractions of 2^F so that both variants use the same table shape. Tick 0: K = (1, 0)
  * units, nothing else: the rounding test. Row sums stay well below 2^F - 1. */
-static stsp_scalar_t K[NT * NU * NX], k0[NT * NU], L[NT * NU * NL];
-static stsp_scalar_t Lambda[NS * NL * NX], lambda0[NS * NL];
+static stsp_scalar_t K[NT * NU * NX], k0[NT * NU], L[NT * NU * N_LATCH];
+static stsp_scalar_t Lambda[NS * N_LATCH * NX], lambda0[NS * N_LATCH];
 static stsp_scalar_t no_min[NU], no_max[NU];
 
 static stsp_scalar_t frac(double f)
@@ -52,9 +52,9 @@ static void fill_gains(void)
     static const double kf[NT * NX] = {0.0, 0.0, 0.11, -0.21, 0.12, -0.22, 0.13, -0.23,
                                        0.14, -0.24};
     static const double k0f[NT] = {0.0, 0.05, -0.06, 0.07, -0.08};
-    static const double lf[NT * NL] = {0.0, 0.0, 0.2, 0.0, 0.25, 0.0, 0.1, -0.1, 0.15, -0.15};
-    static const double lamf[NS * NL * NX] = {0.3, 0.4, 0.0, 0.0, -0.35, 0.15, 0.05, 0.3};
-    static const double lam0f[NS * NL] = {-0.1, 0.0, 0.2, -0.25};
+    static const double lf[NT * N_LATCH] = {0.0, 0.0, 0.2, 0.0, 0.25, 0.0, 0.1, -0.1, 0.15, -0.15};
+    static const double lamf[NS * N_LATCH * NX] = {0.3, 0.4, 0.0, 0.0, -0.35, 0.15, 0.05, 0.3};
+    static const double lam0f[NS * N_LATCH] = {-0.1, 0.0, 0.2, -0.25};
     uint32_t i;
     for (i = 0u; i < NT * NX; ++i) {
         K[i] = frac(kf[i]);
@@ -63,13 +63,13 @@ static void fill_gains(void)
     for (i = 0u; i < NT; ++i) {
         k0[i] = frac(k0f[i]);
     }
-    for (i = 0u; i < NT * NL; ++i) {
+    for (i = 0u; i < NT * N_LATCH; ++i) {
         L[i] = frac(lf[i]);
     }
-    for (i = 0u; i < NS * NL * NX; ++i) {
+    for (i = 0u; i < NS * N_LATCH * NX; ++i) {
         Lambda[i] = frac(lamf[i]);
     }
-    for (i = 0u; i < NS * NL; ++i) {
+    for (i = 0u; i < NS * N_LATCH; ++i) {
         lambda0[i] = frac(lam0f[i]);
     }
     no_min[0] = QMIN;
@@ -78,13 +78,8 @@ static void fill_gains(void)
 
 static stsp_table_t make_table_limited(const stsp_scalar_t *lo, const stsp_scalar_t *hi)
 {
-    stsp_table_t t;
-    memset(&t, 0, sizeof t);
-    t.magic = STSP_TABLE_MAGIC;
-    t.format_version = STSP_FORMAT_VERSION;
-    t.scalar_kind = STSP_SCALAR_KIND;
-    t.nx = NX; t.nu = NU; t.n_latch = NL; t.n_stages = NS; t.n_ticks = NT; t.tick_hz = 10u;
-    t.stage_start = stage_start; t.stage_np = stage_np;
+    stsp_table_t t = table_header(NX, NU, N_LATCH, NS, NT, 10u);
+    t.stage_start = stage_start; t.stage_n_latch = stage_n_latch;
     t.K = K; t.k0 = k0; t.L = L; t.Lambda = Lambda; t.lambda0 = lambda0;
     t.u_min = lo; t.u_max = hi;
     t.x_exp = x_exp; t.u_exp = u_exp; t.v_exp = v_exp;
@@ -118,12 +113,12 @@ static int64_t ref_round(int64_t sum)
 static void ref_latch(const stsp_table_t *t, uint32_t s, const stsp_scalar_t *x, int64_t *v)
 {
     uint32_t c, j;
-    for (c = 0u; c < NL; ++c) {
-        int64_t sum = (int64_t)t->lambda0[s * NL + c] * ONE;
+    for (c = 0u; c < N_LATCH; ++c) {
+        int64_t sum = (int64_t)t->lambda0[s * N_LATCH + c] * ONE;
         for (j = 0u; j < NX; ++j) {
-            sum += (int64_t)t->Lambda[(s * NL + c) * NX + j] * x[j];
+            sum += (int64_t)t->Lambda[(s * N_LATCH + c) * NX + j] * x[j];
         }
-        v[c] = (c < t->stage_np[s]) ? ref_round(sum) : 0;
+        v[c] = (c < t->stage_n_latch[s]) ? ref_round(sum) : 0;
     }
 }
 
@@ -135,8 +130,8 @@ static int64_t ref_law(const stsp_table_t *t, uint32_t tick, const stsp_scalar_t
     for (j = 0u; j < NX; ++j) {
         sum += (int64_t)t->K[tick * NX + j] * x[j];
     }
-    for (j = 0u; j < NL; ++j) {
-        sum += (int64_t)t->L[tick * NL + j] * v[j];
+    for (j = 0u; j < N_LATCH; ++j) {
+        sum += (int64_t)t->L[tick * N_LATCH + j] * v[j];
     }
     return ref_round(sum);
 }
@@ -166,7 +161,7 @@ static void test_law_matches_reference(void **state)
     for (trial = 0u; trial < 2000u; ++trial) {
         stsp_ctrl_t c;
         stsp_scalar_t xl[NX], x[NX], u[NU];
-        int64_t v[NL];
+        int64_t v[N_LATCH];
         uint32_t tick;
         assert_int_equal(stsp_init(&c, &t), STSP_OK);
         for (tick = 0u; tick < NT; ++tick) {
@@ -208,8 +203,8 @@ static void test_rounding_is_half_up(void **state)
 /* Extreme table: every law row and latch row at the largest allowed absolute sum 2^F - 1,
  * states at the Q range ends in every sign pattern: the result matches the reference and
  * stays within +-(2^F - 1); under UBSan an accumulator overflow would abort. */
-static stsp_scalar_t xk[NT * NU * NX], xk0[NT * NU], xl_[NT * NU * NL];
-static stsp_scalar_t xlam[NS * NL * NX], xlam0[NS * NL];
+static stsp_scalar_t xk[NT * NU * NX], xk0[NT * NU], xl_[NT * NU * N_LATCH];
+static stsp_scalar_t xlam[NS * N_LATCH * NX], xlam0[NS * N_LATCH];
 
 static stsp_table_t make_extreme(int sign)
 {
@@ -222,10 +217,10 @@ static stsp_table_t make_extreme(int sign)
         xk[i * NX] = q4;
         xk[i * NX + 1u] = (stsp_scalar_t)-q4;
         xk0[i] = q4;
-        xl_[i * NL] = q8;
-        xl_[i * NL + 1u] = (stsp_scalar_t)(-(q8 - sign)); /* 3/4 + 1/8 + 1/8 - 1 LSB */
+        xl_[i * N_LATCH] = q8;
+        xl_[i * N_LATCH + 1u] = (stsp_scalar_t)(-(q8 - sign)); /* 3/4 + 1/8 + 1/8 - 1 LSB */
     }
-    for (i = 0u; i < NS * NL; ++i) {
+    for (i = 0u; i < NS * N_LATCH; ++i) {
         xlam0[i] = q2;
         xlam[i * NX] = (stsp_scalar_t)-q4;
         xlam[i * NX + 1u] = (stsp_scalar_t)(q4 - sign); /* 1/2 + 1/4 + 1/4 - 1 LSB */
@@ -245,7 +240,7 @@ static void test_extreme_rows_do_not_overflow(void **state)
         for (pattern = 0u; pattern < 16u; ++pattern) {
             stsp_ctrl_t c;
             stsp_scalar_t x[NX], xl[NX], u[NU];
-            int64_t v[NL];
+            int64_t v[N_LATCH];
             uint32_t tick;
             xl[0] = (pattern & 1u) ? QMAX : QMIN;
             xl[1] = (pattern & 2u) ? QMAX : QMIN;
@@ -289,7 +284,7 @@ static void test_row_sum_over_limit_is_refused(void **state)
     t.crc32 = stsp_table_crc32(&t);
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
     t = make_extreme(-1);
-    xl_[NT * NL - 1u] = QMIN; /* one huge entry */
+    xl_[NT * N_LATCH - 1u] = QMIN; /* one huge entry */
     t.crc32 = stsp_table_crc32(&t);
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
 }
@@ -326,12 +321,12 @@ static void test_wrong_variant_and_scales_are_refused(void **state)
 
 /* The band dual is a float32 feature (binary32 multipliers from a double solver): a fixed-point
  * build refuses a table with band_qp, even one that is valid in every other respect and whose
- * band dual meets the float32 contract (q = stage_np[0], no later latch, nx the table's,
+ * band dual meets the float32 contract (q = stage_n_latch[0], no later latch, nx the table's,
  * W > 0, lo <= hi), with STSP_ERR_BAD_DIMS and the CRC recomputed over the band data, so that
  * the refusal is not a CRC failure; the instance stays not ready. */
 static void test_band_table_is_refused(void **state)
 {
-    static const uint16_t joint_np[NS] = {2u, 0u};
+    static const uint16_t joint_stage_n_latch[NS] = {2u, 0u};
     static const double Nt[2 * NX] = {1.0, 0.0, 0.0, 1.0};
     static const double mt[2] = {0.0, 0.0};
     static const double W[2 * 2] = {2.0, 0.5, 0.5, 1.0};
@@ -343,7 +338,7 @@ static void test_band_table_is_refused(void **state)
     stsp_ctrl_t c;
     stsp_table_t t = make_table();
     (void)state;
-    t.stage_np = joint_np;
+    t.stage_n_latch = joint_stage_n_latch;
     t.crc32 = stsp_table_crc32(&t);
     assert_int_equal(stsp_init(&c, &t), STSP_OK); /* the joint layout alone is valid */
 
@@ -367,7 +362,7 @@ static void test_crc_covers_scales_and_kind(void **state)
     stsp_ctrl_t c;
     stsp_table_t t = make_table();
     const uint32_t crc = t.crc32;
-    int8_t exps[NL] = {1, 0};
+    int8_t exps[N_LATCH] = {1, 0};
     stsp_table_t k = t;
     (void)state;
     t.v_exp = exps;
@@ -514,7 +509,7 @@ static void test_table_changed_after_init(void **state)
         case 2u: t.n_ticks = NT + 1u; break;
         case 3u: t.K = t.k0; break;             /* an array half as long */
         case 4u: t.x_exp = t.u_exp; break;      /* one exponent where two were */
-        default: t.n_latch = NL + 1u; break;
+        default: t.n_latch = N_LATCH + 1u; break;
         }
         for (tick = 1u; tick <= NT; ++tick) {
             assert_int_equal(stsp_step(&c, tick, x, u), stsp_step(&ref, tick, x, u_ref));
@@ -555,10 +550,10 @@ static void test_gains_changed_after_init_do_not_overflow(void **state)
     for (i = 0u; i < NT * NU * NX; ++i) {
         K[i] = QMIN;                            /* K x alone: 2 * 2^(2F) per row */
     }
-    for (i = 0u; i < NT * NU * NL; ++i) {
+    for (i = 0u; i < NT * NU * N_LATCH; ++i) {
         L[i] = QMIN;
     }
-    for (i = 0u; i < NS * NL * NX; ++i) {
+    for (i = 0u; i < NS * N_LATCH * NX; ++i) {
         Lambda[i] = QMIN;
     }
     k0[1] = QMAX;

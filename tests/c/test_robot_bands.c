@@ -65,7 +65,7 @@ static void test_header_and_band_dual(void **state)
     assert_int_equal(robot_bands_table.format_version, STSP_FORMAT_VERSION);
     assert_non_null(robot_bands_table.band_qp);
     assert_int_equal(robot_bands_table.band_qp->q, ROBOT_BANDS_BAND_ROWS);
-    assert_int_equal(robot_bands_table.stage_np[0], ROBOT_BANDS_BAND_ROWS);
+    assert_int_equal(robot_bands_table.stage_n_latch[0], ROBOT_BANDS_BAND_ROWS);
     assert_int_equal(robot_bands_table.n_latch, ROBOT_BANDS_N_LATCH);
     assert_int_equal(stsp_table_crc32(&robot_bands_table), robot_bands_table.crc32);
 }

@@ -14,6 +14,25 @@ static inline uint32_t f32_bits(float value)
     return bits;
 }
 
+/* A table header of this build's arithmetic and these dimensions, every array NULL: the
+ * caller sets the arrays it has, then the CRC. */
+static inline stsp_table_t table_header(uint16_t nx, uint16_t nu, uint16_t n_latch,
+                                        uint16_t n_stages, uint32_t n_ticks, uint32_t tick_hz)
+{
+    stsp_table_t t;
+    memset(&t, 0, sizeof t);
+    t.magic = STSP_TABLE_MAGIC;
+    t.format_version = STSP_FORMAT_VERSION;
+    t.scalar_kind = STSP_SCALAR_KIND;
+    t.nx = nx;
+    t.nu = nu;
+    t.n_latch = n_latch;
+    t.n_stages = n_stages;
+    t.n_ticks = n_ticks;
+    t.tick_hz = tick_hz;
+    return t;
+}
+
 /* Heap blocks of exactly the size asked. The unit tests are compiled without ASan (only the
  * controller of the _san builds is instrumented), so their own stack and static arrays have no
  * red zones; a block from ASan's malloc has, so a read or write by the controller beyond one
@@ -31,7 +50,7 @@ static inline stsp_table_t heap_table(stsp_table_t t)
 {
     const size_t s = sizeof(stsp_scalar_t), nt = t.n_ticks, ns = t.n_stages;
     t.stage_start = heap_copy(t.stage_start, (ns + 1u) * sizeof(uint32_t));
-    t.stage_np = heap_copy(t.stage_np, ns * sizeof(uint16_t));
+    t.stage_n_latch = heap_copy(t.stage_n_latch, ns * sizeof(uint16_t));
     t.K = heap_copy(t.K, nt * t.nu * t.nx * s);
     t.k0 = heap_copy(t.k0, nt * t.nu * s);
     t.L = heap_copy(t.L, nt * t.nu * t.n_latch * s);
@@ -50,7 +69,7 @@ static inline stsp_table_t heap_table(stsp_table_t t)
 static inline void free_heap_table(const stsp_table_t *t)
 {
     free((void *)t->stage_start);
-    free((void *)t->stage_np);
+    free((void *)t->stage_n_latch);
     free((void *)t->K);
     free((void *)t->k0);
     free((void *)t->L);

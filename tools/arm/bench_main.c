@@ -14,7 +14,7 @@
  * After the loop it prints one line per stsp_step call, in call order, which the script
  * pairs with the calls it finds in QEMU's execution trace, and the table's dimensions:
  *     call <index> table <0|1|2> tick <tick> stage <stage> latch <0|1> status <status>
- *     table nx <nx> nu <nu> n_latch <n_latch> stage_np <np0> <np1> ... */
+ *     table nx <nx> nu <nu> n_latch <n_latch> stage_n_latch <np0> <np1> ... */
 #include <stdint.h>
 #include <stdio.h>
 
@@ -49,7 +49,7 @@ static void bench_step(stsp_ctrl_t *c, uint32_t tick, const stsp_scalar_t *x, ui
         rec->stage = (uint8_t)c->stage;
         rec->table = table;
         rec->latch = (uint8_t)((latched_before == 0u ||
-                                (c->stage != stage_before && c->table->stage_np[c->stage] > 0u))
+                                (c->stage != stage_before && c->table->stage_n_latch[c->stage] > 0u))
                                    ? 1u
                                    : 0u);
     }
@@ -134,10 +134,10 @@ int main(void)
     }
     printf("bench: %lu calls, sizeof(stsp_ctrl_t) %lu\n", (unsigned long)n_calls,
            (unsigned long)sizeof(stsp_ctrl_t));
-    printf("table nx %u nu %u n_latch %u stage_np", (unsigned)ROBOT_TABLE.nx,
+    printf("table nx %u nu %u n_latch %u stage_n_latch", (unsigned)ROBOT_TABLE.nx,
            (unsigned)ROBOT_TABLE.nu, (unsigned)ROBOT_TABLE.n_latch);
     for (i = 0u; i < ROBOT_TABLE.n_stages; ++i) {
-        printf(" %u", (unsigned)ROBOT_TABLE.stage_np[i]);
+        printf(" %u", (unsigned)ROBOT_TABLE.stage_n_latch[i]);
     }
     printf("\n");
     return 0;

@@ -159,12 +159,12 @@ def trace_calls(build: Path, image: str, machine: str = "mps2-an386"
     for c, (n, muls) in zip(calls, counts):
         c["insns"], c["fmuls"] = n, muls
     m = re.search(r"sizeof\(stsp_ctrl_t\) (\d+)", out)
-    dims = re.search(r"table nx (\d+) nu (\d+) n_latch (\d+) stage_np([ \d]+)", out)
+    dims = re.search(r"table nx (\d+) nu (\d+) n_latch (\d+) stage_n_latch([ \d]+)", out)
     return calls, funcs, {"trace_lines": lines, "dfilter": dfilter,
                           "sizeof_ctrl": int(m.group(1)) if m else None,
                           "nx": int(dims.group(1)), "nu": int(dims.group(2)),
                           "n_latch": int(dims.group(3)),
-                          "stage_np": [int(v) for v in dims.group(4).split()]}
+                          "stage_n_latch": [int(v) for v in dims.group(4).split()]}
 
 
 def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
@@ -259,7 +259,7 @@ def main() -> int:
             if only and image not in only:
                 continue
             calls, funcs, info = trace_calls(build, image, MACHINE[cpu])
-            nx, nu, np_of_stage, nl = info["nx"], info["nu"], info["stage_np"], info["n_latch"]
+            nx, nu, np_of_stage, nl = info["nx"], info["nu"], info["stage_n_latch"], info["n_latch"]
             where = ("Cortex-M4F, QEMU mps2-an386" if cpu == "cortex-m4" else
                      "Cortex-M0+ code (-mcpu=cortex-m0plus) on QEMU mps2-an385 (Cortex-M3)")
             print(f"== Instructions per stsp_step call, {where}, {variant}")

@@ -61,10 +61,10 @@ static int naive_step(naive_ctrl_t *c, uint32_t tick, const float *x, float *u)
     while (s + 1u < t->n_stages && t->stage_start[s + 1u] <= tick) {
         ++s;
     }
-    if (!c->latched || (s != c->stage && t->stage_np[s] > 0u)) {
+    if (!c->latched || (s != c->stage && t->stage_n_latch[s] > 0u)) {
         for (i = 0u; i < t->n_latch; ++i) {
             float acc = 0.0f;
-            if (i < t->stage_np[s]) {
+            if (i < t->stage_n_latch[s]) {
                 acc = t->lambda0[s * t->n_latch + i];
                 for (j = 0u; j < t->nx; ++j) {
                     acc += t->Lambda[(s * t->n_latch + i) * t->nx + j] * x[j];
@@ -119,16 +119,69 @@ static void report(const char *name, double *per_tick, double checksum)
            checksum);
 }
 
+/* One controller under test: reset to the plan's start, and one tick. */
+typedef void (*bench_reset_t)(void *ctrl);
+typedef int (*bench_step_t)(void *ctrl, uint32_t tick, const float *x, float *u);
+
+static void reset_stsp(void *ctrl)
+{
+    (void)stsp_reset((stsp_ctrl_t *)ctrl);
+}
+
+static int step_stsp(void *ctrl, uint32_t tick, const float *x, float *u)
+{
+    return stsp_step((stsp_ctrl_t *)ctrl, tick, x, u);
+}
+
+static void reset_naive(void *ctrl)
+{
+    naive_ctrl_t *c = (naive_ctrl_t *)ctrl;
+    const stsp_table_t *t = c->t;
+    memset(c, 0, sizeof *c);
+    c->t = t;
+}
+
+static int step_naive(void *ctrl, uint32_t tick, const float *x, float *u)
+{
+    return naive_step((naive_ctrl_t *)ctrl, tick, x, u);
+}
+
+/* Times BENCH_PLANS whole plans (reset untimed, then the NT recorded states in order):
+ * per_tick[plan] in ns. Returns the last plan's sum of commands (the checksum), or NAN when a
+ * step does not return STSP_OK. */
+static double time_plans(bench_reset_t reset, bench_step_t step, void *ctrl, double *per_tick)
+{
+    volatile float sink = 0.0f;
+    float acc = 0.0f;
+    float u[NU];
+    uint32_t plan, tick;
+    for (plan = 0u; plan < BENCH_PLANS; ++plan) {
+        double t0, t1;
+        acc = 0.0f;
+        reset(ctrl);
+        t0 = now_ns();
+        for (tick = 0u; tick < NT; ++tick) {
+            if (step(ctrl, tick, states[tick], u) != STSP_OK) {
+                return NAN;
+            }
+            acc += u[0] + u[1];
+        }
+        t1 = now_ns();
+        sink = acc;
+        per_tick[plan] = (t1 - t0) / (double)NT;
+    }
+    (void)sink;
+    return (double)acc;
+}
+
 int main(void)
 {
     static double per_tick[BENCH_PLANS];
     double x[NX] = {-5.0, 0.0, 1.0, 0.0};
     const double h = 1.0 / (double)ROBOT_CORRIDOR_TICK_HZ;
-    volatile float sink = 0.0f;
-    double checksum;
     stsp_ctrl_t ctrl;
     naive_ctrl_t naive;
-    uint32_t tick, plan;
+    uint32_t tick;
     float u[NU];
 
     /* States of the noise-free closed loop (exact ZOH of x'' = u per axis). */
@@ -149,47 +202,13 @@ int main(void)
         x[3] += h * u[1];
     }
 
-    checksum = 0.0;
-    for (plan = 0u; plan < BENCH_PLANS; ++plan) {
-        double t0, t1;
-        float acc = 0.0f;
-        (void)stsp_reset(&ctrl);
-        t0 = now_ns();
-        for (tick = 0u; tick < NT; ++tick) {
-            if (stsp_step(&ctrl, tick, states[tick], u) != STSP_OK) {
-                return 1;
-            }
-            acc += u[0] + u[1];
-        }
-        t1 = now_ns();
-        sink = acc;
-        checksum = (double)acc;
-        per_tick[plan] = (t1 - t0) / (double)NT;
-    }
 #ifdef STSP_FIXED_NX
-    report("stsp_step_fixed_4_2_4", per_tick, checksum);
+    report("stsp_step_fixed_4_2_4", per_tick, time_plans(reset_stsp, step_stsp, &ctrl, per_tick));
 #else
-    report("stsp_step_generic", per_tick, checksum);
+    report("stsp_step_generic", per_tick, time_plans(reset_stsp, step_stsp, &ctrl, per_tick));
 #endif
-
-    for (plan = 0u; plan < BENCH_PLANS; ++plan) {
-        double t0, t1;
-        float acc = 0.0f;
-        memset(&naive, 0, sizeof naive);
-        naive.t = &robot_corridor_table;
-        t0 = now_ns();
-        for (tick = 0u; tick < NT; ++tick) {
-            if (naive_step(&naive, tick, states[tick], u) != STSP_OK) {
-                return 1;
-            }
-            acc += u[0] + u[1];
-        }
-        t1 = now_ns();
-        sink = acc;
-        checksum = (double)acc;
-        per_tick[plan] = (t1 - t0) / (double)NT;
-    }
-    report("naive_generic_loops", per_tick, checksum);
-    (void)sink;
+    naive.t = &robot_corridor_table;
+    report("naive_generic_loops", per_tick,
+           time_plans(reset_naive, step_naive, &naive, per_tick));
     return 0;
 }

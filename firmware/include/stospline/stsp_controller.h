@@ -9,7 +9,7 @@
  *
  * Law, at tick j of stage s (time t0 + j / tick_hz):
  *
- *     at the stage's first tick, if stage_np[s] > 0:
+ *     at the stage's first tick, if stage_n_latch[s] > 0:
  *                                 v = Lambda[s] x + lambda0[s]          (latch)
  *       or, at stage 0 of a table with band_qp (band constraints lo <= E{C2 x(t_k)} <= hi):
  *                                 v = argmax of the band dual at x      (stsp_bandqp.h)
@@ -17,7 +17,7 @@
  *
  * where sat() clamps input i to [u_min[i], u_max[i]] (STSP_WARN_SATURATED says it did).
  * Stage-wise designs latch at every constrained stage; joint designs latch once, at stage 0
- * (stage_np[s] = 0 afterwards keeps v). Entries of v beyond stage_np[s] are set to zero.
+ * (stage_n_latch[s] = 0 afterwards keeps v). Entries of v beyond stage_n_latch[s] are set to zero.
  * The caller holds u until the next tick (zero-order hold).
  *
  * Evaluation order (fixed: the QEMU replay test checks the Cortex-M builds against the host
@@ -191,7 +191,7 @@ typedef enum {
  * Generated gain tables plus the header that stsp_init() verifies.
  * Layouts (row-major): K[tick][i*nx + j], k0[tick][i], L[tick][i*n_latch + c],
  * Lambda[stage][c*nx + j], lambda0[stage][c], u_min[i], u_max[i]; multiplier columns beyond a
- * stage's stage_np are zero. u_min[i] = -FLT_MAX and u_max[i] = FLT_MAX mean unlimited.
+ * stage's stage_n_latch are zero. u_min[i] = -FLT_MAX and u_max[i] = FLT_MAX mean unlimited.
  *
  * Fixed point (scalar_kind Q15/Q31, F = STSP_Q_FRAC_BITS): the entries are integers in
  * [-2^F, 2^F - 1] that carry the scales, and the law's gains are stored negated:
@@ -213,8 +213,8 @@ typedef struct {
     uint32_t n_ticks;        /**< ticks in the whole plan */
     uint32_t tick_hz;        /**< controller rate */
     const uint32_t *stage_start; /**< [n_stages + 1]: first tick of each stage, then n_ticks */
-    const uint16_t *stage_np;    /**< [n_stages]: multipliers latched at each stage start
-                                      (0: keep the v latched before) */
+    const uint16_t *stage_n_latch; /**< [n_stages]: multipliers latched at each stage start
+                                        (0: keep the v latched before) */
     const stsp_scalar_t *K;
     const stsp_scalar_t *k0;
     const stsp_scalar_t *L;
@@ -231,7 +231,7 @@ typedef struct {
     const stsp_bandqp_t *band_qp; /**< NULL, or the band dual of a joint design: the stage-0
                                       latch then solves it for the measured x0 (v[c] =
                                       (float)lam[c], c < q) instead of Lambda x + lambda0;
-                                      requires q == stage_np[0] and stage_np[s] == 0 for
+                                      requires q == stage_n_latch[0] and stage_n_latch[s] == 0 for
                                       s > 0 (one latch, at t0). float32 only: a fixed-point
                                       build refuses a table with one (STSP_ERR_BAD_DIMS) */
     uint32_t crc32;              /**< CRC-32 of dims and arrays, see stsp_table_crc32() */
@@ -254,7 +254,7 @@ typedef struct {
     const stsp_scalar_t *Lambda;
     const stsp_scalar_t *lambda0;
     const uint32_t *stage_start;
-    const uint16_t *stage_np;
+    const uint16_t *stage_n_latch;
 #ifdef STSP_ARITH_FIXED
     const int8_t *x_exp;
     const int8_t *u_exp;
@@ -276,7 +276,7 @@ typedef struct {
  */
 typedef struct {
     const stsp_table_t *table;
-    uint32_t ready;          /**< STSP_CTRL_READY after a successful init (private) */
+    uint32_t ready;          /**< a magic value after a successful init (private) */
     uint32_t next_tick;      /**< tick expected at the next step */
     uint32_t stage_end;      /**< first tick after `stage` once latched, else 0 (private) */
     uint16_t stage;          /**< stage of the last successful step */
@@ -288,16 +288,9 @@ typedef struct {
     stsp_header_t checked;   /**< the validated table header (private) */
 } stsp_ctrl_t;
 
-/** Value of stsp_ctrl_t.ready after a successful stsp_init(): a Thumb-2 immediate that no
- * byte-fill pattern of uninitialised memory (0x00, 0xFF, 0xA5, 0xCC, ...) matches. */
-#define STSP_CTRL_READY 0x53005300u
-/** Value of stsp_ctrl_t.ready after stsp_verify() found the table changed (private): the
- * instance is stopped, and stsp_step() holds zeros in the validated u[nu]. */
-#define STSP_CTRL_STOPPED 0x53015301u
-
 /**
  * CRC-32 (IEEE 802.3 polynomial, reflected, as zlib) of the table's canonical serialization:
- * nx, nu, n_latch, n_stages, n_ticks, tick_hz as little-endian u32; stage_start and stage_np
+ * nx, nu, n_latch, n_stages, n_ticks, tick_hz as little-endian u32; stage_start and stage_n_latch
  * as little-endian u32 each; then K, k0, L, Lambda, lambda0, u_min, u_max as little-endian
  * binary32 bit patterns (L, Lambda, lambda0 only when n_latch > 0). Fixed point: scalar_kind
  * as a u32 after tick_hz, the same arrays as little-endian int16 (Q15) or int32 (Q31), then

@@ -40,7 +40,7 @@ typedef struct {
     uint32_t magic; uint16_t format_version; uint16_t scalar_kind;
     uint16_t nx; uint16_t nu; uint16_t n_latch; uint16_t n_stages;
     uint32_t n_ticks; uint32_t tick_hz;
-    const uint32_t *stage_start; const uint16_t *stage_np;
+    const uint32_t *stage_start; const uint16_t *stage_n_latch;
     const stsp_scalar_t *K; const stsp_scalar_t *k0; const stsp_scalar_t *L;
     const stsp_scalar_t *Lambda; const stsp_scalar_t *lambda0;
     const stsp_scalar_t *u_min; const stsp_scalar_t *u_max;%(exps)s

@@ -197,7 +197,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     bar = progress.start("oracle", table.n_ticks)
     for k in range(table.n_stages):
         stage = problem.stages[k]
-        if k == 0 or table.stage_np[k] > 0:      # else: v latched earlier is kept
+        if k == 0 or table.stage_n_latch[k] > 0:      # else: v latched earlier is kept
             Lam = table.Lambda[k].astype(float)
             lam0 = table.lambda0[k].astype(float)
             if k == 0 and table.band_qp is not None:

@@ -111,7 +111,7 @@ extern const stsp_table_t {p}_table;
     T, e, lit, neg = table.n_ticks, v.element, v.literal, v.negated
     arrays = [
         _array("uint32_t", f"{p}_stage_start", table.stage_start, u32, "[n_stages + 1]"),
-        _array("uint16_t", f"{p}_stage_np", table.stage_np, u32, "[n_stages]"),
+        _array("uint16_t", f"{p}_stage_n_latch", table.stage_n_latch, u32, "[n_stages]"),
         _array(e, f"{p}_K", table.K, lit, f"{neg.format('K')}[n_ticks][nu][nx] = [{T}][{m}][{n}]"),
         _array(e, f"{p}_k0", table.k0, lit, f"{neg.format('k0')}[n_ticks][nu] = [{T}][{m}]"),
         _array(e, f"{p}_L", table.L, lit,
@@ -126,7 +126,7 @@ extern const stsp_table_t {p}_table;
 const stsp_table_t {p}_table = {{
     0x{MAGIC:08X}u, {FORMAT_VERSION}u, {v.scalar_kind}u,
     {n}u, {m}u, {n_latch}u, {table.n_stages}u, {table.n_ticks}u, {table.tick_hz}u,
-    {p}_stage_start, {p}_stage_np,
+    {p}_stage_start, {p}_stage_n_latch,
     {p}_K, {p}_k0, {p}_L, {p}_Lambda, {p}_lambda0,
     {p}_u_min, {p}_u_max,{v.tail_pointers}
     0x{table_crc32(table):08X}u,

@@ -63,9 +63,9 @@ class BandQP:
 
 class TableShape:
     """Shape of a per-tick table (float32 or fixed point) from its ``stage_start``,
-    ``stage_np``, ``K`` and ``L`` arrays."""
+    ``stage_n_latch``, ``K`` and ``L`` arrays."""
     stage_start: np.ndarray
-    stage_np: np.ndarray
+    stage_n_latch: np.ndarray
     K: np.ndarray
     L: np.ndarray
 
@@ -75,7 +75,7 @@ class TableShape:
 
     @property
     def n_stages(self) -> int:
-        return len(self.stage_np)
+        return len(self.stage_n_latch)
 
     @property
     def dims(self) -> tuple[int, int, int]:
@@ -98,7 +98,7 @@ class GainTable(TableShape):
     tick_hz: int
     t0: float
     stage_start: np.ndarray   # (n_stages + 1,) first tick of each stage, then n_ticks
-    stage_np: np.ndarray      # (n_stages,) multipliers latched on each stage
+    stage_n_latch: np.ndarray      # (n_stages,) multipliers latched on each stage
     K: np.ndarray
     k0: np.ndarray
     L: np.ndarray
@@ -260,7 +260,7 @@ def table_crc32(table: GainTable) -> int:
     """CRC-32 (IEEE 802.3, as zlib) over the table's canonical little-endian serialization.
 
     The firmware computes the same value in ``stsp_table_crc32``: the dimensions and tick rate
-    as u32, ``stage_start`` as u32, ``stage_np`` as u32, then K, k0, L, Lambda, lambda0 (these
+    as u32, ``stage_start`` as u32, ``stage_n_latch`` as u32, then K, k0, L, Lambda, lambda0 (these
     three only when n_latch > 0), u_min, u_max as IEEE-754 binary32 bit patterns, each little-endian.
     A fixed-point table (`stospline.table.qformat.FixedPointTable`) adds its scalar kind as u32 after the
     tick rate, stores the arrays as little-endian int16 (Q15) or int32 (Q31), and ends with
@@ -274,7 +274,7 @@ def table_crc32(table: GainTable) -> int:
     if arith != "float32":
         head += struct.pack("<I", table.scalar_kind)
     parts = [head, np.asarray(table.stage_start, "<u4").tobytes(),
-             np.asarray(table.stage_np, "<u4").tobytes()]
+             np.asarray(table.stage_n_latch, "<u4").tobytes()]
     arrays = [table.K, table.k0, table.L, table.Lambda, table.lambda0, table.u_min, table.u_max]
     if arith == "float32":
         parts += [np.asarray(a, "<f4").tobytes() for a in arrays]

@@ -92,7 +92,7 @@ class FixedPointTable(TableShape):
     tick_hz: int
     t0: float
     stage_start: np.ndarray
-    stage_np: np.ndarray
+    stage_n_latch: np.ndarray
     K: np.ndarray
     k0: np.ndarray
     L: np.ndarray
@@ -139,8 +139,8 @@ class FixedPointTable(TableShape):
 
     def latch_stage(self, stage) -> np.ndarray:
         """The stage whose latch a tick of `stage` uses: the last one at or before it that
-        latches (stage_np > 0); -1 when none does (v = 0)."""
-        latching = np.where(self.stage_np > 0, np.arange(self.n_stages), -1)
+        latches (stage_n_latch > 0); -1 when none does (v = 0)."""
+        latching = np.where(self.stage_n_latch > 0, np.arange(self.n_stages), -1)
         return np.maximum.accumulate(latching)[np.asarray(stage)]
 
     def summary(self) -> dict:
@@ -259,12 +259,12 @@ def quantize_table(table: GainTable, arith: str, x_range, *, name: str | None = 
     # Error bound (module docstring): per tick and input, in command LSBs.
     stage_of = np.searchsorted(table.stage_start, np.arange(table.n_ticks), side="right") - 1
     ft = FixedPointTable(name or f"{table.name}_{arith}", arith, table.tick_hz, table.t0,
-                    np.asarray(table.stage_start, np.uint32), np.asarray(table.stage_np, np.uint16),
+                    np.asarray(table.stage_start, np.uint32), np.asarray(table.stage_n_latch, np.uint16),
                     Kq, k0q, Lq, Lamq, lam0q, u_min, u_max, x_exp.astype(np.int8),
                     u_exp.astype(np.int8), v_exp.astype(np.int8), table.problem_sha256,
                     table, x_range, np.zeros((table.n_ticks, m)))
     eps = 0.5 + np.abs(lam0q - lam0s) + np.abs(Lamq - Lams).sum(axis=2)        # (S, n_latch)
-    eps = np.where(np.arange(n_latch)[None, :] < np.asarray(table.stage_np)[:, None], eps, 0.0)
+    eps = np.where(np.arange(n_latch)[None, :] < np.asarray(table.stage_n_latch)[:, None], eps, 0.0)
     ls = ft.latch_stage(stage_of)
     eps_t = np.where((ls >= 0)[:, None], eps[np.maximum(ls, 0)], 0.0)            # (T, n_latch)
     bound = (0.5 + np.abs(k0q - k0s) + np.abs(Kq - Ks).sum(axis=2)
@@ -281,7 +281,7 @@ def latch_q(ft: FixedPointTable, stage: np.ndarray, X: np.ndarray) -> np.ndarray
     stage = np.asarray(stage)
     acc = (ft.lambda0[stage] << F) + np.einsum("ncj,nj->nc", ft.Lambda[stage], X)
     V = (acc + (1 << (F - 1))) >> F
-    return np.where(np.arange(n_latch)[None, :] < ft.stage_np[stage][:, None], V, 0)
+    return np.where(np.arange(n_latch)[None, :] < ft.stage_n_latch[stage][:, None], V, 0)
 
 
 def law_q(ft: FixedPointTable, tick: np.ndarray, X: np.ndarray, V: np.ndarray) -> np.ndarray:
@@ -297,7 +297,7 @@ def law_q(ft: FixedPointTable, tick: np.ndarray, X: np.ndarray, V: np.ndarray) -
 def law_double(ft: FixedPointTable, tick: np.ndarray, x: np.ndarray, x_latch: np.ndarray
                ) -> np.ndarray:
     """The design's law in double precision: u = -K x - k0 - L v, v latched from x_latch at the
-    tick's latch stage (rows beyond stage_np zero), from the unquantized source table."""
+    tick's latch stage (rows beyond stage_n_latch zero), from the unquantized source table."""
     src = ft.source
     tick = np.asarray(tick)
     ls = ft.latch_stage(ft.stage_of_tick(tick))
@@ -305,7 +305,7 @@ def law_double(ft: FixedPointTable, tick: np.ndarray, x: np.ndarray, x_latch: np
     lsc = np.maximum(ls, 0)
     v = np.asarray(src.lambda0, float)[lsc] + np.einsum(
         "ncj,nj->nc", np.asarray(src.Lambda, float)[lsc], x_latch)
-    keep = (np.arange(n_latch)[None, :] < ft.stage_np[lsc][:, None]) & (ls >= 0)[:, None]
+    keep = (np.arange(n_latch)[None, :] < ft.stage_n_latch[lsc][:, None]) & (ls >= 0)[:, None]
     v = np.where(keep, v, 0.0)
     K, k0, L = (np.asarray(a, float)[tick] for a in (src.K, src.k0, src.L))
     return -(np.einsum("nij,nj->ni", K, x) + k0 + np.einsum("nic,nc->ni", L, v))

@@ -32,7 +32,7 @@ def test_zoh_joint_design_predicts_oracle(robot_problem, hz):
     # The table latches once, at stage 0; stage 1 keeps the latch. Five multipliers exceed
     # n = 4 states, so the table latches the state itself (tables.build_table).
     t = table_of(joint)
-    assert list(t.stage_np) == [4, 0] and t.dims[2] == 4
+    assert list(t.stage_n_latch) == [4, 0] and t.dims[2] == 4
     np.testing.assert_array_equal(t.Lambda[0], np.eye(4, dtype=np.float32))
 
 

@@ -75,7 +75,7 @@ def test_table_carries_the_dual_unfolded(robot):
     problem, b, _ = robot
     t = table_of(b)
     assert t.band_qp is not None and t.band_qp.q == 6
-    assert t.dims[2] == 6 and list(t.stage_np) == [6, 0]   # one latch, not folded into x
+    assert t.dims[2] == 6 and list(t.stage_n_latch) == [6, 0]   # one latch, not folded into x
     assert table_of(b, on_target_qp=False).dims[2] == 4          # affine map: folded to n
 
 

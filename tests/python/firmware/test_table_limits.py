@@ -126,7 +126,7 @@ def _c_init(ctl, t: GainTable) -> int:
     c.nx, c.nu, c.n_latch, c.n_stages, c.n_ticks, c.tick_hz = (n, m, p, t.n_stages,
                                                                t.n_ticks, t.tick_hz)
     c.stage_start = ptr("uint32_t", t.stage_start, np.uint32)
-    c.stage_np = ptr("uint16_t", t.stage_np, np.uint16)
+    c.stage_n_latch = ptr("uint16_t", t.stage_n_latch, np.uint16)
     for name in ("K", "k0", "L", "Lambda", "lambda0", "u_min", "u_max"):
         setattr(c, name, ptr("float", getattr(t, name), np.float32))
     c.crc32 = table_crc32(t)

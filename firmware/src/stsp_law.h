@@ -1,0 +1,60 @@
+/* The law, one definition for every arithmetic, included once by stsp_controller.c after the
+ * arithmetic's row primitives (stsp_law_f32.h or stsp_law_q.h: stsp_row_first, stsp_row_mac,
+ * stsp_row_end, stsp_unlimited_alarm). Static, inlined into stsp_step. Private: not installed. */
+#ifndef STSP_LAW_H
+#define STSP_LAW_H
+
+/* The law at `tick` with multipliers v, into y (never the caller's u: x and u may overlap):
+ * per input i, the row K[i][0] x[0] (with k0[i], as the arithmetic folds it in), the rest of
+ * K[i] x, then L[i] v over all n_latch columns (zero padded, so every tick costs the same).
+ * Returns nonzero when the command needs the cold path: with limits, some y[i] outside
+ * [u_min[i], u_max[i]] (false for NaN, and for one of +-Inf since the limits are finite);
+ * without, stsp_unlimited_alarm(). Inlined into callers whose y is a local array, so that in
+ * an STSP_FIXED_* build x, v and y stay in registers. */
+static STSP_ALWAYS_INLINE uint32_t stsp_law(const stsp_header_t *h, uint32_t tick,
+                                            const stsp_scalar_t *x, const stsp_scalar_t *v,
+                                            stsp_scalar_t *y, uint32_t limited)
+{
+    const uint32_t nx = stsp_nx(h);
+    const uint32_t nu = stsp_nu(h);
+    const uint32_t n_latch = stsp_n_latch(h);
+    const stsp_scalar_t *K = &h->K[tick * (nu * nx)];
+    const stsp_scalar_t *k0 = &h->k0[tick * nu];
+    /* L may be NULL when n_latch == 0: no pointer arithmetic on it then. */
+    const stsp_scalar_t *L = (n_latch > 0u) ? &h->L[tick * (nu * n_latch)] : h->L;
+    uint32_t i;
+    uint32_t out = 0u;
+    STSP_UNROLL
+    for (i = 0u; i < nu; ++i) {
+        stsp_row_acc_t acc = stsp_row_first(K[0], x[0], k0[i]);
+        uint32_t j;
+        STSP_UNROLL
+        for (j = 1u; j < nx; ++j) {
+            acc = stsp_row_mac(acc, K[j], x[j]);
+        }
+        K = &K[nx];
+        if (n_latch > 0u) {
+            STSP_UNROLL
+            for (j = 0u; j < n_latch; ++j) {
+                acc = stsp_row_mac(acc, L[j], v[j]);
+            }
+            L = &L[n_latch];
+        }
+        y[i] = stsp_row_end(acc, k0[i]);
+    }
+    if (limited != 0u) {
+        const stsp_scalar_t *lo = h->u_min;
+        const stsp_scalar_t *hi = h->u_max;
+        STSP_UNROLL
+        for (i = 0u; i < nu; ++i) {
+            if (!((y[i] >= lo[i]) && (y[i] <= hi[i]))) {
+                out = 1u;
+            }
+        }
+    } else {
+        out = stsp_unlimited_alarm(h, y);
+    }
+    return out;
+}
+
+#endif /* STSP_LAW_H */

@@ -396,7 +396,9 @@ static uint32_t fz_build_band(fuzz_in_t *in, stsp_table_t *t)
         switch (npsel % 3u) {
         case 0u: g_stage_n_latch[0] = (uint16_t)(q + 1u); break;
         case 1u: g_stage_n_latch[0] = (uint16_t)((q > 0u) ? q - 1u : 0u); break;
-        default: g_stage_n_latch[1u + npsel % (FZ_MAX_NS - 1u)] = (uint16_t)(1u + npsel % 4u); break;
+        default:
+            g_stage_n_latch[1u + npsel % (FZ_MAX_NS - 1u)] = (uint16_t)(1u + npsel % 4u);
+            break;
         }
     }
     if (nullsel >= 240u) {
@@ -957,7 +959,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 }
             }
 #endif
-            fuzz_check(u[STSP_MAX_NU] == FZ_SENTINEL);                  /* nothing past the buffer */
+            fuzz_check(u[STSP_MAX_NU] == FZ_SENTINEL); /* nothing past the buffer */
             if (!ready) {
                 fuzz_check(st == STSP_ERR_NOT_INITIALIZED);
                 fuzz_check(u[0] == FZ_SENTINEL);                        /* u not written */

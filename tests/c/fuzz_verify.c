@@ -195,7 +195,8 @@ static void fv_build(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
 #ifndef STSP_ARITH_FIXED
     band = (n_latch > 0u) && ((fuzz_u8(in) % 3u) == 0u);
     if (band) {
-        stage_n_latch[0] = (uint16_t)(1u + fuzz_u8(in) % ((n_latch < STSP_BANDQP_MAX) ? n_latch : STSP_BANDQP_MAX));
+        const uint32_t q_max = (n_latch < STSP_BANDQP_MAX) ? n_latch : STSP_BANDQP_MAX;
+        stage_n_latch[0] = (uint16_t)(1u + fuzz_u8(in) % q_max);
         for (s = 1u; s < ns; ++s) {
             stage_n_latch[s] = 0u;
         }

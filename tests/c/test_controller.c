@@ -31,9 +31,9 @@ static const float K[NT * NU * NX] = {0.5f, -1.0f, 0.6f, -1.1f, 0.7f, -1.2f,
                                       0.8f, -1.3f, 0.9f, -1.4f};
 static const float k0[NT * NU] = {0.1f, 0.2f, 0.3f, 0.4f, 0.5f};
 static const float L[NT * NU * N_LATCH] = {2.0f, 0.0f, 2.5f, 0.0f, 3.0f, 0.0f,
-                                      1.0f, -1.0f, 1.5f, -1.5f};
+                                           1.0f, -1.0f, 1.5f, -1.5f};
 static const float Lambda[NS * N_LATCH * NX] = {1.0f, 2.0f, 0.0f, 0.0f,
-                                           -1.0f, 0.5f, 0.25f, 3.0f};
+                                                -1.0f, 0.5f, 0.25f, 3.0f};
 static const float lambda0[NS * N_LATCH] = {-0.5f, 0.0f, 1.0f, -2.0f};
 static const float no_min[NU] = {-FLT_MAX}, no_max[NU] = {FLT_MAX};
 static const float tight_min[NU] = {-0.25f}, tight_max[NU] = {0.5f};

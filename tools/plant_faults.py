@@ -2,7 +2,7 @@
 """Plant plausible bugs in the firmware, one at a time, and show that the tests catch each.
 
 For every fault below the script copies the C sources (``CMakeLists.txt``, ``cmake/``,
-``firmware/``, ``tests/c/``, ``tests/consumer/``, ``gains/``) into a temporary directory,
+``firmware/``, ``tests/c/``, ``tests/consumer/``, ``gains/``, ``tools/bench/``) into a temporary directory,
 applies the one edit there, rebuilds that copy, and runs
 
 * the C tests of the copy: ``ctest`` without the clang, ARM, MISRA and consumer tests (controller,
@@ -158,7 +158,8 @@ class Sandbox:
         self.cffi = base / "cffi"
         self.src.mkdir()
         shutil.copy2(ROOT / "CMakeLists.txt", self.src)
-        for d in ("firmware", "tests/c", "tests/consumer", "gains", "cmake"):
+        # Everything the top-level CMakeLists.txt reads (the host benchmark is a target too).
+        for d in ("firmware", "tests/c", "tests/consumer", "gains", "cmake", "tools/bench"):
             shutil.copytree(ROOT / d, self.src / d)
         self.pristine = {}
 

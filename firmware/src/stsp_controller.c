@@ -22,7 +22,7 @@
  * The sources, one job each: this file is the tick/latch state machine (init, reset, verify,
  * step); stsp_table.c validates and serialises the table (CRC-32); stsp_law.h is the law,
  * inlined into stsp_step(), on the row primitives and latch row of stsp_law_f32.h or
- * stsp_law_q.h (one, by STSP_ARITH_FIXED); stsp_clamp.h
+ * stsp_law_q.h (one, by STSP_ARITH_FIXED_POINT); stsp_clamp.h
  * the actuator clamp; stsp_internal.h the compiler and VFP helpers, the dimensions the law
  * uses and the fixed-point accumulator; stsp_crc32.c, stsp_qconv.c (Q state/command
  * conversions) and stsp_bandqp.c (the band dual) as named. Everything else here (ticks,
@@ -30,7 +30,7 @@
 #include "stsp_internal.h"
 /* The law (stsp_law.h) on the row primitives of the configured arithmetic, inlined into
  * stsp_step(). */
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
 #include "stsp_law_q.h"
 #else
 #include "stsp_law_f32.h"
@@ -148,7 +148,7 @@ static uint16_t stsp_stage_of(const stsp_header_t *h, uint16_t from, uint32_t ti
     return (uint16_t)s;
 }
 
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
 /* The stage-0 latch of a band table: v = the band dual's multipliers for the measured x,
  * rounded to binary32, zero beyond q. Returns 1 on success; 0 if the solver failed (v_new
  * untouched): x not finite (the affine fallback then propagates the NaN/Inf, and the step
@@ -225,7 +225,7 @@ static stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick, const stsp_s
     if ((c->latched == 0u) || ((stage != c->stage) && (n_stage > 0u))) {
         plan->relatch = 1u;
     }
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
     if ((plan->relatch != 0u) && (stage == 0u) && (h->band_qp != NULL)) {
         if (stsp_band_latch(h, x, v_new) != 0) {
             return status;
@@ -345,7 +345,7 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x
         return stsp_step_cold(ctrl, tick, x, u);
     }
     out = stsp_law(&ctrl->checked, tick, x, ctrl->v, y, ctrl->limited);
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
     /* A NaN/Inf command: which error it is depends on x, read before u is written. */
     if ((out != 0u) && (stsp_command_finite(&ctrl->checked, y) == 0)) {
         return stsp_step_nonfinite(ctrl, x, u);

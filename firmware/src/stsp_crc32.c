@@ -77,7 +77,7 @@ uint32_t stsp_crc32_f64s(uint32_t crc, const double *values, uint32_t count)
     return c;
 }
 
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
 uint32_t stsp_crc32_i8s(uint32_t crc, const int8_t *values, uint32_t count)
 {
     uint32_t c = crc;

@@ -17,7 +17,7 @@ uint32_t stsp_crc32_f64s(uint32_t crc, const double *values, uint32_t count);
 /* Feed `count` bytes. */
 uint32_t stsp_crc32_bytes(uint32_t crc, const uint8_t *values, uint32_t count);
 uint32_t stsp_crc32_end(uint32_t crc);
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
 /* Feed `count` signed bytes (the scale exponents) as two's complement. */
 uint32_t stsp_crc32_i8s(uint32_t crc, const int8_t *values, uint32_t count);
 #endif

@@ -31,7 +31,7 @@
 #define STSP_UNROLL
 #endif
 
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
 /* Non-fused multiply-accumulate on a single-precision VFP (Cortex-M4F, M7, M33 with FPU; GCC
  * or clang). VMLS.F32 and VNMLA.F32 round the product to binary32 and then round the sum
  * (ARMv7-M ARM, DDI 0403E, A7.7.238 VMLA, VMLS and A7.7.250 VNMLA, VNMLS, VNMUL: the
@@ -146,7 +146,7 @@ static inline uint32_t stsp_nu(const stsp_header_t *h) { return (uint32_t)h->nu;
 static inline uint32_t stsp_n_latch(const stsp_header_t *h) { return (uint32_t)h->n_latch; }
 #endif
 
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
 /* Fixed-point accumulator. It holds the bias 2^(2F) + 2^(F-1) plus a row's sum of products
  * (the row's constant term k0 or lambda0 is added after the shift, stsp_q_round), which
  * stsp_check_values() bounds by (2^F - 1) 2^F in magnitude: so it stays in
@@ -197,7 +197,7 @@ static inline stsp_scalar_t stsp_q_round(stsp_uacc_t acc, stsp_scalar_t c)
     const stsp_acc_t rounded = ((stsp_acc_t)shifted - STSP_Q_ONE) + (stsp_acc_t)c;
     return (stsp_scalar_t)rounded;
 }
-#endif /* STSP_ARITH_FIXED */
+#endif /* STSP_ARITH_FIXED_POINT */
 
 /* The header fields every later call uses, read once from the table (init, CRC). */
 void stsp_copy_header(stsp_header_t *h, const stsp_table_t *t);

@@ -5,7 +5,7 @@
 
 #include <string.h>
 
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
 
 /* 2^e as a binary32, exact for |e| <= STSP_Q_EXP_MAX + STSP_Q_FRAC_BITS = 91 (stsp_init()
  * checked the exponents). Built from its bits: no libm. e is clamped to the normal range

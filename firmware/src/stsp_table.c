@@ -21,7 +21,7 @@ void stsp_copy_header(stsp_header_t *h, const stsp_table_t *t)
     h->lambda0 = t->lambda0;
     h->stage_start = t->stage_start;
     h->stage_n_latch = t->stage_n_latch;
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     h->x_exp = t->x_exp;
     h->u_exp = t->u_exp;
     h->v_exp = t->v_exp;
@@ -54,7 +54,7 @@ int stsp_header_changed(const stsp_header_t *h, const stsp_table_t *t)
         (t->stage_start != h->stage_start) || (t->stage_n_latch != h->stage_n_latch)) {
         changed = 1;
     }
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     if ((t->x_exp != h->x_exp) || (t->u_exp != h->u_exp) || (t->v_exp != h->v_exp) ||
         (t->band_qp != NULL)) {
         changed = 1;
@@ -76,7 +76,7 @@ int stsp_header_changed(const stsp_header_t *h, const stsp_table_t *t)
     return changed;
 }
 
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
 /* A band dual belongs to a joint design: q rows, all latched once at stage 0. */
 static stsp_status_t stsp_check_band_dims(const stsp_header_t *h)
 {
@@ -124,7 +124,7 @@ static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, i
         ((t->n_latch > 0u) && ((t->L == NULL) || (t->Lambda == NULL) || (t->lambda0 == NULL)))) {
         return STSP_ERR_NULL;
     }
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     if ((t->x_exp == NULL) || (t->u_exp == NULL) || ((t->n_latch > 0u) && (t->v_exp == NULL))) {
         return STSP_ERR_NULL;
     }
@@ -137,7 +137,7 @@ static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, i
             return STSP_ERR_BAD_DIMS;
         }
     }
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     /* The band solver latches binary32 multipliers: float32 tables only. */
     return (has_band != 0) ? STSP_ERR_BAD_DIMS : STSP_OK;
 #else
@@ -145,7 +145,7 @@ static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, i
 #endif
 }
 
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
 /* Sum of |values[0..count)| (count <= STSP_MAX_NX + STSP_MAX_LATCH: no wrap-around). */
 static stsp_uacc_t stsp_q_abs_sum(const stsp_scalar_t *values, uint32_t count)
 {
@@ -294,13 +294,13 @@ uint16_t stsp_has_limits(const stsp_header_t *t)
     }
     return 0u;
 }
-#endif /* STSP_ARITH_FIXED */
+#endif /* STSP_ARITH_FIXED_POINT */
 
 /* The CRC of stsp_table_crc32(), with the dimensions and arrays of the header copy `table`
  * and the remaining scalars (tick_hz, scalar_kind, problem_sha256) of the table header. */
 uint32_t stsp_crc_of(const stsp_header_t *table, const stsp_table_t *scalars)
 {
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     /* Only stsp_table_crc32() of a table init would refuse can have one here. */
     const stsp_bandqp_t *b = scalars->band_qp;
 #else
@@ -319,7 +319,7 @@ uint32_t stsp_crc_of(const stsp_header_t *table, const stsp_table_t *scalars)
     crc = stsp_crc32_u32(crc, ns);
     crc = stsp_crc32_u32(crc, nt);
     crc = stsp_crc32_u32(crc, scalars->tick_hz);
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     crc = stsp_crc32_u32(crc, (uint32_t)scalars->scalar_kind);
 #endif
     for (s = 0u; s <= ns; ++s) {
@@ -337,7 +337,7 @@ uint32_t stsp_crc_of(const stsp_header_t *table, const stsp_table_t *scalars)
     }
     crc = stsp_crc32_scalars(crc, table->u_min, nu);
     crc = stsp_crc32_scalars(crc, table->u_max, nu);
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     crc = stsp_crc32_i8s(crc, table->x_exp, nx);
     crc = stsp_crc32_i8s(crc, table->u_exp, nu);
     if (n_latch > 0u) {

@@ -20,7 +20,7 @@
 #endif
 #define REPLAY_MAX_REPORTS 10u
 
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
 /* Fixed point: the integer's two's complement bits, and the distance in command units. */
 static uint32_t f32_bits(stsp_scalar_t value)
 {

@@ -56,7 +56,7 @@
 #define FZ_MAX_CALLS 64u
 #define FZ_BAND_STORE 16u /* band rows/states the storage holds (invalid counts up to 16) */
 
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
 typedef stsp_scalar_t fz_val_t;
 #define FZ_Q_ONE ((int64_t)1 << STSP_Q_FRAC_BITS)
 #define FZ_SENTINEL ((stsp_scalar_t)12345)
@@ -69,7 +69,7 @@ typedef float fz_val_t;
 #define FZ_BAND_PICK(sel) (((sel) % 3u) == 0u)
 #endif
 
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
 static int fz_finite(fz_val_t v)
 {
     (void)v;
@@ -177,7 +177,7 @@ static void fzs_print(void)
 static int fz_known_status(stsp_status_t st)
 {
     return ((st >= STSP_ERR_BAD_VALUES) && (st <= STSP_WARN_SATURATED))
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
         || (st == STSP_WARN_BAND_FALLBACK)
 #endif
         ;
@@ -192,7 +192,7 @@ static fz_val_t g_L[FZ_MAX_NT * FZ_MAX_NU * FZ_MAX_NL];
 static fz_val_t g_Lambda[FZ_MAX_NS * FZ_MAX_NL * FZ_MAX_NX];
 static fz_val_t g_lambda0[FZ_MAX_NS * FZ_MAX_NL];
 static fz_val_t g_lo[FZ_MAX_NU], g_hi[FZ_MAX_NU];
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
 static int8_t g_xe[FZ_MAX_NX], g_ue[FZ_MAX_NU], g_ve[FZ_MAX_NL];
 #endif
 static stsp_bandqp_t g_band;
@@ -213,7 +213,7 @@ typedef struct {
 /* Gains from a generator seeded by the input (so that a short input describes a whole table
  * and most bytes drive calls); `special` in 1..255 makes about one value in `special` a
  * special one (NaN, Inf, FLT_MAX, subnormal, -0), 0 none. */
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
 /* Fixed point: values within +-2^F/16 (a row of at most 13 of them stays below 2^F - 1);
  * `special` makes about one in `special` a full-range value, which breaks the row bound. */
 static void fz_fill(uint32_t *seed, fz_val_t *a, size_t count, uint32_t special)
@@ -264,7 +264,7 @@ static double fz_bits_f64(uint64_t bits)
     return d;
 }
 
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
 static int fz_finite_f64(double d)
 {
     uint64_t bits;
@@ -455,7 +455,7 @@ static void fz_build_table(fuzz_in_t *in, stsp_table_t *t, fz_table_info_t *info
     t->L = g_L;
     t->Lambda = g_Lambda;
     t->lambda0 = g_lambda0;
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     for (i = 0u; i < FZ_MAX_NX; ++i) {
         g_xe[i] = (int8_t)((int32_t)(fuzz_u8(in) % 21u) - 10);
     }
@@ -517,7 +517,7 @@ static void fz_build_table(fuzz_in_t *in, stsp_table_t *t, fz_table_info_t *info
         case 0u: t->K = NULL; break;
         case 1u: t->u_max = NULL; break;
         case 2u: t->L = NULL; break;
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
         case 3u: t->v_exp = NULL; break;
 #endif
         default: t->stage_n_latch = NULL; break;
@@ -528,7 +528,7 @@ static void fz_build_table(fuzz_in_t *in, stsp_table_t *t, fz_table_info_t *info
     /* The CRC needs valid pointers and dimensions inside the storage; compute it when it can
      * be computed, then perhaps corrupt it. */
     if ((t->K != NULL) && (t->u_max != NULL) && (t->L != NULL) && (t->stage_n_latch != NULL) &&
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
         (t->v_exp != NULL) &&
 #endif
         (t->n_ticks <= FZ_MAX_NT) &&
@@ -560,7 +560,7 @@ static void fz_build_table(fuzz_in_t *in, stsp_table_t *t, fz_table_info_t *info
     }
 }
 
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
 /* The status stsp_init() must return for a table without a main-table corruption, from the
  * documented order of its checks: dimensions and layout (stage_n_latch within n_latch), band
  * arrays NULL, band dimensions and stage_n_latch, CRC, values (limits, band data). Returns 1 and
@@ -700,7 +700,7 @@ static int fz_band_invalid(const stsp_table_t *t)
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
 /* What the stage-0 latch of a band table must do for the finite state x at `tick`: the
  * solver's result (checked against its own contract), whether the controller falls back, the
  * latch v and the law's unclamped commands y. v and y are computed as the firmware computes
@@ -900,7 +900,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             uint32_t tick, i;
             int finite = 1;
             stsp_status_t st, tick_st;
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
             int band_latch = 0;
             fz_latch_t latch;
 #endif
@@ -927,7 +927,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 fuzz_check(memcmp(&c, &before, sizeof c) == 0);
                 continue;
             }
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
             /* A stage-0 latch of a band table (tick in range and order, x finite): what the
              * solver says for this x decides between its multipliers and the fallback. */
             if (ready && (t.band_qp != NULL) && finite && (tick < t.stage_start[1]) &&
@@ -939,7 +939,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 #endif
             st = stsp_step(&c, tick, x, u);
             fuzz_check(fz_known_status(st));
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
             if (band_latch) {
                 FZS(FZS_LATCH);
                 FZS((latch.solve_st == STSP_BANDQP_OK) ? FZS_LATCH_OK
@@ -989,7 +989,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             /* The tick bookkeeping, in the documented order of checks. */
             tick_st = ((model_next > 0u) && (tick + 1u == model_next)) ? STSP_WARN_TICK_REPEATED
                       : (tick > model_next) ? STSP_WARN_TICK_SKIPPED : STSP_OK;
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
             if (band_latch) {
                 fz_check_band_step(&t, &c, st, tick_st, u, &latch);
             }
@@ -1002,7 +1002,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 fuzz_check(st == STSP_ERR_NONFINITE_STATE);
             } else if (st >= STSP_OK) {
                 if (st != STSP_WARN_SATURATED) {
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
                     fuzz_check(st == ((band_latch && latch.fallback) ? STSP_WARN_BAND_FALLBACK
                                                                    : tick_st));
 #else

@@ -98,7 +98,7 @@ static uint32_t fv_lcg(uint32_t *seed)
 static stsp_scalar_t fv_small(uint32_t *seed)
 {
     const int32_t r = (int32_t)(fv_lcg(seed) % 2048u) - 1024;
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     return (stsp_scalar_t)((int64_t)r * (((int64_t)1 << STSP_Q_FRAC_BITS) / 16384));
 #else
     return (float)r / 256.0f;
@@ -117,7 +117,7 @@ static void fv_fill(uint32_t *seed, stsp_scalar_t *a, uint32_t count)
 static stsp_scalar_t fv_state(fuzz_in_t *in)
 {
     const uint32_t sel = fuzz_u8(in);
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     const int64_t one = (int64_t)1 << STSP_Q_FRAC_BITS;
     if (sel < 240u) {
         return (stsp_scalar_t)(((int64_t)fuzz_u8(in) - 128) * (one / 128));
@@ -192,7 +192,7 @@ static void fv_build(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
         stage_n_latch[s] = (uint16_t)((n_latch > 0u) ? fuzz_u8(in) % (n_latch + 1u) : 0u);
     }
     start[ns] = nt;
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
     band = (n_latch > 0u) && ((fuzz_u8(in) % 3u) == 0u);
     if (band) {
         const uint32_t q_max = (n_latch < STSP_BANDQP_MAX) ? n_latch : STSP_BANDQP_MAX;
@@ -228,7 +228,7 @@ static void fv_build(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
     }
     for (i = 0u; i < nu; ++i) {
         const stsp_scalar_t a = fv_small(&seed), b = fv_small(&seed);
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
         const int64_t one = (int64_t)1 << STSP_Q_FRAC_BITS;
         lo[i] = (limits == 0u) ? (stsp_scalar_t)(-one) : (stsp_scalar_t)((a < 0) ? a : -a);
         hi[i] = (limits == 0u) ? (stsp_scalar_t)(one - 1) : (stsp_scalar_t)((b > 0) ? b : -b);
@@ -239,7 +239,7 @@ static void fv_build(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
     }
     t->u_min = lo;
     t->u_max = hi;
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     {
         int8_t *xe = FV_ARRAY(tb, blocks, int8_t, nx);
         int8_t *ue = FV_ARRAY(tb, blocks, int8_t, nu);
@@ -377,7 +377,7 @@ static void fv_change(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
                                   : (const uint32_t *)fv_alloc(blocks, sizeof(uint32_t)); break;
         case 8u: t->stage_n_latch = (pick == 8u) ? NULL
                                : (const uint16_t *)fv_alloc(blocks, sizeof(uint16_t)); break;
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
         case 9u: t->x_exp = (const int8_t *)fv_alloc(blocks, 1u); break;
         default: t->v_exp = (pick == 8u) ? NULL : t->u_exp; break;
 #else
@@ -438,7 +438,7 @@ static int fv_header_changed(const fv_table_t *tb)
                   (t->stage_n_latch != o->stage_n_latch) || (t->K != o->K) || (t->k0 != o->k0) ||
                   (t->L != o->L) || (t->Lambda != o->Lambda) || (t->lambda0 != o->lambda0) ||
                   (t->u_min != o->u_min) || (t->u_max != o->u_max);
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     changed = changed || (t->x_exp != o->x_exp) || (t->u_exp != o->u_exp) ||
               (t->v_exp != o->v_exp) || (t->band_qp != NULL);
 #else
@@ -544,7 +544,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             st_ref = stsp_reset(&ref);
             fuzz_check(st == (stopped ? STSP_ERR_NOT_INITIALIZED : STSP_OK));
             fuzz_check(st_ref == STSP_OK);
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
         } else if (op == 3u) {
             /* The conversions: exactly nx (nu) entries read and written. */
             stsp_f32_t *xf = (stsp_f32_t *)malloc(sizeof(stsp_f32_t) * nx);

@@ -16,7 +16,7 @@
 #include "stospline/stsp_controller.h"
 #include "test_support.h"
 
-#ifndef STSP_ARITH_FIXED
+#ifndef STSP_ARITH_FIXED_POINT
 #error "test_fixedpoint.c tests the STSP_ARITH_Q15/Q31 builds"
 #endif
 

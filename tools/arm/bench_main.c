@@ -44,21 +44,20 @@ static void bench_step(stsp_ctrl_t *c, uint32_t tick, const stsp_scalar_t *x, ui
     stsp_status_t st = stsp_step(c, tick, x, u);
     if (n_calls < BENCH_CALLS) {
         bench_call_t *rec = &calls[n_calls++];
+        const int new_stage_latches =
+            (c->stage != stage_before) && (c->table->stage_n_latch[c->stage] > 0u);
         rec->tick = tick;
         rec->status = (int16_t)st;
         rec->stage = (uint8_t)c->stage;
         rec->table = table;
-        rec->latch = (uint8_t)((latched_before == 0u ||
-                                (c->stage != stage_before && c->table->stage_n_latch[c->stage] > 0u))
-                                   ? 1u
-                                   : 0u);
+        rec->latch = (uint8_t)(((latched_before == 0u) || new_stage_latches) ? 1u : 0u);
     }
 }
 
 /* State j = milli / 1000 in the build's arithmetic (Q: x_q = x 2^(F - x_exp[j]), integers). */
 static stsp_scalar_t bench_state(const stsp_table_t *t, uint32_t j, int32_t milli)
 {
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     return (stsp_scalar_t)(((int64_t)milli * ((int64_t)1 << (STSP_Q_FRAC_BITS - t->x_exp[j]))) /
                            1000);
 #else
@@ -97,7 +96,7 @@ static int bench_table(const stsp_table_t *table, uint8_t label)
 
 int main(void)
 {
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     static stsp_scalar_t wide_lo[ROBOT_NU], wide_hi[ROBOT_NU], tight_lo[ROBOT_NU],
         tight_hi[ROBOT_NU];
 #else
@@ -108,7 +107,7 @@ int main(void)
 #endif
     stsp_table_t wide = ROBOT_TABLE, tight = ROBOT_TABLE;
     uint32_t i;
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     for (i = 0u; i < ROBOT_NU; ++i) {
         const int64_t one = (int64_t)1 << STSP_Q_FRAC_BITS;
         wide_hi[i] = (stsp_scalar_t)(one - 2);

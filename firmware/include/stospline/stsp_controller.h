@@ -73,8 +73,8 @@ typedef int32_t stsp_q31_t;
  * defining STSP_ARITH_Q15 or STSP_ARITH_Q31 (or neither, or STSP_ARITH_FLOAT32: float32) for
  * the library and every file that includes this header. stsp_scalar_t is the type of the
  * state x, the command u, the latched v and every table entry; the fixed-point variants and
- * their scaling are described in docs/guide/firmware.md ("Fixed-point variants") and on stsp_step().
- */
+ * their scaling are described in docs/guide/firmware.md ("Fixed-point variants") and on
+ * stsp_step(). */
 #if defined(STSP_ARITH_Q15) && defined(STSP_ARITH_Q31)
 #error "define at most one of STSP_ARITH_Q15, STSP_ARITH_Q31"
 #endif
@@ -86,11 +86,11 @@ typedef int32_t stsp_q31_t;
 #endif
 #if defined(STSP_ARITH_Q15)
 typedef stsp_q15_t stsp_scalar_t;
-#define STSP_ARITH_FIXED 1
+#define STSP_ARITH_FIXED_POINT 1
 #define STSP_Q_FRAC_BITS 15 /**< F: x = x_q 2^(x_exp - F), u = u_q 2^(u_exp - F) */
 #elif defined(STSP_ARITH_Q31)
 typedef stsp_q31_t stsp_scalar_t;
-#define STSP_ARITH_FIXED 1
+#define STSP_ARITH_FIXED_POINT 1
 #define STSP_Q_FRAC_BITS 31
 #else
 typedef stsp_f32_t stsp_scalar_t;
@@ -222,7 +222,7 @@ typedef struct {
     const stsp_scalar_t *lambda0;
     const stsp_scalar_t *u_min;  /**< [nu]: lower actuator limits */
     const stsp_scalar_t *u_max;  /**< [nu]: upper actuator limits */
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     const int8_t *x_exp;         /**< [nx]: state scale exponents */
     const int8_t *u_exp;         /**< [nu]: command scale exponents */
     const int8_t *v_exp;         /**< [n_latch]: latched multiplier scale exponents (may be NULL
@@ -255,7 +255,7 @@ typedef struct {
     const stsp_scalar_t *lambda0;
     const uint32_t *stage_start;
     const uint16_t *stage_n_latch;
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
     const int8_t *x_exp;
     const int8_t *u_exp;
     const int8_t *v_exp;
@@ -359,7 +359,7 @@ stsp_status_t stsp_verify(stsp_ctrl_t *ctrl);
 stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
                         stsp_scalar_t *u);
 
-#ifdef STSP_ARITH_FIXED
+#ifdef STSP_ARITH_FIXED_POINT
 /*
  * Fixed point, per tick (integers only, no floating point; F = STSP_Q_FRAC_BITS): for each
  * input i, with the accumulator stsp_acc (int32 for Q15, int64 for Q31),

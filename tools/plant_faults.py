@@ -2,8 +2,8 @@
 """Plant plausible bugs in the firmware, one at a time, and show that the tests catch each.
 
 For every fault below the script copies the C sources (``CMakeLists.txt``, ``cmake/``,
-``firmware/``, ``tests/c/``, ``tests/consumer/``, ``gains/``, ``tools/bench/``) into a temporary directory,
-applies the one edit there, rebuilds that copy, and runs
+``firmware/``, ``tests/c/``, ``tests/consumer/``, ``gains/``, ``tools/bench/``) into a
+temporary directory, applies the one edit there, rebuilds that copy, and runs
 
 * the C tests of the copy: ``ctest`` without the clang, ARM, MISRA and consumer tests (controller,
   controller_fixed_2_1_2, robot_table, robot_table_fixed, the fixed-point (Q15/Q31) tests and

@@ -86,8 +86,8 @@ def _tick_data(stage: Stage, h: float) -> _TickData:
     ``e^{gen' h}`` and its integral. ``gen'`` maps symmetric matrices to symmetric matrices,
     so on packed matrices it is ``Gs = E gen' U`` (U duplicates, E picks the upper triangle),
     and ``expm([[Gs h, vech(Lbar) h], [0, 0]])`` holds ``e^{Gs h}`` and ``vech(Hc)``: a
-    ``(d(d+1)/2 + 1)``-square exponential instead of Van Loan's ``2 d^2`` (`exact_tick`),
-    about 20x faster at n = 12, m = 4 and equal to it to rounding.
+    ``(d(d+1)/2 + 1)``-square exponential instead of Van Loan's ``2 d^2`` (`exact_tick`), equal
+    to it to rounding (`tools/bench/zoh_design.py` times designs on both, "previous").
     """
     n, m = stage.B.shape
     d = n + m + 1

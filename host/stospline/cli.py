@@ -68,9 +68,11 @@ def _check_budget(args, problem, command: str, **options) -> None:
     """Refuse (BudgetError, exit 2) a run beyond the limits before any work; announce a long
     one (when progress is shown)."""
     from stospline.budget import check, format_bytes, format_seconds
+    substeps = options.pop("substeps", getattr(args, "substeps", 2))
     est = check(problem, command=command, max_seconds=args.max_time,
                 max_bytes=args.max_memory * 1024 ** 3, **_options(args, problem),
-                paths=getattr(args, "paths", 0), substeps=getattr(args, "substeps", 2),
+                paths=getattr(args, "paths", 0),
+                substeps=1 if substeps == "auto" else substeps,   # "auto": checked again
                 **options)
     if est.seconds > 5:
         progress.note(f"{command} of {problem.name}: estimated ~{format_seconds(est.seconds)}"
@@ -97,8 +99,9 @@ def _simulate(args) -> int:
     if x0 is not None:
         d = start_from(d, x0)
     _note_tables(d, "compiling")
-    mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=args.substeps)
-    s = simulation_summary(d, mc, seed=args.seed, substeps=args.substeps)
+    substeps = _planned_substeps(args, problem, d, "simulate")
+    mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps)
+    s = simulation_summary(d, mc, seed=args.seed)
     _report_simulation(s, args.json)
     sat = s["saturation"]
     if sat["tick_fraction"] > 0:
@@ -106,7 +109,19 @@ def _simulate(args) -> int:
               f"{100 * sat['tick_fraction']:.4g}% of ticks, on {100 * sat['path_fraction']:.4g}% "
               f"of paths; the oracle and predicted numbers assume no saturation (the design "
               f"ignores the actuator limits), so they do not predict this run", file=sys.stderr)
-    return 0
+    return 0 if (s["verdict"]["agree"] or not args.check) else EXIT_DISAGREE
+
+
+def _planned_substeps(args, problem, d, command: str):
+    """`--substeps auto`: the choice for this run, its cost checked against the budget before
+    the run starts (a given number was checked with the problem)."""
+    if args.substeps != "auto":
+        return args.substeps
+    from stospline.pipeline import plan_substeps
+    choice = plan_substeps(d, paths=args.paths, seed=args.seed)
+    if choice.substeps > 1:
+        _check_budget(args, problem, command, substeps=choice.substeps)
+    return choice
 
 
 def _report_simulation(s: dict, as_json: bool) -> None:
@@ -118,11 +133,18 @@ def _report_simulation(s: dict, as_json: bool) -> None:
     print(f"{s['name']}: {s['paths']} paths, seed {s['seed']}, compiled C controller at "
           f"{s['tick_hz']} Hz, plant {s['substeps']} substeps/tick, from x0 = {s['x0']}")
     print(f"  cost  MC {c['mc_mean']:.6g}  95% CI [{c['ci95'][0]:.6g}, {c['ci95'][1]:.6g}]"
-          f"   oracle {c['oracle_implemented']:.6g}   predicted J0 {c['predicted_J0']:.6g}")
+          f"   oracle {c['oracle_implemented']:.6g}   predicted J0 {c['predicted_J0']:.6g}"
+          f"   z {_z_text(c['z'])}")
     bias = s["simulation_bias"]
     ratio = ("n/a MC standard errors (all paths alike)" if bias["cost_over_stderr"] is None
              else f"{bias['cost_over_stderr']:.3g} MC standard errors")
-    print(f"  plant-scheme bias in cost {bias['cost']:.3g} = {ratio}")
+    how = ""
+    if bias["substeps_chosen"] == "auto":
+        how = (f"; {s['substeps']} substeps/tick chosen: the fewest with |bias| <= "
+               f"{bias['target']:.3g}, under 0.1 of the standard error a "
+               f"{bias['pilot_paths']}-path pilot predicts"
+               + ("" if bias["target_met"] else " (NOT met at the largest allowed number)"))
+    print(f"  plant-scheme bias in cost {bias['cost']:.3g} = {ratio}{how}")
     if sat["limited"]:
         print(f"  actuator limits: saturated on {100 * sat['tick_fraction']:.4g}% of ticks "
               f"({100 * sat['path_fraction']:.4g}% of paths); commands issued within "
@@ -133,6 +155,10 @@ def _report_simulation(s: dict, as_json: bool) -> None:
         print(f"  knot {k} (t = {kn['t']:g}): state mean, MC     {fmt(kn['mc_mean'])}")
         print(f"  {'':>15}state mean, oracle {fmt(kn['oracle_mean'])}   "
               f"z {'[' + ', '.join(_z_text(z) for z in kn['z']) + ']'}")
+    v = s["verdict"]
+    print(f"  verdict: {'agree' if v['agree'] else 'DISAGREE'}: max |z| {v['max_abs_z']:.3g}"
+          f" ({v['max_abs_z_of']}) against {v['z_limit']:.3g}, {v['correction']} over "
+          f"{v['statistics']} statistics at {100 * v['confidence']:g}% jointly; {v['reason']}")
     sys.stdout.flush()   # the saturation warning (stderr) comes after the numbers it qualifies
 
 
@@ -151,7 +177,8 @@ def _plot(args) -> int:
     _check_budget(args, problem, "plot")
     d = design_problem(problem, **_options(args, problem))
     _note_tables(d, "compiling")
-    mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=args.substeps)
+    substeps = _planned_substeps(args, problem, d, "plot")
+    mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps)
     write_file(args.out, lambda tmp: plot_corridor(d, mc, tmp))
     print(f"wrote {args.out}")
     return 0
@@ -183,6 +210,17 @@ def _integer(lo: int, hi: int):
             raise argparse.ArgumentTypeError(f"must be an integer in {lo}..{hi}, got {text!r}")
         return value
     return parse
+
+
+def _substeps(text: str):
+    """``auto`` or an integer in 1..MAX_SUBSTEPS."""
+    if text == "auto":
+        return text
+    try:
+        return _integer(1, MAX_SUBSTEPS)(text)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(
+            f"must be auto or an integer in 1..{MAX_SUBSTEPS}, got {text!r}") from None
 
 
 def _positive(hi: float, unit: str):
@@ -221,6 +259,7 @@ def _out_dir(text: str) -> str:
 PLOT_FORMATS = (".png", ".pdf", ".svg")
 MAX_PATHS = 10 ** 9          # the memory/time budget usually refuses far fewer
 MAX_SUBSTEPS = 10_000
+EXIT_DISAGREE = 3   # simulate --check: the Monte Carlo run and the oracle disagree
 SEED_MAX = 2 ** 63 - 1
 
 
@@ -265,8 +304,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"Monte Carlo paths, 2..{MAX_PATHS}")
     p.add_argument("--seed", type=_integer(0, SEED_MAX), default=1,
                    help="seed of the random numbers, 0..2^63-1")
-    p.add_argument("--substeps", type=_integer(1, MAX_SUBSTEPS), default=2,
-                   help=f"plant steps per controller tick, 1..{MAX_SUBSTEPS}")
+    p.add_argument("--substeps", type=_substeps, default="auto",
+                   help=f"plant steps per controller tick, 1..{MAX_SUBSTEPS}, or auto (default): "
+                        "the fewest whose exact bias in the expected cost is at most 0.1 "
+                        "Monte Carlo standard errors of this run")
+    p.add_argument("--check", action="store_true",
+                   help=f"exit with status {EXIT_DISAGREE} unless the verdict is that the "
+                        "Monte Carlo run and the oracle agree")
     p.add_argument("--json", action="store_true")
     p.add_argument("--ignore-noise", action="store_true")
     p.add_argument("--x0", type=_x0, help="start the plant from this state instead of the problem's "
@@ -280,7 +324,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="figure file: .png, .pdf or .svg (its directory must exist)")
     p.add_argument("--paths", type=_integer(2, MAX_PATHS), default=100)
     p.add_argument("--seed", type=_integer(0, SEED_MAX), default=1)
-    p.add_argument("--substeps", type=_integer(1, MAX_SUBSTEPS), default=2)
+    p.add_argument("--substeps", type=_substeps, default="auto")
     p.set_defaults(func=_plot)
     for name, sp in sub.choices.items():
         _common(sp)

@@ -14,8 +14,9 @@ from stospline.design.bands import design_bands, has_bands
 from stospline.design.continuous import DesignError, design_continuous
 from stospline.design.zoh import design_zoh
 from stospline.sim.controller import build_controller
-from stospline.sim.montecarlo import MonteCarloResult, simulate, z_value
+from stospline.sim.montecarlo import MonteCarloResult, joint_verdict, simulate, z_value
 from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table, state_range
+from stospline.sim.plant_scheme import SubstepChoice, choose_substeps
 from stospline.problem.model import Problem, ProblemError
 from stospline.table.format import GainTable, TickGains, table_of
 from stospline.table.qformat import DEFAULT_SIGMAS, FixedPointTable, quantize_table
@@ -23,7 +24,7 @@ from stospline import limits, strict
 from stospline.precision import RoundedUp
 
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
-           "simulation_summary", "write_outputs", "start_from", "double_table", "fixed_point_table",
+           "simulation_summary", "verdict", "plan_substeps", "write_outputs", "start_from", "double_table", "fixed_point_table",
            "check_implementable"]
 
 # JSON summaries keep 10 significant digits and an absolute quantum of 1e-10: the designs
@@ -324,10 +325,11 @@ def check_implementable(d: Designed) -> None:
     strict.check_table_finite(d.problem, d.table, exact=lambda: double_table(d))
 
 
-def simulate_problem(d: Designed, *, paths: int, seed: int, substeps: int = 2,
+def simulate_problem(d: Designed, *, paths: int, seed: int,
+                     substeps: int | str | SubstepChoice = "auto",
                      build_dir=None) -> MonteCarloResult:
     """Monte Carlo of the compiled C controller built from `d.table` in closed loop with the
-    stochastic plant (Euler-Maruyama with `substeps` steps per tick).
+    stochastic plant (exponential Euler-Maruyama with `substeps` steps per tick).
 
     Parameters
     ----------
@@ -336,15 +338,19 @@ def simulate_problem(d: Designed, *, paths: int, seed: int, substeps: int = 2,
         Number of sample paths (at least 1).
     seed : int
         Seed of the plant's noise: the same seed gives the same result.
-    substeps : int
-        Plant steps per controller tick.
+    substeps : int, "auto" or SubstepChoice
+        Plant steps per controller tick. "auto" (default): the fewest (a power of two) whose
+        exact bias in the expected cost is at most 0.1 Monte Carlo standard errors of this
+        run (`sim.plant_scheme.choose_substeps`, or `plan_substeps` beforehand); the choice is
+        in the result's ``substep_choice``.
     build_dir : str or Path, optional
         Where the compiled module is cached (default: the user cache directory).
 
     Returns
     -------
     MonteCarloResult
-        Per-path costs (``cost``, ``cost_mean_ci()``), knot states, saturation counts.
+        Per-path costs (``cost``, ``cost_mean_ci()``), knot states, saturation counts, the
+        plant steps per tick (``substeps``, ``substep_choice``).
 
     Raises
     ------
@@ -362,11 +368,28 @@ def simulate_problem(d: Designed, *, paths: int, seed: int, substeps: int = 2,
     """
     check_implementable(d)
     ctl = build_controller(d.table, build_dir=build_dir)
-    return simulate(d.problem, ctl, paths=paths, seed=seed, substeps=substeps)
+    choice = substeps if isinstance(substeps, SubstepChoice) else None
+    if substeps == "auto":
+        choice = choose_substeps(d.problem, ctl, d.implemented.J, paths=paths, seed=seed)
+    mc = simulate(d.problem, ctl, paths=paths, seed=seed,
+                  substeps=choice.substeps if choice is not None else substeps)
+    mc.substep_choice = choice
+    return mc
 
 
-def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int, substeps: int) -> dict:
-    """Monte Carlo statistics beside the oracle's exact numbers, and the plant scheme's bias.
+def plan_substeps(d: Designed, *, paths: int, seed: int, build_dir=None) -> SubstepChoice:
+    """The plant steps per tick ``simulate_problem(..., substeps="auto")`` would choose for
+    this run (`sim.plant_scheme.choose_substeps`); pass the result as its `substeps` to run
+    with it, e.g. after checking that run's cost."""
+    check_implementable(d)
+    ctl = build_controller(d.table, build_dir=build_dir)
+    return choose_substeps(d.problem, ctl, d.implemented.J, paths=paths, seed=seed)
+
+
+def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int,
+                       confidence: float = 0.99) -> dict:
+    """Monte Carlo statistics beside the oracle's exact numbers, the plant scheme's bias, and
+    the verdict (`verdict`) on whether they agree at the joint `confidence`.
 
     ``saturation.tick_fraction`` is the fraction of (path, tick) steps on which the C controller
     returned STSP_WARN_SATURATED; when it is nonzero the oracle's numbers (which assume the
@@ -375,6 +398,7 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int, substeps
     A ratio to a Monte Carlo standard error that is 0 (every path alike, as without noise) is
     undefined: it is None (JSON null) and a sibling ``<key>_undefined`` says why. Raises
     ProblemError if some other number is not finite."""
+    substeps = mc.substeps
     euler = evaluate_table(d.problem, d.table, propagator="euler", substeps=substeps,
                            path=False)
     mean, hw95 = mc.cost_mean_ci(0.95)
@@ -409,6 +433,7 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int, substeps
             "cost": euler.J - d.implemented.J,
             "cost_over_stderr": bias_z,
             **({"cost_over_stderr_undefined": bias_why} if bias_why else {}),
+            **_substep_choice(mc),
             "knot_cov_max_abs": [float(np.abs(euler.knot_cov[k] - d.implemented.knot_cov[k]).max())
                                  for k in range(len(d.problem.knots))],
         },
@@ -422,8 +447,41 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int, substeps
         },
         **_limits(d),
     })
+    summary["verdict"] = verdict(summary, confidence)
     strict.check_summary_finite(d.problem, summary, "simulated numbers")
     return summary
+
+
+def _substep_choice(mc: MonteCarloResult) -> dict:
+    c = mc.substep_choice
+    if c is None:
+        return {"substeps_chosen": "given"}
+    return {"substeps_chosen": "auto", "target": c.target, "predicted_stderr": c.stderr,
+            "pilot_paths": c.pilot_paths, "target_met": c.met}
+
+
+def verdict(summary: dict, confidence: float = 0.99) -> dict:
+    """Whether the Monte Carlo run agrees with the oracle (`sim.montecarlo.joint_verdict`):
+    the mean cost and every knot-mean component, each by its z-score in the summary, within
+    the two-sided normal bound Bonferroni-corrected so that a correct controller passes all
+    of them at once with probability `confidence`. Saturation makes the run incomparable: the
+    oracle assumes the law is never clipped."""
+    c = summary["cost"]
+    stats = [("cost", c["z"], c["mc_mean"], c["oracle_implemented"])]
+    for k, kn in enumerate(summary["knots"]):
+        stats += [(f"knot {k} mean[{i}]", z, kn["mc_mean"][i], kn["oracle_mean"][i])
+                  for i, z in enumerate(kn["z"])]
+    v = joint_verdict(stats, confidence)
+    if summary["saturation"]["tick_fraction"] > 0:
+        agree, reason = False, ("the controller saturated: the oracle assumes the law is never "
+                                "clipped, so it does not predict this run")
+    elif v.outside:
+        agree, reason = False, "outside the joint interval: " + ", ".join(v.outside)
+    else:
+        agree, reason = True, "every statistic inside the joint interval"
+    return {"agree": agree, "confidence": confidence, "correction": "Bonferroni",
+            "statistics": v.statistics, "z_limit": v.z_limit, "max_abs_z": v.max_abs_z,
+            "max_abs_z_of": v.max_abs_z_of, "reason": reason}
 
 
 # Why a z-score (or another ratio to a Monte Carlo standard error) is null.

@@ -8,6 +8,7 @@ O(dt) weak error in the second moments). The oracle evaluates the same scheme ex
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from stospline.expm import expm
@@ -16,7 +17,11 @@ from stospline import progress
 from stospline.sim.controller import STATUS, CompiledController
 from stospline.problem.model import Problem
 
-__all__ = ["MonteCarloResult", "simulate", "z_value", "Agreement", "compare_to_oracle"]
+if TYPE_CHECKING:
+    from stospline.sim.plant_scheme import SubstepChoice
+
+__all__ = ["MonteCarloResult", "simulate", "z_value", "Agreement", "compare_to_oracle",
+           "JointVerdict", "joint_verdict", "DETERMINISTIC_RTOL"]
 
 
 def z_value(confidence: float, comparisons: int = 1) -> float:
@@ -39,6 +44,9 @@ class MonteCarloResult:
     saturated_ticks: np.ndarray | None = None
     u_low: np.ndarray | None = None
     u_high: np.ndarray | None = None
+    substeps: int = 0                # plant steps per tick of this run
+    # How `substeps` was chosen (pipeline.simulate_problem with substeps="auto"), else None.
+    substep_choice: "SubstepChoice | None" = None
 
     @property
     def paths(self) -> int:
@@ -82,9 +90,10 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
     problem : Problem
         The plant (dynamics, noise, cost) and x0; the controller's table is what is tested.
     controller : CompiledController
-    paths, seed : int
-        Number of paths (>= 1; ValueError otherwise, before anything is allocated); seed of
-        ``numpy.random.default_rng``.
+    paths : int
+        Number of paths (>= 1; ValueError otherwise, before anything is allocated).
+    seed : int or numpy.random.SeedSequence
+        Seed of ``numpy.random.default_rng``.
     substeps : int
         Plant steps per controller tick (>= 1) (time-varying data are frozen at each step's
         midpoint, a second-order error in the step).
@@ -140,43 +149,81 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
     progress.finish(bar)
     t = problem.t0 + np.arange(table.n_ticks + 1) * h
     return MonteCarloResult(cost, knots, t, np.array(sample_x), np.array(sample_u),
-                            np.array(mean_x), worst, saturated, u_low, u_high)
+                            np.array(mean_x), worst, saturated, u_low, u_high, substeps)
+
+
+# A deterministic statistic (zero Monte Carlo spread) agrees when it is this close, relative.
+DETERMINISTIC_RTOL = 1e-6
+
+
+@dataclass(frozen=True)
+class JointVerdict:
+    """Monte Carlo statistics against exact values, all at once: each z-score within the
+    two-sided normal bound `z_limit`, Bonferroni-corrected so that a correct controller passes
+    every one of them together with probability `confidence`."""
+    agree: bool
+    confidence: float
+    statistics: int
+    z_limit: float
+    max_abs_z: float
+    max_abs_z_of: str | None
+    outside: tuple[str, ...]     # the statistics that fail
+
+
+def joint_verdict(stats, confidence: float = 0.99) -> JointVerdict:
+    """`stats`: (name, z, Monte Carlo value, exact value) per statistic, z None where the
+    Monte Carlo spread is zero (every path alike): that statistic must then equal the exact
+    value to DETERMINISTIC_RTOL relative."""
+    stats = list(stats)
+    limit = z_value(confidence, len(stats))
+    worst_name, worst, outside = None, 0.0, []
+    for name, z, mc_value, exact in stats:
+        if z is None:
+            if abs(mc_value - exact) > DETERMINISTIC_RTOL * max(1.0, abs(exact)):
+                outside.append(name)
+            continue
+        if worst_name is None or abs(z) > worst:
+            worst_name, worst = name, abs(z)
+        if not abs(z) <= limit:
+            outside.append(name)
+    return JointVerdict(not outside, confidence, len(stats), limit, worst, worst_name,
+                        tuple(outside))
 
 
 @dataclass
 class Agreement:
-    """Monte Carlo vs exact numbers: z-scores and the joint verdict at a confidence level."""
+    """Monte Carlo vs exact numbers: z-scores (0 where the spread is zero) and the joint
+    verdict at a confidence level."""
     confidence: float
     z_limit: float
     cost_z: float
     knot_mean_z: list[np.ndarray]
+    verdict: JointVerdict
 
     @property
     def max_abs_z(self) -> float:
-        return max([abs(self.cost_z)] + [float(np.abs(z).max()) for z in self.knot_mean_z])
+        return self.verdict.max_abs_z
 
     @property
     def ok(self) -> bool:
-        return self.max_abs_z <= self.z_limit
+        return self.verdict.agree
 
 
 def compare_to_oracle(mc: MonteCarloResult, J: float, knot_means: list[np.ndarray], *,
                       confidence: float = 0.99) -> Agreement:
-    """Compare the Monte Carlo cost and knot means with exact values.
-
-    The intervals are normal-approximation CIs from the sample's own standard errors,
-    Bonferroni-corrected so that the *joint* statement (cost and every knot-mean component)
-    holds at `confidence` when the controller is right. Components with zero spread (a
-    deterministic state) are compared to 1e-6 instead.
-    """
+    """Compare the Monte Carlo cost and knot means with exact values (`joint_verdict`): the
+    z-scores use the sample's own standard errors, Bonferroni-corrected so that the *joint*
+    statement (cost and every knot-mean component) holds at `confidence` when the controller
+    is right."""
     mean, _ = mc.cost_mean_ci()
     se = mc.cost.std(ddof=1) / np.sqrt(mc.paths)
+    cost_z = float((mean - J) / se) if se > 0 else None
+    stats = [("cost", cost_z, mean, J)]
     zs = []
-    count = 1
     for k, exact in enumerate(knot_means):
         m, s = mc.knot_mean_se(k)
-        z = np.where(s > 0, (m - exact) / np.where(s > 0, s, 1.0),
-                     np.where(np.abs(m - exact) <= 1e-6, 0.0, np.inf))
-        zs.append(z)
-        count += len(z)
-    return Agreement(confidence, z_value(confidence, count), float((mean - J) / se), zs)
+        z = [float((m[i] - exact[i]) / s[i]) if s[i] > 0 else None for i in range(len(m))]
+        stats += [(f"knot {k} mean[{i}]", z[i], m[i], exact[i]) for i in range(len(m))]
+        zs.append(np.array([0.0 if v is None else v for v in z]))
+    v = joint_verdict(stats, confidence)
+    return Agreement(confidence, v.z_limit, 0.0 if cost_z is None else cost_z, zs, v)

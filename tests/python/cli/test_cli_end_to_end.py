@@ -63,3 +63,20 @@ def test_missing_file_exits_2(tmp_path):
     r = run("design", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o"))
     assert r.returncode == 2
     assert not (tmp_path / "o").exists()
+
+
+def test_simulate_check_exit_status(tmp_path):
+    """`--check`: status 0 when the run agrees with the oracle, 3 when it cannot (here the
+    actuators saturate, so the oracle does not predict the run); the verdict line either way."""
+    r = run("simulate", ROBOT, "--paths", "300", "--seed", "2", "--check")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "verdict: agree" in r.stdout
+    limited = tmp_path / "limited.toml"
+    limited.write_text(open(ROBOT).read().replace("tick_hz", "u_max = 0.3\ntick_hz", 1))
+    r = run("simulate", str(limited), "--paths", "300", "--seed", "2", "--check")
+    assert r.returncode == 3, r.stdout + r.stderr
+    assert "verdict: DISAGREE" in r.stdout and "saturated" in r.stdout
+    r = run("simulate", str(limited), "--paths", "300", "--seed", "2")
+    assert r.returncode == 0, r.stderr            # without --check: the numbers, status 0
+    s = json.loads(run("simulate", ROBOT, "--paths", "300", "--json").stdout)
+    assert s["verdict"]["agree"] is True and s["simulation_bias"]["substeps_chosen"] == "auto"

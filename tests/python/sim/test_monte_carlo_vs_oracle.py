@@ -76,3 +76,20 @@ def test_check_rejects_a_wrong_controller(robot_problem, robot, fault):
     mc = simulate(robot_problem, bad, paths=1000, seed=SEED, substeps=1)
     agree = compare_to_oracle(mc, robot.implemented.J, robot.implemented.knot_mean)
     assert not agree.ok, f"{fault}: max |z| {agree.max_abs_z:.2f} <= {agree.z_limit:.2f}"
+
+
+@pytest.mark.parametrize("fault", ["feedforward +3% on stage 0",
+                                   "latch offset of stage 0 sign-flipped"])
+def test_simulation_verdict_rejects_a_wrong_controller(robot_problem, robot, fault):
+    """`simulation_summary`'s verdict (what `stospline simulate --check` exits on) for the
+    compiled controller of a faulty table, against the oracle of the correct one."""
+    from dataclasses import replace
+    from stospline.pipeline import simulate_problem, simulation_summary
+    bad = replace(robot, table=_perturbed(robot.table, fault))
+    mc = simulate_problem(bad, paths=1000, seed=SEED, substeps=1)
+    v = simulation_summary(bad, mc, seed=SEED)["verdict"]
+    assert not v["agree"], v
+    assert v["max_abs_z"] > v["z_limit"] and v["statistics"] == 9
+    good = simulation_summary(robot, simulate_problem(robot, paths=1000, seed=SEED,
+                                                      substeps=1), seed=SEED)["verdict"]
+    assert good["agree"], good

@@ -1,0 +1,79 @@
+"""How many plant steps per controller tick: enough that the plant is truth, not a second
+source of error.
+
+The harness advances the plant by exponential Euler–Maruyama steps (`montecarlo.simulate`):
+exact for the mean, with an O(1/substeps) error in the second moments and so in the expected
+cost. That error is known exactly: the oracle evaluates the same scheme
+(``evaluate_table(..., propagator="euler")``). `choose_substeps` picks the fewest steps (a
+power of two) whose bias in the expected cost is at most `tolerance` Monte Carlo standard
+errors of the run being planned, the standard error predicted from a small pilot run on a
+random stream of its own (the run's own stream is untouched).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from stospline.problem.model import Problem
+from stospline.sim.controller import CompiledController
+from stospline.sim.montecarlo import simulate
+from stospline.sim.oracle import evaluate_table
+from stospline.table.format import GainTable
+
+__all__ = ["SubstepChoice", "choose_substeps", "scheme_bias", "PILOT_PATHS", "TOLERANCE"]
+
+PILOT_PATHS = 256     # paths of the run that predicts the cost's standard deviation
+TOLERANCE = 0.1       # bias allowed, in Monte Carlo standard errors of the planned run
+# The pilot's standard deviation has a relative sampling error of a few per cent (256 paths);
+# aiming at 0.8 of the predicted standard error keeps the bound for the run itself.
+_SAFETY = 0.8
+
+
+@dataclass(frozen=True)
+class SubstepChoice:
+    """The plant steps per tick chosen for a run, and why."""
+    substeps: int
+    bias: float           # the scheme's exact bias in the expected cost at `substeps`
+    target: float         # the bound |bias| had to meet: tolerance x predicted standard error
+    stderr: float         # predicted Monte Carlo standard error of the run's mean cost
+    pilot_paths: int
+    met: bool             # False when even the largest allowed number misses the target
+
+
+def scheme_bias(problem: Problem, table: GainTable, substeps: int, exact_cost: float) -> float:
+    """Expected cost under the plant scheme with `substeps` steps per tick, minus the exact
+    one (`exact_cost`, the oracle's cost of the same table with the exact plant)."""
+    return evaluate_table(problem, table, propagator="euler", substeps=substeps,
+                          path=False).J - exact_cost
+
+
+def choose_substeps(problem: Problem, controller: CompiledController, exact_cost: float, *,
+                    paths: int, seed: int, tolerance: float = TOLERANCE,
+                    limit: int = 10_000) -> SubstepChoice:
+    """The fewest plant steps per tick (1, 2, 4, ...; at most `limit`) whose exact bias in
+    the expected cost is at most `tolerance` standard errors of a `paths`-path run.
+
+    The standard error is predicted from a pilot run of ``min(paths, PILOT_PATHS)`` paths with
+    one step per tick, seeded from `seed` through ``SeedSequence.spawn`` (so the run seeded
+    with `seed` itself is the same whatever the pilot did). Without noise (every pilot path
+    alike) the target is rounding: 1e-9 of the cost's magnitude."""
+    table = controller.table
+    pilot_paths = min(paths, PILOT_PATHS)
+    pilot_seed = np.random.SeedSequence(seed).spawn(1)[0]
+    pilot = simulate(problem, controller, paths=pilot_paths, seed=pilot_seed, substeps=1)
+    spread = float(pilot.cost.std(ddof=1)) if pilot_paths > 1 else 0.0
+    stderr = spread / math.sqrt(paths)
+    target = max(tolerance * _SAFETY * stderr, 1e-9 * max(1.0, abs(exact_cost)))
+
+    substeps = 1
+    bias = scheme_bias(problem, table, substeps, exact_cost)
+    if abs(bias) > target:
+        # The bias falls as 1/substeps: jump to the predicted power of two, then double.
+        substeps = min(limit, 2 ** math.ceil(math.log2(abs(bias) / target)))
+        bias = scheme_bias(problem, table, substeps, exact_cost)
+        while abs(bias) > target and substeps < limit:
+            substeps = min(limit, 2 * substeps)
+            bias = scheme_bias(problem, table, substeps, exact_cost)
+    return SubstepChoice(substeps, bias, target, stderr, pilot_paths, abs(bias) <= target)

@@ -482,11 +482,11 @@ def _parse_plot(plot: Any, n: int) -> dict:
         _matrix(wall, f"plot.walls[{i}]", (None, 2), ("", " (x, y points)"))
     if "axes" in plot:
         ax = plot["axes"]
-        if (not isinstance(ax, list) or len(ax) != 2
+        if (not isinstance(ax, list) or len(ax) not in (1, 2)
                 or not all(isinstance(a, int) and not isinstance(a, bool) and 0 <= a < n
                            for a in ax)):
-            raise ProblemError("plot.axes", f"must be two state indices in 0..{n - 1}, "
-                                            f"got {ax!r}")
+            raise ProblemError("plot.axes", f"must be one or two state indices in 0..{n - 1} "
+                                            f"(one: that state against time), got {ax!r}")
     return plot
 
 

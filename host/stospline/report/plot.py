@@ -14,17 +14,28 @@ def _walls(ax, problem) -> None:
         ax.plot(w[:, 0], w[:, 1], color="0.2", lw=2)
 
 
+def plot_axes(problem) -> list[int]:
+    """The states drawn: ``[plot] axes``, else the phase plane of states 0 and 1, or state 0
+    against time when there is only one state."""
+    return list(problem.plot.get("axes", [0, 1] if problem.n >= 2 else [0]))
+
+
 def plot_corridor(d, mc, out: str | Path) -> None:
     """Corridor with start and end, one realisation, the Monte Carlo mean path beside the
-    oracle's exact mean, and the control signals of the realisation."""
+    oracle's exact mean, and the control signals of the realisation; in the phase plane of two
+    states, or one state against time (`plot_axes`)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from stospline.sim.oracle import evaluate_table
 
     p = d.problem
-    ia, ib = p.plot.get("axes", [0, 1])
+    axes = plot_axes(p)
     exact = evaluate_table(p, d.table)
+    if len(axes) == 1:
+        _plot_against_time(d, mc, exact, axes[0], out, plt)
+        return
+    ia, ib = axes
     last = p.knots[-1].constraint
     end = None if last is None or last.is_band else last.value
     fig, axs = plt.subplots(2, 2, figsize=(10, 8.5))
@@ -58,6 +69,42 @@ def plot_corridor(d, mc, out: str | Path) -> None:
     a_u.grid(alpha=0.3)
     fig.suptitle(f"{p.name}: J0 = {d.design.J0:.4g}, MC mean cost "
                  f"{mc.cost.mean():.4g} ± {1.96 * mc.cost.std(ddof=1) / np.sqrt(mc.paths):.2g}")
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+
+
+def _plot_against_time(d, mc, exact, i: int, out, plt) -> None:
+    """One state against time: a realisation, the Monte Carlo mean beside the oracle's mean
+    with its +-2 standard deviation band, the knots' targets, and the controls."""
+    p = d.problem
+    fig, (a_x, a_u) = plt.subplots(2, 1, figsize=(9, 7.5), sharex=True)
+    t = mc.sample_t
+    sd = np.sqrt(exact.path_var[:, i])
+    a_x.fill_between(exact.path_t, exact.path_mean[:, i] - 2 * sd,
+                     exact.path_mean[:, i] + 2 * sd, color="tab:orange", alpha=0.2,
+                     label="oracle mean +- 2 sd")
+    a_x.plot(t, mc.sample_x[:, i], color="0.5", lw=0.8, label="one realisation")
+    a_x.plot(t, mc.mean_x[:, i], color="tab:blue", lw=2, label=f"mean of {mc.paths} paths")
+    a_x.plot(exact.path_t, exact.path_mean[:, i], "--", color="tab:orange", lw=1.5,
+             label="oracle mean (exact)")
+    for k, kn in enumerate(p.knots):
+        a_x.plot(kn.t, exact.knot_mean[k][i], "k+", ms=10)
+    a_x.set_ylabel(f"x{i}")
+    a_x.legend(loc="best", fontsize=8)
+    a_x.grid(alpha=0.3)
+    styles = ["-", "--", ":", "-."]
+    for j in range(mc.sample_u.shape[1]):
+        a_u.plot(t[:-1], mc.sample_u[:, j], styles[j % 4], color="k", lw=1, label=f"u{j + 1}")
+    for kn in p.knots[:-1]:
+        a_x.axvline(kn.t, color="0.6", lw=0.8)
+        a_u.axvline(kn.t, color="0.6", lw=0.8)
+    a_u.set_xlabel("t [s]")
+    a_u.set_title("control signals of the realisation")
+    a_u.legend()
+    a_u.grid(alpha=0.3)
+    fig.suptitle(f"{p.name}: J0 = {d.design.J0:.4g}, MC mean cost "
+                 f"{mc.cost.mean():.4g} +- {1.96 * mc.cost.std(ddof=1) / np.sqrt(mc.paths):.2g}")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     plt.close(fig)

@@ -80,3 +80,44 @@ def test_simulate_check_exit_status(tmp_path):
     assert r.returncode == 0, r.stderr            # without --check: the numbers, status 0
     s = json.loads(run("simulate", ROBOT, "--paths", "300", "--json").stdout)
     assert s["verdict"]["agree"] is True and s["simulation_bias"]["substeps_chosen"] == "auto"
+
+
+ONE_STATE = """
+name = "growth"
+t0 = 0.0
+x0 = [1.0]
+tick_hz = 100
+[dynamics]
+A = [[0.05]]
+B = [[1.0]]
+noise = [{ state = 0, G = [[0.2]] }]
+[cost]
+Q = [[0.0]]
+R = [[1.0]]
+[[knots]]
+t = 1.0
+constraint = { C = [[1.0]], value = [1.5] }
+"""
+
+
+@pytest.mark.parametrize("text", [
+    ONE_STATE,                                                      # by default, n = 1
+    open(ROBOT).read().replace("axes = [0, 2]", "axes = [2]", 1),   # one chosen state
+], ids=["one state", "axes = [2]"])
+def test_plot_one_state_against_time(tmp_path, text):
+    """A problem with a single state (e.g. wealth under geometric noise) plots that state
+    against time instead of failing on the default phase-plane axes; so does `axes = [i]`."""
+    f = tmp_path / "p.toml"
+    f.write_text(text)
+    out = tmp_path / "p.png"
+    r = run("plot", str(f), "--out", str(out), "--paths", "20")
+    assert r.returncode == 0, r.stderr
+    assert out.stat().st_size > 10_000 and out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_plot_axes_must_be_one_or_two_states(tmp_path):
+    f = tmp_path / "p.toml"
+    f.write_text(ONE_STATE + "[plot]\naxes = [0, 1]\n")
+    r = run("plot", str(f), "--out", str(tmp_path / "p.png"))
+    assert r.returncode == 2 and "plot.axes" in r.stderr and "one or two" in r.stderr
+    assert not (tmp_path / "p.png").exists()

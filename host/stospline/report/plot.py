@@ -57,10 +57,16 @@ def plot_corridor(d, mc, out: str | Path) -> None:
     for k, kn in enumerate(p.knots):
         a_mean.plot(exact.knot_mean[k][ia], exact.knot_mean[k][ib], "k+", ms=10)
     a_mean.legend(loc="upper left", fontsize=8)
-    t = mc.sample_t[:-1]
+    _controls_and_save(d, mc, a_u, fig, out, plt)
+
+
+def _controls_and_save(d, mc, a_u, fig, out, plt) -> None:
+    """The controls of the realisation with the stage starts, the title, and the file."""
+    p = d.problem
     styles = ["-", "--", ":", "-."]
     for i in range(mc.sample_u.shape[1]):
-        a_u.plot(t, mc.sample_u[:, i], styles[i % 4], color="k", lw=1, label=f"u{i + 1}")
+        a_u.plot(mc.sample_t[:-1], mc.sample_u[:, i], styles[i % 4], color="k", lw=1,
+                 label=f"u{i + 1}")
     for kn in p.knots[:-1]:
         a_u.axvline(kn.t, color="0.6", lw=0.8)
     a_u.set_xlabel("t [s]")
@@ -93,18 +99,6 @@ def _plot_against_time(d, mc, exact, i: int, out, plt) -> None:
     a_x.set_ylabel(f"x{i}")
     a_x.legend(loc="best", fontsize=8)
     a_x.grid(alpha=0.3)
-    styles = ["-", "--", ":", "-."]
-    for j in range(mc.sample_u.shape[1]):
-        a_u.plot(t[:-1], mc.sample_u[:, j], styles[j % 4], color="k", lw=1, label=f"u{j + 1}")
     for kn in p.knots[:-1]:
         a_x.axvline(kn.t, color="0.6", lw=0.8)
-        a_u.axvline(kn.t, color="0.6", lw=0.8)
-    a_u.set_xlabel("t [s]")
-    a_u.set_title("control signals of the realisation")
-    a_u.legend()
-    a_u.grid(alpha=0.3)
-    fig.suptitle(f"{p.name}: J0 = {d.design.J0:.4g}, MC mean cost "
-                 f"{mc.cost.mean():.4g} +- {1.96 * mc.cost.std(ddof=1) / np.sqrt(mc.paths):.2g}")
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
+    _controls_and_save(d, mc, a_u, fig, out, plt)

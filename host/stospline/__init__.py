@@ -6,7 +6,7 @@ The public API, in the order a script uses it (``docs/guide/library.md`` walks t
     problem = ss.load_problem("robot.toml")          # or ss.problem_from_arrays(A, B, ...)
     d = ss.design_problem(problem)                   # design, float32 table, oracle
     exact = ss.table_of(d.design, quantize=False)    # the design's own per-tick law
-    q15 = ss.fixed_point_table(d, "q15")                   # fixed-point table with error bound
+    q15 = ss.fixed_point_table(d, "q15")             # fixed-point table with error bound
     header, source = ss.generate_c(d.table)          # the C text the firmware compiles
     ctl = ss.build_controller(d.table)               # the real firmware, through cffi
     mc = ss.simulate_problem(d, paths=1000, seed=1)  # Monte Carlo of the compiled C

@@ -100,7 +100,8 @@ def _simulate(args) -> int:
         d = start_from(d, x0)
     _note_tables(d, "compiling")
     substeps = _planned_substeps(args, problem, d, "simulate")
-    mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps)
+    mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps,
+                          workers=args.workers)
     s = simulation_summary(d, mc, seed=args.seed)
     _report_simulation(s, args.json)
     sat = s["saturation"]
@@ -178,7 +179,8 @@ def _plot(args) -> int:
     d = design_problem(problem, **_options(args, problem))
     _note_tables(d, "compiling")
     substeps = _planned_substeps(args, problem, d, "plot")
-    mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps)
+    mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps,
+                          workers=args.workers)
     write_file(args.out, lambda tmp: plot_corridor(d, mc, tmp))
     print(f"wrote {args.out}")
     return 0
@@ -260,6 +262,7 @@ PLOT_FORMATS = (".png", ".pdf", ".svg")
 MAX_PATHS = 10 ** 9          # the memory/time budget usually refuses far fewer
 MAX_SUBSTEPS = 10_000
 EXIT_DISAGREE = 3   # simulate --check: the Monte Carlo run and the oracle disagree
+MAX_WORKERS = 1024
 SEED_MAX = 2 ** 63 - 1
 
 
@@ -308,6 +311,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"plant steps per controller tick, 1..{MAX_SUBSTEPS}, or auto (default): "
                         "the fewest whose exact bias in the expected cost is at most 0.1 "
                         "Monte Carlo standard errors of this run")
+    p.add_argument("--workers", type=_integer(1, MAX_WORKERS), default=None,
+                   help="processes that run the blocks of paths (default: every core); the "
+                        "numbers are the same for any count")
     p.add_argument("--check", action="store_true",
                    help=f"exit with status {EXIT_DISAGREE} unless the verdict is that the "
                         "Monte Carlo run and the oracle agree")
@@ -325,6 +331,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--paths", type=_integer(2, MAX_PATHS), default=100)
     p.add_argument("--seed", type=_integer(0, SEED_MAX), default=1)
     p.add_argument("--substeps", type=_substeps, default="auto")
+    p.add_argument("--workers", type=_integer(1, MAX_WORKERS), default=None)
     p.set_defaults(func=_plot)
     for name, sp in sub.choices.items():
         _common(sp)

@@ -326,7 +326,7 @@ def check_implementable(d: Designed) -> None:
 
 
 def simulate_problem(d: Designed, *, paths: int, seed: int,
-                     substeps: int | str | SubstepChoice = "auto",
+                     substeps: int | str | SubstepChoice = "auto", workers: int | None = None,
                      build_dir=None) -> MonteCarloResult:
     """Monte Carlo of the compiled C controller built from `d.table` in closed loop with the
     stochastic plant (exponential Euler-Maruyama with `substeps` steps per tick).
@@ -343,6 +343,9 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
         exact bias in the expected cost is at most 0.1 Monte Carlo standard errors of this
         run (`sim.plant_scheme.choose_substeps`, or `plan_substeps` beforehand); the choice is
         in the result's ``substep_choice``.
+    workers : int, optional
+        Processes that run the blocks of paths (default: every core; the numbers are the same
+        for any count, `sim.montecarlo.simulate`).
     build_dir : str or Path, optional
         Where the compiled module is cached (default: the user cache directory).
 
@@ -374,7 +377,7 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
     if substeps == "auto":
         choice = choose_substeps(d.problem, ctl, d.implemented.J, paths=paths, seed=seed)
     mc = simulate(d.problem, ctl, paths=paths, seed=seed,
-                  substeps=choice.substeps if choice is not None else substeps)
+                  substeps=choice.substeps if choice is not None else substeps, workers=workers)
     mc.substep_choice = choice
     return mc
 

@@ -6,6 +6,8 @@ that goes into the build), and the returned `CompiledController` steps C instanc
 """
 from __future__ import annotations
 
+import re
+
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,16 +21,11 @@ from stospline.table.format import GainTable
 __all__ = ["build_controller", "CompiledController", "firmware_dir", "STATUS"]
 
 
-# The plant's entry point (plant.c), declared to cffi and to the generated source alike.
-_PLANT_PROTOTYPE = """void harness_plant_tick(size_t paths, size_t n, size_t m, size_t mz, size_t substeps,
-                        double dt, const double *Ad, const double *Bd,
-                        size_t g_count, const size_t *g_index, const double *g_value,
-                        const double *Q, const double *S, const double *q,
-                        const double *R, const double *r, double rho, int state_cost,
-                        const double *dZ, const float *U, double *X, double *cost);
-"""
+# The plant's interface (plant.h), for cffi: the header itself, without its comments.
+_PLANT_H = Path(__file__).with_name("plant.h")
+_PLANT_PROTOTYPE = re.sub(r"/\*.*?\*/", "", _PLANT_H.read_text(), flags=re.S)
 
-_CDEF = """
+_CDEF = """%(plant)s
 typedef float stsp_f32_t;
 typedef %(scalar)s stsp_scalar_t;
 typedef int... stsp_status_t;
@@ -67,12 +64,53 @@ int harness_step_batch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
 int harness_pair_batch(const stsp_ctrl_t *proto, size_t count, const uint32_t *t_latch,
                        const stsp_scalar_t *x_latch, const uint32_t *tick,
                        const stsp_scalar_t *x, stsp_scalar_t *u, int *status);
-%(plant)s"""
+int harness_tick(stsp_ctrl_t *ctrls, size_t count, uint32_t tick, const harness_plant_t *pl,
+                 const double *dZ, double *X, double *cost, int64_t *saturated,
+                 double *u_low, double *u_high, double *x_sum, float *u_first);"""
 
 # Harness-only C: loops over instances so one Python call serves every Monte Carlo path.
 _BATCH = """
+#include "plant.h"
 const stsp_table_t *harness_table(void) { return &%(p)s_table; }
-%(plant)s/* Verify the table once (the CRC covers every byte), then clone the fresh instance.
+/* One tick of every path, float32 tables only (else STSP_ERR_BAD_DIMS, nothing touched):
+ * the controller of path p steps with x = (float)X[p], the plant advances X[p] with the
+ * command held (dZ[p]: substeps x mz), and the run's statistics accumulate: saturated ticks
+ * per path, the smallest and largest command per input, the sum of the new states (for the
+ * mean path), and path 0's command. Returns the worst status. */
+int harness_tick(stsp_ctrl_t *ctrls, size_t count, uint32_t tick, const harness_plant_t *pl,
+                 const double *dZ, double *X, double *cost, int64_t *saturated,
+                 double *u_low, double *u_high, double *x_sum, float *u_first) {
+#ifdef STSP_ARITH_FIXED_POINT
+    (void)ctrls; (void)count; (void)tick; (void)pl; (void)dZ; (void)X; (void)cost;
+    (void)saturated; (void)u_low; (void)u_high; (void)x_sum; (void)u_first;
+    return (int)STSP_ERR_BAD_DIMS;
+#else
+    const size_t n = pl->n, m = pl->m, dz_stride = pl->substeps * pl->mz;
+    float xf[STSP_MAX_NX], uf[STSP_MAX_NU];
+    double ud[STSP_MAX_NU];
+    size_t p, i;
+    int worst = 0;
+    if (n > STSP_MAX_NX || m > STSP_MAX_NU) return (int)STSP_ERR_BAD_DIMS;
+    for (p = 0; p < count; ++p) {
+        double *x = X + p * n;
+        int st;
+        for (i = 0; i < n; ++i) xf[i] = (float)x[i];
+        st = (int)stsp_step(&ctrls[p], tick, xf, uf);
+        if (st < worst) worst = st;
+        if (st == (int)STSP_WARN_SATURATED) ++saturated[p];
+        for (i = 0; i < m; ++i) {
+            ud[i] = (double)uf[i];
+            if (ud[i] < u_low[i]) u_low[i] = ud[i];
+            if (ud[i] > u_high[i]) u_high[i] = ud[i];
+        }
+        if (p == 0) for (i = 0; i < m; ++i) u_first[i] = uf[i];
+        cost[p] += harness_plant_path(pl, ud, dZ + p * dz_stride, x);
+        for (i = 0; i < n; ++i) x_sum[i] += x[i];
+    }
+    return worst;
+#endif
+}
+/* Verify the table once (the CRC covers every byte), then clone the fresh instance.
  * count == 0 (or NULL ctrls) touches no memory and returns STSP_ERR_NULL: there is no
  * ctrls[0] to initialise. */
 int harness_init_batch(stsp_ctrl_t *ctrls, size_t count, const stsp_table_t *table) {
@@ -131,7 +169,9 @@ def _cdef(arith: str) -> str:
                     "plant": _PLANT_PROTOTYPE,
                     "conv": _CONV if fixed else ""}
 
-_CFLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra", "-DSTSP_HOST_MESSAGES"]
+# -O3 as the host CMake build (Release); ISO C keeps floating-point contraction off, so the
+# bits are those of any other build.
+_CFLAGS = ["-std=c99", "-O3", "-Wall", "-Wextra", "-DSTSP_HOST_MESSAGES"]
 
 
 def firmware_dir() -> Path:
@@ -230,32 +270,85 @@ class CompiledController:
             ffi.cast("int *", ffi.from_buffer(status)))
         return U, status
 
-    def plant_tick(self, stage, Ad, Bd, dt: float, substeps: int, dZ: np.ndarray,
-                   U: np.ndarray, X: np.ndarray, cost: np.ndarray) -> None:
-        """Advance X (paths, n) in place by one tick of the C plant integrator."""
+    def plant(self, stage, Ad, Bd, dt: float, substeps: int):
+        """The plant of one stage for `plant_tick`/`tick` (a ``harness_plant_t`` that keeps
+        its arrays alive): step matrices Ad, Bd over dt, `substeps` steps per tick."""
         ffi = self.ffi
-        # from_buffer("double[]", a) keeps `a` alive for the call; the arrays are contiguous.
         GH = stage.noise_tensor                              # multipliers [x; u]
         nz = np.argwhere(GH != 0)                            # rows (i, a, k)
-        g_index = np.ascontiguousarray(nz, dtype=np.uintp)
-        g_value = np.ascontiguousarray(GH[tuple(nz.T)], dtype=float)
-        keep = [np.ascontiguousarray(a, dtype=float) for a in
-                (Ad, Bd, stage.Q, stage.S, stage.q, stage.R, stage.r, dZ)]
-        ptr = [ffi.from_buffer("double[]", a) for a in keep]
-        paths, n = X.shape
-        m, mz = stage.B.shape[1], stage.G.shape[2]
+        keep = [np.ascontiguousarray(nz, dtype=np.uintp),
+                np.ascontiguousarray(GH[tuple(nz.T)], dtype=float)]
+        keep += [np.ascontiguousarray(a, dtype=float) for a in
+                 (Ad, Bd, stage.Q, stage.S, stage.q, stage.R, stage.r)]
+        n, m = stage.B.shape
+        pl = ffi.new("harness_plant_t *")
+        pl.n, pl.m, pl.mz, pl.substeps, pl.dt = n, m, stage.G.shape[2], substeps, dt
+        pl.dz_scale = float(np.sqrt(dt))
+        pl.g_count = len(keep[1])
+        pl.g_index = ffi.cast("const size_t *", ffi.from_buffer(keep[0]))
+        pl.g_value, pl.Ad, pl.Bd, pl.Q, pl.S, pl.q, pl.R, pl.r = (
+            ffi.cast("const double *", ffi.from_buffer(a)) for a in keep[1:])
+        pl.rho = float(stage.rho)
+        pl.state_cost = int(bool(np.any(stage.Q) or np.any(stage.S) or np.any(stage.q)))
+        return _Plant(pl, keep)
+
+    def plant_tick(self, plant, dZ: np.ndarray, U: np.ndarray, X: np.ndarray,
+                   cost: np.ndarray) -> None:
+        """Advance X (paths, n) in place by one tick of the C plant integrator; dZ (paths,
+        substeps, mz) holds standard normal numbers (scaled by sqrt(dt) in C)."""
+        ffi = self.ffi
         assert X.flags.c_contiguous and X.dtype == np.float64 and U.dtype == np.float32
-        self.lib.harness_plant_tick(
-            paths, n, m, mz, substeps, dt, ptr[0], ptr[1], len(g_value),
-            ffi.from_buffer("size_t[]", g_index), ffi.from_buffer("double[]", g_value),
-            *ptr[2:7], float(stage.rho),
-            int(bool(np.any(stage.Q) or np.any(stage.S) or np.any(stage.q))), ptr[7],
-            ffi.from_buffer("float[]", U), ffi.from_buffer("double[]", X),
-            ffi.from_buffer("double[]", cost))
+        self.lib.harness_plant_tick(plant.c, X.shape[0], ffi.from_buffer("double[]", dZ),
+                                    ffi.from_buffer("float[]", U),
+                                    ffi.from_buffer("double[]", X),
+                                    ffi.from_buffer("double[]", cost))
+
+    def ticker(self, ctrls, count: int, dZ: np.ndarray, X: np.ndarray, cost: np.ndarray,
+               stats: "TickStats"):
+        """``tick(j, plant) -> worst status``: one tick of `count` paths in one C call (float32
+        tables): the controllers `ctrls` step from X, the plant advances X with dZ, the cost
+        and `stats` (`TickStats`) accumulate. The arrays are bound once, here."""
+        ffi, lib = self.ffi, self.lib
+        keep = (dZ, X, cost, stats)
+        args = (ffi.from_buffer("double[]", dZ), ffi.from_buffer("double[]", X),
+                ffi.from_buffer("double[]", cost),
+                ffi.cast("int64_t *", ffi.from_buffer(stats.saturated)),
+                ffi.from_buffer("double[]", stats.u_low),
+                ffi.from_buffer("double[]", stats.u_high),
+                ffi.from_buffer("double[]", stats.x_sum),
+                ffi.from_buffer("float[]", stats.u_first))
+
+        def tick(j: int, plant) -> int:
+            return lib.harness_tick(ctrls, count, j, plant.c, *args)
+
+        tick.keep = keep
+        return tick
+
+
+@dataclass
+class _Plant:
+    c: object         # harness_plant_t *
+    keep: list        # the arrays it points into
+
+
+@dataclass
+class TickStats:
+    """What `CompiledController.tick` accumulates: saturated ticks per path, the extreme
+    commands per input, the sum of the states after the tick, and path 0's command."""
+    saturated: np.ndarray
+    u_low: np.ndarray
+    u_high: np.ndarray
+    x_sum: np.ndarray
+    u_first: np.ndarray
+
+    @classmethod
+    def zeros(cls, paths: int, n: int, m: int) -> "TickStats":
+        return cls(np.zeros(paths, np.int64), np.full(m, np.inf), np.full(m, -np.inf),
+                   np.zeros(n), np.zeros(m, np.float32))
 
 
 def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
-                     quiet: bool = True) -> CompiledController:
+                     quiet: bool = True, fixed_shape: bool = True) -> CompiledController:
     """Compile ``firmware/src/*.c`` with the table's generated C into a cffi module and load it.
 
     Builds are cached in `build_dir` (default: `stospline.cache.cache_root`) under a hash of
@@ -268,6 +361,11 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     build_dir : str or Path, optional
     quiet : bool
         Hide the compiler's output.
+    fixed_shape : bool
+        True (default): the firmware's fixed-shape build for the table's dimensions
+        (``STSP_FIXED_NX/NU/N_LATCH``, the fastest; it refuses a table of another shape).
+        False: the generic build, which takes any table within the ``STSP_MAX_*`` limits.
+        Both compute the same bits.
 
     Returns
     -------
@@ -287,13 +385,21 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     """
     header, source = generate_c(table)
     arith = getattr(table, "arith", "float32")
-    cdef, cflags = _cdef(arith), _CFLAGS + VARIANTS[arith][2]
+    # The module serves this one table: its dimensions are compile-time constants of the
+    # plant (HARNESS_N/M) and, by default, of the controller (the firmware's fixed-shape build,
+    # which computes the same bits as the generic one; both are tested by ctest and QEMU).
+    n, m, n_latch = table.dims
+    cdef = _cdef(arith)
+    cflags = _CFLAGS + VARIANTS[arith][2] + [f"-DHARNESS_N={n}", f"-DHARNESS_M={m}"]
+    if fixed_shape:
+        cflags += [f"-DSTSP_FIXED_NX={n}u", f"-DSTSP_FIXED_NU={m}u",
+                   f"-DSTSP_FIXED_N_LATCH={n_latch}u"]
     fw = firmware_dir()
     check_header(fw / "include")   # the shared constants are still the header's
     fw_sources = sorted((fw / "src").glob("*.c"))
     plant = Path(__file__).with_name("plant.c")
     key = source_key([header, source, cdef, _BATCH, " ".join(cflags)]
-                     + [p.read_bytes() for p in sorted(fw.rglob("*.[ch]")) + [plant]])
+                     + [p.read_bytes() for p in sorted(fw.rglob("*.[ch]")) + [plant, _PLANT_H]])
     modname = f"_stsp_{table.name}_{key}"
 
     def build(out: Path) -> Path:
@@ -302,9 +408,10 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
         return compile_cffi(
             out, modname, cdef,
             f'#include "stospline/stsp_controller.h"\n#include "{table.name}.h"\n'
-            + _BATCH % {"p": table.name, "plant": _PLANT_PROTOTYPE},
+            + _BATCH % {"p": table.name},
             sources=[*fw_sources, out / f"{table.name}.c", plant],
-            include_dirs=[fw / "include", fw / "src", out], cflags=cflags, quiet=quiet)
+            include_dirs=[fw / "include", fw / "src", out, plant.parent], cflags=cflags,
+            quiet=quiet)
 
     mod = load_module(cached_build(key, modname, build, root=build_dir))
     return CompiledController(mod.ffi, mod.lib, table)

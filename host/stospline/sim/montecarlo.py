@@ -7,6 +7,7 @@ O(dt) weak error in the second moments). The oracle evaluates the same scheme ex
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -14,13 +15,14 @@ import numpy as np
 from stospline.expm import expm
 
 from stospline import progress
-from stospline.sim.controller import STATUS, CompiledController
+from stospline.sim.controller import STATUS, CompiledController, TickStats
 from stospline.problem.model import Problem
 
 if TYPE_CHECKING:
     from stospline.sim.plant_scheme import SubstepChoice
 
 __all__ = ["MonteCarloResult", "simulate", "z_value", "Agreement", "compare_to_oracle",
+           "BLOCK_PATHS", "block_seed", "default_workers",
            "JointVerdict", "joint_verdict", "DETERMINISTIC_RTOL"]
 
 
@@ -81,8 +83,35 @@ def _zoh(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarra
     return E[:n, :n], E[:n, n:]
 
 
+# Paths per random stream. Block 0 draws from the seed's own stream, block i >= 1 from child
+# i - 1 of ``SeedSequence(seed).spawn``; the blocks are the unit of work spread over processes,
+# so a seed gives the same numbers whatever the number of workers (and runs of up to this many
+# paths are what a single stream gives).
+BLOCK_PATHS = 1024
+# Below this many path-ticks a run stays in this process: starting workers costs more.
+_PARALLEL_WORK = 2_000_000
+
+
+def block_seed(seed, block: int) -> np.random.SeedSequence:
+    """The random stream of `block`: the seed's own for block 0, else child ``block - 1`` of
+    ``SeedSequence(seed).spawn`` (the same children, derived without spawning)."""
+    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    if block == 0:
+        return ss
+    return np.random.SeedSequence(ss.entropy, spawn_key=tuple(ss.spawn_key) + (block - 1,),
+                                  pool_size=ss.pool_size)
+
+
+def default_workers() -> int:
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:          # not on Linux
+        return os.cpu_count() or 1
+
+
 def simulate(problem: Problem, controller: CompiledController, *, paths: int, seed: int,
-             substeps: int = 4) -> MonteCarloResult:
+             substeps: int = 4, workers: int | None = None) -> MonteCarloResult:
     """Run `paths` realisations of the plant with the compiled controller in the loop.
 
     Parameters
@@ -93,63 +122,160 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
     paths : int
         Number of paths (>= 1; ValueError otherwise, before anything is allocated).
     seed : int or numpy.random.SeedSequence
-        Seed of ``numpy.random.default_rng``.
+        Seed of the random streams: blocks of `BLOCK_PATHS` paths, each with its own stream
+        (`block_seed`), so the result depends on the seed and `paths` only.
     substeps : int
         Plant steps per controller tick (>= 1) (time-varying data are frozen at each step's
         midpoint, a second-order error in the step).
+    workers : int, optional
+        Processes that run blocks at once (default: every core this process may use; runs
+        below ~2e6 path-ticks stay in this process). The result is the same for any number.
     """
     for name, value in (("paths", paths), ("substeps", substeps)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
     table = controller.table
+    counts = [min(BLOCK_PATHS, paths - start) for start in range(0, paths, BLOCK_PATHS)]
+    workers = default_workers() if workers is None else max(1, int(workers))
+    parallel = (workers > 1 and len(counts) > 1
+                and paths * table.n_ticks * substeps >= _PARALLEL_WORK)
+    bar = progress.start(f"simulate ({paths} paths)", paths * table.n_ticks, unit="path-tick")
+    try:
+        if parallel:
+            parts = _run_parallel(problem, controller, counts, seed, substeps, workers)
+        else:
+            parts = [_run_block(problem, controller, count, block_seed(seed, i), substeps,
+                                first=i == 0)
+                     for i, count in enumerate(counts)]
+    finally:
+        progress.finish(bar)
+    first = parts[0]
+    h = 1.0 / table.tick_hz
+    t = problem.t0 + np.arange(table.n_ticks + 1) * h
+    x_sum = first.x_sum
+    for part in parts[1:]:
+        x_sum = x_sum + part.x_sum
+    return MonteCarloResult(
+        np.concatenate([p.cost for p in parts]),
+        [np.concatenate([p.knots[k] for p in parts]) for k in range(len(first.knots))],
+        t, first.sample_x, first.sample_u, x_sum / paths, min(p.worst for p in parts),
+        np.concatenate([p.saturated for p in parts]),
+        np.min([p.u_low for p in parts], axis=0), np.max([p.u_high for p in parts], axis=0),
+        substeps)
+
+
+@dataclass
+class _Block:
+    """One block's share of a run: per-path arrays, the sum of its states at every tick, and
+    (block 0) the sample path."""
+    cost: np.ndarray
+    knots: list
+    x_sum: np.ndarray
+    sample_x: np.ndarray | None
+    sample_u: np.ndarray | None
+    worst: int
+    saturated: np.ndarray
+    u_low: np.ndarray
+    u_high: np.ndarray
+
+
+def _run_block(problem: Problem, controller: CompiledController, paths: int, seed,
+               substeps: int, *, first: bool, report: bool = True) -> _Block:
+    table = controller.table
     rng = np.random.default_rng(seed)
     n, m = problem.n, problem.m
     h = 1.0 / table.tick_hz
     dt = h / substeps
-    sq = np.sqrt(dt)
     X = np.ascontiguousarray(np.tile(problem.x0, (paths, 1)), dtype=float)
     cost = np.zeros(paths)
+    # float32 tables: one C call per tick does controller, plant and statistics; otherwise the
+    # controller and the plant are separate calls and numpy gathers the statistics.
+    fused = getattr(table, "arith", "float32") == "float32"
     step = controller.stepper(paths)
+    stats = TickStats.zeros(paths, n, m)
     knots, worst = [], 0
-    saturated = np.zeros(paths, dtype=np.int64)
-    u_low, u_high = np.full(m, np.inf), np.full(m, -np.inf)
-    sample_x = [X[0].copy()]
-    sample_u = []
-    mean_x = [X.mean(axis=0)]
-    bar = progress.start(f"simulate ({paths} paths)", table.n_ticks)
+    x_sum = np.empty((table.n_ticks + 1, n))
+    x_sum[0] = X.sum(axis=0)
+    sample_u = np.empty((table.n_ticks, m))
+    sample_x = np.empty((table.n_ticks + 1, n))
+    sample_x[0] = X[0]
     for k in range(table.n_stages):
         st = problem.stages[k]
-        Ad, Bd = _zoh(st.A, st.B, dt)
+        plant = None if st.varying is not None else controller.plant(st, *_zoh(st.A, st.B, dt),
+                                                                      dt, substeps)
         mz = st.G.shape[2]
+        dZ = np.empty((paths, substeps, mz))       # standard normal; the C scales by sqrt(dt)
+        tick = controller.ticker(step.instances, paths, dZ, X, cost, stats) if fused else None
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
-            U, status = step(j, X)
-            worst = min(worst, int(status.min()))
-            saturated += status == STATUS["WARN_SATURATED"]
-            np.minimum(u_low, U.min(axis=0), out=u_low)
-            np.maximum(u_high, U.max(axis=0), out=u_high)
-            dZ = rng.standard_normal((paths, substeps, mz)) * sq
-            if st.varying is None:
-                controller.plant_tick(st, Ad, Bd, dt, substeps, dZ, U, X, cost)
+            rng.standard_normal(out=dZ)
+            if plant is not None and fused:
+                stats.x_sum[:] = 0.0
+                worst = min(worst, tick(j, plant))
+                sample_u[j] = stats.u_first
+                x_sum[j + 1] = stats.x_sum
             else:
-                # Time-varying data: each substep uses the data at its midpoint.
-                for i in range(substeps):
-                    sd = st.at(problem.t0 + j * h + (i + 0.5) * dt)
-                    Adi, Bdi = _zoh(sd.A, sd.B, dt)
-                    controller.plant_tick(sd, Adi, Bdi, dt, 1,
-                                          np.ascontiguousarray(dZ[:, i:i + 1]), U, X, cost)
-            sample_x.append(X[0].copy())
-            sample_u.append(U[0].astype(float))
-            mean_x.append(X.mean(axis=0))
-            progress.advance()
+                U, status = step(j, X)
+                worst = min(worst, int(status.min()))
+                stats.saturated += status == STATUS["WARN_SATURATED"]
+                np.minimum(stats.u_low, U.min(axis=0), out=stats.u_low)
+                np.maximum(stats.u_high, U.max(axis=0), out=stats.u_high)
+                _plant_tick(controller, problem, plant, st, j, h, dt, substeps, dZ, U, X, cost)
+                sample_u[j] = U[0]
+                x_sum[j + 1] = X.sum(axis=0)
+            sample_x[j + 1] = X[0]
+            if report:
+                progress.advance(paths)
         knot = problem.knots[k]
         if knot.penalty is not None:
             r = X @ knot.penalty.C.T - knot.penalty.target
             cost += knot.penalty.weight * np.einsum("pi,pi->p", r, r)
         knots.append(X.copy())
-    progress.finish(bar)
-    t = problem.t0 + np.arange(table.n_ticks + 1) * h
-    return MonteCarloResult(cost, knots, t, np.array(sample_x), np.array(sample_u),
-                            np.array(mean_x), worst, saturated, u_low, u_high, substeps)
+    return _Block(cost, knots, x_sum, sample_x if first else None,
+                  sample_u if first else None, worst, stats.saturated, stats.u_low,
+                  stats.u_high)
+
+
+# What the forked workers run (set before the pool starts; inherited, never pickled: the
+# problem may hold closures and the controller a loaded C library).
+_JOB: tuple | None = None
+
+
+def _block_job(block: int, count: int) -> _Block:
+    problem, controller, seed, substeps = _JOB
+    return _run_block(problem, controller, count, block_seed(seed, block), substeps,
+                      first=block == 0, report=False)
+
+
+def _run_parallel(problem, controller, counts, seed, substeps, workers) -> list[_Block]:
+    """The blocks on `workers` forked processes, in block order; progress per finished
+    block."""
+    global _JOB
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    _JOB = (problem, controller, seed, substeps)
+    try:
+        ctx = multiprocessing.get_context("fork")
+        with ProcessPoolExecutor(max_workers=min(workers, len(counts)), mp_context=ctx) as pool:
+            futures = [pool.submit(_block_job, i, c) for i, c in enumerate(counts)]
+            parts = []
+            for fut, count in zip(futures, counts):
+                parts.append(fut.result())
+                progress.advance(count * controller.table.n_ticks)
+            return parts
+    finally:
+        _JOB = None
+
+
+def _plant_tick(controller, problem, plant, stage, j, h, dt, substeps, dZ, U, X, cost):
+    """The plant over tick j as its own C call: a constant stage's prepared plant, or, with
+    time-varying data, each substep with the data at its midpoint."""
+    if plant is not None:
+        controller.plant_tick(plant, dZ, U, X, cost)
+        return
+    for i in range(substeps):
+        sd = stage.at(problem.t0 + j * h + (i + 0.5) * dt)
+        one = controller.plant(sd, *_zoh(sd.A, sd.B, dt), dt, 1)
+        controller.plant_tick(one, np.ascontiguousarray(dZ[:, i:i + 1]), U, X, cost)
 
 
 # A deterministic statistic (zero Monte Carlo spread) agrees when it is this close, relative.

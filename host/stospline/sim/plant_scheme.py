@@ -7,7 +7,7 @@ cost. That error is known exactly: the oracle evaluates the same scheme
 (``evaluate_table(..., propagator="euler")``). `choose_substeps` picks the fewest steps (a
 power of two) whose bias in the expected cost is at most `tolerance` Monte Carlo standard
 errors of the run being planned, the standard error predicted from a small pilot run on a
-random stream of its own (the run's own stream is untouched).
+random stream of its own (the run's own streams are untouched).
 """
 from __future__ import annotations
 
@@ -29,6 +29,9 @@ TOLERANCE = 0.1       # bias allowed, in Monte Carlo standard errors of the plan
 # The pilot's standard deviation has a relative sampling error of a few per cent (256 paths);
 # aiming at 0.8 of the predicted standard error keeps the bound for the run itself.
 _SAFETY = 0.8
+# The pilot's stream: a child of SeedSequence(seed) that no run's block uses (block i >= 1
+# uses child i - 1, montecarlo.block_seed).
+_PILOT_STREAM = 2**32 - 1
 
 
 @dataclass(frozen=True)
@@ -56,12 +59,12 @@ def choose_substeps(problem: Problem, controller: CompiledController, exact_cost
     the expected cost is at most `tolerance` standard errors of a `paths`-path run.
 
     The standard error is predicted from a pilot run of ``min(paths, PILOT_PATHS)`` paths with
-    one step per tick, seeded from `seed` through ``SeedSequence.spawn`` (so the run seeded
-    with `seed` itself is the same whatever the pilot did). Without noise (every pilot path
+    one step per tick, on a child stream of ``SeedSequence(seed)`` that no block of the run
+    uses (so the run seeded with `seed` is the same whatever the pilot did). Without noise (every pilot path
     alike) the target is rounding: 1e-9 of the cost's magnitude."""
     table = controller.table
     pilot_paths = min(paths, PILOT_PATHS)
-    pilot_seed = np.random.SeedSequence(seed).spawn(1)[0]
+    pilot_seed = np.random.SeedSequence(seed, spawn_key=(_PILOT_STREAM,))
     pilot = simulate(problem, controller, paths=pilot_paths, seed=pilot_seed, substeps=1)
     spread = float(pilot.cost.std(ddof=1)) if pilot_paths > 1 else 0.0
     stderr = spread / math.sqrt(paths)

@@ -134,20 +134,26 @@ def _c_init(ctl, t: GainTable) -> int:
     return int(ctl.lib.stsp_init(ctrl, c))
 
 
+@pytest.fixture(scope="module")
+def generic_controller(robot):
+    """The firmware's generic build (any table within the STSP_MAX_* limits)."""
+    return build_controller(robot.table, fixed_shape=False)
+
+
 @pytest.mark.parametrize("dims, at", [((limits.MAX_NX, 1, 0, 1), 0),
                                       ((1, limits.MAX_NU, 0, 1), 1),
                                       ((limits.MAX_LATCH, 1, limits.MAX_LATCH, 1), 2),
                                       ((1, 1, 0, limits.MAX_STAGES), 3)])
-def test_firmware_takes_the_limits_and_refuses_one_more(robot_controller, dims, at):
-    """(nx, nu, n_latch, n_stages) at a limit: stsp_init accepts; one more: it refuses, and so
-    does limits.check_table."""
-    assert _c_init(robot_controller, _zero_table(*dims)) == STATUS["OK"]
+def test_firmware_takes_the_limits_and_refuses_one_more(generic_controller, dims, at):
+    """(nx, nu, n_latch, n_stages) at a limit: stsp_init of the generic build accepts; one
+    more: it refuses, and so does limits.check_table."""
+    assert _c_init(generic_controller, _zero_table(*dims)) == STATUS["OK"]
     limits.check_table(_zero_table(*dims))
     more = list(dims)
     more[at] += 1
     if at == 2:
         more[0] += 1   # a designed table has n_latch <= nx: test the latch limit alone
-    assert _c_init(robot_controller, _zero_table(*more)) == STATUS["ERR_BAD_DIMS"]
+    assert _c_init(generic_controller, _zero_table(*more)) == STATUS["ERR_BAD_DIMS"]
     with pytest.raises(ProblemError):
         limits.check_table(_zero_table(*more))
 

@@ -56,3 +56,33 @@ def test_the_pilot_leaves_the_run_stream_alone(robot_10hz):
     fixed = simulate_problem(d, paths=500, seed=SEED, substeps=auto.substeps)
     assert fixed.substep_choice is None
     assert np.array_equal(auto.cost, fixed.cost)
+
+
+def test_block_streams_are_the_seed_sequence_children():
+    """Block 0 draws from the seed's own stream, block i from child i - 1 of
+    ``SeedSequence(seed).spawn`` (derived without spawning, so nothing is mutated)."""
+    from stospline.sim.montecarlo import block_seed
+    root = np.random.SeedSequence(SEED)
+    children = np.random.SeedSequence(SEED).spawn(3)
+    assert block_seed(SEED, 0).generate_state(4).tolist() == root.generate_state(4).tolist()
+    for i, child in enumerate(children, start=1):
+        assert block_seed(SEED, i).generate_state(4).tolist() == child.generate_state(4).tolist()
+
+
+def test_same_numbers_on_one_two_or_four_workers(robot_problem, robot_zoh):
+    """The result for a seed does not depend on how many processes run the blocks."""
+    from stospline.sim.controller import build_controller
+    from stospline.sim.montecarlo import BLOCK_PATHS, simulate
+    ctl = build_controller(robot_zoh.table)
+    paths = 2 * BLOCK_PATHS + 300                  # three blocks, the last one short
+    runs = {w: simulate(robot_problem, ctl, paths=paths, seed=SEED, substeps=1, workers=w)
+            for w in (1, 2, 4)}
+    for w in (2, 4):
+        assert np.array_equal(runs[w].cost, runs[1].cost)
+        assert np.array_equal(runs[w].mean_x, runs[1].mean_x)
+        assert all(np.array_equal(a, b) for a, b in zip(runs[w].knot_states, runs[1].knot_states))
+        assert np.array_equal(runs[w].saturated_ticks, runs[1].saturated_ticks)
+        assert runs[w].worst_status == runs[1].worst_status
+    # and the blocks are really different streams: no two blocks repeat each other's paths
+    c = runs[1].cost
+    assert len(np.unique(c)) == paths

@@ -1,0 +1,30 @@
+/* Harness-only plant integrator (not firmware), shared by plant.c, the harness's C around the
+ * controller (sim/controller.py) and the cffi declarations (read from this file).
+ *
+ * With u held over a tick, each of `substeps` steps is the exponential Euler-Maruyama step
+ *     x+ = Ad x + Bd u + sum_i w_i G_i dZ,      dZ ~ N(0, dt I)  (supplied by the caller)
+ * with w = [x; u] (state noise i < n, input noise i >= n), and the running cost accumulates
+ * the left-point rule dt * L(x, u). All in double. dZ arrives as standard normal numbers
+ * times dz_scale (sqrt(dt)), the product taken here. The diffusion is passed as its nonzeros:
+ * entry e adds w[g_index[3e]] * g_value[e] * dZ[g_index[3e+2]] to component g_index[3e+1]. */
+typedef struct {
+    size_t n, m, mz, substeps;
+    double dt;
+    double dz_scale;                        /* dZ = dz_scale * (the caller's numbers) */
+    const double *Ad, *Bd;                  /* (n, n), (n, m): the step's e^{A dt}, Gamma */
+    size_t g_count;
+    const size_t *g_index;
+    const double *g_value;
+    const double *Q, *S, *q, *R, *r;        /* the stage's running cost */
+    double rho;
+    int state_cost;                         /* 0 when Q, S and q are zero */
+} harness_plant_t;
+
+/* One path over one tick: x (n) advanced in place, u (m) held, dz (substeps, mz). Returns
+ * the running cost over the tick; 0 and x unchanged when n > 64 or m > 32. */
+double harness_plant_path(const harness_plant_t *pl, const double *u, const double *dz,
+                          double *x);
+/* Every path: X (paths, n) in place, U (paths, m) float32 commands, dZ (paths, substeps, mz),
+ * cost (paths) accumulated. */
+void harness_plant_tick(const harness_plant_t *pl, size_t paths, const double *dZ,
+                        const float *U, double *X, double *cost);

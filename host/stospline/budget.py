@@ -57,8 +57,9 @@ CODEGEN_NUMBER = 2.0e-6     # s to format one table number as C
 CODEGEN_BYTES = 48          # peak bytes per number while the C text is built (~14 in the file)
 COMPILE_NUMBER = 4.0e-6     # s for the C compiler per table number (simulate, plot)
 COMPILE_BYTES = 400         # compiler memory per table number
-SIM_TICK = 150e-6           # s per Monte Carlo tick: Python step, controller and plant calls
-SIM_PATH_TICK = 0.005e-6    # s per path, tick and unit of work (below)
+SIM_TICK = 10e-6            # s per Monte Carlo tick and block of paths: the Python step
+SIM_PATH_TICK = 1.0e-9      # s per path, tick and unit of work (below), on one core
+                            # (tools/bench/harness_throughput.py: ~95 ns per robot path-tick)
 SIM_PATH_BYTES = 64         # bytes per path besides states (instances, buffers)
 CONTINUOUS_STAGE = 0.5      # s per stage of the continuous-time design and its oracle
 CONTINUOUS_TICK = 20e-6     # s per tick to sample continuous gains
@@ -223,8 +224,9 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
                  seconds=(CODEGEN_NUMBER + COMPILE_NUMBER) * numbers,
                  bytes=(CODEGEN_BYTES + COMPILE_BYTES) * numbers))
         work = n * (m + n_latch) + substeps * (n * n + n * m + n * mz) + 8
+        blocks = -(-paths // 1024)          # sim.montecarlo.BLOCK_PATHS, one core assumed
         add(Term(f"Monte Carlo ({paths} paths)", "--paths",
-                 seconds=SIM_TICK * T + SIM_PATH_TICK * paths * T * work,
+                 seconds=SIM_TICK * T * blocks + SIM_PATH_TICK * paths * T * work,
                  bytes=paths * (8.0 * n * (S + 6) + 16.0 * substeps * mz + 16.0 * m
                                 + SIM_PATH_BYTES) + T * 3 * (8 * n + 112.0)))
         sec, _ = _expm(D)

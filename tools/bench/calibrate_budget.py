@@ -7,7 +7,7 @@ process, so the times include start-up) and prints, per case, the estimate besid
 wall time and peak resident memory (``ru_maxrss`` of the child), with their ratios. The
 constants in ``host/stospline/budget.py`` were set from these runs so that the estimate is
 within a factor of about 3 of every case (docs/guide/problem-file.md, "Limits"). Cases: the robot
-at 1 and 20 kHz, float32, Q15 and continuous; a 12-state, 4-input chain; 2000 short stages;
+at 1 and 20 kHz, float32, Q15 and continuous; a 12-state, 4-input chain; 250 short stages (the firmware takes at most 256);
 a joint design with 32 constrained knots; a simulation with 2000 paths.
 """
 from __future__ import annotations
@@ -60,10 +60,11 @@ CASES = [  # (label, file text, command line after FILE, quick)
     ("robot 1 kHz q15", robot(1000), ["design", "--arith", "q15"], True),
     ("robot 1 kHz continuous", robot(1000), ["design", "--discretization", "continuous"], False),
     ("chain n=12 m=4, 4 stages, 2 kHz", chain(12, 4, 4, 2000), ["design"], False),
-    ("chain n=2 m=1, 2000 stages", chain(2, 1, 2000, 4000), ["design"], False),
+    ("chain n=2 m=1, 250 stages", chain(2, 1, 250, 4000), ["design"], False),
     ("chain n=6 m=2, joint, 32 knots x 2 rows", chain(6, 2, 32, 3200, rows=2, mode="joint"),
      ["design"], False),
-    ("robot simulate 2000 paths", robot(1000), ["simulate", "--paths", "2000"], True),
+    ("robot simulate 2000 paths", robot(1000),
+     ["simulate", "--paths", "2000", "--substeps", "2"], True),
     ("robot 10 kHz simulate 20 paths", robot(10000), ["simulate", "--paths", "20"], False),
 ]
 

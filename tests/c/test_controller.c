@@ -16,17 +16,9 @@
 #include "stospline/stsp_controller.h"
 #include "test_support.h"
 #include "stsp_crc32.h"
+#include "table_a.h"
 
-/* Table A: nx = 2, nu = 1, n_latch = 2; stage 0 = ticks 0..2 (one multiplier), stage 1 =
- * ticks 3..4 (two). */
-#define NX 2u
-#define NU 1u
-#define N_LATCH 2u
-#define NT 5u
-#define NS 2u
-
-static const uint32_t stage_start[NS + 1u] = {0u, 3u, 5u};
-static const uint16_t stage_n_latch[NS] = {1u, 2u};
+/* Table A's gains (its shape: table_a.h). */
 static const float K[NT * NU * NX] = {0.5f, -1.0f, 0.6f, -1.1f, 0.7f, -1.2f,
                                       0.8f, -1.3f, 0.9f, -1.4f};
 static const float k0[NT * NU] = {0.1f, 0.2f, 0.3f, 0.4f, 0.5f};

@@ -20,18 +20,13 @@
 #error "test_fixedpoint.c tests the STSP_ARITH_Q15/Q31 builds"
 #endif
 
+#include "table_a.h"
+
 #define F STSP_Q_FRAC_BITS
 #define ONE ((int64_t)1 << F)
 #define QMAX ((stsp_scalar_t)(ONE - 1))
 #define QMIN ((stsp_scalar_t)(-ONE))
-#define NX 2u
-#define NU 1u
-#define N_LATCH 2u
-#define NT 5u
-#define NS 2u
 
-static const uint32_t stage_start[NS + 1u] = {0u, 3u, 5u};
-static const uint16_t stage_n_latch[NS] = {1u, 2u};
 static const int8_t x_exp[NX] = {2, -3};
 static const int8_t u_exp[NU] = {4};
 static const int8_t v_exp[N_LATCH] = {1, 0};

@@ -4,6 +4,10 @@ Between ticks the command is held and the plant advances by `substeps` exponenti
 Euler–Maruyama steps ``x+ = e^{A dt} x + Gamma u + sum_i x_i G_i dZ`` (exact for the mean,
 O(dt) weak error in the second moments). The oracle evaluates the same scheme exactly
 (`oracle.euler_tick`), so the simulation bias is a computed number, not a guess.
+
+The paths run in blocks of `BLOCK_PATHS`, each with its own random stream (`block_seed`), on
+every core by default (forked workers); for a float32 table one C call per tick and block
+does the controllers, the plant and the statistics (`CompiledController.ticker`).
 """
 from __future__ import annotations
 

@@ -15,3 +15,5 @@ echo "== Monte Carlo through the compiled C controller"
 "$st" simulate examples/robot_corridor.toml --paths 10000 --seed 1
 echo "== figure"
 "$st" plot examples/robot_corridor.toml --out "$out/robot_corridor.png"
+echo "== report: one self-contained HTML page (design, Monte Carlo, verdict, figures)"
+"$st" report examples/robot_corridor.toml --out "$out/robot_corridor.html"

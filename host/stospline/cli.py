@@ -186,6 +186,25 @@ def _plot(args) -> int:
     return 0
 
 
+@quiet_numerics
+def _report(args) -> int:
+    from stospline.atomic import check_file_target, write_file
+    from stospline.pipeline import design_problem, simulate_problem, simulation_summary
+    from stospline.report.html import report_html
+    check_file_target(args.out)
+    problem = load_problem(args.problem)
+    _check_budget(args, problem, "simulate")
+    d = design_problem(problem, **_options(args, problem))
+    _note_tables(d, "compiling")
+    substeps = _planned_substeps(args, problem, d, "simulate")
+    mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps,
+                          workers=args.workers, record=REPORT_RECORD)
+    page = report_html(d, mc, simulation_summary(d, mc, seed=args.seed))
+    write_file(args.out, lambda tmp: Path(tmp).write_text(page, encoding="utf-8"))
+    print(f"wrote {args.out}")
+    return 0
+
+
 def _version() -> str:
     from stospline import __version__
     return __version__
@@ -252,6 +271,12 @@ def _out_file(text: str) -> str:
     return text
 
 
+def _out_html(text: str) -> str:
+    if Path(text).suffix.lower() != ".html":
+        raise argparse.ArgumentTypeError(f"must name a .html file, got {text!r}")
+    return text
+
+
 def _out_dir(text: str) -> str:
     if not text or "\0" in text:
         raise argparse.ArgumentTypeError(f"must be a directory path, got {text!r}")
@@ -263,6 +288,7 @@ MAX_PATHS = 10 ** 9          # the memory/time budget usually refuses far fewer
 MAX_SUBSTEPS = 10_000
 EXIT_DISAGREE = 3   # simulate --check: the Monte Carlo run and the oracle disagree
 MAX_WORKERS = 1024
+REPORT_RECORD = 200  # paths whose states the report keeps at every tick (percentile bands)
 SEED_MAX = 2 ** 63 - 1
 
 
@@ -323,6 +349,17 @@ def build_parser() -> argparse.ArgumentParser:
                                 "(comma-separated; write --x0=-5,0,1,0 when it starts with a minus); the tables stay the design's and the "
                                 "controller latches from what it measures")
     p.set_defaults(func=_simulate)
+
+    p = sub.add_parser("report", help="one self-contained HTML page: design, Monte Carlo, "
+                                      "verdict, figures")
+    p.add_argument("problem")
+    p.add_argument("--out", required=True, type=_out_html,
+                   help="the page, a .html file (its directory must exist)")
+    p.add_argument("--paths", type=_integer(2, MAX_PATHS), default=2000)
+    p.add_argument("--seed", type=_integer(0, SEED_MAX), default=1)
+    p.add_argument("--substeps", type=_substeps, default="auto")
+    p.add_argument("--workers", type=_integer(1, MAX_WORKERS), default=None)
+    p.set_defaults(func=_report)
 
     p = sub.add_parser("plot", help="figure: corridor, one realisation, MC mean, controls")
     p.add_argument("problem")

@@ -24,8 +24,8 @@ from stospline import limits, strict
 from stospline.precision import RoundedUp
 
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
-           "simulation_summary", "verdict", "plan_substeps", "write_outputs", "start_from", "double_table", "fixed_point_table",
-           "check_implementable"]
+           "simulation_summary", "verdict", "plan_substeps", "write_outputs", "start_from",
+           "double_table", "fixed_point_table", "check_implementable"]
 
 # JSON summaries keep 10 significant digits and an absolute quantum of 1e-10: the designs
 # agree to ~1e-14 however the arithmetic is ordered, so regenerated files stay byte-identical
@@ -327,7 +327,7 @@ def check_implementable(d: Designed) -> None:
 
 def simulate_problem(d: Designed, *, paths: int, seed: int,
                      substeps: int | str | SubstepChoice = "auto", workers: int | None = None,
-                     build_dir=None) -> MonteCarloResult:
+                     record: int = 0, build_dir=None) -> MonteCarloResult:
     """Monte Carlo of the compiled C controller built from `d.table` in closed loop with the
     stochastic plant (exponential Euler-Maruyama with `substeps` steps per tick).
 
@@ -346,6 +346,8 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
     workers : int, optional
         Processes that run the blocks of paths (default: every core; the numbers are the same
         for any count, `sim.montecarlo.simulate`).
+    record : int
+        Keep the states of this many paths at every tick (``record_x``; for reports).
     build_dir : str or Path, optional
         Where the compiled module is cached (default: the user cache directory).
 
@@ -377,7 +379,8 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
     if substeps == "auto":
         choice = choose_substeps(d.problem, ctl, d.implemented.J, paths=paths, seed=seed)
     mc = simulate(d.problem, ctl, paths=paths, seed=seed,
-                  substeps=choice.substeps if choice is not None else substeps, workers=workers)
+                  substeps=choice.substeps if choice is not None else substeps, workers=workers,
+                  record=record)
     mc.substep_choice = choice
     return mc
 

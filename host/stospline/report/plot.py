@@ -54,8 +54,16 @@ def plot_corridor(d, mc, out: str | Path) -> None:
     a_mean.plot(mc.mean_x[:, ia], mc.mean_x[:, ib], color="tab:blue", lw=2, label="Monte Carlo")
     a_mean.plot(exact.path_mean[:, ia], exact.path_mean[:, ib], "--", color="tab:orange",
                 lw=1.5, label="oracle (exact)")
+    angle = np.linspace(0.0, 2 * np.pi, 73)
     for k, kn in enumerate(p.knots):
         a_mean.plot(exact.knot_mean[k][ia], exact.knot_mean[k][ib], "k+", ms=10)
+        # The knot's 2-sd covariance ellipse in the plotted plane (oracle, exact).
+        cov = exact.knot_cov[k][np.ix_([ia, ib], [ia, ib])]
+        w, vec = np.linalg.eigh(cov)
+        ring = vec @ (2 * np.sqrt(np.maximum(w, 0.0))[:, None] * np.vstack([np.cos(angle),
+                                                                           np.sin(angle)]))
+        a_mean.plot(exact.knot_mean[k][ia] + ring[0], exact.knot_mean[k][ib] + ring[1],
+                    color="0.3", lw=0.8, label="knot covariance, 2 sd" if k == 0 else None)
     a_mean.legend(loc="upper left", fontsize=8)
     _controls_and_save(d, mc, a_u, fig, out, plt)
 

@@ -51,6 +51,9 @@ class MonteCarloResult:
     u_low: np.ndarray | None = None
     u_high: np.ndarray | None = None
     substeps: int = 0                # plant steps per tick of this run
+    # States of the first `record` paths at every tick (ticks + 1, record, n), float32; None
+    # unless asked for (simulate(record=...)): for percentile bands in reports.
+    record_x: np.ndarray | None = None
     # How `substeps` was chosen (pipeline.simulate_problem with substeps="auto"), else None.
     substep_choice: "SubstepChoice | None" = None
 
@@ -115,7 +118,7 @@ def default_workers() -> int:
 
 
 def simulate(problem: Problem, controller: CompiledController, *, paths: int, seed: int,
-             substeps: int = 4, workers: int | None = None) -> MonteCarloResult:
+             substeps: int = 4, workers: int | None = None, record: int = 0) -> MonteCarloResult:
     """Run `paths` realisations of the plant with the compiled controller in the loop.
 
     Parameters
@@ -134,6 +137,9 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
     workers : int, optional
         Processes that run blocks at once (default: every core this process may use; runs
         below ~2e6 path-ticks stay in this process). The result is the same for any number.
+    record : int
+        Keep the states of the first ``min(record, paths, BLOCK_PATHS)`` paths at every tick
+        (``record_x``, float32).
     """
     for name, value in (("paths", paths), ("substeps", substeps)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
@@ -146,10 +152,10 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
     bar = progress.start(f"simulate ({paths} paths)", paths * table.n_ticks, unit="path-tick")
     try:
         if parallel:
-            parts = _run_parallel(problem, controller, counts, seed, substeps, workers)
+            parts = _run_parallel(problem, controller, counts, seed, substeps, workers, record)
         else:
             parts = [_run_block(problem, controller, count, block_seed(seed, i), substeps,
-                                first=i == 0)
+                                first=i == 0, record=record)
                      for i, count in enumerate(counts)]
     finally:
         progress.finish(bar)
@@ -165,7 +171,7 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
         t, first.sample_x, first.sample_u, x_sum / paths, min(p.worst for p in parts),
         np.concatenate([p.saturated for p in parts]),
         np.min([p.u_low for p in parts], axis=0), np.max([p.u_high for p in parts], axis=0),
-        substeps)
+        substeps, first.record_x)
 
 
 @dataclass
@@ -181,10 +187,11 @@ class _Block:
     saturated: np.ndarray
     u_low: np.ndarray
     u_high: np.ndarray
+    record_x: np.ndarray | None = None
 
 
 def _run_block(problem: Problem, controller: CompiledController, paths: int, seed,
-               substeps: int, *, first: bool, report: bool = True) -> _Block:
+               substeps: int, *, first: bool, report: bool = True, record: int = 0) -> _Block:
     table = controller.table
     rng = np.random.default_rng(seed)
     n, m = problem.n, problem.m
@@ -203,6 +210,10 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
     sample_u = np.empty((table.n_ticks, m))
     sample_x = np.empty((table.n_ticks + 1, n))
     sample_x[0] = X[0]
+    kept = min(record, paths) if first else 0
+    record_x = np.empty((table.n_ticks + 1, kept, n), np.float32) if kept else None
+    if kept:
+        record_x[0] = X[:kept]
     for k in range(table.n_stages):
         st = problem.stages[k]
         plant = None if st.varying is not None else controller.plant(st, *_zoh(st.A, st.B, dt),
@@ -227,6 +238,8 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
                 sample_u[j] = U[0]
                 x_sum[j + 1] = X.sum(axis=0)
             sample_x[j + 1] = X[0]
+            if kept:
+                record_x[j + 1] = X[:kept]
             if report:
                 progress.advance(paths)
         knot = problem.knots[k]
@@ -236,7 +249,7 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
         knots.append(X.copy())
     return _Block(cost, knots, x_sum, sample_x if first else None,
                   sample_u if first else None, worst, stats.saturated, stats.u_low,
-                  stats.u_high)
+                  stats.u_high, record_x)
 
 
 # What the forked workers run (set before the pool starts; inherited, never pickled: the
@@ -245,18 +258,19 @@ _JOB: tuple | None = None
 
 
 def _block_job(block: int, count: int) -> _Block:
-    problem, controller, seed, substeps = _JOB
+    problem, controller, seed, substeps, record = _JOB
     return _run_block(problem, controller, count, block_seed(seed, block), substeps,
-                      first=block == 0, report=False)
+                      first=block == 0, report=False, record=record)
 
 
-def _run_parallel(problem, controller, counts, seed, substeps, workers) -> list[_Block]:
+def _run_parallel(problem, controller, counts, seed, substeps, workers,
+                  record) -> list[_Block]:
     """The blocks on `workers` forked processes, in block order; progress per finished
     block."""
     global _JOB
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
-    _JOB = (problem, controller, seed, substeps)
+    _JOB = (problem, controller, seed, substeps, record)
     try:
         ctx = multiprocessing.get_context("fork")
         with ProcessPoolExecutor(max_workers=min(workers, len(counts)), mp_context=ctx) as pool:

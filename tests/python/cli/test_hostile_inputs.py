@@ -350,6 +350,10 @@ CLI_CASES = [
     ("plot", ["--out", "p.txt"]), ("plot", ["--out", "FILE/p.png"]),
     ("plot", ["--out", "p.png", "--paths", "0"]), ("plot", ["--out", "p.png", "--paths", "-1"]),
     ("plot", ["--out", "/proc/forbidden.png"]),
+    ("report", ["--out", "p.png"]), ("report", ["--out", "FILE/p.html"]),
+    ("report", ["--out", "p.html", "--paths", "0"]),
+    ("report", ["--out", "p.html", "--workers", "0"]),
+    ("simulate", ["--workers", "-2"]), ("simulate", ["--substeps", "autox"]),
 ]
 
 
@@ -365,7 +369,7 @@ def test_command_line_values_keep_the_contract(command, extra, tmp_path, firmwar
     argv = [command, "p.toml", *extra]
     if command == "simulate":
         argv += ["--paths", "20"] if "--paths" not in extra else []
-    if command == "plot" and "--paths" not in extra:
+    if command in ("plot", "report") and "--paths" not in extra:
         argv += ["--paths", "5"]
     try:
         rc = check_contract(argv, tmp_path, firmware_libs, " ".join(argv),

@@ -1,0 +1,172 @@
+"""One self-contained HTML page of a design and its Monte Carlo run (`stospline report`).
+
+Everything is inside the page: the figures are PNG data URIs, the style is inline, and a few
+lines of script mark the page when every image has loaded and no script error occurred
+(``<body data-images="ok" data-errors="0">``), which the browser test reads back.
+"""
+from __future__ import annotations
+
+import base64
+import html
+import io
+
+import numpy as np
+
+from stospline.report.plot import plot_axes, plot_corridor
+from stospline.report.summary_text import design_summary_text
+
+__all__ = ["report_html"]
+
+_STYLE = """
+body { font-family: sans-serif; max-width: 1100px; margin: 2em auto; color: #222; }
+h1 { font-size: 1.6em; } h2 { font-size: 1.2em; margin-top: 1.6em; }
+pre { background: #f6f6f6; padding: 0.8em; overflow-x: auto; }
+table { border-collapse: collapse; margin: 0.5em 0; }
+td, th { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: right; }
+th { background: #eee; } td.name { text-align: left; }
+.agree { color: #176b1d; font-weight: bold; } .disagree { color: #a31515; font-weight: bold; }
+img { max-width: 100%; }
+"""
+
+# Marks the page for the browser test: every image decoded, and no script error.
+_CHECK = """
+window.__errors = 0;
+window.addEventListener("error", function () { window.__errors += 1; }, true);
+window.addEventListener("load", function () {
+  var imgs = document.images, ok = imgs.length > 0;
+  for (var i = 0; i < imgs.length; i++) {
+    if (!imgs[i].complete || imgs[i].naturalWidth === 0) { ok = false; }
+  }
+  document.body.setAttribute("data-images", ok ? "ok" : "missing");
+  document.body.setAttribute("data-errors", String(window.__errors));
+});
+"""
+
+
+def _png(fig) -> str:
+    import matplotlib.pyplot as plt
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
+    plt.close(fig)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _img(uri: str, alt: str) -> str:
+    return f'<img src="{uri}" alt="{html.escape(alt)}">'
+
+
+def _corridor(d, mc) -> str:
+    buf = io.BytesIO()
+    plot_corridor(d, mc, buf)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def _states(d, mc, exact):
+    """Every state against time: the oracle's mean +- 2 sd, the Monte Carlo mean, the 5-95 %
+    band of the recorded paths; every input of the sample path."""
+    import matplotlib.pyplot as plt
+    n, m = d.problem.n, d.problem.m
+    fig, axs = plt.subplots(n + m, 1, figsize=(9, 1.9 * (n + m) + 0.8), sharex=True,
+                            squeeze=False)
+    t = mc.sample_t
+    for i in range(n):
+        ax = axs[i, 0]
+        sd = np.sqrt(exact.path_var[:, i])
+        ax.fill_between(exact.path_t, exact.path_mean[:, i] - 2 * sd,
+                        exact.path_mean[:, i] + 2 * sd, color="tab:orange", alpha=0.25,
+                        label="oracle mean +- 2 sd")
+        if mc.record_x is not None and mc.record_x.shape[1] >= 2:
+            lo, hi = np.percentile(mc.record_x[:, :, i], [5, 95], axis=1)
+            ax.plot(t, lo, ":", color="tab:blue", lw=1,
+                    label=f"5-95 % of {mc.record_x.shape[1]} recorded paths")
+            ax.plot(t, hi, ":", color="tab:blue", lw=1)
+        ax.plot(t, mc.mean_x[:, i], color="tab:blue", lw=1.5, label=f"mean of {mc.paths} paths")
+        ax.plot(exact.path_t, exact.path_mean[:, i], "--", color="tab:orange", lw=1.2,
+                label="oracle mean")
+        ax.set_ylabel(f"x{i}")
+        ax.grid(alpha=0.3)
+        if i == 0:
+            ax.legend(fontsize=7, loc="best")
+    for j in range(m):
+        ax = axs[n + j, 0]
+        ax.plot(t[:-1], mc.sample_u[:, j], color="k", lw=0.8, label="one realisation")
+        ax.set_ylabel(f"u{j + 1}")
+        ax.grid(alpha=0.3)
+        if j == 0:
+            ax.legend(fontsize=7, loc="best")
+    axs[-1, 0].set_xlabel("t [s]")
+    fig.tight_layout()
+    return _png(fig)
+
+
+def _histogram(mc, oracle_J: float):
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    ax.hist(mc.cost, bins=min(80, max(10, mc.paths // 20)), color="tab:blue", alpha=0.7)
+    ax.axvline(oracle_J, color="tab:orange", lw=2, label=f"oracle expected cost {oracle_J:.5g}")
+    ax.axvline(float(mc.cost.mean()), color="k", ls="--", lw=1,
+               label=f"Monte Carlo mean {mc.cost.mean():.5g}")
+    ax.set_xlabel("cost of a path")
+    ax.set_ylabel("paths")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return _png(fig)
+
+
+def _verdict_rows(summary: dict) -> str:
+    c = summary["cost"]
+    rows = [("cost", c["mc_mean"], c["oracle_implemented"], c["z"])]
+    for k, kn in enumerate(summary["knots"]):
+        rows += [(f"knot {k} (t = {kn['t']:g}) mean x{i}", kn["mc_mean"][i],
+                  kn["oracle_mean"][i], z) for i, z in enumerate(kn["z"])]
+    out = ["<tr><th>statistic</th><th>Monte Carlo</th><th>oracle (exact)</th><th>z</th></tr>"]
+    for name, mc_v, exact, z in rows:
+        z_text = "n/a" if z is None else f"{z:+.2f}"
+        out.append(f'<tr><td class="name">{html.escape(name)}</td><td>{mc_v:.6g}</td>'
+                   f"<td>{exact:.6g}</td><td>{z_text}</td></tr>")
+    return "\n".join(out)
+
+
+def report_html(d, mc, summary: dict) -> str:
+    """The page for design `d` (`pipeline.Designed`), its Monte Carlo run `mc` and that
+    run's `pipeline.simulation_summary`."""
+    from stospline.sim.oracle import evaluate_table
+    p = d.problem
+    exact = evaluate_table(p, d.table)
+    v = summary["verdict"]
+    sat = summary["saturation"]
+    bias = summary["simulation_bias"]
+    verdict_cls = "agree" if v["agree"] else "disagree"
+    axes = plot_axes(p)
+    layout = ("state " + str(axes[0]) + " against time" if len(axes) == 1
+              else f"phase plane of x{axes[0]} and x{axes[1]}, knot covariance ellipses (2 sd)")
+    parts = [
+        "<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>stospline report: {html.escape(p.name)}</title>",
+        f"<style>{_STYLE}</style><script>{_CHECK}</script></head><body>",
+        f"<h1>{html.escape(p.name)}</h1>",
+        f'<p class="{verdict_cls}" id="verdict">Verdict: '
+        f"{'the Monte Carlo run agrees with the oracle' if v['agree'] else 'DISAGREE'} "
+        f"(max |z| {v['max_abs_z']:.3g} against {v['z_limit']:.3g}, {v['correction']} over "
+        f"{v['statistics']} statistics at {100 * v['confidence']:g}% jointly; "
+        f"{html.escape(v['reason'])}).</p>",
+        "<h2>Design</h2>", f"<pre>{html.escape(design_summary_text(d))}</pre>",
+        "<h2>Monte Carlo through the compiled C controller</h2>",
+        f"<p>{mc.paths} paths, seed {summary['seed']}, {summary['substeps']} plant steps per "
+        f"tick (plant-scheme bias in the cost {bias['cost']:.3g}), mean cost "
+        f"<b id=\"mc-cost\">{summary['cost']['mc_mean']:.6g}</b>, 95% CI "
+        f"[{summary['cost']['ci95'][0]:.6g}, {summary['cost']['ci95'][1]:.6g}], oracle "
+        f"<b id=\"oracle-cost\">{summary['cost']['oracle_implemented']:.6g}</b>, "
+        f"predicted J0 {summary['cost']['predicted_J0']:.6g}.</p>",
+        f"<table>{_verdict_rows(summary)}</table>",
+        f"<p id=\"saturation\">Saturation: {100 * sat['tick_fraction']:.4g}% of ticks, "
+        f"{100 * sat['path_fraction']:.4g}% of paths"
+        + ("" if sat["limited"] else " (the table has no actuator limits)") + ".</p>",
+        "<p>Faults: none modelled in this run.</p>",
+        f"<h2>Paths ({html.escape(layout)})</h2>", _img(_corridor(d, mc), "corridor"),
+        "<h2>States and inputs against time</h2>", _img(_states(d, mc, exact), "states"),
+        "<h2>Cost of the paths</h2>",
+        _img(_histogram(mc, summary["cost"]["oracle_implemented"]), "cost histogram"),
+        "</body></html>",
+    ]
+    return "\n".join(parts) + "\n"

@@ -1,0 +1,78 @@
+"""`stospline report`: one self-contained HTML page, opened in headless Chromium (Debian's
+`chromium`, installed by tools/setup.sh). The page marks its <body> once every image has
+decoded and no script error occurred; the test reads that back from the rendered DOM, and
+checks that the key numbers are on the page."""
+import re
+import shutil
+import subprocess
+
+import pytest
+
+from conftest import EXAMPLES
+
+from test_cli_end_to_end import ONE_STATE, run
+
+ROBOT = EXAMPLES / "robot_corridor.toml"
+
+
+def rendered_dom(page) -> str:
+    chromium = shutil.which("chromium")
+    if chromium is None:
+        pytest.fail("chromium not found: tools/setup.sh installs it (Debian package chromium)")
+    r = subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu",
+                        "--virtual-time-budget=5000", "--dump-dom", page.as_uri()],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    return r.stdout
+
+
+@pytest.mark.parametrize("problem", ["robot", "one state"])
+def test_report_page_renders_with_every_image_and_the_numbers(tmp_path, problem):
+    if problem == "robot":
+        source = ROBOT
+    else:
+        source = tmp_path / "growth.toml"
+        source.write_text(ONE_STATE)
+    page = tmp_path / "report.html"
+    r = run("report", str(source), "--out", str(page), "--paths", "300", "--seed", "4")
+    assert r.returncode == 0, r.stderr
+    text = page.read_text(encoding="utf-8")
+    assert "http://" not in text and "https://" not in text       # nothing to fetch
+    dom = rendered_dom(page)
+    body = re.search(r"<body([^>]*)>", dom).group(1)
+    assert 'data-images="ok"' in body and 'data-errors="0"' in body, body
+    assert dom.count("<img") == 3
+    sim = json_summary(source)
+    for key in ("mc-cost", "oracle-cost"):
+        assert re.search(rf'id="{key}">([^<]+)<', dom), key
+    assert f'{sim["cost"]["oracle_implemented"]:.6g}' in dom
+    assert f'{sim["cost"]["mc_mean"]:.6g}' in dom
+    assert ("the Monte Carlo run agrees with the oracle" in dom) == sim["verdict"]["agree"]
+
+
+def json_summary(source):
+    import json
+    r = run("simulate", str(source), "--paths", "300", "--seed", "4", "--json")
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout)
+
+
+def test_report_needs_an_html_file(tmp_path):
+    out = tmp_path / "report.txt"
+    r = run("report", str(ROBOT), "--out", str(out))
+    assert r.returncode == 2 and "--out" in r.stderr and ".html" in r.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_page_check_sees_a_broken_image(tmp_path):
+    """The marks the browser test reads are not constant: a page whose first figure does not
+    decode says so."""
+    page = tmp_path / "report.html"
+    r = run("report", str(ROBOT), "--out", str(page), "--paths", "100")
+    assert r.returncode == 0, r.stderr
+    text = page.read_text(encoding="utf-8")
+    broken = tmp_path / "broken.html"
+    broken.write_text(text.replace("data:image/png;base64,", "data:image/png;base64,AAAA", 1),
+                      encoding="utf-8")
+    body = re.search(r"<body([^>]*)>", rendered_dom(broken)).group(1)
+    assert 'data-images="missing"' in body, body

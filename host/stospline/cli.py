@@ -168,19 +168,26 @@ def _z_text(z) -> str:
     return "n/a" if z is None else f"{z:+.2f}"
 
 
-@quiet_numerics
-def _plot(args) -> int:
-    from stospline.atomic import check_file_target, write_file
+def _monte_carlo(args, command: str, record: int = 0):
+    """Design the file's problem and run its Monte Carlo for `plot`/`report`: ``(d, mc)``;
+    the output file is checked and the budget estimated first."""
+    from stospline.atomic import check_file_target
     from stospline.pipeline import design_problem, simulate_problem
-    from stospline.report.plot import plot_corridor
     check_file_target(args.out)
     problem = load_problem(args.problem)
-    _check_budget(args, problem, "plot")
+    _check_budget(args, problem, command)
     d = design_problem(problem, **_options(args, problem))
     _note_tables(d, "compiling")
-    substeps = _planned_substeps(args, problem, d, "plot")
-    mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps,
-                          workers=args.workers)
+    substeps = _planned_substeps(args, problem, d, command)
+    return d, simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps,
+                               workers=args.workers, record=record)
+
+
+@quiet_numerics
+def _plot(args) -> int:
+    from stospline.atomic import write_file
+    from stospline.report.plot import plot_corridor
+    d, mc = _monte_carlo(args, "plot")
     write_file(args.out, lambda tmp: plot_corridor(d, mc, tmp))
     print(f"wrote {args.out}")
     return 0
@@ -188,17 +195,10 @@ def _plot(args) -> int:
 
 @quiet_numerics
 def _report(args) -> int:
-    from stospline.atomic import check_file_target, write_file
-    from stospline.pipeline import design_problem, simulate_problem, simulation_summary
+    from stospline.atomic import write_file
+    from stospline.pipeline import simulation_summary
     from stospline.report.html import report_html
-    check_file_target(args.out)
-    problem = load_problem(args.problem)
-    _check_budget(args, problem, "simulate")
-    d = design_problem(problem, **_options(args, problem))
-    _note_tables(d, "compiling")
-    substeps = _planned_substeps(args, problem, d, "simulate")
-    mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps,
-                          workers=args.workers, record=REPORT_RECORD)
+    d, mc = _monte_carlo(args, "simulate", record=REPORT_RECORD)
     page = report_html(d, mc, simulation_summary(d, mc, seed=args.seed))
     write_file(args.out, lambda tmp: Path(tmp).write_text(page, encoding="utf-8"))
     print(f"wrote {args.out}")
@@ -350,26 +350,21 @@ def build_parser() -> argparse.ArgumentParser:
                                 "controller latches from what it measures")
     p.set_defaults(func=_simulate)
 
-    p = sub.add_parser("report", help="one self-contained HTML page: design, Monte Carlo, "
-                                      "verdict, figures")
-    p.add_argument("problem")
-    p.add_argument("--out", required=True, type=_out_html,
-                   help="the page, a .html file (its directory must exist)")
-    p.add_argument("--paths", type=_integer(2, MAX_PATHS), default=2000)
-    p.add_argument("--seed", type=_integer(0, SEED_MAX), default=1)
-    p.add_argument("--substeps", type=_substeps, default="auto")
-    p.add_argument("--workers", type=_integer(1, MAX_WORKERS), default=None)
-    p.set_defaults(func=_report)
-
-    p = sub.add_parser("plot", help="figure: corridor, one realisation, MC mean, controls")
-    p.add_argument("problem")
-    p.add_argument("--out", required=True, type=_out_file,
-                   help="figure file: .png, .pdf or .svg (its directory must exist)")
-    p.add_argument("--paths", type=_integer(2, MAX_PATHS), default=100)
-    p.add_argument("--seed", type=_integer(0, SEED_MAX), default=1)
-    p.add_argument("--substeps", type=_substeps, default="auto")
-    p.add_argument("--workers", type=_integer(1, MAX_WORKERS), default=None)
-    p.set_defaults(func=_plot)
+    # Commands that write one file from a Monte Carlo run: (name, help, --out type and help,
+    # default paths, function).
+    for name, text, out_type, out_help, paths, func in (
+            ("report", "one self-contained HTML page: design, Monte Carlo, verdict, figures",
+             _out_html, "the page, a .html file (its directory must exist)", 2000, _report),
+            ("plot", "figure: corridor, one realisation, MC mean, controls", _out_file,
+             "figure file: .png, .pdf or .svg (its directory must exist)", 100, _plot)):
+        p = sub.add_parser(name, help=text)
+        p.add_argument("problem")
+        p.add_argument("--out", required=True, type=out_type, help=out_help)
+        p.add_argument("--paths", type=_integer(2, MAX_PATHS), default=paths)
+        p.add_argument("--seed", type=_integer(0, SEED_MAX), default=1)
+        p.add_argument("--substeps", type=_substeps, default="auto")
+        p.add_argument("--workers", type=_integer(1, MAX_WORKERS), default=None)
+        p.set_defaults(func=func)
     for name, sp in sub.choices.items():
         _common(sp)
         sp.add_argument("--discretization", choices=["exact-zoh", "continuous"],

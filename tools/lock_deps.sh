@@ -6,6 +6,8 @@
 # both kinds of machine; tools/setup.sh installs from it with `pip install --require-hashes`.
 #
 #   bash tools/lock_deps.sh         # then run tools/setup.sh and the tests, commit the lock
+#   bash tools/lock_deps.sh --keep  # the same, but every package already locked keeps its
+#                                   # version (to add a dependency without moving the others)
 #
 # Resolution runs once, for x86-64, on this machine's CPython 3.11 (environment markers are
 # evaluated for it; none of the locked packages has a machine-specific dependency); the arm64
@@ -15,6 +17,8 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 py="${PYTHON:-python3}"
 lock="$root/host/requirements.lock"
+keep=0
+[ "${1:-}" = "--keep" ] && keep=1
 
 "$py" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' || {
   echo "lock_deps: needs CPython 3.11 (the version the lock is for); set PYTHON" >&2; exit 2; }
@@ -46,7 +50,12 @@ fetch() {  # fetch ARCH REQUIREMENTS [pip options]: wheels for CPython 3.11 on A
 }
 
 echo "lock_deps: resolving for x86_64 (CPython 3.11)"
-fetch x86_64 "$tmp/top.txt"
+if [ "$keep" -eq 1 ]; then
+  grep -E '^[A-Za-z0-9._-]+==' "$lock" | sed 's/ .*//' > "$tmp/keep.txt"
+  fetch x86_64 "$tmp/top.txt" -c "$tmp/keep.txt"
+else
+  fetch x86_64 "$tmp/top.txt"
+fi
 # name==version of every wheel (wheel names: <dist>-<version>-<python>-<abi>-<platform>.whl).
 for whl in "$tmp"/x86_64/*.whl; do
   base="$(basename "$whl")"

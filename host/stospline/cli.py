@@ -101,7 +101,7 @@ def _simulate(args) -> int:
     _note_tables(d, "compiling")
     substeps = _planned_substeps(args, problem, d, "simulate")
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps,
-                          workers=args.workers)
+                          workers=args.workers, scheduler=args.scheduler)
     s = simulation_summary(d, mc, seed=args.seed)
     _report_simulation(s, args.json)
     sat = s["saturation"]
@@ -180,7 +180,7 @@ def _monte_carlo(args, command: str, record: int = 0):
     _note_tables(d, "compiling")
     substeps = _planned_substeps(args, problem, d, command)
     return d, simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps,
-                               workers=args.workers, record=record)
+                               workers=args.workers, record=record, scheduler=args.scheduler)
 
 
 @quiet_numerics
@@ -340,6 +340,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=_integer(1, MAX_WORKERS), default=None,
                    help="processes that run the blocks of paths (default: every core); the "
                         "numbers are the same for any count")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the blocks of paths on a Dask cluster: its scheduler's address "
+                        "(e.g. tcp://host:8786), or local for a local cluster of --workers "
+                        "processes; the numbers are the same as without")
     p.add_argument("--check", action="store_true",
                    help=f"exit with status {EXIT_DISAGREE} unless the verdict is that the "
                         "Monte Carlo run and the oracle agree")
@@ -364,6 +368,7 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--seed", type=_integer(0, SEED_MAX), default=1)
         p.add_argument("--substeps", type=_substeps, default="auto")
         p.add_argument("--workers", type=_integer(1, MAX_WORKERS), default=None)
+        p.add_argument("--scheduler", default=None, metavar="ADDRESS")
         p.set_defaults(func=func)
     for name, sp in sub.choices.items():
         _common(sp)

@@ -327,7 +327,8 @@ def check_implementable(d: Designed) -> None:
 
 def simulate_problem(d: Designed, *, paths: int, seed: int,
                      substeps: int | str | SubstepChoice = "auto", workers: int | None = None,
-                     record: int = 0, build_dir=None) -> MonteCarloResult:
+                     record: int = 0, scheduler: str | None = None,
+                     build_dir=None) -> MonteCarloResult:
     """Monte Carlo of the compiled C controller built from `d.table` in closed loop with the
     stochastic plant (exponential Euler-Maruyama with `substeps` steps per tick).
 
@@ -348,6 +349,9 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
         for any count, `sim.montecarlo.simulate`).
     record : int
         Keep the states of this many paths at every tick (``record_x``; for reports).
+    scheduler : str, optional
+        A Dask scheduler's address, or "local" for a local Dask cluster of `workers`
+        processes, to run the blocks on (same numbers).
     build_dir : str or Path, optional
         Where the compiled module is cached (default: the user cache directory).
 
@@ -380,7 +384,7 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
         choice = choose_substeps(d.problem, ctl, d.implemented.J, paths=paths, seed=seed)
     mc = simulate(d.problem, ctl, paths=paths, seed=seed,
                   substeps=choice.substeps if choice is not None else substeps, workers=workers,
-                  record=record)
+                  record=record, scheduler=scheduler)
     mc.substep_choice = choice
     return mc
 

@@ -6,7 +6,8 @@ O(dt) weak error in the second moments). The oracle evaluates the same scheme ex
 (`oracle.euler_tick`), so the simulation bias is a computed number, not a guess.
 
 The paths run in blocks of `BLOCK_PATHS`, each with its own random stream (`block_seed`), on
-every core by default (forked workers); for a float32 table one C call per tick and block
+every core by default (forked workers) or on a Dask cluster (`scheduler`); for a float32
+table one C call per tick and block
 does the controllers, the plant and the statistics (`CompiledController.ticker`).
 """
 from __future__ import annotations
@@ -20,6 +21,7 @@ from stospline.expm import expm
 
 from stospline import progress
 from stospline.sim.controller import STATUS, CompiledController, TickStats
+from stospline.errors import ProblemError
 from stospline.problem.model import Problem
 
 if TYPE_CHECKING:
@@ -118,7 +120,8 @@ def default_workers() -> int:
 
 
 def simulate(problem: Problem, controller: CompiledController, *, paths: int, seed: int,
-             substeps: int = 4, workers: int | None = None, record: int = 0) -> MonteCarloResult:
+             substeps: int = 4, workers: int | None = None, record: int = 0,
+             scheduler: str | None = None) -> MonteCarloResult:
     """Run `paths` realisations of the plant with the compiled controller in the loop.
 
     Parameters
@@ -140,6 +143,11 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
     record : int
         Keep the states of the first ``min(record, paths, BLOCK_PATHS)`` paths at every tick
         (``record_x``, float32).
+    scheduler : str, optional
+        Run the blocks on a Dask cluster instead (``dask.distributed``): the address of its
+        scheduler, or ``"local"`` for a local cluster of `workers` processes. Each worker
+        compiles (or loads from its cache) the controller of the same table. The numbers are
+        those of a run on this machine.
     """
     for name, value in (("paths", paths), ("substeps", substeps)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
@@ -151,7 +159,10 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
                 and paths * table.n_ticks * substeps >= _PARALLEL_WORK)
     bar = progress.start(f"simulate ({paths} paths)", paths * table.n_ticks, unit="path-tick")
     try:
-        if parallel:
+        if scheduler is not None:
+            parts = _run_dask(scheduler, problem, controller.table, counts, seed, substeps,
+                              workers, record)
+        elif parallel:
             parts = _run_parallel(problem, controller, counts, seed, substeps, workers, record)
         else:
             parts = [_run_block(problem, controller, count, block_seed(seed, i), substeps,
@@ -261,6 +272,42 @@ def _block_job(block: int, count: int) -> _Block:
     problem, controller, seed, substeps, record = _JOB
     return _run_block(problem, controller, count, block_seed(seed, block), substeps,
                       first=block == 0, report=False, record=record)
+
+
+def _dask_block(problem, table, seed, substeps, block: int, count: int, record: int) -> _Block:
+    """One block on a Dask worker: the controller of `table` from the worker's cache."""
+    from stospline.sim.controller import build_controller
+    controller = build_controller(table)
+    return _run_block(problem, controller, count, block_seed(seed, block), substeps,
+                      first=block == 0, report=False, record=record)
+
+
+def _run_dask(scheduler: str, problem, table, counts, seed, substeps, workers,
+              record) -> list[_Block]:
+    """The blocks on a Dask cluster (`scheduler`: an address, or "local"), in block order."""
+    from distributed import Client, LocalCluster, as_completed
+    cluster = None
+    if scheduler == "local":
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        address = cluster.scheduler_address
+    else:
+        address = scheduler
+    try:
+        try:
+            client = Client(address, timeout="10s")
+        except OSError as exc:
+            raise ProblemError("--scheduler", f"cannot reach the Dask scheduler at {address!r} "
+                                              f"({exc})") from None
+        with client:
+            futures = [client.submit(_dask_block, problem, table, seed, substeps, i, c, record,
+                                     pure=False) for i, c in enumerate(counts)]
+            for fut in as_completed(futures):
+                progress.advance(counts[futures.index(fut)] * table.n_ticks)
+            return client.gather(futures)
+    finally:
+        if cluster is not None:
+            cluster.close()
 
 
 def _run_parallel(problem, controller, counts, seed, substeps, workers,

@@ -121,3 +121,14 @@ def test_plot_axes_must_be_one_or_two_states(tmp_path):
     r = run("plot", str(f), "--out", str(tmp_path / "p.png"))
     assert r.returncode == 2 and "plot.axes" in r.stderr and "one or two" in r.stderr
     assert not (tmp_path / "p.png").exists()
+
+
+def test_simulate_on_a_local_dask_cluster_gives_the_same_numbers():
+    """`--scheduler local`: the blocks on a local Dask cluster; the summary is the one of the
+    run without it."""
+    args = ["simulate", ROBOT, "--paths", "1500", "--seed", "5", "--substeps", "1", "--json"]
+    plain = json.loads(run(*args).stdout)
+    r = run(*args, "--scheduler", "local", "--workers", "2")
+    assert r.returncode == 0, r.stderr
+    dask = json.loads(r.stdout)
+    assert dask["cost"] == plain["cost"] and dask["knots"] == plain["knots"]

@@ -86,3 +86,26 @@ def test_same_numbers_on_one_two_or_four_workers(robot_problem, robot_zoh):
     # and the blocks are really different streams: no two blocks repeat each other's paths
     c = runs[1].cost
     assert len(np.unique(c)) == paths
+
+
+def test_dask_cluster_gives_the_same_numbers(robot_problem, robot_zoh):
+    """The blocks on a Dask cluster, by address (threads in this process, one and two
+    workers) and as a local cluster of processes: the numbers of the run on this machine."""
+    from distributed import LocalCluster
+    from stospline.sim.controller import build_controller
+    from stospline.sim.montecarlo import BLOCK_PATHS, simulate
+    ctl = build_controller(robot_zoh.table)
+    paths = 2 * BLOCK_PATHS + 100
+    ref = simulate(robot_problem, ctl, paths=paths, seed=SEED, substeps=1, workers=1)
+    runs = []
+    for n in (1, 2):
+        with LocalCluster(n_workers=n, processes=False, threads_per_worker=1,
+                          dashboard_address=None) as cluster:
+            runs.append(simulate(robot_problem, ctl, paths=paths, seed=SEED, substeps=1,
+                                 scheduler=cluster.scheduler_address))
+    runs.append(simulate(robot_problem, ctl, paths=paths, seed=SEED, substeps=1, workers=2,
+                         scheduler="local"))
+    for run in runs:
+        assert np.array_equal(run.cost, ref.cost)
+        assert np.array_equal(run.mean_x, ref.mean_x)
+        assert all(np.array_equal(a, b) for a, b in zip(run.knot_states, ref.knot_states))

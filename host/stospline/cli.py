@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -271,6 +272,14 @@ def _out_file(text: str) -> str:
     return text
 
 
+def _scheduler(text: str) -> str:
+    """``local`` or a Dask scheduler address: [protocol://]host:port."""
+    if text == "local" or re.fullmatch(r"([a-z]+://)?[^\s:/]+:\d{1,5}", text):
+        return text
+    raise argparse.ArgumentTypeError(f"must be local or a Dask scheduler address "
+                                     f"[protocol://]host:port, got {text!r}")
+
+
 def _out_html(text: str) -> str:
     if Path(text).suffix.lower() != ".html":
         raise argparse.ArgumentTypeError(f"must name a .html file, got {text!r}")
@@ -340,7 +349,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=_integer(1, MAX_WORKERS), default=None,
                    help="processes that run the blocks of paths (default: every core); the "
                         "numbers are the same for any count")
-    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+    p.add_argument("--scheduler", type=_scheduler, default=None, metavar="ADDRESS",
                    help="run the blocks of paths on a Dask cluster: its scheduler's address "
                         "(e.g. tcp://host:8786), or local for a local cluster of --workers "
                         "processes; the numbers are the same as without")
@@ -368,7 +377,7 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--seed", type=_integer(0, SEED_MAX), default=1)
         p.add_argument("--substeps", type=_substeps, default="auto")
         p.add_argument("--workers", type=_integer(1, MAX_WORKERS), default=None)
-        p.add_argument("--scheduler", default=None, metavar="ADDRESS")
+        p.add_argument("--scheduler", type=_scheduler, default=None, metavar="ADDRESS")
         p.set_defaults(func=func)
     for name, sp in sub.choices.items():
         _common(sp)

@@ -16,7 +16,7 @@ from stospline.design.zoh import design_zoh
 from stospline.sim.controller import build_controller
 from stospline.sim.montecarlo import MonteCarloResult, joint_verdict, simulate, z_value
 from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table, state_range
-from stospline.sim.plant_scheme import SubstepChoice, choose_substeps
+from stospline.sim.plant_scheme import SubstepChoice, choose_substeps, scheme_moments
 from stospline.problem.model import Problem, ProblemError
 from stospline.table.format import GainTable, TickGains, table_of
 from stospline.table.qformat import DEFAULT_SIGMAS, FixedPointTable, quantize_table
@@ -411,8 +411,9 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int,
     undefined: it is None (JSON null) and a sibling ``<key>_undefined`` says why. Raises
     ProblemError if some other number is not finite."""
     substeps = mc.substeps
-    euler = evaluate_table(d.problem, d.table, propagator="euler", substeps=substeps,
-                           path=False)
+    choice = mc.substep_choice
+    euler = (choice.scheme if choice is not None and choice.substeps == substeps
+             else scheme_moments(d.problem, d.table, substeps))
     mean, hw95 = mc.cost_mean_ci(0.95)
     _, hw99 = mc.cost_mean_ci(0.99)
     se = hw95 / z_value(0.95)

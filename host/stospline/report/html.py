@@ -43,22 +43,26 @@ window.addEventListener("load", function () {
 """
 
 
+def _data_uri(buf: io.BytesIO) -> str:
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
 def _png(fig) -> str:
     import matplotlib.pyplot as plt
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90)
     plt.close(fig)
-    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+    return _data_uri(buf)
 
 
 def _img(uri: str, alt: str) -> str:
     return f'<img src="{uri}" alt="{html.escape(alt)}">'
 
 
-def _corridor(d, mc) -> str:
+def _corridor(d, mc, exact) -> str:
     buf = io.BytesIO()
-    plot_corridor(d, mc, buf)
-    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+    plot_corridor(d, mc, buf, exact)
+    return _data_uri(buf)
 
 
 def _states(d, mc, exact):
@@ -163,7 +167,7 @@ def report_html(d, mc, summary: dict) -> str:
         f"{100 * sat['path_fraction']:.4g}% of paths"
         + ("" if sat["limited"] else " (the table has no actuator limits)") + ".</p>",
         "<p>Faults: none modelled in this run.</p>",
-        f"<h2>Paths ({html.escape(layout)})</h2>", _img(_corridor(d, mc), "corridor"),
+        f"<h2>Paths ({html.escape(layout)})</h2>", _img(_corridor(d, mc, exact), "corridor"),
         "<h2>States and inputs against time</h2>", _img(_states(d, mc, exact), "states"),
         "<h2>Cost of the paths</h2>",
         _img(_histogram(mc, summary["cost"]["oracle_implemented"]), "cost histogram"),

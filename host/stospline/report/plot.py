@@ -20,10 +20,11 @@ def plot_axes(problem) -> list[int]:
     return list(problem.plot.get("axes", [0, 1] if problem.n >= 2 else [0]))
 
 
-def plot_corridor(d, mc, out: str | Path) -> None:
+def plot_corridor(d, mc, out: str | Path, exact=None) -> None:
     """Corridor with start and end, one realisation, the Monte Carlo mean path beside the
     oracle's exact mean, and the control signals of the realisation; in the phase plane of two
-    states, or one state against time (`plot_axes`)."""
+    states, or one state against time (`plot_axes`). `exact`: the oracle of ``d.table`` with
+    its path, when the caller has it already."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -31,7 +32,7 @@ def plot_corridor(d, mc, out: str | Path) -> None:
 
     p = d.problem
     axes = plot_axes(p)
-    exact = evaluate_table(p, d.table)
+    exact = evaluate_table(p, d.table) if exact is None else exact
     if len(axes) == 1:
         _plot_against_time(d, mc, exact, axes[0], out, plt)
         return

@@ -75,8 +75,8 @@ const stsp_table_t *harness_table(void) { return &%(p)s_table; }
 /* One tick of every path, float32 tables only (else STSP_ERR_BAD_DIMS, nothing touched):
  * the controller of path p steps with x = (float)X[p], the plant advances X[p] with the
  * command held (dZ[p]: substeps x mz), and the run's statistics accumulate: saturated ticks
- * per path, the smallest and largest command per input, the sum of the new states (for the
- * mean path), and path 0's command. Returns the worst status. */
+ * per path, the smallest and largest command per input; x_sum is set to the sum of the new
+ * states (for the mean path) and u_first to path 0's command. Returns the worst status. */
 int harness_tick(stsp_ctrl_t *ctrls, size_t count, uint32_t tick, const harness_plant_t *pl,
                  const double *dZ, double *X, double *cost, int64_t *saturated,
                  double *u_low, double *u_high, double *x_sum, float *u_first) {
@@ -91,6 +91,7 @@ int harness_tick(stsp_ctrl_t *ctrls, size_t count, uint32_t tick, const harness_
     size_t p, i;
     int worst = 0;
     if (n > STSP_MAX_NX || m > STSP_MAX_NU) return (int)STSP_ERR_BAD_DIMS;
+    for (i = 0; i < n; ++i) x_sum[i] = 0.0;
     for (p = 0; p < count; ++p) {
         double *x = X + p * n;
         int st;
@@ -333,8 +334,9 @@ class _Plant:
 
 @dataclass
 class TickStats:
-    """What `CompiledController.tick` accumulates: saturated ticks per path, the extreme
-    commands per input, the sum of the states after the tick, and path 0's command."""
+    """What a `CompiledController.ticker` tick accumulates (saturated ticks per path, the
+    extreme commands per input) and writes (the sum of the states after the tick, path 0's
+    command)."""
     saturated: np.ndarray
     u_low: np.ndarray
     u_high: np.ndarray

@@ -231,11 +231,11 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
                                                                       dt, substeps)
         mz = st.G.shape[2]
         dZ = np.empty((paths, substeps, mz))       # standard normal; the C scales by sqrt(dt)
-        tick = controller.ticker(step.instances, paths, dZ, X, cost, stats) if fused else None
+        tick = (controller.ticker(step.instances, paths, dZ, X, cost, stats)
+                if fused and plant is not None else None)
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             rng.standard_normal(out=dZ)
-            if plant is not None and fused:
-                stats.x_sum[:] = 0.0
+            if tick is not None:
                 worst = min(worst, tick(j, plant))
                 sample_u[j] = stats.u_first
                 x_sum[j + 1] = stats.x_sum
@@ -268,18 +268,21 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
 _JOB: tuple | None = None
 
 
-def _block_job(block: int, count: int) -> _Block:
-    problem, controller, seed, substeps, record = _JOB
+def _worker_block(problem, controller, seed, substeps, record, block: int,
+                  count: int) -> _Block:
+    """Block `block` of a run, on a worker (its progress is counted by the caller)."""
     return _run_block(problem, controller, count, block_seed(seed, block), substeps,
                       first=block == 0, report=False, record=record)
 
 
-def _dask_block(problem, table, seed, substeps, block: int, count: int, record: int) -> _Block:
+def _block_job(block: int, count: int) -> _Block:
+    return _worker_block(*_JOB, block, count)
+
+
+def _dask_block(problem, table, seed, substeps, record, block: int, count: int) -> _Block:
     """One block on a Dask worker: the controller of `table` from the worker's cache."""
     from stospline.sim.controller import build_controller
-    controller = build_controller(table)
-    return _run_block(problem, controller, count, block_seed(seed, block), substeps,
-                      first=block == 0, report=False, record=record)
+    return _worker_block(problem, build_controller(table), seed, substeps, record, block, count)
 
 
 def _run_dask(scheduler: str, problem, table, counts, seed, substeps, workers,
@@ -300,11 +303,11 @@ def _run_dask(scheduler: str, problem, table, counts, seed, substeps, workers,
             raise ProblemError("--scheduler", f"cannot reach the Dask scheduler at {address!r} "
                                               f"({exc})") from None
         with client:
-            futures = [client.submit(_dask_block, problem, table, seed, substeps, i, c, record,
-                                     pure=False) for i, c in enumerate(counts)]
+            futures = {client.submit(_dask_block, problem, table, seed, substeps, record, i, c,
+                                     pure=False): c for i, c in enumerate(counts)}
             for fut in as_completed(futures):
-                progress.advance(counts[futures.index(fut)] * table.n_ticks)
-            return client.gather(futures)
+                progress.advance(futures[fut] * table.n_ticks)
+            return client.gather(list(futures))
     finally:
         if cluster is not None:
             cluster.close()

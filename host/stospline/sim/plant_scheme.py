@@ -19,10 +19,11 @@ import numpy as np
 from stospline.problem.model import Problem
 from stospline.sim.controller import CompiledController
 from stospline.sim.montecarlo import simulate
-from stospline.sim.oracle import evaluate_table
+from stospline.sim.oracle import Moments, evaluate_table
 from stospline.table.format import GainTable
 
-__all__ = ["SubstepChoice", "choose_substeps", "scheme_bias", "PILOT_PATHS", "TOLERANCE"]
+__all__ = ["SubstepChoice", "choose_substeps", "scheme_bias", "scheme_moments", "PILOT_PATHS",
+           "TOLERANCE"]
 
 PILOT_PATHS = 256     # paths of the run that predicts the cost's standard deviation
 TOLERANCE = 0.1       # bias allowed, in Monte Carlo standard errors of the planned run
@@ -43,13 +44,18 @@ class SubstepChoice:
     stderr: float         # predicted Monte Carlo standard error of the run's mean cost
     pilot_paths: int
     met: bool             # False when even the largest allowed number misses the target
+    scheme: Moments       # the oracle of the plant scheme at `substeps` (bias = scheme.J - J)
+
+
+def scheme_moments(problem: Problem, table: GainTable, substeps: int) -> Moments:
+    """The oracle of `table` with the plant scheme's `substeps` steps per tick."""
+    return evaluate_table(problem, table, propagator="euler", substeps=substeps, path=False)
 
 
 def scheme_bias(problem: Problem, table: GainTable, substeps: int, exact_cost: float) -> float:
     """Expected cost under the plant scheme with `substeps` steps per tick, minus the exact
     one (`exact_cost`, the oracle's cost of the same table with the exact plant)."""
-    return evaluate_table(problem, table, propagator="euler", substeps=substeps,
-                          path=False).J - exact_cost
+    return scheme_moments(problem, table, substeps).J - exact_cost
 
 
 def choose_substeps(problem: Problem, controller: CompiledController, exact_cost: float, *,
@@ -71,12 +77,14 @@ def choose_substeps(problem: Problem, controller: CompiledController, exact_cost
     target = max(tolerance * _SAFETY * stderr, 1e-9 * max(1.0, abs(exact_cost)))
 
     substeps = 1
-    bias = scheme_bias(problem, table, substeps, exact_cost)
-    if abs(bias) > target:
+    scheme = scheme_moments(problem, table, substeps)
+    if abs(scheme.J - exact_cost) > target:
         # The bias falls as 1/substeps: jump to the predicted power of two, then double.
-        substeps = min(limit, 2 ** math.ceil(math.log2(abs(bias) / target)))
-        bias = scheme_bias(problem, table, substeps, exact_cost)
-        while abs(bias) > target and substeps < limit:
+        substeps = min(limit, 2 ** math.ceil(math.log2(abs(scheme.J - exact_cost) / target)))
+        scheme = scheme_moments(problem, table, substeps)
+        while abs(scheme.J - exact_cost) > target and substeps < limit:
             substeps = min(limit, 2 * substeps)
-            bias = scheme_bias(problem, table, substeps, exact_cost)
-    return SubstepChoice(substeps, bias, target, stderr, pilot_paths, abs(bias) <= target)
+            scheme = scheme_moments(problem, table, substeps)
+    bias = scheme.J - exact_cost
+    return SubstepChoice(substeps, bias, target, stderr, pilot_paths, abs(bias) <= target,
+                         scheme)

@@ -354,6 +354,8 @@ CLI_CASES = [
     ("report", ["--out", "p.html", "--paths", "0"]),
     ("report", ["--out", "p.html", "--workers", "0"]),
     ("simulate", ["--workers", "-2"]), ("simulate", ["--substeps", "autox"]),
+    ("simulate", ["--scheduler", ""]), ("simulate", ["--scheduler", "tcp://host"]),
+    ("report", ["--out", "p.html", "--scheduler", "a b:1"]),
 ]
 
 

@@ -70,9 +70,10 @@ def _check_budget(args, problem, command: str, **options) -> None:
     one (when progress is shown)."""
     from stospline.budget import check, format_bytes, format_seconds
     substeps = options.pop("substeps", getattr(args, "substeps", 2))
+    paths = options.pop("paths", getattr(args, "paths", 0))
     est = check(problem, command=command, max_seconds=args.max_time,
                 max_bytes=args.max_memory * 1024 ** 3, **_options(args, problem),
-                paths=getattr(args, "paths", 0),
+                paths=paths,
                 substeps=1 if substeps == "auto" else substeps,   # "auto": checked again
                 **options)
     if est.seconds > 5:
@@ -90,10 +91,43 @@ def _note_tables(d, doing: str) -> None:
                       f"~{format_seconds(numbers * per)})")
 
 
+def _fault_value(text: str):
+    """An int, a float or a comma-separated list of floats (one per state or input)."""
+    try:
+        if "," in text:
+            return [float(v) for v in text.split(",")]
+        return int(text) if re.fullmatch(r"[+-]?\d+", text.strip()) else float(text)
+    except ValueError:
+        return text        # parse_faults names the key and says what it must be
+
+
+def _fault(text: str) -> tuple[str, object]:
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"must be KEY=VALUE (e.g. sensor_noise=0.01), "
+                                         f"got {text!r}")
+    return key.strip(), _fault_value(value.strip())
+
+
+def _load_with_faults(args):
+    """The problem file, with each ``--fault KEY=VALUE`` replacing that key of its
+    ``[faults]`` (checked like the file's, the field named ``--fault KEY``)."""
+    from dataclasses import replace
+    from stospline.problem.faults import parse_faults
+    problem = load_problem(args.problem)
+    given = getattr(args, "fault", None)
+    if not given:
+        return problem
+    parse_faults(dict(given), problem.n, problem.m, prefix="--fault ")
+    merged = {**problem.faults.as_dict(), **dict(given)}
+    return replace(problem, faults=parse_faults(merged, problem.n, problem.m,
+                                                prefix="--fault "))
+
+
 @quiet_numerics
 def _simulate(args) -> int:
     from stospline.pipeline import design_problem, simulate_problem, simulation_summary, start_from
-    problem = load_problem(args.problem)
+    problem = _load_with_faults(args)
     x0 = args.x0
     _check_budget(args, problem, "simulate")
     d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem))
@@ -147,6 +181,14 @@ def _report_simulation(s: dict, as_json: bool) -> None:
                f"{bias['pilot_paths']}-path pilot predicts"
                + ("" if bias["target_met"] else " (NOT met at the largest allowed number)"))
     print(f"  plant-scheme bias in cost {bias['cost']:.3g} = {ratio}{how}")
+    f = s.get("faults", {})
+    if f.get("levels"):
+        levels = " ".join(f"{k}={v}" for k, v in f["levels"].items())
+        print(f"  faults: {levels}; "
+              + (f"exact oracle of the faulty loop {f['oracle_cost']:.6g}" if f["exact_oracle"]
+                 else "no exact oracle (quantization, missed ticks, or sensor noise before "
+                      "the band latch): Monte Carlo only")
+              + f" (fault-free {f['nominal_cost']:.6g})")
     if sat["limited"]:
         print(f"  actuator limits: saturated on {100 * sat['tick_fraction']:.4g}% of ticks "
               f"({100 * sat['path_fraction']:.4g}% of paths); commands issued within "
@@ -169,14 +211,15 @@ def _z_text(z) -> str:
     return "n/a" if z is None else f"{z:+.2f}"
 
 
-def _monte_carlo(args, command: str, record: int = 0):
+def _monte_carlo(args, command: str, record: int = 0, extra_paths: int = 0):
     """Design the file's problem and run its Monte Carlo for `plot`/`report`: ``(d, mc)``;
-    the output file is checked and the budget estimated first."""
+    the output file is checked and the budget estimated first (for the run's paths and
+    `extra_paths` more of the same kind)."""
     from stospline.atomic import check_file_target
     from stospline.pipeline import design_problem, simulate_problem
     check_file_target(args.out)
-    problem = load_problem(args.problem)
-    _check_budget(args, problem, command)
+    problem = _load_with_faults(args)
+    _check_budget(args, problem, command, paths=args.paths + extra_paths)
     d = design_problem(problem, **_options(args, problem))
     _note_tables(d, "compiling")
     substeps = _planned_substeps(args, problem, d, command)
@@ -199,8 +242,17 @@ def _report(args) -> int:
     from stospline.atomic import write_file
     from stospline.pipeline import simulation_summary
     from stospline.report.html import report_html
-    d, mc = _monte_carlo(args, "simulate", record=REPORT_RECORD)
-    page = report_html(d, mc, simulation_summary(d, mc, seed=args.seed))
+    from stospline.sim.fault_sweep import SWEEP_ROWS
+    sweep_paths = SWEEP_ROWS * args.fault_paths
+    d, mc = _monte_carlo(args, "simulate", record=REPORT_RECORD, extra_paths=sweep_paths)
+    summary = simulation_summary(d, mc, seed=args.seed)
+    rows = None
+    if args.fault_paths:
+        from stospline.pipeline import fault_sweep
+        progress.note(f"fault table: {SWEEP_ROWS} runs of {args.fault_paths} paths")
+        rows = fault_sweep(d, paths=args.fault_paths, seed=args.seed, substeps=mc.substeps,
+                           workers=args.workers, scheduler=args.scheduler)
+    page = report_html(d, mc, summary, rows)
     write_file(args.out, lambda tmp: Path(tmp).write_text(page, encoding="utf-8"))
     print(f"wrote {args.out}")
     return 0
@@ -358,6 +410,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "Monte Carlo run and the oracle agree")
     p.add_argument("--json", action="store_true")
     p.add_argument("--ignore-noise", action="store_true")
+    p.add_argument("--fault", type=_fault, action="append", metavar="KEY=VALUE",
+                   help="a fault of the loop, as in the file's [faults] (which it overrides): "
+                        "sensor_noise, sensor_quantum, delay_ticks, miss_probability, "
+                        "actuator_noise, plant_A_scale, plant_B_scale, plant_noise_scale; "
+                        "a vector as comma-separated numbers; repeat for several")
     p.add_argument("--x0", type=_x0, help="start the plant from this state instead of the problem's "
                                 "(comma-separated; write --x0=-5,0,1,0 when it starts with a minus); the tables stay the design's and the "
                                 "controller latches from what it measures")
@@ -378,6 +435,12 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--substeps", type=_substeps, default="auto")
         p.add_argument("--workers", type=_integer(1, MAX_WORKERS), default=None)
         p.add_argument("--scheduler", type=_scheduler, default=None, metavar="ADDRESS")
+        p.add_argument("--fault", type=_fault, action="append", metavar="KEY=VALUE",
+                       help="a fault of the loop (see simulate --help)")
+        if name == "report":
+            p.add_argument("--fault-paths", type=_integer(0, MAX_PATHS), default=500,
+                           help="paths of each run of the fault table (each fault at a few "
+                                "levels); 0: no fault table")
         p.set_defaults(func=func)
     for name, sp in sub.choices.items():
         _common(sp)

@@ -17,6 +17,8 @@ from stospline.sim.controller import build_controller
 from stospline.sim.montecarlo import MonteCarloResult, joint_verdict, simulate, z_value
 from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table, state_range
 from stospline.sim.plant_scheme import SubstepChoice, choose_substeps, scheme_moments
+from stospline.sim.fault_oracle import evaluate_with_faults, has_exact_oracle
+from stospline.problem.faults import Faults
 from stospline.problem.model import Problem, ProblemError
 from stospline.table.format import GainTable, TickGains, table_of
 from stospline.table.qformat import DEFAULT_SIGMAS, FixedPointTable, quantize_table
@@ -25,7 +27,8 @@ from stospline.precision import RoundedUp
 
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
            "simulation_summary", "verdict", "plan_substeps", "write_outputs", "start_from",
-           "double_table", "fixed_point_table", "check_implementable"]
+           "double_table", "fixed_point_table", "check_implementable", "loop_moments",
+           "fault_sweep"]
 
 # JSON summaries keep 10 significant digits and an absolute quantum of 1e-10: the designs
 # agree to ~1e-14 however the arithmetic is ordered, so regenerated files stay byte-identical
@@ -325,10 +328,22 @@ def check_implementable(d: Designed) -> None:
     strict.check_table_finite(d.problem, d.table, exact=lambda: double_table(d))
 
 
+def loop_moments(d: Designed, faults: Faults | None = None) -> Moments:
+    """The exact moments the Monte Carlo run is compared with: the implemented law's
+    (`Designed.implemented`) without faults, the fault oracle's (`sim.fault_oracle`) in a loop
+    with linear `faults` (default ``d.problem.faults``). Nonlinear faults (quantization, missed
+    ticks) have none: the fault-free loop's moments are returned, and the verdict says the run
+    is not comparable."""
+    faults = d.problem.faults if faults is None else faults
+    if not faults.any or not has_exact_oracle(d.table, faults):
+        return d.implemented
+    return evaluate_with_faults(d.problem, d.table, faults)
+
+
 def simulate_problem(d: Designed, *, paths: int, seed: int,
                      substeps: int | str | SubstepChoice = "auto", workers: int | None = None,
                      record: int = 0, scheduler: str | None = None,
-                     build_dir=None) -> MonteCarloResult:
+                     build_dir=None, faults: Faults | None = None) -> MonteCarloResult:
     """Monte Carlo of the compiled C controller built from `d.table` in closed loop with the
     stochastic plant (exponential Euler-Maruyama with `substeps` steps per tick).
 
@@ -354,6 +369,8 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
         processes, to run the blocks on (same numbers).
     build_dir : str or Path, optional
         Where the compiled module is cached (default: the user cache directory).
+    faults : Faults, optional
+        The loop's faults (default: the problem file's ``[faults]``; `problem.faults`).
 
     Returns
     -------
@@ -379,23 +396,40 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
     """
     check_implementable(d)
     ctl = build_controller(d.table, build_dir=build_dir)
+    faults = d.problem.faults if faults is None else faults
     choice = substeps if isinstance(substeps, SubstepChoice) else None
     if substeps == "auto":
-        choice = choose_substeps(d.problem, ctl, d.implemented.J, paths=paths, seed=seed)
+        choice = choose_substeps(d.problem, ctl, loop_moments(d, faults).J, paths=paths,
+                                 seed=seed, faults=faults)
     mc = simulate(d.problem, ctl, paths=paths, seed=seed,
                   substeps=choice.substeps if choice is not None else substeps, workers=workers,
-                  record=record, scheduler=scheduler)
+                  record=record, scheduler=scheduler, faults=faults)
     mc.substep_choice = choice
     return mc
 
 
-def plan_substeps(d: Designed, *, paths: int, seed: int, build_dir=None) -> SubstepChoice:
+def fault_sweep(d: Designed, *, paths: int, seed: int, substeps: int,
+                workers: int | None = None, scheduler: str | None = None, build_dir=None):
+    """The fault table of the design (`sim.fault_sweep.fault_table`): each fault of the loop
+    at a few levels relative to the plan, the fault oracle beside Monte Carlo through the
+    compiled C controller (`paths` paths per level, the same `seed`)."""
+    from stospline.sim.fault_sweep import fault_table
+    check_implementable(d)
+    ctl = build_controller(d.table, build_dir=build_dir)
+    return fault_table(d.problem, ctl, paths=paths, seed=seed, substeps=substeps,
+                       workers=workers, scheduler=scheduler)
+
+
+def plan_substeps(d: Designed, *, paths: int, seed: int, build_dir=None,
+                  faults: Faults | None = None) -> SubstepChoice:
     """The plant steps per tick ``simulate_problem(..., substeps="auto")`` would choose for
     this run (`sim.plant_scheme.choose_substeps`); pass the result as its `substeps` to run
     with it, e.g. after checking that run's cost."""
     check_implementable(d)
     ctl = build_controller(d.table, build_dir=build_dir)
-    return choose_substeps(d.problem, ctl, d.implemented.J, paths=paths, seed=seed)
+    faults = d.problem.faults if faults is None else faults
+    return choose_substeps(d.problem, ctl, loop_moments(d, faults).J, paths=paths, seed=seed,
+                           faults=faults)
 
 
 def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int,
@@ -409,11 +443,17 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int,
 
     A ratio to a Monte Carlo standard error that is 0 (every path alike, as without noise) is
     undefined: it is None (JSON null) and a sibling ``<key>_undefined`` says why. Raises
-    ProblemError if some other number is not finite."""
+    ProblemError if some other number is not finite.
+
+    With faults (``mc.faults``) the exact numbers are the fault oracle's (`loop_moments`) and
+    ``faults`` says which; faults without an oracle make the verdict "not comparable"."""
     substeps = mc.substeps
     choice = mc.substep_choice
+    faults = mc.faults
+    exact = loop_moments(d, faults)
+    exact_oracle = has_exact_oracle(d.table, faults)
     euler = (choice.scheme if choice is not None and choice.substeps == substeps
-             else scheme_moments(d.problem, d.table, substeps))
+             else scheme_moments(d.problem, d.table, substeps, faults))
     mean, hw95 = mc.cost_mean_ci(0.95)
     _, hw99 = mc.cost_mean_ci(0.99)
     se = hw95 / z_value(0.95)
@@ -421,17 +461,17 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int,
     for k, kn in enumerate(d.problem.knots):
         m, s = mc.knot_mean_se(k)
         alike = np.ptp(mc.knot_states[k], axis=0) == 0   # s is then 0 or rounding error
-        z, why = strict.ratio_or_null(m - d.implemented.knot_mean[k], np.where(alike, 0.0, s),
+        z, why = strict.ratio_or_null(m - exact.knot_mean[k], np.where(alike, 0.0, s),
                                       _ZERO_SE)
         knots.append({
             "t": kn.t,
             "mc_mean": m, "mc_mean_stderr": s, "mc_cov": mc.knot_cov(k),
-            "oracle_mean": d.implemented.knot_mean[k], "oracle_cov": d.implemented.knot_cov[k],
+            "oracle_mean": exact.knot_mean[k], "oracle_cov": exact.knot_cov[k],
             "z": z, **({"z_undefined": why} if why else {}),
         })
     se_z = 0.0 if np.ptp(mc.cost) == 0 else se
-    cost_z, cost_why = strict.ratio_or_null(mean - d.implemented.J, se_z, _ZERO_SE)
-    bias_z, bias_why = strict.ratio_or_null(euler.J - d.implemented.J, se_z, _ZERO_SE)
+    cost_z, cost_why = strict.ratio_or_null(mean - exact.J, se_z, _ZERO_SE)
+    bias_z, bias_why = strict.ratio_or_null(euler.J - exact.J, se_z, _ZERO_SE)
     summary = _r({
         "name": d.problem.name, "paths": mc.paths, "seed": seed, "substeps": substeps,
         "x0": d.problem.x0,
@@ -439,15 +479,20 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int,
         "cost": {
             "mc_mean": mean, "mc_stderr": se,
             "ci95": [mean - hw95, mean + hw95], "ci99": [mean - hw99, mean + hw99],
-            "oracle_implemented": d.implemented.J, "predicted_J0": predicted_cost(d),
+            "oracle_implemented": exact.J, "predicted_J0": predicted_cost(d),
             "z": cost_z, **({"z_undefined": cost_why} if cost_why else {}),
         },
+        "faults": {
+            "levels": faults.as_dict(), "exact_oracle": exact_oracle,
+            "oracle_cost": exact.J if exact_oracle else None,
+            "nominal_cost": d.implemented.J,
+        },
         "simulation_bias": {
-            "cost": euler.J - d.implemented.J,
+            "cost": euler.J - exact.J,
             "cost_over_stderr": bias_z,
             **({"cost_over_stderr_undefined": bias_why} if bias_why else {}),
             **_substep_choice(mc),
-            "knot_cov_max_abs": [float(np.abs(euler.knot_cov[k] - d.implemented.knot_cov[k]).max())
+            "knot_cov_max_abs": [float(np.abs(euler.knot_cov[k] - exact.knot_cov[k]).max())
                                  for k in range(len(d.problem.knots))],
         },
         "knots": knots,
@@ -485,7 +530,11 @@ def verdict(summary: dict, confidence: float = 0.99) -> dict:
         stats += [(f"knot {k} mean[{i}]", z, kn["mc_mean"][i], kn["oracle_mean"][i])
                   for i, z in enumerate(kn["z"])]
     v = joint_verdict(stats, confidence)
-    if summary["saturation"]["tick_fraction"] > 0:
+    if not summary.get("faults", {}).get("exact_oracle", True):
+        agree, reason = False, ("not comparable: these faults have no exact oracle "
+                                "(quantization, missed ticks, or sensor noise before the band "
+                                "latch); the Monte Carlo numbers stand alone")
+    elif summary["saturation"]["tick_fraction"] > 0:
         agree, reason = False, ("the controller saturated: the oracle assumes the law is never "
                                 "clipped, so it does not predict this run")
     elif v.outside:

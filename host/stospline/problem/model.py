@@ -10,6 +10,7 @@ import numpy as np
 
 from stospline.errors import ProblemError
 
+from stospline.problem.faults import Faults
 from stospline.problem.series import Series
 
 __all__ = ["ProblemError", "Stage", "Penalty", "Constraint", "Knot", "Problem", "Series",
@@ -120,6 +121,9 @@ class Problem:
     # design ignores them: the firmware clips the unconstrained optimal law.
     u_min: np.ndarray | None = None
     u_max: np.ndarray | None = None
+    # The loop's faults ([faults]): what the harness and the fault oracle add around the
+    # controller; the design ignores them.
+    faults: Faults = field(default_factory=Faults)
 
     @property
     def n(self) -> int:
@@ -155,7 +159,8 @@ class Problem:
         """The same problem with every diffusion term removed (the paper's Remark 2)."""
         return Problem(self.name, self.t0, self.x0, self.tick_hz,
                        tuple(s.without_noise() for s in self.stages), self.knots,
-                       self.source_sha256, self.plot, self.options, self.u_min, self.u_max)
+                       self.source_sha256, self.plot, self.options, self.u_min, self.u_max,
+                       self.faults)
 
 
 def ticks_per_stage(problem, tick_hz: int) -> np.ndarray:

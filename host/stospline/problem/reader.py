@@ -18,6 +18,7 @@ import numpy as np
 from stospline.errors import ProblemError
 from stospline.firmware_interface import ARITHS
 from stospline.limits import check_problem, check_stage_count, check_state
+from stospline.problem.faults import parse_faults
 from stospline.problem.inputfile import decode_problem, read_problem_file
 from stospline.problem.model import Constraint, Knot, Penalty, Problem, Series, Stage
 from stospline.problem.names import check_name
@@ -25,7 +26,7 @@ from stospline.problem.names import check_name
 __all__ = ["load_problem", "parse_problem"]
 
 _TOP_KEYS = {"name", "t0", "x0", "tick_hz", "u_min", "u_max", "dynamics", "cost", "knots",
-             "stages", "plot", "regions", "design"}
+             "stages", "plot", "regions", "design", "faults"}
 _DESIGN_OPTIONS = {"mode": ("stagewise", "joint"), "discretization": ("exact-zoh", "continuous"),
                    "arith": ARITHS}
 _TOP_REQUIRED = {"name", "x0", "tick_hz", "dynamics", "cost", "knots"}
@@ -715,8 +716,9 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
         if value not in _DESIGN_OPTIONS[key]:
             raise ProblemError(f"design.{key}", f"must be one of {list(_DESIGN_OPTIONS[key])}, "
                                                 f"got {value!r}")
+    faults = parse_faults(doc.get("faults", {}), n, stages[0].B.shape[1])
     problem = Problem(name, t0, x0, tick_hz, stages, knots, source_sha256, plot, dict(options),
-                      u_min, u_max)
+                      u_min, u_max, faults)
     check_problem(problem, B_path=default.B_path)   # the firmware's limits (limits.py)
     return problem
 

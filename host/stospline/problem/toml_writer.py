@@ -9,7 +9,8 @@ What is written (``docs/guide/library.md``, "Writing a problem back"):
   adds to them), which is the same problem;
 * ``[[regions]]`` are written as the band knots they expand to, which is the same problem;
 * equal stages once as ``[dynamics]``/``[cost]``, different ones as ``[[stages]]``;
-* ``x0``, ``t0``, ``tick_hz``, actuator limits, ``[design]`` and ``[plot]`` as they are.
+* ``x0``, ``t0``, ``tick_hz``, actuator limits, ``[design]``, ``[plot]`` and ``[faults]`` as
+  they are.
 
 Floats are written as Python's shortest repr, which reads back to the same double.
 """
@@ -156,4 +157,6 @@ def problem_to_toml(problem: Problem) -> str:
         lines += _table("[[knots]]", _knot(kn))
     if p.plot:
         lines += _table("[plot]", dict(p.plot))
+    if p.faults.any:
+        lines += _table("[faults]", p.faults.as_dict())
     return "\n".join(lines) + "\n"

@@ -66,8 +66,8 @@ def _corridor(d, mc, exact) -> str:
 
 
 def _states(d, mc, exact):
-    """Every state against time: the oracle's mean +- 2 sd, the Monte Carlo mean, the 5-95 %
-    band of the recorded paths; every input of the sample path."""
+    """Every state and input against time: the oracle's mean +- 2 sd, the Monte Carlo mean
+    (states), the 5-95 % band of the recorded paths and one realisation (inputs)."""
     import matplotlib.pyplot as plt
     n, m = d.problem.n, d.problem.m
     fig, axs = plt.subplots(n + m, 1, figsize=(9, 1.9 * (n + m) + 0.8), sharex=True,
@@ -93,7 +93,19 @@ def _states(d, mc, exact):
             ax.legend(fontsize=7, loc="best")
     for j in range(m):
         ax = axs[n + j, 0]
-        ax.plot(t[:-1], mc.sample_u[:, j], color="k", lw=0.8, label="one realisation")
+        if exact.path_u_mean.shape[0] == len(t) - 1:
+            sd = np.sqrt(exact.path_u_var[:, j])
+            ax.fill_between(t[:-1], exact.path_u_mean[:, j] - 2 * sd,
+                            exact.path_u_mean[:, j] + 2 * sd, color="tab:orange", alpha=0.25,
+                            step="post", label="oracle mean +- 2 sd")
+            ax.plot(t[:-1], exact.path_u_mean[:, j], "--", color="tab:orange", lw=1.2,
+                    label="oracle mean")
+        if mc.record_u is not None and mc.record_u.shape[1] >= 2:
+            lo, hi = np.percentile(mc.record_u[:, :, j], [5, 95], axis=1)
+            ax.plot(t[:-1], lo, ":", color="tab:blue", lw=1,
+                    label=f"5-95 % of {mc.record_u.shape[1]} recorded paths")
+            ax.plot(t[:-1], hi, ":", color="tab:blue", lw=1)
+        ax.plot(t[:-1], mc.sample_u[:, j], color="k", lw=0.6, label="one realisation")
         ax.set_ylabel(f"u{j + 1}")
         ax.grid(alpha=0.3)
         if j == 0:
@@ -131,12 +143,46 @@ def _verdict_rows(summary: dict) -> str:
     return "\n".join(out)
 
 
-def report_html(d, mc, summary: dict) -> str:
+def _faults_text(summary: dict) -> str:
+    f = summary.get("faults", {})
+    if not f.get("levels"):
+        return "<p>Faults: none modelled in this run.</p>"
+    levels = ", ".join(f"{k} = {v}" for k, v in f["levels"].items())
+    how = (f"the exact oracle of the faulty loop gives {f['oracle_cost']:.6g}" if f["exact_oracle"]
+           else "these faults have no exact oracle (quantization, missed ticks, or sensor noise "
+           "before the band latch): Monte Carlo only")
+    return (f'<p id="faults">Faults in this run: {html.escape(levels)}; {how} (the fault-free '
+            f"loop: {f['nominal_cost']:.6g}).</p>")
+
+
+def _fault_table(rows) -> str:
+    """The fault sweep (`sim.fault_sweep.fault_table`) as an HTML table."""
+    def g(v, fmt="{:.5g}"):
+        return "-" if v is None else fmt.format(v)
+    out = ['<table id="fault-table"><tr><th>fault</th><th>level</th><th>cost (oracle)</th>'
+           "<th>cost (MC, 95% CI)</th><th>constraint bias (oracle / MC)</th>"
+           "<th>knot variance (oracle / MC)</th><th>saturated ticks</th></tr>"]
+    for r in rows:
+        out.append(f'<tr><td class="name">{html.escape(r.fault)}</td>'
+                   f'<td class="name">{html.escape(r.level)}</td><td>{g(r.oracle_cost)}</td>'
+                   f"<td>{r.mc_cost:.5g} &plusmn; {r.mc_cost_hw95:.2g}</td>"
+                   f"<td>{g(r.oracle_constraint_bias, '{:.2e}')} / "
+                   f"{r.mc_constraint_bias:.2e}</td>"
+                   f"<td>{g(r.oracle_knot_variance)} / {r.mc_knot_variance:.5g}</td>"
+                   f"<td>{100 * r.saturation:.3g}%</td></tr>")
+    return "\n".join(out) + "</table>"
+
+
+def report_html(d, mc, summary: dict, fault_rows=None) -> str:
     """The page for design `d` (`pipeline.Designed`), its Monte Carlo run `mc` and that
-    run's `pipeline.simulation_summary`."""
+    run's `pipeline.simulation_summary`; `fault_rows` (`sim.fault_sweep.fault_table`) adds
+    the fault table."""
+    from stospline.sim.fault_oracle import evaluate_with_faults
     from stospline.sim.oracle import evaluate_table
     p = d.problem
-    exact = evaluate_table(p, d.table)
+    faults = mc.faults
+    exact = (evaluate_with_faults(p, d.table, faults, path=True)
+             if faults.any and summary["faults"]["exact_oracle"] else evaluate_table(p, d.table))
     v = summary["verdict"]
     sat = summary["saturation"]
     bias = summary["simulation_bias"]
@@ -166,11 +212,19 @@ def report_html(d, mc, summary: dict) -> str:
         f"<p id=\"saturation\">Saturation: {100 * sat['tick_fraction']:.4g}% of ticks, "
         f"{100 * sat['path_fraction']:.4g}% of paths"
         + ("" if sat["limited"] else " (the table has no actuator limits)") + ".</p>",
-        "<p>Faults: none modelled in this run.</p>",
+        _faults_text(summary),
         f"<h2>Paths ({html.escape(layout)})</h2>", _img(_corridor(d, mc, exact), "corridor"),
         "<h2>States and inputs against time</h2>", _img(_states(d, mc, exact), "states"),
         "<h2>Cost of the paths</h2>",
         _img(_histogram(mc, summary["cost"]["oracle_implemented"]), "cost histogram"),
+        *(["<h2>Faults of the loop</h2>",
+           f"<p>Each fault at a few levels relative to the plan ({fault_rows[0].paths} paths "
+           "each, the same seed, so the rows differ by the fault): the fault oracle's exact "
+           "numbers where the fault is linear, '-' where it is not (quantization, missed "
+           "ticks), beside Monte Carlo through the compiled C controller. Constraint bias: the "
+           "largest |E{C x} - value| at a knot; knot variance: the largest variance of a "
+           "constrained output at a knot.</p>", _fault_table(fault_rows)]
+          if fault_rows else []),
         "</body></html>",
     ]
     return "\n".join(parts) + "\n"

@@ -66,23 +66,31 @@ int harness_pair_batch(const stsp_ctrl_t *proto, size_t count, const uint32_t *t
                        const stsp_scalar_t *x, stsp_scalar_t *u, int *status);
 int harness_tick(stsp_ctrl_t *ctrls, size_t count, uint32_t tick, const harness_plant_t *pl,
                  const double *dZ, double *X, double *cost, int64_t *saturated,
-                 double *u_low, double *u_high, double *x_sum, float *u_first);"""
+                 double *u_low, double *u_high, double *x_sum, float *u_rec, size_t n_rec);
+int harness_tick_faults(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
+                        const harness_plant_t *pl, const double *dZ, double *X, double *cost,
+                        int64_t *saturated, double *u_low, double *u_high, double *x_sum,
+                        float *u_rec, size_t n_rec, const harness_faults_t *f,
+                        const double *sensor_z, const double *actuator_z, const double *miss_u,
+                        double *held);"""
 
 # Harness-only C: loops over instances so one Python call serves every Monte Carlo path.
 _BATCH = """
+#include <math.h>
 #include "plant.h"
 const stsp_table_t *harness_table(void) { return &%(p)s_table; }
 /* One tick of every path, float32 tables only (else STSP_ERR_BAD_DIMS, nothing touched):
  * the controller of path p steps with x = (float)X[p], the plant advances X[p] with the
  * command held (dZ[p]: substeps x mz), and the run's statistics accumulate: saturated ticks
  * per path, the smallest and largest command per input; x_sum is set to the sum of the new
- * states (for the mean path) and u_first to path 0's command. Returns the worst status. */
+ * states (for the mean path) and u_rec (n_rec x m) to the commands of the first n_rec paths.
+ * Returns the worst status. */
 int harness_tick(stsp_ctrl_t *ctrls, size_t count, uint32_t tick, const harness_plant_t *pl,
                  const double *dZ, double *X, double *cost, int64_t *saturated,
-                 double *u_low, double *u_high, double *x_sum, float *u_first) {
+                 double *u_low, double *u_high, double *x_sum, float *u_rec, size_t n_rec) {
 #ifdef STSP_ARITH_FIXED_POINT
     (void)ctrls; (void)count; (void)tick; (void)pl; (void)dZ; (void)X; (void)cost;
-    (void)saturated; (void)u_low; (void)u_high; (void)x_sum; (void)u_first;
+    (void)saturated; (void)u_low; (void)u_high; (void)x_sum; (void)u_rec; (void)n_rec;
     return (int)STSP_ERR_BAD_DIMS;
 #else
     const size_t n = pl->n, m = pl->m, dz_stride = pl->substeps * pl->mz;
@@ -104,7 +112,64 @@ int harness_tick(stsp_ctrl_t *ctrls, size_t count, uint32_t tick, const harness_
             if (ud[i] < u_low[i]) u_low[i] = ud[i];
             if (ud[i] > u_high[i]) u_high[i] = ud[i];
         }
-        if (p == 0) for (i = 0; i < m; ++i) u_first[i] = uf[i];
+        if (p < n_rec) for (i = 0; i < m; ++i) u_rec[p * m + i] = uf[i];
+        cost[p] += harness_plant_path(pl, ud, dZ + p * dz_stride, x);
+        for (i = 0; i < n; ++i) x_sum[i] += x[i];
+    }
+    return worst;
+#endif
+}
+/* harness_tick with the loop's faults (plant.h): the controller of path p measures
+ * X[p] + noise, rounded; it is not run on a missed tick; the actuator applies held[p] (the
+ * last command, or with a delay the one before it) plus noise. The statistics count the
+ * commands the controllers computed; u_rec holds the applied ones. */
+int harness_tick_faults(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
+                        const harness_plant_t *pl, const double *dZ, double *X, double *cost,
+                        int64_t *saturated, double *u_low, double *u_high, double *x_sum,
+                        float *u_rec, size_t n_rec, const harness_faults_t *f,
+                        const double *sensor_z, const double *actuator_z, const double *miss_u,
+                        double *held) {
+#ifdef STSP_ARITH_FIXED_POINT
+    (void)ctrls; (void)count; (void)tick; (void)pl; (void)dZ; (void)X; (void)cost;
+    (void)saturated; (void)u_low; (void)u_high; (void)x_sum; (void)u_rec; (void)n_rec; (void)f;
+    (void)sensor_z; (void)actuator_z; (void)miss_u; (void)held;
+    return (int)STSP_ERR_BAD_DIMS;
+#else
+    const size_t n = pl->n, m = pl->m, dz_stride = pl->substeps * pl->mz;
+    float xf[STSP_MAX_NX], uf[STSP_MAX_NU];
+    double ud[STSP_MAX_NU];
+    size_t p, i;
+    int worst = 0;
+    if (n > STSP_MAX_NX || m > STSP_MAX_NU) return (int)STSP_ERR_BAD_DIMS;
+    for (i = 0; i < n; ++i) x_sum[i] = 0.0;
+    for (p = 0; p < count; ++p) {
+        double *x = X + p * n, *hp = held + p * m;
+        const int run = !(miss_u != NULL && miss_u[p] < f->miss_probability);
+        for (i = 0; i < n; ++i) {
+            double xm = x[i];
+            if (f->sensor_std != NULL) xm += f->sensor_std[i] * sensor_z[p * n + i];
+            if (f->quantum != NULL && f->quantum[i] > 0.0) {
+                xm = f->quantum[i] * floor(xm / f->quantum[i] + 0.5);
+            }
+            xf[i] = (float)xm;
+        }
+        for (i = 0; i < m; ++i) ud[i] = hp[i];           /* a delayed or a missed tick */
+        if (run) {
+            int st = (int)stsp_step(&ctrls[p], tick, xf, uf);
+            if (st < worst) worst = st;
+            if (st == (int)STSP_WARN_SATURATED) ++saturated[p];
+            for (i = 0; i < m; ++i) {
+                const double c = (double)uf[i];
+                if (c < u_low[i]) u_low[i] = c;
+                if (c > u_high[i]) u_high[i] = c;
+                hp[i] = c;
+                if (f->delay_ticks == 0) ud[i] = c;
+            }
+        }
+        if (f->actuator_std != NULL) {
+            for (i = 0; i < m; ++i) ud[i] += f->actuator_std[i] * actuator_z[p * m + i];
+        }
+        if (p < n_rec) for (i = 0; i < m; ++i) u_rec[p * m + i] = (float)ud[i];
         cost[p] += harness_plant_path(pl, ud, dZ + p * dz_stride, x);
         for (i = 0; i < n; ++i) x_sum[i] += x[i];
     }
@@ -317,10 +382,45 @@ class CompiledController:
                 ffi.from_buffer("double[]", stats.u_low),
                 ffi.from_buffer("double[]", stats.u_high),
                 ffi.from_buffer("double[]", stats.x_sum),
-                ffi.from_buffer("float[]", stats.u_first))
+                ffi.from_buffer("float[]", stats.u_rec), len(stats.u_rec))
 
         def tick(j: int, plant) -> int:
             return lib.harness_tick(ctrls, count, j, plant.c, *args)
+
+        tick.keep = keep
+        return tick
+
+    def fault_ticker(self, ctrls, count: int, dZ: np.ndarray, X: np.ndarray,
+                     cost: np.ndarray, stats: "TickStats", faults: "FaultDraws"):
+        """`ticker` in a loop with faults (``harness_tick_faults``): `faults` holds the fault
+        levels, the arrays the caller refills with each tick's random numbers and the
+        actuator's held commands."""
+        ffi, lib = self.ffi, self.lib
+        f = ffi.new("harness_faults_t *")
+        vec = {}
+        for name, a in (("sensor_std", faults.sensor_std), ("quantum", faults.quantum),
+                        ("actuator_std", faults.actuator_std)):
+            vec[name] = a
+            setattr(f, name, ffi.NULL if a is None else ffi.from_buffer("double[]", a))
+        f.miss_probability = faults.miss_probability
+        f.delay_ticks = faults.delay_ticks
+
+        def buf(a):
+            return ffi.NULL if a is None else ffi.from_buffer("double[]", a)
+
+        keep = (dZ, X, cost, stats, faults, f, vec)
+        args = (ffi.from_buffer("double[]", dZ), ffi.from_buffer("double[]", X),
+                ffi.from_buffer("double[]", cost),
+                ffi.cast("int64_t *", ffi.from_buffer(stats.saturated)),
+                ffi.from_buffer("double[]", stats.u_low),
+                ffi.from_buffer("double[]", stats.u_high),
+                ffi.from_buffer("double[]", stats.x_sum),
+                ffi.from_buffer("float[]", stats.u_rec), len(stats.u_rec), f,
+                buf(faults.sensor_z), buf(faults.actuator_z), buf(faults.miss_u),
+                ffi.from_buffer("double[]", faults.held))
+
+        def tick(j: int, plant) -> int:
+            return lib.harness_tick_faults(ctrls, count, j, plant.c, *args)
 
         tick.keep = keep
         return tick
@@ -333,20 +433,58 @@ class _Plant:
 
 
 @dataclass
+class FaultDraws:
+    """The faults of a block of paths for `CompiledController.fault_ticker`: levels (None: no
+    such fault), the per-tick random numbers (refilled by `draw`) and the actuator's held
+    commands."""
+    sensor_std: np.ndarray | None
+    quantum: np.ndarray | None
+    actuator_std: np.ndarray | None
+    miss_probability: float
+    delay_ticks: int
+    sensor_z: np.ndarray | None      # (paths, n) standard normal
+    actuator_z: np.ndarray | None    # (paths, m) standard normal
+    miss_u: np.ndarray | None        # (paths,) uniform in [0, 1)
+    held: np.ndarray                 # (paths, m)
+
+    @classmethod
+    def of(cls, faults, paths: int, n: int, m: int) -> "FaultDraws":
+        def vec(a):
+            return np.ascontiguousarray(a, dtype=float) if np.any(a) else None
+        sensor, quantum, actuator = (vec(faults.sensor_noise), vec(faults.sensor_quantum),
+                                     vec(faults.actuator_noise))
+        return cls(sensor, quantum, actuator, float(faults.miss_probability),
+                   int(faults.delay_ticks),
+                   np.empty((paths, n)) if sensor is not None else None,
+                   np.empty((paths, m)) if actuator is not None else None,
+                   np.empty(paths) if faults.miss_probability > 0 else None,
+                   np.zeros((paths, m)))
+
+    def draw(self, rng: np.random.Generator) -> None:
+        """This tick's numbers, from the faults' own stream `rng`."""
+        if self.sensor_z is not None:
+            rng.standard_normal(out=self.sensor_z)
+        if self.actuator_z is not None:
+            rng.standard_normal(out=self.actuator_z)
+        if self.miss_u is not None:
+            rng.random(out=self.miss_u)
+
+
+@dataclass
 class TickStats:
     """What a `CompiledController.ticker` tick accumulates (saturated ticks per path, the
-    extreme commands per input) and writes (the sum of the states after the tick, path 0's
-    command)."""
+    extreme commands per input) and writes (the sum of the states after the tick, the
+    commands applied to the first ``len(u_rec)`` paths)."""
     saturated: np.ndarray
     u_low: np.ndarray
     u_high: np.ndarray
     x_sum: np.ndarray
-    u_first: np.ndarray
+    u_rec: np.ndarray           # (recorded paths >= 1, m) float32
 
     @classmethod
-    def zeros(cls, paths: int, n: int, m: int) -> "TickStats":
+    def zeros(cls, paths: int, n: int, m: int, record: int = 1) -> "TickStats":
         return cls(np.zeros(paths, np.int64), np.full(m, np.inf), np.full(m, -np.inf),
-                   np.zeros(n), np.zeros(m, np.float32))
+                   np.zeros(n), np.zeros((max(1, min(record, paths)), m), np.float32))
 
 
 def build_controller(table: GainTable, *, build_dir: str | Path | None = None,

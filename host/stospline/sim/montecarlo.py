@@ -13,14 +13,15 @@ does the controllers, the plant and the statistics (`CompiledController.ticker`)
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
 from stospline.expm import expm
 
 from stospline import progress
-from stospline.sim.controller import STATUS, CompiledController, TickStats
+from stospline.problem.faults import Faults
+from stospline.sim.controller import STATUS, CompiledController, FaultDraws, TickStats
 from stospline.errors import ProblemError
 from stospline.problem.model import Problem
 
@@ -53,11 +54,14 @@ class MonteCarloResult:
     u_low: np.ndarray | None = None
     u_high: np.ndarray | None = None
     substeps: int = 0                # plant steps per tick of this run
-    # States of the first `record` paths at every tick (ticks + 1, record, n), float32; None
-    # unless asked for (simulate(record=...)): for percentile bands in reports.
+    # States of the first `record` paths at every tick (ticks + 1, record, n), float32, and
+    # the commands applied to them (ticks, record, m); None unless asked for
+    # (simulate(record=...)): for percentile bands in reports.
     record_x: np.ndarray | None = None
     # How `substeps` was chosen (pipeline.simulate_problem with substeps="auto"), else None.
     substep_choice: "SubstepChoice | None" = None
+    faults: Faults = field(default_factory=Faults)     # the loop's faults in this run
+    record_u: np.ndarray | None = None
 
     @property
     def paths(self) -> int:
@@ -111,6 +115,18 @@ def block_seed(seed, block: int) -> np.random.SeedSequence:
                                   pool_size=ss.pool_size)
 
 
+# The faults' random numbers come from their own child of each block's stream, so the plant's
+# numbers are the same with and without faults (common random numbers: rows of a fault table
+# differ by the fault, not by the sample).
+_FAULT_STREAM = 2**32 - 2
+
+
+def fault_seed(block: np.random.SeedSequence) -> np.random.SeedSequence:
+    """The stream of a block's fault draws (`_FAULT_STREAM`)."""
+    return np.random.SeedSequence(block.entropy, spawn_key=tuple(block.spawn_key)
+                                  + (_FAULT_STREAM,), pool_size=block.pool_size)
+
+
 def default_workers() -> int:
     """The cores this process may run on."""
     try:
@@ -121,7 +137,7 @@ def default_workers() -> int:
 
 def simulate(problem: Problem, controller: CompiledController, *, paths: int, seed: int,
              substeps: int = 4, workers: int | None = None, record: int = 0,
-             scheduler: str | None = None) -> MonteCarloResult:
+             scheduler: str | None = None, faults: Faults | None = None) -> MonteCarloResult:
     """Run `paths` realisations of the plant with the compiled controller in the loop.
 
     Parameters
@@ -148,11 +164,22 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
         scheduler, or ``"local"`` for a local cluster of `workers` processes. Each worker
         compiles (or loads from its cache) the controller of the same table. The numbers are
         those of a run on this machine.
+    faults : Faults, optional
+        The loop's faults (default ``problem.faults``; `stospline.problem.faults`): what the
+        controller measures, when it runs, what the actuator applies, and the plant's
+        mismatch. Their random numbers come from a stream of their own (`fault_seed`), so the
+        plant's are the same with or without faults. Float32 tables with time-invariant stage data only
+        (ProblemError otherwise).
     """
     for name, value in (("paths", paths), ("substeps", substeps)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
     table = controller.table
+    faults = problem.faults if faults is None else faults
+    if faults.any and (getattr(table, "arith", "float32") != "float32"
+                       or any(st.varying is not None for st in problem.stages)):
+        raise ProblemError("faults", "are simulated for float32 tables with time-invariant "
+                                     "stage data only")
     counts = [min(BLOCK_PATHS, paths - start) for start in range(0, paths, BLOCK_PATHS)]
     workers = default_workers() if workers is None else max(1, int(workers))
     parallel = (workers > 1 and len(counts) > 1
@@ -161,12 +188,13 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
     try:
         if scheduler is not None:
             parts = _run_dask(scheduler, problem, controller.table, counts, seed, substeps,
-                              workers, record)
+                              workers, record, faults)
         elif parallel:
-            parts = _run_parallel(problem, controller, counts, seed, substeps, workers, record)
+            parts = _run_parallel(problem, controller, counts, seed, substeps, workers, record,
+                                  faults)
         else:
             parts = [_run_block(problem, controller, count, block_seed(seed, i), substeps,
-                                first=i == 0, record=record)
+                                first=i == 0, record=record, faults=faults)
                      for i, count in enumerate(counts)]
     finally:
         progress.finish(bar)
@@ -182,7 +210,7 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
         t, first.sample_x, first.sample_u, x_sum / paths, min(p.worst for p in parts),
         np.concatenate([p.saturated for p in parts]),
         np.min([p.u_low for p in parts], axis=0), np.max([p.u_high for p in parts], axis=0),
-        substeps, first.record_x)
+        substeps, first.record_x, faults=faults, record_u=first.record_u)
 
 
 @dataclass
@@ -199,11 +227,15 @@ class _Block:
     u_low: np.ndarray
     u_high: np.ndarray
     record_x: np.ndarray | None = None
+    record_u: np.ndarray | None = None
 
 
 def _run_block(problem: Problem, controller: CompiledController, paths: int, seed,
-               substeps: int, *, first: bool, report: bool = True, record: int = 0) -> _Block:
+               substeps: int, *, first: bool, report: bool = True, record: int = 0,
+               faults: Faults | None = None) -> _Block:
     table = controller.table
+    faults = Faults() if faults is None else faults
+    plant_of = faults.plant_of(problem)         # the plant the loop really has
     rng = np.random.default_rng(seed)
     n, m = problem.n, problem.m
     h = 1.0 / table.tick_hz
@@ -214,30 +246,43 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
     # controller and the plant are separate calls and numpy gathers the statistics.
     fused = getattr(table, "arith", "float32") == "float32"
     step = controller.stepper(paths)
-    stats = TickStats.zeros(paths, n, m)
+    kept = min(record, paths) if first else 0
+    stats = TickStats.zeros(paths, n, m, kept)
     knots, worst = [], 0
     x_sum = np.empty((table.n_ticks + 1, n))
     x_sum[0] = X.sum(axis=0)
     sample_u = np.empty((table.n_ticks, m))
     sample_x = np.empty((table.n_ticks + 1, n))
     sample_x[0] = X[0]
-    kept = min(record, paths) if first else 0
     record_x = np.empty((table.n_ticks + 1, kept, n), np.float32) if kept else None
+    record_u = np.empty((table.n_ticks, kept, m), np.float32) if kept else None
     if kept:
         record_x[0] = X[:kept]
+    draws = FaultDraws.of(faults, paths, n, m) if faults.any else None
+    fault_rng = (np.random.default_rng(fault_seed(np.random.SeedSequence(seed) if
+                                                  not isinstance(seed, np.random.SeedSequence)
+                                                  else seed))
+                 if draws is not None else None)
     for k in range(table.n_stages):
-        st = problem.stages[k]
+        st = plant_of.stages[k]
         plant = None if st.varying is not None else controller.plant(st, *_zoh(st.A, st.B, dt),
                                                                       dt, substeps)
         mz = st.G.shape[2]
         dZ = np.empty((paths, substeps, mz))       # standard normal; the C scales by sqrt(dt)
-        tick = (controller.ticker(step.instances, paths, dZ, X, cost, stats)
-                if fused and plant is not None else None)
+        tick = None
+        if fused and plant is not None:
+            tick = (controller.ticker(step.instances, paths, dZ, X, cost, stats)
+                    if draws is None else
+                    controller.fault_ticker(step.instances, paths, dZ, X, cost, stats, draws))
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             rng.standard_normal(out=dZ)
+            if draws is not None:
+                draws.draw(fault_rng)
             if tick is not None:
                 worst = min(worst, tick(j, plant))
-                sample_u[j] = stats.u_first
+                sample_u[j] = stats.u_rec[0]
+                if kept:
+                    record_u[j] = stats.u_rec[:kept]
                 x_sum[j + 1] = stats.x_sum
             else:
                 U, status = step(j, X)
@@ -247,6 +292,8 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
                 np.maximum(stats.u_high, U.max(axis=0), out=stats.u_high)
                 _plant_tick(controller, problem, plant, st, j, h, dt, substeps, dZ, U, X, cost)
                 sample_u[j] = U[0]
+                if kept:
+                    record_u[j] = U[:kept]
                 x_sum[j + 1] = X.sum(axis=0)
             sample_x[j + 1] = X[0]
             if kept:
@@ -260,7 +307,7 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
         knots.append(X.copy())
     return _Block(cost, knots, x_sum, sample_x if first else None,
                   sample_u if first else None, worst, stats.saturated, stats.u_low,
-                  stats.u_high, record_x)
+                  stats.u_high, record_x, record_u)
 
 
 # What the forked workers run (set before the pool starts; inherited, never pickled: the
@@ -268,25 +315,27 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
 _JOB: tuple | None = None
 
 
-def _worker_block(problem, controller, seed, substeps, record, block: int,
+def _worker_block(problem, controller, seed, substeps, record, faults, block: int,
                   count: int) -> _Block:
     """Block `block` of a run, on a worker (its progress is counted by the caller)."""
     return _run_block(problem, controller, count, block_seed(seed, block), substeps,
-                      first=block == 0, report=False, record=record)
+                      first=block == 0, report=False, record=record, faults=faults)
 
 
 def _block_job(block: int, count: int) -> _Block:
     return _worker_block(*_JOB, block, count)
 
 
-def _dask_block(problem, table, seed, substeps, record, block: int, count: int) -> _Block:
+def _dask_block(problem, table, seed, substeps, record, faults, block: int,
+                count: int) -> _Block:
     """One block on a Dask worker: the controller of `table` from the worker's cache."""
     from stospline.sim.controller import build_controller
-    return _worker_block(problem, build_controller(table), seed, substeps, record, block, count)
+    return _worker_block(problem, build_controller(table), seed, substeps, record, faults,
+                         block, count)
 
 
 def _run_dask(scheduler: str, problem, table, counts, seed, substeps, workers,
-              record) -> list[_Block]:
+              record, faults) -> list[_Block]:
     """The blocks on a Dask cluster (`scheduler`: an address, or "local"), in block order."""
     from distributed import Client, LocalCluster, as_completed
     cluster = None
@@ -303,8 +352,8 @@ def _run_dask(scheduler: str, problem, table, counts, seed, substeps, workers,
             raise ProblemError("--scheduler", f"cannot reach the Dask scheduler at {address!r} "
                                               f"({exc})") from None
         with client:
-            futures = {client.submit(_dask_block, problem, table, seed, substeps, record, i, c,
-                                     pure=False): c for i, c in enumerate(counts)}
+            futures = {client.submit(_dask_block, problem, table, seed, substeps, record, faults,
+                                     i, c, pure=False): c for i, c in enumerate(counts)}
             for fut in as_completed(futures):
                 progress.advance(futures[fut] * table.n_ticks)
             return client.gather(list(futures))
@@ -314,13 +363,13 @@ def _run_dask(scheduler: str, problem, table, counts, seed, substeps, workers,
 
 
 def _run_parallel(problem, controller, counts, seed, substeps, workers,
-                  record) -> list[_Block]:
+                  record, faults) -> list[_Block]:
     """The blocks on `workers` forked processes, in block order; progress per finished
     block."""
     global _JOB
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
-    _JOB = (problem, controller, seed, substeps, record)
+    _JOB = (problem, controller, seed, substeps, record, faults)
     try:
         ctx = multiprocessing.get_context("fork")
         with ProcessPoolExecutor(max_workers=min(workers, len(counts)), mp_context=ctx) as pool:
@@ -404,11 +453,14 @@ class Agreement:
 
 
 def compare_to_oracle(mc: MonteCarloResult, J: float, knot_means: list[np.ndarray], *,
-                      confidence: float = 0.99) -> Agreement:
+                      confidence: float = 0.99,
+                      knot_covs: list[np.ndarray] | None = None) -> Agreement:
     """Compare the Monte Carlo cost and knot means with exact values (`joint_verdict`): the
     z-scores use the sample's own standard errors, Bonferroni-corrected so that the *joint*
     statement (cost and every knot-mean component) holds at `confidence` when the controller
-    is right."""
+    is right. With `knot_covs`, every knot variance joins them (its standard error that of
+    the mean of the squared deviations): faults such as sensor noise move the spread, not
+    the mean."""
     mean, _ = mc.cost_mean_ci()
     se = mc.cost.std(ddof=1) / np.sqrt(mc.paths)
     cost_z = float((mean - J) / se) if se > 0 else None
@@ -419,5 +471,13 @@ def compare_to_oracle(mc: MonteCarloResult, J: float, knot_means: list[np.ndarra
         z = [float((m[i] - exact[i]) / s[i]) if s[i] > 0 else None for i in range(len(m))]
         stats += [(f"knot {k} mean[{i}]", z[i], m[i], exact[i]) for i in range(len(m))]
         zs.append(np.array([0.0 if v is None else v for v in z]))
+        if knot_covs is not None:
+            X = mc.knot_states[k]
+            var = np.var(X, axis=0, ddof=1)
+            se_var = np.std((X - m) ** 2, axis=0, ddof=1) / np.sqrt(X.shape[0])
+            exact_var = np.diag(knot_covs[k])
+            stats += [(f"knot {k} var[{i}]",
+                       float((var[i] - exact_var[i]) / se_var[i]) if se_var[i] > 0 else None,
+                       var[i], exact_var[i]) for i in range(len(m))]
     v = joint_verdict(stats, confidence)
     return Agreement(confidence, v.z_limit, 0.0 if cost_z is None else cost_z, zs, v)

@@ -43,6 +43,9 @@ class Moments:
     path_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     path_mean: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     path_var: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # state variances
+    # The command's mean and variance over each tick (ticks, m), with path=True.
+    path_u_mean: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    path_u_var: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 def _knot_terms(problem: Problem, k: int, M: np.ndarray, n: int):
@@ -193,6 +196,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     means, covs, cons = [], [], []
     path_mean = [x0.copy()] if path else []
     path_var = [np.zeros(n)] if path else []
+    u_mean, u_var = [], []
     xs, vs = slice(0, n), slice(n, n + n_latch)
     bar = progress.start("oracle", table.n_ticks)
     for k in range(table.n_stages):
@@ -232,6 +236,9 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             TM = Tw @ M                               # E w y'
             Mw = TM @ Tw.T
             Mwv = TM[:n + m, vs]                      # E [x; u] v'
+            if path:
+                u_mean.append(Mw[n:n + m, -1].copy())
+                u_var.append(np.diag(Mw[n:n + m, n:n + m]) - Mw[n:n + m, -1] ** 2)
             if varying:
                 Mw, dJ, Fmean = _tick_varying(stage, Mw, table.t0 + j * h, h, n, m)
                 J += dJ
@@ -254,7 +261,8 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     progress.finish(bar)
     path_t = problem.t0 + np.arange(table.n_ticks + 1) * h if path else np.zeros(0)
     return Moments(float(J), means, covs, cons, path_t, np.array(path_mean),
-                   np.maximum(np.array(path_var), 0.0))
+                   np.maximum(np.array(path_var), 0.0), np.array(u_mean),
+                   np.maximum(np.array(u_var), 0.0))
 
 
 def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: float = 1e-12,

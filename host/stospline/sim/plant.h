@@ -28,3 +28,15 @@ double harness_plant_path(const harness_plant_t *pl, const double *u, const doub
  * cost (paths) accumulated. */
 void harness_plant_tick(const harness_plant_t *pl, size_t paths, const double *dZ,
                         const float *U, double *X, double *cost);
+
+/* The loop's faults for harness_tick_faults (problem.faults.Faults): a NULL vector is no such
+ * fault. Per tick the caller supplies standard normal numbers for the sensor (paths, n) and
+ * the actuator (paths, m) and uniform numbers in [0, 1) for missed ticks (paths), and keeps
+ * each path's actuator command (`held`, paths x m, starting at 0) across ticks. */
+typedef struct {
+    const double *sensor_std;     /* (n): measured x = x + sensor_std * N(0, 1) */
+    const double *quantum;        /* (n): then rounded to a multiple (0: not rounded) */
+    const double *actuator_std;   /* (m): applied u = held + actuator_std * N(0, 1) */
+    double miss_probability;      /* the controller is not run when uniform < this */
+    int delay_ticks;              /* 1: a command computed at tick j is applied from j + 1 */
+} harness_faults_t;

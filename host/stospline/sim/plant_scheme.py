@@ -16,8 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from stospline.problem.faults import Faults
 from stospline.problem.model import Problem
 from stospline.sim.controller import CompiledController
+from stospline.sim.fault_oracle import evaluate_with_faults, has_exact_oracle
 from stospline.sim.montecarlo import simulate
 from stospline.sim.oracle import Moments, evaluate_table
 from stospline.table.format import GainTable
@@ -47,8 +49,14 @@ class SubstepChoice:
     scheme: Moments       # the oracle of the plant scheme at `substeps` (bias = scheme.J - J)
 
 
-def scheme_moments(problem: Problem, table: GainTable, substeps: int) -> Moments:
-    """The oracle of `table` with the plant scheme's `substeps` steps per tick."""
+def scheme_moments(problem: Problem, table: GainTable, substeps: int,
+                   faults: Faults | None = None) -> Moments:
+    """The oracle of `table` with the plant scheme's `substeps` steps per tick, in the loop
+    with `faults` when they are linear (`fault_oracle`); nonlinear faults have no oracle, and
+    the fault-free loop's scheme stands in for them (the plant's error, not the faults')."""
+    if faults is not None and faults.any and has_exact_oracle(table, faults):
+        return evaluate_with_faults(problem, table, faults, propagator="euler",
+                                    substeps=substeps)
     return evaluate_table(problem, table, propagator="euler", substeps=substeps, path=False)
 
 
@@ -60,31 +68,35 @@ def scheme_bias(problem: Problem, table: GainTable, substeps: int, exact_cost: f
 
 def choose_substeps(problem: Problem, controller: CompiledController, exact_cost: float, *,
                     paths: int, seed: int, tolerance: float = TOLERANCE,
-                    limit: int = 10_000) -> SubstepChoice:
+                    limit: int = 10_000, faults: Faults | None = None) -> SubstepChoice:
     """The fewest plant steps per tick (1, 2, 4, ...; at most `limit`) whose exact bias in
     the expected cost is at most `tolerance` standard errors of a `paths`-path run.
 
     The standard error is predicted from a pilot run of ``min(paths, PILOT_PATHS)`` paths with
     one step per tick, on a child stream of ``SeedSequence(seed)`` that no block of the run
-    uses (so the run seeded with `seed` is the same whatever the pilot did). Without noise (every pilot path
-    alike) the target is rounding: 1e-9 of the cost's magnitude."""
+    uses (so the run seeded with `seed` is the same whatever the pilot did). Without noise
+    (every pilot path alike) the target is rounding: 1e-9 of the cost's magnitude. With
+    `faults` (default ``problem.faults``) the pilot and the scheme's oracle include them;
+    `exact_cost` is then the exact cost of the faulty loop (`scheme_moments`)."""
+    faults = problem.faults if faults is None else faults
     table = controller.table
     pilot_paths = min(paths, PILOT_PATHS)
     pilot_seed = np.random.SeedSequence(seed, spawn_key=(_PILOT_STREAM,))
-    pilot = simulate(problem, controller, paths=pilot_paths, seed=pilot_seed, substeps=1)
+    pilot = simulate(problem, controller, paths=pilot_paths, seed=pilot_seed, substeps=1,
+                     faults=faults)
     spread = float(pilot.cost.std(ddof=1)) if pilot_paths > 1 else 0.0
     stderr = spread / math.sqrt(paths)
     target = max(tolerance * _SAFETY * stderr, 1e-9 * max(1.0, abs(exact_cost)))
 
     substeps = 1
-    scheme = scheme_moments(problem, table, substeps)
+    scheme = scheme_moments(problem, table, substeps, faults)
     if abs(scheme.J - exact_cost) > target:
         # The bias falls as 1/substeps: jump to the predicted power of two, then double.
         substeps = min(limit, 2 ** math.ceil(math.log2(abs(scheme.J - exact_cost) / target)))
-        scheme = scheme_moments(problem, table, substeps)
+        scheme = scheme_moments(problem, table, substeps, faults)
         while abs(scheme.J - exact_cost) > target and substeps < limit:
             substeps = min(limit, 2 * substeps)
-            scheme = scheme_moments(problem, table, substeps)
+            scheme = scheme_moments(problem, table, substeps, faults)
     bias = scheme.J - exact_cost
     return SubstepChoice(substeps, bias, target, stderr, pilot_paths, abs(bias) <= target,
                          scheme)

@@ -60,6 +60,15 @@ OPTION_CASES = [  # (command line after FILE, option named, reason substring)
     (["simulate", "--max-memory", "-1"], "--max-memory", "number of GiB"),
     (["design", "--arith", "q7"], "--arith", "must be one of"),
     (["design", "--mode", "both"], "--mode", "invalid choice"),
+    (["simulate", "--fault", "sensor_noise"], "--fault", "must be KEY=VALUE"),
+    (["simulate", "--fault", "wobble=1"], "--fault wobble", "unknown fault"),
+    (["simulate", "--fault", "sensor_noise=1,2"], "--fault sensor_noise", "length 2, expected 4"),
+    (["simulate", "--fault", "delay_ticks=2"], "--fault delay_ticks", "must be 0 or 1"),
+    (["simulate", "--fault", "actuator_noise=nan"], "--fault actuator_noise", "finite"),
+    (["simulate", "--fault", "plant_B_scale=x"], "--fault plant_B_scale", "must be a number"),
+    (["report", "--out", "r.html", "--fault", "miss_probability=1"],
+     "--fault miss_probability", "below 1"),
+    (["report", "--out", "r.html", "--fault-paths", "-1"], "--fault-paths", "integer in 0.."),
 ]
 
 

@@ -76,3 +76,35 @@ def test_the_page_check_sees_a_broken_image(tmp_path):
                       encoding="utf-8")
     body = re.search(r"<body([^>]*)>", rendered_dom(broken)).group(1)
     assert 'data-images="missing"' in body, body
+
+
+def test_report_has_the_fault_table_and_the_run_faults(tmp_path):
+    """With a fault in the run, the page states it with the fault oracle's cost (the number
+    `simulate --json` reports for the same run), and the fault table has its twelve rows,
+    the linear faults with an oracle cost and the others with '-'."""
+    page = tmp_path / "report.html"
+    args = ["--paths", "300", "--seed", "4", "--fault", "delay_ticks=1"]
+    r = run("report", str(ROBOT), "--out", str(page), "--fault-paths", "100", *args)
+    assert r.returncode == 0, r.stderr
+    dom = rendered_dom(page)
+    assert 'data-images="ok"' in dom
+    import json
+    sim = json.loads(run("simulate", str(ROBOT), "--json", *args).stdout)
+    assert sim["faults"]["levels"] == {"delay_ticks": 1} and sim["faults"]["exact_oracle"]
+    assert f'{sim["faults"]["oracle_cost"]:.6g}' in re.search(r'id="faults">(.*?)</p>',
+                                                              dom).group(1)
+    table = re.search(r'<table id="fault-table">(.*?)</table>', dom, flags=re.S).group(1)
+    rows = re.findall(r"<tr>(.*?)</tr>", table, flags=re.S)[1:]
+    assert len(rows) == 12
+    no_oracle = [r for r in rows if re.search(r"quantization|missed ticks", r)]
+    assert len(no_oracle) == 4
+    assert all(re.findall(r"<td>([^<]*)</td>", r)[0] == "-" for r in no_oracle)
+    assert all(re.findall(r"<td>([^<]*)</td>", r)[0] != "-"
+               for r in rows if r not in no_oracle)
+
+
+def test_report_without_the_fault_table(tmp_path):
+    page = tmp_path / "report.html"
+    r = run("report", str(ROBOT), "--out", str(page), "--paths", "100", "--fault-paths", "0")
+    assert r.returncode == 0, r.stderr
+    assert "fault-table" not in page.read_text(encoding="utf-8")

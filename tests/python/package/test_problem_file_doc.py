@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from stospline.problem import reader as problem_module
+from stospline.problem.faults import FAULT_KEYS
 from stospline.cli import build_parser
 from stospline.problem import load_problem, parse_problem
 
@@ -106,6 +107,7 @@ def test_fragments_change_the_minimal_file():
             changed = (len(problem.knots) != len(base.knots)
                        or not all(map(same_knot, problem.knots, base.knots)) or problem.options or problem.plot
                        or problem.u_min is not None or problem.mz != base.mz
+                       or problem.faults.any
                        or any(s.varying is not None or not np.array_equal(s.R, b.R)
                               or not np.array_equal(s.A, b.A) or s.G.any()
                               for s, b in zip(problem.stages, base.stages)))
@@ -118,7 +120,7 @@ def documented(key: str) -> bool:
 
 # Keys accepted below the top-level tables (the parser spells these inline).
 NESTED = ["state", "input", "G", "C", "target", "weight", "value", "lower", "upper", "t",
-          "values", "interpolation", "y0", "every", "axes", "walls"]
+          "values", "interpolation", "y0", "every", "axes", "walls", *FAULT_KEYS]
 
 
 @pytest.mark.parametrize("key", sorted(problem_module._TOP_KEYS | problem_module._DYN_KEYS

@@ -1,0 +1,165 @@
+"""Exact moments of the controller as implemented in a loop with linear faults: sensor noise,
+a one-tick computation delay, actuator noise and model mismatch (`problem.faults.Faults`).
+
+The same Ito moment propagation as `oracle.evaluate_table`, on a larger augmented state. Between
+ticks the state is ``z = [x; p; v; 1]``: the plant state, the command waiting to be applied
+(``p``, with a delay only) and the latched multipliers. At tick j the independent zero-mean
+noises of that tick are appended, ``z_e = [z; nu; eta]`` (sensor ``nu``, actuator ``eta``, their
+covariances known), and everything the loop does is a linear map of ``z_e``:
+
+    measured  x_m = x + nu
+    latch     v   = Lambda x_m + lambda0             (a stage's first tick)
+    command   c   = -K x_m - L v - k0
+    applied   u   = (p if delayed else c) + eta      held over the tick
+
+so ``w = [x; u; 1]`` moves by the exact one-tick map of the plant (the faulty plant: model
+mismatch is just another plant), and the passengers ``a = [c (delayed); v]``, which the plant
+does not touch, follow the mean map ``E x+ a' = [Ad, Bd] E [x; u] a'``. Quantization and missed
+ticks are not linear: `FaultsNotExact`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from stospline.problem.faults import Faults
+from stospline.problem.model import Problem
+from stospline.sim.oracle import Moments, _knot_terms, _tick_maps, _tick_varying
+from stospline.table.format import GainTable
+
+__all__ = ["evaluate_with_faults", "FaultsNotExact", "has_exact_oracle"]
+
+
+class FaultsNotExact(ValueError):
+    """The faults make the loop nonlinear (quantization, missed ticks, a band latch from a
+    noisy measurement): no exact moments; Monte Carlo only."""
+
+
+def has_exact_oracle(table: GainTable, faults: Faults) -> bool:
+    """Whether `evaluate_with_faults` can evaluate `table` in a loop with `faults`."""
+    try:
+        _check_exact(table, faults)
+    except FaultsNotExact:
+        return False
+    return True
+
+
+def _check_exact(table: GainTable, faults: Faults) -> None:
+    if not faults.exact:
+        raise FaultsNotExact("quantization and missed ticks make the loop nonlinear")
+    if table.band_qp is not None and np.any(faults.sensor_noise):
+        raise FaultsNotExact("the firmware's band latch solves a QP from the noisy measurement")
+
+
+def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | None = None, *,
+                         propagator: str = "exact", substeps: int = 4,
+                         path: bool = False) -> Moments:
+    """Exact moments and cost of `table`'s law in a loop with `faults` (default
+    ``problem.faults``) around the plant of `problem` (to which the faults' model mismatch
+    is applied). Without faults this is `oracle.evaluate_table`, computed another way.
+
+    `propagator`/`substeps` as in `oracle.evaluate_table` ("euler": the Monte Carlo plant
+    scheme). `path` keeps the mean and variance at every tick. Raises `FaultsNotExact` for
+    faults without an exact oracle."""
+    faults = problem.faults if faults is None else faults
+    _check_exact(table, faults)
+    plant = faults.plant_of(problem)
+    n, m, nl = table.dims
+    h = 1.0 / table.tick_hz
+    delayed = faults.delay_ticks == 1
+    sig_x = faults.sensor_noise if np.any(faults.sensor_noise) else np.zeros(0)
+    sig_u = faults.actuator_noise if np.any(faults.actuator_noise) else np.zeros(0)
+    mp = m if delayed else 0
+    # Between ticks: z = [x; p; v; 1]. During a tick: z_e = [x; p; v; nu; eta; 1].
+    xs, ps, vs = slice(0, n), slice(n, n + mp), slice(n + mp, n + mp + nl)
+    d_z = n + mp + nl + 1
+    nus = slice(d_z - 1, d_z - 1 + len(sig_x))
+    etas = slice(nus.stop, nus.stop + len(sig_u))
+    D = etas.stop + 1
+    z0 = np.concatenate([problem.x0, np.zeros(mp + nl), [1.0]])
+    M = np.outer(z0, z0)
+    noise_cov = np.diag(np.concatenate([sig_x ** 2, sig_u ** 2]))
+    J = 0.0
+    means, covs, cons = [], [], []
+    path_mean = [problem.x0.copy()] if path else []
+    path_var = [np.zeros(n)] if path else []
+    u_mean, u_var = [], []
+
+    # The measured state, as rows over z_e.
+    Sx = np.zeros((n, D))
+    Sx[:, xs] = np.eye(n)
+    if len(sig_x):
+        Sx[:, nus] = np.eye(n)
+    for k in range(table.n_stages):
+        stage = plant.stages[k]
+        varying = stage.varying is not None
+        if varying and propagator != "exact":
+            raise ValueError("the Euler plant scheme is evaluated for time-invariant stages only")
+        if not varying:
+            prop, cost_row, Fmean = _tick_maps(stage, n, m, h, propagator, substeps)
+        relatch = k == 0 or table.stage_n_latch[k] > 0
+        for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
+            # Append this tick's noises (independent of everything so far).
+            Me = np.zeros((D, D))
+            keep = np.r_[0:d_z - 1, D - 1]
+            Me[np.ix_(keep, keep)] = M
+            Me[d_z - 1:D - 1, d_z - 1:D - 1] = noise_cov
+            if relatch and j == table.stage_start[k]:
+                T = np.eye(D)
+                T[vs] = 0.0
+                if k == 0 and table.band_qp is not None:
+                    from stospline.design.bands import target_latch
+                    T[vs.start:vs.start + table.band_qp.q, -1] = target_latch(
+                        table.band_qp, problem.x0, float32=table.K.dtype == np.float32)
+                else:
+                    T[vs] = table.Lambda[k].astype(float) @ Sx
+                    T[vs, -1] += table.lambda0[k].astype(float)
+                Me = T @ Me @ T.T
+            Fc = -table.K[j].astype(float) @ Sx          # c = Fc z_e
+            Fc[:, vs] -= table.L[j].astype(float)
+            Fc[:, -1] -= table.k0[j].astype(float)
+            Fu = np.zeros((m, D))
+            if delayed:
+                Fu[:, ps] = np.eye(m)
+            else:
+                Fu += Fc
+            if len(sig_u):
+                Fu[:, etas] += np.eye(m)
+            Tw = np.zeros((n + m + 1, D))
+            Tw[:n, xs] = np.eye(n)
+            Tw[n:n + m] = Fu
+            Tw[-1, -1] = 1.0
+            Ta = np.vstack(([Fc] if delayed else []) + [np.eye(D)[vs]])   # passengers [c; v]
+            TM = Tw @ Me
+            Mw = TM @ Tw.T
+            Mwa = TM[:n + m] @ Ta.T                           # E [x; u] a'
+            if path:
+                u_mean.append(Mw[n:n + m, -1].copy())
+                u_var.append(np.diag(Mw[n:n + m, n:n + m]) - Mw[n:n + m, -1] ** 2)
+            if varying:
+                Mw, dJ, Fmean = _tick_varying(stage, Mw, table.t0 + j * h, h, n, m)
+                J += dJ
+            else:
+                J += cost_row @ Mw.ravel()
+                Mw = (prop.Phi @ Mw.ravel()).reshape(n + m + 1, n + m + 1)
+            Ma = Ta @ Me
+            M = np.empty((d_z, d_z))
+            a = slice(n, d_z - 1)
+            M[xs, xs] = Mw[:n, :n]
+            M[xs, -1] = M[-1, xs] = Mw[:n, -1]
+            M[-1, -1] = 1.0
+            M[xs, a] = Fmean @ Mwa
+            M[a, xs] = M[xs, a].T
+            M[a, a] = Ma @ Ta.T
+            M[a, -1] = M[-1, a] = Ma[:, -1]
+            if path:
+                path_mean.append(M[:n, -1].copy())
+                path_var.append(np.diag(M[xs, xs]) - M[:n, -1] ** 2)
+        # The knot terms read the state block and the constant only.
+        sub = np.r_[0:n, d_z - 1]
+        pen, mean, cov, con = _knot_terms(problem, k, M[np.ix_(sub, sub)], n)
+        J += pen
+        means.append(mean); covs.append(cov); cons.append(con)
+    path_t = problem.t0 + np.arange(table.n_ticks + 1) * h if path else np.zeros(0)
+    return Moments(float(J), means, covs, cons, path_t, np.array(path_mean),
+                   np.maximum(np.array(path_var), 0.0) if path else np.zeros((0, 0)),
+                   np.array(u_mean), np.maximum(np.array(u_var), 0.0))

@@ -84,51 +84,20 @@ const stsp_table_t *harness_table(void) { return &%(p)s_table; }
  * command held (dZ[p]: substeps x mz), and the run's statistics accumulate: saturated ticks
  * per path, the smallest and largest command per input; x_sum is set to the sum of the new
  * states (for the mean path) and u_rec (n_rec x m) to the commands of the first n_rec paths.
- * Returns the worst status. */
-int harness_tick(stsp_ctrl_t *ctrls, size_t count, uint32_t tick, const harness_plant_t *pl,
-                 const double *dZ, double *X, double *cost, int64_t *saturated,
-                 double *u_low, double *u_high, double *x_sum, float *u_rec, size_t n_rec) {
-#ifdef STSP_ARITH_FIXED_POINT
-    (void)ctrls; (void)count; (void)tick; (void)pl; (void)dZ; (void)X; (void)cost;
-    (void)saturated; (void)u_low; (void)u_high; (void)x_sum; (void)u_rec; (void)n_rec;
-    return (int)STSP_ERR_BAD_DIMS;
-#else
-    const size_t n = pl->n, m = pl->m, dz_stride = pl->substeps * pl->mz;
-    float xf[STSP_MAX_NX], uf[STSP_MAX_NU];
-    double ud[STSP_MAX_NU];
-    size_t p, i;
-    int worst = 0;
-    if (n > STSP_MAX_NX || m > STSP_MAX_NU) return (int)STSP_ERR_BAD_DIMS;
-    for (i = 0; i < n; ++i) x_sum[i] = 0.0;
-    for (p = 0; p < count; ++p) {
-        double *x = X + p * n;
-        int st;
-        for (i = 0; i < n; ++i) xf[i] = (float)x[i];
-        st = (int)stsp_step(&ctrls[p], tick, xf, uf);
-        if (st < worst) worst = st;
-        if (st == (int)STSP_WARN_SATURATED) ++saturated[p];
-        for (i = 0; i < m; ++i) {
-            ud[i] = (double)uf[i];
-            if (ud[i] < u_low[i]) u_low[i] = ud[i];
-            if (ud[i] > u_high[i]) u_high[i] = ud[i];
-        }
-        if (p < n_rec) for (i = 0; i < m; ++i) u_rec[p * m + i] = uf[i];
-        cost[p] += harness_plant_path(pl, ud, dZ + p * dz_stride, x);
-        for (i = 0; i < n; ++i) x_sum[i] += x[i];
-    }
-    return worst;
+ * With faults f (plant.h; NULL: none) the controller measures X[p] + noise, rounded, is not
+ * run on a missed tick, and the actuator applies held[p] (the last command, or with a delay
+ * the one before it) plus noise; the statistics count the commands the controllers computed,
+ * u_rec the applied ones. Returns the worst status. Inlined into both entry points, so the
+ * fault-free one compiles without the fault branches. */
+#if defined(__GNUC__)
+__attribute__((always_inline))
 #endif
-}
-/* harness_tick with the loop's faults (plant.h): the controller of path p measures
- * X[p] + noise, rounded; it is not run on a missed tick; the actuator applies held[p] (the
- * last command, or with a delay the one before it) plus noise. The statistics count the
- * commands the controllers computed; u_rec holds the applied ones. */
-int harness_tick_faults(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
-                        const harness_plant_t *pl, const double *dZ, double *X, double *cost,
-                        int64_t *saturated, double *u_low, double *u_high, double *x_sum,
-                        float *u_rec, size_t n_rec, const harness_faults_t *f,
-                        const double *sensor_z, const double *actuator_z, const double *miss_u,
-                        double *held) {
+static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
+                             const harness_plant_t *pl, const double *dZ, double *X,
+                             double *cost, int64_t *saturated, double *u_low, double *u_high,
+                             double *x_sum, float *u_rec, size_t n_rec,
+                             const harness_faults_t *f, const double *sensor_z,
+                             const double *actuator_z, const double *miss_u, double *held) {
 #ifdef STSP_ARITH_FIXED_POINT
     (void)ctrls; (void)count; (void)tick; (void)pl; (void)dZ; (void)X; (void)cost;
     (void)saturated; (void)u_low; (void)u_high; (void)x_sum; (void)u_rec; (void)n_rec; (void)f;
@@ -143,30 +112,30 @@ int harness_tick_faults(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
     if (n > STSP_MAX_NX || m > STSP_MAX_NU) return (int)STSP_ERR_BAD_DIMS;
     for (i = 0; i < n; ++i) x_sum[i] = 0.0;
     for (p = 0; p < count; ++p) {
-        double *x = X + p * n, *hp = held + p * m;
-        const int run = !(miss_u != NULL && miss_u[p] < f->miss_probability);
+        double *x = X + p * n;
+        const int run = f == NULL || !(miss_u != NULL && miss_u[p] < f->miss_probability);
         for (i = 0; i < n; ++i) {
             double xm = x[i];
-            if (f->sensor_std != NULL) xm += f->sensor_std[i] * sensor_z[p * n + i];
-            if (f->quantum != NULL && f->quantum[i] > 0.0) {
+            if (f != NULL && f->sensor_std != NULL) xm += f->sensor_std[i] * sensor_z[p * n + i];
+            if (f != NULL && f->quantum != NULL && f->quantum[i] > 0.0) {
                 xm = f->quantum[i] * floor(xm / f->quantum[i] + 0.5);
             }
             xf[i] = (float)xm;
         }
-        for (i = 0; i < m; ++i) ud[i] = hp[i];           /* a delayed or a missed tick */
+        if (f != NULL) for (i = 0; i < m; ++i) ud[i] = held[p * m + i];   /* delayed, missed */
         if (run) {
-            int st = (int)stsp_step(&ctrls[p], tick, xf, uf);
+            const int st = (int)stsp_step(&ctrls[p], tick, xf, uf);
             if (st < worst) worst = st;
             if (st == (int)STSP_WARN_SATURATED) ++saturated[p];
             for (i = 0; i < m; ++i) {
                 const double c = (double)uf[i];
                 if (c < u_low[i]) u_low[i] = c;
                 if (c > u_high[i]) u_high[i] = c;
-                hp[i] = c;
-                if (f->delay_ticks == 0) ud[i] = c;
+                if (f != NULL) held[p * m + i] = c;
+                if (f == NULL || f->delay_ticks == 0) ud[i] = c;
             }
         }
-        if (f->actuator_std != NULL) {
+        if (f != NULL && f->actuator_std != NULL) {
             for (i = 0; i < m; ++i) ud[i] += f->actuator_std[i] * actuator_z[p * m + i];
         }
         if (p < n_rec) for (i = 0; i < m; ++i) u_rec[p * m + i] = (float)ud[i];
@@ -175,6 +144,22 @@ int harness_tick_faults(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
     }
     return worst;
 #endif
+}
+int harness_tick(stsp_ctrl_t *ctrls, size_t count, uint32_t tick, const harness_plant_t *pl,
+                 const double *dZ, double *X, double *cost, int64_t *saturated,
+                 double *u_low, double *u_high, double *x_sum, float *u_rec, size_t n_rec) {
+    return tick_paths(ctrls, count, tick, pl, dZ, X, cost, saturated, u_low, u_high, x_sum,
+                      u_rec, n_rec, NULL, NULL, NULL, NULL, NULL);
+}
+int harness_tick_faults(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
+                        const harness_plant_t *pl, const double *dZ, double *X, double *cost,
+                        int64_t *saturated, double *u_low, double *u_high, double *x_sum,
+                        float *u_rec, size_t n_rec, const harness_faults_t *f,
+                        const double *sensor_z, const double *actuator_z, const double *miss_u,
+                        double *held) {
+    if (f == NULL || held == NULL) return (int)STSP_ERR_NULL;
+    return tick_paths(ctrls, count, tick, pl, dZ, X, cost, saturated, u_low, u_high, x_sum,
+                      u_rec, n_rec, f, sensor_z, actuator_z, miss_u, held);
 }
 /* Verify the table once (the CRC covers every byte), then clone the fresh instance.
  * count == 0 (or NULL ctrls) touches no memory and returns STSP_ERR_NULL: there is no
@@ -370,57 +355,36 @@ class CompiledController:
                                     ffi.from_buffer("double[]", cost))
 
     def ticker(self, ctrls, count: int, dZ: np.ndarray, X: np.ndarray, cost: np.ndarray,
-               stats: "TickStats"):
+               stats: "TickStats", faults: "FaultDraws | None" = None):
         """``tick(j, plant) -> worst status``: one tick of `count` paths in one C call (float32
         tables): the controllers `ctrls` step from X, the plant advances X with dZ, the cost
-        and `stats` (`TickStats`) accumulate. The arrays are bound once, here."""
+        and `stats` (`TickStats`) accumulate. With `faults` (``harness_tick_faults``), the
+        fault levels, the arrays the caller refills with each tick's random numbers and the
+        actuator's held commands. The arrays are bound once, here."""
         ffi, lib = self.ffi, self.lib
-        keep = (dZ, X, cost, stats)
-        args = (ffi.from_buffer("double[]", dZ), ffi.from_buffer("double[]", X),
-                ffi.from_buffer("double[]", cost),
+
+        def buf(a, kind="double[]"):
+            return ffi.NULL if a is None else ffi.from_buffer(kind, a)
+
+        keep = [dZ, X, cost, stats, faults]
+        args = [buf(dZ), buf(X), buf(cost),
                 ffi.cast("int64_t *", ffi.from_buffer(stats.saturated)),
-                ffi.from_buffer("double[]", stats.u_low),
-                ffi.from_buffer("double[]", stats.u_high),
-                ffi.from_buffer("double[]", stats.x_sum),
-                ffi.from_buffer("float[]", stats.u_rec), len(stats.u_rec))
+                buf(stats.u_low), buf(stats.u_high), buf(stats.x_sum),
+                buf(stats.u_rec, "float[]"), len(stats.u_rec)]
+        step = lib.harness_tick
+        if faults is not None:
+            f = ffi.new("harness_faults_t *")
+            levels = [buf(faults.sensor_std), buf(faults.quantum), buf(faults.actuator_std)]
+            f.sensor_std, f.quantum, f.actuator_std = levels
+            f.miss_probability = faults.miss_probability
+            f.delay_ticks = faults.delay_ticks
+            keep += [f, levels]
+            args += [f, buf(faults.sensor_z), buf(faults.actuator_z), buf(faults.miss_u),
+                     buf(faults.held)]
+            step = lib.harness_tick_faults
 
         def tick(j: int, plant) -> int:
-            return lib.harness_tick(ctrls, count, j, plant.c, *args)
-
-        tick.keep = keep
-        return tick
-
-    def fault_ticker(self, ctrls, count: int, dZ: np.ndarray, X: np.ndarray,
-                     cost: np.ndarray, stats: "TickStats", faults: "FaultDraws"):
-        """`ticker` in a loop with faults (``harness_tick_faults``): `faults` holds the fault
-        levels, the arrays the caller refills with each tick's random numbers and the
-        actuator's held commands."""
-        ffi, lib = self.ffi, self.lib
-        f = ffi.new("harness_faults_t *")
-        vec = {}
-        for name, a in (("sensor_std", faults.sensor_std), ("quantum", faults.quantum),
-                        ("actuator_std", faults.actuator_std)):
-            vec[name] = a
-            setattr(f, name, ffi.NULL if a is None else ffi.from_buffer("double[]", a))
-        f.miss_probability = faults.miss_probability
-        f.delay_ticks = faults.delay_ticks
-
-        def buf(a):
-            return ffi.NULL if a is None else ffi.from_buffer("double[]", a)
-
-        keep = (dZ, X, cost, stats, faults, f, vec)
-        args = (ffi.from_buffer("double[]", dZ), ffi.from_buffer("double[]", X),
-                ffi.from_buffer("double[]", cost),
-                ffi.cast("int64_t *", ffi.from_buffer(stats.saturated)),
-                ffi.from_buffer("double[]", stats.u_low),
-                ffi.from_buffer("double[]", stats.u_high),
-                ffi.from_buffer("double[]", stats.x_sum),
-                ffi.from_buffer("float[]", stats.u_rec), len(stats.u_rec), f,
-                buf(faults.sensor_z), buf(faults.actuator_z), buf(faults.miss_u),
-                ffi.from_buffer("double[]", faults.held))
-
-        def tick(j: int, plant) -> int:
-            return lib.harness_tick_faults(ctrls, count, j, plant.c, *args)
+            return step(ctrls, count, j, plant.c, *args)
 
         tick.keep = keep
         return tick

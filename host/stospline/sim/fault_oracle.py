@@ -23,7 +23,8 @@ import numpy as np
 
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem
-from stospline.sim.oracle import Moments, _knot_terms, _tick_maps, _tick_varying
+from stospline.sim.oracle import (Moments, _knot_terms, _PathRecord, _plant_tick,
+                                  _tick_maps)
 from stospline.table.format import GainTable
 
 __all__ = ["evaluate_with_faults", "FaultsNotExact", "has_exact_oracle"]
@@ -80,9 +81,7 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
     noise_cov = np.diag(np.concatenate([sig_x ** 2, sig_u ** 2]))
     J = 0.0
     means, covs, cons = [], [], []
-    path_mean = [problem.x0.copy()] if path else []
-    path_var = [np.zeros(n)] if path else []
-    u_mean, u_var = [], []
+    rec = _PathRecord(problem.x0, path)
 
     # The measured state, as rows over z_e.
     Sx = np.zeros((n, D))
@@ -94,8 +93,7 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
         varying = stage.varying is not None
         if varying and propagator != "exact":
             raise ValueError("the Euler plant scheme is evaluated for time-invariant stages only")
-        if not varying:
-            prop, cost_row, Fmean = _tick_maps(stage, n, m, h, propagator, substeps)
+        maps = None if varying else _tick_maps(stage, n, m, h, propagator, substeps)
         relatch = k == 0 or table.stage_n_latch[k] > 0
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             # Append this tick's noises (independent of everything so far).
@@ -132,15 +130,9 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
             TM = Tw @ Me
             Mw = TM @ Tw.T
             Mwa = TM[:n + m] @ Ta.T                           # E [x; u] a'
-            if path:
-                u_mean.append(Mw[n:n + m, -1].copy())
-                u_var.append(np.diag(Mw[n:n + m, n:n + m]) - Mw[n:n + m, -1] ** 2)
-            if varying:
-                Mw, dJ, Fmean = _tick_varying(stage, Mw, table.t0 + j * h, h, n, m)
-                J += dJ
-            else:
-                J += cost_row @ Mw.ravel()
-                Mw = (prop.Phi @ Mw.ravel()).reshape(n + m + 1, n + m + 1)
+            rec.command(Mw, n, m)
+            Mw, dJ, Fmean = _plant_tick(stage, maps, Mw, table.t0 + j * h, h, n, m)
+            J += dJ
             Ma = Ta @ Me
             M = np.empty((d_z, d_z))
             a = slice(n, d_z - 1)
@@ -151,15 +143,10 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
             M[a, xs] = M[xs, a].T
             M[a, a] = Ma @ Ta.T
             M[a, -1] = M[-1, a] = Ma[:, -1]
-            if path:
-                path_mean.append(M[:n, -1].copy())
-                path_var.append(np.diag(M[xs, xs]) - M[:n, -1] ** 2)
+            rec.state(M, n)
         # The knot terms read the state block and the constant only.
         sub = np.r_[0:n, d_z - 1]
         pen, mean, cov, con = _knot_terms(problem, k, M[np.ix_(sub, sub)], n)
         J += pen
         means.append(mean); covs.append(cov); cons.append(con)
-    path_t = problem.t0 + np.arange(table.n_ticks + 1) * h if path else np.zeros(0)
-    return Moments(float(J), means, covs, cons, path_t, np.array(path_mean),
-                   np.maximum(np.array(path_var), 0.0) if path else np.zeros((0, 0)),
-                   np.array(u_mean), np.maximum(np.array(u_var), 0.0))
+    return rec.moments(J, means, covs, cons, problem.t0, h, table.n_ticks)

@@ -271,9 +271,7 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
         dZ = np.empty((paths, substeps, mz))       # standard normal; the C scales by sqrt(dt)
         tick = None
         if fused and plant is not None:
-            tick = (controller.ticker(step.instances, paths, dZ, X, cost, stats)
-                    if draws is None else
-                    controller.fault_ticker(step.instances, paths, dZ, X, cost, stats, draws))
+            tick = controller.ticker(step.instances, paths, dZ, X, cost, stats, draws)
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             rng.standard_normal(out=dZ)
             if draws is not None:

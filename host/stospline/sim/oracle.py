@@ -104,6 +104,45 @@ def _tick_varying(stage, Mw: np.ndarray, t0: float, h: float, n: int, m: int,
     return 0.5 * (M + M.T), float(y[d * d]), y[d * d + 1:].reshape(n, n + m)
 
 
+def _plant_tick(stage, maps, Mw: np.ndarray, t: float, h: float, n: int, m: int):
+    """The moments of ``w = [x; u; 1]`` after one tick from `Mw` (u held), the tick's expected
+    running cost, and the mean map ``[Ad, Bd]``: from the stage's tick `maps` (`_tick_maps`),
+    or with None (time-varying data) by integrating from time `t`."""
+    if maps is None:
+        return _tick_varying(stage, Mw, t, h, n, m)
+    prop, cost_row, Fmean = maps
+    d = n + m + 1
+    return (prop.Phi @ Mw.ravel()).reshape(d, d), float(cost_row @ Mw.ravel()), Fmean
+
+
+class _PathRecord:
+    """Mean and variance of the state at every tick and of the command over each (kept
+    only when `on`)."""
+
+    def __init__(self, x0: np.ndarray, on: bool):
+        self.on = on
+        self.x_mean, self.x_var = ([x0.copy()], [np.zeros(len(x0))]) if on else ([], [])
+        self.u_mean, self.u_var = [], []
+
+    def command(self, Mw: np.ndarray, n: int, m: int) -> None:
+        if self.on:
+            mu = Mw[n:n + m, -1]
+            self.u_mean.append(mu.copy())
+            self.u_var.append(np.diag(Mw[n:n + m, n:n + m]) - mu ** 2)
+
+    def state(self, M: np.ndarray, n: int) -> None:
+        if self.on:
+            mu = M[:n, -1]
+            self.x_mean.append(mu.copy())
+            self.x_var.append(np.diag(M[:n, :n]) - mu ** 2)
+
+    def moments(self, J, means, covs, cons, t0: float, h: float, ticks: int) -> "Moments":
+        path_t = t0 + np.arange(ticks + 1) * h if self.on else np.zeros(0)
+        var = np.maximum(np.array(self.x_var), 0.0) if self.on else np.zeros((0, 0))
+        return Moments(float(J), means, covs, cons, path_t, np.array(self.x_mean), var,
+                       np.array(self.u_mean), np.maximum(np.array(self.u_var), 0.0))
+
+
 # Tick maps of recent stages: the design's law and its float32 table are evaluated on the
 # same stages, and consecutive stages often share one Stage object. Keyed by the object's id;
 # the entry holds the stage itself, so the id cannot be reused while it is cached.
@@ -194,9 +233,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     M = np.outer(y0, y0)
     J = 0.0
     means, covs, cons = [], [], []
-    path_mean = [x0.copy()] if path else []
-    path_var = [np.zeros(n)] if path else []
-    u_mean, u_var = [], []
+    rec = _PathRecord(x0, path)
     xs, vs = slice(0, n), slice(n, n + n_latch)
     bar = progress.start("oracle", table.n_ticks)
     for k in range(table.n_stages):
@@ -217,8 +254,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         varying = stage.varying is not None
         if varying and propagator != "exact":
             raise ValueError("the Euler plant scheme is evaluated for time-invariant stages only")
-        if not varying:
-            prop, cost_row, Fmean = _tick_maps(stage, n, m, h, propagator, substeps)
+        maps = None if varying else _tick_maps(stage, n, m, h, propagator, substeps)
         Tw = np.zeros((d_w, d_y))
         Tw[:n, :n] = np.eye(n)
         Tw[-1, -1] = 1.0
@@ -227,7 +263,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         if kernel is not None:             # the same loop in C (oracle_kernel.c)
             sl = slice(ticks.start, ticks.stop)
             Phi_x, cost = _packed_maps(stage, n, m, h, propagator, substeps)
-            M, J = kernel(table.K[sl], table.L[sl], table.k0[sl], Phi_x, cost, Fmean, M, J)
+            M, J = kernel(table.K[sl], table.L[sl], table.k0[sl], Phi_x, cost, maps[2], M, J)
             ticks = range(0)
         for j in ticks:
             Tw[n:n + m, :n] = -table.K[j]
@@ -236,33 +272,22 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             TM = Tw @ M                               # E w y'
             Mw = TM @ Tw.T
             Mwv = TM[:n + m, vs]                      # E [x; u] v'
-            if path:
-                u_mean.append(Mw[n:n + m, -1].copy())
-                u_var.append(np.diag(Mw[n:n + m, n:n + m]) - Mw[n:n + m, -1] ** 2)
-            if varying:
-                Mw, dJ, Fmean = _tick_varying(stage, Mw, table.t0 + j * h, h, n, m)
-                J += dJ
-            else:
-                J += cost_row @ Mw.ravel()
-                Mw = (prop.Phi @ Mw.ravel()).reshape(d_w, d_w)
+            rec.command(Mw, n, m)
+            Mw, dJ, Fmean = _plant_tick(stage, maps, Mw, table.t0 + j * h, h, n, m)
+            J += dJ
             Mxv = Fmean @ Mwv
             M = M.copy()
             M[xs, xs] = Mw[:n, :n]
             M[xs, -1] = M[-1, xs] = Mw[:n, -1]
             M[xs, vs] = Mxv
             M[vs, xs] = Mxv.T
-            if path:
-                path_mean.append(M[:n, -1].copy())
-                path_var.append(np.diag(M[xs, xs]) - M[:n, -1] ** 2)
+            rec.state(M, n)
             progress.advance()
         pen, mean, cov, con = _knot_terms(problem, k, M, n)
         J += pen
         means.append(mean); covs.append(cov); cons.append(con)
     progress.finish(bar)
-    path_t = problem.t0 + np.arange(table.n_ticks + 1) * h if path else np.zeros(0)
-    return Moments(float(J), means, covs, cons, path_t, np.array(path_mean),
-                   np.maximum(np.array(path_var), 0.0), np.array(u_mean),
-                   np.maximum(np.array(u_var), 0.0))
+    return rec.moments(J, means, covs, cons, problem.t0, h, table.n_ticks)
 
 
 def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: float = 1e-12,

@@ -224,7 +224,7 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
                  seconds=(CODEGEN_NUMBER + COMPILE_NUMBER) * numbers,
                  bytes=(CODEGEN_BYTES + COMPILE_BYTES) * numbers))
         work = n * (m + n_latch) + substeps * (n * n + n * m + n * mz) + 8
-        blocks = -(-paths // 1024)          # sim.montecarlo.BLOCK_PATHS, one core assumed
+        blocks = -(-paths // 512)           # sim.montecarlo.BLOCK_PATHS, one core assumed
         add(Term(f"Monte Carlo ({paths} paths)", "--paths",
                  seconds=SIM_TICK * T * blocks + SIM_PATH_TICK * paths * T * work,
                  bytes=paths * (8.0 * n * (S + 6) + 16.0 * substeps * mz + 16.0 * m

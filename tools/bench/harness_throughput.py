@@ -2,17 +2,16 @@
 """Monte Carlo throughput of the harness against a plain numpy loop, in the same run.
 
 Both simulate the robot corridor (examples/robot_corridor.toml, 6000 ticks at 1 kHz) with the
-same plant scheme (exponential Euler-Maruyama, 2 steps per tick, standard normals from
-``numpy.random.default_rng``):
+same plant scheme (exponential Euler-Maruyama, 2 steps per tick, Gaussian increments):
 
 * **stospline**: `stospline.sim.montecarlo.simulate`, the compiled C controller of the
   float32 table in the loop, blocks of paths spread over `--workers` processes (default:
-  every core);
+  every core), the normal numbers from its C generator (xoshiro256++ and a ziggurat);
 * **numpy**: the same closed loop written as one would in numpy, in one process: the law
   ``u = -(K x + k0 + L v)`` with the table's gains in float64 (v latched at each stage start,
   ``v = Lambda x + lambda0``), the plant step and the noise as matrix products, the running
   cost; no controller logic (tick checks, limits, statuses), so it is a lower bound on what
-  a numpy harness costs.
+  a numpy harness costs; normal numbers from ``numpy.random.default_rng``.
 
 Prints path-ticks per second for each path count, their ratio, and the time per path (which
 must stay flat: time linear in paths). The numpy baseline runs up to 10^4 paths (beyond, its

@@ -321,6 +321,29 @@ class CompiledController:
             ffi.cast("int *", ffi.from_buffer(status)))
         return U, status
 
+    def normals(self, seed: np.random.SeedSequence):
+        """``into(out) -> fill()``: a generator of standard normal numbers in C
+        (``harness_normals``) seeded by `seed` (its first four 64-bit words); ``fill()``
+        refills the float64 array `out` (bound once, so a tick pays one C call)."""
+        state = np.ascontiguousarray(seed.generate_state(4, np.uint64))
+        if not state.any():
+            state[0] = 1                       # xoshiro's one forbidden state
+        ffi, lib = self.ffi, self.lib
+        pstate = ffi.from_buffer("uint64_t[]", state)
+
+        def into(out: np.ndarray):
+            if out.dtype != np.float64 or not out.flags.c_contiguous:
+                raise ValueError("normals: out must be a C-contiguous float64 array")
+            pout, size = ffi.from_buffer("double[]", out), out.size
+
+            def fill() -> None:
+                lib.harness_normals(pstate, pout, size)
+
+            fill.keep = (state, out)
+            return fill
+
+        return into
+
     def plant(self, stage, Ad, Bd, dt: float, substeps: int):
         """The plant of one stage for `plant_tick`/`tick` (a ``harness_plant_t`` that keeps
         its arrays alive): step matrices Ad, Bd over dt, `substeps` steps per tick."""
@@ -501,9 +524,11 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     fw = firmware_dir()
     check_header(fw / "include")   # the shared constants are still the header's
     fw_sources = sorted((fw / "src").glob("*.c"))
-    plant = Path(__file__).with_name("plant.c")
+    here = Path(__file__).parent
+    harness = [here / "plant.c", here / "normals.c"]      # the harness's own C
     key = source_key([header, source, cdef, _BATCH, " ".join(cflags)]
-                     + [p.read_bytes() for p in sorted(fw.rglob("*.[ch]")) + [plant, _PLANT_H]])
+                     + [p.read_bytes() for p in sorted(fw.rglob("*.[ch]")) + harness
+                        + [_PLANT_H, here / "ziggurat_tables.h"]])
     modname = f"_stsp_{table.name}_{key}"
 
     def build(out: Path) -> Path:
@@ -513,8 +538,8 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
             out, modname, cdef,
             f'#include "stospline/stsp_controller.h"\n#include "{table.name}.h"\n'
             + _BATCH % {"p": table.name},
-            sources=[*fw_sources, out / f"{table.name}.c", plant],
-            include_dirs=[fw / "include", fw / "src", out, plant.parent], cflags=cflags,
+            sources=[*fw_sources, out / f"{table.name}.c", *harness],
+            include_dirs=[fw / "include", fw / "src", out, here], cflags=cflags,
             quiet=quiet)
 
     mod = load_module(cached_build(key, modname, build, root=build_dir))

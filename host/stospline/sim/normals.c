@@ -1,0 +1,73 @@
+/* Harness-only standard normal numbers for the plant (not firmware): see plant.h. */
+#include <math.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "plant.h"
+#include "ziggurat_tables.h"
+
+/* xoshiro256++ (Blackman & Vigna, "Scrambled linear pseudorandom number generators", ACM
+ * TOMS 47(4), 2021): 64 bits per call, period 2^256 - 1. */
+static inline uint64_t rotl(uint64_t x, int k)
+{
+    return (x << k) | (x >> (64 - k));
+}
+
+static inline uint64_t next_word(uint64_t *s)
+{
+    const uint64_t out = rotl(s[0] + s[3], 23) + s[0];
+    const uint64_t t = s[1] << 17;
+    s[2] ^= s[0];
+    s[3] ^= s[1];
+    s[1] ^= s[2];
+    s[0] ^= s[3];
+    s[2] ^= t;
+    s[3] = rotl(s[3], 45);
+    return out;
+}
+
+/* A uniform number in [0, 1) with 53 random bits. */
+static inline double next_unit(uint64_t *s)
+{
+    return (double)(int64_t)(next_word(s) >> 11) * 0x1p-53;
+}
+
+/* The ziggurat: one word gives the layer (8 bits), the sign (1 bit) and a 52-bit magnitude;
+ * ~99% of draws are accepted inside their layer's core with one multiply. The rest test the
+ * wedge against the density (layer i spans heights f(x_i) .. f(x_{i+1})), or (layer 0)
+ * sample the tail beyond R (Marsaglia 1964). */
+static double next_normal(uint64_t *s)
+{
+    for (;;) {
+        uint64_t r = next_word(s);
+        const unsigned layer = (unsigned)(r & 0xffu);
+        const int negative = (int)((r >> 8) & 1u);
+        const uint64_t mag = (r >> 9) & 0x000fffffffffffffULL;
+        double x = (double)(int64_t)mag * harness_zig_w[layer];
+        if (mag < harness_zig_k[layer]) {
+            return negative ? -x : x;
+        }
+        if (layer == 0u) {
+            double xx, yy;
+            do {
+                xx = -log1p(-next_unit(s)) / HARNESS_ZIG_R;
+                yy = -log1p(-next_unit(s));
+            } while (yy + yy <= xx * xx);
+            x = HARNESS_ZIG_R + xx;
+            return negative ? -x : x;
+        }
+        if (harness_zig_f[layer]
+                + next_unit(s) * (harness_zig_f[layer + 1u] - harness_zig_f[layer])
+            < exp(-0.5 * x * x)) {
+            return negative ? -x : x;
+        }
+    }
+}
+
+void harness_normals(uint64_t *state, double *out, size_t count)
+{
+    size_t i;
+    for (i = 0; i < count; ++i) {
+        out[i] = next_normal(state);
+    }
+}

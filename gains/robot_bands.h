@@ -16,8 +16,8 @@
 #define ROBOT_BANDS_BAND_ROWS 6u
 
 /* Tables in flash; layout K[tick][i*NX + j], k0[tick][i], L[tick][i*N_LATCH + c],
- * Lambda[stage][c*NX + j], lambda0[stage][c], u_min[i], u_max[i] (see stsp_controller.h;
- * +-3.4028235e+38f = +-FLT_MAX: unlimited). */
+ * Lambda[stage][c*NX + j], lambda0[stage][c], u_min[i], u_max[i], u_hold[i] (see
+ * stsp_controller.h; +-3.4028235e+38f = +-FLT_MAX: unlimited). */
 extern const stsp_table_t robot_bands_table;
 
 #endif /* ROBOT_BANDS_GAINS_H */

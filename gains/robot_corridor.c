@@ -18050,12 +18050,17 @@ static const stsp_f32_t robot_corridor_u_max[2] = {
     3.4028235e+38f, 3.4028235e+38f,
 };
 
+/* [nu] safe command of a refused step */
+static const stsp_f32_t robot_corridor_u_hold[2] = {
+    0.0e+00f, 0.0e+00f,
+};
+
 const stsp_table_t robot_corridor_table = {
-    0x53545350u, 3u, 1u,
+    0x53545350u, 4u, 1u,
     4u, 2u, 4u, 2u, 6000u, 1000u,
     robot_corridor_stage_start, robot_corridor_stage_n_latch,
     robot_corridor_K, robot_corridor_k0, robot_corridor_L, robot_corridor_Lambda, robot_corridor_lambda0,
-    robot_corridor_u_min, robot_corridor_u_max, NULL,
-    0xBEE1ACC9u,
+    robot_corridor_u_min, robot_corridor_u_max, robot_corridor_u_hold, NULL,
+    0x8BF0EEDBu,
     {0x26u, 0x51u, 0x69u, 0x29u, 0xecu, 0x32u, 0xd8u, 0x01u, 0xe2u, 0x16u, 0x81u, 0xc9u, 0x1fu, 0xe7u, 0xecu, 0xf8u, 0x52u, 0x88u, 0x5du, 0x9du, 0xfau, 0x19u, 0x72u, 0xe4u, 0x24u, 0x10u, 0x0fu, 0x51u, 0xc0u, 0x32u, 0x90u, 0x19u}
 };

@@ -18050,6 +18050,11 @@ static const stsp_q15_t robot_corridor_q15_u_max[2] = {
     32767, 32767,
 };
 
+/* [nu] safe command of a refused step (command units) */
+static const stsp_q15_t robot_corridor_q15_u_hold[2] = {
+    0, 0,
+};
+
 /* [nx] state scale exponents */
 static const int8_t robot_corridor_q15_x_exp[4] = {
     3, 3, 4, 3,
@@ -18066,13 +18071,13 @@ static const int8_t robot_corridor_q15_v_exp[4] = {
 };
 
 const stsp_table_t robot_corridor_q15_table = {
-    0x53545350u, 3u, 2u,
+    0x53545350u, 4u, 2u,
     4u, 2u, 4u, 2u, 6000u, 1000u,
     robot_corridor_q15_stage_start, robot_corridor_q15_stage_n_latch,
     robot_corridor_q15_K, robot_corridor_q15_k0, robot_corridor_q15_L, robot_corridor_q15_Lambda, robot_corridor_q15_lambda0,
-    robot_corridor_q15_u_min, robot_corridor_q15_u_max,
+    robot_corridor_q15_u_min, robot_corridor_q15_u_max, robot_corridor_q15_u_hold,
     robot_corridor_q15_x_exp, robot_corridor_q15_u_exp, robot_corridor_q15_v_exp,
     NULL, /* band_qp: the band re-solve is float32 only */
-    0x92BAD598u,
+    0xF84A9211u,
     {0x26u, 0x51u, 0x69u, 0x29u, 0xecu, 0x32u, 0xd8u, 0x01u, 0xe2u, 0x16u, 0x81u, 0xc9u, 0x1fu, 0xe7u, 0xecu, 0xf8u, 0x52u, 0x88u, 0x5du, 0x9du, 0xfau, 0x19u, 0x72u, 0xe4u, 0x24u, 0x10u, 0x0fu, 0x51u, 0xc0u, 0x32u, 0x90u, 0x19u}
 };

@@ -16,8 +16,8 @@
 #define ROBOT_NARROW_CORRIDOR_BAND_ROWS 0u
 
 /* Tables in flash; layout K[tick][i*NX + j], k0[tick][i], L[tick][i*N_LATCH + c],
- * Lambda[stage][c*NX + j], lambda0[stage][c], u_min[i], u_max[i] (see stsp_controller.h;
- * +-3.4028235e+38f = +-FLT_MAX: unlimited). */
+ * Lambda[stage][c*NX + j], lambda0[stage][c], u_min[i], u_max[i], u_hold[i] (see
+ * stsp_controller.h; +-3.4028235e+38f = +-FLT_MAX: unlimited). */
 extern const stsp_table_t robot_narrow_corridor_table;
 
 #endif /* ROBOT_NARROW_CORRIDOR_GAINS_H */

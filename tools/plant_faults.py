@@ -81,9 +81,9 @@ FAULTS = [
           CTL,
           "        return stsp_step_nonfinite(ctrl, x, u);",
           "        ctrl->next_tick = tick + 1u;\n        return stsp_step_nonfinite(ctrl, x, u);"),
-    Fault("F10", "command not zeroed on an error of an ordinary tick", CTL,
+    Fault("F10", "command not set to u_hold on an error of an ordinary tick", CTL,
           "    const stsp_status_t st = stsp_nonfinite_status(&ctrl->checked, x);\n"
-          "    stsp_zero(u, stsp_nu(&ctrl->checked));\n",
+          "    stsp_hold(ctrl, u);\n",
           "    const stsp_status_t st = stsp_nonfinite_status(&ctrl->checked, x);\n"
           "    (void)u;\n"),
     Fault("F11", "CRC does not cover u_max", CRC,
@@ -132,6 +132,20 @@ FAULTS = [
     Fault("F26", "the command is written for the header's nu, not the validated one", CTL,
           "    stsp_copy(u, y, stsp_nu(&ctrl->checked));\n    if (out != 0u) {",
           "    stsp_copy(u, y, ctrl->table->nu);\n    if (out != 0u) {"),
+    Fault("F27", "a refused step writes zeros, not the safe command u_hold", CTL,
+          "    stsp_copy(u, ctrl->hold, stsp_nu(&ctrl->checked));",
+          "    stsp_zero(u, stsp_nu(&ctrl->checked));"),
+    Fault("F28", "CRC does not cover u_hold", CRC,
+          "    crc = stsp_crc32_scalars(crc, table->u_hold, nu);\n", ""),
+    Fault("F29", "init does not check u_hold against the limits (float32)", CTL,
+          "(stsp_isfinite_f32(hold) == 0) || !(lo <= hold) || !(hi >= hold)",
+          "(stsp_isfinite_f32(hold) == 0)"),
+    Fault("F30", "Q: init does not check u_hold against the limits", CTL,
+          "if ((t->u_min[r] > t->u_hold[r]) || (t->u_max[r] < t->u_hold[r])) {",
+          "if (t->u_min[r] > t->u_max[r]) {"),
+    Fault("F31", "a refused step reads u_hold from the table, not the copy made at init", CTL,
+          "    stsp_copy(u, ctrl->hold, stsp_nu(&ctrl->checked));",
+          "    stsp_copy(u, ctrl->checked.u_hold, stsp_nu(&ctrl->checked));"),
 ]
 
 

@@ -71,6 +71,7 @@ stsp_status_t stsp_init(stsp_ctrl_t *ctrl, const stsp_table_t *table)
         return stsp_refuse(ctrl, st);
     }
     ctrl->table = table;
+    stsp_copy(ctrl->hold, table->u_hold, ctrl->checked.nu);
     ctrl->limited = stsp_has_limits(&ctrl->checked);
     ctrl->ready = STSP_CTRL_READY;
     return STSP_OK;
@@ -294,7 +295,7 @@ static STSP_NOINLINE stsp_status_t stsp_step_cold(stsp_ctrl_t *ctrl, uint32_t ti
         }
     }
     if (status < STSP_OK) {
-        stsp_zero(u, stsp_nu(h));
+        stsp_hold(ctrl, u);
         return status;
     }
     stsp_copy(u, y, stsp_nu(h));
@@ -315,11 +316,11 @@ static STSP_NOINLINE stsp_status_t stsp_step_fixup(stsp_ctrl_t *ctrl, uint32_t t
 }
 
 /* Not ready: u is not written, as nu is unknown; except for an instance stsp_verify() stopped,
- * which knows its validated nu and holds zeros there. */
+ * which knows its validated nu and the safe command init copied. */
 static STSP_NOINLINE stsp_status_t stsp_step_refused(const stsp_ctrl_t *ctrl, stsp_scalar_t *u)
 {
     if (ctrl->ready == STSP_CTRL_STOPPED) {
-        stsp_zero(u, stsp_nu(&ctrl->checked));
+        stsp_hold(ctrl, u);
     }
     return STSP_ERR_NOT_INITIALIZED;
 }
@@ -336,7 +337,7 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x
         return stsp_step_refused(ctrl, u);
     }
     if (x == NULL) {
-        stsp_zero(u, stsp_nu(&ctrl->checked));
+        stsp_hold(ctrl, u);
         return STSP_ERR_NULL;
     }
     /* Ordinary tick: the expected one, inside the latched stage (stage_end is 0 until the

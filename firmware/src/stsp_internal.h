@@ -99,7 +99,7 @@ static inline int stsp_all_finite(const stsp_f32_t *values, uint32_t count)
  * byte-fill pattern of uninitialised memory (0x00, 0xFF, 0xA5, 0xCC, ...) matches. */
 #define STSP_CTRL_READY 0x53005300u
 /* Value of stsp_ctrl_t.ready after stsp_verify() found the table changed (private): the
- * instance is stopped, and stsp_step() holds zeros in the validated u[nu]. */
+ * instance is stopped, and stsp_step() writes the copied u_hold to the validated u[nu]. */
 #define STSP_CTRL_STOPPED 0x53015301u
 
 /* STSP_OK when ctrl is an instance stsp_init() accepted (and stsp_verify() did not stop),
@@ -129,6 +129,7 @@ static inline void stsp_copy(stsp_scalar_t *u, const stsp_scalar_t *y, uint32_t 
     }
 }
 
+
 /* Dimensions as the law uses them: compile-time constants in an STSP_FIXED_* build (the
  * public header requires all three macros or none), else the validated copy (never the table
  * header: it may have changed since init). */
@@ -145,6 +146,12 @@ static inline uint32_t stsp_nx(const stsp_header_t *h) { return (uint32_t)h->nx;
 static inline uint32_t stsp_nu(const stsp_header_t *h) { return (uint32_t)h->nu; }
 static inline uint32_t stsp_n_latch(const stsp_header_t *h) { return (uint32_t)h->n_latch; }
 #endif
+
+/* A refused step's command: the safe u_hold init copied into the instance. */
+static inline void stsp_hold(const stsp_ctrl_t *ctrl, stsp_scalar_t *u)
+{
+    stsp_copy(u, ctrl->hold, stsp_nu(&ctrl->checked));
+}
 
 #ifdef STSP_ARITH_FIXED_POINT
 /* Fixed-point accumulator. It holds the bias 2^(2F) + 2^(F-1) plus a row's sum of products

@@ -89,12 +89,13 @@ static STSP_ALWAYS_INLINE int stsp_command_finite(const stsp_header_t *h, const 
     return finite;
 }
 
-/* An ordinary tick whose command is not finite: the error, u zeroed (x not yet overwritten). */
+/* An ordinary tick whose command is not finite: the error, u the safe command (x not yet
+ * overwritten). */
 static STSP_NOINLINE stsp_status_t stsp_step_nonfinite(const stsp_ctrl_t *ctrl,
                                                        const stsp_f32_t *x, stsp_f32_t *u)
 {
     const stsp_status_t st = stsp_nonfinite_status(&ctrl->checked, x);
-    stsp_zero(u, stsp_nu(&ctrl->checked));
+    stsp_hold(ctrl, u);
     return st;
 }
 

@@ -17,6 +17,7 @@ void stsp_copy_header(stsp_header_t *h, const stsp_table_t *t)
     h->L = t->L;
     h->u_min = t->u_min;
     h->u_max = t->u_max;
+    h->u_hold = t->u_hold;
     h->Lambda = t->Lambda;
     h->lambda0 = t->lambda0;
     h->stage_start = t->stage_start;
@@ -50,7 +51,8 @@ int stsp_header_changed(const stsp_header_t *h, const stsp_table_t *t)
         changed = 1;
     }
     if ((t->K != h->K) || (t->k0 != h->k0) || (t->L != h->L) || (t->u_min != h->u_min) ||
-        (t->u_max != h->u_max) || (t->Lambda != h->Lambda) || (t->lambda0 != h->lambda0) ||
+        (t->u_max != h->u_max) || (t->u_hold != h->u_hold) || (t->Lambda != h->Lambda) ||
+        (t->lambda0 != h->lambda0) ||
         (t->stage_start != h->stage_start) || (t->stage_n_latch != h->stage_n_latch)) {
         changed = 1;
     }
@@ -120,7 +122,7 @@ static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, i
         return STSP_ERR_BAD_DIMS;
     }
     if ((t->stage_start == NULL) || (t->stage_n_latch == NULL) || (t->K == NULL) ||
-        (t->k0 == NULL) || (t->u_min == NULL) || (t->u_max == NULL) ||
+        (t->k0 == NULL) || (t->u_min == NULL) || (t->u_max == NULL) || (t->u_hold == NULL) ||
         ((t->n_latch > 0u) && ((t->L == NULL) || (t->Lambda == NULL) || (t->lambda0 == NULL)))) {
         return STSP_ERR_NULL;
     }
@@ -173,7 +175,7 @@ static int stsp_q_exps_ok(const int8_t *e, uint32_t count)
 /* Fixed point: exponents in range; every law row (tick, input) with
  * |k0| + sum_j |K| + sum_c |L| <= 2^F - 1 and every latch row with |lambda0| + sum_j |Lambda|
  * <= 2^F - 1, the condition under which stsp_law and the latch cannot overflow or leave the
- * Q range (stsp_step); limits with u_min <= 0 <= u_max. */
+ * Q range (stsp_step); limits with u_min <= u_hold <= u_max. */
 static stsp_status_t stsp_check_values(const stsp_header_t *t)
 {
     const stsp_uacc_t row_max = (stsp_uacc_t)STSP_Q_ONE - 1u;
@@ -201,7 +203,7 @@ static stsp_status_t stsp_check_values(const stsp_header_t *t)
         }
     }
     for (r = 0u; r < nu; ++r) {
-        if ((t->u_min[r] > 0) || (t->u_max[r] < 0)) {
+        if ((t->u_min[r] > t->u_hold[r]) || (t->u_max[r] < t->u_hold[r])) {
             return STSP_ERR_BAD_VALUES;
         }
     }
@@ -254,7 +256,7 @@ static stsp_status_t stsp_check_band_values(const stsp_bandqp_t *b)
     return STSP_OK;
 }
 
-/* Gains finite; limits finite, ordered, and containing the safe hold value 0; band data
+/* Gains finite; limits and the safe command finite, with u_min <= u_hold <= u_max; band data
  * finite and ordered. */
 static stsp_status_t stsp_check_values(const stsp_header_t *t)
 {
@@ -275,8 +277,9 @@ static stsp_status_t stsp_check_values(const stsp_header_t *t)
     for (i = 0u; i < nu; ++i) {
         const stsp_f32_t lo = t->u_min[i];
         const stsp_f32_t hi = t->u_max[i];
-        if ((stsp_isfinite_f32(lo) == 0) || (stsp_isfinite_f32(hi) == 0) || !(lo <= 0.0f) ||
-            !(hi >= 0.0f)) {
+        const stsp_f32_t hold = t->u_hold[i];
+        if ((stsp_isfinite_f32(lo) == 0) || (stsp_isfinite_f32(hi) == 0) ||
+            (stsp_isfinite_f32(hold) == 0) || !(lo <= hold) || !(hi >= hold)) {
             return STSP_ERR_BAD_VALUES;
         }
     }
@@ -337,6 +340,7 @@ uint32_t stsp_crc_of(const stsp_header_t *table, const stsp_table_t *scalars)
     }
     crc = stsp_crc32_scalars(crc, table->u_min, nu);
     crc = stsp_crc32_scalars(crc, table->u_max, nu);
+    crc = stsp_crc32_scalars(crc, table->u_hold, nu);
 #ifdef STSP_ARITH_FIXED_POINT
     crc = stsp_crc32_i8s(crc, table->x_exp, nx);
     crc = stsp_crc32_i8s(crc, table->u_exp, nu);

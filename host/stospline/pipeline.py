@@ -187,11 +187,12 @@ def _limits(d: Designed) -> dict:
     """``{"actuator_limits": {"u_min": [...] | None, "u_max": ...}}`` as the table stores them
     (float32), when the problem sets limits; ``{}`` otherwise (summaries stay unchanged)."""
     p = d.problem
-    if p.u_min is None and p.u_max is None:
+    if p.u_min is None and p.u_max is None and p.u_hold is None:
         return {}
     return {"actuator_limits": {
         "u_min": None if p.u_min is None else d.table.u_min.astype(float),
         "u_max": None if p.u_max is None else d.table.u_max.astype(float),
+        **({} if p.u_hold is None else {"u_hold": d.table.u_hold.astype(float)}),
         "note": "the design ignores the limits: the firmware clips the unconstrained law, "
                 "and the oracle's numbers assume no command is clipped",
     }}

@@ -14,12 +14,13 @@
  *
  * Invariants (any broken one aborts, as any sanitizer report): until verify stops it, the
  * instance on the changed table behaves bit for bit as the reference (the header changes do
- * not reach it; changed data reach both alike), with a known status, u all +0.0 on an error;
+ * not reach it; changed data reach both alike), with a known status, u the safe command
+ * u_hold as init copied it on an error (even when the table's u_hold changed since);
  * stsp_verify() returns STSP_ERR_TABLE_CHANGED exactly when the header (magic, version, kind,
  * a dimension, an array address, the band dual's header or address) differs from the one
  * init saw, else STSP_ERR_BAD_CRC exactly when the CRC over the validated arrays (with the
  * current tick_hz and problem hash) differs from the crc32 field, else STSP_OK; after an
- * error every step returns STSP_ERR_NOT_INITIALIZED with u all zeros, reset and verify
+ * error every step returns STSP_ERR_NOT_INITIALIZED with u that safe command, reset and verify
  * STSP_ERR_NOT_INITIALIZED. */
 #include <float.h>
 #include <stddef.h>
@@ -145,8 +146,9 @@ typedef struct {
     stsp_table_t *orig;     /* its header as init saw it (heap; the reference's table) */
     stsp_bandqp_t *band;    /* the table's band dual (heap), or NULL */
     stsp_bandqp_t *band0;   /* its header as init saw it (the reference's band dual) */
-    void *arrays[16];       /* every array block, for data changes */
-    size_t sizes[16];
+    void *arrays[24];       /* every array block, for data changes */
+    size_t sizes[24];
+    stsp_scalar_t hold0[STSP_MAX_NU]; /* u_hold as init saw it: what a refused step writes */
     uint32_t n_arrays;
 } fv_table_t;
 
@@ -184,6 +186,7 @@ static void fv_build(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
     uint16_t *stage_n_latch = FV_ARRAY(tb, blocks, uint16_t, ns);
     stsp_scalar_t *lo = FV_ARRAY(tb, blocks, stsp_scalar_t, nu);
     stsp_scalar_t *hi = FV_ARRAY(tb, blocks, stsp_scalar_t, nu);
+    stsp_scalar_t *hold = FV_ARRAY(tb, blocks, stsp_scalar_t, nu);
     uint32_t s, i, nt = 0u;
     int band = 0;
     for (s = 0u; s < ns; ++s) {
@@ -237,8 +240,14 @@ static void fv_build(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
         hi[i] = (limits == 0u) ? FLT_MAX : ((b > 0.0f) ? b : -b);
 #endif
     }
+    for (i = 0u; i < nu; ++i) {                 /* the safe command: a limit, or 0 */
+        const uint32_t pick = fv_lcg(&seed) % 3u;
+        hold[i] = (pick == 0u) ? lo[i] : ((pick == 1u) ? hi[i] : (stsp_scalar_t)0);
+        tb->hold0[i] = hold[i];
+    }
     t->u_min = lo;
     t->u_max = hi;
+    t->u_hold = hold;
 #ifdef STSP_ARITH_FIXED_POINT
     {
         int8_t *xe = FV_ARRAY(tb, blocks, int8_t, nx);
@@ -354,18 +363,18 @@ static void fv_change(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
         }
         break;
     case 3u: { /* an array address: NULL, another array of the table, or a one-entry block */
-        const stsp_scalar_t *arrays[7] = {t->K, t->k0, t->L, t->Lambda, t->lambda0, t->u_min,
-                                          t->u_max};
+        const stsp_scalar_t *arrays[8] = {t->K, t->k0, t->L, t->Lambda, t->lambda0, t->u_min,
+                                          t->u_max, t->u_hold};
         const stsp_scalar_t *p = NULL;
-        const uint32_t pick = value % 9u;
-        if (pick < 7u) {
+        const uint32_t pick = value % 10u;
+        if (pick < 8u) {
             p = arrays[pick];
-        } else if (pick == 7u) {
+        } else if (pick == 8u) {
             p = (const stsp_scalar_t *)fv_alloc(blocks, sizeof(stsp_scalar_t));
         } else {
             /* NULL */
         }
-        switch (which % 11u) {
+        switch (which % 12u) {
         case 0u: t->K = p; break;
         case 1u: t->k0 = p; break;
         case 2u: t->L = p; break;
@@ -373,13 +382,14 @@ static void fv_change(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
         case 4u: t->lambda0 = p; break;
         case 5u: t->u_min = p; break;
         case 6u: t->u_max = p; break;
-        case 7u: t->stage_start = (pick == 8u) ? NULL
+        case 7u: t->stage_start = (pick == 9u) ? NULL
                                   : (const uint32_t *)fv_alloc(blocks, sizeof(uint32_t)); break;
-        case 8u: t->stage_n_latch = (pick == 8u) ? NULL
+        case 8u: t->stage_n_latch = (pick == 9u) ? NULL
                                : (const uint16_t *)fv_alloc(blocks, sizeof(uint16_t)); break;
+        case 11u: t->u_hold = p; break;
 #ifdef STSP_ARITH_FIXED_POINT
         case 9u: t->x_exp = (const int8_t *)fv_alloc(blocks, 1u); break;
-        default: t->v_exp = (pick == 8u) ? NULL : t->u_exp; break;
+        default: t->v_exp = (pick == 9u) ? NULL : t->u_exp; break;
 #else
         default: break;
 #endif
@@ -437,7 +447,7 @@ static int fv_header_changed(const fv_table_t *tb)
                   (t->n_ticks != o->n_ticks) || (t->stage_start != o->stage_start) ||
                   (t->stage_n_latch != o->stage_n_latch) || (t->K != o->K) || (t->k0 != o->k0) ||
                   (t->L != o->L) || (t->Lambda != o->Lambda) || (t->lambda0 != o->lambda0) ||
-                  (t->u_min != o->u_min) || (t->u_max != o->u_max);
+                  (t->u_min != o->u_min) || (t->u_max != o->u_max) || (t->u_hold != o->u_hold);
 #ifdef STSP_ARITH_FIXED_POINT
     changed = changed || (t->x_exp != o->x_exp) || (t->u_exp != o->u_exp) ||
               (t->v_exp != o->v_exp) || (t->band_qp != NULL);
@@ -490,11 +500,12 @@ static int fv_known_status(stsp_status_t st)
            (st == STSP_WARN_BAND_FALLBACK);
 }
 
-static int fv_all_zero(const stsp_scalar_t *u, uint32_t n)
+/* u[0..n) is the safe command init copied, bit for bit (whatever the table holds now). */
+static int fv_is_hold(const stsp_scalar_t *u, const fv_table_t *tb, uint32_t n)
 {
     uint32_t i;
     for (i = 0u; i < n; ++i) {
-        if (memcmp(&u[i], &(stsp_scalar_t){0}, sizeof u[i]) != 0) {
+        if (memcmp(&u[i], &tb->hold0[i], sizeof u[i]) != 0) {
             return 0;
         }
     }
@@ -618,7 +629,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             if (stopped) {
                 FVS(FVS_STOPPED_STEPS);
                 fuzz_check(st == STSP_ERR_NOT_INITIALIZED);
-                fuzz_check(fv_all_zero(u, nu));
+                fuzz_check(fv_is_hold(u, &tb, nu));
             } else {
                 if (changed) {
                     FVS(FVS_STEPS_CHANGED);
@@ -629,7 +640,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                          c.latched == ref.latched && c.sat_mask == ref.sat_mask &&
                          c.stage_end == ref.stage_end &&
                          memcmp(c.v, ref.v, sizeof c.v) == 0);
-                fuzz_check((st >= STSP_OK) || fv_all_zero(u, nu));
+                fuzz_check((st >= STSP_OK) || fv_is_hold(u, &tb, nu));
             }
             free(xbuf); free(ubuf); free(xr); free(ur);
         }
@@ -642,7 +653,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         fuzz_check(x && u);
         stopped = fv_verify(&c, &tb, stopped);
         st = stsp_step(&c, c.next_tick, x, u);
-        fuzz_check(stopped ? ((st == STSP_ERR_NOT_INITIALIZED) && fv_all_zero(u, nu))
+        fuzz_check(stopped ? ((st == STSP_ERR_NOT_INITIALIZED) && fv_is_hold(u, &tb, nu))
                          : fv_known_status(st));
         free(x);
         free(u);

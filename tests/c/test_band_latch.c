@@ -17,7 +17,7 @@
 #include "stospline/stsp_controller.h"
 #include "test_support.h"
 
-static const float no_min[1] = {-FLT_MAX}, no_max[1] = {FLT_MAX};
+static const float no_min[1] = {-FLT_MAX}, no_max[1] = {FLT_MAX}, zero_hold[1] = {0.0f};
 
 /* Table D: a joint band table, nx = 2, nu = 1, n_latch = 2; stage 0 = ticks 0..1 latches both
  * multipliers through the band dual, stage 1 = ticks 2..3 keeps them. Dual: e = x0, W =
@@ -38,14 +38,14 @@ static const double d_lo[2] = {0.5, -1.0};
 static const double d_hi[2] = {0.5, 1.0};
 /* CRC-32 of table D as host/stospline/table/format.py table_crc32 computes it
  * (tests/python/firmware/test_band_relatch.py builds the same table). */
-#define TABLE_D_CRC32 0x04805D9Eu
+#define TABLE_D_CRC32 0x7395DA83u
 
 static stsp_table_t make_table_d(const stsp_bandqp_t *qp)
 {
     stsp_table_t t = table_header(2u, 1u, 2u, 2u, 4u, 1u);
     t.stage_start = d_start; t.stage_n_latch = d_stage_n_latch;
     t.K = d_K; t.k0 = d_k0; t.L = d_L; t.Lambda = d_Lambda; t.lambda0 = d_lambda0;
-    t.u_min = no_min; t.u_max = no_max;
+    t.u_min = no_min; t.u_max = no_max; t.u_hold = zero_hold;
     t.band_qp = qp;
     t.crc32 = stsp_table_crc32(&t);
     return t;

@@ -30,20 +30,26 @@ static const float lambda0[NS * N_LATCH] = {-0.5f, 0.0f, 1.0f, -2.0f};
 static const float no_min[NU] = {-FLT_MAX}, no_max[NU] = {FLT_MAX};
 static const float tight_min[NU] = {-0.25f}, tight_max[NU] = {0.5f};
 static const float wide_min[NU] = {-1000.0f}, wide_max[NU] = {1000.0f};
+static const float zero_hold[NU] = {0.0f};
 
 /* CRC-32 of table A (unlimited) as host/stospline/table/format.py table_crc32 computes it
  * (tests/python/firmware/test_table_limits.py builds the same table): the serialization order of
  * both implementations, limits included, is pinned here. */
-#define TABLE_A_CRC32 0x144FE504u
+#define TABLE_A_CRC32 0x6C34DDB7u
 
-static stsp_table_t make_table_limited(const float *lo, const float *hi)
+static stsp_table_t make_table_hold(const float *lo, const float *hi, const float *hold)
 {
     stsp_table_t t = table_header(NX, NU, N_LATCH, NS, NT, 10u);
     t.stage_start = stage_start; t.stage_n_latch = stage_n_latch;
     t.K = K; t.k0 = k0; t.L = L; t.Lambda = Lambda; t.lambda0 = lambda0;
-    t.u_min = lo; t.u_max = hi;
+    t.u_min = lo; t.u_max = hi; t.u_hold = hold;
     t.crc32 = stsp_table_crc32(&t);
     return t;
+}
+
+static stsp_table_t make_table_limited(const float *lo, const float *hi)
+{
+    return make_table_hold(lo, hi, zero_hold);
 }
 
 static stsp_table_t make_table(void)
@@ -58,12 +64,13 @@ static const uint16_t b_stage_n_latch[1] = {0u};
 static const float b_K[3 * 2] = {1.0f, 1.0f, 1.0f, 1.0f, 1.0f, 1.0f};
 static const float b_k0[3 * 2] = {0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
 static const float b_min[2] = {-FLT_MAX, -FLT_MAX}, b_max[2] = {FLT_MAX, FLT_MAX};
+static const float b_hold[2] = {0.0f, 0.0f};
 
 static stsp_table_t make_table_b(void)
 {
     stsp_table_t t = table_header(1u, 2u, 0u, 1u, 3u, 1u);
     t.stage_start = b_start; t.stage_n_latch = b_stage_n_latch; t.K = b_K; t.k0 = b_k0;
-    t.u_min = b_min; t.u_max = b_max;
+    t.u_min = b_min; t.u_max = b_max; t.u_hold = b_hold;
     t.crc32 = stsp_table_crc32(&t);
     return t;
 }
@@ -525,6 +532,8 @@ static void test_corrupt_tables_are_refused(void **state)
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_NULL);
     t = make_table(); t.u_max = NULL;
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_NULL);
+    t = make_table(); t.u_hold = NULL;
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_NULL);
     t = make_table(); t.stage_start = NULL;
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_NULL);
 
@@ -537,9 +546,15 @@ static void test_corrupt_tables_are_refused(void **state)
     lam0inf[2] = -INFINITY;
     t = make_table(); t.lambda0 = lam0inf; t.crc32 = stsp_table_crc32(&t);
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
-    t = make_table_limited(pos_min, no_max);       /* 0 below u_min */
+    t = make_table_limited(pos_min, no_max);       /* u_hold = 0 below u_min */
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
-    t = make_table_limited(no_min, neg_max);       /* 0 above u_max */
+    t = make_table_limited(no_min, neg_max);       /* u_hold = 0 above u_max */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    t = make_table_hold(pos_min, no_max, pos_min); /* u_min > 0 with u_hold at it: valid */
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    t = make_table_hold(tight_min, tight_max, wide_max);   /* u_hold above u_max */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    t = make_table_hold(no_min, no_max, nan_lim);          /* u_hold NaN */
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
     t = make_table_limited(swapped_min, swapped_max);
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
@@ -548,6 +563,39 @@ static void test_corrupt_tables_are_refused(void **state)
     t = make_table_limited(no_min, inf_max);
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
     assert_int_equal(stsp_step(&c, 0u, x, u), STSP_ERR_NOT_INITIALIZED);
+}
+
+/* Every refused step writes the table's safe command u_hold, as init copied it: a minimum
+ * thrust (u_min > 0) is a valid table; NaN state, NULL x, a tick past the plan and a stopped
+ * instance all command it, even after the table's u_hold changed; the CRC covers it. */
+static void test_safe_command(void **state)
+{
+    static const float lo[NU] = {0.125f}, hi[NU] = {0.875f};
+    static float hold[NU] = {0.375f};
+    const float x_nan[NX] = {NAN, 0.0f}, x[NX] = {0.0f, 0.0f};
+    float u[NU];
+    stsp_ctrl_t c;
+    stsp_table_t t = make_table_hold(lo, hi, hold);
+    (void)state;
+    hold[0] = 0.375f;
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    u[0] = -1.0f;
+    assert_int_equal(stsp_step(&c, 0u, x_nan, u), STSP_ERR_NONFINITE_STATE);
+    assert_true(u[0] == 0.375f);
+    u[0] = -1.0f;
+    assert_int_equal(stsp_step(&c, 0u, NULL, u), STSP_ERR_NULL);
+    assert_true(u[0] == 0.375f);
+    u[0] = -1.0f;
+    assert_int_equal(stsp_step(&c, NT, x, u), STSP_ERR_TICK_RANGE);
+    assert_true(u[0] == 0.375f);
+    assert_true(stsp_step(&c, 0u, x, u) >= STSP_OK);          /* a valid step: the law */
+    assert_true(u[0] >= 0.125f && u[0] <= 0.875f);
+    hold[0] = 0.5f;                                    /* the table changes after init */
+    assert_int_equal(stsp_verify(&c), STSP_ERR_BAD_CRC);   /* the CRC covers u_hold */
+    u[0] = -1.0f;
+    assert_int_equal(stsp_step(&c, 1u, x, u), STSP_ERR_NOT_INITIALIZED);
+    assert_true(u[0] == 0.375f);                       /* the copy, not the changed table */
+    hold[0] = 0.375f;
 }
 
 static void test_wrong_dimensions(void **state)
@@ -934,6 +982,7 @@ int main(void)
         cmocka_unit_test_setup(test_law_and_latching, setup),
         cmocka_unit_test_setup(test_inactive_limits_change_nothing, setup),
         cmocka_unit_test_setup(test_nonfinite_state, setup),
+        cmocka_unit_test_setup(test_safe_command, setup),
         cmocka_unit_test_setup(test_subnormal_state_is_finite, setup),
         cmocka_unit_test_setup(test_overflow_gives_zero_and_error, setup),
         cmocka_unit_test_setup(test_saturation, setup),

@@ -35,7 +35,7 @@ static const int8_t v_exp[N_LATCH] = {1, 0};
  * units, nothing else: the rounding test. Row sums stay well below 2^F - 1. */
 static stsp_scalar_t K[NT * NU * NX], k0[NT * NU], L[NT * NU * N_LATCH];
 static stsp_scalar_t Lambda[NS * N_LATCH * NX], lambda0[NS * N_LATCH];
-static stsp_scalar_t no_min[NU], no_max[NU];
+static stsp_scalar_t no_min[NU], no_max[NU], zero_hold[NU];
 
 static stsp_scalar_t frac(double f)
 {
@@ -76,7 +76,7 @@ static stsp_table_t make_table_limited(const stsp_scalar_t *lo, const stsp_scala
     stsp_table_t t = table_header(NX, NU, N_LATCH, NS, NT, 10u);
     t.stage_start = stage_start; t.stage_n_latch = stage_n_latch;
     t.K = K; t.k0 = k0; t.L = L; t.Lambda = Lambda; t.lambda0 = lambda0;
-    t.u_min = lo; t.u_max = hi;
+    t.u_min = lo; t.u_max = hi; t.u_hold = zero_hold;
     t.x_exp = x_exp; t.u_exp = u_exp; t.v_exp = v_exp;
     t.crc32 = stsp_table_crc32(&t);
     return t;
@@ -85,6 +85,33 @@ static stsp_table_t make_table_limited(const stsp_scalar_t *lo, const stsp_scala
 static stsp_table_t make_table(void)
 {
     return make_table_limited(no_min, no_max);
+}
+
+/* The safe command in Q units: a table with u_min > 0 and u_hold inside is valid, one with
+ * u_hold outside the limits is refused, and a refused step (a tick past the plan) writes
+ * u_hold. */
+static void test_safe_command(void **state)
+{
+    stsp_scalar_t lo[NU], hi[NU], hold[NU];
+    const stsp_scalar_t x[NX] = {0, 0};
+    stsp_scalar_t u[NU];
+    stsp_ctrl_t c;
+    stsp_table_t t;
+    (void)state;
+    lo[0] = frac(0.125); hi[0] = frac(0.75); hold[0] = frac(0.25);
+    t = make_table_limited(lo, hi);
+    t.u_hold = hold;
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    u[0] = 0;
+    assert_int_equal(stsp_step(&c, NT, x, u), STSP_ERR_TICK_RANGE);
+    assert_int_equal(u[0], hold[0]);
+    hold[0] = frac(0.875);                                 /* above u_max */
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    hold[0] = frac(0.0625);                                /* below u_min */
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
 }
 
 static int setup(void **state)
@@ -595,6 +622,7 @@ int main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test_setup(test_law_matches_reference, setup),
+        cmocka_unit_test_setup(test_safe_command, setup),
         cmocka_unit_test_setup(test_rounding_is_half_up, setup),
         cmocka_unit_test_setup(test_extreme_rows_do_not_overflow, setup),
         cmocka_unit_test_setup(test_row_sum_over_limit_is_refused, setup),

@@ -58,6 +58,7 @@ static inline stsp_table_t heap_table(stsp_table_t t)
     t.lambda0 = heap_copy(t.lambda0, ns * t.n_latch * s);
     t.u_min = heap_copy(t.u_min, t.nu * s);
     t.u_max = heap_copy(t.u_max, t.nu * s);
+    t.u_hold = heap_copy(t.u_hold, t.nu * s);
 #ifdef STSP_ARITH_FIXED_POINT
     t.x_exp = heap_copy(t.x_exp, t.nx);
     t.u_exp = heap_copy(t.u_exp, t.nu);
@@ -77,6 +78,7 @@ static inline void free_heap_table(const stsp_table_t *t)
     free((void *)t->lambda0);
     free((void *)t->u_min);
     free((void *)t->u_max);
+    free((void *)t->u_hold);
 #ifdef STSP_ARITH_FIXED_POINT
     free((void *)t->x_exp);
     free((void *)t->u_exp);

@@ -99,8 +99,8 @@ typedef stsp_f32_t stsp_scalar_t;
 /** Table magic, "STSP" as a little-endian u32. */
 #define STSP_TABLE_MAGIC 0x53545350u
 /** Table format understood by this firmware (2: actuator limits u_min/u_max; 3: optional
- * band dual QP re-solved at the t0 latch). */
-#define STSP_FORMAT_VERSION 3u
+ * band dual QP re-solved at the t0 latch; 4: the safe command u_hold). */
+#define STSP_FORMAT_VERSION 4u
 /** Arithmetic variant tag stored in the table (scalar_kind): float32, Q15 or Q31 tables. */
 #define STSP_SCALAR_FLOAT32 1u
 #define STSP_SCALAR_Q15 2u
@@ -144,8 +144,8 @@ typedef stsp_f32_t stsp_scalar_t;
 
 /**
  * Status codes: 0 success, positive = the command is valid (finite, within the limits) but
- * something is worth logging, negative = the command is the safe hold value (all zeros,
- * which stsp_init() requires to lie within the limits) and the error says why.
+ * something is worth logging, negative = the command is the table's safe command u_hold
+ * (which stsp_init() requires to lie within the limits) and the error says why.
  * When several warnings apply, STSP_WARN_SATURATED wins, then STSP_WARN_BAND_FALLBACK, then
  * the tick warnings (the caller knows which tick it passed, but not what the law did).
  */
@@ -176,8 +176,8 @@ typedef enum {
     STSP_ERR_TICK_ORDER = -8,       /**< tick went backwards by more than one repeat */
     STSP_ERR_NONFINITE_STATE = -9,  /**< x holds NaN or +-Inf */
     STSP_ERR_NONFINITE_OUTPUT = -10,/**< the state is finite but u (or the latch) overflowed */
-    STSP_ERR_BAD_VALUES = -11,      /**< a table value is NaN or +-Inf, u_min > u_max, or 0
-                                         lies outside [u_min, u_max]; fixed point: a scale
+    STSP_ERR_BAD_VALUES = -11,      /**< a table value is NaN or +-Inf, u_min > u_max, or
+                                         u_hold outside [u_min, u_max]; fixed point: a scale
                                          exponent beyond +-STSP_Q_EXP_MAX, or a row whose
                                          absolute sum exceeds 2^F - 1 (see stsp_step) */
     STSP_ERR_BAD_PROBLEM = -12,     /**< stsp_init_problem(): the table's problem_sha256 is not
@@ -190,8 +190,10 @@ typedef enum {
 /**
  * Generated gain tables plus the header that stsp_init() verifies.
  * Layouts (row-major): K[tick][i*nx + j], k0[tick][i], L[tick][i*n_latch + c],
- * Lambda[stage][c*nx + j], lambda0[stage][c], u_min[i], u_max[i]; multiplier columns beyond a
- * stage's stage_n_latch are zero. u_min[i] = -FLT_MAX and u_max[i] = FLT_MAX mean unlimited.
+ * Lambda[stage][c*nx + j], lambda0[stage][c], u_min[i], u_max[i], u_hold[i]; multiplier
+ * columns beyond a stage's stage_n_latch are zero. u_min[i] = -FLT_MAX and u_max[i] = FLT_MAX
+ * mean unlimited. u_hold is the safe command every refused step writes (a hover thrust, a
+ * brake): within [u_min, u_max].
  *
  * Fixed point (scalar_kind Q15/Q31, F = STSP_Q_FRAC_BITS): the entries are integers in
  * [-2^F, 2^F - 1] that carry the scales, and the law's gains are stored negated:
@@ -200,7 +202,8 @@ typedef enum {
  *     Lambda[s][c][j] = Lambda_cj 2^(x_exp[j] - v_exp[c]) 2^F,
  *     lambda0[s][c] = lambda0_c 2^(F - v_exp[c])
  * (rounded half up), so that x[j] = x_q[j] 2^(x_exp[j] - F), v[c] = v_q[c] 2^(v_exp[c] - F),
- * u[i] = u_q[i] 2^(u_exp[i] - F). u_min/u_max are in u_q units; -2^F and 2^F - 1 mean unlimited.
+ * u[i] = u_q[i] 2^(u_exp[i] - F). u_min/u_max/u_hold are in u_q units; -2^F and 2^F - 1 mean
+ * unlimited.
  */
 typedef struct {
     uint32_t magic;          /**< STSP_TABLE_MAGIC */
@@ -222,6 +225,7 @@ typedef struct {
     const stsp_scalar_t *lambda0;
     const stsp_scalar_t *u_min;  /**< [nu]: lower actuator limits */
     const stsp_scalar_t *u_max;  /**< [nu]: upper actuator limits */
+    const stsp_scalar_t *u_hold; /**< [nu]: the safe command of a refused step, in the limits */
 #ifdef STSP_ARITH_FIXED_POINT
     const int8_t *x_exp;         /**< [nx]: state scale exponents */
     const int8_t *u_exp;         /**< [nu]: command scale exponents */
@@ -251,6 +255,7 @@ typedef struct {
     const stsp_scalar_t *L;
     const stsp_scalar_t *u_min;
     const stsp_scalar_t *u_max;
+    const stsp_scalar_t *u_hold;
     const stsp_scalar_t *Lambda;
     const stsp_scalar_t *lambda0;
     const uint32_t *stage_start;
@@ -285,13 +290,15 @@ typedef struct {
                                   (not updated by other statuses) */
     uint16_t limited;        /**< nonzero if the table has a finite limit (private) */
     stsp_scalar_t v[STSP_MAX_LATCH];
+    stsp_scalar_t hold[STSP_MAX_NU]; /**< the table's u_hold, copied at init (private): a
+                                          refused step writes it even if the table changed */
     stsp_header_t checked;   /**< the validated table header (private) */
 } stsp_ctrl_t;
 
 /**
  * CRC-32 (IEEE 802.3 polynomial, reflected, as zlib) of the table's canonical serialization:
  * nx, nu, n_latch, n_stages, n_ticks, tick_hz as little-endian u32; stage_start and stage_n_latch
- * as little-endian u32 each; then K, k0, L, Lambda, lambda0, u_min, u_max as little-endian
+ * as little-endian u32 each; then K, k0, L, Lambda, lambda0, u_min, u_max, u_hold as little-endian
  * binary32 bit patterns (L, Lambda, lambda0 only when n_latch > 0). Fixed point: scalar_kind
  * as a u32 after tick_hz, the same arrays as little-endian int16 (Q15) or int32 (Q31), then
  * x_exp, u_exp and v_exp (when n_latch > 0) one byte each. Then, when band_qp is not NULL,
@@ -339,17 +346,17 @@ stsp_status_t stsp_reset(stsp_ctrl_t *ctrl);
  * changed header. Then the CRC-32, recomputed over the arrays init validated (and tick_hz,
  * problem_sha256 and the crc32 field of the header): a difference is STSP_ERR_BAD_CRC. Either
  * error stops the instance: every later stsp_step() returns STSP_ERR_NOT_INITIALIZED with u
- * all zeros (the safe hold value, written to the validated u[nu]), reset and verify return
+ * the safe command u_hold as init copied it (written to the validated u[nu]), reset and verify return
  * STSP_ERR_NOT_INITIALIZED, until a new init.
  */
 stsp_status_t stsp_verify(stsp_ctrl_t *ctrl);
 
 /**
  * Compute the command for tick `tick` from the measured state x[nx]; writes u[nu].
- * On a negative status u is all zeros (the documented safe hold value) and the instance is
- * unchanged; otherwise u is finite and u_min[i] <= u[i] <= u_max[i]. Exceptions: with
+ * On a negative status u is the table's safe command u_hold (copied at init) and the instance
+ * is unchanged; otherwise u is finite and u_min[i] <= u[i] <= u_max[i]. Exceptions: with
  * u == NULL nothing is written, and before a successful init (STSP_ERR_NOT_INITIALIZED) u is
- * not written because nu is unknown (after stsp_verify() stopped the instance it is zeroed).
+ * not written because nu is unknown (after stsp_verify() stopped the instance it is u_hold).
  * nx and nu are the dimensions init validated, whatever the table header says later.
  * x and u may be the same buffer or overlap: every read of x happens before the first write
  * of u, so the status and the command are those of separate buffers (the overlapping entries

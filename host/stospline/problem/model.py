@@ -124,6 +124,8 @@ class Problem:
     # The loop's faults ([faults]): what the harness and the fault oracle add around the
     # controller; the design ignores them.
     faults: Faults = field(default_factory=Faults)
+    # The safe command (m,) the firmware writes on a refused step; None: 0 (within the limits).
+    u_hold: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -160,7 +162,7 @@ class Problem:
         return Problem(self.name, self.t0, self.x0, self.tick_hz,
                        tuple(s.without_noise() for s in self.stages), self.knots,
                        self.source_sha256, self.plot, self.options, self.u_min, self.u_max,
-                       self.faults)
+                       self.faults, self.u_hold)
 
 
 def ticks_per_stage(problem, tick_hz: int) -> np.ndarray:

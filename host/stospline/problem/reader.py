@@ -25,7 +25,8 @@ from stospline.problem.names import check_name
 
 __all__ = ["load_problem", "parse_problem"]
 
-_TOP_KEYS = {"name", "t0", "x0", "tick_hz", "u_min", "u_max", "dynamics", "cost", "knots",
+_TOP_KEYS = {"name", "t0", "x0", "tick_hz", "u_min", "u_max", "u_hold", "dynamics", "cost",
+             "knots",
              "stages", "plot", "regions", "design", "faults"}
 _DESIGN_OPTIONS = {"mode": ("stagewise", "joint"), "discretization": ("exact-zoh", "continuous"),
                    "arith": ARITHS}
@@ -502,11 +503,12 @@ def _input(path: str, i: int) -> str:
     return f"input {i}: " if path.endswith("]") else ""
 
 
-def _parse_limits(doc: dict, m: int) -> tuple[np.ndarray | None, np.ndarray | None]:
-    """``u_min``/``u_max``: a number (every input) or one number per input, with
-    ``u_min <= 0 <= u_max`` (the firmware's safe-hold command u = 0 must be within them)."""
+def _parse_limits(doc: dict, m: int) -> tuple[np.ndarray | None, ...]:
+    """``u_min``/``u_max``/``u_hold``: a number (every input) or one number per input, with
+    ``u_min <= u_hold <= u_max``; ``u_hold`` (the firmware's safe command on a refused step)
+    defaults to 0 where 0 is within the limits and is required where it is not."""
     out = {}
-    for key in ("u_min", "u_max"):
+    for key in ("u_min", "u_max", "u_hold"):
         if key not in doc:
             out[key] = None
             continue
@@ -547,20 +549,29 @@ def _parse_limits(doc: dict, m: int) -> tuple[np.ndarray | None, np.ndarray | No
             i = int(bad[0])
             raise ProblemError(lp[i], f"{_input(lp[i] + hp[i], i)}u_min = {lo[i]:g} > u_max = "
                                       f"{hi[i]:g}; the range of commands is empty")
-    why = ("the firmware commands the safe-hold value u = 0 when it refuses a tick or a "
-           "state (any error status), so 0 must be a valid command: u_min <= 0 <= u_max")
+    why = ("the firmware commands the safe value u_hold when it refuses a tick or a state "
+           "(any error status), so it must be a valid command: u_min <= u_hold <= u_max")
+    if out["u_hold"] is not None:
+        hold, hold_paths = out["u_hold"]
+    else:
+        hold, hold_paths = np.zeros(m), None
     for key, sign in (("u_min", 1), ("u_max", -1)):
         if out[key] is None:
             continue
         vals, paths = out[key]
-        bad = np.flatnonzero(sign * vals > 0)
+        bad = np.flatnonzero(sign * (vals - hold) > 0)
         if bad.size:
             i = int(bad[0])
-            rel = "<=" if key == "u_min" else ">="
-            raise ProblemError(paths[i], f"{_input(paths[i], i)}must be {rel} 0, got "
-                                         f"{vals[i]:g}; {why}")
-        out[key] = vals
-    return out["u_min"], out["u_max"]
+            if hold_paths is None:
+                rel = "<=" if key == "u_min" else ">="
+                raise ProblemError(paths[i], f"{_input(paths[i], i)}is {vals[i]:g}, so 0 is "
+                                             f"not a valid command: give u_hold, the safe "
+                                             f"command within the limits (u_min <= u_hold <= "
+                                             f"u_max; 0 is the default only when {key} {rel} 0)")
+            rel = "<" if key == "u_min" else ">"
+            raise ProblemError(hold_paths[i], f"{_input(hold_paths[i], i)}{hold[i]:g} is "
+                                              f"{rel} {key} = {vals[i]:g}; {why}")
+    return tuple(None if out[k] is None else out[k][0] for k in ("u_min", "u_max", "u_hold"))
 
 
 def _merge_constraints(a: Constraint | None, b: Constraint) -> Constraint:
@@ -709,7 +720,7 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     built = {id(d): d.build(n, mz) for d in data}
     stages = tuple(built[id(d)] for d in data)
 
-    u_min, u_max = _parse_limits(doc, stages[0].B.shape[1])
+    u_min, u_max, u_hold = _parse_limits(doc, stages[0].B.shape[1])
     plot = _parse_plot(doc.get("plot", {}), n)
     options = _check_keys(doc.get("design", {}), "design", set(_DESIGN_OPTIONS), set())
     for key, value in options.items():
@@ -718,7 +729,7 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
                                                 f"got {value!r}")
     faults = parse_faults(doc.get("faults", {}), n, stages[0].B.shape[1])
     problem = Problem(name, t0, x0, tick_hz, stages, knots, source_sha256, plot, dict(options),
-                      u_min, u_max, faults)
+                      u_min, u_max, faults, u_hold)
     check_problem(problem, B_path=default.B_path)   # the firmware's limits (limits.py)
     return problem
 

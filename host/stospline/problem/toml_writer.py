@@ -136,7 +136,7 @@ def problem_to_toml(problem: Problem) -> str:
              "docs/guide/problem-file.md",
              f"name = {_value(p.name)}", f"t0 = {_value(float(p.t0))}",
              f"x0 = {_value(p.x0)}", f"tick_hz = {_value(int(p.tick_hz))}"]
-    for key in ("u_min", "u_max"):
+    for key in ("u_min", "u_max", "u_hold"):
         limit = getattr(p, key)
         if limit is not None:
             lines.append(f"{key} = {_value(np.asarray(limit, dtype=float))}")

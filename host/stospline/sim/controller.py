@@ -40,7 +40,7 @@ typedef struct {
     const uint32_t *stage_start; const uint16_t *stage_n_latch;
     const stsp_scalar_t *K; const stsp_scalar_t *k0; const stsp_scalar_t *L;
     const stsp_scalar_t *Lambda; const stsp_scalar_t *lambda0;
-    const stsp_scalar_t *u_min; const stsp_scalar_t *u_max;%(exps)s
+    const stsp_scalar_t *u_min; const stsp_scalar_t *u_max; const stsp_scalar_t *u_hold;%(exps)s
     const stsp_bandqp_t *band_qp;
     uint32_t crc32; uint8_t problem_sha256[32];
 } stsp_table_t;

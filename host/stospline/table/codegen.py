@@ -120,6 +120,8 @@ extern const stsp_table_t {p}_table;
         _array(e, f"{p}_lambda0", table.lambda0, lit, "[n_stages][n_latch]"),
         _array(e, f"{p}_u_min", table.u_min, lit, f"[nu] lower actuator limits{v.limit_units}"),
         _array(e, f"{p}_u_max", table.u_max, lit, f"[nu] upper actuator limits{v.limit_units}"),
+        _array(e, f"{p}_u_hold", table.u_hold, lit,
+               f"[nu] safe command of a refused step{v.limit_units}"),
         *v.extra_arrays,
     ]
     source = banner + f'#include "{p}.h"\n\n' + "\n".join(arrays) + f"""
@@ -128,7 +130,7 @@ const stsp_table_t {p}_table = {{
     {n}u, {m}u, {n_latch}u, {table.n_stages}u, {table.n_ticks}u, {table.tick_hz}u,
     {p}_stage_start, {p}_stage_n_latch,
     {p}_K, {p}_k0, {p}_L, {p}_Lambda, {p}_lambda0,
-    {p}_u_min, {p}_u_max,{v.tail_pointers}
+    {p}_u_min, {p}_u_max, {p}_u_hold,{v.tail_pointers}
     0x{table_crc32(table):08X}u,
     {_sha_initializer(sha)}
 }};
@@ -169,8 +171,8 @@ def _float32_variant(table, p: str) -> _Variant:
         ]
         band = f"&{p}_band_qp"
     layout = ("/* Tables in flash; layout K[tick][i*NX + j], k0[tick][i], L[tick][i*N_LATCH + c],\n"
-              " * Lambda[stage][c*NX + j], lambda0[stage][c], u_min[i], u_max[i] (see stsp_controller.h;\n"
-              " * +-3.4028235e+38f = +-FLT_MAX: unlimited). */")
+              " * Lambda[stage][c*NX + j], lambda0[stage][c], u_min[i], u_max[i], u_hold[i] (see\n"
+              " * stsp_controller.h; +-3.4028235e+38f = +-FLT_MAX: unlimited). */")
     return _Variant("", f"BAND_ROWS {q}u", layout, "stsp_f32_t", _f32_literal, "",
                     "", extra, SCALAR_FLOAT32, f" {band},")
 

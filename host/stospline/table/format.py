@@ -8,6 +8,7 @@ Layout (all row-major, float32, padded to ``n_latch`` multipliers with zeros)::
     Lambda[stage][c][j]  (n_stages, n_latch, n)   latch map  v = Lambda x + lambda0
     lambda0[stage][c]    (n_stages, n_latch)
     u_min[i], u_max[i]   (m,)               actuator limits (+-FLT_MAX: unlimited)
+    u_hold[i]            (m,)               the safe command of a refused step
     band_qp (optional)                      the band dual re-solved at the t0 latch (BandQP)
 
 At tick ``j`` (time ``t0 + j / tick_hz``) the controller applies
@@ -91,8 +92,9 @@ class GainTable(TableShape):
     """Quantized, per-tick gains of one design (see the module docstring for the layout).
 
     ``u_min``/``u_max`` are optional: ``None`` (the default) means unlimited, stored as
-    -FLT_MAX/FLT_MAX. Given limits must satisfy ``u_min <= 0 <= u_max`` (the firmware's safe
-    hold value, all zeros, has to be a valid command); the firmware refuses other tables.
+    -FLT_MAX/FLT_MAX. ``u_hold`` (default zeros) is the command the firmware writes on every
+    refused step; it must satisfy ``u_min <= u_hold <= u_max`` (the firmware refuses other
+    tables).
     """
     name: str
     tick_hz: int
@@ -108,10 +110,11 @@ class GainTable(TableShape):
     u_min: np.ndarray | None = None
     u_max: np.ndarray | None = None
     band_qp: BandQP | None = None
+    u_hold: np.ndarray | None = None
 
     def __post_init__(self):
         m = self.K.shape[1]
-        for name, default in (("u_min", -F32_MAX), ("u_max", F32_MAX)):
+        for name, default in (("u_min", -F32_MAX), ("u_max", F32_MAX), ("u_hold", 0.0)):
             val = getattr(self, name)
             arr = (np.full(m, default, dtype=np.float32) if val is None
                    else np.asarray(val, dtype=np.float32).reshape(-1))
@@ -120,8 +123,9 @@ class GainTable(TableShape):
             if not np.all(np.isfinite(arr)):
                 raise ValueError(f"{name} must be finite (use +-FLT_MAX for unlimited)")
             object.__setattr__(self, name, arr)
-        if np.any(self.u_min > 0) or np.any(self.u_max < 0):
-            raise ValueError("actuator limits must satisfy u_min <= 0 <= u_max")
+        if np.any(self.u_min > self.u_hold) or np.any(self.u_max < self.u_hold):
+            raise ValueError("the safe command and the limits must satisfy "
+                             "u_min <= u_hold <= u_max")
 
     def with_arrays(self, **arrays) -> "GainTable":
         """A copy with some arrays replaced (re-quantized to float32); for fault planting."""
@@ -130,7 +134,8 @@ class GainTable(TableShape):
     def quantized(self) -> "GainTable":
         """The table as the firmware stores it: every gain rounded to float32."""
         return self.with_arrays(K=self.K, k0=self.k0, L=self.L, Lambda=self.Lambda,
-                                lambda0=self.lambda0, u_min=self.u_min, u_max=self.u_max)
+                                lambda0=self.lambda0, u_min=self.u_min, u_max=self.u_max,
+                                u_hold=self.u_hold)
 
     @property
     def limited(self) -> bool:
@@ -154,7 +159,8 @@ def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = 
 
     ``quantize=False`` keeps float64 values (for checking a design before quantization).
     ``u_min``/``u_max`` (m,) are the actuator limits; ``None`` takes the problem's (its
-    ``u_min``/``u_max`` keys), unlimited when the problem has none.
+    ``u_min``/``u_max`` keys), unlimited when the problem has none. The safe command is the
+    problem's ``u_hold`` (zeros when it has none).
 
     When more multipliers are latched than there are states (joint or band designs with many
     knots), the table latches the state instead: ``L v = (L Lambda) x_latch + L lambda0``, so
@@ -183,7 +189,7 @@ def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = 
     return GainTable(problem.name, int(tick_hz), problem.t0, start,
                      np.array([g[3].shape[0] for g in stages], dtype=np.uint16),
                      cast(K), cast(k0), cast(L), cast(Lam), cast(lam0), problem.source_sha256,
-                     u_min, u_max, band_qp)
+                     u_min, u_max, band_qp, getattr(problem, "u_hold", None))
 
 
 def _latch_state(stages: list[tuple], n: int) -> list[tuple]:
@@ -261,7 +267,8 @@ def table_crc32(table: GainTable) -> int:
 
     The firmware computes the same value in ``stsp_table_crc32``: the dimensions and tick rate
     as u32, ``stage_start`` as u32, ``stage_n_latch`` as u32, then K, k0, L, Lambda, lambda0 (these
-    three only when n_latch > 0), u_min, u_max as IEEE-754 binary32 bit patterns, each little-endian.
+    three only when n_latch > 0), u_min, u_max, u_hold as IEEE-754 binary32 bit patterns, each
+    little-endian.
     A fixed-point table (`stospline.table.qformat.FixedPointTable`) adds its scalar kind as u32 after the
     tick rate, stores the arrays as little-endian int16 (Q15) or int32 (Q31), and ends with
     x_exp, u_exp and v_exp (when n_latch > 0) as one signed byte each. Then, with a band QP (float32
@@ -275,7 +282,8 @@ def table_crc32(table: GainTable) -> int:
         head += struct.pack("<I", table.scalar_kind)
     parts = [head, np.asarray(table.stage_start, "<u4").tobytes(),
              np.asarray(table.stage_n_latch, "<u4").tobytes()]
-    arrays = [table.K, table.k0, table.L, table.Lambda, table.lambda0, table.u_min, table.u_max]
+    arrays = [table.K, table.k0, table.L, table.Lambda, table.lambda0, table.u_min, table.u_max,
+              table.u_hold]
     if arith == "float32":
         parts += [np.asarray(a, "<f4").tobytes() for a in arrays]
     else:

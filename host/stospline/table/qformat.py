@@ -100,6 +100,7 @@ class FixedPointTable(TableShape):
     lambda0: np.ndarray
     u_min: np.ndarray
     u_max: np.ndarray
+    u_hold: np.ndarray
     x_exp: np.ndarray
     u_exp: np.ndarray
     v_exp: np.ndarray
@@ -230,6 +231,8 @@ def quantize_table(table: GainTable, arith: str, x_range, *, name: str | None = 
     v_exp = _exponent(r_v, n + 1, F)
     sv = np.ldexp(1.0, v_exp)
     r_u = (np.abs(k0) + np.abs(K) @ sx + (np.abs(L) @ sv if n_latch else 0.0)).max(axis=0)
+    # The safe command must be representable too (a hover thrust may exceed every command).
+    r_u = np.maximum(r_u, 2.0 * np.abs(np.asarray(table.u_hold, dtype=float)))
     u_exp = _exponent(r_u, n + n_latch + 1, F)
     for what, e in (("state", x_exp), ("command", u_exp), ("multiplier", v_exp)):
         if e.size and np.abs(e).max() > EXP_MAX:
@@ -255,12 +258,14 @@ def quantize_table(table: GainTable, arith: str, x_range, *, name: str | None = 
     scale_u = np.ldexp(1.0, F - u_exp)
     u_min = np.where(lo <= -F32_MAX, -one, np.maximum(-one, np.ceil(lo * scale_u))).astype(np.int64)
     u_max = np.where(hi >= F32_MAX, qmax, np.minimum(qmax, np.floor(hi * scale_u))).astype(np.int64)
+    # The safe command to the nearest unit, kept within the rounded-inward limits.
+    u_hold = np.clip(_rhu(np.asarray(table.u_hold, float) * scale_u), u_min, u_max).astype(np.int64)
 
     # Error bound (module docstring): per tick and input, in command LSBs.
     stage_of = np.searchsorted(table.stage_start, np.arange(table.n_ticks), side="right") - 1
     ft = FixedPointTable(name or f"{table.name}_{arith}", arith, table.tick_hz, table.t0,
                     np.asarray(table.stage_start, np.uint32), np.asarray(table.stage_n_latch, np.uint16),
-                    Kq, k0q, Lq, Lamq, lam0q, u_min, u_max, x_exp.astype(np.int8),
+                    Kq, k0q, Lq, Lamq, lam0q, u_min, u_max, u_hold, x_exp.astype(np.int8),
                     u_exp.astype(np.int8), v_exp.astype(np.int8), table.problem_sha256,
                     table, x_range, np.zeros((table.n_ticks, m)))
     eps = 0.5 + np.abs(lam0q - lam0s) + np.abs(Lamq - Lams).sum(axis=2)        # (S, n_latch)

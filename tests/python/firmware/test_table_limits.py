@@ -23,18 +23,22 @@ def _table_a(**limits) -> GainTable:
 
 def test_default_limits_are_unlimited_and_pinned_crc():
     t = _table_a()
-    assert FORMAT_VERSION == 3
+    assert FORMAT_VERSION == 4
+    np.testing.assert_array_equal(t.u_hold, np.float32([0.0]))
     np.testing.assert_array_equal(t.u_min, np.float32([-F32_MAX]))
     np.testing.assert_array_equal(t.u_max, np.float32([F32_MAX]))
     assert not t.limited
     # The same constant is pinned in tests/c/test_controller.c (TABLE_A_CRC32).
-    assert table_crc32(t) == 0x144FE504
+    assert table_crc32(t) == 0x6C34DDB7
     assert table_crc32(_table_a(u_min=[-1.0], u_max=[1.0])) != table_crc32(t)
+    assert table_crc32(_table_a(u_hold=[0.5])) != table_crc32(t)      # the CRC covers u_hold
 
 
 @pytest.mark.parametrize("limits, message", [
-    (dict(u_min=[0.5]), "u_min <= 0 <= u_max"),
-    (dict(u_max=[-0.5]), "u_min <= 0 <= u_max"),
+    (dict(u_min=[0.5]), "u_min <= u_hold <= u_max"),
+    (dict(u_max=[-0.5]), "u_min <= u_hold <= u_max"),
+    (dict(u_min=[0.5], u_hold=[0.25]), "u_min <= u_hold <= u_max"),
+    (dict(u_hold=[np.nan]), "finite"),
     (dict(u_min=[np.nan]), "finite"),
     (dict(u_max=[np.inf]), "finite"),
     (dict(u_min=[-1.0, -1.0]), "one entry per input"),
@@ -42,6 +46,25 @@ def test_default_limits_are_unlimited_and_pinned_crc():
 def test_invalid_limits_are_refused(limits, message):
     with pytest.raises(ValueError, match=message):
         _table_a(**limits)
+
+
+def test_safe_command_through_c(robot):
+    """A minimum command (u_min > 0) with a safe command u_hold inside the limits: the C
+    controller accepts the table (its CRC equals Python's), and every refused step (NaN state,
+    a tick past the plan) commands u_hold, bit for bit."""
+    lo, hi, hold = np.float32([0.5, -2.0]), np.float32([9.0, 2.0]), np.float32([4.905, 0.25])
+    table = replace(robot.table, u_min=lo, u_max=hi, u_hold=hold)
+    ctl = build_controller(table)
+    assert ctl.lib.stsp_table_crc32(ctl.c_table) == table_crc32(table) == ctl.c_table.crc32
+    step = ctl.stepper(2)
+    X = np.float32([[np.nan, 0, 1, 0], [-5, 0, 1, 0]])
+    U, status = step(0, X)
+    assert status[0] == STATUS["ERR_NONFINITE_STATE"] and status[1] >= 0
+    np.testing.assert_array_equal(U[0], hold)
+    assert np.all((U[1] >= lo) & (U[1] <= hi))
+    U, status = step(table.n_ticks, X)
+    assert np.all(status == STATUS["ERR_TICK_RANGE"])
+    np.testing.assert_array_equal(U, np.stack([hold, hold]))
 
 
 def test_limited_robot_table_saturates_in_c(robot):
@@ -127,7 +150,7 @@ def _c_init(ctl, t: GainTable) -> int:
                                                                t.n_ticks, t.tick_hz)
     c.stage_start = ptr("uint32_t", t.stage_start, np.uint32)
     c.stage_n_latch = ptr("uint16_t", t.stage_n_latch, np.uint16)
-    for name in ("K", "k0", "L", "Lambda", "lambda0", "u_min", "u_max"):
+    for name in ("K", "k0", "L", "Lambda", "lambda0", "u_min", "u_max", "u_hold"):
         setattr(c, name, ptr("float", getattr(t, name), np.float32))
     c.crc32 = table_crc32(t)
     ctrl = ffi.new("stsp_ctrl_t *")

@@ -149,3 +149,26 @@ def test_loose_limits_reproduce_the_unlimited_numbers_exactly(tmp_path, capsys):
     free_sat, loose_sat = free.pop("saturation"), loose.pop("saturation")
     assert free_sat["u_low"] == loose_sat["u_low"] and free_sat["u_high"] == loose_sat["u_high"]
     assert loose == free
+
+
+def test_safe_command_u_hold_from_the_file_to_the_firmware(capsys):
+    """``u_hold``: a minimum command (u_min > 0, a thrust that must never be cut) is allowed
+    once the safe command is given; it reaches the table, the C text, the summary and the
+    written-back file, and the compiled controller commands it on a refused step."""
+    text = with_limits(TWO_INPUTS, "u_min = [0.5, -1]\nu_max = [9, 1]\nu_hold = [4.9, 0]")
+    p = parse(text)
+    np.testing.assert_array_equal(p.u_hold, [4.9, 0.0])
+    assert parse(p.to_toml()).u_hold.tolist() == [4.9, 0.0]
+    d = design_problem(p)
+    np.testing.assert_array_equal(d.table.u_hold, np.float32([4.9, 0.0]))
+    _, source = generate_c(d.table)
+    assert f"static const stsp_f32_t {p.name}_u_hold[2] = {{" in source
+    assert design_summary(d)["actuator_limits"]["u_hold"] == pytest.approx([4.9, 0.0])
+    from stospline.sim.controller import STATUS, build_controller
+    step = build_controller(d.table).stepper(1)
+    U, status = step(0, np.float32([[np.nan, 0.0]]))
+    assert status[0] == STATUS["ERR_NONFINITE_STATE"]
+    np.testing.assert_array_equal(U[0], np.float32([4.9, 0.0]))
+    # Without u_hold the same limits are refused: 0 is not a valid command for input 0.
+    with pytest.raises(Exception, match="give u_hold"):
+        parse(with_limits(TWO_INPUTS, "u_min = [0.5, -1]\nu_max = [9, 1]"))

@@ -31,9 +31,10 @@
  * VMLS.F32: chained, not fused (the product is rounded, then the difference), so the same
  * operations in the same order; define STSP_NO_VFP_MAC for separate VMUL and VSUB.
  *
- * Buffers: stsp_ctrl_t holds STSP_MAX_LATCH scalars for v, 24 bytes of state and the
- * validated copy of the table header (stsp_header_t); on 32-bit targets 164 bytes with the
- * default STSP_MAX_LATCH = 16 (float32), 116 (Q15), 148 (Q31). stsp_step() uses
+ * Buffers: stsp_ctrl_t holds STSP_MAX_LATCH scalars for v, STSP_MAX_NU for the copy of
+ * u_hold, 24 bytes of state and the validated copy of the table header (stsp_header_t); on
+ * 32-bit targets 232 bytes with the default STSP_MAX_LATCH = STSP_MAX_NU = 16 (float32), 152
+ * (Q15), 216 (Q31). stsp_step() uses
  * STSP_MAX_LATCH + STSP_MAX_NU scalars of stack, plus, on the stage-0 latch of a band table
  * only, the band solver's work area and multipliers (sizeof(stsp_bandqp_work_t) +
  * STSP_BANDQP_MAX doubles, about 0.8 KB with STSP_BANDQP_MAX = 8; docs/guide/firmware.md). The
@@ -255,7 +256,6 @@ typedef struct {
     const stsp_scalar_t *L;
     const stsp_scalar_t *u_min;
     const stsp_scalar_t *u_max;
-    const stsp_scalar_t *u_hold;
     const stsp_scalar_t *Lambda;
     const stsp_scalar_t *lambda0;
     const uint32_t *stage_start;
@@ -273,6 +273,7 @@ typedef struct {
     uint16_t nu;
     uint16_t n_latch;
     uint16_t n_stages;
+    const stsp_scalar_t *u_hold; /* last: the ordinary tick's offsets stay as they were */
 } stsp_header_t;
 
 /**
@@ -290,9 +291,10 @@ typedef struct {
                                   (not updated by other statuses) */
     uint16_t limited;        /**< nonzero if the table has a finite limit (private) */
     stsp_scalar_t v[STSP_MAX_LATCH];
-    stsp_scalar_t hold[STSP_MAX_NU]; /**< the table's u_hold, copied at init (private): a
-                                          refused step writes it even if the table changed */
     stsp_header_t checked;   /**< the validated table header (private) */
+    stsp_scalar_t hold[STSP_MAX_NU]; /**< the table's u_hold, copied at init (private): a
+                                          refused step writes it even if the table changed;
+                                          last, so the ordinary tick's offsets are unchanged */
 } stsp_ctrl_t;
 
 /**

@@ -1,13 +1,14 @@
 """Continuous-time stage-wise design (the paper's Proposition 3, corrected per docs/theory/math.md).
 
-Backward on each stage ``[t_k, t_{k+1}]``, with ``K = R^-1 (P B + S)'`` and ``Acl = A - B K``::
+Backward on each stage ``[t_k, t_{k+1}]``, with ``K = R^-1 (P B + S)'`` and ``Acl = A - B K``
+(drift ``A x + B u + f``)::
 
     -P' = A'P + PA + Q + Pi(P) - (PB+S) R^-1 (PB+S)'      Pi(P)_kl = tr(G_k' P G_l)
-    -p' = Acl' p + q - K' r
-    -c' = rho - (B'p + r)' R^-1 (B'p + r)
+    -p' = Acl' p + q - K' r + P f
+    -c' = rho - (B'p + r)' R^-1 (B'p + r) + 2 p'f
     -N' = Acl' N                     N(t_{k+1}) = C2'
      W' = -N' B R^-1 B' N            W(t_{k+1}) = 0
-     m' = N' B R^-1 (B'p + r)        m(t_{k+1}) = -zeta
+     m' = N' B R^-1 (B'p + r) - N'f  m(t_{k+1}) = -zeta
 
 At the stage start the controller latches ``v = W^-1 (N' x + m)`` and applies
 ``u = -K x - R^-1 (B'p + r) - R^-1 B' N v`` until the next stage start.
@@ -138,10 +139,15 @@ def _stage_rhs(stage: Stage, n: int, p: int, noise: bool):
         g = B.T @ pv + r
         dp = -(Acl.T @ pv + q - K.T @ r)
         dc = -(rho - g @ Rinv @ g)
+        if st.f is not None:          # the drift f: E d(x'Px + 2p'x) gains 2(Px + p)'f dt
+            dp -= P @ st.f
+            dc -= 2.0 * (pv @ st.f)
         dN = -(Acl.T @ N)
         BtN = B.T @ N
         dW = -(BtN.T @ Rinv @ BtN)
         dm = BtN.T @ Rinv @ g
+        if st.f is not None:          # ... and E d(N'x) gains N'f dt
+            dm = dm - N.T @ st.f
         return np.concatenate([dP.ravel(), dp, [dc], dN.ravel(), dW.ravel(), dm])
 
     return rhs

@@ -57,6 +57,8 @@ def augmented_drift(stage: Stage, n_const: int) -> np.ndarray:
     Ahat = np.zeros((d, d))
     Ahat[:n, :n] = stage.A
     Ahat[:n, n:n + m] = stage.B   # u is the first block of the constants
+    if stage.f is not None and n_const > m:
+        Ahat[:n, -1] = stage.f    # the drift f multiplies the constant 1, the last component
     return Ahat
 
 

@@ -117,7 +117,8 @@ def _tick_data(stage: Stage, h: float) -> _TickData:
 def _stage_key(stage: Stage, h: float) -> bytes:
     return b"".join(np.ascontiguousarray(a, float).tobytes() for a in
                     (stage.A, stage.B, stage.noise_tensor, stage.Q, stage.S, stage.R,
-                     stage.q, stage.r, np.array([stage.rho, h])))
+                     stage.q, stage.r, np.array([stage.rho, h]),
+                     np.zeros(0) if stage.f is None else stage.f))
 
 
 def _stage_ticks_numpy(td: _TickData, V, N, W, mv, T: int, m: int):

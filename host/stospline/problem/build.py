@@ -35,7 +35,8 @@ def problem_from_arrays(A: Any, B: Any, Q: Any = None, R: Any = None, *, x0: Any
                         knots: Iterable[Mapping], tick_hz: int, t0: float = 0.0,
                         name: str = "problem", noise: Any = None, S: Any = None,
                         q: Any = None, r: Any = None, rho: float | None = None,
-                        u_min: Any = None, u_max: Any = None,
+                        u_min: Any = None, u_max: Any = None, u_hold: Any = None,
+                        f: Any = None, faults: Mapping | None = None,
                         design: Mapping | None = None, plot: Mapping | None = None,
                         stages: Iterable[Mapping] | None = None,
                         regions: Iterable[Mapping] | None = None) -> Problem:
@@ -45,7 +46,9 @@ def problem_from_arrays(A: Any, B: Any, Q: Any = None, R: Any = None, *, x0: Any
     Parameters
     ----------
     A, B : array-like, (n, n) and (n, m)
-        Drift ``dx = (A x + B u) dt + ...``.
+        Drift ``dx = (A x + B u + f) dt + ...``.
+    f : array-like (n,), optional
+        The affine drift (gravity, an offset), as the file's ``[dynamics] f``.
     Q, R : array-like, (n, n) and (m, m)
         Running cost ``x'Qx + u'Ru`` (Q defaults to zero; R is required).
     x0 : array-like, (n,)
@@ -57,7 +60,7 @@ def problem_from_arrays(A: Any, B: Any, Q: Any = None, R: Any = None, *, x0: Any
         Controller tick rate; every stage must last a whole number of ticks.
     noise : array-like (n, n, mz), or a list of ``{"state": i, "G": ...}`` /
         ``{"input": j, "G": ...}`` entries as in the file. None: no noise.
-    S, q, r, rho, u_min, u_max, design, plot, stages, regions
+    S, q, r, rho, u_min, u_max, u_hold, faults, design, plot, stages, regions
         As the file's keys of the same names.
 
     The problem's ``source_sha256`` is that of its TOML form (`problem_to_toml`), so the
@@ -87,6 +90,8 @@ def problem_from_arrays(A: Any, B: Any, Q: Any = None, R: Any = None, *, x0: Any
     (1, 1, 1)
     """
     dynamics: dict = {"A": A, "B": B}
+    if f is not None:
+        dynamics["f"] = f
     if noise is not None:
         is_tensor = not (isinstance(noise, (list, tuple)) and noise
                          and all(isinstance(e, Mapping) for e in noise))
@@ -95,7 +100,8 @@ def problem_from_arrays(A: Any, B: Any, Q: Any = None, R: Any = None, *, x0: Any
                                           ("rho", rho)) if value is not None}
     doc: dict = {"name": name, "t0": t0, "x0": x0, "tick_hz": tick_hz,
                  "dynamics": dynamics, "cost": cost, "knots": list(knots)}
-    for key, value in (("u_min", u_min), ("u_max", u_max), ("design", design), ("plot", plot),
+    for key, value in (("u_min", u_min), ("u_max", u_max), ("u_hold", u_hold),
+                       ("faults", faults), ("design", design), ("plot", plot),
                        ("stages", stages), ("regions", regions)):
         if value is not None:
             doc[key] = dict(value) if isinstance(value, Mapping) else list(value)

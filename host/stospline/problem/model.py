@@ -23,7 +23,8 @@ class Stage:
 
     The diffusion is ``sum_i x_i G[i] dZ + sum_j u_j H[j] dZ``: ``G[i]`` (n x mz) multiplies
     the state component ``x_i``, ``H[j]`` (n x mz) the input ``u_j`` (None: no such noise).
-    The running cost is ``x'Qx + 2x'Su + u'Ru + 2q'x + 2r'u + rho``.
+    The running cost is ``x'Qx + 2x'Su + u'Ru + 2q'x + 2r'u + rho``. The drift is
+    ``A x + B u + f`` (``f`` None: zero), e.g. gravity.
     """
     A: np.ndarray
     B: np.ndarray
@@ -35,6 +36,8 @@ class Stage:
     r: np.ndarray
     rho: float
     H: np.ndarray | None = None   # shape (m, n, mz)
+    # The affine drift f of dX = (A X + B u + f) dt + ... (n,); None: no drift.
+    f: np.ndarray | None = None
     # Time-varying data: t -> {field: value at t} for the fields that vary (None: constant).
     varying: Callable[[float], dict] | None = field(default=None, compare=False)
     # What the stage was parsed from (samples of time-varying data, tracking), so that
@@ -62,7 +65,7 @@ class Stage:
             varying = lambda t: {k: v for k, v in outer(t).items()  # noqa: E731
                                  if k not in ("G", "H")}
         return Stage(self.A, self.B, np.zeros_like(self.G), self.Q, self.S, self.R,
-                     self.q, self.r, self.rho, None, varying)
+                     self.q, self.r, self.rho, None, self.f, varying)
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ _TOP_KEYS = {"name", "t0", "x0", "tick_hz", "u_min", "u_max", "u_hold", "dynamic
 _DESIGN_OPTIONS = {"mode": ("stagewise", "joint"), "discretization": ("exact-zoh", "continuous"),
                    "arith": ARITHS}
 _TOP_REQUIRED = {"name", "x0", "tick_hz", "dynamics", "cost", "knots"}
-_DYN_KEYS, _DYN_REQUIRED = {"A", "B", "noise"}, {"A", "B"}
+_DYN_KEYS, _DYN_REQUIRED = {"A", "B", "f", "noise"}, {"A", "B"}
 _COST_KEYS, _COST_REQUIRED = {"Q", "S", "R", "q", "r", "rho", "tracking"}, {"R"}
 _C_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _C_KEYWORDS = frozenset(
@@ -311,6 +311,8 @@ def _parse_stage(dyn: _Layers, cost: _Layers, n: int,
                                    f"every stage must have the same number of inputs m")
     value, path = _pick(dyn, "noise")
     noise = [] if path is None else _parse_noise(value, path, n, m)
+    value, f_path = _pick(dyn, "f")
+    drift = {} if f_path is None else {"f": _series_or(value, f_path, _vector, n, _N_IS_LEN_X0)}
 
     def optional(key, parse, default, *args):
         value, path = _pick(cost, key)
@@ -352,7 +354,8 @@ def _parse_stage(dyn: _Layers, cost: _Layers, n: int,
     value, tpath = _pick(cost, "tracking")
     if tpath is not None:
         tracking = _parse_tracking(value, tpath, n)
-    return _StageData(dict(A=A, B=B, Q=Q, S=S, R=R, q=q, r=r, rho=rho), B_path, noise, tracking)
+    return _StageData(dict(A=A, B=B, Q=Q, S=S, R=R, q=q, r=r, rho=rho, **drift), B_path, noise,
+                      tracking)
 
 
 def _parse_tracking(value: Any, path: str, n: int) -> tuple:

@@ -79,6 +79,8 @@ def _stage_tables(stage: Stage, k: int, mz: int) -> tuple[dict, dict]:
     """``(dynamics, cost)`` tables of one stage."""
     if stage.varying is None:
         dyn = {"A": stage.A, "B": stage.B, "noise": _noise_of_arrays(stage, mz)}
+        if stage.f is not None:
+            dyn["f"] = stage.f
         cost = {"Q": stage.Q, "S": stage.S, "R": stage.R, "q": stage.q, "r": stage.r,
                 "rho": float(stage.rho)}
         return dyn, cost
@@ -91,6 +93,8 @@ def _stage_tables(stage: Stage, k: int, mz: int) -> tuple[dict, dict]:
     dyn = {"A": f["A"], "B": f["B"],
            "noise": [{"state": i, "G": g} if i < n else {"input": i - n, "G": g}
                      for i, g, _ in origin.noise]}
+    if "f" in f:
+        dyn["f"] = f["f"]
     cost = {key: f[key] for key in ("Q", "S", "R", "q", "r", "rho")}
     if origin.tracking is not None:
         C, Qy, y0 = origin.tracking
@@ -104,7 +108,9 @@ def _same(a: Stage, b: Stage) -> bool:
         return True
     if a.varying is not None or b.varying is not None:
         return False
-    if (a.H is None) != (b.H is None):
+    if (a.H is None) != (b.H is None) or (a.f is None) != (b.f is None):
+        return False
+    if a.f is not None and not np.array_equal(a.f, b.f):
         return False
     return all(np.array_equal(getattr(a, f), getattr(b, f))
                for f in ("A", "B", "G", "Q", "S", "R", "q", "r", "rho")) and (

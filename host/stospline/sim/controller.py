@@ -344,9 +344,10 @@ class CompiledController:
 
         return into
 
-    def plant(self, stage, Ad, Bd, dt: float, substeps: int):
+    def plant(self, stage, Ad, Bd, fd, dt: float, substeps: int):
         """The plant of one stage for `plant_tick`/`tick` (a ``harness_plant_t`` that keeps
-        its arrays alive): step matrices Ad, Bd over dt, `substeps` steps per tick."""
+        its arrays alive): step matrices Ad, Bd and drift fd (None: none) over dt, `substeps`
+        steps per tick."""
         ffi = self.ffi
         GH = stage.noise_tensor                              # multipliers [x; u]
         nz = np.argwhere(GH != 0)                            # rows (i, a, k)
@@ -364,6 +365,11 @@ class CompiledController:
             ffi.cast("const double *", ffi.from_buffer(a)) for a in keep[1:])
         pl.rho = float(stage.rho)
         pl.state_cost = int(bool(np.any(stage.Q) or np.any(stage.S) or np.any(stage.q)))
+        if fd is None:
+            pl.fd = ffi.NULL
+        else:
+            keep.append(np.ascontiguousarray(fd, dtype=float))
+            pl.fd = ffi.cast("const double *", ffi.from_buffer(keep[-1]))
         return _Plant(pl, keep)
 
     def plant_tick(self, plant, dZ: np.ndarray, U: np.ndarray, X: np.ndarray,

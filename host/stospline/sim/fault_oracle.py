@@ -14,8 +14,8 @@ covariances known), and everything the loop does is a linear map of ``z_e``:
 
 so ``w = [x; u; 1]`` moves by the exact one-tick map of the plant (the faulty plant: model
 mismatch is just another plant), and the passengers ``a = [c (delayed); v]``, which the plant
-does not touch, follow the mean map ``E x+ a' = [Ad, Bd] E [x; u] a'``. Quantization and missed
-ticks are not linear: `FaultsNotExact`.
+does not touch, follow the mean map ``E x+ a' = [Ad, Bd, fd] E [x; u; 1] a'``. Quantization
+and missed ticks are not linear: `FaultsNotExact`.
 """
 from __future__ import annotations
 
@@ -129,7 +129,7 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
             Ta = np.vstack(([Fc] if delayed else []) + [np.eye(D)[vs]])   # passengers [c; v]
             TM = Tw @ Me
             Mw = TM @ Tw.T
-            Mwa = TM[:n + m] @ Ta.T                           # E [x; u] a'
+            Mwa = TM @ Ta.T                                   # E [x; u; 1] a'
             rec.command(Mw, n, m)
             Mw, dJ, Fmean = _plant_tick(stage, maps, Mw, table.t0 + j * h, h, n, m)
             J += dJ

@@ -90,12 +90,16 @@ class MonteCarloResult:
         return np.cov(self.knot_states[k], rowvar=False)
 
 
-def _zoh(A: np.ndarray, B: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    n, m = B.shape
-    big = np.zeros((n + m, n + m))
-    big[:n, :n], big[:n, n:] = A, B
+def _zoh(stage, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """``(Ad, Bd, fd)`` of one plant step of length dt: ``x+ = Ad x + Bd u + fd`` in the mean
+    (fd None without a drift)."""
+    n, m = stage.B.shape
+    big = np.zeros((n + m + 1, n + m + 1))
+    big[:n, :n], big[:n, n:n + m] = stage.A, stage.B
+    if stage.f is not None:
+        big[:n, -1] = stage.f
     E = expm(big * dt)
-    return E[:n, :n], E[:n, n:]
+    return E[:n, :n], E[:n, n:n + m], (None if stage.f is None else E[:n, -1])
 
 
 # Paths per random stream. Block 0 draws from the seed's own stream, block i >= 1 from child
@@ -266,8 +270,8 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
     fault_rng = np.random.default_rng(fault_seed(seed)) if draws is not None else None
     for k in range(table.n_stages):
         st = plant_of.stages[k]
-        plant = None if st.varying is not None else controller.plant(st, *_zoh(st.A, st.B, dt),
-                                                                      dt, substeps)
+        plant = (None if st.varying is not None
+                 else controller.plant(st, *_zoh(st, dt), dt, substeps))
         mz = st.G.shape[2]
         dZ = np.empty((paths, substeps, mz))       # standard normal; the C scales by sqrt(dt)
         fill_dZ = normals(dZ)
@@ -391,7 +395,7 @@ def _plant_tick(controller, problem, plant, stage, j, h, dt, substeps, dZ, U, X,
         return
     for i in range(substeps):
         sd = stage.at(problem.t0 + j * h + (i + 0.5) * dt)
-        one = controller.plant(sd, *_zoh(sd.A, sd.B, dt), dt, 1)
+        one = controller.plant(sd, *_zoh(sd, dt), dt, 1)
         controller.plant_tick(one, np.ascontiguousarray(dZ[:, i:i + 1]), U, X, cost)
 
 

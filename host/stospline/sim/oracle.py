@@ -84,24 +84,28 @@ def _tick_varying(stage, Mw: np.ndarray, t0: float, h: float, n: int, m: int,
         M = y[:d * d].reshape(d, d)
         Ah = np.zeros((d, d))
         Ah[:n, :n], Ah[:n, n:n + m] = sd.A, sd.B
+        if sd.f is not None:
+            Ah[:n, -1] = sd.f
         AM = Ah @ M
         G = sd.noise_tensor                                  # multipliers [x; u]
         dM = AM + AM.T
         dM[:n, :n] += np.einsum("ij,iak,jbk->ab", M[:n + m, :n + m], G, G)
         Lb = running_cost_matrix(sd, n, m, d, n)
-        F = y[d * d + 1:].reshape(n, n + m)
-        dF = sd.A @ F
-        dF[:, n:] += sd.B
+        F = y[d * d + 1:].reshape(n, d)
+        dF = sd.A @ F                                        # d/dt of E x = F [x0; u; 1]
+        dF[:, n:n + m] += sd.B
+        if sd.f is not None:
+            dF[:, -1] += sd.f
         return np.concatenate([dM.ravel(), [np.sum(Lb * M)], dF.ravel()])
 
-    F0 = np.hstack([np.eye(n), np.zeros((n, m))])
+    F0 = np.hstack([np.eye(n), np.zeros((n, m + 1))])
     from scipy.integrate import solve_ivp   # lazy: a slow import the CLI rarely needs
     res = solve_ivp(rhs, (t0, t0 + h),
                     require_finite(np.concatenate([Mw.ravel(), [0.0], F0.ravel()])),
                     method="DOP853", rtol=rtol, atol=atol)
     y = res.y[:, -1]
     M = y[:d * d].reshape(d, d)
-    return 0.5 * (M + M.T), float(y[d * d]), y[d * d + 1:].reshape(n, n + m)
+    return 0.5 * (M + M.T), float(y[d * d]), y[d * d + 1:].reshape(n, d)
 
 
 def _plant_tick(stage, maps, Mw: np.ndarray, t: float, h: float, n: int, m: int):
@@ -159,8 +163,9 @@ def _tick_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int):
     prop = (exact_tick(stage, m + 1, h) if propagator == "exact"
             else euler_tick(stage, m + 1, h, substeps))
     cost_row = running_cost_matrix(stage, n, m, n + m + 1, n).ravel() @ prop.Psi
-    # Mean map of one tick: E x+ = Ad x + Bd u (exact for both propagators).
-    Fmean = expm(augmented_drift(stage, m) * h)[:n]
+    # Mean map of one tick: E x+ = Ad x + Bd u + fd = Fmean [x; u; 1] (exact for both
+    # propagators).
+    Fmean = expm(augmented_drift(stage, m + 1) * h)[:n]
     if len(_MAPS) >= _MAPS_MAX:
         _MAPS.clear()
     _MAPS[key] = (stage, (prop, cost_row, Fmean), {})
@@ -175,6 +180,10 @@ def _packed_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int
         from stospline.design.kernels import pack_oracle_maps
         extra["packed"] = pack_oracle_maps(prop.Phi, cost_row, n)
     return extra["packed"]
+
+
+def _has_drift(problem: Problem) -> bool:
+    return any(st.f is not None for st in problem.stages)
 
 
 def _c_kernel():
@@ -197,8 +206,8 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
 
     The augmented state is ``y = [x; v; 1]``. Over a tick, ``E xx'`` depends only on the
     moments of ``w = [x; u; 1]`` (u = F y is held; v enters neither the dynamics nor the
-    cost), and ``E x v'`` follows the mean map ``E x+ v' = [Ad, Bd] E [x; u] v'``; so each tick
-    costs a small fixed map however many multipliers are latched.
+    cost), and ``E x v'`` follows the mean map ``E x+ v' = [Ad, Bd, fd] E [x; u; 1] v'``; so
+    each tick costs a small fixed map however many multipliers are latched.
 
     Parameters
     ----------
@@ -259,11 +268,13 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         Tw[:n, :n] = np.eye(n)
         Tw[-1, -1] = 1.0
         ticks = range(int(table.stage_start[k]), int(table.stage_start[k + 1]))
-        kernel = None if varying or path else _c_kernel()
+        # The C loop carries the mean map without the constant column: not with a drift.
+        kernel = None if varying or path or _has_drift(problem) else _c_kernel()
         if kernel is not None:             # the same loop in C (oracle_kernel.c)
             sl = slice(ticks.start, ticks.stop)
             Phi_x, cost = _packed_maps(stage, n, m, h, propagator, substeps)
-            M, J = kernel(table.K[sl], table.L[sl], table.k0[sl], Phi_x, cost, maps[2], M, J)
+            M, J = kernel(table.K[sl], table.L[sl], table.k0[sl], Phi_x, cost,
+                          np.ascontiguousarray(maps[2][:, :n + m]), M, J)
             ticks = range(0)
         for j in ticks:
             Tw[n:n + m, :n] = -table.K[j]
@@ -271,7 +282,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             Tw[n:n + m, -1] = -table.k0[j]
             TM = Tw @ M                               # E w y'
             Mw = TM @ Tw.T
-            Mwv = TM[:n + m, vs]                      # E [x; u] v'
+            Mwv = TM[:, vs]                           # E [x; u; 1] v'
             rec.command(Mw, n, m)
             Mw, dJ, Fmean = _plant_tick(stage, maps, Mw, table.t0 + j * h, h, n, m)
             J += dJ
@@ -322,6 +333,8 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
             Abar = np.zeros((d, d))
             Abar[:n, :n] = sd.A
             Abar[:n] += sd.B @ F
+            if sd.f is not None:
+                Abar[:n, -1] += sd.f            # the drift multiplies the constant 1
             AM = Abar @ Mt
             # The diffusion sum_i x_i G_i + sum_j u_j H_j with u = F y is sum_i y_i Geff_i dZ.
             Geff = np.zeros((d,) + sd.G.shape[1:])

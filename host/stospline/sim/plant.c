@@ -60,6 +60,9 @@ double harness_plant_path(const harness_plant_t *pl, const double *u, const doub
             for (j = 0; j < m; ++j) {
                 acc += pl->Bd[i * m + j] * u[j];
             }
+            if (pl->fd != NULL) {
+                acc += pl->fd[i];
+            }
             xn[i] = acc;
         }
         for (k = 0; k < pl->g_count; ++k) {

@@ -2,7 +2,7 @@
  * controller (sim/controller.py) and the cffi declarations (read from this file).
  *
  * With u held over a tick, each of `substeps` steps is the exponential Euler-Maruyama step
- *     x+ = Ad x + Bd u + sum_i w_i G_i dZ,      dZ ~ N(0, dt I)  (supplied by the caller)
+ *     x+ = Ad x + Bd u + fd + sum_i w_i G_i dZ,      dZ ~ N(0, dt I)  (supplied by the caller)
  * with w = [x; u] (state noise i < n, input noise i >= n), and the running cost accumulates
  * the left-point rule dt * L(x, u). All in double. dZ arrives as standard normal numbers
  * times dz_scale (sqrt(dt)), the product taken here. The diffusion is passed as its nonzeros:
@@ -12,6 +12,7 @@ typedef struct {
     double dt;
     double dz_scale;                        /* dZ = dz_scale * (the caller's numbers) */
     const double *Ad, *Bd;                  /* (n, n), (n, m): the step's e^{A dt}, Gamma */
+    const double *fd;                       /* (n): the step's drift term, or NULL: none */
     size_t g_count;
     const size_t *g_index;
     const double *g_value;

@@ -34,7 +34,7 @@ def flash_bytes(table, arith: str = "float32") -> int:
     e = ARITH_ELEMENT_BYTES[arith]
     total = 4 * _count(S + 1) + 2 * _count(S)                       # stage_start, stage_n_latch
     total += e * (_count(T * m * n) + _count(T * m) + _count(T * m * n_latch)    # K, k0, L
-                  + _count(S * n_latch * n) + _count(S * n_latch) + 2 * _count(m))     # Lambda, lambda0, limits
+                  + _count(S * n_latch * n) + _count(S * n_latch) + 3 * _count(m))  # Lambda, lambda0, u_min/max/hold
     total += _HEADER_FIELDS + _PTR * _TABLE_POINTERS + _HEADER_TAIL
     if arith == "float32":
         band = getattr(table, "band_qp", None)

@@ -108,7 +108,9 @@ def test_fragments_change_the_minimal_file():
                        or not all(map(same_knot, problem.knots, base.knots)) or problem.options or problem.plot
                        or problem.u_min is not None or problem.mz != base.mz
                        or problem.faults.any
+                       or problem.u_hold is not None
                        or any(s.varying is not None or not np.array_equal(s.R, b.R)
+                              or s.f is not None
                               or not np.array_equal(s.A, b.A) or s.G.any()
                               for s, b in zip(problem.stages, base.stages)))
             assert changed, label(block)

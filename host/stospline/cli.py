@@ -247,7 +247,11 @@ def _report(args) -> int:
     d, mc = _monte_carlo(args, "simulate", record=REPORT_RECORD, extra_paths=sweep_paths)
     summary = simulation_summary(d, mc, seed=args.seed)
     rows = None
-    if args.fault_paths:
+    from stospline.sim.fault_sweep import sweepable
+    why_not = sweepable(d.problem, d.table)
+    if args.fault_paths and why_not:
+        progress.note(f"no fault table: {why_not}")
+    elif args.fault_paths:
         from stospline.pipeline import fault_sweep
         progress.note(f"fault table: {SWEEP_ROWS} runs of {args.fault_paths} paths")
         rows = fault_sweep(d, paths=args.fault_paths, seed=args.seed, substeps=mc.substeps,

@@ -9,7 +9,7 @@ say how the loop it runs in differs. Per tick ``j`` (``docs/guide/problem-file.m
 * with probability ``miss_probability`` the controller is not run at all and the actuator keeps
   its command;
 * with ``delay_ticks = 1`` the command computed at tick j is applied from tick j + 1 (over tick
-  0 the actuator holds 0, the firmware's safe command);
+  0 the actuator holds the safe command ``u_hold``, 0 unless the problem sets it);
 * the plant receives the applied command plus ``actuator_noise * N(0, I)``, held over the tick;
 * the plant's ``A``, ``B`` and diffusion (``G``, ``H``) are the design's times ``plant_A_scale``,
   ``plant_B_scale`` and ``plant_noise_scale`` (model mismatch).

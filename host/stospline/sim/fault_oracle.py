@@ -24,7 +24,7 @@ import numpy as np
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem
 from stospline.sim.oracle import (Moments, _knot_terms, _PathRecord, _plant_tick,
-                                  _tick_maps)
+                                  _stage_maps)
 from stospline.table.format import GainTable
 
 __all__ = ["evaluate_with_faults", "FaultsNotExact", "has_exact_oracle"]
@@ -76,7 +76,9 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
     nus = slice(d_z - 1, d_z - 1 + len(sig_x))
     etas = slice(nus.stop, nus.stop + len(sig_u))
     D = etas.stop + 1
-    z0 = np.concatenate([problem.x0, np.zeros(mp + nl), [1.0]])
+    # The actuator starts on the safe command (the firmware's u_hold, 0 unless set).
+    hold0 = np.asarray(table.u_hold, dtype=float)[:mp]
+    z0 = np.concatenate([problem.x0, hold0, np.zeros(nl), [1.0]])
     M = np.outer(z0, z0)
     noise_cov = np.diag(np.concatenate([sig_x ** 2, sig_u ** 2]))
     J = 0.0
@@ -91,9 +93,7 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
     for k in range(table.n_stages):
         stage = plant.stages[k]
         varying = stage.varying is not None
-        if varying and propagator != "exact":
-            raise ValueError("the Euler plant scheme is evaluated for time-invariant stages only")
-        maps = None if varying else _tick_maps(stage, n, m, h, propagator, substeps)
+        maps = None
         relatch = k == 0 or table.stage_n_latch[k] > 0
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             # Append this tick's noises (independent of everything so far).
@@ -131,6 +131,9 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
             Mw = TM @ Tw.T
             Mwa = TM @ Ta.T                                   # E [x; u; 1] a'
             rec.command(Mw, n, m)
+            if maps is None or varying:
+                maps = _stage_maps(stage, varying, n, m, table.t0 + j * h, h, propagator,
+                                   substeps)
             Mw, dJ, Fmean = _plant_tick(stage, maps, Mw, table.t0 + j * h, h, n, m)
             J += dJ
             Ma = Ta @ Me

@@ -22,7 +22,8 @@ from stospline.sim.montecarlo import MonteCarloResult, simulate
 from stospline.sim.oracle import Moments, evaluate_table
 from stospline.table.format import GainTable
 
-__all__ = ["FaultRow", "default_levels", "fault_table", "fault_table_markdown", "SWEEP_ROWS"]
+__all__ = ["FaultRow", "default_levels", "fault_table", "fault_table_markdown", "SWEEP_ROWS",
+           "sweepable"]
 
 SWEEP_ROWS = 12      # runs in the standard sweep (`default_levels`), for budget estimates
 
@@ -107,6 +108,16 @@ def _variance(problem: Problem, covs) -> float:
         if C is not None:
             worst = max(worst, float(np.max(np.diag(C @ covs[k] @ C.T))))
     return worst
+
+
+def sweepable(problem: Problem, table: GainTable) -> str | None:
+    """None when the harness can run faults on this design, else why not (the fault harness
+    runs float32 tables with time-invariant stage data)."""
+    if getattr(table, "arith", "float32") != "float32":
+        return "the fault harness runs float32 tables"
+    if any(st.varying is not None for st in problem.stages):
+        return "the fault harness runs time-invariant stage data (this problem's vary in time)"
+    return None
 
 
 def fault_table(problem: Problem, controller: CompiledController, *, paths: int, seed: int,

@@ -267,6 +267,8 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
     if kept:
         record_x[0] = X[:kept]
     draws = FaultDraws.of(faults, paths, n, m) if faults.any else None
+    if draws is not None:
+        draws.held[:] = np.asarray(table.u_hold, dtype=float)   # the actuator starts there
     fault_rng = np.random.default_rng(fault_seed(seed)) if draws is not None else None
     for k in range(table.n_stages):
         st = plant_of.stages[k]

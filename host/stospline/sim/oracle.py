@@ -172,6 +172,41 @@ def _tick_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int):
     return prop, cost_row, Fmean
 
 
+def _euler_varying_maps(stage, n: int, m: int, t0: float, h: float, substeps: int):
+    """``(prop, cost_row, Fmean)`` of the Monte Carlo plant scheme over the tick ``[t0, t0 +
+    h]`` of a stage whose data vary: as the harness does (`montecarlo._plant_tick`), each of
+    the `substeps` steps takes the data at its midpoint; the step maps are composed."""
+    d = n + m + 1
+    dt = h / substeps
+    Phi = np.eye(d * d)
+    cost_row = np.zeros(d * d)
+    F = np.eye(d)
+    for i in range(substeps):
+        sd = stage.at(t0 + (i + 0.5) * dt)
+        step = euler_tick(sd, m + 1, dt, 1)
+        cost_row += (running_cost_matrix(sd, n, m, d, n).ravel() @ step.Psi) @ Phi
+        Phi = step.Phi @ Phi
+        F = expm(augmented_drift(sd, m + 1) * dt) @ F
+    return _Prop(Phi), cost_row, F[:n]
+
+
+@dataclass
+class _Prop:
+    Phi: np.ndarray
+
+
+def _stage_maps(stage, varying: bool, n: int, m: int, t0: float, h: float, propagator: str,
+                substeps: int):
+    """The maps `_plant_tick` needs for the tick starting at `t0`: cached constant-stage maps,
+    the plant scheme's composed maps of a varying stage ("euler"), or None (a varying stage's
+    exact moments, integrated by `_tick_varying`)."""
+    if not varying:
+        return _tick_maps(stage, n, m, h, propagator, substeps)
+    if propagator == "euler":
+        return _euler_varying_maps(stage, n, m, t0, h, substeps)
+    return None
+
+
 def _packed_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int):
     """`kernels.pack_oracle_maps` of `_tick_maps` (cached alongside it)."""
     prop, cost_row, _ = _tick_maps(stage, n, m, h, propagator, substeps)
@@ -261,8 +296,6 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             T = _latch_transform(n, n_latch, Lam, lam0, d_y)
             M = T @ M @ T.T
         varying = stage.varying is not None
-        if varying and propagator != "exact":
-            raise ValueError("the Euler plant scheme is evaluated for time-invariant stages only")
         maps = None if varying else _tick_maps(stage, n, m, h, propagator, substeps)
         Tw = np.zeros((d_w, d_y))
         Tw[:n, :n] = np.eye(n)
@@ -284,6 +317,8 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             Mw = TM @ Tw.T
             Mwv = TM[:, vs]                           # E [x; u; 1] v'
             rec.command(Mw, n, m)
+            if varying:
+                maps = _stage_maps(stage, True, n, m, table.t0 + j * h, h, propagator, substeps)
             Mw, dJ, Fmean = _plant_tick(stage, maps, Mw, table.t0 + j * h, h, n, m)
             J += dJ
             Mxv = Fmean @ Mwv

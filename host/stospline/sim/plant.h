@@ -33,7 +33,8 @@ void harness_plant_tick(const harness_plant_t *pl, size_t paths, const double *d
 /* The loop's faults for harness_tick_faults (problem.faults.Faults): a NULL vector is no such
  * fault. Per tick the caller supplies standard normal numbers for the sensor (paths, n) and
  * the actuator (paths, m) and uniform numbers in [0, 1) for missed ticks (paths), and keeps
- * each path's actuator command (`held`, paths x m, starting at 0) across ticks. */
+ * each path's actuator command (`held`, paths x m, starting at the safe command u_hold)
+ * across ticks. */
 typedef struct {
     const double *sensor_std;     /* (n): measured x = x + sensor_std * N(0, 1) */
     const double *quantum;        /* (n): then rounded to a multiple (0: not rounded) */

@@ -49,5 +49,5 @@ def test_population_smoothing_knots():
 
 def test_coupled_axes_twelve_states_twenty_stages():
     p, d, s = _run("coupled_axes")
-    assert (p.n, p.m, len(p.knots)) == (12, 4, 20)
+    assert (p.n, p.m, len(p.knots)) == (12, 6, 20)
     assert s["verdict"]["agree"], s["verdict"]

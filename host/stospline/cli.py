@@ -256,7 +256,7 @@ def _report(args) -> int:
         progress.note(f"fault table: {SWEEP_ROWS} runs of {args.fault_paths} paths")
         rows = fault_sweep(d, paths=args.fault_paths, seed=args.seed, substeps=mc.substeps,
                            workers=args.workers, scheduler=args.scheduler)
-    page = report_html(d, mc, summary, rows)
+    page = report_html(d, mc, summary, rows, why_not if args.fault_paths else None)
     write_file(args.out, lambda tmp: Path(tmp).write_text(page, encoding="utf-8"))
     print(f"wrote {args.out}")
     return 0

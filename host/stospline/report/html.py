@@ -173,10 +173,11 @@ def _fault_table(rows) -> str:
     return "\n".join(out) + "</table>"
 
 
-def report_html(d, mc, summary: dict, fault_rows=None) -> str:
+def report_html(d, mc, summary: dict, fault_rows=None, no_fault_table: str | None = None
+                ) -> str:
     """The page for design `d` (`pipeline.Designed`), its Monte Carlo run `mc` and that
     run's `pipeline.simulation_summary`; `fault_rows` (`sim.fault_sweep.fault_table`) adds
-    the fault table."""
+    the fault table, `no_fault_table` says why there is none."""
     from stospline.sim.fault_oracle import evaluate_with_faults
     from stospline.sim.oracle import evaluate_table
     p = d.problem
@@ -225,6 +226,8 @@ def report_html(d, mc, summary: dict, fault_rows=None) -> str:
            "largest |E{C x} - value| at a knot; knot variance: the largest variance of a "
            "constrained output at a knot.</p>", _fault_table(fault_rows)]
           if fault_rows else []),
+        *([f'<p id="no-fault-table">No fault table: {html.escape(no_fault_table)}.</p>']
+          if no_fault_table and not fault_rows else []),
         "</body></html>",
     ]
     return "\n".join(parts) + "\n"

@@ -108,3 +108,14 @@ def test_report_without_the_fault_table(tmp_path):
     r = run("report", str(ROBOT), "--out", str(page), "--paths", "100", "--fault-paths", "0")
     assert r.returncode == 0, r.stderr
     assert "fault-table" not in page.read_text(encoding="utf-8")
+
+
+def test_report_says_why_there_is_no_fault_table(tmp_path):
+    """Time-varying data: the fault harness cannot run them, and the page says so instead of
+    leaving the section out silently."""
+    page = tmp_path / "report.html"
+    r = run("report", str(EXAMPLES / "investment.toml"), "--out", str(page), "--paths", "100")
+    assert r.returncode == 0, r.stderr
+    text = page.read_text(encoding="utf-8")
+    assert 'id="no-fault-table"' in text and "time-invariant" in text
+    assert '<table id="fault-table"' not in text

@@ -118,8 +118,7 @@ def _load_with_faults(args):
     given = getattr(args, "fault", None)
     if not given:
         return problem
-    parse_faults(dict(given), problem.n, problem.m, prefix="--fault ")
-    merged = {**problem.faults.as_dict(), **dict(given)}
+    merged = {**problem.faults.as_dict(), **dict(given)}    # the file's keys are valid
     return replace(problem, faults=parse_faults(merged, problem.n, problem.m,
                                                 prefix="--fault "))
 
@@ -247,8 +246,8 @@ def _report(args) -> int:
     d, mc = _monte_carlo(args, "simulate", record=REPORT_RECORD, extra_paths=sweep_paths)
     summary = simulation_summary(d, mc, seed=args.seed)
     rows = None
-    from stospline.sim.fault_sweep import sweepable
-    why_not = sweepable(d.problem, d.table)
+    from stospline.sim.montecarlo import faults_unsupported
+    why_not = faults_unsupported(d.problem, d.table)
     if args.fault_paths and why_not:
         progress.note(f"no fault table: {why_not}")
     elif args.fault_paths:

@@ -21,7 +21,8 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 from stospline.atomic import write_file  # noqa: E402
 from stospline.pipeline import design_problem, fault_sweep, plan_substeps  # noqa: E402
 from stospline.problem import load_problem  # noqa: E402
-from stospline.sim.fault_sweep import fault_table_markdown, sweepable  # noqa: E402
+from stospline.sim.fault_sweep import fault_table_markdown  # noqa: E402
+from stospline.sim.montecarlo import faults_unsupported  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -53,7 +54,7 @@ def main() -> int:
         problem = load_problem(path)
         d = design_problem(problem, **{k: v for k, v in problem.options.items()
                                        if k in ("mode", "discretization")})
-        why_not = sweepable(problem, d.table)
+        why_not = faults_unsupported(problem, d.table)
         if why_not:
             parts.append(f"### {path.relative_to(ROOT)}\n\nNo fault table: {why_not}.\n")
             continue

@@ -156,20 +156,15 @@ def _faults_text(summary: dict) -> str:
 
 
 def _fault_table(rows) -> str:
-    """The fault sweep (`sim.fault_sweep.fault_table`) as an HTML table."""
-    def g(v, fmt="{:.5g}"):
-        return "-" if v is None else fmt.format(v)
-    out = ['<table id="fault-table"><tr><th>fault</th><th>level</th><th>cost (oracle)</th>'
-           "<th>cost (MC, 95% CI)</th><th>constraint bias (oracle / MC)</th>"
-           "<th>knot variance (oracle / MC)</th><th>saturated ticks</th></tr>"]
+    """The fault sweep (`sim.fault_sweep.fault_table`) as an HTML table (the cells of
+    `fault_row_cells`; the first two, names, left-aligned)."""
+    from stospline.sim.fault_sweep import FAULT_COLUMNS, fault_row_cells
+    out = ['<table id="fault-table"><tr>' + "".join(f"<th>{html.escape(c)}</th>"
+                                                    for c in FAULT_COLUMNS) + "</tr>"]
     for r in rows:
-        out.append(f'<tr><td class="name">{html.escape(r.fault)}</td>'
-                   f'<td class="name">{html.escape(r.level)}</td><td>{g(r.oracle_cost)}</td>'
-                   f"<td>{r.mc_cost:.5g} &plusmn; {r.mc_cost_hw95:.2g}</td>"
-                   f"<td>{g(r.oracle_constraint_bias, '{:.2e}')} / "
-                   f"{r.mc_constraint_bias:.2e}</td>"
-                   f"<td>{g(r.oracle_knot_variance)} / {r.mc_knot_variance:.5g}</td>"
-                   f"<td>{100 * r.saturation:.3g}%</td></tr>")
+        cells = [html.escape(c) for c in fault_row_cells(r)]
+        out.append("<tr>" + "".join(f'<td class="name">{c}</td>' for c in cells[:2])
+                   + "".join(f"<td>{c}</td>" for c in cells[2:]) + "</tr>")
     return "\n".join(out) + "</table>"
 
 

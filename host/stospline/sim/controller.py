@@ -441,7 +441,11 @@ class FaultDraws:
     held: np.ndarray                 # (paths, m)
 
     @classmethod
-    def of(cls, faults, paths: int, n: int, m: int) -> "FaultDraws":
+    def of(cls, faults, paths: int, n: int, hold: np.ndarray) -> "FaultDraws":
+        """The draws of `faults` for `paths` paths of n states; the actuator of every path
+        starts on the safe command `hold` (m,)."""
+        m = len(hold)
+
         def vec(a):
             return np.ascontiguousarray(a, dtype=float) if np.any(a) else None
         sensor, quantum, actuator = (vec(faults.sensor_noise), vec(faults.sensor_quantum),
@@ -451,7 +455,7 @@ class FaultDraws:
                    np.empty((paths, n)) if sensor is not None else None,
                    np.empty((paths, m)) if actuator is not None else None,
                    np.empty(paths) if faults.miss_probability > 0 else None,
-                   np.zeros((paths, m)))
+                   np.tile(np.asarray(hold, dtype=float), (paths, 1)))
 
     def draw(self, rng: np.random.Generator) -> None:
         """This tick's numbers, from the faults' own stream `rng`."""

@@ -85,11 +85,23 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
     means, covs, cons = [], [], []
     rec = _PathRecord(problem.x0, path)
 
-    # The measured state, as rows over z_e.
+    # What does not change from tick to tick, as rows over z_e: the measured state; z inside
+    # z_e; the applied command without the law's part (the held one, the actuator noise);
+    # w = [x; u; 1] around its command rows; the latched multipliers.
     Sx = np.zeros((n, D))
     Sx[:, xs] = np.eye(n)
     if len(sig_x):
         Sx[:, nus] = np.eye(n)
+    keep = np.r_[0:d_z - 1, D - 1]
+    Fu_fixed = np.zeros((m, D))
+    if delayed:
+        Fu_fixed[:, ps] = np.eye(m)
+    if len(sig_u):
+        Fu_fixed[:, etas] += np.eye(m)
+    Tw = np.zeros((n + m + 1, D))
+    Tw[:n, xs] = np.eye(n)
+    Tw[-1, -1] = 1.0
+    Sv = np.eye(D)[vs]
     for k in range(table.n_stages):
         stage = plant.stages[k]
         varying = stage.varying is not None
@@ -98,7 +110,6 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             # Append this tick's noises (independent of everything so far).
             Me = np.zeros((D, D))
-            keep = np.r_[0:d_z - 1, D - 1]
             Me[np.ix_(keep, keep)] = M
             Me[d_z - 1:D - 1, d_z - 1:D - 1] = noise_cov
             if relatch and j == table.stage_start[k]:
@@ -115,18 +126,8 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
             Fc = -table.K[j].astype(float) @ Sx          # c = Fc z_e
             Fc[:, vs] -= table.L[j].astype(float)
             Fc[:, -1] -= table.k0[j].astype(float)
-            Fu = np.zeros((m, D))
-            if delayed:
-                Fu[:, ps] = np.eye(m)
-            else:
-                Fu += Fc
-            if len(sig_u):
-                Fu[:, etas] += np.eye(m)
-            Tw = np.zeros((n + m + 1, D))
-            Tw[:n, xs] = np.eye(n)
-            Tw[n:n + m] = Fu
-            Tw[-1, -1] = 1.0
-            Ta = np.vstack(([Fc] if delayed else []) + [np.eye(D)[vs]])   # passengers [c; v]
+            Tw[n:n + m] = Fu_fixed if delayed else Fu_fixed + Fc      # the applied command
+            Ta = np.vstack([Fc, Sv]) if delayed else Sv              # passengers [c; v]
             TM = Tw @ Me
             Mw = TM @ Tw.T
             Mwa = TM @ Ta.T                                   # E [x; u; 1] a'

@@ -19,11 +19,11 @@ from stospline.problem.model import Problem
 from stospline.sim.controller import CompiledController
 from stospline.sim.fault_oracle import evaluate_with_faults, has_exact_oracle
 from stospline.sim.montecarlo import MonteCarloResult, simulate
-from stospline.sim.oracle import Moments, evaluate_table
+from stospline.sim.oracle import Moments, state_range
 from stospline.table.format import GainTable
 
 __all__ = ["FaultRow", "default_levels", "fault_table", "fault_table_markdown", "SWEEP_ROWS",
-           "sweepable"]
+           "FAULT_COLUMNS", "fault_row_cells"]
 
 SWEEP_ROWS = 12      # runs in the standard sweep (`default_levels`), for budget estimates
 
@@ -46,17 +46,11 @@ class FaultRow:
     paths: int = 0
 
 
-def _state_range(problem: Problem, table: GainTable) -> np.ndarray:
-    mom = evaluate_table(problem, table, path=True)
-    r = np.max(np.abs(mom.path_mean) + 3.0 * np.sqrt(mom.path_var), axis=0)
-    return np.where(r > 0, r, 1.0)
-
-
 def default_levels(problem: Problem, table: GainTable, nominal: MonteCarloResult
                    ) -> list[tuple[str, str, Faults]]:
     """``(fault, level, Faults)`` for the standard sweep (the module docstring), starting with
     the fault-free loop."""
-    r = _state_range(problem, table)
+    r = state_range(problem, table, sigmas=3.0)
     u = np.maximum(np.abs(nominal.u_low), np.abs(nominal.u_high))
     u = np.where(np.isfinite(u) & (u > 0), u, 1.0)
     rows = [("none", "-", Faults())]
@@ -110,16 +104,6 @@ def _variance(problem: Problem, covs) -> float:
     return worst
 
 
-def sweepable(problem: Problem, table: GainTable) -> str | None:
-    """None when the harness can run faults on this design, else why not (the fault harness
-    runs float32 tables with time-invariant stage data)."""
-    if getattr(table, "arith", "float32") != "float32":
-        return "the fault harness runs float32 tables"
-    if any(st.varying is not None for st in problem.stages):
-        return "the fault harness runs time-invariant stage data (this problem's vary in time)"
-    return None
-
-
 def fault_table(problem: Problem, controller: CompiledController, *, paths: int, seed: int,
                 substeps: int, workers: int | None = None, scheduler: str | None = None,
                 levels=None) -> list[FaultRow]:
@@ -149,17 +133,24 @@ def fault_table(problem: Problem, controller: CompiledController, *, paths: int,
     return rows
 
 
-def fault_table_markdown(rows: list[FaultRow]) -> str:
-    """The table as Markdown (``-`` where there is no exact oracle)."""
+FAULT_COLUMNS = ("fault", "level", "cost (oracle)", "cost (MC, 95% CI)",
+                 "constraint bias (oracle / MC)", "knot variance (oracle / MC)",
+                 "saturated ticks")
+
+
+def fault_row_cells(r: FaultRow) -> list[str]:
+    """The text of each of `FAULT_COLUMNS` for one row (``-`` where there is no exact
+    oracle): the Markdown table and the report's HTML one."""
     def g(v, fmt="{:.5g}"):
         return "-" if v is None else fmt.format(v)
-    out = ["| fault | level | cost (oracle) | cost (MC, 95% CI) | constraint bias (oracle / MC) "
-           "| knot variance (oracle / MC) | saturated ticks |",
-           "|---|---|---|---|---|---|---|"]
-    for r in rows:
-        out.append(f"| {r.fault} | {r.level} | {g(r.oracle_cost)} | "
-                   f"{r.mc_cost:.5g} ± {r.mc_cost_hw95:.2g} | "
-                   f"{g(r.oracle_constraint_bias, '{:.2e}')} / {r.mc_constraint_bias:.2e} | "
-                   f"{g(r.oracle_knot_variance)} / {r.mc_knot_variance:.5g} | "
-                   f"{100 * r.saturation:.3g}% |")
+    return [r.fault, r.level, g(r.oracle_cost), f"{r.mc_cost:.5g} ± {r.mc_cost_hw95:.2g}",
+            f"{g(r.oracle_constraint_bias, '{:.2e}')} / {r.mc_constraint_bias:.2e}",
+            f"{g(r.oracle_knot_variance)} / {r.mc_knot_variance:.5g}",
+            f"{100 * r.saturation:.3g}%"]
+
+
+def fault_table_markdown(rows: list[FaultRow]) -> str:
+    """The table as Markdown."""
+    out = ["| " + " | ".join(FAULT_COLUMNS) + " |", "|" + "---|" * len(FAULT_COLUMNS)]
+    out += ["| " + " | ".join(fault_row_cells(r)) + " |" for r in rows]
     return "\n".join(out) + "\n"

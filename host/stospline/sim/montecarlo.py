@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 
 __all__ = ["MonteCarloResult", "simulate", "z_value", "Agreement", "compare_to_oracle",
            "BLOCK_PATHS", "block_seed", "default_workers",
-           "JointVerdict", "joint_verdict", "DETERMINISTIC_RTOL"]
+           "JointVerdict", "joint_verdict", "DETERMINISTIC_RTOL", "faults_unsupported"]
 
 
 def z_value(confidence: float, comparisons: int = 1) -> float:
@@ -134,6 +134,16 @@ def fault_seed(block: np.random.SeedSequence) -> np.random.SeedSequence:
                                   + (_FAULT_STREAM,), pool_size=block.pool_size)
 
 
+def faults_unsupported(problem: Problem, table) -> str | None:
+    """Why the harness cannot run faults around `table` on `problem`, or None: it runs them
+    in the fused C tick, for float32 tables with time-invariant stage data."""
+    if getattr(table, "arith", "float32") != "float32":
+        return "the fault harness runs float32 tables"
+    if any(st.varying is not None for st in problem.stages):
+        return "the fault harness runs time-invariant stage data (this problem's vary in time)"
+    return None
+
+
 def default_workers() -> int:
     """The cores this process may run on."""
     try:
@@ -183,8 +193,7 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
             raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
     table = controller.table
     faults = problem.faults if faults is None else faults
-    if faults.any and (getattr(table, "arith", "float32") != "float32"
-                       or any(st.varying is not None for st in problem.stages)):
+    if faults.any and faults_unsupported(problem, table):
         raise ProblemError("faults", "are simulated for float32 tables with time-invariant "
                                      "stage data only")
     counts = [min(BLOCK_PATHS, paths - start) for start in range(0, paths, BLOCK_PATHS)]
@@ -266,9 +275,7 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
     record_u = np.empty((table.n_ticks, kept, m), np.float32) if kept else None
     if kept:
         record_x[0] = X[:kept]
-    draws = FaultDraws.of(faults, paths, n, m) if faults.any else None
-    if draws is not None:
-        draws.held[:] = np.asarray(table.u_hold, dtype=float)   # the actuator starts there
+    draws = FaultDraws.of(faults, paths, n, table.u_hold) if faults.any else None
     fault_rng = np.random.default_rng(fault_seed(seed)) if draws is not None else None
     for k in range(table.n_stages):
         st = plant_of.stages[k]

@@ -20,7 +20,8 @@ from stospline.expm import expm, require_finite
 
 from stospline import progress
 from stospline.design.continuous import ContinuousDesign
-from stospline.design.moments import augmented_drift, euler_tick, exact_tick, running_cost_matrix
+from stospline.design.moments import (TickPropagator, augmented_drift, euler_tick, exact_tick,
+                                      running_cost_matrix)
 from stospline.problem.model import Problem
 from stospline.table.format import GainTable
 from stospline.table.qformat import DEFAULT_SIGMAS, scalable_ranges
@@ -179,20 +180,17 @@ def _euler_varying_maps(stage, n: int, m: int, t0: float, h: float, substeps: in
     d = n + m + 1
     dt = h / substeps
     Phi = np.eye(d * d)
+    Psi = np.zeros((d * d, d * d))
     cost_row = np.zeros(d * d)
     F = np.eye(d)
     for i in range(substeps):
         sd = stage.at(t0 + (i + 0.5) * dt)
         step = euler_tick(sd, m + 1, dt, 1)
         cost_row += (running_cost_matrix(sd, n, m, d, n).ravel() @ step.Psi) @ Phi
+        Psi += step.Psi @ Phi
         Phi = step.Phi @ Phi
         F = expm(augmented_drift(sd, m + 1) * dt) @ F
-    return _Prop(Phi), cost_row, F[:n]
-
-
-@dataclass
-class _Prop:
-    Phi: np.ndarray
+    return TickPropagator(Phi, Psi), cost_row, F[:n]
 
 
 def _stage_maps(stage, varying: bool, n: int, m: int, t0: float, h: float, propagator: str,

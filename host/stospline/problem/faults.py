@@ -42,6 +42,9 @@ FAULT_KEYS = {
     "plant_noise_scale": ("the plant's diffusion (G, H) is the design's times this", "1"),
 }
 _SCALE_LIMIT = 1e3      # a model mismatch beyond this factor is a typo, not a test
+# Noise and quantizer steps beyond the float32 range make every measurement of the float32
+# controller infinite (and their squares overflow the moments): refused, as x0 is.
+_F32_MAX = float(np.finfo(np.float32).max)
 
 
 def _zeros() -> np.ndarray:
@@ -143,6 +146,9 @@ def _nonneg(value: Any, path: str) -> float:
         raise ProblemError(path, f"must be a number, got {type(value).__name__} ({value!r})")
     if not math.isfinite(value) or value < 0:
         raise ProblemError(path, f"must be finite and >= 0, got {value}")
+    if value > _F32_MAX:
+        raise ProblemError(path, f"must be within the float32 range the controller measures "
+                                 f"in (<= {_F32_MAX:.8g}), got {value:g}")
     return float(value)
 
 

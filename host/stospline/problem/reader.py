@@ -516,9 +516,10 @@ def _parse_limits(doc: dict, m: int) -> tuple[np.ndarray | None, ...]:
             out[key] = None
             continue
         raw = doc[key]
+        what = "safe command" if key == "u_hold" else "limit"
         if isinstance(raw, list):
             if not raw:
-                raise ProblemError(key, f"must be a number (the same limit for every input) "
+                raise ProblemError(key, f"must be a number (the same {what} for every input) "
                                         f"or an array with one number per input (m = {m}), "
                                         f"got an empty array")
             paths = [f"{key}[{i}]" for i in range(len(raw))]
@@ -526,19 +527,20 @@ def _parse_limits(doc: dict, m: int) -> tuple[np.ndarray | None, ...]:
         elif isinstance(raw, (int, float)) and not isinstance(raw, bool):
             paths, items = [key] * m, [raw] * m
         else:
-            raise ProblemError(key, f"must be a number (the same limit for every input) or "
+            raise ProblemError(key, f"must be a number (the same {what} for every input) or "
                                     f"an array with one number per input (m = {m}), got "
                                     f"{_kind(raw)} ({raw!r})")
         vals = []
         for v, vp in zip(items, paths):
             if (isinstance(v, (int, float)) and not isinstance(v, bool)
                     and not math.isnan(v) and not _fits_float32(v)):   # Inf or too large
+                hint = ("" if key == "u_hold" else
+                        f"; omit {key} for no limit on any input, or give "
+                        f"{'-' if key == 'u_min' else ''}{_F32_MAX:.8g} (FLT_MAX, which the "
+                        f"firmware treats as unlimited) for one input")
                 raise ProblemError(vp, f"must be finite and within the float32 range of the "
-                                       f"gain table (|value| <= {_F32_MAX:.8g}), got {v!r}; "
-                                       f"omit {key} for no limit on any input, or give "
-                                       f"{'-' if key == 'u_min' else ''}{_F32_MAX:.8g} "
-                                       f"(FLT_MAX, which the firmware treats as unlimited) "
-                                       f"for one input")
+                                       f"gain table (|value| <= {_F32_MAX:.8g}), got "
+                                       f"{v!r}{hint}")
             vals.append(_number(v, vp))
         if len(vals) != m:
             raise ProblemError(key, f"has length {len(vals)}, expected {m} (m, one entry per "

@@ -178,6 +178,8 @@ CASES = [
      "u_hold", "must be finite"),
     ("hold_length", edit(BASE, ("tick_hz = 10", "tick_hz = 10\nu_hold = [1, 2]")),
      "u_hold", "has length 2, expected 1"),
+    ("hold_huge", edit(BASE, ("tick_hz = 10", "tick_hz = 10\nu_hold = 1e39")),
+     "u_hold", "within the float32 range of the gain table (|value| <= 3.4028235e+38), got 1e+39"),
     ("limits_string", edit(BASE, ("tick_hz = 10", 'tick_hz = 10\nu_min = "-1"')),
      "u_min", "must be a number (the same limit for every input) or an array with one "
               "number per input (m = 1), got a string"),

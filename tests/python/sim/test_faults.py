@@ -161,6 +161,7 @@ def test_faults_refuse_tables_the_fault_harness_does_not_run(di):
     ({"plant_B_scale": 0.0}, "faults.plant_B_scale", "in \\(0, 1000\\]"),
     ({"sensor_quantum": float("nan")}, "faults.sensor_quantum", "finite"),
     ({"actuator_noise": "big"}, "faults.actuator_noise", "must be a number"),
+    ({"sensor_noise": 1e300}, "faults.sensor_noise", "within the float32 range"),
 ])
 def test_bad_faults_name_the_field(spec, field, reason):
     doc = tomllib.loads(BASE)

@@ -22,7 +22,7 @@ from stospline.problem.faults import Faults
 from stospline.problem.model import Problem, ProblemError
 from stospline.table.format import GainTable, TickGains, table_of
 from stospline.table.qformat import DEFAULT_SIGMAS, FixedPointTable, quantize_table
-from stospline import limits, strict
+from stospline import limits, progress, strict
 from stospline.precision import RoundedUp
 
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
@@ -144,16 +144,28 @@ def _design_problem(problem: Problem, *, noise: bool, discretization: str,
         design = continuous_law = design_continuous(problem, noise=noise, mode=mode)
     else:
         raise ValueError(f"discretization must be one of {DISCRETIZATIONS}")
-    if discretization == "continuous":
-        law = evaluate_continuous(problem, continuous_law)
-    else:
-        law = evaluate_table(problem, table_of(design, quantize=False), path=False)
     table = table_of(design)
     # A float32 entry that overflowed would make the oracle's moments non-finite: refuse it
     # here, naming the cause, before evaluating the table as implemented.
     strict.check_table_finite(problem, table, exact=lambda: table_of(design, quantize=False))
-    return Designed(problem, design, discretization, table, law,
-                    evaluate_table(problem, table, path=False))
+    if discretization == "continuous":
+        law = lambda: evaluate_continuous(problem, continuous_law)           # noqa: E731
+    else:
+        exact = table_of(design, quantize=False)
+        law = lambda: evaluate_table(problem, exact, path=False)             # noqa: E731
+    law, implemented = _both(law, lambda: evaluate_table(problem, table, path=False),
+                             2 * table.n_ticks)
+    return Designed(problem, design, discretization, table, law, implemented)
+
+
+def _both(first, second, ticks: int):
+    """Run two independent oracle evaluations at once (their loops are C or numpy, which
+    release the GIL), under one progress bar of `ticks`; results in order, each exactly
+    what it would be alone."""
+    from concurrent.futures import ThreadPoolExecutor
+    with progress.shared("oracle", ticks), ThreadPoolExecutor(max_workers=2) as pool:
+        a, b = pool.submit(first), pool.submit(second)
+        return a.result(), b.result()
 
 
 def start_from(d: Designed, x0) -> Designed:

@@ -8,12 +8,17 @@ costs one function call.
 from __future__ import annotations
 
 import sys
+import threading
+from contextlib import contextmanager
 
-__all__ = ["enable", "enabled", "start", "advance", "finish", "close_all", "note", "DELAY"]
+__all__ = ["enable", "enabled", "start", "advance", "finish", "close_all", "note", "shared",
+           "DELAY"]
 
 DELAY = 1.0           # seconds before a bar appears
 _enabled = False
 _bars: list = []      # open bars, innermost last
+_shared: list = []    # [bar or None] while loops run concurrently under `shared`
+_lock = threading.Lock()
 
 
 def enable(on: bool = True) -> None:
@@ -27,7 +32,7 @@ def enabled() -> bool:
 
 def start(label: str, total: int, unit: str = "tick"):
     """Open a bar of `total` units (a token for `finish`; None when disabled)."""
-    if not _enabled:
+    if not _enabled or _shared:
         return None
     try:
         from tqdm import tqdm
@@ -41,7 +46,11 @@ def start(label: str, total: int, unit: str = "tick"):
 
 def advance(n: int = 1) -> None:
     """Count `n` units of the innermost open bar."""
-    if _bars:
+    if _shared:
+        with _lock:
+            if _shared[0] is not None:
+                _shared[0].update(n)
+    elif _bars:
         _bars[-1].update(n)
 
 
@@ -59,6 +68,19 @@ def finish(bar) -> None:
 def close_all() -> None:
     while _bars:
         _bars.pop().close()
+
+
+@contextmanager
+def shared(label: str, total: int, unit: str = "tick"):
+    """One bar for loops that run concurrently (in threads): inside, `start` opens no bar
+    and every `advance` counts on this one."""
+    bar = start(label, total, unit)
+    _shared.append(bar)
+    try:
+        yield
+    finally:
+        _shared.clear()
+        finish(bar)
 
 
 def note(message: str) -> None:

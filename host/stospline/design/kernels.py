@@ -8,6 +8,7 @@ of the exact zero-order-hold design (`design_zoh`) in C.
 """
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,7 @@ __all__ = ["build_kernels", "load_kernels", "zoh_stage_ticks", "oracle_stage_tic
 
 _SOURCE = Path(__file__).with_name("tick_kernel.c")
 _ORACLE_SOURCE = Path(__file__).with_name("oracle_kernel.c")
+_VARYING_SOURCE = Path(__file__).with_name("varying_kernel.c")
 _CDEF = """
 size_t stsp_zoh_work_size(int n, int m, int q);
 int stsp_zoh_stage_ticks(int n, int m, int q, long T,
@@ -29,10 +31,26 @@ size_t stsp_oracle_work_size(int n, int m, int n_latch);
 int stsp_oracle_stage_ticks(int n, int m, int n_latch, long T, const double *K, const double *L,
                             const double *k0, const double *Phi_x, const double *cost,
                             const double *Fmean, double *M, double *J, double *work);
+size_t stsp_tv_zoh_work_size(int n, int m, int q, int na, int mz);
+size_t stsp_tv_iwork_size(int n, int m, int na, int mz);
+int stsp_tv_zoh_ticks(int n, int m, int q, long T, int P, int na, int mz, const double *coef,
+                      double h, const int *act, const double *Ar, const double *G,
+                      const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
+                      double *V, double *N, double *W,
+                      double *mv, double *K, double *k0, double *L, double *work,
+                      int *iwork, long *bad_tick);
+size_t stsp_tv_oracle_work_size(int n, int m, int n_latch, int na, int mz);
+int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, const double *L,
+                         const double *k0, int P, int na, int mz, const double *coef,
+                         double h, const int *act, const double *Ar, const double *G,
+                         const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
+                         double *M, double *J, double *xm,
+                         double *xv, double *um, double *uv, double *work, int *iwork);
 """
-_CFLAGS = ["-std=c99", "-O2", "-Wall", "-Wextra"]
+_CFLAGS = ["-std=c99", "-O3", "-Wall", "-Wextra"]
 _ERR_NOT_PD, _ERR_DIMS = -1, -2
 _loaded = None
+_load_lock = threading.Lock()
 
 
 class KernelBuildError(RuntimeError):
@@ -41,7 +59,7 @@ class KernelBuildError(RuntimeError):
 
 def build_kernels(build_dir: str | Path | None = None, *, quiet: bool = True) -> Path:
     """Compile the kernels (if not cached) and return the path of the extension module."""
-    source = _SOURCE.read_bytes() + b"\n" + _ORACLE_SOURCE.read_bytes()
+    source = b"\n".join(p.read_bytes() for p in (_SOURCE, _ORACLE_SOURCE, _VARYING_SOURCE))
     key = source_key([source, _CDEF, " ".join(_CFLAGS)])
     modname = f"_stsp_kernels_{key}"
 
@@ -51,15 +69,17 @@ def build_kernels(build_dir: str | Path | None = None, *, quiet: bool = True) ->
     try:
         return cached_build(key, modname, build, root=build_dir)
     except Exception as exc:  # noqa: BLE001 - any failure here means "no compiled kernel"
-        raise KernelBuildError(f"cannot build {_SOURCE.name}, {_ORACLE_SOURCE.name}: {exc}"
-                               ) from exc
+        names = ", ".join(p.name for p in (_SOURCE, _ORACLE_SOURCE, _VARYING_SOURCE))
+        raise KernelBuildError(f"cannot build {names}: {exc}") from exc
 
 
 def load_kernels():
-    """The loaded cffi module (``.ffi``, ``.lib``), built on first use."""
+    """The loaded cffi module (``.ffi``, ``.lib``), built on first use (once, whichever
+    thread asks first)."""
     global _loaded
-    if _loaded is None:
-        _loaded = load_module(build_kernels())
+    with _load_lock:
+        if _loaded is None:
+            _loaded = load_module(build_kernels())
     return _loaded
 
 

@@ -28,6 +28,7 @@ from stospline.design.stage_values import StageStart, StageValues, check_group, 
 from stospline.errors import DesignError
 from stospline.design.moments import augmented_drift, moment_generator, running_cost_matrix, varying_tick
 from stospline.design.latch import latch_groups
+from stospline.design.varying import zoh_ticks
 from stospline.problem.model import Problem, Stage, ticks_per_stage
 
 __all__ = ["ZohStage", "ZohDesign", "design_zoh"]
@@ -167,7 +168,8 @@ def _varying_tick_data(stage: Stage, t: float, h: float) -> _TickData:
 
 
 def _varying_stage_ticks(stage: Stage, t_start: float, h: float, V, N, W, mv, T: int, m: int):
-    """`_stage_ticks_numpy` with a fresh tick map at every tick (time-varying data)."""
+    """`_stage_ticks_numpy` with a fresh tick map at every tick (time-varying data): the
+    numpy reference of the C loop `varying.zoh_ticks` (same order, another method)."""
     n, q = N.shape
     K = np.empty((T, m, n)); k0 = np.empty((T, m)); L = np.empty((T, m, q))
     for j in range(T - 1, -1, -1):
@@ -262,7 +264,9 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
                     td = cache.get(key) or cache.setdefault(key, _tick_data(stage, h))
                     K, k0, L, V, N, W, mv = stage_ticks(td, V, N, W, mv, int(counts[k]), m)
                 else:
-                    K, k0, L, V, N, W, mv = _varying_stage_ticks(
+                    varying_ticks = (zoh_ticks if stage_ticks is _stage_ticks_c
+                                     else _varying_stage_ticks)
+                    K, k0, L, V, N, W, mv = varying_ticks(
                         stage, problem.times[k], h, V, N, W, mv, int(counts[k]), m)
         except np.linalg.LinAlgError:
             from stospline.strict import riccati_failure

@@ -114,16 +114,28 @@ class Faults:
 
     def _stage(self, s):
         a, b, g = self.plant_A_scale, self.plant_B_scale, self.plant_noise_scale
-        varying = None
-        if s.varying is not None:
-            outer = s.varying
-            factors = {"A": a, "B": b, "G": g, "H": g}
-
-            def varying(t, outer=outer, factors=factors):
-                return {k: (v * factors[k] if k in factors and v is not None else v)
-                        for k, v in outer(t).items()}
+        varying = None if s.varying is None else _Scaled(
+            s.varying, {"A": a, "B": b, "G": g, "H": g})
         return replace(s, A=s.A * a, B=s.B * b, G=s.G * g,
                        H=None if s.H is None else s.H * g, varying=varying)
+
+
+class _Scaled:
+    """Varying data with some fields scaled (model mismatch), at one time or at many."""
+
+    def __init__(self, outer, factors: dict):
+        self.outer, self.factors = outer, factors
+
+    def _scale(self, values: dict) -> dict:
+        return {k: (v * self.factors[k] if k in self.factors and v is not None else v)
+                for k, v in values.items()}
+
+    def __call__(self, t: float) -> dict:
+        return self._scale(self.outer(t))
+
+    def many(self, times) -> dict:
+        from stospline.problem.series import sample_varying
+        return self._scale(sample_varying(self.outer, times))
 
 
 _NONE = Faults()

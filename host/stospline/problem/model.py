@@ -11,7 +11,7 @@ import numpy as np
 from stospline.errors import ProblemError
 
 from stospline.problem.faults import Faults
-from stospline.problem.series import Series
+from stospline.problem.series import Series, sample_varying
 
 __all__ = ["ProblemError", "Stage", "Penalty", "Constraint", "Knot", "Problem", "Series",
            "ticks_per_stage"]
@@ -58,14 +58,43 @@ class Stage:
     def has_control_noise(self) -> bool:
         return self.H is not None and bool(np.any(self.H))
 
+    def samples(self, times) -> dict:
+        """Every field at every time of `times`, stacked on a first axis (``f`` and ``H`` may
+        be None): vectorised when the varying data offer ``many(times)`` (samples read from a
+        file do), else one call per time."""
+        times = np.asarray(times, dtype=float)
+        names = ("A", "B", "G", "H", "Q", "S", "R", "q", "r", "rho", "f")
+        varied = {} if self.varying is None else sample_varying(self.varying, times)
+        out = {}
+        for k in names:
+            v = varied.get(k, getattr(self, k))
+            if v is None:
+                out[k] = None
+            elif k in varied:
+                out[k] = np.asarray(v, dtype=float)
+            else:
+                v = np.asarray(v, dtype=float)
+                out[k] = np.broadcast_to(v, (times.size,) + v.shape)
+        return out
+
     def without_noise(self) -> "Stage":
-        varying = None
-        if self.varying is not None:
-            outer = self.varying
-            varying = lambda t: {k: v for k, v in outer(t).items()  # noqa: E731
-                                 if k not in ("G", "H")}
+        varying = None if self.varying is None else _Dropped(self.varying, ("G", "H"))
         return Stage(self.A, self.B, np.zeros_like(self.G), self.Q, self.S, self.R,
                      self.q, self.r, self.rho, None, self.f, varying)
+
+
+class _Dropped:
+    """Varying data without some fields (``without_noise``), at one time or at many."""
+
+    def __init__(self, outer, drop: tuple):
+        self.outer, self.drop = outer, drop
+
+    def __call__(self, t: float) -> dict:
+        return {k: v for k, v in self.outer(t).items() if k not in self.drop}
+
+    def many(self, times) -> dict:
+        return {k: v for k, v in sample_varying(self.outer, times).items()
+                if k not in self.drop}
 
 
 @dataclass(frozen=True)

@@ -252,6 +252,12 @@ class _StageData:
             GH[i] = g(t) if isinstance(g, Series) and t is not None else _first(g)
         return GH
 
+    def _noise_many(self, n: int, m: int, mz: int, ts: np.ndarray) -> np.ndarray:
+        GH = np.zeros((ts.size, n + m, n, mz))
+        for i, g, _ in self.noise:
+            GH[:, i] = g.many(ts) if isinstance(g, Series) else _first(g)
+        return GH
+
     def _fields_at(self, t: float | None) -> dict:
         f = {k: (v(t) if isinstance(v, Series) and t is not None else _first(v))
              for k, v in self.fields.items()}
@@ -264,6 +270,18 @@ class _StageData:
             f["rho"] = f["rho"] + float(y0 @ Qy @ y0)
         return f
 
+    def _fields_many(self, keys, ts: np.ndarray) -> dict:
+        """`_fields_at` of the varying `keys` at every time of `ts`, stacked (the same sums)."""
+        f = {k: (v.many(ts) if isinstance(v, Series) else np.asarray(_first(v))[None])
+             for k, v in self.fields.items() if k in keys}
+        if self.tracking is not None:
+            C, Qy, y0s = self.tracking
+            y0 = y0s.many(ts)                                   # (T, ny)
+            f["Q"] = f["Q"] + C.T @ Qy @ C
+            f["q"] = f["q"] - np.array([C.T @ Qy @ y for y in y0])
+            f["rho"] = f["rho"] + np.array([float(y @ Qy @ y) for y in y0])
+        return {k: np.broadcast_to(v, (ts.size,) + np.shape(v)[1:]) for k, v in f.items()}
+
     def build(self, n: int, mz: int) -> Stage:
         m = _first(self.fields["B"]).shape[1]
         GH = self._noise_at(n, m, mz, None)
@@ -274,18 +292,40 @@ class _StageData:
             if self.tracking is not None:
                 keys += ["Q", "q", "rho"]
             noisy = any(isinstance(g, Series) for _, g, _ in self.noise)
-
-            def varying(t, keys=tuple(set(keys)), noisy=noisy):
-                f = self._fields_at(t)
-                out = {k: f[k] for k in keys}
-                if noisy:
-                    GHt = self._noise_at(n, m, mz, t)
-                    out["G"] = GHt[:n]
-                    if H is not None:
-                        out["H"] = GHt[n:]
-                return out
+            varying = _SampledData(self, tuple(sorted(set(keys))), noisy, n, m, mz,
+                                   H is not None)
         base = self._fields_at(None)
         return Stage(G=GH[:n], H=H, varying=varying, origin=self, **base)
+
+
+class _SampledData:
+    """``Stage.varying`` of a parsed stage: its samples at a time (a call) or at many (`many`,
+    vectorised, equal to the calls)."""
+
+    def __init__(self, data: _StageData, keys: tuple, noisy: bool, n: int, m: int, mz: int,
+                 has_H: bool):
+        self.data, self.keys, self.noisy = data, keys, noisy
+        self.n, self.m, self.mz, self.has_H = n, m, mz, has_H
+
+    def __call__(self, t: float) -> dict:
+        f = self.data._fields_at(t)
+        out = {k: f[k] for k in self.keys}
+        if self.noisy:
+            GHt = self.data._noise_at(self.n, self.m, self.mz, t)
+            out["G"] = GHt[:self.n]
+            if self.has_H:
+                out["H"] = GHt[self.n:]
+        return out
+
+    def many(self, ts) -> dict:
+        ts = np.asarray(ts, dtype=float)
+        out = self.data._fields_many(self.keys, ts)
+        if self.noisy:
+            GHt = self.data._noise_many(self.n, self.m, self.mz, ts)
+            out["G"] = GHt[:, :self.n]
+            if self.has_H:
+                out["H"] = GHt[:, self.n:]
+        return out
 
 
 def _parse_stage(dyn: _Layers, cost: _Layers, n: int,

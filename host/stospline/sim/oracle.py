@@ -135,6 +135,12 @@ class _PathRecord:
             self.u_mean.append(mu.copy())
             self.u_var.append(np.diag(Mw[n:n + m, n:n + m]) - mu ** 2)
 
+    def extend(self, x_mean, x_var, u_mean, u_var) -> None:
+        """Many ticks at once (None: not recorded)."""
+        if self.on:
+            self.x_mean.extend(x_mean); self.x_var.extend(x_var)
+            self.u_mean.extend(u_mean); self.u_var.extend(u_var)
+
     def state(self, M: np.ndarray, n: int) -> None:
         if self.on:
             mu = M[:n, -1]
@@ -157,10 +163,16 @@ _MAPS_MAX = 16
 
 def _tick_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int):
     """``(prop, cost_row, Fmean)`` of one tick of a time-invariant stage (cached)."""
+    return _tick_entry(stage, n, m, h, propagator, substeps)[1]
+
+
+def _tick_entry(stage, n: int, m: int, h: float, propagator: str, substeps: int):
+    """The cache entry ``(stage, maps, extra)`` of `_tick_maps`: held by the caller, so another
+    thread clearing the cache cannot take it away."""
     key = (id(stage), m, h, propagator, substeps)
     hit = _MAPS.get(key)
     if hit is not None and hit[0] is stage:
-        return hit[1]
+        return hit
     prop = (exact_tick(stage, m + 1, h) if propagator == "exact"
             else euler_tick(stage, m + 1, h, substeps))
     cost_row = running_cost_matrix(stage, n, m, n + m + 1, n).ravel() @ prop.Psi
@@ -169,8 +181,8 @@ def _tick_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int):
     Fmean = expm(augmented_drift(stage, m + 1) * h)[:n]
     if len(_MAPS) >= _MAPS_MAX:
         _MAPS.clear()
-    _MAPS[key] = (stage, (prop, cost_row, Fmean), {})
-    return prop, cost_row, Fmean
+    entry = _MAPS[key] = (stage, (prop, cost_row, Fmean), {})
+    return entry
 
 
 def _euler_varying_maps(stage, n: int, m: int, t0: float, h: float, substeps: int):
@@ -207,8 +219,7 @@ def _stage_maps(stage, varying: bool, n: int, m: int, t0: float, h: float, propa
 
 def _packed_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int):
     """`kernels.pack_oracle_maps` of `_tick_maps` (cached alongside it)."""
-    prop, cost_row, _ = _tick_maps(stage, n, m, h, propagator, substeps)
-    extra = _MAPS[(id(stage), m, h, propagator, substeps)][2]
+    _, (prop, cost_row, _), extra = _tick_entry(stage, n, m, h, propagator, substeps)
     if "packed" not in extra:
         from stospline.design.kernels import pack_oracle_maps
         extra["packed"] = pack_oracle_maps(prop.Phi, cost_row, n)
@@ -301,7 +312,17 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         ticks = range(int(table.stage_start[k]), int(table.stage_start[k + 1]))
         # The C loop carries the mean map without the constant column: not with a drift.
         kernel = None if varying or path or _has_drift(problem) else _c_kernel()
-        if kernel is not None:             # the same loop in C (oracle_kernel.c)
+        if varying and propagator == "exact" and _c_kernel() is not None:
+            # Time-varying data: the Gauss-point Taylor loop in C (design.varying).
+            from stospline.design.varying import oracle_ticks
+            sl = slice(ticks.start, ticks.stop)
+            M, J, xm, xv, um, uv = oracle_ticks(stage, table.t0 + ticks.start * h, h,
+                                                table.K[sl], table.L[sl], table.k0[sl],
+                                                M, J, path)
+            rec.extend(xm, xv, um, uv)
+            progress.advance(len(ticks))
+            ticks = range(0)
+        elif kernel is not None:           # the same loop in C (oracle_kernel.c)
             sl = slice(ticks.start, ticks.stop)
             Phi_x, cost = _packed_maps(stage, n, m, h, propagator, substeps)
             M, J = kernel(table.K[sl], table.L[sl], table.k0[sl], Phi_x, cost,

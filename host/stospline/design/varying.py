@@ -1,0 +1,200 @@
+"""Ticks of stages whose data vary in time, in C (``varying_kernel.c``): the exact ZOH
+designer's backward recursion and the moment oracle's forward one.
+
+Over a tick the moment equations' generator is interpolated through ``P`` Gauss–Legendre
+points (the designer: 2, order 4; the oracle: 3, order 6) and the resulting linear ODE is
+solved by its Taylor series to rounding, so a tick costs a few generator actions on one
+``d x d`` matrix instead of an exponential of a ``d^2``-square map. The data at the Gauss
+points are sampled for a chunk of ticks at once (`Stage.samples`, vectorised for data read
+from a file) and handed to C; the recursion state passes from chunk to chunk.
+"""
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from stospline.problem.model import Stage
+
+__all__ = ["POINTS", "TickSamples", "tick_samples", "zoh_ticks",
+           "oracle_ticks"]
+
+POINTS = 2            # Gauss points per tick (order 4), designer and oracle alike
+CHUNK = 512            # ticks sampled and handed to C at once (bounds the memory)
+
+
+def _gauss(P: int):
+    """Gauss–Legendre nodes on [0, 1] and the coefficients of their Lagrange basis
+    polynomials, forward (in s) and backward (in 1 - s): ``l_i(s) = sum_l coef[i, l] s^l``."""
+    x, _ = np.polynomial.legendre.leggauss(P)
+    nodes = 0.5 * (x + 1.0)
+
+    def basis(pts):
+        V = np.vander(pts, P, increasing=True)       # V[j, l] = pts_j^l
+        return np.ascontiguousarray(np.linalg.inv(V).T)
+
+    return nodes, basis(nodes), basis(1.0 - nodes)
+
+
+@dataclass(frozen=True)
+class TickSamples:
+    """The data of `T` ticks at `P` points each, laid out for the C kernels: ``Ar`` (T, P, n,
+    d) the rows ``[A, B, f]``, ``G`` (T, P, na, n, mz) the diffusion of the active
+    multipliers ``act`` (indices into ``[x; u]``), ``Lb`` (T, P, d, d) the running cost. A
+    field that is constant over the chunk is held once, shape (1, 1, ...), and flagged in
+    ``same`` (Ar, G, Lb); ``ar_nz`` lists where Ar can be nonzero (row-major in n x d)."""
+    Ar: np.ndarray
+    G: np.ndarray
+    Lb: np.ndarray
+    act: np.ndarray
+    same: np.ndarray
+    ar_nz: np.ndarray      # positions in (n, d) where Ar is nonzero at some tick of the chunk
+
+
+def _constant(a) -> bool:
+    """A stacked field from `Stage.samples` that is a broadcast constant."""
+    return a is None or a.strides[0] == 0
+
+
+def tick_samples(stage: Stage, t_first: float, h: float, T: int, nodes: np.ndarray
+                 ) -> TickSamples:
+    """Sample `stage` at the `nodes` (fractions of a tick) of ticks ``t_first + j h``."""
+    n, m = stage.B.shape
+    d = n + m + 1
+    P = nodes.size
+    times = (t_first + h * (np.arange(T)[:, None] + nodes[None, :])).ravel()
+    s = stage.samples(times)
+    same = [all(_constant(s[k]) for k in keys)
+            for keys in (("A", "B", "f"), ("G", "H"), ("Q", "S", "R", "q", "r", "rho"))]
+    pick = [slice(0, 1) if c else slice(None) for c in same]
+    first = {k: (None if v is None else v[pick[i]])
+             for i, keys in enumerate((("A", "B", "f"), ("G", "H"),
+                                        ("Q", "S", "R", "q", "r", "rho")))
+             for k, v in s.items() if k in keys}
+    TA = first["A"].shape[0]
+    drift = [first["A"], np.broadcast_to(first["B"], (TA, n, m)),
+             np.zeros((TA, n, 1)) if first["f"] is None
+             else np.broadcast_to(first["f"], (TA, n))[:, :, None]]
+    Ar = np.concatenate(drift, axis=2)
+    # The diffusion of the multipliers that are nonzero somewhere in the chunk, gathered
+    # from G (state multipliers) and H (input multipliers) without stacking them first.
+    parts = [(first["G"], 0)] + ([(first["H"], n)] if first["H"] is not None else [])
+    live = [(np.flatnonzero(g.any(axis=(0, 2, 3))), g, o) for g, o in parts]
+    act = np.concatenate([rows + o for rows, _, o in live]).astype(np.intc)
+    G = np.concatenate([g[:, rows] for rows, g, _ in live], axis=1)
+    TL = first["Q"].shape[0]
+    Lb = np.zeros((TL, d, d))
+    Lb[:, :n, :n], Lb[:, n:n + m, n:n + m] = first["Q"], first["R"]
+    Lb[:, :n, n:n + m] = first["S"]
+    Lb[:, n:n + m, :n] = np.swapaxes(first["S"], 1, 2)
+    Lb[:, :n, -1] = Lb[:, -1, :n] = first["q"]
+    Lb[:, n:n + m, -1] = Lb[:, -1, n:n + m] = first["r"]
+    Lb[:, -1, -1] = first["rho"]
+
+    def lay(a, const):
+        shape = (1, 1) if const else (T, P)
+        return np.ascontiguousarray(a.reshape(shape + a.shape[1:]))
+
+    ar_nz = np.flatnonzero(np.any(Ar != 0.0, axis=0)).astype(np.intc)
+    return TickSamples(lay(Ar, same[0]), lay(G, same[1]), lay(Lb, same[2]), act,
+                       np.array(same, dtype=np.intc), ar_nz)
+
+
+# Samples of recent chunks: the oracle evaluates the design's own law and its float32 table
+# on the same ticks. Keyed by the stage object's id (the entry holds the stage, so the id
+# cannot be reused while cached), bounded in bytes.
+_CACHE: dict = {}
+_CACHE_LOCK = threading.Lock()       # the oracle's two evaluations may run in threads
+CACHE_BYTES = 128 << 20
+
+
+def cached_samples(stage: Stage, t_first: float, h: float, T: int, nodes: np.ndarray
+                   ) -> TickSamples:
+    """`tick_samples`, remembered for the next call with the same arguments."""
+    key = (id(stage), float(t_first), float(h), int(T), nodes.tobytes())
+    with _CACHE_LOCK:
+        hit = _CACHE.get(key)
+    if hit is not None and hit[0] is stage:
+        return hit[1]
+    smp = tick_samples(stage, t_first, h, T, nodes)
+    size = smp.Ar.nbytes + smp.G.nbytes + smp.Lb.nbytes
+    with _CACHE_LOCK:
+        while _CACHE and sum(v[2] for v in _CACHE.values()) + size > CACHE_BYTES:
+            _CACHE.pop(next(iter(_CACHE)))              # the oldest entry
+        if size <= CACHE_BYTES:
+            _CACHE[key] = (stage, smp, size)
+    return smp
+
+
+def _chunks(T: int):
+    return [(a, min(a + CHUNK, T)) for a in range(0, T, CHUNK)]
+
+
+def _ptr(ffi, a, kind="double[]"):
+    """A C pointer into `a` (C-contiguous), or to a dummy element when `a` is empty."""
+    return ffi.from_buffer(kind, a) if a.size else ffi.new(kind.replace("[]", "[1]"))
+
+
+def _data_args(ffi, smp: TickSamples):
+    return (smp.act.size, smp.G.shape[-1]), (
+        _ptr(ffi, smp.act, "int[]"), _ptr(ffi, smp.Ar), _ptr(ffi, smp.G), _ptr(ffi, smp.Lb),
+        _ptr(ffi, smp.same, "int[]"), _ptr(ffi, smp.ar_nz, "int[]"), smp.ar_nz.size)
+
+
+def zoh_ticks(stage: Stage, t_start: float, h: float, V, N, W, mv, T: int, m: int):
+    """`zoh._stage_ticks_numpy` for a time-varying stage: gains per tick and the value
+    before the stage's first tick. Raises `numpy.linalg.LinAlgError` (Huu not positive
+    definite) or `RuntimeError` (a series that does not converge: non-finite data)."""
+    from stospline.design.kernels import load_kernels
+    mod = load_kernels()
+    ffi, lib = mod.ffi, mod.lib
+    n, q = N.shape
+    nodes, _, coef = _gauss(POINTS)
+    V, N, W, mv = (np.array(a, dtype=np.float64, order="C") for a in (V, N, W, mv))
+    K, k0, L = np.empty((T, m, n)), np.empty((T, m)), np.empty((T, m, q))
+    bad = ffi.new("long *", -1)
+    for a, b in reversed(_chunks(T)):
+        smp = cached_samples(stage, t_start + a * h, h, b - a, nodes)
+        (na, mz), data = _data_args(ffi, smp)
+        work = np.empty(int(lib.stsp_tv_zoh_work_size(n, m, q, na, mz)))
+        iwork = np.empty(int(lib.stsp_tv_iwork_size(n, m, na, mz)), dtype=np.intc)
+        status = lib.stsp_tv_zoh_ticks(
+            n, m, q, b - a, POINTS, na, mz, _ptr(ffi, coef), h, *data,
+            *(_ptr(ffi, x) for x in (V, N, W, mv, K[a:b], k0[a:b], L[a:b], work)),
+            _ptr(ffi, iwork, "int[]"), bad)
+        if status == -1:
+            raise np.linalg.LinAlgError(f"Huu is not positive definite at tick {a + bad[0]}")
+        if status != 0:
+            raise RuntimeError(f"stsp_tv_zoh_ticks: status {status} at ticks {a}..{b}")
+    return K, k0, L, V, N, W, mv
+
+
+def oracle_ticks(stage: Stage, t_start: float, h: float, K, L, k0, M, J: float,
+                 record: bool):
+    """The oracle's ticks over a time-varying stage (``evaluate_table``'s loop): the second
+    moment `M` of ``[x; v; 1]`` and the cost `J` after them and, when `record`, the mean and
+    variance of x after each tick and of the command over it (else four None)."""
+    from stospline.design.kernels import load_kernels
+    mod = load_kernels()
+    ffi, lib = mod.ffi, mod.lib
+    T, m, n = K.shape
+    n_latch = L.shape[2]
+    nodes, coef, _ = _gauss(POINTS)
+    K, L, k0 = (np.ascontiguousarray(a, dtype=np.float64) for a in (K, L, k0))
+    M = np.array(M, dtype=np.float64, order="C")
+    Jp = ffi.new("double *", float(J))
+    rec = [np.empty((T, n)), np.empty((T, n)), np.empty((T, m)), np.empty((T, m))]
+    for a, b in _chunks(T):
+        smp = cached_samples(stage, t_start + a * h, h, b - a, nodes)
+        (na, mz), data = _data_args(ffi, smp)
+        work = np.empty(int(lib.stsp_tv_oracle_work_size(n, m, n_latch, na, mz)))
+        iwork = np.empty(int(lib.stsp_tv_iwork_size(n, m, na, mz)), dtype=np.intc)
+        out = [_ptr(ffi, x[a:b]) if record else ffi.NULL for x in rec]
+        status = lib.stsp_tv_oracle_ticks(
+            n, m, n_latch, b - a, _ptr(ffi, K[a:b]), _ptr(ffi, L[a:b]), _ptr(ffi, k0[a:b]),
+            POINTS, na, mz, _ptr(ffi, coef), h, *data, _ptr(ffi, M), Jp,
+            *out, _ptr(ffi, work), _ptr(ffi, iwork, "int[]"))
+        if status != 0:
+            raise RuntimeError(f"stsp_tv_oracle_ticks: status {status} at ticks {a}..{b}")
+    return (M, float(Jp[0]), *(rec if record else (None,) * 4))

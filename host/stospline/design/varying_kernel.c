@@ -1,0 +1,654 @@
+/* Host-side kernels of stages whose data vary in time: the exact zero-order-hold designer's
+ * backward recursion (stsp_tv_zoh_ticks) and the moment oracle's forward one
+ * (stsp_tv_oracle_ticks).  Not firmware: double precision on the design host, called through
+ * cffi (stospline.design.varying), compiled in one unit after tick_kernel.c, whose
+ * stsp_zoh_tick_update does the per-tick Riccati step.
+ *
+ * Over a tick [t, t+h] the command is held and the moments obey a linear ODE whose generator
+ * varies with the data.  The generator is replaced by its interpolating polynomial through P
+ * Gauss-Legendre points of the tick (P = 2: a method of order 4, as the fourth-order Magnus
+ * expansion the designer used before; P = 3: order 6, the oracle), and that ODE is solved by
+ * its Taylor series in time, (k+1) X_{k+1} = hs sum_l G_(l)(X_{k-l}) (+ forcing), G_(l) the
+ * coefficient of r^l of the interpolated generator on a sub-step r in [0, 1].  The series is
+ * entire; sub-steps keep hs |G| <= 1/2, so about ten terms reach rounding.  Only generator
+ * *actions* on one matrix are needed, never the d^2 x d^2 map: O(d^3) per term at most.
+ *
+ * The actions (d = n+m+1, z = [x; u; 1]) use the data at one point: Ar = [A, B, f] (n x d,
+ * the nonzero rows of Ahat), the diffusion on the active multipliers G (na x n x mz; G[p][a][k]
+ * is row a, column k of the matrix multiplying z_act[p]) and the running cost Lb (d x d,
+ * E L = <Lb, E zz'>):
+ *   FORWARD   M -> Ahat M + M Ahat' + sum_pq M[act p, act q] G_p G_q'   (second moments, d x d)
+ *   ADJOINT   Y -> Ahat'Y + Y Ahat + [tr(G_p' Y G_q)] at (act p, act q)  (values, d x d; + Lb)
+ *   MEAN      X -> Ahat X       (d x c: E z+ X' = flow of E z X', e.g. E x+ v')
+ *   MEAN_ADJ  U -> Ahat'U       (d x c: U = flow' [N; 0], i.e. (N'F)' for E x+ = F z)
+ * Arrays are row-major and caller-owned; nothing is allocated.
+ */
+#include <math.h>
+#include <stddef.h>
+
+size_t stsp_zoh_update_size(int n, int m, int q);
+int stsp_zoh_tick_update(int n, int m, int q, const double *H, const double *F,
+                         const double *Hl_in, double *vp, double *N, double *W, double *mv,
+                         double *Kt, double *k0t, double *Lt, double *work);
+
+enum { TV_FORWARD = 0, TV_ADJOINT = 1, TV_MEAN = 2, TV_MEAN_ADJ = 3 };
+enum { TV_MAX_POINTS = 3, TV_MAX_TERMS = 60, TV_MAX_SUB = 1 << 16, TV_MAX_DIM = 256 };
+enum { TV_OK = 0, TV_ERR_NOT_PD = -1, TV_ERR_DIMS = -2, TV_ERR_SERIES = -3 };
+
+/* The data of one tick at its P points, and which of them are known to be the same at every
+ * point (the caller passes a field that is constant over the chunk once, with stride 0). */
+typedef struct {
+    int n, d, na, mz, P;
+    const int *act;
+    const double *Ar;   /* P x n x d */
+    const double *G;    /* P x na x n x mz */
+    const double *Lb;   /* P x d x d */
+    int ar_same, g_same, lb_same;
+    int lb_const;          /* Lb is the same for every tick of the chunk */
+    const int *ar_nz;      /* positions (row-major in n x d) of Ar's possible nonzeros */
+    int ar_cnt;
+    double gb[TV_MAX_POINTS];   /* noise_bound of each point */
+    /* The diffusion's nonzero entries, point by point and column by column (sparse: applied
+     * pair by pair when that is cheaper than the dense products). */
+    int sparse;
+    const int *nz_start;   /* P*mz + 1 offsets into nz_p, nz_a, nz_g */
+    const int *nz_p, *nz_a;
+    const double *nz_g;
+} tv_tick;
+
+/* One sub-step's generator as a polynomial in r in [0, 1]: the coefficient of r^l is
+ * G_(l) = sum_i cs[i][l] G_i.  The drift and the cost are linear in the data and blended
+ * (Arl[l] = sum_i cs[i][l] Ar_i, Lbl[l] likewise); the diffusion, quadratic in the data, is
+ * applied point by point with the weights cs[i][l] (once, with weight 1 at l = 0, when every
+ * point has the same diffusion).  nrm[l] bounds |G_(l)(X)|max / |X|max. */
+typedef struct {
+    double cs[TV_MAX_POINTS * TV_MAX_POINTS];
+    double nrm[TV_MAX_POINTS];
+    int lb_count[TV_MAX_POINTS];  /* nonzero entries of Lbl[l], listed in lb_at[l] */
+    double *Arl, *Lbl;            /* P x n x d, P x d x d */
+    int *lb_at;                   /* P x d*d */
+    int lb_done;                  /* Lbl and its lists hold a chunk-constant Lb already */
+} tv_blend;
+
+static double abs_d(double x) { return fabs(x); }
+
+static double max_abs(const double *x, size_t len)
+{
+    double r = 0.0;
+    size_t e;
+    for (e = 0; e < len; ++e) {
+        const double a = abs_d(x[e]);
+        r = a > r ? a : r;
+    }
+    return r;
+}
+
+static int same_points(const double *x, int P, size_t len)
+{
+    int i;
+    size_t e;
+    for (i = 1; i < P; ++i)
+        for (e = 0; e < len; ++e)
+            if (x[(size_t)i * len + e] != x[e]) return 0;
+    return 1;
+}
+
+/* The interpolation coefficients of sub-step j of `sub`, in its own variable r in [0, 1]:
+ * l_i((j + r) / sub) = sum_e cs[i][e] r^e from l_i(s) = sum_l coef[i][l] s^l. */
+static void shift_coefficients(int P, const double *coef, int j, int sub, double *cs)
+{
+    int i, e, l, t;
+    for (i = 0; i < P; ++i)
+        for (e = 0; e < P; ++e) {
+            double s = 0.0;
+            for (l = e; l < P; ++l) {
+                double binom = 1.0, jp = 1.0, sp = 1.0;
+                for (t = 0; t < e; ++t) binom = binom * (double)(l - t) / (double)(t + 1);
+                for (t = e; t < l; ++t) jp *= (double)j;
+                for (t = 0; t < l; ++t) sp *= (double)sub;
+                s += coef[i * P + l] * binom * jp / sp;
+            }
+            cs[i * P + e] = s;
+        }
+}
+
+/* sum_k (sum_{p,a} |G_p[a,k]|)^2 of one point: bounds the diffusion term in both directions. */
+static double noise_bound(const tv_tick *v, int i)
+{
+    const double *G = v->G + (size_t)i * v->na * v->n * v->mz;
+    double out = 0.0;
+    int k, e;
+    for (k = 0; k < v->mz; ++k) {
+        double s = 0.0;
+        for (e = 0; e < v->na * v->n; ++e) s += abs_d(G[(size_t)e * v->mz + k]);
+        out += s * s;
+    }
+    return out;
+}
+
+/* Data equal at every point are taken as they are: the weights of the constant coefficient sum
+ * to 1, and the others to 0, only up to rounding. */
+static void blend(const tv_tick *v, const double *coef, int j, int sub, tv_blend *bl)
+{
+    const int P = v->P, n = v->n, d = v->d;
+    const size_t nd = (size_t)n * d, D = (size_t)d * d;
+    double rows[TV_MAX_DIM], cols[TV_MAX_DIM];
+    int i, l, a, z;
+    size_t e;
+    shift_coefficients(P, coef, j, sub, bl->cs);
+    for (l = 0; l < P; ++l) {
+        double *Ar = bl->Arl + l * nd, *Lb = bl->Lbl + l * D, g = 0.0, rmax = 0.0;
+        /* Ar on its nonzero pattern (the rest stays 0 from the loop's start). */
+        for (z = 0; z < v->ar_cnt; ++z) {
+            const int at = v->ar_nz[z];
+            double s = 0.0;
+            if (v->ar_same)
+                s = l == 0 ? v->Ar[at] : 0.0;
+            else
+                for (i = 0; i < P; ++i) s += bl->cs[i * P + l] * v->Ar[i * nd + (size_t)at];
+            Ar[at] = s;
+        }
+        if (!(v->lb_const && bl->lb_done)) {
+            if (v->lb_same) {
+                for (e = 0; e < D; ++e) Lb[e] = l == 0 ? v->Lb[e] : 0.0;
+            } else {
+                for (e = 0; e < D; ++e) Lb[e] = 0.0;
+                for (i = 0; i < P; ++i) {
+                    const double w = bl->cs[i * P + l];
+                    for (e = 0; e < D; ++e) Lb[e] += w * v->Lb[i * D + e];
+                }
+            }
+            bl->lb_count[l] = 0;
+            for (e = 0; e < D; ++e)
+                if (Lb[e] != 0.0) bl->lb_at[l * D + (size_t)bl->lb_count[l]++] = (int)e;
+        }
+        for (a = 0; a < d; ++a) rows[a] = cols[a] = 0.0;
+        for (z = 0; z < v->ar_cnt; ++z) {
+            const int at = v->ar_nz[z];
+            rows[at / d] += abs_d(Ar[at]);
+            cols[at % d] += abs_d(Ar[at]);
+        }
+        for (a = 0; a < d; ++a) {
+            if (rows[a] > rmax) rmax = rows[a];
+            if (cols[a] > rmax) rmax = cols[a];
+        }
+        if (v->g_same)
+            g = l == 0 ? v->gb[0] : 0.0;
+        else
+            for (i = 0; i < P; ++i) g += abs_d(bl->cs[i * P + l]) * v->gb[i];
+        bl->nrm[l] = 2.0 * rmax + g;
+    }
+    bl->lb_done = v->lb_const;
+}
+
+/* The diffusion term of point i on X, compactly: FORWARD the n x n block
+ * sum_pq X[act p, act q] G_p G_q' (on the x rows and columns), ADJOINT the na x na block
+ * tr(G_p' X G_q) (at act p, act q). */
+static void point_noise(int kind, const tv_tick *v, int i, const double *X, double *out,
+                        double *tmp)
+{
+    const int n = v->n, d = v->d, na = v->na, mz = v->mz;
+    const double *G = v->G + (size_t)i * na * n * mz;
+    const int side = kind == TV_FORWARD ? n : na;
+    int k, a, b, p, q;
+    for (a = 0; a < side * side; ++a) out[a] = 0.0;
+    for (k = 0; k < mz; ++k) {
+        if (kind == TV_FORWARD) {
+            for (p = 0; p < na; ++p)
+                for (b = 0; b < n; ++b) {
+                    double s = 0.0;
+                    for (q = 0; q < na; ++q)
+                        s += X[v->act[p] * d + v->act[q]] * G[((size_t)q * n + b) * mz + k];
+                    tmp[p * n + b] = s;
+                }
+            for (a = 0; a < n; ++a)
+                for (b = a; b < n; ++b) {
+                    double s = 0.0;
+                    for (p = 0; p < na; ++p) s += G[((size_t)p * n + a) * mz + k] * tmp[p * n + b];
+                    out[a * n + b] += s;
+                    if (a != b) out[b * n + a] += s;
+                }
+        } else {
+            for (p = 0; p < na; ++p)
+                for (b = 0; b < n; ++b) {
+                    double s = 0.0;
+                    for (a = 0; a < n; ++a) s += G[((size_t)p * n + a) * mz + k] * X[a * d + b];
+                    tmp[p * n + b] = s;
+                }
+            for (p = 0; p < na; ++p)
+                for (q = p; q < na; ++q) {
+                    double s = 0.0;
+                    for (b = 0; b < n; ++b) s += tmp[p * n + b] * G[((size_t)q * n + b) * mz + k];
+                    out[p * na + q] += s;
+                    if (p != q) out[q * na + p] += s;
+                }
+        }
+    }
+}
+
+/* next += w * a compact diffusion block of `point_noise`. */
+static void add_noise(int kind, const tv_tick *v, double w, const double *blk, double *next)
+{
+    const int n = v->n, d = v->d, na = v->na;
+    int a, b;
+    if (kind == TV_FORWARD) {
+        for (a = 0; a < n; ++a)
+            for (b = 0; b < n; ++b) next[a * d + b] += w * blk[a * n + b];
+    } else {
+        for (a = 0; a < na; ++a)
+            for (b = 0; b < na; ++b) next[v->act[a] * d + v->act[b]] += w * blk[a * na + b];
+    }
+}
+
+/* next += w * the diffusion term of point i on X from its nonzero entries (FORWARD: at the x
+ * rows and columns, ADJOINT: at the active multipliers). */
+static void pair_noise(int kind, const tv_tick *v, int i, double w, const double *X,
+                       double *next)
+{
+    const int d = v->d;
+    int k, e1, e2;
+    for (k = 0; k < v->mz; ++k) {
+        const int lo = v->nz_start[i * v->mz + k], hi = v->nz_start[i * v->mz + k + 1];
+        for (e1 = lo; e1 < hi; ++e1) {
+            const double g1 = w * v->nz_g[e1];
+            const int p1 = v->act[v->nz_p[e1]], a1 = v->nz_a[e1];
+            for (e2 = lo; e2 < hi; ++e2) {
+                const double g = g1 * v->nz_g[e2];
+                const int p2 = v->act[v->nz_p[e2]], a2 = v->nz_a[e2];
+                if (kind == TV_FORWARD) next[a1 * d + a2] += g * X[p1 * d + p2];
+                else next[p1 * d + p2] += g * X[a1 * d + a2];
+            }
+        }
+    }
+}
+
+/* The nonzero lists of the tick's diffusion (into the caller's arrays), and whether the pairs
+ * cost less than the dense products. */
+static void noise_lists(tv_tick *v, int *start, int *np_, int *na_, double *g)
+{
+    const int n = v->n, na = v->na, mz = v->mz, points = v->g_same ? 1 : v->P;
+    long pairs = 0, dense = (long)na * n * (n + na) * mz;
+    int i, k, p, a, e = 0;
+    for (i = 0; i < points; ++i)
+        for (k = 0; k < mz; ++k) {
+            const int lo = e;
+            start[i * mz + k] = e;
+            for (p = 0; p < na; ++p)
+                for (a = 0; a < n; ++a) {
+                    const double x = v->G[(((size_t)i * na + p) * n + a) * mz + k];
+                    if (x != 0.0) { np_[e] = p; na_[e] = a; g[e] = x; ++e; }
+                }
+            pairs += (long)(e - lo) * (e - lo);
+        }
+    start[points * mz] = e;
+    v->nz_start = start; v->nz_p = np_; v->nz_a = na_; v->nz_g = g;
+    v->sparse = pairs <= dense * points;
+}
+
+/* acc += the drift part of G_(l) on X (d x cols; MEAN reads only its first `rows` rows, the
+ * others being zero), before symmetrisation: FORWARD and MEAN Ahat X (rows < n of acc),
+ * ADJOINT and MEAN_ADJ Ahat'X (all rows).  Ahat has only n nonzero rows, Ar.  The FORWARD and
+ * ADJOINT terms are acc + acc'. */
+static void add_drift(int kind, const tv_tick *v, const tv_blend *bl, int l, const double *X,
+                      int cols, int rows, double *acc)
+{
+    const int d = v->d;
+    const double *Ar = bl->Arl + (size_t)l * v->n * d;
+    const int fwd = kind == TV_FORWARD || kind == TV_MEAN;
+    int z, b;
+    for (z = 0; z < v->ar_cnt; ++z) {
+        const int at = v->ar_nz[z], a = at / d, c = at % d;
+        const double s = Ar[at];
+        const double *restrict xr;
+        double *restrict out;
+        if (s == 0.0) continue;
+        if (fwd) {                                     /* row a += Ahat[a, c] X[c, :] */
+            if (c >= rows) continue;
+            xr = X + (size_t)c * cols; out = acc + (size_t)a * cols;
+        } else {                                       /* row c += Ahat[a, c] X[a, :] */
+            xr = X + (size_t)a * cols; out = acc + (size_t)c * cols;
+        }
+        for (b = 0; b < cols; ++b) out[b] += s * xr[b];
+    }
+}
+
+/* Work of `taylor` for matrices of d x cols (cols <= cmax), with the blended data of one
+ * sub-step (`tv_blend`) after it. */
+static size_t taylor_size(int n, int m, int na, int cmax)
+{
+    const size_t d = (size_t)n + (size_t)m + 1u, D = d * (size_t)(cmax > (int)d ? cmax : (int)d);
+    return (TV_MAX_POINTS + 2u) * D + (size_t)na * n + TV_MAX_POINTS * TV_MAX_POINTS * d * d;
+}
+
+static size_t blend_size(int n, int m)
+{
+    const size_t d = (size_t)n + (size_t)m + 1u;
+    return TV_MAX_POINTS * ((size_t)n * d + d * d);
+}
+
+/* X (d x cols) <- X(1) for dX/dr = hs (G(r) X [+ Lb(r), ADJOINT]) on r in [0, 1], G(r) the
+ * blended generator of `bl`; FORWARD also adds hs * integral of <Lb(r), X(r)> to *J.  Each
+ * term's diffusion blocks are kept per point (they enter the next P terms with different
+ * weights); the drift is applied blended, lag by lag, and a lag whose contribution is below
+ * 2^-60 of the sum is left out. */
+static int taylor(int kind, const tv_tick *v, const tv_blend *bl, double hs, double *X, int cols,
+                  double *J, double *work)
+{
+    const int P = v->P, d = v->d, n = v->n, points = v->g_same ? 1 : v->P;
+    const int noisy = (kind == TV_FORWARD || kind == TV_ADJOINT) && v->na > 0;
+    const size_t D = (size_t)d * cols, nb = (size_t)d * d;
+    const int sym = kind == TV_FORWARD || kind == TV_ADJOINT;
+    double *ring = work, *next = ring + (size_t)P * D, *tmp = next + D,
+           *ringN = tmp + (size_t)v->na * n;
+    double tmax[TV_MAX_POINTS], xmax = max_abs(X, D);
+    int k, l, i;
+    size_t e;
+    if (D == 0) return TV_OK;
+    for (e = 0; e < D; ++e) ring[e] = X[e];
+    tmax[0] = xmax;
+    for (k = 0; k < TV_MAX_TERMS; ++k) {
+        const int lmax = k < P - 1 ? k : P - 1;
+        const double *term = ring + (size_t)(k % P) * D;
+        double nmax = 0.0, bound = 0.0;
+        if (kind == TV_FORWARD && J != NULL) {         /* <Lb(r), term> r^k, integrated */
+            double acc = 0.0;
+            for (l = 0; l < P; ++l) {
+                const double *lb = bl->Lbl + (size_t)l * D;
+                const int *at = bl->lb_at + (size_t)l * D;
+                double inner = 0.0;
+                int z;
+                for (z = 0; z < bl->lb_count[l]; ++z) inner += lb[at[z]] * term[at[z]];
+                acc += inner / (double)(k + l + 1);
+            }
+            *J += hs * acc;
+        }
+        if (noisy && !v->sparse)
+            for (i = 0; i < points; ++i)
+                point_noise(kind, v, i, term, ringN + ((size_t)(k % P) * P + i) * nb, tmp);
+        /* The symmetric kinds gather half of the term in `next` (drift Z, half the noise and
+         * forcing) and take next + next' below. */
+        for (e = 0; e < D; ++e) next[e] = 0.0;
+        for (l = 0; l <= lmax; ++l) {
+            const int s = (k - l) % P;
+            if (l > 0 && bl->nrm[l] * tmax[s] * hs <= 0x1p-60 * xmax * (double)(k + 1))
+                continue;
+            add_drift(kind, v, bl, l, ring + (size_t)s * D, cols,
+                      kind == TV_MEAN && k - l > 0 ? n : d, next);
+            if (!noisy) continue;
+            for (i = 0; i < points; ++i) {
+                const double w = v->g_same ? (l == 0 ? 0.5 : 0.0) : 0.5 * bl->cs[i * P + l];
+                if (w == 0.0) continue;
+                if (v->sparse) pair_noise(kind, v, i, w, ring + (size_t)s * D, next);
+                else add_noise(kind, v, w, ringN + ((size_t)s * P + i) * nb, next);
+            }
+        }
+        if (kind == TV_ADJOINT && k < P) {
+            const double *lb = bl->Lbl + (size_t)k * D;
+            const int *at = bl->lb_at + (size_t)k * D;
+            int z;
+            for (z = 0; z < bl->lb_count[k]; ++z) next[at[z]] += 0.5 * lb[at[z]];
+        }
+        {
+            double *dst = ring + (size_t)((k + 1) % P) * D;
+            const double f = hs / (double)(k + 1);
+            if (sym) {
+                int r, c;
+                for (r = 0; r < d; ++r)
+                    for (c = r; c < d; ++c) {
+                        const double t = (next[r * d + c] + next[c * d + r]) * f, a = abs_d(t);
+                        dst[r * d + c] = dst[c * d + r] = t;
+                        X[r * d + c] += t;
+                        if (c != r) X[c * d + r] += t;
+                        nmax = a > nmax ? a : nmax;
+                    }
+            } else {
+                for (e = 0; e < D; ++e) {
+                    const double t = next[e] * f, a = abs_d(t);
+                    dst[e] = t;
+                    X[e] += t;
+                    nmax = a > nmax ? a : nmax;
+                }
+            }
+        }
+        tmax[(k + 1) % P] = nmax;
+        if (k < P) {                /* the scale of the sum, once the forcing is in */
+            const double x = max_abs(X, D);
+            if (x > xmax) xmax = x;
+        }
+        /* Stop when this term and a bound of the next one are below rounding: hs |G| <= 1/2
+         * then shrinks every later term. */
+        for (l = 0; l < P && l <= k + 1; ++l)
+            bound += bl->nrm[l] * tmax[(k + 1 - l) % P];
+        if (k >= P - 1 && nmax <= 0x1p-56 * xmax && bound * hs <= 0x1p-57 * xmax * (k + 2))
+            return TV_OK;
+    }
+    return TV_ERR_SERIES;
+}
+
+/* Sub-steps of one tick: enough that h/sub times the bound of the interpolated generator on
+ * the tick (the sum of its coefficients' bounds) is at most 1/2.  Leaves sub-step 0 of 1 in
+ * `bl`.  0: non-finite data, or more than TV_MAX_SUB. */
+static int sub_steps(const tv_tick *v, const double *coef, double h, tv_blend *bl)
+{
+    double bound = 0.0, need;
+    int l;
+    blend(v, coef, 0, 1, bl);
+    for (l = 0; l < v->P; ++l) bound += bl->nrm[l];
+    need = 2.0 * h * bound;
+    if (!(need <= (double)TV_MAX_SUB)) return 0;       /* also NaN */
+    return need <= 1.0 ? 1 : (int)need + 1;
+}
+
+static tv_tick tick_of(int n, int d, int na, int mz, int P, const int *act, const double *Ar,
+                       const double *G, const double *Lb, const int *same, const int *ar_nz,
+                       int ar_cnt, long t)
+{
+    tv_tick v;
+    int i;
+    v.n = n; v.d = d; v.na = na; v.mz = mz; v.P = P; v.act = act;
+    v.Ar = same[0] ? Ar : Ar + (size_t)t * P * n * d;
+    v.G = same[1] ? G : G + (size_t)t * P * na * n * mz;
+    v.Lb = same[2] ? Lb : Lb + (size_t)t * P * d * d;
+    v.ar_same = same[0] || same_points(v.Ar, P, (size_t)n * d);
+    v.g_same = same[1] || same_points(v.G, P, (size_t)na * n * mz);
+    v.lb_same = same[2] || same_points(v.Lb, P, (size_t)d * d);
+    v.lb_const = same[2];
+    v.ar_nz = ar_nz; v.ar_cnt = ar_cnt;
+    for (i = 0; i < (v.g_same ? 1 : P); ++i) v.gb[i] = noise_bound(&v, i);
+    return v;
+}
+
+/* Integer work of either loop: the diffusion's nonzero lists. */
+size_t stsp_tv_iwork_size(int n, int m, int na, int mz)
+{
+    const size_t d = (size_t)n + (size_t)m + 1u;
+    return TV_MAX_POINTS * (size_t)mz + 1u + 2u * TV_MAX_POINTS * (size_t)na * n * mz
+           + TV_MAX_POINTS * d * d;
+}
+
+static void lists_of(tv_tick *v, int *iwork, double *gwork)
+{
+    const size_t cap = TV_MAX_POINTS * (size_t)v->na * v->n * v->mz;
+    int *start = iwork, *p = start + TV_MAX_POINTS * v->mz + 1, *a = p + cap;
+    noise_lists(v, start, p, a, gwork);
+}
+
+/* The Lb nonzero lists of `bl` at the end of the integer work. */
+static int *lb_lists(int *iwork, int n, int m, int na, int mz)
+{
+    const size_t d = (size_t)n + (size_t)m + 1u;
+    return iwork + stsp_tv_iwork_size(n, m, na, mz) - TV_MAX_POINTS * d * d;
+}
+
+size_t stsp_tv_zoh_work_size(int n, int m, int q, int na, int mz)
+{
+    const size_t d = (size_t)n + (size_t)m + 1u, r = (size_t)n + 1u;
+    return d * d + d * (size_t)q + (size_t)q * d + r * (r + 1u) / 2u
+           + stsp_zoh_update_size(n, m, q) + taylor_size(n, m, na, q) + blend_size(n, m)
+           + TV_MAX_POINTS * (size_t)na * n * mz;
+}
+
+/* The T ticks of one chunk of a time-varying stage, backward (as stsp_zoh_stage_ticks): the
+ * tick's H from the ADJOINT series started at the value after it, and Hl' = F'N from the
+ * MEAN_ADJ series started at [N; 0], both in the backward variable 1 - s (coef); then the
+ * Riccati step.  Data of tick t at Ar + t*P*n*d, G + t*P*na*n*mz, Lb + t*P*d*d, or, for a field
+ * with same[f] set, one point for every tick. */
+int stsp_tv_zoh_ticks(int n, int m, int q, long T, int P, int na, int mz, const double *coef,
+                      double h, const int *act, const double *Ar, const double *G,
+                      const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
+                      double *V, double *N, double *W,
+                      double *mv, double *K, double *k0, double *L, double *work,
+                      int *iwork, long *bad_tick)
+{
+    const int d = n + m + 1, r = n + 1;
+    double *Y, *U, *Hl, *vp, *up, *tw, *gw;
+    tv_blend bl;
+    long t;
+    int a, b, p, l, j, st;
+    if (n < 1 || m < 1 || q < 0 || T < 0 || P < 1 || P > TV_MAX_POINTS || na < 0 ||
+        na > n + m || mz < 0 || d > TV_MAX_DIM || ar_cnt < 0 || ar_cnt > n * d)
+        return TV_ERR_DIMS;
+    Y = work; U = Y + (size_t)d * d; Hl = U + (size_t)d * q; vp = Hl + (size_t)q * d;
+    up = vp + (size_t)r * (r + 1) / 2; tw = up + stsp_zoh_update_size(n, m, q);
+    bl.Arl = tw + taylor_size(n, m, na, q);
+    bl.Lbl = bl.Arl + TV_MAX_POINTS * (size_t)n * d;
+    bl.lb_done = 0;
+    for (a = 0; a < TV_MAX_POINTS * n * d; ++a) bl.Arl[a] = 0.0;
+    gw = bl.Arl + blend_size(n, m);
+    bl.lb_at = lb_lists(iwork, n, m, na, mz);
+#define RS(a) ((a) < n ? (a) : d - 1)
+    for (a = 0, p = 0; a < r; ++a)
+        for (b = a; b < r; ++b, ++p) vp[p] = 0.5 * (V[a * r + b] + V[b * r + a]);
+    for (t = T - 1; t >= 0; --t) {
+        tv_tick v = tick_of(n, d, na, mz, P, act, Ar, G, Lb, same, ar_nz, ar_cnt, t);
+        const int sub = sub_steps(&v, coef, h, &bl);
+        lists_of(&v, iwork, gw);
+        if (sub == 0) return TV_ERR_SERIES;
+        for (a = 0; a < d * d; ++a) Y[a] = 0.0;
+        for (a = 0, p = 0; a < r; ++a)
+            for (b = a; b < r; ++b, ++p) Y[RS(a) * d + RS(b)] = Y[RS(b) * d + RS(a)] = vp[p];
+        for (a = 0; a < d * q; ++a) U[a] = a < n * q ? N[a] : 0.0;
+        for (j = 0; j < sub; ++j) {
+            if (sub > 1) blend(&v, coef, j, sub, &bl);
+            st = taylor(TV_ADJOINT, &v, &bl, h / sub, Y, d, NULL, tw);
+            if (st == TV_OK) st = taylor(TV_MEAN_ADJ, &v, &bl, h / sub, U, q, NULL, tw);
+            if (st) return st;
+        }
+        for (l = 0; l < q; ++l) {                      /* Hl = (F'N)' + mv in the 1 column */
+            for (b = 0; b < d; ++b) Hl[l * d + b] = U[b * q + l];
+            Hl[l * d + d - 1] += mv[l];
+        }
+        if (stsp_zoh_tick_update(n, m, q, Y, NULL, Hl, vp, N, W, mv, K + (size_t)t * m * n,
+                                 k0 + (size_t)t * m, L + (size_t)t * m * q, up)) {
+            if (bad_tick) *bad_tick = t;
+            return TV_ERR_NOT_PD;
+        }
+    }
+    for (a = 0, p = 0; a < r; ++a)
+        for (b = a; b < r; ++b, ++p) V[a * r + b] = V[b * r + a] = vp[p];
+#undef RS
+    return TV_OK;
+}
+
+size_t stsp_tv_oracle_work_size(int n, int m, int n_latch, int na, int mz)
+{
+    const size_t dw = (size_t)n + (size_t)m + 1u, dy = (size_t)n + (size_t)n_latch + 1u;
+    return dw * dy + dw * dw + dw * (size_t)n_latch + taylor_size(n, m, na, n_latch)
+           + blend_size(n, m) + TV_MAX_POINTS * (size_t)na * n * mz;
+}
+
+/* The T ticks of one chunk of a time-varying stage, forward (as stsp_oracle_stage_ticks, M
+ * the second moment of y = [x; v; 1]), the mean map's constant column (a drift) included:
+ * E x+ v' from the MEAN series on E w v'.  xm, xv (T x n): mean and variance of x after each
+ * tick; um, uv (T x m): of the command over it (all four NULL: not recorded).  Data as in
+ * stsp_tv_zoh_ticks, coef in the forward variable s. */
+int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, const double *L,
+                         const double *k0, int P, int na, int mz, const double *coef,
+                         double h, const int *act, const double *Ar, const double *G,
+                         const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
+                         double *M, double *J, double *xm,
+                         double *xv, double *um, double *uv, double *work, int *iwork)
+{
+    const int dy = n + n_latch + 1, dw = n + m + 1, nl = n_latch;
+    double *TM, *Mw, *Xv, *tw, *gw;
+    tv_blend bl;
+    double acc = *J;
+    long t;
+    int a, b, c, j, st;
+    if (n < 1 || m < 1 || n_latch < 0 || T < 0 || P < 1 || P > TV_MAX_POINTS || na < 0 ||
+        na > n + m || mz < 0 || dw > TV_MAX_DIM || ar_cnt < 0 || ar_cnt > n * dw)
+        return TV_ERR_DIMS;
+    TM = work; Mw = TM + (size_t)dw * dy; Xv = Mw + (size_t)dw * dw;
+    tw = Xv + (size_t)dw * nl;
+    bl.Arl = tw + taylor_size(n, m, na, nl);
+    bl.Lbl = bl.Arl + TV_MAX_POINTS * (size_t)n * dw;
+    bl.lb_done = 0;
+    for (a = 0; a < TV_MAX_POINTS * n * dw; ++a) bl.Arl[a] = 0.0;
+    gw = bl.Arl + blend_size(n, m);
+    bl.lb_at = lb_lists(iwork, n, m, na, mz);
+    for (t = 0; t < T; ++t) {
+        tv_tick v = tick_of(n, dw, na, mz, P, act, Ar, G, Lb, same, ar_nz, ar_cnt, t);
+        const double *Kt = K + (size_t)t * m * n, *Lt = L + (size_t)t * m * nl,
+                     *kt = k0 + (size_t)t * m;
+        int sub;
+        /* TM = E w y' for w = [x; u; 1] = Tw y: the x and 1 rows are rows of M, the command
+         * rows -K x - L v - k0. */
+        for (a = 0; a < n; ++a)
+            for (b = 0; b < dy; ++b) TM[a * dy + b] = M[a * dy + b];
+        for (b = 0; b < dy; ++b) TM[(dw - 1) * dy + b] = M[(dy - 1) * dy + b];
+        for (a = 0; a < m; ++a)
+            for (b = 0; b < dy; ++b) {
+                double s = 0.0;
+                for (c = 0; c < n; ++c) s -= Kt[a * n + c] * M[c * dy + b];
+                for (c = 0; c < nl; ++c) s -= Lt[a * nl + c] * M[(n + c) * dy + b];
+                s -= kt[a] * M[(dy - 1) * dy + b];
+                TM[(n + a) * dy + b] = s;
+            }
+        for (a = 0; a < dw; ++a)                       /* Mw = TM Tw' = E w w' */
+            for (b = a; b < dw; ++b) {
+                double s;
+                if (b < n) {
+                    s = TM[a * dy + b];
+                } else if (b == dw - 1) {
+                    s = TM[a * dy + dy - 1];
+                } else {
+                    const int u = b - n;
+                    s = 0.0;
+                    for (c = 0; c < n; ++c) s -= TM[a * dy + c] * Kt[u * n + c];
+                    for (c = 0; c < nl; ++c) s -= TM[a * dy + n + c] * Lt[u * nl + c];
+                    s -= TM[a * dy + dy - 1] * kt[u];
+                }
+                Mw[a * dw + b] = Mw[b * dw + a] = s;
+            }
+        if (um != NULL)
+            for (a = 0; a < m; ++a) {
+                const double mu = Mw[(n + a) * dw + dw - 1];
+                um[t * m + a] = mu;
+                uv[t * m + a] = Mw[(n + a) * dw + n + a] - mu * mu;
+            }
+        for (a = 0; a < dw; ++a)                       /* E w v' */
+            for (b = 0; b < nl; ++b) Xv[a * nl + b] = TM[a * dy + n + b];
+        sub = sub_steps(&v, coef, h, &bl);
+        if (sub == 0) return TV_ERR_SERIES;
+        lists_of(&v, iwork, gw);
+        for (j = 0; j < sub; ++j) {
+            if (sub > 1) blend(&v, coef, j, sub, &bl);
+            st = taylor(TV_FORWARD, &v, &bl, h / sub, Mw, dw, &acc, tw);
+            if (st == TV_OK) st = taylor(TV_MEAN, &v, &bl, h / sub, Xv, nl, NULL, tw);
+            if (st) return st;
+        }
+        for (a = 0; a < n; ++a) {
+            for (b = 0; b < nl; ++b) M[a * dy + n + b] = M[(n + b) * dy + a] = Xv[a * nl + b];
+            for (b = 0; b < n; ++b) M[a * dy + b] = Mw[a * dw + b];
+            M[a * dy + dy - 1] = M[(dy - 1) * dy + a] = Mw[a * dw + dw - 1];
+        }
+        if (xm != NULL)
+            for (a = 0; a < n; ++a) {
+                const double mu = M[a * dy + dy - 1];
+                xm[t * n + a] = mu;
+                xv[t * n + a] = M[a * dy + a] - mu * mu;
+            }
+    }
+    *J = acc;
+    return TV_OK;
+}

@@ -1,0 +1,139 @@
+"""The C loops of time-varying stages (design/varying_kernel.c): the designer's backward
+recursion and the oracle's forward one, both on the data interpolated through two Gauss points
+per tick and solved by Taylor series, against references that share none of their code — the
+numpy designer with a Magnus exponential per tick, the oracle integrating every tick with
+DOP853 — and the vectorised sampling of the data they read."""
+import copy
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from stospline.design import varying
+from stospline.design.zoh import design_zoh
+from stospline.problem import parse_problem
+from stospline.problem.faults import Faults
+from stospline.problem.series import Series
+from stospline.sim.oracle import evaluate_table
+from stospline.table.format import table_of
+
+from test_time_varying_data import tv_doc
+
+
+def _with_drift(doc):
+    """tv_doc with a time-varying affine drift as well (the constant column of the maps)."""
+    doc = copy.deepcopy(doc)
+    doc["dynamics"]["f"] = {"t": [0, 1, 2], "values": [[0.0, 0.5], [0.2, -0.3], [0.0, 0.1]]}
+    return doc
+
+
+def _reference_oracle(problem, table, monkeypatch, path=True):
+    with monkeypatch.context() as mp:
+        mp.setenv("STOSPLINE_ORACLE_KERNEL", "numpy")
+        return evaluate_table(problem, table, path=path)
+
+
+@pytest.mark.parametrize("mode", ["stagewise", "joint"])
+def test_c_loops_agree_with_the_references(mode, monkeypatch):
+    problem = parse_problem(_with_drift(tv_doc()))
+    d = design_zoh(problem, mode=mode)
+    ref_design = design_zoh(problem, mode=mode, kernel="numpy")
+    table = table_of(d, quantize=False)
+    c = evaluate_table(problem, table, path=True)
+    ref = _reference_oracle(problem, table, monkeypatch)
+    # Two fourth-order tick maps (Gauss-point interpolation, Magnus) at 20 Hz.
+    assert abs(d.J0 - ref_design.J0) <= 1e-7 * d.J0
+    for a, b in zip(d.stages, ref_design.stages):
+        np.testing.assert_allclose(a.K, b.K, atol=1e-6 * np.abs(b.K).max())
+    # The C oracle and DOP853 on every tick, same table: cost, knots and the whole path.
+    assert abs(c.J - ref.J) <= 1e-7 * ref.J
+    np.testing.assert_allclose(c.path_mean, ref.path_mean, atol=1e-7)
+    np.testing.assert_allclose(c.path_var, ref.path_var, atol=1e-7 * ref.path_var.max())
+    np.testing.assert_allclose(c.path_u_mean, ref.path_u_mean, atol=1e-7)
+    np.testing.assert_allclose(c.path_u_var, ref.path_u_var, atol=1e-7 * ref.path_u_var.max())
+    for k, kn in enumerate(problem.knots):
+        np.testing.assert_allclose(c.knot_constraint[k], kn.constraint.value, atol=1e-7)
+    # Designer and C oracle read the same interpolated data: equal to rounding.
+    assert abs(c.J - d.J0) <= 1e-12 * d.J0
+
+
+def test_oracle_error_falls_as_h_to_the_fourth(monkeypatch):
+    errors = []
+    for hz in (20, 40):
+        doc = _with_drift(tv_doc())
+        doc["tick_hz"] = hz
+        problem = parse_problem(doc)
+        table = table_of(design_zoh(problem), quantize=False)
+        c = evaluate_table(problem, table, path=False).J
+        errors.append(abs(c - _reference_oracle(problem, table, monkeypatch, path=False).J))
+    assert errors[1] < errors[0] / 10          # order 4: a factor ~16 (kinks: less)
+
+
+def test_constant_data_given_as_samples_is_exact():
+    """Samples that do not change: the Taylor loops must give the constant-stage results (an
+    exact exponential per stage) to rounding."""
+    doc = {"name": "flat", "x0": [1.0, -0.5], "tick_hz": 50,
+           "dynamics": {"A": [[0, 1], [-2, -0.3]], "B": [[0], [1]],
+                        "noise": [{"state": 1, "G": [[0.0], [0.3]]}]},
+           "cost": {"R": [[0.5]], "Q": [[1, 0], [0, 0.1]]},
+           "knots": [{"t": 1.0, "constraint": {"C": [[1, 0]], "value": [0.5]}},
+                     {"t": 2.0, "penalty": {"C": [[0, 1]], "target": [0.2], "weight": 3.0}}]}
+    flat = parse_problem(doc)
+    sampled_doc = copy.deepcopy(doc)
+    sampled_doc["dynamics"]["A"] = {"t": [0, 2], "values": [doc["dynamics"]["A"]] * 2}
+    sampled = parse_problem(sampled_doc)
+    assert sampled.stages[0].varying is not None
+    a, b = design_zoh(flat), design_zoh(sampled)
+    assert abs(a.J0 - b.J0) <= 1e-12 * a.J0
+    for sa, sb in zip(a.stages, b.stages):
+        np.testing.assert_allclose(sb.K, sa.K, rtol=0, atol=1e-11 * np.abs(sa.K).max())
+        np.testing.assert_allclose(sb.k0, sa.k0, rtol=0, atol=1e-11 * np.abs(sa.k0).max())
+    ja = evaluate_table(flat, table_of(a, quantize=False), path=False).J
+    jb = evaluate_table(sampled, table_of(a, quantize=False), path=False).J
+    assert abs(ja - jb) <= 1e-12 * ja
+
+
+def test_sub_steps_keep_stiff_slow_ticks_exact(monkeypatch):
+    """A fast pole at a slow tick rate (h |A| = 10): the loops split each tick into sub-steps
+    and still match DOP853."""
+    doc = tv_doc()
+    doc["tick_hz"] = 10
+    doc["dynamics"]["A"]["values"] = [[[0, 1], [-100, -20]], [[0, 1], [-80, -25]],
+                                      [[0, 1], [-100, -20]]]
+    problem = parse_problem(doc)
+    table = table_of(design_zoh(problem), quantize=False)
+    c = evaluate_table(problem, table, path=False)
+    ref = _reference_oracle(problem, table, monkeypatch, path=False)
+    assert abs(c.J - ref.J) <= 1e-6 * ref.J
+    smp = varying.tick_samples(problem.stages[0], 0.0, 0.1, 3, varying._gauss(2)[0])
+    assert smp.Ar.shape[0] == 3     # the data vary: one entry per tick
+
+
+times = st.lists(st.floats(-1.0, 4.0, allow_nan=False), min_size=1, max_size=30)
+
+
+@settings(max_examples=60, deadline=None)
+@given(knots=st.lists(st.floats(0.0, 3.0), min_size=1, max_size=6, unique=True),
+       at=times, interpolation=st.sampled_from(["linear", "zoh"]), seed=st.integers(0, 99))
+def test_series_many_equals_one_call_per_time(knots, at, interpolation, seed):
+    t = np.array(sorted(knots))
+    values = np.random.default_rng(seed).normal(size=(t.size, 2, 3))
+    s = Series(t, values, interpolation, "x")
+    got = s.many(np.array(at))
+    for j, tj in enumerate(at):
+        np.testing.assert_array_equal(got[j], s(tj))
+
+
+@pytest.mark.parametrize("wrap", ["none", "without_noise", "mismatch"])
+def test_stage_samples_equal_the_stage_at_each_time(wrap):
+    stage = parse_problem(_with_drift(tv_doc())).stages[1]
+    if wrap == "without_noise":
+        stage = stage.without_noise()
+    elif wrap == "mismatch":
+        stage = Faults(plant_A_scale=1.1, plant_noise_scale=0.5)._stage(stage)
+    ts = np.linspace(0.8, 2.3, 23)
+    s = stage.samples(ts)
+    for j, t in enumerate(ts):
+        frozen = stage.at(t)
+        for k in ("A", "B", "G", "Q", "R", "S", "q", "r", "rho", "f"):
+            np.testing.assert_array_equal(s[k][j], np.asarray(getattr(frozen, k), float), k)

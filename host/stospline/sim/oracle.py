@@ -266,7 +266,16 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     >>> m = stospline.evaluate_table(p, stospline.design_problem(p).table, path=False)
     >>> print(f"{m.J:.4f}", np.round(m.knot_mean[-1], 6) + 0.0)   # cost; mean state at t = 6
     27.7745 [-1.  0.  5.  0.]
+
+    A table designed for a one-tick delay (``table.delay_ticks``) is evaluated by the fault
+    oracle's loop (`fault_oracle.evaluate_with_faults` without faults), whose state carries
+    the command waiting to be applied.
     """
+    if getattr(table, "delay_ticks", 0):
+        from stospline.problem.faults import Faults
+        from stospline.sim.fault_oracle import evaluate_with_faults
+        return evaluate_with_faults(problem, table, Faults(), propagator=propagator,
+                                    substeps=substeps, path=path)
     n, m, n_latch = table.dims
     h = 1.0 / table.tick_hz
     d_y, d_w = n + n_latch + 1, n + m + 1

@@ -196,6 +196,10 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
     if faults.any and faults_unsupported(problem, table):
         raise ProblemError("faults", "are simulated for float32 tables with time-invariant "
                                      "stage data only")
+    if getattr(table, "delay_ticks", 0) and faults.delay_ticks:
+        raise ProblemError("faults.delay_ticks", "the table is designed for a one-tick delay "
+                                                 "and runs with it; a delay fault on top of it "
+                                                 "is not simulated")
     counts = [min(BLOCK_PATHS, paths - start) for start in range(0, paths, BLOCK_PATHS)]
     workers = default_workers() if workers is None else max(1, int(workers))
     parallel = (workers > 1 and len(counts) > 1
@@ -275,7 +279,11 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
     record_u = np.empty((table.n_ticks, kept, m), np.float32) if kept else None
     if kept:
         record_x[0] = X[:kept]
-    draws = FaultDraws.of(faults, paths, n, table.u_hold) if faults.any else None
+    # A table designed for a one-tick delay runs in the delayed loop (the fault path of the
+    # fused tick, measuring the held command too).
+    delayed = int(getattr(table, "delay_ticks", 0))
+    draws = (FaultDraws.of(faults, paths, n, table.u_hold, delayed)
+             if faults.any or delayed else None)
     fault_rng = np.random.default_rng(fault_seed(seed)) if draws is not None else None
     for k in range(table.n_stages):
         st = plant_of.stages[k]

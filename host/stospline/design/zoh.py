@@ -237,6 +237,12 @@ def check_delay(problem: Problem, delay_ticks, discretization: str = "exact-zoh"
     if any(st.varying is not None for st in problem.stages):
         raise DesignError("design.delay_ticks", "a one-tick delay is designed for "
                                                 "time-invariant stage data only")
+    from stospline.limits import MAX_NX
+    if problem.n + problem.m > MAX_NX:
+        raise DesignError("design.delay_ticks", f"the delayed law's state [x; a] has n + m = "
+                                                f"{problem.n + problem.m} components; the "
+                                                f"firmware takes at most {MAX_NX} "
+                                                f"(STSP_MAX_NX)")
     return delay
 
 

@@ -141,6 +141,9 @@ def faults_unsupported(problem: Problem, table) -> str | None:
         return "the fault harness runs float32 tables"
     if any(st.varying is not None for st in problem.stages):
         return "the fault harness runs time-invariant stage data (this problem's vary in time)"
+    if getattr(table, "delay_ticks", 0):
+        return ("the fault harness runs tables designed without a delay (this one is designed "
+                "for a one-tick delay, which it always runs with)")
     return None
 
 
@@ -193,13 +196,13 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
             raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
     table = controller.table
     faults = problem.faults if faults is None else faults
-    if faults.any and faults_unsupported(problem, table):
-        raise ProblemError("faults", "are simulated for float32 tables with time-invariant "
-                                     "stage data only")
     if getattr(table, "delay_ticks", 0) and faults.delay_ticks:
         raise ProblemError("faults.delay_ticks", "the table is designed for a one-tick delay "
                                                  "and runs with it; a delay fault on top of it "
                                                  "is not simulated")
+    if faults.any and faults_unsupported(problem, table):
+        raise ProblemError("faults", "are simulated for float32 tables designed without a "
+                                     "delay, with time-invariant stage data only")
     counts = [min(BLOCK_PATHS, paths - start) for start in range(0, paths, BLOCK_PATHS)]
     workers = default_workers() if workers is None else max(1, int(workers))
     parallel = (workers > 1 and len(counts) > 1

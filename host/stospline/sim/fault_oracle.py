@@ -28,6 +28,7 @@ import numpy as np
 
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem
+from stospline.sim import oracle as _oracle
 from stospline.sim.oracle import (Moments, _knot_terms, _PathRecord, _plant_tick,
                                   _stage_maps)
 from stospline.table.format import GainTable
@@ -170,3 +171,14 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
         J += pen
         means.append(mean); covs.append(cov); cons.append(con)
     return rec.moments(J, means, covs, cons, problem.t0, h, table.n_ticks)
+
+
+def evaluate_delayed_table(problem: Problem, table: GainTable, *, propagator: str = "exact",
+                           substeps: int = 4, path: bool = True) -> Moments:
+    """`oracle.evaluate_table` of a table designed for a one-tick delay: the delayed loop
+    without faults."""
+    return evaluate_with_faults(problem, table, Faults(), propagator=propagator,
+                                substeps=substeps, path=path)
+
+
+_oracle._DELAYED_LOOP[:] = [evaluate_delayed_table]

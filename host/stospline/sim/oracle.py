@@ -232,6 +232,10 @@ def _c_kernel():
     return oracle_stage_ticks
 
 
+# `fault_oracle.evaluate_delayed_table`, set when that module is imported.
+_DELAYED_LOOP: list = []
+
+
 def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
                    substeps: int = 4, path: bool = True) -> Moments:
     """Exact moments of the controller as implemented: ZOH at the table's tick rate, with the
@@ -272,10 +276,13 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     the command waiting to be applied.
     """
     if getattr(table, "delay_ticks", 0):
-        from stospline.problem.faults import Faults
-        from stospline.sim.fault_oracle import evaluate_with_faults
-        return evaluate_with_faults(problem, table, Faults(), propagator=propagator,
-                                    substeps=substeps, path=path)
+        # The fault oracle's delayed loop, which registers itself here on import (it builds on
+        # this module, so a static import from here would be a cycle).
+        if not _DELAYED_LOOP:
+            import importlib
+            importlib.import_module("stospline.sim.fault_oracle")
+        return _DELAYED_LOOP[0](problem, table, propagator=propagator, substeps=substeps,
+                                path=path)
     n, m, n_latch = table.dims
     h = 1.0 / table.tick_hz
     d_y, d_w = n + n_latch + 1, n + m + 1

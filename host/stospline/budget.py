@@ -159,8 +159,10 @@ def _widths(problem: Problem, mode: str) -> tuple[list[int], int]:
 
 def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewise",
              discretization: str = "exact-zoh", arith: str = "float32", paths: int = 0,
-             substeps: int = 2) -> Estimate:
+             substeps: int = 2, delay_ticks: int = 0) -> Estimate:
     """Estimate the time and peak memory of ``stospline COMMAND`` on `problem`.
+
+    A design for a one-tick delay (`delay_ticks` 1) is counted as one of ``n + m`` states.
 
     Parameters
     ----------
@@ -169,6 +171,7 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
         The Monte Carlo run of simulate and plot.
     """
     n, m, mz = problem.n, problem.m, problem.mz
+    n += m * (delay_ticks == 1)
     d = n + m + 1
     D = d * d
     ds, vs = d * (d + 1) // 2, (n + 1) * (n + 2) // 2

@@ -23,9 +23,17 @@ __all__ = ["main"]
 
 def _options(args, problem) -> dict:
     """Design options: command line first, then the file's [design] table, then defaults."""
+    delay = problem.options.get("delay_ticks", 0)
+    if args.delay_ticks is not None:
+        if args.delay_ticks not in ("0", "1"):
+            raise ProblemError("--delay-ticks", f"must be 0 or 1 (ticks between measuring x "
+                                                f"and applying its command), got "
+                                                f"{args.delay_ticks!r}")
+        delay = int(args.delay_ticks)
     return {"mode": args.mode or problem.options.get("mode", "stagewise"),
             "discretization": args.discretization
-            or problem.options.get("discretization", "exact-zoh")}
+            or problem.options.get("discretization", "exact-zoh"),
+            "delay_ticks": delay}
 
 
 @quiet_numerics
@@ -456,6 +464,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help="stagewise (default): re-plan the multipliers at every stage "
                              "start; joint: one multiplier vector for all knots, latched at t0 "
                              "(needed for bands). Default: the file's [design] mode")
+        sp.add_argument("--delay-ticks", default=None, metavar="{0,1}",
+                        help="1: design for a one-tick computation delay (the command computed "
+                             "from the state at tick j is applied at tick j+1; the controller "
+                             "is fed [x; the command being applied], docs/guide/firmware.md). "
+                             "Default: the file's [design] delay_ticks, else 0")
     return ap
 
 

@@ -12,7 +12,7 @@ import numpy as np
 from stospline.table.codegen import GENERATOR, generate_c
 from stospline.design.bands import design_bands, has_bands
 from stospline.design.continuous import DesignError, design_continuous
-from stospline.design.zoh import design_zoh
+from stospline.design.zoh import check_delay, design_zoh
 from stospline.sim.controller import build_controller
 from stospline.sim.montecarlo import MonteCarloResult, joint_verdict, simulate, z_value
 from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table, state_range
@@ -82,7 +82,8 @@ class Designed:
 
 
 def design_problem(problem: Problem, *, noise: bool = True,
-                   discretization: str = "exact-zoh", mode: str = "stagewise") -> Designed:
+                   discretization: str = "exact-zoh", mode: str = "stagewise",
+                   delay_ticks: int | None = None) -> Designed:
     """Design at the problem's tick rate, quantize the table, evaluate both with the oracle.
 
     Parameters
@@ -97,6 +98,11 @@ def design_problem(problem: Problem, *, noise: bool = True,
         "continuous" solves the continuous-time design and samples its gains at the ticks.
     mode : {"stagewise", "joint"}
         Multipliers latched at every stage start, or once at t0 (`stospline.design.latch`).
+    delay_ticks : {0, 1}, optional
+        1: design for a one-tick computation delay (the command computed from the state at
+        tick j is applied at tick j+1; exact-zoh only). The table's law is then over ``[x;
+        a]``, ``a`` the command being applied (docs/guide/firmware.md, "A one-tick delay").
+        Default: the problem's ``[design] delay_ticks``, else 0.
 
     Returns
     -------
@@ -120,15 +126,19 @@ def design_problem(problem: Problem, *, noise: bool = True,
     (6000, (4, 2, 4))
     """
     limits.check_mode(problem, mode)   # before the work: the firmware's STSP_MAX_LATCH
+    if delay_ticks is None:
+        delay_ticks = problem.options.get("delay_ticks", 0)
+    delay_ticks = check_delay(problem, delay_ticks, discretization)
     try:
-        return _design_problem(problem, noise=noise, discretization=discretization, mode=mode)
+        return _design_problem(problem, noise=noise, discretization=discretization, mode=mode,
+                               delay_ticks=delay_ticks)
     except FloatingPointError:
         # Products of extreme data (B = 1e308, C'C of 1e300) overflowed to Inf or NaN.
         raise DesignError(*strict.overflow_failure(problem)) from None
 
 
 def _design_problem(problem: Problem, *, noise: bool, discretization: str,
-                    mode: str) -> Designed:
+                    mode: str, delay_ticks: int = 0) -> Designed:
     if has_bands(problem):
         if mode != "joint":
             raise DesignError("knots", "band constraints (lower/upper) are exact only with one "
@@ -139,7 +149,8 @@ def _design_problem(problem: Problem, *, noise: bool, discretization: str,
         design = design_bands(problem, discretization=discretization, noise=noise)
         continuous_law = design.base
     elif discretization == "exact-zoh":
-        design = continuous_law = design_zoh(problem, noise=noise, mode=mode)
+        design = continuous_law = design_zoh(problem, noise=noise, mode=mode,
+                                             delay_ticks=delay_ticks)
     elif discretization == "continuous":
         design = continuous_law = design_continuous(problem, noise=noise, mode=mode)
     else:
@@ -301,6 +312,9 @@ def fixed_point_table(d: Designed, arith: str, *, sigmas: float = DEFAULT_SIGMAS
     >>> q.name, q.arith, q.K.shape
     ('robot_corridor_q15', 'q15', (6000, 2, 4))
     """
+    if d.table.delay_ticks:
+        raise DesignError("design.delay_ticks", f"a design for a one-tick delay has float32 "
+                                                f"tables only, not {arith}")
     if x_range is None:
         x_range = state_range(d.problem, d.table, sigmas=sigmas)
     return quantize_table(double_table(d), arith, x_range)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import os
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -29,7 +29,7 @@ from stospline.errors import DesignError
 from stospline.design.moments import augmented_drift, moment_generator, running_cost_matrix, varying_tick
 from stospline.design.latch import latch_groups
 from stospline.design.varying import zoh_ticks
-from stospline.problem.model import Problem, Stage, ticks_per_stage
+from stospline.problem.model import Knot, Problem, Stage, ticks_per_stage
 
 __all__ = ["ZohStage", "ZohDesign", "design_zoh"]
 
@@ -55,6 +55,33 @@ class ZohDesign(StageValues):
     stages: list[ZohStage]
     noise_aware: bool
     mode: str = "stagewise"
+    # 1: the command computed at tick j is applied at tick j+1; the law's state is then
+    # [x; a], a the command being applied (`_delayed_tick_data`), the first a the table's
+    # safe command u_hold.
+    delay_ticks: int = 0
+
+    def start_state(self, x0: np.ndarray) -> np.ndarray:
+        """The law's state at t0 from the plant's `x0`: `x0` itself, or with a delay ``[x0;
+        u_hold]`` (the command applied over the first tick: the safe command, as float32)."""
+        x0 = np.asarray(x0, dtype=float)
+        if not self.delay_ticks:
+            return x0
+        hold = self.problem.u_hold
+        hold = np.zeros(self.problem.m) if hold is None else np.asarray(hold, float)
+        return np.concatenate([x0, hold.astype(np.float32).astype(float)])
+
+    @property
+    def J0(self) -> float:
+        return self.cost_to_go(0, self.start_state(self.problem.x0))
+
+    def cost_from(self, x0: np.ndarray) -> float:
+        return self.cost_to_go(0, self.start_state(x0))
+
+    def summary_terms(self) -> dict:
+        if not self.delay_ticks:
+            return {}
+        return {"delay_ticks": self.delay_ticks,
+                "controller_state": delayed_state_names(self.problem)}
 
     def tick_gains(self, tick_hz: int | None = None) -> tuple[int, list[tuple]]:
         """Per-stage ``(K, k0, L, Lambda, lambda0)`` of the law, exact at its own tick rate
@@ -113,6 +140,118 @@ def _tick_data(stage: Stage, h: float) -> _TickData:
     A2 = np.ascontiguousarray(A2s[pos.ravel()][:, vpos.ravel()] * half)
     F = expm(augmented_drift(stage, m + 1) * h)[:n]
     return _TickData(A2, Hcs[pos], F, np.ascontiguousarray(A2s.T), Hcs)
+
+
+def _delayed_tick_data(td: _TickData, n: int, m: int) -> _TickData:
+    """The tick data of a one-tick computation delay (``[design] delay_ticks = 1``), from the
+    plain tick data `td` of the same stage.
+
+    The controller's state is ``xi = [x; a]``: ``a`` is the command applied over the tick
+    (decided one tick earlier), and the decision ``u`` is applied over the next tick. With
+    ``z' = [x; a; u; 1]`` and ``w = [x; a; 1]`` (the plain tick's ``z`` with ``a`` held), a
+    value after the tick over ``[x+; a+; 1]``, ``a+ = u``,
+
+        x+'Pxx x+ + 2 x+'Pxa u + u'Paa u + 2 px'x+ + 2 pa'u + c
+
+    is before it ``w'(mat(A2 vec [[Pxx, px], [px', c]]) + Hc) w + 2 (F w)'Pxa u + u'Paa u +
+    2 pa'u``: the plain map on the ``x, 1`` blocks (running cost on the applied ``a``), and
+    ``E x+ = F w`` for the cross term (u is known at the tick). ``E xi+ = F' z'`` with
+    ``F' = [[F on w], [0, 0, I, 0]]``. So this is an ordinary `_TickData` with ``n' = n + m``
+    states and ``d' = n + 2m + 1``, and `_stage_ticks_numpy` / the C kernel run unchanged.
+    """
+    nx, d, r = n + m, n + m + 1, n + m + 1          # states, plain d, V' side
+    dd = nx + m + 1
+    wi = np.r_[0:n + m, dd - 1]                      # w = [x; a; 1] inside z'
+    vw = np.r_[0:n, nx]                              # [x; 1] inside [x; a; 1]
+    us, as_ = np.arange(nx, nx + m), np.arange(n, nx)
+    A2 = np.zeros((dd * dd, r * r))
+    A2[np.ix_((wi[:, None] * dd + wi[None, :]).ravel(),
+              (vw[:, None] * r + vw[None, :]).ravel())] = td.A2
+    for k in range(m):
+        u, a = us[k], as_[k]
+        for i in range(n):                           # x+'Pxa u, both halves of V'
+            A2[wi * dd + u, i * r + a] += td.F[i]
+            A2[u * dd + wi, a * r + i] += td.F[i]
+        A2[u * dd + us, a * r + as_] = 1.0           # u'Paa u
+        A2[u * dd + dd - 1, a * r + nx] = 1.0        # 2 pa'u
+        A2[(dd - 1) * dd + u, nx * r + a] = 1.0
+    Hc = np.zeros((dd, dd))
+    Hc[np.ix_(wi, wi)] = td.Hc
+    F = np.zeros((nx, dd))
+    F[:n, wi] = td.F
+    F[n:, us] = np.eye(m)
+    # Packed forms for the C kernel: packed V' -> packed sym(H'), as in `_tick_data`.
+    iu, ju = np.triu_indices(dd)
+    ia, ib = np.triu_indices(r)
+    cols = A2[:, ia * r + ib] + (ia != ib) * A2[:, ib * r + ia]
+    A2s = 0.5 * (cols[iu * dd + ju] + cols[ju * dd + iu])
+    return _TickData(A2, Hc, F, np.ascontiguousarray(A2s.T), Hc[iu, ju].copy())
+
+
+def _unapplied_tick(td: _TickData, V, N, W, mv, m: int, hold: np.ndarray):
+    """The last tick of a delayed plan: its decision would be applied after the plan ends, so
+    it moves no cost and no constraint (``Huu = 0``; the Riccati step would divide by it).
+    The law outputs the safe command there (``K = L = 0``, ``k0 = -u_hold``); the value before
+    the tick is the ``[x; a; 1]`` block of H. Same returns as `_stage_ticks_numpy`, one tick."""
+    n, q = N.shape
+    d = n + m + 1
+    rs = np.r_[0:n, d - 1]
+    H = (td.A2 @ V.ravel()).reshape(d, d)
+    H = 0.5 * (H + H.T) + td.Hc
+    Hl = N.T @ td.F
+    Hl[:, -1] += mv
+    Hlr = Hl[:, rs]
+    return (np.zeros((1, m, n)), -hold[None, :].copy(), np.zeros((1, m, q)),
+            _sym(H[np.ix_(rs, rs)]), Hlr[:, :n].T, W, Hlr[:, n])
+
+
+def _padded_knot(knot: Knot, nx: int) -> Knot:
+    """`knot` with its penalty and constraint rows over ``xi = [x; a]`` (zeros on ``a``):
+    knots weigh and constrain the plant state only."""
+    def pad(C):
+        return np.hstack([C, np.zeros((C.shape[0], nx - C.shape[1]))])
+    pen, con = knot.penalty, knot.constraint
+    return replace(knot, penalty=None if pen is None else replace(pen, C=pad(pen.C)),
+                   constraint=None if con is None else replace(con, C=pad(con.C)))
+
+
+DELAYS = (0, 1)
+
+
+def check_delay(problem: Problem, delay_ticks, discretization: str = "exact-zoh") -> int:
+    """`delay_ticks` as an int, or a DesignError naming ``design.delay_ticks``: 0 or 1, and
+    1 only for the exact zero-order-hold design of time-invariant stage data without bands."""
+    if isinstance(delay_ticks, bool) or delay_ticks not in DELAYS:
+        raise DesignError("design.delay_ticks", f"must be 0 or 1 (ticks between measuring x "
+                                                f"and applying its command), got "
+                                                f"{delay_ticks!r}")
+    delay = int(delay_ticks)
+    if not delay:
+        return 0
+    if discretization != "exact-zoh":
+        raise DesignError("design.delay_ticks", f"a one-tick delay is designed by the exact "
+                                                f"zero-order-hold design only, not with "
+                                                f"discretization {discretization!r}")
+    if any(kn.constraint is not None and kn.constraint.is_band for kn in problem.knots):
+        raise DesignError("design.delay_ticks", "a one-tick delay is not designed with band "
+                                                "constraints (lower/upper) yet")
+    if any(st.varying is not None for st in problem.stages):
+        raise DesignError("design.delay_ticks", "a one-tick delay is designed for "
+                                                "time-invariant stage data only")
+    from stospline.limits import MAX_NX
+    if problem.n + problem.m > MAX_NX:
+        raise DesignError("design.delay_ticks", f"the delayed law's state [x; a] has n + m = "
+                                                f"{problem.n + problem.m} components; the "
+                                                f"firmware takes at most {MAX_NX} "
+                                                f"(STSP_MAX_NX)")
+    return delay
+
+
+def delayed_state_names(problem: Problem) -> list[str]:
+    """Names of the controller state of a delayed design: the plant's, then the commands
+    being applied (``u0_applied``, ...)."""
+    return ([f"x{i}" for i in range(problem.n)]
+            + [f"u{j}_applied" for j in range(problem.m)])
 
 
 def _stage_key(stage: Stage, h: float) -> bytes:
@@ -204,7 +343,8 @@ def _pick_kernel(kernel: str | None):
 
 
 def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = True,
-               mode: str = "stagewise", kernel: str | None = None) -> ZohDesign:
+               mode: str = "stagewise", kernel: str | None = None,
+               delay_ticks: int = 0) -> ZohDesign:
     """Solve the exact sampled-data design at `tick_hz` (default: the problem's).
 
     Parameters
@@ -219,6 +359,10 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
     kernel : {"c", "numpy"}, optional
         The per-tick loop: compiled C (`kernels`, the default) or the numpy reference
         (``STOSPLINE_ZOH_KERNEL=numpy`` sets the default). They agree to rounding.
+    delay_ticks : {0, 1}
+        1: the command computed from the state at tick j is applied at tick j+1 (a one-tick
+        computation delay). The law is then over ``[x; a]``, ``a`` the command being applied
+        (`_delayed_tick_data`): its gains have ``n + m`` columns.
 
     Returns
     -------
@@ -230,7 +374,14 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
     except ValueError as exc:
         raise DesignError("tick_hz", str(exc)) from None
     h = 1.0 / tick_hz
+    delay = check_delay(problem, delay_ticks)
     n, m = problem.n, problem.m
+    knots = problem.knots
+    if delay:      # the law's state xi = [x; a]: from here on n counts its components
+        n = n + m
+        knots = tuple(_padded_knot(kn, n) for kn in knots)
+        hold = (np.zeros(m) if problem.u_hold is None
+                else np.asarray(problem.u_hold, dtype=float).astype(np.float32).astype(float))
     stage_ticks = _pick_kernel(kernel)
     _, group_of = latch_groups(problem, mode)
     cache: dict[bytes, _TickData] = {}
@@ -239,7 +390,7 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
     out: list[ZohStage | None] = [None] * len(problem.knots)
     bar = progress.start("design", int(np.sum(counts)))
     for k in range(len(problem.knots) - 1, -1, -1):
-        knot, g = problem.knots[k], group_of[k]
+        knot, g = knots[k], group_of[k]
         stage = problem.stages[k] if noise else problem.stages[k].without_noise()
         PT, pT, cT = knot_terminal(knot, V[:n, :n], V[:n, n], V[n, n])
         V = np.block([[PT, pT[:, None]], [pT[None, :], np.array([[cT]])]])
@@ -261,8 +412,20 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
             with np.errstate(over="ignore", invalid="ignore"):
                 if stage.varying is None:
                     key = _stage_key(stage, h)
-                    td = cache.get(key) or cache.setdefault(key, _tick_data(stage, h))
-                    K, k0, L, V, N, W, mv = stage_ticks(td, V, N, W, mv, int(counts[k]), m)
+                    td = cache.get(key)
+                    if td is None:
+                        td = _tick_data(stage, h)
+                        if delay:
+                            td = _delayed_tick_data(td, problem.n, m)
+                        cache[key] = td
+                    T = int(counts[k])
+                    if delay and k == len(problem.knots) - 1:
+                        last = _unapplied_tick(td, V, N, W, mv, m, hold)
+                        V, N, W, mv = last[3:]
+                        T -= 1
+                    K, k0, L, V, N, W, mv = stage_ticks(td, V, N, W, mv, T, m)
+                    if delay and k == len(problem.knots) - 1:
+                        K, k0, L = (np.concatenate([a, b]) for a, b in zip((K, k0, L), last))
                 else:
                     varying_ticks = (zoh_ticks if stage_ticks is _stage_ticks_c
                                      else _varying_stage_ticks)
@@ -289,4 +452,4 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
         out[k] = st
         progress.advance(int(counts[k]))
     progress.finish(bar)
-    return ZohDesign(problem, tick_hz, out, noise, mode)
+    return ZohDesign(problem, tick_hz, out, noise, mode, delay)

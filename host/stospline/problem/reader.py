@@ -29,7 +29,7 @@ _TOP_KEYS = {"name", "t0", "x0", "tick_hz", "u_min", "u_max", "u_hold", "dynamic
              "knots",
              "stages", "plot", "regions", "design", "faults"}
 _DESIGN_OPTIONS = {"mode": ("stagewise", "joint"), "discretization": ("exact-zoh", "continuous"),
-                   "arith": ARITHS}
+                   "arith": ARITHS, "delay_ticks": (0, 1)}
 _TOP_REQUIRED = {"name", "x0", "tick_hz", "dynamics", "cost", "knots"}
 _DYN_KEYS, _DYN_REQUIRED = {"A", "B", "f", "noise"}, {"A", "B"}
 _COST_KEYS, _COST_REQUIRED = {"Q", "S", "R", "q", "r", "rho", "tracking"}, {"R"}
@@ -769,6 +769,11 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     plot = _parse_plot(doc.get("plot", {}), n)
     options = _check_keys(doc.get("design", {}), "design", set(_DESIGN_OPTIONS), set())
     for key, value in options.items():
+        if key == "delay_ticks" and (isinstance(value, bool) or not isinstance(value, int)
+                                     or value not in (0, 1)):
+            raise ProblemError("design.delay_ticks", f"must be 0 or 1 (ticks between "
+                                                     f"measuring x and applying its command), "
+                                                     f"got {value!r}")
         if value not in _DESIGN_OPTIONS[key]:
             raise ProblemError(f"design.{key}", f"must be one of {list(_DESIGN_OPTIONS[key])}, "
                                                 f"got {value!r}")

@@ -30,8 +30,11 @@ def design_summary_text(d, arith: str = "float32") -> str:
     the flash the tables take in each arithmetic, and the worst constraint residual."""
     t, p = d.table, d.problem
     n, m, _ = t.dims
+    delay = getattr(t, "delay_ticks", 0)
+    states = (f"n = {p.n} states + {m} applied command{'s' * (m > 1)} (one-tick delay: the "
+              f"controller is fed {n})" if delay else f"n = {n} states")
     lines = [f"{p.name}: {d.design.mode} {d.discretization} design"
-             f"{'' if d.design.noise_aware else ' (noise ignored)'}, n = {n} states, "
+             f"{'' if d.design.noise_aware else ' (noise ignored)'}, {states}, "
              f"m = {m} inputs",
              f"  J0 (designed)                  {d.design.J0:.10g}",
              f"  J of the float32 table         {d.implemented.J:.10g}   (exact moment oracle, "

@@ -86,7 +86,8 @@ const stsp_table_t *harness_table(void) { return &%(p)s_table; }
  * states (for the mean path) and u_rec (n_rec x m) to the commands of the first n_rec paths.
  * With faults f (plant.h; NULL: none) the controller measures X[p] + noise, rounded, is not
  * run on a missed tick, and the actuator applies held[p] (the last command, or with a delay
- * the one before it) plus noise; the statistics count the commands the controllers computed,
+ * the one before it) plus noise; with feed_held (a table designed for the delay) the
+ * controller measures [x; held[p]], the command being applied; the statistics count the commands the controllers computed,
  * u_rec the applied ones. Returns the worst status. Inlined into both entry points, so the
  * fault-free one compiles without the fault branches. */
 #if defined(__GNUC__)
@@ -109,7 +110,9 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
     double ud[STSP_MAX_NU];
     size_t p, i;
     int worst = 0;
-    if (n > STSP_MAX_NX || m > STSP_MAX_NU) return (int)STSP_ERR_BAD_DIMS;
+    if (n + (f != NULL && f->feed_held ? m : 0u) > STSP_MAX_NX || m > STSP_MAX_NU) {
+        return (int)STSP_ERR_BAD_DIMS;
+    }
     for (i = 0; i < n; ++i) x_sum[i] = 0.0;
     for (p = 0; p < count; ++p) {
         double *x = X + p * n;
@@ -121,6 +124,9 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
                 xm = f->quantum[i] * floor(xm / f->quantum[i] + 0.5);
             }
             xf[i] = (float)xm;
+        }
+        if (f != NULL && f->feed_held) {           /* a table designed for the delay */
+            for (i = 0; i < m; ++i) xf[n + i] = (float)held[p * m + i];
         }
         if (f != NULL) for (i = 0; i < m; ++i) ud[i] = held[p * m + i];   /* delayed, missed */
         if (run) {
@@ -407,6 +413,7 @@ class CompiledController:
             f.sensor_std, f.quantum, f.actuator_std = levels
             f.miss_probability = faults.miss_probability
             f.delay_ticks = faults.delay_ticks
+            f.feed_held = faults.feed_held
             keep += [f, levels]
             args += [f, buf(faults.sensor_z), buf(faults.actuator_z), buf(faults.miss_u),
                      buf(faults.held)]
@@ -435,15 +442,22 @@ class FaultDraws:
     actuator_std: np.ndarray | None
     miss_probability: float
     delay_ticks: int
+    feed_held: int                   # 1: a table designed for the delay (`GainTable`)
     sensor_z: np.ndarray | None      # (paths, n) standard normal
     actuator_z: np.ndarray | None    # (paths, m) standard normal
     miss_u: np.ndarray | None        # (paths,) uniform in [0, 1)
     held: np.ndarray                 # (paths, m)
 
     @classmethod
-    def of(cls, faults, paths: int, n: int, hold: np.ndarray) -> "FaultDraws":
+    def of(cls, faults, paths: int, n: int, hold: np.ndarray,
+           table_delay: int = 0) -> "FaultDraws":
         """The draws of `faults` for `paths` paths of n states; the actuator of every path
-        starts on the safe command `hold` (m,)."""
+        starts on the safe command `hold` (m,). `table_delay` 1: the table is designed for a
+        one-tick delay, so the loop has one (its controller also measures the held command);
+        a delay fault on top of it is refused (ValueError)."""
+        if table_delay and faults.delay_ticks:
+            raise ValueError("a table designed for a one-tick delay runs with that delay; a "
+                             "delay fault on top of it is not simulated")
         m = len(hold)
 
         def vec(a):
@@ -451,7 +465,7 @@ class FaultDraws:
         sensor, quantum, actuator = (vec(faults.sensor_noise), vec(faults.sensor_quantum),
                                      vec(faults.actuator_noise))
         return cls(sensor, quantum, actuator, float(faults.miss_probability),
-                   int(faults.delay_ticks),
+                   int(faults.delay_ticks) or int(table_delay), int(table_delay),
                    np.empty((paths, n)) if sensor is not None else None,
                    np.empty((paths, m)) if actuator is not None else None,
                    np.empty(paths) if faults.miss_probability > 0 else None,
@@ -527,7 +541,8 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     # which computes the same bits as the generic one; both are tested by ctest and QEMU).
     n, m, n_latch = table.dims
     cdef = _cdef(arith)
-    cflags = _CFLAGS + VARIANTS[arith][2] + [f"-DHARNESS_N={n}", f"-DHARNESS_M={m}"]
+    n_plant = n - m * getattr(table, "delay_ticks", 0)   # a delayed law also measures u
+    cflags = _CFLAGS + VARIANTS[arith][2] + [f"-DHARNESS_N={n_plant}", f"-DHARNESS_M={m}"]
     if fixed_shape:
         cflags += [f"-DSTSP_FIXED_NX={n}u", f"-DSTSP_FIXED_NU={m}u",
                    f"-DSTSP_FIXED_N_LATCH={n_latch}u"]

@@ -16,6 +16,11 @@ so ``w = [x; u; 1]`` moves by the exact one-tick map of the plant (the faulty pl
 mismatch is just another plant), and the passengers ``a = [c (delayed); v]``, which the plant
 does not touch, follow the mean map ``E x+ a' = [Ad, Bd, fd] E [x; u; 1] a'``. Quantization
 and missed ticks are not linear: `FaultsNotExact`.
+
+A table designed for a one-tick delay (``GainTable.delay_ticks = 1``, `design.zoh`) is the
+delayed loop whose controller also measures the command being applied: its state is
+``[x_m; p]``. `evaluate_table` evaluates such tables here (without faults); a delay fault on
+top of it (two ticks) is not evaluated.
 """
 from __future__ import annotations
 
@@ -23,6 +28,7 @@ import numpy as np
 
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem
+from stospline.sim import oracle as _oracle
 from stospline.sim.oracle import (Moments, _knot_terms, _PathRecord, _plant_tick,
                                   _stage_maps)
 from stospline.table.format import GainTable
@@ -47,6 +53,9 @@ def has_exact_oracle(table: GainTable, faults: Faults) -> bool:
 def _check_exact(table: GainTable, faults: Faults) -> None:
     if not faults.exact:
         raise FaultsNotExact("quantization and missed ticks make the loop nonlinear")
+    if getattr(table, "delay_ticks", 0) and faults.delay_ticks:
+        raise FaultsNotExact("the table is designed for a one-tick delay: a delay fault on "
+                             "top of it is not evaluated")
     if table.band_qp is not None and np.any(faults.sensor_noise):
         raise FaultsNotExact("the firmware's band latch solves a QP from the noisy measurement")
 
@@ -64,9 +73,14 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
     faults = problem.faults if faults is None else faults
     _check_exact(table, faults)
     plant = faults.plant_of(problem)
-    n, m, nl = table.dims
+    n_c, m, nl = table.dims                  # the controller's state: n_c = n (+ m, fed)
+    n = problem.n
+    fed = int(getattr(table, "delay_ticks", 0))
+    if n_c != n + m * fed:
+        raise ValueError(f"the table's law has {n_c} states, the problem {n} "
+                         f"(delay_ticks {fed})")
     h = 1.0 / table.tick_hz
-    delayed = faults.delay_ticks == 1
+    delayed = faults.delay_ticks == 1 or fed == 1
     sig_x = faults.sensor_noise if np.any(faults.sensor_noise) else np.zeros(0)
     sig_u = faults.actuator_noise if np.any(faults.actuator_noise) else np.zeros(0)
     mp = m if delayed else 0
@@ -85,13 +99,16 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
     means, covs, cons = [], [], []
     rec = _PathRecord(problem.x0, path)
 
-    # What does not change from tick to tick, as rows over z_e: the measured state; z inside
+    # What does not change from tick to tick, as rows over z_e: what the controller measures
+    # (the state; with a table designed for the delay also the command p being applied); z inside
     # z_e; the applied command without the law's part (the held one, the actuator noise);
     # w = [x; u; 1] around its command rows; the latched multipliers.
-    Sx = np.zeros((n, D))
-    Sx[:, xs] = np.eye(n)
+    Sx = np.zeros((n_c, D))
+    Sx[:n, xs] = np.eye(n)
     if len(sig_x):
-        Sx[:, nus] = np.eye(n)
+        Sx[:n, nus] = np.eye(n)
+    if fed:
+        Sx[n:, ps] = np.eye(m)
     keep = np.r_[0:d_z - 1, D - 1]
     Fu_fixed = np.zeros((m, D))
     if delayed:
@@ -154,3 +171,14 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
         J += pen
         means.append(mean); covs.append(cov); cons.append(con)
     return rec.moments(J, means, covs, cons, problem.t0, h, table.n_ticks)
+
+
+def evaluate_delayed_table(problem: Problem, table: GainTable, *, propagator: str = "exact",
+                           substeps: int = 4, path: bool = True) -> Moments:
+    """`oracle.evaluate_table` of a table designed for a one-tick delay: the delayed loop
+    without faults."""
+    return evaluate_with_faults(problem, table, Faults(), propagator=propagator,
+                                substeps=substeps, path=path)
+
+
+_oracle._DELAYED_LOOP[:] = [evaluate_delayed_table]

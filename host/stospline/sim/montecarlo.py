@@ -141,6 +141,9 @@ def faults_unsupported(problem: Problem, table) -> str | None:
         return "the fault harness runs float32 tables"
     if any(st.varying is not None for st in problem.stages):
         return "the fault harness runs time-invariant stage data (this problem's vary in time)"
+    if getattr(table, "delay_ticks", 0):
+        return ("the fault harness runs tables designed without a delay (this one is designed "
+                "for a one-tick delay, which it always runs with)")
     return None
 
 
@@ -193,9 +196,13 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
             raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
     table = controller.table
     faults = problem.faults if faults is None else faults
+    if getattr(table, "delay_ticks", 0) and faults.delay_ticks:
+        raise ProblemError("faults.delay_ticks", "the table is designed for a one-tick delay "
+                                                 "and runs with it; a delay fault on top of it "
+                                                 "is not simulated")
     if faults.any and faults_unsupported(problem, table):
-        raise ProblemError("faults", "are simulated for float32 tables with time-invariant "
-                                     "stage data only")
+        raise ProblemError("faults", "are simulated for float32 tables designed without a "
+                                     "delay, with time-invariant stage data only")
     counts = [min(BLOCK_PATHS, paths - start) for start in range(0, paths, BLOCK_PATHS)]
     workers = default_workers() if workers is None else max(1, int(workers))
     parallel = (workers > 1 and len(counts) > 1
@@ -275,7 +282,11 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
     record_u = np.empty((table.n_ticks, kept, m), np.float32) if kept else None
     if kept:
         record_x[0] = X[:kept]
-    draws = FaultDraws.of(faults, paths, n, table.u_hold) if faults.any else None
+    # A table designed for a one-tick delay runs in the delayed loop (the fault path of the
+    # fused tick, measuring the held command too).
+    delayed = int(getattr(table, "delay_ticks", 0))
+    draws = (FaultDraws.of(faults, paths, n, table.u_hold, delayed)
+             if faults.any or delayed else None)
     fault_rng = np.random.default_rng(fault_seed(seed)) if draws is not None else None
     for k in range(table.n_stages):
         st = plant_of.stages[k]

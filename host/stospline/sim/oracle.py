@@ -243,6 +243,10 @@ def _c_kernel():
     return oracle_stage_ticks
 
 
+# `fault_oracle.evaluate_delayed_table`, set when that module is imported.
+_DELAYED_LOOP: list = []
+
+
 def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
                    substeps: int = 4, path: bool = True) -> Moments:
     """Exact moments of the controller as implemented: ZOH at the table's tick rate, with the
@@ -277,7 +281,19 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     >>> m = stospline.evaluate_table(p, stospline.design_problem(p).table, path=False)
     >>> print(f"{m.J:.4f}", np.round(m.knot_mean[-1], 6) + 0.0)   # cost; mean state at t = 6
     27.7745 [-1.  0.  5.  0.]
+
+    A table designed for a one-tick delay (``table.delay_ticks``) is evaluated by the fault
+    oracle's loop (`fault_oracle.evaluate_with_faults` without faults), whose state carries
+    the command waiting to be applied.
     """
+    if getattr(table, "delay_ticks", 0):
+        # The fault oracle's delayed loop, which registers itself here on import (it builds on
+        # this module, so a static import from here would be a cycle).
+        if not _DELAYED_LOOP:
+            import importlib
+            importlib.import_module("stospline.sim.fault_oracle")
+        return _DELAYED_LOOP[0](problem, table, propagator=propagator, substeps=substeps,
+                                path=path)
     n, m, n_latch = table.dims
     h = 1.0 / table.tick_hz
     d_y, d_w = n + n_latch + 1, n + m + 1

@@ -41,6 +41,9 @@ typedef struct {
     const double *actuator_std;   /* (m): applied u = held + actuator_std * N(0, 1) */
     double miss_probability;      /* the controller is not run when uniform < this */
     int delay_ticks;              /* 1: a command computed at tick j is applied from j + 1 */
+    int feed_held;                /* 1 (a table designed for the delay, with delay_ticks 1):
+                                     the controller measures [x; held], held the command
+                                     applied over this tick (its previous output) */
 } harness_faults_t;
 
 /* Standard normal numbers (normals.c): xoshiro256++ words through a 256-layer ziggurat,

@@ -111,6 +111,11 @@ class GainTable(TableShape):
     u_max: np.ndarray | None = None
     band_qp: BandQP | None = None
     u_hold: np.ndarray | None = None
+    # 1: a law designed for a one-tick computation delay (`design.zoh`, ``[design]
+    # delay_ticks``): its state is [x; a] (n = plant states + m), a the command being applied
+    # now (the previous tick's output; u_hold at the first tick), and its output is applied at
+    # the next tick. Not stored in the firmware's table: the caller's contract.
+    delay_ticks: int = 0
 
     def __post_init__(self):
         m = self.K.shape[1]
@@ -153,7 +158,8 @@ def _to_float32(a: np.ndarray) -> np.ndarray:
 
 
 def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = True,
-                u_min=None, u_max=None, band_qp: BandQP | None = None) -> GainTable:
+                u_min=None, u_max=None, band_qp: BandQP | None = None,
+                delay_ticks: int = 0) -> GainTable:
     """Assemble a table from per-stage gains ``(K, k0, L, Lambda, lambda0)`` with shapes
     (T_k, m, n), (T_k, m), (T_k, m, p_k), (p_k, n), (p_k,).
 
@@ -168,8 +174,11 @@ def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = 
     law, with n latched values and n multiply-accumulates per input instead of p.
     Not with ``band_qp``: the firmware then latches the multipliers themselves (the band
     dual's solution is not affine in the state), so the table keeps all p columns.
+
+    ``delay_ticks = 1``: the gains act on ``[x; a]`` (``n + m`` columns; `GainTable`).
     """
-    n, m = problem.n, problem.m
+    m = problem.m
+    n = problem.n + m * int(delay_ticks)
     n_latch = max([g[2].shape[2] for g in stages] + [g[3].shape[0] for g in stages])
     if n_latch > n and band_qp is None:
         stages, n_latch = _latch_state(stages, n), n
@@ -189,7 +198,7 @@ def build_table(problem, tick_hz: int, stages: list[tuple], *, quantize: bool = 
     return GainTable(problem.name, int(tick_hz), problem.t0, start,
                      np.array([g[3].shape[0] for g in stages], dtype=np.uint16),
                      cast(K), cast(k0), cast(L), cast(Lam), cast(lam0), problem.source_sha256,
-                     u_min, u_max, band_qp, getattr(problem, "u_hold", None))
+                     u_min, u_max, band_qp, getattr(problem, "u_hold", None), int(delay_ticks))
 
 
 def _latch_state(stages: list[tuple], n: int) -> list[tuple]:
@@ -259,7 +268,8 @@ def table_of(design: TickGains, tick_hz: int | None = None, *, quantize: bool = 
     tick_hz, stages = design.tick_gains(tick_hz)
     dual = design.band_dual(exact=not quantize) if on_target_qp else None
     return build_table(design.problem, tick_hz, stages, quantize=quantize,
-                       band_qp=None if dual is None else BandQP(*dual))
+                       band_qp=None if dual is None else BandQP(*dual),
+                       delay_ticks=getattr(design, "delay_ticks", 0))
 
 
 def table_crc32(table: GainTable) -> int:

@@ -26,9 +26,15 @@ def test_quadrotor_gravity_hover_hold_and_delay():
     assert s["verdict"]["agree"], s["verdict"]
     np.testing.assert_array_equal(p.stages[0].f, [0.0, -9.81])            # gravity: a drift
     assert p.u_min[0] > 0 and d.table.u_hold[0] == np.float32(9.81)      # hover safe command
-    f = s["faults"]                      # the one-tick delay, with its exact oracle
-    assert f["levels"] == {"delay_ticks": 1} and f["exact_oracle"]
-    assert f["oracle_cost"] > f["nominal_cost"]
+    # Designed for the one-tick delay ([design] delay_ticks = 1): the law is fed [z, zdot, a].
+    assert d.table.delay_ticks == 1 and d.table.dims[0] == 3
+    assert s["cost"]["oracle_implemented"] == pytest.approx(s["cost"]["predicted_J0"], rel=1e-8)
+    # ... and beats the ordinary design run a tick late (the fault oracle).
+    from stospline.problem.faults import Faults
+    from stospline.sim.fault_oracle import evaluate_with_faults
+    plain = stospline.design_problem(p, delay_ticks=0)
+    late = evaluate_with_faults(p, plain.table, Faults(delay_ticks=1))
+    assert d.implemented.J < late.J
     assert s["saturation"]["tick_fraction"] == 0
 
 

@@ -221,6 +221,20 @@ def _limits(d: Designed) -> dict:
     }}
 
 
+def _cov_digits(cov: np.ndarray, mean: np.ndarray) -> np.ndarray:
+    """A knot covariance for the summary. The oracle computes it as ``E xx' - mean mean'``, so
+    it keeps only the digits of ``E xx'``: rounded to `_SIG` significant digits of
+    ``max(|cov|, |mean|^2)`` (a wealth of 100 with a variance of 12 loses three digits, and
+    the last bits of the design would otherwise show)."""
+    cov, mean = np.asarray(cov, dtype=float), np.asarray(mean, dtype=float)
+    scale = max(float(np.abs(cov).max(initial=0.0)), float(np.max(mean ** 2, initial=0.0)))
+    if not np.isfinite(scale) or scale == 0.0:
+        return cov
+    # The decade rounded to nearest, not down: means at constrained knots are round numbers
+    # (a mean of 100 gives a scale of exactly 1e4), and the digits kept must not flip there.
+    return np.round(cov, _SIG - 1 - int(np.floor(np.log10(scale) + 0.5)))
+
+
 def design_summary(d: Designed) -> dict:
     """Machine-readable summary: predicted J0 and per-knot predicted moments (and the
     actuator limits, when the problem sets them)."""
@@ -230,9 +244,9 @@ def design_summary(d: Designed) -> dict:
         entry = {
             "t": kn.t,
             "mean": d.law.knot_mean[k],
-            "cov": d.law.knot_cov[k],
+            "cov": _cov_digits(d.law.knot_cov[k], d.law.knot_mean[k]),
             "implemented_mean": d.implemented.knot_mean[k],
-            "implemented_cov": d.implemented.knot_cov[k],
+            "implemented_cov": _cov_digits(d.implemented.knot_cov[k], d.implemented.knot_mean[k]),
         }
         if kn.constraint is not None:
             lo, hi = kn.constraint.bounds

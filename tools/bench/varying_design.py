@@ -40,6 +40,8 @@ with the reference oracle, which integrates the moment equations over every tick
 (rtol 1e-12, ``STOSPLINE_ORACLE_KERNEL=numpy``) and shares no code with the C loops, evaluating
 the designer's own law (the unquantized table).
 
+Then ``stospline design`` end to end, a new process per run, on the problem written as a file.
+
 ``--previous`` also times the implementation before this change at n = 3 (the designer's
 per-tick Magnus exponential of the d^2 + 1 square moment generator, kernel="numpy", and the
 DOP853 oracle): tens of seconds at n = 12, so only n = 3 by default.
@@ -52,7 +54,11 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
 import argparse                                     # noqa: E402
+import subprocess                                   # noqa: E402
+import sys                                          # noqa: E402
+import tempfile                                     # noqa: E402
 import time                                         # noqa: E402
+from pathlib import Path                            # noqa: E402
 
 import numpy as np                                  # noqa: E402
 from scipy.integrate import solve_ivp               # noqa: E402
@@ -62,6 +68,7 @@ from stospline.design import varying                # noqa: E402
 from stospline.design.zoh import design_zoh         # noqa: E402
 from stospline.pipeline import design_problem       # noqa: E402
 from stospline.problem import parse_problem         # noqa: E402
+from stospline.problem.toml_writer import problem_to_toml   # noqa: E402
 from stospline.sim import oracle                    # noqa: E402
 from stospline.sim.oracle import evaluate_table     # noqa: E402
 from stospline.table.format import table_of         # noqa: E402
@@ -171,6 +178,25 @@ def speed(repeat: int) -> None:
               f"| {t_cont * 1e3:.0f} ms | **{t_base / t_whole:.1f}x** |", flush=True)
 
 
+def end_to_end(repeat: int) -> None:
+    """`stospline design` as a user runs it (a new process: imports, parsing, design, tables,
+    oracle, files written), on the problem written as a TOML file."""
+    print("\n| problem | `stospline design` end to end (median of %d) |" % repeat)
+    print("|---|---|")
+    cli = Path(sys.executable).with_name("stospline")
+    for blocks, hz in ((1, 1000), (4, 1000)):
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "varying.toml"
+            path.write_text(problem_to_toml(varying_chain(blocks, hz)))
+            times = []
+            for _ in range(repeat + 1):                # the first builds nothing: cached
+                t = time.perf_counter()
+                subprocess.run([str(cli), "design", str(path), "--out", tmp, "--quiet"],
+                               check=True, stdout=subprocess.DEVNULL)
+                times.append(time.perf_counter() - t)
+        print(f"| n = {3 * blocks}, {hz} Hz | {np.median(times[1:]):.2f} s |", flush=True)
+
+
 def accuracy() -> None:
     print("\n| problem | J0 (designer) | J, reference oracle (DOP853 per tick) | designer rel. "
           "error | C oracle rel. error |")
@@ -213,6 +239,7 @@ def main() -> None:
     ap.add_argument("--previous", action="store_true")
     args = ap.parse_args()
     speed(args.repeat)
+    end_to_end(args.repeat)
     if args.accuracy:
         accuracy()
     if args.previous:

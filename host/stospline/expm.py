@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["expm", "NonFiniteMatrix", "require_finite"]
+__all__ = ["expm", "expm_many", "NonFiniteMatrix", "require_finite"]
 
 
 class NonFiniteMatrix(FloatingPointError, ValueError):
@@ -91,6 +91,49 @@ def expm(A) -> np.ndarray:
     scaled[4] = scaled[2] @ scaled[2]
     scaled[6] = scaled[4] @ scaled[2]
     U, V = _pade(As, 13, scaled)
+    X = np.linalg.solve(V - U, V + U)
+    for _ in range(s):
+        X = X @ X
+    return X
+
+
+def expm_many(A) -> np.ndarray:
+    """``exp`` of each of a stack of square matrices ``(N, d, d)``: `expm`'s algorithm with
+    the degree and the scaling of the largest norm in the stack (a higher degree than one
+    matrix needs is as accurate), vectorised over the stack."""
+    A = np.asarray(A, dtype=float)
+    if A.ndim != 3 or A.shape[1] != A.shape[2]:
+        raise ValueError(f"expm_many needs a stack of square matrices, got shape {A.shape}")
+    if A.shape[0] == 0 or A.shape[1] == 0:
+        return A.copy()
+    if not np.all(np.isfinite(A)):
+        raise NonFiniteMatrix("expm needs a finite matrix")
+    norm = float(np.abs(A).sum(axis=1).max())
+    if norm > _THETA[13] * 2.0 ** _MAX_SQUARINGS:
+        return np.stack([expm(a) for a in A])          # the rare path, one by one
+    eye = np.eye(A.shape[1])
+    for m in (3, 5, 7, 9):
+        if norm <= _THETA[m]:
+            powers = {2: A @ A}
+            for k in range(4, m, 2):
+                powers[k] = powers[k - 2] @ powers[2]
+            b = _B[m]
+            U, V = b[1] * eye, b[0] * eye
+            for k in range(1, m // 2 + 1):
+                U = U + b[2 * k + 1] * powers[2 * k]
+                V = V + b[2 * k] * powers[2 * k]
+            U = A @ U
+            return np.linalg.solve(V - U, V + U)
+    s = max(0, int(np.ceil(np.log2(norm / _THETA[13]))))
+    As = np.ldexp(A, -s)
+    A2 = As @ As
+    A4 = A2 @ A2
+    A6 = A4 @ A2
+    b = _B[13]
+    U = As @ (A6 @ (b[13] * A6 + b[11] * A4 + b[9] * A2)
+              + b[7] * A6 + b[5] * A4 + b[3] * A2 + b[1] * eye)
+    V = (A6 @ (b[12] * A6 + b[10] * A4 + b[8] * A2)
+         + b[6] * A6 + b[4] * A4 + b[2] * A2 + b[0] * eye)
     X = np.linalg.solve(V - U, V + U)
     for _ in range(s):
         X = X @ X

@@ -46,6 +46,13 @@ int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, con
                          const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
                          double *M, double *J, double *xm,
                          double *xv, double *um, double *uv, double *work, int *iwork);
+size_t stsp_tv_euler_work_size(int n, int m, int n_latch, int na, int mz);
+int stsp_tv_euler_oracle_ticks(int n, int m, int n_latch, long T, const double *K,
+                               const double *L, const double *k0, int sub, int na, int mz,
+                               double dt, const int *act, const double *Ad, const double *G,
+                               const double *Lb, const int *same, double *M, double *J,
+                               double *xm, double *xv, double *um, double *uv, double *work,
+                               int *iwork);
 """
 _CFLAGS = ["-std=c99", "-O3", "-Wall", "-Wextra"]
 _ERR_NOT_PD, _ERR_DIMS = -1, -2

@@ -198,3 +198,43 @@ def oracle_ticks(stage: Stage, t_start: float, h: float, K, L, k0, M, J: float,
         if status != 0:
             raise RuntimeError(f"stsp_tv_oracle_ticks: status {status} at ticks {a}..{b}")
     return (M, float(Jp[0]), *(rec if record else (None,) * 4))
+
+
+def euler_oracle_ticks(stage: Stage, t_start: float, h: float, substeps: int, K, L, k0, M,
+                       J: float, record: bool):
+    """`oracle_ticks` for the Monte Carlo plant scheme (the oracle's "euler" propagator):
+    `substeps` exponential Euler–Maruyama steps per tick, each with the data at its midpoint
+    as the harness takes them (`montecarlo._plant_tick`), ``exp(Ahat dt)`` per step."""
+    from stospline.design.kernels import load_kernels
+    from stospline.expm import expm_many
+    mod = load_kernels()
+    ffi, lib = mod.ffi, mod.lib
+    T, m, n = K.shape
+    n_latch = L.shape[2]
+    dt = h / substeps
+    mid = (np.arange(substeps) + 0.5) / substeps        # step midpoints, fractions of a tick
+    K, L, k0 = (np.ascontiguousarray(a, dtype=np.float64) for a in (K, L, k0))
+    M = np.array(M, dtype=np.float64, order="C")
+    Jp = ffi.new("double *", float(J))
+    rec = [np.empty((T, n)), np.empty((T, n)), np.empty((T, m)), np.empty((T, m))]
+    d = n + m + 1
+    for a, b in _chunks(T):
+        smp = tick_samples(stage, t_start + a * h, h, b - a, mid)
+        Ahat = np.zeros(smp.Ar.shape[:2] + (d, d))
+        Ahat[..., :n, :] = smp.Ar
+        Ad = expm_many(Ahat.reshape(-1, d, d) * dt)
+        if smp.same[0]:                                 # one drift for the whole chunk
+            Ad = np.repeat(Ad, (b - a) * substeps, axis=0)
+        Ad = np.ascontiguousarray(Ad)
+        na, mz = smp.act.size, smp.G.shape[-1]
+        work = np.empty(int(lib.stsp_tv_euler_work_size(n, m, n_latch, na, mz)))
+        iwork = np.empty(int(lib.stsp_tv_iwork_size(n, m, na, mz)), dtype=np.intc)
+        out = [_ptr(ffi, x[a:b]) if record else ffi.NULL for x in rec]
+        status = lib.stsp_tv_euler_oracle_ticks(
+            n, m, n_latch, b - a, _ptr(ffi, K[a:b]), _ptr(ffi, L[a:b]), _ptr(ffi, k0[a:b]),
+            substeps, na, mz, dt, _ptr(ffi, smp.act, "int[]"), _ptr(ffi, Ad),
+            _ptr(ffi, smp.G), _ptr(ffi, smp.Lb), _ptr(ffi, smp.same, "int[]"), _ptr(ffi, M),
+            Jp, *out, _ptr(ffi, work), _ptr(ffi, iwork, "int[]"))
+        if status != 0:
+            raise RuntimeError(f"stsp_tv_euler_oracle_ticks: status {status} at ticks {a}..{b}")
+    return (M, float(Jp[0]), *(rec if record else (None,) * 4))

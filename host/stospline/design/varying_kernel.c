@@ -550,10 +550,74 @@ int stsp_tv_zoh_ticks(int n, int m, int q, long T, int P, int na, int mz, const 
     return TV_OK;
 }
 
+/* The command's moments at the start of a tick: TM = E w y' and Mw = E w w' for w = [x; u; 1]
+ * = Tw y, u = -K x - L v - k0 (the x and 1 rows of TM are rows of M); and, when um is not
+ * NULL, the command's mean and variance into um, uv. */
+static void command_moments(int n, int m, int nl, const double *Kt, const double *Lt,
+                            const double *kt, const double *M, double *TM, double *Mw,
+                            double *um, double *uv)
+{
+    const int dy = n + nl + 1, dw = n + m + 1;
+    int a, b, c;
+    for (a = 0; a < n; ++a)
+        for (b = 0; b < dy; ++b) TM[a * dy + b] = M[a * dy + b];
+    for (b = 0; b < dy; ++b) TM[(dw - 1) * dy + b] = M[(dy - 1) * dy + b];
+    for (a = 0; a < m; ++a)
+        for (b = 0; b < dy; ++b) {
+            double s = 0.0;
+            for (c = 0; c < n; ++c) s -= Kt[a * n + c] * M[c * dy + b];
+            for (c = 0; c < nl; ++c) s -= Lt[a * nl + c] * M[(n + c) * dy + b];
+            s -= kt[a] * M[(dy - 1) * dy + b];
+            TM[(n + a) * dy + b] = s;
+        }
+    for (a = 0; a < dw; ++a)
+        for (b = a; b < dw; ++b) {
+            double s;
+            if (b < n) {
+                s = TM[a * dy + b];
+            } else if (b == dw - 1) {
+                s = TM[a * dy + dy - 1];
+            } else {
+                const int u = b - n;
+                s = 0.0;
+                for (c = 0; c < n; ++c) s -= TM[a * dy + c] * Kt[u * n + c];
+                for (c = 0; c < nl; ++c) s -= TM[a * dy + n + c] * Lt[u * nl + c];
+                s -= TM[a * dy + dy - 1] * kt[u];
+            }
+            Mw[a * dw + b] = Mw[b * dw + a] = s;
+        }
+    if (um != NULL)
+        for (a = 0; a < m; ++a) {
+            const double mu = Mw[(n + a) * dw + dw - 1];
+            um[a] = mu;
+            uv[a] = Mw[(n + a) * dw + n + a] - mu * mu;
+        }
+}
+
+/* After the tick: M's x blocks from Mw (E x+ x+', E x+) and from Xv (E x+ v'); the state's
+ * mean and variance into xm, xv when not NULL. */
+static void fold_back(int n, int m, int nl, const double *Mw, const double *Xv, double *M,
+                      double *xm, double *xv)
+{
+    const int dy = n + nl + 1, dw = n + m + 1;
+    int a, b;
+    for (a = 0; a < n; ++a) {
+        for (b = 0; b < nl; ++b) M[a * dy + n + b] = M[(n + b) * dy + a] = Xv[a * nl + b];
+        for (b = 0; b < n; ++b) M[a * dy + b] = Mw[a * dw + b];
+        M[a * dy + dy - 1] = M[(dy - 1) * dy + a] = Mw[a * dw + dw - 1];
+    }
+    if (xm != NULL)
+        for (a = 0; a < n; ++a) {
+            const double mu = M[a * dy + dy - 1];
+            xm[a] = mu;
+            xv[a] = M[a * dy + a] - mu * mu;
+        }
+}
+
 size_t stsp_tv_oracle_work_size(int n, int m, int n_latch, int na, int mz)
 {
     const size_t dw = (size_t)n + (size_t)m + 1u, dy = (size_t)n + (size_t)n_latch + 1u;
-    return dw * dy + dw * dw + dw * (size_t)n_latch + taylor_size(n, m, na, n_latch)
+    return dw * dy + 2u * dw * dw + dw * (size_t)n_latch + taylor_size(n, m, na, n_latch)
            + blend_size(n, m) + TV_MAX_POINTS * (size_t)na * n * mz;
 }
 
@@ -574,11 +638,11 @@ int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, con
     tv_blend bl;
     double acc = *J;
     long t;
-    int a, b, c, j, st;
+    int a, j, st;
     if (n < 1 || m < 1 || n_latch < 0 || T < 0 || P < 1 || P > TV_MAX_POINTS || na < 0 ||
         na > n + m || mz < 0 || dw > TV_MAX_DIM || ar_cnt < 0 || ar_cnt > n * dw)
         return TV_ERR_DIMS;
-    TM = work; Mw = TM + (size_t)dw * dy; Xv = Mw + (size_t)dw * dw;
+    TM = work; Mw = TM + (size_t)dw * dy; Xv = Mw + 2u * (size_t)dw * dw;
     tw = Xv + (size_t)dw * nl;
     bl.Arl = tw + taylor_size(n, m, na, nl);
     bl.Lbl = bl.Arl + TV_MAX_POINTS * (size_t)n * dw;
@@ -588,46 +652,12 @@ int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, con
     bl.lb_at = lb_lists(iwork, n, m, na, mz);
     for (t = 0; t < T; ++t) {
         tv_tick v = tick_of(n, dw, na, mz, P, act, Ar, G, Lb, same, ar_nz, ar_cnt, t);
-        const double *Kt = K + (size_t)t * m * n, *Lt = L + (size_t)t * m * nl,
-                     *kt = k0 + (size_t)t * m;
         int sub;
-        /* TM = E w y' for w = [x; u; 1] = Tw y: the x and 1 rows are rows of M, the command
-         * rows -K x - L v - k0. */
-        for (a = 0; a < n; ++a)
-            for (b = 0; b < dy; ++b) TM[a * dy + b] = M[a * dy + b];
-        for (b = 0; b < dy; ++b) TM[(dw - 1) * dy + b] = M[(dy - 1) * dy + b];
-        for (a = 0; a < m; ++a)
-            for (b = 0; b < dy; ++b) {
-                double s = 0.0;
-                for (c = 0; c < n; ++c) s -= Kt[a * n + c] * M[c * dy + b];
-                for (c = 0; c < nl; ++c) s -= Lt[a * nl + c] * M[(n + c) * dy + b];
-                s -= kt[a] * M[(dy - 1) * dy + b];
-                TM[(n + a) * dy + b] = s;
-            }
-        for (a = 0; a < dw; ++a)                       /* Mw = TM Tw' = E w w' */
-            for (b = a; b < dw; ++b) {
-                double s;
-                if (b < n) {
-                    s = TM[a * dy + b];
-                } else if (b == dw - 1) {
-                    s = TM[a * dy + dy - 1];
-                } else {
-                    const int u = b - n;
-                    s = 0.0;
-                    for (c = 0; c < n; ++c) s -= TM[a * dy + c] * Kt[u * n + c];
-                    for (c = 0; c < nl; ++c) s -= TM[a * dy + n + c] * Lt[u * nl + c];
-                    s -= TM[a * dy + dy - 1] * kt[u];
-                }
-                Mw[a * dw + b] = Mw[b * dw + a] = s;
-            }
-        if (um != NULL)
-            for (a = 0; a < m; ++a) {
-                const double mu = Mw[(n + a) * dw + dw - 1];
-                um[t * m + a] = mu;
-                uv[t * m + a] = Mw[(n + a) * dw + n + a] - mu * mu;
-            }
+        command_moments(n, m, nl, K + (size_t)t * m * n, L + (size_t)t * m * nl,
+                        k0 + (size_t)t * m, M, TM, Mw, um ? um + t * m : NULL,
+                        uv ? uv + t * m : NULL);
         for (a = 0; a < dw; ++a)                       /* E w v' */
-            for (b = 0; b < nl; ++b) Xv[a * nl + b] = TM[a * dy + n + b];
+            for (j = 0; j < nl; ++j) Xv[a * nl + j] = TM[a * dy + n + j];
         sub = sub_steps(&v, coef, h, &bl);
         if (sub == 0) return TV_ERR_SERIES;
         lists_of(&v, iwork, gw);
@@ -637,18 +667,96 @@ int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, con
             if (st == TV_OK) st = taylor(TV_MEAN, &v, &bl, h / sub, Xv, nl, NULL, tw);
             if (st) return st;
         }
-        for (a = 0; a < n; ++a) {
-            for (b = 0; b < nl; ++b) M[a * dy + n + b] = M[(n + b) * dy + a] = Xv[a * nl + b];
-            for (b = 0; b < n; ++b) M[a * dy + b] = Mw[a * dw + b];
-            M[a * dy + dy - 1] = M[(dy - 1) * dy + a] = Mw[a * dw + dw - 1];
-        }
-        if (xm != NULL)
-            for (a = 0; a < n; ++a) {
-                const double mu = M[a * dy + dy - 1];
-                xm[t * n + a] = mu;
-                xv[t * n + a] = M[a * dy + a] - mu * mu;
-            }
+        fold_back(n, m, nl, Mw, Xv, M, xm ? xm + t * n : NULL, xv ? xv + t * n : NULL);
     }
     *J = acc;
     return TV_OK;
+}
+
+/* The Monte Carlo harness's plant scheme over T ticks of a time-varying stage (the oracle's
+ * "euler" propagator): each of the `sub` steps of a tick takes the data at its midpoint and
+ * does Mw <- Ad Mw Ad' + dt sum_pq Mw[p,q] G_p G_q', its running cost dt <Lb, Mw> taken
+ * before the step, and E w v' <- Ad E w v'.  Ad = exp(Ahat dt) per step (T*sub x d x d) from
+ * the caller; G and Lb per step as in stsp_tv_oracle_ticks with one point (same[1], same[2]:
+ * one for all steps). */
+int stsp_tv_euler_oracle_ticks(int n, int m, int n_latch, long T, const double *K,
+                               const double *L, const double *k0, int sub, int na, int mz,
+                               double dt, const int *act, const double *Ad, const double *G,
+                               const double *Lb, const int *same, double *M, double *J,
+                               double *xm, double *xv, double *um, double *uv, double *work,
+                               int *iwork)
+{
+    const int dy = n + n_latch + 1, dw = n + m + 1, nl = n_latch;
+    const size_t D = (size_t)dw * dw;
+    double *TM, *Mw, *Mn, *Xv, *T1, *blk, *tmp, *gw;
+    double acc = *J;
+    long t;
+    int a, b, c, i, no_ar = 0;
+    size_t e;
+    if (n < 1 || m < 1 || n_latch < 0 || T < 0 || sub < 1 || na < 0 || na > n + m || mz < 0 ||
+        dw > TV_MAX_DIM)
+        return TV_ERR_DIMS;
+    TM = work; Mw = TM + (size_t)dw * dy; Mn = Mw + D; Xv = Mn + D; T1 = Xv + (size_t)dw * nl;
+    blk = T1 + D; tmp = blk + D; gw = tmp + (size_t)na * n;
+    for (t = 0; t < T; ++t) {
+        command_moments(n, m, nl, K + (size_t)t * m * n, L + (size_t)t * m * nl,
+                        k0 + (size_t)t * m, M, TM, Mw, um ? um + t * m : NULL,
+                        uv ? uv + t * m : NULL);
+        for (a = 0; a < dw; ++a)
+            for (b = 0; b < nl; ++b) Xv[a * nl + b] = TM[a * dy + n + b];
+        for (i = 0; i < sub; ++i) {
+            const double *A = Ad + (size_t)(t * sub + i) * D;
+            const int same_all[3] = {1, same[1], same[2]};
+            tv_tick v = tick_of(n, dw, na, mz, 1, act, Ad, G, Lb, same_all, &no_ar, 0,
+                                t * sub + i);
+            double cost = 0.0;
+            for (e = 0; e < D; ++e) cost += v.Lb[e] * Mw[e];
+            acc += dt * cost;
+            for (a = 0; a < dw; ++a)                   /* T1 = Ad Mw (rows >= n: Mw's) */
+                for (b = 0; b < dw; ++b) {
+                    double s = 0.0;
+                    if (a >= n) { T1[a * dw + b] = Mw[a * dw + b]; continue; }
+                    for (c = 0; c < dw; ++c) s += A[a * dw + c] * Mw[c * dw + b];
+                    T1[a * dw + b] = s;
+                }
+            for (a = 0; a < dw; ++a)                   /* Mn = T1 Ad' */
+                for (b = a; b < dw; ++b) {
+                    double s = 0.0;
+                    if (b >= n) {
+                        s = T1[a * dw + b];
+                    } else {
+                        for (c = 0; c < dw; ++c) s += T1[a * dw + c] * A[b * dw + c];
+                    }
+                    Mn[a * dw + b] = Mn[b * dw + a] = s;
+                }
+            if (na > 0) {                              /* + dt sum Mw[p,q] G_p G_q' */
+                lists_of(&v, iwork, gw);
+                if (v.sparse) {
+                    pair_noise(TV_FORWARD, &v, 0, dt, Mw, Mn);
+                } else {
+                    point_noise(TV_FORWARD, &v, 0, Mw, blk, tmp);
+                    add_noise(TV_FORWARD, &v, dt, blk, Mn);
+                }
+            }
+            for (a = 0; a < n; ++a)                    /* Xv <- Ad Xv (rows >= n constant) */
+                for (b = 0; b < nl; ++b) {
+                    double s = 0.0;
+                    for (c = 0; c < dw; ++c) s += A[a * dw + c] * Xv[c * nl + b];
+                    T1[a * nl + b] = s;
+                }
+            for (a = 0; a < n; ++a)
+                for (b = 0; b < nl; ++b) Xv[a * nl + b] = T1[a * nl + b];
+            for (e = 0; e < D; ++e) Mw[e] = Mn[e];
+        }
+        fold_back(n, m, nl, Mw, Xv, M, xm ? xm + t * n : NULL, xv ? xv + t * n : NULL);
+    }
+    *J = acc;
+    return TV_OK;
+}
+
+size_t stsp_tv_euler_work_size(int n, int m, int n_latch, int na, int mz)
+{
+    const size_t dw = (size_t)n + (size_t)m + 1u, dy = (size_t)n + (size_t)n_latch + 1u;
+    return dw * dy + 4u * dw * dw + dw * (size_t)n_latch + (size_t)na * n
+           + TV_MAX_POINTS * (size_t)na * n * mz;
 }

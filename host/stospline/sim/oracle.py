@@ -328,13 +328,16 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         ticks = range(int(table.stage_start[k]), int(table.stage_start[k + 1]))
         # The C loop carries the mean map without the constant column: not with a drift.
         kernel = None if varying or path or _has_drift(problem) else _c_kernel()
-        if varying and propagator == "exact" and _c_kernel() is not None:
-            # Time-varying data: the Gauss-point Taylor loop in C (design.varying).
-            from stospline.design.varying import oracle_ticks
+        if varying and _c_kernel() is not None:
+            # Time-varying data: the Gauss-point Taylor loop in C, or the plant scheme's steps
+            # (design.varying).
+            from stospline.design.varying import euler_oracle_ticks, oracle_ticks
             sl = slice(ticks.start, ticks.stop)
-            M, J, xm, xv, um, uv = oracle_ticks(stage, table.t0 + ticks.start * h, h,
-                                                table.K[sl], table.L[sl], table.k0[sl],
-                                                M, J, path)
+            gains = (table.K[sl], table.L[sl], table.k0[sl], M, J, path)
+            t_first = table.t0 + ticks.start * h
+            M, J, xm, xv, um, uv = (oracle_ticks(stage, t_first, h, *gains)
+                                    if propagator == "exact" else
+                                    euler_oracle_ticks(stage, t_first, h, substeps, *gains))
             rec.extend(xm, xv, um, uv)
             progress.advance(len(ticks))
             ticks = range(0)

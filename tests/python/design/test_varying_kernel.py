@@ -137,3 +137,21 @@ def test_stage_samples_equal_the_stage_at_each_time(wrap):
         frozen = stage.at(t)
         for k in ("A", "B", "G", "Q", "R", "S", "q", "r", "rho", "f"):
             np.testing.assert_array_equal(s[k][j], np.asarray(getattr(frozen, k), float), k)
+
+
+@pytest.mark.parametrize("substeps", [1, 3])
+def test_plant_scheme_loop_equals_the_python_maps(substeps, monkeypatch):
+    """The oracle's "euler" propagator (the Monte Carlo plant's own scheme, data at each step's
+    midpoint) in C equals the composed numpy maps of `oracle._euler_varying_maps`."""
+    problem = parse_problem(_with_drift(tv_doc()))
+    table = table_of(design_zoh(problem))
+    c = evaluate_table(problem, table, propagator="euler", substeps=substeps, path=True)
+    with monkeypatch.context() as mp:
+        mp.setenv("STOSPLINE_ORACLE_KERNEL", "numpy")
+        ref = evaluate_table(problem, table, propagator="euler", substeps=substeps, path=True)
+    assert abs(c.J - ref.J) <= 1e-13 * ref.J
+    np.testing.assert_allclose(c.path_mean, ref.path_mean, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(c.path_var, ref.path_var, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(c.path_u_var, ref.path_u_var, rtol=0, atol=1e-12)
+    for a, b in zip(c.knot_cov, ref.knot_cov):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-13)

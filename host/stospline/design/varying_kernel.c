@@ -480,6 +480,20 @@ static int *lb_lists(int *iwork, int n, int m, int na, int mz)
     return iwork + stsp_tv_iwork_size(n, m, na, mz) - TV_MAX_POINTS * d * d;
 }
 
+/* A blend's storage at `at` (zeroed: blend writes only Ar's nonzero pattern) and its Lb lists
+ * in the integer work; returns the double work after it (the diffusion's nonzero values). */
+static double *blend_at(tv_blend *bl, double *at, int *iwork, int n, int m, int na, int mz)
+{
+    const size_t d = (size_t)n + (size_t)m + 1u, len = TV_MAX_POINTS * (size_t)n * d;
+    size_t e;
+    bl->Arl = at;
+    bl->Lbl = at + len;
+    bl->lb_done = 0;
+    bl->lb_at = lb_lists(iwork, n, m, na, mz);
+    for (e = 0; e < len; ++e) bl->Arl[e] = 0.0;
+    return at + blend_size(n, m);
+}
+
 size_t stsp_tv_zoh_work_size(int n, int m, int q, int na, int mz)
 {
     const size_t d = (size_t)n + (size_t)m + 1u, r = (size_t)n + 1u;
@@ -510,12 +524,7 @@ int stsp_tv_zoh_ticks(int n, int m, int q, long T, int P, int na, int mz, const 
         return TV_ERR_DIMS;
     Y = work; U = Y + (size_t)d * d; Hl = U + (size_t)d * q; vp = Hl + (size_t)q * d;
     up = vp + (size_t)r * (r + 1) / 2; tw = up + stsp_zoh_update_size(n, m, q);
-    bl.Arl = tw + taylor_size(n, m, na, q);
-    bl.Lbl = bl.Arl + TV_MAX_POINTS * (size_t)n * d;
-    bl.lb_done = 0;
-    for (a = 0; a < TV_MAX_POINTS * n * d; ++a) bl.Arl[a] = 0.0;
-    gw = bl.Arl + blend_size(n, m);
-    bl.lb_at = lb_lists(iwork, n, m, na, mz);
+    gw = blend_at(&bl, tw + taylor_size(n, m, na, q), iwork, n, m, na, mz);
 #define RS(a) ((a) < n ? (a) : d - 1)
     for (a = 0, p = 0; a < r; ++a)
         for (b = a; b < r; ++b, ++p) vp[p] = 0.5 * (V[a * r + b] + V[b * r + a]);
@@ -617,7 +626,7 @@ static void fold_back(int n, int m, int nl, const double *Mw, const double *Xv, 
 size_t stsp_tv_oracle_work_size(int n, int m, int n_latch, int na, int mz)
 {
     const size_t dw = (size_t)n + (size_t)m + 1u, dy = (size_t)n + (size_t)n_latch + 1u;
-    return dw * dy + 2u * dw * dw + dw * (size_t)n_latch + taylor_size(n, m, na, n_latch)
+    return dw * dy + dw * dw + dw * (size_t)n_latch + taylor_size(n, m, na, n_latch)
            + blend_size(n, m) + TV_MAX_POINTS * (size_t)na * n * mz;
 }
 
@@ -642,14 +651,9 @@ int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, con
     if (n < 1 || m < 1 || n_latch < 0 || T < 0 || P < 1 || P > TV_MAX_POINTS || na < 0 ||
         na > n + m || mz < 0 || dw > TV_MAX_DIM || ar_cnt < 0 || ar_cnt > n * dw)
         return TV_ERR_DIMS;
-    TM = work; Mw = TM + (size_t)dw * dy; Xv = Mw + 2u * (size_t)dw * dw;
+    TM = work; Mw = TM + (size_t)dw * dy; Xv = Mw + (size_t)dw * dw;
     tw = Xv + (size_t)dw * nl;
-    bl.Arl = tw + taylor_size(n, m, na, nl);
-    bl.Lbl = bl.Arl + TV_MAX_POINTS * (size_t)n * dw;
-    bl.lb_done = 0;
-    for (a = 0; a < TV_MAX_POINTS * n * dw; ++a) bl.Arl[a] = 0.0;
-    gw = bl.Arl + blend_size(n, m);
-    bl.lb_at = lb_lists(iwork, n, m, na, mz);
+    gw = blend_at(&bl, tw + taylor_size(n, m, na, nl), iwork, n, m, na, mz);
     for (t = 0; t < T; ++t) {
         tv_tick v = tick_of(n, dw, na, mz, P, act, Ar, G, Lb, same, ar_nz, ar_cnt, t);
         int sub;

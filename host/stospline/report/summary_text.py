@@ -42,8 +42,10 @@ def design_summary_text(d, arith: str = "float32") -> str:
              f"  ticks                          {t.n_ticks} at {t.tick_hz} Hz "
              f"({t.n_ticks / t.tick_hz:g} s), {t.n_stages} stage"
              f"{'' if t.n_stages == 1 else 's'}"]
+    # A delayed design has float32 tables only (design.delay_ticks): no fixed-point sizes.
+    ariths = [a for a in ARITH_ELEMENT_BYTES if not delay or a == "float32"]
     sizes = "   ".join(f"{a}{'*' if a == arith else ''} {flash_bytes(t, a):,} B"
-                       for a in ARITH_ELEMENT_BYTES)
+                       for a in ariths)
     lines.append(f"  flash of the tables            {sizes}   (* this run's arithmetic)")
     worst = worst_constraint_residual(d)
     if worst is None:

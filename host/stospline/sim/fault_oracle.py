@@ -28,9 +28,8 @@ import numpy as np
 
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem
-from stospline.sim import oracle as _oracle
-from stospline.sim.oracle import (Moments, _knot_terms, _PathRecord, _plant_tick,
-                                  _stage_maps)
+from stospline.sim.tick_moments import (Moments, _knot_terms, _PathRecord, _plant_tick,
+                                        _stage_maps)
 from stospline.table.format import GainTable
 
 __all__ = ["evaluate_with_faults", "FaultsNotExact", "has_exact_oracle"]
@@ -180,5 +179,3 @@ def evaluate_delayed_table(problem: Problem, table: GainTable, *, propagator: st
     return evaluate_with_faults(problem, table, Faults(), propagator=propagator,
                                 substeps=substeps, path=path)
 
-
-_oracle._DELAYED_LOOP[:] = [evaluate_delayed_table]

@@ -498,6 +498,24 @@ class TickStats:
                    np.zeros(n), np.zeros((max(1, min(record, paths)), m), np.float32))
 
 
+# The generated C of recent tables: writing every gain as a shortest float32 literal takes
+# about 0.2 s per 100 000 entries, and a run builds the same table's controller more than
+# once (the substep pilot, then the run). Keyed by the table object's id; the entry holds the
+# table, so the id cannot be reused while cached.
+_SOURCES: dict = {}
+
+
+def _table_sources(table) -> tuple[str, str]:
+    hit = _SOURCES.get(id(table))
+    if hit is not None and hit[0] is table:
+        return hit[1]
+    if len(_SOURCES) >= 4:
+        _SOURCES.clear()
+    text = generate_c(table)
+    _SOURCES[id(table)] = (table, text)
+    return text
+
+
 def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
                      quiet: bool = True, fixed_shape: bool = True) -> CompiledController:
     """Compile ``firmware/src/*.c`` with the table's generated C into a cffi module and load it.
@@ -534,7 +552,7 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     >>> u.shape, ctl.status_str(int(status[0]))    # the t0 tick latches and commands
     ((1, 2), 'ok')
     """
-    header, source = generate_c(table)
+    header, source = _table_sources(table)
     arith = getattr(table, "arith", "float32")
     # The module serves this one table: its dimensions are compile-time constants of the
     # plant (HARNESS_N/M) and, by default, of the controller (the firmware's fixed-shape build,

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from stospline.expm import NonFiniteMatrix
 from stospline.problem.model import Stage
 
 __all__ = ["POINTS", "TickSamples", "tick_samples", "zoh_ticks",
@@ -131,6 +132,20 @@ def _chunks(T: int):
     return [(a, min(a + CHUNK, T)) for a in range(0, T, CHUNK)]
 
 
+_ERR_NOT_PD, _ERR_SERIES = -1, -3
+
+
+def _check(status: int, name: str, a: int, b: int) -> None:
+    """A kernel status as the numpy paths report it: a series that does not converge means
+    non-finite data or data whose products overflow (`NonFiniteMatrix`, a FloatingPointError
+    the pipeline names the extreme input of); anything else is a bug."""
+    if status == _ERR_SERIES:
+        raise NonFiniteMatrix(f"{name}: the tick series did not converge at ticks {a}..{b} "
+                              f"(non-finite or overflowing data)")
+    if status != 0:
+        raise RuntimeError(f"{name}: status {status} at ticks {a}..{b}")
+
+
 def _ptr(ffi, a, kind="double[]"):
     """A C pointer into `a` (C-contiguous), or to a dummy element when `a` is empty."""
     return ffi.from_buffer(kind, a) if a.size else ffi.new(kind.replace("[]", "[1]"))
@@ -145,7 +160,7 @@ def _data_args(ffi, smp: TickSamples):
 def zoh_ticks(stage: Stage, t_start: float, h: float, V, N, W, mv, T: int, m: int):
     """`zoh._stage_ticks_numpy` for a time-varying stage: gains per tick and the value
     before the stage's first tick. Raises `numpy.linalg.LinAlgError` (Huu not positive
-    definite) or `RuntimeError` (a series that does not converge: non-finite data)."""
+    definite) or `NonFiniteMatrix` (a series that does not converge: non-finite data)."""
     from stospline.design.kernels import load_kernels
     mod = load_kernels()
     ffi, lib = mod.ffi, mod.lib
@@ -163,10 +178,9 @@ def zoh_ticks(stage: Stage, t_start: float, h: float, V, N, W, mv, T: int, m: in
             n, m, q, b - a, POINTS, na, mz, _ptr(ffi, coef), h, *data,
             *(_ptr(ffi, x) for x in (V, N, W, mv, K[a:b], k0[a:b], L[a:b], work)),
             _ptr(ffi, iwork, "int[]"), bad)
-        if status == -1:
+        if status == _ERR_NOT_PD:
             raise np.linalg.LinAlgError(f"Huu is not positive definite at tick {a + bad[0]}")
-        if status != 0:
-            raise RuntimeError(f"stsp_tv_zoh_ticks: status {status} at ticks {a}..{b}")
+        _check(status, "stsp_tv_zoh_ticks", a, b)
     return K, k0, L, V, N, W, mv
 
 
@@ -195,8 +209,7 @@ def oracle_ticks(stage: Stage, t_start: float, h: float, K, L, k0, M, J: float,
             n, m, n_latch, b - a, _ptr(ffi, K[a:b]), _ptr(ffi, L[a:b]), _ptr(ffi, k0[a:b]),
             POINTS, na, mz, _ptr(ffi, coef), h, *data, _ptr(ffi, M), Jp,
             *out, _ptr(ffi, work), _ptr(ffi, iwork, "int[]"))
-        if status != 0:
-            raise RuntimeError(f"stsp_tv_oracle_ticks: status {status} at ticks {a}..{b}")
+        _check(status, "stsp_tv_oracle_ticks", a, b)
     return (M, float(Jp[0]), *(rec if record else (None,) * 4))
 
 
@@ -235,6 +248,5 @@ def euler_oracle_ticks(stage: Stage, t_start: float, h: float, substeps: int, K,
             substeps, na, mz, dt, _ptr(ffi, smp.act, "int[]"), _ptr(ffi, Ad),
             _ptr(ffi, smp.G), _ptr(ffi, smp.Lb), _ptr(ffi, smp.same, "int[]"), _ptr(ffi, M),
             Jp, *out, _ptr(ffi, work), _ptr(ffi, iwork, "int[]"))
-        if status != 0:
-            raise RuntimeError(f"stsp_tv_euler_oracle_ticks: status {status} at ticks {a}..{b}")
+        _check(status, "stsp_tv_euler_oracle_ticks", a, b)
     return (M, float(Jp[0]), *(rec if record else (None,) * 4))

@@ -155,3 +155,24 @@ def test_plant_scheme_loop_equals_the_python_maps(substeps, monkeypatch):
     np.testing.assert_allclose(c.path_u_var, ref.path_u_var, rtol=0, atol=1e-12)
     for a, b in zip(c.knot_cov, ref.knot_cov):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-13)
+
+
+def test_overflowing_varying_data_is_named_not_a_traceback(tmp_path):
+    """Samples whose products overflow: the C loops' series cannot converge; the design stops
+    with exit status 2, one line naming the extreme input, and writes nothing."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    doc = tmp_path / "huge.toml"
+    doc.write_text('name = "huge"\nx0 = [1.0, 0.0]\ntick_hz = 10\n[dynamics]\n'
+                   'A = { t = [0.0, 1.0], values = [[[0, 1], [-1e200, 0]], '
+                   '[[0, 1], [-2e200, 0]]] }\nB = [[0], [1]]\n[cost]\nR = [[1.0]]\n'
+                   '[[knots]]\nt = 1.0\nconstraint = { C = [[1, 0]], value = [0.5] }\n')
+    cli = Path(sys.executable).with_name("stospline")
+    out = tmp_path / "out"
+    run = subprocess.run([str(cli), "design", str(doc), "--out", str(out)],
+                         capture_output=True, text=True)
+    assert run.returncode == 2, run.stderr
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and "dynamics.A" in lines[0] and "overflow" in lines[0], run.stderr
+    assert not out.exists()

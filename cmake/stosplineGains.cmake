@@ -16,6 +16,10 @@ include_guard(GLOBAL)
 #   <prefix>_NX, <prefix>_NU, <prefix>_N_LATCH   the table's dimensions
 #   <prefix>_FIXED_DEFS  STSP_FIXED_NX=<nx>u;STSP_FIXED_NU=<nu>u;STSP_FIXED_N_LATCH=<n>u, the
 #                        definitions of a controller built for this shape only
+#   <prefix>_BAND_ROWS   rows of the table's band dual (<NAME>_BAND_ROWS; 0: none)
+#   <prefix>_LINK_OPTIONS  what a program with this table must link with: for a band table,
+#                        the band solver (-Wl,--undefined=stsp_bandqp_solve: the controller
+#                        refers to it weakly, docs/guide/firmware.md), else nothing
 # A relative <table.c> is taken relative to the calling directory (CMAKE_CURRENT_SOURCE_DIR).
 function(stospline_read_gains_header source prefix)
   get_filename_component(source "${source}" ABSOLUTE BASE_DIR "${CMAKE_CURRENT_SOURCE_DIR}")
@@ -27,12 +31,16 @@ function(stospline_read_gains_header source prefix)
                         "that `stospline design` writes next to it")
   endif()
   string(TOUPPER "${name}" uname)
-  file(STRINGS "${header}" lines REGEX "^#define ${uname}_(NX|NU|N_LATCH|ARITH_Q15|ARITH_Q31) ")
+  file(STRINGS "${header}" lines
+       REGEX "^#define ${uname}_(NX|NU|N_LATCH|BAND_ROWS|ARITH_Q15|ARITH_Q31) ")
   set(arith float32)
   set(arith_defs "")
+  set(band_rows 0)
   foreach(line IN LISTS lines)
     if(line MATCHES "^#define ${uname}_(NX|NU|N_LATCH) ([0-9]+)u$")
       set(dim_${CMAKE_MATCH_1} "${CMAKE_MATCH_2}")
+    elseif(line MATCHES "^#define ${uname}_BAND_ROWS ([0-9]+)u$")
+      set(band_rows "${CMAKE_MATCH_1}")
     elseif(line MATCHES "^#define ${uname}_ARITH_(Q15|Q31) 1$")
       string(TOLOWER "${CMAKE_MATCH_1}" arith)
       set(arith_defs "STSP_ARITH_${CMAKE_MATCH_1}")
@@ -52,6 +60,12 @@ function(stospline_read_gains_header source prefix)
   set(${prefix}_ARITH "${arith}" PARENT_SCOPE)
   set(${prefix}_ARITH_DEFS "${arith_defs}" PARENT_SCOPE)
   set(${prefix}_FIXED_DEFS "${fixed_defs}" PARENT_SCOPE)
+  set(${prefix}_BAND_ROWS "${band_rows}" PARENT_SCOPE)
+  if(band_rows GREATER 0)
+    set(${prefix}_LINK_OPTIONS "LINKER:--undefined=stsp_bandqp_solve" PARENT_SCOPE)
+  else()
+    set(${prefix}_LINK_OPTIONS "" PARENT_SCOPE)
+  endif()
 endfunction()
 
 # stospline_add_gains(<target> <path/to/name.c> [FIXED_SHAPE])
@@ -112,6 +126,10 @@ function(stospline_add_gains target source)
 
   add_library(${target} STATIC "${source}")
   target_include_directories(${target} PUBLIC "${dir}")
+  # A band table: link the band solver, which the controller refers to only weakly.
+  if(table_LINK_OPTIONS)
+    target_link_options(${target} INTERFACE ${table_LINK_OPTIONS})
+  endif()
   target_link_libraries(${target} PUBLIC ${controller})
   set_target_properties(${target} PROPERTIES C_STANDARD 99 C_STANDARD_REQUIRED ON
                         C_EXTENSIONS OFF STSP_ARITH "${table_ARITH}")

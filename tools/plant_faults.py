@@ -146,6 +146,11 @@ FAULTS = [
     Fault("F31", "a refused step reads u_hold from the table, not the copy made at init", CTL,
           "    stsp_copy(u, ctrl->hold, stsp_nu(&ctrl->checked));",
           "    stsp_copy(u, ctrl->checked.u_hold, stsp_nu(&ctrl->checked));"),
+    Fault("F32", "init accepts a band table in a program without the band solver", CTL,
+          "    if (stsp_band_solver_linked() == 0) {", "    if (stsp_band_solver_linked() < 0) {"),
+    Fault("F33", "band order check compares magnitudes only (lo = -1 > hi = 0.5)", CTL,
+          "    return ((bits >> 63) != 0u) ? -magnitude : magnitude;",
+          "    return magnitude;"),
 ]
 
 

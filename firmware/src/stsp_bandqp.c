@@ -9,6 +9,7 @@
 #include "stospline/stsp_bandqp.h"
 #include "stsp_f32bits.h"
 
+#include <float.h>
 #include <stddef.h>
 
 /* Newton steps of stsp_bandqp_sqrt(), a bound that reaches the root for every positive
@@ -254,4 +255,29 @@ stsp_bandqp_status_t stsp_bandqp_solve(const stsp_bandqp_t *qp, const float *x0,
         }
     }
     return (found != 0u) ? STSP_BANDQP_OK : STSP_BANDQP_ERR_INFEASIBLE;
+}
+
+stsp_bandqp_status_t stsp_bandqp_solve_f32(const stsp_bandqp_t *qp, const float *x0, float *v)
+{
+    stsp_bandqp_work_t work;
+    double lam[STSP_BANDQP_MAX];
+    uint32_t i;
+    const stsp_bandqp_status_t st = stsp_bandqp_solve(qp, x0, lam, &work, NULL);
+    if (st != STSP_BANDQP_OK) {
+        return st;
+    }
+    if (v == NULL) {
+        return STSP_BANDQP_ERR_NULL;
+    }
+    /* A multiplier beyond the binary32 range has no float value (the conversion would be
+     * undefined). */
+    for (i = 0u; i < qp->q; ++i) {
+        if (!((lam[i] <= (double)FLT_MAX) && (lam[i] >= -(double)FLT_MAX))) {
+            return STSP_BANDQP_ERR_RANGE;
+        }
+    }
+    for (i = 0u; i < qp->q; ++i) {
+        v[i] = (float)lam[i];
+    }
+    return STSP_BANDQP_OK;
 }

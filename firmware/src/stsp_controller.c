@@ -155,28 +155,21 @@ static uint16_t stsp_stage_of(const stsp_header_t *h, uint16_t from, uint32_t ti
  * untouched): x not finite (the affine fallback then propagates the NaN/Inf, and the step
  * fails with STSP_ERR_NONFINITE_STATE as for any table), Nt x + mt overflowed, no active set
  * met the optimality conditions (W not positive definite in double precision), or a
- * multiplier lies outside the binary32 range. Out of line: its ~0.8 KB of
- * stack (solver work area) is used on this tick only. */
+ * multiplier lies outside the binary32 range. The solver (stsp_bandqp_solve_f32, with its
+ * ~0.8 KB of stack, used on this tick only) is linked only into programs with a band table:
+ * init refuses a band table without it (stsp_internal.h). */
 static STSP_NOINLINE int stsp_band_latch(const stsp_header_t *h, const stsp_f32_t *x,
                                          stsp_f32_t *v_new)
 {
-    stsp_bandqp_work_t work;
-    double lam[STSP_BANDQP_MAX];
+    stsp_f32_t v[STSP_BANDQP_MAX];
     const uint32_t q = h->band.q;
     uint32_t i;
     /* The validated copy of the band dual's header, not the table's: q and nx as init checked. */
-    if (stsp_bandqp_solve(&h->band, x, lam, &work, NULL) != STSP_BANDQP_OK) {
+    if (stsp_bandqp_solve_f32(&h->band, x, v) != STSP_BANDQP_OK) {
         return 0;
     }
-    /* A multiplier beyond the binary32 range has no float value (the conversion would be
-     * undefined): fall back as for a failed solve. */
-    for (i = 0u; i < q; ++i) {
-        if (!((lam[i] <= (double)FLT_MAX) && (lam[i] >= -(double)FLT_MAX))) {
-            return 0;
-        }
-    }
     for (i = 0u; i < stsp_n_latch(h); ++i) {
-        v_new[i] = (i < q) ? (stsp_f32_t)lam[i] : 0.0f;
+        v_new[i] = (i < q) ? v[i] : 0.0f;
     }
     return 1;
 }

@@ -95,6 +95,31 @@ static inline int stsp_all_finite(const stsp_f32_t *values, uint32_t count)
 }
 #endif
 
+#ifndef STSP_ARITH_FIXED_POINT
+/* The band solver (stsp_bandqp.c and the double-precision routines it needs, about 4.5 KB on
+ * a Cortex-M4F) is linked only into programs whose tables have a band dual: with GCC or clang
+ * on an ELF target the controller refers to the solver (stsp_bandqp_solve_f32) weakly, so a
+ * static link pulls it in only when something else refers to it (or to stsp_bandqp_solve, in
+ * the same object) strongly. The build does that for a band table:
+ * stospline_add_gains() (and the repository's gains libraries) add -Wl,--undefined=
+ * stsp_bandqp_solve when the table's header says <NAME>_BAND_ROWS > 0; any program may call
+ * stsp_bandqp_solve or pass that option itself. Without the solver, stsp_init() refuses a band
+ * table (STSP_ERR_BAD_DIMS, as a fixed-point build does), so the stage-0 latch of an accepted
+ * band table always has it. Elsewhere (other compilers and object formats) the reference is
+ * an ordinary one and the solver is always linked. */
+#if (defined(__GNUC__) || defined(__clang__)) && defined(__ELF__)
+extern stsp_bandqp_status_t stsp_bandqp_solve_f32(const stsp_bandqp_t *qp, const float *x0,
+                                                  float *v) __attribute__((weak));
+/* 1 when the band solver is linked into the program (its weak reference resolved). */
+static inline int stsp_band_solver_linked(void)
+{
+    return (&stsp_bandqp_solve_f32 != NULL) ? 1 : 0;
+}
+#else
+static inline int stsp_band_solver_linked(void) { return 1; }
+#endif
+#endif
+
 /* Value of stsp_ctrl_t.ready after a successful stsp_init(): a Thumb-2 immediate that no
  * byte-fill pattern of uninitialised memory (0x00, 0xFF, 0xA5, 0xCC, ...) matches. */
 #define STSP_CTRL_READY 0x53005300u

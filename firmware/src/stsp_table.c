@@ -84,6 +84,10 @@ static stsp_status_t stsp_check_band_dims(const stsp_header_t *h)
 {
     const stsp_bandqp_t *b = &h->band;
     uint32_t s;
+    /* cppcheck-suppress knownConditionTrueFalse ; link-dependent (a weak reference) */
+    if (stsp_band_solver_linked() == 0) {
+        return STSP_ERR_BAD_DIMS; /* a program without the solver: stsp_internal.h */
+    }
     if ((b->Nt == NULL) || (b->mt == NULL) || (b->W == NULL) || (b->lo == NULL) ||
         (b->hi == NULL)) {
         return STSP_ERR_NULL;
@@ -238,6 +242,21 @@ static int stsp_all_finite_f64(const double *values, uint32_t count)
     return 1;
 }
 
+/* A key of a finite binary64 whose integer order is the numeric order (-0 and +0 equal):
+ * lo <= hi without a double-precision compare, which on a core without a double-precision
+ * FPU would link the soft-float comparison routines into every program (the band solver's
+ * own are linked only with a band table, stsp_internal.h). */
+static int64_t stsp_f64_order(const double *value)
+{
+    uint64_t bits;
+    uint64_t magnitude_bits;
+    int64_t magnitude;
+    (void)memcpy(&bits, value, sizeof bits);
+    magnitude_bits = bits & 0x7FFFFFFFFFFFFFFFu;
+    magnitude = (int64_t)magnitude_bits;
+    return ((bits >> 63) != 0u) ? -magnitude : magnitude;
+}
+
 /* Band dual data finite and every band ordered (lo <= hi; lo == hi is an equality row). */
 static stsp_status_t stsp_check_band_values(const stsp_bandqp_t *b)
 {
@@ -249,7 +268,7 @@ static stsp_status_t stsp_check_band_values(const stsp_bandqp_t *b)
         return STSP_ERR_BAD_VALUES;
     }
     for (i = 0u; i < q; ++i) {
-        if (!(b->lo[i] <= b->hi[i])) {
+        if (stsp_f64_order(&b->lo[i]) > stsp_f64_order(&b->hi[i])) {
             return STSP_ERR_BAD_VALUES;
         }
     }

@@ -130,6 +130,9 @@ static void test_band_tables_are_checked(void **state)
 {
     static const double nan_W[2 * 2] = {2.0, 0.5, 0.5, NAN};
     static const double swapped_lo[2] = {0.5, 2.0};
+    /* Ordered bands whose magnitudes are not (|lo| > |hi|), and signed zeros: accepted. */
+    static const double wide_lo[2] = {-0.0, -2.0};
+    static const double wide_hi[2] = {0.0, -1.5};
     static const double W_changed[2 * 2] = {2.0, 0.5, 0.5, 1.0000000000000002};
     static const uint16_t np_later[2] = {2u, 1u};
     static const uint16_t np_one[2] = {1u, 0u};
@@ -156,6 +159,10 @@ static void test_band_tables_are_checked(void **state)
     qp = good; qp.W = nan_W; t = make_table_d(&qp);
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
     qp = good; qp.lo = swapped_lo; t = make_table_d(&qp);  /* lo > hi on row 1 */
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
+    qp = good; qp.lo = wide_lo; qp.hi = wide_hi; t = make_table_d(&qp);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    qp = good; qp.lo = wide_hi; qp.hi = wide_lo; t = make_table_d(&qp); /* -1.5 > -2 */
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_VALUES);
     qp = good; t = make_table_d(&qp); qp.W = W_changed;    /* one ulp after the CRC */
     assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_CRC);

@@ -208,6 +208,16 @@ def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
         size_line = run(["arm-none-eabi-size", str(elf)]).splitlines()[1]
         t, d, b = (int(v) for v in size_line.split()[:3])
         rows.append((what, t, d, b))
+        if not extra_roots and not sfx:
+            # A program with a band table: the build adds --undefined=stsp_bandqp_solve
+            # (stospline_add_gains), which links the band solver the controller refers to weakly.
+            band_elf = elf.with_name(elf.stem + "_band.elf")
+            band_cmd = [str(band_elf) if c == str(elf) else c for c in cmd]
+            band_cmd.insert(band_cmd.index(str(libs[0])), "-Wl,--undefined=stsp_bandqp_solve")
+            run(band_cmd)
+            size_line = run(["arm-none-eabi-size", str(band_elf)]).splitlines()[1]
+            bt, bd, bb = (int(v) for v in size_line.split()[:3])
+            rows.append(("controller linked with the band solver (a band table)", bt, bd, bb))
         if not extra_roots:
             lib = {n: sz for n, (_, sz) in symbols(elf).items()
                    if sz and not n.startswith(("stsp_", "robot_corridor"))}

@@ -38,7 +38,9 @@ typedef enum {
     STSP_BANDQP_ERR_NULL = -1,        /**< a pointer argument is NULL */
     STSP_BANDQP_ERR_DIMS = -2,        /**< q == 0, q > STSP_BANDQP_MAX or nx == 0 */
     STSP_BANDQP_ERR_NONFINITE = -3,   /**< x0 holds NaN or +-Inf, or Nt x0 + mt overflowed */
-    STSP_BANDQP_ERR_INFEASIBLE = -4   /**< no active set meets the conditions (W not > 0) */
+    STSP_BANDQP_ERR_INFEASIBLE = -4,  /**< no active set meets the conditions (W not > 0) */
+    STSP_BANDQP_ERR_RANGE = -5        /**< stsp_bandqp_solve_f32(): a multiplier lies beyond
+                                           the binary32 range (+-FLT_MAX) */
 } stsp_bandqp_status_t;
 
 /** Const problem data, generated with the design (row-major). */
@@ -70,6 +72,16 @@ typedef struct {
  */
 stsp_bandqp_status_t stsp_bandqp_solve(const stsp_bandqp_t *qp, const float *x0, double *lam,
                                        stsp_bandqp_work_t *work, uint32_t *candidates);
+
+/**
+ * The stage-0 latch of a band table (the controller calls it): stsp_bandqp_solve() for x0,
+ * then v[c] = (float)lam[c], c < q. Returns STSP_BANDQP_OK; a status of stsp_bandqp_solve()
+ * (v not written); or STSP_BANDQP_ERR_RANGE when a multiplier lies beyond +-FLT_MAX (v not
+ * written). Its work area and multipliers are on its own stack frame (sizeof
+ * (stsp_bandqp_work_t) + STSP_BANDQP_MAX doubles). In the same object as stsp_bandqp_solve():
+ * linking either links both (the controller refers to this one weakly, stsp_controller.h).
+ */
+stsp_bandqp_status_t stsp_bandqp_solve_f32(const stsp_bandqp_t *qp, const float *x0, float *v);
 
 #ifdef __cplusplus
 }

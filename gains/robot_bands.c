@@ -2295,6 +2295,11 @@ static const stsp_bandqp_t robot_bands_band_qp = {
     6u, 4u, robot_bands_band_Nt, robot_bands_band_mt, robot_bands_band_W, robot_bands_band_lo, robot_bands_band_hi
 };
 
+/* The controller refers to the band solver only weakly, so that programs without a
+ * band table do not link it: this reference links it with the table. */
+stsp_bandqp_status_t (*const robot_bands_band_solver)(const stsp_bandqp_t *, const float *, float *) =
+    &stsp_bandqp_solve_f32;
+
 const stsp_table_t robot_bands_table = {
     0x53545350u, 4u, 1u,
     4u, 2u, 6u, 2u, 600u, 100u,

@@ -100,10 +100,10 @@ static inline int stsp_all_finite(const stsp_f32_t *values, uint32_t count)
  * a Cortex-M4F) is linked only into programs whose tables have a band dual: with GCC or clang
  * on an ELF target the controller refers to the solver (stsp_bandqp_solve_f32) weakly, so a
  * static link pulls it in only when something else refers to it (or to stsp_bandqp_solve, in
- * the same object) strongly. The build does that for a band table:
- * stospline_add_gains() (and the repository's gains libraries) add -Wl,--undefined=
- * stsp_bandqp_solve when the table's header says <NAME>_BAND_ROWS > 0; any program may call
- * stsp_bandqp_solve or pass that option itself. Without the solver, stsp_init() refuses a band
+ * the same object) strongly. A band table's generated C does (<name>_band_solver, a constant
+ * pointer to stsp_bandqp_solve_f32), and stospline_add_gains() (and the repository's gains
+ * libraries) add -Wl,--undefined=stsp_bandqp_solve when the table's header says
+ * <NAME>_BAND_ROWS > 0. Without the solver, stsp_init() refuses a band
  * table (STSP_ERR_BAD_DIMS, as a fixed-point build does), so the stage-0 latch of an accepted
  * band table always has it. Elsewhere (other compilers and object formats) the reference is
  * an ordinary one and the solver is always linked. */

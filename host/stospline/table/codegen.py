@@ -104,7 +104,7 @@ def generate_c(table: GainTable, *, prefix: str | None = None,
 
 {v.layout}
 extern const stsp_table_t {p}_table;
-
+{v.declarations}
 #endif /* {name}_GAINS_H */
 """
     u32 = lambda x: f"{int(x)}u"  # noqa: E731
@@ -148,6 +148,7 @@ class _Variant(NamedTuple):
     negated: str          # note before an array's dimensions ("{}" is the array's name)
     limit_units: str      # note after the actuator limits' description
     extra_arrays: list    # arrays after u_max
+    declarations: str     # header declarations after the table's (empty, or the band solver's)
     scalar_kind: int
     tail_pointers: str    # initializers after u_max, up to the CRC
 
@@ -156,9 +157,11 @@ def _float32_variant(table, p: str) -> _Variant:
     """float32 gains, and the band dual when the table carries one."""
     n = table.dims[0]
     q = 0 if table.band_qp is None else table.band_qp.q
-    extra, band = [], "NULL"
+    extra, band, declarations = [], "NULL", ""
     if table.band_qp is not None:
         b, f64 = table.band_qp, _f64_literal
+        solver_type = (f"stsp_bandqp_status_t (*const {p}_band_solver)(const stsp_bandqp_t *, "
+                       f"const float *, float *)")
         extra = [
             _array("double", f"{p}_band_Nt", b.Nt, f64, f"[q][nx] = [{b.q}][{n}]: e = Nt x0 + mt"),
             _array("double", f"{p}_band_mt", b.mt, f64, "[q]"),
@@ -168,13 +171,17 @@ def _float32_variant(table, p: str) -> _Variant:
             f"/* Band dual, re-solved from the measured x0 at the t0 latch (stsp_bandqp.h). */\n"
             f"static const stsp_bandqp_t {p}_band_qp = {{\n    {b.q}u, {n}u, {p}_band_Nt, "
             f"{p}_band_mt, {p}_band_W, {p}_band_lo, {p}_band_hi\n}};\n",
+            f"/* The controller refers to the band solver only weakly, so that programs without a\n"
+            f" * band table do not link it: this reference links it with the table. */\n"
+            f"{solver_type} =\n    &stsp_bandqp_solve_f32;\n",
         ]
+        declarations = f"extern {solver_type};\n"
         band = f"&{p}_band_qp"
     layout = ("/* Tables in flash; layout K[tick][i*NX + j], k0[tick][i], L[tick][i*N_LATCH + c],\n"
               " * Lambda[stage][c*NX + j], lambda0[stage][c], u_min[i], u_max[i], u_hold[i] (see\n"
               " * stsp_controller.h; +-3.4028235e+38f = +-FLT_MAX: unlimited). */")
     return _Variant("", f"BAND_ROWS {q}u", layout, "stsp_f32_t", _f32_literal, "",
-                    "", extra, SCALAR_FLOAT32, f" {band},")
+                    "", extra, declarations, SCALAR_FLOAT32, f" {band},")
 
 
 def _fixed_point_variant(table, p: str) -> _Variant:
@@ -202,7 +209,7 @@ def _fixed_point_variant(table, p: str) -> _Variant:
     tail = (f"\n    {p}_x_exp, {p}_u_exp, {p}_v_exp,\n"
             "    NULL, /* band_qp: the band re-solve is float32 only */")
     return _Variant(guard, f"ARITH_{kind} 1", layout, f"stsp_{table.arith}_t", _qlit(F),
-                    "-{} scaled, ", " (command units)", extra, table.scalar_kind, tail)
+                    "-{} scaled, ", " (command units)", extra, "", table.scalar_kind, tail)
 
 
 def _qlit(F: int):

@@ -109,6 +109,7 @@ def test_fragments_change_the_minimal_file():
                        or problem.u_min is not None or problem.mz != base.mz
                        or problem.faults.any
                        or problem.u_hold is not None
+                       or problem.corridors
                        or any(s.varying is not None or not np.array_equal(s.R, b.R)
                               or s.f is not None
                               or not np.array_equal(s.A, b.A) or s.G.any()
@@ -122,7 +123,8 @@ def documented(key: str) -> bool:
 
 # Keys accepted below the top-level tables (the parser spells these inline).
 NESTED = ["state", "input", "G", "C", "target", "weight", "value", "lower", "upper", "t",
-          "values", "interpolation", "y0", "every", "axes", "walls", *FAULT_KEYS]
+          "values", "interpolation", "y0", "every", "axes", "walls", "polygons", "epsilon",
+          "A", "b", *FAULT_KEYS]
 
 
 @pytest.mark.parametrize("key", sorted(problem_module._TOP_KEYS | problem_module._DYN_KEYS

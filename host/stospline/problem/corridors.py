@@ -60,13 +60,20 @@ class Corridor:
                 out.append(f"polygon {k} row {i}: {terms} <= {b[i]:g}")
         return out
 
+    def unit_walls(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(A, b)`` of every wall scaled so each row of A has length 1: ``a y - b`` is then
+        the distance beyond the wall (the harness's C uses these same numbers)."""
+        A = np.ascontiguousarray(self.A, dtype=float)
+        norm = np.linalg.norm(A, axis=1)
+        return np.ascontiguousarray(A / norm[:, None]), np.ascontiguousarray(self.b / norm)
+
     def exit_wall(self, Y: np.ndarray) -> np.ndarray:
         """The wall each output of `Y` (points x p) is attributed to, -1 inside the union
         (the module docstring's rule; ties go to the first)."""
         Y = np.atleast_2d(Y)
         starts = self.row_start
-        norms = np.linalg.norm(self.A, axis=1)
-        excess = (Y @ self.A.T - self.b) / norms                  # points x walls
+        A, b = self.unit_walls()
+        excess = Y @ A.T - b                                       # points x walls
         best_wall = np.empty((Y.shape[0], len(self.polygons)), dtype=int)
         best = np.empty((Y.shape[0], len(self.polygons)))
         for k in range(len(self.polygons)):

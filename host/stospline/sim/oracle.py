@@ -47,6 +47,10 @@ class Moments:
     # The command's mean and variance over each tick (ticks, m), with path=True.
     path_u_mean: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     path_u_var: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    # With evaluate_table(output=Cy): the mean (ticks + 1, p) and covariance (ticks + 1, p, p)
+    # of Cy x at every tick.
+    path_y_mean: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    path_y_cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 0)))
 
 
 def _knot_terms(problem: Problem, k: int, M: np.ndarray, n: int):
@@ -122,12 +126,16 @@ def _plant_tick(stage, maps, Mw: np.ndarray, t: float, h: float, n: int, m: int)
 
 class _PathRecord:
     """Mean and variance of the state at every tick and of the command over each (kept
-    only when `on`)."""
+    only when `on`); with an output matrix `Cy`, the mean and covariance of ``Cy x`` at every
+    tick too."""
 
-    def __init__(self, x0: np.ndarray, on: bool):
+    def __init__(self, x0: np.ndarray, on: bool, Cy: np.ndarray | None = None):
         self.on = on
         self.x_mean, self.x_var = ([x0.copy()], [np.zeros(len(x0))]) if on else ([], [])
         self.u_mean, self.u_var = [], []
+        self.Cy = Cy
+        if Cy is not None:
+            self.y_mean, self.y_cov = [Cy @ x0], [np.zeros((len(Cy), len(Cy)))]
 
     def command(self, Mw: np.ndarray, n: int, m: int) -> None:
         if self.on:
@@ -146,12 +154,22 @@ class _PathRecord:
             mu = M[:n, -1]
             self.x_mean.append(mu.copy())
             self.x_var.append(np.diag(M[:n, :n]) - mu ** 2)
+        if self.Cy is not None:
+            mu = M[:n, -1]
+            cov = M[:n, :n] - np.outer(mu, mu)
+            ym = self.Cy @ mu
+            yc = self.Cy @ cov @ self.Cy.T
+            self.y_mean.append(ym)
+            self.y_cov.append(0.5 * (yc + yc.T))
 
     def moments(self, J, means, covs, cons, t0: float, h: float, ticks: int) -> "Moments":
         path_t = t0 + np.arange(ticks + 1) * h if self.on else np.zeros(0)
         var = np.maximum(np.array(self.x_var), 0.0) if self.on else np.zeros((0, 0))
-        return Moments(float(J), means, covs, cons, path_t, np.array(self.x_mean), var,
-                       np.array(self.u_mean), np.maximum(np.array(self.u_var), 0.0))
+        out = Moments(float(J), means, covs, cons, path_t, np.array(self.x_mean), var,
+                      np.array(self.u_mean), np.maximum(np.array(self.u_var), 0.0))
+        if self.Cy is not None:
+            out.path_y_mean, out.path_y_cov = np.array(self.y_mean), np.array(self.y_cov)
+        return out
 
 
 # Tick maps of recent stages: the design's law and its float32 table are evaluated on the
@@ -248,7 +266,8 @@ _DELAYED_LOOP: list = []
 
 
 def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
-                   substeps: int = 4, path: bool = True) -> Moments:
+                   substeps: int = 4, path: bool = True,
+                   output: np.ndarray | None = None) -> Moments:
     """Exact moments of the controller as implemented: ZOH at the table's tick rate, with the
     table's (quantized) values, latched at each stage's first tick.
 
@@ -268,6 +287,12 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         with `substeps` steps per tick, so the difference is the simulation bias.
     path : bool
         Also keep the mean and variance at every tick (``path_mean``, ``path_var``).
+    output : ndarray, optional
+        An output matrix ``Cy`` (p x n): also keep the mean and covariance of ``Cy x`` at
+        every tick (``path_y_mean``, ``path_y_cov``; the corridors' exit bounds). The ticks
+        then run in this module's loop, time-varying stages by the DOP853 moment integration
+        (`_tick_varying`) rather than the Gauss-point C loop, which records only variances.
+        Not for tables designed for a delay (ValueError).
 
     Returns
     -------
@@ -286,6 +311,9 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     oracle's loop (`fault_oracle.evaluate_with_faults` without faults), whose state carries
     the command waiting to be applied.
     """
+    if output is not None and getattr(table, "delay_ticks", 0):
+        raise ValueError("evaluate_table: output moments are not recorded for a table "
+                         "designed for a one-tick delay")
     if getattr(table, "delay_ticks", 0):
         # The fault oracle's delayed loop, which registers itself here on import (it builds on
         # this module, so a static import from here would be a cycle).
@@ -302,7 +330,10 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     M = np.outer(y0, y0)
     J = 0.0
     means, covs, cons = [], [], []
-    rec = _PathRecord(x0, path)
+    Cy = None if output is None else np.atleast_2d(np.asarray(output, dtype=float))
+    if Cy is not None and Cy.shape[1] != n:
+        raise ValueError(f"evaluate_table: output has {Cy.shape[1]} columns, expected n = {n}")
+    rec = _PathRecord(x0, path, Cy)
     xs, vs = slice(0, n), slice(n, n + n_latch)
     bar = progress.start("oracle", table.n_ticks)
     for k in range(table.n_stages):
@@ -327,8 +358,9 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         Tw[-1, -1] = 1.0
         ticks = range(int(table.stage_start[k]), int(table.stage_start[k + 1]))
         # The C loop carries the mean map without the constant column: not with a drift.
-        kernel = None if varying or path or _has_drift(problem) else _c_kernel()
-        if varying and _c_kernel() is not None:
+        kernel = (None if varying or path or Cy is not None or _has_drift(problem)
+                  else _c_kernel())
+        if varying and Cy is None and _c_kernel() is not None:
             # Time-varying data: the Gauss-point Taylor loop in C, or the plant scheme's steps
             # (design.varying).
             from stospline.design.varying import euler_oracle_ticks, oracle_ticks

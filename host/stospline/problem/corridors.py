@@ -67,6 +67,22 @@ class Corridor:
         norm = np.linalg.norm(A, axis=1)
         return np.ascontiguousarray(A / norm[:, None]), np.ascontiguousarray(self.b / norm)
 
+    def physical_walls(self) -> list[tuple[str, list[int]]]:
+        """The walls grouped by the line they lie on (the same unit row and offset: two legs of
+        the L share the outer walls), each as ``(label, wall indices)``, in order of first
+        appearance; the label reads ``"1 y0 <= 0"``."""
+        A, b = self.unit_walls()
+        groups: dict = {}
+        for w in range(len(b)):
+            key = tuple(np.round(np.append(A[w], b[w]), 12))
+            groups.setdefault(key, []).append(w)
+        out = []
+        for walls in groups.values():
+            a, off = self.A[walls[0]], self.b[walls[0]]
+            terms = " + ".join(f"{a[j]:g} y{j}" for j in range(len(a)) if a[j])
+            out.append((f"{terms} <= {off:g}", walls))
+        return out
+
     def exit_wall(self, Y: np.ndarray) -> np.ndarray:
         """The wall each output of `Y` (points x p) is attributed to, -1 inside the union
         (the module docstring's rule; ties go to the first)."""

@@ -41,7 +41,8 @@ def corridor_report(problem, table, exit_tick: np.ndarray | None,
                     exit_wall: np.ndarray | None, *, outputs=None,
                     bins: int = TIME_BINS, examples: int = 10) -> list[dict]:
     """One dict per corridor: its interval, epsilon, the analytic bounds (Cantelli: valid;
-    Gaussian: an assumption) overall, at the worst tick, by time bin and by wall, and, with a
+    Gaussian: an assumption) overall, at the worst tick, by time bin and by wall (each row of
+    each polygon, and by physical wall: the rows on one line together), and, with a
     run (`exit_tick`/`exit_wall`, corridors x paths), the Monte Carlo exits likewise with
     one-sided 99 % Clopper-Pearson upper bounds and the first `examples` exiting paths
     (index, time, wall). `outputs`: `exit_bound.corridor_outputs` if already computed."""
@@ -54,14 +55,18 @@ def corridor_report(problem, table, exit_tick: np.ndarray | None,
         lo, hi = bounds["cantelli"].ticks
         edges = np.unique(np.rint(np.linspace(lo, hi + 1, bins + 1)).astype(int))
         names = c.wall_names()
+        physical = c.physical_walls()
         entry = {
             "t": list(c.t), "epsilon": c.epsilon, "walls": names,
+            "physical_walls": [{"wall": label, "rows": rows} for label, rows in physical],
             "bins_t": [[problem.t0 + a * h, problem.t0 + (b - 1) * h]
                        for a, b in zip(edges[:-1], edges[1:])],
             "bound": {tail: {"total": b.total, "sum": float(b.per_tick.sum()),
                              "worst_tick": b.worst_tick,
                              "worst_tick_t": problem.t0 + (lo + int(np.argmax(b.per_tick))) * h,
-                             "by_bin": b.by_bins(edges), "by_wall": b.per_wall}
+                             "by_bin": b.by_bins(edges), "by_wall": b.per_wall,
+                             "by_physical_wall": [float(b.per_wall[rows].sum())
+                                                  for _, rows in physical]}
                       for tail, b in bounds.items()},
         }
         if exit_tick is not None:
@@ -73,6 +78,8 @@ def corridor_report(problem, table, exit_tick: np.ndarray | None,
                 "paths": int(n), "confidence": CONFIDENCE, **_counted(len(out_idx), n),
                 "by_bin": [_counted(int(np.sum(bin_of == b)), n) for b in range(len(edges) - 1)],
                 "by_wall": [_counted(int(np.sum(ew[out_idx] == w)), n) for w in range(len(names))],
+                "by_physical_wall": [_counted(int(np.isin(ew[out_idx], rows).sum()), n)
+                                     for _, rows in physical],
                 "examples": [{"path": int(p), "t": problem.t0 + int(et[p]) * h,
                               "wall": int(ew[p])} for p in out_idx[:examples]],
             }

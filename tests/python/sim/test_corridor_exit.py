@@ -137,3 +137,26 @@ def test_corridors_change_nothing_else_and_not_the_worker_count(robot_problem, r
     np.testing.assert_array_equal(runs[1].exit_tick, runs[2].exit_tick)
     np.testing.assert_array_equal(runs[1].exit_wall, runs[2].exit_wall)
     assert (runs[1].exit_tick >= 0).any()
+
+
+def test_simulate_json_reports_the_corridor(tmp_path, capsys):
+    """`stospline simulate --json`: the exits with their upper bound, the bounds, by time and
+    wall, strict JSON (no NaN/Infinity); the text output has one line per corridor."""
+    import json
+    from stospline.cli import main
+    f = tmp_path / "walk.toml"
+    f.write_text(scalar(polygons=[{"A": [[1.0], [-1.0]], "b": [B, B]}]).to_toml()
+                 .replace("[[corridors]]", "[[corridors]]\nepsilon = 0.5"))
+    assert main(["simulate", str(f), "--paths", "3000", "--seed", "2", "--substeps", "1",
+                 "--workers", "1", "--json", "--quiet"]) == 0
+    s = json.loads(capsys.readouterr().out, parse_constant=lambda c: pytest.fail(c))
+    (c,) = s["corridors"]
+    m = c["mc"]
+    assert m["paths"] == 3000 and 0 < m["exits"] < 3000
+    assert m["estimate"] <= m["upper99"] <= 1 and m["meets_epsilon"] == (m["upper99"] <= 0.5)
+    assert sum(b["exits"] for b in m["by_bin"]) == m["exits"]
+    assert sum(w["exits"] for w in m["by_wall"]) == m["exits"]
+    assert c["bound"]["cantelli"]["total"] == 1.0 and c["bound"]["gaussian"]["sum"] > 0
+    assert main(["simulate", str(f), "--paths", "300", "--seed", "2", "--substeps", "1",
+                 "--workers", "1", "--quiet"]) == 0
+    assert "corridor 0 (t = [0, 1], epsilon 0.5): left by" in capsys.readouterr().out

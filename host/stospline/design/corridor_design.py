@@ -13,9 +13,11 @@ noise coupling is handled by evaluating every candidate with the exact oracle of
 through the compiled C controller, not by a Gaussian model. The data stay constant per stage,
 so the Monte Carlo harness keeps its fused C tick.
 
-`strip_weights_problem` builds the problem for a weight; the search over weights (the least
-weight, hence the least extra cost in the original cost functional, whose Monte Carlo
-upper bound meets epsilon) is in ``tools/reports/corridor_design.py``.
+A second weight damps the outputs' rate (the velocity), whose heavy tails make paths
+overshoot the open end of a leg. `strip_weights_problem` builds the problem for the two
+weights; the search (the grid point of least cost in the original cost functional whose
+Monte Carlo upper bound meets epsilon, certified on fresh paths) is in
+``tools/reports/corridor_design.py``.
 """
 from __future__ import annotations
 
@@ -55,16 +57,22 @@ def stage_polygons(problem, corridor: Corridor, y_mean: np.ndarray) -> list[int]
             for lo, hi in zip(bounds[:-1], bounds[1:])]
 
 
-def strip_weights_problem(problem, corridor: Corridor, polygons: list[int], weight: float):
+def strip_weights_problem(problem, corridor: Corridor, polygons: list[int], weight: float,
+                          rate_weight: float = 0.0):
     """`problem` with ``weight * (a'C x - c)^2`` added to the running cost of stage k for every
     strip ``(a, c)`` of polygon ``polygons[k]``: ``Q += w C'aa'C``, ``q -= w c C'a``,
-    ``rho += w c^2``. Stages with time-varying data are refused (ValueError): the knob keeps
-    the data constant."""
+    ``rho += w c^2``; and ``rate_weight * |C A x|^2``, the outputs' drift rate (the robot's
+    velocity): with noise proportional to the velocity its tails are heavy (a velocity that
+    runs away overshoots the end of a leg, which no strip faces), and damping it shortens
+    them. Stages with time-varying data are refused (ValueError): the knob keeps the data
+    constant."""
     stages = []
     for k, st in enumerate(problem.stages):
         if st.varying is not None:
             raise ValueError("strip weights: stage data must be constant")
         Q, q, rho = st.Q.copy(), st.q.copy(), float(st.rho)
+        rate = corridor.C @ st.A
+        Q += rate_weight * rate.T @ rate
         A, b = corridor.polygons[polygons[k]]
         for a, c in strips(A, b):
             g = corridor.C.T @ a

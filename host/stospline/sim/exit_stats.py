@@ -53,7 +53,10 @@ def corridor_report(problem, table, exit_tick: np.ndarray | None,
     for i, (c, (ym, yc)) in enumerate(zip(problem.corridors, outputs)):
         bounds = exit_bounds(c, ym, yc, problem.t0, problem.tick_hz)
         lo, hi = bounds["cantelli"].ticks
-        edges = np.unique(np.rint(np.linspace(lo, hi + 1, bins + 1)).astype(int))
+        # Equal bins of whole seconds when they divide (0-999, 1000-1999, ...); the last
+        # takes the closing tick.
+        edges = np.unique(np.append(np.rint(np.linspace(lo, hi, bins + 1))[:-1], hi + 1)
+                          ).astype(int)
         names = c.wall_names()
         physical = c.physical_walls()
         entry = {

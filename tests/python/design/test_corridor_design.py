@@ -27,5 +27,8 @@ def test_robot_stages_and_cost(robot_problem, robot_zoh):
         st, base = q.stages[k], p.stages[k]
         extra = x @ (st.Q - base.Q) @ x + 2 * (st.q - base.q) @ x + st.rho - base.rho
         assert np.isclose(extra, 5.0 * (want_dy ** 2 + want_dx ** 2))
+    r = strip_weights_problem(p, c, polys, 0.0, rate_weight=3.0)
+    extra = x @ (r.stages[0].Q - p.stages[0].Q) @ x
+    assert np.isclose(extra, 3.0 * (0.7 ** 2 + 0.2 ** 2))      # the velocities (x', y')
     d = design_problem(q)
     assert d.implemented.J > robot_zoh.implemented.J   # in its own cost, with the extra term

@@ -91,6 +91,13 @@ def test_snippet_parses(block, tmp_path):
             for a, b in zip(problem.knots, same.knots):
                 assert same_knot(a, b)
             assert problem.plot == same.plot and problem.options == same.options
+            assert len(problem.corridors) == len(same.corridors)
+            for a, b in zip(problem.corridors, same.corridors):
+                assert a.t == b.t and a.epsilon == b.epsilon
+                np.testing.assert_array_equal(a.C, b.C)
+                np.testing.assert_array_equal(a.A, b.A)
+                np.testing.assert_array_equal(a.b, b.b)
+                np.testing.assert_array_equal(a.row_start, b.row_start)
     else:
         assert kind(block) == "fragment"
         parse_problem(merged(minimal(), tomllib.loads(block)))

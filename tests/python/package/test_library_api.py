@@ -58,6 +58,12 @@ def same_problem(a, b) -> bool:
         return False
     if len(a.knots) != len(b.knots) or len(a.stages) != len(b.stages):
         return False
+    if len(a.corridors) != len(b.corridors) or not all(
+            ca.t == cb.t and ca.epsilon == cb.epsilon and eq(ca.C, cb.C)
+            and len(ca.polygons) == len(cb.polygons)
+            and all(eq(A, B) and eq(x, y) for (A, x), (B, y) in zip(ca.polygons, cb.polygons))
+            for ca, cb in zip(a.corridors, b.corridors)):
+        return False
     for ka, kb in zip(a.knots, b.knots):
         if ka.t != kb.t or (ka.penalty is None) != (kb.penalty is None) or (
                 (ka.constraint is None) != (kb.constraint is None)):

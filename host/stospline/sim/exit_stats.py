@@ -38,21 +38,26 @@ def _counted(k: int, n: int) -> dict:
 
 
 def corridor_report(problem, table, exit_tick: np.ndarray | None,
-                    exit_wall: np.ndarray | None, *, outputs=None,
+                    exit_wall: np.ndarray | None, *, outputs=None, with_bounds: bool = True,
                     bins: int = TIME_BINS, examples: int = 10) -> list[dict]:
     """One dict per corridor: its interval, epsilon, the analytic bounds (Cantelli: valid;
     Gaussian: an assumption) overall, at the worst tick, by time bin and by wall (each row of
     each polygon, and by physical wall: the rows on one line together), and, with a
     run (`exit_tick`/`exit_wall`, corridors x paths), the Monte Carlo exits likewise with
     one-sided 99 % Clopper-Pearson upper bounds and the first `examples` exiting paths
-    (index, time, wall). `outputs`: `exit_bound.corridor_outputs` if already computed."""
+    (index, time, wall). `outputs`: `exit_bound.corridor_outputs` if already computed;
+    `with_bounds` False: no oracle bounds (``bound`` None; a table designed for a delay has
+    no output moments)."""
+    from stospline.problem.corridors import corridor_ticks
     from stospline.sim.exit_bound import corridor_outputs
-    outputs = corridor_outputs(problem, table) if outputs is None else outputs
+    if with_bounds and outputs is None:
+        outputs = corridor_outputs(problem, table)
     h = 1.0 / problem.tick_hz
     out = []
-    for i, (c, (ym, yc)) in enumerate(zip(problem.corridors, outputs)):
-        bounds = exit_bounds(c, ym, yc, problem.t0, problem.tick_hz)
-        lo, hi = bounds["cantelli"].ticks
+    for i, c in enumerate(problem.corridors):
+        bounds = (exit_bounds(c, *outputs[i], problem.t0, problem.tick_hz) if with_bounds
+                  else None)
+        lo, hi = corridor_ticks(c, problem.t0, problem.tick_hz)
         # Equal bins of whole seconds when they divide (0-999, 1000-1999, ...); the last
         # takes the closing tick.
         edges = np.unique(np.append(np.rint(np.linspace(lo, hi, bins + 1))[:-1], hi + 1)
@@ -64,13 +69,13 @@ def corridor_report(problem, table, exit_tick: np.ndarray | None,
             "physical_walls": [{"wall": label, "rows": rows} for label, rows in physical],
             "bins_t": [[problem.t0 + a * h, problem.t0 + (b - 1) * h]
                        for a, b in zip(edges[:-1], edges[1:])],
-            "bound": {tail: {"total": b.total, "sum": float(b.per_tick.sum()),
-                             "worst_tick": b.worst_tick,
-                             "worst_tick_t": problem.t0 + (lo + int(np.argmax(b.per_tick))) * h,
-                             "by_bin": b.by_bins(edges), "by_wall": b.per_wall,
-                             "by_physical_wall": [float(b.per_wall[rows].sum())
-                                                  for _, rows in physical]}
-                      for tail, b in bounds.items()},
+            "bound": None if bounds is None else {
+                tail: {"total": b.total, "sum": float(b.per_tick.sum()),
+                       "worst_tick": b.worst_tick,
+                       "worst_tick_t": problem.t0 + (lo + int(np.argmax(b.per_tick))) * h,
+                       "by_bin": b.by_bins(edges), "by_wall": b.per_wall,
+                       "by_physical_wall": [float(b.per_wall[rows].sum()) for _, rows in physical]}
+                for tail, b in bounds.items()},
         }
         if exit_tick is not None:
             et, ew = exit_tick[i], exit_wall[i]
@@ -88,7 +93,7 @@ def corridor_report(problem, table, exit_tick: np.ndarray | None,
             }
             if c.epsilon is not None:
                 entry["mc"]["meets_epsilon"] = entry["mc"]["upper99"] <= c.epsilon
-        if c.epsilon is not None:
+        if c.epsilon is not None and bounds is not None:
             entry["bound"]["cantelli"]["meets_epsilon"] = bounds["cantelli"].total <= c.epsilon
         out.append(entry)
     return out

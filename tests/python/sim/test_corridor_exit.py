@@ -160,3 +160,20 @@ def test_simulate_json_reports_the_corridor(tmp_path, capsys):
     assert main(["simulate", str(f), "--paths", "300", "--seed", "2", "--substeps", "1",
                  "--workers", "1", "--quiet"]) == 0
     assert "corridor 0 (t = [0, 1], epsilon 0.5): left by" in capsys.readouterr().out
+
+
+def test_a_table_designed_for_a_delay_has_exits_without_bounds(tmp_path, capsys):
+    """The oracle records no output moments for a delayed table: the Monte Carlo exits are
+    reported, the bounds are null, and the report page says so."""
+    import json
+    from stospline.cli import main
+    f = tmp_path / "walk.toml"
+    f.write_text(scalar().to_toml())
+    assert main(["simulate", str(f), "--paths", "600", "--seed", "2", "--substeps", "1",
+                 "--workers", "1", "--json", "--quiet", "--delay-ticks", "1"]) == 0
+    (c,) = json.loads(capsys.readouterr().out)["corridors"]
+    assert c["bound"] is None and c["mc"]["exits"] > 0
+    page = tmp_path / "r.html"
+    assert main(["report", str(f), "--out", str(page), "--paths", "600", "--seed", "2",
+                 "--substeps", "1", "--workers", "1", "--quiet", "--delay-ticks", "1"]) == 0
+    assert "No oracle bounds: the table is designed for a delay." in page.read_text()

@@ -177,3 +177,27 @@ def test_a_table_designed_for_a_delay_has_exits_without_bounds(tmp_path, capsys)
     assert main(["report", str(f), "--out", str(page), "--paths", "600", "--seed", "2",
                  "--substeps", "1", "--workers", "1", "--quiet", "--delay-ticks", "1"]) == 0
     assert "No oracle bounds: the table is designed for a delay." in page.read_text()
+
+
+def test_corridors_with_faults_change_nothing_else(robot_problem, robot_zoh):
+    """The fault tick with a corridor watch (harness_tick_watch with faults) runs the same
+    loop as without the watch, and its exits match a numpy recount of its recorded paths
+    wherever the float32 record is not within rounding of a wall."""
+    from dataclasses import replace
+    from stospline.problem.faults import parse_faults
+    ctl = build_controller(robot_zoh.table)
+    faults = parse_faults({"sensor_noise": 0.02, "actuator_noise": 0.1}, 4, 2)
+    bare = replace(robot_problem, corridors=())
+    a = simulate(bare, ctl, paths=300, seed=9, substeps=1, workers=1, faults=faults)
+    b = simulate(robot_problem, ctl, paths=300, seed=9, substeps=1, workers=1, faults=faults,
+                 record=300)
+    np.testing.assert_array_equal(a.cost, b.cost)
+    np.testing.assert_array_equal(a.knot_states[1], b.knot_states[1])
+    (c,) = robot_problem.corridors
+    Y = b.record_x.astype(float) @ c.C.T                       # ticks x paths x 2
+    walls = np.stack([c.exit_wall(Y[j]) for j in range(Y.shape[0])])
+    first = np.where((walls >= 0).any(axis=0), np.argmax(walls >= 0, axis=0), -1)
+    assert (b.exit_tick[0] >= 0).sum() > 5
+    A, off = c.unit_walls()
+    near = np.abs(Y @ A.T - off).min(axis=2).min(axis=0) < 1e-5   # paths grazing a wall
+    np.testing.assert_array_equal(first[~near], b.exit_tick[0][~near])

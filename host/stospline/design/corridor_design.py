@@ -4,8 +4,8 @@ The exit probability of a path is set by how far the mean runs from the walls in
 the spread across them. With noise proportional to the velocity (the robot) the spread at the
 corner is what leaves the corridor: its x-spread there is 0.52 with the outer wall one unit
 from the centre line, a 2.7 % per-tick probability (Gaussian) even with the mean on the
-centre line, so moving the mean (bands on E{C x}) cannot meet a 1 % budget by itself
-(``docs/evidence/corridor-exit.md``). The knob here does
+centre line, so moving the mean (bands on E{C x}) does not meet a 1 % budget unless it also
+changes the spread (which grows with the velocity; ``docs/evidence/corridor-exit.md``). The knob here does
 both at once: for each stage, a running cost ``w |a'y - c|^2`` for every *strip* of the polygon
 the stage's mean path lies in (two parallel walls ``a'y <= b1``, ``-a'y <= b2``; ``c`` their
 centre line), i.e. a constant ``Q``, ``q``, ``rho`` per stage. It pulls the mean to the centre

@@ -210,6 +210,18 @@ def _report_simulation(s: dict, as_json: bool) -> None:
               f"({100 * sat['path_fraction']:.4g}% of paths); commands issued within "
               f"[{', '.join(f'{v:.6g}' for v in sat['u_low'])}] .. "
               f"[{', '.join(f'{v:.6g}' for v in sat['u_high'])}]")
+    for i, c in enumerate(s.get("corridors", [])):
+        mc = c["mc"]
+        eps = "" if c["epsilon"] is None else f", epsilon {c['epsilon']:g}"
+        bounds = "no oracle bounds (a table designed for a delay)"
+        if c["bound"] is not None:
+            bc, bg = c["bound"]["cantelli"], c["bound"]["gaussian"]
+            bounds = (f"oracle union bounds over the ticks: Cantelli {bc['total']:.4g} (valid), "
+                      f"Gaussian {bg['total']:.4g} (assumes Gaussian outputs); worst tick "
+                      f"{bc['worst_tick']:.3g} / {bg['worst_tick']:.3g}")
+        print(f"  corridor {i} (t = [{c['t'][0]:g}, {c['t'][1]:g}]{eps}): left by "
+              f"{mc['exits']} of {mc['paths']} paths = {100 * mc['estimate']:.4g}%, one-sided "
+              f"99% upper bound {100 * mc['upper99']:.4g}%; {bounds}")
     fmt = lambda v: "[" + ", ".join(f"{x:+.5f}" for x in v) + "]"  # noqa: E731
     for k, kn in enumerate(s["knots"]):
         print(f"  knot {k} (t = {kn['t']:g}): state mean, MC     {fmt(kn['mc_mean'])}")

@@ -545,10 +545,30 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int,
             "u_low": mc.u_low, "u_high": mc.u_high,
         },
         **_limits(d),
+        **_corridors(d, mc),
     })
     summary["verdict"] = verdict(summary, confidence)
     strict.check_summary_finite(d.problem, summary, "simulated numbers")
     return summary
+
+
+def _corridors(d: Designed, mc: MonteCarloResult) -> dict:
+    """``{"corridors": [...]}`` when the problem has corridors (`sim.exit_stats`): the Monte
+    Carlo exit probability with its one-sided 99 % upper bound, and the exact oracle's
+    Cantelli (valid) and Gaussian (assumed) union bounds, for the fault-free loop (None for a
+    table designed for a delay)."""
+    if not d.problem.corridors or mc.exit_tick is None:
+        return {}
+    from stospline.sim.exit_stats import corridor_report
+    # The oracle's output moments exist for tables designed without a delay.
+    bounded = not getattr(d.table, "delay_ticks", 0)
+    rep = corridor_report(d.problem, d.table, mc.exit_tick, mc.exit_wall,
+                          with_bounds=bounded)
+    for entry in rep:
+        if entry["bound"] is not None:
+            entry["bound"]["loop"] = ("fault-free (the bounds ignore [faults])"
+                                      if mc.faults.any else "the implemented table")
+    return {"corridors": rep}
 
 
 def _substep_choice(mc: MonteCarloResult) -> dict:

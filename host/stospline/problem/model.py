@@ -10,11 +10,12 @@ import numpy as np
 
 from stospline.errors import ProblemError
 
+from stospline.problem.corridors import Corridor
 from stospline.problem.faults import Faults
 from stospline.problem.series import Series, sample_varying
 
 __all__ = ["ProblemError", "Stage", "Penalty", "Constraint", "Knot", "Problem", "Series",
-           "ticks_per_stage"]
+           "Corridor", "ticks_per_stage"]
 
 
 @dataclass(frozen=True)
@@ -158,6 +159,9 @@ class Problem:
     faults: Faults = field(default_factory=Faults)
     # The safe command (m,) the firmware writes on a refused step; None: 0 (within the limits).
     u_hold: np.ndarray | None = None
+    # [[corridors]]: where realisations of outputs must stay (measured; the design ignores
+    # them).
+    corridors: tuple[Corridor, ...] = ()
 
     @property
     def n(self) -> int:
@@ -194,7 +198,7 @@ class Problem:
         return Problem(self.name, self.t0, self.x0, self.tick_hz,
                        tuple(s.without_noise() for s in self.stages), self.knots,
                        self.source_sha256, self.plot, self.options, self.u_min, self.u_max,
-                       self.faults, self.u_hold)
+                       self.faults, self.u_hold, self.corridors)
 
 
 def ticks_per_stage(problem, tick_hz: int) -> np.ndarray:

@@ -20,6 +20,7 @@ from stospline.firmware_interface import ARITHS
 from stospline.limits import check_problem, check_stage_count, check_state
 from stospline.problem.faults import parse_faults
 from stospline.problem.inputfile import decode_problem, read_problem_file
+from stospline.problem.corridors import Corridor
 from stospline.problem.model import Constraint, Knot, Penalty, Problem, Series, Stage
 from stospline.problem.names import check_name
 
@@ -27,7 +28,7 @@ __all__ = ["load_problem", "parse_problem"]
 
 _TOP_KEYS = {"name", "t0", "x0", "tick_hz", "u_min", "u_max", "u_hold", "dynamics", "cost",
              "knots",
-             "stages", "plot", "regions", "design", "faults"}
+             "stages", "plot", "regions", "design", "faults", "corridors"}
 _DESIGN_OPTIONS = {"mode": ("stagewise", "joint"), "discretization": ("exact-zoh", "continuous"),
                    "arith": ARITHS, "delay_ticks": (0, 1)}
 _TOP_REQUIRED = {"name", "x0", "tick_hz", "dynamics", "cost", "knots"}
@@ -42,6 +43,9 @@ _U32_MAX = 2**32 - 1  # the C table stores tick counts and the tick rate as uint
 _F32_MAX = float(np.finfo(np.float32).max)  # the table stores limits as float32 (FLT_MAX)
 _N_IS_LEN_X0 = " (n, the length of x0)"
 _MAX_GRID_POINTS = 100_000  # [[regions]] band points over all regions (parse-time work bound)
+# [[corridors]]: outputs and walls the harness checks per path and tick (its C keeps y on the
+# stack); enough for any corridor drawn by hand, and a bound on the per-tick work.
+_MAX_CORRIDOR_OUTPUTS, _MAX_CORRIDOR_WALLS = 32, 256
 
 
 # ---------------------------------------------------------------------------------------
@@ -668,6 +672,64 @@ def _parse_regions(raw: Any, n: int, t0: float, t_end: float,
     return out
 
 
+def _parse_corridors(raw: Any, n: int, t0: float, t_end: float,
+                     tick_hz: int) -> tuple[Corridor, ...]:
+    """``[[corridors]]``: ``C x(t)`` inside a union of convex polygons ``{A y <= b}`` at every
+    tick of ``t = [a, b]`` (both ends), with an optional risk budget ``epsilon``."""
+    if not isinstance(raw, list):
+        raise ProblemError("corridors", f"must be an array of tables ([[corridors]]), got "
+                                        f"{_kind(raw)}")
+    out = []
+    for i, cor in enumerate(raw):
+        cp = f"corridors[{i}]"
+        _check_keys(cor, cp, {"t", "C", "polygons", "epsilon"}, {"t", "C", "polygons"})
+        a, b = _vector(cor["t"], _join(cp, "t"), 2)
+        if not t0 <= a <= b <= t_end:
+            raise ProblemError(_join(cp, "t"), f"must be [start, end] with {t0:g} <= start <= "
+                                               f"end <= {t_end:g} (the last knot)")
+        for end in (a, b):
+            ticks = (end - t0) * tick_hz
+            if abs(ticks - round(ticks)) > 1e-9 * max(1.0, ticks):
+                raise ProblemError(_join(cp, "t"), f"{end:g} s is not a whole number of ticks "
+                                                   f"after t0 at tick_hz = {tick_hz}: the "
+                                                   f"corridor is checked at the ticks")
+        C = _matrix(cor["C"], _join(cp, "C"), (None, n), (" (one row per output)",
+                                                          _N_IS_LEN_X0))
+        p = C.shape[0]
+        if p > _MAX_CORRIDOR_OUTPUTS:
+            raise ProblemError(_join(cp, "C"), f"has {p} rows; at most {_MAX_CORRIDOR_OUTPUTS} "
+                                               f"outputs")
+        polys = cor["polygons"]
+        pp = _join(cp, "polygons")
+        if not isinstance(polys, list) or not polys:
+            raise ProblemError(pp, f"must be a non-empty array of {{ A = [[...]], b = [...] }} "
+                                   f"tables (A y <= b), got {polys!r}")
+        parsed, walls = [], 0
+        for k, poly in enumerate(polys):
+            kp = f"{pp}[{k}]"
+            _check_keys(poly, kp, {"A", "b"}, {"A", "b"})
+            A = _matrix(poly["A"], _join(kp, "A"), (None, p),
+                        ("", f" (p = {p}, the rows of {_join(cp, 'C')})"))
+            bv = _vector(poly["b"], _join(kp, "b"), A.shape[0], " (one entry per row of A)")
+            zero = np.flatnonzero(~np.any(A != 0, axis=1))
+            if zero.size:
+                raise ProblemError(f"{kp}.A[{int(zero[0])}]", "is all zeros: a wall needs a "
+                                                              "direction")
+            walls += A.shape[0]
+            if walls > _MAX_CORRIDOR_WALLS:
+                raise ProblemError(_join(kp, "A"), f"gives {walls} walls (rows of A) in the "
+                                                   f"corridor; at most {_MAX_CORRIDOR_WALLS}")
+            parsed.append((A, bv))
+        eps = None
+        if "epsilon" in cor:
+            eps = _number(cor["epsilon"], _join(cp, "epsilon"))
+            if not 0.0 < eps < 1.0:
+                raise ProblemError(_join(cp, "epsilon"), f"must be a probability in (0, 1), "
+                                                         f"got {eps:g}")
+        out.append(Corridor((float(a), float(b)), C, tuple(parsed), eps))
+    return tuple(out)
+
+
 def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     """Validate a decoded TOML document (or the same structure built in Python: any numpy
     array, numpy scalar or tuple is taken as the list or number it holds) and return a
@@ -778,8 +840,10 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
             raise ProblemError(f"design.{key}", f"must be one of {list(_DESIGN_OPTIONS[key])}, "
                                                 f"got {value!r}")
     faults = parse_faults(doc.get("faults", {}), n, stages[0].B.shape[1])
+    corridors = (_parse_corridors(doc["corridors"], n, t0, knots[-1].t, tick_hz)
+                 if "corridors" in doc else ())
     problem = Problem(name, t0, x0, tick_hz, stages, knots, source_sha256, plot, dict(options),
-                      u_min, u_max, faults, u_hold)
+                      u_min, u_max, faults, u_hold, corridors)
     check_problem(problem, B_path=default.B_path)   # the firmware's limits (limits.py)
     return problem
 

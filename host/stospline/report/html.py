@@ -168,6 +168,48 @@ def _fault_table(rows) -> str:
     return "\n".join(out) + "</table>"
 
 
+def _corridor_text(summary: dict) -> str:
+    """The corridors' exit probabilities (`pipeline.simulation_summary`), by time and wall,
+    beside the oracle's bounds (none for a table designed for a delay)."""
+    out = []
+    for i, c in enumerate(summary.get("corridors", [])):
+        m, bound = c["mc"], c["bound"]
+        eps = "" if c["epsilon"] is None else f", risk budget epsilon = {c['epsilon']:g}"
+        if bound is None:
+            said = "No oracle bounds: the table is designed for a delay."
+            per_bin = [("-", "-")] * len(m["by_bin"])
+        else:
+            bc, bg = bound["cantelli"], bound["gaussian"]
+            said = (f"The oracle's union bounds over the ticks: Cantelli {bc['total']:.4g} "
+                    f"(valid for any distribution; sum {bc['sum']:.4g}), Gaussian "
+                    f"{bg['total']:.4g} (an assumption: the multiplicative noise makes the "
+                    f"outputs non-Gaussian; sum {bg['sum']:.4g}); worst single tick "
+                    f"{bc['worst_tick']:.3g} (Cantelli), {bg['worst_tick']:.3g} (Gaussian).")
+            per_bin = [(f"{g:.3g}", f"{k:.3g}") for g, k in zip(bg["by_bin"], bc["by_bin"])]
+        rows = "".join(
+            f"<tr><td>{lo:.3f} – {hi:.3f}</td><td>{mb['exits']}</td>"
+            f"<td>{100 * mb['estimate']:.4g}%</td><td>{100 * mb['upper99']:.4g}%</td>"
+            f"<td>{gb}</td><td>{cb}</td></tr>"
+            for (lo, hi), mb, (gb, cb) in zip(c["bins_t"], m["by_bin"], per_bin))
+        walls = "".join(
+            f"<tr><td>{html.escape(w['wall'])}</td><td>{mw['exits']}</td>"
+            f"<td>{100 * mw['estimate']:.4g}%</td><td>{100 * mw['upper99']:.4g}%</td></tr>"
+            for w, mw in zip(c["physical_walls"], m["by_physical_wall"]))
+        examples = ", ".join(f"path {e['path']} at {e['t']:.3f} s (wall {e['wall']})"
+                             for e in m["examples"])
+        out += [
+            f'<h3 id="corridor-{i}">Corridor {i}: t = [{c["t"][0]:g}, {c["t"][1]:g}] s{eps}</h3>',
+            f"<p>Left at some tick by <b>{m['exits']}</b> of {m['paths']} paths: "
+            f"<b>{100 * m['estimate']:.4g}%</b>, one-sided 99% upper bound (Clopper-Pearson) "
+            f"<b>{100 * m['upper99']:.4g}%</b>. {said}</p>",
+            "<table><tr><th>time (s)</th><th>exits</th><th>estimate</th><th>99% upper</th>"
+            f"<th>Gaussian bound</th><th>Cantelli bound</th></tr>{rows}</table>",
+            "<table><tr><th>wall (y = C x)</th><th>exits</th><th>estimate</th>"
+            f"<th>99% upper</th></tr>{walls}</table>",
+            f"<p>First paths that leave: {html.escape(examples) or 'none'}.</p>"]
+    return "\n".join((["<h2>Corridors: probability of leaving</h2>"] + out) if out else [])
+
+
 def report_html(d, mc, summary: dict, fault_rows=None, no_fault_table: str | None = None
                 ) -> str:
     """The page for design `d` (`pipeline.Designed`), its Monte Carlo run `mc` and that
@@ -209,6 +251,7 @@ def report_html(d, mc, summary: dict, fault_rows=None, no_fault_table: str | Non
         f"{100 * sat['path_fraction']:.4g}% of paths"
         + ("" if sat["limited"] else " (the table has no actuator limits)") + ".</p>",
         _faults_text(summary),
+        _corridor_text(summary),
         f"<h2>Paths ({html.escape(layout)})</h2>", _img(_corridor(d, mc, exact), "corridor"),
         "<h2>States and inputs against time</h2>", _img(_states(d, mc, exact), "states"),
         "<h2>Cost of the paths</h2>",

@@ -52,6 +52,7 @@ def plot_corridor(d, mc, out: str | Path, exact=None) -> None:
         ax.grid(alpha=0.3)
     a_setup.legend(loc="upper left")
     a_real.plot(mc.sample_x[:, ia], mc.sample_x[:, ib], color="tab:blue", lw=1)
+    _exiting_paths(a_real, mc, ia, ib)
     a_mean.plot(mc.mean_x[:, ia], mc.mean_x[:, ib], color="tab:blue", lw=2, label="Monte Carlo")
     a_mean.plot(exact.path_mean[:, ia], exact.path_mean[:, ib], "--", color="tab:orange",
                 lw=1.5, label="oracle (exact)")
@@ -67,6 +68,24 @@ def plot_corridor(d, mc, out: str | Path, exact=None) -> None:
                     color="0.3", lw=0.8, label="knot covariance, 2 sd" if k == 0 else None)
     a_mean.legend(loc="upper left", fontsize=8)
     _controls_and_save(d, mc, a_u, fig, out, plt)
+
+
+def _exiting_paths(ax, mc, ia: int, ib: int, most: int = 20) -> None:
+    """The recorded paths that leave a corridor (`mc.exit_tick`), in red up to their exit,
+    with the exit point marked: the realisations a corridor report is about."""
+    if mc.exit_tick is None or mc.record_x is None:
+        return
+    kept = mc.record_x.shape[1]
+    first = np.where(mc.exit_tick[:, :kept] >= 0, mc.exit_tick[:, :kept], np.iinfo(np.int32).max)
+    first = first.min(axis=0)
+    out = np.flatnonzero(first < np.iinfo(np.int32).max)
+    for q in out[:most]:
+        j = int(first[q])
+        ax.plot(mc.record_x[:j + 1, q, ia], mc.record_x[:j + 1, q, ib], color="tab:red",
+                lw=0.6, alpha=0.7)
+        ax.plot(mc.record_x[j, q, ia], mc.record_x[j, q, ib], "x", color="tab:red", ms=5)
+    ax.set_title(f"one realisation; {len(out)} of the {kept} recorded paths leave a corridor "
+                 f"(red, {min(len(out), most)} drawn to their exit)", fontsize=9)
 
 
 def _controls_and_save(d, mc, a_u, fig, out, plt) -> None:

@@ -18,7 +18,7 @@ from stospline.firmware_interface import STATUS, check_header
 from stospline.table.codegen import generate_c
 from stospline.table.format import GainTable
 
-__all__ = ["build_controller", "CompiledController", "firmware_dir", "STATUS"]
+__all__ = ["build_controller", "CompiledController", "CorridorWatch", "firmware_dir", "STATUS"]
 
 
 # The plant's interface (plant.h), for cffi: the header itself, without its comments.
@@ -72,7 +72,13 @@ int harness_tick_faults(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
                         int64_t *saturated, double *u_low, double *u_high, double *x_sum,
                         float *u_rec, size_t n_rec, const harness_faults_t *f,
                         const double *sensor_z, const double *actuator_z, const double *miss_u,
-                        double *held);"""
+                        double *held);
+int harness_tick_watch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
+                       const harness_plant_t *pl, const double *dZ, double *X, double *cost,
+                       int64_t *saturated, double *u_low, double *u_high, double *x_sum,
+                       float *u_rec, size_t n_rec, const harness_faults_t *f,
+                       const double *sensor_z, const double *actuator_z, const double *miss_u,
+                       double *held, const harness_corridor_t *cor, size_t n_cor);"""
 
 # Harness-only C: loops over instances so one Python call serves every Monte Carlo path.
 _BATCH = """
@@ -90,6 +96,31 @@ const stsp_table_t *harness_table(void) { return &%(p)s_table; }
  * controller measures [x; held[p]], the command being applied; the statistics count the commands the controllers computed,
  * u_rec the applied ones. Returns the worst status. Inlined into both entry points, so the
  * fault-free one compiles without the fault branches. */
+#ifndef STSP_ARITH_FIXED_POINT
+/* The wall a state x (n) leaves corridor c through, -1 inside (plant.h's rule). */
+static int corridor_wall(const harness_corridor_t *c, size_t n, const double *x) {
+    double y[32], best = 0.0;
+    size_t i, j, k, r;
+    int wall = -1;
+    for (i = 0; i < c->p; ++i) {
+        double s = 0.0;
+        for (j = 0; j < n; ++j) s += c->C[i * n + j] * x[j];
+        y[i] = s;
+    }
+    for (k = 0; k < c->n_poly; ++k) {
+        double worst = 0.0;
+        int at = -1;
+        for (r = c->row_start[k]; r < c->row_start[k + 1]; ++r) {
+            double e = -c->b[r];
+            for (i = 0; i < c->p; ++i) e += c->A[r * c->p + i] * y[i];
+            if (at < 0 || e > worst) { worst = e; at = (int)r; }
+        }
+        if (!(worst > 0.0)) return -1;             /* inside polygon k */
+        if (wall < 0 || worst < best) { best = worst; wall = at; }
+    }
+    return wall;
+}
+#endif
 #if defined(__GNUC__)
 __attribute__((always_inline))
 #endif
@@ -98,11 +129,12 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
                              double *cost, int64_t *saturated, double *u_low, double *u_high,
                              double *x_sum, float *u_rec, size_t n_rec,
                              const harness_faults_t *f, const double *sensor_z,
-                             const double *actuator_z, const double *miss_u, double *held) {
+                             const double *actuator_z, const double *miss_u, double *held,
+                             const harness_corridor_t *cor, size_t n_cor) {
 #ifdef STSP_ARITH_FIXED_POINT
     (void)ctrls; (void)count; (void)tick; (void)pl; (void)dZ; (void)X; (void)cost;
     (void)saturated; (void)u_low; (void)u_high; (void)x_sum; (void)u_rec; (void)n_rec; (void)f;
-    (void)sensor_z; (void)actuator_z; (void)miss_u; (void)held;
+    (void)sensor_z; (void)actuator_z; (void)miss_u; (void)held; (void)cor; (void)n_cor;
     return (int)STSP_ERR_BAD_DIMS;
 #else
     const size_t n = pl->n, m = pl->m, dz_stride = pl->substeps * pl->mz;
@@ -113,6 +145,7 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
     if (n + (f != NULL && f->feed_held ? m : 0u) > STSP_MAX_NX || m > STSP_MAX_NU) {
         return (int)STSP_ERR_BAD_DIMS;
     }
+    for (i = 0; i < n_cor; ++i) if (cor[i].p > 32u) return (int)STSP_ERR_BAD_DIMS;
     for (i = 0; i < n; ++i) x_sum[i] = 0.0;
     for (p = 0; p < count; ++p) {
         double *x = X + p * n;
@@ -147,6 +180,13 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
         if (p < n_rec) for (i = 0; i < m; ++i) u_rec[p * m + i] = (float)ud[i];
         cost[p] += harness_plant_path(pl, ud, dZ + p * dz_stride, x);
         for (i = 0; i < n; ++i) x_sum[i] += x[i];
+        for (i = 0; i < n_cor; ++i) {             /* the state after the tick: tick + 1 */
+            const harness_corridor_t *c = &cor[i];
+            if (tick + 1u >= c->first && tick + 1u <= c->last && c->exit_tick[p] < 0) {
+                const int w = corridor_wall(c, n, x);
+                if (w >= 0) { c->exit_tick[p] = (int32_t)(tick + 1u); c->exit_wall[p] = w; }
+            }
+        }
     }
     return worst;
 #endif
@@ -155,7 +195,7 @@ int harness_tick(stsp_ctrl_t *ctrls, size_t count, uint32_t tick, const harness_
                  const double *dZ, double *X, double *cost, int64_t *saturated,
                  double *u_low, double *u_high, double *x_sum, float *u_rec, size_t n_rec) {
     return tick_paths(ctrls, count, tick, pl, dZ, X, cost, saturated, u_low, u_high, x_sum,
-                      u_rec, n_rec, NULL, NULL, NULL, NULL, NULL);
+                      u_rec, n_rec, NULL, NULL, NULL, NULL, NULL, NULL, 0u);
 }
 int harness_tick_faults(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
                         const harness_plant_t *pl, const double *dZ, double *X, double *cost,
@@ -165,7 +205,22 @@ int harness_tick_faults(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
                         double *held) {
     if (f == NULL || held == NULL) return (int)STSP_ERR_NULL;
     return tick_paths(ctrls, count, tick, pl, dZ, X, cost, saturated, u_low, u_high, x_sum,
-                      u_rec, n_rec, f, sensor_z, actuator_z, miss_u, held);
+                      u_rec, n_rec, f, sensor_z, actuator_z, miss_u, held, NULL, 0u);
+}
+/* harness_tick (f NULL) or harness_tick_faults, watching n_cor corridors (plant.h). */
+int harness_tick_watch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
+                       const harness_plant_t *pl, const double *dZ, double *X, double *cost,
+                       int64_t *saturated, double *u_low, double *u_high, double *x_sum,
+                       float *u_rec, size_t n_rec, const harness_faults_t *f,
+                       const double *sensor_z, const double *actuator_z, const double *miss_u,
+                       double *held, const harness_corridor_t *cor, size_t n_cor) {
+    if ((f != NULL && held == NULL) || (cor == NULL && n_cor > 0u)) return (int)STSP_ERR_NULL;
+    if (f == NULL) {            /* its own inlined copy, without the fault branches */
+        return tick_paths(ctrls, count, tick, pl, dZ, X, cost, saturated, u_low, u_high, x_sum,
+                          u_rec, n_rec, NULL, NULL, NULL, NULL, NULL, cor, n_cor);
+    }
+    return tick_paths(ctrls, count, tick, pl, dZ, X, cost, saturated, u_low, u_high, x_sum,
+                      u_rec, n_rec, f, sensor_z, actuator_z, miss_u, held, cor, n_cor);
 }
 /* Verify the table once (the CRC covers every byte), then clone the fresh instance.
  * count == 0 (or NULL ctrls) touches no memory and returns STSP_ERR_NULL: there is no
@@ -390,12 +445,14 @@ class CompiledController:
                                     ffi.from_buffer("double[]", cost))
 
     def ticker(self, ctrls, count: int, dZ: np.ndarray, X: np.ndarray, cost: np.ndarray,
-               stats: "TickStats", faults: "FaultDraws | None" = None):
+               stats: "TickStats", faults: "FaultDraws | None" = None,
+               watch: "CorridorWatch | None" = None):
         """``tick(j, plant) -> worst status``: one tick of `count` paths in one C call (float32
         tables): the controllers `ctrls` step from X, the plant advances X with dZ, the cost
         and `stats` (`TickStats`) accumulate. With `faults` (``harness_tick_faults``), the
         fault levels, the arrays the caller refills with each tick's random numbers and the
-        actuator's held commands. The arrays are bound once, here."""
+        actuator's held commands. With `watch` (``harness_tick_watch``), each path's first
+        exit from the corridors (`CorridorWatch`). The arrays are bound once, here."""
         ffi, lib = self.ffi, self.lib
 
         def buf(a, kind="double[]"):
@@ -418,6 +475,13 @@ class CompiledController:
             args += [f, buf(faults.sensor_z), buf(faults.actuator_z), buf(faults.miss_u),
                      buf(faults.held)]
             step = lib.harness_tick_faults
+        if watch is not None:
+            if faults is None:
+                args += [ffi.NULL] * 5
+            cors = watch.c_structs(ffi)
+            keep.append(cors)
+            args += [cors[0], len(watch.corridors)]
+            step = lib.harness_tick_watch
 
         def tick(j: int, plant) -> int:
             return step(ctrls, count, j, plant.c, *args)
@@ -479,6 +543,57 @@ class FaultDraws:
             rng.standard_normal(out=self.actuator_z)
         if self.miss_u is not None:
             rng.random(out=self.miss_u)
+
+
+@dataclass
+class CorridorWatch:
+    """Each path's first exit from each corridor (`stospline.problem.corridors`): the state
+    tick (``exit_tick``, corridors x paths, -1: never) and the wall (``exit_wall``). The C
+    tick (``harness_tick_watch``) fills them; `check` does the same in numpy, for the tick-0
+    state and for runs that step the plant outside that C call."""
+    corridors: tuple
+    ticks: list                    # (first, last) state tick per corridor
+    exit_tick: np.ndarray          # (corridors, paths) int32
+    exit_wall: np.ndarray
+
+    @classmethod
+    def of(cls, corridors, paths: int, t0: float, tick_hz: int) -> "CorridorWatch":
+        from stospline.problem.corridors import corridor_ticks
+        k = len(corridors)
+        return cls(tuple(corridors), [corridor_ticks(c, t0, tick_hz) for c in corridors],
+                   np.full((k, paths), -1, np.int32), np.full((k, paths), -1, np.int32))
+
+    def check(self, state_tick: int, X: np.ndarray) -> None:
+        """Record the paths that are outside at `state_tick` (states X) for the first time."""
+        for i, (c, (lo, hi)) in enumerate(zip(self.corridors, self.ticks)):
+            if lo <= state_tick <= hi:
+                fresh = self.exit_tick[i] < 0
+                wall = c.exit_wall(X[fresh] @ c.C.T)
+                idx = np.flatnonzero(fresh)[wall >= 0]
+                self.exit_tick[i, idx] = state_tick
+                self.exit_wall[i, idx] = wall[wall >= 0]
+
+    def c_structs(self, ffi):
+        """``(harness_corridor_t[], arrays they point into)`` for the C tick."""
+        cors = ffi.new("harness_corridor_t[]", len(self.corridors))
+        keep = []
+
+        def ptr(a, kind):
+            keep.append(a)
+            return ffi.cast(kind, ffi.from_buffer(a))
+        for i, c in enumerate(self.corridors):
+            A, b = c.unit_walls()
+            cs = cors[i]
+            cs.first, cs.last = self.ticks[i]
+            cs.p, cs.n_poly = c.p, len(c.polygons)
+            cs.C = ptr(np.ascontiguousarray(c.C, dtype=float), "const double *")
+            cs.row_start = ptr(np.ascontiguousarray(c.row_start, dtype=np.uintp),
+                               "const size_t *")
+            cs.A = ptr(A, "const double *")
+            cs.b = ptr(b, "const double *")
+            cs.exit_tick = ptr(self.exit_tick[i], "int32_t *")
+            cs.exit_wall = ptr(self.exit_wall[i], "int32_t *")
+        return cors, keep
 
 
 @dataclass

@@ -23,7 +23,8 @@ from stospline.expm import expm
 
 from stospline import progress
 from stospline.problem.faults import Faults
-from stospline.sim.controller import STATUS, CompiledController, FaultDraws, TickStats
+from stospline.sim.controller import (STATUS, CompiledController, CorridorWatch, FaultDraws,
+                                      TickStats)
 from stospline.errors import ProblemError
 from stospline.problem.model import Problem
 
@@ -64,6 +65,10 @@ class MonteCarloResult:
     substep_choice: "SubstepChoice | None" = None
     faults: Faults = field(default_factory=Faults)     # the loop's faults in this run
     record_u: np.ndarray | None = None
+    # With corridors (problem.corridors): each path's first state tick outside corridor i
+    # (corridors, paths; -1: never) and the wall it left through (`CorridorWatch`).
+    exit_tick: np.ndarray | None = None
+    exit_wall: np.ndarray | None = None
 
     @property
     def paths(self) -> int:
@@ -233,7 +238,11 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
         t, first.sample_x, first.sample_u, x_sum / paths, min(p.worst for p in parts),
         np.concatenate([p.saturated for p in parts]),
         np.min([p.u_low for p in parts], axis=0), np.max([p.u_high for p in parts], axis=0),
-        substeps, first.record_x, faults=faults, record_u=first.record_u)
+        substeps, first.record_x, faults=faults, record_u=first.record_u,
+        exit_tick=(None if first.exit_tick is None
+                   else np.concatenate([p.exit_tick for p in parts], axis=1)),
+        exit_wall=(None if first.exit_wall is None
+                   else np.concatenate([p.exit_wall for p in parts], axis=1)))
 
 
 @dataclass
@@ -251,6 +260,8 @@ class _Block:
     u_high: np.ndarray
     record_x: np.ndarray | None = None
     record_u: np.ndarray | None = None
+    exit_tick: np.ndarray | None = None
+    exit_wall: np.ndarray | None = None
 
 
 def _run_block(problem: Problem, controller: CompiledController, paths: int, seed,
@@ -288,6 +299,10 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
     draws = (FaultDraws.of(faults, paths, n, table.u_hold, delayed)
              if faults.any or delayed else None)
     fault_rng = np.random.default_rng(fault_seed(seed)) if draws is not None else None
+    watch = (CorridorWatch.of(problem.corridors, paths, problem.t0, table.tick_hz)
+             if problem.corridors else None)
+    if watch is not None:
+        watch.check(0, X)                         # x0 (the others after each tick, in C)
     for k in range(table.n_stages):
         st = plant_of.stages[k]
         plant = (None if st.varying is not None
@@ -297,7 +312,7 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
         fill_dZ = normals(dZ)
         tick = None
         if fused and plant is not None:
-            tick = controller.ticker(step.instances, paths, dZ, X, cost, stats, draws)
+            tick = controller.ticker(step.instances, paths, dZ, X, cost, stats, draws, watch)
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             fill_dZ()
             if draws is not None:
@@ -315,6 +330,8 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
                 np.minimum(stats.u_low, U.min(axis=0), out=stats.u_low)
                 np.maximum(stats.u_high, U.max(axis=0), out=stats.u_high)
                 _plant_tick(controller, problem, plant, st, j, h, dt, substeps, dZ, U, X, cost)
+                if watch is not None:
+                    watch.check(j + 1, X)
                 sample_u[j] = U[0]
                 if kept:
                     record_u[j] = U[:kept]
@@ -331,7 +348,9 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
         knots.append(X.copy())
     return _Block(cost, knots, x_sum, sample_x if first else None,
                   sample_u if first else None, worst, stats.saturated, stats.u_low,
-                  stats.u_high, record_x, record_u)
+                  stats.u_high, record_x, record_u,
+                  None if watch is None else watch.exit_tick,
+                  None if watch is None else watch.exit_wall)
 
 
 # What the forked workers run (set before the pool starts; inherited, never pickled: the

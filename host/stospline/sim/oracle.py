@@ -32,7 +32,8 @@ __all__ = ["Moments", "evaluate_continuous", "evaluate_table"]
 
 
 def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
-                   substeps: int = 4, path: bool = True) -> Moments:
+                   substeps: int = 4, path: bool = True,
+                   output: np.ndarray | None = None) -> Moments:
     """Exact moments of the controller as implemented: ZOH at the table's tick rate, with the
     table's (quantized) values, latched at each stage's first tick.
 
@@ -52,6 +53,12 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         with `substeps` steps per tick, so the difference is the simulation bias.
     path : bool
         Also keep the mean and variance at every tick (``path_mean``, ``path_var``).
+    output : ndarray, optional
+        An output matrix ``Cy`` (p x n): also keep the mean and covariance of ``Cy x`` at
+        every tick (``path_y_mean``, ``path_y_cov``; the corridors' exit bounds). The ticks
+        then run in this module's loop, time-varying stages by the DOP853 moment integration
+        (`_tick_varying`) rather than the Gauss-point C loop, which records only variances.
+        Not for tables designed for a delay (ValueError).
 
     Returns
     -------
@@ -70,6 +77,9 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     oracle's loop (`fault_oracle.evaluate_with_faults` without faults), whose state carries
     the command waiting to be applied.
     """
+    if output is not None and getattr(table, "delay_ticks", 0):
+        raise ValueError("evaluate_table: output moments are not recorded for a table "
+                         "designed for a one-tick delay")
     if getattr(table, "delay_ticks", 0):
         return evaluate_delayed_table(problem, table, propagator=propagator,
                                       substeps=substeps, path=path)
@@ -81,7 +91,10 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     M = np.outer(y0, y0)
     J = 0.0
     means, covs, cons = [], [], []
-    rec = _PathRecord(x0, path)
+    Cy = None if output is None else np.atleast_2d(np.asarray(output, dtype=float))
+    if Cy is not None and Cy.shape[1] != n:
+        raise ValueError(f"evaluate_table: output has {Cy.shape[1]} columns, expected n = {n}")
+    rec = _PathRecord(x0, path, Cy)
     xs, vs = slice(0, n), slice(n, n + n_latch)
     bar = progress.start("oracle", table.n_ticks)
     for k in range(table.n_stages):
@@ -106,8 +119,9 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         Tw[-1, -1] = 1.0
         ticks = range(int(table.stage_start[k]), int(table.stage_start[k + 1]))
         # The C loop carries the mean map without the constant column: not with a drift.
-        kernel = None if varying or path or _has_drift(problem) else _c_kernel()
-        if varying and _c_kernel() is not None:
+        kernel = (None if varying or path or Cy is not None or _has_drift(problem)
+                  else _c_kernel())
+        if varying and Cy is None and _c_kernel() is not None:
             # Time-varying data: the Gauss-point Taylor loop in C, or the plant scheme's steps
             # (design.varying).
             from stospline.design.varying import euler_oracle_ticks, oracle_ticks

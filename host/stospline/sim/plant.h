@@ -46,6 +46,22 @@ typedef struct {
                                      applied over this tick (its previous output) */
 } harness_faults_t;
 
+/* A corridor the harness watches (problem.corridors.Corridor; harness_tick_watch): the output
+ * y = C x after each tick j (the state x(t0 + (j + 1) h)) is checked when first <= j + 1 <=
+ * last, for each path that has not left yet; outside the union of the polygons {A_k y <= b_k}
+ * (every polygon has a row with a y > b) the path records the tick and the wall: in each
+ * polygon its most violated row by a y - b (rows scaled to |a| = 1 by the caller, so this is
+ * the distance), of the polygon where that is least (ties: the first). */
+typedef struct {
+    uint32_t first, last;         /* state ticks checked, both included */
+    size_t p, n_poly;             /* outputs (at most 32), polygons */
+    const double *C;              /* (p, n) */
+    const size_t *row_start;      /* (n_poly + 1): polygon k's walls are row_start[k] ... */
+    const double *A, *b;          /* (walls, p), (walls): the rows scaled to unit length */
+    int32_t *exit_tick;           /* (paths): first state tick outside, -1: none yet */
+    int32_t *exit_wall;           /* (paths): the wall it is attributed to */
+} harness_corridor_t;
+
 /* Standard normal numbers (normals.c): xoshiro256++ words through a 256-layer ziggurat,
  * `count` of them into `out`; `state` (4 words, not all zero) is the generator's and
  * advances. About 5 ns a number where numpy's standard_normal takes 12 (this is what the

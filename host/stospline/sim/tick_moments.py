@@ -35,6 +35,10 @@ class Moments:
     # The command's mean and variance over each tick (ticks, m), with path=True.
     path_u_mean: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     path_u_var: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    # With evaluate_table(output=Cy): the mean (ticks + 1, p) and covariance (ticks + 1, p, p)
+    # of Cy x at every tick.
+    path_y_mean: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    path_y_cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 0)))
 
 
 def _knot_terms(problem: Problem, k: int, M: np.ndarray, n: int):
@@ -110,12 +114,16 @@ def _plant_tick(stage, maps, Mw: np.ndarray, t: float, h: float, n: int, m: int)
 
 class _PathRecord:
     """Mean and variance of the state at every tick and of the command over each (kept
-    only when `on`)."""
+    only when `on`); with an output matrix `Cy`, the mean and covariance of ``Cy x`` at every
+    tick too."""
 
-    def __init__(self, x0: np.ndarray, on: bool):
+    def __init__(self, x0: np.ndarray, on: bool, Cy: np.ndarray | None = None):
         self.on = on
         self.x_mean, self.x_var = ([x0.copy()], [np.zeros(len(x0))]) if on else ([], [])
         self.u_mean, self.u_var = [], []
+        self.Cy = Cy
+        if Cy is not None:
+            self.y_mean, self.y_cov = [Cy @ x0], [np.zeros((len(Cy), len(Cy)))]
 
     def command(self, Mw: np.ndarray, n: int, m: int) -> None:
         if self.on:
@@ -134,12 +142,22 @@ class _PathRecord:
             mu = M[:n, -1]
             self.x_mean.append(mu.copy())
             self.x_var.append(np.diag(M[:n, :n]) - mu ** 2)
+        if self.Cy is not None:
+            mu = M[:n, -1]
+            cov = M[:n, :n] - np.outer(mu, mu)
+            ym = self.Cy @ mu
+            yc = self.Cy @ cov @ self.Cy.T
+            self.y_mean.append(ym)
+            self.y_cov.append(0.5 * (yc + yc.T))
 
     def moments(self, J, means, covs, cons, t0: float, h: float, ticks: int) -> "Moments":
         path_t = t0 + np.arange(ticks + 1) * h if self.on else np.zeros(0)
         var = np.maximum(np.array(self.x_var), 0.0) if self.on else np.zeros((0, 0))
-        return Moments(float(J), means, covs, cons, path_t, np.array(self.x_mean), var,
-                       np.array(self.u_mean), np.maximum(np.array(self.u_var), 0.0))
+        out = Moments(float(J), means, covs, cons, path_t, np.array(self.x_mean), var,
+                      np.array(self.u_mean), np.maximum(np.array(self.u_var), 0.0))
+        if self.Cy is not None:
+            out.path_y_mean, out.path_y_cov = np.array(self.y_mean), np.array(self.y_cov)
+        return out
 
 
 # Tick maps of recent stages: the design's law and its float32 table are evaluated on the

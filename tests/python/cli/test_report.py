@@ -48,6 +48,11 @@ def test_report_page_renders_with_every_image_and_the_numbers(tmp_path, problem)
     assert f'{sim["cost"]["oracle_implemented"]:.6g}' in dom
     assert f'{sim["cost"]["mc_mean"]:.6g}' in dom
     assert ("the Monte Carlo run agrees with the oracle" in dom) == sim["verdict"]["agree"]
+    if problem == "robot":       # its L-shaped [[corridors]]: exits, by time and by wall
+        (c,) = sim["corridors"]
+        assert 'id="corridor-0"' in dom
+        assert f"<b>{c['mc']['exits']}</b> of 300 paths" in dom
+        assert f"<b>{100 * c['mc']['upper99']:.4g}%</b>" in dom
 
 
 def json_summary(source):

@@ -91,6 +91,13 @@ def test_snippet_parses(block, tmp_path):
             for a, b in zip(problem.knots, same.knots):
                 assert same_knot(a, b)
             assert problem.plot == same.plot and problem.options == same.options
+            assert len(problem.corridors) == len(same.corridors)
+            for a, b in zip(problem.corridors, same.corridors):
+                assert a.t == b.t and a.epsilon == b.epsilon
+                np.testing.assert_array_equal(a.C, b.C)
+                np.testing.assert_array_equal(a.A, b.A)
+                np.testing.assert_array_equal(a.b, b.b)
+                np.testing.assert_array_equal(a.row_start, b.row_start)
     else:
         assert kind(block) == "fragment"
         parse_problem(merged(minimal(), tomllib.loads(block)))
@@ -109,6 +116,7 @@ def test_fragments_change_the_minimal_file():
                        or problem.u_min is not None or problem.mz != base.mz
                        or problem.faults.any
                        or problem.u_hold is not None
+                       or problem.corridors
                        or any(s.varying is not None or not np.array_equal(s.R, b.R)
                               or s.f is not None
                               or not np.array_equal(s.A, b.A) or s.G.any()
@@ -122,7 +130,8 @@ def documented(key: str) -> bool:
 
 # Keys accepted below the top-level tables (the parser spells these inline).
 NESTED = ["state", "input", "G", "C", "target", "weight", "value", "lower", "upper", "t",
-          "values", "interpolation", "y0", "every", "axes", "walls", *FAULT_KEYS]
+          "values", "interpolation", "y0", "every", "axes", "walls", "polygons", "epsilon",
+          "A", "b", *FAULT_KEYS]
 
 
 @pytest.mark.parametrize("key", sorted(problem_module._TOP_KEYS | problem_module._DYN_KEYS

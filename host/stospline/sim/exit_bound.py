@@ -1,0 +1,121 @@
+"""Upper bounds on the probability that a path leaves a corridor, from exact moments.
+
+For the output ``y = C x(t_j)`` with the oracle's exact mean ``mu_j`` and covariance ``S_j``
+at tick j, wall ``a' y <= b`` has margin ``d = b - a' mu_j`` and spread ``s^2 = a' S_j a``, and
+
+* Cantelli (one-sided Chebyshev; valid for any distribution with these two moments):
+  ``P(a' y > b) <= s^2 / (s^2 + d^2)`` when ``d > 0``, else 1;
+* Gaussian: ``P(a' y > b) = Phi(-d / s)``, exact *if* y were Gaussian. It is an assumption:
+  noise proportional to the state (or input) makes x(t) a mixture, not Gaussian, with heavier
+  tails than the normal of the same variance, so this is an estimate, not a guarantee.
+
+A point outside the union of the polygons is outside each of them, so per tick
+``P(exit) <= min_k P(y outside P_k) <= min_k min(1, sum_{rows of P_k} P(a' y > b))`` (a union
+bound over rows); over the ticks of ``[a, b]``, ``P(exit at some tick) <= min(1, sum_j ...)``
+(a union bound over time, loose when the tick events are strongly correlated, which at a
+fine tick rate they are). Both tails are reported; only the Cantelli sum is a certificate.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from stospline.problem.corridors import Corridor, corridor_ticks
+
+__all__ = ["ExitBound", "wall_tails", "exit_bounds", "corridor_outputs"]
+
+
+def wall_tails(a: np.ndarray, b: np.ndarray, mean: np.ndarray, cov: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """``(cantelli, gaussian)`` bounds on ``P(a_i' y > b_i)`` per tick and wall, shapes (ticks,
+    walls), for y of `mean` (ticks, p) and `cov` (ticks, p, p); a: (walls, p), b: (walls,).
+
+    A variance that rounding made slightly negative counts as 0; with no spread the event is
+    certain (``d < 0``) or impossible (``d >= 0``: the wall is ``a' y <= b``, so a point on it
+    is inside)."""
+    from scipy.special import ndtr     # lazy, as the rest of scipy here
+    d = b[None, :] - mean @ a.T                                   # margins
+    var = np.maximum(np.einsum("wp,tpq,wq->tw", a, cov, a), 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cant = np.where(d > 0, var / (var + d * d), 1.0)
+        gauss = np.where(var > 0, ndtr(-d / np.sqrt(var)), (d < 0).astype(float))
+    cant = np.where((var == 0) & (d >= 0), 0.0, cant)
+    return cant, gauss
+
+
+@dataclass(frozen=True)
+class ExitBound:
+    """Bounds on the exit probability of one corridor under one tail (`tail`).
+
+    ``per_tick`` (ticks,) bounds ``P(y(t_j) outside)`` at each tick ``ticks[0] ... ticks[-1]``
+    (`corridor_ticks`); ``total`` bounds ``P(outside at some tick)`` (their sum, at most 1);
+    ``per_wall`` (walls,) is each wall's share of the sum (its terms at the ticks where its
+    polygon gave the minimum)."""
+    tail: str
+    ticks: tuple[int, int]
+    per_tick: np.ndarray
+    per_wall: np.ndarray
+
+    @property
+    def total(self) -> float:
+        return float(min(1.0, self.per_tick.sum()))
+
+    @property
+    def worst_tick(self) -> float:
+        return float(self.per_tick.max()) if self.per_tick.size else 0.0
+
+    def by_bins(self, edges: np.ndarray) -> np.ndarray:
+        """The bound summed over tick bins ``[edges[i], edges[i+1])`` (tick indices), each at
+        most 1."""
+        j = np.arange(self.ticks[0], self.ticks[1] + 1)
+        out = np.array([self.per_tick[(j >= lo) & (j < hi)].sum()
+                        for lo, hi in zip(edges[:-1], edges[1:])])
+        return np.minimum(out, 1.0)
+
+
+def _bound(corridor: Corridor, tails: np.ndarray, tail: str, ticks) -> ExitBound:
+    starts = corridor.row_start
+    per_poly = np.stack([np.minimum(1.0, tails[:, starts[k]:starts[k + 1]].sum(axis=1))
+                         for k in range(len(corridor.polygons))], axis=1)   # ticks x polygons
+    best = np.argmin(per_poly, axis=1)
+    per_tick = per_poly[np.arange(len(best)), best]
+    per_wall = np.zeros(len(corridor.b))
+    for k in range(len(corridor.polygons)):
+        rows = best == k
+        # The polygon's terms where it is the minimum, scaled so they add up to the capped
+        # per-tick value.
+        part = tails[rows, starts[k]:starts[k + 1]]
+        total = part.sum(axis=1, keepdims=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            share = np.where(total > 0, part / total, 0.0) * per_tick[rows, None]
+        per_wall[starts[k]:starts[k + 1]] += share.sum(axis=0)
+    return ExitBound(tail, ticks, per_tick, per_wall)
+
+
+def exit_bounds(corridor: Corridor, y_mean: np.ndarray, y_cov: np.ndarray, t0: float,
+                tick_hz: int) -> dict[str, ExitBound]:
+    """``{"cantelli": ..., "gaussian": ...}`` for `corridor`, from the exact moments of its
+    outputs at every tick of the plan, ``y_mean`` (ticks + 1, p) and ``y_cov`` (ticks + 1,
+    p, p) (`corridor_outputs`)."""
+    lo, hi = corridor_ticks(corridor, t0, tick_hz)
+    mean, cov = y_mean[lo:hi + 1], y_cov[lo:hi + 1]
+    cant, gauss = wall_tails(corridor.A, corridor.b, mean, cov)
+    return {"cantelli": _bound(corridor, cant, "cantelli", (lo, hi)),
+            "gaussian": _bound(corridor, gauss, "gaussian", (lo, hi))}
+
+
+def corridor_outputs(problem, table, **oracle_options) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``(y_mean, y_cov)`` of each corridor's outputs at every tick, from one exact oracle
+    pass (`oracle.evaluate_table` with the corridors' rows stacked)."""
+    from stospline.sim.oracle import evaluate_table
+    if not problem.corridors:
+        return []
+    C = np.vstack([c.C for c in problem.corridors])
+    mom = evaluate_table(problem, table, path=False, output=C, **oracle_options)
+    out, r = [], 0
+    for c in problem.corridors:
+        s = slice(r, r + c.p)
+        out.append((mom.path_y_mean[:, s], mom.path_y_cov[:, s, s]))
+        r += c.p
+    return out

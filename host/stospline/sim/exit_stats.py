@@ -1,0 +1,99 @@
+"""Corridor exits of a Monte Carlo run beside the oracle's bounds: counts, one-sided
+Clopper-Pearson bounds overall, by time bin and by wall, as plain numbers for JSON.
+
+The exits are those of the compiled C controller's paths (`montecarlo.simulate` records each
+path's first exit tick and wall); the bounds are `exit_bound.exit_bounds` from the exact
+moments of the implemented law. Clopper-Pearson intervals are exact for a binomial count
+(conservative), so ``upper`` is a valid one-sided bound at its confidence for each number
+on its own (the bins and walls are not corrected for being many).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from stospline.sim.exit_bound import exit_bounds
+
+__all__ = ["clopper_pearson_upper", "clopper_pearson_lower", "corridor_report",
+           "CONFIDENCE", "TIME_BINS"]
+
+CONFIDENCE = 0.99      # one-sided
+TIME_BINS = 6          # equal bins of the corridor's ticks in the reports
+
+
+def clopper_pearson_upper(k: int, n: int, confidence: float = CONFIDENCE) -> float:
+    """One-sided upper bound on a binomial probability after `k` successes in `n` trials:
+    ``P(p <= upper) >= confidence`` (1 when k = n)."""
+    from scipy.stats import beta
+    return 1.0 if k >= n else float(beta.ppf(confidence, k + 1, n - k))
+
+
+def clopper_pearson_lower(k: int, n: int, confidence: float = CONFIDENCE) -> float:
+    """One-sided lower bound (0 when k = 0)."""
+    from scipy.stats import beta
+    return 0.0 if k <= 0 else float(beta.ppf(1 - confidence, k, n - k + 1))
+
+
+def _counted(k: int, n: int) -> dict:
+    return {"exits": int(k), "estimate": k / n, "upper99": clopper_pearson_upper(k, n)}
+
+
+def corridor_report(problem, table, exit_tick: np.ndarray | None,
+                    exit_wall: np.ndarray | None, *, outputs=None, with_bounds: bool = True,
+                    bins: int = TIME_BINS, examples: int = 10) -> list[dict]:
+    """One dict per corridor: its interval, epsilon, the analytic bounds (Cantelli: valid;
+    Gaussian: an assumption) overall, at the worst tick, by time bin and by wall (each row of
+    each polygon, and by physical wall: the rows on one line together), and, with a
+    run (`exit_tick`/`exit_wall`, corridors x paths), the Monte Carlo exits likewise with
+    one-sided 99 % Clopper-Pearson upper bounds and the first `examples` exiting paths
+    (index, time, wall). `outputs`: `exit_bound.corridor_outputs` if already computed;
+    `with_bounds` False: no oracle bounds (``bound`` None; a table designed for a delay has
+    no output moments)."""
+    from stospline.problem.corridors import corridor_ticks
+    from stospline.sim.exit_bound import corridor_outputs
+    if with_bounds and outputs is None:
+        outputs = corridor_outputs(problem, table)
+    h = 1.0 / problem.tick_hz
+    out = []
+    for i, c in enumerate(problem.corridors):
+        bounds = (exit_bounds(c, *outputs[i], problem.t0, problem.tick_hz) if with_bounds
+                  else None)
+        lo, hi = corridor_ticks(c, problem.t0, problem.tick_hz)
+        # Equal bins of whole seconds when they divide (0-999, 1000-1999, ...); the last
+        # takes the closing tick.
+        edges = np.unique(np.append(np.rint(np.linspace(lo, hi, bins + 1))[:-1], hi + 1)
+                          ).astype(int)
+        names = c.wall_names()
+        physical = c.physical_walls()
+        entry = {
+            "t": list(c.t), "epsilon": c.epsilon, "walls": names,
+            "physical_walls": [{"wall": label, "rows": rows} for label, rows in physical],
+            "bins_t": [[problem.t0 + a * h, problem.t0 + (b - 1) * h]
+                       for a, b in zip(edges[:-1], edges[1:])],
+            "bound": None if bounds is None else {
+                tail: {"total": b.total, "sum": float(b.per_tick.sum()),
+                       "worst_tick": b.worst_tick,
+                       "worst_tick_t": problem.t0 + (lo + int(np.argmax(b.per_tick))) * h,
+                       "by_bin": b.by_bins(edges), "by_wall": b.per_wall,
+                       "by_physical_wall": [float(b.per_wall[rows].sum()) for _, rows in physical]}
+                for tail, b in bounds.items()},
+        }
+        if exit_tick is not None:
+            et, ew = exit_tick[i], exit_wall[i]
+            n = et.shape[0]
+            out_idx = np.flatnonzero(et >= 0)
+            bin_of = np.searchsorted(edges, et[out_idx], side="right") - 1
+            entry["mc"] = {
+                "paths": int(n), "confidence": CONFIDENCE, **_counted(len(out_idx), n),
+                "by_bin": [_counted(int(np.sum(bin_of == b)), n) for b in range(len(edges) - 1)],
+                "by_wall": [_counted(int(np.sum(ew[out_idx] == w)), n) for w in range(len(names))],
+                "by_physical_wall": [_counted(int(np.isin(ew[out_idx], rows).sum()), n)
+                                     for _, rows in physical],
+                "examples": [{"path": int(p), "t": problem.t0 + int(et[p]) * h,
+                              "wall": int(ew[p])} for p in out_idx[:examples]],
+            }
+            if c.epsilon is not None:
+                entry["mc"]["meets_epsilon"] = entry["mc"]["upper99"] <= c.epsilon
+        if c.epsilon is not None and bounds is not None:
+            entry["bound"]["cantelli"]["meets_epsilon"] = bounds["cantelli"].total <= c.epsilon
+        out.append(entry)
+    return out

@@ -40,7 +40,8 @@ def flash_bytes(table, arith: str = "float32") -> int:
         band = getattr(table, "band_qp", None)
         if band is not None:
             q = band.q
-            total += 8 * (_count(q * n) + 3 * _count(q) + _count(q * q)) + _BANDQP_HEADER
+            # + the pointer that links the band solver with the table (`<name>_band_solver`)
+            total += 8 * (_count(q * n) + 3 * _count(q) + _count(q * q)) + _BANDQP_HEADER + _PTR
     else:
         total += _count(n) + _count(m) + _count(n_latch) + _PTR * _FIXED_POINTERS   # int8 exponents
     return total

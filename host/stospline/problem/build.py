@@ -39,7 +39,8 @@ def problem_from_arrays(A: Any, B: Any, Q: Any = None, R: Any = None, *, x0: Any
                         f: Any = None, faults: Mapping | None = None,
                         design: Mapping | None = None, plot: Mapping | None = None,
                         stages: Iterable[Mapping] | None = None,
-                        regions: Iterable[Mapping] | None = None) -> Problem:
+                        regions: Iterable[Mapping] | None = None,
+                        corridors: Iterable[Mapping] | None = None) -> Problem:
     """A validated `Problem` from arrays, with the same meaning as the problem file's keys
     (``docs/guide/problem-file.md``).
 
@@ -60,7 +61,7 @@ def problem_from_arrays(A: Any, B: Any, Q: Any = None, R: Any = None, *, x0: Any
         Controller tick rate; every stage must last a whole number of ticks.
     noise : array-like (n, n, mz), or a list of ``{"state": i, "G": ...}`` /
         ``{"input": j, "G": ...}`` entries as in the file. None: no noise.
-    S, q, r, rho, u_min, u_max, u_hold, faults, design, plot, stages, regions
+    S, q, r, rho, u_min, u_max, u_hold, faults, design, plot, stages, regions, corridors
         As the file's keys of the same names.
 
     The problem's ``source_sha256`` is that of its TOML form (`problem_to_toml`), so the
@@ -102,7 +103,7 @@ def problem_from_arrays(A: Any, B: Any, Q: Any = None, R: Any = None, *, x0: Any
                  "dynamics": dynamics, "cost": cost, "knots": list(knots)}
     for key, value in (("u_min", u_min), ("u_max", u_max), ("u_hold", u_hold),
                        ("faults", faults), ("design", design), ("plot", plot),
-                       ("stages", stages), ("regions", regions)):
+                       ("stages", stages), ("regions", regions), ("corridors", corridors)):
         if value is not None:
             doc[key] = dict(value) if isinstance(value, Mapping) else list(value)
     problem = parse_problem(doc)

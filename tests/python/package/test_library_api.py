@@ -141,6 +141,11 @@ ROBOT_KNOTS = [
 ]
 
 
+ROBOT_CORRIDOR = [{"t": [0.0, 6.0], "C": [[1, 0, 0, 0], [0, 0, 1, 0]],
+                   "polygons": [{"A": [[0, -1], [0, 1], [1, 0]], "b": [0, 2, 0]},
+                                {"A": [[-1, 0], [1, 0], [0, -1]], "b": [2, 0, 0]}]}]
+
+
 def robot_from_arrays(**kw):
     return stospline.problem_from_arrays(
         ROBOT["A"], ROBOT["B"], None, np.eye(2), x0=np.array([-5.0, 0.0, 1.0, 0.0]),
@@ -149,9 +154,11 @@ def robot_from_arrays(**kw):
 
 def test_problem_from_arrays_is_the_robot_file(robot_problem):
     from dataclasses import replace
-    p = robot_from_arrays(plot=robot_problem.plot)
-    # The array builders take no corridors (the file's [[corridors]] is for simulate/report).
-    assert same_problem(p, replace(robot_problem, corridors=()))
+    p = robot_from_arrays(plot=robot_problem.plot, corridors=ROBOT_CORRIDOR)
+    assert same_problem(p, robot_problem)
+    # Without the corridor, the same problem but for it.
+    assert same_problem(robot_from_arrays(plot=robot_problem.plot),
+                        replace(robot_problem, corridors=()))
     # Its hash is that of its TOML form: the tables it designs name the file it writes.
     import hashlib
     assert p.source_sha256 == hashlib.sha256(p.to_toml().encode()).hexdigest()

@@ -160,11 +160,14 @@ def _design_problem(problem: Problem, *, noise: bool, discretization: str,
     # here, naming the cause, before evaluating the table as implemented.
     strict.check_table_finite(problem, table, exact=lambda: table_of(design, quantize=False))
     if discretization == "continuous":
-        law = lambda: evaluate_continuous(problem, continuous_law)           # noqa: E731
+        def evaluate_law():
+            return evaluate_continuous(problem, continuous_law)
     else:
         exact = table_of(design, quantize=False)
-        law = lambda: evaluate_table(problem, exact, path=False)             # noqa: E731
-    law, implemented = _both(law, lambda: evaluate_table(problem, table, path=False),
+
+        def evaluate_law():
+            return evaluate_table(problem, exact, path=False)
+    law, implemented = _both(evaluate_law, lambda: evaluate_table(problem, table, path=False),
                              2 * table.n_ticks)
     return Designed(problem, design, discretization, table, law, implemented)
 

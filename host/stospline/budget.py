@@ -159,10 +159,13 @@ def _widths(problem: Problem, mode: str) -> tuple[list[int], int]:
 
 def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewise",
              discretization: str = "exact-zoh", arith: str = "float32", paths: int = 0,
-             substeps: int = 2, delay_ticks: int = 0) -> Estimate:
+             substeps: int = 2, delay_ticks: int = 0, table: str = "per-tick",
+             spline_tolerance: float | None = None) -> Estimate:
     """Estimate the time and peak memory of ``stospline COMMAND`` on `problem`.
 
     A design for a one-tick delay (`delay_ticks` 1) is counted as one of ``n + m`` states.
+    A spline table (`table`, `spline_tolerance`) is counted as a per-tick one: its fit takes
+    a fraction of the design (docs/evidence/spline-tables.md) and its C text is smaller.
 
     Parameters
     ----------

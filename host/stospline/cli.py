@@ -26,6 +26,8 @@ from stospline.errors import ProblemError                        # noqa: E402
 from stospline.firmware_interface import ARITHS                  # noqa: E402
 from stospline.problem.reader import load_problem                # noqa: E402
 from stospline.strict import dumps, quiet_numerics               # noqa: E402
+from stospline.table_options import (DEFAULT_SPLINE_TOLERANCE, TABLE_KINDS,  # noqa: E402
+                                     check_spline_tolerance)
 
 __all__ = ["main"]
 
@@ -39,10 +41,19 @@ def _options(args, problem) -> dict:
                                                 f"and applying its command), got "
                                                 f"{args.delay_ticks!r}")
         delay = int(args.delay_ticks)
+    tolerance = problem.options.get("spline_tolerance", DEFAULT_SPLINE_TOLERANCE)
+    if args.spline_tolerance is not None:
+        try:
+            value = float(args.spline_tolerance)
+        except ValueError:
+            value = args.spline_tolerance
+        tolerance = check_spline_tolerance(value, "--spline-tolerance")
     return {"mode": args.mode or problem.options.get("mode", "stagewise"),
             "discretization": args.discretization
             or problem.options.get("discretization", "exact-zoh"),
-            "delay_ticks": delay}
+            "delay_ticks": delay,
+            "table": args.table or problem.options.get("table", "per-tick"),
+            "spline_tolerance": tolerance}
 
 
 @quiet_numerics
@@ -53,8 +64,13 @@ def _design(args) -> int:
         check_target(args.out)                  # before any work: nothing is created
     problem = load_problem(args.problem)
     arith = args.arith or problem.options.get("arith", "float32")
+    spline = _options(args, problem)["table"] == "spline"
+    if spline and arith != "float32":
+        raise ProblemError("--table" if args.table else "design.table",
+                           f"spline tables are float32 only, not {arith}")
     if args.out:
-        stem = problem.name if arith == "float32" else f"{problem.name}_{arith}"
+        stem = (problem.name if arith == "float32" else f"{problem.name}_{arith}") \
+            + ("_spline" if spline else "")
         check_target(args.out, [f"{stem}{ext}" for ext in (".h", ".c", ".json")])
     _check_budget(args, problem, "design", arith=arith)
     d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem))
@@ -485,6 +501,15 @@ def build_parser() -> argparse.ArgumentParser:
                         help="stagewise (default): re-plan the multipliers at every stage "
                              "start; joint: one multiplier vector for all knots, latched at t0 "
                              "(needed for bands). Default: the file's [design] mode")
+        sp.add_argument("--table", choices=list(TABLE_KINDS), default=None,
+                        help="per-tick (default): one row of gains per tick; spline: the gains "
+                             "as cubic B-splines per stage, ~100x smaller, latch maps re-solved "
+                             "for the law as evaluated (float32; written as "
+                             "<name>_spline.{c,h,json}). Default: the file's [design] table")
+        sp.add_argument("--spline-tolerance", default=None, metavar="TOL",
+                        help="the spline's budget: largest relative error of a gain entry, "
+                             "1e-9..0.1 (default: the file's [design] spline_tolerance, else "
+                             f"{DEFAULT_SPLINE_TOLERANCE:g})")
         sp.add_argument("--delay-ticks", default=None, metavar="{0,1}",
                         help="1: design for a one-tick computation delay (the command computed "
                              "from the state at tick j is applied at tick j+1; the controller "

@@ -18,12 +18,15 @@ from stospline.sim.montecarlo import MonteCarloResult, joint_verdict, simulate, 
 from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table, state_range
 from stospline.sim.plant_scheme import SubstepChoice, choose_substeps, scheme_moments
 from stospline.sim.fault_oracle import evaluate_with_faults, has_exact_oracle
+from stospline.sim.spline_certificate import certificate, spline_table
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem, ProblemError
 from stospline.table.format import GainTable, TickGains, table_of
 from stospline.table.qformat import DEFAULT_SIGMAS, FixedPointTable, quantize_table
 from stospline import limits, progress, strict
 from stospline.precision import RoundedUp
+from stospline.table_options import (DEFAULT_SPLINE_TOLERANCE, TABLE_KINDS,
+                                     check_spline_tolerance)
 
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
            "simulation_summary", "verdict", "plan_substeps", "write_outputs", "start_from",
@@ -71,6 +74,9 @@ class Designed:
     table: GainTable
     law: Moments
     implemented: Moments
+    # With ``table="spline"``: what the spline table costs and saves, for the law exactly as
+    # the firmware evaluates it (`stospline.sim.spline_certificate.certificate`).
+    certificate: dict | None = None
 
     def gains(self, *, quantized: bool = True):
         """``Gains(t, K, k0, L, Lambda, lambda0, stage_start)`` as numpy arrays: K is
@@ -83,7 +89,8 @@ class Designed:
 
 def design_problem(problem: Problem, *, noise: bool = True,
                    discretization: str = "exact-zoh", mode: str = "stagewise",
-                   delay_ticks: int | None = None) -> Designed:
+                   delay_ticks: int | None = None, table: str | None = None,
+                   spline_tolerance: float | None = None) -> Designed:
     """Design at the problem's tick rate, quantize the table, evaluate both with the oracle.
 
     Parameters
@@ -103,6 +110,16 @@ def design_problem(problem: Problem, *, noise: bool = True,
         tick j is applied at tick j+1; exact-zoh only). The table's law is then over ``[x;
         a]``, ``a`` the command being applied (docs/guide/firmware.md, "A one-tick delay").
         Default: the problem's ``[design] delay_ticks``, else 0.
+    table : {"per-tick", "spline"}, optional
+        The table the firmware runs: one row of gains per tick, or cubic B-splines of the
+        gains per stage, with the latch maps re-solved so that the expected constraints hold
+        for the law as the firmware evaluates it (`stospline.table.spline`; float32,
+        time-invariant stage data, no bands, no delay). ``implemented`` is then the spline
+        law's and ``certificate`` says what it costs. Default: the problem's ``[design]
+        table``, else "per-tick".
+    spline_tolerance : float, optional
+        The spline's budget: the largest relative error of a gain entry (default: the
+        problem's ``[design] spline_tolerance``, else 1e-5).
 
     Returns
     -------
@@ -129,16 +146,24 @@ def design_problem(problem: Problem, *, noise: bool = True,
     if delay_ticks is None:
         delay_ticks = problem.options.get("delay_ticks", 0)
     delay_ticks = check_delay(problem, delay_ticks, discretization)
+    table = table or problem.options.get("table", "per-tick")
+    if table not in TABLE_KINDS:
+        raise ValueError(f"table must be one of {TABLE_KINDS}, got {table!r}")
+    if spline_tolerance is None:
+        spline_tolerance = problem.options.get("spline_tolerance", DEFAULT_SPLINE_TOLERANCE)
+    spline_tolerance = check_spline_tolerance(spline_tolerance, "spline_tolerance")
     try:
         return _design_problem(problem, noise=noise, discretization=discretization, mode=mode,
-                               delay_ticks=delay_ticks)
+                               delay_ticks=delay_ticks,
+                               spline_tolerance=spline_tolerance if table == "spline" else None)
     except FloatingPointError:
         # Products of extreme data (B = 1e308, C'C of 1e300) overflowed to Inf or NaN.
         raise DesignError(*strict.overflow_failure(problem)) from None
 
 
 def _design_problem(problem: Problem, *, noise: bool, discretization: str,
-                    mode: str, delay_ticks: int = 0) -> Designed:
+                    mode: str, delay_ticks: int = 0,
+                    spline_tolerance: float | None = None) -> Designed:
     if has_bands(problem):
         if mode != "joint":
             raise DesignError("knots", "band constraints (lower/upper) are exact only with one "
@@ -159,17 +184,23 @@ def _design_problem(problem: Problem, *, noise: bool, discretization: str,
     # A float32 entry that overflowed would make the oracle's moments non-finite: refuse it
     # here, naming the cause, before evaluating the table as implemented.
     strict.check_table_finite(problem, table, exact=lambda: table_of(design, quantize=False))
+    exact = table_of(design, quantize=False)
+    per_tick = table
+    if spline_tolerance is not None:
+        table = spline_table(problem, exact, per_tick, spline_tolerance)
     if discretization == "continuous":
         def evaluate_law():
             return evaluate_continuous(problem, continuous_law)
     else:
-        exact = table_of(design, quantize=False)
-
         def evaluate_law():
             return evaluate_table(problem, exact, path=False)
     law, implemented = _both(evaluate_law, lambda: evaluate_table(problem, table, path=False),
                              2 * table.n_ticks)
-    return Designed(problem, design, discretization, table, law, implemented)
+    d = Designed(problem, design, discretization, table, law, implemented)
+    if spline_tolerance is not None:
+        d.certificate = certificate(d.problem, table, per_tick, d.design.J0, law, implemented,
+                                    tolerance=spline_tolerance)
+    return d
 
 
 def _both(first, second, ticks: int):
@@ -271,6 +302,7 @@ def design_summary(d: Designed) -> dict:
         "oracle_J_design": d.law.J,
         "oracle_J_implemented": d.implemented.J,
         "knots": knots,
+        **({"table": d.certificate} if d.certificate is not None else {}),
         **_band_terms(d),
         **_limits(d),
     })
@@ -348,7 +380,9 @@ def generated_files(d: Designed, source_name: str, arith: str = "float32", *,
     check_implementable(d)
     summary = design_summary(d)
     if arith == "float32":
-        table, n = d.table, d.problem.name
+        table, n = d.table, d.table.name
+    elif d.table.spline is not None:
+        raise DesignError("design.table", f"spline tables are float32 only, not {arith}")
     else:
         try:
             table = fixed_point_table(d, arith)

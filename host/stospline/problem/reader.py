@@ -18,6 +18,7 @@ import numpy as np
 from stospline.errors import ProblemError
 from stospline.firmware_interface import ARITHS
 from stospline.limits import check_problem, check_stage_count, check_state
+from stospline.table_options import TABLE_KINDS, check_spline_tolerance
 from stospline.problem.faults import parse_faults
 from stospline.problem.inputfile import decode_problem, read_problem_file
 from stospline.problem.corridors import Corridor
@@ -30,7 +31,8 @@ _TOP_KEYS = {"name", "t0", "x0", "tick_hz", "u_min", "u_max", "u_hold", "dynamic
              "knots",
              "stages", "plot", "regions", "design", "faults", "corridors"}
 _DESIGN_OPTIONS = {"mode": ("stagewise", "joint"), "discretization": ("exact-zoh", "continuous"),
-                   "arith": ARITHS, "delay_ticks": (0, 1)}
+                   "arith": ARITHS, "delay_ticks": (0, 1), "table": TABLE_KINDS,
+                   "spline_tolerance": None}
 _TOP_REQUIRED = {"name", "x0", "tick_hz", "dynamics", "cost", "knots"}
 _DYN_KEYS, _DYN_REQUIRED = {"A", "B", "f", "noise"}, {"A", "B"}
 _COST_KEYS, _COST_REQUIRED = {"Q", "S", "R", "q", "r", "rho", "tracking"}, {"R"}
@@ -836,6 +838,9 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
             raise ProblemError("design.delay_ticks", f"must be 0 or 1 (ticks between "
                                                      f"measuring x and applying its command), "
                                                      f"got {value!r}")
+        if key == "spline_tolerance":
+            options[key] = check_spline_tolerance(value, "design.spline_tolerance")
+            continue
         if value not in _DESIGN_OPTIONS[key]:
             raise ProblemError(f"design.{key}", f"must be one of {list(_DESIGN_OPTIONS[key])}, "
                                                 f"got {value!r}")

@@ -31,27 +31,35 @@ def design_summary_text(d, arith: str = "float32") -> str:
     t, p = d.table, d.problem
     n, m, _ = t.dims
     delay = getattr(t, "delay_ticks", 0)
+    cert = getattr(d, "certificate", None)
+    kind = "spline" if cert is not None else "float32"
     states = (f"n = {p.n} states + {m} applied command{'s' * (m > 1)} (one-tick delay: the "
               f"controller is fed {n})" if delay else f"n = {n} states")
     lines = [f"{p.name}: {d.design.mode} {d.discretization} design"
              f"{'' if d.design.noise_aware else ' (noise ignored)'}, {states}, "
              f"m = {m} inputs",
              f"  J0 (designed)                  {d.design.J0:.10g}",
-             f"  J of the float32 table         {d.implemented.J:.10g}   (exact moment oracle, "
+             f"  {'J of the ' + kind + ' table':<31}{d.implemented.J:.10g}   (exact moment oracle, "
              f"held per tick)",
              f"  ticks                          {t.n_ticks} at {t.tick_hz} Hz "
              f"({t.n_ticks / t.tick_hz:g} s), {t.n_stages} stage"
              f"{'' if t.n_stages == 1 else 's'}"]
-    # A delayed design has float32 tables only (design.delay_ticks): no fixed-point sizes.
-    ariths = [a for a in ARITH_ELEMENT_BYTES if not delay or a == "float32"]
+    # Delayed designs and spline tables are float32 only: no fixed-point sizes.
+    ariths = [a for a in ARITH_ELEMENT_BYTES if not (delay or cert) or a == "float32"]
     sizes = "   ".join(f"{a}{'*' if a == arith else ''} {flash_bytes(t, a):,} B"
                        for a in ariths)
     lines.append(f"  flash of the tables            {sizes}   (* this run's arithmetic)")
+    if cert is not None:
+        lines.append(f"  spline table                   {cert['compression_ratio']:.0f}x smaller "
+                     f"than per-tick ({cert['per_tick_flash_bytes']:,} B); spans per stage "
+                     f"{cert['spans']}, tolerance {cert['spline_tolerance']:g}")
+        lines.append(f"  its cost over J0               {cert['excess_over_J0']:+.3g} relative "
+                     f"(oracle, as the firmware evaluates it)")
     worst = worst_constraint_residual(d)
     if worst is None:
         lines.append("  worst constraint residual      - (no constraints)")
     else:
         r, k, i = worst
         lines.append(f"  worst constraint residual      {r:.3g}   (knot {k}, row {i}; "
-                     f"E{{Cx}} of the float32 table, oracle)")
+                     f"E{{Cx}} of the {kind} table, oracle)")
     return "\n".join(lines) + "\n"

@@ -109,13 +109,19 @@ extern const stsp_table_t {p}_table;
 """
     u32 = lambda x: f"{int(x)}u"  # noqa: E731
     T, e, lit, neg = table.n_ticks, v.element, v.literal, v.negated
-    arrays = [
-        _array("uint32_t", f"{p}_stage_start", table.stage_start, u32, "[n_stages + 1]"),
-        _array("uint16_t", f"{p}_stage_n_latch", table.stage_n_latch, u32, "[n_stages]"),
+    spline = getattr(table, "spline", None)
+    gains = [] if spline is not None else [
         _array(e, f"{p}_K", table.K, lit, f"{neg.format('K')}[n_ticks][nu][nx] = [{T}][{m}][{n}]"),
         _array(e, f"{p}_k0", table.k0, lit, f"{neg.format('k0')}[n_ticks][nu] = [{T}][{m}]"),
         _array(e, f"{p}_L", table.L, lit,
                f"{neg.format('L')}[n_ticks][nu][n_latch] = [{T}][{m}][{n_latch}]"),
+    ]
+    pointers = ("NULL, NULL, NULL" if spline is not None
+                else f"{p}_K, {p}_k0, {p}_L")
+    arrays = [
+        _array("uint32_t", f"{p}_stage_start", table.stage_start, u32, "[n_stages + 1]"),
+        _array("uint16_t", f"{p}_stage_n_latch", table.stage_n_latch, u32, "[n_stages]"),
+        *gains,
         _array(e, f"{p}_Lambda", table.Lambda, lit, "[n_stages][n_latch][nx]"),
         _array(e, f"{p}_lambda0", table.lambda0, lit, "[n_stages][n_latch]"),
         _array(e, f"{p}_u_min", table.u_min, lit, f"[nu] lower actuator limits{v.limit_units}"),
@@ -129,7 +135,7 @@ const stsp_table_t {p}_table = {{
     0x{MAGIC:08X}u, {FORMAT_VERSION}u, {v.scalar_kind}u,
     {n}u, {m}u, {n_latch}u, {table.n_stages}u, {table.n_ticks}u, {table.tick_hz}u,
     {p}_stage_start, {p}_stage_n_latch,
-    {p}_K, {p}_k0, {p}_L, {p}_Lambda, {p}_lambda0,
+    {pointers}, {p}_Lambda, {p}_lambda0,
     {p}_u_min, {p}_u_max, {p}_u_hold,{v.tail_pointers}
     0x{table_crc32(table):08X}u,
     {_sha_initializer(sha)}
@@ -180,8 +186,39 @@ def _float32_variant(table, p: str) -> _Variant:
     layout = ("/* Tables in flash; layout K[tick][i*NX + j], k0[tick][i], L[tick][i*N_LATCH + c],\n"
               " * Lambda[stage][c*NX + j], lambda0[stage][c], u_min[i], u_max[i], u_hold[i] (see\n"
               " * stsp_controller.h; +-3.4028235e+38f = +-FLT_MAX: unlimited). */")
+    spline = "NULL"
+    if getattr(table, "spline", None) is not None:
+        extra += _spline_arrays(table.spline, p)
+        spline = f"&{p}_spline"
+        layout = ("/* Tables in flash: the gains K, k0, L as cubic B-splines per stage (stsp_spline_t,\n"
+                  " * docs/guide/firmware.md \"Spline tables\"); Lambda[stage][c*NX + j],\n"
+                  " * lambda0[stage][c], u_min[i], u_max[i], u_hold[i] as in stsp_controller.h\n"
+                  " * (+-3.4028235e+38f = +-FLT_MAX: unlimited). */")
     return _Variant("", f"BAND_ROWS {q}u", layout, "stsp_f32_t", _f32_literal, "",
-                    "", extra, declarations, SCALAR_FLOAT32, f" {band},")
+                    "", extra, declarations, SCALAR_FLOAT32, f" {band}, {spline},")
+
+
+def _spline_arrays(sp, p: str) -> list[str]:
+    """The arrays and the `stsp_spline_t` of a spline table (`stospline.table.spline`)."""
+    u32 = lambda x: f"{int(x)}u"  # noqa: E731
+    return [
+        _array("uint32_t", f"{p}_knot_start", sp.knot_start, u32,
+               "[n_stages + 1]: each stage's clamped knot vector in knot[]"),
+        _array("stsp_f32_t", f"{p}_knot", sp.knot, _f32_literal,
+               "[n_knots]: knots in ticks from the stage's first tick"),
+        _array("uint16_t", f"{p}_row_start", sp.row_start, u32,
+               "[n_stages * nu + 1]: each (stage, input)'s entries in col[]"),
+        _array("uint8_t", f"{p}_col", sp.col, u32,
+               "[n_entries]: j < nx: K[i][j]; nx: k0[i]; nx + 1 + c: L[i][c]"),
+        _array("uint32_t", f"{p}_coef_start", sp.coef_start, u32,
+               "[n_stages + 1]: each stage's coefficients in coef[]"),
+        _array("stsp_f32_t", f"{p}_coef", sp.coef, _f32_literal,
+               "[n_coef]: per entry, its stage's spans + 3 B-spline coefficients"),
+        f"/* The gains as cubic B-splines per stage (stsp_controller.h, stsp_spline_t). */\n"
+        f"static const stsp_spline_t {p}_spline = {{\n    {sp.knot.size}u, {sp.col.size}u, "
+        f"{sp.coef.size}u,\n    {p}_knot_start, {p}_knot, {p}_row_start, {p}_col, "
+        f"{p}_coef_start, {p}_coef\n}};\n",
+    ]
 
 
 def _fixed_point_variant(table, p: str) -> _Variant:
@@ -207,7 +244,7 @@ def _fixed_point_variant(table, p: str) -> _Variant:
         _array("int8_t", f"{p}_v_exp", table.v_exp, d, "[n_latch] multiplier scale exponents"),
     ]
     tail = (f"\n    {p}_x_exp, {p}_u_exp, {p}_v_exp,\n"
-            "    NULL, /* band_qp: the band re-solve is float32 only */")
+            "    NULL, NULL, /* band_qp, spline: float32 only */")
     return _Variant(guard, f"ARITH_{kind} 1", layout, f"stsp_{table.arith}_t", _qlit(F),
                     "-{} scaled, ", " (command units)", extra, "", table.scalar_kind, tail)
 

@@ -7,19 +7,28 @@ from __future__ import annotations
 
 from stospline.firmware_interface import ELEMENT_BYTES
 
-__all__ = ["flash_bytes", "ARITH_ELEMENT_BYTES"]
+__all__ = ["flash_bytes", "spline_bytes", "ARITH_ELEMENT_BYTES"]
 
 ARITH_ELEMENT_BYTES = ELEMENT_BYTES
 _PTR = 4                               # pointer size on the 32-bit targets
 _HEADER_FIELDS = 4 + 6 * 2 + 2 * 4     # magic; version, kind, nx, nu, n_latch, n_stages; ticks, hz
 _HEADER_TAIL = 4 + 32                  # crc32, problem_sha256
-_TABLE_POINTERS = 10 + 1               # stage_start .. u_hold, band_qp
+_TABLE_POINTERS = 10 + 2               # stage_start .. u_hold, band_qp, spline
+_SPLINE_HEADER = 3 * 4 + 6 * _PTR      # n_knots, n_entries, n_coef; six array pointers
 _FIXED_POINTERS = 3                    # x_exp, u_exp, v_exp
 _BANDQP_HEADER = 2 * 2 + 5 * _PTR      # q, nx; Nt, mt, W, lo, hi
 
 
 def _count(k: int) -> int:
     return max(int(k), 1)              # codegen writes an empty array as one zero
+
+
+def spline_bytes(spline) -> int:
+    """Bytes of a spline table's gains (`stospline.table.spline.SplineGains`): its arrays, one
+    element at least each, and its `stsp_spline_t`; float32 only."""
+    sizes = ((spline.knot_start, 4), (spline.knot, 4), (spline.row_start, 2), (spline.col, 1),
+             (spline.coef_start, 4), (spline.coef, 4))
+    return sum(b * _count(a.size) for a, b in sizes) + _SPLINE_HEADER
 
 
 def flash_bytes(table, arith: str = "float32") -> int:
@@ -33,8 +42,12 @@ def flash_bytes(table, arith: str = "float32") -> int:
     T, S = table.n_ticks, table.n_stages
     e = ARITH_ELEMENT_BYTES[arith]
     total = 4 * _count(S + 1) + 2 * _count(S)                       # stage_start, stage_n_latch
-    total += e * (_count(T * m * n) + _count(T * m) + _count(T * m * n_latch)    # K, k0, L
-                  + _count(S * n_latch * n) + _count(S * n_latch) + 3 * _count(m))  # Lambda, lambda0, u_min/max/hold
+    spline = getattr(table, "spline", None)
+    if spline is None:
+        total += e * (_count(T * m * n) + _count(T * m) + _count(T * m * n_latch))  # K, k0, L
+    else:
+        total += spline_bytes(spline)
+    total += e * (_count(S * n_latch * n) + _count(S * n_latch) + 3 * _count(m))  # Lambda, lambda0, u_min/max/hold
     total += _HEADER_FIELDS + _PTR * _TABLE_POINTERS + _HEADER_TAIL
     if arith == "float32":
         band = getattr(table, "band_qp", None)

@@ -10,6 +10,10 @@ Layout (all row-major, float32, padded to ``n_latch`` multipliers with zeros)::
     u_min[i], u_max[i]   (m,)               actuator limits (+-FLT_MAX: unlimited)
     u_hold[i]            (m,)               the safe command of a refused step
     band_qp (optional)                      the band dual re-solved at the t0 latch (BandQP)
+    spline (optional)                       the gains as cubic B-splines per stage
+                                            (`stospline.table.spline`); K, k0, L then hold
+                                            their evaluation, tick by tick, as the firmware
+                                            computes it, and are not written to the C
 
 At tick ``j`` (time ``t0 + j / tick_hz``) the controller applies
 ``u = clip(-K x - k0 - L v, u_min, u_max)`` and holds it for one tick; at a stage's first
@@ -116,6 +120,10 @@ class GainTable(TableShape):
     # now (the previous tick's output; u_hold at the first tick), and its output is applied at
     # the next tick. Not stored in the firmware's table: the caller's contract.
     delay_ticks: int = 0
+    # A spline table (`stospline.table.spline.SplineGains`): the firmware evaluates K, k0 and L
+    # from it at every tick; the arrays K, k0, L above are that evaluation (bit for bit), so
+    # the oracle, the fault oracle and the summaries read them as for a per-tick table.
+    spline: object | None = None
 
     def __post_init__(self):
         m = self.K.shape[1]
@@ -281,7 +289,10 @@ def table_crc32(table: GainTable) -> int:
     little-endian.
     A fixed-point table (`stospline.table.qformat.FixedPointTable`) adds its scalar kind as u32 after the
     tick rate, stores the arrays as little-endian int16 (Q15) or int32 (Q31), and ends with
-    x_exp, u_exp and v_exp (when n_latch > 0) as one signed byte each. Then, with a band QP (float32
+    x_exp, u_exp and v_exp (when n_latch > 0) as one signed byte each. A spline table leaves
+    out K, k0 and L and adds, after u_hold, its n_knots, n_entries and n_coef as u32, then
+    knot_start (u32 each), knot (binary32), row_start (u32 each), col (u32 each), coef_start
+    (u32 each) and coef (binary32). Then, with a band QP (float32
     tables only), its q and n as u32 and Nt, mt, W, lo, hi as binary64 bit patterns. Last, the
     32 bytes of the problem file's SHA-256 (zeros when unknown).
     """
@@ -302,6 +313,9 @@ def table_crc32(table: GainTable) -> int:
         parts += [np.asarray(e).astype("i1").tobytes()
                   for e in (table.x_exp, table.u_exp, table.v_exp)]
     b = getattr(table, "band_qp", None)
+    if getattr(table, "spline", None) is not None:
+        parts[3:6] = []                # K, k0, L: the firmware evaluates them from the spline
+        parts += _spline_crc_parts(table.spline)
     if b is not None:
         parts.append(struct.pack("<2I", b.q, b.Nt.shape[1]))
         parts += [np.asarray(a, "<f8").tobytes() for a in (b.Nt, b.mt, b.W, b.lo, b.hi)]
@@ -310,3 +324,12 @@ def table_crc32(table: GainTable) -> int:
     for part in parts:
         crc = zlib.crc32(part, crc)
     return crc & 0xFFFFFFFF
+
+
+def _spline_crc_parts(sp) -> list[bytes]:
+    """A spline's part of the CRC serialization (`table_crc32`)."""
+    u32 = lambda a: np.asarray(a).astype("<u4").tobytes()  # noqa: E731
+    f32 = lambda a: np.asarray(a, "<f4").tobytes()         # noqa: E731
+    return [struct.pack("<3I", sp.knot.size, sp.col.size, sp.coef.size),
+            u32(sp.knot_start), f32(sp.knot), u32(sp.row_start), u32(sp.col),
+            u32(sp.coef_start), f32(sp.coef)]

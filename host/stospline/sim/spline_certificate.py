@@ -1,0 +1,80 @@
+"""A spline table for a design, and its certificate: what the law exactly as the firmware
+evaluates it (B-spline gains in binary32, re-solved latch maps, held per tick) costs against
+the uncompressed optimum, how well it meets the expected constraints, and the flash it saves.
+
+The table's K, k0 and L are the spline's evaluation tick by tick, bit for bit as the firmware
+computes them (`stospline.table.spline.evaluate`), so the exact moment oracle, the fault
+oracle and the Monte Carlo harness (which compiles the spline itself) all see the law the
+firmware runs."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from stospline.problem.model import Problem
+from stospline.sim.tick_moments import Moments
+from stospline.table.flash import flash_bytes, spline_bytes
+from stospline.table.format import GainTable
+from stospline.table.spline import compress
+
+__all__ = ["spline_table", "certificate"]
+
+
+def spline_table(problem: Problem, exact: GainTable, per_tick: GainTable,
+                 tolerance: float) -> GainTable:
+    """The float32 spline table of a design: `exact` is its per-tick table in double
+    precision (``table_of(design, quantize=False)``), `per_tick` the float32 one. Raises
+    DesignError naming ``design.table`` for what has no spline table (bands, a delay,
+    time-varying stage data, a latched state) or ``design.spline_tolerance`` when the budget
+    cannot be met within the firmware's limits."""
+    spline, K, k0, L, Lam, lam0 = compress(problem, exact, per_tick, tolerance)
+    return replace(per_tick, name=f"{per_tick.name}_spline", K=K, k0=k0, L=L, Lambda=Lam,
+                   lambda0=lam0, spline=spline)
+
+
+def _residual(problem: Problem, moments: Moments) -> float:
+    """Largest |E{C2 x} - value| over the constrained knots (0 without constraints)."""
+    worst = 0.0
+    for k, kn in enumerate(problem.knots):
+        if kn.constraint is not None:
+            lo, _ = kn.constraint.bounds
+            y = np.asarray(moments.knot_constraint[k], dtype=float)
+            worst = max(worst, float(np.max(np.abs(y - lo), initial=0.0)))
+    return worst
+
+
+def _cov_change(law: Moments, implemented: Moments) -> float:
+    """Largest change of a knot covariance, relative to its norm (Frobenius)."""
+    worst = 0.0
+    for a, b in zip(law.knot_cov, implemented.knot_cov):
+        scale = float(np.linalg.norm(a))
+        if scale > 0:
+            worst = max(worst, float(np.linalg.norm(b - a)) / scale)
+    return worst
+
+
+def certificate(problem: Problem, table: GainTable, per_tick: GainTable, J0: float,
+                law: Moments, implemented: Moments, *, tolerance: float) -> dict:
+    """The spline table's certificate (the summary's ``table``): its oracle cost and excess
+    over the designed optimum ``J0`` and over the design's own law in double precision
+    (`law`), the worst expected-constraint residual, the knot covariances' change, the flash
+    and the compression ratio against the per-tick float32 table, the spans per stage and
+    the compression time."""
+    sp = table.spline
+    total, per_tick_total = flash_bytes(table), flash_bytes(per_tick)
+    return {
+        "kind": "spline",
+        "spline_tolerance": tolerance,
+        "spans": [int(sp.spans(s)) for s in range(table.n_stages)],
+        "entries": int(sp.col.size),
+        "oracle_J": implemented.J,
+        "excess_over_J0": (implemented.J - J0) / abs(J0) if J0 else implemented.J - J0,
+        "excess_over_law": (implemented.J - law.J) / abs(law.J) if law.J else implemented.J,
+        "constraint_residual": _residual(problem, implemented),
+        "knot_cov_change": _cov_change(law, implemented),
+        "flash_bytes": total,
+        "gain_bytes": spline_bytes(sp),
+        "per_tick_flash_bytes": per_tick_total,
+        "compression_ratio": per_tick_total / total,
+    }

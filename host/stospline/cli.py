@@ -117,7 +117,9 @@ def _check_budget(args, problem, command: str, **options) -> None:
 def _note_tables(d, doing: str) -> None:
     """Announce a long step without a progress bar (formatting or compiling big tables)."""
     from stospline.budget import CODEGEN_NUMBER, COMPILE_NUMBER, format_seconds
-    numbers = d.table.K.size + d.table.k0.size + d.table.L.size
+    t = d.table
+    numbers = (t.K.size + t.k0.size + t.L.size if t.spline is None
+               else t.spline.coef.size + t.spline.knot.size)
     per = CODEGEN_NUMBER + (COMPILE_NUMBER if doing == "compiling" else 0.0)
     if numbers * per > 5:
         progress.note(f"{doing} the C tables ({numbers} numbers, estimated "

@@ -16,7 +16,7 @@ from stospline.problem.model import Problem
 from stospline.sim.tick_moments import Moments
 from stospline.table.flash import flash_bytes, spline_bytes
 from stospline.table.format import GainTable
-from stospline.table.spline import compress
+from stospline.table.spline_compress import compress
 
 __all__ = ["spline_table", "certificate"]
 

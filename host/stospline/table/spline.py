@@ -24,7 +24,7 @@ import numpy as np
 from stospline.errors import DesignError
 
 __all__ = ["SplineGains", "SplineBudgetError", "evaluate", "fit_spline", "max_relative_error",
-           "gain_columns", "DEFAULT_MAX_SPANS", "MIN_TOLERANCE"]
+           "gain_columns", "DEFAULT_MAX_SPANS", "INITIAL_SPANS", "MIN_TOLERANCE"]
 
 DEFAULT_MAX_SPANS = 1024
 # Below this the float32 coefficients and the float32 evaluation (a few roundings of values
@@ -34,9 +34,9 @@ MIN_TOLERANCE = 2.0 ** -21
 # kind (K, k0 or L) are round-off of exact zeros: not stored.
 ZERO_FRACTION = 1e-12
 FIELD = "design.spline_tolerance"
-# The first fit: this many uniform spans, fewer on short stages (about 16 ticks a span at
-# least: a per-tick table is smaller than a spline with few ticks per span).
-_INITIAL_SPANS = 8
+# The first fit: this many uniform spans (fewer refits than starting from one span, for
+# about the same knots), fewer on short stages (16 ticks a span at least).
+INITIAL_SPANS = 8
 _INITIAL_TICKS_PER_SPAN = 16
 # Splitting a span whose error is r times the tolerance into ceil(1.25 r^(1/4)) pieces: the
 # error of a cubic fit falls like h^4; the margin saves a round of refits for most spans.
@@ -330,12 +330,12 @@ def _refined(breaks: np.ndarray, excess: np.ndarray) -> np.ndarray:
     return np.unique(np.concatenate(new))
 
 
-def _fit_stage(Y: np.ndarray, tolerance: float, max_spans: int, s: int
+def _fit_stage(Y: np.ndarray, tolerance: float, max_spans: int, initial_spans: int, s: int
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One stage: breakpoints, float32 coefficients (entries, S + 3) and the values the
     firmware evaluates (ticks, entries), every entry within `tolerance` of its largest."""
     T, E = Y.shape
-    S0 = max(1, min(_INITIAL_SPANS, T // _INITIAL_TICKS_PER_SPAN, max_spans))
+    S0 = max(1, min(initial_spans, T // _INITIAL_TICKS_PER_SPAN, max_spans))
     breaks = np.unique(np.rint(np.linspace(0, T, S0 + 1)).astype(np.int64))
     if E == 0:
         return breaks[[0, -1]], np.zeros((0, 4), np.float32), np.zeros((T, 0), np.float32)
@@ -364,8 +364,8 @@ def _fit_stage(Y: np.ndarray, tolerance: float, max_spans: int, s: int
         breaks = finer
 
 
-def fit_spline(exact, tolerance: float, *, max_spans: int = DEFAULT_MAX_SPANS
-               ) -> SplineGains:
+def fit_spline(exact, tolerance: float, *, max_spans: int = DEFAULT_MAX_SPANS,
+               initial_spans: int = INITIAL_SPANS) -> SplineGains:
     """Compress a table's per-tick gains to cubic B-splines, one knot vector per stage.
 
     Parameters
@@ -378,6 +378,9 @@ def fit_spline(exact, tolerance: float, *, max_spans: int = DEFAULT_MAX_SPANS
         largest magnitude over the stage.
     max_spans : int
         Spans allowed per stage.
+    initial_spans : int
+        Uniform spans of the first fit (fewer on stages under 16 ticks a span); the fit only
+        ever adds knots, so a coarse tolerance may keep them all.
 
     Returns
     -------
@@ -396,18 +399,20 @@ def fit_spline(exact, tolerance: float, *, max_spans: int = DEFAULT_MAX_SPANS
     are split, until every entry meets the tolerance. Entries that are identically zero over
     the stage are not stored.
     """
-    return _fit(exact, tolerance, max_spans)[0]
+    return _fit(exact, tolerance, max_spans, initial_spans)[0]
 
 
-def _fit(exact, tolerance: float, max_spans: int) -> tuple[SplineGains, np.ndarray]:
+def _fit(exact, tolerance: float, max_spans: int, initial_spans: int = INITIAL_SPANS
+         ) -> tuple[SplineGains, np.ndarray]:
     """`fit_spline` and the per-tick values it evaluated, (ticks, m, cols) float32 (the
     same as `evaluate` of the result, computed once)."""
     tolerance = float(tolerance)
     if not np.isfinite(tolerance) or not MIN_TOLERANCE <= tolerance < 1:
         raise SplineBudgetError(FIELD, f"the tolerance must lie in [{MIN_TOLERANCE:.3g}, 1) "
                                        f"(float32 coefficients), not {tolerance:g}")
-    if int(max_spans) < 1:
-        raise ValueError(f"max_spans must be at least 1, not {max_spans}")
+    if int(max_spans) < 1 or int(initial_spans) < 1:
+        raise ValueError(f"max_spans and initial_spans must be at least 1, not {max_spans} "
+                         f"and {initial_spans}")
     n, m, n_latch = exact.dims
     if n + n_latch > 255:
         raise ValueError("a spline table addresses at most 256 gain columns (uint8)")
@@ -419,7 +424,7 @@ def _fit(exact, tolerance: float, max_spans: int) -> tuple[SplineGains, np.ndarr
     for s in range(exact.n_stages):
         a, b = int(start[s]), int(start[s + 1])
         keep, Y = _stage_entries(exact, a, b)
-        breaks, C, G = _fit_stage(Y, tolerance, int(max_spans), s)
+        breaks, C, G = _fit_stage(Y, tolerance, int(max_spans), int(initial_spans), s)
         values[a:b][:, keep] = G
         knots.append(_clamped(breaks.astype(float)))
         counts.extend(keep.sum(axis=1))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stospline.table.spline import DEFAULT_MAX_SPANS, SplineGains, _fit
+from stospline.table.spline import DEFAULT_MAX_SPANS, INITIAL_SPANS, SplineGains, _fit
 from stospline.table.spline_latch import resolve_latch
 
 __all__ = ["compress"]
@@ -20,9 +20,9 @@ def _to_float32(a: np.ndarray) -> np.ndarray:
 
 
 def compress(problem, exact, quantized, tolerance: float, *,
-             max_spans: int = DEFAULT_MAX_SPANS, resolve: bool = True
-             ) -> tuple[SplineGains, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                        np.ndarray]:
+             max_spans: int = DEFAULT_MAX_SPANS, initial_spans: int = INITIAL_SPANS,
+             resolve: bool = True
+             ) -> tuple[SplineGains, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Fit, evaluate as the firmware does, re-solve the latch maps, round to float32.
 
     Parameters
@@ -36,8 +36,8 @@ def compress(problem, exact, quantized, tolerance: float, *,
         ``resolve=False`` and everything the spline does not replace.
     tolerance : float
         Relative tolerance of every gain entry (`stospline.table.spline.fit_spline`).
-    max_spans : int
-        Spans allowed per stage.
+    max_spans, initial_spans : int
+        Spans allowed per stage, and of the first fit (`fit_spline`).
     resolve : bool
         Re-solve ``Lambda, lambda0`` for the spline's gains (`spline_latch.resolve_latch`), so
         that the constraints hold in expectation as they do for the per-tick table; False keeps
@@ -63,7 +63,7 @@ def compress(problem, exact, quantized, tolerance: float, *,
     if exact.dims != quantized.dims or not np.array_equal(exact.stage_start,
                                                           quantized.stage_start):
         raise ValueError("the exact and the quantized tables are of different designs")
-    spline, values = _fit(exact, tolerance, max_spans)
+    spline, values = _fit(exact, tolerance, max_spans, initial_spans)
     n = exact.dims[0]
     K, k0, L = (np.ascontiguousarray(a) for a in (values[:, :, :n], values[:, :, n],
                                                    values[:, :, n + 1:]))

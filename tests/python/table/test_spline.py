@@ -282,11 +282,23 @@ def test_compress_gives_the_firmwares_gains_and_latch_maps(robot_problem, robot_
     implemented = q.with_arrays(K=K, k0=k0, L=L)
     # Exact before rounding; after it, at the float32 floor (|lambda0| ~ 5, ulp 4.8e-7) as
     # the per-tick table is (4.3e-8).
-    exact_maps = replace(implemented, Lambda=np.array(resolve_latch(robot_problem,
-                                                                    implemented)[0]),
-                         lambda0=resolve_latch(robot_problem, implemented)[1])
-    assert _residual(robot_problem, exact_maps) < 1e-11
+    Lam64, lam0_64 = resolve_latch(robot_problem, implemented)
+    assert _residual(robot_problem, replace(implemented, Lambda=Lam64, lambda0=lam0_64)) < 1e-11
     law = replace(implemented, Lambda=Lam, lambda0=lam0)
     assert _residual(robot_problem, law) < 2e-7
     J = evaluate_table(robot_problem, law, path=False).J
     assert J == pytest.approx(robot_zoh.implemented.J, rel=1e-6)
+
+
+def test_on_a_coarse_spline_only_the_re_solved_latch_meets_the_constraints(robot_problem,
+                                                                          robot_zoh,
+                                                                          robot_exact):
+    """Two spans a stage (10 % gain error): the design's latch maps miss the constraints by
+    6e-4; re-solved, they meet them as the per-tick table does. (Least-squares errors are
+    orthogonal to smooth functions, so fine fits barely move the constraints at all.)"""
+    q = robot_zoh.table
+    sp, K, k0, L, Lam, lam0 = compress(robot_problem, robot_exact, q, 0.5, initial_spans=2)
+    assert [sp.spans(s) for s in range(sp.n_stages)] == [2, 2]
+    assert _residual(robot_problem, q.with_arrays(K=K, k0=k0, L=L)) > 1e-4
+    assert _residual(robot_problem, q.with_arrays(K=K, k0=k0, L=L, Lambda=Lam,
+                                                  lambda0=lam0)) < 2e-7

@@ -8,7 +8,8 @@ change and the worst knot-constraint residual |E{C2 x} - zeta|, with the latch m
 for the spline's gains (`spline_latch.resolve_latch`, rounded to float32) and with the design's.
 Then the times: `compress` (fit, evaluate, re-solve) against `design_problem`, the first call
 in this process (lazy imports, compiled kernels loaded) and warm (fresh problem objects),
-each the best of --repeat runs. Prints Markdown.
+each the best of --repeat runs. Last, coarse splines (the first fit's uniform spans kept,
+tolerance 0.5): where re-solving the latch maps matters. Prints Markdown.
 
 Usage: PYTHONPATH=host .venv/bin/python tools/reports/spline_tradeoff.py
            [--example robot_corridor] [--mode stagewise] [--tolerances 1e-3 1e-4 ...]
@@ -26,11 +27,12 @@ from stospline.pipeline import design_problem
 from stospline.problem import load_problem
 from stospline.sim.oracle import evaluate_table
 from stospline.table.format import table_of
-from stospline.table.spline import max_relative_error
+from stospline.table.spline import INITIAL_SPANS, max_relative_error
 from stospline.table.spline_compress import compress
 
 ROOT = Path(__file__).resolve().parents[2]
 TOLERANCES = [1e-2, 1e-3, 1e-4, 1e-5, 1e-6]
+COARSE_SPANS = [2, 4, 8]
 
 
 def residual(problem, moments) -> float:
@@ -71,25 +73,35 @@ def main() -> None:
           f"n = {n}, m = {m}, {n_latch} latched multipliers. The float32 per-tick table: "
           f"K, k0, L {per_tick} bytes; oracle J = {base.J:.9f}, worst constraint residual "
           f"{residual(problem, base):.2e}.\n")
-    print("| tolerance | spans per stage | spline bytes | max rel gain error | "
-          "J rel change, re-solved latch | J rel change, design's latch | "
-          "residual, re-solved | residual, design's | compress |")
-    print("|---:|---|---:|---:|---:|---:|---:|---:|---:|")
-    for tol in args.tolerances:
-        sp, K, k0, L, Lam, lam0 = compress(problem, exact, table, tol)
-        spent = best_of(args.repeat, lambda: compress(problem, exact, table, tol))
+    header = ("| spans per stage | spline bytes | max rel gain error | "
+              "J rel change, re-solved latch | J rel change, design's latch | "
+              "residual, re-solved | residual, design's |")
+
+    def row(tol, initial_spans=INITIAL_SPANS) -> str:
+        sp, K, k0, L, Lam, lam0 = compress(problem, exact, table, tol,
+                                           initial_spans=initial_spans)
         resolved = evaluate_table(problem, table.with_arrays(K=K, k0=k0, L=L, Lambda=Lam,
                                                              lambda0=lam0), path=False)
         design_latch = evaluate_table(problem, table.with_arrays(K=K, k0=k0, L=L), path=False)
         spans = ", ".join(str(sp.spans(s)) for s in range(sp.n_stages))
-        print(f"| {tol:g} | {spans} | {sp.nbytes} | {max_relative_error(sp, exact):.2e} | "
-              f"{(resolved.J - base.J) / base.J:+.2e} | "
-              f"{(design_latch.J - base.J) / base.J:+.2e} | "
-              f"{residual(problem, resolved):.2e} | {residual(problem, design_latch):.2e} | "
-              f"{spent * 1e3:.1f} ms |")
+        return (f"| {spans} | {sp.nbytes} | {max_relative_error(sp, exact):.2e} | "
+                f"{(resolved.J - base.J) / base.J:+.2e} | "
+                f"{(design_latch.J - base.J) / base.J:+.2e} | "
+                f"{residual(problem, resolved):.2e} | {residual(problem, design_latch):.2e} |")
+
+    print("| tolerance " + header + " compress |")
+    print("|---:|---|---:|---:|---:|---:|---:|---:|---:|")
+    for tol in args.tolerances:
+        spent = best_of(args.repeat, lambda: compress(problem, exact, table, tol))
+        print(f"| {tol:g} " + row(tol) + f" {spent * 1e3:.1f} ms |")
     print(f"\ndesign_problem: {first * 1e3:.0f} ms the first call in this process, "
           f"{warm * 1e3:.1f} ms warm (best of {args.repeat}); compress times above are the "
-          f"best of {args.repeat}.")
+          f"best of {args.repeat}.\n")
+    print("Coarse splines (tolerance 0.5, the first fit's uniform spans kept):\n")
+    print("| first fit " + header)
+    print("|---:|---|---:|---:|---:|---:|---:|---:|")
+    for spans in COARSE_SPANS:
+        print(f"| {spans} spans " + row(0.5, spans))
 
 
 if __name__ == "__main__":

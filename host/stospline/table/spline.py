@@ -1,0 +1,459 @@
+"""Spline tables: each stage's gains as cubic B-splines of the tick instead of one row per tick
+(issue 13's format, ``spline_spec.md``, which the firmware implements; this is the host side).
+
+`SplineGains` holds the arrays the firmware reads; `evaluate` computes the per-tick gains
+exactly as the firmware does (binary32, one rounded operation at a time, the spec's order);
+`fit_spline` compresses a design's exact per-tick gains to a given relative tolerance,
+choosing each stage's integer breakpoints by refinement.
+
+The arrays, concatenated over stages (S_s spans in stage s, E_s stored entries)::
+
+    knot_start  uint32 (n_stages + 1,)   knot[knot_start[s]:knot_start[s+1]]: S_s + 7 knots
+    knot        float32                  [0,0,0,0, b_1 .. b_{S-1}, T,T,T,T], ticks of the stage
+    row_start   uint16 (n_stages*nu + 1,)  entries of (s, i): col[row_start[s*nu+i]:...+1]]
+    col         uint8  (n_entries,)      j < nx: K[i][j]; nx: k0[i]; nx+1+c: L[i][c]
+    coef_start  uint32 (n_stages + 1,)   coef[coef_start[s]:...]: E_s x (S_s + 3), entry-major
+    coef        float32
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from stospline.errors import DesignError
+
+__all__ = ["SplineGains", "SplineBudgetError", "evaluate", "fit_spline", "max_relative_error",
+           "gain_columns", "DEFAULT_MAX_SPANS", "INITIAL_SPANS", "MIN_TOLERANCE"]
+
+DEFAULT_MAX_SPANS = 1024
+# Below this the float32 coefficients and the float32 evaluation (a few roundings of values
+# up to the entry's largest) cannot promise the tolerance, whatever the knots.
+MIN_TOLERANCE = 2.0 ** -21
+# Entries whose largest value over the stage is below this fraction of the largest of their
+# kind (K, k0 or L) are round-off of exact zeros: not stored.
+ZERO_FRACTION = 1e-12
+FIELD = "design.spline_tolerance"
+# The first fit: this many uniform spans (fewer refits than starting from one span, for
+# about the same knots), fewer on short stages (16 ticks a span at least).
+INITIAL_SPANS = 8
+_INITIAL_TICKS_PER_SPAN = 16
+# Splitting a span whose error is r times the tolerance into ceil(1.25 r^(1/4)) pieces: the
+# error of a cubic fit falls like h^4; the margin saves a round of refits for most spans.
+_SPLIT_MARGIN = 1.25
+_DENSE_SOLVE_MAX = 400        # normal equations up to this size by numpy's dense solver
+
+
+class SplineBudgetError(DesignError):
+    """The gains cannot be fitted to the tolerance within the spans allowed per stage (or the
+    tolerance is finer than float32 coefficients can promise)."""
+
+
+@dataclass(frozen=True)
+class SplineGains:
+    """One table's gains as cubic B-splines per stage (the arrays of the module docstring).
+
+    ``nu`` inputs, ``nx`` states (the law's state: ``n + m`` with a delay), ``n_latch`` latched
+    multipliers (the table's padded width). Entries not stored are exactly zero.
+    """
+    knot_start: np.ndarray
+    knot: np.ndarray
+    row_start: np.ndarray
+    col: np.ndarray
+    coef_start: np.ndarray
+    coef: np.ndarray
+    nu: int
+    nx: int
+    n_latch: int
+
+    _DTYPES = {"knot_start": np.uint32, "knot": np.float32, "row_start": np.uint16,
+               "col": np.uint8, "coef_start": np.uint32, "coef": np.float32}
+
+    def __post_init__(self):
+        for name, dtype in self._DTYPES.items():
+            object.__setattr__(self, name, np.ascontiguousarray(getattr(self, name), dtype))
+        for name in ("nu", "nx", "n_latch"):
+            object.__setattr__(self, name, int(getattr(self, name)))
+        self._check()
+
+    def _check(self) -> None:
+        """The structural rules of the spec (the firmware refuses a table breaking them)."""
+        ns = self.n_stages
+        if ns < 1 or self.knot_start[0] != 0 or self.knot_start[-1] != self.knot.size:
+            raise ValueError("knot_start must run from 0 to the number of knots")
+        rows = self.row_start.astype(np.int64)
+        if rows.shape != (ns * self.nu + 1,) or rows[0] != 0 or rows[-1] != self.col.size \
+                or np.any(np.diff(rows) < 0):
+            raise ValueError("row_start must be nondecreasing from 0 to the number of entries, "
+                             "one row per (stage, input)")
+        if self.coef_start.shape != (ns + 1,) or self.coef_start[0] != 0 \
+                or self.coef_start[-1] != self.coef.size:
+            raise ValueError("coef_start must run from 0 to the number of coefficients")
+        if self.col.size and int(self.col.max()) > self.nx + self.n_latch:
+            raise ValueError("an entry's column is beyond nx + 1 + n_latch")
+        for s in range(ns):
+            U = self.knots(s).astype(float)
+            S = U.size - 7
+            if S < 1 or np.any(U[:4] != 0) or np.any(U[-4:] != U[-1]) \
+                    or np.any(np.diff(U[3:-3]) <= 0) or np.any(U != np.rint(U)) \
+                    or U[-1] >= 2 ** 24:
+                raise ValueError(f"stage {s}: the knots must be [0,0,0,0, b_1 < ... < b_(S-1), "
+                                 f"T,T,T,T] with integer breakpoints, 0 < b < T < 2^24")
+            cols = self.col[self.entry_slice(s)]
+            if self.coef_start[s + 1] - self.coef_start[s] != cols.size * (S + 3):
+                raise ValueError(f"stage {s}: {cols.size} entries need {cols.size * (S + 3)} "
+                                 f"coefficients")
+
+    @property
+    def n_stages(self) -> int:
+        return len(self.knot_start) - 1
+
+    @property
+    def n_entries(self) -> int:
+        return int(self.col.size)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the six arrays (what the spline adds to flash, headers aside)."""
+        return sum(getattr(self, name).nbytes for name in self._DTYPES)
+
+    def spans(self, s: int) -> int:
+        """Stage s's number of spans S_s."""
+        return int(self.knot_start[s + 1] - self.knot_start[s]) - 7
+
+    def knots(self, s: int) -> np.ndarray:
+        """Stage s's clamped knot vector (float32, S_s + 7 values)."""
+        return self.knot[self.knot_start[s]:self.knot_start[s + 1]]
+
+    def entry_slice(self, s: int) -> slice:
+        """Stage s's entries in `col` (all its inputs, row by row)."""
+        return slice(int(self.row_start[s * self.nu]), int(self.row_start[(s + 1) * self.nu]))
+
+    def entries(self, s: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(inputs, cols)`` of stage s's entries, in stored order: entry e is the gain of
+        input ``inputs[e]`` on operand ``cols[e]``."""
+        rows = self.row_start[s * self.nu:(s + 1) * self.nu + 1].astype(np.int64)
+        return np.repeat(np.arange(self.nu), np.diff(rows)), self.col[self.entry_slice(s)]
+
+    def coefficients(self, s: int) -> np.ndarray:
+        """Stage s's coefficients, (entries, S_s + 3) float32."""
+        c = self.coef[self.coef_start[s]:self.coef_start[s + 1]]
+        return c.reshape(-1, self.spans(s) + 3)
+
+
+def _basis(U: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The span index sigma and the four nonzero cubic B-splines ``N[0..3]`` at each `tau`
+    (The NURBS Book, A2.2), in the dtype of `U` and `tau`: in float32 every operation is one
+    binary32 rounding in the spec's order (numpy never fuses a multiply and an add)."""
+    S = U.size - 7
+    # U[sigma + 3] <= tau < U[sigma + 4]; tau < T, so sigma <= S - 1.
+    sigma = np.searchsorted(U[3:S + 3], tau, side="right") - 1
+    i = sigma + 3
+    left = [None] + [tau - U[i + 1 - j] for j in (1, 2, 3)]
+    right = [None] + [U[i + j] - tau for j in (1, 2, 3)]
+    N = [np.ones_like(tau), None, None, None]
+    for j in (1, 2, 3):
+        saved = np.zeros_like(tau)
+        for r in range(j):
+            temp = N[r] / (right[r + 1] + left[j - r])
+            N[r] = saved + right[r + 1] * temp
+            saved = left[j - r] * temp
+        N[j] = saved
+    return sigma, N
+
+
+def _combine(sigma: np.ndarray, N: list[np.ndarray], C: np.ndarray) -> np.ndarray:
+    """``g = N0 c[sigma]; g += N1 c[sigma+1]; ...`` for every entry: (ticks, entries), in the
+    dtype of N and C (C is (entries, S + 3))."""
+    Ct = C.T
+    g = N[0][:, None] * np.take(Ct, sigma, axis=0)
+    for r in (1, 2, 3):
+        g = g + N[r][:, None] * np.take(Ct, sigma + r, axis=0)
+    return g
+
+
+def _stage_values(knots: np.ndarray, C: np.ndarray, T: int) -> np.ndarray:
+    """A stage's entries at its ticks 0..T-1 as the firmware evaluates them (float32)."""
+    tau = np.arange(T, dtype=np.float32)
+    sigma, N = _basis(np.asarray(knots, np.float32), tau)
+    return _combine(sigma, N, np.asarray(C, np.float32))
+
+
+def evaluate(spline: SplineGains, stage_start: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The per-tick gains the firmware computes from `spline`, bit for bit.
+
+    Parameters
+    ----------
+    spline : SplineGains
+    stage_start : ndarray
+        The table's first tick of each stage, then the number of ticks.
+
+    Returns
+    -------
+    K, k0, L : ndarray
+        float32, shapes (ticks, nu, nx), (ticks, nu), (ticks, nu, n_latch); 0 where no entry
+        is stored.
+    """
+    start = np.asarray(stage_start, dtype=np.int64)
+    if start.size != spline.n_stages + 1:
+        raise ValueError(f"{start.size - 1} stages in the table, {spline.n_stages} in the spline")
+    nx, nu = spline.nx, spline.nu
+    Z = np.zeros((int(start[-1]), nu, nx + 1 + spline.n_latch), dtype=np.float32)
+    for s in range(spline.n_stages):
+        a, b = int(start[s]), int(start[s + 1])
+        U = spline.knots(s)
+        if float(U[-1]) != b - a:
+            raise ValueError(f"stage {s}: the spline spans {float(U[-1]):g} ticks, the table "
+                             f"{b - a}")
+        inputs, cols = spline.entries(s)
+        if cols.size:
+            Z[a:b, inputs, cols] = _stage_values(U, spline.coefficients(s), b - a)
+    return Z[:, :, :nx].copy(), Z[:, :, nx].copy(), Z[:, :, nx + 1:].copy()
+
+
+def gain_columns(table) -> np.ndarray:
+    """A table's gains side by side per tick, in the spline's column order: (ticks, m,
+    n + 1 + n_latch) = ``[K, k0, L]``."""
+    return _side_by_side(table.K, table.k0, table.L)
+
+
+def _side_by_side(K: np.ndarray, k0: np.ndarray, L: np.ndarray) -> np.ndarray:
+    return np.concatenate([K, k0[:, :, None], L], axis=2)
+
+
+def _stage_entries(table, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """The stored entries of the stage of ticks ``a..b-1``: the mask (m, cols) of the
+    (input, column) entries not identically zero over the stage (round-off of zeros, below
+    `ZERO_FRACTION` of the largest of their kind, aside) and their values (ticks, entries)
+    float64, in `col` order."""
+    kinds = [np.asarray(g, dtype=float) for g in (table.K[a:b], table.k0[a:b, :, None],
+                                                  table.L[a:b])]
+    keep = []
+    for g in kinds:
+        peak = np.abs(g).max(axis=0, initial=0.0)
+        top = peak.max(initial=0.0)
+        keep.append(peak > ZERO_FRACTION * top if top > 0 else np.zeros(peak.shape, bool))
+    # Gathered kind by kind, input by input: concatenating the (ticks, m, cols) arrays first
+    # is slow (numpy works row by row on rows of a few values).
+    values = [g[:, i, kept[i]] for i in range(len(keep[0])) for g, kept in zip(kinds, keep)]
+    keep = np.concatenate(keep, axis=1)
+    return keep, np.concatenate(values, axis=1)
+
+
+def _clamped(breaks: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0.0] * 3, breaks, [float(breaks[-1])] * 3])
+
+
+def _lsq(breaks: np.ndarray, N: list[np.ndarray], YT: np.ndarray) -> np.ndarray:
+    """Least-squares B-spline coefficients (entries, S + 3) of the rows of `YT` (entries,
+    ticks) at ticks 0..T-1, by the banded normal equations (float64). Ticks of one span are
+    consecutive, so their sums are `numpy.add.reduceat` over the span starts."""
+    S = breaks.size - 1
+    nb = S + 3
+    starts = breaks[:-1]
+    band = np.zeros((4, nb))            # band[d, j] = (B'B)[j, j + d]
+    rhs = np.zeros((YT.shape[0], nb))
+    for a in range(4):
+        for b in range(a, 4):
+            band[b - a, a:a + S] += np.add.reduceat(N[a] * N[b], starts)
+        rhs[:, a:a + S] += np.add.reduceat(YT * N[a], starts, axis=1)
+    # A basis function that no tick reaches (a last span one tick long) would make the
+    # system singular; the ridge puts its coefficient at 0, which no tick evaluates.
+    band[0] += 1e-13 * band[0].max()
+    return _solve_banded(band, rhs.T).T
+
+
+def _solve_banded(band: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve ``A x = rhs`` for the symmetric positive definite A given by its upper band
+    (``band[d, j] = A[j, j + d]``): dense for small systems (numpy's LAPACK), else a banded
+    LDL' in a loop (no scipy.linalg: importing it costs more than the compression)."""
+    w, nb = band.shape
+    if nb <= _DENSE_SOLVE_MAX:
+        A = np.diag(band[0])
+        for d in range(1, w):
+            A += np.diag(band[d, :nb - d], d) + np.diag(band[d, :nb - d], -d)
+        return np.linalg.solve(A, rhs)
+    # A = L D L' with unit lower L of bandwidth w - 1: lw[d][j] = L[j + d, j].
+    a = band.tolist()
+    Dg = [0.0] * nb
+    lw = [[0.0] * nb for _ in range(w)]
+    for j in range(nb):
+        dj = a[0][j] - sum(lw[j - k][k] ** 2 * Dg[k] for k in range(max(0, j - w + 1), j))
+        Dg[j] = dj
+        for d in range(1, min(w, nb - j)):
+            acc = a[d][j]
+            for k in range(max(0, j + d - w + 1), j):
+                acc -= lw[j + d - k][k] * lw[j - k][k] * Dg[k]
+            lw[d][j] = acc / dj
+    x = np.array(rhs, dtype=float)
+    for j in range(nb):                       # L y = rhs
+        for d in range(1, min(w, nb - j)):
+            x[j + d] -= lw[d][j] * x[j]
+    x /= np.array(Dg)[:, None]
+    for j in range(nb - 1, -1, -1):           # L' x = y / D
+        for d in range(1, min(w, nb - j)):
+            x[j] -= lw[d][j] * x[j + d]
+    return x
+
+
+def _worst_excess(G: np.ndarray, Y: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Per tick, the largest ``|G - Y| * scale`` over the entries (columns)."""
+    D = G - Y
+    np.abs(D, out=D)
+    D *= scale
+    worst = D[:, 0].copy()
+    for e in range(1, D.shape[1]):       # column by column: far faster than max(axis=1)
+        np.maximum(worst, D[:, e], out=worst)
+    return worst
+
+
+def _refined(breaks: np.ndarray, excess: np.ndarray) -> np.ndarray:
+    """`breaks` with the spans whose worst error is `excess` (> 1: over the tolerance) split
+    into about ``excess^(1/4)`` integer pieces; the same array if none can be split.
+
+    A one-tick span that misses cannot be split: its error comes from the coefficients it
+    shares with the spans around it (a cubic's basis reaches three spans each way), so
+    those are halved instead.
+    """
+    length = np.diff(breaks)
+    pieces = np.zeros(length.size, dtype=np.int64)
+    for s in np.flatnonzero(excess > 1):
+        if length[s] > 1:
+            pieces[s] = max(pieces[s], 2, int(np.ceil(_SPLIT_MARGIN * excess[s] ** 0.25)))
+        else:
+            near = slice(max(0, s - 3), s + 4)
+            pieces[near] = np.maximum(pieces[near], 2)
+    pieces = np.minimum(pieces, length)
+    new = [breaks] + [np.rint(np.linspace(breaks[s], breaks[s + 1], pieces[s] + 1)[1:-1])
+                      .astype(np.int64) for s in np.flatnonzero(pieces > 1)]
+    return np.unique(np.concatenate(new))
+
+
+def _fit_stage(Y: np.ndarray, tolerance: float, max_spans: int, initial_spans: int, s: int
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One stage: breakpoints, float32 coefficients (entries, S + 3) and the values the
+    firmware evaluates (ticks, entries), every entry within `tolerance` of its largest."""
+    T, E = Y.shape
+    S0 = max(1, min(initial_spans, T // _INITIAL_TICKS_PER_SPAN, max_spans))
+    breaks = np.unique(np.rint(np.linspace(0, T, S0 + 1)).astype(np.int64))
+    if E == 0:
+        return breaks[[0, -1]], np.zeros((0, 4), np.float32), np.zeros((T, 0), np.float32)
+    YT = np.ascontiguousarray(Y.T)
+    scale = 1.0 / (tolerance * np.abs(YT).max(axis=1))
+    tau = np.arange(T, dtype=np.float32)
+    while True:
+        # The least squares on the firmware's own (float32) basis: the fit is best for the
+        # values it will evaluate.
+        sigma, N = _basis(_clamped(breaks.astype(float)).astype(np.float32), tau)
+        C = _lsq(breaks, [b.astype(float) for b in N], YT).astype(np.float32)
+        G = _combine(sigma, N, C)
+        excess = _worst_excess(G, Y, scale)
+        if excess.max() <= 1.0:
+            return breaks, C, G
+        worst = np.maximum.reduceat(excess, breaks[:-1])
+        finer = _refined(breaks, worst)
+        if finer.size == breaks.size:
+            raise SplineBudgetError(FIELD, f"stage {s}: the float32 spline misses the "
+                                           f"tolerance {tolerance:g} by {excess.max():.3g}x "
+                                           f"even with one-tick spans around the miss")
+        if finer.size - 1 > max_spans:
+            raise SplineBudgetError(FIELD, f"stage {s}: the gains need more than {max_spans} "
+                                           f"spans for the tolerance {tolerance:g} (raise "
+                                           f"the tolerance or the span limit)")
+        breaks = finer
+
+
+def fit_spline(exact, tolerance: float, *, max_spans: int = DEFAULT_MAX_SPANS,
+               initial_spans: int = INITIAL_SPANS) -> SplineGains:
+    """Compress a table's per-tick gains to cubic B-splines, one knot vector per stage.
+
+    Parameters
+    ----------
+    exact : GainTable
+        The design's own per-tick law, ``table_of(design, quantize=False)`` (float64).
+    tolerance : float
+        Every stored entry, evaluated as the firmware does (`evaluate`), is within
+        ``tolerance * max |g|`` of the exact value at every tick, ``max |g|`` the entry's
+        largest magnitude over the stage.
+    max_spans : int
+        Spans allowed per stage.
+    initial_spans : int
+        Uniform spans of the first fit (fewer on stages under 16 ticks a span); the fit only
+        ever adds knots, so a coarse tolerance may keep them all.
+
+    Returns
+    -------
+    SplineGains
+
+    Raises
+    ------
+    SplineBudgetError
+        (field ``design.spline_tolerance``) The tolerance is below what float32 coefficients
+        can promise (`MIN_TOLERANCE`), or some stage needs more than `max_spans` spans.
+
+    Notes
+    -----
+    Each stage starts from a few uniform spans, is least-squares fitted at its ticks (all
+    entries at once, coefficients rounded to float32), and the spans where some entry misses
+    are split, until every entry meets the tolerance. Entries that are identically zero over
+    the stage are not stored.
+    """
+    return _fit(exact, tolerance, max_spans, initial_spans)[0]
+
+
+def _fit(exact, tolerance: float, max_spans: int, initial_spans: int = INITIAL_SPANS
+         ) -> tuple[SplineGains, np.ndarray]:
+    """`fit_spline` and the per-tick values it evaluated, (ticks, m, cols) float32 (the
+    same as `evaluate` of the result, computed once)."""
+    tolerance = float(tolerance)
+    if not np.isfinite(tolerance) or not MIN_TOLERANCE <= tolerance < 1:
+        raise SplineBudgetError(FIELD, f"the tolerance must lie in [{MIN_TOLERANCE:.3g}, 1) "
+                                       f"(float32 coefficients), not {tolerance:g}")
+    if int(max_spans) < 1 or int(initial_spans) < 1:
+        raise ValueError(f"max_spans and initial_spans must be at least 1, not {max_spans} "
+                         f"and {initial_spans}")
+    n, m, n_latch = exact.dims
+    if n + n_latch > 255:
+        raise ValueError("a spline table addresses at most 256 gain columns (uint8)")
+    start = np.asarray(exact.stage_start, dtype=np.int64)
+    if np.any(np.diff(start) >= 2 ** 24):
+        raise ValueError("a stage of 2^24 ticks or more has knots float32 cannot hold")
+    values = np.zeros((int(start[-1]), m, n + 1 + n_latch), dtype=np.float32)
+    knots, counts, cols, coefs = [], [], [], []
+    for s in range(exact.n_stages):
+        a, b = int(start[s]), int(start[s + 1])
+        keep, Y = _stage_entries(exact, a, b)
+        breaks, C, G = _fit_stage(Y, tolerance, int(max_spans), int(initial_spans), s)
+        values[a:b][:, keep] = G
+        knots.append(_clamped(breaks.astype(float)))
+        counts.extend(keep.sum(axis=1))
+        cols.extend(np.flatnonzero(row) for row in keep)
+        coefs.append(C.ravel())
+    if sum(counts) > np.iinfo(np.uint16).max:
+        raise ValueError(f"{sum(counts)} stored entries: row_start (uint16) holds 65535")
+    spline = SplineGains(
+        knot_start=np.concatenate([[0], np.cumsum([k.size for k in knots])]),
+        knot=np.concatenate(knots),
+        row_start=np.concatenate([[0], np.cumsum(counts)]),
+        col=np.concatenate(cols),
+        coef_start=np.concatenate([[0], np.cumsum([c.size for c in coefs])]),
+        coef=np.concatenate(coefs), nu=m, nx=n, n_latch=n_latch)
+    return spline, values
+
+
+def max_relative_error(spline: SplineGains, exact) -> float:
+    """The largest error of `spline`'s stored entries, evaluated as the firmware does, against
+    `exact`'s per-tick gains, each relative to the entry's largest magnitude over the stage
+    (what `fit_spline`'s tolerance bounds)."""
+    start = np.asarray(exact.stage_start, dtype=np.int64)
+    fitted = _side_by_side(*evaluate(spline, start)).astype(float)
+    Z = gain_columns(exact).astype(float)
+    worst = 0.0
+    for s in range(spline.n_stages):
+        Y, G = Z[start[s]:start[s + 1]], fitted[start[s]:start[s + 1]]
+        inputs, cols = spline.entries(s)
+        err = np.abs(G[:, inputs, cols] - Y[:, inputs, cols]).max(axis=0, initial=0.0)
+        peak = np.abs(Y[:, inputs, cols]).max(axis=0, initial=0.0)
+        worst = max(worst, float((err / peak).max(initial=0.0)))
+    return worst

@@ -1,0 +1,73 @@
+"""Everything a spline table's assembler needs from one design: the spline fit, the per-tick
+gains the firmware will compute from it, and the latch maps re-solved for those gains."""
+from __future__ import annotations
+
+import numpy as np
+
+from stospline.table.spline import DEFAULT_MAX_SPANS, INITIAL_SPANS, SplineGains, _fit
+from stospline.table.spline_latch import resolve_latch
+
+__all__ = ["compress"]
+
+
+def _to_float32(a: np.ndarray) -> np.ndarray:
+    """float32 after flushing what is below 1e-12 of the array's largest to zero, as the
+    per-tick tables round (`stospline.table.format`): the re-solve turns the structural zeros
+    of a latch map into 1e-17s that would differ between machines."""
+    a = np.asarray(a, dtype=float)
+    scale = float(np.abs(a).max()) if a.size else 0.0
+    return np.where(np.abs(a) < 1e-12 * scale, 0.0, a).astype(np.float32)
+
+
+def compress(problem, exact, quantized, tolerance: float, *,
+             max_spans: int = DEFAULT_MAX_SPANS, initial_spans: int = INITIAL_SPANS,
+             resolve: bool = True
+             ) -> tuple[SplineGains, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Fit, evaluate as the firmware does, re-solve the latch maps, round to float32.
+
+    Parameters
+    ----------
+    problem : Problem
+        The problem the tables were designed for.
+    exact : GainTable
+        The design's own law, ``table_of(design, quantize=False)``.
+    quantized : GainTable
+        Its float32 per-tick table (``table_of(design)``): the latch maps kept when
+        ``resolve=False`` and everything the spline does not replace.
+    tolerance : float
+        Relative tolerance of every gain entry (`stospline.table.spline.fit_spline`).
+    max_spans, initial_spans : int
+        Spans allowed per stage, and of the first fit (`fit_spline`).
+    resolve : bool
+        Re-solve ``Lambda, lambda0`` for the spline's gains (`spline_latch.resolve_latch`), so
+        that the constraints hold in expectation as they do for the per-tick table; False keeps
+        the design's, which then miss them by about the tolerance.
+
+    Returns
+    -------
+    spline : SplineGains
+    K, k0, L : ndarray
+        float32 per-tick gains, exactly `stospline.table.spline.evaluate` of `spline`.
+    Lambda, lambda0 : ndarray
+        float32 latch maps, shaped as the table's.
+
+    Raises
+    ------
+    SplineBudgetError
+        The tolerance cannot be met (`fit_spline`).
+    DesignError
+        (field ``design.table``) The re-solve is not exact for this table (band, delayed,
+        state-latching tables, time-varying data): pass ``resolve=False`` to keep the design's
+        latch maps.
+    """
+    if exact.dims != quantized.dims or not np.array_equal(exact.stage_start,
+                                                          quantized.stage_start):
+        raise ValueError("the exact and the quantized tables are of different designs")
+    spline, values = _fit(exact, tolerance, max_spans, initial_spans)
+    n = exact.dims[0]
+    K, k0, L = (np.ascontiguousarray(a) for a in (values[:, :, :n], values[:, :, n],
+                                                   values[:, :, n + 1:]))
+    if not resolve:
+        return spline, K, k0, L, quantized.Lambda, quantized.lambda0
+    Lam, lam0 = resolve_latch(problem, quantized.with_arrays(K=K, k0=k0, L=L))
+    return spline, K, k0, L, _to_float32(Lam), _to_float32(lam0)

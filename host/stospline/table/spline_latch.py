@@ -1,0 +1,181 @@
+"""The latch maps re-solved for a law as implemented: with gains that differ from the design's
+(a spline's evaluation), the design's ``Lambda, lambda0`` no longer make the expected outputs
+meet the knot constraints; these do, exactly (in float64).
+
+From the latch tick of a group (multipliers ``v`` for the constrained knots up to the next
+latch), the mean obeys ``m_{j+1} = F [m_j; u_j; 1]``, ``u_j = -K_j m_j - k0_j - L_j v`` (the
+command's mean: the law is affine and the noise has zero mean), so ``m(t) = Phi x + psi +
+Gamma v`` at every tick. The constraints ``C2_k m(t_k) = zeta_k`` at the group's knots are
+square in ``v``: ``G = C2 Gamma``, ``Lambda = -G^-1 C2 Phi``, ``lambda0 = G^-1 (zeta - C2 psi)``.
+
+The groups are read off the table (a latch at every stage with ``stage_n_latch > 0``,
+covering the constrained knots up to the next latch), which is what
+`stospline.design.latch.latch_groups` makes of both modes; the table layer imports no
+designer, so the tick's mean map is computed here too (as ``design.zoh._tick_data``'s ``F``).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from stospline.errors import DesignError
+from stospline.expm import expm
+
+__all__ = ["resolve_latch", "latch_groups_of_table", "mean_tick_map"]
+
+FIELD = "design.table"
+
+
+def mean_tick_map(stage, h: float) -> np.ndarray:
+    """``F`` (n, n + m + 1) with ``E x+ = F [x; u; 1]`` over one tick of constant data,
+    the command held: the drift ``[[A, B, f], [0, 0, 0]]`` exponentiated."""
+    n, m = stage.B.shape
+    drift = np.zeros((n + m + 1, n + m + 1))
+    drift[:n, :n] = stage.A
+    drift[:n, n:n + m] = stage.B
+    if stage.f is not None:
+        drift[:n, -1] = stage.f
+    return expm(drift * h)[:n]
+
+
+def latch_groups_of_table(problem, table) -> list[tuple[int, list[int]]]:
+    """``(latch stage, constrained knots)`` of every latch of `table`, the knots in order:
+    their constraints' rows are the latched vector's, in that order.
+
+    Raises DesignError (field ``design.table``) when the latched widths do not match the
+    constraints: a table that latches the state (more multipliers than states), or a table
+    of another problem.
+    """
+    n_latch = np.asarray(table.stage_n_latch, dtype=int)
+    latches = [s for s in range(table.n_stages) if n_latch[s] > 0]
+    groups, covered = [], set()
+    for i, s in enumerate(latches):
+        end = latches[i + 1] if i + 1 < len(latches) else table.n_stages
+        knots = [k for k in range(s, end) if problem.knots[k].n_constraints]
+        width = sum(problem.knots[k].n_constraints for k in knots)
+        if width != n_latch[s]:
+            raise DesignError(FIELD, f"stage {s} latches {n_latch[s]} values but its group's "
+                                     f"constraints have {width} rows (a table that latches "
+                                     f"the state, or of another problem): not re-solvable")
+        groups.append((s, knots))
+        covered.update(knots)
+    missed = [k for k, kn in enumerate(problem.knots) if kn.n_constraints and k not in covered]
+    if missed:
+        raise DesignError(FIELD, f"no latch of the table covers knot {missed[0]}'s constraint")
+    return groups
+
+
+def _refuse_unsupported(problem, table) -> None:
+    """What the re-solve cannot do exactly is refused, naming the reason."""
+    why = None
+    if getattr(table, "arith", "float32") != "float32" or not np.issubdtype(table.K.dtype,
+                                                                             np.floating):
+        why = "a fixed-point table"
+    elif getattr(table, "band_qp", None) is not None or any(
+            kn.constraint is not None and kn.constraint.is_band for kn in problem.knots):
+        why = "a band table (the firmware re-solves the band dual, not an affine latch)"
+    elif getattr(table, "delay_ticks", 0):
+        why = "a table designed for a one-tick delay (its state carries the command)"
+    elif any(st.varying is not None for st in problem.stages):
+        why = "time-varying stage data (the mean map is not one exponential per stage)"
+    elif len(table.stage_start) != len(problem.knots) + 1 or not np.array_equal(
+            np.diff(np.asarray(table.stage_start, dtype=np.int64)),
+            np.rint(np.diff(problem.times) * table.tick_hz).astype(np.int64)):
+        why = "the table's stages do not match the problem's at its tick rate"
+    if why is not None:
+        raise DesignError(FIELD, f"the latch maps cannot be re-solved exactly for {why}")
+
+
+def _affine_product(P: np.ndarray) -> np.ndarray:
+    """The composition ``P[-1] o ... o P[0]`` of affine blocks ``P[j] = [A_j | C_j]`` (n, d),
+    each the map ``[m; c] -> [A_j m + C_j c; c]`` (c the constants ``[v; 1]``), by pairwise
+    products: a dozen batched matmuls instead of one Python step per tick."""
+    n = P.shape[1]
+    while P.shape[0] > 1:
+        k = P.shape[0]
+        later = P[1::2]
+        pair = later[:, :, :n] @ P[0:k - 1:2]
+        pair[:, :, n:] += later[:, :, n:]
+        P = np.concatenate([pair, P[k - 1:] if k % 2 else P[:0]])
+    return P[0]
+
+
+def _stage_map(stage, table, s: int, width: int, h: float) -> np.ndarray:
+    """The mean over stage s as an affine block (n, n + width + 1): ``m_end = A m_start + C
+    [v; 1]`` under the table's gains (its first `width` multiplier columns)."""
+    n, m, _ = table.dims
+    a, b = int(table.stage_start[s]), int(table.stage_start[s + 1])
+    F = mean_tick_map(stage, h)
+    Bd, d = F[:, n:n + m], n + width + 1
+    # Per tick P = [Ad | 0 | fd] - Bd [K | L | k0] (u = -K m - L v - k0), every tick in one
+    # matrix product (numpy is slow on arrays of 4-wide rows, fast on one product): the
+    # tick's gains side by side, input by input, then 1, times `spread`, whose row for the
+    # gain of input i on operand j holds -Bd[:, i] in column j, and whose last row the
+    # constant part.
+    gains = np.hstack([np.asarray(table.K[a:b], dtype=float).reshape(b - a, m * n),
+                       np.asarray(table.L[a:b, :, :width], dtype=float).reshape(b - a, m * width),
+                       np.asarray(table.k0[a:b], dtype=float), np.ones((b - a, 1))])
+    operand = np.r_[np.tile(np.arange(n), m), np.tile(np.arange(n, n + width), m),
+                    np.full(m, d - 1)]
+    of_input = np.r_[np.repeat(np.arange(m), n), np.repeat(np.arange(m), width), np.arange(m)]
+    spread = np.zeros((gains.shape[1], n, d))
+    spread[np.arange(operand.size), :, operand] = -Bd[:, of_input].T
+    spread[-1, :, :n] = F[:, :n]
+    spread[-1, :, -1] = F[:, -1]
+    return _affine_product((gains @ spread.reshape(-1, n * d)).reshape(b - a, n, d))
+
+
+def resolve_latch(problem, table) -> tuple[np.ndarray, np.ndarray]:
+    """The latch maps that make `table`'s law meet every knot constraint in expectation.
+
+    Parameters
+    ----------
+    problem : Problem
+        The problem the table was designed for (plant, knots, constraints).
+    table : GainTable
+        The law as implemented: its K, k0 and L (float32 or float64) are taken as they are;
+        its own Lambda and lambda0 are ignored where the table latches.
+
+    Returns
+    -------
+    Lambda, lambda0 : ndarray
+        float64, the table's shapes (n_stages, n_latch, n) and (n_stages, n_latch): re-solved
+        rows at the latching stages, the table's values elsewhere.
+
+    Raises
+    ------
+    DesignError
+        (field ``design.table``) For what is not re-solved exactly: fixed-point, band or
+        delayed tables, tables that latch the state, time-varying stage data, or gains under
+        which the multipliers do not move the constraints (a singular ``C2 Gamma``).
+
+    Notes
+    -----
+    As the oracle (`stospline.sim.oracle.evaluate_table`), this assumes no command is
+    clipped by the table's limits.
+    """
+    _refuse_unsupported(problem, table)
+    n = table.dims[0]
+    h = 1.0 / table.tick_hz
+    Lam = np.array(table.Lambda, dtype=float)
+    lam0 = np.array(table.lambda0, dtype=float)
+    for latch, knots in latch_groups_of_table(problem, table):
+        width = int(table.stage_n_latch[latch])
+        W = np.eye(n, n + width + 1)             # m = W [x; v; 1], from the latch tick
+        rows, zeta = [], []
+        for s in range(latch, knots[-1] + 1):
+            P = _stage_map(problem.stages[s], table, s, width, h)
+            W = P[:, :n] @ W
+            W[:, n:] += P[:, n:]
+            if s in knots:
+                con = problem.knots[s].constraint
+                rows.append(con.C @ W)
+                zeta.append(con.value)
+        CW, zeta = np.vstack(rows), np.concatenate(zeta)
+        G = CW[:, n:n + width]
+        if np.linalg.cond(G) > 1e12:
+            raise DesignError(FIELD, f"the multipliers latched at stage {latch} hardly move "
+                                     f"their constraints under these gains (cond(C2 Gamma) = "
+                                     f"{np.linalg.cond(G):.2g})")
+        Lam[latch, :width] = -np.linalg.solve(G, CW[:, :n])
+        lam0[latch, :width] = np.linalg.solve(G, zeta - CW[:, -1])
+    return Lam, lam0

@@ -1,0 +1,304 @@
+"""Spline tables (issue 13): the host's mirror of the firmware's evaluation, the fit, and the
+latch maps re-solved for the fitted gains.
+
+* `evaluate` is the spec's binary32 evaluation (docs: ``spline_spec.md``): bit for bit a
+  scalar transcription of the spec (numpy float32 scalars, one rounding per operation), and
+  scipy's float64 B-splines to float32 precision; its basis sums to 1 within rounding;
+* `fit_spline` meets its tolerance on every stored entry, stores no structural zero, and
+  refuses what it cannot meet;
+* `resolve_latch` makes a perturbed law meet its constraints again (by the oracle, to float64
+  rounding), reproduces the design's latch maps for the design's own gains, and refuses what it
+  cannot do exactly; the oracle check catches a wrong re-solve.
+"""
+import tomllib
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from scipy.interpolate import BSpline
+
+from stospline.design.latch import latch_groups
+from stospline.design.zoh import _tick_data, design_zoh
+from stospline.errors import DesignError
+from stospline.problem import parse_problem
+from stospline.sim.oracle import evaluate_table
+from stospline.table.format import BandQP, table_of
+from stospline.table.spline import (MIN_TOLERANCE, SplineBudgetError, SplineGains, _basis,
+                                    _lsq, _solve_banded, evaluate, fit_spline,
+                                    max_relative_error)
+from stospline.table.spline_compress import compress
+from stospline.table.spline_latch import latch_groups_of_table, mean_tick_map, resolve_latch
+
+from support.problems import BASE, edit
+
+F32 = np.float32
+EPS32 = float(np.finfo(np.float32).eps)
+
+
+def _settings(n):
+    return settings(derandomize=True, database=None, max_examples=n, deadline=None,
+                    suppress_health_check=[HealthCheck.too_slow])
+
+
+# ---------------------------------------------------------------------------------------
+# The mirror
+
+
+def _random_spline(rng, T):
+    """One stage of T ticks, one input, nx = 2, one multiplier: K[0][0], k0 and L[0][0]
+    stored (cols 0, 2, 3) with random integer breakpoints and coefficients."""
+    S = int(rng.integers(1, min(T, 9) + 1))
+    inner = np.sort(rng.choice(np.arange(1, T), size=S - 1, replace=False)) if S > 1 else []
+    knot = np.concatenate([[0] * 4, inner, [T] * 4])
+    coef = (rng.normal(size=(3, S + 3)) * 10.0 ** rng.integers(-3, 4)).astype(F32)
+    return SplineGains(knot_start=[0, knot.size], knot=knot, row_start=[0, 3], col=[0, 2, 3],
+                       coef_start=[0, coef.size], coef=coef.ravel(), nu=1, nx=2, n_latch=1)
+
+
+def _spec_gain(U, c, tick):
+    """The spec's evaluation, transcribed literally with float32 scalars."""
+    U = [F32(u) for u in U]
+    tau = F32(tick)
+    sigma = next(s for s in range(len(U) - 7) if U[s + 3] <= tau < U[s + 4])
+    i = sigma + 3
+    left = [None] + [F32(tau - U[i + 1 - j]) for j in (1, 2, 3)]
+    right = [None] + [F32(U[i + j] - tau) for j in (1, 2, 3)]
+    N = [F32(1), F32(0), F32(0), F32(0)]
+    for j in (1, 2, 3):
+        saved = F32(0)
+        for r in range(j):
+            temp = F32(N[r] / F32(right[r + 1] + left[j - r]))
+            N[r] = F32(saved + F32(right[r + 1] * temp))
+            saved = F32(left[j - r] * temp)
+        N[j] = saved
+    g = F32(N[0] * c[sigma])
+    for r in (1, 2, 3):
+        g = F32(g + F32(N[r] * c[sigma + r]))
+    return g
+
+
+@_settings(40)
+@given(seed=st.integers(0, 2 ** 32 - 1), T=st.integers(1, 60))
+def test_the_mirror_is_the_spec_bit_for_bit_and_the_float64_spline_to_float32(seed, T):
+    sp = _random_spline(np.random.default_rng(seed), T)
+    K, k0, L = evaluate(sp, [0, T])
+    assert K.dtype == k0.dtype == L.dtype == np.float32
+    assert not K[:, 0, 1].any()                    # not stored: exactly zero
+    U, C = sp.knots(0), sp.coefficients(0)
+    for got, c in zip((K[:, 0, 0], k0[:, 0], L[:, 0, 0]), C):
+        spec = np.array([_spec_gain(U, c, t) for t in range(T)], dtype=F32)
+        np.testing.assert_array_equal(got.view(np.uint32), spec.view(np.uint32))
+        ref = BSpline(U.astype(float), c.astype(float), 3)(np.arange(T, dtype=float))
+        assert np.abs(got - ref).max() <= 8 * EPS32 * np.abs(c).max()
+    again = evaluate(sp, [0, T])
+    assert all(np.array_equal(a, b) for a, b in zip((K, k0, L), again))
+
+
+@_settings(30)
+@given(seed=st.integers(0, 2 ** 32 - 1), T=st.integers(1, 400))
+def test_the_basis_sums_to_one_within_rounding(seed, T):
+    U = _random_spline(np.random.default_rng(seed), T).knots(0)
+    tau = np.arange(T, dtype=F32)
+    _, N32 = _basis(U, tau)
+    assert np.abs(np.sum(N32, axis=0, dtype=float) - 1).max() <= 8 * EPS32
+    _, N64 = _basis(U.astype(float), tau.astype(float))
+    assert np.abs(sum(N64) - 1).max() <= 1e-14
+    assert min(n.min() for n in N32) >= 0
+
+
+def test_evaluate_refuses_a_spline_of_other_stages():
+    sp = _random_spline(np.random.default_rng(1), 30)
+    with pytest.raises(ValueError, match="spans 30 ticks"):
+        evaluate(sp, [0, 31])
+    with pytest.raises(ValueError, match="stages"):
+        evaluate(sp, [0, 10, 30])
+
+
+# ---------------------------------------------------------------------------------------
+# The fit
+
+
+@pytest.fixture(scope="module")
+def robot_exact(robot_zoh):
+    return table_of(robot_zoh.design, quantize=False)
+
+
+@pytest.mark.parametrize("tolerance", [1e-3, 1e-5])
+def test_the_fit_meets_the_tolerance_on_every_entry_and_stores_no_zero(robot_exact, tolerance):
+    exact = robot_exact
+    sp = fit_spline(exact, tolerance)
+    K, k0, L = evaluate(sp, exact.stage_start)
+    got = np.concatenate([K, k0[..., None], L], axis=2).astype(float)
+    want = np.concatenate([exact.K, exact.k0[..., None], exact.L], axis=2)
+    n = exact.dims[0]
+    for s in range(exact.n_stages):
+        a, b = exact.stage_start[s], exact.stage_start[s + 1]
+        peak = np.abs(want[a:b]).max(axis=0)
+        err = np.abs(got[a:b] - want[a:b]).max(axis=0)
+        stored = np.zeros(peak.shape, dtype=bool)
+        stored[sp.entries(s)] = True
+        assert np.all(err[stored] <= tolerance * peak[stored])
+        assert not got[a:b][:, ~stored].any()      # not stored: exactly zero
+        # ... and only the zeros are missing: the robot's axes are decoupled (K and the
+        # multipliers of the other axis are 0), stage 0 has one multiplier of four.
+        assert np.all(peak[~stored] <= 1e-12 * peak[:, :n].max())
+    assert [sp.spans(s) < 200 for s in range(sp.n_stages)] == [True, True]
+    assert sp.n_entries == 8 + 10
+    assert max_relative_error(sp, exact) <= tolerance
+    assert sp.nbytes < 4000                         # the per-tick float32 table: 432 000
+
+
+def test_a_budget_that_cannot_be_met_is_refused(robot_exact):
+    with pytest.raises(SplineBudgetError) as exc:
+        fit_spline(robot_exact, 1e-6, max_spans=4)
+    assert isinstance(exc.value, DesignError) and isinstance(exc.value, ValueError)
+    assert exc.value.field == "design.spline_tolerance" and "4 spans" in exc.value.reason
+    for bad in (MIN_TOLERANCE / 2, 0.0, float("nan"), 1.0):
+        with pytest.raises(SplineBudgetError, match="tolerance"):
+            fit_spline(robot_exact, bad)
+
+
+def test_the_banded_solver_is_the_dense_one():
+    rng = np.random.default_rng(3)
+    nb = 450                                     # above the dense solver's limit
+    band = np.vstack([rng.uniform(4, 5, nb), rng.uniform(-1, 1, (3, nb))])
+    A = np.diag(band[0])
+    for d in (1, 2, 3):
+        A += np.diag(band[d, :nb - d], d) + np.diag(band[d, :nb - d], -d)
+    rhs = rng.normal(size=(nb, 3))
+    np.testing.assert_allclose(_solve_banded(band, rhs), np.linalg.solve(A, rhs),
+                               rtol=1e-11, atol=1e-12)
+
+
+def test_the_least_squares_fit_recovers_a_spline_of_many_spans():
+    """A spline on 420 spans (the banded path) sampled at its ticks is fitted back exactly,
+    one-tick spans (whose last basis function no tick reaches) included."""
+    rng = np.random.default_rng(4)
+    T = 1200
+    breaks = np.unique(np.r_[0, np.sort(rng.choice(np.arange(1, T - 3), 415, replace=False)),
+                             T - 3, T - 2, T - 1, T])
+    U = np.concatenate([[0.0] * 3, breaks, [float(T)] * 3])
+    c = rng.normal(size=(breaks.size + 2, 2))
+    tau = np.arange(T, dtype=float)
+    Y = BSpline(U, c, 3)(tau)
+    _, N = _basis(U, tau)
+    fitted = BSpline(U, _lsq(breaks, N, Y.T).T, 3)(tau)
+    np.testing.assert_allclose(fitted, Y, atol=1e-9)
+
+
+# ---------------------------------------------------------------------------------------
+# The latch re-solve
+
+
+def _parse(text):
+    return parse_problem(tomllib.loads(text))
+
+
+FAST = edit(BASE, ("tick_hz = 10", "tick_hz = 100"))
+# Knot 0 penalised only, knots 1 and 2 constrained (one row each): stage 0 latches nothing in
+# the stage-wise design, and the joint vector (2 rows) is no wider than the state.
+THREE = edit(FAST, ("constraint = { C = [[1, 0]], value = [1.0] }\n", ""),
+             ("constraint = { C = [[1, 0], [0, 1]], value = [0.0, 0.0] }",
+              "constraint = { C = [[1, 0]], value = [0.0] }\n\n[[knots]]\nt = 3.0\n"
+              "constraint = { C = [[0, 1]], value = [0.5] }"))
+
+
+def _residual(problem, table) -> float:
+    mom = evaluate_table(problem, table, path=False)
+    return max(float(np.abs(mom.knot_constraint[k] - kn.constraint.value).max())
+               for k, kn in enumerate(problem.knots) if kn.constraint is not None)
+
+
+# (FAST's joint table latches the state, 3 rows > 2 states: refused below.)
+@pytest.mark.parametrize("text, mode", [(FAST, "stagewise"), (THREE, "stagewise"),
+                                        (THREE, "joint")],
+                         ids=["two knots", "three knots", "three knots joint"])
+def test_the_re_solve_makes_a_perturbed_law_meet_its_constraints(text, mode):
+    problem = _parse(text)
+    exact = table_of(design_zoh(problem, mode=mode), quantize=False)
+    # The design's own gains: the design's latch maps, found another way.
+    Lam, lam0 = resolve_latch(problem, exact)
+    np.testing.assert_allclose(Lam, exact.Lambda, rtol=1e-8, atol=1e-9)
+    np.testing.assert_allclose(lam0, exact.lambda0, rtol=1e-8, atol=1e-9)
+    # Gains off by 2 % (a coarse fit, say): the design's latch misses, the re-solved one not.
+    off = replace(exact, K=exact.K * 1.02, k0=exact.k0 + 0.01, L=exact.L * 0.98)
+    assert _residual(problem, off) > 1e-3
+    Lam, lam0 = resolve_latch(problem, off)
+    assert _residual(problem, replace(off, Lambda=Lam, lambda0=lam0)) < 1e-11
+    # The check catches a wrong re-solve (here a sign error in lambda0 = G^-1 (zeta - C psi)).
+    assert _residual(problem, replace(off, Lambda=Lam, lambda0=-lam0)) > 1e-3
+
+
+@pytest.mark.parametrize("mode", ["stagewise", "joint"])
+def test_the_table_latch_groups_are_the_designers(mode):
+    problem = _parse(THREE)
+    table = table_of(design_zoh(problem, mode=mode))
+    groups, _ = latch_groups(problem, mode)
+    assert latch_groups_of_table(problem, table) == [(g.latch_stage, list(g.knots))
+                                                     for g in groups]
+
+
+def test_the_mean_map_is_the_designers():
+    problem = _parse(edit(FAST, ("B = [[0], [1]]", "B = [[0], [1]]\nf = [0.3, -9.81]")))
+    stage = problem.stages[0]
+    np.testing.assert_allclose(mean_tick_map(stage, 0.01), _tick_data(stage, 0.01).F,
+                               rtol=1e-13, atol=1e-15)
+
+
+def test_what_is_not_re_solved_exactly_is_refused():
+    problem = _parse(FAST)
+    cases = {
+        "latches the state": (problem, table_of(design_zoh(problem, mode="joint"))),
+        "delay": (problem, table_of(design_zoh(problem, delay_ticks=1))),
+    }
+    plain = table_of(design_zoh(problem))
+    cases["band"] = (problem, replace(plain, band_qp=BandQP(np.zeros((1, 2)), np.zeros(1),
+                                                            np.eye(1), np.zeros(1),
+                                                            np.zeros(1))))
+    varying = _parse(edit(FAST, ("B = [[0], [1]]", "B = [[0], [1]]\n"
+                                 "f = { t = [0, 2], values = [[0, -1], [0, 0]] }")))
+    cases["time-varying"] = (varying, plain)
+    cases["stages do not match"] = (_parse(edit(FAST, ("\nt = 2.0", "\nt = 2.5"))), plain)
+    for words, (p, table) in cases.items():
+        with pytest.raises(DesignError) as exc:
+            resolve_latch(p, table)
+        assert exc.value.field == "design.table", words
+        assert words in exc.value.reason, exc.value.reason
+
+
+# ---------------------------------------------------------------------------------------
+# Everything together on the robot
+
+
+def test_compress_gives_the_firmwares_gains_and_latch_maps(robot_problem, robot_zoh,
+                                                           robot_exact):
+    q = robot_zoh.table
+    sp, K, k0, L, Lam, lam0 = compress(robot_problem, robot_exact, q, 1e-3)
+    for got, want in zip((K, k0, L), evaluate(sp, q.stage_start)):
+        np.testing.assert_array_equal(got, want)
+    assert Lam.dtype == lam0.dtype == np.float32 and Lam.shape == q.Lambda.shape
+    implemented = q.with_arrays(K=K, k0=k0, L=L)
+    # Exact before rounding; after it, at the float32 floor (|lambda0| ~ 5, ulp 4.8e-7) as
+    # the per-tick table is (4.3e-8).
+    Lam64, lam0_64 = resolve_latch(robot_problem, implemented)
+    assert _residual(robot_problem, replace(implemented, Lambda=Lam64, lambda0=lam0_64)) < 1e-11
+    law = replace(implemented, Lambda=Lam, lambda0=lam0)
+    assert _residual(robot_problem, law) < 2e-7
+    J = evaluate_table(robot_problem, law, path=False).J
+    assert J == pytest.approx(robot_zoh.implemented.J, rel=1e-6)
+
+
+def test_on_a_coarse_spline_only_the_re_solved_latch_meets_the_constraints(robot_problem,
+                                                                          robot_zoh,
+                                                                          robot_exact):
+    """Two spans a stage (10 % gain error): the design's latch maps miss the constraints by
+    6e-4; re-solved, they meet them as the per-tick table does. (Least-squares errors are
+    orthogonal to smooth functions, so fine fits barely move the constraints at all.)"""
+    q = robot_zoh.table
+    sp, K, k0, L, Lam, lam0 = compress(robot_problem, robot_exact, q, 0.5, initial_spans=2)
+    assert [sp.spans(s) for s in range(sp.n_stages)] == [2, 2]
+    assert _residual(robot_problem, q.with_arrays(K=K, k0=k0, L=L)) > 1e-4
+    assert _residual(robot_problem, q.with_arrays(K=K, k0=k0, L=L, Lambda=Lam,
+                                                  lambda0=lam0)) < 2e-7

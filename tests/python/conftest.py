@@ -7,6 +7,17 @@ import pytest
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLES = REPO / "examples"
 GAINS = REPO / "gains"
+# Examples whose spline tables (`--table spline`, <name>_spline.*) are shipped beside the
+# per-tick ones (tools/regen_gains.sh).
+SPLINE_EXAMPLES = ("robot_corridor", "robot_corridor_eps01")
+
+
+def gains_stem(example: str) -> str:
+    """The stem `stospline design` gives an example's files: <name>, or <name>_spline when
+    the file's [design] table is "spline"."""
+    import tomllib
+    doc = tomllib.loads((EXAMPLES / f"{example}.toml").read_text())
+    return example + ("_spline" if doc.get("design", {}).get("table") == "spline" else "")
 
 # cffi builds go to the repository's build tree, never to the user's cache (~/.cache), also in
 # the CLI subprocesses the tests start (they inherit the environment).

@@ -3,7 +3,7 @@ import filecmp
 
 from stospline.cli import main
 
-from conftest import EXAMPLES, GAINS
+from conftest import EXAMPLES, GAINS, SPLINE_EXAMPLES, gains_stem
 
 
 import pytest
@@ -13,9 +13,19 @@ import pytest
 def test_regenerating_gains_changes_no_byte(tmp_path, example):
     assert main(["design", str(EXAMPLES / f"{example}.toml"), "--out", str(tmp_path)]) == 0
     for suffix in ("c", "h", "json"):
-        name = f"{example}.{suffix}"
+        name = f"{gains_stem(example)}.{suffix}"
         assert filecmp.cmp(tmp_path / name, GAINS / name, shallow=False), \
             f"gains/{name} differs from a fresh `stospline design` (regenerate with tools/regen_gains.sh)"
+
+
+@pytest.mark.parametrize("example", SPLINE_EXAMPLES)
+def test_regenerating_spline_gains_changes_no_byte(tmp_path, example):
+    assert main(["design", str(EXAMPLES / f"{example}.toml"), "--table", "spline",
+                 "--out", str(tmp_path)]) == 0
+    for suffix in ("c", "h", "json"):
+        name = f"{example}_spline.{suffix}"
+        assert filecmp.cmp(tmp_path / name, GAINS / name, shallow=False), \
+            f"gains/{name} differs from a fresh `stospline design --table spline`"
 
 
 @pytest.mark.parametrize("arith", ["q15", "q31"])

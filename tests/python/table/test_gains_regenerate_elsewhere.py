@@ -28,7 +28,7 @@ from stospline.sim import oracle
 from stospline.cli import main
 from stospline.problem import load_problem
 
-from conftest import EXAMPLES, GAINS
+from conftest import EXAMPLES, GAINS, SPLINE_EXAMPLES
 
 # Relative size of the perturbation, and an absolute part relative to each array's largest
 # entry (a structural zero may come out as 1e-18 elsewhere, a small entry with a larger
@@ -45,6 +45,9 @@ def _regenerate(out) -> None:
         assert main(["design", str(toml), "--out", str(out)]) == 0
     for arith in ("q15", "q31"):
         assert main(["design", str(EXAMPLES / "robot_corridor.toml"), "--arith", arith,
+                     "--out", str(out)]) == 0
+    for example in SPLINE_EXAMPLES:
+        assert main(["design", str(EXAMPLES / f"{example}.toml"), "--table", "spline",
                      "--out", str(out)]) == 0
 
 

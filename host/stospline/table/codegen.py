@@ -181,7 +181,7 @@ def _float32_variant(table, p: str) -> _Variant:
               " * Lambda[stage][c*NX + j], lambda0[stage][c], u_min[i], u_max[i], u_hold[i] (see\n"
               " * stsp_controller.h; +-3.4028235e+38f = +-FLT_MAX: unlimited). */")
     return _Variant("", f"BAND_ROWS {q}u", layout, "stsp_f32_t", _f32_literal, "",
-                    "", extra, declarations, SCALAR_FLOAT32, f" {band},")
+                    "", extra, declarations, SCALAR_FLOAT32, f" {band}, NULL,")
 
 
 def _fixed_point_variant(table, p: str) -> _Variant:
@@ -207,7 +207,8 @@ def _fixed_point_variant(table, p: str) -> _Variant:
         _array("int8_t", f"{p}_v_exp", table.v_exp, d, "[n_latch] multiplier scale exponents"),
     ]
     tail = (f"\n    {p}_x_exp, {p}_u_exp, {p}_v_exp,\n"
-            "    NULL, /* band_qp: the band re-solve is float32 only */")
+            "    NULL, /* band_qp: the band re-solve is float32 only */\n"
+            "    NULL, /* spline: spline gains are float32 only */")
     return _Variant(guard, f"ARITH_{kind} 1", layout, f"stsp_{table.arith}_t", _qlit(F),
                     "-{} scaled, ", " (command units)", extra, "", table.scalar_kind, tail)
 

@@ -13,7 +13,7 @@ ARITH_ELEMENT_BYTES = ELEMENT_BYTES
 _PTR = 4                               # pointer size on the 32-bit targets
 _HEADER_FIELDS = 4 + 6 * 2 + 2 * 4     # magic; version, kind, nx, nu, n_latch, n_stages; ticks, hz
 _HEADER_TAIL = 4 + 32                  # crc32, problem_sha256
-_TABLE_POINTERS = 10 + 1               # stage_start .. u_hold, band_qp
+_TABLE_POINTERS = 10 + 2               # stage_start .. u_hold, band_qp, spline
 _FIXED_POINTERS = 3                    # x_exp, u_exp, v_exp
 _BANDQP_HEADER = 2 * 2 + 5 * _PTR      # q, nx; Nt, mt, W, lo, hi
 

@@ -9814,11 +9814,11 @@ static const stsp_f32_t coupled_axes_u_hold[6] = {
 };
 
 const stsp_table_t coupled_axes_table = {
-    0x53545350u, 4u, 1u,
+    0x53545350u, 5u, 1u,
     12u, 6u, 6u, 20u, 500u, 100u,
     coupled_axes_stage_start, coupled_axes_stage_n_latch,
     coupled_axes_K, coupled_axes_k0, coupled_axes_L, coupled_axes_Lambda, coupled_axes_lambda0,
-    coupled_axes_u_min, coupled_axes_u_max, coupled_axes_u_hold, NULL,
+    coupled_axes_u_min, coupled_axes_u_max, coupled_axes_u_hold, NULL, NULL,
     0x0945B6E8u,
     {0x16u, 0x19u, 0xd6u, 0x9cu, 0xc1u, 0x9fu, 0xfbu, 0x54u, 0x2du, 0x1eu, 0x8eu, 0xb0u, 0x43u, 0x47u, 0x33u, 0x02u, 0xebu, 0xbbu, 0x74u, 0xe6u, 0x4bu, 0x1fu, 0x1au, 0xe5u, 0x2cu, 0x16u, 0x62u, 0x9bu, 0xebu, 0xe4u, 0x32u, 0x5du}
 };

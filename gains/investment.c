@@ -110,11 +110,11 @@ static const stsp_f32_t investment_u_hold[1] = {
 };
 
 const stsp_table_t investment_table = {
-    0x53545350u, 4u, 1u,
+    0x53545350u, 5u, 1u,
     1u, 1u, 1u, 2u, 120u, 12u,
     investment_stage_start, investment_stage_n_latch,
     investment_K, investment_k0, investment_L, investment_Lambda, investment_lambda0,
-    investment_u_min, investment_u_max, investment_u_hold, NULL,
+    investment_u_min, investment_u_max, investment_u_hold, NULL, NULL,
     0x51E83D71u,
     {0x39u, 0x96u, 0x1bu, 0x81u, 0xfau, 0x42u, 0x96u, 0x6eu, 0xadu, 0xf4u, 0x3eu, 0x5du, 0x1du, 0xafu, 0xb5u, 0x3au, 0x23u, 0x7cu, 0x17u, 0x8au, 0x4fu, 0xd1u, 0x02u, 0xfau, 0x08u, 0x05u, 0x08u, 0x06u, 0x77u, 0x8au, 0x8bu, 0xc8u}
 };

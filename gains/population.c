@@ -72,11 +72,11 @@ static const stsp_f32_t population_u_hold[1] = {
 };
 
 const stsp_table_t population_table = {
-    0x53545350u, 4u, 1u,
+    0x53545350u, 5u, 1u,
     1u, 1u, 1u, 8u, 32u, 4u,
     population_stage_start, population_stage_n_latch,
     population_K, population_k0, population_L, population_Lambda, population_lambda0,
-    population_u_min, population_u_max, population_u_hold, NULL,
+    population_u_min, population_u_max, population_u_hold, NULL, NULL,
     0x27CC9F7Cu,
     {0x20u, 0xd8u, 0xd5u, 0xa3u, 0x8bu, 0x05u, 0x34u, 0x97u, 0x45u, 0xd4u, 0x58u, 0x13u, 0x3au, 0x8bu, 0xc5u, 0x12u, 0xddu, 0x19u, 0xe9u, 0xbeu, 0x10u, 0xe1u, 0x10u, 0x25u, 0x66u, 0x06u, 0x29u, 0x2eu, 0x3au, 0xceu, 0x3bu, 0xefu}
 };

@@ -3052,11 +3052,11 @@ static const stsp_f32_t quadrotor_u_hold[1] = {
 };
 
 const stsp_table_t quadrotor_table = {
-    0x53545350u, 4u, 1u,
+    0x53545350u, 5u, 1u,
     3u, 1u, 2u, 3u, 3000u, 500u,
     quadrotor_stage_start, quadrotor_stage_n_latch,
     quadrotor_K, quadrotor_k0, quadrotor_L, quadrotor_Lambda, quadrotor_lambda0,
-    quadrotor_u_min, quadrotor_u_max, quadrotor_u_hold, NULL,
+    quadrotor_u_min, quadrotor_u_max, quadrotor_u_hold, NULL, NULL,
     0xFE113BA0u,
     {0x7au, 0x5bu, 0x41u, 0x4cu, 0xa4u, 0x1bu, 0xfbu, 0x96u, 0x48u, 0x6du, 0xf7u, 0xc5u, 0x0au, 0xfau, 0xfbu, 0xe0u, 0xdcu, 0x0eu, 0xf2u, 0x15u, 0x12u, 0x82u, 0x49u, 0x4eu, 0xa4u, 0x9eu, 0x2eu, 0xe4u, 0xf6u, 0x66u, 0xebu, 0x71u}
 };

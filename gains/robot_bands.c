@@ -2301,11 +2301,11 @@ stsp_bandqp_status_t (*const robot_bands_band_solver)(const stsp_bandqp_t *, con
     &stsp_bandqp_solve_f32;
 
 const stsp_table_t robot_bands_table = {
-    0x53545350u, 4u, 1u,
+    0x53545350u, 5u, 1u,
     4u, 2u, 6u, 2u, 600u, 100u,
     robot_bands_stage_start, robot_bands_stage_n_latch,
     robot_bands_K, robot_bands_k0, robot_bands_L, robot_bands_Lambda, robot_bands_lambda0,
-    robot_bands_u_min, robot_bands_u_max, robot_bands_u_hold, &robot_bands_band_qp,
+    robot_bands_u_min, robot_bands_u_max, robot_bands_u_hold, &robot_bands_band_qp, NULL,
     0x7F871E12u,
     {0x15u, 0xc1u, 0xacu, 0x16u, 0x74u, 0xc5u, 0x36u, 0xc4u, 0xfcu, 0x37u, 0x75u, 0x56u, 0x30u, 0x57u, 0xe0u, 0x06u, 0xddu, 0xb1u, 0x1fu, 0xecu, 0x2au, 0xfdu, 0xb2u, 0xcbu, 0x55u, 0x05u, 0xe4u, 0x75u, 0xe8u, 0x30u, 0xe1u, 0x8eu}
 };

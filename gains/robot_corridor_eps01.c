@@ -18056,11 +18056,11 @@ static const stsp_f32_t robot_corridor_eps01_u_hold[2] = {
 };
 
 const stsp_table_t robot_corridor_eps01_table = {
-    0x53545350u, 4u, 1u,
+    0x53545350u, 5u, 1u,
     4u, 2u, 4u, 2u, 6000u, 1000u,
     robot_corridor_eps01_stage_start, robot_corridor_eps01_stage_n_latch,
     robot_corridor_eps01_K, robot_corridor_eps01_k0, robot_corridor_eps01_L, robot_corridor_eps01_Lambda, robot_corridor_eps01_lambda0,
-    robot_corridor_eps01_u_min, robot_corridor_eps01_u_max, robot_corridor_eps01_u_hold, NULL,
+    robot_corridor_eps01_u_min, robot_corridor_eps01_u_max, robot_corridor_eps01_u_hold, NULL, NULL,
     0x6A2168CFu,
     {0x5au, 0x2au, 0x8au, 0xc7u, 0x93u, 0xa9u, 0xe8u, 0xe5u, 0xa2u, 0x05u, 0x2fu, 0x4du, 0x8du, 0x44u, 0x65u, 0x5eu, 0x69u, 0x13u, 0xbdu, 0x19u, 0xc4u, 0x06u, 0xd8u, 0x7bu, 0x33u, 0x6bu, 0x18u, 0xbbu, 0x0du, 0x45u, 0xe2u, 0xc3u}
 };

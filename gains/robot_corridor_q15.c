@@ -18071,13 +18071,14 @@ static const int8_t robot_corridor_q15_v_exp[4] = {
 };
 
 const stsp_table_t robot_corridor_q15_table = {
-    0x53545350u, 4u, 2u,
+    0x53545350u, 5u, 2u,
     4u, 2u, 4u, 2u, 6000u, 1000u,
     robot_corridor_q15_stage_start, robot_corridor_q15_stage_n_latch,
     robot_corridor_q15_K, robot_corridor_q15_k0, robot_corridor_q15_L, robot_corridor_q15_Lambda, robot_corridor_q15_lambda0,
     robot_corridor_q15_u_min, robot_corridor_q15_u_max, robot_corridor_q15_u_hold,
     robot_corridor_q15_x_exp, robot_corridor_q15_u_exp, robot_corridor_q15_v_exp,
     NULL, /* band_qp: the band re-solve is float32 only */
+    NULL, /* spline: spline gains are float32 only */
     0xD7F8BB22u,
     {0x06u, 0x7bu, 0xdcu, 0x13u, 0xfau, 0x63u, 0x21u, 0x2au, 0x99u, 0x10u, 0x64u, 0x27u, 0x1fu, 0x47u, 0x12u, 0xc2u, 0x43u, 0xbau, 0x19u, 0x7bu, 0xc3u, 0x2du, 0x2du, 0xe1u, 0x90u, 0x4fu, 0xc6u, 0xefu, 0x5du, 0xbdu, 0x9fu, 0x57u}
 };

@@ -627,11 +627,11 @@ static const stsp_f32_t robot_narrow_corridor_u_hold[2] = {
 };
 
 const stsp_table_t robot_narrow_corridor_table = {
-    0x53545350u, 4u, 1u,
+    0x53545350u, 5u, 1u,
     4u, 2u, 4u, 60u, 120u, 20u,
     robot_narrow_corridor_stage_start, robot_narrow_corridor_stage_n_latch,
     robot_narrow_corridor_K, robot_narrow_corridor_k0, robot_narrow_corridor_L, robot_narrow_corridor_Lambda, robot_narrow_corridor_lambda0,
-    robot_narrow_corridor_u_min, robot_narrow_corridor_u_max, robot_narrow_corridor_u_hold, NULL,
+    robot_narrow_corridor_u_min, robot_narrow_corridor_u_max, robot_narrow_corridor_u_hold, NULL, NULL,
     0x38E94072u,
     {0x98u, 0xcau, 0xbeu, 0x24u, 0x3eu, 0x9bu, 0x74u, 0x34u, 0x10u, 0xe1u, 0x29u, 0xe7u, 0x86u, 0x8au, 0xb4u, 0xe5u, 0xb2u, 0xfau, 0x34u, 0xfeu, 0x79u, 0x0fu, 0xeau, 0x95u, 0xffu, 0xc7u, 0xd3u, 0x8bu, 0x83u, 0x6cu, 0xe6u, 0x4cu}
 };

@@ -6,8 +6,9 @@
 #include "stsp_internal.h"
 
 /* Clamps u[i] to [u_min[i], u_max[i]] (bits of *mask); STSP_WARN_SATURATED if any was, else
- * STSP_OK. */
-static stsp_status_t stsp_clamp(const stsp_header_t *h, stsp_scalar_t *u, uint16_t *mask)
+ * STSP_OK. Inlined into each caller: a call would keep the cold paths' y in memory. */
+static STSP_ALWAYS_INLINE stsp_status_t stsp_clamp(const stsp_header_t *h, stsp_scalar_t *u,
+                                                   uint16_t *mask)
 {
     const uint32_t nu = stsp_nu(h);
     uint32_t i;

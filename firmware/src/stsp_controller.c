@@ -36,6 +36,9 @@
 #include "stsp_law_f32.h"
 #endif
 #include "stsp_law.h"
+#ifndef STSP_ARITH_FIXED_POINT
+#include "stsp_law_spline.h"
+#endif
 
 #include <float.h>
 #include <string.h>
@@ -117,6 +120,9 @@ stsp_status_t stsp_reset(stsp_ctrl_t *ctrl)
     ctrl->latched = 0u;
     ctrl->sat_mask = 0u;
     stsp_zero(ctrl->v, STSP_MAX_LATCH);
+#ifndef STSP_ARITH_FIXED_POINT
+    (void)memset(&ctrl->span, 0, sizeof ctrl->span);
+#endif
     return STSP_OK;
 }
 
@@ -183,9 +189,11 @@ typedef struct {
 
 /* Cold path, part 1: range and order checks, stage search, and the latch v_new = Lambda x +
  * lambda0 (or a copy of the v kept) into the caller's scratch: the instance changes only on
- * success, in stsp_commit(). Returns a negative error, or the tick warning (or STSP_OK). */
-static stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick, const stsp_scalar_t *x,
-                               stsp_scalar_t *v_new, stsp_plan_t *plan)
+ * success, in stsp_commit(). Returns a negative error, or the tick warning (or STSP_OK).
+ * Inlined into both cold paths (as a call it costs each cold tick some 20 instructions). */
+static STSP_ALWAYS_INLINE stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick,
+                                                  const stsp_scalar_t *x, stsp_scalar_t *v_new,
+                                                  stsp_plan_t *plan)
 {
     const stsp_header_t *h = &c->checked;
     const uint32_t nx = stsp_nx(h);
@@ -244,14 +252,46 @@ static stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick, const stsp_s
     return status;
 }
 
-/* Cold path, part 2: the step succeeded; record the stage, the latch and the tick. The stage
- * end the ordinary tick compares with never exceeds the validated n_ticks, even if stage_start
- * changed since init: the law never indexes a tick beyond the table. */
-static void stsp_commit(stsp_ctrl_t *c, uint32_t tick, const stsp_plan_t *plan,
-                        const stsp_scalar_t *v_new)
+/* The first tick after stage s, capped at the validated n_ticks even if stage_start changed
+ * since init: the law never indexes a tick beyond the table. */
+static uint32_t stsp_stage_end(const stsp_header_t *h, uint16_t s)
+{
+    const uint32_t end = h->stage_start[(uint32_t)s + 1u];
+    return (end < h->n_ticks) ? end : h->n_ticks;
+}
+
+#ifndef STSP_ARITH_FIXED_POINT
+/* Cold path, spline table: the span of `tick` in `stage`, into p. The search starts at the
+ * span of the last step when the tick stays in its stage (a later tick, or the same again:
+ * never before that span), else at the stage's first span. */
+static void stsp_spline_locate(const stsp_ctrl_t *c, uint32_t tick, uint16_t stage,
+                               stsp_span_t *p)
+{
+    const uint32_t from = ((c->latched != 0u) && (stage == c->stage)) ? c->span.span : 0u;
+    stsp_spline_span(&c->checked, stage, from, tick, stsp_stage_end(&c->checked, stage), p);
+}
+
+/* Cold path, spline table: the state and a fresh latch must be finite, as the command does
+ * not show it (an input need not use every x[j] or v[c]): STSP_ERR_NONFINITE_STATE, else
+ * STSP_ERR_NONFINITE_OUTPUT for a latch that overflowed, else STSP_OK. */
+static stsp_status_t stsp_spline_inputs(const stsp_header_t *h, const stsp_f32_t *x,
+                                        const stsp_f32_t *v_new, uint32_t relatch)
+{
+    if (stsp_all_finite(x, stsp_nx(h)) == 0) {
+        return STSP_ERR_NONFINITE_STATE;
+    }
+    if ((relatch != 0u) && (stsp_all_finite(v_new, stsp_n_latch(h)) == 0)) {
+        return STSP_ERR_NONFINITE_OUTPUT;
+    }
+    return STSP_OK;
+}
+#endif
+
+/* Cold path, part 2: the step succeeded; record the stage, the latch and the tick. */
+static STSP_ALWAYS_INLINE void stsp_commit(stsp_ctrl_t *c, uint32_t tick,
+                                           const stsp_plan_t *plan, const stsp_scalar_t *v_new)
 {
     const stsp_header_t *h = &c->checked;
-    const uint32_t end = h->stage_start[(uint32_t)plan->stage + 1u];
     if (plan->relatch != 0u) {
         uint32_t i;
         for (i = 0u; i < stsp_n_latch(h); ++i) {
@@ -260,7 +300,7 @@ static void stsp_commit(stsp_ctrl_t *c, uint32_t tick, const stsp_plan_t *plan,
         c->latched = 1u;
     }
     c->stage = plan->stage;
-    c->stage_end = (end < h->n_ticks) ? end : h->n_ticks;
+    c->stage_end = stsp_stage_end(h, plan->stage);
     if ((tick + 1u) > c->next_tick) {
         c->next_tick = tick + 1u;
     }
@@ -297,6 +337,51 @@ static STSP_NOINLINE stsp_status_t stsp_step_cold(stsp_ctrl_t *ctrl, uint32_t ti
     return status;
 }
 
+#ifndef STSP_ARITH_FIXED_POINT
+/* Every tick of a spline table but its ordinary one, as stsp_step_cold: the same plan and
+ * commit, with the span located and recorded, and the state and a fresh latch checked for
+ * finiteness (stsp_spline_inputs). stage_end stays 0: every tick of a spline table leaves
+ * stsp_step's ordinary path for stsp_step_spline, which compares with the span's end. */
+static STSP_NOINLINE stsp_status_t stsp_step_cold_spline(stsp_ctrl_t *ctrl, uint32_t tick,
+                                                         const stsp_f32_t *x, stsp_f32_t *u)
+{
+    const stsp_header_t *h = &ctrl->checked;
+    stsp_f32_t v_new[STSP_MAX_LATCH];
+    stsp_f32_t y[STSP_MAX_NU];
+    stsp_plan_t plan = {0u, 0u};
+    stsp_span_t span;
+    stsp_status_t status;
+    uint16_t mask = 0u;
+    stsp_zero(v_new, STSP_MAX_LATCH);
+    (void)memset(&span, 0, sizeof span);
+    status = stsp_plan(ctrl, tick, x, v_new, &plan);
+    if (status >= STSP_OK) {
+        const stsp_status_t st = stsp_spline_inputs(h, x, v_new, plan.relatch);
+        if (st != STSP_OK) {
+            status = st;
+        } else {
+            stsp_spline_locate(ctrl, tick, plan.stage, &span);
+            if (stsp_spline_law(h, &span, tick, x, v_new, y, ctrl->limited) != 0u) {
+                const stsp_status_t lim = stsp_limit(h, x, y, &mask);
+                if (lim != STSP_OK) {
+                    status = lim;
+                }
+            }
+        }
+    }
+    if (status < STSP_OK) {
+        stsp_hold(ctrl, u);
+        return status;
+    }
+    stsp_copy(u, y, stsp_nu(h));
+    ctrl->sat_mask = mask;
+    stsp_commit(ctrl, tick, &plan, v_new);
+    ctrl->stage_end = 0u;
+    ctrl->span = span;
+    return status;
+}
+#endif
+
 /* An ordinary tick whose finite command (already in u) is out of range, or a false alarm. */
 static STSP_NOINLINE stsp_status_t stsp_step_fixup(stsp_ctrl_t *ctrl, uint32_t tick,
                                                    stsp_scalar_t *u)
@@ -327,6 +412,40 @@ static STSP_NOINLINE stsp_status_t stsp_step_null_state(const stsp_ctrl_t *ctrl,
     return STSP_ERR_NULL;
 }
 
+#ifndef STSP_ARITH_FIXED_POINT
+/* A spline table's every tick (its stage_end stays 0, so each leaves stsp_step's ordinary
+ * path). The ordinary one is here: the expected tick inside the span of the last step
+ * (span.next is 0 until the first latch, and never beyond the stage or n_ticks), the law
+ * evaluated at that span. Anything else (a new span too), and a command or state the law's
+ * check flags, takes stsp_step_cold_spline, which evaluates it again and sorts it out. */
+static STSP_NOINLINE stsp_status_t stsp_step_spline(stsp_ctrl_t *ctrl, uint32_t tick,
+                                                    const stsp_f32_t *x, stsp_f32_t *u)
+{
+    stsp_f32_t y[STSP_MAX_NU];
+    if ((tick != ctrl->next_tick) || (tick >= ctrl->span.next)) {
+        return stsp_step_cold_spline(ctrl, tick, x, u);
+    }
+    if (stsp_spline_law(&ctrl->checked, &ctrl->span, tick, x, ctrl->v, y, ctrl->limited) !=
+        0u) {
+        return stsp_step_cold_spline(ctrl, tick, x, u);
+    }
+    stsp_copy(u, y, stsp_nu(&ctrl->checked));
+    ctrl->next_tick = tick + 1u;
+    return STSP_OK;
+}
+
+/* Every tick that leaves stsp_step's ordinary path: a spline table's, or the cold path. Its
+ * own function, so that the per-tick cold path does not pay for the spline tick's frame. */
+static STSP_NOINLINE stsp_status_t stsp_step_other(stsp_ctrl_t *ctrl, uint32_t tick,
+                                                   const stsp_f32_t *x, stsp_f32_t *u)
+{
+    if (ctrl->checked.spline != NULL) {
+        return stsp_step_spline(ctrl, tick, x, u);
+    }
+    return stsp_step_cold(ctrl, tick, x, u);
+}
+#endif
+
 stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
                         stsp_scalar_t *u)
 {
@@ -342,9 +461,14 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x
         return stsp_step_null_state(ctrl, u);
     }
     /* Ordinary tick: the expected one, inside the latched stage (stage_end is 0 until the
-     * first latch, and never above n_ticks). Anything else takes the cold path. */
+     * first latch, and never above n_ticks). Anything else takes the cold path; every tick
+     * of a spline table (stage_end 0) its own, stsp_step_spline. */
     if ((tick != ctrl->next_tick) || (tick >= ctrl->stage_end)) {
+#ifndef STSP_ARITH_FIXED_POINT
+        return stsp_step_other(ctrl, tick, x, u);
+#else
         return stsp_step_cold(ctrl, tick, x, u);
+#endif
     }
     out = stsp_law(&ctrl->checked, tick, x, ctrl->v, y, ctrl->limited);
 #ifndef STSP_ARITH_FIXED_POINT

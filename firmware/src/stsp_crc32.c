@@ -54,6 +54,28 @@ uint32_t stsp_crc32_scalars(uint32_t crc, const stsp_scalar_t *values, uint32_t 
     return c;
 }
 
+uint32_t stsp_crc32_u32s(uint32_t crc, const uint32_t *values, uint32_t count)
+{
+    uint32_t c = crc;
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        c = stsp_crc32_u32(c, values[i]);
+    }
+    return c;
+}
+
+uint32_t stsp_crc32_f32s(uint32_t crc, const stsp_f32_t *values, uint32_t count)
+{
+    uint32_t c = crc;
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        uint32_t bits;
+        (void)memcpy(&bits, &values[i], sizeof bits);
+        c = stsp_crc32_u32(c, bits);
+    }
+    return c;
+}
+
 uint32_t stsp_crc32_bytes(uint32_t crc, const uint8_t *values, uint32_t count)
 {
     uint32_t c = crc;

@@ -4,13 +4,35 @@
 #ifndef STSP_LAW_H
 #define STSP_LAW_H
 
+/* Whether a command y needs the cold path: with limits, some y[i] outside [u_min[i],
+ * u_max[i]] (false for NaN, and for one of +-Inf since the limits are finite); without,
+ * stsp_unlimited_alarm(). Shared by the per-tick and the spline law. */
+static STSP_ALWAYS_INLINE uint32_t stsp_law_alarm(const stsp_header_t *h, const stsp_scalar_t *y,
+                                                  uint32_t limited)
+{
+    const uint32_t nu = stsp_nu(h);
+    uint32_t out = 0u;
+    if (limited != 0u) {
+        const stsp_scalar_t *lo = h->u_min;
+        const stsp_scalar_t *hi = h->u_max;
+        uint32_t i;
+        STSP_UNROLL
+        for (i = 0u; i < nu; ++i) {
+            if (!((y[i] >= lo[i]) && (y[i] <= hi[i]))) {
+                out = 1u;
+            }
+        }
+    } else {
+        out = stsp_unlimited_alarm(h, y);
+    }
+    return out;
+}
+
 /* The law at `tick` with multipliers v, into y (never the caller's u: x and u may overlap):
  * per input i, the row K[i][0] x[0] (with k0[i], as the arithmetic folds it in), the rest of
  * K[i] x, then L[i] v over all n_latch columns (zero padded, so every tick costs the same).
- * Returns nonzero when the command needs the cold path: with limits, some y[i] outside
- * [u_min[i], u_max[i]] (false for NaN, and for one of +-Inf since the limits are finite);
- * without, stsp_unlimited_alarm(). Inlined into callers whose y is a local array, so that in
- * an STSP_FIXED_* build x, v and y stay in registers. */
+ * Returns stsp_law_alarm(). Inlined into callers whose y is a local array, so that in an
+ * STSP_FIXED_* build x, v and y stay in registers. */
 static STSP_ALWAYS_INLINE uint32_t stsp_law(const stsp_header_t *h, uint32_t tick,
                                             const stsp_scalar_t *x, const stsp_scalar_t *v,
                                             stsp_scalar_t *y, uint32_t limited)
@@ -23,7 +45,6 @@ static STSP_ALWAYS_INLINE uint32_t stsp_law(const stsp_header_t *h, uint32_t tic
     /* L may be NULL when n_latch == 0: no pointer arithmetic on it then. */
     const stsp_scalar_t *L = (n_latch > 0u) ? &h->L[tick * (nu * n_latch)] : h->L;
     uint32_t i;
-    uint32_t out = 0u;
     STSP_UNROLL
     for (i = 0u; i < nu; ++i) {
         stsp_row_acc_t acc = stsp_row_first(K[0], x[0], k0[i]);
@@ -42,19 +63,7 @@ static STSP_ALWAYS_INLINE uint32_t stsp_law(const stsp_header_t *h, uint32_t tic
         }
         y[i] = stsp_row_end(acc, k0[i]);
     }
-    if (limited != 0u) {
-        const stsp_scalar_t *lo = h->u_min;
-        const stsp_scalar_t *hi = h->u_max;
-        STSP_UNROLL
-        for (i = 0u; i < nu; ++i) {
-            if (!((y[i] >= lo[i]) && (y[i] <= hi[i]))) {
-                out = 1u;
-            }
-        }
-    } else {
-        out = stsp_unlimited_alarm(h, y);
-    }
-    return out;
+    return stsp_law_alarm(h, y, limited);
 }
 
 #endif /* STSP_LAW_H */

@@ -16,9 +16,9 @@ static stsp_status_t stsp_nonfinite_status(const stsp_header_t *h, const stsp_f3
 /* Cold path, part 3: some y[i] may be outside [u_min[i], u_max[i]] or not finite. If any is
  * NaN/Inf, returns the error that says why. Otherwise clamps y (bits of *mask) and returns
  * STSP_WARN_SATURATED, or STSP_OK if nothing needed clamping (a false alarm of the fast
- * check). */
-static stsp_status_t stsp_limit(const stsp_header_t *h, const stsp_f32_t *x, stsp_f32_t *y,
-                                uint16_t *mask)
+ * check). Inlined into both cold paths, so that y can stay in registers. */
+static STSP_ALWAYS_INLINE stsp_status_t stsp_limit(const stsp_header_t *h, const stsp_f32_t *x,
+                                                   stsp_f32_t *y, uint16_t *mask)
 {
     if (stsp_all_finite(y, stsp_nu(h)) == 0) {
         return stsp_nonfinite_status(h, x);

@@ -31,6 +31,10 @@ void stsp_copy_header(stsp_header_t *h, const stsp_table_t *t)
     if (t->band_qp != NULL) {
         h->band = *t->band_qp;
     }
+    h->spline = t->spline;
+    if (t->spline != NULL) {
+        h->sp = *t->spline;
+    }
 #endif
     h->n_ticks = t->n_ticks;
     h->nx = t->nx;
@@ -58,7 +62,7 @@ int stsp_header_changed(const stsp_header_t *h, const stsp_table_t *t)
     }
 #ifdef STSP_ARITH_FIXED_POINT
     if ((t->x_exp != h->x_exp) || (t->u_exp != h->u_exp) || (t->v_exp != h->v_exp) ||
-        (t->band_qp != NULL)) {
+        (t->band_qp != NULL) || (t->spline != NULL)) {
         changed = 1;
     }
 #else
@@ -73,6 +77,20 @@ int stsp_header_changed(const stsp_header_t *h, const stsp_table_t *t)
         }
     } else {
         /* no band dual, as validated */
+    }
+    if (t->spline != h->spline) {
+        changed = 1;
+    } else if (t->spline != NULL) {
+        const stsp_spline_t *p = t->spline;
+        const stsp_spline_t *q = &h->sp;
+        if ((p->n_knots != q->n_knots) || (p->n_entries != q->n_entries) ||
+            (p->n_coef != q->n_coef) || (p->knot_start != q->knot_start) ||
+            (p->knot != q->knot) || (p->row_start != q->row_start) || (p->col != q->col) ||
+            (p->coef_start != q->coef_start) || (p->coef != q->coef)) {
+            changed = 1;
+        }
+    } else {
+        /* gains per tick, as validated */
     }
 #endif
     return changed;
@@ -105,9 +123,100 @@ static stsp_status_t stsp_check_band_dims(const stsp_header_t *h)
 }
 #endif
 
-/* The copy's dimensions and layout (tick_hz and the band pointer come from the header:
- * scalars read once). */
-static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, int has_band)
+#ifndef STSP_ARITH_FIXED_POINT
+/* 1 when the knots k[0..len) are stage s's clamped knot vector for `ticks` ticks (< 2^24, so
+ * every integer up to it is a binary32): four 0, then strictly increasing integers in (0,
+ * ticks), then four times `ticks`. NaN fails every comparison. */
+static int stsp_knots_ok(const stsp_f32_t *k, uint32_t len, uint32_t ticks)
+{
+    const stsp_f32_t end = (stsp_f32_t)ticks;
+    uint32_t i;
+    for (i = 0u; i < 4u; ++i) {
+        if (!(k[i] == 0.0f) || !(k[len - 4u + i] == end)) {
+            return 0;
+        }
+    }
+    for (i = 4u; i < (len - 4u); ++i) {
+        /* 0 < k[i] < ticks < 2^24 here, so the conversion is defined. */
+        if (!(k[i] > k[i - 1u]) || !(k[i] < end) ||
+            ((stsp_f32_t)(uint32_t)k[i] != k[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* Stage s of a spline table, once knot_start, row_start and coef_start are known to be
+ * nondecreasing within their arrays: fewer than 2^24 ticks, S + 3 coefficients for each of its
+ * entries (no product is formed: it could wrap), its knots (stsp_knots_ok). */
+static stsp_status_t stsp_check_spline_stage(const stsp_header_t *h, uint32_t s)
+{
+    const stsp_spline_t *p = &h->sp;
+    const uint32_t nu = h->nu;
+    const uint32_t ticks = h->stage_start[s + 1u] - h->stage_start[s];
+    const uint32_t k0 = p->knot_start[s];
+    const uint32_t n_knots = p->knot_start[s + 1u] - k0;
+    const uint32_t n_coef = p->coef_start[s + 1u] - p->coef_start[s];
+    const uint32_t entries = (uint32_t)p->row_start[(s + 1u) * nu] - p->row_start[s * nu];
+    const uint32_t stride = n_knots - 4u; /* S + 3 */
+    if ((ticks >= 16777216u) || ((n_coef % stride) != 0u) || ((n_coef / stride) != entries) ||
+        (stsp_knots_ok(&p->knot[k0], n_knots, ticks) == 0)) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    return STSP_OK;
+}
+
+/* A spline table's layout (stsp_spline_t): its arrays present; the three index arrays from 0
+ * to their lengths and nondecreasing, at least 8 knots per stage (all checked before any
+ * other element is read through them); every operand index below nx + 1 + n_latch; each stage
+ * as stsp_check_spline_stage says. */
+static stsp_status_t stsp_check_spline_dims(const stsp_header_t *h)
+{
+    const stsp_spline_t *p = &h->sp;
+    const uint32_t ns = h->n_stages;
+    const uint32_t rows = ns * (uint32_t)h->nu;
+    const uint32_t nz = (uint32_t)h->nx + 1u + h->n_latch;
+    uint32_t i;
+    if ((p->knot_start == NULL) || (p->knot == NULL) || (p->row_start == NULL) ||
+        (p->col == NULL) || (p->coef_start == NULL) || (p->coef == NULL)) {
+        return STSP_ERR_NULL;
+    }
+    if ((p->knot_start[0] != 0u) || (p->knot_start[ns] != p->n_knots) ||
+        (p->row_start[0] != 0u) || (p->row_start[rows] != p->n_entries) ||
+        (p->coef_start[0] != 0u) || (p->coef_start[ns] != p->n_coef)) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    for (i = 0u; i < ns; ++i) {
+        const uint32_t k0 = p->knot_start[i];
+        const uint32_t k1 = p->knot_start[i + 1u];
+        if ((k1 < k0) || ((k1 - k0) < 8u) || (p->coef_start[i + 1u] < p->coef_start[i])) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    for (i = 0u; i < rows; ++i) {
+        if (p->row_start[i + 1u] < p->row_start[i]) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    for (i = 0u; i < p->n_entries; ++i) {
+        if (p->col[i] >= nz) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    for (i = 0u; i < ns; ++i) {
+        const stsp_status_t st = stsp_check_spline_stage(h, i);
+        if (st != STSP_OK) {
+            return st;
+        }
+    }
+    return STSP_OK;
+}
+#endif
+
+/* The copy's dimensions and layout (tick_hz and the band and spline pointers come from the
+ * header: scalars read once). */
+static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, int has_band,
+                                     int has_spline)
 {
     uint32_t s;
     if ((t->nx == 0u) || (t->nx > STSP_MAX_NX) || (t->nu == 0u) || (t->nu > STSP_MAX_NU) ||
@@ -121,13 +230,21 @@ static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, i
         return STSP_ERR_BAD_DIMS;
     }
 #endif
-    /* Every table offset is computed in uint32_t: the largest array must stay addressable. */
-    if (t->n_ticks > (UINT32_MAX / ((uint32_t)t->nu * ((uint32_t)t->nx + t->n_latch)))) {
+    /* A spline table's gains are the splines': no per-tick arrays, and no band dual. */
+    if ((has_spline != 0) &&
+        ((has_band != 0) || (t->K != NULL) || (t->k0 != NULL) || (t->L != NULL))) {
         return STSP_ERR_BAD_DIMS;
     }
-    if ((t->stage_start == NULL) || (t->stage_n_latch == NULL) || (t->K == NULL) ||
-        (t->k0 == NULL) || (t->u_min == NULL) || (t->u_max == NULL) || (t->u_hold == NULL) ||
-        ((t->n_latch > 0u) && ((t->L == NULL) || (t->Lambda == NULL) || (t->lambda0 == NULL)))) {
+    /* Every per-tick offset is computed in uint32_t: the largest array must stay addressable. */
+    if ((has_spline == 0) &&
+        (t->n_ticks > (UINT32_MAX / ((uint32_t)t->nu * ((uint32_t)t->nx + t->n_latch))))) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    if ((t->stage_start == NULL) || (t->stage_n_latch == NULL) || (t->u_min == NULL) ||
+        (t->u_max == NULL) || (t->u_hold == NULL) ||
+        ((has_spline == 0) && ((t->K == NULL) || (t->k0 == NULL) ||
+                               ((t->n_latch > 0u) && (t->L == NULL)))) ||
+        ((t->n_latch > 0u) && ((t->Lambda == NULL) || (t->lambda0 == NULL)))) {
         return STSP_ERR_NULL;
     }
 #ifdef STSP_ARITH_FIXED_POINT
@@ -144,9 +261,13 @@ static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, i
         }
     }
 #ifdef STSP_ARITH_FIXED_POINT
-    /* The band solver latches binary32 multipliers: float32 tables only. */
-    return (has_band != 0) ? STSP_ERR_BAD_DIMS : STSP_OK;
+    /* The band solver latches binary32 multipliers, and spline gains are binary32: float32
+     * tables only. */
+    return ((has_band != 0) || (has_spline != 0)) ? STSP_ERR_BAD_DIMS : STSP_OK;
 #else
+    if (has_spline != 0) {
+        return stsp_check_spline_dims(t);
+    }
     return (has_band != 0) ? stsp_check_band_dims(t) : STSP_OK;
 #endif
 }
@@ -275,8 +396,8 @@ static stsp_status_t stsp_check_band_values(const stsp_bandqp_t *b)
     return STSP_OK;
 }
 
-/* Gains finite; limits and the safe command finite, with u_min <= u_hold <= u_max; band data
- * finite and ordered. */
+/* Gains (per tick, or the spline coefficients) finite; limits and the safe command finite,
+ * with u_min <= u_hold <= u_max; band data finite and ordered. */
 static stsp_status_t stsp_check_values(const stsp_header_t *t)
 {
     const uint32_t nx = t->nx;
@@ -285,12 +406,19 @@ static stsp_status_t stsp_check_values(const stsp_header_t *t)
     const uint32_t ns = t->n_stages;
     const uint32_t nt = t->n_ticks;
     uint32_t i;
-    if ((stsp_all_finite(t->K, nt * nu * nx) == 0) || (stsp_all_finite(t->k0, nt * nu) == 0)) {
+    if (t->spline != NULL) {
+        if (stsp_all_finite(t->sp.coef, t->sp.n_coef) == 0) {
+            return STSP_ERR_BAD_VALUES;
+        }
+    } else if ((stsp_all_finite(t->K, nt * nu * nx) == 0) ||
+               (stsp_all_finite(t->k0, nt * nu) == 0) ||
+               ((n_latch > 0u) && (stsp_all_finite(t->L, nt * nu * n_latch) == 0))) {
         return STSP_ERR_BAD_VALUES;
+    } else {
+        /* finite gains per tick */
     }
-    if ((n_latch > 0u) && ((stsp_all_finite(t->L, nt * nu * n_latch) == 0) ||
-                      (stsp_all_finite(t->Lambda, ns * n_latch * nx) == 0) ||
-                      (stsp_all_finite(t->lambda0, ns * n_latch) == 0))) {
+    if ((n_latch > 0u) && ((stsp_all_finite(t->Lambda, ns * n_latch * nx) == 0) ||
+                           (stsp_all_finite(t->lambda0, ns * n_latch) == 0))) {
         return STSP_ERR_BAD_VALUES;
     }
     for (i = 0u; i < nu; ++i) {
@@ -318,15 +446,39 @@ uint16_t stsp_has_limits(const stsp_header_t *t)
 }
 #endif /* STSP_ARITH_FIXED_POINT */
 
+/* The spline part of stsp_table_crc32()'s serialization: counts, then the six arrays, index
+ * arrays as u32 each, knots and coefficients as binary32. */
+static uint32_t stsp_crc_spline(uint32_t crc, const stsp_spline_t *sp, uint32_t ns, uint32_t nu)
+{
+    const uint32_t rows = (ns * nu) + 1u;
+    uint32_t c = crc;
+    uint32_t i;
+    c = stsp_crc32_u32(c, sp->n_knots);
+    c = stsp_crc32_u32(c, sp->n_entries);
+    c = stsp_crc32_u32(c, sp->n_coef);
+    c = stsp_crc32_u32s(c, sp->knot_start, ns + 1u);
+    c = stsp_crc32_f32s(c, sp->knot, sp->n_knots);
+    for (i = 0u; i < rows; ++i) {
+        c = stsp_crc32_u32(c, (uint32_t)sp->row_start[i]);
+    }
+    for (i = 0u; i < sp->n_entries; ++i) {
+        c = stsp_crc32_u32(c, (uint32_t)sp->col[i]);
+    }
+    c = stsp_crc32_u32s(c, sp->coef_start, ns + 1u);
+    return stsp_crc32_f32s(c, sp->coef, sp->n_coef);
+}
+
 /* The CRC of stsp_table_crc32(), with the dimensions and arrays of the header copy `table`
  * and the remaining scalars (tick_hz, scalar_kind, problem_sha256) of the table header. */
 uint32_t stsp_crc_of(const stsp_header_t *table, const stsp_table_t *scalars)
 {
 #ifdef STSP_ARITH_FIXED_POINT
-    /* Only stsp_table_crc32() of a table init would refuse can have one here. */
+    /* Only stsp_table_crc32() of a table init would refuse can have these here. */
     const stsp_bandqp_t *b = scalars->band_qp;
+    const stsp_spline_t *sp = scalars->spline;
 #else
     const stsp_bandqp_t *b = (table->band_qp != NULL) ? &table->band : NULL;
+    const stsp_spline_t *sp = (table->spline != NULL) ? &table->sp : NULL;
 #endif
     const uint32_t nx = table->nx;
     const uint32_t nu = table->nu;
@@ -350,10 +502,14 @@ uint32_t stsp_crc_of(const stsp_header_t *table, const stsp_table_t *scalars)
     for (s = 0u; s < ns; ++s) {
         crc = stsp_crc32_u32(crc, (uint32_t)table->stage_n_latch[s]);
     }
-    crc = stsp_crc32_scalars(crc, table->K, nt * nu * nx);
-    crc = stsp_crc32_scalars(crc, table->k0, nt * nu);
+    if (sp == NULL) {
+        crc = stsp_crc32_scalars(crc, table->K, nt * nu * nx);
+        crc = stsp_crc32_scalars(crc, table->k0, nt * nu);
+    }
     if (n_latch > 0u) {
-        crc = stsp_crc32_scalars(crc, table->L, nt * nu * n_latch);
+        if (sp == NULL) {
+            crc = stsp_crc32_scalars(crc, table->L, nt * nu * n_latch);
+        }
         crc = stsp_crc32_scalars(crc, table->Lambda, ns * n_latch * nx);
         crc = stsp_crc32_scalars(crc, table->lambda0, ns * n_latch);
     }
@@ -367,6 +523,9 @@ uint32_t stsp_crc_of(const stsp_header_t *table, const stsp_table_t *scalars)
         crc = stsp_crc32_i8s(crc, table->v_exp, n_latch);
     }
 #endif
+    if (sp != NULL) {
+        crc = stsp_crc_spline(crc, sp, ns, nu);
+    }
     if (b != NULL) {
         const uint32_t q = b->q;
         crc = stsp_crc32_u32(crc, q);
@@ -392,7 +551,8 @@ uint32_t stsp_table_crc32(const stsp_table_t *table)
 /* The checks of stsp_init() on the header copy h, read once from `table`. */
 stsp_status_t stsp_check_table(const stsp_header_t *h, const stsp_table_t *table)
 {
-    stsp_status_t st = stsp_check_dims(h, table->tick_hz, (table->band_qp != NULL) ? 1 : 0);
+    stsp_status_t st = stsp_check_dims(h, table->tick_hz, (table->band_qp != NULL) ? 1 : 0,
+                                       (table->spline != NULL) ? 1 : 0);
     if (st != STSP_OK) {
         return st;
     }

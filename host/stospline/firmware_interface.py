@@ -18,7 +18,7 @@ FRAC_BITS = {"q15": 15, "q31": 31}             # STSP_Q_FRAC_BITS
 SCALAR_KIND = {"float32": 1, "q15": 2, "q31": 3}   # STSP_SCALAR_FLOAT32/_Q15/_Q31
 ELEMENT_BYTES = {"float32": 4, "q15": 2, "q31": 4}  # bytes of one table entry
 MAGIC = 0x53545350                             # STSP_TABLE_MAGIC, "STSP"
-FORMAT_VERSION = 4                             # STSP_FORMAT_VERSION
+FORMAT_VERSION = 5                             # STSP_FORMAT_VERSION
 
 STATUS = {                                     # stsp_status_t, without the STSP_ prefix
     "OK": 0, "WARN_TICK_SKIPPED": 1, "WARN_TICK_REPEATED": 2, "ERR_NULL": -1,

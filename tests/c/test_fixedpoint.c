@@ -379,6 +379,42 @@ static void test_band_table_is_refused(void **state)
     assert_int_equal(stsp_init(&c, &t), STSP_OK);
 }
 
+/* Spline gains are float32 only: a fixed-point build refuses a table with spline, with its
+ * per-tick arrays (a valid Q table otherwise) or without them (K, k0, L NULL: BAD_DIMS, not
+ * STSP_ERR_NULL), the CRC recomputed over the spline data; stsp_verify() of an instance whose
+ * table gains a spline afterwards reports the header change. */
+static void test_spline_table_is_refused(void **state)
+{
+    static const uint32_t knot_start[NS + 1u] = {0u, 8u, 16u};
+    static const float knot[16] = {0.0f, 0.0f, 0.0f, 0.0f, 3.0f, 3.0f, 3.0f, 3.0f,
+                                   0.0f, 0.0f, 0.0f, 0.0f, 2.0f, 2.0f, 2.0f, 2.0f};
+    static const uint16_t row_start[NS * NU + 1u] = {0u, 1u, 2u};
+    static const uint8_t col[2] = {0u, 2u};
+    static const uint32_t coef_start[NS + 1u] = {0u, 4u, 8u};
+    static const float coef[8] = {0.5f, 0.5f, 0.5f, 0.5f, 0.25f, 0.25f, 0.25f, 0.25f};
+    const stsp_spline_t sp = {16u, 2u, 8u, knot_start, knot, row_start, col, coef_start, coef};
+    const stsp_scalar_t x[NX] = {0, 0};
+    stsp_scalar_t u[NU] = {7};
+    stsp_ctrl_t c;
+    stsp_table_t t = make_table();
+    (void)state;
+    t.spline = &sp;
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_ERR_NOT_INITIALIZED);
+    assert_int_equal(u[0], 7);
+    t.K = NULL;
+    t.k0 = NULL;
+    t.L = NULL;
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS);
+
+    t = make_table();
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    t.spline = &sp;
+    assert_int_equal(stsp_verify(&c), STSP_ERR_TABLE_CHANGED);
+}
+
 static void test_crc_covers_scales_and_kind(void **state)
 {
     stsp_ctrl_t c;
@@ -635,6 +671,7 @@ int main(void)
         cmocka_unit_test_setup(test_table_changed_after_init, setup),
         cmocka_unit_test_setup(test_gains_changed_after_init_do_not_overflow, setup),
         cmocka_unit_test_setup(test_state_and_command_may_share_a_buffer, setup),
+        cmocka_unit_test(test_spline_table_is_refused),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

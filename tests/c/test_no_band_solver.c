@@ -32,7 +32,7 @@ static stsp_table_t table_with(const stsp_bandqp_t *b)
 {
     stsp_table_t t = {STSP_TABLE_MAGIC, STSP_FORMAT_VERSION, STSP_SCALAR_KIND, 2u, 1u, 2u, 1u,
                       4u, 100u, stage_start, stage_n_latch, K, k0, L, Lambda, lambda0,
-                      u_min, u_max, u_hold, b, 0u, {0u}};
+                      u_min, u_max, u_hold, b, NULL, 0u, {0u}};
     t.crc32 = stsp_table_crc32(&t);
     return t;
 }

@@ -11,20 +11,35 @@
  * path (no data-dependent branches for finite x, except the clamping in table 2).
  * Fixed-point builds (STSP_ARITH_Q15/Q31) use the robot's Q tables, the same states converted
  * to Q units, and the limits in command units: +-(2^F - 2) (inactive) and +-0.5 converted.
+ * With BENCH_SPLINE (float32 only) the table is tools/arm/spline_bench_table.c, a spline table
+ * of the robot's shape (30 spans of 100 ticks per stage, 10 entries), its CRC computed here;
+ * each repetition also steps ticks 95..104 after tick 9 (95 by a skip), so that tick 100 starts
+ * a new span.
  * After the loop it prints one line per stsp_step call, in call order, which the script
  * pairs with the calls it finds in QEMU's execution trace, and the table's dimensions:
- *     call <index> table <0|1|2> tick <tick> stage <stage> latch <0|1> status <status>
- *     table nx <nx> nu <nu> n_latch <n_latch> stage_n_latch <np0> <np1> ... */
+ *     call <index> table <0|1|2> tick <tick> stage <stage> latch <0|1> status <status> span <0|1>
+ *     table nx <nx> nu <nu> n_latch <n_latch> stage_n_latch <np0> <np1> ...
+ * (span 1: the tick starts a new spline span inside its stage; always 0 for a per-tick table). */
 #include <stdint.h>
 #include <stdio.h>
 
-#include "robot_variant.h"
 #include "stospline/stsp_controller.h"
+#ifdef BENCH_SPLINE
+#include "spline_bench_table.h"
+#define ROBOT_TABLE spline_bench_table
+#define ROBOT_NX SPLINE_BENCH_NX
+#define ROBOT_NU SPLINE_BENCH_NU
+#define BENCH_SPAN_TICKS SPLINE_BENCH_SPAN_TICKS
+#define BENCH_SPAN_RUN 10u
+#else
+#include "robot_variant.h"
+#define BENCH_SPAN_RUN 0u
+#endif
 
 #define BENCH_REPS 10u
 #define BENCH_RUN 10u
 #define BENCH_TABLES 3u
-#define BENCH_CALLS (BENCH_TABLES * BENCH_REPS * 2u * (BENCH_RUN + 1u))
+#define BENCH_CALLS (BENCH_TABLES * BENCH_REPS * (2u * (BENCH_RUN + 1u) + BENCH_SPAN_RUN))
 
 typedef struct {
     uint32_t tick;
@@ -32,6 +47,7 @@ typedef struct {
     uint8_t stage;
     uint8_t latch;
     uint8_t table;
+    uint8_t span;
 } bench_call_t;
 
 static bench_call_t calls[BENCH_CALLS];
@@ -51,6 +67,15 @@ static void bench_step(stsp_ctrl_t *c, uint32_t tick, const stsp_scalar_t *x, ui
         rec->stage = (uint8_t)c->stage;
         rec->table = table;
         rec->latch = (uint8_t)(((latched_before == 0u) || new_stage_latches) ? 1u : 0u);
+        rec->span = 0u;
+#ifdef BENCH_SPLINE
+        {
+            const uint32_t in_stage = tick - c->table->stage_start[c->stage];
+            rec->span = (uint8_t)(((in_stage > 0u) && ((in_stage % BENCH_SPAN_TICKS) == 0u))
+                                      ? 1u
+                                      : 0u);
+        }
+#endif
     }
 }
 
@@ -87,6 +112,11 @@ static int bench_table(const stsp_table_t *table, uint8_t label)
         for (k = 0u; k < BENCH_RUN; ++k) {
             bench_step(&ctrl, k, x, label);
         }
+#ifdef BENCH_SPLINE
+        for (k = 0u; k < BENCH_SPAN_RUN; ++k) {
+            bench_step(&ctrl, BENCH_SPAN_TICKS - (BENCH_SPAN_RUN / 2u) + k, x, label);
+        }
+#endif
         for (k = 0u; k < BENCH_RUN + 2u; ++k) {
             bench_step(&ctrl, sw - 1u + k, x, label);
         }
@@ -106,6 +136,9 @@ int main(void)
     static const stsp_f32_t tight_hi[ROBOT_NU] = {0.5f, 0.5f};
 #endif
     stsp_table_t wide = ROBOT_TABLE, tight = ROBOT_TABLE;
+#ifdef BENCH_SPLINE
+    stsp_table_t plain = ROBOT_TABLE; /* the generated file leaves the CRC to us */
+#endif
     uint32_t i;
 #ifdef STSP_ARITH_FIXED_POINT
     for (i = 0u; i < ROBOT_NU; ++i) {
@@ -122,14 +155,23 @@ int main(void)
     tight.u_min = tight_lo;
     tight.u_max = tight_hi;
     tight.crc32 = stsp_table_crc32(&tight);
+#ifdef BENCH_SPLINE
+    plain.crc32 = stsp_table_crc32(&plain);
+    if (bench_table(&plain, 0u) != 0 || bench_table(&wide, 1u) != 0 ||
+        bench_table(&tight, 2u) != 0) {
+        return 1;
+    }
+#else
     if (bench_table(&ROBOT_TABLE, 0u) != 0 || bench_table(&wide, 1u) != 0 ||
         bench_table(&tight, 2u) != 0) {
         return 1;
     }
+#endif
     for (i = 0u; i < n_calls; ++i) {
-        printf("call %lu table %u tick %lu stage %u latch %u status %d\n", (unsigned long)i,
-               (unsigned)calls[i].table, (unsigned long)calls[i].tick, (unsigned)calls[i].stage,
-               (unsigned)calls[i].latch, (int)calls[i].status);
+        printf("call %lu table %u tick %lu stage %u latch %u status %d span %u\n",
+               (unsigned long)i, (unsigned)calls[i].table, (unsigned long)calls[i].tick,
+               (unsigned)calls[i].stage, (unsigned)calls[i].latch, (int)calls[i].status,
+               (unsigned)calls[i].span);
     }
     printf("bench: %lu calls, sizeof(stsp_ctrl_t) %lu\n", (unsigned long)n_calls,
            (unsigned long)sizeof(stsp_ctrl_t));

@@ -116,12 +116,12 @@ def trace_calls(build: Path, image: str, machine: str = "mps2-an386"
                "-dfilter", dfilter])
     calls = []
     for line in out.splitlines():
-        m = re.match(r"call (\d+) table (\d) tick (\d+) stage (\d+) latch (\d) status (-?\d+)",
-                     line)
+        m = re.match(r"call (\d+) table (\d) tick (\d+) stage (\d+) latch (\d) status (-?\d+)"
+                     r"(?: span (\d))?", line)
         if m:
             calls.append({"table": int(m.group(2)), "tick": int(m.group(3)),
                           "stage": int(m.group(4)), "latch": m.group(5) == "1",
-                          "status": int(m.group(6))})
+                          "status": int(m.group(6)), "span": m.group(7) == "1"})
     entry = syms["stsp_step"][0]
     in_caller = lambda pc: ranges["bench_step"][0] <= pc < sum(ranges["bench_step"])  # noqa: E731
     counts, current, lines, prev = [], None, 0, None
@@ -251,6 +251,11 @@ def images(cpu: str):
         yield (f"bench{sfx}.elf", f"{arith}, generic dimensions (libstsp_{arith.lower()}.a)")
         yield (f"bench_fixed{sfx}.elf",
                f"{arith}, STSP_FIXED 4/2/4 (libstsp_fixed_robot_corridor{sfx}.a)")
+    # The spline table of tools/arm/spline_bench_table.c (float32; soft float on the M0+).
+    yield ("bench_spline.elf", "float32 spline table (tools/arm/spline_bench_table.c), "
+           "generic dimensions (libstsp_float32.a)")
+    yield ("bench_spline_fixed.elf", "float32 spline table (tools/arm/spline_bench_table.c), "
+           "STSP_FIXED 4/2/4 (libstsp_fixed_robot_corridor.a)")
 
 
 def main() -> int:
@@ -291,6 +296,7 @@ def main() -> int:
                              "max": max(n), "min": min(n), "macs": macs,
                              "statuses": sorted({c["status"] for c in sel})})
 
+            spline = "spline" in image
             for tab, tlabel in TABLES.items():
                 for latch in (False, True):
                     kind = "latch" if latch else "ordinary"
@@ -298,12 +304,22 @@ def main() -> int:
                         p = np_of_stage[st]
                         macs = nu * nx + nu * p + (p * nx if latch else 0)
                         sel = [c for c in calls
-                               if c["table"] == tab and c["latch"] == latch and c["stage"] == st]
-                        row(tlabel, f"{kind}, stage {st} (np={p})", sel, macs)
+                               if c["table"] == tab and c["latch"] == latch and c["stage"] == st
+                               and not c["span"]]
+                        row(tlabel, f"{kind}, stage {st} (np={p})", sel, 0 if spline else macs)
+                if spline:
+                    sel = [c for c in calls if c["table"] == tab and c["span"]]
+                    row(tlabel, "new span, stage 0", sel, 0)
             skipped = [c["insns"] for c in calls if c["status"] == 1 and c["table"] == 0]
-            print("   MACs = nu*nx + nu*np (+ np*nx on a latch tick): the multiply-adds the law "
-                  f"needs; the firmware runs nu*(nx + n_latch) = {nu * (nx + nl)} on every tick "
-                  "(L over all n_latch columns)")
+            if spline:
+                print("   Spline table: per stage 10 stored entries (4 K, 2 k0, 4 L), each "
+                      "4 multiply-adds for its gain and 1 for the command, plus the basis (6 "
+                      "divisions); 'new span': the first tick of a span (cold path), "
+                      "once per 100 ticks here.")
+            else:
+                print("   MACs = nu*nx + nu*np (+ np*nx on a latch tick): the multiply-adds the law "
+                      f"needs; the firmware runs nu*(nx + n_latch) = {nu * (nx + nl)} on every "
+                      "tick (L over all n_latch columns)")
             print("   muls run = multiply instructions executed (FP vmul/vnmul/vmls/vnmla/...; integer mul/mla/"
                   "smlal/...; on the M0+, Q31's 64-bit products are libgcc __aeabi_lmul calls).")
             print(f"   Ordinary stage 0 (no limits) includes {len(skipped)} calls reached by a "

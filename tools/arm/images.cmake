@@ -11,6 +11,9 @@
 #   bench<sfx>.elf, bench_fixed<sfx>.elf    tools/arm/bench_main.c (count_instructions.sh)
 #   replay<sfx>.elf, replay_fixed<sfx>.elf  tests/arm/replay_main.c with the records file given
 #                                           as STSP_REPLAY_RECORDS<_Q15|_Q31> (run_replay.sh)
+#   bench_spline.elf, bench_spline_fixed.elf  bench_main.c with BENCH_SPLINE: the spline table of
+#                                           tools/arm/spline_bench_table.c (float32; on both
+#                                           cores, soft float on the M0+)
 if(NOT TARGET stsp_gains_robot_corridor)
   return()
 endif()
@@ -57,3 +60,15 @@ foreach(arith float32 q15 q31)
                    "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c" "${records}")
   endif()
 endforeach()
+
+# The spline bench: a hand-made spline table of the robot's shape (make_spline_bench_table.py)
+# with the float32 controller, generic and built for the robot's shape.
+add_library(stsp_spline_bench_table STATIC ${arm_dir}/spline_bench_table.c)
+target_include_directories(stsp_spline_bench_table PUBLIC ${arm_dir}
+                           ${PROJECT_SOURCE_DIR}/firmware/include)
+target_compile_options(stsp_spline_bench_table PRIVATE ${STSP_WARNINGS})
+stsp_add_image(bench_spline stsp_float32 stsp_spline_bench_table ${arm_dir}/bench_main.c)
+stsp_add_image(bench_spline_fixed stsp_fixed_robot_corridor stsp_spline_bench_table
+               ${arm_dir}/bench_main.c)
+target_compile_definitions(bench_spline PRIVATE BENCH_SPLINE)
+target_compile_definitions(bench_spline_fixed PRIVATE BENCH_SPLINE)

@@ -15,7 +15,9 @@
  *                                 v = argmax of the band dual at x      (stsp_bandqp.h)
  *     every tick:                 u = sat(-K[j] x - k0[j] - L[j] v)
  *
- * where sat() clamps input i to [u_min[i], u_max[i]] (STSP_WARN_SATURATED says it did).
+ * where sat() clamps input i to [u_min[i], u_max[i]] (STSP_WARN_SATURATED says it did). A
+ * spline table (stsp_spline_t, float32 only) has the same law with K[j], k0[j], L[j] the
+ * stage's cubic B-splines evaluated at tick j (the order below).
  * Stage-wise designs latch at every constrained stage; joint designs latch once, at stage 0
  * (stage_n_latch[s] = 0 afterwards keeps v). Entries of v beyond stage_n_latch[s] are set to zero.
  * The caller holds u until the next tick (zero-order hold).
@@ -30,6 +32,18 @@
  * On a single-precision VFP (Cortex-M4F) each step is one VNMLA.F32 (the first two terms) or
  * VMLS.F32: chained, not fused (the product is rounded, then the difference), so the same
  * operations in the same order; define STSP_NO_VFP_MAC for separate VMUL and VSUB.
+ *
+ * Spline tables (stsp_spline_t), binary32, every operation rounded, no fused multiply-add: at
+ * tick j of stage s, tau = (float)(j - stage_start[s]) (exact) and U the stage's knots, the span
+ * sigma with U[sigma+3] <= tau < U[sigma+4] and i = sigma + 3 give the basis (The NURBS Book,
+ * A2.2): left[k] = tau - U[i+1-k], right[k] = U[i+k] - tau (k = 1..3), N[0] = 1, and for
+ * k = 1..3: saved = 0; for r = 0..k-1: temp = N[r] / (right[r+1] + left[k-r]),
+ * N[r] = saved + right[r+1] temp, saved = left[k-r] temp; then N[k] = saved. Each stored entry
+ * (coefficients c) has the gain g = ((N[0] c[sigma] + N[1] c[sigma+1]) + N[2] c[sigma+2]) +
+ * N[3] c[sigma+3], and for each input i
+ *     u[i] = (((+0 - g_1 z[col_1]) - g_2 z[col_2]) - ...)   over the entries of (s, i) in order,
+ * with z = [x, 1, v]; then the limit and finiteness checks and the clamp of the per-tick law.
+ * On the M4F each step is one VMLA.F32 or VMLS.F32 (chained, as above).
  *
  * Buffers: stsp_ctrl_t holds STSP_MAX_LATCH scalars for v, STSP_MAX_NU for the copy of
  * u_hold, 24 bytes of state and the validated copy of the table header (stsp_header_t); on
@@ -100,8 +114,9 @@ typedef stsp_f32_t stsp_scalar_t;
 /** Table magic, "STSP" as a little-endian u32. */
 #define STSP_TABLE_MAGIC 0x53545350u
 /** Table format understood by this firmware (2: actuator limits u_min/u_max; 3: optional
- * band dual QP re-solved at the t0 latch; 4: the safe command u_hold). */
-#define STSP_FORMAT_VERSION 4u
+ * band dual QP re-solved at the t0 latch; 4: the safe command u_hold; 5: optional spline
+ * gains, stsp_table_t.spline). */
+#define STSP_FORMAT_VERSION 5u
 /** Arithmetic variant tag stored in the table (scalar_kind): float32, Q15 or Q31 tables. */
 #define STSP_SCALAR_FLOAT32 1u
 #define STSP_SCALAR_Q15 2u
@@ -170,23 +185,55 @@ typedef enum {
     STSP_ERR_BAD_MAGIC = -3,        /**< the table header's magic is wrong */
     STSP_ERR_BAD_VERSION = -4,      /**< table format or scalar variant not supported */
     STSP_ERR_BAD_DIMS = -5,         /**< dimensions zero, above the STSP_MAX_* limits, not the
-                                         STSP_FIXED_* ones or the expected ones, or the stage
-                                         index arrays inconsistent */
+                                         STSP_FIXED_* ones or the expected ones, the stage
+                                         index arrays inconsistent, or a spline table's
+                                         layout or knots invalid (stsp_spline_t) */
     STSP_ERR_BAD_CRC = -6,          /**< the tables do not match their CRC-32 */
     STSP_ERR_TICK_RANGE = -7,       /**< tick >= n_ticks: the plan is over */
     STSP_ERR_TICK_ORDER = -8,       /**< tick went backwards by more than one repeat */
     STSP_ERR_NONFINITE_STATE = -9,  /**< x holds NaN or +-Inf */
     STSP_ERR_NONFINITE_OUTPUT = -10,/**< the state is finite but u (or the latch) overflowed */
-    STSP_ERR_BAD_VALUES = -11,      /**< a table value is NaN or +-Inf, u_min > u_max, or
+    STSP_ERR_BAD_VALUES = -11,      /**< a table value (a spline coefficient too) is NaN or
+                                         +-Inf, u_min > u_max, or
                                          u_hold outside [u_min, u_max]; fixed point: a scale
                                          exponent beyond +-STSP_Q_EXP_MAX, or a row whose
                                          absolute sum exceeds 2^F - 1 (see stsp_step) */
     STSP_ERR_BAD_PROBLEM = -12,     /**< stsp_init_problem(): the table's problem_sha256 is not
                                          the expected one (tables from another problem file) */
     STSP_ERR_TABLE_CHANGED = -13    /**< stsp_verify(): the table header (magic, version, kind,
-                                         a dimension, an array address, the band dual's
-                                         header) is not the one stsp_init() validated */
+                                         a dimension, an array address, the band dual's or
+                                         the spline's header) is not the one stsp_init()
+                                         validated */
 } stsp_status_t;
+
+/**
+ * Spline gains (format 5, float32 builds only): each stage's gains as cubic B-splines of the
+ * tick, instead of one row per tick. Arrays concatenated over the stages s = 0..n_stages-1:
+ *   knot[knot_start[s] .. knot_start[s+1]): stage s's clamped knot vector, S_s + 7 knots for
+ *     S_s >= 1 spans: [0, 0, 0, 0, b_1, ..., b_{S_s-1}, T, T, T, T] in ticks from the stage's
+ *     first, T = stage_start[s+1] - stage_start[s] < 2^24, 0 < b_1 < ... < b_{S_s-1} < T
+ *     integers;
+ *   col[row_start[s*nu + i] .. row_start[s*nu + i + 1]): the stored (nonzero) entries of stage
+ *     s, input i, each the index of its operand in z = [x, 1, v]: j < nx is K[i][j], j == nx
+ *     k0[i], j = nx + 1 + c is L[i][c]; an entry not stored is exactly 0;
+ *   coef[coef_start[s] .. coef_start[s+1]): the stage's S_s + 3 B-spline coefficients of each
+ *     entry, entry after entry in col order.
+ * stsp_init() checks: knot_start[0] == 0, row_start[0] == 0, coef_start[0] == 0, all three
+ * nondecreasing and ending at n_knots, n_entries and n_coef; every stage's knots as above;
+ * col[e] < nx + 1 + n_latch; coef_start[s+1] - coef_start[s] == (entries of stage s) x
+ * (S_s + 3) (else STSP_ERR_BAD_DIMS); every coefficient finite (STSP_ERR_BAD_VALUES).
+ */
+typedef struct {
+    uint32_t n_knots;             /**< length of knot */
+    uint32_t n_entries;           /**< length of col */
+    uint32_t n_coef;              /**< length of coef */
+    const uint32_t *knot_start;   /**< [n_stages + 1] */
+    const stsp_f32_t *knot;       /**< [n_knots] */
+    const uint16_t *row_start;    /**< [n_stages * nu + 1] */
+    const uint8_t *col;           /**< [n_entries] */
+    const uint32_t *coef_start;   /**< [n_stages + 1] */
+    const stsp_f32_t *coef;       /**< [n_coef] */
+} stsp_spline_t;
 
 /**
  * Generated gain tables plus the header that stsp_init() verifies.
@@ -205,6 +252,8 @@ typedef enum {
  * (rounded half up), so that x[j] = x_q[j] 2^(x_exp[j] - F), v[c] = v_q[c] 2^(v_exp[c] - F),
  * u[i] = u_q[i] 2^(u_exp[i] - F). u_min/u_max/u_hold are in u_q units; -2^F and 2^F - 1 mean
  * unlimited.
+ *
+ * A spline table (spline != NULL) has K, k0 and L NULL: its gains are the splines'.
  */
 typedef struct {
     uint32_t magic;          /**< STSP_TABLE_MAGIC */
@@ -239,6 +288,10 @@ typedef struct {
                                       requires q == stage_n_latch[0] and stage_n_latch[s] == 0 for
                                       s > 0 (one latch, at t0). float32 only: a fixed-point
                                       build refuses a table with one (STSP_ERR_BAD_DIMS) */
+    const stsp_spline_t *spline;  /**< NULL (gains per tick: K, k0, L), or the spline gains
+                                      (K, k0, L then NULL; not with band_qp: otherwise
+                                      STSP_ERR_BAD_DIMS). float32 only: a fixed-point build
+                                      refuses a table with one (STSP_ERR_BAD_DIMS) */
     uint32_t crc32;              /**< CRC-32 of dims and arrays, see stsp_table_crc32() */
     uint8_t problem_sha256[32];  /**< hash of the problem file the tables came from */
 } stsp_table_t;
@@ -274,7 +327,30 @@ typedef struct {
     uint16_t n_latch;
     uint16_t n_stages;
     const stsp_scalar_t *u_hold; /* last: the ordinary tick's offsets stay as they were */
+#ifndef STSP_ARITH_FIXED_POINT
+    const stsp_spline_t *spline;  /**< the table's pointer (NULL: gains per tick) */
+    stsp_spline_t sp;             /**< copy of *spline (all zero without one) */
+#endif
 } stsp_header_t;
+
+#ifndef STSP_ARITH_FIXED_POINT
+/**
+ * Private to the controller: where a spline table's last successful step was, set on the cold
+ * path (stage change, span change, skip) and read by the ordinary tick. Every pointer and count
+ * was bounded by the validated array lengths when it was set.
+ */
+typedef struct {
+    const stsp_f32_t *knot;  /**< U[sigma + 1], the first of the six knots of the span's basis */
+    const stsp_f32_t *coef;  /**< coefficient sigma of the stage's first entry */
+    const uint8_t *col;      /**< the stage's first entry */
+    uint32_t first;          /**< the stage's first tick */
+    uint32_t next;           /**< first tick after the span (0: no span yet) */
+    uint32_t stride;         /**< coefficients per entry, S + 3 */
+    uint32_t span;           /**< sigma */
+    uint32_t z_mask;         /**< z = [x, 1, v] padded to z_mask + 1, a power of two */
+    uint16_t row_end[STSP_MAX_NU]; /**< input i's entries end at row_end[i] (from col) */
+} stsp_span_t;
+#endif
 
 /**
  * One controller instance; caller-owned (stack, static or a struct of the application).
@@ -284,7 +360,8 @@ typedef struct {
     const stsp_table_t *table;
     uint32_t ready;          /**< a magic value after a successful init (private) */
     uint32_t next_tick;      /**< tick expected at the next step */
-    uint32_t stage_end;      /**< first tick after `stage` once latched, else 0 (private) */
+    uint32_t stage_end;      /**< first tick after `stage` once latched, else 0; always 0
+                                  for a spline table (private) */
     uint16_t stage;          /**< stage of the last successful step */
     uint16_t latched;        /**< nonzero once v holds a latch for `stage` */
     uint16_t sat_mask;       /**< after STSP_WARN_SATURATED: bit i set if u[i] was clamped
@@ -294,16 +371,24 @@ typedef struct {
     stsp_header_t checked;   /**< the validated table header (private) */
     stsp_scalar_t hold[STSP_MAX_NU]; /**< the table's u_hold, copied at init (private): a
                                           refused step writes it even if the table changed;
-                                          last, so the ordinary tick's offsets are unchanged */
+                                          after the fields the ordinary tick reads, so their
+                                          offsets are unchanged */
+#ifndef STSP_ARITH_FIXED_POINT
+    stsp_span_t span;        /**< a spline table's current span (private) */
+#endif
 } stsp_ctrl_t;
 
 /**
  * CRC-32 (IEEE 802.3 polynomial, reflected, as zlib) of the table's canonical serialization:
  * nx, nu, n_latch, n_stages, n_ticks, tick_hz as little-endian u32; stage_start and stage_n_latch
  * as little-endian u32 each; then K, k0, L, Lambda, lambda0, u_min, u_max, u_hold as little-endian
- * binary32 bit patterns (L, Lambda, lambda0 only when n_latch > 0). Fixed point: scalar_kind
+ * binary32 bit patterns (L, Lambda, lambda0 only when n_latch > 0; K, k0, L not for a spline
+ * table). Fixed point: scalar_kind
  * as a u32 after tick_hz, the same arrays as little-endian int16 (Q15) or int32 (Q31), then
- * x_exp, u_exp and v_exp (when n_latch > 0) one byte each. Then, when band_qp is not NULL,
+ * x_exp, u_exp and v_exp (when n_latch > 0) one byte each. Then, for a spline table, n_knots,
+ * n_entries and n_coef as u32, knot_start as u32 each, knot as binary32 bit patterns,
+ * row_start, col and coef_start as u32 each, coef as binary32 bit patterns (all little-endian).
+ * Then, when band_qp is not NULL,
  * its q and nx as u32 and Nt, mt, W, lo, hi as little-endian binary64 bit patterns. Last,
  * the 32 bytes of problem_sha256. Independent of the
  * target's byte order. The table's dimensions and pointers must already be valid (stsp_init()

@@ -244,7 +244,8 @@ def _fixed_point_variant(table, p: str) -> _Variant:
         _array("int8_t", f"{p}_v_exp", table.v_exp, d, "[n_latch] multiplier scale exponents"),
     ]
     tail = (f"\n    {p}_x_exp, {p}_u_exp, {p}_v_exp,\n"
-            "    NULL, NULL, /* band_qp, spline: float32 only */")
+            "    NULL, /* band_qp: the band re-solve is float32 only */\n"
+            "    NULL, /* spline: spline gains are float32 only */")
     return _Variant(guard, f"ARITH_{kind} 1", layout, f"stsp_{table.arith}_t", _qlit(F),
                     "-{} scaled, ", " (command units)", extra, "", table.scalar_kind, tail)
 

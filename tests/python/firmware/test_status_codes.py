@@ -32,7 +32,7 @@ def test_the_header_check_stops_a_build_on_a_diverged_header(tmp_path):
                              "stsp_status_t"),
                             ("STSP_TABLE_MAGIC 0x53545350u", "STSP_TABLE_MAGIC 0x53545351u",
                              "STSP_TABLE_MAGIC"),
-                            ("STSP_FORMAT_VERSION 4u", "STSP_FORMAT_VERSION 5u",
+                            ("STSP_FORMAT_VERSION 5u", "STSP_FORMAT_VERSION 6u",
                              "STSP_FORMAT_VERSION")]:
         inc = tmp_path / named
         shutil.copytree(src, inc)

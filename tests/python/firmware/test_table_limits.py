@@ -23,7 +23,7 @@ def _table_a(**limits) -> GainTable:
 
 def test_default_limits_are_unlimited_and_pinned_crc():
     t = _table_a()
-    assert FORMAT_VERSION == 4
+    assert FORMAT_VERSION == 5
     np.testing.assert_array_equal(t.u_hold, np.float32([0.0]))
     np.testing.assert_array_equal(t.u_min, np.float32([-F32_MAX]))
     np.testing.assert_array_equal(t.u_max, np.float32([F32_MAX]))

@@ -10,7 +10,9 @@ the spline's excess over the per-tick table's and over the designed optimum J0; 
 E-constraint residual of each (|E{C2 x} - value| at the knots, oracle); and the compression
 time (fit + evaluation + latch re-solve, `spline_table`) against the time of
 `design_problem` with a per-tick table (the design, the float32 table and the oracle on both
-laws: what `stospline design` computes). Times are medians of `--repeat` runs after a warm-up,
+laws: what `stospline design` computes), twice: "warm", medians of `--repeat` runs after a
+warm-up in this process (the designer's caches of tick maps hit: the least a design costs),
+and "cold", the first call of each in a fresh process, as in one `stospline design` run.
 `time.perf_counter`, BLAS pinned to one thread. Figures are in docs/evidence/spline-tables.md.
 """
 from __future__ import annotations
@@ -31,8 +33,37 @@ from stospline.table.flash import flash_bytes                      # noqa: E402
 from stospline.table.format import table_of                        # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
+# investment (time-varying data), robot_bands and robot_narrow_corridor (bands) and quadrotor
+# (a one-tick delay) have no spline table (docs/guide/problem-file.md, `table`).
 EXAMPLES = ["robot_corridor.toml", "robot_corridor_eps01.toml", "robot_patrol_60s.toml",
-            "coupled_axes.toml", "investment.toml", "population.toml"]
+            "coupled_axes.toml", "population.toml"]
+_COLD = """
+import os, sys, time
+for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(v, "1")
+import stospline
+from stospline.sim.spline_certificate import spline_table
+from stospline.table.format import table_of
+p = stospline.load_problem(sys.argv[1])
+t = time.perf_counter()
+d = stospline.design_problem(p, table="per-tick")
+t_design = time.perf_counter() - t
+exact = table_of(d.design, quantize=False)
+t = time.perf_counter()
+spline_table(p, exact, d.table, float(sys.argv[2]))
+print(t_design, time.perf_counter() - t)
+"""
+
+
+def _cold(path: Path, tolerance: float) -> tuple[float, float]:
+    """``(design s, compress s)``, each the first call in a fresh process (the C kernels are
+    built already, the caches empty): what one `stospline design` run spends on each."""
+    import subprocess
+    import sys
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "host")}
+    out = subprocess.run([sys.executable, "-c", _COLD, str(path), repr(tolerance)], env=env,
+                         check=True, capture_output=True, text=True).stdout.split()
+    return float(out[0]), float(out[1])
 
 
 def _median_time(work, repeat: int):
@@ -63,16 +94,19 @@ def main() -> None:
     tolerances = [float(t) for t in args.tolerances.split(",")]
     print("| example | ticks | tolerance | spans per stage | per-tick B | spline B | ratio | "
           "J per-tick | J spline | excess vs per-tick | excess vs J0 | residual per-tick | "
-          "residual spline | design s | compress s | compress / design |")
-    print("|---|" + "---|" * 15)
+          "residual spline | warm: design s | compress s | ratio | cold: design s | compress s "
+          "| ratio |")
+    print("|---|" + "---|" * 18)
     for name in args.examples.split(","):
         problem = stospline.load_problem(str(ROOT / "examples" / name))
-        d, t_design = _median_time(lambda: stospline.design_problem(problem), args.repeat)
+        d, t_design = _median_time(lambda: stospline.design_problem(problem, table="per-tick"),
+                                   args.repeat)
         exact = table_of(d.design, quantize=False)
         for tol in tolerances:
             sp, t_comp = _median_time(lambda: spline_table(problem, exact, d.table, tol),
                                       args.repeat)
             m = stospline.evaluate_table(problem, sp, path=False)
+            c_design, c_comp = _cold(ROOT / "examples" / name, tol)
             print(f"| {name.removesuffix('.toml')} | {d.table.n_ticks} | {tol:g} | "
                   f"{[int(sp.spline.spans(s)) for s in range(sp.n_stages)]} | "
                   f"{flash_bytes(d.table):,} | {flash_bytes(sp):,} | "
@@ -80,7 +114,8 @@ def main() -> None:
                   f"{m.J:.10g} | {(m.J - d.implemented.J) / abs(d.implemented.J):+.2e} | "
                   f"{(m.J - d.design.J0) / abs(d.design.J0):+.2e} | "
                   f"{_residual(problem, d.implemented):.2e} | {_residual(problem, m):.2e} | "
-                  f"{t_design:.3f} | {t_comp:.3f} | {t_comp / t_design:.1%} |", flush=True)
+                  f"{t_design:.3f} | {t_comp:.3f} | {t_comp / t_design:.0%} | "
+                  f"{c_design:.3f} | {c_comp:.3f} | {c_comp / c_design:.0%} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -349,11 +349,10 @@ static STSP_NOINLINE stsp_status_t stsp_step_cold_spline(stsp_ctrl_t *ctrl, uint
     stsp_f32_t v_new[STSP_MAX_LATCH];
     stsp_f32_t y[STSP_MAX_NU];
     stsp_plan_t plan = {0u, 0u};
-    stsp_span_t span;
+    stsp_span_t span; /* written by stsp_spline_locate before any use */
     stsp_status_t status;
     uint16_t mask = 0u;
     stsp_zero(v_new, STSP_MAX_LATCH);
-    (void)memset(&span, 0, sizeof span);
     status = stsp_plan(ctrl, tick, x, v_new, &plan);
     if (status >= STSP_OK) {
         const stsp_status_t st = stsp_spline_inputs(h, x, v_new, plan.relatch);
@@ -377,7 +376,7 @@ static STSP_NOINLINE stsp_status_t stsp_step_cold_spline(stsp_ctrl_t *ctrl, uint
     ctrl->sat_mask = mask;
     stsp_commit(ctrl, tick, &plan, v_new);
     ctrl->stage_end = 0u;
-    ctrl->span = span;
+    stsp_spline_commit(h, &ctrl->span, &span);
     return status;
 }
 #endif
@@ -416,20 +415,27 @@ static STSP_NOINLINE stsp_status_t stsp_step_null_state(const stsp_ctrl_t *ctrl,
 /* A spline table's every tick (its stage_end stays 0, so each leaves stsp_step's ordinary
  * path). The ordinary one is here: the expected tick inside the span of the last step
  * (span.next is 0 until the first latch, and never beyond the stage or n_ticks), the law
- * evaluated at that span. Anything else (a new span too), and a command or state the law's
- * check flags, takes stsp_step_cold_spline, which evaluates it again and sorts it out. */
+ * evaluated at that span. Anything else (a new span too) takes stsp_step_cold_spline. */
 static STSP_NOINLINE stsp_status_t stsp_step_spline(stsp_ctrl_t *ctrl, uint32_t tick,
                                                     const stsp_f32_t *x, stsp_f32_t *u)
 {
+    const stsp_header_t *h = &ctrl->checked;
     stsp_f32_t y[STSP_MAX_NU];
+    uint32_t out;
     if ((tick != ctrl->next_tick) || (tick >= ctrl->span.next)) {
         return stsp_step_cold_spline(ctrl, tick, x, u);
     }
-    if (stsp_spline_law(&ctrl->checked, &ctrl->span, tick, x, ctrl->v, y, ctrl->limited) !=
-        0u) {
-        return stsp_step_cold_spline(ctrl, tick, x, u);
+    out = stsp_spline_law(h, &ctrl->span, tick, x, ctrl->v, y, ctrl->limited);
+    /* As the per-tick ordinary tick: a NaN/Inf command or state is an error that depends on
+     * x, read before u is written; else the command is clamped in place. */
+    if ((out != 0u) &&
+        ((stsp_command_finite(h, y) == 0) || (stsp_all_finite(x, stsp_nx(h)) == 0))) {
+        return stsp_step_nonfinite(ctrl, x, u);
     }
-    stsp_copy(u, y, stsp_nu(&ctrl->checked));
+    stsp_copy(u, y, stsp_nu(h));
+    if (out != 0u) {
+        return stsp_step_fixup(ctrl, tick, u);
+    }
     ctrl->next_tick = tick + 1u;
     return STSP_OK;
 }

@@ -4,32 +4,30 @@
 #ifndef STSP_LAW_SPLINE_H
 #define STSP_LAW_SPLINE_H
 
-/* z = [x, 1, v], the operands the entries' col index, padded with zeros to a power of two, so
- * that col & (length - 1) bounds an index read after init in one instruction. */
+/* z = [x, 1, v], the operands the entries' col index. An index read after init is bounded in
+ * the cheaper way for the build: in an STSP_FIXED_* build z is padded with zeros to a power of
+ * two and the index masked (one instruction per entry, and a few constant stores per tick);
+ * in the generic build (the padding would be a loop) the index is clamped to z's last entry. */
 #ifdef STSP_FIXED_NX
 #define STSP_NZ (STSP_FIXED_NX + 1u + STSP_FIXED_N_LATCH)
-#else
-#define STSP_NZ (STSP_MAX_NX + 1u + STSP_MAX_LATCH)
-#endif
-#define STSP_NZ_POW2                                                                       \
+#define STSP_Z_LEN                                                                         \
     ((STSP_NZ <= 8u) ? 8u                                                                  \
                      : ((STSP_NZ <= 16u) ? 16u                                             \
                                          : ((STSP_NZ <= 32u) ? 32u                         \
                                                              : ((STSP_NZ <= 64u) ? 64u     \
                                                                                  : 256u))))
 
-/* The mask of z's padded length for a table with nz operands: a constant in an STSP_FIXED_*
- * build, else the smallest power of two >= nz, minus one (stsp_spline_stage). */
-#ifdef STSP_FIXED_NX
-static inline uint32_t stsp_z_mask(const stsp_span_t *p)
+static inline uint32_t stsp_z_index(uint32_t col, uint32_t last)
 {
-    (void)p;
-    return STSP_NZ_POW2 - 1u;
+    (void)last;
+    return col & (STSP_Z_LEN - 1u);
 }
 #else
-static inline uint32_t stsp_z_mask(const stsp_span_t *p)
+#define STSP_Z_LEN (STSP_MAX_NX + 1u + STSP_MAX_LATCH)
+
+static inline uint32_t stsp_z_index(uint32_t col, uint32_t last)
 {
-    return p->z_mask;
+    return (col < last) ? col : last;
 }
 #endif
 
@@ -55,16 +53,14 @@ static uint32_t stsp_spline_stage(const stsp_header_t *h, uint32_t s, stsp_span_
         (e0 > sp->n_entries)) {
         fits = 0u;
     }
-    for (i = 0u; i < STSP_MAX_NU; ++i) {
-        if (i < nu) {
-            const uint32_t end = sp->row_start[(s * nu) + i + 1u];
-            if ((end < e1) || (end > sp->n_entries)) {
-                fits = 0u;
-            } else {
-                e1 = end;
-            }
+    for (i = 0u; i < nu; ++i) {
+        const uint32_t end = sp->row_start[(s * nu) + i + 1u];
+        if ((end < e1) || (end > sp->n_entries)) {
+            fits = 0u;
+        } else {
+            e1 = end;
         }
-        p->row_end[i] = (uint16_t)(e1 - e0); /* every entry written: the span is copied whole */
+        p->row_end[i] = (uint16_t)(e1 - e0);
     }
     if (fits != 0u) {
         n_spans = (k1 - k0) - 7u;
@@ -81,17 +77,30 @@ static uint32_t stsp_spline_stage(const stsp_header_t *h, uint32_t s, stsp_span_
         p->knot = sp->knot; /* n_knots >= 8: init checked every stage's */
         p->coef = sp->coef;
         p->col = sp->col;
-        for (i = 0u; i < STSP_MAX_NU; ++i) {
+        for (i = 0u; i < nu; ++i) {
             p->row_end[i] = 0u;
         }
     }
     p->stride = n_spans + 3u;
     p->first = h->stage_start[s];
-    p->z_mask = 7u;
-    while (p->z_mask < (stsp_nx(h) + stsp_n_latch(h))) {
-        p->z_mask = (p->z_mask * 2u) + 1u; /* at most 255: nz <= STSP_NZ */
-    }
     return n_spans;
+}
+
+/* Cold path: record span p in the instance's dst, row_end only for the table's inputs (the
+ * rest stays zero, as init left it). */
+static void stsp_spline_commit(const stsp_header_t *h, stsp_span_t *dst, const stsp_span_t *p)
+{
+    uint32_t i;
+    dst->knot = p->knot;
+    dst->coef = p->coef;
+    dst->col = p->col;
+    dst->first = p->first;
+    dst->next = p->next;
+    dst->stride = p->stride;
+    dst->span = p->span;
+    for (i = 0u; i < stsp_nu(h); ++i) {
+        dst->row_end[i] = p->row_end[i];
+    }
 }
 
 /* Cold path: the span of `tick` in stage s, into p (stage layout: stsp_spline_stage): the
@@ -209,8 +218,8 @@ stsp_spline_entry(stsp_f32_t acc, const stsp_f32_t *c, const stsp_f32_t *n, stsp
  * the cold path: as stsp_law_alarm(), and also when the state is not finite (an input need
  * not use every x[j], so the command does not reveal it: the state's sum joins the command's
  * in the check; it also overflows for some huge finite states, a false alarm the cold path
- * clears). A col changed since init is masked to z's padded length: a wrong command, no
- * access outside z. */
+ * clears). A col changed since init is bounded by stsp_z_index(): a wrong command, no access
+ * outside z. */
 static STSP_ALWAYS_INLINE uint32_t stsp_spline_law(const stsp_header_t *h, const stsp_span_t *p,
                                                    uint32_t tick, const stsp_f32_t *x,
                                                    const stsp_f32_t *v, stsp_f32_t *y,
@@ -219,15 +228,15 @@ static STSP_ALWAYS_INLINE uint32_t stsp_spline_law(const stsp_header_t *h, const
     const uint32_t nx = stsp_nx(h);
     const uint32_t nu = stsp_nu(h);
     const uint32_t n_latch = stsp_n_latch(h);
-    const uint32_t mask = stsp_z_mask(p);
+    const uint32_t last = nx + n_latch;
     const uint32_t stride = p->stride;
     const uint32_t in_stage = tick - p->first; /* tau, exact: < 2^24 on a valid table */
     const stsp_f32_t *coef = p->coef;
     const uint8_t *col = p->col;
-    stsp_f32_t z[STSP_NZ_POW2];
+    stsp_f32_t z[STSP_Z_LEN];
     const stsp_f32_t *zp;
     stsp_f32_t n[4];
-    stsp_f32_t sum = -0.0f;   /* -0 + a = a: the compiler drops this add */
+    stsp_f32_t total = -0.0f; /* of x, then of y: -0 + a = a, the compiler drops this add */
     uint32_t off = 0u;        /* an offset, not a pointer: it ends beyond the coefficients */
     uint32_t e = 0u;
     uint32_t i;
@@ -235,17 +244,19 @@ static STSP_ALWAYS_INLINE uint32_t stsp_spline_law(const stsp_header_t *h, const
     STSP_UNROLL
     for (i = 0u; i < nx; ++i) {
         z[i] = x[i];
-        sum += x[i];
+        total += x[i];
     }
     z[nx] = 1.0f;
     STSP_UNROLL
     for (i = 0u; i < n_latch; ++i) {
         z[nx + 1u + i] = v[i];
     }
+#ifdef STSP_FIXED_NX
     STSP_UNROLL
-    for (i = nx + 1u + n_latch; i <= mask; ++i) {
+    for (i = last + 1u; i < STSP_Z_LEN; ++i) {
         z[i] = 0.0f;
     }
+#endif
     stsp_spline_basis(p->knot, (stsp_f32_t)in_stage, n);
     zp = z;
 #if STSP_VFP_MAC
@@ -256,7 +267,7 @@ static STSP_ALWAYS_INLINE uint32_t stsp_spline_law(const stsp_header_t *h, const
         const uint32_t end = p->row_end[i];
         stsp_f32_t acc = 0.0f;
         for (; e < end; ++e) {
-            acc = stsp_spline_entry(acc, &coef[off], n, zp[(uint32_t)col[e] & mask]);
+            acc = stsp_spline_entry(acc, &coef[off], n, zp[stsp_z_index(col[e], last)]);
             off += stride;
         }
         y[i] = acc;
@@ -266,11 +277,11 @@ static STSP_ALWAYS_INLINE uint32_t stsp_spline_law(const stsp_header_t *h, const
     } else {
         STSP_UNROLL
         for (i = 0u; i < nu; ++i) {
-            sum += y[i];
+            total += y[i];
         }
     }
-    /* sum - sum is +0 for a finite sum, NaN for NaN and +-Inf. */
-    if (!((sum - sum) == 0.0f)) {
+    /* total - total is +0 for a finite total, NaN for NaN and +-Inf. */
+    if (!((total - total) == 0.0f)) {
         out = 1u;
     }
     return out;

@@ -347,7 +347,6 @@ typedef struct {
     uint32_t next;           /**< first tick after the span (0: no span yet) */
     uint32_t stride;         /**< coefficients per entry, S + 3 */
     uint32_t span;           /**< sigma */
-    uint32_t z_mask;         /**< z = [x, 1, v] padded to z_mask + 1, a power of two */
     uint16_t row_end[STSP_MAX_NU]; /**< input i's entries end at row_end[i] (from col) */
 } stsp_span_t;
 #endif

@@ -168,6 +168,8 @@ FAULTS = [
     Fault("F39", "span search stops at a knot (tau == U[sigma + 4] stays in the left span)", CTL,
           "    while (((sigma + 1u) < n_spans) && !(tau < U[sigma + 4u])) {",
           "    while (((sigma + 1u) < n_spans) && (tau > U[sigma + 4u])) {"),
+    Fault("F40", "the first tick of the next span evaluates the old span's knots", CTL,
+          "    return stsp_spline_tick(ctrl, &p->knot[1],", "    return stsp_spline_tick(ctrl, p->knot,"),
 ]
 
 

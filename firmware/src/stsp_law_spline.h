@@ -98,41 +98,52 @@ static void stsp_spline_commit(const stsp_header_t *h, stsp_span_t *dst, const s
     dst->next = p->next;
     dst->stride = p->stride;
     dst->span = p->span;
+    dst->n_spans = p->n_spans;
     for (i = 0u; i < stsp_nu(h); ++i) {
         dst->row_end[i] = p->row_end[i];
     }
 }
 
+/* The first tick after span sigma (of n_spans; `first`, the stage's first tick, and k, the
+ * span's knots from U[sigma + 1]): `end` in the last span, else the tick of U[sigma + 4], an
+ * integer in (tick - first, end - first) on a valid table (the conversion is then exact, and
+ * the comparisons make it defined whatever a knot changed since init holds: else tick + 1). */
+static uint32_t stsp_span_end(const stsp_f32_t *k_span, uint32_t sigma, uint32_t n_spans,
+                              uint32_t tick, uint32_t first, uint32_t end)
+{
+    const uint32_t in_stage = tick - first;
+    const uint32_t length = end - first;
+    uint32_t next = end;
+    if ((sigma + 1u) < n_spans) {
+        const stsp_f32_t k = k_span[3];
+        next = tick + 1u;
+        if ((k > (stsp_f32_t)in_stage) && (k < (stsp_f32_t)length) &&
+            ((uint32_t)k < length)) {
+            next = first + (uint32_t)k;
+        }
+    }
+    return next;
+}
+
 /* Cold path: the span of `tick` in stage s, into p (stage layout: stsp_spline_stage): the
  * first span sigma from `from` (bounded by S) with tau < U[sigma + 4], so U[sigma + 3] <= tau
  * on a valid table when U[from + 3] <= tau, at most S - 1 steps; and the tick it ends at, the
- * ordinary tick's bound (the first tick of the next span, or `end` in the last; tick + 1 if a
- * knot changed since init is no integer tick after this one). */
+ * ordinary tick's bound (stsp_span_end). */
 static void stsp_spline_span(const stsp_header_t *h, uint32_t s, uint32_t from, uint32_t tick,
                              uint32_t end, stsp_span_t *p)
 {
     const uint32_t n_spans = stsp_spline_stage(h, s, p);
     const stsp_f32_t *U = p->knot;
     const uint32_t in_stage = tick - p->first;
-    const uint32_t length = end - p->first;
     const stsp_f32_t tau = (stsp_f32_t)in_stage;
     uint32_t sigma = (from < n_spans) ? from : 0u;
-    uint32_t next = end;
     while (((sigma + 1u) < n_spans) && !(tau < U[sigma + 4u])) {
         ++sigma;
     }
-    if ((sigma + 1u) < n_spans) {
-        const stsp_f32_t k = U[sigma + 4u];
-        /* On a valid table an integer in (tau, end - first): the conversion is then exact, and
-         * the comparisons make it defined (0 < k < 2^32) whatever the knot holds now. */
-        next = tick + 1u;
-        if ((k > tau) && (k < (stsp_f32_t)length) && ((uint32_t)k < length)) {
-            next = p->first + (uint32_t)k;
-        }
-    }
     p->span = sigma;
-    p->next = next;
+    p->n_spans = n_spans;
     p->knot = &U[sigma + 1u];
+    p->next = stsp_span_end(p->knot, sigma, n_spans, tick, p->first, end);
     if (p->row_end[stsp_nu(h) - 1u] > 0u) {
         p->coef = &p->coef[sigma]; /* < the stage's S + 3 coefficients of its first entry */
     }
@@ -212,18 +223,20 @@ stsp_spline_entry(stsp_f32_t acc, const stsp_f32_t *c, const stsp_f32_t *n, stsp
 #endif
 }
 
-/* The spline law at `tick` in span p with multipliers v, into y (x and u may overlap: y is
- * never the caller's u): the basis once, then per input i, over its entries in stored order,
- * acc = acc - g z[col] from acc = +0 (stsp_spline_entry). Returns nonzero when the step needs
- * the cold path: as stsp_law_alarm(), and also when the state is not finite (an input need
+/* The spline law at `tick` in p's stage, in the span whose knots start at knot (U[sigma + 1])
+ * and whose first entry's coefficients at coef, with multipliers v, into y (x and u may
+ * overlap: y is never the caller's u): the basis once, then per input i, over its entries in
+ * stored order, acc = acc - g z[col] from acc = +0 (stsp_spline_entry). Returns nonzero when
+ * the step needs the cold path: as stsp_law_alarm(), and also when the state is not finite (an input need
  * not use every x[j], so the command does not reveal it: the state's sum joins the command's
  * in the check; it also overflows for some huge finite states, a false alarm the cold path
  * clears). A col changed since init is bounded by stsp_z_index(): a wrong command, no access
  * outside z. */
 static STSP_ALWAYS_INLINE uint32_t stsp_spline_law(const stsp_header_t *h, const stsp_span_t *p,
-                                                   uint32_t tick, const stsp_f32_t *x,
-                                                   const stsp_f32_t *v, stsp_f32_t *y,
-                                                   uint32_t limited)
+                                                   const stsp_f32_t *knot,
+                                                   const stsp_f32_t *coef, uint32_t tick,
+                                                   const stsp_f32_t *x, const stsp_f32_t *v,
+                                                   stsp_f32_t *y, uint32_t limited)
 {
     const uint32_t nx = stsp_nx(h);
     const uint32_t nu = stsp_nu(h);
@@ -231,7 +244,6 @@ static STSP_ALWAYS_INLINE uint32_t stsp_spline_law(const stsp_header_t *h, const
     const uint32_t last = nx + n_latch;
     const uint32_t stride = p->stride;
     const uint32_t in_stage = tick - p->first; /* tau, exact: < 2^24 on a valid table */
-    const stsp_f32_t *coef = p->coef;
     const uint8_t *col = p->col;
     stsp_f32_t z[STSP_Z_LEN];
     const stsp_f32_t *zp;
@@ -257,7 +269,7 @@ static STSP_ALWAYS_INLINE uint32_t stsp_spline_law(const stsp_header_t *h, const
         z[i] = 0.0f;
     }
 #endif
-    stsp_spline_basis(p->knot, (stsp_f32_t)in_stage, n);
+    stsp_spline_basis(knot, (stsp_f32_t)in_stage, n);
     zp = z;
 #if STSP_VFP_MAC
     __asm__("" : "+r"(zp));

@@ -341,12 +341,14 @@ typedef struct {
  */
 typedef struct {
     const stsp_f32_t *knot;  /**< U[sigma + 1], the first of the six knots of the span's basis */
-    const stsp_f32_t *coef;  /**< coefficient sigma of the stage's first entry */
+    const stsp_f32_t *coef;  /**< coefficient sigma of the stage's first entry (the stage's
+                                  first coefficient when it has no entries) */
     const uint8_t *col;      /**< the stage's first entry */
     uint32_t first;          /**< the stage's first tick */
     uint32_t next;           /**< first tick after the span (0: no span yet) */
     uint32_t stride;         /**< coefficients per entry, S + 3 */
     uint32_t span;           /**< sigma */
+    uint32_t n_spans;        /**< S */
     uint16_t row_end[STSP_MAX_NU]; /**< input i's entries end at row_end[i] (from col) */
 } stsp_span_t;
 #endif

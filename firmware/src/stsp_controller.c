@@ -13,6 +13,13 @@
  * (tick range, order, repeats, skips, stage changes, latching, clamping, errors) is on cold
  * paths in functions of their own.
  *
+ * A spline table (float32) keeps stage_end at 0, so each of its ticks leaves that path for
+ * stsp_step_spline: its ordinary tick is again two compares (the expected tick, inside the
+ * recorded span), the spline law (stsp_law_spline.h) and the same checks, except that the
+ * state is checked too (a sparse row need not use every x[j]); the first tick of the next
+ * span is also evaluated without the cold path; everything else goes to stsp_step_cold_spline
+ * (the per-tick cold path's plan and commit, plus the span search).
+ *
  * After init every function works from the instance's copy of the validated header
  * (stsp_header_t: dimensions, array addresses, the band dual's header), never from the table
  * header, so a header changed later cannot move an access outside the arrays init checked;
@@ -22,11 +29,11 @@
  * The sources, one job each: this file is the tick/latch state machine (init, reset, verify,
  * step); stsp_table.c validates and serialises the table (CRC-32); stsp_law.h is the law,
  * inlined into stsp_step(), on the row primitives and latch row of stsp_law_f32.h or
- * stsp_law_q.h (one, by STSP_ARITH_FIXED_POINT); stsp_clamp.h
- * the actuator clamp; stsp_internal.h the compiler and VFP helpers, the dimensions the law
- * uses and the fixed-point accumulator; stsp_crc32.c, stsp_qconv.c (Q state/command
- * conversions) and stsp_bandqp.c (the band dual) as named. Everything else here (ticks,
- * stages, latching order, statuses) is the same code in every arithmetic. */
+ * stsp_law_q.h (one, by STSP_ARITH_FIXED_POINT); stsp_law_spline.h the spline law (float32);
+ * stsp_clamp.h the actuator clamp; stsp_internal.h the compiler and VFP helpers, the
+ * dimensions the law uses and the fixed-point accumulator; stsp_crc32.c, stsp_qconv.c (Q
+ * state/command conversions) and stsp_bandqp.c (the band dual) as named. Everything else here
+ * (ticks, stages, latching order, statuses) is the same code in every arithmetic. */
 #include "stsp_internal.h"
 /* The law (stsp_law.h) on the row primitives of the configured arithmetic, inlined into
  * stsp_step(). */

@@ -227,11 +227,11 @@ stsp_spline_entry(stsp_f32_t acc, const stsp_f32_t *c, const stsp_f32_t *n, stsp
  * and whose first entry's coefficients at coef, with multipliers v, into y (x and u may
  * overlap: y is never the caller's u): the basis once, then per input i, over its entries in
  * stored order, acc = acc - g z[col] from acc = +0 (stsp_spline_entry). Returns nonzero when
- * the step needs the cold path: as stsp_law_alarm(), and also when the state is not finite (an input need
- * not use every x[j], so the command does not reveal it: the state's sum joins the command's
- * in the check; it also overflows for some huge finite states, a false alarm the cold path
- * clears). A col changed since init is bounded by stsp_z_index(): a wrong command, no access
- * outside z. */
+ * the step needs the cold path: as stsp_law_alarm(), and also when the state is not finite
+ * (an input need not use every x[j], so the command does not reveal it: the state's sum joins
+ * the command's in the check; it also overflows for some huge finite states, a false alarm
+ * the cold path clears). A col changed since init is bounded by stsp_z_index(): a wrong
+ * command, no access outside z. */
 static STSP_ALWAYS_INLINE uint32_t stsp_spline_law(const stsp_header_t *h, const stsp_span_t *p,
                                                    const stsp_f32_t *knot,
                                                    const stsp_f32_t *coef, uint32_t tick,

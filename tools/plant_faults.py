@@ -79,7 +79,9 @@ FAULTS = [
           "if ((c->latched == 0u) || ((tick == h->stage_start[stage]) && (n_stage > 0u))) {"),
     Fault("F9", "the tick is consumed before the overflow check (instance changed on error)",
           CTL,
+          "    if ((out != 0u) && (stsp_command_finite(&ctrl->checked, y) == 0)) {\n"
           "        return stsp_step_nonfinite(ctrl, x, u);",
+          "    if ((out != 0u) && (stsp_command_finite(&ctrl->checked, y) == 0)) {\n"
           "        ctrl->next_tick = tick + 1u;\n        return stsp_step_nonfinite(ctrl, x, u);"),
     Fault("F10", "command not set to u_hold on an error of an ordinary tick", CTL,
           "    const stsp_status_t st = stsp_nonfinite_status(&ctrl->checked, x);\n"
@@ -123,8 +125,8 @@ FAULTS = [
           "    if (stsp_header_changed(&ctrl->checked, ctrl->table) != 0) {",
           "    if (stsp_header_changed(&ctrl->checked, ctrl->table) > 1) {"),
     Fault("F24", "stage end not capped at n_ticks (stage_start changed after init)", CTL,
-          "    c->stage_end = (end < h->n_ticks) ? end : h->n_ticks;",
-          "    c->stage_end = end;"),
+          "    return (end < h->n_ticks) ? end : h->n_ticks;",
+          "    return end;"),
     Fault("F25", "ordinary tick writes u before classifying a non-finite command", CTL,
           "    out = stsp_law(&ctrl->checked, tick, x, ctrl->v, y, ctrl->limited);\n",
           "    out = stsp_law(&ctrl->checked, tick, x, ctrl->v, y, ctrl->limited);\n"
@@ -151,6 +153,23 @@ FAULTS = [
     Fault("F33", "band order check compares magnitudes only (lo = -1 > hi = 0.5)", CTL,
           "    return ((bits >> 63) != 0u) ? -magnitude : magnitude;",
           "    return magnitude;"),
+    Fault("F34", "spline basis: a wrong left term in the last round", CTL,
+          "    n[3] = left1 * temp;", "    n[3] = left2 * temp;"),
+    Fault("F35", "spline ordinary tick does not check the state (a sparse row hides a NaN)", CTL,
+          "        z[i] = x[i];\n        total += x[i];", "        z[i] = x[i];"),
+    Fault("F36", "spline operand index not bounded (col changed after init)", CTL,
+          "    return (col < last) ? col : last;", "    (void)last;\n    return col;"),
+    Fault("F37", "spline stage layout not bounded by the coefficient count (changed after init)",
+          CTL, "        if ((e1 - e0) > ((sp->n_coef - c0) / (n_spans + 3u))) {",
+          "        if ((e1 - e0) > sp->n_coef) {"),
+    Fault("F38", "stsp_verify misses a changed spline coefficient address", CTL,
+          "            (p->coef_start != q->coef_start) || (p->coef != q->coef)) {",
+          "            (p->coef_start != q->coef_start)) {"),
+    Fault("F39", "span search stops at a knot (tau == U[sigma + 4] stays in the left span)", CTL,
+          "    while (((sigma + 1u) < n_spans) && !(tau < U[sigma + 4u])) {",
+          "    while (((sigma + 1u) < n_spans) && (tau > U[sigma + 4u])) {"),
+    Fault("F40", "the first tick of the next span evaluates the old span's knots", CTL,
+          "    return stsp_spline_tick(ctrl, &p->knot[1],", "    return stsp_spline_tick(ctrl, p->knot,"),
 ]
 
 

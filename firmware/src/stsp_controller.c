@@ -13,6 +13,13 @@
  * (tick range, order, repeats, skips, stage changes, latching, clamping, errors) is on cold
  * paths in functions of their own.
  *
+ * A spline table (float32) keeps stage_end at 0, so each of its ticks leaves that path for
+ * stsp_step_spline: its ordinary tick is again two compares (the expected tick, inside the
+ * recorded span), the spline law (stsp_law_spline.h) and the same checks, except that the
+ * state is checked too (a sparse row need not use every x[j]); the first tick of the next
+ * span is also evaluated without the cold path; everything else goes to stsp_step_cold_spline
+ * (the per-tick cold path's plan and commit, plus the span search).
+ *
  * After init every function works from the instance's copy of the validated header
  * (stsp_header_t: dimensions, array addresses, the band dual's header), never from the table
  * header, so a header changed later cannot move an access outside the arrays init checked;
@@ -22,11 +29,11 @@
  * The sources, one job each: this file is the tick/latch state machine (init, reset, verify,
  * step); stsp_table.c validates and serialises the table (CRC-32); stsp_law.h is the law,
  * inlined into stsp_step(), on the row primitives and latch row of stsp_law_f32.h or
- * stsp_law_q.h (one, by STSP_ARITH_FIXED_POINT); stsp_clamp.h
- * the actuator clamp; stsp_internal.h the compiler and VFP helpers, the dimensions the law
- * uses and the fixed-point accumulator; stsp_crc32.c, stsp_qconv.c (Q state/command
- * conversions) and stsp_bandqp.c (the band dual) as named. Everything else here (ticks,
- * stages, latching order, statuses) is the same code in every arithmetic. */
+ * stsp_law_q.h (one, by STSP_ARITH_FIXED_POINT); stsp_law_spline.h the spline law (float32);
+ * stsp_clamp.h the actuator clamp; stsp_internal.h the compiler and VFP helpers, the
+ * dimensions the law uses and the fixed-point accumulator; stsp_crc32.c, stsp_qconv.c (Q
+ * state/command conversions) and stsp_bandqp.c (the band dual) as named. Everything else here
+ * (ticks, stages, latching order, statuses) is the same code in every arithmetic. */
 #include "stsp_internal.h"
 /* The law (stsp_law.h) on the row primitives of the configured arithmetic, inlined into
  * stsp_step(). */
@@ -271,6 +278,20 @@ static void stsp_spline_locate(const stsp_ctrl_t *c, uint32_t tick, uint16_t sta
     stsp_spline_span(&c->checked, stage, from, tick, stsp_stage_end(&c->checked, stage), p);
 }
 
+/* Ordinary tick of a spline table, success: the span it evaluated, the one after the
+ * recorded one (stsp_step_spline checked that there is one in the stage), into the instance. */
+static STSP_NOINLINE void stsp_spline_next_span(stsp_ctrl_t *c, uint32_t tick,
+                                                const stsp_f32_t *knot, const stsp_f32_t *coef)
+{
+    stsp_span_t *p = &c->span;
+    const uint32_t sigma = p->span + 1u;
+    p->span = sigma;
+    p->knot = knot;
+    p->coef = coef;
+    p->next = stsp_span_end(knot, sigma, p->n_spans, tick, p->first,
+                            stsp_stage_end(&c->checked, c->stage));
+}
+
 /* Cold path, spline table: the state and a fresh latch must be finite, as the command does
  * not show it (an input need not use every x[j] or v[c]): STSP_ERR_NONFINITE_STATE, else
  * STSP_ERR_NONFINITE_OUTPUT for a latch that overflowed, else STSP_OK. */
@@ -349,11 +370,10 @@ static STSP_NOINLINE stsp_status_t stsp_step_cold_spline(stsp_ctrl_t *ctrl, uint
     stsp_f32_t v_new[STSP_MAX_LATCH];
     stsp_f32_t y[STSP_MAX_NU];
     stsp_plan_t plan = {0u, 0u};
-    stsp_span_t span;
+    stsp_span_t span; /* written by stsp_spline_locate before any use */
     stsp_status_t status;
     uint16_t mask = 0u;
     stsp_zero(v_new, STSP_MAX_LATCH);
-    (void)memset(&span, 0, sizeof span);
     status = stsp_plan(ctrl, tick, x, v_new, &plan);
     if (status >= STSP_OK) {
         const stsp_status_t st = stsp_spline_inputs(h, x, v_new, plan.relatch);
@@ -361,7 +381,8 @@ static STSP_NOINLINE stsp_status_t stsp_step_cold_spline(stsp_ctrl_t *ctrl, uint
             status = st;
         } else {
             stsp_spline_locate(ctrl, tick, plan.stage, &span);
-            if (stsp_spline_law(h, &span, tick, x, v_new, y, ctrl->limited) != 0u) {
+            if (stsp_spline_law(h, &span, span.knot, span.coef, tick, x, v_new, y,
+                                ctrl->limited) != 0u) {
                 const stsp_status_t lim = stsp_limit(h, x, y, &mask);
                 if (lim != STSP_OK) {
                     status = lim;
@@ -377,7 +398,7 @@ static STSP_NOINLINE stsp_status_t stsp_step_cold_spline(stsp_ctrl_t *ctrl, uint
     ctrl->sat_mask = mask;
     stsp_commit(ctrl, tick, &plan, v_new);
     ctrl->stage_end = 0u;
-    ctrl->span = span;
+    stsp_spline_commit(h, &ctrl->span, &span);
     return status;
 }
 #endif
@@ -413,25 +434,65 @@ static STSP_NOINLINE stsp_status_t stsp_step_null_state(const stsp_ctrl_t *ctrl,
 }
 
 #ifndef STSP_ARITH_FIXED_POINT
+/* A spline table's tick inside the span whose knots start at knot and whose first entry's
+ * coefficients at coef: the recorded span (advance 0), or the next one (advance 1: recorded on
+ * success). As the per-tick ordinary tick, a NaN/Inf command or state is an error that depends
+ * on x, read before u is written; otherwise the command is clamped in place if need be.
+ * Inlined into both callers with advance a constant. */
+static STSP_ALWAYS_INLINE stsp_status_t stsp_spline_tick(stsp_ctrl_t *ctrl,
+                                                         const stsp_f32_t *knot,
+                                                         const stsp_f32_t *coef,
+                                                         uint32_t advance, uint32_t tick,
+                                                         const stsp_f32_t *x, stsp_f32_t *u)
+{
+    const stsp_header_t *h = &ctrl->checked;
+    stsp_f32_t y[STSP_MAX_NU];
+    const uint32_t out =
+        stsp_spline_law(h, &ctrl->span, knot, coef, tick, x, ctrl->v, y, ctrl->limited);
+    if ((out != 0u) &&
+        ((stsp_command_finite(h, y) == 0) || (stsp_all_finite(x, stsp_nx(h)) == 0))) {
+        return stsp_step_nonfinite(ctrl, x, u);
+    }
+    stsp_copy(u, y, stsp_nu(h));
+    if (advance != 0u) {
+        stsp_spline_next_span(ctrl, tick, knot, coef);
+    }
+    if (out != 0u) {
+        return stsp_step_fixup(ctrl, tick, u);
+    }
+    ctrl->next_tick = tick + 1u;
+    return STSP_OK;
+}
+
+/* A spline table's tick other than the ordinary one: the expected tick that starts the next
+ * span of the stage is that span's tick (its knots and coefficients one further: within the
+ * stage's arrays, as there is a next span); anything else the cold path. Out of line, so that
+ * the ordinary tick keeps its registers. */
+static STSP_NOINLINE stsp_status_t stsp_step_next_span(stsp_ctrl_t *ctrl, uint32_t tick,
+                                                       const stsp_f32_t *x, stsp_f32_t *u)
+{
+    const stsp_span_t *p = &ctrl->span;
+    const uint32_t nu = stsp_nu(&ctrl->checked);
+    if ((tick != ctrl->next_tick) || (tick != p->next) || ((p->span + 1u) >= p->n_spans)) {
+        return stsp_step_cold_spline(ctrl, tick, x, u);
+    }
+    /* The coefficients move only when the stage has entries (otherwise the pointer is the
+     * stage's first coefficient, which may be one past the array). */
+    return stsp_spline_tick(ctrl, &p->knot[1],
+                            (p->row_end[nu - 1u] > 0u) ? &p->coef[1] : p->coef, 1u, tick, x, u);
+}
+
 /* A spline table's every tick (its stage_end stays 0, so each leaves stsp_step's ordinary
  * path). The ordinary one is here: the expected tick inside the span of the last step
- * (span.next is 0 until the first latch, and never beyond the stage or n_ticks), the law
- * evaluated at that span. Anything else (a new span too), and a command or state the law's
- * check flags, takes stsp_step_cold_spline, which evaluates it again and sorts it out. */
+ * (span.next is 0 until the first latch, and never beyond the stage or n_ticks). Anything
+ * else takes stsp_step_next_span. */
 static STSP_NOINLINE stsp_status_t stsp_step_spline(stsp_ctrl_t *ctrl, uint32_t tick,
                                                     const stsp_f32_t *x, stsp_f32_t *u)
 {
-    stsp_f32_t y[STSP_MAX_NU];
     if ((tick != ctrl->next_tick) || (tick >= ctrl->span.next)) {
-        return stsp_step_cold_spline(ctrl, tick, x, u);
+        return stsp_step_next_span(ctrl, tick, x, u);
     }
-    if (stsp_spline_law(&ctrl->checked, &ctrl->span, tick, x, ctrl->v, y, ctrl->limited) !=
-        0u) {
-        return stsp_step_cold_spline(ctrl, tick, x, u);
-    }
-    stsp_copy(u, y, stsp_nu(&ctrl->checked));
-    ctrl->next_tick = tick + 1u;
-    return STSP_OK;
+    return stsp_spline_tick(ctrl, ctrl->span.knot, ctrl->span.coef, 0u, tick, x, u);
 }
 
 /* Every tick that leaves stsp_step's ordinary path: a spline table's, or the cold path. Its

@@ -4,32 +4,30 @@
 #ifndef STSP_LAW_SPLINE_H
 #define STSP_LAW_SPLINE_H
 
-/* z = [x, 1, v], the operands the entries' col index, padded with zeros to a power of two, so
- * that col & (length - 1) bounds an index read after init in one instruction. */
+/* z = [x, 1, v], the operands the entries' col index. An index read after init is bounded in
+ * the cheaper way for the build: in an STSP_FIXED_* build z is padded with zeros to a power of
+ * two and the index masked (one instruction per entry, and a few constant stores per tick);
+ * in the generic build (the padding would be a loop) the index is clamped to z's last entry. */
 #ifdef STSP_FIXED_NX
 #define STSP_NZ (STSP_FIXED_NX + 1u + STSP_FIXED_N_LATCH)
-#else
-#define STSP_NZ (STSP_MAX_NX + 1u + STSP_MAX_LATCH)
-#endif
-#define STSP_NZ_POW2                                                                       \
+#define STSP_Z_LEN                                                                         \
     ((STSP_NZ <= 8u) ? 8u                                                                  \
                      : ((STSP_NZ <= 16u) ? 16u                                             \
                                          : ((STSP_NZ <= 32u) ? 32u                         \
                                                              : ((STSP_NZ <= 64u) ? 64u     \
                                                                                  : 256u))))
 
-/* The mask of z's padded length for a table with nz operands: a constant in an STSP_FIXED_*
- * build, else the smallest power of two >= nz, minus one (stsp_spline_stage). */
-#ifdef STSP_FIXED_NX
-static inline uint32_t stsp_z_mask(const stsp_span_t *p)
+static inline uint32_t stsp_z_index(uint32_t col, uint32_t last)
 {
-    (void)p;
-    return STSP_NZ_POW2 - 1u;
+    (void)last;
+    return col & (STSP_Z_LEN - 1u);
 }
 #else
-static inline uint32_t stsp_z_mask(const stsp_span_t *p)
+#define STSP_Z_LEN (STSP_MAX_NX + 1u + STSP_MAX_LATCH)
+
+static inline uint32_t stsp_z_index(uint32_t col, uint32_t last)
 {
-    return p->z_mask;
+    return (col < last) ? col : last;
 }
 #endif
 
@@ -55,16 +53,14 @@ static uint32_t stsp_spline_stage(const stsp_header_t *h, uint32_t s, stsp_span_
         (e0 > sp->n_entries)) {
         fits = 0u;
     }
-    for (i = 0u; i < STSP_MAX_NU; ++i) {
-        if (i < nu) {
-            const uint32_t end = sp->row_start[(s * nu) + i + 1u];
-            if ((end < e1) || (end > sp->n_entries)) {
-                fits = 0u;
-            } else {
-                e1 = end;
-            }
+    for (i = 0u; i < nu; ++i) {
+        const uint32_t end = sp->row_start[(s * nu) + i + 1u];
+        if ((end < e1) || (end > sp->n_entries)) {
+            fits = 0u;
+        } else {
+            e1 = end;
         }
-        p->row_end[i] = (uint16_t)(e1 - e0); /* every entry written: the span is copied whole */
+        p->row_end[i] = (uint16_t)(e1 - e0);
     }
     if (fits != 0u) {
         n_spans = (k1 - k0) - 7u;
@@ -81,49 +77,73 @@ static uint32_t stsp_spline_stage(const stsp_header_t *h, uint32_t s, stsp_span_
         p->knot = sp->knot; /* n_knots >= 8: init checked every stage's */
         p->coef = sp->coef;
         p->col = sp->col;
-        for (i = 0u; i < STSP_MAX_NU; ++i) {
+        for (i = 0u; i < nu; ++i) {
             p->row_end[i] = 0u;
         }
     }
     p->stride = n_spans + 3u;
     p->first = h->stage_start[s];
-    p->z_mask = 7u;
-    while (p->z_mask < (stsp_nx(h) + stsp_n_latch(h))) {
-        p->z_mask = (p->z_mask * 2u) + 1u; /* at most 255: nz <= STSP_NZ */
-    }
     return n_spans;
+}
+
+/* Cold path: record span p in the instance's dst, row_end only for the table's inputs (the
+ * rest stays zero, as init left it). */
+static void stsp_spline_commit(const stsp_header_t *h, stsp_span_t *dst, const stsp_span_t *p)
+{
+    uint32_t i;
+    dst->knot = p->knot;
+    dst->coef = p->coef;
+    dst->col = p->col;
+    dst->first = p->first;
+    dst->next = p->next;
+    dst->stride = p->stride;
+    dst->span = p->span;
+    dst->n_spans = p->n_spans;
+    for (i = 0u; i < stsp_nu(h); ++i) {
+        dst->row_end[i] = p->row_end[i];
+    }
+}
+
+/* The first tick after span sigma (of n_spans; `first`, the stage's first tick, and k, the
+ * span's knots from U[sigma + 1]): `end` in the last span, else the tick of U[sigma + 4], an
+ * integer in (tick - first, end - first) on a valid table (the conversion is then exact, and
+ * the comparisons make it defined whatever a knot changed since init holds: else tick + 1). */
+static uint32_t stsp_span_end(const stsp_f32_t *k_span, uint32_t sigma, uint32_t n_spans,
+                              uint32_t tick, uint32_t first, uint32_t end)
+{
+    const uint32_t in_stage = tick - first;
+    const uint32_t length = end - first;
+    uint32_t next = end;
+    if ((sigma + 1u) < n_spans) {
+        const stsp_f32_t k = k_span[3];
+        next = tick + 1u;
+        if ((k > (stsp_f32_t)in_stage) && (k < (stsp_f32_t)length) &&
+            ((uint32_t)k < length)) {
+            next = first + (uint32_t)k;
+        }
+    }
+    return next;
 }
 
 /* Cold path: the span of `tick` in stage s, into p (stage layout: stsp_spline_stage): the
  * first span sigma from `from` (bounded by S) with tau < U[sigma + 4], so U[sigma + 3] <= tau
  * on a valid table when U[from + 3] <= tau, at most S - 1 steps; and the tick it ends at, the
- * ordinary tick's bound (the first tick of the next span, or `end` in the last; tick + 1 if a
- * knot changed since init is no integer tick after this one). */
+ * ordinary tick's bound (stsp_span_end). */
 static void stsp_spline_span(const stsp_header_t *h, uint32_t s, uint32_t from, uint32_t tick,
                              uint32_t end, stsp_span_t *p)
 {
     const uint32_t n_spans = stsp_spline_stage(h, s, p);
     const stsp_f32_t *U = p->knot;
     const uint32_t in_stage = tick - p->first;
-    const uint32_t length = end - p->first;
     const stsp_f32_t tau = (stsp_f32_t)in_stage;
     uint32_t sigma = (from < n_spans) ? from : 0u;
-    uint32_t next = end;
     while (((sigma + 1u) < n_spans) && !(tau < U[sigma + 4u])) {
         ++sigma;
     }
-    if ((sigma + 1u) < n_spans) {
-        const stsp_f32_t k = U[sigma + 4u];
-        /* On a valid table an integer in (tau, end - first): the conversion is then exact, and
-         * the comparisons make it defined (0 < k < 2^32) whatever the knot holds now. */
-        next = tick + 1u;
-        if ((k > tau) && (k < (stsp_f32_t)length) && ((uint32_t)k < length)) {
-            next = p->first + (uint32_t)k;
-        }
-    }
     p->span = sigma;
-    p->next = next;
+    p->n_spans = n_spans;
     p->knot = &U[sigma + 1u];
+    p->next = stsp_span_end(p->knot, sigma, n_spans, tick, p->first, end);
     if (p->row_end[stsp_nu(h) - 1u] > 0u) {
         p->coef = &p->coef[sigma]; /* < the stage's S + 3 coefficients of its first entry */
     }
@@ -203,31 +223,32 @@ stsp_spline_entry(stsp_f32_t acc, const stsp_f32_t *c, const stsp_f32_t *n, stsp
 #endif
 }
 
-/* The spline law at `tick` in span p with multipliers v, into y (x and u may overlap: y is
- * never the caller's u): the basis once, then per input i, over its entries in stored order,
- * acc = acc - g z[col] from acc = +0 (stsp_spline_entry). Returns nonzero when the step needs
- * the cold path: as stsp_law_alarm(), and also when the state is not finite (an input need
- * not use every x[j], so the command does not reveal it: the state's sum joins the command's
- * in the check; it also overflows for some huge finite states, a false alarm the cold path
- * clears). A col changed since init is masked to z's padded length: a wrong command, no
- * access outside z. */
+/* The spline law at `tick` in p's stage, in the span whose knots start at knot (U[sigma + 1])
+ * and whose first entry's coefficients at coef, with multipliers v, into y (x and u may
+ * overlap: y is never the caller's u): the basis once, then per input i, over its entries in
+ * stored order, acc = acc - g z[col] from acc = +0 (stsp_spline_entry). Returns nonzero when
+ * the step needs the cold path: as stsp_law_alarm(), and also when the state is not finite
+ * (an input need not use every x[j], so the command does not reveal it: the state's sum joins
+ * the command's in the check; it also overflows for some huge finite states, a false alarm
+ * the cold path clears). A col changed since init is bounded by stsp_z_index(): a wrong
+ * command, no access outside z. */
 static STSP_ALWAYS_INLINE uint32_t stsp_spline_law(const stsp_header_t *h, const stsp_span_t *p,
-                                                   uint32_t tick, const stsp_f32_t *x,
-                                                   const stsp_f32_t *v, stsp_f32_t *y,
-                                                   uint32_t limited)
+                                                   const stsp_f32_t *knot,
+                                                   const stsp_f32_t *coef, uint32_t tick,
+                                                   const stsp_f32_t *x, const stsp_f32_t *v,
+                                                   stsp_f32_t *y, uint32_t limited)
 {
     const uint32_t nx = stsp_nx(h);
     const uint32_t nu = stsp_nu(h);
     const uint32_t n_latch = stsp_n_latch(h);
-    const uint32_t mask = stsp_z_mask(p);
+    const uint32_t last = nx + n_latch;
     const uint32_t stride = p->stride;
     const uint32_t in_stage = tick - p->first; /* tau, exact: < 2^24 on a valid table */
-    const stsp_f32_t *coef = p->coef;
     const uint8_t *col = p->col;
-    stsp_f32_t z[STSP_NZ_POW2];
+    stsp_f32_t z[STSP_Z_LEN];
     const stsp_f32_t *zp;
     stsp_f32_t n[4];
-    stsp_f32_t sum = -0.0f;   /* -0 + a = a: the compiler drops this add */
+    stsp_f32_t total = -0.0f; /* of x, then of y: -0 + a = a, the compiler drops this add */
     uint32_t off = 0u;        /* an offset, not a pointer: it ends beyond the coefficients */
     uint32_t e = 0u;
     uint32_t i;
@@ -235,18 +256,20 @@ static STSP_ALWAYS_INLINE uint32_t stsp_spline_law(const stsp_header_t *h, const
     STSP_UNROLL
     for (i = 0u; i < nx; ++i) {
         z[i] = x[i];
-        sum += x[i];
+        total += x[i];
     }
     z[nx] = 1.0f;
     STSP_UNROLL
     for (i = 0u; i < n_latch; ++i) {
         z[nx + 1u + i] = v[i];
     }
+#ifdef STSP_FIXED_NX
     STSP_UNROLL
-    for (i = nx + 1u + n_latch; i <= mask; ++i) {
+    for (i = last + 1u; i < STSP_Z_LEN; ++i) {
         z[i] = 0.0f;
     }
-    stsp_spline_basis(p->knot, (stsp_f32_t)in_stage, n);
+#endif
+    stsp_spline_basis(knot, (stsp_f32_t)in_stage, n);
     zp = z;
 #if STSP_VFP_MAC
     __asm__("" : "+r"(zp));
@@ -256,7 +279,7 @@ static STSP_ALWAYS_INLINE uint32_t stsp_spline_law(const stsp_header_t *h, const
         const uint32_t end = p->row_end[i];
         stsp_f32_t acc = 0.0f;
         for (; e < end; ++e) {
-            acc = stsp_spline_entry(acc, &coef[off], n, zp[(uint32_t)col[e] & mask]);
+            acc = stsp_spline_entry(acc, &coef[off], n, zp[stsp_z_index(col[e], last)]);
             off += stride;
         }
         y[i] = acc;
@@ -266,11 +289,11 @@ static STSP_ALWAYS_INLINE uint32_t stsp_spline_law(const stsp_header_t *h, const
     } else {
         STSP_UNROLL
         for (i = 0u; i < nu; ++i) {
-            sum += y[i];
+            total += y[i];
         }
     }
-    /* sum - sum is +0 for a finite sum, NaN for NaN and +-Inf. */
-    if (!((sum - sum) == 0.0f)) {
+    /* total - total is +0 for a finite total, NaN for NaN and +-Inf. */
+    if (!((total - total) == 0.0f)) {
         out = 1u;
     }
     return out;

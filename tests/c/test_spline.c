@@ -700,11 +700,19 @@ static void ch_band(stsp_table_t *t, spline_buf_t *b) { (void)b; t->band_qp = &a
 static void ch_K(stsp_table_t *t, spline_buf_t *b) { (void)b; t->K = any_gain; }
 static void ch_k0(stsp_table_t *t, spline_buf_t *b) { (void)b; t->k0 = any_gain; }
 static void ch_L(stsp_table_t *t, spline_buf_t *b) { (void)b; t->L = any_gain; }
-static void ch_null_knot_start(stsp_table_t *t, spline_buf_t *b) { (void)t; b->sp.knot_start = NULL; }
+static void ch_null_knot_start(stsp_table_t *t, spline_buf_t *b)
+{
+    (void)t;
+    b->sp.knot_start = NULL;
+}
 static void ch_null_knot(stsp_table_t *t, spline_buf_t *b) { (void)t; b->sp.knot = NULL; }
 static void ch_null_row_start(stsp_table_t *t, spline_buf_t *b) { (void)t; b->sp.row_start = NULL; }
 static void ch_null_col(stsp_table_t *t, spline_buf_t *b) { (void)t; b->sp.col = NULL; }
-static void ch_null_coef_start(stsp_table_t *t, spline_buf_t *b) { (void)t; b->sp.coef_start = NULL; }
+static void ch_null_coef_start(stsp_table_t *t, spline_buf_t *b)
+{
+    (void)t;
+    b->sp.coef_start = NULL;
+}
 static void ch_null_coef(stsp_table_t *t, spline_buf_t *b) { (void)t; b->sp.coef = NULL; }
 static void ch_null_Lambda(stsp_table_t *t, spline_buf_t *b) { (void)b; t->Lambda = NULL; }
 static void ch_knot_start0(stsp_table_t *t, spline_buf_t *b) { (void)t; b->knot_start[0] = 1u; }

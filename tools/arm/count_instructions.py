@@ -39,7 +39,8 @@ CPU_FLAGS = {
 # Instructions after which the next pc need not be the next address (branches, returns).
 BRANCH = re.compile(r"(b|bl|blx|bx|cbz|cbnz|tbb|tbh)(\.[nw])?\b"
                     r"|b(eq|ne|cs|hs|cc|lo|mi|pl|vs|vc|hi|ls|ge|lt|gt|le)(\.[nw])?\b"
-                    r"|(pop|ldm\w*)(\.[nw])?\s.*\bpc\b")
+                    r"|(pop|ldm\w*)(\.[nw])?\s.*\bpc\b"
+                    r"|(mov|add)(\.[nw])?\s+pc\b")  # libgcc's soft-float jump tables (M0+)
 
 
 def run(cmd: list[str], **kw) -> str:

@@ -46,11 +46,12 @@
  * On the M4F each step is one VMLA.F32 or VMLS.F32 (chained, as above).
  *
  * Buffers: stsp_ctrl_t holds STSP_MAX_LATCH scalars for v, STSP_MAX_NU for the copy of
- * u_hold, 24 bytes of state and the validated copy of the table header (stsp_header_t); on
- * 32-bit targets 232 bytes with the default STSP_MAX_LATCH = STSP_MAX_NU = 16 (float32), 152
- * (Q15), 216 (Q31). stsp_step() uses
- * STSP_MAX_LATCH + STSP_MAX_NU scalars of stack, plus, on the stage-0 latch of a band table
- * only, the band solver's work area and multipliers (sizeof(stsp_bandqp_work_t) +
+ * u_hold, 24 bytes of state, the validated copy of the table header (stsp_header_t) and, in
+ * float32 builds, a spline table's current span (stsp_span_t); on 32-bit targets 336 bytes
+ * with the default STSP_MAX_LATCH = STSP_MAX_NU = 16 (float32), 152 (Q15), 216 (Q31).
+ * stsp_step() uses STSP_MAX_LATCH + STSP_MAX_NU scalars of stack (a spline table: also
+ * z = [x, 1, v], STSP_MAX_NX + 1 + STSP_MAX_LATCH floats), plus, on the stage-0 latch of a
+ * band table only, the band solver's work area and multipliers (sizeof(stsp_bandqp_work_t) +
  * STSP_BANDQP_MAX doubles, about 0.8 KB with STSP_BANDQP_MAX = 8; docs/guide/firmware.md). The
  * tables stay where the caller put them (const, normally flash) and are never copied; their
  * header (dimensions, array addresses) is: after stsp_init() every call works from the
@@ -341,13 +342,14 @@ typedef struct {
  */
 typedef struct {
     const stsp_f32_t *knot;  /**< U[sigma + 1], the first of the six knots of the span's basis */
-    const stsp_f32_t *coef;  /**< coefficient sigma of the stage's first entry */
+    const stsp_f32_t *coef;  /**< coefficient sigma of the stage's first entry (the stage's
+                                  first coefficient when it has no entries) */
     const uint8_t *col;      /**< the stage's first entry */
     uint32_t first;          /**< the stage's first tick */
     uint32_t next;           /**< first tick after the span (0: no span yet) */
     uint32_t stride;         /**< coefficients per entry, S + 3 */
     uint32_t span;           /**< sigma */
-    uint32_t z_mask;         /**< z = [x, 1, v] padded to z_mask + 1, a power of two */
+    uint32_t n_spans;        /**< S */
     uint16_t row_end[STSP_MAX_NU]; /**< input i's entries end at row_end[i] (from col) */
 } stsp_span_t;
 #endif

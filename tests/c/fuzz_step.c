@@ -8,7 +8,14 @@
  * invalid count, nx the table's or not, W positive definite, diagonal, indefinite, negative
  * definite, singular or raw bits (NaN/Inf), bands, equality rows, lo > hi, huge or
  * non-finite bounds, NULL arrays, stage_n_latch as the contract requires (q at stage 0, 0 after)
- * or not, and the CRC right or wrong. The arrays always have room for the dimensions the
+ * or not, and the CRC right or wrong; and about one table in three carries spline gains
+ * (spline, format 5; fz_build_spline): valid (random spans, breakpoints, stored entries and
+ * coefficients, modest, huge or subnormal; stages of up to 2^24 - 1 ticks now and then) or
+ * with one corruption (knots out of order, equal, not integers, T wrong at either end,
+ * row_start decreasing, a col out of range, a NaN/Inf coefficient, coef_start inconsistent,
+ * lengths lying, too few knots, a NULL array, per-tick gains or a band dual next to it, raw
+ * index bits, a stage of 2^24 ticks or more), and now and then a knot or coefficient bit
+ * changed after the CRC. The arrays always have room for the dimensions the
  * table declares: that is the documented precondition of stsp_init() (the generated tables
  * satisfy it by construction). The calls: init, init_expect, reset, verify and step, with
  * ticks in order, repeated, skipped, backwards or past the end, states with
@@ -28,7 +35,12 @@
  * the firmware's order, and u the law with that v, clamped, bit for bit (or, if it overflows,
  * STSP_ERR_NONFINITE_OUTPUT); and the solver's own contract: at most 3^(band rows)
  * candidates, exactly that many when it finds none, none on an overflow, lam all zeros on a
- * failure.
+ * failure. Spline tables: init returns exactly the status the spline checks prescribe
+ * (fz_spline_check, written from the contract) and never STSP_OK for invalid spline gains;
+ * every step of an accepted one at a tick in range and order with a finite state gives the
+ * status, the command (clamped, bit for bit), the stage, the latch v and the saturation mask
+ * of fz_spline_model (the stage, the latch, and The NURBS Book A2.2 literally), or
+ * STSP_ERR_NONFINITE_OUTPUT exactly when that latch or command is not finite.
  *
  * Built once per arithmetic variant (fuzz_step, fuzz_step_q15, fuzz_step_q31): in the Q15/Q31
  * builds the tables, states and commands are integers (gains small enough for valid row sums,
@@ -36,7 +48,8 @@
  * there is no non-finite value. A fixed-point build has no band solver: about one table in
  * eight carries a band dual all the same (the generator above), and init must never return
  * STSP_OK for it, and return exactly STSP_ERR_BAD_DIMS when the rest of the table is valid
- * (or has any main-table corruption but magic, version and NULL arrays, which come first). */
+ * (or has any main-table corruption but magic, version and NULL arrays, which come first);
+ * the same for about one table in eight with spline gains. */
 #include <float.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -62,11 +75,13 @@ typedef stsp_scalar_t fz_val_t;
 #define FZ_SENTINEL ((stsp_scalar_t)12345)
 #define FZ_GEN_NL 5u   /* n_latch of a table without bands: a row of 1 + 7 + 5 small gains */
 #define FZ_BAND_PICK(sel) (((sel) % 8u) == 7u) /* not an exhausted input's 0: refused */
+#define FZ_SPLINE_PICK(sel) (((sel) % 8u) == 6u) /* refused as well */
 #else
 typedef float fz_val_t;
 #define FZ_SENTINEL 1234.5f
 #define FZ_GEN_NL FZ_MAX_NL
 #define FZ_BAND_PICK(sel) (((sel) % 3u) == 0u)
+#define FZ_SPLINE_PICK(sel) (((sel) % 3u) == 1u)
 #endif
 
 #ifdef STSP_ARITH_FIXED_POINT
@@ -143,12 +158,18 @@ static float fz_value(fuzz_in_t *in)
 enum { FZS_TABLES, FZS_BAND_TABLES, FZS_INIT_MODELLED, FZS_INIT_OK, FZS_BAND_INIT_OK,
        FZS_BAND_NULL, FZS_BAND_DIMS, FZS_BAND_CRC, FZS_BAND_VALUES, FZS_LATCH, FZS_LATCH_OK,
        FZS_LATCH_INFEASIBLE, FZS_LATCH_OVERFLOW, FZS_LATCH_BEYOND_FLT, FZS_FALLBACK,
-       FZS_LATCH_Q8, FZS_LATCH_ERR, FZS_N };
+       FZS_LATCH_Q8, FZS_LATCH_ERR, FZS_SPL_TABLES, FZS_SPL_CORRUPT, FZS_SPL_INIT_OK,
+       FZS_SPL_NULL, FZS_SPL_DIMS, FZS_SPL_CRC, FZS_SPL_VALUES, FZS_SPL_READY, FZS_SPL_STEPS,
+       FZS_SPL_LATCH, FZS_SPL_SAT, FZS_SPL_OVERFLOW, FZS_SPL_LONG, FZS_N };
 static const char *const fzs_names[FZS_N] = {
     "tables", "band tables", "init modelled", "init ok", "band init ok", "band init ERR_NULL",
     "band init BAD_DIMS", "band init BAD_CRC", "band init BAD_VALUES", "band latch steps",
     "  solver ok", "  solver infeasible", "  solver e overflow", "  |lam| > FLT_MAX",
-    "  status BAND_FALLBACK", "  q = 8", "  step error"};
+    "  status BAND_FALLBACK", "  q = 8", "  step error", "spline tables",
+    "  with a corruption", "  init ok (model)", "  init ERR_NULL (model)",
+    "  init BAD_DIMS (model)", "  init BAD_CRC (model)", "  init BAD_VALUES (model)",
+    "  init ok (real)", "  steps modelled", "    latching", "    saturated",
+    "    NONFINITE_OUTPUT", "    on stages > 4096 ticks"};
 static unsigned long fzs[FZS_N];
 static void fzs_print(void)
 {
@@ -197,7 +218,9 @@ typedef struct {
     uint32_t main_corrupt; /* nonzero: 1 + the main-table corruption (float32: init's status
                               not modelled) */
     uint32_t band;         /* the table carries band_qp */
-    uint32_t band_crc_ok;  /* the CRC covers the band data as it is now */
+    uint32_t band_crc_ok;  /* the CRC covers the band (and spline) data as it is now */
+    uint32_t spline;       /* the table carries spline gains */
+    uint32_t spline_corrupt; /* 1 + the spline corruption asked for, or 0 */
 } fz_table_info_t;
 
 /* Gains from a generator seeded by the input (so that a short input describes a whole table
@@ -405,11 +428,486 @@ static uint32_t fz_build_band(fuzz_in_t *in, stsp_table_t *t)
 }
 
 
+/* Spline gains (format 5): storage with room for every layout the input can declare (up to
+ * FZ_SPL_SPANS spans per stage, every operand of every (stage, input) stored). */
+#define FZ_SPL_SPANS 8u
+#define FZ_SPL_NZ (FZ_MAX_NX + 1u + FZ_MAX_NL)
+#define FZ_SPL_KNOTS (FZ_MAX_NS * (FZ_SPL_SPANS + 7u) + 8u)
+#define FZ_SPL_ENTRIES (FZ_MAX_NS * FZ_MAX_NU * FZ_SPL_NZ + 8u)
+#define FZ_SPL_COEF (FZ_MAX_NS * FZ_MAX_NU * FZ_SPL_NZ * (FZ_SPL_SPANS + 3u) + 16u)
+#define FZ_SPL_KINDS 14u  /* corruptions of fz_build_spline */
+static uint32_t g_knot_start[FZ_MAX_NS + 1u];
+static float g_knot[FZ_SPL_KNOTS];
+static uint16_t g_row_start[FZ_MAX_NS * FZ_MAX_NU + 1u];
+static uint8_t g_col[FZ_SPL_ENTRIES];
+static uint32_t g_coef_start[FZ_MAX_NS + 1u];
+static float g_coef[FZ_SPL_COEF];
+static stsp_spline_t g_spline;
+
+/* Bits to binary32 and back, in every build (spline knots and coefficients are binary32). */
+static float fz_spl_f32(uint32_t bits)
+{
+    float f;
+    memcpy(&f, &bits, sizeof f);
+    return f;
+}
+
+static float fz_spline_value(uint32_t *seed, uint32_t vsel)
+{
+    const uint32_t r = fz_lcg(seed);
+    float f = ((float)(int32_t)(r % 4096u) - 2048.0f) / 512.0f;   /* +-4 */
+    switch (vsel % 8u) {
+    case 6u: f *= 1e35f; break;                  /* commands that overflow or saturate */
+    case 7u: f *= ((r >> 12) % 4u == 0u) ? 1e-40f : 1.0f; break;  /* some subnormal */
+    default: break;
+    }
+    return f;
+}
+
+/* A spline table's gains from the input (float32 values in every build: a fixed-point build
+ * must refuse whatever it is). Valid unless the selector asks for one corruption, all applied
+ * before the CRC (so that init's status is the one of that check): knots out of order or
+ * equal, not integers, the stage's tick count T wrong at either end, row_start decreasing or
+ * not from 0, a col beyond nx + 1 + n_latch, a NaN/Inf coefficient, coef_start inconsistent,
+ * lengths (n_knots, n_entries, n_coef) lying, fewer than 8 knots or knot_start decreasing, a
+ * NULL array, K/k0/L or a band dual next to the spline, raw bits in an index array or the
+ * knots, a stage of 2^24 ticks or more, a stage's coefficient count off by its entries. Stages
+ * are long (up to 2^24 - 1 ticks: a spline table has no per-tick arrays) now and then.
+ * Sets t->spline (K, k0, L NULL); returns 1 + the corruption, or 0. */
+static uint32_t fz_build_spline(fuzz_in_t *in, stsp_table_t *t)
+{
+    const uint32_t lsel = fuzz_u8(in), csel = fuzz_u8(in), vsel = fuzz_u8(in);
+    const uint32_t corrupt = (csel >= 160u) ? 1u + csel % FZ_SPL_KINDS : 0u;
+    uint32_t seed = fuzz_u32(in);
+    const uint32_t ns = t->n_stages, nu = t->nu, nz = (uint32_t)t->nx + 1u + t->n_latch;
+    uint32_t s, i, nk = 0u, ne = 0u, nc = 0u;
+    memset(g_knot_start, 0, sizeof g_knot_start);
+    memset(g_knot, 0, sizeof g_knot);
+    memset(g_row_start, 0, sizeof g_row_start);
+    memset(g_col, 0, sizeof g_col);
+    memset(g_coef_start, 0, sizeof g_coef_start);
+    memset(g_coef, 0, sizeof g_coef);
+    if ((lsel & 3u) == 3u) {                       /* long stages */
+        uint32_t nt = 0u;
+        for (s = 0u; s < FZ_MAX_NS; ++s) {
+            nt += 1u + fz_lcg(&seed) % (((lsel & 4u) != 0u) ? 4096u : 16777215u);
+            g_start[s + 1u] = nt;
+        }
+        t->n_ticks = g_start[t->n_stages];
+    }
+    if (corrupt == 1u + 13u) {                     /* a stage of 2^24 ticks or more */
+        const uint32_t d = 16777216u + fz_lcg(&seed) % 3u - (g_start[1] - g_start[0]);
+        for (s = 1u; s <= FZ_MAX_NS; ++s) {
+            g_start[s] += d;
+        }
+        t->n_ticks = g_start[t->n_stages];
+    }
+    g_row_start[0] = 0u;
+    for (s = 0u; s < ns; ++s) {
+        const uint32_t T = g_start[s + 1u] - g_start[s];
+        const uint32_t max_spans = (T < FZ_SPL_SPANS) ? T : FZ_SPL_SPANS;
+        uint32_t spans = 1u + fz_lcg(&seed) % max_spans;
+        uint32_t b[FZ_SPL_SPANS];
+        uint32_t nb = 0u, k;
+        /* spans - 1 distinct breakpoints in (0, T), sorted (duplicates dropped) */
+        for (k = 0u; (k + 1u < spans) && (T > 1u); ++k) {
+            const uint32_t v = 1u + fz_lcg(&seed) % (T - 1u);
+            uint32_t j = nb;
+            int dup = 0;
+            for (j = 0u; j < nb; ++j) {
+                dup = dup || (b[j] == v);
+            }
+            if (!dup) {
+                for (j = nb; (j > 0u) && (b[j - 1u] > v); --j) {
+                    b[j] = b[j - 1u];
+                }
+                b[j] = v;
+                ++nb;
+            }
+        }
+        spans = nb + 1u;
+        g_knot_start[s] = nk;
+        for (k = 0u; k < 4u; ++k) {
+            g_knot[nk + k] = 0.0f;
+            g_knot[nk + 4u + nb + k] = (float)T;
+        }
+        for (k = 0u; k < nb; ++k) {
+            g_knot[nk + 4u + k] = (float)b[k];
+        }
+        nk += spans + 7u;
+        g_coef_start[s] = nc;
+        for (i = 0u; i < nu; ++i) {
+            const uint32_t pick = fz_lcg(&seed);
+            const uint32_t bits = fz_lcg(&seed);
+            uint32_t c;
+            for (c = 0u; c < nz; ++c) {
+                const int stored = ((pick % 8u) == 0u) ? 0 : ((pick % 8u) == 1u) ? 1
+                                   : (int)((bits >> c) & 1u);
+                if (stored) {
+                    uint32_t e;
+                    g_col[ne] = (uint8_t)c;
+                    for (e = 0u; e < spans + 3u; ++e) {
+                        g_coef[nc++] = fz_spline_value(&seed, vsel);
+                    }
+                    ++ne;
+                }
+            }
+            g_row_start[s * nu + i + 1u] = (uint16_t)ne;
+        }
+    }
+    g_knot_start[ns] = nk;
+    g_coef_start[ns] = nc;
+    g_spline.n_knots = nk;
+    g_spline.n_entries = ne;
+    g_spline.n_coef = nc;
+    g_spline.knot_start = g_knot_start;
+    g_spline.knot = g_knot;
+    g_spline.row_start = g_row_start;
+    g_spline.col = g_col;
+    g_spline.coef_start = g_coef_start;
+    g_spline.coef = g_coef;
+    t->spline = &g_spline;
+    t->K = NULL;
+    t->k0 = NULL;
+    t->L = NULL;
+    {
+        const uint32_t s0 = fz_lcg(&seed) % ns;                 /* the stage to corrupt */
+        const uint32_t k0 = g_knot_start[s0], len = g_knot_start[s0 + 1u] - k0;
+        const uint32_t r = fz_lcg(&seed);
+        switch (corrupt) {
+        case 1u + 0u:                                /* knots out of order, or equal */
+            if (len > 8u) {
+                const uint32_t j = k0 + 4u + r % (len - 8u);
+                g_knot[j] = ((r >> 8) & 1u) ? g_knot[j - 1u] : g_knot[j - 1u] - 1.0f;
+            } else {
+                g_knot[k0 + 1u + r % 3u] = 1.0f;     /* a nonzero among the first four */
+            }
+            break;
+        case 1u + 1u:                                /* not an integer */
+            g_knot[k0 + 4u + ((len > 8u) ? r % (len - 8u) : 0u)] -= 0.5f;
+            break;
+        case 1u + 2u:                                /* T wrong at either end */
+            if ((r & 1u) != 0u) {
+                g_knot[k0 + len - 1u - (r >> 1) % 4u] += ((r & 2u) ? 1.0f : -1.0f);
+            } else {
+                g_knot[k0 + (r >> 1) % 4u] = (float)(g_start[s0 + 1u] - g_start[s0]);
+            }
+            break;
+        case 1u + 3u: {                              /* row_start decreasing, or not from 0 */
+            const uint32_t j = r % (ns * nu);
+            g_row_start[j] = (uint16_t)(g_row_start[j + 1u] + 1u);
+            break;
+        }
+        case 1u + 4u:                                /* a col out of range */
+            if (ne > 0u) {
+                g_col[r % ne] = (uint8_t)(nz + (r >> 8) % (256u - nz));
+            } else {
+                g_spline.n_entries = 1u;             /* and a lying length */
+            }
+            break;
+        case 1u + 5u:                                /* a NaN/Inf coefficient */
+            if (nc > 0u) {
+                static const uint32_t bad[3] = {0x7FC00000u, 0x7F800000u, 0xFF800000u};
+                g_coef[r % nc] = fz_spl_f32(bad[(r >> 8) % 3u]);
+            }
+            break;
+        case 1u + 6u:                                /* coef_start inconsistent */
+            g_coef_start[r % (ns + 1u)] += ((r >> 8) & 1u) ? 1u : (uint32_t)-1;
+            break;
+        case 1u + 7u: {                              /* a length lying (within the storage) */
+            const uint32_t d = 1u + (r >> 2) % 8u;
+            const int up = ((r >> 5) & 1u) != 0u;
+            switch (r % 3u) {
+            case 0u: g_spline.n_knots = up ? nk + d : ((nk > d) ? nk - d : 0u); break;
+            case 1u: g_spline.n_entries = up ? ne + d : ((ne > d) ? ne - d : 0u); break;
+            default: g_spline.n_coef = up ? nc + d : ((nc > d) ? nc - d : 0u); break;
+            }
+            break;
+        }
+        case 1u + 8u:                                /* fewer than 8 knots, or decreasing */
+            if ((r & 1u) != 0u) {
+                g_knot_start[s0 + 1u] = g_knot_start[s0] + (r >> 1) % 8u;
+            } else {
+                g_knot_start[r % (ns + 1u)] += ((r >> 8) & 1u) ? 1u : (uint32_t)-1;
+            }
+            break;
+        case 1u + 9u:                                /* a NULL array */
+            switch (r % 6u) {
+            case 0u: g_spline.knot_start = NULL; break;
+            case 1u: g_spline.knot = NULL; break;
+            case 2u: g_spline.row_start = NULL; break;
+            case 3u: g_spline.col = NULL; break;
+            case 4u: g_spline.coef_start = NULL; break;
+            default: g_spline.coef = NULL; break;
+            }
+            break;
+        case 1u + 10u:                               /* per-tick gains next to the spline */
+            switch (r % 3u) {
+            case 0u: t->K = g_K; break;
+            case 1u: t->k0 = g_k0; break;
+            default: t->L = g_L; break;
+            }
+            break;
+        case 1u + 11u:                               /* raw bits */
+            switch (r % 4u) {
+            case 0u: g_row_start[r % (ns * nu + 1u)] = (uint16_t)(r >> 8); break;
+            case 1u: g_knot_start[r % (ns + 1u)] = fz_lcg(&seed) % (FZ_SPL_KNOTS + 1u); break;
+            case 2u: g_coef_start[r % (ns + 1u)] = fz_lcg(&seed); break;
+            default: g_knot[r % (nk + 1u)] = fz_spl_f32(fz_lcg(&seed) ^ (r << 20)); break;
+            }
+            break;
+        case 1u + 12u:               /* the last stage's coefficients off by its entries */
+            g_coef_start[ns] = nc + (g_row_start[ns * nu] - g_row_start[0]);
+            g_spline.n_coef = g_coef_start[ns];
+            if (g_spline.n_coef > FZ_SPL_COEF) {
+                g_spline.n_coef = FZ_SPL_COEF;
+            }
+            break;
+        default:                                     /* valid, or 2^24 ticks (above) */
+            break;
+        }
+    }
+    /* Declared lengths never beyond the storage (init's precondition). */
+    if (g_spline.n_knots > FZ_SPL_KNOTS) {
+        g_spline.n_knots = FZ_SPL_KNOTS;
+    }
+    if (g_spline.n_entries > FZ_SPL_ENTRIES) {
+        g_spline.n_entries = FZ_SPL_ENTRIES;
+    }
+    if (g_spline.n_coef > FZ_SPL_COEF) {
+        g_spline.n_coef = FZ_SPL_COEF;
+    }
+    return corrupt;
+}
+
+#ifndef STSP_ARITH_FIXED_POINT
+/* Whether a binary32 value is an integer (from its bits: no conversion). */
+static int fz_f32_is_integer(float f)
+{
+    const uint32_t b = fz_f32_bits(f);
+    const int32_t e = (int32_t)((b >> 23) & 0xFFu) - 127;
+    if (e < 0) {
+        return (b & 0x7FFFFFFFu) == 0u;
+    }
+    if (e >= 23) {
+        return 1;
+    }
+    return (b & ((1u << (23 - e)) - 1u)) == 0u;
+}
+
+/* Whether the knots k[0..len) are a clamped knot vector for T ticks (the spec, written out
+ * again here): four 0, strictly increasing integers in (0, T), four T. */
+static int fz_knots_valid(const float *k, uint32_t len, uint32_t T)
+{
+    uint32_t i;
+    if ((len < 8u) || (T >= 16777216u)) {
+        return 0;
+    }
+    for (i = 0u; i < 4u; ++i) {
+        if (!(k[i] == 0.0f) || !(k[len - 1u - i] == (float)T)) {
+            return 0;
+        }
+    }
+    for (i = 4u; i + 4u < len; ++i) {
+        if (!(k[i] > k[i - 1u]) || !(k[i] < (float)T) || !fz_f32_is_integer(k[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* init's verdict on a spline table's own arrays (the header's dimensions and stage layout
+ * already valid): STSP_ERR_NULL, STSP_ERR_BAD_DIMS or STSP_OK (stsp_controller.h, stsp_spline_t). */
+static stsp_status_t fz_spline_check(const stsp_table_t *t)
+{
+    const stsp_spline_t *p = t->spline;
+    const uint32_t ns = t->n_stages, rows = ns * t->nu;
+    const uint32_t nz = (uint32_t)t->nx + 1u + t->n_latch;
+    uint32_t s, i;
+    if ((p->knot_start == NULL) || (p->knot == NULL) || (p->row_start == NULL) ||
+        (p->col == NULL) || (p->coef_start == NULL) || (p->coef == NULL)) {
+        return STSP_ERR_NULL;
+    }
+    if ((p->knot_start[0] != 0u) || (p->knot_start[ns] != p->n_knots) ||
+        (p->row_start[0] != 0u) || (p->row_start[rows] != p->n_entries) ||
+        (p->coef_start[0] != 0u) || (p->coef_start[ns] != p->n_coef)) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    for (s = 0u; s < ns; ++s) {
+        if ((p->knot_start[s + 1u] < p->knot_start[s]) ||
+            (p->coef_start[s + 1u] < p->coef_start[s])) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    for (i = 0u; i < rows; ++i) {
+        if (p->row_start[i + 1u] < p->row_start[i]) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    for (i = 0u; i < p->n_entries; ++i) {
+        if (p->col[i] >= nz) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    for (s = 0u; s < ns; ++s) {
+        const uint32_t len = p->knot_start[s + 1u] - p->knot_start[s];
+        const uint64_t entries = (uint64_t)p->row_start[(s + 1u) * t->nu] - p->row_start[s * t->nu];
+        const uint64_t coefs = (uint64_t)p->coef_start[s + 1u] - p->coef_start[s];
+        if ((len < 8u) || (coefs != entries * (len - 4u)) ||
+            !fz_knots_valid(&p->knot[p->knot_start[s]], len,
+                            t->stage_start[s + 1u] - t->stage_start[s])) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    return STSP_OK;
+}
+
+static int fz_spline_coef_finite(const stsp_spline_t *p)
+{
+    uint32_t i;
+    for (i = 0u; i < p->n_coef; ++i) {
+        if (!fz_finite(p->coef[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* What a step of a valid spline table at a tick that passes the range and order checks, with
+ * a finite state, must do (from the contract, independently of the firmware's code): the
+ * stage (searched from the last one), whether it latches (the first step, or a new stage with
+ * stage_n_latch > 0) and the v it then uses (Lambda x + lambda0 in that order, zero beyond
+ * stage_n_latch), and the command of the spline law at that tick, by The NURBS Book A2.2
+ * literally (every operation its own statement: no contraction). */
+typedef struct {
+    uint32_t stage;
+    int relatch;
+    int v_finite;
+    int y_finite;
+    float v[FZ_MAX_NL];
+    float y[FZ_MAX_NU];
+} fz_spline_model_t;
+
+static void fz_spline_model(const stsp_table_t *t, const stsp_ctrl_t *before, uint32_t tick,
+                            const float *x, fz_spline_model_t *m)
+{
+    const stsp_spline_t *sp = t->spline;
+    const uint32_t nx = t->nx, nu = t->nu, n_latch = t->n_latch;
+    uint32_t s = before->stage, i, j, r;
+    const float *U;
+    uint32_t n_spans, sigma = 0u, e0;
+    float tau, N[4], left[4], right[4];
+    while ((s + 1u < t->n_stages) && (t->stage_start[s + 1u] <= tick)) {
+        ++s;
+    }
+    m->stage = s;
+    m->relatch = (before->latched == 0u) || ((s != before->stage) && (t->stage_n_latch[s] > 0u));
+    m->v_finite = 1;
+    for (i = 0u; i < n_latch; ++i) {
+        float v = before->v[i];
+        if (m->relatch) {
+            v = 0.0f;
+            if (i < t->stage_n_latch[s]) {
+                const uint32_t row = s * n_latch + i;
+                v = t->lambda0[row];
+                for (j = 0u; j < nx; ++j) {
+                    const float p = t->Lambda[row * nx + j] * x[j];
+                    v = v + p;
+                }
+            }
+        }
+        m->v[i] = v;
+        m->v_finite = m->v_finite && fz_finite(v);
+    }
+    U = &sp->knot[sp->knot_start[s]];
+    n_spans = sp->knot_start[s + 1u] - sp->knot_start[s] - 7u;
+    tau = (float)(tick - t->stage_start[s]);
+    while ((sigma + 1u < n_spans) && !(tau < U[sigma + 4u])) {
+        ++sigma;
+    }
+    N[0] = 1.0f;
+    for (j = 1u; j <= 3u; ++j) {
+        float saved = 0.0f;
+        left[j] = tau - U[sigma + 3u + 1u - j];
+        right[j] = U[sigma + 3u + j] - tau;
+        for (r = 0u; r < j; ++r) {
+            const float den = right[r + 1u] + left[j - r];
+            const float temp = N[r] / den;
+            const float p = right[r + 1u] * temp;
+            N[r] = saved + p;
+            saved = left[j - r] * temp;
+        }
+        N[j] = saved;
+    }
+    e0 = sp->row_start[s * nu];
+    m->y_finite = 1;
+    for (i = 0u; i < nu; ++i) {
+        float acc = 0.0f;
+        uint32_t e;
+        for (e = sp->row_start[s * nu + i]; e < sp->row_start[s * nu + i + 1u]; ++e) {
+            const float *c = &sp->coef[sp->coef_start[s] + (e - e0) * (n_spans + 3u) + sigma];
+            const uint32_t col = sp->col[e];
+            const float z = (col < nx) ? x[col] : (col == nx) ? 1.0f : m->v[col - nx - 1u];
+            float g = N[0] * c[0], p;
+            p = N[1] * c[1];
+            g = g + p;
+            p = N[2] * c[2];
+            g = g + p;
+            p = N[3] * c[3];
+            g = g + p;
+            p = g * z;
+            acc = acc - p;
+        }
+        m->y[i] = acc;
+        m->y_finite = m->y_finite && fz_finite(acc);
+    }
+}
+
+/* A step of a spline table that the model covers: status, command (clamped, bit for bit),
+ * stage, latch and saturation mask as the model says. */
+static void fz_check_spline_step(const stsp_table_t *t, const stsp_ctrl_t *c, stsp_status_t st,
+                                 stsp_status_t tick_st, const float *u,
+                                 const fz_spline_model_t *m)
+{
+    uint32_t i, sat = 0u;
+    if ((m->relatch && !m->v_finite) || !m->y_finite) {
+        fuzz_check(st == STSP_ERR_NONFINITE_OUTPUT);
+        return;
+    }
+    for (i = 0u; i < t->nu; ++i) {
+        float want = m->y[i];
+        if (want > t->u_max[i]) {
+            want = t->u_max[i];
+            sat |= 1u << i;
+        } else if (want < t->u_min[i]) {
+            want = t->u_min[i];
+            sat |= 1u << i;
+        } else {
+            /* within the limits */
+        }
+        fuzz_check(fz_f32_bits(u[i]) == fz_f32_bits(want));
+    }
+    fuzz_check(st == ((sat != 0u) ? STSP_WARN_SATURATED : tick_st));
+    if (sat != 0u) {
+        fuzz_check(c->sat_mask == sat);
+    }
+    fuzz_check((c->latched != 0u) && (c->stage == m->stage));
+    for (i = 0u; i < t->n_latch; ++i) {
+        fuzz_check(fz_f32_bits(c->v[i]) == fz_f32_bits(m->v[i]));
+    }
+}
+#endif
+
 /* A table from the input: valid most of the time (so that the calls reach the law), with at
  * most one corruption chosen by a selector byte. */
 static void fz_build_table(fuzz_in_t *in, stsp_table_t *t, fz_table_info_t *info)
 {
     const uint32_t shape = fuzz_u8(in), lim = fuzz_u8(in), sel = fuzz_u8(in), bsel = fuzz_u8(in);
+    const uint32_t ssel = fuzz_u8(in);
+    /* Spline gains (one table in three; never with a band dual but now and then, which init
+     * must refuse) or a band dual (one in three). */
+    const int spline = FZ_SPLINE_PICK(ssel);
+    const int band = FZ_BAND_PICK(bsel) && (!spline || (ssel >= 240u));
     uint32_t band_corrupt = 0u;
     const uint32_t corrupt = (sel >= 160u) ? (sel % 10u) : 10u;  /* 10: none */
     uint32_t s, nt = 0u, i;
@@ -494,9 +992,13 @@ static void fz_build_table(fuzz_in_t *in, stsp_table_t *t, fz_table_info_t *info
     t->u_max = g_hi;
     t->u_hold = g_hold;
     memset(info, 0, sizeof *info);
-    if (FZ_BAND_PICK(bsel)) {
+    if (band) {
         band_corrupt = fz_build_band(in, t);
         info->band = 1u;
+    }
+    if (spline) {
+        info->spline_corrupt = fz_build_spline(in, t);
+        info->spline = 1u;
     }
     info->main_corrupt = (corrupt != 10u) ? 1u + corrupt : 0u; /* which one, for the Q model */
     switch (corrupt) {
@@ -527,12 +1029,15 @@ static void fz_build_table(fuzz_in_t *in, stsp_table_t *t, fz_table_info_t *info
     }
     /* The CRC needs valid pointers and dimensions inside the storage; compute it when it can
      * be computed, then perhaps corrupt it. */
-    if ((t->K != NULL) && (t->u_max != NULL) && (t->u_hold != NULL) && (t->L != NULL) &&
-        (t->stage_n_latch != NULL) &&
+    if ((t->u_max != NULL) && (t->u_hold != NULL) && (t->stage_n_latch != NULL) &&
 #ifdef STSP_ARITH_FIXED_POINT
         (t->v_exp != NULL) &&
 #endif
-        (t->n_ticks <= FZ_MAX_NT) &&
+        ((t->spline == NULL)
+         ? ((t->K != NULL) && (t->L != NULL) && (t->n_ticks <= FZ_MAX_NT))
+         : ((g_spline.knot_start != NULL) && (g_spline.knot != NULL) &&
+            (g_spline.row_start != NULL) && (g_spline.col != NULL) &&
+            (g_spline.coef_start != NULL) && (g_spline.coef != NULL))) &&
         ((t->band_qp == NULL) ||
          ((g_band.Nt != NULL) && (g_band.mt != NULL) && (g_band.W != NULL) &&
           (g_band.lo != NULL) && (g_band.hi != NULL) && (g_band.q <= FZ_BAND_STORE) &&
@@ -559,13 +1064,26 @@ static void fz_build_table(fuzz_in_t *in, stsp_table_t *t, fz_table_info_t *info
     } else {
         /* CRC as computed */
     }
+    if ((t->spline != NULL) && (fuzz_u8(in) >= 240u)) {
+        /* A bit of a knot or coefficient changed after the CRC (covered by it when within
+         * the declared lengths). */
+        const uint32_t k = fuzz_u8(in), bit = fuzz_u8(in) % 32u;
+        uint32_t bits;
+        float *a = ((k & 1u) != 0u) ? &g_knot[(k >> 1) % FZ_SPL_KNOTS]
+                                    : &g_coef[(k >> 1) % FZ_SPL_COEF];
+        memcpy(&bits, a, sizeof bits);
+        bits ^= 1u << bit;
+        memcpy(a, &bits, sizeof bits);
+        info->band_crc_ok = 0u;
+    }
 }
 
 #ifndef STSP_ARITH_FIXED_POINT
 /* The status stsp_init() must return for a table without a main-table corruption, from the
- * documented order of its checks: dimensions and layout (stage_n_latch within n_latch), band
- * arrays NULL, band dimensions and stage_n_latch, CRC, values (limits, band data). Returns 1 and
- * the status in *st when the table is modelled. */
+ * documented order of its checks: dimensions and layout (a spline table without per-tick
+ * gains and band dual; stage_n_latch within n_latch), the spline's arrays (NULL, layout,
+ * knots), band arrays NULL, band dimensions and stage_n_latch, CRC, values (limits, spline
+ * coefficients, band data). Returns 1 and the status in *st when the table is modelled. */
 static int fz_expected_init(const stsp_table_t *t, const fz_table_info_t *info,
                             stsp_status_t *st)
 {
@@ -574,9 +1092,21 @@ static int fz_expected_init(const stsp_table_t *t, const fz_table_info_t *info,
     if (info->main_corrupt != 0u) {
         return 0;
     }
+    if ((t->spline != NULL) &&
+        ((b != NULL) || (t->K != NULL) || (t->k0 != NULL) || (t->L != NULL))) {
+        *st = STSP_ERR_BAD_DIMS;
+        return 1;
+    }
     for (s = 0u; s < t->n_stages; ++s) {
         if (t->stage_n_latch[s] > t->n_latch) {
             *st = STSP_ERR_BAD_DIMS;
+            return 1;
+        }
+    }
+    if (t->spline != NULL) {
+        const stsp_status_t sp_st = fz_spline_check(t);
+        if (sp_st != STSP_OK) {
+            *st = sp_st;
             return 1;
         }
     }
@@ -612,6 +1142,9 @@ static int fz_expected_init(const stsp_table_t *t, const fz_table_info_t *info,
             !(t->u_min[i] <= t->u_hold[i]) || !(t->u_max[i] >= t->u_hold[i])) {
             *st = STSP_ERR_BAD_VALUES;
         }
+    }
+    if ((t->spline != NULL) && !fz_spline_coef_finite(t->spline)) {
+        *st = STSP_ERR_BAD_VALUES;
     }
     if (b != NULL) {
         const uint32_t q = b->q, nx = b->nx;
@@ -672,17 +1205,28 @@ static int fz_band_invalid(const stsp_table_t *t)
     }
     return 0;
 }
+
+/* 1 if the spline gains are invalid by the contract (any of init's spline checks fails, with
+ * the dimensions the header declares): init must then never return STSP_OK. */
+static int fz_spline_invalid(const stsp_table_t *t)
+{
+    if (t->spline == NULL) {
+        return 0;
+    }
+    return (t->band_qp != NULL) || (t->K != NULL) || (t->k0 != NULL) || (t->L != NULL) ||
+           (fz_spline_check(t) != STSP_OK) || !fz_spline_coef_finite(t->spline);
+}
 #else
-/* Fixed point: the layout check refuses any band_qp with STSP_ERR_BAD_DIMS, after magic,
- * version, dimensions, NULL main arrays and the stage layout, and before the CRC and the
- * values. So a band table gets exactly that status when its main part is valid, and also with
- * a broken dimension or layout (BAD_DIMS either way), special gains or exponents, or a flipped
- * CRC bit: every main corruption but magic (0), version (1) and NULL arrays (8), which may
- * come first. Tables without bands are not modelled. */
+/* Fixed point: the layout check refuses any band_qp or spline with STSP_ERR_BAD_DIMS, after
+ * magic, version, dimensions, NULL main arrays and the stage layout, and before the CRC and
+ * the values. So a band or spline table gets exactly that status when its main part is
+ * valid, and also with a broken dimension or layout (BAD_DIMS either way), special gains or
+ * exponents, or a flipped CRC bit: every main corruption but magic (0), version (1) and NULL
+ * arrays (8), which may come first. Tables without either are not modelled. */
 static int fz_expected_init(const stsp_table_t *t, const fz_table_info_t *info,
                             stsp_status_t *st)
 {
-    if ((t->band_qp == NULL) || (info->main_corrupt == 1u + 0u) ||
+    if (((t->band_qp == NULL) && (t->spline == NULL)) || (info->main_corrupt == 1u + 0u) ||
         (info->main_corrupt == 1u + 1u) || (info->main_corrupt == 1u + 8u)) {
         return 0;
     }
@@ -694,6 +1238,12 @@ static int fz_expected_init(const stsp_table_t *t, const fz_table_info_t *info,
 static int fz_band_invalid(const stsp_table_t *t)
 {
     return t->band_qp != NULL;
+}
+
+/* Every spline table too. */
+static int fz_spline_invalid(const stsp_table_t *t)
+{
+    return t->spline != NULL;
 }
 #endif
 
@@ -832,7 +1382,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     int ready, modelled, band_invalid;
     fz_build_table(&in, &t, &info);
     modelled = fz_expected_init(&t, &info, &init_expected);
-    band_invalid = fz_band_invalid(&t);
+    band_invalid = fz_band_invalid(&t) || fz_spline_invalid(&t);
 #ifdef FZ_STATS
     {
         static int registered = 0;
@@ -843,6 +1393,21 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         FZS(FZS_TABLES);
         if (info.band) {
             FZS(FZS_BAND_TABLES);
+        }
+        if (info.spline) {
+            FZS(FZS_SPL_TABLES);
+            if (info.spline_corrupt != 0u) {
+                FZS(FZS_SPL_CORRUPT);
+            }
+            if (modelled) {
+                switch (init_expected) {
+                case STSP_OK: FZS(FZS_SPL_INIT_OK); break;
+                case STSP_ERR_NULL: FZS(FZS_SPL_NULL); break;
+                case STSP_ERR_BAD_DIMS: FZS(FZS_SPL_DIMS); break;
+                case STSP_ERR_BAD_CRC: FZS(FZS_SPL_CRC); break;
+                default: FZS(FZS_SPL_VALUES); break;
+                }
+            }
         }
         if (modelled) {
             FZS(FZS_INIT_MODELLED);
@@ -884,6 +1449,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             }
             ready = (st == STSP_OK);
             model_next = 0u;
+            if (ready && (t.spline != NULL)) {
+                FZS(FZS_SPL_READY);
+            }
             if (ready) {
                 fuzz_check(c.next_tick == 0u);
             }
@@ -902,14 +1470,15 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             int finite = 1;
             stsp_status_t st, tick_st;
 #ifndef STSP_ARITH_FIXED_POINT
-            int band_latch = 0;
+            int band_latch = 0, spline_step = 0;
             fz_latch_t latch;
+            fz_spline_model_t sm;
 #endif
             switch (how) {
             case 0u: case 1u: case 2u: tick = model_next; break;
             case 3u: tick = model_next - 1u; break;               /* repeat (or wrap) */
             case 4u: tick = model_next + 1u + fuzz_u8(&in) % 4u; break;
-            case 5u: tick = fuzz_u8(&in); break;
+            case 5u: tick = ready ? fuzz_u32(&in) % (t.n_ticks + 2u) : fuzz_u8(&in); break;
             case 6u: tick = ready ? t.n_ticks + fuzz_u8(&in) % 2u : 0u; break;
             default: tick = fuzz_u32(&in); break;
             }
@@ -936,6 +1505,13 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 ((before.latched == 0u) || (before.stage != 0u))) {
                 band_latch = 1;
                 fz_band_latch_model(&t, tick, x, &latch);
+            }
+            /* A spline table's step at a tick in range and order with a finite state: the
+             * model says what it must do. */
+            if (ready && (t.spline != NULL) && finite && (tick < t.n_ticks) &&
+                !((model_next > 0u) && (tick + 1u < model_next))) {
+                spline_step = 1;
+                fz_spline_model(&t, &before, tick, x, &sm);
             }
 #endif
             st = stsp_step(&c, tick, x, u);
@@ -993,6 +1569,22 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 #ifndef STSP_ARITH_FIXED_POINT
             if (band_latch) {
                 fz_check_band_step(&t, &c, st, tick_st, u, &latch);
+            }
+            if (spline_step) {
+                FZS(FZS_SPL_STEPS);
+                if (sm.relatch) {
+                    FZS(FZS_SPL_LATCH);
+                }
+                if (st == STSP_WARN_SATURATED) {
+                    FZS(FZS_SPL_SAT);
+                }
+                if (st == STSP_ERR_NONFINITE_OUTPUT) {
+                    FZS(FZS_SPL_OVERFLOW);
+                }
+                if (t.stage_start[sm.stage + 1u] - t.stage_start[sm.stage] > 4096u) {
+                    FZS(FZS_SPL_LONG);
+                }
+                fz_check_spline_step(&t, &c, st, tick_st, u, &sm);
             }
 #endif
             if (tick >= t.n_ticks) {

@@ -2,12 +2,16 @@
  * with clang, -fsanitize=fuzzer,address,undefined, once per arithmetic variant; the tests
  * fuzz_step_verify, fuzz_step_verify_q15 and fuzz_step_verify_q31 run it for a bounded time).
  *
- * Each input builds a valid table whose header, band dual and every array live in heap blocks
- * of exactly the size init validates (so ASan reports any access beyond them), inits two
- * instances (one on the table, one, the reference, on an untouched copy of its header and
- * band dual: same arrays), steps both, then changes the table: header fields (dimensions,
- * magic, version, kind, tick_hz, crc32, problem hash), array addresses (NULL, another array,
- * a one-element block), the band dual's header, its address, and bytes of any array; then
+ * Each input builds a valid table whose header, band dual or spline gains (float32: one table
+ * in three has spline gains, 1..8 spans per stage of up to 40 ticks) and every array live in
+ * heap blocks of exactly the size init validates (so ASan reports any access beyond them),
+ * inits two instances (one on the table, one, the reference, on an untouched copy of its
+ * header and band dual or spline header: same arrays), steps both, then changes the table:
+ * header fields (dimensions, magic, version, kind, tick_hz, crc32, problem hash), array
+ * addresses (NULL, another array, a one-element block), the band dual's header, its address,
+ * the spline's header (a length by a step or to anything, an array address: NULL, another of
+ * its arrays, a one-entry block), its address (gone, another header, back), and bytes of any
+ * array (the spline's knots, index arrays, cols and coefficients too); then
  * interleaves steps (ticks in order, repeated, skipped, backwards, past the end; states with
  * NaN/Inf/huge entries; x and u in separate, shared or overlapping blocks of exactly the
  * validated nx and nu), resets, conversions and stsp_verify().
@@ -17,11 +21,11 @@
  * not reach it; changed data reach both alike), with a known status, u the safe command
  * u_hold as init copied it on an error (even when the table's u_hold changed since);
  * stsp_verify() returns STSP_ERR_TABLE_CHANGED exactly when the header (magic, version, kind,
- * a dimension, an array address, the band dual's header or address) differs from the one
- * init saw, else STSP_ERR_BAD_CRC exactly when the CRC over the validated arrays (with the
- * current tick_hz and problem hash) differs from the crc32 field, else STSP_OK; after an
- * error every step returns STSP_ERR_NOT_INITIALIZED with u that safe command, reset and verify
- * STSP_ERR_NOT_INITIALIZED. */
+ * a dimension, an array address, the band dual's or the spline's header or address) differs
+ * from the one init saw, else STSP_ERR_BAD_CRC exactly when the CRC over the validated arrays
+ * (with the current tick_hz and problem hash) differs from the crc32 field, else STSP_OK;
+ * after an error every step returns STSP_ERR_NOT_INITIALIZED with u that safe command, reset
+ * and verify STSP_ERR_NOT_INITIALIZED. */
 #include <float.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -37,17 +41,21 @@
 #define FV_MAX_N_LATCH 5u
 #define FV_MAX_NS 4u
 #define FV_MAX_STAGE_TICKS 4u
+#define FV_MAX_SPLINE_STAGE_TICKS 40u /* a spline table's stages (at most 8 spans each) */
+#define FV_MAX_SPANS 8u
 #define FV_MAX_CALLS 40u
 #define FV_MAX_BLOCKS 48u
 
 /* -DFV_STATS: count what the inputs reached and print it at exit (not in the ctest build). */
 #ifdef FV_STATS
-enum { FVS_INPUTS, FVS_BAND, FVS_HDR, FVS_DATA, FVS_VERIFY_OK, FVS_VERIFY_CHANGED,
-       FVS_VERIFY_CRC, FVS_STEPS_CHANGED, FVS_STOPPED_STEPS, FVS_SHARED, FVS_N };
+enum { FVS_INPUTS, FVS_BAND, FVS_SPLINE, FVS_HDR, FVS_DATA, FVS_SPLINE_HDR, FVS_SPLINE_DATA,
+       FVS_VERIFY_OK, FVS_VERIFY_CHANGED, FVS_VERIFY_CRC, FVS_STEPS_CHANGED,
+       FVS_SPLINE_STEPS_CHANGED, FVS_STOPPED_STEPS, FVS_SHARED, FVS_N };
 static const char *const fvs_names[FVS_N] = {
-    "inputs", "band tables", "header changes", "data changes", "verify OK",
-    "verify TABLE_CHANGED", "verify BAD_CRC", "steps on a changed table", "steps when stopped",
-    "steps with shared x/u"};
+    "inputs", "band tables", "spline tables", "header changes", "data changes",
+    "  on spline tables: header", "  on spline tables: data", "verify OK", "verify TABLE_CHANGED",
+    "verify BAD_CRC", "steps on a changed table", "  of them spline tables",
+    "steps when stopped", "steps with shared x/u"};
 static unsigned long fvs[FVS_N];
 static void fvs_print(void)
 {
@@ -146,6 +154,9 @@ typedef struct {
     stsp_table_t *orig;     /* its header as init saw it (heap; the reference's table) */
     stsp_bandqp_t *band;    /* the table's band dual (heap), or NULL */
     stsp_bandqp_t *band0;   /* its header as init saw it (the reference's band dual) */
+    stsp_spline_t *spline;  /* the table's spline gains (heap), or NULL */
+    stsp_spline_t *spline0; /* their header as init saw it (the reference's) */
+    uint32_t spline_arrays; /* arrays[spline_arrays..] are the spline's (data changes) */
     void *arrays[24];       /* every array block, for data changes */
     size_t sizes[24];
     stsp_scalar_t hold0[STSP_MAX_NU]; /* u_hold as init saw it: what a refused step writes */
@@ -171,8 +182,114 @@ static void *fv_array(fv_table_t *tb, fv_blocks_t *blocks, size_t size)
     return p;
 }
 
+#ifndef STSP_ARITH_FIXED_POINT
+/* An array of the spline gains: a block of exactly `size` bytes, registered for data changes
+ * unless empty (a stage may store no entry: col and coef may be empty, but not NULL). */
+static void *fv_spline_array(fv_table_t *tb, fv_blocks_t *blocks, size_t size)
+{
+    return (size > 0u) ? fv_array(tb, blocks, size) : fv_alloc(blocks, 0u);
+}
+
+/* Valid spline gains for t (float32): per stage 1..8 spans on distinct integer breakpoints,
+ * per (stage, input) none, all or a random subset of the operands stored, small
+ * coefficients; every array
+ * in its own block of exactly its size. */
+static void fv_build_spline(fv_blocks_t *blocks, fv_table_t *tb, stsp_table_t *t,
+                            uint32_t *seed)
+{
+    const uint32_t ns = t->n_stages, nu = t->nu, nz = (uint32_t)t->nx + 1u + t->n_latch;
+    uint32_t spans[FV_MAX_NS], bp[FV_MAX_NS][FV_MAX_SPANS], mask[FV_MAX_NS * FV_MAX_NU];
+    uint32_t nk = 0u, ne = 0u, nc = 0u, s, i, k, c;
+    uint32_t *knot_start, *coef_start;
+    uint16_t *row_start;
+    uint8_t *col;
+    float *knot, *coef;
+    stsp_spline_t *sp;
+    for (s = 0u; s < ns; ++s) {
+        const uint32_t T = t->stage_start[s + 1u] - t->stage_start[s];
+        const uint32_t want = 1u + fv_lcg(seed) % ((T < FV_MAX_SPANS) ? T : FV_MAX_SPANS);
+        uint32_t nb = 0u;
+        for (k = 0u; (k + 1u < want) && (T > 1u); ++k) {
+            const uint32_t v = 1u + fv_lcg(seed) % (T - 1u);
+            uint32_t j;
+            int dup = 0;
+            for (j = 0u; j < nb; ++j) {
+                dup = dup || (bp[s][j] == v);
+            }
+            if (!dup) {
+                for (j = nb; (j > 0u) && (bp[s][j - 1u] > v); --j) {
+                    bp[s][j] = bp[s][j - 1u];
+                }
+                bp[s][j] = v;
+                ++nb;
+            }
+        }
+        spans[s] = nb + 1u;
+        nk += spans[s] + 7u;
+        for (i = 0u; i < nu; ++i) {
+            const uint32_t pick = fv_lcg(seed) % 8u;    /* none, all, or a random subset */
+            const uint32_t m = ((pick == 0u) ? 0u : (pick == 1u) ? ~0u : fv_lcg(seed)) &
+                               ((1u << nz) - 1u);
+            mask[s * nu + i] = m;
+            for (c = 0u; c < nz; ++c) {
+                if ((m >> c) & 1u) {
+                    ++ne;
+                    nc += spans[s] + 3u;
+                }
+            }
+        }
+    }
+    knot_start = (uint32_t *)fv_spline_array(tb, blocks, sizeof(uint32_t) * (ns + 1u));
+    knot = (float *)fv_spline_array(tb, blocks, sizeof(float) * nk);
+    row_start = (uint16_t *)fv_spline_array(tb, blocks, sizeof(uint16_t) * (ns * nu + 1u));
+    col = (uint8_t *)fv_spline_array(tb, blocks, ne);
+    coef_start = (uint32_t *)fv_spline_array(tb, blocks, sizeof(uint32_t) * (ns + 1u));
+    coef = (float *)fv_spline_array(tb, blocks, sizeof(float) * nc);
+    nk = ne = nc = 0u;
+    row_start[0] = 0u;
+    for (s = 0u; s < ns; ++s) {
+        const uint32_t T = t->stage_start[s + 1u] - t->stage_start[s];
+        knot_start[s] = nk;
+        coef_start[s] = nc;
+        for (k = 0u; k < 4u; ++k) {
+            knot[nk + k] = 0.0f;
+            knot[nk + spans[s] + 3u + k] = (float)T;
+        }
+        for (k = 0u; k + 1u < spans[s]; ++k) {
+            knot[nk + 4u + k] = (float)bp[s][k];
+        }
+        nk += spans[s] + 7u;
+        for (i = 0u; i < nu; ++i) {
+            for (c = 0u; c < nz; ++c) {
+                if ((mask[s * nu + i] >> c) & 1u) {
+                    col[ne++] = (uint8_t)c;
+                    for (k = 0u; k < spans[s] + 3u; ++k) {
+                        coef[nc++] = fv_small(seed);
+                    }
+                }
+            }
+            row_start[s * nu + i + 1u] = (uint16_t)ne;
+        }
+    }
+    knot_start[ns] = nk;
+    coef_start[ns] = nc;
+    sp = (stsp_spline_t *)fv_alloc(blocks, sizeof *sp);
+    sp->n_knots = nk;
+    sp->n_entries = ne;
+    sp->n_coef = nc;
+    sp->knot_start = knot_start;
+    sp->knot = knot;
+    sp->row_start = row_start;
+    sp->col = col;
+    sp->coef_start = coef_start;
+    sp->coef = coef;
+    t->spline = sp;
+    tb->spline = sp;
+}
+#endif
+
 /* A valid table (init accepts it) from the input: dimensions, stages, a seeded generator for
- * the values, limits, and (float32) a band dual now and then. */
+ * the values, limits, and (float32) a band dual or spline gains now and then. */
 static void fv_build(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
 {
     const uint32_t nx = 1u + fuzz_u8(in) % FV_MAX_NX;
@@ -188,15 +305,18 @@ static void fv_build(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
     stsp_scalar_t *hi = FV_ARRAY(tb, blocks, stsp_scalar_t, nu);
     stsp_scalar_t *hold = FV_ARRAY(tb, blocks, stsp_scalar_t, nu);
     uint32_t s, i, nt = 0u;
-    int band = 0;
+    int band = 0, spline = 0;
+#ifndef STSP_ARITH_FIXED_POINT
+    spline = (fuzz_u8(in) % 3u) == 1u;
+#endif
     for (s = 0u; s < ns; ++s) {
         start[s] = nt;
-        nt += 1u + fuzz_u8(in) % FV_MAX_STAGE_TICKS;
+        nt += 1u + fuzz_u8(in) % (spline ? FV_MAX_SPLINE_STAGE_TICKS : FV_MAX_STAGE_TICKS);
         stage_n_latch[s] = (uint16_t)((n_latch > 0u) ? fuzz_u8(in) % (n_latch + 1u) : 0u);
     }
     start[ns] = nt;
 #ifndef STSP_ARITH_FIXED_POINT
-    band = (n_latch > 0u) && ((fuzz_u8(in) % 3u) == 0u);
+    band = !spline && (n_latch > 0u) && ((fuzz_u8(in) % 3u) == 0u);
     if (band) {
         const uint32_t q_max = (n_latch < STSP_BANDQP_MAX) ? n_latch : STSP_BANDQP_MAX;
         stage_n_latch[0] = (uint16_t)(1u + fuzz_u8(in) % q_max);
@@ -217,13 +337,17 @@ static void fv_build(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
     t->tick_hz = 1u + fuzz_u8(in);
     t->stage_start = start;
     t->stage_n_latch = stage_n_latch;
-    t->K = FV_ARRAY(tb, blocks, stsp_scalar_t, nt * nu * nx);
-    fv_fill(&seed, (stsp_scalar_t *)t->K, nt * nu * nx);
-    t->k0 = FV_ARRAY(tb, blocks, stsp_scalar_t, nt * nu);
-    fv_fill(&seed, (stsp_scalar_t *)t->k0, nt * nu);
+    if (!spline) {
+        t->K = FV_ARRAY(tb, blocks, stsp_scalar_t, nt * nu * nx);
+        fv_fill(&seed, (stsp_scalar_t *)t->K, nt * nu * nx);
+        t->k0 = FV_ARRAY(tb, blocks, stsp_scalar_t, nt * nu);
+        fv_fill(&seed, (stsp_scalar_t *)t->k0, nt * nu);
+    }
     if (n_latch > 0u) {
-        t->L = FV_ARRAY(tb, blocks, stsp_scalar_t, nt * nu * n_latch);
-        fv_fill(&seed, (stsp_scalar_t *)t->L, nt * nu * n_latch);
+        if (!spline) {
+            t->L = FV_ARRAY(tb, blocks, stsp_scalar_t, nt * nu * n_latch);
+            fv_fill(&seed, (stsp_scalar_t *)t->L, nt * nu * n_latch);
+        }
         t->Lambda = FV_ARRAY(tb, blocks, stsp_scalar_t, ns * n_latch * nx);
         fv_fill(&seed, (stsp_scalar_t *)t->Lambda, ns * n_latch * nx);
         t->lambda0 = FV_ARRAY(tb, blocks, stsp_scalar_t, ns * n_latch);
@@ -270,6 +394,13 @@ static void fv_build(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
     }
 #endif
     tb->band = NULL;
+    tb->spline = NULL;
+    tb->spline_arrays = tb->n_arrays;
+#ifndef STSP_ARITH_FIXED_POINT
+    if (spline) {
+        fv_build_spline(blocks, tb, t, &seed);
+    }
+#endif
     if (band) {
         const uint32_t q = stage_n_latch[0];
         stsp_bandqp_t *b = (stsp_bandqp_t *)fv_alloc(blocks, sizeof *b);
@@ -319,6 +450,12 @@ static void fv_build(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
         *tb->band0 = *tb->band;
         tb->orig->band_qp = tb->band0;
     }
+    tb->spline0 = NULL;
+    if (tb->spline != NULL) {
+        tb->spline0 = (stsp_spline_t *)fv_alloc(blocks, sizeof *tb->spline0);
+        *tb->spline0 = *tb->spline;
+        tb->orig->spline = tb->spline0;
+    }
 }
 
 /* A byte of an array (data: the CRC covers it). */
@@ -333,7 +470,7 @@ static void fv_change_data(fv_table_t *tb, uint32_t which, uint32_t value)
 static void fv_change(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
 {
     stsp_table_t *t = tb->t;
-    const uint32_t kind = fuzz_u8(in) % 10u;
+    const uint32_t kind = fuzz_u8(in) % 11u;
     const uint32_t which = fuzz_u8(in);
     const uint32_t value = fuzz_u32(in);
     switch (kind) {
@@ -399,7 +536,7 @@ static void fv_change(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
     case 4u: /* the problem hash (covered by the CRC) */
         t->problem_sha256[which % 32u] ^= (uint8_t)(1u + value % 255u);
         break;
-    case 5u: /* the band dual's header (no band dual: a data change instead) */
+    case 5u: /* the band dual's or the spline's header (neither: a data change instead) */
         if (tb->band != NULL) {
             stsp_bandqp_t *b = tb->band;
             switch (which % 4u) {
@@ -407,6 +544,28 @@ static void fv_change(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
             case 1u: b->nx = (uint16_t)(value % 10u); break;
             case 2u: b->W = ((value & 1u) != 0u) ? b->mt : NULL; break;
             default: b->Nt = (const double *)fv_alloc(blocks, sizeof(double)); break;
+            }
+        } else if (tb->spline != NULL) {
+            /* a length by a small step or to anything, or an array address: NULL, another of
+             * the spline's arrays, or a one-entry block */
+            stsp_spline_t *p = tb->spline;
+            const uint32_t v = ((value & 1u) != 0u) ? (value >> 24) : (value >> 1);
+            const uint32_t step = (value >> 8) % 5u;  /* -2..2 as an offset */
+            const void *arrays[6] = {p->knot_start, p->knot, p->row_start, p->col,
+                                     p->coef_start, p->coef};
+            const uint32_t pick = (value >> 12) % 8u;
+            const void *q = (pick < 6u) ? arrays[pick]
+                            : (pick == 6u) ? fv_alloc(blocks, sizeof(uint32_t)) : NULL;
+            switch (which % 9u) {
+            case 0u: p->n_knots = ((which & 16u) != 0u) ? v : p->n_knots + step - 2u; break;
+            case 1u: p->n_entries = ((which & 16u) != 0u) ? v : p->n_entries + step - 2u; break;
+            case 2u: p->n_coef = ((which & 16u) != 0u) ? v : p->n_coef + step - 2u; break;
+            case 3u: p->knot_start = (const uint32_t *)q; break;
+            case 4u: p->knot = (const float *)q; break;
+            case 5u: p->row_start = (const uint16_t *)q; break;
+            case 6u: p->col = (const uint8_t *)q; break;
+            case 7u: p->coef_start = (const uint32_t *)q; break;
+            default: p->coef = (const float *)q; break;
             }
         } else {
             fv_change_data(tb, which, value);
@@ -430,6 +589,24 @@ static void fv_change(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
         if (tb->band != NULL) {
             *tb->band = *tb->band0;
         }
+        t->spline = tb->spline;
+        if (tb->spline != NULL) {
+            *tb->spline = *tb->spline0;
+        }
+        break;
+    case 10u: /* the spline's address: gone, another header with the same arrays, or back */
+        switch (value % 3u) {
+        case 0u: t->spline = NULL; break;
+        case 1u: {
+            stsp_spline_t *p = (stsp_spline_t *)fv_alloc(blocks, sizeof *p);
+            if (tb->spline0 != NULL) {
+                *p = *tb->spline0;
+            }
+            t->spline = p;
+            break;
+        }
+        default: t->spline = tb->spline; break;
+        }
         break;
     default:
         fv_change_data(tb, which, value);
@@ -450,8 +627,20 @@ static int fv_header_changed(const fv_table_t *tb)
                   (t->u_min != o->u_min) || (t->u_max != o->u_max) || (t->u_hold != o->u_hold);
 #ifdef STSP_ARITH_FIXED_POINT
     changed = changed || (t->x_exp != o->x_exp) || (t->u_exp != o->u_exp) ||
-              (t->v_exp != o->v_exp) || (t->band_qp != NULL);
+              (t->v_exp != o->v_exp) || (t->band_qp != NULL) || (t->spline != NULL);
 #else
+    if (t->spline != tb->spline) {
+        changed = 1;
+    } else if (tb->spline != NULL) {
+        const stsp_spline_t *p = tb->spline, *p0 = tb->spline0;
+        changed = changed || (p->n_knots != p0->n_knots) || (p->n_entries != p0->n_entries) ||
+                  (p->n_coef != p0->n_coef) || (p->knot_start != p0->knot_start) ||
+                  (p->knot != p0->knot) || (p->row_start != p0->row_start) ||
+                  (p->col != p0->col) || (p->coef_start != p0->coef_start) ||
+                  (p->coef != p0->coef);
+    } else {
+        /* gains per tick, as init saw */
+    }
     if (t->band_qp != tb->band) {
         changed = 1;
     } else if (tb->band != NULL) {
@@ -537,6 +726,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     if (tb.band != NULL) {
         FVS(FVS_BAND);
     }
+    if (tb.spline != NULL) {
+        FVS(FVS_SPLINE);
+    }
     nx = tb.orig->nx;
     nu = tb.orig->nu;
     n_changes = fuzz_u8(&in) % 5u;
@@ -548,6 +740,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             --n_changes;
             changed = 1u;
             FVS(fv_header_changed(&tb) ? FVS_HDR : FVS_DATA);
+            if (tb.spline != NULL) {
+                FVS(fv_header_changed(&tb) ? FVS_SPLINE_HDR : FVS_SPLINE_DATA);
+            }
         } else if (op == 1u) {
             stopped = fv_verify(&c, &tb, stopped);
         } else if (op == 2u) {
@@ -633,6 +828,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             } else {
                 if (changed) {
                     FVS(FVS_STEPS_CHANGED);
+                    if (tb.spline != NULL) {
+                        FVS(FVS_SPLINE_STEPS_CHANGED);
+                    }
                 }
                 fuzz_check(st == st_ref);
                 fuzz_check(memcmp(u, ur, sizeof(stsp_scalar_t) * nu) == 0);

@@ -46,6 +46,9 @@ while [ $# -gt 0 ]; do
 done
 prefix="$(dirname "$work")/install/prefix"
 table="$src/gains/robot_corridor.c"
+# The host package of this checkout (and so its firmware/, which the harness compiles), even
+# when the virtual environment is shared with another checkout (a git worktree).
+export PYTHONPATH="$src/host${PYTHONPATH:+:$PYTHONPATH}"
 
 fail() { echo "run.sh ($mode): FAIL: $*" >&2; exit 1; }
 

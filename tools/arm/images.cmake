@@ -11,6 +11,11 @@
 #   bench<sfx>.elf, bench_fixed<sfx>.elf    tools/arm/bench_main.c (count_instructions.sh)
 #   replay<sfx>.elf, replay_fixed<sfx>.elf  tests/arm/replay_main.c with the records file given
 #                                           as STSP_REPLAY_RECORDS<_Q15|_Q31> (run_replay.sh)
+#   replay_spline.elf, replay_spline_fixed.elf  the same on gains/robot_corridor_spline.c (float32;
+#                                           on both cores, soft float on the M0+), records
+#                                           STSP_REPLAY_RECORDS_SPLINE (make_replay.py --table
+#                                           spline); STSP_REPLAY_PERTURB_COEF=<n> nudges a
+#                                           coefficient (the test must then fail)
 #   bench_spline.elf, bench_spline_fixed.elf  bench_main.c with BENCH_SPLINE: the spline table of
 #                                           tools/arm/spline_bench_table.c (float32; on both
 #                                           cores, soft float on the M0+)
@@ -60,6 +65,25 @@ foreach(arith float32 q15 q31)
                    "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c" "${records}")
   endif()
 endforeach()
+
+# The replay of the robot's spline table (float32 controller, generic and built for the robot's
+# shape; the M0+ runs it in soft float).
+set(STSP_REPLAY_RECORDS_SPLINE "" CACHE FILEPATH "spline records (make_replay.py --table spline)")
+set(STSP_REPLAY_PERTURB_COEF "" CACHE STRING
+    "test the test: the spline replay images move this coefficient by one ulp (empty: none)")
+if(STSP_REPLAY_RECORDS_SPLINE AND TARGET stsp_gains_robot_corridor_spline)
+  stsp_add_image(replay_spline stsp_float32 stsp_gains_robot_corridor_spline
+                 "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c" "${STSP_REPLAY_RECORDS_SPLINE}")
+  stsp_add_image(replay_spline_fixed stsp_fixed_robot_corridor_spline
+                 stsp_gains_robot_corridor_spline "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c"
+                 "${STSP_REPLAY_RECORDS_SPLINE}")
+  foreach(image replay_spline replay_spline_fixed)
+    target_compile_definitions(${image} PRIVATE ROBOT_SPLINE)
+    if(NOT STSP_REPLAY_PERTURB_COEF STREQUAL "")
+      target_compile_definitions(${image} PRIVATE REPLAY_PERTURB_COEF=${STSP_REPLAY_PERTURB_COEF}u)
+    endif()
+  endforeach()
+endif()
 
 # The spline bench: a hand-made spline table of the robot's shape (make_spline_bench_table.py)
 # with the float32 controller, generic and built for the robot's shape.

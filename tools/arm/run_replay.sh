@@ -1,31 +1,41 @@
 #!/usr/bin/env bash
 # QEMU replay test: the Cortex-M builds of the firmware must reproduce, bit for bit, the
-# commands the host build (cffi harness) of the same arithmetic variant computed on a
-# closed-loop run of the robot example.
+# statuses and commands the host build (cffi harness) of the same arithmetic variant computed
+# on closed-loop runs of the robot example.
 #
 #   tools/arm/run_replay.sh [--no-setup] [--preset arm-m4f|arm-m0plus] [--build-dir DIR]
-#                           [--arith LIST] [--perturb RECORD] [--fp-contract off|fast]
+#                           [--arith LIST] [--perturb RECORD] [--perturb-coef N]
+#                           [--fp-contract off|fast]
 #
-# 1. tools/arm/make_replay.py writes DIR/replay_records[_q15|_q31].c (host x, u per recorded
-#    tick) for each variant of LIST (default: float32,q15,q31 on arm-m4f; q15,q31 on
-#    arm-m0plus, which has no float32 images);
+# 1. tools/arm/make_replay.py writes DIR/replay_records[_q15|_q31|_spline].c (per call: tick,
+#    host x, status, u, instance fields) for each variant of LIST (default:
+#    float32,q15,q31,spline on arm-m4f; q15,q31,spline on arm-m0plus, which has no per-tick
+#    float32 images); `spline` is the robot's spline table (float32, make_replay.py --table
+#    spline: every call of two closed-loop runs, with skips, repeats, non-finite states and
+#    limits);
 # 2. tools/arm/build.sh builds DIR/replay<sfx>.elf (generic firmware + gains/robot_corridor<sfx>.c
-#    + records) and DIR/replay_fixed<sfx>.elf (the firmware built for the robot's dimensions);
+#    + records) and DIR/replay_fixed<sfx>.elf (the firmware built for the robot's dimensions;
+#    for spline: replay_spline.elf, replay_spline_fixed.elf);
 # 3. qemu-system-arm runs each: -M mps2-an386 (Cortex-M4F) for arm-m4f; for arm-m0plus
 #    -M mps2-an385, a Cortex-M3 (QEMU has no Cortex-M0+ board; the -mcpu=cortex-m0plus code is
 #    ARMv6-M, a subset of what the M3 runs). Semihosting prints the summary and returns the
 #    exit status, 0 only if every command matched.
-# --perturb moves one recorded u by one ulp / one unit (the test must then fail); --fp-contract
-# fast lets GCC fuse multiply-adds on the target, with the float law compiled as plain C
-# instead of the VMLS/VNMLA asm that contraction cannot fuse (STSP_ARM_NO_VFP_MAC): the
-# float32 test then fails too. Without --no-setup, tools/setup.sh runs first (ctest passes
-# --no-setup: it runs inside a configured build).
+# --perturb moves one recorded u by one ulp / one unit (the test must then fail);
+# --perturb-coef N builds the spline images with spline coefficient N one ulp larger (and the
+# table's CRC recomputed on the target), so that their commands differ from the host's (the
+# spline test must then fail); --fp-contract fast lets GCC fuse multiply-adds on the target,
+# with the float law compiled as plain C instead of the VMLS/VNMLA asm that contraction cannot
+# fuse (STSP_ARM_NO_VFP_MAC): the float32 and spline tests then fail too. Without --no-setup,
+# tools/setup.sh runs first (ctest passes --no-setup: it runs inside a configured build). The
+# host side imports this checkout's host/ package (PYTHONPATH), whose harness compiles this
+# checkout's firmware/.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 build=""
 preset=arm-m4f
 setup=1
 perturb=()
+perturb_coef=""
 contract=off
 ariths=""
 while [ $# -gt 0 ]; do
@@ -35,38 +45,48 @@ while [ $# -gt 0 ]; do
     --build-dir) build="$2"; shift 2 ;;
     --arith) ariths="$2"; shift 2 ;;
     --perturb) perturb=(--perturb "$2"); shift 2 ;;
+    --perturb-coef) perturb_coef="$2"; shift 2 ;;
     --fp-contract) contract="$2"; shift 2 ;;
     *) echo "run_replay: unknown argument $1" >&2; exit 2 ;;
   esac
 done
 case "$preset" in
-  arm-m4f) machine=mps2-an386; : "${ariths:=float32,q15,q31}" ;;
-  arm-m0plus) machine=mps2-an385; : "${ariths:=q15,q31}" ;;
+  arm-m4f) machine=mps2-an386; : "${ariths:=float32,q15,q31,spline}" ;;
+  arm-m0plus) machine=mps2-an385; : "${ariths:=q15,q31,spline}" ;;
   *) echo "run_replay: --preset must be arm-m4f or arm-m0plus" >&2; exit 2 ;;
 esac
 : "${build:=$root/build/$preset}"
 [ "$setup" -eq 0 ] || "$root/tools/setup.sh"
 py="$root/.venv/bin/python"
 [ -x "$py" ] || { echo "run_replay: $py missing: run tools/setup.sh" >&2; exit 2; }
+# The host package of this checkout (and so its firmware/, which the harness compiles), even
+# when the virtual environment is shared with another checkout.
+export PYTHONPATH="$root/host${PYTHONPATH:+:$PYTHONPATH}"
 
 mkdir -p "$build"
 defs=()
 images=()
 for arith in ${ariths//,/ }; do
+  gen=(--arith "$arith")
   case "$arith" in
     float32) sfx=""; var=STSP_REPLAY_RECORDS ;;
     q15|q31) sfx="_$arith"; var="STSP_REPLAY_RECORDS_${arith^^}" ;;
+    spline) sfx="_spline"; var=STSP_REPLAY_RECORDS_SPLINE; gen=(--table spline) ;;
     *) echo "run_replay: unknown variant $arith" >&2; exit 2 ;;
   esac
   [ "$preset" = arm-m4f ] || [ "$arith" != float32 ] || {
     echo "run_replay: no float32 images for $preset" >&2; exit 2; }
   records="$build/replay_records$sfx.c"
-  "$py" "$root/tools/arm/make_replay.py" --arith "$arith" --out "$records" "${perturb[@]}"
+  "$py" "$root/tools/arm/make_replay.py" "${gen[@]}" --out "$records" "${perturb[@]}"
   defs+=("-D$var=$records")
-  images+=("replay$sfx" "replay_fixed$sfx")
+  if [ "$arith" = spline ]; then
+    images+=(replay_spline replay_spline_fixed)
+  else
+    images+=("replay$sfx" "replay_fixed$sfx")
+  fi
 done
 "$root/tools/arm/build.sh" --preset "$preset" --build-dir "$build" \
-  "${defs[@]}" -DSTSP_ARM_FP_CONTRACT="$contract" \
+  "${defs[@]}" -DSTSP_REPLAY_PERTURB_COEF="$perturb_coef" -DSTSP_ARM_FP_CONTRACT="$contract" \
   -DSTSP_ARM_NO_VFP_MAC="$([ "$contract" = off ] && echo OFF || echo ON)" >/dev/null
 
 # Both builds of each variant: the generic controller and the one compiled for the robot's

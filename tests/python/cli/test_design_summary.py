@@ -69,9 +69,17 @@ def symbol_bytes(c_file, defines, tmp_path) -> int:
 @pytest.mark.parametrize("name, arith", [("robot_corridor", "float32"),
                                          ("robot_corridor_q15", "q15"),
                                          ("robot_corridor_q31", "q31"),
-                                         ("robot_bands", "float32")])
+                                         ("robot_bands", "float32"),
+                                         ("robot_corridor_spline", "float32"),
+                                         ("robot_patrol_60s_spline", "float32")])
 def test_flash_bytes_match_the_compiled_tables(name, arith, robot_zoh, tmp_path):
-    if name == "robot_bands":
+    if name.endswith("_spline"):
+        from stospline.pipeline import design_problem
+        from stospline.problem import load_problem
+        problem = load_problem(EXAMPLES / f"{name.removesuffix('_spline')}.toml")
+        table = design_problem(problem, table="spline").table
+        assert table.spline is not None
+    elif name == "robot_bands":
         from stospline.pipeline import design_problem
         from stospline.problem import load_problem
         table = design_problem(load_problem(EXAMPLES / "robot_bands.toml"), mode="joint").table

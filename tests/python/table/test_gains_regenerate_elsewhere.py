@@ -28,7 +28,12 @@ from stospline.sim import oracle
 from stospline.cli import main
 from stospline.problem import load_problem
 
-from conftest import EXAMPLES, GAINS, SPLINE_EXAMPLES
+from conftest import EXAMPLES, GAINS, SPLINE_EXAMPLES, gains_stem
+
+# Examples whose shipped table is per tick (the others ship only their spline table).
+PER_TICK_EXAMPLES = sorted(p.stem for p in EXAMPLES.glob("*.toml") if gains_stem(p.stem) == p.stem)
+SPLINE_SHIPPED = sorted({*SPLINE_EXAMPLES, *(p.stem for p in EXAMPLES.glob("*.toml")
+                                              if gains_stem(p.stem) != p.stem)})
 
 # Relative size of the perturbation, and an absolute part relative to each array's largest
 # entry (a structural zero may come out as 1e-18 elsewhere, a small entry with a larger
@@ -125,7 +130,7 @@ def _f32_boundary_distance(a: np.ndarray) -> np.ndarray:
     return np.minimum(np.abs((f + up) / 2 - a), np.abs(a - (f + down) / 2))
 
 
-@pytest.mark.parametrize("example", sorted(p.stem for p in EXAMPLES.glob("*.toml")))
+@pytest.mark.parametrize("example", PER_TICK_EXAMPLES)
 def test_no_table_entry_is_near_a_rounding_boundary(monkeypatch, example):
     """Every number a shipped table stores is rounded from a double (float32, Q15/Q31 integers,
     the band dual's 10 digits); none lies within `_reach` of where its rounding changes, so no
@@ -164,6 +169,34 @@ def test_no_table_entry_is_near_a_rounding_boundary(monkeypatch, example):
     for a in (a for a in rounded["band"] if np.any(a)):
         q = 10.0 ** (np.floor(np.log10(np.abs(a).max())) - bands.BANDQP_DIGITS + 1)
         assert_clear(np.abs(a / q - np.floor(a / q) - 0.5) * q, a, "band dual")
+
+
+@pytest.mark.parametrize("example", SPLINE_SHIPPED)
+def test_no_spline_entry_is_near_a_rounding_boundary(monkeypatch, example):
+    """The same for the shipped spline tables: every coefficient (rounded from the least
+    squares fit) and every re-solved latch entry (rounded after the flush of round-off zeros)
+    is clear of where its float32 rounding changes."""
+    from stospline.table import spline, spline_compress
+    rounded = {"coef": [], "latch": []}
+
+    def capture(kind, fn):
+        def wrapped(*args):
+            out = fn(*args)
+            rounded[kind].append(np.array(out if kind == "coef" else args[0], dtype=float))
+            return out
+        return wrapped
+    monkeypatch.setattr(spline, "_lsq", capture("coef", spline._lsq))
+    monkeypatch.setattr(spline_compress, "_to_float32",
+                        capture("latch", spline_compress._to_float32))
+    problem = load_problem(EXAMPLES / f"{example}.toml")
+    pipeline.design_problem(problem, table="spline")
+    assert rounded["coef"] and rounded["latch"]
+    # Every fit is checked, the refinement's discarded ones too (a superset of those kept).
+    for what, arrays in (("coefficient", rounded["coef"]), ("latch", rounded["latch"])):
+        for a in (a for a in arrays if np.any(a)):
+            kept = np.abs(a) >= (1e-12 * np.abs(a).max() if what == "latch" else 0)
+            near = int(np.sum(np.where(kept, _f32_boundary_distance(a), np.inf) <= _reach(a)))
+            assert near == 0, f"{near} spline {what} entries within reach of a rounding boundary"
 
 
 def test_written_bound_is_rounded_up_never_down(robot_zoh):

@@ -184,7 +184,10 @@ def _design_problem(problem: Problem, *, noise: bool, discretization: str,
     # A float32 entry that overflowed would make the oracle's moments non-finite: refuse it
     # here, naming the cause, before evaluating the table as implemented.
     strict.check_table_finite(problem, table, exact=lambda: table_of(design, quantize=False))
-    exact = table_of(design, quantize=False)
+    # The design's own law in double precision: the oracle's reference (zero-order hold) and
+    # what a spline is fitted to; a continuous design without a spline needs neither.
+    exact = (table_of(design, quantize=False)
+             if discretization != "continuous" or spline_tolerance is not None else None)
     per_tick = table
     if spline_tolerance is not None:
         table = spline_table(problem, exact, per_tick, spline_tolerance)

@@ -28,7 +28,8 @@ import time                                                        # noqa: E402
 from pathlib import Path                                           # noqa: E402
 
 import stospline                                                   # noqa: E402
-from stospline.sim.spline_certificate import spline_table          # noqa: E402
+from stospline.sim.spline_certificate import (constraint_residual,  # noqa: E402
+                                               spline_table)
 from stospline.table.flash import flash_bytes                      # noqa: E402
 from stospline.table.format import table_of                        # noqa: E402
 
@@ -76,15 +77,6 @@ def _median_time(work, repeat: int):
     return out, statistics.median(times)
 
 
-def _residual(problem, moments) -> float:
-    worst = 0.0
-    for k, kn in enumerate(problem.knots):
-        if kn.constraint is not None:
-            lo, _ = kn.constraint.bounds
-            worst = max(worst, float(abs(moments.knot_constraint[k] - lo).max()))
-    return worst
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
@@ -113,7 +105,7 @@ def main() -> None:
                   f"{flash_bytes(d.table) / flash_bytes(sp):.0f} | {d.implemented.J:.10g} | "
                   f"{m.J:.10g} | {(m.J - d.implemented.J) / abs(d.implemented.J):+.2e} | "
                   f"{(m.J - d.design.J0) / abs(d.design.J0):+.2e} | "
-                  f"{_residual(problem, d.implemented):.2e} | {_residual(problem, m):.2e} | "
+                  f"{constraint_residual(problem, d.implemented):.2e} | {constraint_residual(problem, m):.2e} | "
                   f"{t_design:.3f} | {t_comp:.3f} | {t_comp / t_design:.0%} | "
                   f"{c_design:.3f} | {c_comp:.3f} | {c_comp / c_design:.0%} |", flush=True)
 

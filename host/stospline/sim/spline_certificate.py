@@ -18,7 +18,7 @@ from stospline.table.flash import flash_bytes, spline_bytes
 from stospline.table.format import GainTable
 from stospline.table.spline_compress import compress
 
-__all__ = ["spline_table", "certificate"]
+__all__ = ["spline_table", "certificate", "constraint_residual"]
 
 
 def spline_table(problem: Problem, exact: GainTable, per_tick: GainTable,
@@ -33,7 +33,7 @@ def spline_table(problem: Problem, exact: GainTable, per_tick: GainTable,
                    lambda0=lam0, spline=spline)
 
 
-def _residual(problem: Problem, moments: Moments) -> float:
+def constraint_residual(problem: Problem, moments: Moments) -> float:
     """Largest |E{C2 x} - value| over the constrained knots (0 without constraints)."""
     worst = 0.0
     for k, kn in enumerate(problem.knots):
@@ -71,7 +71,7 @@ def certificate(problem: Problem, table: GainTable, per_tick: GainTable, J0: flo
         "oracle_J": implemented.J,
         "excess_over_J0": (implemented.J - J0) / abs(J0) if J0 else implemented.J - J0,
         "excess_over_law": (implemented.J - law.J) / abs(law.J) if law.J else implemented.J,
-        "constraint_residual": _residual(problem, implemented),
+        "constraint_residual": constraint_residual(problem, implemented),
         "knot_cov_change": _cov_change(law, implemented),
         "flash_bytes": total,
         "gain_bytes": spline_bytes(sp),

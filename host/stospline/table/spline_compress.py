@@ -5,18 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from stospline.table.spline import DEFAULT_MAX_SPANS, INITIAL_SPANS, SplineGains, _fit
+from stospline.table.format import _to_float32   # flushes round-off zeros, as per-tick tables
 from stospline.table.spline_latch import resolve_latch
 
 __all__ = ["compress"]
-
-
-def _to_float32(a: np.ndarray) -> np.ndarray:
-    """float32 after flushing what is below 1e-12 of the array's largest to zero, as the
-    per-tick tables round (`stospline.table.format`): the re-solve turns the structural zeros
-    of a latch map into 1e-17s that would differ between machines."""
-    a = np.asarray(a, dtype=float)
-    scale = float(np.abs(a).max()) if a.size else 0.0
-    return np.where(np.abs(a) < 1e-12 * scale, 0.0, a).astype(np.float32)
 
 
 def compress(problem, exact, quantized, tolerance: float, *,

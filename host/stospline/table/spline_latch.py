@@ -88,14 +88,18 @@ def _refuse_unsupported(problem, table) -> None:
 def _affine_product(P: np.ndarray) -> np.ndarray:
     """The composition ``P[-1] o ... o P[0]`` of affine blocks ``P[j] = [A_j | C_j]`` (n, d),
     each the map ``[m; c] -> [A_j m + C_j c; c]`` (c the constants ``[v; 1]``), by pairwise
-    products: a dozen batched matmuls instead of one Python step per tick."""
-    n = P.shape[1]
+    products: a dozen batched matmuls instead of one Python step per tick. Each level is
+    written into a new array, the odd block last, unpaired until the next level."""
+    n, d = P.shape[1:]
     while P.shape[0] > 1:
         k = P.shape[0]
-        later = P[1::2]
-        pair = later[:, :, :n] @ P[0:k - 1:2]
-        pair[:, :, n:] += later[:, :, n:]
-        P = np.concatenate([pair, P[k - 1:] if k % 2 else P[:0]])
+        half, later = k // 2, P[1::2]
+        out = np.empty((k - half, n, d))
+        np.matmul(later[:, :, :n], P[0:k - 1:2], out=out[:half])
+        out[:half, :, n:] += later[:, :, n:]
+        if k % 2:
+            out[half] = P[k - 1]
+        P = out
     return P[0]
 
 

@@ -389,9 +389,9 @@ def _refined(breaks: np.ndarray, excess: np.ndarray) -> np.ndarray:
     # once, in its arithmetic (k * (delta / pieces) + b_s): one call instead of one a span.
     split = np.flatnonzero(pieces > 1)
     inner = pieces[split] - 1
-    k = np.arange(inner.sum()) - np.repeat(np.cumsum(inner) - inner, inner) + 1
+    k = (np.arange(inner.sum()) - np.repeat(np.cumsum(inner) - inner, inner) + 1).astype(float)
     step = (breaks[split + 1] - breaks[split]).astype(float) / pieces[split]
-    new = k.astype(float) * np.repeat(step, inner) + np.repeat(breaks[split], inner).astype(float)
+    new = k * np.repeat(step, inner) + np.repeat(breaks[split].astype(float), inner)
     return _distinct(np.concatenate([breaks, np.rint(new).astype(np.int64)]))
 
 

@@ -339,8 +339,11 @@ def _span_excess(G: np.ndarray, YT: np.ndarray, scale: np.ndarray, breaks: np.nd
 class _Bases:
     """The float32 basis at a stage's ticks for given breakpoints, its float64 copy and its
     normal matrix, kept for the next stage: stages of equal length start from the same
-    breakpoints and often refine to the same (the 60 s patrol: 4 bases for 20 fits)."""
-    KEEP = 8
+    breakpoints and often refine to the same (the 60 s patrol: 4 bases for 20 fits).
+
+    At most `KEEP_TICKS` ticks of bases are kept (56 bytes a tick), the least recently used
+    dropped first: long stages, which rarely repeat, cost no more memory than without."""
+    KEEP_TICKS = 1 << 19
 
     def __init__(self):
         self._cache: dict[tuple[int, bytes], tuple] = {}
@@ -355,9 +358,10 @@ class _Bases:
             sigma, N = _basis(_clamped(breaks.astype(float)).astype(np.float32), tau)
             N64 = [b.astype(float) for b in N]
             hit = sigma, N, N64, _normal_band(breaks, N64)
-            if len(self._cache) >= self.KEEP:
+        if T <= self.KEEP_TICKS:
+            while sum(k[0] for k in self._cache) + T > self.KEEP_TICKS:
                 del self._cache[next(iter(self._cache))]
-        self._cache[key] = hit                    # the most recent last
+            self._cache[key] = hit                # the most recent last
         return hit
 
 

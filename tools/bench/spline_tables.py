@@ -12,8 +12,10 @@ time (fit + evaluation + latch re-solve, `spline_table`) against the time of
 `design_problem` with a per-tick table (the design, the float32 table and the oracle on both
 laws: what `stospline design` computes), twice: "warm", medians of `--repeat` runs after a
 warm-up in this process (the designer's caches of tick maps hit: the least a design costs),
-and "cold", the first call of each in a fresh process, as in one `stospline design` run.
-`time.perf_counter`, BLAS pinned to one thread. Figures are in docs/evidence/spline-tables.md.
+and "cold", the first call of each in a fresh process, as in one `stospline design` run
+(medians of `--repeat` processes). `time.perf_counter` (wall clock: the design runs its two
+oracle evaluations in two threads, the compression in one), BLAS pinned to one thread.
+Figures are in docs/evidence/spline-tables.md.
 """
 from __future__ import annotations
 
@@ -56,15 +58,17 @@ print(t_design, time.perf_counter() - t)
 """
 
 
-def _cold(path: Path, tolerance: float) -> tuple[float, float]:
+def _cold(path: Path, tolerance: float, repeat: int) -> tuple[float, float]:
     """``(design s, compress s)``, each the first call in a fresh process (the C kernels are
-    built already, the caches empty): what one `stospline design` run spends on each."""
+    built already, the caches empty): what one `stospline design` run spends on each; the
+    medians of `repeat` processes."""
     import subprocess
     import sys
     env = {**os.environ, "PYTHONPATH": str(ROOT / "host")}
-    out = subprocess.run([sys.executable, "-c", _COLD, str(path), repr(tolerance)], env=env,
-                         check=True, capture_output=True, text=True).stdout.split()
-    return float(out[0]), float(out[1])
+    runs = [subprocess.run([sys.executable, "-c", _COLD, str(path), repr(tolerance)], env=env,
+                           check=True, capture_output=True, text=True).stdout.split()
+            for _ in range(repeat)]
+    return tuple(statistics.median(float(r[i]) for r in runs) for i in (0, 1))
 
 
 def _median_time(work, repeat: int):
@@ -98,7 +102,7 @@ def main() -> None:
             sp, t_comp = _median_time(lambda: spline_table(problem, exact, d.table, tol),
                                       args.repeat)
             m = stospline.evaluate_table(problem, sp, path=False)
-            c_design, c_comp = _cold(ROOT / "examples" / name, tol)
+            c_design, c_comp = _cold(ROOT / "examples" / name, tol, args.repeat)
             print(f"| {name.removesuffix('.toml')} | {d.table.n_ticks} | {tol:g} | "
                   f"{[int(sp.spline.spans(s)) for s in range(sp.n_stages)]} | "
                   f"{flash_bytes(d.table):,} | {flash_bytes(sp):,} | "

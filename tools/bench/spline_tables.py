@@ -1,7 +1,10 @@
 """Spline tables against per-tick tables: flash, cost, constraint residual, compression time.
 
 Usage: .venv/bin/python tools/bench/spline_tables.py [--repeat 3] [--examples a.toml,b.toml]
-           [--tolerances 1e-4,1e-5,1e-6]
+           [--tolerances 1e-4,1e-5,1e-6] [--profile]
+
+`--profile`: instead of the table, where the warm compression of the first example at the
+first tolerance spends its time (cProfile, the functions of `stospline.table`).
 
 For every example and tolerance: the per-tick float32 table's flash and the spline table's
 (`stospline.table.flash.flash_bytes`, what the generated C takes on a 32-bit target), their
@@ -81,13 +84,38 @@ def _median_time(work, repeat: int):
     return out, statistics.median(times)
 
 
+def _profile(name: str, tolerance: float, repeat: int) -> None:
+    import cProfile
+    import pstats
+    problem = stospline.load_problem(str(ROOT / "examples" / name))
+    d = stospline.design_problem(problem, table="per-tick")
+    exact = table_of(d.design, quantize=False)
+    spline_table(problem, exact, d.table, tolerance)           # warm-up
+    profile = cProfile.Profile()
+    profile.enable()
+    for _ in range(repeat):
+        spline_table(problem, exact, d.table, tolerance)
+    profile.disable()
+    print(f"{name} at {tolerance:g}: cumulative ms per compression (cProfile adds overhead)")
+    stats = pstats.Stats(profile).stats
+    rows = [(ct / repeat * 1e3, f"{Path(file).name}:{func}")
+            for (file, _, func), (_, _, _, ct, _) in stats.items()
+            if "stospline" in file and ("table" in file or func == "spline_table")]
+    for ms, where in sorted(rows, reverse=True)[:16]:
+        print(f"{ms:8.2f}  {where}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--examples", default=",".join(EXAMPLES))
     ap.add_argument("--tolerances", default="1e-5")
+    ap.add_argument("--profile", action="store_true")
     args = ap.parse_args()
     tolerances = [float(t) for t in args.tolerances.split(",")]
+    if args.profile:
+        _profile(args.examples.split(",")[0], tolerances[0], args.repeat)
+        return
     print("| example | ticks | tolerance | spans per stage | per-tick B | spline B | ratio | "
           "J per-tick | J spline | excess vs per-tick | excess vs J0 | residual per-tick | "
           "residual spline | warm: design s | compress s | ratio | cold: design s | compress s "

@@ -366,8 +366,8 @@ class _Bases:
 
 
 def _distinct(a: np.ndarray) -> np.ndarray:
-    """``numpy.unique`` of integers: its first call imports ``numpy.ma`` (15 ms, a third of
-    a cold compression of the 60 s patrol)."""
+    """``numpy.unique`` of integers: its first call imports ``numpy.ma`` (15 ms of a cold
+    run; nothing else of ``stospline design`` needs it)."""
     a = np.sort(a)
     return a[np.r_[True, a[1:] != a[:-1]]]
 
@@ -488,7 +488,7 @@ def _fit(exact, tolerance: float, max_spans: int, initial_spans: int = INITIAL_S
         raise ValueError("a stage of 2^24 ticks or more has knots float32 cannot hold")
     ticks = int(start[-1])
     # Filled in place, kind by kind: one (ticks, m, n + 1 + n_latch) array split afterwards
-    # would write every value twice (the split's copies), 3x slower on the 60 s patrol.
+    # writes every value twice (the split's copies), several times slower on long tables.
     K = np.zeros((ticks, m, n), np.float32)
     k0 = np.zeros((ticks, m), np.float32)
     L = np.zeros((ticks, m, n_latch), np.float32)

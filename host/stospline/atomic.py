@@ -52,6 +52,7 @@ import errno
 import fcntl
 import json
 import os
+import secrets
 import shutil
 import signal
 import stat
@@ -368,8 +369,11 @@ def write_set(out_dir: str | Path, files: dict[str, str | bytes]) -> list[Path]:
 
 def _transaction(out: Path, blobs: dict[str, bytes], guard: _SignalGuard, state: dict) -> None:
     """Stage, commit and publish `blobs` in `out` (locked by the caller)."""
-    stage = Path(_mkdtemp(out))
+    # The name is chosen before the directory exists, so a signal just after the mkdir (the
+    # handler raises there) still finds the directory to remove; mkdtemp would lose it.
+    stage = _staging_name(out)
     try:
+        os.mkdir(stage, 0o700)
         for name, blob in blobs.items():
             _write_synced(stage / name, blob)
         _fsync_dir(stage)
@@ -388,9 +392,10 @@ def _transaction(out: Path, blobs: dict[str, bytes], guard: _SignalGuard, state:
         _publish(out, stage, list(blobs))       # once more, from the journal
 
 
-def _mkdtemp(out: Path) -> str:
-    import tempfile
-    return tempfile.mkdtemp(prefix=STAGING_PREFIX, dir=out)
+def _staging_name(out: Path) -> Path:
+    """A fresh staging directory's path (not created). The lock serialises writers of `out`
+    and recovery removes every earlier staging directory, so a random suffix cannot clash."""
+    return out / f"{STAGING_PREFIX}{os.getpid()}-{secrets.token_hex(6)}"
 
 
 def write_file(path: str | Path, writer) -> Path:

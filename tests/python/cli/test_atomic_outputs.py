@@ -18,7 +18,6 @@ import re
 import signal
 import subprocess
 import sys
-import tempfile   # noqa: F401 - imported before any fork (atomic uses it)
 import time
 
 import numpy as np
@@ -175,9 +174,9 @@ def test_persistent_failure_is_completed_by_recovery(tmp_path, monkeypatch, sets
     assert seen == want, seen
 
 
-def _run_child(out, files, k, sig):
-    """Fork; the child writes `files` into `out` and sends itself `sig` at os call k.
-    Returns (wait status, calls made)."""
+def _run_child(out, files, k, sig, after=False):
+    """Fork; the child writes `files` into `out` and sends itself `sig` at os call k (just
+    before it, or with `after` just after it returns). Returns (wait status, calls made)."""
     r, w = os.pipe()
     pid = os.fork()
     if pid == 0:                                          # child
@@ -190,9 +189,12 @@ def _run_child(out, files, k, sig):
             def wrap(name):
                 def call(*a, **kw):
                     count[0] += 1
-                    if count[0] == k:
+                    if count[0] == k and not after:
                         real_kill(os.getpid(), sig)
-                    return real[name](*a, **kw)
+                    result = real[name](*a, **kw)
+                    if count[0] == k and after:
+                        real_kill(os.getpid(), sig)
+                    return result
                 return call
             for n in CALLS:
                 setattr(os, n, wrap(n))
@@ -215,13 +217,15 @@ def _run_child(out, files, k, sig):
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="needs fork")
+@pytest.mark.parametrize("after", [False, True], ids=["before", "after"])
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGKILL],
                          ids=["SIGTERM", "SIGINT", "SIGKILL"])
-def test_signal_at_every_call(tmp_path, sets, sig):
-    """SIGTERM/SIGINT at call k: the process dies by that signal (or KeyboardInterrupt) with
-    the old set before the commit point and the new set after it, no leftovers, nothing to
-    recover. SIGKILL at call k: each file stays whole, and after `recover` the directory is
-    one set with no leftovers."""
+def test_signal_at_every_call(tmp_path, sets, sig, after):
+    """SIGTERM/SIGINT just before or just after call k: the process dies by that signal (or
+    KeyboardInterrupt) with the old set before the commit point and the new set after it, no
+    leftovers, nothing to recover. (Just after the staging directory's mkdir is the window a
+    timed kill of a real design once hit.) SIGKILL at call k: each file stays whole, and after
+    `recover` the directory is one set with no leftovers."""
     old, new = sets
     seen = set()
     k = 0
@@ -229,7 +233,7 @@ def test_signal_at_every_call(tmp_path, sets, sig):
         k += 1
         out = tmp_path / f"k{k}"
         atomic.write_set(out, old)
-        status, calls = _run_child(out, new, k, sig)
+        status, calls = _run_child(out, new, k, sig, after)
         if calls is not None and calls < k:               # finished before call k
             assert os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0
             assert state(out, sets) == "new"

@@ -46,7 +46,9 @@ BANDQP_DIGITS = 10
 
 
 def has_bands(problem: Problem) -> bool:
-    return any(kn.constraint is not None and kn.constraint.is_band for kn in problem.knots)
+    """Any band knot, or a region at every tick (which the design meets with band knots)."""
+    return bool(problem.tick_regions) or any(kn.constraint is not None and kn.constraint.is_band
+                                             for kn in problem.knots)
 
 
 @dataclass

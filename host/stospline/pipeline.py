@@ -356,8 +356,8 @@ def every_tick_check(d: Designed) -> dict:
         regions.append({"region": reg.index, "ticks": int(reg.ticks(p.t0, p.tick_hz).size),
                         "worst_at_ticks_design": float(law.max()),
                         "worst_at_ticks_implemented": float(imp.max()),
-                        "worst_between_ticks": None if gap["t"] is None else gap["worst"],
-                        "between_ticks_exact": gap["exact"]})
+                        "worst_over_interval": gap["worst"], "worst_over_interval_t": gap["t"],
+                        "over_interval_exact": gap["exact"]})
     return {**d.every_tick.summary(), "regions": regions}
 
 

@@ -170,11 +170,13 @@ def design_every_tick(problem: Problem, *, noise: bool = True,
 
 def between_ticks(problem: Problem, path_mean: np.ndarray, u_mean: np.ndarray,
                   points: int = 64) -> list[dict]:
-    """Per tick region, the worst excursion of ``E{C x(t)}`` beyond its band between two of its
-    ticks, with the command held over each tick. For a time-invariant stage whose A is
-    nilpotent (an integrator chain) the mean is a polynomial in time over a tick and its
-    extrema are found exactly; otherwise it is sampled at `points` points per tick (data
-    frozen at the tick's midpoint). ``exact`` says which."""
+    """Per tick region, ``worst``: the largest excursion of ``E{C x(t)}`` beyond its band over
+    all t in [a, b] (ticks and the times between them; negative: inside by that much), with
+    the command held over each tick, and ``t``, ``row`` where it occurs. For a time-invariant
+    stage whose A is nilpotent (an integrator chain) the mean is a polynomial in time over a
+    tick and its extrema are found exactly; otherwise it is sampled at `points` + 1 points per
+    tick (data frozen at the tick's midpoint). ``exact`` says which. (t0 itself counts:
+    the mean there is x0.)"""
     h = 1.0 / problem.tick_hz
     t0 = problem.t0
     bounds = np.array([t0] + [kn.t for kn in problem.knots])
@@ -206,11 +208,10 @@ def between_ticks(problem: Problem, path_mean: np.ndarray, u_mean: np.ndarray,
                 ycoef = coef @ reg.C.T                 # (degree + 1, p), ascending powers
                 for i in range(ycoef.shape[1]):
                     poly = np.polynomial.Polynomial(ycoef[:, i])
-                    s = [r.real for r in poly.deriv().roots()
-                         if abs(r.imag) < 1e-12 and 0 < r.real < h
-                         and a < t + r.real < b_end]
-                    if 0 < b_end - t < h * (1 - 1e-9):   # b between ticks ends a piece
-                        s.append(b_end - t)
+                    # The piece's ends (ticks, or a/b inside the tick) and its extrema.
+                    lo_s, hi_s = max(0.0, a - t), min(h, b_end - t)
+                    s = [lo_s, hi_s] + [r.real for r in poly.deriv().roots()
+                                        if abs(r.imag) < 1e-12 and lo_s < r.real < hi_s]
                     for si in s:
                         y = poly(si)
                         v = max(y - reg.upper[i], reg.lower[i] - y)
@@ -221,9 +222,8 @@ def between_ticks(problem: Problem, path_mean: np.ndarray, u_mean: np.ndarray,
                 from scipy.linalg import expm
                 M = np.zeros((n + 1, n + 1))
                 M[:n, :n], M[:n, n] = A, b
-                for s in np.append(np.arange(1, points) * h / points, b_end - t):
-                    if not (a < t + s < b_end or (t + s == b_end and s < h * (1 - 1e-9))):
-                        continue
+                lo_s, hi_s = max(0.0, a - t), min(h, b_end - t)
+                for s in np.linspace(lo_s, hi_s, points + 1):
                     xs = (expm(M * s) @ np.append(x, 1.0))[:n]
                     y = reg.C @ xs
                     v = np.maximum(y - reg.upper, reg.lower - y)

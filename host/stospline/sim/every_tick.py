@@ -139,10 +139,11 @@ def design_every_tick(problem: Problem, *, noise: bool = True,
         if len(work.knots) > MAX_STAGES:
             r = rows[-1][1]
             raise DesignError(f"regions[{problem.tick_regions[r].index}]",
-                              f"every = \"tick\" needs band knots at {len(work.knots)} - "
-                              f"{len(problem.knots)} ticks, more than the firmware's "
-                              f"{MAX_STAGES} stages (STSP_MAX_STAGES) allow with the "
-                              f"file's knots: use a grid (every = seconds) or fewer contacts")
+                              f"every = \"tick\" needs {len(work.knots)} stages (the file's "
+                              f"knots and a band knot at each tick where the expected output "
+                              f"touches a region; an arc of contact costs one per tick), "
+                              f"more than the firmware's {MAX_STAGES} (STSP_MAX_STAGES): use "
+                              f"a grid (every = seconds) or a lower tick_hz")
         design = design_bands(work, discretization="exact-zoh", noise=noise)
         exact = table_of(design, quantize=False)
         path = evaluate_table(work, exact, path=True).path_mean

@@ -3,27 +3,27 @@
 #include "robot_monotone.h"
 
 /* [n_stages + 1] */
-static const uint32_t robot_monotone_stage_start[95] = {
-    0u, 1u, 3u, 7u, 300u, 511u,
-    512u, 513u, 514u, 515u, 516u, 517u,
-    518u, 519u, 520u, 521u, 522u, 523u,
-    524u, 525u, 526u, 527u, 528u, 529u,
-    530u, 531u, 532u, 533u, 534u, 535u,
-    536u, 537u, 538u, 539u, 540u, 541u,
-    542u, 543u, 544u, 545u, 546u, 547u,
-    548u, 549u, 550u, 551u, 552u, 553u,
-    554u, 555u, 556u, 557u, 558u, 559u,
-    560u, 561u, 562u, 563u, 564u, 565u,
-    566u, 567u, 568u, 569u, 570u, 571u,
-    572u, 573u, 574u, 575u, 576u, 577u,
-    578u, 579u, 580u, 581u, 582u, 583u,
-    584u, 585u, 586u, 587u, 588u, 589u,
-    590u, 591u, 592u, 593u, 594u, 595u,
-    596u, 597u, 598u, 599u, 600u,
+static const uint32_t robot_monotone_stage_start[93] = {
+    0u, 1u, 300u, 511u, 512u, 513u,
+    514u, 515u, 516u, 517u, 518u, 519u,
+    520u, 521u, 522u, 523u, 524u, 525u,
+    526u, 527u, 528u, 529u, 530u, 531u,
+    532u, 533u, 534u, 535u, 536u, 537u,
+    538u, 539u, 540u, 541u, 542u, 543u,
+    544u, 545u, 546u, 547u, 548u, 549u,
+    550u, 551u, 552u, 553u, 554u, 555u,
+    556u, 557u, 558u, 559u, 560u, 561u,
+    562u, 563u, 564u, 565u, 566u, 567u,
+    568u, 569u, 570u, 571u, 572u, 573u,
+    574u, 575u, 576u, 577u, 578u, 579u,
+    580u, 581u, 582u, 583u, 584u, 585u,
+    586u, 587u, 588u, 589u, 590u, 591u,
+    592u, 593u, 594u, 595u, 596u, 597u,
+    598u, 599u, 600u,
 };
 
 /* [n_stages] */
-static const uint16_t robot_monotone_stage_n_latch[94] = {
+static const uint16_t robot_monotone_stage_n_latch[92] = {
     4u, 0u, 0u, 0u, 0u, 0u,
     0u, 0u, 0u, 0u, 0u, 0u,
     0u, 0u, 0u, 0u, 0u, 0u,
@@ -39,7 +39,7 @@ static const uint16_t robot_monotone_stage_n_latch[94] = {
     0u, 0u, 0u, 0u, 0u, 0u,
     0u, 0u, 0u, 0u, 0u, 0u,
     0u, 0u, 0u, 0u, 0u, 0u,
-    0u, 0u, 0u, 0u,
+    0u, 0u,
 };
 
 /* [n_ticks][nu][nx] = [600][2][4] */
@@ -1855,7 +1855,7 @@ static const stsp_f32_t robot_monotone_L[4800] = {
 };
 
 /* [n_stages][n_latch][nx] */
-static const stsp_f32_t robot_monotone_Lambda[1504] = {
+static const stsp_f32_t robot_monotone_Lambda[1472] = {
     1.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 1.0e+00f,
     0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 1.0e+00f, 0.0e+00f,
     0.0e+00f, 0.0e+00f, 0.0e+00f, 1.0e+00f, 0.0e+00f, 0.0e+00f,
@@ -2101,16 +2101,11 @@ static const stsp_f32_t robot_monotone_Lambda[1504] = {
     0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
     0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
     0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
-    0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
-    0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
-    0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
-    0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
-    0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
-    0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
+    0.0e+00f, 0.0e+00f,
 };
 
 /* [n_stages][n_latch] */
-static const stsp_f32_t robot_monotone_lambda0[376] = {
+static const stsp_f32_t robot_monotone_lambda0[368] = {
     0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
     0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
     0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
@@ -2172,8 +2167,7 @@ static const stsp_f32_t robot_monotone_lambda0[376] = {
     0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
     0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
     0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
-    0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
-    0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
+    0.0e+00f, 0.0e+00f,
 };
 
 /* [nu] lower actuator limits */
@@ -2193,10 +2187,10 @@ static const stsp_f32_t robot_monotone_u_hold[2] = {
 
 const stsp_table_t robot_monotone_table = {
     0x53545350u, 5u, 1u,
-    4u, 2u, 4u, 94u, 600u, 100u,
+    4u, 2u, 4u, 92u, 600u, 100u,
     robot_monotone_stage_start, robot_monotone_stage_n_latch,
     robot_monotone_K, robot_monotone_k0, robot_monotone_L, robot_monotone_Lambda, robot_monotone_lambda0,
     robot_monotone_u_min, robot_monotone_u_max, robot_monotone_u_hold, NULL, NULL,
-    0x01971C1Du,
+    0x71D9C477u,
     {0xb0u, 0x90u, 0x19u, 0xecu, 0x7au, 0x9fu, 0x6du, 0xb8u, 0xcau, 0x16u, 0x73u, 0x9du, 0xb6u, 0x0du, 0x29u, 0xb5u, 0x7au, 0xeeu, 0x0au, 0xceu, 0xbfu, 0xfcu, 0x3fu, 0xd9u, 0x5eu, 0x7au, 0xb7u, 0xa6u, 0x9du, 0xc0u, 0xf3u, 0xa4u}
 };

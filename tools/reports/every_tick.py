@@ -71,8 +71,11 @@ def case(label: str, doc: dict, grid: float) -> None:
     f = design_problem(parse_problem(f_doc), mode="joint")
     ticks = sum(r["ticks"] for r in s["regions"])
     print(f"{label}: {p.tick_hz} Hz, {ticks} region ticks")
-    print(f"  every tick : {s['iterations']} designs, {s['working_set_rows']} band rows added, "
-          f"J0 = {d.design.J0:.10g}, design + tables + oracle {seconds:.2f} s "
+    qp = d.table.band_qp
+    print(f"  every tick : {s['iterations']} designs, {s['working_set_rows']} band rows kept "
+          f"({s['dropped_rows']} dropped), {d.table.n_stages} stages, "
+          f"{'band dual of ' + str(qp.q) + ' rows re-solved' if qp else 'active set latched'}"
+          f" on the target; J0 = {d.design.J0:.10g}, design + tables + oracle {seconds:.2f} s "
           f"(constraint generation {d.every_tick.seconds:.2f} s)")
     for r in s["regions"]:
         print(f"    region {r['region']}: worst at ticks {r['worst_at_ticks_design']:.3g} "

@@ -48,9 +48,11 @@ class EveryTick:
     working_set: list[tuple[int, int, int]]     # (tick, region index, row) of each added row
     history: list[dict] = field(default_factory=list)   # per iteration: J0, worst, rows added
     seconds: float = 0.0
+    dropped: int = 0           # rows cut in some round that the optimum left inside their bands
 
     def summary(self) -> dict:
         return {"iterations": self.iterations, "working_set_rows": len(self.working_set),
+                "dropped_rows": self.dropped,
                 "working_set": [{"tick": j, "region": r, "row": i}
                                 for j, r, i in self.working_set]}
 
@@ -110,6 +112,23 @@ def _independent(problem: Problem, rows: list, cuts: list) -> list[tuple[int, in
     return out
 
 
+def _slack(problem: Problem, work: Problem, design: BandDesign,
+           rows: list[tuple[int, int, int]]) -> set[tuple[int, int, int]]:
+    """The working-set rows that the design leaves inactive (inside their bands)."""
+    t0, hz = problem.t0, problem.tick_hz
+    file_rows = {int(round((kn.t - t0) * hz)): kn.n_constraints for kn in problem.knots}
+    by_tick: dict[int, list] = {}
+    for j, r, i in sorted(rows):                   # the order `_bands` stacks them in
+        by_tick.setdefault(j, []).append((j, r, i))
+    out = set()
+    for (k, i), a in zip(design.rows, design.solution.active):
+        j = int(round((work.knots[k].t - t0) * hz))
+        w = i - file_rows.get(j, 0)
+        if a == 0 and w >= 0:
+            out.add(by_tick[j][w])
+    return out
+
+
 def _bands(problem: Problem, rows: list[tuple[int, int, int]]) -> dict[int, Constraint]:
     """The working set as one band constraint per tick (rows in a fixed order)."""
     by_tick: dict[int, list] = {}
@@ -152,6 +171,21 @@ def design_every_tick(problem: Problem, *, noise: bool = True,
         history.append({"iteration": it, "J0": design.J0, "rows": len(rows),
                         "worst": max((c[3] for c in cuts), default=0.0), "added": len(new)})
         if not cuts:
+            slack = _slack(problem, work, design, rows)
+            if slack:
+                # Rows the optimum leaves inside their bands (cut in an earlier round, then
+                # overtaken) are dropped: the same optimum with fewer stages and rows. Checked
+                # again at every tick; kept if that check fails.
+                kept = [x for x in rows if x not in slack]
+                work2 = with_bands(problem, _bands(problem, kept))
+                design2 = design_bands(work2, discretization="exact-zoh", noise=noise)
+                path2 = evaluate_table(work2, table_of(design2, quantize=False),
+                                       path=True).path_mean
+                if not _cuts(problem, path2):
+                    history.append({"iteration": it + 1, "J0": design2.J0, "rows": len(kept),
+                                    "worst": 0.0, "added": -len(slack)})
+                    return EveryTick(design2, work2, it + 1, sorted(kept), history,
+                                     time.perf_counter() - start, dropped=len(slack))
             return EveryTick(design, work, it, sorted(rows), history,
                              time.perf_counter() - start)
         if not new:

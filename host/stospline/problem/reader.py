@@ -664,6 +664,10 @@ def _parse_regions(raw: Any, n: int, t0: float, t_end: float, tick_hz: int,
         if np.any(lo > hi):
             raise ProblemError(_join(rp, "lower"), "lower > upper: the band is empty")
         if tick:   # met by the design's constraint generation, not by a knot per tick
+            zero = np.flatnonzero(~np.any(C != 0, axis=1))
+            if zero.size:
+                raise ProblemError(_join(rp, "C"), f"row {int(zero[0])} is zero: it constrains "
+                                                   f"no output")
             region = TickRegion((a, b), C, lo, hi, i)
             if region.ticks(t0, tick_hz).size:
                 ticked.append(region)

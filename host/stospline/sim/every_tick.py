@@ -104,8 +104,10 @@ def _independent(problem: Problem, rows: list, cuts: list) -> list[tuple[int, in
         if j in at_knot:
             C = list(at_knot[j]) + C
         cand = np.array(C + [problem.tick_regions[r].C[i]])
-        sv = np.linalg.svd(cand / np.linalg.norm(cand, axis=1, keepdims=True),
-                           compute_uv=False)
+        norms = np.linalg.norm(cand, axis=1, keepdims=True)
+        if not np.all(norms > 0):       # a zero row (refused when read, but not when built)
+            continue
+        sv = np.linalg.svd(cand / norms, compute_uv=False)
         if sv[-1] > 1e-8 * sv[0]:
             taken.append((j, r, i))
             out.append((j, r, i))
@@ -127,6 +129,36 @@ def _slack(problem: Problem, work: Problem, design: BandDesign,
         if a == 0 and w >= 0:
             out.add(by_tick[j][w])
     return out
+
+
+def _check_fixed(problem: Problem) -> None:
+    """Refuse a region row that a knot's equality rows fix outside its band at that tick
+    (e.g. a speed band that excludes the rest the last knot demands): no design meets it,
+    and the loop would only find that out after filling the stages."""
+    t0, hz = problem.t0, problem.tick_hz
+    for kn in problem.knots:
+        if kn.constraint is None:
+            continue
+        lo, hi = kn.constraint.bounds
+        E, value = kn.constraint.C[lo == hi], lo[lo == hi]
+        if not E.shape[0]:
+            continue
+        j = int(round((kn.t - t0) * hz))
+        for reg in problem.tick_regions:
+            if j not in reg.ticks(t0, hz):
+                continue
+            for i, row in enumerate(reg.C):
+                c = np.linalg.lstsq(E.T, row, rcond=None)[0]
+                if np.linalg.norm(row - E.T @ c) > 1e-9 * np.linalg.norm(row):
+                    continue
+                y = float(c @ value)
+                tol = TOLERANCE * _scale(reg)
+                if y > reg.upper[i] + tol or y < reg.lower[i] - tol:
+                    raise DesignError(f"regions[{reg.index}]",
+                                      f"row {i} must lie in [{reg.lower[i]:g}, "
+                                      f"{reg.upper[i]:g}] at t = {kn.t:g}, where the knot's "
+                                      f"equality constraints fix it at {y:g}: the bands "
+                                      f"cannot all be met")
 
 
 def _bands(problem: Problem, rows: list[tuple[int, int, int]]) -> dict[int, Constraint]:
@@ -151,7 +183,9 @@ def design_every_tick(problem: Problem, *, noise: bool = True,
     Raises DesignError naming ``regions[i]`` when the working set would need more stages than
     the firmware takes or the loop does not settle within `max_iterations`."""
     start = time.perf_counter()
+    _check_fixed(problem)
     rows: list[tuple[int, int, int]] = []
+    new: list[tuple[int, int, int]] = []
     history = []
     for it in range(1, max_iterations + 1):
         work = with_bands(problem, _bands(problem, rows))
@@ -163,7 +197,18 @@ def design_every_tick(problem: Problem, *, noise: bool = True,
                               f"touches a region; an arc of contact costs one per tick), "
                               f"more than the firmware's {MAX_STAGES} (STSP_MAX_STAGES): use "
                               f"a grid (every = seconds) or a lower tick_hz")
-        design = design_bands(work, discretization="exact-zoh", noise=noise)
+        try:
+            design = design_bands(work, discretization="exact-zoh", noise=noise)
+        except DesignError as exc:
+            if not rows:
+                raise
+            # The knots it names are band knots the loop added: name the region instead.
+            j, r, i = new[0]
+            raise DesignError(f"regions[{problem.tick_regions[r].index}]",
+                              f"row {i} violates its band at t = "
+                              f"{problem.t0 + j / problem.tick_hz:g}, and with it as a "
+                              f"constraint there the design fails ({exc.field}: "
+                              f"{exc.reason})") from None
         exact = table_of(design, quantize=False)
         path = evaluate_table(work, exact, path=True).path_mean
         cuts = _cuts(problem, path)

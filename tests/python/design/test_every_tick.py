@@ -162,6 +162,23 @@ def test_written_back_as_a_tick_region():
     (lambda doc: doc["regions"][0].update(lower=[0.0, 11.0]), "regions[0].lower", "empty"),
     (lambda doc: doc["regions"][0].update(t=[0.005, 6.0]), "regions[0].t", "whole number"),
     (lambda doc: doc["design"].update(mode="stagewise"), "regions[0].every", "mode joint"),
+    (lambda doc: doc["regions"][0].update(C=[[0, 1, 0, 0], [0, 0, 0, 0]]), "regions[0].C",
+     "row 1 is zero"),
+    # E{xdot} <= -1 at every tick, yet at rest at t = 6: contradicts the knot there.
+    (lambda doc: doc["regions"][0].update(lower=[-10.0, 0.0], upper=[-1.0, 10.0]),
+     "regions[0]", "cannot all be met"),
+    # A third state the input cannot move, kept in a band it starts outside of.
+    (lambda doc: doc.update(x0=[-5.0, 0.0, 1.0, 0.0, 0.0],
+                            dynamics={**{k: [r + [0] for r in v] + [[0] * 5]
+                                         for k, v in doc["dynamics"].items() if k == "A"},
+                                      "B": doc["dynamics"]["B"] + [[0, 0]]},
+                            knots=[{**kn, **{key: {**kn[key], "C": [r + [0] for r in
+                                                                     kn[key]["C"]]}
+                                             for key in ("penalty", "constraint")}}
+                                   for kn in doc["knots"]],
+                            regions=[{"t": [0.0, 6.0], "every": "tick", "C": [[0, 0, 0, 0, 1]],
+                                      "lower": [1.0], "upper": [2.0]}]),
+     "regions[0]", "the design fails"),
 ])
 def test_bad_input_exits_2_naming_the_field_and_writes_nothing(tmp_path, capsys, edit, field,
                                                                reason):

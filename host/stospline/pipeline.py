@@ -177,6 +177,10 @@ def _design_problem(problem: Problem, *, noise: bool, discretization: str,
         if discretization != "exact-zoh":
             raise DesignError(first, 'a region at every tick is met for the law held over '
                                      'each tick: use --discretization exact-zoh')
+        if spline_tolerance is not None:   # its ticks are checked for the per-tick gains
+            raise DesignError("design.table", 'a spline table does not carry the band dual '
+                                              'of a region at every tick: use table '
+                                              '"per-tick"')
         every_tick = design_every_tick(problem, noise=noise)
         # From here on the problem is the one the tables are for: the file's knots plus the
         # working set's band knots (its tick regions kept, so it says what it was made for).

@@ -198,6 +198,18 @@ def test_bad_input_exits_2_naming_the_field_and_writes_nothing(tmp_path, capsys,
     assert os.listdir(out) == []
 
 
+def test_a_spline_table_is_refused():
+    with pytest.raises(DesignError) as err:
+        design_problem(load_problem(MONOTONE), mode="joint", table="spline")
+    assert err.value.field == "design.table"
+
+
+def test_a_delay_is_refused():
+    with pytest.raises(DesignError) as err:
+        design_problem(load_problem(MONOTONE), mode="joint", delay_ticks=1)
+    assert err.value.field == "design.delay_ticks"
+
+
 def test_continuous_discretization_is_refused():
     with pytest.raises(DesignError) as err:
         design_problem(load_problem(MONOTONE), mode="joint", discretization="continuous")

@@ -1,7 +1,10 @@
 """Spline tables against per-tick tables: flash, cost, constraint residual, compression time.
 
 Usage: .venv/bin/python tools/bench/spline_tables.py [--repeat 3] [--examples a.toml,b.toml]
-           [--tolerances 1e-4,1e-5,1e-6]
+           [--tolerances 1e-4,1e-5,1e-6] [--profile]
+
+`--profile`: instead of the table, where the warm compression of the first example at the
+first tolerance spends its time (cProfile, the functions of `stospline.table`).
 
 For every example and tolerance: the per-tick float32 table's flash and the spline table's
 (`stospline.table.flash.flash_bytes`, what the generated C takes on a 32-bit target), their
@@ -12,8 +15,10 @@ time (fit + evaluation + latch re-solve, `spline_table`) against the time of
 `design_problem` with a per-tick table (the design, the float32 table and the oracle on both
 laws: what `stospline design` computes), twice: "warm", medians of `--repeat` runs after a
 warm-up in this process (the designer's caches of tick maps hit: the least a design costs),
-and "cold", the first call of each in a fresh process, as in one `stospline design` run.
-`time.perf_counter`, BLAS pinned to one thread. Figures are in docs/evidence/spline-tables.md.
+and "cold", the first call of each in a fresh process, as in one `stospline design` run
+(medians of `--repeat` processes). `time.perf_counter` (wall clock: the design runs its two
+oracle evaluations in two threads, the compression in one), BLAS pinned to one thread.
+Figures are in docs/evidence/spline-tables.md.
 """
 from __future__ import annotations
 
@@ -56,15 +61,17 @@ print(t_design, time.perf_counter() - t)
 """
 
 
-def _cold(path: Path, tolerance: float) -> tuple[float, float]:
+def _cold(path: Path, tolerance: float, repeat: int) -> tuple[float, float]:
     """``(design s, compress s)``, each the first call in a fresh process (the C kernels are
-    built already, the caches empty): what one `stospline design` run spends on each."""
+    built already, the caches empty): what one `stospline design` run spends on each; the
+    medians of `repeat` processes."""
     import subprocess
     import sys
     env = {**os.environ, "PYTHONPATH": str(ROOT / "host")}
-    out = subprocess.run([sys.executable, "-c", _COLD, str(path), repr(tolerance)], env=env,
-                         check=True, capture_output=True, text=True).stdout.split()
-    return float(out[0]), float(out[1])
+    runs = [subprocess.run([sys.executable, "-c", _COLD, str(path), repr(tolerance)], env=env,
+                           check=True, capture_output=True, text=True).stdout.split()
+            for _ in range(repeat)]
+    return tuple(statistics.median(float(r[i]) for r in runs) for i in (0, 1))
 
 
 def _median_time(work, repeat: int):
@@ -77,13 +84,38 @@ def _median_time(work, repeat: int):
     return out, statistics.median(times)
 
 
+def _profile(name: str, tolerance: float, repeat: int) -> None:
+    import cProfile
+    import pstats
+    problem = stospline.load_problem(str(ROOT / "examples" / name))
+    d = stospline.design_problem(problem, table="per-tick")
+    exact = table_of(d.design, quantize=False)
+    spline_table(problem, exact, d.table, tolerance)           # warm-up
+    profile = cProfile.Profile()
+    profile.enable()
+    for _ in range(repeat):
+        spline_table(problem, exact, d.table, tolerance)
+    profile.disable()
+    print(f"{name} at {tolerance:g}: cumulative ms per compression (cProfile adds overhead)")
+    stats = pstats.Stats(profile).stats
+    rows = [(ct / repeat * 1e3, f"{Path(file).name}:{func}")
+            for (file, _, func), (_, _, _, ct, _) in stats.items()
+            if "stospline" in file and ("table" in file or func == "spline_table")]
+    for ms, where in sorted(rows, reverse=True)[:16]:
+        print(f"{ms:8.2f}  {where}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--examples", default=",".join(EXAMPLES))
     ap.add_argument("--tolerances", default="1e-5")
+    ap.add_argument("--profile", action="store_true")
     args = ap.parse_args()
     tolerances = [float(t) for t in args.tolerances.split(",")]
+    if args.profile:
+        _profile(args.examples.split(",")[0], tolerances[0], args.repeat)
+        return
     print("| example | ticks | tolerance | spans per stage | per-tick B | spline B | ratio | "
           "J per-tick | J spline | excess vs per-tick | excess vs J0 | residual per-tick | "
           "residual spline | warm: design s | compress s | ratio | cold: design s | compress s "
@@ -98,7 +130,7 @@ def main() -> None:
             sp, t_comp = _median_time(lambda: spline_table(problem, exact, d.table, tol),
                                       args.repeat)
             m = stospline.evaluate_table(problem, sp, path=False)
-            c_design, c_comp = _cold(ROOT / "examples" / name, tol)
+            c_design, c_comp = _cold(ROOT / "examples" / name, tol, args.repeat)
             print(f"| {name.removesuffix('.toml')} | {d.table.n_ticks} | {tol:g} | "
                   f"{[int(sp.spline.spans(s)) for s in range(sp.n_stages)]} | "
                   f"{flash_bytes(d.table):,} | {flash_bytes(sp):,} | "

@@ -19,8 +19,9 @@ Measured
 --------
 "design": `design_zoh` (the exact zero-order-hold law); "whole": `design_problem`, which is
 what `stospline design` runs (the design, the float32 table, and the exact oracle on the
-design's law and on the table, the two at once in two threads: `pipeline._both`). Each run
-starts cold: the samples of the data and the tick maps cached by the run before are dropped.
+design's law and on the table, the two at once in two threads: `pipeline._concurrently`).
+Each run starts cold: the samples of the data and the tick maps cached by the run before are
+dropped.
 
 Baseline
 --------

@@ -44,10 +44,10 @@ def constraint_residual(problem: Problem, moments: Moments) -> float:
     return worst
 
 
-def _cov_change(law: Moments, implemented: Moments) -> float:
+def _cov_change(reference: Moments, implemented: Moments) -> float:
     """Largest change of a knot covariance, relative to its norm (Frobenius)."""
     worst = 0.0
-    for a, b in zip(law.knot_cov, implemented.knot_cov):
+    for a, b in zip(reference.knot_cov, implemented.knot_cov):
         scale = float(np.linalg.norm(a))
         if scale > 0:
             worst = max(worst, float(np.linalg.norm(b - a)) / scale)
@@ -55,14 +55,18 @@ def _cov_change(law: Moments, implemented: Moments) -> float:
 
 
 def certificate(problem: Problem, table: GainTable, per_tick: GainTable, J0: float,
-                law: Moments, implemented: Moments, *, tolerance: float) -> dict:
-    """The spline table's certificate (the summary's ``table``): its oracle cost and excess
-    over the designed optimum ``J0`` and over the design's own law in double precision
-    (`law`), the worst expected-constraint residual, the knot covariances' change, the flash
-    and the compression ratio against the per-tick float32 table, the spans per stage and
-    the compression time."""
+                compressed: Moments, implemented: Moments, *, tolerance: float) -> dict:
+    """The spline table's certificate (the summary's ``table``): its oracle cost
+    (`implemented`) and excess over the designed optimum ``J0`` and over the per-tick law the
+    spline compresses in double precision (`compressed`: the oracle of
+    ``table_of(design, quantize=False)``, which for a continuous-time design is its gains
+    sampled at the ticks, not the continuous law, whose difference is the cost of sampling),
+    the worst expected-constraint residual, the knot covariances' change against the same
+    per-tick law, the flash and the compression ratio against the per-tick float32 table, the
+    spans per stage."""
     sp = table.spline
     total, per_tick_total = flash_bytes(table), flash_bytes(per_tick)
+    J = compressed.J
     return {
         "kind": "spline",
         "spline_tolerance": tolerance,
@@ -70,9 +74,9 @@ def certificate(problem: Problem, table: GainTable, per_tick: GainTable, J0: flo
         "entries": int(sp.col.size),
         "oracle_J": implemented.J,
         "excess_over_J0": (implemented.J - J0) / abs(J0) if J0 else implemented.J - J0,
-        "excess_over_law": (implemented.J - law.J) / abs(law.J) if law.J else implemented.J,
+        "excess_over_law": (implemented.J - J) / abs(J) if J else implemented.J,
         "constraint_residual": constraint_residual(problem, implemented),
-        "knot_cov_change": _cov_change(law, implemented),
+        "knot_cov_change": _cov_change(compressed, implemented),
         "flash_bytes": total,
         "gain_bytes": spline_bytes(sp),
         "per_tick_flash_bytes": per_tick_total,

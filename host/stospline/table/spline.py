@@ -222,45 +222,69 @@ def _side_by_side(K: np.ndarray, k0: np.ndarray, L: np.ndarray) -> np.ndarray:
     return np.concatenate([K, k0[:, :, None], L], axis=2)
 
 
+def _column_peaks(g: np.ndarray) -> np.ndarray:
+    """``max |g|`` over the rows (ticks) of `g` (ticks, k), 64 rows at a time: numpy reduces
+    the first axis of a few columns in a short loop per row (8x slower on a 6000-tick
+    stage), of 64 k columns in long ones."""
+    x = np.abs(g)
+    T, k = x.shape
+    q = T - T % 64
+    top = x[:q].reshape(-1, 64 * k).max(axis=0, initial=0.0).reshape(64, k).max(axis=0)
+    return np.maximum(top, x[q:].max(axis=0, initial=0.0))
+
+
 def _stage_entries(table, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
     """The stored entries of the stage of ticks ``a..b-1``: the mask (m, cols) of the
     (input, column) entries not identically zero over the stage (round-off of zeros, below
-    `ZERO_FRACTION` of the largest of their kind, aside) and their values (ticks, entries)
+    `ZERO_FRACTION` of the largest of their kind, aside) and their values (entries, ticks)
     float64, in `col` order."""
-    kinds = [np.asarray(g, dtype=float) for g in (table.K[a:b], table.k0[a:b, :, None],
-                                                  table.L[a:b])]
+    T, m = b - a, table.K.shape[1]
+    kinds = [np.asarray(g, dtype=float).reshape(T, m, -1)
+             for g in (table.K[a:b], table.k0[a:b], table.L[a:b])]
     keep = []
     for g in kinds:
-        peak = np.abs(g).max(axis=0, initial=0.0)
+        peak = _column_peaks(g.reshape(T, -1)).reshape(g.shape[1:])
         top = peak.max(initial=0.0)
         keep.append(peak > ZERO_FRACTION * top if top > 0 else np.zeros(peak.shape, bool))
-    # Gathered kind by kind, input by input: concatenating the (ticks, m, cols) arrays first
-    # is slow (numpy works row by row on rows of a few values).
-    values = [g[:, i, kept[i]] for i in range(len(keep[0])) for g, kept in zip(kinds, keep)]
+    # Gathered kind by kind, input by input, then transposed once: concatenating the (ticks,
+    # m, cols) arrays first is slow (numpy works row by row on rows of a few values).
+    values = [g[:, i, kept[i]] for i in range(m) for g, kept in zip(kinds, keep)]
     keep = np.concatenate(keep, axis=1)
-    return keep, np.concatenate(values, axis=1)
+    return keep, np.ascontiguousarray(np.concatenate(values, axis=1).T)
 
 
 def _clamped(breaks: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0] * 3, breaks, [float(breaks[-1])] * 3])
 
 
-def _lsq(breaks: np.ndarray, N: list[np.ndarray], YT: np.ndarray) -> np.ndarray:
-    """Least-squares B-spline coefficients (entries, S + 3) of the rows of `YT` (entries,
-    ticks) at ticks 0..T-1, by the banded normal equations (float64). Ticks of one span are
-    consecutive, so their sums are `numpy.add.reduceat` over the span starts."""
+def _normal_band(breaks: np.ndarray, N: list[np.ndarray]) -> np.ndarray:
+    """The upper band of the normal matrix ``B'B`` of the basis `N` (float64) at ticks
+    0..T-1: ``band[d, j] = (B'B)[j, j + d]``. Ticks of one span are consecutive, so their
+    sums are `numpy.add.reduceat` over the span starts."""
     S = breaks.size - 1
-    nb = S + 3
     starts = breaks[:-1]
-    band = np.zeros((4, nb))            # band[d, j] = (B'B)[j, j + d]
-    rhs = np.zeros((YT.shape[0], nb))
+    band = np.zeros((4, S + 3))
     for a in range(4):
         for b in range(a, 4):
             band[b - a, a:a + S] += np.add.reduceat(N[a] * N[b], starts)
-        rhs[:, a:a + S] += np.add.reduceat(YT * N[a], starts, axis=1)
     # A basis function that no tick reaches (a last span one tick long) would make the
     # system singular; the ridge puts its coefficient at 0, which no tick evaluates.
     band[0] += 1e-13 * band[0].max()
+    return band
+
+
+def _lsq(breaks: np.ndarray, N: list[np.ndarray], YT: np.ndarray,
+         band: np.ndarray | None = None) -> np.ndarray:
+    """Least-squares B-spline coefficients (entries, S + 3) of the rows of `YT` (entries,
+    ticks) at ticks 0..T-1, by the banded normal equations (float64); `band` is
+    ``_normal_band(breaks, N)`` when the caller has it already."""
+    S = breaks.size - 1
+    starts = breaks[:-1]
+    if band is None:
+        band = _normal_band(breaks, N)
+    rhs = np.zeros((YT.shape[0], S + 3))
+    for a in range(4):
+        rhs[:, a:a + S] += np.add.reduceat(YT * N[a], starts, axis=1)
     return _solve_banded(band, rhs.T).T
 
 
@@ -270,9 +294,11 @@ def _solve_banded(band: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     LDL' in a loop (no scipy.linalg: importing it costs more than the compression)."""
     w, nb = band.shape
     if nb <= _DENSE_SOLVE_MAX:
-        A = np.diag(band[0])
-        for d in range(1, w):
-            A += np.diag(band[d, :nb - d], d) + np.diag(band[d, :nb - d], -d)
+        A = np.zeros((nb, nb))
+        flat = A.reshape(-1)                  # diagonal d from (0, d) and from (d, 0)
+        for d in range(w):
+            flat[d:(nb - d) * nb:nb + 1] = band[d, :nb - d]
+            flat[d * nb::nb + 1] = band[d, :nb - d]
         return np.linalg.solve(A, rhs)
     # A = L D L' with unit lower L of bandwidth w - 1: lw[d][j] = L[j + d, j].
     a = band.tolist()
@@ -297,15 +323,53 @@ def _solve_banded(band: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     return x
 
 
-def _worst_excess(G: np.ndarray, Y: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """Per tick, the largest ``|G - Y| * scale`` over the entries (columns)."""
-    D = G - Y
+def _span_excess(G: np.ndarray, YT: np.ndarray, scale: np.ndarray, breaks: np.ndarray
+                 ) -> np.ndarray:
+    """Per span, the largest ``|G - Y| * scale`` over its ticks and the entries: `G` (ticks,
+    entries) float32, `YT` (entries, ticks), `scale` per entry. The maxima are taken on the
+    (entries, ticks) layout, whose rows are contiguous, before scaling: scaling by a positive
+    number is monotonic in floating point too, so this is the scaled errors' maximum."""
+    D = G.T - YT
     np.abs(D, out=D)
-    D *= scale
-    worst = D[:, 0].copy()
-    for e in range(1, D.shape[1]):       # column by column: far faster than max(axis=1)
-        np.maximum(worst, D[:, e], out=worst)
-    return worst
+    worst = np.maximum.reduceat(D, breaks[:-1], axis=1)
+    worst *= scale[:, None]
+    return worst.max(axis=0)
+
+
+class _Bases:
+    """The float32 basis at a stage's ticks for given breakpoints, its float64 copy and its
+    normal matrix, kept for the next stage: stages of equal length start from the same
+    breakpoints and often refine to the same (the 60 s patrol: 4 bases for 20 fits).
+
+    At most `KEEP_TICKS` ticks of bases are kept (56 bytes a tick), the least recently used
+    dropped first: long stages, which rarely repeat, cost no more memory than without."""
+    KEEP_TICKS = 1 << 19
+
+    def __init__(self):
+        self._cache: dict[tuple[int, bytes], tuple] = {}
+
+    def get(self, T: int, breaks: np.ndarray):
+        key = (T, breaks.tobytes())
+        hit = self._cache.pop(key, None)
+        if hit is None:
+            tau = np.arange(T, dtype=np.float32)
+            # The least squares on the firmware's own (float32) basis: the fit is best for
+            # the values it will evaluate.
+            sigma, N = _basis(_clamped(breaks.astype(float)).astype(np.float32), tau)
+            N64 = [b.astype(float) for b in N]
+            hit = sigma, N, N64, _normal_band(breaks, N64)
+        if T <= self.KEEP_TICKS:
+            while sum(k[0] for k in self._cache) + T > self.KEEP_TICKS:
+                del self._cache[next(iter(self._cache))]
+            self._cache[key] = hit                # the most recent last
+        return hit
+
+
+def _distinct(a: np.ndarray) -> np.ndarray:
+    """``numpy.unique`` of integers: its first call imports ``numpy.ma`` (15 ms of a cold
+    run; nothing else of ``stospline design`` needs it)."""
+    a = np.sort(a)
+    return a[np.r_[True, a[1:] != a[:-1]]]
 
 
 def _refined(breaks: np.ndarray, excess: np.ndarray) -> np.ndarray:
@@ -325,37 +389,40 @@ def _refined(breaks: np.ndarray, excess: np.ndarray) -> np.ndarray:
             near = slice(max(0, s - 3), s + 4)
             pieces[near] = np.maximum(pieces[near], 2)
     pieces = np.minimum(pieces, length)
-    new = [breaks] + [np.rint(np.linspace(breaks[s], breaks[s + 1], pieces[s] + 1)[1:-1])
-                      .astype(np.int64) for s in np.flatnonzero(pieces > 1)]
-    return np.unique(np.concatenate(new))
+    # The inner points of ``numpy.linspace(b_s, b_s+1, pieces + 1)`` for every split span at
+    # once, in its arithmetic (k * (delta / pieces) + b_s): one call instead of one a span.
+    split = np.flatnonzero(pieces > 1)
+    inner = pieces[split] - 1
+    k = (np.arange(inner.sum()) - np.repeat(np.cumsum(inner) - inner, inner) + 1).astype(float)
+    step = (breaks[split + 1] - breaks[split]).astype(float) / pieces[split]
+    new = k * np.repeat(step, inner) + np.repeat(breaks[split].astype(float), inner)
+    return _distinct(np.concatenate([breaks, np.rint(new).astype(np.int64)]))
 
 
-def _fit_stage(Y: np.ndarray, tolerance: float, max_spans: int, initial_spans: int, s: int
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _fit_stage(YT: np.ndarray, tolerance: float, max_spans: int, initial_spans: int, s: int,
+               bases: _Bases | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One stage: breakpoints, float32 coefficients (entries, S + 3) and the values the
-    firmware evaluates (ticks, entries), every entry within `tolerance` of its largest."""
-    T, E = Y.shape
+    firmware evaluates (ticks, entries), every entry of `YT` (entries, ticks) within
+    `tolerance` of its largest."""
+    E, T = YT.shape
     S0 = max(1, min(initial_spans, T // _INITIAL_TICKS_PER_SPAN, max_spans))
-    breaks = np.unique(np.rint(np.linspace(0, T, S0 + 1)).astype(np.int64))
+    breaks = _distinct(np.rint(np.linspace(0, T, S0 + 1)).astype(np.int64))
     if E == 0:
         return breaks[[0, -1]], np.zeros((0, 4), np.float32), np.zeros((T, 0), np.float32)
-    YT = np.ascontiguousarray(Y.T)
+    YT = np.ascontiguousarray(YT, dtype=float)
     scale = 1.0 / (tolerance * np.abs(YT).max(axis=1))
-    tau = np.arange(T, dtype=np.float32)
+    bases = bases or _Bases()
     while True:
-        # The least squares on the firmware's own (float32) basis: the fit is best for the
-        # values it will evaluate.
-        sigma, N = _basis(_clamped(breaks.astype(float)).astype(np.float32), tau)
-        C = _lsq(breaks, [b.astype(float) for b in N], YT).astype(np.float32)
+        sigma, N, N64, band = bases.get(T, breaks)
+        C = _lsq(breaks, N64, YT, band).astype(np.float32)
         G = _combine(sigma, N, C)
-        excess = _worst_excess(G, Y, scale)
-        if excess.max() <= 1.0:
+        worst = _span_excess(G, YT, scale, breaks)
+        if worst.max() <= 1.0:
             return breaks, C, G
-        worst = np.maximum.reduceat(excess, breaks[:-1])
         finer = _refined(breaks, worst)
         if finer.size == breaks.size:
             raise SplineBudgetError(FIELD, f"stage {s}: the float32 spline misses the "
-                                           f"tolerance {tolerance:g} by {excess.max():.3g}x "
+                                           f"tolerance {tolerance:g} by {worst.max():.3g}x "
                                            f"even with one-tick spans around the miss")
         if finer.size - 1 > max_spans:
             raise SplineBudgetError(FIELD, f"stage {s}: the gains need more than {max_spans} "
@@ -403,9 +470,9 @@ def fit_spline(exact, tolerance: float, *, max_spans: int = DEFAULT_MAX_SPANS,
 
 
 def _fit(exact, tolerance: float, max_spans: int, initial_spans: int = INITIAL_SPANS
-         ) -> tuple[SplineGains, np.ndarray]:
-    """`fit_spline` and the per-tick values it evaluated, (ticks, m, cols) float32 (the
-    same as `evaluate` of the result, computed once)."""
+         ) -> tuple[SplineGains, np.ndarray, np.ndarray, np.ndarray]:
+    """`fit_spline` and the per-tick gains K, k0, L it evaluated, float32 in the table's
+    shapes (the same as `evaluate` of the result, computed once)."""
     tolerance = float(tolerance)
     if not np.isfinite(tolerance) or not MIN_TOLERANCE <= tolerance < 1:
         raise SplineBudgetError(FIELD, f"the tolerance must lie in [{MIN_TOLERANCE:.3g}, 1) "
@@ -419,13 +486,23 @@ def _fit(exact, tolerance: float, max_spans: int, initial_spans: int = INITIAL_S
     start = np.asarray(exact.stage_start, dtype=np.int64)
     if np.any(np.diff(start) >= 2 ** 24):
         raise ValueError("a stage of 2^24 ticks or more has knots float32 cannot hold")
-    values = np.zeros((int(start[-1]), m, n + 1 + n_latch), dtype=np.float32)
+    ticks = int(start[-1])
+    # Filled in place, kind by kind: one (ticks, m, n + 1 + n_latch) array split afterwards
+    # writes every value twice (the split's copies), several times slower on long tables.
+    K = np.zeros((ticks, m, n), np.float32)
+    k0 = np.zeros((ticks, m), np.float32)
+    L = np.zeros((ticks, m, n_latch), np.float32)
+    flat = (K.reshape(ticks, m * n), k0, L.reshape(ticks, m * n_latch))
     knots, counts, cols, coefs = [], [], [], []
+    bases = _Bases()
     for s in range(exact.n_stages):
         a, b = int(start[s]), int(start[s + 1])
-        keep, Y = _stage_entries(exact, a, b)
-        breaks, C, G = _fit_stage(Y, tolerance, int(max_spans), int(initial_spans), s)
-        values[a:b][:, keep] = G
+        keep, YT = _stage_entries(exact, a, b)
+        breaks, C, G = _fit_stage(YT, tolerance, int(max_spans), int(initial_spans), s, bases)
+        inputs, col = np.nonzero(keep)              # the entries of G, in order
+        for kind, (first, width) in enumerate(((0, n), (n, 1), (n + 1, n_latch))):
+            mine = (col >= first) & (col < first + width)
+            flat[kind][a:b, inputs[mine] * width + col[mine] - first] = G[:, mine]
         knots.append(_clamped(breaks.astype(float)))
         counts.extend(keep.sum(axis=1))
         cols.extend(np.flatnonzero(row) for row in keep)
@@ -439,7 +516,7 @@ def _fit(exact, tolerance: float, max_spans: int, initial_spans: int = INITIAL_S
         col=np.concatenate(cols),
         coef_start=np.concatenate([[0], np.cumsum([c.size for c in coefs])]),
         coef=np.concatenate(coefs), nu=m, nx=n, n_latch=n_latch)
-    return spline, values
+    return spline, K, k0, L
 
 
 def max_relative_error(spline: SplineGains, exact) -> float:

@@ -55,11 +55,8 @@ def compress(problem, exact, quantized, tolerance: float, *,
     if exact.dims != quantized.dims or not np.array_equal(exact.stage_start,
                                                           quantized.stage_start):
         raise ValueError("the exact and the quantized tables are of different designs")
-    spline, values = _fit(exact, tolerance, max_spans, initial_spans)
-    n = exact.dims[0]
-    K, k0, L = (np.ascontiguousarray(a) for a in (values[:, :, :n], values[:, :, n],
-                                                   values[:, :, n + 1:]))
+    spline, K, k0, L = _fit(exact, tolerance, max_spans, initial_spans)
     if not resolve:
         return spline, K, k0, L, quantized.Lambda, quantized.lambda0
-    Lam, lam0 = resolve_latch(problem, quantized.with_arrays(K=K, k0=k0, L=L))
+    Lam, lam0 = resolve_latch(problem, quantized.with_arrays(K=K, k0=k0, L=L), spline)
     return spline, K, k0, L, _to_float32(Lam), _to_float32(lam0)

@@ -88,18 +88,45 @@ def _refuse_unsupported(problem, table) -> None:
 def _affine_product(P: np.ndarray) -> np.ndarray:
     """The composition ``P[-1] o ... o P[0]`` of affine blocks ``P[j] = [A_j | C_j]`` (n, d),
     each the map ``[m; c] -> [A_j m + C_j c; c]`` (c the constants ``[v; 1]``), by pairwise
-    products: a dozen batched matmuls instead of one Python step per tick."""
-    n = P.shape[1]
+    products: a dozen batched matmuls instead of one Python step per tick. Each level is
+    written into a new array, the odd block last, unpaired until the next level."""
+    n, d = P.shape[1:]
     while P.shape[0] > 1:
         k = P.shape[0]
-        later = P[1::2]
-        pair = later[:, :, :n] @ P[0:k - 1:2]
-        pair[:, :, n:] += later[:, :, n:]
-        P = np.concatenate([pair, P[k - 1:] if k % 2 else P[:0]])
+        half, later = k // 2, P[1::2]
+        out = np.empty((k - half, n, d))
+        np.matmul(later[:, :, :n], P[0:k - 1:2], out=out[:half])
+        out[:half, :, n:] += later[:, :, n:]
+        if k % 2:
+            out[half] = P[k - 1]
+        P = out
     return P[0]
 
 
-def _stage_map(stage, table, s: int, width: int, h: float) -> np.ndarray:
+def _gain_columns(table, s: int, width: int, spline) -> tuple[np.ndarray, np.ndarray,
+                                                                np.ndarray]:
+    """Stage s's gains that can be nonzero, as ``(kind, input, operand)`` per column, in the
+    order K (input-major), L (the first `width` multipliers), k0: kind 0, 1, 2 index the
+    table's K, L, k0; the operand of k0 is 0. All of them, or only the entries `spline`
+    stores (the others are exactly zero, and skipping them halves the stage's products)."""
+    n, m, _ = table.dims
+    if spline is None:
+        kind = np.r_[np.zeros(m * n, int), np.ones(m * width, int), np.full(m, 2)]
+        inputs = np.r_[np.repeat(np.arange(m), n), np.repeat(np.arange(m), width),
+                       np.arange(m)]
+        operand = np.r_[np.tile(np.arange(n), m), np.tile(np.arange(width), m),
+                        np.zeros(m, int)]
+        return kind, inputs, operand
+    inputs, cols = spline.entries(s)
+    cols = cols.astype(int)
+    kind = np.where(cols < n, 0, np.where(cols > n, 1, 2))
+    operand = np.where(cols < n, cols, np.where(cols > n, cols - n - 1, 0))
+    used = (kind != 1) | (operand < width)
+    order = np.lexsort((operand[used], inputs[used], kind[used]))
+    return kind[used][order], inputs[used][order], operand[used][order]
+
+
+def _stage_map(stage, table, s: int, width: int, h: float, spline=None) -> np.ndarray:
     """The mean over stage s as an affine block (n, n + width + 1): ``m_end = A m_start + C
     [v; 1]`` under the table's gains (its first `width` multiplier columns)."""
     n, m, _ = table.dims
@@ -108,23 +135,25 @@ def _stage_map(stage, table, s: int, width: int, h: float) -> np.ndarray:
     Bd, d = F[:, n:n + m], n + width + 1
     # Per tick P = [Ad | 0 | fd] - Bd [K | L | k0] (u = -K m - L v - k0), every tick in one
     # matrix product (numpy is slow on arrays of 4-wide rows, fast on one product): the
-    # tick's gains side by side, input by input, then 1, times `spread`, whose row for the
-    # gain of input i on operand j holds -Bd[:, i] in column j, and whose last row the
-    # constant part.
-    gains = np.hstack([np.asarray(table.K[a:b], dtype=float).reshape(b - a, m * n),
-                       np.asarray(table.L[a:b, :, :width], dtype=float).reshape(b - a, m * width),
-                       np.asarray(table.k0[a:b], dtype=float), np.ones((b - a, 1))])
-    operand = np.r_[np.tile(np.arange(n), m), np.tile(np.arange(n, n + width), m),
-                    np.full(m, d - 1)]
-    of_input = np.r_[np.repeat(np.arange(m), n), np.repeat(np.arange(m), width), np.arange(m)]
-    spread = np.zeros((gains.shape[1], n, d))
-    spread[np.arange(operand.size), :, operand] = -Bd[:, of_input].T
+    # tick's gains side by side, then 1, times `spread`, whose row for the gain of input i on
+    # operand j holds -Bd[:, i] in column j, and whose last row the constant part.
+    kind, inputs, operand = _gain_columns(table, s, width, spline)
+    T, sources = b - a, (table.K[a:b], table.L[a:b], table.k0[a:b, :, None])
+    gains = np.empty((T, kind.size + 1))
+    for k, g in enumerate(sources):
+        mine = kind == k
+        gains[:, np.flatnonzero(mine)] = g.reshape(T, -1)[:, inputs[mine] * g.shape[2]
+                                                          + operand[mine]]
+    gains[:, -1] = 1.0
+    column = np.where(kind == 0, operand, np.where(kind == 1, n + operand, d - 1))
+    spread = np.zeros((kind.size + 1, n, d))
+    spread[np.arange(kind.size), :, column] = -Bd[:, inputs].T
     spread[-1, :, :n] = F[:, :n]
     spread[-1, :, -1] = F[:, -1]
-    return _affine_product((gains @ spread.reshape(-1, n * d)).reshape(b - a, n, d))
+    return _affine_product((gains @ spread.reshape(-1, n * d)).reshape(T, n, d))
 
 
-def resolve_latch(problem, table) -> tuple[np.ndarray, np.ndarray]:
+def resolve_latch(problem, table, spline=None) -> tuple[np.ndarray, np.ndarray]:
     """The latch maps that make `table`'s law meet every knot constraint in expectation.
 
     Parameters
@@ -134,6 +163,9 @@ def resolve_latch(problem, table) -> tuple[np.ndarray, np.ndarray]:
     table : GainTable
         The law as implemented: its K, k0 and L (float32 or float64) are taken as they are;
         its own Lambda and lambda0 are ignored where the table latches.
+    spline : SplineGains, optional
+        The spline whose evaluation `table`'s K, k0, L are (`stospline.table.spline.evaluate`):
+        the entries it does not store are then taken as zero, unread.
 
     Returns
     -------
@@ -163,7 +195,7 @@ def resolve_latch(problem, table) -> tuple[np.ndarray, np.ndarray]:
         W = np.eye(n, n + width + 1)             # m = W [x; v; 1], from the latch tick
         rows, zeta = [], []
         for s in range(latch, knots[-1] + 1):
-            P = _stage_map(problem.stages[s], table, s, width, h)
+            P = _stage_map(problem.stages[s], table, s, width, h, spline)
             W = P[:, :n] @ W
             W[:, n:] += P[:, n:]
             if s in knots:

@@ -25,9 +25,10 @@ from stospline.errors import DesignError
 from stospline.problem import parse_problem
 from stospline.sim.oracle import evaluate_table
 from stospline.table.format import BandQP, table_of
-from stospline.table.spline import (MIN_TOLERANCE, SplineBudgetError, SplineGains, _basis,
-                                    _lsq, _solve_banded, evaluate, fit_spline,
-                                    max_relative_error)
+from stospline.table.spline import (MIN_TOLERANCE, SplineBudgetError, SplineGains, _Bases,
+                                    _basis, _column_peaks, _fit_stage, _lsq, _refined,
+                                    _solve_banded, _span_excess, _stage_entries, evaluate,
+                                    fit_spline, max_relative_error)
 from stospline.table.spline_compress import compress
 from stospline.table.spline_latch import latch_groups_of_table, mean_tick_map, resolve_latch
 
@@ -186,6 +187,80 @@ def test_the_least_squares_fit_recovers_a_spline_of_many_spans():
     _, N = _basis(U, tau)
     fitted = BSpline(U, _lsq(breaks, N, Y.T).T, 3)(tau)
     np.testing.assert_allclose(fitted, Y, atol=1e-9)
+
+
+# The fit's fast paths compute what the plain numpy they replace computes, bit for bit (the
+# shipped spline tables must regenerate byte for byte).
+
+
+@_settings(60)
+@given(st.integers(1, 300), st.integers(1, 6), st.integers(0, 2 ** 32 - 1))
+def test_column_peaks_are_numpys(T, k, seed):
+    g = np.random.default_rng(seed).normal(size=(T, k)) * 10.0 ** np.arange(k)
+    np.testing.assert_array_equal(_column_peaks(g), np.abs(g).max(axis=0))
+
+
+@_settings(60)
+@given(st.integers(2, 3000), st.integers(1, 40), st.integers(0, 2 ** 32 - 1))
+def test_the_refined_breakpoints_are_linspaces(T, spans, seed):
+    rng = np.random.default_rng(seed)
+    inner = rng.choice(np.arange(1, T), size=min(spans, T) - 1, replace=False)
+    breaks = np.unique(np.r_[0, inner, T]).astype(np.int64)
+    excess = rng.uniform(0, 2, breaks.size - 1) ** rng.uniform(1, 30)
+    length = np.diff(breaks)
+    pieces = np.zeros(length.size, dtype=np.int64)     # as _refined decides them
+    for s in np.flatnonzero(excess > 1):
+        if length[s] > 1:
+            pieces[s] = max(pieces[s], 2, int(np.ceil(1.25 * excess[s] ** 0.25)))
+        else:
+            pieces[max(0, s - 3):s + 4] = np.maximum(pieces[max(0, s - 3):s + 4], 2)
+    pieces = np.minimum(pieces, length)
+    want = np.unique(np.concatenate(
+        [breaks] + [np.rint(np.linspace(breaks[s], breaks[s + 1], pieces[s] + 1)[1:-1])
+                    .astype(np.int64) for s in np.flatnonzero(pieces > 1)]))
+    np.testing.assert_array_equal(_refined(breaks, excess), want)
+
+
+@pytest.mark.parametrize("nb", [4, 5, 27, 400])
+def test_the_dense_solve_assembles_the_banded_matrix(nb):
+    rng = np.random.default_rng(nb)
+    band = np.vstack([rng.uniform(4, 5, nb), rng.uniform(-1, 1, (3, nb))])
+    A = np.diag(band[0])
+    for d in (1, 2, 3):
+        A += np.diag(band[d, :nb - d], d) + np.diag(band[d, :nb - d], -d)
+    rhs = rng.normal(size=(nb, 3))
+    np.testing.assert_array_equal(_solve_banded(band, rhs), np.linalg.solve(A, rhs))
+
+
+def test_the_span_errors_are_the_scaled_per_tick_errors():
+    rng = np.random.default_rng(7)
+    Y = rng.normal(size=(500, 5)) * 10.0 ** np.arange(5)
+    G = (Y * (1 + rng.normal(size=Y.shape) * 1e-5)).astype(np.float32)
+    scale = 1.0 / (1e-4 * np.abs(Y).max(axis=0))
+    breaks = np.array([0, 7, 8, 100, 333, 500])
+    per_tick = (np.abs(G - Y) * scale).max(axis=1)
+    np.testing.assert_array_equal(_span_excess(G, np.ascontiguousarray(Y.T), scale, breaks),
+                                  np.maximum.reduceat(per_tick, breaks[:-1]))
+
+
+def test_the_bases_kept_across_stages_change_no_fit(robot_exact):
+    """Stages fitted with the bases of earlier stages (equal lengths: the robot's two 3 s
+    legs) give what each stage fitted alone gives; the store drops the oldest bases beyond
+    its bound and never keeps one longer than it."""
+    start = robot_exact.stage_start
+    assert start[1] - start[0] == start[2] - start[1]
+    shared = _Bases()
+    for s in range(robot_exact.n_stages):
+        YT = _stage_entries(robot_exact, int(start[s]), int(start[s + 1]))[1]
+        for got, want in zip(_fit_stage(YT, 1e-5, 1024, 8, s, shared),
+                             _fit_stage(YT, 1e-5, 1024, 8, s)):
+            np.testing.assert_array_equal(got, want)
+    assert {T for T, _ in shared._cache} == {int(start[1])} and len(shared._cache) >= 2
+    small = _Bases()
+    small.KEEP_TICKS = 100
+    for T in (40, 60, 30, 200):
+        small.get(T, np.array([0, T]))
+    assert [T for T, _ in small._cache] == [60, 30]
 
 
 # ---------------------------------------------------------------------------------------

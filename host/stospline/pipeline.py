@@ -19,6 +19,7 @@ from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table, s
 from stospline.sim.plant_scheme import SubstepChoice, choose_substeps, scheme_moments
 from stospline.sim.fault_oracle import evaluate_with_faults, has_exact_oracle
 from stospline.sim.spline_certificate import certificate, spline_table
+from stospline.sim.every_tick import EveryTick, between_ticks, design_every_tick, tick_violation
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem, ProblemError
 from stospline.table.format import GainTable, TickGains, table_of
@@ -77,6 +78,9 @@ class Designed:
     # With ``table="spline"``: what the spline table costs and saves, for the law exactly as
     # the firmware evaluates it (`stospline.sim.spline_certificate.certificate`).
     certificate: dict | None = None
+    # With [[regions]] at every tick: the constraint generation that met them
+    # (`stospline.sim.every_tick.EveryTick`).
+    every_tick: EveryTick | None = None
 
     def gains(self, *, quantized: bool = True):
         """``Gains(t, K, k0, L, Lambda, lambda0, stage_start)`` as numpy arrays: K is
@@ -164,7 +168,25 @@ def design_problem(problem: Problem, *, noise: bool = True,
 def _design_problem(problem: Problem, *, noise: bool, discretization: str,
                     mode: str, delay_ticks: int = 0,
                     spline_tolerance: float | None = None) -> Designed:
-    if has_bands(problem):
+    every_tick = None
+    if problem.tick_regions:
+        first = f"regions[{problem.tick_regions[0].index}].every"
+        if mode != "joint":
+            raise DesignError(first, 'a region at every tick is a band: use mode joint '
+                                     '(--mode joint)')
+        if discretization != "exact-zoh":
+            raise DesignError(first, 'a region at every tick is met for the law held over '
+                                     'each tick: use --discretization exact-zoh')
+        if spline_tolerance is not None:   # its ticks are checked for the per-tick gains
+            raise DesignError("design.table", 'a spline table does not carry the band dual '
+                                              'of a region at every tick: use table '
+                                              '"per-tick"')
+        every_tick = design_every_tick(problem, noise=noise)
+        # From here on the problem is the one the tables are for: the file's knots plus the
+        # working set's band knots (its tick regions kept, so it says what it was made for).
+        problem = every_tick.problem
+        design = continuous_law = every_tick.design
+    elif has_bands(problem):
         if mode != "joint":
             raise DesignError("knots", "band constraints (lower/upper) are exact only with one "
                                        "multiplier vector for all knots: use mode joint "
@@ -201,7 +223,8 @@ def _design_problem(problem: Problem, *, noise: bool, discretization: str,
         if spline_tolerance is not None:
             evaluations.append(evaluate_exact)
     law, implemented, *compressed = _concurrently(evaluations, 2 * table.n_ticks)
-    d = Designed(problem, design, discretization, table, law, implemented)
+    d = Designed(problem, design, discretization, table, law, implemented,
+                 every_tick=every_tick)
     if spline_tolerance is not None:
         d.certificate = certificate(d.problem, table, per_tick, d.design.J0,
                                     compressed[0] if compressed else law, implemented,
@@ -321,7 +344,31 @@ def _band_terms(d: Designed) -> dict:
     terms = d.design.summary_terms()
     if has_bands(d.problem):
         terms["band_qp_rows"] = 0 if d.table.band_qp is None else d.table.band_qp.q
+    if d.every_tick is not None:
+        terms["every_tick"] = every_tick_check(d)
     return terms
+
+
+def every_tick_check(d: Designed, *, where: bool = False) -> dict:
+    """The every-tick regions checked by the oracle: the worst violation at any tick of each
+    region (negative: inside by that much) for the design's law in double precision and for
+    the float32 table, and the worst over all of [a, b] with the mean between ticks (the
+    command held). ``where``: also the time of that worst (not in the summary: along an arc
+    of contact many times tie, and which one wins differs in the last bits)."""
+    p = d.problem
+    exact = evaluate_table(p, table_of(d.design, quantize=False), path=True)
+    implemented = evaluate_table(p, d.table, path=True)
+    regions = []
+    for reg, law, imp, gap in zip(p.tick_regions, tick_violation(p, exact.path_mean),
+                                  tick_violation(p, implemented.path_mean),
+                                  between_ticks(p, exact.path_mean, exact.path_u_mean)):
+        regions.append({"region": reg.index, "ticks": int(reg.ticks(p.t0, p.tick_hz).size),
+                        "worst_at_ticks_design": float(law.max()),
+                        "worst_at_ticks_implemented": float(imp.max()),
+                        "worst_over_interval": gap["worst"],
+                        "over_interval_exact": gap["exact"],
+                        **({"worst_over_interval_t": gap["t"]} if where else {})})
+    return {**d.every_tick.summary(), "regions": regions}
 
 
 def write_outputs(out_dir: str | Path, files: dict[str, str]) -> list[Path]:

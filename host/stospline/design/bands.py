@@ -46,7 +46,9 @@ BANDQP_DIGITS = 10
 
 
 def has_bands(problem: Problem) -> bool:
-    return any(kn.constraint is not None and kn.constraint.is_band for kn in problem.knots)
+    """Any band knot, or a region at every tick (which the design meets with band knots)."""
+    return bool(problem.tick_regions) or any(kn.constraint is not None and kn.constraint.is_band
+                                             for kn in problem.knots)
 
 
 @dataclass
@@ -88,6 +90,10 @@ def solve_band_dual(e: np.ndarray, W: np.ndarray, lo: np.ndarray, hi: np.ndarray
     q = len(e)
     eq = np.flatnonzero(lo == hi)
     band = np.flatnonzero(lo != hi)
+    if band.size == 0:   # equalities only: one linear solve (and no QP solver chatter)
+        lam = np.linalg.solve(W, e - hi)
+        active = np.where(lam >= 0, 1, -1)
+        return BandSolution(lam, e - W @ lam, active, _dual_value(lam, e, W, lo, hi))
     nv = len(eq) + 2 * len(band)
     T = np.zeros((q, nv))
     T[eq, np.arange(len(eq))] = 1.0
@@ -114,9 +120,30 @@ def solve_band_dual(e: np.ndarray, W: np.ndarray, lo: np.ndarray, hi: np.ndarray
     active = np.where(y >= hi - tol * scale, 1, 0)
     active = np.where(y <= lo + tol * scale, -1, active)
     active[eq] = np.where(lam[eq] >= 0, 1, -1)
-    lam = _refine(e, W, lo, hi, active)
+    lam, active = _settle(e, W, lo, hi, active, tol * scale)
     y = e - W @ lam
     return BandSolution(lam, y, active, _dual_value(lam, e, W, lo, hi), int(res.info.iter))
+
+
+def _settle(e, W, lo, hi, active, tol, rounds: int = 50):
+    """Refine on `active`, then correct the set until the refined point is a KKT point:
+    rows beyond their bands join it, band rows whose multiplier has the wrong sign leave it
+    (a primal-dual active-set step). OSQP's set is usually right, and then nothing changes;
+    with many nearly dependent rows (bands at neighbouring ticks) it can miss a row by more
+    than `tol`."""
+    band = lo != hi
+    for _ in range(rounds):
+        lam = _refine(e, W, lo, hi, active)
+        y = e - W @ lam
+        new = active.copy()
+        new[band & (y > hi + tol)] = 1
+        new[band & (y < lo - tol)] = -1
+        new[band & (new > 0) & (lam < 0) & (y <= hi + tol)] = 0
+        new[band & (new < 0) & (lam > 0) & (y >= lo - tol)] = 0
+        if np.array_equal(new, active):
+            return lam, active
+        active = new
+    return lam, active
 
 
 def enumerate_active_sets(e, W, lo, hi, *, tol: float = 1e-9) -> BandSolution:

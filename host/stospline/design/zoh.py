@@ -232,9 +232,10 @@ def check_delay(problem: Problem, delay_ticks, discretization: str = "exact-zoh"
         raise DesignError("design.delay_ticks", f"a one-tick delay is designed by the exact "
                                                 f"zero-order-hold design only, not with "
                                                 f"discretization {discretization!r}")
-    if any(kn.constraint is not None and kn.constraint.is_band for kn in problem.knots):
+    if problem.tick_regions or any(kn.constraint is not None and kn.constraint.is_band
+                                   for kn in problem.knots):
         raise DesignError("design.delay_ticks", "a one-tick delay is not designed with band "
-                                                "constraints (lower/upper) yet")
+                                                "constraints (lower/upper, regions) yet")
     if any(st.varying is not None for st in problem.stages):
         raise DesignError("design.delay_ticks", "a one-tick delay is designed for "
                                                 "time-invariant stage data only")

@@ -15,7 +15,7 @@ from stospline.problem.faults import Faults
 from stospline.problem.series import Series, sample_varying
 
 __all__ = ["ProblemError", "Stage", "Penalty", "Constraint", "Knot", "Problem", "Series",
-           "Corridor", "ticks_per_stage"]
+           "Corridor", "TickRegion", "ticks_per_stage"]
 
 
 @dataclass(frozen=True)
@@ -139,6 +139,25 @@ class Knot:
 
 
 @dataclass(frozen=True)
+class TickRegion:
+    """A ``[[regions]]`` entry with ``every = "tick"``: ``lower <= E{C x(t)} <= upper`` at every
+    controller tick of ``t = [a, b]``, both ends included, except t0 (where the mean is x0).
+    It is not expanded into knots: the design adds band knots at the ticks that need them
+    (`stospline.sim.every_tick`)."""
+    t: tuple[float, float]
+    C: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    index: int = field(default=0, compare=False)   # its place in the file's [[regions]]
+
+    def ticks(self, t0: float, tick_hz: int) -> np.ndarray:
+        """Indices (from t0) of the ticks in [a, b], t0 excluded."""
+        first = max(1, int(round((self.t[0] - t0) * tick_hz)))
+        last = int(np.floor((self.t[1] - t0) * tick_hz + 1e-9))
+        return np.arange(first, last + 1)
+
+
+@dataclass(frozen=True)
 class Problem:
     """A validated stochastic spline problem; knot ``k`` closes stage ``k``."""
     name: str
@@ -162,6 +181,9 @@ class Problem:
     # [[corridors]]: where realisations of outputs must stay (measured; the design ignores
     # them).
     corridors: tuple[Corridor, ...] = ()
+    # [[regions]] with every = "tick": bands at every tick, met by the design's constraint
+    # generation rather than by knots written into the problem.
+    tick_regions: tuple[TickRegion, ...] = ()
 
     @property
     def n(self) -> int:
@@ -198,7 +220,7 @@ class Problem:
         return Problem(self.name, self.t0, self.x0, self.tick_hz,
                        tuple(s.without_noise() for s in self.stages), self.knots,
                        self.source_sha256, self.plot, self.options, self.u_min, self.u_max,
-                       self.faults, self.u_hold, self.corridors)
+                       self.faults, self.u_hold, self.corridors, self.tick_regions)
 
 
 def ticks_per_stage(problem, tick_hz: int) -> np.ndarray:

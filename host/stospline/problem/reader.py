@@ -22,8 +22,10 @@ from stospline.table_options import TABLE_KINDS, check_spline_tolerance
 from stospline.problem.faults import parse_faults
 from stospline.problem.inputfile import decode_problem, read_problem_file
 from stospline.problem.corridors import Corridor
-from stospline.problem.model import Constraint, Knot, Penalty, Problem, Series, Stage
+from stospline.problem.model import (Constraint, Knot, Penalty, Problem, Series, Stage,
+                                     TickRegion)
 from stospline.problem.names import check_name
+from stospline.problem.regions import merge_constraints
 
 __all__ = ["load_problem", "parse_problem"]
 
@@ -625,21 +627,13 @@ def _parse_limits(doc: dict, m: int) -> tuple[np.ndarray | None, ...]:
     return tuple(None if out[k] is None else out[k][0] for k in ("u_min", "u_max", "u_hold"))
 
 
-def _merge_constraints(a: Constraint | None, b: Constraint) -> Constraint:
-    """Stack the rows of two constraints at one knot (equality rows keep lower = upper)."""
-    if a is None:
-        return b
-    (alo, ahi), (blo, bhi) = a.bounds, b.bounds
-    C = np.vstack([a.C, b.C])
-    lo, hi = np.concatenate([alo, blo]), np.concatenate([ahi, bhi])
-    return Constraint(C, lo.copy()) if np.array_equal(lo, hi) else Constraint(C, None, lo, hi)
-
-
-def _parse_regions(raw: Any, n: int, t0: float, t_end: float,
-                   tick_hz: int) -> list[tuple[float, Constraint]]:
+def _parse_regions(raw: Any, n: int, t0: float, t_end: float, tick_hz: int,
+                   ticked: list) -> list[tuple[float, Constraint]]:
     """``[[regions]]``: keep ``lower <= E{C x(t)} <= upper`` on the open interval ``t = [a, b]``,
     imposed as bands at ``a + every, a + 2 every, ...`` strictly before b (the paper's open
-    problem f(t) <= E y(t) <= g(t), approximated on a dense grid)."""
+    problem f(t) <= E y(t) <= g(t), approximated on a dense grid). ``every = "tick"``: the
+    region is appended to `ticked` as a `TickRegion` (bands at every tick, added by the
+    design where they are needed) instead."""
     if not isinstance(raw, list):
         raise ProblemError("regions", f"must be an array of tables ([[regions]]), got {_kind(raw)}")
     out = []
@@ -651,7 +645,11 @@ def _parse_regions(raw: Any, n: int, t0: float, t_end: float,
         if not t0 <= a < b <= t_end:
             raise ProblemError(_join(rp, "t"), f"must be [start, end] with {t0:g} <= start < "
                                                f"end <= {t_end:g} (the last knot)")
-        every = _number(reg["every"], _join(rp, "every"))
+        tick = reg["every"] == "tick"
+        if isinstance(reg["every"], str) and not tick:
+            raise ProblemError(_join(rp, "every"), f'must be a number of seconds or "tick", '
+                                                   f'got {reg["every"]!r}')
+        every = 1.0 / tick_hz if tick else _number(reg["every"], _join(rp, "every"))
         if every <= 0:
             raise ProblemError(_join(rp, "every"), "must be positive")
         for key, val in (("t", a - t0), ("every", every)):
@@ -665,6 +663,15 @@ def _parse_regions(raw: Any, n: int, t0: float, t_end: float,
         hi = _vector(reg["upper"], _join(rp, "upper"), C.shape[0], " (one entry per row of C)")
         if np.any(lo > hi):
             raise ProblemError(_join(rp, "lower"), "lower > upper: the band is empty")
+        if tick:   # met by the design's constraint generation, not by a knot per tick
+            zero = np.flatnonzero(~np.any(C != 0, axis=1))
+            if zero.size:
+                raise ProblemError(_join(rp, "C"), f"row {int(zero[0])} is zero: it constrains "
+                                                   f"no output")
+            region = TickRegion((a, b), C, lo, hi, i)
+            if region.ticks(t0, tick_hz).size:
+                ticked.append(region)
+            continue
         count = int(np.floor((b - a) / every - 1e-9))
         if len(out) + count > _MAX_GRID_POINTS:   # bound the work before building them
             raise ProblemError(_join(rp, "every"), f"gives {len(out) + count} band points in "
@@ -783,12 +790,13 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
                 for k, (sd, sc) in enumerate(_parse_stage_overrides(doc["stages"], len(knots)))]
     else:
         data = [default] * len(knots)
+    ticked: list[TickRegion] = []
     if "regions" in doc:
         # Region bands become extra knots; each splits the stage it falls in, whose data the
         # pieces share. A band at an existing knot adds rows to that knot's constraint.
         merged = {kn.t: (kn, d) for kn, d in zip(knots, data)}
         user_t = np.array([kn.t for kn in knots])
-        bands = _parse_regions(doc["regions"], n, t0, knots[-1].t, tick_hz)
+        bands = _parse_regions(doc["regions"], n, t0, knots[-1].t, tick_hz, ticked)
         check_stage_count([kn.t for kn in knots], [t for t, _ in bands])
         # Every knot and band time falls on a tick: look times up by tick index (a scan of
         # all knots per band point made a grid of 10^5 points take hours).
@@ -801,7 +809,7 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
                 at_tick[round((t - t0) * tick_hz)] = t
             else:
                 kn, stage_data = merged[hit]
-                merged[hit] = (Knot(kn.t, kn.penalty, _merge_constraints(kn.constraint, con)),
+                merged[hit] = (Knot(kn.t, kn.penalty, merge_constraints(kn.constraint, con)),
                                stage_data)
         order = sorted(merged)
         knots = tuple(merged[t][0] for t in order)
@@ -848,7 +856,7 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     corridors = (_parse_corridors(doc["corridors"], n, t0, knots[-1].t, tick_hz)
                  if "corridors" in doc else ())
     problem = Problem(name, t0, x0, tick_hz, stages, knots, source_sha256, plot, dict(options),
-                      u_min, u_max, faults, u_hold, corridors)
+                      u_min, u_max, faults, u_hold, corridors, tuple(ticked))
     check_problem(problem, B_path=default.B_path)   # the firmware's limits (limits.py)
     return problem
 

@@ -8,6 +8,7 @@ What is written (``docs/guide/library.md``, "Writing a problem back"):
 * a tracking cost on a constant stage is written folded into ``Q``, ``q`` and ``rho`` (what it
   adds to them), which is the same problem;
 * ``[[regions]]`` are written as the band knots they expand to, which is the same problem;
+  a region with ``every = "tick"`` (`TickRegion`) as itself;
 * equal stages once as ``[dynamics]``/``[cost]``, different ones as ``[[stages]]``;
 * ``x0``, ``t0``, ``tick_hz``, actuator limits, ``[design]``, ``[plot]``, ``[faults]`` and
   ``[[corridors]]`` as they are.
@@ -161,6 +162,9 @@ def problem_to_toml(problem: Problem) -> str:
             lines += _table("[stages.cost]", cost)[1:]
     for kn in p.knots:
         lines += _table("[[knots]]", _knot(kn))
+    for reg in p.tick_regions:
+        lines += _table("[[regions]]", {"t": [float(reg.t[0]), float(reg.t[1])], "every": "tick",
+                                        "C": reg.C, "lower": reg.lower, "upper": reg.upper})
     if p.plot:
         lines += _table("[plot]", dict(p.plot))
     if p.faults.any:

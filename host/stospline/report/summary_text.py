@@ -62,4 +62,10 @@ def design_summary_text(d, arith: str = "float32") -> str:
         r, k, i = worst
         lines.append(f"  worst constraint residual      {r:.3g}   (knot {k}, row {i}; "
                      f"E{{Cx}} of the {kind} table, oracle)")
+    et = getattr(d, "every_tick", None)
+    if et is not None:
+        lines.append(f"  regions at every tick          met after {et.iterations} design"
+                     f"{'s' * (et.iterations > 1)}, {len(et.working_set)} band rows added at "
+                     f"{len({j for j, _, _ in et.working_set})} ticks "
+                     f"(--json: every_tick has each region checked by the oracle)")
     return "\n".join(lines) + "\n"

@@ -56,7 +56,17 @@ VARYING = {  # time-varying samples, tracking
               {"t": 2.0, "penalty": {"C": [[1]], "target": [2.0], "weight": 1.0}}],
 }
 
-BASES = {"cart": CART, "noisy": NOISY, "bands": BANDS, "varying": VARYING}
+TICK = {  # a region at every tick (constraint generation), active: the speed limit binds
+    "name": "tick", "x0": [0.0, 0.0], "tick_hz": 10, "design": {"mode": "joint"},
+    "dynamics": {"A": [[0, 1], [0, 0]], "B": [[0], [1]],
+                 "noise": [{"state": 1, "G": [[0], [0.2]]}]},
+    "cost": {"R": [[1]]},
+    "knots": [{"t": 2.0, "constraint": {"C": [[1, 0], [0, 1]], "value": [1.0, 0.0]}}],
+    "regions": [{"t": [0.0, 2.0], "every": "tick", "C": [[0, 1]], "lower": [0.0],
+                 "upper": [0.7]}],
+}
+
+BASES = {"cart": CART, "noisy": NOISY, "bands": BANDS, "varying": VARYING, "tick": TICK}
 
 
 # ---------------------------------------------------------------------------------------

@@ -64,6 +64,10 @@ def same_problem(a, b) -> bool:
             and all(eq(A, B) and eq(x, y) for (A, x), (B, y) in zip(ca.polygons, cb.polygons))
             for ca, cb in zip(a.corridors, b.corridors)):
         return False
+    if len(a.tick_regions) != len(b.tick_regions) or not all(
+            ra.t == rb.t and eq(ra.C, rb.C) and eq(ra.lower, rb.lower) and eq(ra.upper, rb.upper)
+            for ra, rb in zip(a.tick_regions, b.tick_regions)):
+        return False
     for ka, kb in zip(a.knots, b.knots):
         if ka.t != kb.t or (ka.penalty is None) != (kb.penalty is None) or (
                 (ka.constraint is None) != (kb.constraint is None)):

@@ -1,0 +1,297 @@
+"""[[regions]] with every = "tick": the band holds at every controller tick of the implemented
+law (issue 16, part 1), met by constraint generation (`stospline.sim.every_tick`)."""
+import copy
+import os
+import tomllib
+
+import numpy as np
+import pytest
+
+from conftest import EXAMPLES
+from stospline.cli import main
+from stospline.design.bands import design_bands
+from stospline.errors import DesignError
+from stospline.pipeline import design_problem, design_summary
+from stospline.problem import ProblemError, load_problem, parse_problem
+from stospline.problem.model import Constraint
+from stospline.problem.regions import with_bands
+from stospline.sim.every_tick import between_ticks, design_every_tick
+from stospline.sim.oracle import evaluate_table
+from stospline.table.format import table_of
+
+MONOTONE = EXAMPLES / "robot_monotone.toml"
+ROBOT = EXAMPLES / "robot_corridor.toml"
+
+
+def robot_doc(hz: int, regions: list) -> dict:
+    doc = tomllib.loads(ROBOT.read_text())
+    doc.pop("corridors")
+    doc.update(tick_hz=hz, design={"mode": "joint"}, regions=regions)
+    return doc
+
+
+def velocities(prob, table):
+    """E{xdot}, E{ydot} at every tick of [t0 + 1 tick, 6] from the oracle."""
+    return evaluate_table(prob, table, path=True).path_mean[1:, [1, 3]]
+
+
+@pytest.fixture(scope="module")
+def monotone():
+    return design_problem(load_problem(MONOTONE), mode="joint")
+
+
+def test_region_holds_at_every_tick_on_the_oracle(monotone):
+    d = monotone
+    assert d.every_tick.iterations > 1 and len(d.every_tick.working_set) > 0
+    exact = velocities(d.problem, table_of(d.design, quantize=False))
+    assert exact.min() >= -1e-9 * 10            # tolerance 1e-9 of the bounds' scale (10)
+    assert velocities(d.problem, d.table).min() >= -1e-6      # float32 gains
+    # The region binds: without it the expected x overshoots and comes back.
+    doc = tomllib.loads(MONOTONE.read_text())
+    doc.pop("regions")
+    free = design_problem(parse_problem(doc), mode="joint")
+    assert velocities(free.problem, free.table).min() < -0.02
+    assert d.design.J0 > free.design.J0
+    # The summary says the same (negative: inside).
+    reg = design_summary(d)["every_tick"]["regions"][0]
+    assert reg["ticks"] == 600 and reg["worst_at_ticks_design"] <= 1e-8
+
+
+def test_agrees_with_the_dense_design_over_all_ticks():
+    """At 20 Hz the band at every tick of the region can be posed densely (one band knot per
+    tick, as `every` = one tick would): the same optimum and the same active ticks."""
+    p = parse_problem(robot_doc(20, [{"t": [0.0, 5.5], "every": "tick", "C": [[0, 1, 0, 0]],
+                                      "lower": [0.0], "upper": [10.0]}]))
+    et = design_every_tick(p)
+    reg = p.tick_regions[0]
+    dense_p = with_bands(p, {int(j): Constraint(reg.C, None, reg.lower, reg.upper)
+                             for j in reg.ticks(p.t0, p.tick_hz)})
+    dense = design_bands(dense_p)
+
+    def active(prob, des):
+        return sorted((round((prob.knots[k].t - prob.t0) * prob.tick_hz), int(a))
+                      for (k, _), a in zip(des.rows, des.solution.active)
+                      if a != 0 and prob.knots[k].penalty is None)
+    assert len(dense_p.knots) == 111 and len(et.problem.knots) < 12
+    assert et.design.J0 == pytest.approx(dense.J0, rel=1e-12, abs=0)
+    assert active(et.problem, et.design) == active(dense_p, dense)
+    assert len(active(dense_p, dense)) >= 5          # an arc of contacts, not one tick
+    assert np.linalg.cond(et.design.base.stages[0].W0) < np.linalg.cond(dense.base.stages[0].W0)
+
+
+def test_a_grid_misses_what_every_tick_catches():
+    """The same region on a 0.1 s grid: met at the grid points, violated between them."""
+    doc = tomllib.loads(MONOTONE.read_text())
+    grid = copy.deepcopy(doc)
+    grid["regions"][0]["every"] = 0.1
+    g = design_problem(parse_problem(grid), mode="joint")
+    v = velocities(g.problem, table_of(g.design, quantize=False))
+    on_grid = np.arange(10, 600, 10) - 1                  # ticks 10, 20, ... (row j = tick j+1)
+    assert v[on_grid].min() >= -1e-9
+    assert v.min() < -1e-4
+    e = design_problem(parse_problem(doc), mode="joint")
+    assert velocities(e.problem, table_of(e.design, quantize=False)).min() >= -1e-8
+    assert e.design.J0 > g.design.J0
+
+
+def narrow_corridor_at_every_tick():
+    doc = tomllib.loads((EXAMPLES / "robot_narrow_corridor.toml").read_text())
+    doc["knots"][0]["constraint"] = {"C": [[1, 0, 1, 0]], "value": [0.0]}
+    for r in doc["regions"]:
+        r["every"] = "tick"
+    return doc
+
+
+def no_overshoot():
+    """E{x} <= -1 at every tick: the contact is at zero speed, so the mean bulges out
+    between the ticks it touches."""
+    return robot_doc(20, [{"t": [0.0, 6.0], "every": "tick", "C": [[1, 0, 0, 0]],
+                           "lower": [-6.0], "upper": [-1.0]}])
+
+
+@pytest.mark.parametrize("make, bulge", [(narrow_corridor_at_every_tick, False),
+                                         (no_overshoot, True)])
+def test_between_ticks_finds_the_exact_extremum(make, bulge):
+    """Positions of a double integrator are quadratic over a tick: the worst over the
+    interval from the polynomial's ends and extrema equals a brute-force search on 2001 points
+    per tick, and is never below it."""
+    d = design_problem(parse_problem(make()), mode="joint")
+    p = d.problem
+    m = evaluate_table(p, table_of(d.design, quantize=False), path=True)
+    got = between_ticks(p, m.path_mean, m.path_u_mean)
+    A, B = p.stages[0].A, p.stages[0].B
+    h = 1.0 / p.tick_hz
+    s = np.linspace(0, h, 2001)
+    for reg, g in zip(p.tick_regions, got):
+        assert g["exact"]
+        worst = -np.inf
+        for j in range(int(round(reg.t[0] * p.tick_hz)), int(round(reg.t[1] * p.tick_hz))):
+            x, u = m.path_mean[j], m.path_u_mean[j]
+            # x(s) = x + s A x + s^2/2 A^2 x + s B u + s^2/2 A B u (A^3 = 0 here)
+            xs = (x + np.outer(s, A @ x) + np.outer(s ** 2 / 2, A @ A @ x)
+                  + np.outer(s, B @ u) + np.outer(s ** 2 / 2, A @ B @ u))
+            y = xs @ reg.C.T
+            worst = max(worst, float(np.maximum(y - reg.upper, reg.lower - y).max()))
+        assert g["worst"] >= worst - 1e-15 and g["worst"] == pytest.approx(worst, abs=1e-12)
+        at_ticks = float(design_summary(d)["every_tick"]["regions"][0]["worst_at_ticks_design"])
+        if bulge:     # beyond the band only between ticks (O(h^2), tiny here)
+            assert at_ticks <= 6e-9 < 1e-8 < g["worst"] < 1e-6
+            assert abs(g["t"] * p.tick_hz - round(g["t"] * p.tick_hz)) > 1e-3
+
+
+def test_iteration_cap_names_the_region():
+    p = load_problem(MONOTONE)
+    with pytest.raises(DesignError) as err:
+        design_every_tick(p, max_iterations=2)
+    assert err.value.field == "regions[0]" and "2 rounds" in str(err.value)
+
+
+def test_written_back_as_a_tick_region():
+    p = load_problem(MONOTONE)
+    q = parse_problem(tomllib.loads(p.to_toml()))
+    assert len(q.tick_regions) == 1 and len(q.knots) == 2
+    a, b = p.tick_regions[0], q.tick_regions[0]
+    assert a.t == b.t and np.array_equal(a.C, b.C) and np.array_equal(a.lower, b.lower)
+    assert 'every = "tick"' in p.to_toml()
+
+
+@pytest.mark.parametrize("edit, field, reason", [
+    (lambda doc: doc["regions"][0].update(every="tock"), "regions[0].every", '"tick"'),
+    (lambda doc: doc["regions"][0].update(every=[1]), "regions[0].every", "number"),
+    (lambda doc: doc["regions"][0].update(t=[0.0, 7.0]), "regions[0].t", "last knot"),
+    (lambda doc: doc["regions"][0].update(lower=[0.0, 11.0]), "regions[0].lower", "empty"),
+    (lambda doc: doc["regions"][0].update(t=[0.005, 6.0]), "regions[0].t", "whole number"),
+    (lambda doc: doc["design"].update(mode="stagewise"), "regions[0].every", "mode joint"),
+    (lambda doc: doc["regions"][0].update(C=[[0, 1, 0, 0], [0, 0, 0, 0]]), "regions[0].C",
+     "row 1 is zero"),
+    # E{xdot} <= -1 at every tick, yet at rest at t = 6: contradicts the knot there.
+    (lambda doc: doc["regions"][0].update(lower=[-10.0, 0.0], upper=[-1.0, 10.0]),
+     "regions[0]", "cannot all be met"),
+    # A third state the input cannot move, kept in a band it starts outside of.
+    (lambda doc: doc.update(x0=[-5.0, 0.0, 1.0, 0.0, 0.0],
+                            dynamics={**{k: [r + [0] for r in v] + [[0] * 5]
+                                         for k, v in doc["dynamics"].items() if k == "A"},
+                                      "B": doc["dynamics"]["B"] + [[0, 0]]},
+                            knots=[{**kn, **{key: {**kn[key], "C": [r + [0] for r in
+                                                                     kn[key]["C"]]}
+                                             for key in ("penalty", "constraint")}}
+                                   for kn in doc["knots"]],
+                            regions=[{"t": [0.0, 6.0], "every": "tick", "C": [[0, 0, 0, 0, 1]],
+                                      "lower": [1.0], "upper": [2.0]}]),
+     "regions[0]", "the design fails"),
+])
+def test_bad_input_exits_2_naming_the_field_and_writes_nothing(tmp_path, capsys, edit, field,
+                                                               reason):
+    doc = tomllib.loads(MONOTONE.read_text())
+    edit(doc)
+    src = tmp_path / "in"
+    src.mkdir()
+    f = src / "bad.toml"
+    f.write_text(_dump(doc))
+    out = tmp_path / "out"
+    out.mkdir()
+    code = main(["design", str(f), "--out", str(out)])
+    stdout, err = capsys.readouterr()
+    assert code == 2, err
+    assert stdout == "" and err.count("\n") == 1, err
+    assert f"{field}: " in err and reason in err, err
+    assert os.listdir(out) == []
+
+
+def test_a_spline_table_is_refused():
+    with pytest.raises(DesignError) as err:
+        design_problem(load_problem(MONOTONE), mode="joint", table="spline")
+    assert err.value.field == "design.table"
+
+
+def test_a_delay_is_refused():
+    with pytest.raises(DesignError) as err:
+        design_problem(load_problem(MONOTONE), mode="joint", delay_ticks=1)
+    assert err.value.field == "design.delay_ticks"
+
+
+def test_continuous_discretization_is_refused():
+    with pytest.raises(DesignError) as err:
+        design_problem(load_problem(MONOTONE), mode="joint", discretization="continuous")
+    assert err.value.field == "regions[0].every"
+
+
+def _dump(doc: dict) -> str:
+    """A problem file from a decoded one (the dicts here are plain TOML values)."""
+    import json
+
+    def val(v):
+        if isinstance(v, dict):
+            return "{ " + ", ".join(f"{k} = {val(x)}" for k, x in v.items()) + " }"
+        if isinstance(v, list):
+            return "[" + ", ".join(val(x) for x in v) + "]"
+        return json.dumps(v)
+    lines = [f"{k} = {val(v)}" for k, v in doc.items() if not isinstance(v, (dict, list))
+             or (isinstance(v, list) and v and not isinstance(v[0], dict))]
+    for k, v in doc.items():
+        if isinstance(v, dict):
+            lines += [f"[{k}]"] + [f"{kk} = {val(x)}" for kk, x in v.items()]
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            for item in v:
+                lines += [f"[[{k}]]"] + [f"{kk} = {val(x)}" for kk, x in item.items()]
+    return "\n".join(lines) + "\n"
+
+
+def test_monte_carlo_through_the_compiled_controller_agrees(monotone):
+    """The tables of the every-tick design run in the harness like any band table: Monte Carlo
+    through the compiled C controller agrees with the oracle (fixed seed)."""
+    from stospline.pipeline import simulate_problem, simulation_summary
+    mc = simulate_problem(monotone, paths=2000, seed=20261125)
+    s = simulation_summary(monotone, mc, seed=20261125)
+    assert s["verdict"]["agree"], s["verdict"]
+    assert len(monotone.table.stage_start) - 1 == 92          # 2 file knots + 90 band knots
+
+
+def test_more_stages_than_the_firmware_takes_exits_2(tmp_path, capsys):
+    """At 1 kHz the arc of contact of robot_monotone needs a knot per tick: refused, naming
+    the region, nothing written."""
+    doc = tomllib.loads(MONOTONE.read_text())
+    doc["tick_hz"] = 1000
+    f = tmp_path / "fast.toml"
+    f.write_text(_dump(doc))
+    out = tmp_path / "out"
+    out.mkdir()
+    code = main(["design", str(f), "--out", str(out)])
+    stdout, err = capsys.readouterr()
+    assert code == 2 and stdout == "" and err.count("\n") == 1, err
+    assert "regions[0]: " in err and "STSP_MAX_STAGES" in err, err
+    assert os.listdir(out) == []
+
+
+def test_region_ends_are_ticks_of_the_region():
+    """[a, b] includes its ends: the narrow corridor's only contact is the corner t = 3, the
+    end of the first leg, which a grid (ends excluded) never checks."""
+    d = design_problem(parse_problem(narrow_corridor_at_every_tick()), mode="joint")
+    assert d.every_tick.working_set == [(60, 0, 0)]          # E{y} >= 0.55 at tick 60 = 3 s
+    m = evaluate_table(d.problem, table_of(d.design, quantize=False), path=True)
+    assert m.path_mean[60, 2] >= 0.55 - 1e-12
+
+
+def test_contacts_at_neighbouring_ticks_at_100_hz():
+    """E{x} <= -1 at 100 Hz: the working set's dual has nearly dependent rows (contacts at
+    neighbouring ticks), where OSQP's active set alone misses a row by ~2e-6; settled by KKT
+    steps, every tick holds to the tolerance."""
+    doc = no_overshoot()
+    doc["tick_hz"] = 100
+    et = design_every_tick(parse_problem(doc))
+    m = evaluate_table(et.problem, table_of(et.design, quantize=False), path=True)
+    assert m.path_mean[1:, 0].max() <= -1 + 6e-9
+    assert et.iterations >= 5 and len(et.working_set) + et.dropped >= 5
+
+
+def test_rows_the_optimum_leaves_slack_are_dropped():
+    """Rows cut in an early round and overtaken later are dropped at the end: the same J0,
+    fewer stages, and here few enough rows (7 <= 8) for the table to carry the band dual."""
+    p = parse_problem(no_overshoot())
+    et = design_every_tick(p)
+    assert et.dropped > 0 and len(et.working_set) == 2
+    assert len(et.problem.knots) == len(p.knots) + 2
+    assert et.history[-1]["added"] == -et.dropped
+    assert et.history[-1]["J0"] == pytest.approx(et.history[-2]["J0"], rel=1e-12)
+    d = design_problem(p, mode="joint")
+    assert d.table.band_qp is not None and d.table.band_qp.q == 7

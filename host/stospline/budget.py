@@ -35,7 +35,8 @@ import numpy as np
 from stospline.problem.model import Problem, ProblemError
 
 __all__ = ["BudgetError", "Term", "Estimate", "estimate", "check", "enforce",
-           "DEFAULT_MAX_SECONDS", "DEFAULT_MAX_BYTES", "machine_memory", "format_bytes", "format_seconds"]
+           "DEFAULT_MAX_SECONDS", "DEFAULT_MAX_BYTES", "machine_memory", "format_bytes",
+           "format_seconds"]
 
 DEFAULT_MAX_SECONDS = 600.0          # 10 minutes
 DEFAULT_MAX_BYTES = 4 * 1024 ** 3    # 4 GiB

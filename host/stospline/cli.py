@@ -109,6 +109,10 @@ def _corridor_design(args) -> int:
             raise ProblemError(option if getattr(args, key) is not None else f"design.{key}",
                                "corridor-design writes per-tick tables without a delay")
     opts = {k: opts[k] for k in ("mode", "discretization")}
+    if args.mode or args.discretization:      # the designed file says how it was designed
+        from dataclasses import replace
+        problem = replace(problem, options={**problem.options, **{
+            k: opts[k] for k in ("mode", "discretization") if getattr(args, k)}})
     name = problem.name
     files = [f"{name}{ext}" for ext in (".toml", ".c", ".h", ".json", "_corridor.json")]
     if args.out:

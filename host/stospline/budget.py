@@ -279,6 +279,6 @@ def _sizes(problem: Problem, key: str, options: dict) -> str:
         return f"with n = {problem.n} states and m = {problem.m} inputs"
     if key == "--paths":
         return f"with {options.get('paths')} paths over {T} ticks"
-    if key.startswith("--"):
+    if key in ("--search", "--certify"):          # corridor-design's Monte Carlo runs
         return f"over {T} ticks"
     return f"with {len(problem.knots)} stages (knots and region band points)"

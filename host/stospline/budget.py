@@ -34,8 +34,9 @@ import numpy as np
 
 from stospline.problem.model import Problem, ProblemError
 
-__all__ = ["BudgetError", "Term", "Estimate", "estimate", "check", "DEFAULT_MAX_SECONDS",
-           "DEFAULT_MAX_BYTES", "machine_memory", "format_bytes", "format_seconds"]
+__all__ = ["BudgetError", "Term", "Estimate", "estimate", "check", "enforce",
+           "DEFAULT_MAX_SECONDS", "DEFAULT_MAX_BYTES", "machine_memory", "format_bytes",
+           "format_seconds"]
 
 DEFAULT_MAX_SECONDS = 600.0          # 10 minutes
 DEFAULT_MAX_BYTES = 4 * 1024 ** 3    # 4 GiB
@@ -246,7 +247,13 @@ def check(problem: Problem, *, max_seconds: float = DEFAULT_MAX_SECONDS,
           max_bytes: float = DEFAULT_MAX_BYTES, **options) -> Estimate:
     """`estimate` and refuse (BudgetError) what exceeds `max_bytes` (capped at the machine's
     memory) or `max_seconds`. Returns the estimate."""
-    est = estimate(problem, **options)
+    return enforce(estimate(problem, **options), problem, max_seconds=max_seconds,
+                   max_bytes=max_bytes, **options)
+
+
+def enforce(est: Estimate, problem: Problem, *, max_seconds: float = DEFAULT_MAX_SECONDS,
+            max_bytes: float = DEFAULT_MAX_BYTES, **options) -> Estimate:
+    """Refuse (BudgetError) an estimate `est` beyond the limits, as `check` does."""
     limit = min(float(max_bytes), machine_memory())
     for kind, need, cap, fmt, what in (
             ("bytes", est.bytes, limit, format_bytes,
@@ -272,4 +279,6 @@ def _sizes(problem: Problem, key: str, options: dict) -> str:
         return f"with n = {problem.n} states and m = {problem.m} inputs"
     if key == "--paths":
         return f"with {options.get('paths')} paths over {T} ticks"
+    if key in ("--search", "--certify"):          # corridor-design's Monte Carlo runs
+        return f"over {T} ticks"
     return f"with {len(problem.knots)} stages (knots and region band points)"

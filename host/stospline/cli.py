@@ -88,6 +88,66 @@ def _design(args) -> int:
     return 0
 
 
+@quiet_numerics
+def _corridor_design(args) -> int:
+    """Search the (w, wv) grid for the cheapest design that meets the corridor's epsilon
+    (`stospline.corridor_search`); write the designed problem file, its tables and the
+    certificate together."""
+    from stospline import corridor_search as cs
+    from stospline.atomic import check_target
+    from stospline.budget import enforce, format_seconds
+    from stospline.pipeline import generated_files, write_outputs
+    if args.out:
+        check_target(args.out)                  # before any work: nothing is created
+    if args.seed == args.certify_seed:
+        raise ProblemError("--certify-seed", f"must differ from --seed ({args.seed}): "
+                                             f"certifying on the screening sample biases it")
+    problem, index = cs.target_corridor(load_problem(args.problem), args.epsilon)
+    opts = _options(args, problem)
+    for key, option, bad in (("table", "--table", "spline"), ("delay_ticks", "--delay-ticks", 1)):
+        if opts[key] == bad:
+            raise ProblemError(option if getattr(args, key) is not None else f"design.{key}",
+                               "corridor-design writes per-tick tables without a delay")
+    opts = {k: opts[k] for k in ("mode", "discretization")}
+    if args.mode or args.discretization:      # the designed file says how it was designed
+        from dataclasses import replace
+        problem = replace(problem, options={**problem.options, **{
+            k: opts[k] for k in ("mode", "discretization") if getattr(args, k)}})
+    name = problem.name
+    files = [f"{name}{ext}" for ext in (".toml", ".c", ".h", ".json", "_corridor.json")]
+    if args.out:
+        check_target(args.out, files)
+    grid = len(args.strip) * len(args.rate)
+    est = enforce(cs.work_estimate(problem, grid=grid, search_paths=args.search,
+                                   certify_paths=args.certify, attempts=args.attempts,
+                                   substeps=args.substeps, **opts),
+                  problem, max_seconds=args.max_time, max_bytes=args.max_memory * 1024 ** 3)
+    progress.note(f"corridor-design of {name}: at most ~{format_seconds(est.seconds)} "
+                  f"({grid} grid points screened, {args.attempts} certifications)")
+    result = cs.evaluate_grid(problem, index, strip=args.strip, rate=args.rate, **opts)
+    cs.search(problem, index, result, search_paths=args.search, certify_paths=args.certify,
+              search_seed=args.seed, certify_seed=args.certify_seed, attempts=args.attempts,
+              substeps=args.substeps, workers=args.workers, scheduler=args.scheduler, **opts)
+    c = result.chosen
+    sha = "" if c is None else result.designed.problem.source_sha256
+    cert = cs.certificate(result, problem_sha256=sha, design_options=opts,
+                          substeps=args.substeps)
+    text = dumps(cert) + "\n"
+    if c is not None and args.out:
+        out = generated_files(result.designed, f"{name}.toml")
+        written = write_outputs(args.out, {f"{name}.toml": c.toml, **out,
+                                           f"{name}_corridor.json": text})
+    if args.json:
+        print(text, end="")
+    else:
+        print(cs.summary_text(result))
+        for path in written if c is not None and args.out else []:
+            print(f"wrote {path}")
+    if c is None:
+        raise ProblemError(f"corridors[{index}].epsilon", cs.failure_reason(result))
+    return 0
+
+
 def _start(arg: str | None):
     """``--x0 "a,b,..."`` as floats (None: the problem's x0)."""
     if arg is None:
@@ -360,6 +420,29 @@ def _positive(hi: float, unit: str):
     return parse
 
 
+def _probability(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"must be a number in (0, 1), got {text!r}")
+    return value
+
+
+def _weights(text: str) -> tuple[float, ...]:
+    """Comma-separated finite weights >= 0, at least one, no repeats."""
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if (not values or not all(math.isfinite(v) and 0 <= v <= 1e12 for v in values)
+            or len(set(values)) != len(values)):
+        raise argparse.ArgumentTypeError(f"must be distinct comma-separated numbers in "
+                                         f"[0, 1e12], got {text!r}")
+    return values
+
+
 def _x0(text: str) -> list[float]:
     try:
         return _start(text)
@@ -469,6 +552,41 @@ def build_parser() -> argparse.ArgumentParser:
                                 "(comma-separated; write --x0=-5,0,1,0 when it starts with a minus); the tables stay the design's and the "
                                 "controller latches from what it measures")
     p.set_defaults(func=_simulate)
+
+    p = sub.add_parser("corridor-design",
+                       help="the cheapest design whose paths stay in the corridor with "
+                            "probability 1 - epsilon, certified by Monte Carlo")
+    p.add_argument("problem", help="problem file (TOML) with one corridor that has epsilon")
+    p.add_argument("--epsilon", type=_probability, default=None,
+                   help="the risk budget of the file's only corridor (overrides its epsilon)")
+    p.add_argument("--search", type=_integer(1, MAX_PATHS), default=30_000, metavar="N",
+                   help="Monte Carlo paths screening each grid point (default 30000)")
+    p.add_argument("--certify", type=_integer(1, MAX_PATHS), default=1_000_000, metavar="N",
+                   help="fresh Monte Carlo paths certifying the chosen point (default 10^6)")
+    p.add_argument("--seed", type=_integer(0, SEED_MAX), default=20261126,
+                   help="seed of the screening runs (default 20261126)")
+    p.add_argument("--certify-seed", type=_integer(0, SEED_MAX), default=20261127,
+                   help="seed of the certification runs (default 20261127; must differ "
+                        "from --seed)")
+    p.add_argument("--attempts", type=_integer(1, 1000), default=3,
+                   help="certification runs at most (the next cheapest point that passes "
+                        "screening after a failed one; default 3)")
+    p.add_argument("--strip", type=_weights, default=(0.0, 2.0, 5.0, 10.0, 20.0, 40.0),
+                   metavar="W,W,...", help="grid of centre-line weights w (default "
+                                           "0,2,5,10,20,40)")
+    p.add_argument("--rate", type=_weights, default=(0.0, 0.5, 1.0, 2.0, 5.0),
+                   metavar="WV,WV,...", help="grid of velocity-damping weights wv (default "
+                                             "0,0.5,1,2,5)")
+    p.add_argument("--substeps", type=_integer(1, MAX_SUBSTEPS), default=1,
+                   help="plant steps per controller tick (default 1)")
+    p.add_argument("--workers", type=_integer(1, MAX_WORKERS), default=None)
+    p.add_argument("--scheduler", type=_scheduler, default=None, metavar="ADDRESS")
+    p.add_argument("--out", type=_out_dir,
+                   help="directory for <name>.toml (the designed problem), <name>.{c,h,json} "
+                        "(its tables) and <name>_corridor.json (the certificate), written "
+                        "together or not at all")
+    p.add_argument("--json", action="store_true", help="print the certificate as JSON")
+    p.set_defaults(func=_corridor_design)
 
     # Commands that write one file from a Monte Carlo run: (name, help, --out type and help,
     # default paths, function).

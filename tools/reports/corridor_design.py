@@ -11,47 +11,26 @@ whose screening one-sided 99 % Clopper-Pearson upper bound is at most eps is cho
 certifying on the same would bias the bound. If the certification fails, the next cheapest
 candidate is certified. Prints Markdown (docs/evidence/corridor-exit.md).
 
-Usage: .venv/bin/python tools/reports/corridor_design.py [--search N] [--certify N]
+The search is the package's (`stospline.corridor_search`, the command ``stospline
+corridor-design``); this script screens the *whole* grid for the table (the command screens
+only up to the first point that passes) and hands those screenings to the search.
+
+Usage: PYTHONPATH=host .venv/bin/python tools/reports/corridor_design.py [--search N] [--certify N]
        [--workers W] [--eps 0.1,0.05,0.01,0.001]
 """
 from __future__ import annotations
 
 import argparse
-import itertools
 import time
 from pathlib import Path
 
-import numpy as np
-
-from stospline.design.corridor_design import stage_polygons, strip_weights_problem
-from stospline.pipeline import design_problem
+from stospline import corridor_search as cs
 from stospline.problem import load_problem
-from stospline.sim.controller import build_controller
-from stospline.sim.exit_bound import corridor_outputs, exit_bounds
-from stospline.sim.exit_stats import clopper_pearson_upper
-from stospline.sim.montecarlo import simulate
-from stospline.sim.oracle import evaluate_table
 
 ROOT = Path(__file__).resolve().parents[2]
 FILE = ROOT / "examples" / "robot_corridor.toml"
-STRIP = [0.0, 2.0, 5.0, 10.0, 20.0, 40.0]
-RATE = [0.0, 0.5, 1.0, 2.0, 5.0]
-SEARCH_SEED, CERTIFY_SEED = 20261126, 20261127
-
-
-def evaluate(p, corridor, polys, w, wv, paths, seed, workers):
-    """(J in the original cost, Cantelli total, Gaussian total, exits) of the weights.
-
-    The stage polygons are a fixed point: the design's own mean path must run in the same
-    legs (else the knob pulled towards the wrong centre line; AssertionError)."""
-    d = design_problem(strip_weights_problem(p, corridor, polys, w, wv))
-    J = evaluate_table(p, d.table, path=False).J
-    ((ym, yc),) = corridor_outputs(p, d.table)
-    assert stage_polygons(p, corridor, ym) == polys, (w, wv)
-    b = exit_bounds(corridor, ym, yc, p.t0, p.tick_hz)
-    mc = simulate(p, build_controller(d.table), paths=paths, seed=seed, substeps=1,
-                  workers=workers)
-    return J, b["cantelli"].total, b["gaussian"].total, int(np.sum(mc.exit_tick[0] >= 0))
+STRIP, RATE = cs.STRIP_WEIGHTS, cs.RATE_WEIGHTS
+SEARCH_SEED, CERTIFY_SEED = cs.SEARCH_SEED, cs.CERTIFY_SEED
 
 
 def main() -> None:
@@ -62,44 +41,45 @@ def main() -> None:
     ap.add_argument("--eps", default="0.1,0.05,0.01,0.001")
     a = ap.parse_args()
     eps_list = [float(e) for e in a.eps.split(",")]
-    p = load_problem(FILE)
-    (corridor,) = p.corridors
-    base = design_problem(p)
-    J0 = base.implemented.J
-    ((ym, _),) = corridor_outputs(p, base.table)
-    polys = stage_polygons(p, corridor, ym)
     start = time.perf_counter()
-    print(f"Stage polygons (the leg each stage's mean runs in): {polys}; screening "
+    # The grid designed once (the corridor's epsilon does not change a design), every point
+    # screened for the table.
+    p, index = cs.target_corridor(load_problem(FILE), eps_list[0])
+    grid = cs.evaluate_grid(p, index, strip=STRIP, rate=RATE)
+    # The stage polygons are a fixed point: each design's own mean path must run in the same
+    # legs (else the knob pulled towards the wrong centre line).
+    assert all(c.legs_unchanged for c in grid.candidates), grid.polygons
+    J0 = grid.J0
+    print(f"Stage polygons (the leg each stage's mean runs in): {grid.polygons}; screening "
           f"{a.search} paths (seed {SEARCH_SEED}), certification {a.certify} paths (seed "
           f"{CERTIFY_SEED}), 1 plant step per tick; today's design J = {J0:.4f}\n")
     print("| w (strip) | wv (rate) | J (original cost) | extra | Cantelli bound | Gaussian "
           "bound | MC exits | estimate | 99 % upper |")
     print("|---|---|---|---|---|---|---|---|---|")
-    grid = {}
-    for w, wv in itertools.product(STRIP, RATE):
-        J, bc, bg, k = grid[w, wv] = evaluate(p, corridor, polys, w, wv, a.search,
-                                              SEARCH_SEED, a.workers)
-        print(f"| {w:g} | {wv:g} | {J:.4f} | {J - J0:+.4f} | {bc:.3g} | {bg:.3g} | {k} | "
-              f"{k / a.search:.3g} | {clopper_pearson_upper(k, a.search):.3g} |", flush=True)
+    screening = {}
+    for c in sorted(grid.candidates, key=lambda c: (c.w, c.wv)):
+        e = screening[c.w, c.wv] = cs.count_exits(p, index, c, paths=a.search,
+                                                  seed=SEARCH_SEED, workers=a.workers)
+        print(f"| {c.w:g} | {c.wv:g} | {c.J:.4f} | {c.J - J0:+.4f} | {c.cantelli:.3g} | "
+              f"{c.gaussian:.3g} | {e.exits} | {e.estimate:.3g} | {e.upper:.3g} |", flush=True)
     print("\n| eps | w | wv | J | extra cost | Cantelli bound | Gaussian bound | certified "
           "MC exits | estimate | 99 % upper | meets eps |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for eps in eps_list:
-        ok = sorted((v[0], key) for key, v in grid.items()
-                    if clopper_pearson_upper(v[3], a.search) <= eps)
-        if not ok:
+        p, index = cs.target_corridor(p, eps)
+        result = cs.evaluate_grid(p, index, strip=STRIP, rate=RATE)
+        for c in result.candidates:
+            c.screening = screening[c.w, c.wv]
+        cs.search(p, index, result, search_paths=a.search, certify_paths=a.certify,
+                  workers=a.workers)
+        if not result.certified:
             print(f"| {eps:g} | none of the grid | | | | | | | | | no |")
-            continue
-        for _, (w, wv) in ok[:3]:
-            J, bc, bg, k = evaluate(p, corridor, polys, w, wv, a.certify, CERTIFY_SEED,
-                                    a.workers)
-            up = clopper_pearson_upper(k, a.certify)
-            print(f"| {eps:g} | {w:g} | {wv:g} | {J:.4f} | {J - J0:+.4f} "
-                  f"({100 * (J / J0 - 1):+.2g} %) | {bc:.3g} | {bg:.3g} | {k} / {a.certify} "
-                  f"| {k / a.certify:.3g} | {up:.3g} | {'yes' if up <= eps else 'NO'} |",
-                  flush=True)
-            if up <= eps:
-                break
+        for c in result.certified:
+            e = c.certification
+            print(f"| {eps:g} | {c.w:g} | {c.wv:g} | {c.J:.4f} | {c.J - J0:+.4f} "
+                  f"({100 * (c.J / J0 - 1):+.2g} %) | {c.cantelli:.3g} | {c.gaussian:.3g} | "
+                  f"{e.exits} / {e.paths} | {e.estimate:.3g} | {e.upper:.3g} | "
+                  f"{'yes' if e.upper <= eps else 'NO'} |", flush=True)
     print(f"\n({time.perf_counter() - start:.0f} s)")
 
 

@@ -18,8 +18,8 @@ so the Monte Carlo harness keeps its fused C tick.
 A second weight damps the outputs' rate (the velocity), whose heavy tails make paths
 overshoot the open end of a leg. `strip_weights_problem` builds the problem for the two
 weights; the search (the grid point of least cost in the original cost functional whose
-Monte Carlo upper bound meets epsilon, certified on fresh paths) is in
-``tools/reports/corridor_design.py``.
+Monte Carlo upper bound meets epsilon, certified on fresh paths) is
+`stospline.corridor_search`, the command ``stospline corridor-design``.
 """
 from __future__ import annotations
 

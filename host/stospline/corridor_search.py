@@ -1,0 +1,335 @@
+"""Designs for a corridor's risk budget: the search behind ``stospline corridor-design``.
+
+A problem file whose corridor carries ``epsilon`` asks for ``P(a path leaves the corridor at
+some tick of [a, b]) <= epsilon``. The knob (`stospline.design.corridor_design`) adds to each
+stage's running cost a pull ``w |a'y - c|^2`` towards the centre line of the polygon the
+stage's mean path runs in, and a velocity damping ``wv |C A x|^2``. The search, over a grid
+of (w, wv):
+
+1. designs every grid point (from the problem file the weights make, written and read back,
+   so the tables name that file's SHA-256) and evaluates its law with the exact oracle in the
+   *original* cost functional (cheap: no Monte Carlo), with the Cantelli and Gaussian union
+   bounds of the exit probability;
+2. screens the candidates in increasing order of that cost by Monte Carlo through the
+   compiled C controller (`search_paths`, `search_seed`): a candidate passes when the
+   one-sided 99 % Clopper-Pearson upper bound of its exits is at most epsilon. The first
+   that passes is the cheapest on the grid that passes: the others are not screened;
+3. certifies it on fresh paths (`certify_paths`, another seed: selecting on one sample and
+   certifying on the same would bias the bound); if the certified bound exceeds epsilon,
+   the next cheapest candidate that passes screening is certified, at most `attempts` times.
+
+Every number depends only on the problem, the grid, the path counts and the seeds (the Monte
+Carlo result is the same for any number of workers). `docs/evidence/corridor-exit.md` has the
+robot's designs for eps = 0.1 ... 0.001.
+"""
+from __future__ import annotations
+
+import hashlib
+import itertools
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from stospline import progress
+from stospline.budget import (BASE_SECONDS, Estimate, Term, estimate)
+from stospline.design.corridor_design import stage_polygons, strip_weights_problem
+from stospline.errors import ProblemError
+from stospline.pipeline import design_problem
+from stospline.problem.inputfile import decode_problem
+from stospline.problem.reader import parse_problem
+from stospline.sim.controller import build_controller
+from stospline.sim.exit_bound import exit_bounds
+from stospline.sim.exit_stats import CONFIDENCE, clopper_pearson_upper
+from stospline.sim.montecarlo import simulate
+from stospline.sim.oracle import evaluate_table
+
+__all__ = ["STRIP_WEIGHTS", "RATE_WEIGHTS", "SEARCH_SEED", "CERTIFY_SEED", "ATTEMPTS",
+           "Candidate", "Exits", "SearchResult", "target_corridor", "with_weights",
+           "evaluate_grid", "count_exits", "search", "certificate", "work_estimate",
+           "summary_text", "failure_reason"]
+
+STRIP_WEIGHTS = (0.0, 2.0, 5.0, 10.0, 20.0, 40.0)     # w, the centre-line pull
+RATE_WEIGHTS = (0.0, 0.5, 1.0, 2.0, 5.0)              # wv, the velocity damping
+SEARCH_SEED, CERTIFY_SEED = 20261126, 20261127
+ATTEMPTS = 3            # certification runs at most (each after a screening that passed)
+
+
+@dataclass(frozen=True)
+class Exits:
+    """A Monte Carlo count of the paths that left the corridor."""
+    exits: int
+    paths: int
+    seed: int
+
+    @property
+    def estimate(self) -> float:
+        return self.exits / self.paths
+
+    @property
+    def upper(self) -> float:
+        """One-sided 99 % Clopper-Pearson upper bound of the exit probability."""
+        return clopper_pearson_upper(self.exits, self.paths)
+
+    def as_dict(self) -> dict:
+        return {"exits": self.exits, "paths": self.paths, "seed": self.seed,
+                "estimate": self.estimate, "upper99": self.upper}
+
+
+@dataclass
+class Candidate:
+    """One grid point: its weights, the problem they make (read back from `toml`), and the
+    exact oracle's numbers of its table in the original cost functional."""
+    w: float
+    wv: float
+    toml: str
+    J: float                 # the original cost of the law (exact oracle, table as run)
+    cantelli: float          # union bounds of the exit probability (Cantelli: valid)
+    gaussian: float
+    legs_unchanged: bool     # its own mean path runs in the legs the weights assume
+    screening: Exits | None = None
+    certification: Exits | None = None
+
+    @property
+    def key(self) -> tuple:
+        return (self.J, self.w, self.wv)
+
+    def problem(self):
+        data = self.toml.encode("utf-8")
+        return parse_problem(decode_problem(data), source_sha256=hashlib.sha256(data).hexdigest())
+
+
+@dataclass
+class SearchResult:
+    epsilon: float
+    corridor: int            # index of the corridor designed for
+    J0: float                # the original design's cost (the table as run)
+    polygons: list[int]      # the polygon each stage's mean path runs in
+    candidates: list[Candidate]          # the whole grid, cheapest first
+    screened: list[Candidate] = field(default_factory=list)      # in the order screened
+    certified: list[Candidate] = field(default_factory=list)     # in the order certified
+    chosen: Candidate | None = None
+    designed: object = None  # pipeline.Designed of the chosen candidate
+
+
+def target_corridor(problem, epsilon: float | None = None):
+    """``(problem, index)``: the problem with the corridor to design for, and its index.
+
+    Without `epsilon`: exactly one corridor must carry ``epsilon``. With it (``--epsilon``):
+    the problem must have exactly one corridor, whose epsilon it sets. Raises ProblemError
+    naming the field or option otherwise, and for stage data that vary in time."""
+    cors = problem.corridors
+    if epsilon is not None:
+        if not (isinstance(epsilon, float) and 0.0 < epsilon < 1.0):
+            raise ProblemError("--epsilon", f"must be a number in (0, 1), got {epsilon!r}")
+        if len(cors) != 1:
+            raise ProblemError("--epsilon", f"sets the epsilon of the file's only corridor, but "
+                                            f"the file has {len(cors)} corridors"
+                                            + ("; give epsilon in the file on the one to "
+                                               "design for" if cors else ""))
+        problem = replace(problem, corridors=(replace(cors[0], epsilon=float(epsilon)),))
+        index = 0
+    else:
+        marked = [i for i, c in enumerate(cors) if c.epsilon is not None]
+        if not marked:
+            raise ProblemError("corridors", "no corridor has an epsilon (the risk budget to "
+                                            "design for); add epsilon to one [[corridors]] "
+                                            "entry or give --epsilon")
+        if len(marked) > 1:
+            raise ProblemError(f"corridors[{marked[1]}].epsilon",
+                               f"{len(marked)} corridors have an epsilon; the search designs "
+                               f"for one: remove the others' epsilon")
+        index = marked[0]
+    for k, st in enumerate(problem.stages):
+        if st.varying is not None:
+            raise ProblemError(f"stages[{k}]", "the corridor design adds constant weights to "
+                                               "each stage: stage data must not vary in time")
+    return problem, index
+
+
+def with_weights(problem, corridor: int, polygons: list[int], w: float, wv: float) -> str:
+    """The problem file (TOML text) of `problem` with the weights added as stage data."""
+    return strip_weights_problem(problem, problem.corridors[corridor], polygons, w,
+                                 wv).to_toml()
+
+
+def _outputs(problem, table, corridor: int):
+    c = problem.corridors[corridor]
+    mom = evaluate_table(problem, table, path=False, output=c.C)
+    return mom.J, mom.path_y_mean, mom.path_y_cov
+
+
+def evaluate_grid(problem, corridor: int, *, strip=STRIP_WEIGHTS, rate=RATE_WEIGHTS,
+                  **design_options) -> SearchResult:
+    """Design the problem and every grid point; the result's candidates sorted by their cost
+    in the original cost functional (ties by w, wv), nothing screened yet."""
+    c = problem.corridors[corridor]
+    base = design_problem(problem, **design_options)
+    J0, ym, _ = _outputs(problem, base.table, corridor)
+    polys = stage_polygons(problem, c, ym)
+    grid = list(itertools.product(strip, rate))
+    bar = progress.start("corridor designs", len(grid), unit="design")
+    out = []
+    try:
+        for w, wv in grid:
+            text = with_weights(problem, corridor, polys, w, wv)
+            cand = Candidate(float(w), float(wv), text, 0.0, 0.0, 0.0, True)
+            d = design_problem(cand.problem(), **design_options)
+            J, ym, yc = _outputs(problem, d.table, corridor)
+            b = exit_bounds(c, ym, yc, problem.t0, problem.tick_hz)
+            cand.J, cand.cantelli, cand.gaussian = (float(J), b["cantelli"].total,
+                                                    b["gaussian"].total)
+            cand.legs_unchanged = stage_polygons(problem, c, ym) == polys
+            out.append(cand)
+            progress.advance()
+    finally:
+        progress.finish(bar)
+    out.sort(key=lambda cd: cd.key)
+    return SearchResult(float(c.epsilon), corridor, float(J0), polys, out)
+
+
+def count_exits(problem, corridor: int, cand: Candidate, *, paths: int, seed: int,
+                substeps: int = 1, workers=None, scheduler=None, **design_options) -> Exits:
+    """Monte Carlo of the candidate's compiled C controller with the problem's plant (and
+    faults): how many of `paths` paths leave the corridor."""
+    d = design_problem(cand.problem(), **design_options)
+    mc = simulate(problem, build_controller(d.table), paths=paths, seed=seed,
+                  substeps=substeps, workers=workers, scheduler=scheduler)
+    return Exits(int(np.sum(mc.exit_tick[corridor] >= 0)), int(paths), int(seed))
+
+
+def search(problem, corridor: int, result: SearchResult, *, search_paths: int,
+           certify_paths: int, search_seed: int = SEARCH_SEED,
+           certify_seed: int = CERTIFY_SEED, attempts: int = ATTEMPTS, substeps: int = 1,
+           workers=None, scheduler=None, **design_options) -> SearchResult:
+    """Screen `result.candidates` cheapest first and certify the first that passes (the
+    next that passes if certification fails, at most `attempts` certifications). A
+    candidate's `screening` already set (e.g. by a full-grid run with the same paths and
+    seed) is used as it is. Sets ``screened``, ``certified``, ``chosen`` and ``designed``
+    (None when no grid point meets epsilon)."""
+    eps = result.epsilon
+    run = dict(substeps=substeps, workers=workers, scheduler=scheduler, **design_options)
+    for i, cand in enumerate(result.candidates):
+        if len(result.certified) >= attempts:
+            break
+        known = cand.screening
+        if known is None or (known.paths, known.seed) != (search_paths, search_seed):
+            progress.note(f"screening w = {cand.w:g}, wv = {cand.wv:g} (J = {cand.J:.6g}, "
+                          f"{i + 1} of {len(result.candidates)} by cost): {search_paths} paths")
+            cand.screening = count_exits(problem, corridor, cand, paths=search_paths,
+                                         seed=search_seed, **run)
+        result.screened.append(cand)
+        if cand.screening.upper > eps:
+            continue
+        progress.note(f"certifying w = {cand.w:g}, wv = {cand.wv:g}: {certify_paths} fresh "
+                      f"paths")
+        cand.certification = count_exits(problem, corridor, cand, paths=certify_paths,
+                                         seed=certify_seed, **run)
+        result.certified.append(cand)
+        if cand.certification.upper <= eps:
+            result.chosen = cand
+            result.designed = design_problem(cand.problem(), **design_options)
+            break
+    return result
+
+
+def certificate(result: SearchResult, *, problem_sha256: str, design_options: dict,
+                substeps: int) -> dict:
+    """The JSON certificate of a search (plain numbers, all finite)."""
+    c = result.chosen
+
+    def row(cd: Candidate) -> dict:
+        return {"w": cd.w, "wv": cd.wv, "J": cd.J, "cantelli_bound": cd.cantelli,
+                "gaussian_bound": cd.gaussian, "legs_unchanged": cd.legs_unchanged,
+                "screening": cd.screening.as_dict()
+                if any(cd is s for s in result.screened) else None,
+                "certification": None if cd.certification is None
+                else cd.certification.as_dict()}
+
+    return {
+        "epsilon": result.epsilon, "corridor": result.corridor, "confidence": CONFIDENCE,
+        "meets_epsilon": c is not None,
+        "J0": result.J0,
+        "chosen": None if c is None else {
+            "w": c.w, "wv": c.wv, "J": c.J, "extra": c.J - result.J0,
+            "extra_percent": 100.0 * (c.J / result.J0 - 1.0) if result.J0 else 0.0,
+            "screening": c.screening.as_dict(), "certification": c.certification.as_dict(),
+            "cantelli_bound": c.cantelli, "gaussian_bound": c.gaussian,
+            "problem_sha256": problem_sha256},
+        "stage_polygons": result.polygons,
+        "design": dict(design_options), "substeps": substeps,
+        "screened": len(result.screened), "certified": len(result.certified),
+        "grid": [row(cd) for cd in result.candidates],
+        "method": "grid of (w, wv), cheapest in the original cost first; screened by Monte "
+                  "Carlo through the compiled C controller (one-sided 99 % Clopper-Pearson "
+                  "upper bound <= epsilon), then certified on fresh paths with another seed",
+    }
+
+
+def work_estimate(problem, *, grid: int, search_paths: int, certify_paths: int,
+                  attempts: int = ATTEMPTS, substeps: int = 1, **design_options) -> Estimate:
+    """The most the search can take: every grid point designed and screened, `attempts`
+    certifications. The Monte Carlo terms are path-ticks at the harness throughput measured
+    for `stospline.budget` (one core; `tools/bench/harness_throughput.py`)."""
+    opts = {k: v for k, v in design_options.items() if k in ("mode", "discretization")}
+    design = estimate(problem, command="design", **opts)
+    per_design = sum(t.seconds for t in design.terms
+                     if not t.what.startswith(("start-up", "C text")))
+    tables = max((t.bytes for t in design.terms), default=0.0)
+
+    def mc(paths: int):
+        e = estimate(problem, command="simulate", paths=paths, substeps=substeps, **opts)
+        mc_term = next(t for t in e.terms if t.what.startswith("Monte Carlo"))
+        compiled = next(t for t in e.terms if t.what.startswith("C text"))
+        return mc_term, compiled
+
+    screen, compiled = mc(search_paths)
+    cert, _ = mc(certify_paths)
+    est = Estimate("corridor-design")
+    est.terms += [
+        Term("start-up (imports, compiled kernels)", "--max-time", seconds=BASE_SECONDS),
+        Term(f"designs and oracles of {grid + 1} grid points", "tick_hz",
+             seconds=(grid + 1) * 1.5 * per_design, bytes=tables),
+        Term(f"compiling {grid} controllers", "tick_hz", seconds=grid * compiled.seconds,
+             bytes=compiled.bytes),
+        Term(f"Monte Carlo screening ({grid} grid points x {search_paths} paths)",
+             "--search", seconds=grid * screen.seconds, bytes=screen.bytes),
+        Term(f"Monte Carlo certification ({attempts} x {certify_paths} paths)",
+             "--certify", seconds=attempts * cert.seconds, bytes=cert.bytes),
+    ]
+    return est
+
+
+def summary_text(result: SearchResult) -> str:
+    """What the search did, one line per screened candidate, and its outcome."""
+    n = len(result.candidates)
+    lines = [f"corridor {result.corridor}, epsilon {result.epsilon:g}: {n} grid points, the "
+             f"original design J0 = {result.J0:.6g}; screened cheapest first: "
+             f"{len(result.screened)} of {n}, certified: {len(result.certified)}"]
+    for cd in result.screened:
+        s, c = cd.screening, cd.certification
+        line = (f"  w = {cd.w:g}, wv = {cd.wv:g}: J = {cd.J:.6g} ({cd.J - result.J0:+.4g}); "
+                f"screening {s.exits} of {s.paths} paths left, upper99 {s.upper:.4g}"
+                f" -> {'pass' if s.upper <= result.epsilon else 'fail'}")
+        if c is not None:
+            line += (f"; certification {c.exits} of {c.paths}, upper99 {c.upper:.4g} -> "
+                     f"{'certified' if c.upper <= result.epsilon else 'FAILED'}")
+        lines.append(line)
+    c = result.chosen
+    if c is not None:
+        lines.append(f"chosen: w = {c.w:g}, wv = {c.wv:g}, J = {c.J:.6g} "
+                     f"({100 * (c.J / result.J0 - 1) if result.J0 else 0.0:+.3g} % over J0); "
+                     f"P(leave) <= {c.certification.upper:.4g} (one-sided 99 %, "
+                     f"{c.certification.paths} fresh paths) <= epsilon {result.epsilon:g}")
+    return "\n".join(lines)
+
+
+def failure_reason(result: SearchResult) -> str:
+    """Why no design was chosen (for the error line)."""
+    eps = result.epsilon
+    if result.certified:
+        best = min(cd.certification.upper for cd in result.certified)
+        return (f"no grid point was certified: {len(result.certified)} that passed screening "
+                f"failed certification (best one-sided 99 % bound {best:.4g} > {eps:g})")
+    best = min((cd.screening.upper for cd in result.screened), default=1.0)
+    return (f"no grid point meets {eps:g}: the best screening bound (one-sided 99 %) is "
+            f"{best:.4g}; raise the weights (--strip, --rate), the paths, or epsilon")

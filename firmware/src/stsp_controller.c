@@ -359,6 +359,17 @@ static STSP_NOINLINE stsp_status_t stsp_step_cold(stsp_ctrl_t *ctrl, uint32_t ti
 }
 
 #ifndef STSP_ARITH_FIXED_POINT
+/* The spline law out of line, for the ticks other than the ordinary one (the first of a span,
+ * the cold path): one more copy of it in flash instead of two. */
+static STSP_NOINLINE uint32_t stsp_spline_law_other(const stsp_header_t *h, const stsp_span_t *p,
+                                                    const stsp_f32_t *knot,
+                                                    const stsp_f32_t *coef, uint32_t tick,
+                                                    const stsp_f32_t *x, const stsp_f32_t *v,
+                                                    stsp_f32_t *y, uint32_t limited)
+{
+    return stsp_spline_law(h, p, knot, coef, tick, x, v, y, limited);
+}
+
 /* Every tick of a spline table but its ordinary one, as stsp_step_cold: the same plan and
  * commit, with the span located and recorded, and the state and a fresh latch checked for
  * finiteness (stsp_spline_inputs). stage_end stays 0: every tick of a spline table leaves
@@ -381,8 +392,8 @@ static STSP_NOINLINE stsp_status_t stsp_step_cold_spline(stsp_ctrl_t *ctrl, uint
             status = st;
         } else {
             stsp_spline_locate(ctrl, tick, plan.stage, &span);
-            if (stsp_spline_law(h, &span, span.knot, span.coef, tick, x, v_new, y,
-                                ctrl->limited) != 0u) {
+            if (stsp_spline_law_other(h, &span, span.knot, span.coef, tick, x, v_new, y,
+                                      ctrl->limited) != 0u) {
                 const stsp_status_t lim = stsp_limit(h, x, y, &mask);
                 if (lim != STSP_OK) {
                     status = lim;
@@ -448,7 +459,10 @@ static STSP_ALWAYS_INLINE stsp_status_t stsp_spline_tick(stsp_ctrl_t *ctrl,
     const stsp_header_t *h = &ctrl->checked;
     stsp_f32_t y[STSP_MAX_NU];
     const uint32_t out =
-        stsp_spline_law(h, &ctrl->span, knot, coef, tick, x, ctrl->v, y, ctrl->limited);
+        (advance != 0u)
+            ? stsp_spline_law_other(h, &ctrl->span, knot, coef, tick, x, ctrl->v, y,
+                                    ctrl->limited)
+            : stsp_spline_law(h, &ctrl->span, knot, coef, tick, x, ctrl->v, y, ctrl->limited);
     if ((out != 0u) &&
         ((stsp_command_finite(h, y) == 0) || (stsp_all_finite(x, stsp_nx(h)) == 0))) {
         return stsp_step_nonfinite(ctrl, x, u);

@@ -446,6 +446,7 @@ uint16_t stsp_has_limits(const stsp_header_t *t)
 }
 #endif /* STSP_ARITH_FIXED_POINT */
 
+#ifndef STSP_ARITH_FIXED_POINT
 /* The spline part of stsp_table_crc32()'s serialization: counts, then the six arrays, index
  * arrays as u32 each, knots and coefficients as binary32. */
 static uint32_t stsp_crc_spline(uint32_t crc, const stsp_spline_t *sp, uint32_t ns, uint32_t nu)
@@ -467,13 +468,16 @@ static uint32_t stsp_crc_spline(uint32_t crc, const stsp_spline_t *sp, uint32_t 
     c = stsp_crc32_u32s(c, sp->coef_start, ns + 1u);
     return stsp_crc32_f32s(c, sp->coef, sp->n_coef);
 }
+#endif
 
 /* The CRC of stsp_table_crc32(), with the dimensions and arrays of the header copy `table`
  * and the remaining scalars (tick_hz, scalar_kind, problem_sha256) of the table header. */
 uint32_t stsp_crc_of(const stsp_header_t *table, const stsp_table_t *scalars)
 {
 #ifdef STSP_ARITH_FIXED_POINT
-    /* Only stsp_table_crc32() of a table init would refuse can have these here. */
+    /* Only stsp_table_crc32() of a table init would refuse can have a band dual here. A spline
+     * table is refused before its CRC: its arrays are not serialised (K, k0, L, which it need
+     * not have, are left out as in a float32 build). */
     const stsp_bandqp_t *b = scalars->band_qp;
     const stsp_spline_t *sp = scalars->spline;
 #else
@@ -522,10 +526,11 @@ uint32_t stsp_crc_of(const stsp_header_t *table, const stsp_table_t *scalars)
     if (n_latch > 0u) {
         crc = stsp_crc32_i8s(crc, table->v_exp, n_latch);
     }
-#endif
+#else
     if (sp != NULL) {
         crc = stsp_crc_spline(crc, sp, ns, nu);
     }
+#endif
     if (b != NULL) {
         const uint32_t q = b->q;
         crc = stsp_crc32_u32(crc, q);

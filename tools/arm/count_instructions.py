@@ -196,11 +196,16 @@ def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
                  *totals([ctl])))
     rows.append(("controller + robot tables objects", *totals([ctl, tables])))
     roots = ["stsp_init", "stsp_reset", "stsp_step"]
-    for what, extra_roots, libs in (("controller linked (API roots)", [], [ctl]),
-                                    ("controller + tables linked",
-                                     [f"robot_corridor{sfx}_table"],
-                                     [tables, ctl])):
-        elf = build / f"footprint_{Path(controller).stem}_{'tables' if extra_roots else 'ctl'}.elf"
+    links = [("controller linked (API roots)", [], [ctl]),
+             ("controller + tables linked", [f"robot_corridor{sfx}_table"], [tables, ctl])]
+    if not sfx:
+        # float32: also the spline table of the robot's shape (tools/arm/spline_bench_table.c).
+        links.append(("controller + spline bench table linked", ["spline_bench_table"],
+                      [build / "libstsp_spline_bench_table.a", ctl]))
+    for what, extra_roots, libs in links:
+        kind = ("spline" if "spline_bench_table" in extra_roots else
+                "tables" if extra_roots else "ctl")
+        elf = build / f"footprint_{Path(controller).stem}_{kind}.elf"
         cmd = (["arm-none-eabi-gcc", *CPU_FLAGS[cpu], "-nostdlib", "-nostartfiles",
                 "-Wl,--gc-sections", "-Wl,-e,stsp_step", "-o", str(elf)]
                + [f"-Wl,-u,{r}" for r in roots + extra_roots] + [str(p) for p in libs]

@@ -219,10 +219,11 @@ typedef enum {
  *     k0[i], j = nx + 1 + c is L[i][c]; an entry not stored is exactly 0;
  *   coef[coef_start[s] .. coef_start[s+1]): the stage's S_s + 3 B-spline coefficients of each
  *     entry, entry after entry in col order.
- * stsp_init() checks: knot_start[0] == 0, row_start[0] == 0, coef_start[0] == 0, all three
- * nondecreasing and ending at n_knots, n_entries and n_coef; every stage's knots as above;
- * col[e] < nx + 1 + n_latch; coef_start[s+1] - coef_start[s] == (entries of stage s) x
- * (S_s + 3) (else STSP_ERR_BAD_DIMS); every coefficient finite (STSP_ERR_BAD_VALUES).
+ * stsp_init() checks: the six arrays not NULL (else STSP_ERR_NULL); knot_start[0] == 0,
+ * row_start[0] == 0, coef_start[0] == 0, all three nondecreasing and ending at n_knots,
+ * n_entries and n_coef; every stage's knots as above; col[e] < nx + 1 + n_latch;
+ * coef_start[s+1] - coef_start[s] == (entries of stage s) x (S_s + 3) (else
+ * STSP_ERR_BAD_DIMS); every coefficient finite (STSP_ERR_BAD_VALUES).
  */
 typedef struct {
     uint32_t n_knots;             /**< length of knot */

@@ -967,7 +967,7 @@ static void test_changed_arrays_stay_in_bounds(void **state_)
 {
     uint32_t k, tick;
     (void)state_;
-    for (k = 0u; k < 10u; ++k) {
+    for (k = 0u; k < 11u; ++k) {
         uint32_t *knot_start = heap_copy(s_knot_start, sizeof s_knot_start);
         float *knot = heap_copy(s_knot, sizeof s_knot);
         uint16_t *row_start = heap_copy(s_row_start, sizeof s_row_start);
@@ -981,8 +981,12 @@ static void test_changed_arrays_stay_in_bounds(void **state_)
         stsp_ctrl_t c;
         t.stage_start = stage_start;
         assert_int_equal(stsp_init(&c, &t), STSP_OK);
+        /* x in a heap block of its exact size too: the test itself is not built with ASan,
+         * so a read past a stack array here would go unnoticed. */
+        static const float no_state[S_NX] = {0.0f, 0.0f};
+        float *x = heap_copy(no_state, sizeof no_state);
         for (tick = 0u; tick < 24u; ++tick) {
-            float x[S_NX], u[S_NU];
+            float u[S_NU];
             stsp_status_t st;
             if (tick == 2u + k) {
                 switch (k) {
@@ -995,6 +999,9 @@ static void test_changed_arrays_stay_in_bounds(void **state_)
                 case 6u: stage_start[1] = 0xFFFFFFFFu; stage_start[2] = 3u; break;
                 case 7u: row_start[3] = 0u; row_start[2] = 8u; break;
                 case 8u: knot_start[1] = 18u; coef_start[1] = 43u; row_start[2] = 7u; break;
+                /* a gain of x now naming x[nx], x[nx + 1]: just past x, where ASan's redzone
+                 * is (0xFF above reads far beyond it) */
+                case 9u: col[0] = (uint8_t)S_NX; col[4] = (uint8_t)(S_NX + 1u); break;
                 default: memset(knot, 0xFF, sizeof s_knot); memset(coef, 0xFF, sizeof s_coef);
                     break;
                 }
@@ -1008,6 +1015,7 @@ static void test_changed_arrays_stay_in_bounds(void **state_)
         assert_int_equal(stsp_verify(&c), STSP_ERR_BAD_CRC);
         free(knot_start); free(knot); free(row_start); free(col); free(coef_start); free(coef);
         free(stage_start);
+        free(x);
     }
 }
 

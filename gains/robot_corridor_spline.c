@@ -174,6 +174,10 @@ static const stsp_spline_t robot_corridor_spline_spline = {
     robot_corridor_spline_knot_start, robot_corridor_spline_knot, robot_corridor_spline_row_start, robot_corridor_spline_col, robot_corridor_spline_coef_start, robot_corridor_spline_coef
 };
 
+/* The controller refers to the spline code only weakly, so that programs without a
+ * spline table do not link it: this reference links it with the table. */
+const uint32_t *const robot_corridor_spline_spline_code = &stsp_spline_code;
+
 const stsp_table_t robot_corridor_spline_table = {
     0x53545350u, 5u, 1u,
     4u, 2u, 4u, 2u, 6000u, 1000u,

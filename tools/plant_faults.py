@@ -156,9 +156,9 @@ FAULTS = [
     Fault("F34", "spline basis: a wrong left term in the last round", CTL,
           "    n[3] = left1 * temp;", "    n[3] = left2 * temp;"),
     Fault("F35", "spline ordinary tick does not check the state (a sparse row hides a NaN)", CTL,
-          "        z[i] = x[i];\n        total += x[i];", "        z[i] = x[i];"),
+          "        total += x[i];", "        (void)x;"),
     Fault("F36", "spline operand index not bounded (col changed after init)", CTL,
-          "    return (col < last) ? col : last;", "    (void)last;\n    return col;"),
+          "    return (col < nx) ? col : (nx - 1u);", "    (void)nx;\n    return col;"),
     Fault("F37", "spline stage layout not bounded by the coefficient count (changed after init)",
           CTL, "        if ((e1 - e0) > ((sp->n_coef - c0) / (n_spans + 3u))) {",
           "        if ((e1 - e0) > sp->n_coef) {"),
@@ -169,7 +169,12 @@ FAULTS = [
           "    while (((sigma + 1u) < n_spans) && !(tau < U[sigma + 4u])) {",
           "    while (((sigma + 1u) < n_spans) && (tau > U[sigma + 4u])) {"),
     Fault("F40", "the first tick of the next span evaluates the old span's knots", CTL,
-          "    return stsp_spline_tick(ctrl, &p->knot[1],", "    return stsp_spline_tick(ctrl, p->knot,"),
+          "    knot = &p->knot[1];", "    knot = p->knot;"),
+    Fault("F41", "the fold at the first tick of the next span uses k0 and L of the old span", CTL,
+          "    stsp_spline_fold(h, p, coef, ctrl->v, fold);",
+          "    stsp_spline_fold(h, p, p->coef, ctrl->v, fold);"),
+    Fault("F42", "init accepts a spline table in a program without the spline code", CTL,
+          "        if (stsp_spline_linked() == 0) {", "        if (stsp_spline_linked() < 0) {"),
 ]
 
 

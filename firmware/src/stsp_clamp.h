@@ -28,4 +28,16 @@ static STSP_ALWAYS_INLINE stsp_status_t stsp_clamp(const stsp_header_t *h, stsp_
     return (m != 0u) ? STSP_WARN_SATURATED : STSP_OK;
 }
 
+/* An ordinary tick whose finite command (already in u) is out of range, or a false alarm
+ * (stsp_controller.c, stsp_spline.c). */
+static STSP_NOINLINE stsp_status_t stsp_step_fixup(stsp_ctrl_t *ctrl, uint32_t tick,
+                                                   stsp_scalar_t *u)
+{
+    uint16_t mask = 0u;
+    const stsp_status_t st = stsp_clamp(&ctrl->checked, u, &mask);
+    ctrl->sat_mask = mask;
+    ctrl->next_tick = tick + 1u;
+    return st;
+}
+
 #endif /* STSP_CLAMP_H */

@@ -54,6 +54,7 @@ uint32_t stsp_crc32_scalars(uint32_t crc, const stsp_scalar_t *values, uint32_t 
     return c;
 }
 
+#ifndef STSP_ARITH_FIXED_POINT
 uint32_t stsp_crc32_u32s(uint32_t crc, const uint32_t *values, uint32_t count)
 {
     uint32_t c = crc;
@@ -75,6 +76,7 @@ uint32_t stsp_crc32_f32s(uint32_t crc, const stsp_f32_t *values, uint32_t count)
     }
     return c;
 }
+#endif
 
 uint32_t stsp_crc32_bytes(uint32_t crc, const uint8_t *values, uint32_t count)
 {

@@ -134,6 +134,34 @@ static inline int stsp_band_solver_linked(void) { return 1; }
 #endif
 #endif
 
+#ifndef STSP_ARITH_FIXED_POINT
+/* The spline tables' code (stsp_spline.c, about 4 KB on a Cortex-M4F) is linked only into
+ * programs with a spline table, as the band solver: with GCC or clang on an ELF target the
+ * controller refers to its two entry points weakly, and a generated spline table refers to
+ * stsp_spline_code (same object) strongly (<name>_spline_code). Without it stsp_init()
+ * refuses a spline table (STSP_ERR_BAD_DIMS), so stsp_step() calls stsp_spline_step only when
+ * it is linked. Elsewhere the references are ordinary ones. */
+#if (defined(__GNUC__) || defined(__clang__)) && defined(__ELF__)
+#define STSP_WEAK_SPLINE __attribute__((weak))
+#else
+#define STSP_WEAK_SPLINE
+#endif
+/* Every tick of a spline table (stsp_step() after its argument and ready checks). */
+extern stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_t *x,
+                                      stsp_f32_t *u) STSP_WEAK_SPLINE;
+/* init's checks of a spline table's layout (stsp_spline_t), on the header copy. */
+extern stsp_status_t stsp_spline_check_dims(const stsp_header_t *h) STSP_WEAK_SPLINE;
+#if (defined(__GNUC__) || defined(__clang__)) && defined(__ELF__)
+/* 1 when the spline code is linked into the program (its weak references resolved). */
+static inline int stsp_spline_linked(void)
+{
+    return (&stsp_spline_step != NULL) ? 1 : 0;
+}
+#else
+static inline int stsp_spline_linked(void) { return 1; }
+#endif
+#endif
+
 /* Value of stsp_ctrl_t.ready after a successful stsp_init(): a Thumb-2 immediate that no
  * byte-fill pattern of uninitialised memory (0x00, 0xFF, 0xA5, 0xCC, ...) matches. */
 #define STSP_CTRL_READY 0x53005300u

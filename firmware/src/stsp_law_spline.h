@@ -1,33 +1,16 @@
-/* The law of a spline table (stsp_spline_t, float32 only), included once by stsp_controller.c
+/* The law of a spline table (stsp_spline_t, float32 only), included once by stsp_spline.c
  * after stsp_law.h: the stage layout and span search of the cold path, and the law at a span
  * (static, inlined into the spline ordinary tick and the cold path). Private: not installed. */
 #ifndef STSP_LAW_SPLINE_H
 #define STSP_LAW_SPLINE_H
 
-/* z = [x, 1, v], the operands the entries' col index. An index read after init is bounded in
- * the cheaper way for the build: in an STSP_FIXED_* build z is padded with zeros to a power of
- * two and the index masked (one instruction per entry, and a few constant stores per tick);
- * in the generic build (the padding would be a loop) the index is clamped to z's last entry. */
-#ifdef STSP_FIXED_NX
-#define STSP_NZ (STSP_FIXED_NX + 1u + STSP_FIXED_N_LATCH)
-#define STSP_Z_LEN                                                                         \
-    ((STSP_NZ <= 8u) ? 8u                                                                  \
-                     : ((STSP_NZ <= 16u) ? 16u                                             \
-                                         : ((STSP_NZ <= 32u) ? 32u                         \
-                                                             : ((STSP_NZ <= 64u) ? 64u     \
-                                                                                 : 256u))))
-
-static inline uint32_t stsp_z_index(uint32_t col, uint32_t last)
+#ifndef STSP_FIXED_NX
+/* The state entry of a gain of x in the generic build, col < nx on a table init accepted,
+ * clamped whatever col holds now (a table changed after init: a wrong command, no access
+ * outside x). An STSP_FIXED_* build reads no col on the ordinary tick (x_mask). */
+static inline uint32_t stsp_x_index(uint32_t col, uint32_t nx)
 {
-    (void)last;
-    return col & (STSP_Z_LEN - 1u);
-}
-#else
-#define STSP_Z_LEN (STSP_MAX_NX + 1u + STSP_MAX_LATCH)
-
-static inline uint32_t stsp_z_index(uint32_t col, uint32_t last)
-{
-    return (col < last) ? col : last;
+    return (col < nx) ? col : (nx - 1u);
 }
 #endif
 
@@ -55,11 +38,20 @@ static uint32_t stsp_spline_stage(const stsp_header_t *h, uint32_t s, stsp_span_
     }
     for (i = 0u; i < nu; ++i) {
         const uint32_t end = sp->row_start[(s * nu) + i + 1u];
+        uint32_t k = e1;
+        uint32_t mask = 0u;
         if ((end < e1) || (end > sp->n_entries)) {
             fits = 0u;
         } else {
+            /* The row's gains of x: its first entries (init checked col increasing). */
+            while ((k < end) && (sp->col[k] < stsp_nx(h))) {
+                mask |= (uint32_t)1u << sp->col[k];
+                ++k;
+            }
             e1 = end;
         }
+        p->k_end[i] = (uint16_t)(k - e0);
+        p->x_mask[i] = mask;
         p->row_end[i] = (uint16_t)(e1 - e0);
     }
     if (fits != 0u) {
@@ -78,7 +70,9 @@ static uint32_t stsp_spline_stage(const stsp_header_t *h, uint32_t s, stsp_span_
         p->coef = sp->coef;
         p->col = sp->col;
         for (i = 0u; i < nu; ++i) {
+            p->k_end[i] = 0u;
             p->row_end[i] = 0u;
+            p->x_mask[i] = 0u;
         }
     }
     p->stride = n_spans + 3u;
@@ -86,12 +80,22 @@ static uint32_t stsp_spline_stage(const stsp_header_t *h, uint32_t s, stsp_span_
     return n_spans;
 }
 
-/* Cold path: record span p in the instance's dst, row_end only for the table's inputs (the
- * rest stays zero, as init left it). */
+/* Input i's folded coefficients at fold[4 i .. 4 i + 3]: dst = src for the table's inputs. */
+static void stsp_spline_copy_fold(const stsp_header_t *h, stsp_f32_t *dst, const stsp_f32_t *src)
+{
+    uint32_t i;
+    for (i = 0u; i < (4u * stsp_nu(h)); ++i) {
+        dst[i] = src[i];
+    }
+}
+
+/* Cold path: record span p in the instance's dst, k_end, row_end and the fold only for the
+ * table's inputs (the rest stays zero, as reset left it). */
 static void stsp_spline_commit(const stsp_header_t *h, stsp_span_t *dst, const stsp_span_t *p)
 {
     uint32_t i;
     dst->knot = p->knot;
+    dst->inv = p->inv;
     dst->coef = p->coef;
     dst->col = p->col;
     dst->first = p->first;
@@ -100,8 +104,20 @@ static void stsp_spline_commit(const stsp_header_t *h, stsp_span_t *dst, const s
     dst->span = p->span;
     dst->n_spans = p->n_spans;
     for (i = 0u; i < stsp_nu(h); ++i) {
+        dst->k_end[i] = p->k_end[i];
         dst->row_end[i] = p->row_end[i];
+        dst->x_mask[i] = p->x_mask[i];
     }
+    stsp_spline_copy_fold(h, dst->fold, p->fold);
+}
+
+/* 1 / (U[sigma + 4] - U[sigma + 3]) for the span whose knots start at k = U[sigma + 1]: the
+ * first division of The NURBS Book A2.2, 1 / (right1 + left1), which does not depend on tau
+ * (right1 + left1 = (k[3] - tau) + (tau - k[2]), integers below 2^24 on a valid table: every
+ * step exact, so the same bits as k[3] - k[2]). Once per span instead of once per tick. */
+static stsp_f32_t stsp_span_inv(const stsp_f32_t *k)
+{
+    return 1.0f / (k[3] - k[2]);
 }
 
 /* The first tick after span sigma (of n_spans; `first`, the stage's first tick, and k, the
@@ -143,6 +159,7 @@ static void stsp_spline_span(const stsp_header_t *h, uint32_t s, uint32_t from, 
     p->span = sigma;
     p->n_spans = n_spans;
     p->knot = &U[sigma + 1u];
+    p->inv = stsp_span_inv(p->knot);
     p->next = stsp_span_end(p->knot, sigma, n_spans, tick, p->first, end);
     if (p->row_end[stsp_nu(h) - 1u] > 0u) {
         p->coef = &p->coef[sigma]; /* < the stage's S + 3 coefficients of its first entry */
@@ -154,8 +171,8 @@ static void stsp_spline_span(const stsp_header_t *h, uint32_t s, uint32_t from, 
  * order of stsp_controller.h, except that the first step of each round, saved + right[1] temp
  * with saved = +0, is right[1] temp: +0 + p is p for every p >= +0, and on a valid span every
  * term is >= +0 (left[k] >= 0, right[k] > 0, so no quotient or product is -0). */
-static STSP_ALWAYS_INLINE void stsp_spline_basis(const stsp_f32_t *k, stsp_f32_t tau,
-                                                 stsp_f32_t *n)
+static STSP_ALWAYS_INLINE void stsp_spline_basis(const stsp_f32_t *k, stsp_f32_t inv,
+                                                 stsp_f32_t tau, stsp_f32_t *n)
 {
     const stsp_f32_t left1 = tau - k[2];
     const stsp_f32_t left2 = tau - k[1];
@@ -168,8 +185,8 @@ static STSP_ALWAYS_INLINE void stsp_spline_basis(const stsp_f32_t *k, stsp_f32_t
     stsp_f32_t n2;
     stsp_f32_t temp;
     stsp_f32_t saved;
-    /* round 1 (N[0] = 1) */
-    temp = 1.0f / (right1 + left1);
+    /* round 1 (N[0] = 1): temp = 1 / (right1 + left1), the span's inv (stsp_span_inv) */
+    temp = inv;
     n0 = right1 * temp;
     n1 = left1 * temp;
     /* round 2 */
@@ -191,97 +208,160 @@ static STSP_ALWAYS_INLINE void stsp_spline_basis(const stsp_f32_t *k, stsp_f32_t
     n[3] = left1 * temp;
 }
 
-/* acc - g z for one entry whose four coefficients of the span are c[0..3]: g = ((n[0] c[0] +
- * n[1] c[1]) + n[2] c[2]) + n[3] c[3], every product and sum rounded (not fused), then the
- * product g z rounded and subtracted. On a single-precision VFP one VLDM of c and VMUL, three
- * VMLA, VMLS (chained: the bits of the C below, as for stsp_mls), in one asm statement so
- * that the four coefficients land in consecutive registers (s12-s15, with g in s11: all
- * caller-saved, declared clobbered). */
+/* Cold path: the feed-forward of each input folded with the latch v into one spline, for the
+ * span of p's stage (layout, k_end, row_end) whose first entry's coefficients are at coef:
+ * for r = 0..3, over input i's entries after its
+ * gains of x (k0[i]: z = 1; L[i][c]: z = v[c]) in stored order,
+ *     fold[4 i + r] = ((+0 - c_e1[r] z_e1) - c_e2[r] z_e2) - ...
+ * with c_e the entry's coefficients of the span (every product and difference rounded, not
+ * fused), so that the ordinary tick evaluates one spline per input for k0[i] + L[i] v instead
+ * of one per entry. A col changed since init is bounded: v's index clamped to n_latch - 1 (v
+ * has STSP_MAX_LATCH >= 1 entries, zero beyond n_latch). */
+static void stsp_spline_fold(const stsp_header_t *h, const stsp_span_t *p,
+                             const stsp_f32_t *coef, const stsp_f32_t *v, stsp_f32_t *fold)
+{
+    const uint32_t nx = stsp_nx(h);
+    const uint32_t n_latch = stsp_n_latch(h);
+    uint32_t last = 0u; /* v's last index */
+    uint32_t i;
+    if (n_latch > 0u) {
+        last = n_latch - 1u;
+    }
+    for (i = 0u; i < stsp_nu(h); ++i) {
+        stsp_f32_t f[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+        uint32_t e;
+        uint32_t r;
+        for (e = p->k_end[i]; e < p->row_end[i]; ++e) {
+            const uint32_t col = p->col[e];
+            const uint32_t c = col - nx - 1u; /* wraps for col <= nx: clamped below */
+            const stsp_f32_t z = (col == nx) ? 1.0f : v[(c < last) ? c : last];
+            const stsp_f32_t *cf = &coef[e * p->stride];
+            for (r = 0u; r < 4u; ++r) {
+                f[r] = stsp_mls(f[r], cf[r], z);
+            }
+        }
+        for (r = 0u; r < 4u; ++r) {
+            fold[(4u * i) + r] = f[r];
+        }
+    }
+}
+
+/* g = ((n[0] c[0] + n[1] c[1]) + n[2] c[2]) + n[3] c[3], every product and sum rounded (not
+ * fused): a gain from its four coefficients of the span. On a single-precision VFP one VLDM of
+ * c and VMUL, three VMLA (chained: the bits of the C below, as for stsp_mla) in one asm
+ * statement, so that the coefficients land in consecutive registers (s12-s15: caller-saved,
+ * declared clobbered). */
 static STSP_ALWAYS_INLINE stsp_f32_t
 /* cppcheck-suppress misra-c2012-2.7 ; deviation D5: the parameters are asm operands */
-stsp_spline_entry(stsp_f32_t acc, const stsp_f32_t *c, const stsp_f32_t *n, stsp_f32_t z)
+stsp_spline_gain(const stsp_f32_t *c, const stsp_f32_t *n)
 {
 #if STSP_VFP_MAC
-    stsp_f32_t r = acc;
-    __asm__ volatile("vldmia %[c], {s12-s15}\n\t"
-                     "vmul.f32 s11, %[n0], s12\n\t"
-                     "vmla.f32 s11, %[n1], s13\n\t"
-                     "vmla.f32 s11, %[n2], s14\n\t"
-                     "vmla.f32 s11, %[n3], s15\n\t"
-                     "vmls.f32 %[r], s11, %[z]"
-                     : [r] "+t"(r)
+    stsp_f32_t g;
+    __asm__ volatile("vldmia %[c], {s0-s3}\n\t"
+                     "vmul.f32 %[g], %[n0], s0\n\t"
+                     "vmla.f32 %[g], %[n1], s1\n\t"
+                     "vmla.f32 %[g], %[n2], s2\n\t"
+                     "vmla.f32 %[g], %[n3], s3"
+                     : [g] "=&t"(g)
                      : [c] "r"(c), [n0] "t"(n[0]), [n1] "t"(n[1]), [n2] "t"(n[2]),
-                       [n3] "t"(n[3]), [z] "t"(z), "m"(c[0]), "m"(c[1]), "m"(c[2]), "m"(c[3])
-                     : "s11", "s12", "s13", "s14", "s15");
-    return r;
+                       [n3] "t"(n[3]), "m"(c[0]), "m"(c[1]), "m"(c[2]), "m"(c[3])
+                     : "s0", "s1", "s2", "s3");
+    return g;
 #else
     stsp_f32_t g = n[0] * c[0];
     g = stsp_mla(g, n[1], c[1]);
     g = stsp_mla(g, n[2], c[2]);
-    g = stsp_mla(g, n[3], c[3]);
-    return stsp_mls(acc, g, z);
+    return stsp_mla(g, n[3], c[3]);
 #endif
 }
 
-/* The spline law at `tick` in p's stage, in the span whose knots start at knot (U[sigma + 1])
- * and whose first entry's coefficients at coef, with multipliers v, into y (x and u may
- * overlap: y is never the caller's u): the basis once, then per input i, over its entries in
- * stored order, acc = acc - g z[col] from acc = +0 (stsp_spline_entry). Returns nonzero when
- * the step needs the cold path: as stsp_law_alarm(), and also when the state is not finite
+/* acc - g x for one gain of x whose four coefficients of the span are c[0..3] (g as
+ * stsp_spline_gain, then the product g x rounded and subtracted). On a single-precision VFP
+ * one VLDM of c and VMUL, three VMLA, VMLS in one asm statement (g in a scratch register the
+ * compiler picks). */
+static STSP_ALWAYS_INLINE stsp_f32_t
+/* cppcheck-suppress misra-c2012-2.7 ; deviation D5: the parameters are asm operands */
+stsp_spline_entry(stsp_f32_t acc, const stsp_f32_t *c, const stsp_f32_t *n, stsp_f32_t x)
+{
+#if STSP_VFP_MAC
+    stsp_f32_t r = acc;
+    stsp_f32_t g; /* scratch: the gain */
+    __asm__ volatile("vldmia %[c], {s0-s3}\n\t"
+                     "vmul.f32 %[g], %[n0], s0\n\t"
+                     "vmla.f32 %[g], %[n1], s1\n\t"
+                     "vmla.f32 %[g], %[n2], s2\n\t"
+                     "vmla.f32 %[g], %[n3], s3\n\t"
+                     "vmls.f32 %[r], %[g], %[x]"
+                     : [r] "+t"(r), [g] "=&t"(g)
+                     : [c] "r"(c), [n0] "t"(n[0]), [n1] "t"(n[1]), [n2] "t"(n[2]),
+                       [n3] "t"(n[3]), [x] "t"(x), "m"(c[0]), "m"(c[1]), "m"(c[2]), "m"(c[3])
+                     : "s0", "s1", "s2", "s3");
+    return r;
+#else
+    return stsp_mls(acc, stsp_spline_gain(c, n), x);
+#endif
+}
+
+/* The spline law at `tick` in p's stage, in the span whose knots start at knot (U[sigma + 1]),
+ * with inv its stsp_span_inv, whose first entry's coefficients at coef and whose folded feed-forward (stsp_spline_fold) is
+ * fold, into y (x and u may overlap: y is never the caller's u): the basis once, then per
+ * input i, acc = the folded spline's value (stsp_spline_gain of fold[4 i ..]) and, over the
+ * row's gains of x in stored order, acc = acc - g x[col] (stsp_spline_entry). Returns nonzero
+ * when the step needs the cold path: as stsp_law_alarm(), and also when the state is not finite
  * (an input need not use every x[j], so the command does not reveal it: the state's sum joins
  * the command's in the check; it also overflows for some huge finite states, a false alarm
- * the cold path clears). A col changed since init is bounded by stsp_z_index(): a wrong
- * command, no access outside z. */
+ * the cold path clears). A col changed since init is bounded by stsp_x_index() (generic
+ * build) or not read (x_mask, STSP_FIXED_* build). */
 static STSP_ALWAYS_INLINE uint32_t stsp_spline_law(const stsp_header_t *h, const stsp_span_t *p,
-                                                   const stsp_f32_t *knot,
-                                                   const stsp_f32_t *coef, uint32_t tick,
-                                                   const stsp_f32_t *x, const stsp_f32_t *v,
-                                                   stsp_f32_t *y, uint32_t limited)
+                                                   const stsp_f32_t *knot, stsp_f32_t inv,
+                                                   const stsp_f32_t *coef,
+                                                   const stsp_f32_t *fold, uint32_t tick,
+                                                   const stsp_f32_t *x, stsp_f32_t *y,
+                                                   uint32_t limited)
 {
     const uint32_t nx = stsp_nx(h);
     const uint32_t nu = stsp_nu(h);
-    const uint32_t n_latch = stsp_n_latch(h);
-    const uint32_t last = nx + n_latch;
     const uint32_t stride = p->stride;
     const uint32_t in_stage = tick - p->first; /* tau, exact: < 2^24 on a valid table */
     const uint8_t *col = p->col;
-    stsp_f32_t z[STSP_Z_LEN];
-    const stsp_f32_t *zp;
     stsp_f32_t n[4];
     stsp_f32_t total = -0.0f; /* of x, then of y: -0 + a = a, the compiler drops this add */
-    uint32_t off = 0u;        /* an offset, not a pointer: it ends beyond the coefficients */
     uint32_t e = 0u;
     uint32_t i;
     uint32_t out = 0u;
     STSP_UNROLL
     for (i = 0u; i < nx; ++i) {
-        z[i] = x[i];
         total += x[i];
     }
-    z[nx] = 1.0f;
-    STSP_UNROLL
-    for (i = 0u; i < n_latch; ++i) {
-        z[nx + 1u + i] = v[i];
-    }
-#ifdef STSP_FIXED_NX
-    STSP_UNROLL
-    for (i = last + 1u; i < STSP_Z_LEN; ++i) {
-        z[i] = 0.0f;
-    }
-#endif
-    stsp_spline_basis(knot, (stsp_f32_t)in_stage, n);
-    zp = z;
-#if STSP_VFP_MAC
-    __asm__("" : "+r"(zp));
-#endif
+    stsp_spline_basis(knot, inv, (stsp_f32_t)in_stage, n);
     STSP_UNROLL
     for (i = 0u; i < nu; ++i) {
-        const uint32_t end = p->row_end[i];
-        stsp_f32_t acc = 0.0f;
-        for (; e < end; ++e) {
-            acc = stsp_spline_entry(acc, &coef[off], n, zp[stsp_z_index(col[e], last)]);
+        uint32_t off = e * stride; /* an offset, not a pointer: it may end beyond coef */
+        stsp_f32_t acc = stsp_spline_gain(&fold[4u * i], n);
+#ifdef STSP_FIXED_NX
+        /* The row's gains of x by its bit mask of their columns (set on the cold path with
+         * k_end): unrolled over j < nx with x[j] in a register, the entries in stored order
+         * (increasing col), no column read. */
+        const uint32_t mask = p->x_mask[i];
+        uint32_t j;
+        (void)col;
+        STSP_UNROLL
+        for (j = 0u; j < nx; ++j) {
+            if ((mask & ((uint32_t)1u << j)) != 0u) {
+                acc = stsp_spline_entry(acc, &coef[off], n, x[j]);
+                off += stride;
+            }
+        }
+#else
+        const uint8_t *cp = &col[e];
+        const uint8_t *const ce = &col[p->k_end[i]]; /* >= cp: k_end[i] >= row_end[i - 1] */
+        while (cp < ce) {
+            acc = stsp_spline_entry(acc, &coef[off], n, x[stsp_x_index(*cp, nx)]);
+            ++cp;
             off += stride;
         }
+#endif
+        e = p->row_end[i];
         y[i] = acc;
     }
     if (limited != 0u) {

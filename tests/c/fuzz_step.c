@@ -749,6 +749,14 @@ static stsp_status_t fz_spline_check(const stsp_table_t *t)
             return STSP_ERR_BAD_DIMS;
         }
     }
+    for (i = 0u; i < rows; ++i) {   /* operands increasing within a row */
+        uint32_t e;
+        for (e = (uint32_t)p->row_start[i] + 1u; e < p->row_start[i + 1u]; ++e) {
+            if (p->col[e] <= p->col[e - 1u]) {
+                return STSP_ERR_BAD_DIMS;
+            }
+        }
+    }
     for (s = 0u; s < ns; ++s) {
         const uint32_t len = p->knot_start[s + 1u] - p->knot_start[s];
         const uint64_t entries = (uint64_t)p->row_start[(s + 1u) * t->nu] - p->row_start[s * t->nu];
@@ -778,7 +786,8 @@ static int fz_spline_coef_finite(const stsp_spline_t *p)
  * stage (searched from the last one), whether it latches (the first step, or a new stage with
  * stage_n_latch > 0) and the v it then uses (Lambda x + lambda0 in that order, zero beyond
  * stage_n_latch), and the command of the spline law at that tick, by The NURBS Book A2.2
- * literally (every operation its own statement: no contraction). */
+ * literally (every operation its own statement: no contraction), the feed-forward folded into
+ * one spline per input first (stsp_law_spline.h). */
 typedef struct {
     uint32_t stage;
     int relatch;
@@ -842,21 +851,40 @@ static void fz_spline_model(const stsp_table_t *t, const stsp_ctrl_t *before, ui
     e0 = sp->row_start[s * nu];
     m->y_finite = 1;
     for (i = 0u; i < nu; ++i) {
-        float acc = 0.0f;
+        /* k0[i] + L[i] v folded into one spline (per coefficient +0 - c z over the entries
+         * beyond x, in stored order); its value starts the command, then the gains of x. */
+        float fold[4] = {0.0f, 0.0f, 0.0f, 0.0f}, acc, p;
         uint32_t e;
         for (e = sp->row_start[s * nu + i]; e < sp->row_start[s * nu + i + 1u]; ++e) {
             const float *c = &sp->coef[sp->coef_start[s] + (e - e0) * (n_spans + 3u) + sigma];
             const uint32_t col = sp->col[e];
-            const float z = (col < nx) ? x[col] : (col == nx) ? 1.0f : m->v[col - nx - 1u];
-            float g = N[0] * c[0], p;
-            p = N[1] * c[1];
-            g = g + p;
-            p = N[2] * c[2];
-            g = g + p;
-            p = N[3] * c[3];
-            g = g + p;
-            p = g * z;
-            acc = acc - p;
+            if (col >= nx) {
+                const float z = (col == nx) ? 1.0f : m->v[col - nx - 1u];
+                for (r = 0u; r < 4u; ++r) {
+                    p = c[r] * z;
+                    fold[r] = fold[r] - p;
+                }
+            }
+        }
+        acc = N[0] * fold[0];
+        for (r = 1u; r < 4u; ++r) {
+            p = N[r] * fold[r];
+            acc = acc + p;
+        }
+        for (e = sp->row_start[s * nu + i]; e < sp->row_start[s * nu + i + 1u]; ++e) {
+            const float *c = &sp->coef[sp->coef_start[s] + (e - e0) * (n_spans + 3u) + sigma];
+            const uint32_t col = sp->col[e];
+            if (col < nx) {
+                float g = N[0] * c[0];
+                p = N[1] * c[1];
+                g = g + p;
+                p = N[2] * c[2];
+                g = g + p;
+                p = N[3] * c[3];
+                g = g + p;
+                p = g * x[col];
+                acc = acc - p;
+            }
         }
         m->y[i] = acc;
         m->y_finite = m->y_finite && fz_finite(acc);

@@ -2,7 +2,8 @@
 """Expected values for tests/c/test_spline.c, computed independently of the firmware: table S's
 commands over a run of ticks by the spline format's evaluation order (numpy float32 scalars,
 every operation rounded to binary32, the basis by the literal loops of The NURBS Book A2.2
-including the +0 adds), and its CRC-32 from the documented serialization (zlib). Prints the C
+including the +0 adds; per input the folded feed-forward spline first, then the gains of x),
+and its CRC-32 from the documented serialization (zlib). Prints the C
 constants that test_spline.c pastes (SPLINE_EXPECTED_BITS, TABLE_S_CRC32).
     .venv/bin/python tests/c/spline_reference.py
 Table S must match the arrays of test_spline.c (written out again here on purpose).
@@ -89,15 +90,26 @@ def command(t: int, x: list, v: list) -> list:
     coef = [c_float(c) for c in COEF[COEF_START[s]:COEF_START[s + 1]]]
     u = []
     e0 = ROW_START[s * NU]
+
+    def gain(c):
+        g = N[0] * c[0]
+        g = g + N[1] * c[1]
+        g = g + N[2] * c[2]
+        return g + N[3] * c[3]
+
     for i in range(NU):
-        acc = f(0)
-        for e in range(ROW_START[s * NU + i], ROW_START[s * NU + i + 1]):
-            c = coef[(e - e0) * (S + 3) + sigma:]
-            g = N[0] * c[0]
-            g = g + N[1] * c[1]
-            g = g + N[2] * c[2]
-            g = g + N[3] * c[3]
-            acc = acc - g * z[COL[e]]
+        rows = range(ROW_START[s * NU + i], ROW_START[s * NU + i + 1])
+        # k0[i] + L[i] v folded into one spline: per coefficient, +0 - c z over the entries
+        # with an operand beyond x, in stored order; then its value starts the command.
+        fold = [f(0)] * 4
+        for e in rows:
+            if COL[e] >= NX:
+                c = coef[(e - e0) * (S + 3) + sigma:]
+                fold = [fold[r] - c[r] * z[COL[e]] for r in range(4)]
+        acc = gain(fold)
+        for e in rows:
+            if COL[e] < NX:
+                acc = acc - gain(coef[(e - e0) * (S + 3) + sigma:]) * z[COL[e]]
         u.append(acc)
     return u
 

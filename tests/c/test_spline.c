@@ -67,23 +67,23 @@ static const uint32_t SPLINE_EXPECTED_BITS[22][2] = {
     {0x3F9129FAu, 0x3DEFE4A3u}, /* 1: 1.13409352, 0.117135309 */
     {0x3F6EC073u, 0x3D7969CDu}, /* 2: 0.932624042, 0.0608919151 */
     {0x3F34B87Fu, 0x3CA22B0Cu}, /* 3: 0.705940187, 0.019795917 */
-    {0x3ECD5062u, 0xBC833D3Du}, /* 4: 0.401003897, -0.0160204116 */
-    {0x3D9B1A20u, 0xBD4CCCCEu}, /* 5: 0.0757334232, -0.0500000045 */
-    {0xBE44E038u, 0xBDABFD7Eu}, /* 6: -0.192261577, -0.0839795917 */
-    {0xBEABCF32u, 0xBDF55792u}, /* 7: -0.33556515, -0.119795933 */
-    {0xBEA13042u, 0xBE24C0DAu}, /* 8: -0.314821303, -0.16089192 */
-    {0xBE2C879Au, 0xBE5E58B8u}, /* 9: -0.168486029, -0.21713531 */
-    {0x00000000u, 0x403147ADu}, /* 10: 0, 2.76999974 */
-    {0x00000000u, 0x3FB39BF8u}, /* 11: 0, 1.40319729 */
-    {0x00000000u, 0x3E612880u}, /* 12: 0, 0.219881058 */
-    {0x00000000u, 0xBF5393B8u}, /* 13: 0, -0.826472759 */
-    {0x00000000u, 0xBFE3EA76u}, /* 14: 0, -1.78059268 */
+    {0x3ECD505Fu, 0xBC833D3Du}, /* 4: 0.401003808, -0.0160204116 */
+    {0x3D9B1A24u, 0xBD4CCCCEu}, /* 5: 0.075733453, -0.0500000045 */
+    {0xBE44E034u, 0xBDABFD7Eu}, /* 6: -0.192261517, -0.0839795917 */
+    {0xBEABCF33u, 0xBDF55792u}, /* 7: -0.33556518, -0.119795933 */
+    {0xBEA13041u, 0xBE24C0DAu}, /* 8: -0.314821273, -0.16089192 */
+    {0xBE2C8798u, 0xBE5E58B8u}, /* 9: -0.168485999, -0.21713531 */
+    {0x00000000u, 0x403147AEu}, /* 10: 0, 2.76999998 */
+    {0x00000000u, 0x3FB39BF6u}, /* 11: 0, 1.40319705 */
+    {0x00000000u, 0x3E612860u}, /* 12: 0, 0.219880581 */
+    {0x00000000u, 0xBF5393ACu}, /* 13: 0, -0.826472044 */
+    {0x00000000u, 0xBFE3EA74u}, /* 14: 0, -1.78059244 */
     {0x00000000u, 0xC02BDDDFu}, /* 15: 0, -2.68541694 */
-    {0x00000000u, 0xC064C981u}, /* 16: 0, -3.57479882 */
+    {0x00000000u, 0xC064C980u}, /* 16: 0, -3.57479858 */
     {0x00000000u, 0xC08E774Eu}, /* 17: 0, -4.45206356 */
     {0x00000000u, 0xC0AA015Eu}, /* 18: 0, -5.31266689 */
     {0x00000000u, 0xC0C4D9E3u}, /* 19: 0, -6.1515975 */
-    {0x00000000u, 0xC0DED3FDu}, /* 20: 0, -6.96337748 */
+    {0x00000000u, 0xC0DED3FEu}, /* 20: 0, -6.96337795 */
     {0x00000000u, 0xC0F7BF03u}, /* 21: 0, -7.74206686 */
 };
 #define TABLE_S_CRC32 0x9548F0FEu
@@ -189,7 +189,8 @@ static void check_span(const stsp_ctrl_t *c, const stsp_table_t *t, uint32_t tic
     assert_int_equal(c->stage_end, 0u);
 }
 
-/* The spline format's evaluation, literally: A2.2 with its loops and the +0 adds. */
+/* The spline format's evaluation, literally: A2.2 with its loops and the +0 adds, the folded
+ * feed-forward, then the gains of x. */
 static void ref_command(const stsp_table_t *t, uint32_t tick, const float *x, const float *v,
                         float *u)
 {
@@ -227,14 +228,32 @@ static void ref_command(const stsp_table_t *t, uint32_t tick, const float *x, co
         z[t->nx + 1u + j] = v[j];
     }
     for (i = 0u; i < t->nu; ++i) {
-        float acc = 0.0f;
+        /* k0[i] + L[i] v folded into one spline (+0 - c z per coefficient over the entries
+         * with an operand beyond x, in stored order), whose value starts the command; then
+         * the gains of x. */
+        float fold[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+        float acc, g;
         for (e = sp->row_start[s * t->nu + i]; e < sp->row_start[s * t->nu + i + 1u]; ++e) {
             const float *c = &coef[(e - e0) * (n_spans + 3u) + sigma];
-            float g = N[0] * c[0];
-            g = g + N[1] * c[1];
-            g = g + N[2] * c[2];
-            g = g + N[3] * c[3];
-            acc = acc - g * z[sp->col[e]];
+            if (sp->col[e] >= t->nx) {
+                for (r = 0u; r < 4u; ++r) {
+                    fold[r] = fold[r] - c[r] * z[sp->col[e]];
+                }
+            }
+        }
+        acc = N[0] * fold[0];
+        acc = acc + N[1] * fold[1];
+        acc = acc + N[2] * fold[2];
+        acc = acc + N[3] * fold[3];
+        for (e = sp->row_start[s * t->nu + i]; e < sp->row_start[s * t->nu + i + 1u]; ++e) {
+            const float *c = &coef[(e - e0) * (n_spans + 3u) + sigma];
+            if (sp->col[e] < t->nx) {
+                g = N[0] * c[0];
+                g = g + N[1] * c[1];
+                g = g + N[2] * c[2];
+                g = g + N[3] * c[3];
+                acc = acc - g * z[sp->col[e]];
+            }
         }
         u[i] = acc;
     }
@@ -744,6 +763,16 @@ static void ch_row_start0(stsp_table_t *t, spline_buf_t *b) { (void)t; b->row_st
 static void ch_row_start_down(stsp_table_t *t, spline_buf_t *b) { (void)t; b->row_start[2] = 2u; }
 static void ch_row_start_end(stsp_table_t *t, spline_buf_t *b) { (void)t; b->sp.n_entries = 7u; }
 static void ch_col(stsp_table_t *t, spline_buf_t *b) { (void)t; b->col[5] = 5u; }
+/* Within a row the operands must increase: x's gains, then k0, then L (stage 0, input 0 is
+ * [0, 2, 3]; stage 1, input 1 [0, 1, 2, 3]). */
+static void ch_col_order(stsp_table_t *t, spline_buf_t *b) { (void)t; b->col[1] = 4u; }
+static void ch_col_twice(stsp_table_t *t, spline_buf_t *b) { (void)t; b->col[5] = 0u; }
+static void ch_col_x_last(stsp_table_t *t, spline_buf_t *b)
+{
+    (void)t;
+    b->col[6] = 3u;
+    b->col[7] = 1u;
+}
 static void ch_coef_start0(stsp_table_t *t, spline_buf_t *b) { (void)t; b->coef_start[0] = 1u; }
 static void ch_coef_start_end(stsp_table_t *t, spline_buf_t *b) { (void)t; b->sp.n_coef = 43u; }
 static void ch_coef_start_down(stsp_table_t *t, spline_buf_t *b)
@@ -828,6 +857,9 @@ static void test_init_refusals(void **state_)
         {ch_row_start_down, STSP_ERR_BAD_DIMS},
         {ch_row_start_end, STSP_ERR_BAD_DIMS},
         {ch_col, STSP_ERR_BAD_DIMS},
+        {ch_col_order, STSP_ERR_BAD_DIMS},
+        {ch_col_twice, STSP_ERR_BAD_DIMS},
+        {ch_col_x_last, STSP_ERR_BAD_DIMS},
         {ch_coef_start0, STSP_ERR_BAD_DIMS},
         {ch_coef_start_end, STSP_ERR_BAD_DIMS},
         {ch_coef_start_down, STSP_ERR_BAD_DIMS},
@@ -875,7 +907,7 @@ static void test_long_stage(void **state_)
 /* A coefficient or a knot changed (still a valid layout) without a new CRC: STSP_ERR_BAD_CRC. */
 static void ch_coef_value(stsp_table_t *t, spline_buf_t *b) { (void)t; b->coef[40] = 1.25f; }
 static void ch_knot_value(stsp_table_t *t, spline_buf_t *b) { (void)t; b->knot[4] = 4.0f; }
-static void ch_col_value(stsp_table_t *t, spline_buf_t *b) { (void)t; b->col[1] = 4u; }
+static void ch_col_value(stsp_table_t *t, spline_buf_t *b) { (void)t; b->col[1] = 1u; }
 static void test_crc_mismatch(void **state_)
 {
     (void)state_;
@@ -935,7 +967,7 @@ static void test_changed_arrays_stay_in_bounds(void **state_)
 {
     uint32_t k, tick;
     (void)state_;
-    for (k = 0u; k < 10u; ++k) {
+    for (k = 0u; k < 11u; ++k) {
         uint32_t *knot_start = heap_copy(s_knot_start, sizeof s_knot_start);
         float *knot = heap_copy(s_knot, sizeof s_knot);
         uint16_t *row_start = heap_copy(s_row_start, sizeof s_row_start);
@@ -949,8 +981,12 @@ static void test_changed_arrays_stay_in_bounds(void **state_)
         stsp_ctrl_t c;
         t.stage_start = stage_start;
         assert_int_equal(stsp_init(&c, &t), STSP_OK);
+        /* x in a heap block of its exact size too: the test itself is not built with ASan,
+         * so a read past a stack array here would go unnoticed. */
+        static const float no_state[S_NX] = {0.0f, 0.0f};
+        float *x = heap_copy(no_state, sizeof no_state);
         for (tick = 0u; tick < 24u; ++tick) {
-            float x[S_NX], u[S_NU];
+            float u[S_NU];
             stsp_status_t st;
             if (tick == 2u + k) {
                 switch (k) {
@@ -963,6 +999,9 @@ static void test_changed_arrays_stay_in_bounds(void **state_)
                 case 6u: stage_start[1] = 0xFFFFFFFFu; stage_start[2] = 3u; break;
                 case 7u: row_start[3] = 0u; row_start[2] = 8u; break;
                 case 8u: knot_start[1] = 18u; coef_start[1] = 43u; row_start[2] = 7u; break;
+                /* a gain of x now naming x[nx], x[nx + 1]: just past x, where ASan's redzone
+                 * is (0xFF above reads far beyond it) */
+                case 9u: col[0] = (uint8_t)S_NX; col[4] = (uint8_t)(S_NX + 1u); break;
                 default: memset(knot, 0xFF, sizeof s_knot); memset(coef, 0xFF, sizeof s_coef);
                     break;
                 }
@@ -976,6 +1015,7 @@ static void test_changed_arrays_stay_in_bounds(void **state_)
         assert_int_equal(stsp_verify(&c), STSP_ERR_BAD_CRC);
         free(knot_start); free(knot); free(row_start); free(col); free(coef_start); free(coef);
         free(stage_start);
+        free(x);
     }
 }
 

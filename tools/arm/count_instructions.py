@@ -48,12 +48,17 @@ def run(cmd: list[str], **kw) -> str:
 
 
 def symbols(elf: Path) -> dict[str, tuple[int, int]]:
-    """name -> (address, size) of the sized function/object symbols (Thumb bit cleared)."""
+    """name -> (address, size) of the sized function/object symbols (Thumb bit cleared). A
+    static function defined in two objects (stsp_controller.c and stsp_spline.c share private
+    headers) appears twice: the second and later as name@address."""
     out = {}
     for line in run(["arm-none-eabi-nm", "-S", str(elf)]).splitlines():
         parts = line.split()
         if len(parts) == 4:
-            out[parts[3]] = (int(parts[0], 16) & ~1, int(parts[1], 16))
+            addr, name = int(parts[0], 16) & ~1, parts[3]
+            if name in out and out[name][0] != addr:
+                name = f"{name}@{addr:x}"
+            out[name] = (addr, int(parts[1], 16))
     return out
 
 
@@ -196,11 +201,16 @@ def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
                  *totals([ctl])))
     rows.append(("controller + robot tables objects", *totals([ctl, tables])))
     roots = ["stsp_init", "stsp_reset", "stsp_step"]
-    for what, extra_roots, libs in (("controller linked (API roots)", [], [ctl]),
-                                    ("controller + tables linked",
-                                     [f"robot_corridor{sfx}_table"],
-                                     [tables, ctl])):
-        elf = build / f"footprint_{Path(controller).stem}_{'tables' if extra_roots else 'ctl'}.elf"
+    links = [("controller linked (API roots)", [], [ctl]),
+             ("controller + tables linked", [f"robot_corridor{sfx}_table"], [tables, ctl])]
+    if not sfx:
+        # float32: also the spline table of the robot's shape (tools/arm/spline_bench_table.c).
+        links.append(("controller + spline bench table linked", ["spline_bench_table"],
+                      [build / "libstsp_spline_bench_table.a", ctl]))
+    for what, extra_roots, libs in links:
+        kind = ("spline" if "spline_bench_table" in extra_roots else
+                "tables" if extra_roots else "ctl")
+        elf = build / f"footprint_{Path(controller).stem}_{kind}.elf"
         cmd = (["arm-none-eabi-gcc", *CPU_FLAGS[cpu], "-nostdlib", "-nostartfiles",
                 "-Wl,--gc-sections", "-Wl,-e,stsp_step", "-o", str(elf)]
                + [f"-Wl,-u,{r}" for r in roots + extra_roots] + [str(p) for p in libs]
@@ -313,10 +323,12 @@ def main() -> int:
                     row(tlabel, "new span, stage 0", sel, 0)
             skipped = [c["insns"] for c in calls if c["status"] == 1 and c["table"] == 0]
             if spline:
-                print("   Spline table: per stage 10 stored entries (4 K, 2 k0, 4 L), each "
-                      "4 multiply-adds for its gain and 1 for the command, plus the basis (6 "
-                      "divisions); 'new span': the first tick of a span (cold path), "
-                      "once per 100 ticks here.")
+                print("   Spline table: per stage 10 stored entries (4 K, 2 k0, 4 L); k0 + L v "
+                      "is folded into one spline per input at each span change and latch, so "
+                      "an ordinary tick evaluates 4 gains of x and 2 folded splines (4 "
+                      "multiply-adds each, plus 1 per gain of x for the command) after the "
+                      "basis (5 divisions); 'new span': the first tick of a span (it folds "
+                      "the span's k0 + L v), once per 100 ticks here.")
             else:
                 print("   MACs = nu*nx + nu*np (+ np*nx on a latch tick): the multiply-adds the law "
                       f"needs; the firmware runs nu*(nx + n_latch) = {nu * (nx + nl)} on every "
@@ -349,7 +361,10 @@ def main() -> int:
                     print(f"     {what:60.60s} flash {t + d:7d} B  static RAM {d + b:4d} B  "
                           f"(text {t}, data {d}, bss {b})")
                 stack = {k: su.get(k) for k in ("stsp_step", "stsp_step_cold", "stsp_step_fixup",
-                                                "stsp_limit", "stsp_init", "stsp_table_crc32")}
+                                                "stsp_limit", "stsp_init", "stsp_table_crc32",
+                                                "stsp_spline_step", "stsp_step_next_span",
+                                                "stsp_step_cold_spline",
+                                                "stsp_spline_law_other")}
                 report["sizes"][f"{cpu}/{controller}"]["stack"] = stack
                 print("     stack (-fstack-usage, own frame): "
                       + ", ".join(f"{k} {v} B" for k, v in stack.items() if v is not None))

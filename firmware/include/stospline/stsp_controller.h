@@ -219,10 +219,12 @@ typedef enum {
  *     k0[i], j = nx + 1 + c is L[i][c]; an entry not stored is exactly 0;
  *   coef[coef_start[s] .. coef_start[s+1]): the stage's S_s + 3 B-spline coefficients of each
  *     entry, entry after entry in col order.
- * stsp_init() checks: knot_start[0] == 0, row_start[0] == 0, coef_start[0] == 0, all three
- * nondecreasing and ending at n_knots, n_entries and n_coef; every stage's knots as above;
- * col[e] < nx + 1 + n_latch; coef_start[s+1] - coef_start[s] == (entries of stage s) x
- * (S_s + 3) (else STSP_ERR_BAD_DIMS); every coefficient finite (STSP_ERR_BAD_VALUES).
+ * stsp_init() checks: the six arrays not NULL (else STSP_ERR_NULL); knot_start[0] == 0,
+ * row_start[0] == 0, coef_start[0] == 0, all three nondecreasing and ending at n_knots,
+ * n_entries and n_coef; every stage's knots as above; col[e] < nx + 1 + n_latch, and
+ * strictly increasing within each (stage, input) row (so its gains of x come first);
+ * coef_start[s+1] - coef_start[s] == (entries of stage s) x (S_s + 3) (else
+ * STSP_ERR_BAD_DIMS); every coefficient finite (STSP_ERR_BAD_VALUES).
  */
 typedef struct {
     uint32_t n_knots;             /**< length of knot */
@@ -342,6 +344,7 @@ typedef struct {
  */
 typedef struct {
     const stsp_f32_t *knot;  /**< U[sigma + 1], the first of the six knots of the span's basis */
+    stsp_f32_t inv;          /**< 1 / (U[sigma + 4] - U[sigma + 3]): the basis's first quotient */
     const stsp_f32_t *coef;  /**< coefficient sigma of the stage's first entry (the stage's
                                   first coefficient when it has no entries) */
     const uint8_t *col;      /**< the stage's first entry */
@@ -351,6 +354,11 @@ typedef struct {
     uint32_t span;           /**< sigma */
     uint32_t n_spans;        /**< S */
     uint16_t row_end[STSP_MAX_NU]; /**< input i's entries end at row_end[i] (from col) */
+    uint16_t k_end[STSP_MAX_NU];   /**< and its gains of x (col < nx, its first entries) at
+                                        k_end[i] */
+    uint32_t x_mask[STSP_MAX_NU];  /**< bit j set: input i has a gain of x[j] */
+    stsp_f32_t fold[4u * STSP_MAX_NU]; /**< input i's k0[i] + L[i] v as one spline, negated:
+                                            the span's four coefficients at fold[4 i] */
 } stsp_span_t;
 #endif
 
@@ -379,6 +387,16 @@ typedef struct {
     stsp_span_t span;        /**< a spline table's current span (private) */
 #endif
 } stsp_ctrl_t;
+
+/**
+ * Defined by the spline tables' code (firmware/src/stsp_spline.c; value STSP_FORMAT_VERSION),
+ * which a program links only when something refers to it strongly: a generated spline table
+ * does (`<name>_spline_code`, a pointer to this). The controller refers to that code only
+ * weakly (GCC or clang, ELF), so that programs with per-tick tables do not carry it; without
+ * it stsp_init() refuses a spline table with STSP_ERR_BAD_DIMS. A hand-made spline table must
+ * refer to it too (or link with -Wl,--undefined=stsp_spline_code).
+ */
+extern const uint32_t stsp_spline_code;
 
 /**
  * CRC-32 (IEEE 802.3 polynomial, reflected, as zlib) of the table's canonical serialization:

@@ -190,6 +190,11 @@ def _float32_variant(table, p: str) -> _Variant:
     if getattr(table, "spline", None) is not None:
         extra += _spline_arrays(table.spline, p)
         spline = f"&{p}_spline"
+        code = f"const uint32_t *const {p}_spline_code"
+        extra.append(f"/* The controller refers to the spline code only weakly, so that programs without a\n"
+                     f" * spline table do not link it: this reference links it with the table. */\n"
+                     f"{code} = &stsp_spline_code;\n")
+        declarations += f"extern {code};\n"
         layout = ("/* Tables in flash: the gains K, k0, L as cubic B-splines per stage (stsp_spline_t,\n"
                   " * docs/guide/firmware.md \"Spline tables\"); Lambda[stage][c*NX + j],\n"
                   " * lambda0[stage][c], u_min[i], u_max[i], u_hold[i] as in stsp_controller.h\n"

@@ -46,7 +46,8 @@ def flash_bytes(table, arith: str = "float32") -> int:
     if spline is None:
         total += e * (_count(T * m * n) + _count(T * m) + _count(T * m * n_latch))  # K, k0, L
     else:
-        total += spline_bytes(spline)
+        # + the pointer that links the spline code with the table (`<name>_spline_code`)
+        total += spline_bytes(spline) + _PTR
     total += e * (_count(S * n_latch * n) + _count(S * n_latch) + 3 * _count(m))  # Lambda, lambda0, u_min/max/hold
     total += _HEADER_FIELDS + _PTR * _TABLE_POINTERS + _HEADER_TAIL
     if arith == "float32":

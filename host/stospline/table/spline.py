@@ -23,7 +23,8 @@ import numpy as np
 
 from stospline.errors import DesignError
 
-__all__ = ["SplineGains", "SplineBudgetError", "evaluate", "fit_spline", "max_relative_error",
+__all__ = ["SplineGains", "SplineBudgetError", "evaluate", "command", "fit_spline",
+           "max_relative_error",
            "gain_columns", "DEFAULT_MAX_SPANS", "INITIAL_SPANS", "MIN_TOLERANCE"]
 
 DEFAULT_MAX_SPANS = 1024
@@ -91,6 +92,9 @@ class SplineGains:
             raise ValueError("coef_start must run from 0 to the number of coefficients")
         if self.col.size and int(self.col.max()) > self.nx + self.n_latch:
             raise ValueError("an entry's column is beyond nx + 1 + n_latch")
+        for r in range(ns * self.nu):
+            if np.any(np.diff(self.col[rows[r]:rows[r + 1]].astype(np.int64)) <= 0):
+                raise ValueError("the columns of a (stage, input) row must increase")
         for s in range(ns):
             U = self.knots(s).astype(float)
             S = U.size - 7
@@ -210,6 +214,45 @@ def evaluate(spline: SplineGains, stage_start: np.ndarray
         if cols.size:
             Z[a:b, inputs, cols] = _stage_values(U, spline.coefficients(s), b - a)
     return Z[:, :, :nx].copy(), Z[:, :, nx].copy(), Z[:, :, nx + 1:].copy()
+
+
+def command(spline: SplineGains, stage_start: np.ndarray, tick: int, x: np.ndarray,
+            v: np.ndarray) -> np.ndarray:
+    """The command ``u = -(K x + k0 + L v)`` the firmware computes at `tick` from state `x` and
+    latch `v`, bit for bit (float32). Per input: ``k0[i] + L[i] v`` is folded into one spline,
+    coefficient by coefficient ``f = ((+0 - c_1 z_1) - c_2 z_2) - ...`` over the input's entries
+    beyond x in stored order (``z`` = 1 for k0, ``v[c]`` for L), once per span; its value at
+    tick starts the command, from which each gain of x times its state entry is subtracted in
+    stored order. (The gains of `evaluate` are K, k0, L themselves; this folded order is the
+    command's rounding, not the oracle's law.)"""
+    start = np.asarray(stage_start, dtype=np.int64)
+    s = int(np.searchsorted(start[1:], tick, side="right"))
+    nx = spline.nx
+    x = np.asarray(x, np.float32)
+    z = np.concatenate([x, [np.float32(1)], np.asarray(v, np.float32)]).astype(np.float32)
+    U = spline.knots(s)
+    sigma, N = _basis(np.asarray(U, np.float32), np.array([tick - start[s]], np.float32))
+    sg = int(sigma[0])
+    N = [n[0] for n in N]
+    C = spline.coefficients(s)[:, sg:sg + 4]
+    inputs, cols = spline.entries(s)
+
+    def value(c):
+        g = np.float32(N[0] * c[0])
+        for r in (1, 2, 3):
+            g = np.float32(g + np.float32(N[r] * c[r]))
+        return g
+
+    u = np.zeros(spline.nu, dtype=np.float32)
+    for i in range(spline.nu):
+        fold = np.zeros(4, dtype=np.float32)
+        for e in np.flatnonzero((inputs == i) & (cols >= nx)):
+            fold = (fold - C[e] * z[cols[e]]).astype(np.float32)
+        acc = value(fold)
+        for e in np.flatnonzero((inputs == i) & (cols < nx)):
+            acc = np.float32(acc - np.float32(value(C[e]) * z[cols[e]]))
+        u[i] = acc
+    return u
 
 
 def gain_columns(table) -> np.ndarray:

@@ -14,6 +14,7 @@ from stospline.sim.controller import build_controller
 from stospline.sim.montecarlo import compare_to_oracle, simulate
 from stospline.sim.oracle import evaluate_table
 from stospline.table.format import table_of
+from stospline.table.spline import command
 from stospline.table.spline_compress import compress
 
 PATHS, SEED, SUBSTEPS = 20000, 20261125, 2
@@ -25,17 +26,9 @@ def robot_spline(robot_problem):
 
 
 def _law(table, x, v, tick):
-    """u = -(K x + k0 + L v) in the firmware's order for a spline table: per input, entries
-    in stored order, acc = acc - g * z (binary32)."""
-    sp = table.spline
-    s = table.stage_of_tick(tick)
-    inputs, cols = sp.entries(s)
-    z = np.concatenate([x, [np.float32(1)], v]).astype(np.float32)
-    gains = np.concatenate([table.K[tick], table.k0[tick][:, None], table.L[tick]], axis=1)
-    u = np.zeros(table.dims[1], dtype=np.float32)
-    for i, c in zip(inputs, cols):
-        u[i] = np.float32(u[i] - np.float32(gains[i, c] * z[c]))
-    return u
+    """u = -(K x + k0 + L v) in the firmware's order for a spline table
+    (`stospline.table.spline.command`: the folded feed-forward, then the gains of x)."""
+    return command(table.spline, table.stage_start, tick, x, v)
 
 
 def test_the_c_spline_law_is_the_evaluated_one_bit_for_bit(robot_spline):

@@ -27,8 +27,8 @@ from stospline.sim.oracle import evaluate_table
 from stospline.table.format import BandQP, table_of
 from stospline.table.spline import (MIN_TOLERANCE, SplineBudgetError, SplineGains, _Bases,
                                     _basis, _column_peaks, _fit_stage, _lsq, _refined,
-                                    _solve_banded, _span_excess, _stage_entries, evaluate,
-                                    fit_spline, max_relative_error)
+                                    _solve_banded, _span_excess, _stage_entries, command,
+                                    evaluate, fit_spline, max_relative_error)
 from stospline.table.spline_compress import compress
 from stospline.table.spline_latch import latch_groups_of_table, mean_tick_map, resolve_latch
 
@@ -107,6 +107,46 @@ def test_the_basis_sums_to_one_within_rounding(seed, T):
     _, N64 = _basis(U.astype(float), tau.astype(float))
     assert np.abs(sum(N64) - 1).max() <= 1e-14
     assert min(n.min() for n in N32) >= 0
+
+
+def _spec_command(U, C, tick, x, v):
+    """The firmware's command from the spec, literally: per coefficient the feed-forward folded
+    as (+0 - c_k0 * 1) - c_L * v, its spline's value, minus the gain of x times x."""
+    fold = [F32(F32(F32(0) - F32(C[1][r] * F32(1))) - F32(C[2][r] * v))
+            for r in range(C.shape[1])]
+    return F32(_spec_gain(U, np.array(fold, F32), tick) - F32(_spec_gain(U, C[0], tick) * x))
+
+
+@_settings(40)
+@given(seed=st.integers(0, 2 ** 32 - 1), T=st.integers(1, 60))
+def test_the_command_folds_the_feed_forward_and_is_the_law_to_rounding(seed, T):
+    """`command` (the firmware's order: k0 + L v folded into one spline per span, then the
+    gains of x) is the spec's fold bit for bit, and -(K x + k0 + L v) of `evaluate`'s gains in
+    float64 to a few roundings of the terms: the fold changes the command's rounding only."""
+    rng = np.random.default_rng(seed)
+    sp = _random_spline(rng, T)
+    K, k0, L = evaluate(sp, [0, T])
+    U, C = sp.knots(0), sp.coefficients(0)
+    for t in range(T):
+        x = rng.normal(size=2).astype(F32) * F32(10.0 ** rng.integers(-2, 3))
+        v = rng.normal(size=1).astype(F32) * F32(10.0 ** rng.integers(-2, 3))
+        u = command(sp, [0, T], t, x, v)
+        assert u.dtype == np.float32
+        assert u.view(np.uint32)[0] == np.array(_spec_command(U, C, t, x[0], v[0]),
+                                                F32).view(np.uint32)
+        law = -(float(K[t, 0, 0]) * float(x[0]) + float(k0[t, 0])
+                + float(L[t, 0, 0]) * float(v[0]))
+        scale = (np.abs(C[0]).max() * abs(float(x[0])) + np.abs(C[1]).max()
+                 + np.abs(C[2]).max() * abs(float(v[0])))
+        assert abs(float(u[0]) - law) <= 16 * EPS32 * scale
+
+
+def test_the_columns_of_a_row_must_increase():
+    sp = _random_spline(np.random.default_rng(2), 20)
+    with pytest.raises(ValueError, match="increase"):
+        replace(sp, col=np.array([0, 3, 2], np.uint8))
+    with pytest.raises(ValueError, match="increase"):
+        replace(sp, col=np.array([0, 2, 2], np.uint8))
 
 
 def test_evaluate_refuses_a_spline_of_other_stages():

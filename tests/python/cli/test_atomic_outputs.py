@@ -182,6 +182,9 @@ def _run_child(out, files, k, sig, after=False):
     if pid == 0:                                          # child
         os.close(r)
         try:
+            # Python's own SIGINT handler, as in a terminal: a shell starts background jobs
+            # with SIGINT ignored, which the writer rightly leaves alone.
+            signal.signal(signal.SIGINT, signal.default_int_handler)
             count = [0]
             real = {n: getattr(os, n) for n in CALLS}
             real_kill, real_write = os.kill, os.write

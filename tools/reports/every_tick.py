@@ -25,7 +25,7 @@ from stospline.pipeline import design_problem, every_tick_check, start_from
 from stospline.problem import parse_problem
 from stospline.problem.model import Constraint
 from stospline.problem.regions import with_bands
-from stospline.sim.every_tick import design_every_tick, tick_violation
+from stospline.sim.every_tick import active_ticks, design_every_tick, tick_violation
 from stospline.sim.oracle import evaluate_table
 from stospline.table.format import table_of
 
@@ -85,12 +85,6 @@ def case(label: str, doc: dict, grid: float) -> None:
     print(f"  grid {grid:g} s: J0 = {g.design.J0:.10g}, worst at ticks "
           f"{worst_at_ticks(p, g):.3g}")
     print(f"  no region : J0 = {f.design.J0:.10g}, worst at ticks {worst_at_ticks(p, f):.3g}")
-
-
-def active_ticks(prob, des) -> list:
-    return sorted((round((prob.knots[k].t - prob.t0) * prob.tick_hz), int(a))
-                  for (k, _), a in zip(des.rows, des.solution.active)
-                  if a != 0 and prob.knots[k].penalty is None)
 
 
 def dense_check() -> None:

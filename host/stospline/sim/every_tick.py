@@ -30,7 +30,7 @@ from stospline.problem.regions import with_bands
 from stospline.sim.oracle import evaluate_table
 from stospline.table.format import table_of
 
-__all__ = ["EveryTick", "design_every_tick", "tick_violation", "between_ticks",
+__all__ = ["EveryTick", "design_every_tick", "tick_violation", "between_ticks", "active_ticks",
            "MAX_ITERATIONS", "TOLERANCE"]
 
 MAX_ITERATIONS = 60
@@ -112,6 +112,14 @@ def _independent(problem: Problem, rows: list, cuts: list) -> list[tuple[int, in
             taken.append((j, r, i))
             out.append((j, r, i))
     return out
+
+
+def active_ticks(problem: Problem, design: BandDesign) -> list[tuple[int, int]]:
+    """``(tick, side)`` of every band row the design holds at a bound (side -1 lower, +1
+    upper), over the knots without a penalty (the band knots a region added)."""
+    return sorted((round((problem.knots[k].t - problem.t0) * problem.tick_hz), int(a))
+                  for (k, _), a in zip(design.rows, design.solution.active)
+                  if a != 0 and problem.knots[k].penalty is None)
 
 
 def _slack(problem: Problem, work: Problem, design: BandDesign,

@@ -8,7 +8,7 @@
 #define ROBOT_MONOTONE_NX 4u
 #define ROBOT_MONOTONE_NU 2u
 #define ROBOT_MONOTONE_N_LATCH 4u
-#define ROBOT_MONOTONE_N_STAGES 92u
+#define ROBOT_MONOTONE_N_STAGES 2u
 #define ROBOT_MONOTONE_N_TICKS 600u
 #define ROBOT_MONOTONE_TICK_HZ 100u
 /* SHA-256 of the problem file, for stsp_init_problem(): uint8_t want[32] = ROBOT_MONOTONE_PROBLEM_SHA256; */

@@ -58,6 +58,8 @@ CODEGEN_NUMBER = 2.0e-6     # s to format one table number as C
 CODEGEN_BYTES = 48          # peak bytes per number while the C text is built (~14 in the file)
 COMPILE_NUMBER = 4.0e-6     # s for the C compiler per table number (simulate, plot)
 COMPILE_BYTES = 400         # compiler memory per table number
+TICK_QP_TICK = 6e-4         # s per tick of the tick-grid QP (regions at every tick), n + m = 6
+TICK_QP_BYTES = 15e3        # peak bytes per tick of it (sparse LU of the KKT matrix), n + m = 6
 SIM_TICK = 10e-6            # s per Monte Carlo tick and block of paths: the Python step
 SIM_PATH_TICK = 1.0e-9      # s per path, tick and unit of work (below), on one core
                             # (tools/bench/harness_throughput.py: ~95 ns per robot path-tick)
@@ -213,6 +215,10 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
         add(Term("the design's tick recursion", "tick_hz",
                  seconds=KERNEL_FLOP * flops * (T - T_var) + VARYING_TICK * T_var
                  * (1 + (D + 1) ** 3 / 1e5)))
+    if problem.tick_regions:
+        grow = ((n + m) / 6) ** 2
+        add(Term("regions at every tick (the QP on the tick grid, if needed)", "tick_hz",
+                 seconds=TICK_QP_TICK * T * grow, bytes=TICK_QP_BYTES * T * grow))
     sec, byt = _expm(2 * D)
     add(Term("tick map of the oracle (matrix exponential per stage and pass)", dims,
              seconds=passes * sec * (S - sum(varying)), bytes=byt + 4 * 8.0 * D * D))

@@ -262,9 +262,11 @@ def _stage_key(stage: Stage, h: float) -> bytes:
                      np.zeros(0) if stage.f is None else stage.f))
 
 
-def _stage_ticks_numpy(td: _TickData, V, N, W, mv, T: int, m: int):
+def _stage_ticks_numpy(td: _TickData, V, N, W, mv, T: int, m: int, huu=None):
     """The reference implementation of one stage's ticks (backward): gains K, k0, L per tick
-    and the value V, N, W, mv before the first tick. Raises `numpy.linalg.LinAlgError`."""
+    and the value V, N, W, mv before the first tick. ``huu`` (T, m, m), if given, receives
+    each tick's ``H_uu`` (the curvature of the expected cost in the command held over the
+    tick; `stospline.design.tick_qp`). Raises `numpy.linalg.LinAlgError`."""
     n, q = N.shape
     d = n + m + 1
     us, rs = np.arange(n, n + m), np.r_[0:n, d - 1]
@@ -277,6 +279,8 @@ def _stage_ticks_numpy(td: _TickData, V, N, W, mv, T: int, m: int):
         Huu = H[np.ix_(us, us)]
         Hur = H[np.ix_(us, rs)]
         Hlu = Hl[:, us]
+        if huu is not None:
+            huu[j] = Huu
         G = np.linalg.solve(Huu, np.hstack([Hur, Hlu.T]))
         Gr, Gl = G[:, :n + 1], G[:, n + 1:]
         K[j], k0[j], L[j] = Gr[:, :n], Gr[:, n], Gl

@@ -64,8 +64,14 @@ def design_summary_text(d, arith: str = "float32") -> str:
                      f"E{{Cx}} of the {kind} table, oracle)")
     et = getattr(d, "every_tick", None)
     if et is not None:
-        lines.append(f"  regions at every tick          met after {et.iterations} design"
-                     f"{'s' * (et.iterations > 1)}, {len(et.working_set)} band rows added at "
-                     f"{len({j for j, _, _ in et.working_set})} ticks "
-                     f"(--json: every_tick has each region checked by the oracle)")
+        ticks = len({j for j, _, _ in et.working_set})
+        if et.method == "tick-qp":
+            lines.append(f"  regions at every tick          met by the tick-grid QP, "
+                         f"{len(et.working_set)} rows active at {ticks} ticks "
+                         f"(--json: every_tick has each region checked by the oracle)")
+        else:
+            lines.append(f"  regions at every tick          met after {et.iterations} design"
+                         f"{'s' * (et.iterations > 1)}, {len(et.working_set)} band rows added "
+                         f"at {ticks} ticks "
+                         f"(--json: every_tick has each region checked by the oracle)")
     return "\n".join(lines) + "\n"

@@ -1,12 +1,17 @@
-"""Regions met at every controller tick (``[[regions]]`` with ``every = "tick"``) by constraint
-generation.
+"""Regions met at every controller tick (``[[regions]]`` with ``every = "tick"``): by constraint
+generation while few rows are active, else by the sparse QP on the tick grid.
 
 A band at every tick of a long interval is a QP with thousands of rows whose dual matrix
 ``W(t0)`` is nearly singular (neighbouring ticks constrain almost the same output). Instead:
 design with the problem's own knots plus a small working set of band knots, compute the
 exact expected output at every tick of the law as tabulated (the moment oracle on the
 double-precision table), add the most violated tick of each run of violating ticks, and
-repeat until no tick violates. Each iterate is the exact optimum of a relaxation of the
+repeat until no tick violates. While the working set has at most BANDQP_MAX rows, the table
+carries their band dual and the firmware re-solves it from the measured start. Once it needs
+more, the table would latch the affine map of the active set anyway, and each added row would
+cost a stage and worsen ``W``'s conditioning (an arc of contact costs a row per tick): the design
+then switches to `stospline.design.tick_qp`, which poses every row at every tick in one sparse
+QP with no stage or conditioning limit, and gives the same optimum. Each iterate is the exact optimum of a relaxation of the
 every-tick problem (a subset of its constraints), so the first iterate that meets them all is
 the every-tick optimum; the cost rises strictly with each cut, and there are finitely many
 ticks, so the loop ends. ``docs/theory/math-notes.md`` ("Regions at every tick").
@@ -24,13 +29,14 @@ import numpy as np
 
 from stospline.design.bands import BandDesign, design_bands
 from stospline.design.continuous import DesignError
-from stospline.limits import MAX_STAGES
+from stospline.design.tick_qp import TickQPDesign, design_tick_qp
+from stospline.limits import BANDQP_MAX, MAX_STAGES
 from stospline.problem.model import Constraint, Problem, TickRegion
 from stospline.problem.regions import with_bands
 from stospline.sim.oracle import evaluate_table
 from stospline.table.format import table_of
 
-__all__ = ["EveryTick", "design_every_tick", "tick_violation", "between_ticks", "active_ticks",
+__all__ = ["EveryTick", "design_every_tick", "tick_grid", "tick_violation", "between_ticks", "active_ticks",
            "MAX_ITERATIONS", "TOLERANCE"]
 
 MAX_ITERATIONS = 60
@@ -41,17 +47,21 @@ TOLERANCE = 1e-9
 
 @dataclass
 class EveryTick:
-    """The every-tick design: the band design on the final working set, and how it got there."""
-    design: BandDesign
-    problem: Problem                # the input problem plus the working set's band knots
+    """The every-tick design: the band design on the final working set (or the tick-grid QP's
+    design), and how it got there."""
+    design: BandDesign | TickQPDesign
+    problem: Problem                # the input problem plus the working set's band knots (the
+                                    # input problem itself for the tick-grid QP)
     iterations: int
     working_set: list[tuple[int, int, int]]     # (tick, region index, row) of each added row
     history: list[dict] = field(default_factory=list)   # per iteration: J0, worst, rows added
     seconds: float = 0.0
     dropped: int = 0           # rows cut in some round that the optimum left inside their bands
+    method: str = "constraint-generation"      # or "tick-qp"
 
     def summary(self) -> dict:
-        return {"iterations": self.iterations, "working_set_rows": len(self.working_set),
+        return {"method": self.method, "iterations": self.iterations,
+                "working_set_rows": len(self.working_set),
                 "dropped_rows": self.dropped,
                 "working_set": [{"tick": j, "region": r, "row": i}
                                 for j, r, i in self.working_set]}
@@ -116,7 +126,10 @@ def _independent(problem: Problem, rows: list, cuts: list) -> list[tuple[int, in
 
 def active_ticks(problem: Problem, design: BandDesign) -> list[tuple[int, int]]:
     """``(tick, side)`` of every band row the design holds at a bound (side -1 lower, +1
-    upper), over the knots without a penalty (the band knots a region added)."""
+    upper), over the knots without a penalty (the band knots a region added); for the
+    tick-grid QP, over the regions' rows."""
+    if isinstance(design, TickQPDesign):
+        return design.active_ticks()
     return sorted((round((problem.knots[k].t - problem.t0) * problem.tick_hz), int(a))
                   for (k, _), a in zip(design.rows, design.solution.active)
                   if a != 0 and problem.knots[k].penalty is None)
@@ -184,12 +197,16 @@ def _bands(problem: Problem, rows: list[tuple[int, int, int]]) -> dict[int, Cons
 
 
 def design_every_tick(problem: Problem, *, noise: bool = True,
-                      max_iterations: int = MAX_ITERATIONS) -> EveryTick:
+                      max_iterations: int = MAX_ITERATIONS,
+                      band_rows: int | None = BANDQP_MAX) -> EveryTick:
     """The joint exact-zero-order-hold band design whose expected outputs meet every tick
     region at every tick (to `TOLERANCE` of the bounds' scale), by constraint generation.
 
-    Raises DesignError naming ``regions[i]`` when the working set would need more stages than
-    the firmware takes or the loop does not settle within `max_iterations`."""
+    Once the working set needs more than BANDQP_MAX rows, the design is the tick-grid QP's
+    (`tick_grid`; module docstring); ``band_rows=None`` keeps generating constraints (the
+    reference the tests compare the QP with) up to the firmware's MAX_STAGES. Raises
+    DesignError naming ``regions[i]`` when the loop does not settle within `max_iterations`,
+    needs more stages than the firmware takes, or the QP has no solution."""
     start = time.perf_counter()
     _check_fixed(problem)
     rows: list[tuple[int, int, int]] = []
@@ -197,14 +214,16 @@ def design_every_tick(problem: Problem, *, noise: bool = True,
     history = []
     for it in range(1, max_iterations + 1):
         work = with_bands(problem, _bands(problem, rows))
+        if band_rows is not None and len(rows) > band_rows:
+            return tick_grid(problem, noise=noise, iterations=it - 1, history=history,
+                             start=start)
         if len(work.knots) > MAX_STAGES:
             r = rows[-1][1]
             raise DesignError(f"regions[{problem.tick_regions[r].index}]",
                               f"every = \"tick\" needs {len(work.knots)} stages (the file's "
                               f"knots and a band knot at each tick where the expected output "
                               f"touches a region; an arc of contact costs one per tick), "
-                              f"more than the firmware's {MAX_STAGES} (STSP_MAX_STAGES): use "
-                              f"a grid (every = seconds) or a lower tick_hz")
+                              f"more than the firmware's {MAX_STAGES} (STSP_MAX_STAGES)")
         try:
             design = design_bands(work, discretization="exact-zoh", noise=noise)
         except DesignError as exc:
@@ -254,6 +273,29 @@ def design_every_tick(problem: Problem, *, noise: bool = True,
                       f"every = \"tick\": still violated after {max_iterations} rounds of "
                       f"constraint generation ({len(rows)} band rows, worst {worst[3]:.3g} at "
                       f"tick {worst[0]}): use a grid (every = seconds)")
+
+
+def tick_grid(problem: Problem, *, noise: bool = True, iterations: int = 0,
+              history: list | None = None, start: float | None = None) -> EveryTick:
+    """The every-tick design as the sparse QP on the tick grid (`design_tick_qp`), checked
+    at every tick by the oracle on its law in double precision."""
+    start = time.perf_counter() if start is None else start
+    design = design_tick_qp(problem, noise=noise)
+    path = evaluate_table(problem, table_of(design, quantize=False), path=True).path_mean
+    cuts = _cuts(problem, path)
+    if cuts:      # the KKT loop met every row to TOLERANCE: the oracle must agree
+        j, r, i, v = max(cuts, key=lambda c: c[3])
+        raise DesignError(f"regions[{problem.tick_regions[r].index}]",
+                          f"the tick-grid design leaves row {i} {v:.3g} beyond its band at "
+                          f"t = {problem.t0 + j / problem.tick_hz:g} on the oracle")
+    work = [(t.tick, next(k for k, g in enumerate(problem.tick_regions) if g.index == t.index),
+             t.row) for t, a in zip(design.rows, design.active)
+            if t.kind == "region" and a != 0]
+    history = list(history or []) + [{"iteration": iterations + 1, "J0": design.J0,
+                                      "rows": len(work), "worst": 0.0, "added": 0,
+                                      "tick_qp_rounds": design.rounds}]
+    return EveryTick(design, problem, iterations + 1, sorted(work), history,
+                     time.perf_counter() - start, method="tick-qp")
 
 
 def between_ticks(problem: Problem, path_mean: np.ndarray, u_mean: np.ndarray,

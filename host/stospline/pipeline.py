@@ -78,8 +78,8 @@ class Designed:
     # With ``table="spline"``: what the spline table costs and saves, for the law exactly as
     # the firmware evaluates it (`stospline.sim.spline_certificate.certificate`).
     certificate: dict | None = None
-    # With [[regions]] at every tick: the constraint generation that met them
-    # (`stospline.sim.every_tick.EveryTick`).
+    # With [[regions]] at every tick: how they were met, by constraint generation or the
+    # tick-grid QP (`stospline.sim.every_tick.EveryTick`).
     every_tick: EveryTick | None = None
 
     def gains(self, *, quantized: bool = True):
@@ -366,6 +366,7 @@ def every_tick_check(d: Designed, *, where: bool = False) -> dict:
                         "worst_at_ticks_design": float(law.max()),
                         "worst_at_ticks_implemented": float(imp.max()),
                         "worst_over_interval": gap["worst"],
+                        "between_ticks_enforced": bool(reg.between),
                         "over_interval_exact": gap["exact"],
                         **({"worst_over_interval_t": gap["t"]} if where else {})})
     return {**d.every_tick.summary(), "regions": regions}

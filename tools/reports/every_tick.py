@@ -8,7 +8,8 @@ design's double-precision law and on the float32 table) and over the whole inter
 ticks too, the command held), and the design time. Then the check against the dense design
 (a band knot at every tick) at 20 Hz, and the condition number of the dense W(t0) against
 the working set's as the tick rate grows; the tick-grid QP against constraint generation on
-robot_monotone at 100 Hz, and robot_monotone at 1 kHz (an arc of contact of 912 ticks).
+robot_monotone at 100 Hz, robot_monotone at 1 kHz (an arc of contact of 912 ticks), and the
+no-overshoot band held between ticks too (between_ticks = true).
 Usage: PYTHONPATH=host .venv/bin/python tools/reports/every_tick.py
 """
 from __future__ import annotations
@@ -67,6 +68,7 @@ def case(label: str, doc: dict, grid: float) -> None:
     g_doc = copy.deepcopy(doc)
     for r in g_doc["regions"]:
         r["every"] = grid
+        r.pop("between_ticks", None)
     g = design_problem(parse_problem(g_doc), mode="joint")
     f_doc = copy.deepcopy(doc)
     f_doc.pop("regions")
@@ -189,6 +191,10 @@ def main() -> None:
         case("no overshoot, E{x} <= -1", robot(hz, [{"t": [0.0, 6.0], "every": "tick",
                                                       "C": [[1, 0, 0, 0]], "lower": [-6.0],
                                                       "upper": [-1.0]}]), 0.1)
+    for hz in (20, 100, 1000):
+        case("no overshoot, E{x} <= -1, between ticks too (between_ticks = true)",
+             robot(hz, [{"t": [0.0, 6.0], "every": "tick", "C": [[1, 0, 0, 0]],
+                         "lower": [-6.0], "upper": [-1.0], "between_ticks": True}]), 0.1)
     dense_check()
     conditioning()
     other_starts()

@@ -41,6 +41,12 @@ __all__ = ["TickRow", "TickQPDesign", "design_tick_qp"]
 # Exact corrections of the interior-point guess of the active set, and its iterations.
 MAX_ROUNDS = 50
 IPM_MAX_ITERATIONS = 80
+KKT_REGULARIZATION = 1e-13
+# Relative excess over the interior point's lower bound at which a feasible KKT point is
+# certified optimal when the multipliers of degenerate rows have the wrong sign.
+OPTIMALITY = 1e-10
+# A row is a combination of others when it is within this (relative) of their span.
+DEPENDENT = 1e-9
 # The interior point stops at a mean complementarity s'z / rows below this (times the bounds'
 # scale): tight enough that the rows it calls active are the optimum's but for a few at the
 # ends of arcs (robot at 1 kHz: none to 3 corrections left for the exact loop).
@@ -52,14 +58,20 @@ TOLERANCE = 1e-9
 
 @dataclass(frozen=True)
 class TickRow:
-    """One constraint row on the mean at a tick: ``lower <= c' E{x_tick} <= upper``."""
+    """One constraint row: ``lower <= c' m_tick + cd' d_tick + offset <= upper``. A knot's or
+    a region's row at a tick has ``cd`` None and no offset; a "between" row bounds one
+    Bernstein coefficient (`bernstein`) of a region row's mean over the tick that starts at
+    `tick` (`_between_rows`)."""
     tick: int
-    kind: str            # "knot" or "region"
+    kind: str            # "knot", "region" or "between"
     index: int           # the knot's index, or the region's place in the file's [[regions]]
     row: int
     c: np.ndarray
     lower: float
     upper: float
+    cd: np.ndarray | None = None
+    offset: float = 0.0
+    bernstein: int = -1
 
 
 @dataclass
@@ -189,8 +201,9 @@ def _backward(problem: Problem, tick_hz: int, noise: bool):
     return K, ks, H, F, stage_of, V
 
 
-def _rows(problem: Problem, tick_hz: int) -> list[TickRow]:
-    """Every constraint row, ordered by tick: the knots' rows, then the regions'."""
+def _rows(problem: Problem, tick_hz: int, K, ks, stage_of) -> list[TickRow]:
+    """Every constraint row, ordered by tick: the knots' rows, then the regions' (and their
+    rows between ticks)."""
     t0 = problem.t0
     rows = []
     for k, kn in enumerate(problem.knots):
@@ -206,8 +219,104 @@ def _rows(problem: Problem, tick_hz: int) -> list[TickRow]:
             for i, c in enumerate(reg.C):
                 rows.append(TickRow(int(j), "region", reg.index, i, np.asarray(c, float),
                                     float(reg.lower[i]), float(reg.upper[i])))
-    rows.sort(key=lambda r: (r.tick, r.kind != "knot", r.index, r.row))
+        if reg.between:
+            rows += _between_rows(problem, tick_hz, reg, K, ks, stage_of)
+    rows.sort(key=lambda r: (r.tick, ("knot", "region", "between").index(r.kind), r.index,
+                             r.row, r.bernstein))
     return rows
+
+
+def _between_rows(problem: Problem, tick_hz: int, reg, K, ks, stage_of) -> list[TickRow]:
+    """A region's rows between ticks. Over a tick the command is held, and for an integrator
+    chain (``A`` nilpotent, data constant) the mean is a polynomial of degree D <= n in the
+    time s since the tick:
+
+        E{c'x(s)} = sum_k s^k/k! c'A^k m_j + s^(k+1)/(k+1)! c'A^k (B u_j + f),
+        u_j = -K_j m_j - k*_j - d_j,
+
+    linear in ``(m_j, d_j)``. On a piece ``[alpha, beta]`` of the tick, with
+    ``s = alpha + (beta - alpha) sigma``, a polynomial lies between its smallest and largest
+    Bernstein coefficients over sigma in [0, 1], and its end coefficients are its values at
+    the ends. So bounding the interior coefficients (and the end one where the piece ends
+    inside a tick, at b) keeps it inside the band at every time of the piece: sufficient, and
+    close (a quadratic's middle coefficient exceeds its extremum by at most a quarter of its
+    range over the tick); the values at the ticks are the tick rows. A degree-1 mean (a
+    velocity of a double integrator) needs no interior row."""
+    t0, h = problem.t0, 1.0 / tick_hz
+    bounds = np.array([t0] + [kn.t for kn in problem.knots])
+    a, b = reg.t
+    first = int(round((a - t0) * tick_hz))
+    last = int(np.ceil((b - t0) * tick_hz - 1e-9))
+    field = f"regions[{reg.index}].between_ticks"
+    cache: dict = {}
+    out = []
+    for j in range(first, last):
+        k = int(stage_of[min(j, len(stage_of) - 1)])
+        st = problem.stages[k]
+        if k not in cache:
+            n = st.A.shape[0]
+            if st.varying is not None or np.any(np.linalg.matrix_power(st.A, n)):
+                raise DesignError(field, f"the mean is a polynomial over a tick only for an "
+                                         f"integrator chain (A nilpotent, data constant in "
+                                         f"time); stage {k} (t = {bounds[k]:g} to "
+                                         f"{bounds[k + 1]:g}) is not one")
+            f = np.zeros(n) if st.f is None else np.asarray(st.f, float)
+            cache[k] = (st.A, st.B, f)
+        A, B, f = cache[k]
+        n, m = B.shape
+        alpha = 0.0
+        beta = min(h, b - (t0 + j * h))
+        if beta <= 1e-12 * h:
+            continue
+        for i, c in enumerate(reg.C):
+            P = _power_coefficients(c, A, B, f, K[j], ks[j])        # (n+1, n+m+1)
+            nz = np.flatnonzero(np.abs(P).max(axis=1) > 1e-12 * max(1.0, np.abs(P).max()))
+            D = int(nz.max()) if nz.size else 0
+            Bz = _bernstein(P[:D + 1], alpha, beta)
+            ends = beta < h * (1 - 1e-9)                     # the piece ends inside a tick
+            for q in range(1, D + (1 if ends else 0)):
+                out.append(TickRow(j, "between", reg.index, i, Bz[q, :n],
+                                   float(reg.lower[i]), float(reg.upper[i]),
+                                   cd=Bz[q, n:n + m], offset=float(Bz[q, -1]), bernstein=q))
+    return out
+
+
+def _power_coefficients(c, A, B, f, Kj, ksj) -> np.ndarray:
+    """Rows k = 0..n: the coefficient of s^k in ``c'E{x(s)}`` over a tick, as a linear form
+    in ``[m_j; d_j; 1]`` (the command ``-K_j m_j - k*_j - d_j`` held)."""
+    n, m = B.shape
+    P = np.zeros((n + 1, n + m + 1))
+    cA = np.asarray(c, float)                # c'A^k
+    fact = 1.0
+    for k in range(n + 1):
+        if k:
+            fact *= k
+        P[k, :n] += cA / fact
+        if k < n:
+            u = cA @ B / (fact * (k + 1))       # s^(k+1)/(k+1)! c'A^k B u
+            P[k + 1, :n] -= u @ Kj
+            P[k + 1, n:n + m] -= u
+            P[k + 1, -1] += -u @ ksj + cA @ f / (fact * (k + 1))
+        cA = cA @ A
+    return P
+
+
+def _bernstein(P: np.ndarray, alpha: float, beta: float) -> np.ndarray:
+    """Bernstein coefficients over [alpha, beta] of the polynomial with power coefficients
+    `P` (rows: s^0 .. s^D, each a linear form)."""
+    from math import comb
+    D = P.shape[0] - 1
+    L = beta - alpha
+    # Power coefficients in sigma, s = alpha + L sigma.
+    Q = np.zeros_like(P)
+    for k in range(D + 1):
+        for i in range(k + 1):
+            Q[i] += comb(k, i) * alpha ** (k - i) * L ** i * P[k]
+    out = np.zeros_like(P)
+    for i in range(D + 1):
+        for k in range(i + 1):
+            out[i] += comb(i, k) / comb(D, k) * Q[k]
+    return out
 
 
 class _Grid:
@@ -222,6 +331,7 @@ class _Grid:
         off_d = (T + 1) * n
         Fx, Fu, F1 = F[stage_of, :, :n], F[stage_of, :, n:n + m], F[stage_of, :, -1]
         Acl = Fx - np.einsum("tik,tkj->tij", Fu, K)
+        self.Acl, self.Fu = Acl, Fu            # the mean map of each tick
         # Equality rows: m_0 = x0, then m_{j+1} - Acl_j m_j + Fu_j d_j = -Fu_j k*_j + F1_j.
         j, a, b = np.meshgrid(np.arange(T), np.arange(n), np.arange(n), indexing="ij")
         ju, au, bu = np.meshgrid(np.arange(T), np.arange(n), np.arange(m), indexing="ij")
@@ -238,12 +348,18 @@ class _Grid:
         rr = np.repeat(np.arange(q), n)
         cc = np.concatenate([r.tick * n + np.arange(n) for r in rows]) if q else np.zeros(0, int)
         vv = np.concatenate([r.c for r in rows]) if q else np.zeros(0)
+        between = [(i, r) for i, r in enumerate(rows) if r.cd is not None]
+        if between:         # the rows between ticks also weigh that tick's offset d_j
+            rr = np.concatenate([rr, np.repeat([i for i, _ in between], m)])
+            cc = np.concatenate([cc] + [off_d + r.tick * m + np.arange(m) for _, r in between])
+            vv = np.concatenate([vv] + [r.cd for _, r in between])
         self.E = sparse.csr_matrix((np.concatenate(v_i), (np.concatenate(r_i),
                                                           np.concatenate(c_i))),
                                    shape=(self.n_eq, self.nv))
         self.C = sparse.csr_matrix((vv, (rr, cc)), shape=(q, self.nv))
-        self.lo = np.array([r.lower for r in rows])
-        self.hi = np.array([r.upper for r in rows])
+        self.offset = np.array([r.offset for r in rows])
+        self.lo = np.array([r.lower for r in rows]) - self.offset
+        self.hi = np.array([r.upper for r in rows]) - self.offset
         pd = np.arange(T * m).reshape(T, m) + off_d
         self.P = sparse.csc_matrix((2 * H.ravel(), (np.repeat(pd, m, axis=1).ravel(),
                                                      np.tile(pd, (1, m)).ravel())),
@@ -282,7 +398,7 @@ def _interior_point(g: _Grid, x0, eq: np.ndarray) -> tuple[np.ndarray, int]:
     guess = np.zeros(len(g.lo), dtype=int)
     guess[eq] = 1
     if ni == 0:
-        return guess, 0
+        return guess, 0, -np.inf
 
     def solve(wdiag, r1, r2):
         M = sparse.bmat([[P + G.T @ sparse.diags(wdiag) @ G, E.T], [E, None]], format="csc")
@@ -295,24 +411,33 @@ def _interior_point(g: _Grid, x0, eq: np.ndarray) -> tuple[np.ndarray, int]:
     s = np.maximum(h - G @ w, 1e-2 * scale)
     z = np.ones(ni)
     it = 0
+    best = None
     for it in range(1, IPM_MAX_ITERATIONS + 1):
         rd = P @ w + E.T @ y + G.T @ z
         re = E @ w - b
         ri = G @ w + s - h
         mu = float(s @ z) / ni
-        if (mu < IPM_MU * scale and np.abs(ri).max() < 1e-10 * scale
-                and np.abs(re).max() < 1e-10 * scale):
+        resid = max(float(np.abs(rd).max()), float(np.abs(re).max()) / scale,
+                    float(np.abs(ri).max()) / scale)
+        if resid < 1e-8 and (best is None or mu < best[0]):
+            best = (mu, s, z, 0.5 * float(w @ (P @ w)) - float(s @ z))
+        if mu < IPM_MU * scale and resid < 1e-10:
             break
-        wd = z / s
-        M = sparse.bmat([[P + G.T @ sparse.diags(wd) @ G, E.T], [E, None]], format="csc")
+        if best is not None and resid > 1e-6:
+            # Degenerate rows (dependent ones at a bound along an arc) drive z/s to where
+            # the Newton systems lose their accuracy: keep the last accurate iterate.
+            break
+        # The augmented Newton system: the inequality rows keep their own block
+        # -(s/z + delta), so rows that depend on others and reach their bound (z/s -> inf)
+        # stay solvable, as in the KKT matrix of the exact solve.
+        M = sparse.bmat([[P, E.T, G.T], [E, None, None],
+                         [G, None, -sparse.diags(s / z + KKT_REGULARIZATION)]], format="csc")
         lu = splu(M)
 
         def step(rc):
-            r1 = -rd + G.T @ ((rc - z * ri) / s)
-            sol = lu.solve(np.concatenate([r1, -re]))
-            dw, dy = sol[:nv], sol[nv:]
+            sol = lu.solve(np.concatenate([-rd, -re, rc / z - ri]))
+            dw, dy, dz = sol[:nv], sol[nv:nv + ne], sol[nv + ne:]
             ds = -ri - G @ dw
-            dz = (-rc - z * ds) / s
             return dw, dy, ds, dz
 
         def longest(v, dv):
@@ -328,6 +453,9 @@ def _interior_point(g: _Grid, x0, eq: np.ndarray) -> tuple[np.ndarray, int]:
         w, y, s, z = w + a * dw, y + a * dy, s + a * ds, z + a * dz
         if a < 1e-10:       # stalled at rounding: the guess is as good as it gets
             break
+    lower = -np.inf
+    if best is not None:
+        _, s, z, lower = best
     # Active where the multiplier outweighs the slack.
     zu, zl = np.zeros(len(ineq)), np.zeros(len(ineq))
     su, sl = np.ones(len(ineq)), np.ones(len(ineq))
@@ -335,29 +463,75 @@ def _interior_point(g: _Grid, x0, eq: np.ndarray) -> tuple[np.ndarray, int]:
     zu[fu], su[fu] = z[:k], s[:k]
     zl[fl], sl[fl] = z[k:], s[k:]
     guess[ineq] = np.where(zu > su, 1, np.where(zl > sl, -1, 0))
-    return guess, it
+    # ``lower``: the objective of the iterate less its complementarity gap, a lower bound on
+    # the optimum's (to the iterate's residuals, < 1e-8).
+    return guess, it, lower
 
 
-def _independent_rows(rows: list[TickRow], active: np.ndarray) -> np.ndarray:
-    """Drop from `active` each row that depends on the rows taken before it at its tick
-    (equal bounds first): its value is then fixed by them, and the KKT matrix would be
-    singular."""
+def _orth(vectors: list[np.ndarray], dim: int) -> np.ndarray:
+    """An orthonormal basis (columns) of the span of `vectors` (unit-normalised first)."""
+    if not vectors:
+        return np.zeros((dim, 0))
+    A = np.array([v / np.linalg.norm(v) for v in vectors]).T
+    u, sv, _ = np.linalg.svd(A, full_matrices=False)
+    return u[:, sv > DEPENDENT * sv[0]]
+
+
+def _outside(basis: np.ndarray, v: np.ndarray) -> bool:
+    """`v` is not (to `DEPENDENT`) in the span of the orthonormal columns of `basis`."""
+    v = v / np.linalg.norm(v)
+    return bool(np.linalg.norm(v - basis @ (basis.T @ v)) > DEPENDENT)
+
+
+def _independent_rows(g: _Grid, rows: list[TickRow], active: np.ndarray) -> np.ndarray:
+    """Drop from `active` each row that is a combination of the rows before it (in time;
+    equal bounds first at a tick) and of x0: its value is then fixed by them, and the KKT
+    matrix would be singular. Along an arc where a position stays at its bound between ticks
+    too, its values at the ticks and the middle Bernstein coefficients fix zero speed and zero
+    command, so every other row there is implied.
+
+    A forward sweep finds them exactly, in O(ticks n^3): ``V_j``, the functionals ``c`` of the
+    mean ``m_j`` whose value ``c'm_j`` is a combination of the rows so far and x0 (``V_0`` is
+    all of R^n). A row at tick j is dependent iff ``c`` is in ``V_j`` (then the row is
+    dropped, else ``V_j`` grows by it). In the coordinates ``(m_j, d_j)`` of tick j,
+    ``S_j = V_j x {0} + span(rows between ticks j and j+1 taken)``, and since
+    ``m_{j+1} = Acl_j m_j - Fu_j d_j + const``, ``V_{j+1} = {c : (Acl_j'c, -Fu_j'c) in S_j}``
+    (the d-part of a combination can only come from rows of that tick)."""
     out = active.copy()
-    taken: dict[int, list[np.ndarray]] = {}
-    order = sorted(np.flatnonzero(active), key=lambda i: (rows[i].tick,
-                                                          rows[i].lower != rows[i].upper, i))
-    for i in order:
-        c = rows[i].c / np.linalg.norm(rows[i].c)
-        have = taken.setdefault(rows[i].tick, [])
-        if have:
-            basis = np.array(have).T
-            c_out = c - basis @ np.linalg.lstsq(basis, c, rcond=None)[0]
-        else:
-            c_out = c
-        if np.linalg.norm(c_out) > 1e-8:
-            have.append(c)
-        else:
-            out[i] = 0
+    n, m = g.n, g.m
+    by_tick: dict[int, list[int]] = {}
+    for i in sorted(np.flatnonzero(active), key=lambda i: (rows[i].tick, rows[i].cd is not None,
+                                                           rows[i].lower != rows[i].upper, i)):
+        by_tick.setdefault(rows[i].tick, []).append(i)
+    V = np.eye(n)                              # m_0 = x0: every functional is fixed
+    for j in range(g.T + 1):
+        for i in by_tick.get(j, []):
+            if rows[i].cd is None:
+                if _outside(V, rows[i].c):
+                    V = _orth(list(V.T) + [rows[i].c], n)
+                else:
+                    out[i] = 0
+        if j == g.T:
+            break
+        # S_j, with the d-part scaled by the tick's input gain (|Fu| ~ h^2 for a position):
+        # dependence does not depend on the scale of d, the tolerance does.
+        sd = max(float(np.abs(g.Fu[j]).max()), 1e-300)
+        S = [np.concatenate([v, np.zeros(m)]) for v in V.T]
+        for i in by_tick.get(j, []):
+            if rows[i].cd is not None:
+                v = np.concatenate([rows[i].c, rows[i].cd / sd])
+                if not S or _outside(_orth(S, n + m), v):
+                    S.append(v)
+                else:
+                    out[i] = 0
+        Sb = _orth(S, n + m)
+        # V_{j+1}: the null space of (I - Sb Sb') [Acl_j'; -Fu_j' / sd] (n + m x n).
+        Mj = np.vstack([g.Acl[j].T, -g.Fu[j].T / sd])
+        R = Mj - Sb @ (Sb.T @ Mj)
+        _, sv, vt = np.linalg.svd(R)
+        scale = max(float(np.abs(Mj).max()), 1e-300)
+        rank = int(np.sum(sv > DEPENDENT * scale))
+        V = vt[rank:].T
     return out
 
 
@@ -368,7 +542,14 @@ def _kkt(g: _Grid, active: np.ndarray):
     idx = np.flatnonzero(active)
     Ea = sparse.vstack([g.E, g.C[idx]], format="csc")
     k = Ea.shape[0]
-    M = sparse.bmat([[g.P, Ea.T], [Ea, None]], format="csc")
+    # The active rows' block is regularised by -KKT_REGULARIZATION: rows that depend on others
+    # through the dynamics (along an arc where a position stays at its bound, its values at the
+    # ticks and the middle coefficients between them fix more than the commands can) then share
+    # their multiplier instead of making the matrix singular, and the correction loop drops
+    # the ones whose share has the wrong sign. Independent rows move by ~1e-14.
+    reg = sparse.diags(np.concatenate([np.zeros(g.n_eq), np.full(idx.size,
+                                                                 -KKT_REGULARIZATION)]))
+    M = sparse.bmat([[g.P, Ea.T], [Ea, reg]], format="csc")
     try:
         return splu(M), idx, k
     except RuntimeError:
@@ -393,15 +574,15 @@ def design_tick_qp(problem: Problem, *, noise: bool = True,
     start = time.perf_counter()
     tick_hz = problem.tick_hz if tick_hz is None else int(tick_hz)
     K, ks, H, F, stage_of, V0 = _backward(problem, tick_hz, noise)
-    rows = _rows(problem, tick_hz)
+    rows = _rows(problem, tick_hz, K, ks, stage_of)
     g = _Grid(problem, K, ks, H, F, stage_of, rows)
     x0 = np.asarray(problem.x0, float)
     eq = g.lo == g.hi
-    scale = np.maximum(1.0, np.maximum(np.abs(g.lo), np.abs(g.hi)))
-    active, iters = _interior_point(g, x0, eq)
+    scale = np.maximum(1.0, np.maximum(np.abs(g.lo + g.offset), np.abs(g.hi + g.offset)))
+    active, iters, lower = _interior_point(g, x0, eq)
     rounds = 0
     for rounds in range(1, MAX_ROUNDS + 1):
-        active = _independent_rows(rows, active)
+        active = _independent_rows(g, rows, active)
         lu, idx, k = _kkt(g, active)
         w, y = _solve(lu, g, idx, k, active, g.rhs(x0))
         mult = np.zeros(len(rows))
@@ -413,6 +594,12 @@ def design_tick_qp(problem: Problem, *, noise: bool = True,
         wrong = (~eq) & (active != 0) & (active * mult < -ytol)
         add = beyond & (active == 0)
         if not add.any() and not wrong.any():
+            break
+        # Degenerate rows (an arc held between ticks: the rows at its bound are dependent
+        # through the dynamics) need not have multipliers of the right sign on the subset
+        # kept; the interior point's nonnegative ones certify instead: a feasible point whose
+        # objective is within OPTIMALITY of the lower bound is the optimum to that much.
+        if not add.any() and 0.5 * float(w @ (g.P @ w)) <= lower + OPTIMALITY * abs(lower):
             break
         active = np.where(add, np.where(val > g.hi, 1, -1), active)
         active[wrong] = 0
@@ -429,7 +616,7 @@ def design_tick_qp(problem: Problem, *, noise: bool = True,
     z = np.append(x0, 1.0)
     J0 = float(z @ V0 @ z + np.einsum("ti,tij,tj->", delta, H, delta))
     return TickQPDesign(problem, tick_hz, K, ks, H, delta, D, V0, J0, rows, active, mult,
-                        np.asarray(val), rounds, iters, time.perf_counter() - start,
+                        np.asarray(val) + g.offset, rounds, iters, time.perf_counter() - start,
                         noise_aware=noise,
                         stats={"variables": g.nv, "rows": len(rows),
                                "equalities": g.n_eq})

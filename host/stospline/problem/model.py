@@ -149,6 +149,9 @@ class TickRegion:
     lower: np.ndarray
     upper: np.ndarray
     index: int = field(default=0, compare=False)   # its place in the file's [[regions]]
+    # ``between_ticks = true``: also at every time between the ticks of [a, b] (the mean is a
+    # polynomial over a tick when the stage is an integrator chain; `stospline.design.tick_qp`)
+    between: bool = False
 
     def ticks(self, t0: float, tick_hz: int) -> np.ndarray:
         """Indices (from t0) of the ticks in [a, b], t0 excluded."""

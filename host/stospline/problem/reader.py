@@ -639,7 +639,7 @@ def _parse_regions(raw: Any, n: int, t0: float, t_end: float, tick_hz: int,
     out = []
     for i, reg in enumerate(raw):
         rp = f"regions[{i}]"
-        _check_keys(reg, rp, {"t", "every", "C", "lower", "upper"},
+        _check_keys(reg, rp, {"t", "every", "C", "lower", "upper", "between_ticks"},
                     {"t", "every", "C", "lower", "upper"})
         a, b = _vector(reg["t"], _join(rp, "t"), 2)
         if not t0 <= a < b <= t_end:
@@ -663,13 +663,20 @@ def _parse_regions(raw: Any, n: int, t0: float, t_end: float, tick_hz: int,
         hi = _vector(reg["upper"], _join(rp, "upper"), C.shape[0], " (one entry per row of C)")
         if np.any(lo > hi):
             raise ProblemError(_join(rp, "lower"), "lower > upper: the band is empty")
+        between = reg.get("between_ticks", False)
+        if not isinstance(between, bool):
+            raise ProblemError(_join(rp, "between_ticks"), f"must be true or false, got "
+                                                           f"{_kind(between)}")
+        if between and not tick:
+            raise ProblemError(_join(rp, "between_ticks"), 'needs every = "tick" (a grid '
+                                                           'region holds at its grid points)')
         if tick:   # met by the design's constraint generation, not by a knot per tick
             zero = np.flatnonzero(~np.any(C != 0, axis=1))
             if zero.size:
                 raise ProblemError(_join(rp, "C"), f"row {int(zero[0])} is zero: it constrains "
                                                    f"no output")
-            region = TickRegion((a, b), C, lo, hi, i)
-            if region.ticks(t0, tick_hz).size:
+            region = TickRegion((a, b), C, lo, hi, i, between)
+            if region.ticks(t0, tick_hz).size or between:
                 ticked.append(region)
             continue
         count = int(np.floor((b - a) / every - 1e-9))

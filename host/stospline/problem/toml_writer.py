@@ -164,7 +164,8 @@ def problem_to_toml(problem: Problem) -> str:
         lines += _table("[[knots]]", _knot(kn))
     for reg in p.tick_regions:
         lines += _table("[[regions]]", {"t": [float(reg.t[0]), float(reg.t[1])], "every": "tick",
-                                        "C": reg.C, "lower": reg.lower, "upper": reg.upper})
+                                        "C": reg.C, "lower": reg.lower, "upper": reg.upper,
+                                        **({"between_ticks": True} if reg.between else {})})
     if p.plot:
         lines += _table("[plot]", dict(p.plot))
     if p.faults.any:

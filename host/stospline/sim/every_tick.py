@@ -209,6 +209,8 @@ def design_every_tick(problem: Problem, *, noise: bool = True,
     needs more stages than the firmware takes, or the QP has no solution."""
     start = time.perf_counter()
     _check_fixed(problem)
+    if any(reg.between for reg in problem.tick_regions):    # rows between ticks: the QP's
+        return tick_grid(problem, noise=noise, start=start)
     rows: list[tuple[int, int, int]] = []
     new: list[tuple[int, int, int]] = []
     history = []
@@ -288,6 +290,15 @@ def tick_grid(problem: Problem, *, noise: bool = True, iterations: int = 0,
         raise DesignError(f"regions[{problem.tick_regions[r].index}]",
                           f"the tick-grid design leaves row {i} {v:.3g} beyond its band at "
                           f"t = {problem.t0 + j / problem.tick_hz:g} on the oracle")
+    if any(reg.between for reg in problem.tick_regions):
+        u_mean = np.array([-(K @ x) - k for K, k, x in
+                           zip(design.K, design.kstar + design.delta, path[:-1])])
+        for reg, gap in zip(problem.tick_regions, between_ticks(problem, path, u_mean)):
+            if reg.between and gap["worst"] > TOLERANCE * _scale(reg):
+                raise DesignError(f"regions[{reg.index}].between_ticks",
+                                  f"the tick-grid design leaves row {gap['row']} "
+                                  f"{gap['worst']:.3g} beyond its band at t = {gap['t']:g} "
+                                  f"between ticks (exact polynomial extremum)")
     work = [(t.tick, next(k for k, g in enumerate(problem.tick_regions) if g.index == t.index),
              t.row) for t, a in zip(design.rows, design.active)
             if t.kind == "region" and a != 0]

@@ -27,7 +27,7 @@ firmware's band solver takes).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -375,12 +375,12 @@ class _Grid:
         return w[self.off_d:].reshape(self.T, self.m)
 
 
-def _interior_point(g: _Grid, x0, eq: np.ndarray) -> tuple[np.ndarray, int]:
+def _interior_point(g: _Grid, x0, eq: np.ndarray) -> tuple[np.ndarray, int, float]:
     """A guess of the active set (+1 upper, -1 lower per constraint row) from a primal-dual
-    interior-point method (Mehrotra's predictor-corrector) on the QP. Each iteration solves
-    one sparse system of the KKT matrix's pattern, ``[[P + C' diag(z/s) C, E'], [E, 0]]``
-    (banded in time), and their number hardly grows with the ticks (about 30), where ADMM's
-    grew with the horizon (OSQP: 2 700 iterations at 1 kHz, 12 100 at 2 kHz on the robot).
+    interior-point method (Mehrotra's predictor-corrector) on the QP, its iterations, and a
+    lower bound on the optimal objective. Each iteration solves one sparse augmented system
+    ``[[P, E', G'], [E, 0, 0], [G, 0, -(S/Z + delta)]]`` (banded in time), and their number hardly grows with the ticks (15-17 on the robot from
+    100 Hz to 5 kHz, `tools/bench/tick_qp.py`), where ADMM's grew with the horizon.
     The rows with a bound (``lower < upper``) are ``G w <= h``, ``G = [C; -C]``; the knots'
     equalities join ``E``. The exact KKT loop corrects the guess."""
     from scipy import sparse
@@ -400,12 +400,9 @@ def _interior_point(g: _Grid, x0, eq: np.ndarray) -> tuple[np.ndarray, int]:
     if ni == 0:
         return guess, 0, -np.inf
 
-    def solve(wdiag, r1, r2):
-        M = sparse.bmat([[P + G.T @ sparse.diags(wdiag) @ G, E.T], [E, None]], format="csc")
-        return splu(M).solve(np.concatenate([r1, r2]))
-
     # Start: the equality-constrained optimum, slacks pushed inside.
-    z0 = solve(np.zeros(ni), np.zeros(nv), b)
+    z0 = splu(sparse.bmat([[P, E.T], [E, None]], format="csc")).solve(
+        np.concatenate([np.zeros(nv), b]))
     w, y = z0[:nv], z0[nv:]
     scale = max(1.0, float(np.abs(h).max()))
     s = np.maximum(h - G @ w, 1e-2 * scale)

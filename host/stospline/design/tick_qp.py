@@ -178,8 +178,11 @@ def _backward(problem: Problem, tick_hz: int, noise: bool):
     for k in range(len(problem.knots) - 1, -1, -1):
         stage = problem.stages[k] if noise else problem.stages[k].without_noise()
         if stage.varying is not None:
-            raise DesignError(f"stages[{k}]", "a region at every tick is designed on the tick "
-                                              "grid for time-invariant stage data only")
+            idx = problem.tick_regions[0].index if problem.tick_regions else 0
+            raise DesignError(f"regions[{idx}]", f"designed on the tick grid here (more than "
+                                                 f"8 rows bind, or between_ticks), which "
+                                                 f"takes time-invariant stage data only; "
+                                                 f"stage {k}'s vary in time")
         PT, pT, cT = knot_terminal(problem.knots[k], V[:n, :n], V[:n, n], V[n, n])
         V = np.block([[PT, pT[:, None]], [pT[None, :], np.array([[cT]])]])
         key = id(stage)

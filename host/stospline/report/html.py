@@ -115,6 +115,79 @@ def _states(d, mc, exact):
     return _png(fig)
 
 
+def _regions(d, mc, exact):
+    """Each row of each [[regions]] entry at every tick against time: its band, the oracle's
+    mean (and +- 2 sd where the row is one state), the Monte Carlo mean and the 5-95 % band
+    of the recorded paths, and the ticks where the design holds the row at a bound."""
+    import matplotlib.pyplot as plt
+    p = d.problem
+    rows = [(reg, i) for reg in p.tick_regions for i in range(reg.C.shape[0])]
+    fig, axs = plt.subplots(len(rows), 1, figsize=(9, 2.2 * len(rows) + 0.8), sharex=True,
+                            squeeze=False)
+    # The rows the design holds at a bound: constraint generation's working set, or the
+    # tick-grid QP's active region rows (tick, region position, row).
+    held = set() if d.every_tick is None else {
+        (p.tick_regions[k].index, i, j) for j, k, i in d.every_tick.working_set}
+    t = mc.sample_t
+    for ax, (reg, i) in zip(axs[:, 0], rows):
+        c = reg.C[i]
+        a, b = reg.t
+        on = (exact.path_t >= a - 1e-12) & (exact.path_t <= b + 1e-12)
+        y = exact.path_mean @ c
+        unit = np.count_nonzero(c) == 1
+        if unit:
+            k = int(np.flatnonzero(c)[0])
+            sd = abs(c[k]) * np.sqrt(np.maximum(exact.path_var[:, k], 0.0))
+            ax.fill_between(exact.path_t[on], (y - 2 * sd)[on], (y + 2 * sd)[on],
+                            color="tab:orange", alpha=0.2, label="oracle mean +- 2 sd")
+        if mc.record_x is not None and mc.record_x.shape[1] >= 2:
+            yr = mc.record_x.astype(float) @ c
+            lo, hi = np.percentile(yr, [5, 95], axis=1)
+            ax.plot(t[on], lo[on], ":", color="tab:blue", lw=1,
+                    label=f"5-95 % of {mc.record_x.shape[1]} recorded paths")
+            ax.plot(t[on], hi[on], ":", color="tab:blue", lw=1)
+        ax.plot(t[on], (mc.mean_x @ c)[on], color="tab:blue", lw=1.5,
+                label=f"mean of {mc.paths} paths")
+        ax.plot(exact.path_t[on], y[on], "--", color="tab:orange", lw=1.2, label="oracle mean")
+        ticks = sorted(j for (r, q, j) in held if r == reg.index and q == i)
+        if ticks:
+            ax.plot(exact.path_t[ticks], y[ticks], "o", ms=2.5, color="tab:red",
+                    label=f"held at a bound ({len(ticks)} tick{'s' * (len(ticks) > 1)})")
+        for bound in (reg.lower[i], reg.upper[i]):
+            ax.axhline(bound, color="k", lw=0.8)
+        # Zoom on the paths; a bound far from them is drawn but left off the axis range.
+        lo_y, hi_y = float(y[on].min()), float(y[on].max())
+        pad = 0.3 * max(hi_y - lo_y, 1e-9) + (2 * float(sd[on].max()) if unit else 0.0)
+        lo_lim = reg.lower[i] if reg.lower[i] >= lo_y - 2 * pad else lo_y - pad
+        hi_lim = reg.upper[i] if reg.upper[i] <= hi_y + 2 * pad else hi_y + pad
+        ax.set_ylim(min(lo_lim, lo_y) - 0.1 * pad, max(hi_lim, hi_y) + 0.1 * pad)
+        ax.set_ylabel(f"region {reg.index}, row {i}")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+    axs[-1, 0].set_xlabel("t [s]")
+    fig.tight_layout()
+    return _png(fig)
+
+
+def _regions_text(d) -> str:
+    """The every-tick check of the summary as a table (oracle, at every tick and between)."""
+    from stospline.pipeline import every_tick_check
+    s = every_tick_check(d)
+    how = ("one sparse QP on the tick grid" if s["method"] == "tick-qp"
+           else f"constraint generation ({s['iterations']} designs)")
+    rows = "".join(
+        f"<tr><td>{r['region']}</td><td>{r['ticks']}</td>"
+        f"<td>{r['worst_at_ticks_design']:.3g}</td><td>{r['worst_at_ticks_implemented']:.3g}</td>"
+        f"<td>{r['worst_over_interval']:.3g}{'' if r['over_interval_exact'] else ' (sampled)'}"
+        f"</td><td>{'yes' if r['between_ticks_enforced'] else 'no'}</td></tr>"
+        for r in s["regions"])
+    return (f"<p id=\"regions\">Met by {how}, {s['working_set_rows']} rows held at a bound. "
+            "Worst excursion beyond each band (negative: inside by that much), exact moment "
+            "oracle:</p><table><tr><th>region</th><th>ticks</th><th>at the ticks, design's "
+            "law</th><th>at the ticks, float32 table</th><th>over [a, b], between ticks "
+            f"too</th><th>between ticks enforced</th></tr>{rows}</table>")
+
+
 def _histogram(mc, oracle_J: float):
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(7, 3.2))
@@ -254,6 +327,8 @@ def report_html(d, mc, summary: dict, fault_rows=None, no_fault_table: str | Non
         _corridor_text(summary),
         f"<h2>Paths ({html.escape(layout)})</h2>", _img(_corridor(d, mc, exact), "corridor"),
         "<h2>States and inputs against time</h2>", _img(_states(d, mc, exact), "states"),
+        *(["<h2>Regions at every tick</h2>", _regions_text(d),
+           _img(_regions(d, mc, exact), "regions")] if p.tick_regions else []),
         "<h2>Cost of the paths</h2>",
         _img(_histogram(mc, summary["cost"]["oracle_implemented"]), "cost histogram"),
         *(["<h2>Faults of the loop</h2>",

@@ -124,3 +124,32 @@ def test_report_says_why_there_is_no_fault_table(tmp_path):
     text = page.read_text(encoding="utf-8")
     assert 'id="no-fault-table"' in text and "time-invariant" in text
     assert '<table id="fault-table"' not in text
+
+
+def test_report_shows_the_regions_at_every_tick(tmp_path):
+    """robot_monotone: a figure of each region row against time (band, oracle and Monte Carlo,
+    the ticks held at a bound) and the oracle's every-tick check as a table, the same numbers
+    as `design --json`'s every_tick entry."""
+    import json
+    source = EXAMPLES / "robot_monotone.toml"
+    page = tmp_path / "report.html"
+    r = run("report", str(source), "--out", str(page), "--paths", "300", "--seed", "4")
+    assert r.returncode == 0, r.stderr
+    dom = rendered_dom(page)
+    body = re.search(r"<body([^>]*)>", dom).group(1)
+    assert 'data-images="ok"' in body and 'data-errors="0"' in body, body
+    assert dom.count("<img") == 4 and 'alt="regions"' in dom
+    d = run("design", str(source), "--json")
+    assert d.returncode == 0, d.stderr
+    et = json.loads(d.stdout)["every_tick"]
+    (reg,) = et["regions"]
+    assert 'id="regions"' in dom and "one sparse QP on the tick grid" in dom
+    assert f"{et['working_set_rows']} rows held at a bound" in dom
+    # The page's row: region, ticks, then the three worst excursions (the summary rounds them
+    # to its JSON resolution).
+    cells = re.search(r"<tr><td>0</td><td>600</td><td>([^<]+)</td><td>([^<]+)</td>"
+                      r"<td>([^<]+)</td><td>no</td></tr>", dom)
+    assert cells, dom[dom.index('id="regions"'):][:800]
+    for got, key in zip(cells.groups(), ("worst_at_ticks_design", "worst_at_ticks_implemented",
+                                         "worst_over_interval")):
+        assert float(got) == pytest.approx(reg[key], abs=1e-10)

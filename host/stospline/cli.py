@@ -120,6 +120,7 @@ def _corridor_design(args) -> int:
     grid = len(args.strip) * len(args.rate)
     est = enforce(cs.work_estimate(problem, grid=grid, search_paths=args.search,
                                    certify_paths=args.certify, attempts=args.attempts,
+                                   refine=args.refine,
                                    substeps=args.substeps, **opts),
                   problem, max_seconds=args.max_time, max_bytes=args.max_memory * 1024 ** 3)
     progress.note(f"corridor-design of {name}: at most ~{format_seconds(est.seconds)} "
@@ -127,6 +128,7 @@ def _corridor_design(args) -> int:
     result = cs.evaluate_grid(problem, index, strip=args.strip, rate=args.rate, **opts)
     cs.search(problem, index, result, search_paths=args.search, certify_paths=args.certify,
               search_seed=args.seed, certify_seed=args.certify_seed, attempts=args.attempts,
+              refine=args.refine,
               substeps=args.substeps, workers=args.workers, scheduler=args.scheduler, **opts)
     c = result.chosen
     sha = "" if c is None else result.designed.problem.source_sha256
@@ -571,6 +573,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--attempts", type=_integer(1, 1000), default=3,
                    help="certification runs at most (the next cheapest point that passes "
                         "screening after a failed one; default 3)")
+    p.add_argument("--refine", type=_integer(0, 20), default=0, metavar="K",
+                   help="bisect K times between the last failing and the first passing grid "
+                        "point before certifying (each a screening; default 0: the grid only)")
     p.add_argument("--strip", type=_weights, default=(0.0, 2.0, 5.0, 10.0, 20.0, 40.0),
                    metavar="W,W,...", help="grid of centre-line weights w (default "
                                            "0,2,5,10,20,40)")

@@ -44,7 +44,7 @@ from stospline.sim.montecarlo import simulate
 from stospline.sim.oracle import evaluate_table
 
 __all__ = ["STRIP_WEIGHTS", "RATE_WEIGHTS", "SEARCH_SEED", "CERTIFY_SEED", "ATTEMPTS",
-           "Candidate", "Exits", "SearchResult", "target_corridor", "with_weights",
+           "Candidate", "Exits", "SearchResult", "target_corridor", "with_weights", "candidate",
            "evaluate_grid", "count_exits", "search", "certificate", "work_estimate",
            "summary_text", "failure_reason"]
 
@@ -107,6 +107,7 @@ class SearchResult:
     candidates: list[Candidate]          # the whole grid, cheapest first
     screened: list[Candidate] = field(default_factory=list)      # in the order screened
     certified: list[Candidate] = field(default_factory=list)     # in the order certified
+    refined: list[Candidate] = field(default_factory=list)       # bisection points screened
     chosen: Candidate | None = None
     designed: object = None  # pipeline.Designed of the chosen candidate
 
@@ -171,20 +172,27 @@ def evaluate_grid(problem, corridor: int, *, strip=STRIP_WEIGHTS, rate=RATE_WEIG
     out = []
     try:
         for w, wv in grid:
-            text = with_weights(problem, corridor, polys, w, wv)
-            cand = Candidate(float(w), float(wv), text, 0.0, 0.0, 0.0, True)
-            d = design_problem(cand.problem(), **design_options)
-            J, ym, yc = _outputs(problem, d.table, corridor)
-            b = exit_bounds(c, ym, yc, problem.t0, problem.tick_hz)
-            cand.J, cand.cantelli, cand.gaussian = (float(J), b["cantelli"].total,
-                                                    b["gaussian"].total)
-            cand.legs_unchanged = stage_polygons(problem, c, ym) == polys
-            out.append(cand)
+            out.append(candidate(problem, corridor, polys, w, wv, **design_options))
             progress.advance()
     finally:
         progress.finish(bar)
     out.sort(key=lambda cd: cd.key)
     return SearchResult(float(c.epsilon), corridor, float(J0), polys, out)
+
+
+def candidate(problem, corridor: int, polys: list[int], w: float, wv: float,
+              **design_options) -> Candidate:
+    """The design of weights (w, wv) with its exact oracle's numbers (no Monte Carlo)."""
+    c = problem.corridors[corridor]
+    text = with_weights(problem, corridor, polys, w, wv)
+    cand = Candidate(float(w), float(wv), text, 0.0, 0.0, 0.0, True)
+    d = design_problem(cand.problem(), **design_options)
+    J, ym, yc = _outputs(problem, d.table, corridor)
+    b = exit_bounds(c, ym, yc, problem.t0, problem.tick_hz)
+    cand.J, cand.cantelli, cand.gaussian = (float(J), b["cantelli"].total,
+                                            b["gaussian"].total)
+    cand.legs_unchanged = stage_polygons(problem, c, ym) == polys
+    return cand
 
 
 def count_exits(problem, corridor: int, cand: Candidate, *, paths: int, seed: int,
@@ -200,14 +208,22 @@ def count_exits(problem, corridor: int, cand: Candidate, *, paths: int, seed: in
 def search(problem, corridor: int, result: SearchResult, *, search_paths: int,
            certify_paths: int, search_seed: int = SEARCH_SEED,
            certify_seed: int = CERTIFY_SEED, attempts: int = ATTEMPTS, substeps: int = 1,
-           workers=None, scheduler=None, **design_options) -> SearchResult:
+           workers=None, scheduler=None, refine: int = 0, **design_options) -> SearchResult:
     """Screen `result.candidates` cheapest first and certify the first that passes (the
     next that passes if certification fails, at most `attempts` certifications). A
     candidate's `screening` already set (e.g. by a full-grid run with the same paths and
     seed) is used as it is. Sets ``screened``, ``certified``, ``chosen`` and ``designed``
-    (None when no grid point meets epsilon)."""
+    (None when no grid point meets epsilon).
+
+    ``refine`` > 0: before certifying the first grid point P that passes, bisect `refine`
+    times on the segment of weights from the last grid point screened before it (F, which
+    failed) to P, screening each point; the cheapest point of the segment that passes (in
+    the original cost) is certified first, P after it if that fails. Between two grid points
+    the cheapest passing design is usually inside the segment, and the grid alone overpays
+    by up to the cost step between them."""
     eps = result.epsilon
     run = dict(substeps=substeps, workers=workers, scheduler=scheduler, **design_options)
+    queue: list[Candidate] = []
     for i, cand in enumerate(result.candidates):
         if len(result.certified) >= attempts:
             break
@@ -220,16 +236,48 @@ def search(problem, corridor: int, result: SearchResult, *, search_paths: int,
         result.screened.append(cand)
         if cand.screening.upper > eps:
             continue
-        progress.note(f"certifying w = {cand.w:g}, wv = {cand.wv:g}: {certify_paths} fresh "
-                      f"paths")
-        cand.certification = count_exits(problem, corridor, cand, paths=certify_paths,
-                                         seed=certify_seed, **run)
-        result.certified.append(cand)
-        if cand.certification.upper <= eps:
-            result.chosen = cand
-            result.designed = design_problem(cand.problem(), **design_options)
-            break
+        queue = [cand]
+        if refine and not result.refined and len(result.screened) > 1:
+            queue = _bisect(problem, corridor, result, result.screened[-2], cand, refine,
+                            search_paths, search_seed, run, design_options) + queue
+        for q in queue:
+            if len(result.certified) >= attempts:
+                break
+            progress.note(f"certifying w = {q.w:g}, wv = {q.wv:g}: {certify_paths} fresh "
+                          f"paths")
+            q.certification = count_exits(problem, corridor, q, paths=certify_paths,
+                                          seed=certify_seed, **run)
+            result.certified.append(q)
+            if q.certification.upper <= eps:
+                result.chosen = q
+                result.designed = design_problem(q.problem(), **design_options)
+                return result
     return result
+
+
+def _bisect(problem, corridor: int, result: SearchResult, fail: Candidate, ok: Candidate,
+            steps: int, paths: int, seed: int, run: dict, design_options: dict
+            ) -> list[Candidate]:
+    """`steps` bisections of the weights between `fail` and `ok`; the points that pass
+    screening and cost less than `ok`, cheapest first (each also in ``result.refined``)."""
+    lo, hi = 0.0, 1.0
+    passed = []
+    for _ in range(steps):
+        th = 0.5 * (lo + hi)
+        w = fail.w + th * (ok.w - fail.w)
+        wv = fail.wv + th * (ok.wv - fail.wv)
+        q = candidate(problem, corridor, result.polygons, w, wv, **design_options)
+        progress.note(f"refining: w = {q.w:.6g}, wv = {q.wv:.6g} (J = {q.J:.6g}): "
+                      f"{paths} paths")
+        q.screening = count_exits(problem, corridor, q, paths=paths, seed=seed, **run)
+        result.refined.append(q)
+        if q.screening.upper <= result.epsilon:
+            hi = th
+            if q.J < ok.J:
+                passed.append(q)
+        else:
+            lo = th
+    return sorted(passed, key=lambda cd: cd.key)
 
 
 def certificate(result: SearchResult, *, problem_sha256: str, design_options: dict,
@@ -259,16 +307,22 @@ def certificate(result: SearchResult, *, problem_sha256: str, design_options: di
         "design": dict(design_options), "substeps": substeps,
         "screened": len(result.screened), "certified": len(result.certified),
         "grid": [row(cd) for cd in result.candidates],
-        "method": "grid of (w, wv), cheapest in the original cost first; screened by Monte "
-                  "Carlo through the compiled C controller (one-sided 99 % Clopper-Pearson "
-                  "upper bound <= epsilon), then certified on fresh paths with another seed",
+        "refined": [{**row(cd), "screening": cd.screening.as_dict()}
+                    for cd in result.refined],
+        "method": "grid of (w, wv), cheapest in the original cost first"
+                  + (", refined by bisection between the last failing and the first passing "
+                     "grid point" if result.refined else "")
+                  + "; screened by Monte Carlo through the compiled C controller (one-sided "
+                    "99 % Clopper-Pearson upper bound <= epsilon), then certified on fresh "
+                    "paths with another seed",
     }
 
 
 def work_estimate(problem, *, grid: int, search_paths: int, certify_paths: int,
-                  attempts: int = ATTEMPTS, substeps: int = 1, **design_options) -> Estimate:
-    """The most the search can take: every grid point designed and screened, `attempts`
-    certifications. The Monte Carlo terms are path-ticks at the harness throughput measured
+                  attempts: int = ATTEMPTS, substeps: int = 1, refine: int = 0,
+                  **design_options) -> Estimate:
+    """The most the search can take: every grid point designed and screened, `refine`
+    bisection points designed and screened, `attempts` certifications. The Monte Carlo terms are path-ticks at the harness throughput measured
     for `stospline.budget` (one core; `tools/bench/harness_throughput.py`)."""
     opts = {k: v for k, v in design_options.items() if k in ("mode", "discretization")}
     design = estimate(problem, command="design", **opts)
@@ -284,6 +338,7 @@ def work_estimate(problem, *, grid: int, search_paths: int, certify_paths: int,
 
     screen, compiled = mc(search_paths)
     cert, _ = mc(certify_paths)
+    grid += refine           # a bisection point costs what a grid point costs
     est = Estimate("corridor-design")
     est.terms += [
         Term("start-up (imports, compiled kernels)", "--max-time", seconds=BASE_SECONDS),
@@ -314,9 +369,18 @@ def summary_text(result: SearchResult) -> str:
             line += (f"; certification {c.exits} of {c.paths}, upper99 {c.upper:.4g} -> "
                      f"{'certified' if c.upper <= result.epsilon else 'FAILED'}")
         lines.append(line)
+    for cd in result.refined:
+        s, c = cd.screening, cd.certification
+        line = (f"  refined w = {cd.w:.6g}, wv = {cd.wv:.6g}: J = {cd.J:.6g} "
+                f"({cd.J - result.J0:+.4g}); screening {s.exits} of {s.paths} paths left, "
+                f"upper99 {s.upper:.4g} -> {'pass' if s.upper <= result.epsilon else 'fail'}")
+        if c is not None:
+            line += (f"; certification {c.exits} of {c.paths}, upper99 {c.upper:.4g} -> "
+                     f"{'certified' if c.upper <= result.epsilon else 'FAILED'}")
+        lines.append(line)
     c = result.chosen
     if c is not None:
-        lines.append(f"chosen: w = {c.w:g}, wv = {c.wv:g}, J = {c.J:.6g} "
+        lines.append(f"chosen: w = {c.w:.6g}, wv = {c.wv:.6g}, J = {c.J:.6g} "
                      f"({100 * (c.J / result.J0 - 1) if result.J0 else 0.0:+.3g} % over J0); "
                      f"P(leave) <= {c.certification.upper:.4g} (one-sided 99 %, "
                      f"{c.certification.paths} fresh paths) <= epsilon {result.epsilon:g}")

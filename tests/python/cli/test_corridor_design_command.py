@@ -143,3 +143,35 @@ def test_no_grid_point_meets_epsilon_exits_2_and_writes_nothing(tmp_path, capsys
     assert cap.err.count("\n") == 1
     assert "screened cheapest first: 1 of 1" in cap.out
     assert not out.exists()
+
+
+def test_refine_bisects_to_a_cheaper_certified_design(designed, tmp_path):
+    """--refine 3: three screened points on the segment from the last failing grid point to
+    the first passing one. The chosen design is the cheapest of them that passes screening
+    (certified on fresh paths), at most the grid's choice in cost; every refined point's
+    screening is in the certificate, and recounting the chosen one's certification from the
+    written file gives the same exits."""
+    _, _, grid_cert = designed
+    rc, out = run(tmp_path, "--refine", "3")
+    assert rc == 0
+    cert = json.loads((out / "robot_risk_corridor.json").read_text())
+    ch, g = cert["chosen"], grid_cert["chosen"]
+    assert len(cert["refined"]) == 3 and "bisection" in cert["method"]
+    grid_rows = [r for r in cert["grid"] if r["screening"] is not None]
+    fail, ok = grid_rows[-2], grid_rows[-1]
+    assert (ok["w"], ok["wv"]) == (g["w"], g["wv"]) and fail["screening"]["upper99"] > EPS
+    for r in cert["refined"]:            # on the segment, strictly inside
+        th = ((r["w"] - fail["w"]) / (ok["w"] - fail["w"]) if ok["w"] != fail["w"]
+              else (r["wv"] - fail["wv"]) / (ok["wv"] - fail["wv"]))
+        assert 0 < th < 1
+        assert r["wv"] == pytest.approx(fail["wv"] + th * (ok["wv"] - fail["wv"]))
+    passing = [r for r in cert["refined"] + [ok] if r["screening"]["upper99"] <= EPS]
+    cheapest = min(passing, key=lambda r: r["J"])
+    assert (ch["w"], ch["wv"], ch["J"]) == (cheapest["w"], cheapest["wv"], cheapest["J"])
+    assert ch["J"] <= g["J"] and ch["certification"]["upper99"] <= EPS
+    p = load_problem(out / "robot_risk.toml")
+    cand = cs.Candidate(ch["w"], ch["wv"], (out / "robot_risk.toml").read_text(), ch["J"],
+                        1.0, 1.0, True)
+    again = cs.count_exits(p, 0, cand, paths=CERTIFY, seed=ch["certification"]["seed"],
+                           workers=1)
+    assert again.exits == ch["certification"]["exits"]

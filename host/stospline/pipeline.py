@@ -19,7 +19,8 @@ from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table, s
 from stospline.sim.plant_scheme import SubstepChoice, choose_substeps, scheme_moments
 from stospline.sim.fault_oracle import evaluate_with_faults, has_exact_oracle
 from stospline.sim.spline_certificate import certificate, spline_table
-from stospline.sim.every_tick import EveryTick, between_ticks, design_every_tick, tick_violation
+from stospline.sim.every_tick import (EveryTick, design_every_tick,  # noqa: F401
+                                      every_tick_check)
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem, ProblemError
 from stospline.table.format import GainTable, TickGains, table_of
@@ -347,29 +348,6 @@ def _band_terms(d: Designed) -> dict:
     if d.every_tick is not None:
         terms["every_tick"] = every_tick_check(d)
     return terms
-
-
-def every_tick_check(d: Designed, *, where: bool = False) -> dict:
-    """The every-tick regions checked by the oracle: the worst violation at any tick of each
-    region (negative: inside by that much) for the design's law in double precision and for
-    the float32 table, and the worst over all of [a, b] with the mean between ticks (the
-    command held). ``where``: also the time of that worst (not in the summary: along an arc
-    of contact many times tie, and which one wins differs in the last bits)."""
-    p = d.problem
-    exact = evaluate_table(p, table_of(d.design, quantize=False), path=True)
-    implemented = evaluate_table(p, d.table, path=True)
-    regions = []
-    for reg, law, imp, gap in zip(p.tick_regions, tick_violation(p, exact.path_mean),
-                                  tick_violation(p, implemented.path_mean),
-                                  between_ticks(p, exact.path_mean, exact.path_u_mean)):
-        regions.append({"region": reg.index, "ticks": int(reg.ticks(p.t0, p.tick_hz).size),
-                        "worst_at_ticks_design": float(law.max()),
-                        "worst_at_ticks_implemented": float(imp.max()),
-                        "worst_over_interval": gap["worst"],
-                        "between_ticks_enforced": bool(reg.between),
-                        "over_interval_exact": gap["exact"],
-                        **({"worst_over_interval_t": gap["t"]} if where else {})})
-    return {**d.every_tick.summary(), "regions": regions}
 
 
 def write_outputs(out_dir: str | Path, files: dict[str, str]) -> list[Path]:

@@ -171,7 +171,7 @@ def _regions(d, mc, exact):
 
 def _regions_text(d) -> str:
     """The every-tick check of the summary as a table (oracle, at every tick and between)."""
-    from stospline.pipeline import every_tick_check
+    from stospline.sim.every_tick import every_tick_check
     s = every_tick_check(d)
     how = ("one sparse QP on the tick grid" if s["method"] == "tick-qp"
            else f"constraint generation ({s['iterations']} designs)")

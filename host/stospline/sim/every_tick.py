@@ -36,7 +36,7 @@ from stospline.problem.regions import with_bands
 from stospline.sim.oracle import evaluate_table
 from stospline.table.format import table_of
 
-__all__ = ["EveryTick", "design_every_tick", "tick_grid", "tick_violation", "between_ticks", "active_ticks",
+__all__ = ["EveryTick", "design_every_tick", "tick_grid", "every_tick_check", "tick_violation", "between_ticks", "active_ticks",
            "MAX_ITERATIONS", "TOLERANCE"]
 
 MAX_ITERATIONS = 60
@@ -307,6 +307,30 @@ def tick_grid(problem: Problem, *, noise: bool = True, iterations: int = 0,
                                       "tick_qp_rounds": design.rounds}]
     return EveryTick(design, problem, iterations + 1, sorted(work), history,
                      time.perf_counter() - start, method="tick-qp")
+
+
+def every_tick_check(d, *, where: bool = False) -> dict:
+    """The every-tick regions of design `d` (`stospline.pipeline.Designed`) checked by the
+    oracle: the worst violation at any tick of each
+    region (negative: inside by that much) for the design's law in double precision and for
+    the float32 table, and the worst over all of [a, b] with the mean between ticks (the
+    command held). ``where``: also the time of that worst (not in the summary: along an arc
+    of contact many times tie, and which one wins differs in the last bits)."""
+    p = d.problem
+    exact = evaluate_table(p, table_of(d.design, quantize=False), path=True)
+    implemented = evaluate_table(p, d.table, path=True)
+    regions = []
+    for reg, law, imp, gap in zip(p.tick_regions, tick_violation(p, exact.path_mean),
+                                  tick_violation(p, implemented.path_mean),
+                                  between_ticks(p, exact.path_mean, exact.path_u_mean)):
+        regions.append({"region": reg.index, "ticks": int(reg.ticks(p.t0, p.tick_hz).size),
+                        "worst_at_ticks_design": float(law.max()),
+                        "worst_at_ticks_implemented": float(imp.max()),
+                        "worst_over_interval": gap["worst"],
+                        "between_ticks_enforced": bool(reg.between),
+                        "over_interval_exact": gap["exact"],
+                        **({"worst_over_interval_t": gap["t"]} if where else {})})
+    return {**d.every_tick.summary(), "regions": regions}
 
 
 def between_ticks(problem: Problem, path_mean: np.ndarray, u_mean: np.ndarray,

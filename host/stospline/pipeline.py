@@ -19,8 +19,7 @@ from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table, s
 from stospline.sim.plant_scheme import SubstepChoice, choose_substeps, scheme_moments
 from stospline.sim.fault_oracle import evaluate_with_faults, has_exact_oracle
 from stospline.sim.spline_certificate import certificate, spline_table
-from stospline.sim.every_tick import (EveryTick, design_every_tick,  # noqa: F401
-                                      every_tick_check)
+from stospline.sim.every_tick import EveryTick, design_every_tick, every_tick_check
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem, ProblemError
 from stospline.table.format import GainTable, TickGains, table_of

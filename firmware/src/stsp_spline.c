@@ -231,7 +231,7 @@ static STSP_ALWAYS_INLINE uint32_t stsp_spline_finish(stsp_ctrl_t *ctrl, uint32_
         *st = stsp_step_nonfinite(ctrl, x, u);
         return 0u;
     }
-    stsp_copy(u, y, stsp_nu(h));
+    stsp_copy_command(u, y, stsp_nu(h));
     if (out != 0u) {
         *st = stsp_step_fixup(ctrl, tick, u);
     } else {

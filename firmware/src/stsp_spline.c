@@ -8,6 +8,8 @@
 
 #ifndef STSP_ARITH_FIXED_POINT
 #include "stsp_law_f32.h"
+/* Of stsp_law.h only the alarm (stsp_law_alarm): not the per-tick law's out-of-line rows. */
+#define STSP_LAW_ALARM_ONLY 1
 #include "stsp_law.h"
 #include "stsp_law_spline.h"
 #define STSP_PLAN_BAND 0

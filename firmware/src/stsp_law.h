@@ -90,17 +90,12 @@ static STSP_NOINLINE stsp_f32_t stsp_law_rows(const stsp_header_t *h, uint32_t t
     /* L may be NULL when n_latch == 0: no pointer arithmetic on it then (stsp_law_pair). */
     const stsp_f32_t *L = (n_latch > 0u) ? &h->L[tick * (nu * n_latch)] : h->L;
     stsp_f32_t total = -0.0f; /* -0 + a = a for every a */
-    uint32_t i;
-    for (i = 0u; (i + 1u) < nu; i += 2u) {
-        stsp_f32_t acc0 = -k0[i];
-        stsp_f32_t acc1 = -k0[i + 1u];
-        stsp_law_pair(x, v, nx, n_latch, &acc0, &acc1, &K, &L);
-        y[i] = acc0;
-        y[i + 1u] = acc1;
-        total = (total + acc0) + acc1;
+    stsp_f32_t *yp = y;
+    if (nu >= 2u) {
+        stsp_law_pairs(x, v, nx, n_latch, nu >> 1, &k0, &yp, &K, &L, &total);
     }
-    if (i < nu) {
-        stsp_f32_t acc = -k0[i];
+    if ((nu & 1u) != 0u) {
+        stsp_f32_t acc = -k0[0];
         uint32_t j;
         for (j = 0u; j < nx; ++j) {
             acc = stsp_mls(acc, K[j], x[j]);
@@ -108,7 +103,7 @@ static STSP_NOINLINE stsp_f32_t stsp_law_rows(const stsp_header_t *h, uint32_t t
         for (j = 0u; j < n_latch; ++j) {
             acc = stsp_mls(acc, L[j], v[j]);
         }
-        y[i] = acc;
+        yp[0] = acc;
         total = total + acc;
     }
     return total;

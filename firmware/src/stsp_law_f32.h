@@ -41,115 +41,141 @@ typedef stsp_f32_t stsp_row_acc_t;
 #define stsp_row_mac stsp_mls
 #define stsp_row_end(acc, k0) (acc)
 #else
-/* Rows i and i + 1 of the generic law (stsp_law.h): *acc0 -= K[c] x[c] and *acc1 -= K[nx + c]
- * x[c] for c = 0 .. nx - 1 in order, then *acc0 -= L[c] v[c] and *acc1 -= L[n_latch + c] v[c]
- * for c = 0 .. n_latch - 1, each step the bits of stsp_mls; *K and *L then the next pair's
- * rows. On a single-precision VFP one asm statement: per four columns one VLDM each of x (v)
- * and of the two rows (into s0-s11: caller-saved, declared clobbered) and eight VMLS, 11
- * instructions for 8 multiply-adds where separate loads take 20; then the n % 4 last columns
- * one at a time; and no loop count or pointer for GCC to keep in a register around it.
- * n_latch == 0: no access to L and no C pointer arithmetic on it (it may be NULL). */
+/* The pairs of rows of the generic law (stsp_law.h), np >= 1 of them: for each, acc0 = -k0[0]
+ * and acc1 = -k0[1], acc0 -= K[c] x[c] and acc1 -= K[nx + c] x[c] for c = 0 .. nx - 1 in order,
+ * then acc0 -= L[c] v[c] and acc1 -= L[nl + c] v[c] for c = 0 .. nl - 1, each step the bits of
+ * stsp_mls; y[0] = acc0, y[1] = acc1, and *total + acc0 + acc1 in that order; then k0, y, K and
+ * L move to the next pair (*k0, *y, *K, *L: where the rows after the pairs are). On a
+ * single-precision VFP one asm statement: per pair, per four columns one VLDM each of x (v)
+ * and of the two rows and eight VMLS (11 instructions for 8 multiply-adds where separate
+ * loads take 20), then the n % 4 last columns one at a time; the accumulators in s12-s13
+ * (VLDM of k0, VSTM to y), the operands in s0-s11 (caller-saved, declared clobbered); no
+ * loop count or pointer for GCC to keep in a register around it. nl == 0: no access to L and
+ * no C pointer arithmetic on it (it may be NULL). */
 static STSP_ALWAYS_INLINE void
 /* cppcheck-suppress misra-c2012-2.7 ; deviation D5: the parameters are asm operands */
-stsp_law_pair(const stsp_f32_t *x, const stsp_f32_t *v, uint32_t nx, uint32_t n_latch,
-              stsp_f32_t *acc0, stsp_f32_t *acc1, const stsp_f32_t **K, const stsp_f32_t **L)
+stsp_law_pairs(const stsp_f32_t *x, const stsp_f32_t *v, uint32_t nx, uint32_t nl, uint32_t np,
+               const stsp_f32_t **k0, stsp_f32_t **y, const stsp_f32_t **K,
+               const stsp_f32_t **L, stsp_f32_t *total)
 {
-    stsp_f32_t r0 = *acc0;
-    stsp_f32_t r1 = *acc1;
     const stsp_f32_t *kp = *K;
     const stsp_f32_t *lp = *L;
+    const stsp_f32_t *bp = *k0;
+    stsp_f32_t *yp = *y;
+    stsp_f32_t t = *total;
 #if STSP_VFP_MAC
     const stsp_f32_t *p1;
     const stsp_f32_t *q;
     uint32_t k;
-    /* Rows against x (labels 1-4), then against v (5-8): per four columns one VLDM each
-     * and eight VMLS (loop 1, 5), then the n % 4 last columns one at a time (3, 7). */
-    __asm__ volatile("add %[p1], %[kp], %[nx], lsl #2\n\t"
+    uint32_t n = np;
+    /* Per pair (loop 1): rows against x (labels 2-5), then against v (6-9); per four columns
+     * one VLDM each and eight VMLS (loops 2, 6), then the n % 4 last columns (4, 8). */
+    __asm__ volatile("1:\n"
+                     "vldmia %[k0]!, {s12-s13}\n\t"
+                     "vneg.f32 s12, s12\n\t"
+                     "vneg.f32 s13, s13\n\t"
+                     "add %[p1], %[kp], %[nx], lsl #2\n\t"
                      "mov %[q], %[x]\n\t"
                      "lsrs %[k], %[nx], #2\n\t"
-                     "beq 2f\n\t"
-                     "1:\n"
+                     "beq 3f\n\t"
+                     "2:\n"
                      "vldmia %[q]!, {s0-s3}\n\t"
                      "vldmia %[kp]!, {s4-s7}\n\t"
                      "vldmia %[p1]!, {s8-s11}\n\t"
-                     "vmls.f32 %[r0], s4, s0\n\t"
-                     "vmls.f32 %[r1], s8, s0\n\t"
-                     "vmls.f32 %[r0], s5, s1\n\t"
-                     "vmls.f32 %[r1], s9, s1\n\t"
-                     "vmls.f32 %[r0], s6, s2\n\t"
-                     "vmls.f32 %[r1], s10, s2\n\t"
-                     "vmls.f32 %[r0], s7, s3\n\t"
-                     "vmls.f32 %[r1], s11, s3\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "vmls.f32 s13, s8, s0\n\t"
+                     "vmls.f32 s12, s5, s1\n\t"
+                     "vmls.f32 s13, s9, s1\n\t"
+                     "vmls.f32 s12, s6, s2\n\t"
+                     "vmls.f32 s13, s10, s2\n\t"
+                     "vmls.f32 s12, s7, s3\n\t"
+                     "vmls.f32 s13, s11, s3\n\t"
                      "subs %[k], %[k], #1\n\t"
-                     "bne 1b\n\t"
-                     "2:\n"
-                     "ands %[k], %[nx], #3\n\t"
-                     "beq 4f\n\t"
+                     "bne 2b\n\t"
                      "3:\n"
+                     "ands %[k], %[nx], #3\n\t"
+                     "beq 5f\n\t"
+                     "4:\n"
                      "vldmia %[q]!, {s0}\n\t"
                      "vldmia %[kp]!, {s4}\n\t"
                      "vldmia %[p1]!, {s8}\n\t"
-                     "vmls.f32 %[r0], s4, s0\n\t"
-                     "vmls.f32 %[r1], s8, s0\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "vmls.f32 s13, s8, s0\n\t"
                      "subs %[k], %[k], #1\n\t"
-                     "bne 3b\n\t"
-                     "4:\n"
+                     "bne 4b\n\t"
+                     "5:\n"
                      "mov %[kp], %[p1]\n\t"
                      "add %[p1], %[lp], %[nl], lsl #2\n\t"
                      "mov %[q], %[v]\n\t"
                      "lsrs %[k], %[nl], #2\n\t"
-                     "beq 6f\n\t"
-                     "5:\n"
+                     "beq 7f\n\t"
+                     "6:\n"
                      "vldmia %[q]!, {s0-s3}\n\t"
                      "vldmia %[lp]!, {s4-s7}\n\t"
                      "vldmia %[p1]!, {s8-s11}\n\t"
-                     "vmls.f32 %[r0], s4, s0\n\t"
-                     "vmls.f32 %[r1], s8, s0\n\t"
-                     "vmls.f32 %[r0], s5, s1\n\t"
-                     "vmls.f32 %[r1], s9, s1\n\t"
-                     "vmls.f32 %[r0], s6, s2\n\t"
-                     "vmls.f32 %[r1], s10, s2\n\t"
-                     "vmls.f32 %[r0], s7, s3\n\t"
-                     "vmls.f32 %[r1], s11, s3\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "vmls.f32 s13, s8, s0\n\t"
+                     "vmls.f32 s12, s5, s1\n\t"
+                     "vmls.f32 s13, s9, s1\n\t"
+                     "vmls.f32 s12, s6, s2\n\t"
+                     "vmls.f32 s13, s10, s2\n\t"
+                     "vmls.f32 s12, s7, s3\n\t"
+                     "vmls.f32 s13, s11, s3\n\t"
                      "subs %[k], %[k], #1\n\t"
-                     "bne 5b\n\t"
-                     "6:\n"
-                     "ands %[k], %[nl], #3\n\t"
-                     "beq 8f\n\t"
+                     "bne 6b\n\t"
                      "7:\n"
+                     "ands %[k], %[nl], #3\n\t"
+                     "beq 9f\n\t"
+                     "8:\n"
                      "vldmia %[q]!, {s0}\n\t"
                      "vldmia %[lp]!, {s4}\n\t"
                      "vldmia %[p1]!, {s8}\n\t"
-                     "vmls.f32 %[r0], s4, s0\n\t"
-                     "vmls.f32 %[r1], s8, s0\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "vmls.f32 s13, s8, s0\n\t"
                      "subs %[k], %[k], #1\n\t"
-                     "bne 7b\n\t"
-                     "8:\n"
-                     "mov %[lp], %[p1]"
-                     : [r0] "+t"(r0), [r1] "+t"(r1), [kp] "+&r"(kp), [lp] "+&r"(lp),
-                       [p1] "=&r"(p1), [q] "=&r"(q), [k] "=&r"(k)
-                     : [x] "r"(x), [v] "r"(v), [nx] "r"(nx), [nl] "r"(n_latch)
+                     "bne 8b\n\t"
+                     "9:\n"
+                     "mov %[lp], %[p1]\n\t"
+                     "vstmia %[y]!, {s12-s13}\n\t"
+                     "vadd.f32 %[t], %[t], s12\n\t"
+                     "vadd.f32 %[t], %[t], s13\n\t"
+                     "subs %[np], %[np], #1\n\t"
+                     "bne 1b"
+                     : [kp] "+&r"(kp), [lp] "+&r"(lp), [k0] "+&r"(bp), [y] "+&r"(yp), [np] "+&r"(n),
+                       [t] "+t"(t), [p1] "=&r"(p1), [q] "=&r"(q), [k] "=&r"(k)
+                     : [x] "r"(x), [v] "r"(v), [nx] "r"(nx), [nl] "r"(nl)
                      : "s0", "s1", "s2", "s3", "s4", "s5", "s6", "s7", "s8", "s9", "s10",
-                       "s11", "cc", "memory");
+                       "s11", "s12", "s13", "cc", "memory");
 #else
-    uint32_t c;
-    for (c = 0u; c < nx; ++c) {
-        r0 = stsp_mls(r0, kp[c], x[c]);
-        r1 = stsp_mls(r1, kp[nx + c], x[c]);
-    }
-    kp = &kp[2u * nx];
-    if (n_latch > 0u) {
-        for (c = 0u; c < n_latch; ++c) {
-            r0 = stsp_mls(r0, lp[c], v[c]);
-            r1 = stsp_mls(r1, lp[n_latch + c], v[c]);
+    uint32_t n;
+    for (n = 0u; n < np; ++n) {
+        stsp_f32_t r0 = -bp[0];
+        stsp_f32_t r1 = -bp[1];
+        uint32_t c;
+        for (c = 0u; c < nx; ++c) {
+            r0 = stsp_mls(r0, kp[c], x[c]);
+            r1 = stsp_mls(r1, kp[nx + c], x[c]);
         }
-        lp = &lp[2u * n_latch];
+        kp = &kp[2u * nx];
+        if (nl > 0u) {
+            for (c = 0u; c < nl; ++c) {
+                r0 = stsp_mls(r0, lp[c], v[c]);
+                r1 = stsp_mls(r1, lp[nl + c], v[c]);
+            }
+            lp = &lp[2u * nl];
+        }
+        yp[0] = r0;
+        yp[1] = r1;
+        t = (t + r0) + r1;
+        bp = &bp[2];
+        yp = &yp[2];
     }
 #endif
-    *acc0 = r0;
-    *acc1 = r1;
     *K = kp;
     *L = lp;
+    *k0 = bp;
+    *y = yp;
+    *total = t;
 }
 #endif
 

@@ -69,7 +69,7 @@ static STSP_ALWAYS_INLINE uint32_t stsp_law(const stsp_header_t *h, uint32_t tic
 }
 #else
 /* float32, generic dimensions: two rows at a time, each x[j] (v[c]) loaded once for both
- * (stsp_law_pair: on the M4F VLDM of four columns and VMLS), an odd last row alone. Each row is
+ * (stsp_law_pairs: on the M4F VLDM of four columns and VMLS), an odd last row alone. Each row is
  * still its own chain in the documented order: acc = -k0[i], then acc = stsp_mls(acc,
  * K[i][j], x[j]) for j = 0 .. nx - 1 and stsp_mls(acc, L[i][c], v[c]) for c = 0 .. n_latch - 1.
  * Its first step, -k0[i] - K[i][0] x[0], is the documented (-(K[i][0] x[0])) - k0[i]: both are
@@ -87,7 +87,7 @@ static STSP_NOINLINE stsp_f32_t stsp_law_rows(const stsp_header_t *h, uint32_t t
     const uint32_t n_latch = stsp_n_latch(h);
     const stsp_f32_t *K = &h->K[tick * (nu * nx)];
     const stsp_f32_t *k0 = &h->k0[tick * nu];
-    /* L may be NULL when n_latch == 0: no pointer arithmetic on it then (stsp_law_pair). */
+    /* L may be NULL when n_latch == 0: no pointer arithmetic on it then (stsp_law_pairs). */
     const stsp_f32_t *L = (n_latch > 0u) ? &h->L[tick * (nu * n_latch)] : h->L;
     stsp_f32_t total = -0.0f; /* -0 + a = a for every a */
     stsp_f32_t *yp = y;

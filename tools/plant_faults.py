@@ -132,8 +132,8 @@ FAULTS = [
           "    out = stsp_law(&ctrl->checked, tick, x, ctrl->v, y, ctrl->limited);\n"
           "    stsp_copy(u, y, stsp_nu(&ctrl->checked));\n"),
     Fault("F26", "the command is written for the header's nu, not the validated one", CTL,
-          "    stsp_copy(u, y, stsp_nu(&ctrl->checked));\n    if (out != 0u) {",
-          "    stsp_copy(u, y, ctrl->table->nu);\n    if (out != 0u) {"),
+          "    stsp_copy_command(u, y, stsp_nu(&ctrl->checked));\n    if (out != 0u) {",
+          "    stsp_copy_command(u, y, ctrl->table->nu);\n    if (out != 0u) {"),
     Fault("F27", "a refused step writes zeros, not the safe command u_hold", CTL,
           "    stsp_copy(u, ctrl->hold, stsp_nu(&ctrl->checked));",
           "    stsp_zero(u, stsp_nu(&ctrl->checked));"),
@@ -175,6 +175,12 @@ FAULTS = [
           "    stsp_spline_fold(h, p, p->coef, ctrl->v, fold);"),
     Fault("F42", "init accepts a spline table in a program without the spline code", CTL,
           "        if (stsp_spline_linked() == 0) {", "        if (stsp_spline_linked() < 0) {"),
+    # The generic float32 law (two rows at a time; the host runs the C branch of the M4F asm).
+    Fault("F43", "generic float32 law: the second row of a pair uses the first row's gains", CTL,
+          "            r1 = stsp_mls(r1, kp[nx + c], x[c]);",
+          "            r1 = stsp_mls(r1, kp[c], x[c]);"),
+    Fault("F44", "generic float32 law: an odd last row starts from +k0 (k0 added, not subtracted)",
+          CTL, "        stsp_f32_t acc = -k0[0];", "        stsp_f32_t acc = k0[0];"),
 ]
 
 

@@ -240,7 +240,7 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x
         return stsp_step_nonfinite(ctrl, x, u);
     }
 #endif
-    stsp_copy(u, y, stsp_nu(&ctrl->checked));
+    stsp_copy_command(u, y, stsp_nu(&ctrl->checked));
     if (out != 0u) {
         return stsp_step_fixup(ctrl, tick, u);
     }

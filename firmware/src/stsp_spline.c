@@ -8,6 +8,8 @@
 
 #ifndef STSP_ARITH_FIXED_POINT
 #include "stsp_law_f32.h"
+/* Of stsp_law.h only the alarm (stsp_law_alarm): not the per-tick law's out-of-line rows. */
+#define STSP_LAW_ALARM_ONLY 1
 #include "stsp_law.h"
 #include "stsp_law_spline.h"
 #define STSP_PLAN_BAND 0
@@ -231,7 +233,7 @@ static STSP_ALWAYS_INLINE uint32_t stsp_spline_finish(stsp_ctrl_t *ctrl, uint32_
         *st = stsp_step_nonfinite(ctrl, x, u);
         return 0u;
     }
-    stsp_copy(u, y, stsp_nu(h));
+    stsp_copy_command(u, y, stsp_nu(h));
     if (out != 0u) {
         *st = stsp_step_fixup(ctrl, tick, u);
     } else {

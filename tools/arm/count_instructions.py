@@ -360,7 +360,8 @@ def main() -> int:
                         continue
                     print(f"     {what:60.60s} flash {t + d:7d} B  static RAM {d + b:4d} B  "
                           f"(text {t}, data {d}, bss {b})")
-                stack = {k: su.get(k) for k in ("stsp_step", "stsp_step_cold", "stsp_step_fixup",
+                stack = {k: su.get(k) for k in ("stsp_step", "stsp_law_rows", "stsp_step_cold",
+                                                "stsp_step_fixup",
                                                 "stsp_limit", "stsp_init", "stsp_table_crc32",
                                                 "stsp_spline_step", "stsp_step_next_span",
                                                 "stsp_step_cold_spline",

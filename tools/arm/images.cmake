@@ -19,6 +19,9 @@
 #   bench_spline.elf, bench_spline_fixed.elf  bench_main.c with BENCH_SPLINE: the spline table of
 #                                           tools/arm/spline_bench_table.c (float32; on both
 #                                           cores, soft float on the M0+)
+#   shapes.elf                              tests/arm/shapes_main.c: the generic float32 law on
+#                                           every shape up to nx 9, nu 5, n_latch 6 against the
+#                                           documented order (cortex-m4 only; run_replay.sh)
 if(NOT TARGET stsp_gains_robot_corridor)
   return()
 endif()
@@ -55,6 +58,9 @@ foreach(arith float32 q15 q31)
     continue()
   endif()
   stsp_add_image(bench${sfx} stsp_${arith} ${tables} ${arm_dir}/bench_main.c)
+  if(arith STREQUAL "float32")
+    stsp_add_image(shapes stsp_float32 ${tables} "${PROJECT_SOURCE_DIR}/tests/arm/shapes_main.c")
+  endif()
   stsp_add_image(bench_fixed${sfx} ${shaped} ${tables} ${arm_dir}/bench_main.c)
   string(TOUPPER "STSP_REPLAY_RECORDS${sfx}" records_var)
   set(records "${${records_var}}")

@@ -84,6 +84,8 @@ for arith in ${ariths//,/ }; do
   else
     images+=("replay$sfx" "replay_fixed$sfx")
   fi
+  # float32: also the generic law on every small shape (tests/arm/shapes_main.c).
+  [ "$arith" != float32 ] || images+=(shapes)
 done
 "$root/tools/arm/build.sh" --preset "$preset" --build-dir "$build" \
   "${defs[@]}" -DSTSP_REPLAY_PERTURB_COEF="$perturb_coef" -DSTSP_ARM_FP_CONTRACT="$contract" \
@@ -102,7 +104,7 @@ for image in "${images[@]}"; do
   if [ "$status" -eq 124 ]; then
     echo "run_replay: FAIL: QEMU timed out ($image.elf)" >&2
     fail=1
-  elif [ "$status" -ne 0 ] || ! grep -q '^replay: PASS' "$log"; then
+  elif [ "$status" -ne 0 ] || ! grep -q '^\(replay\|shapes\): PASS' "$log"; then
     echo "run_replay: FAIL ($image.elf, exit status $status)" >&2
     fail=1
   fi

@@ -1,0 +1,141 @@
+/* Fixed-point spline gains (stsp_qspline.h): evaluation and layout check. Fixed-point builds
+ * only; a program that does not call them does not link them (static library). */
+#include "stsp_qspline.h"
+
+#ifdef STSP_ARITH_FIXED_POINT
+
+uint32_t stsp_qspline_basis(uint32_t k, uint32_t tau, uint32_t *p)
+{
+    const uint32_t D = (uint32_t)1u << k;
+    const uint32_t d = tau & (D - 1u);
+    const uint32_t e = D - d;                /* in [1, D] */
+    const uint32_t D3 = D * D * D;           /* <= 2^27 */
+    p[0] = e * e * e;                        /* <= 2^27 */
+    p[3] = d * d * d;
+    p[1] = (4u * D3) - (3u * d * d * (D + e)); /* 2 D - d = D + e; 3 d^2 (2D - d) < 4 D^3 */
+    p[2] = (6u * D3) - p[0] - p[1] - p[3];   /* >= 0: the four sum to 6 D^3 */
+    return tau >> k;
+}
+
+int64_t stsp_qspline_value(const stsp_scalar_t *c, const uint32_t *p, uint32_t sh)
+{
+    int64_t acc = 0;
+    uint32_t r;
+    for (r = 0u; r < 4u; ++r) {
+        /* p[r] <= 2^29: an int32, so the product is one 32 x 32 -> 64 multiply */
+        acc += (int64_t)c[r] * (int64_t)(int32_t)p[r];
+    }
+    {
+        /* floor(acc / 2^sh + 1/2) without a signed shift: acc + 2^62 is in (0, 2^63) as
+         * |acc| < 2^61 (the unsigned sum wraps to exactly that), and 2^62 is a multiple of
+         * 2^sh (sh <= 57). */
+        const uint64_t offset = (uint64_t)1u << 62u;
+        const uint32_t half_bit = sh - 1u;
+        const uint64_t half = (uint64_t)1u << half_bit;
+        const uint64_t lifted = (uint64_t)acc + offset;
+        const uint64_t biased = lifted + half;
+        const uint64_t shifted = biased >> sh;
+        const uint64_t base = offset >> sh;
+        return (int64_t)shifted - (int64_t)base;
+    }
+}
+
+/* Stage s's spans: S = ceil(T / 2^k). */
+static uint32_t stsp_qspline_spans(uint32_t ticks, uint32_t k)
+{
+    return (ticks >> k) + (((ticks & (((uint32_t)1u << k) - 1u)) != 0u) ? 1u : 0u);
+}
+
+static stsp_status_t stsp_qspline_check_stage(const stsp_qspline_t *sp,
+                                              const uint32_t *stage_start, uint32_t s,
+                                              uint32_t nu, uint32_t nz)
+{
+    const uint32_t k = sp->span_log2[s];
+    const uint32_t e0 = sp->row_start[s * nu];
+    const uint32_t e1 = sp->row_start[(s + 1u) * nu];
+    const uint32_t n_coef = sp->coef_start[s + 1u] - sp->coef_start[s];
+    uint32_t stride;
+    uint32_t i;
+    if ((k > STSP_QSPLINE_MAX_SPAN_LOG2) || (stage_start[s + 1u] <= stage_start[s])) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    /* (S + 3) per entry, without forming the product (it could wrap) */
+    stride = stsp_qspline_spans(stage_start[s + 1u] - stage_start[s], k) + 3u;
+    if (((n_coef % stride) != 0u) || ((n_coef / stride) != (e1 - e0))) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    for (i = 0u; i < nu; ++i) {
+        uint32_t e;
+        for (e = sp->row_start[(s * nu) + i]; e < sp->row_start[(s * nu) + i + 1u]; ++e) {
+            if ((sp->col[e] >= nz) || ((e > sp->row_start[(s * nu) + i]) &&
+                                       (sp->col[e] <= sp->col[e - 1u]))) {
+                return STSP_ERR_BAD_DIMS;
+            }
+            if ((sp->shift[e] < 1u) || (sp->shift[e] > STSP_QSPLINE_MAX_SHIFT)) {
+                return STSP_ERR_BAD_DIMS;
+            }
+        }
+    }
+    return STSP_OK;
+}
+
+stsp_status_t stsp_qspline_check(const stsp_qspline_t *sp, const uint32_t *stage_start,
+                                 uint32_t n_stages, uint32_t nu, uint32_t nz)
+{
+    const uint32_t rows = n_stages * nu;
+    uint32_t i;
+    if ((sp == NULL) || (stage_start == NULL) || (sp->span_log2 == NULL) ||
+        (sp->row_start == NULL) || (sp->col == NULL) || (sp->shift == NULL) ||
+        (sp->coef_start == NULL) || (sp->coef == NULL)) {
+        return STSP_ERR_NULL;
+    }
+    if ((n_stages == 0u) || (nu == 0u) || (nz > 256u) || (sp->row_start[0] != 0u) ||
+        (sp->row_start[rows] != sp->n_entries) || (sp->coef_start[0] != 0u) ||
+        (sp->coef_start[n_stages] != sp->n_coef)) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    for (i = 0u; i < rows; ++i) {
+        if (sp->row_start[i + 1u] < sp->row_start[i]) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    for (i = 0u; i < n_stages; ++i) {
+        if (sp->coef_start[i + 1u] < sp->coef_start[i]) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    for (i = 0u; i < n_stages; ++i) {
+        const stsp_status_t st = stsp_qspline_check_stage(sp, stage_start, i, nu, nz);
+        if (st != STSP_OK) {
+            return st;
+        }
+    }
+    return STSP_OK;
+}
+
+void stsp_qspline_gains(const stsp_qspline_t *sp, const uint32_t *stage_start, uint32_t s,
+                        uint32_t nu, uint32_t nz, uint32_t tau, stsp_scalar_t *g)
+{
+    const uint32_t k = sp->span_log2[s];
+    const uint32_t ticks = stage_start[s + 1u] - stage_start[s];
+    const uint32_t stride = stsp_qspline_spans(ticks, k) + 3u;
+    const stsp_scalar_t *coef = &sp->coef[sp->coef_start[s]];
+    uint32_t p[4];
+    const uint32_t sigma = stsp_qspline_basis(k, tau, p);
+    uint32_t off = 0u;
+    uint32_t i;
+    for (i = 0u; i < (nu * nz); ++i) {
+        g[i] = 0;
+    }
+    for (i = 0u; i < nu; ++i) {
+        uint32_t e;
+        for (e = sp->row_start[(s * nu) + i]; e < sp->row_start[(s * nu) + i + 1u]; ++e) {
+            /* in the scalar's range for a table whose row sums are (stsp_qspline.h) */
+            g[(i * nz) + sp->col[e]] = (stsp_scalar_t)stsp_qspline_value(
+                &coef[off + sigma], p, (3u * k) + sp->shift[e]);
+            off += stride;
+        }
+    }
+}
+
+#endif /* STSP_ARITH_FIXED_POINT */

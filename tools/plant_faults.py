@@ -44,7 +44,7 @@ CRC = "firmware/src"
 PY_TESTS = ["tests/python/firmware/test_c_step_equals_law.py",
             "tests/python/sim/test_monte_carlo_vs_oracle.py",
             "tests/python/firmware/test_table_limits.py", "tests/python/firmware/test_fixed_point.py",
-            "tests/python/firmware/test_band_relatch.py"]
+            "tests/python/firmware/test_band_relatch.py", "tests/python/table/test_qspline_c.py"]
 CTEST_EXCLUDE = r"^(clang_|arm_|misra|consumer_)"
 
 
@@ -175,6 +175,21 @@ FAULTS = [
           "    stsp_spline_fold(h, p, p->coef, ctrl->v, fold);"),
     Fault("F42", "init accepts a spline table in a program without the spline code", CTL,
           "        if (stsp_spline_linked() == 0) {", "        if (stsp_spline_linked() < 0) {"),
+    Fault("F43", "fixed-point spline gain rounded half down", CTL,
+          "        const uint64_t biased = lifted + half;",
+          "        const uint64_t biased = (lifted + half) - 1u;"),
+    Fault("F44", "fixed-point spline basis P1 with 2D + d instead of 2D - d", CTL,
+          "    p[1] = (4u * D3) - (3u * d * d * (D + e));",
+          "    p[1] = (4u * D3) - (3u * d * d * (D + d));"),
+    Fault("F45", "fixed-point spline layout check accepts a column equal to nx + 1 + n_latch",
+          CTL, "            if ((sp->col[e] >= nz) ||", "            if ((sp->col[e] > nz) ||"),
+    Fault("F46", "fixed-point spline layout check accepts a coefficient scale of 31", CTL,
+          "(sp->shift[e] > STSP_QSPLINE_MAX_SHIFT)) {",
+          "(sp->shift[e] > (STSP_QSPLINE_MAX_SHIFT + 1u))) {"),
+    Fault("F47", "fixed-point spline gains read the previous span's coefficients", CTL,
+          "                &coef[off + sigma], p, (3u * k) + sp->shift[e]);",
+          "                &coef[(off + sigma) - ((sigma > 0u) ? 1u : 0u)], p,\n"
+          "                (3u * k) + sp->shift[e]);"),
 ]
 
 

@@ -1,7 +1,8 @@
 """The firmware's fixed-point spline evaluation (firmware/src/stsp_qspline.c) against the host's
 mirror (`stospline.table.qspline.evaluate_q`), bit for bit, at every tick of the robot's Q15
 and Q31 spline tables and of a random table at the format's extremes; its layout check takes
-both. (The controller does not run these tables yet: this is the evaluation it will call.)"""
+both; and the compiled per-tick Q controller on the spline's gains is the host's integer law.
+(The controller does not run these tables yet: this is the evaluation it will call.)"""
 import numpy as np
 import pytest
 
@@ -131,3 +132,27 @@ def test_c_evaluates_random_tables_at_the_extremes_bit_for_bit(arith):
 
 def _per_stage(coefs, nu, ns):
     return [np.concatenate(coefs[s * nu:(s + 1) * nu]) for s in range(ns)]
+
+
+@pytest.mark.parametrize("arith", SCALAR)
+def test_compiled_q_law_on_the_splines_gains_is_the_hosts_and_within_the_bound(qtables, arith):
+    """The spline's integer gains in the per-tick form (`replace(table, spline=None)`: the
+    same integers at every tick) through the compiled Q controller: bit for bit the host's
+    integer law (`law_q`) at 100 000 random in-range samples, and within the table's error
+    bound of the design's double law. Together with the evaluation's equality above, this is
+    the law the controller will run once it evaluates the splines itself."""
+    from dataclasses import replace
+
+    from stospline.sim.controller import build_controller
+    from stospline.sim.fixed_point_error import random_q_samples
+    from stospline.table.qformat import latch_q, law_double, law_q
+    ft = qtables[arith]
+    ctl = build_controller(replace(ft, spline=None))
+    rng = np.random.default_rng(20261125)
+    tick, ls, t_latch, X, XL = random_q_samples(ft, 100_000, rng)
+    U, status = ctl.pair_steps(t_latch, XL, tick, X)
+    assert status.min() >= 0
+    V = latch_q(ft, np.maximum(ls, 0), XL)
+    np.testing.assert_array_equal(U.astype(np.int64), law_q(ft, tick, X, V))
+    err = np.abs(U * ft.u_lsb - law_double(ft, tick, X * ft.x_lsb, XL * ft.x_lsb))
+    assert (err / ft.bound[tick]).max() <= 1.0

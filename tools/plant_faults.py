@@ -175,9 +175,8 @@ FAULTS = [
           "    stsp_spline_fold(h, p, p->coef, ctrl->v, fold);"),
     Fault("F42", "init accepts a spline table in a program without the spline code", CTL,
           "        if (stsp_spline_linked() == 0) {", "        if (stsp_spline_linked() < 0) {"),
-    Fault("F43", "fixed-point spline gain rounded half down", CTL,
-          "        const uint64_t biased = lifted + half;",
-          "        const uint64_t biased = (lifted + half) - 1u;"),
+    Fault("F43", "fixed-point spline gain floored instead of rounded half up", CTL,
+          "    const uint64_t up = halves + 1u;", "    const uint64_t up = halves;"),
     Fault("F44", "fixed-point spline basis P1 with 2D + d instead of 2D - d", CTL,
           "    p[1] = (4u * D3) - (3u * d * d * (D + e));",
           "    p[1] = (4u * D3) - (3u * d * d * (D + d));"),
@@ -187,9 +186,9 @@ FAULTS = [
           "(sp->shift[e] > STSP_QSPLINE_MAX_SHIFT)) {",
           "(sp->shift[e] > (STSP_QSPLINE_MAX_SHIFT + 1u))) {"),
     Fault("F47", "fixed-point spline gains read the previous span's coefficients", CTL,
-          "                &coef[off + sigma], p, (3u * k) + sp->shift[e]);",
-          "                &coef[(off + sigma) - ((sigma > 0u) ? 1u : 0u)], p,\n"
-          "                (3u * k) + sp->shift[e]);"),
+          "    const stsp_scalar_t *c = &sp->coef[sp->coef_start[s] + sigma];",
+          "    const stsp_scalar_t *c =\n"
+          "        &sp->coef[(sp->coef_start[s] + sigma) - ((sigma > 0u) ? 1u : 0u)];"),
 ]
 
 

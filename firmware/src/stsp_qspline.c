@@ -17,27 +17,45 @@ uint32_t stsp_qspline_basis(uint32_t k, uint32_t tau, uint32_t *p)
     return tau >> k;
 }
 
+/* The gain biased by 2^(62 - sh): floor(acc / 2^sh + 1/2) + 2^(62 - sh), with acc the exact
+ * sum. No signed shift: acc + 2^62 is in (0, 2^63) as |acc| < 2^61 (the unsigned sum wraps to
+ * exactly that); floor((a + 2^(sh-1)) / 2^sh) = floor((floor(a / 2^(sh-1)) + 1) / 2) for
+ * a >= 0, one variable shift; and 2^62 / 2^sh is an integer (sh <= 57). */
+static inline uint64_t stsp_qspline_biased(const stsp_scalar_t *c, const uint32_t *p,
+                                           uint32_t sh)
+{
+    /* p[r] <= 2^29: an int32, so each product is one 32 x 32 -> 64 multiply */
+    const int64_t t0 = (int64_t)c[0] * (int64_t)(int32_t)p[0];
+    const int64_t t1 = (int64_t)c[1] * (int64_t)(int32_t)p[1];
+    const int64_t t2 = (int64_t)c[2] * (int64_t)(int32_t)p[2];
+    const int64_t t3 = (int64_t)c[3] * (int64_t)(int32_t)p[3];
+    const int64_t acc = ((t0 + t1) + t2) + t3;
+    const uint64_t lifted = (uint64_t)acc + ((uint64_t)1u << 62u);
+    const uint32_t down = sh - 1u;
+    const uint64_t halves = lifted >> down;
+    const uint64_t up = halves + 1u;
+    return up >> 1u;
+}
+
 int64_t stsp_qspline_value(const stsp_scalar_t *c, const uint32_t *p, uint32_t sh)
 {
-    int64_t acc = 0;
-    uint32_t r;
-    for (r = 0u; r < 4u; ++r) {
-        /* p[r] <= 2^29: an int32, so the product is one 32 x 32 -> 64 multiply */
-        acc += (int64_t)c[r] * (int64_t)(int32_t)p[r];
-    }
-    {
-        /* floor(acc / 2^sh + 1/2) without a signed shift: acc + 2^62 is in (0, 2^63) as
-         * |acc| < 2^61 (the unsigned sum wraps to exactly that), and 2^62 is a multiple of
-         * 2^sh (sh <= 57). */
-        const uint64_t offset = (uint64_t)1u << 62u;
-        const uint32_t half_bit = sh - 1u;
-        const uint64_t half = (uint64_t)1u << half_bit;
-        const uint64_t lifted = (uint64_t)acc + offset;
-        const uint64_t biased = lifted + half;
-        const uint64_t shifted = biased >> sh;
-        const uint64_t base = offset >> sh;
-        return (int64_t)shifted - (int64_t)base;
-    }
+    const uint64_t biased = stsp_qspline_biased(c, p, sh);
+    const uint32_t bias_bit = 62u - sh;
+    const uint64_t bias = (uint64_t)1u << bias_bit;
+    return (int64_t)biased - (int64_t)bias;
+}
+
+/* stsp_qspline_value's low 32 bits, as a stsp_scalar_t: the value itself when it fits (the
+ * table's row sums ensure it), from 32-bit arithmetic for the bias. */
+static inline stsp_scalar_t stsp_qspline_narrow(const stsp_scalar_t *c, const uint32_t *p,
+                                                uint32_t sh)
+{
+    const uint64_t biased = stsp_qspline_biased(c, p, sh);
+    const uint32_t bias_bit = 62u - sh;
+    const uint32_t bias = (bias_bit < 32u) ? ((uint32_t)1u << bias_bit) : 0u;
+    const uint32_t low = (uint32_t)biased;
+    const uint32_t value = low - bias;
+    return (stsp_scalar_t)(int32_t)value;
 }
 
 /* Stage s's spans: S = ceil(T / 2^k). */
@@ -117,23 +135,28 @@ void stsp_qspline_gains(const stsp_qspline_t *sp, const uint32_t *stage_start, u
                         uint32_t nu, uint32_t nz, uint32_t tau, stsp_scalar_t *g)
 {
     const uint32_t k = sp->span_log2[s];
+    const uint32_t k3 = 3u * k;
     const uint32_t ticks = stage_start[s + 1u] - stage_start[s];
     const uint32_t stride = stsp_qspline_spans(ticks, k) + 3u;
-    const stsp_scalar_t *coef = &sp->coef[sp->coef_start[s]];
+    const uint16_t *rows = &sp->row_start[s * nu];
+    const uint8_t *col = sp->col;
+    const uint8_t *shift = sp->shift;
     uint32_t p[4];
     const uint32_t sigma = stsp_qspline_basis(k, tau, p);
-    uint32_t off = 0u;
+    /* entry e's four coefficients of the span: c, then stride further for the next entry */
+    const stsp_scalar_t *c = &sp->coef[sp->coef_start[s] + sigma];
+    uint32_t e = rows[0];
     uint32_t i;
     for (i = 0u; i < (nu * nz); ++i) {
         g[i] = 0;
     }
     for (i = 0u; i < nu; ++i) {
-        uint32_t e;
-        for (e = sp->row_start[(s * nu) + i]; e < sp->row_start[(s * nu) + i + 1u]; ++e) {
+        stsp_scalar_t *gi = &g[i * nz];
+        const uint32_t end = rows[i + 1u];
+        for (; e < end; ++e) {
             /* in the scalar's range for a table whose row sums are (stsp_qspline.h) */
-            g[(i * nz) + sp->col[e]] = (stsp_scalar_t)stsp_qspline_value(
-                &coef[off + sigma], p, (3u * k) + sp->shift[e]);
-            off += stride;
+            gi[col[e]] = stsp_qspline_narrow(c, p, k3 + shift[e]);
+            c = &c[stride];
         }
     }
 }

@@ -458,6 +458,8 @@ def fixed_point_spline(d: Designed, arith: str, *, tolerance: float | None = Non
     per_tick = quantize_table(exact, arith, x_range)
     try:
         ft = q_spline_table(d.problem, exact, arith, x_range, tolerance)
+    except DesignError:
+        raise
     except ValueError as exc:            # scale exponents beyond STSP_Q_EXP_MAX
         raise strict.fixed_scale_error(d.problem, arith, exc) from None
     law, implemented, per_tick_moments = _concurrently(

@@ -48,6 +48,9 @@ FIELD = "design.spline_tolerance"
 # The coefficient scale leaves this much room above the entry's largest value: least-squares
 # coefficients overshoot the values a little (a refit with s_e - 1 follows if they still do).
 _COEF_HEADROOM = 1.25
+# Weight of the curvature penalty of the least squares (`_curvature_band`), against normal
+# equations whose diagonal is about (span length) / 3 per coefficient.
+CURVATURE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -166,6 +169,23 @@ def _float_basis(k: int, T: int) -> tuple[np.ndarray, np.ndarray, list[np.ndarra
     return breaks, sigma, [p.astype(float) / (6.0 * D ** 3) for p in P]
 
 
+def _curvature_band(nb: int) -> np.ndarray:
+    """A light penalty on the coefficients' second differences, ``CURVATURE * D2'D2`` as an
+    upper band (4, nb): the basis functions that the stage's last, partial span barely reaches
+    (a stage of 25 ticks in spans of 16 leaves 7 ticks of the second span) get no huge
+    coefficients from the least squares, which the integer format could not hold; the others
+    move by about CURVATURE relative (the fit is checked against its tolerance anyway)."""
+    band = np.zeros((4, nb))
+    if nb >= 3:
+        D2 = np.zeros((nb - 2, nb))
+        idx = np.arange(nb - 2)
+        D2[idx, idx], D2[idx, idx + 1], D2[idx, idx + 2] = 1.0, -2.0, 1.0
+        M = D2.T @ D2
+        for d in range(3):
+            band[d, :nb - d] = np.diagonal(M, d)
+    return CURVATURE * band
+
+
 def _shifts(peak: np.ndarray, bits: int, k: int) -> np.ndarray:
     """Per entry the largest s_e whose coefficients (6 c / 2^s_e = values up to `peak`, with
     headroom) fit a signed `bits` integer, within [1, MAX_SHIFT] and 3k + s_e <= 62."""
@@ -177,10 +197,12 @@ def _shifts(peak: np.ndarray, bits: int, k: int) -> np.ndarray:
 
 def _fit_uniform(YT: np.ndarray, k: int, bits: int, peak: np.ndarray):
     """Least squares on spans of 2^k ticks, coefficients rounded to their integer grid; a
-    coefficient beyond `bits` lowers its entry's shift and refits. Returns (C, shift, G)."""
+    coefficient beyond `bits` lowers its entry's shift and refits. Returns (C, shift, G), or
+    None when a coefficient exceeds `bits` even at shift 1 (a last, partial span that its
+    basis functions barely reach can ask for that)."""
     E, T = YT.shape
     breaks, sigma, N = _float_basis(k, T)
-    band = _normal_band(breaks, N)
+    band = _normal_band(breaks, N) + _curvature_band(breaks.size + 2)
     Cf = _lsq(breaks, N, YT, band)                      # (E, S + 3), in LSB
     shift = _shifts(peak, bits, k)
     top = 2 ** (bits - 1) - 1
@@ -190,7 +212,7 @@ def _fit_uniform(YT: np.ndarray, k: int, bits: int, peak: np.ndarray):
         if not over.any():
             break
         if np.any(shift[over] <= 1):
-            raise DesignError(FIELD, "a spline coefficient exceeds the integer format")
+            return None                 # not with spans this long: the caller tries shorter
         shift = np.where(over, shift - 1, shift)
     C = C.astype(np.int64)
     return C, shift, _stage_gains(k, C, shift, T)
@@ -209,15 +231,22 @@ def _fit_stage(YT: np.ndarray, tolerance: float, bits: int, max_spans: int, s: i
     for k in range(top_k, -1, -1):
         if -(-T // (1 << k)) > max_spans:
             break
-        C, shift, G = _fit_uniform(YT, k, bits, peak)
+        fit = _fit_uniform(YT, k, bits, peak)
+        if fit is None:
+            continue
+        C, shift, G = fit
         err = np.abs(G.T - YT).max(axis=1)
         allowed = tolerance * peak + 3.0 / np.ldexp(1.0, shift) + 0.5
         if np.all(err <= allowed):
             return k, C, shift, G
-        worst = float((err / allowed).max())
+        worst = max(worst or 0.0, float((err / allowed).max()))
+    shortest = max(1, -(-T // max_spans))
+    if worst is None:
+        raise DesignError(FIELD, f"stage {s}: the fixed-point spline's coefficients exceed "
+                                 f"the integer format with spans of {shortest} ticks or more")
     raise DesignError(FIELD, f"stage {s}: the fixed-point spline misses the tolerance "
-                             f"{tolerance:g} by {worst:.3g}x with spans of "
-                             f"{max(1, -(-T // max_spans))} ticks or more")
+                             f"{tolerance:g} by {worst:.3g}x or more with spans of "
+                             f"{shortest} ticks or more")
 
 
 def fit_q_spline(scaled: tuple[np.ndarray, np.ndarray, np.ndarray], stage_start, arith: str,

@@ -202,3 +202,19 @@ def test_band_tables_are_refused():
     with pytest.raises(DesignError) as err:
         fixed_point_spline(d, "q15")
     assert err.value.field == "design.table"
+
+
+@pytest.mark.parametrize("arith", ARITHS)
+def test_short_stages_with_a_partial_last_span(arith):
+    """A 25-tick stage whose gain falls steeply to its end (coupled_axes' shape): spans of 16
+    leave the second span's last basis functions barely reached, which a plain least squares
+    fits with coefficients several times the gain's range (beyond int16); the fit stays within
+    the format and its budget (the curvature penalty, or shorter spans)."""
+    T = 25
+    t = np.arange(T)
+    y = -15489.6 * np.cos(0.5 * np.pi * t / 25.5) ** 3
+    K = y.reshape(T, 1, 1)
+    sp = fit_q_spline((K, np.zeros((T, 1)), np.zeros((T, 1, 0))), [0, T], arith, 1e-5)
+    g = evaluate_q(sp, [0, T])[0][:, 0, 0]
+    budget = 1e-5 * np.abs(y).max() + 3.0 / 2.0 ** int(sp.shift[0]) + 0.5
+    assert np.abs(g - y).max() <= budget

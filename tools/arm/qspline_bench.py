@@ -31,7 +31,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tools" / "arm"))
-from count_instructions import CPU_FLAGS, callees, disassemble, symbols  # noqa: E402
+from count_instructions import CPU_FLAGS, callees, symbols  # noqa: E402
 
 MACHINE = {"cortex-m4": "mps2-an386", "cortex-m0plus": "mps2-an385"}
 COUNT_TICKS = 100
@@ -136,8 +136,8 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     import stospline
     from stospline.pipeline import fixed_point_spline
-    d = stospline.design_problem(stospline.load_problem(str(ROOT / "examples/robot_corridor.toml")),
-                                 table="spline")
+    robot = stospline.load_problem(str(ROOT / "examples/robot_corridor.toml"))
+    d = stospline.design_problem(robot, table="spline")
     print("| core | arith | entries per stage | bit-exact (6000 ticks) | instructions per tick, "
           "median [min, max] per stage | text B of stsp_qspline.o |")
     print("|---|---|---|---|---|---|")
@@ -155,19 +155,20 @@ def main() -> None:
             run = qemu(build(out, cpu, arith, data, False), cpu)
             exact = run.returncode == 0 and f"hash {expected:08x}" in run.stdout
             counts = count(build(out, cpu, arith, data, True), cpu, out, stage_calls)
-            text = subprocess.run(["arm-none-eabi-gcc", *CPU_FLAGS[cpu], "-std=c99", "-O2",
-                                   f"-DSTSP_ARITH_{arith.upper()}",
-                                   f"-I{ROOT / 'firmware/include'}", f"-I{ROOT / 'firmware/src'}",
-                                   "-c", str(ROOT / "firmware/src/stsp_qspline.c"), "-o",
-                                   str(out / "stsp_qspline.o")], check=True)
-            size = subprocess.run(["arm-none-eabi-size", str(out / "stsp_qspline.o")],
+            obj = out / "stsp_qspline.o"
+            subprocess.run(["arm-none-eabi-gcc", *CPU_FLAGS[cpu], "-std=c99", "-O2",
+                            f"-DSTSP_ARITH_{arith.upper()}", f"-I{ROOT / 'firmware/include'}",
+                            f"-I{ROOT / 'firmware/src'}", "-c",
+                            str(ROOT / "firmware/src/stsp_qspline.c"), "-o", str(obj)],
+                           check=True)
+            size = subprocess.run(["arm-none-eabi-size", str(obj)],
                                   check=True, capture_output=True, text=True).stdout
             text_b = int(size.splitlines()[1].split()[0])
             per_stage = "; ".join(f"{int(statistics.median(c))} [{min(c)}, {max(c)}]"
                                   for c in counts)
-            print(f"| {cpu} | {arith} | {entries} | {'yes' if exact else 'NO: ' + run.stdout.strip()} "
-                  f"| {per_stage} | {text_b} |", flush=True)
-            del text
+            verdict = "yes" if exact else "NO: " + run.stdout.strip()
+            print(f"| {cpu} | {arith} | {entries} | {verdict} | {per_stage} | {text_b} |",
+                  flush=True)
 
 
 if __name__ == "__main__":

@@ -261,7 +261,7 @@ def fit_q_spline(scaled: tuple[np.ndarray, np.ndarray, np.ndarray], stage_start,
     if arith not in COEF_BITS:
         raise ValueError(f"arith must be q15 or q31, not {arith!r}")
     Ks, k0s, Ls = (np.asarray(a, dtype=float) for a in scaled)
-    T_all, m, n = Ks.shape
+    _, m, n = Ks.shape
     n_latch = Ls.shape[2]
     if n + n_latch > 255:
         raise ValueError("a spline table addresses at most 256 gain columns (uint8)")

@@ -44,7 +44,7 @@ CRC = "firmware/src"
 PY_TESTS = ["tests/python/firmware/test_c_step_equals_law.py",
             "tests/python/sim/test_monte_carlo_vs_oracle.py",
             "tests/python/firmware/test_table_limits.py", "tests/python/firmware/test_fixed_point.py",
-            "tests/python/firmware/test_band_relatch.py"]
+            "tests/python/firmware/test_band_relatch.py", "tests/python/table/test_qspline_c.py"]
 CTEST_EXCLUDE = r"^(clang_|arm_|misra|consumer_)"
 
 
@@ -181,6 +181,21 @@ FAULTS = [
           "            r1 = stsp_mls(r1, kp[c], x[c]);"),
     Fault("F44", "generic float32 law: an odd last row starts from +k0 (k0 added, not subtracted)",
           CTL, "        stsp_f32_t acc = -k0[0];", "        stsp_f32_t acc = k0[0];"),
+    # The fixed-point spline evaluation (stsp_qspline.c).
+    Fault("F45", "fixed-point spline gain floored instead of rounded half up", CTL,
+          "    const uint64_t up = halves + 1u;", "    const uint64_t up = halves;"),
+    Fault("F46", "fixed-point spline basis P1 with 2D + d instead of 2D - d", CTL,
+          "    p[1] = (4u * D3) - (3u * d * d * (D + e));",
+          "    p[1] = (4u * D3) - (3u * d * d * (D + d));"),
+    Fault("F47", "fixed-point spline layout check accepts a column equal to nx + 1 + n_latch",
+          CTL, "            if ((sp->col[e] >= nz) ||", "            if ((sp->col[e] > nz) ||"),
+    Fault("F48", "fixed-point spline layout check accepts a coefficient scale of 31", CTL,
+          "(sp->shift[e] > STSP_QSPLINE_MAX_SHIFT)) {",
+          "(sp->shift[e] > (STSP_QSPLINE_MAX_SHIFT + 1u))) {"),
+    Fault("F49", "fixed-point spline gains read the previous span's coefficients", CTL,
+          "    const stsp_scalar_t *c = &sp->coef[sp->coef_start[s] + sigma];",
+          "    const stsp_scalar_t *c =\n"
+          "        &sp->coef[(sp->coef_start[s] + sigma) - ((sigma > 0u) ? 1u : 0u)];"),
 ]
 
 

@@ -31,8 +31,8 @@ from stospline.table_options import (DEFAULT_SPLINE_TOLERANCE, TABLE_KINDS,
 
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
            "simulation_summary", "verdict", "plan_substeps", "write_outputs", "start_from",
-           "double_table", "fixed_point_table", "check_implementable", "loop_moments",
-           "fault_sweep"]
+           "double_table", "fixed_point_table", "fixed_point_spline", "check_implementable",
+           "loop_moments", "fault_sweep"]
 
 # JSON summaries keep 10 significant digits and an absolute quantum of 1e-10: the designs
 # agree to ~1e-14 however the arithmetic is ordered, so regenerated files stay byte-identical
@@ -398,6 +398,56 @@ def fixed_point_table(d: Designed, arith: str, *, sigmas: float = DEFAULT_SIGMAS
     if x_range is None:
         x_range = state_range(d.problem, d.table, sigmas=sigmas)
     return quantize_table(double_table(d), arith, x_range)
+
+
+def fixed_point_spline(d: Designed, arith: str, *, tolerance: float | None = None,
+                       sigmas: float = DEFAULT_SIGMAS, x_range=None
+                       ) -> tuple[FixedPointTable, dict]:
+    """A Q15/Q31 spline table of a design and its certificate (host side: the firmware and
+    the C code generation do not take it yet, `generated_files` refuses it).
+
+    The gains of the per-tick Q table (`fixed_point_table`, same scales) as uniform cubic
+    B-splines with integer coefficients, evaluated in exact integer arithmetic
+    (`stospline.table.qspline`); the latch maps re-solved for the gains as evaluated; the
+    error bound computed from them. ``tolerance``: the fit's relative budget per entry
+    (default: the design's spline tolerance, else the problem's, else 1e-5).
+
+    Returns ``(table, certificate)``: a `FixedPointTable` whose ``spline`` is the
+    `QSplineGains` and whose K, k0, L its evaluation at every tick, bit for bit; the
+    certificate as `stospline.sim.spline_certificate.q_certificate`.
+
+    Raises DesignError naming ``design.table`` for what has no spline table (as for float32)
+    or ``design.spline_tolerance`` when a stage cannot meet the tolerance."""
+    from stospline.sim.spline_certificate import q_certificate
+    from stospline.table.qspline import dequantized, q_spline_table
+    if d.table.delay_ticks:
+        raise DesignError("design.delay_ticks", f"a design for a one-tick delay has float32 "
+                                                f"tables only, not {arith}")
+    if has_bands(d.problem) or d.every_tick is not None:
+        raise DesignError("design.table", "a spline table does not carry the band dual: use "
+                                          'table "per-tick"')
+    if tolerance is None:
+        tolerance = (d.certificate["spline_tolerance"] if d.certificate is not None else
+                     d.problem.options.get("spline_tolerance", DEFAULT_SPLINE_TOLERANCE))
+    tolerance = check_spline_tolerance(tolerance, "spline_tolerance")
+    exact = double_table(d)
+    if x_range is None:
+        x_range = state_range(d.problem, d.table, sigmas=sigmas)
+    per_tick = quantize_table(exact, arith, x_range)
+    try:
+        ft = q_spline_table(d.problem, exact, arith, x_range, tolerance)
+    except DesignError:
+        raise
+    except ValueError as exc:            # scale exponents beyond STSP_Q_EXP_MAX
+        raise strict.fixed_scale_error(d.problem, arith, exc) from None
+    law, implemented, per_tick_moments = _concurrently(
+        [lambda: evaluate_table(d.problem, exact, path=False),
+         lambda: evaluate_table(d.problem, dequantized(ft), path=False),
+         lambda: evaluate_table(d.problem, dequantized(per_tick), path=False)],
+        3 * exact.n_ticks)
+    cert = q_certificate(d.problem, ft, per_tick, d.design.J0, law, implemented,
+                         per_tick_moments, tolerance=tolerance)
+    return ft, _r(cert)
 
 
 def generated_files(d: Designed, source_name: str, arith: str = "float32", *,

@@ -1,7 +1,14 @@
 """Spline tables against per-tick tables: flash, cost, constraint residual, compression time.
 
 Usage: .venv/bin/python tools/bench/spline_tables.py [--repeat 3] [--examples a.toml,b.toml]
-           [--tolerances 1e-4,1e-5,1e-6] [--profile]
+           [--tolerances 1e-4,1e-5,1e-6] [--profile] [--arith q15,q31]
+
+`--arith q15,q31`: instead, the fixed-point spline tables (`pipeline.fixed_point_spline`)
+against the per-tick Q tables of the same scales: flash, ratio, the oracle's cost of each law
+as stored (integer gains and latch maps in real units), the spline's excess over the per-tick
+Q table and over J0, the residuals, the error bound of each (|u_fixed - u_double| per input,
+the largest over the inputs, in the command's LSBs and in its units), the span length per
+stage and the time of `fixed_point_spline` (fit, latch re-solve, three oracle evaluations).
 
 `--profile`: instead of the table, where the warm compression of the first example at the
 first tolerance spends its time (cProfile, the functions of `stospline.table`).
@@ -105,14 +112,43 @@ def _profile(name: str, tolerance: float, repeat: int) -> None:
         print(f"{ms:8.2f}  {where}")
 
 
+def _fixed_point(examples: list[str], tolerances: list[float], ariths: list[str]) -> None:
+    print("| example | arith | tolerance | span ticks per stage | per-tick B | spline B | ratio | "
+          "J per-tick | J spline | excess vs per-tick | excess vs J0 | residual per-tick | "
+          "residual spline | bound per-tick LSB | bound spline LSB | bound spline (units) | "
+          "time s |")
+    print("|---|" + "---|" * 16)
+    for name in examples:
+        problem = stospline.load_problem(str(ROOT / "examples" / name))
+        d = stospline.design_problem(problem, table="spline")
+        for arith in ariths:
+            for tol in tolerances:
+                start = time.perf_counter()
+                _, c = stospline.pipeline.fixed_point_spline(d, arith, tolerance=tol)
+                took = time.perf_counter() - start
+                print(f"| {name.removesuffix('.toml')} | {arith} | {tol:g} | {c['span_ticks']} | "
+                      f"{c['per_tick_flash_bytes']:,} | {c['flash_bytes']:,} | "
+                      f"{c['compression_ratio']:.0f} | {c['per_tick_oracle_J']:.10g} | "
+                      f"{c['oracle_J']:.10g} | {c['excess_over_per_tick']:+.2e} | "
+                      f"{c['excess_over_J0']:+.2e} | {c['per_tick_constraint_residual']:.2e} | "
+                      f"{c['constraint_residual']:.2e} | "
+                      f"{max(c['per_tick_u_error_bound_lsb']):g} | "
+                      f"{max(c['u_error_bound_lsb']):g} | {max(c['u_error_bound']):.3g} | "
+                      f"{took:.2f} |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--examples", default=",".join(EXAMPLES))
     ap.add_argument("--tolerances", default="1e-5")
     ap.add_argument("--profile", action="store_true")
+    ap.add_argument("--arith", default=None)
     args = ap.parse_args()
     tolerances = [float(t) for t in args.tolerances.split(",")]
+    if args.arith:
+        _fixed_point(args.examples.split(","), tolerances, args.arith.split(","))
+        return
     if args.profile:
         _profile(args.examples.split(",")[0], tolerances[0], args.repeat)
         return

@@ -358,6 +358,30 @@ class CompiledController:
         step.instances = ctrls
         return step
 
+    def real_stepper(self, count: int):
+        """``step(tick, X) -> (U, status)`` with real states X (float64, (count, n)) and real
+        commands U (float32, (count, m)) whatever the table's arithmetic: `stepper` for a
+        float32 table; for a Q15/Q31 one, X rounded half up to its Q format and saturated at
+        the Q range (as a quantizing sensor would deliver it) and the integer commands times
+        their LSB (exact in float32 for Q15, rounded to it for Q31). The Monte Carlo harness
+        runs fixed-point tables through this."""
+        step = self.stepper(count)
+        if self.arith == "float32":
+            return step
+        t = self.table
+        F = t.frac_bits
+        to_q = np.ldexp(1.0, F - np.asarray(t.x_exp, dtype=int))
+        lsb = np.asarray(t.u_lsb, dtype=float)
+        lo, hi = -(1 << F), (1 << F) - 1
+
+        def real(tick: int, X: np.ndarray):
+            Xq = np.clip(np.floor(np.asarray(X, dtype=float) * to_q + 0.5), lo, hi)
+            U, status = step(tick, Xq.astype(self.dtype))
+            return (U * lsb).astype(np.float32), status
+
+        real.instances = step.instances
+        return real
+
     def pair_steps(self, t_latch, x_latch, tick, x):
         """For each sample k, a fresh instance latches at ``t_latch[k]`` from ``x_latch[k]``
         and is then stepped at ``tick[k]`` with ``x[k]``: returns ``(U, status)``."""

@@ -280,7 +280,8 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
     # float32 tables: one C call per tick does controller, plant and statistics; otherwise the
     # controller and the plant are separate calls and numpy gathers the statistics.
     fused = getattr(table, "arith", "float32") == "float32"
-    step = controller.stepper(paths)
+    # real states in, real commands out, also for a Q15/Q31 table (`real_stepper`)
+    step = controller.real_stepper(paths)
     kept = min(record, paths) if first else 0
     stats = TickStats.zeros(paths, n, m, kept)
     knots, worst = [], 0

@@ -18,7 +18,7 @@ from stospline.table.flash import flash_bytes, spline_bytes
 from stospline.table.format import GainTable
 from stospline.table.spline_compress import compress
 
-__all__ = ["spline_table", "certificate", "constraint_residual"]
+__all__ = ["spline_table", "certificate", "q_certificate", "constraint_residual"]
 
 
 def spline_table(problem: Problem, exact: GainTable, per_tick: GainTable,
@@ -79,6 +79,49 @@ def certificate(problem: Problem, table: GainTable, per_tick: GainTable, J0: flo
         "knot_cov_change": _cov_change(compressed, implemented),
         "flash_bytes": total,
         "gain_bytes": spline_bytes(sp),
+        "per_tick_flash_bytes": per_tick_total,
+        "compression_ratio": per_tick_total / total,
+    }
+
+
+def q_certificate(problem: Problem, ft, per_tick, J0: float, law: Moments,
+                  implemented: Moments, per_tick_moments: Moments, *, tolerance: float) -> dict:
+    """The certificate of a fixed-point spline table `ft` (`stospline.table.qspline`): the
+    exact oracle's cost of its law as the firmware evaluates it (`implemented`: the gains the
+    integer splines give at every tick and the re-solved latch maps, both as stored, in real
+    units; the command's final rounding is the error bound's), its excess over ``J0``, over
+    the design's per-tick law in double precision (`law`) and over the per-tick table of the
+    same arithmetic (`per_tick`, whose oracle is `per_tick_moments`), the worst
+    expected-constraint residual of both, the error bound of both (``|u_fixed - u_double|``
+    per input in the command's LSBs, as written), the flash of both and the ratio."""
+    from stospline.table.flash import flash_bytes as _flash
+    from stospline.table.qspline import q_spline_bytes
+    sp = ft.spline
+    total, per_tick_total = _flash(ft, ft.arith), _flash(per_tick, per_tick.arith)
+    start = np.asarray(ft.stage_start, dtype=np.int64)
+
+    def rel(a, b):
+        return (a - b) / abs(b) if b else a - b
+    return {
+        "kind": "spline",
+        "arith": ft.arith,
+        "spline_tolerance": tolerance,
+        "span_ticks": [1 << int(k) for k in sp.span_log2],
+        "spans": [int(sp.spans(s, start[s + 1] - start[s])) for s in range(sp.n_stages)],
+        "entries": int(sp.n_entries),
+        "oracle_J": implemented.J,
+        "excess_over_J0": rel(implemented.J, J0),
+        "excess_over_law": rel(implemented.J, law.J),
+        "excess_over_per_tick": rel(implemented.J, per_tick_moments.J),
+        "per_tick_oracle_J": per_tick_moments.J,
+        "constraint_residual": constraint_residual(problem, implemented),
+        "per_tick_constraint_residual": constraint_residual(problem, per_tick_moments),
+        "knot_cov_change": _cov_change(law, implemented),
+        "u_error_bound_lsb": ft.written_bound_lsb(),
+        "per_tick_u_error_bound_lsb": per_tick.written_bound_lsb(),
+        "u_error_bound": ft.written_bound(),
+        "flash_bytes": total,
+        "gain_bytes": q_spline_bytes(sp),
         "per_tick_flash_bytes": per_tick_total,
         "compression_ratio": per_tick_total / total,
     }

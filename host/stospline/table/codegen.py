@@ -110,6 +110,9 @@ extern const stsp_table_t {p}_table;
     u32 = lambda x: f"{int(x)}u"  # noqa: E731
     T, e, lit, neg = table.n_ticks, v.element, v.literal, v.negated
     spline = getattr(table, "spline", None)
+    if spline is not None and hasattr(spline, "span_log2"):
+        raise ValueError("fixed-point spline tables (stospline.table.qspline) have no C form "
+                         "yet: write the per-tick table, or float32 spline tables")
     gains = [] if spline is not None else [
         _array(e, f"{p}_K", table.K, lit, f"{neg.format('K')}[n_ticks][nu][nx] = [{T}][{m}][{n}]"),
         _array(e, f"{p}_k0", table.k0, lit, f"{neg.format('k0')}[n_ticks][nu] = [{T}][{m}]"),

@@ -45,6 +45,10 @@ def flash_bytes(table, arith: str = "float32") -> int:
     spline = getattr(table, "spline", None)
     if spline is None:
         total += e * (_count(T * m * n) + _count(T * m) + _count(T * m * n_latch))  # K, k0, L
+    elif hasattr(spline, "span_log2"):
+        # a fixed-point spline (`stospline.table.qspline`), linked as a float32 one
+        from stospline.table.qspline import q_spline_bytes
+        total += q_spline_bytes(spline) + _PTR
     else:
         # + the pointer that links the spline code with the table (`<name>_spline_code`)
         total += spline_bytes(spline) + _PTR

@@ -53,7 +53,8 @@ from stospline.firmware_interface import ARITHS, FRAC_BITS, SCALAR_KIND
 from stospline.precision import RoundedUp, ceil_significant
 from stospline.table.format import F32_MAX, GainTable, TableShape
 
-__all__ = ["FixedPointTable", "quantize_table", "state_range", "law_q", "latch_q", "law_double",
+__all__ = ["FixedPointTable", "quantize_table", "scaled_entries", "row_sums", "assemble",
+           "state_range", "law_q", "latch_q", "law_double",
            "ARITHS", "FRAC_BITS", "SCALAR_KIND", "EXP_MAX", "DEFAULT_SIGMAS"]
 
 EXP_MAX = limits.Q_EXP_MAX  # the firmware refuses scale exponents beyond +-60
@@ -108,6 +109,9 @@ class FixedPointTable(TableShape):
     source: GainTable = field(repr=False)
     x_range: np.ndarray = field(repr=False)
     bound_lsb: np.ndarray = field(repr=False)
+    # A fixed-point spline table (`stospline.table.qspline.QSplineGains`): K, k0, L are then
+    # its evaluation, tick by tick, exactly as the firmware computes it.
+    spline: object | None = field(default=None, repr=False)
 
     @property
     def frac_bits(self) -> int:
@@ -215,7 +219,6 @@ def quantize_table(table: GainTable, arith: str, x_range, *, name: str | None = 
     if arith not in FRAC_BITS:
         raise ValueError(f"arith must be one of {list(FRAC_BITS)}, got {arith!r}")
     F = FRAC_BITS[arith]
-    one, qmax = 1 << F, (1 << F) - 1
     n, m, n_latch = table.dims
     x_range = np.asarray(x_range, dtype=float).reshape(-1)
     if x_range.shape != (n,) or not np.all(np.isfinite(x_range)) or np.any(x_range <= 0):
@@ -225,6 +228,7 @@ def quantize_table(table: GainTable, arith: str, x_range, *, name: str | None = 
     K, k0, L = (np.asarray(a, dtype=float) for a in (table.K, table.k0, table.L))
     Lam, lam0 = np.asarray(table.Lambda, dtype=float), np.asarray(table.lambda0, dtype=float)
     sx = np.ldexp(1.0, x_exp)
+    qmax = (1 << F) - 1
 
     # v scale: one exponent per column over the whole plan (v keeps its meaning across stages).
     r_v = (np.abs(lam0) + np.abs(Lam) @ sx).max(axis=0) if n_latch else np.zeros(0)
@@ -241,18 +245,50 @@ def quantize_table(table: GainTable, arith: str, x_range, *, name: str | None = 
                              f"+-{EXP_MAX} (STSP_Q_EXP_MAX): gains or state range too extreme "
                              f"for the fixed-point format")
 
-    # Unrounded scaled entries (signs as stored), then round half up.
+    Ks, k0s, Ls, Lams, lam0s = scaled_entries(table, F, x_exp, u_exp, v_exp)
+    Kq, k0q, Lq, Lamq, lam0q = (_rhu(a) for a in (Ks, k0s, Ls, Lams, lam0s))
+    law_rows, latch_rows = row_sums(Kq, k0q, Lq, Lamq, lam0q)
+    assert law_rows.max(initial=0) <= qmax and latch_rows.max(initial=0) <= qmax, \
+        "exponent choice must keep every row sum within 2^F - 1"
+    return assemble(table, arith, x_range, (x_exp, u_exp, v_exp), (Kq, k0q, Lq, Lamq, lam0q),
+                    (Ks, k0s, Ls, Lams, lam0s), name=name)
+
+
+def scaled_entries(table, F: int, x_exp, u_exp, v_exp) -> tuple[np.ndarray, ...]:
+    """``Ks, k0s, Ls, Lams, lam0s``: `table`'s entries scaled to the Q format of the given
+    exponents, gains negated (the module docstring), before rounding (float64)."""
+    x_exp, u_exp, v_exp = (np.asarray(e, dtype=int) for e in (x_exp, u_exp, v_exp))
+    K, k0, L = (np.asarray(a, dtype=float) for a in (table.K, table.k0, table.L))
+    Lam, lam0 = np.asarray(table.Lambda, dtype=float), np.asarray(table.lambda0, dtype=float)
     Ks = -K * np.ldexp(1.0, x_exp[None, None, :] - u_exp[None, :, None] + F)
     k0s = -k0 * np.ldexp(1.0, F - u_exp[None, :])
     Ls = -L * np.ldexp(1.0, v_exp[None, None, :] - u_exp[None, :, None] + F)
     Lams = Lam * np.ldexp(1.0, x_exp[None, None, :] - v_exp[None, :, None] + F)
     lam0s = lam0 * np.ldexp(1.0, F - v_exp[None, :])
-    Kq, k0q, Lq, Lamq, lam0q = (_rhu(a) for a in (Ks, k0s, Ls, Lams, lam0s))
+    return Ks, k0s, Ls, Lams, lam0s
+
+
+def row_sums(Kq, k0q, Lq, Lamq, lam0q) -> tuple[np.ndarray, np.ndarray]:
+    """The law's row sums (ticks, m) and the latch's (stages, n_latch) of integer entries,
+    each of which the firmware requires to be at most 2^F - 1."""
     law_rows = np.abs(k0q) + np.abs(Kq).sum(axis=2) + np.abs(Lq).sum(axis=2)
     latch_rows = np.abs(lam0q) + np.abs(Lamq).sum(axis=2)
-    assert law_rows.max(initial=0) <= qmax and latch_rows.max(initial=0) <= qmax, \
-        "exponent choice must keep every row sum within 2^F - 1"
+    return law_rows, latch_rows
 
+
+def assemble(table: GainTable, arith: str, x_range, exponents, q_entries, scaled,
+             *, name: str | None = None) -> FixedPointTable:
+    """The `FixedPointTable` of integer entries `q_entries` (``Kq, k0q, Lq, Lamq, lam0q``) in
+    the scales `exponents` (``x_exp, u_exp, v_exp``), with `table`'s limits and safe command
+    converted, and the error bound of each tick against `table`'s double law, whose scaled
+    entries are `scaled` (``scaled_entries``; the module docstring's bound, with each entry's
+    actual error, whatever its size)."""
+    F = FRAC_BITS[arith]
+    one, qmax = 1 << F, (1 << F) - 1
+    _, m, n_latch = table.dims
+    x_exp, u_exp, v_exp = (np.asarray(e, dtype=int) for e in exponents)
+    Kq, k0q, Lq, Lamq, lam0q = q_entries
+    Ks, k0s, Ls, Lams, lam0s = scaled
     # Limits in command units, rounded inwards so the clamp never passes the real limit.
     lo, hi = np.asarray(table.u_min, float), np.asarray(table.u_max, float)
     scale_u = np.ldexp(1.0, F - u_exp)

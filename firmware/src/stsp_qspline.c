@@ -1,0 +1,164 @@
+/* Fixed-point spline gains (stsp_qspline.h): evaluation and layout check. Fixed-point builds
+ * only; a program that does not call them does not link them (static library). */
+#include "stsp_qspline.h"
+
+#ifdef STSP_ARITH_FIXED_POINT
+
+uint32_t stsp_qspline_basis(uint32_t k, uint32_t tau, uint32_t *p)
+{
+    const uint32_t D = (uint32_t)1u << k;
+    const uint32_t d = tau & (D - 1u);
+    const uint32_t e = D - d;                /* in [1, D] */
+    const uint32_t D3 = D * D * D;           /* <= 2^27 */
+    p[0] = e * e * e;                        /* <= 2^27 */
+    p[3] = d * d * d;
+    p[1] = (4u * D3) - (3u * d * d * (D + e)); /* 2 D - d = D + e; 3 d^2 (2D - d) < 4 D^3 */
+    p[2] = (6u * D3) - p[0] - p[1] - p[3];   /* >= 0: the four sum to 6 D^3 */
+    return tau >> k;
+}
+
+/* The gain biased by 2^(62 - sh): floor(acc / 2^sh + 1/2) + 2^(62 - sh), with acc the exact
+ * sum. No signed shift: acc + 2^62 is in (0, 2^63) as |acc| < 2^61 (the unsigned sum wraps to
+ * exactly that); floor((a + 2^(sh-1)) / 2^sh) = floor((floor(a / 2^(sh-1)) + 1) / 2) for
+ * a >= 0, one variable shift; and 2^62 / 2^sh is an integer (sh <= 57). */
+static inline uint64_t stsp_qspline_biased(const stsp_scalar_t *c, const uint32_t *p,
+                                           uint32_t sh)
+{
+    /* p[r] <= 2^29: an int32, so each product is one 32 x 32 -> 64 multiply */
+    const int64_t t0 = (int64_t)c[0] * (int64_t)(int32_t)p[0];
+    const int64_t t1 = (int64_t)c[1] * (int64_t)(int32_t)p[1];
+    const int64_t t2 = (int64_t)c[2] * (int64_t)(int32_t)p[2];
+    const int64_t t3 = (int64_t)c[3] * (int64_t)(int32_t)p[3];
+    const int64_t acc = ((t0 + t1) + t2) + t3;
+    const uint64_t lifted = (uint64_t)acc + ((uint64_t)1u << 62u);
+    const uint32_t down = sh - 1u;
+    const uint64_t halves = lifted >> down;
+    const uint64_t up = halves + 1u;
+    return up >> 1u;
+}
+
+int64_t stsp_qspline_value(const stsp_scalar_t *c, const uint32_t *p, uint32_t sh)
+{
+    const uint64_t biased = stsp_qspline_biased(c, p, sh);
+    const uint32_t bias_bit = 62u - sh;
+    const uint64_t bias = (uint64_t)1u << bias_bit;
+    return (int64_t)biased - (int64_t)bias;
+}
+
+/* stsp_qspline_value's low 32 bits, as a stsp_scalar_t: the value itself when it fits (the
+ * table's row sums ensure it), from 32-bit arithmetic for the bias. */
+static inline stsp_scalar_t stsp_qspline_narrow(const stsp_scalar_t *c, const uint32_t *p,
+                                                uint32_t sh)
+{
+    const uint64_t biased = stsp_qspline_biased(c, p, sh);
+    const uint32_t bias_bit = 62u - sh;
+    const uint32_t bias = (bias_bit < 32u) ? ((uint32_t)1u << bias_bit) : 0u;
+    const uint32_t low = (uint32_t)biased;
+    const uint32_t value = low - bias;
+    return (stsp_scalar_t)(int32_t)value;
+}
+
+/* Stage s's spans: S = ceil(T / 2^k). */
+static uint32_t stsp_qspline_spans(uint32_t ticks, uint32_t k)
+{
+    return (ticks >> k) + (((ticks & (((uint32_t)1u << k) - 1u)) != 0u) ? 1u : 0u);
+}
+
+static stsp_status_t stsp_qspline_check_stage(const stsp_qspline_t *sp,
+                                              const uint32_t *stage_start, uint32_t s,
+                                              uint32_t nu, uint32_t nz)
+{
+    const uint32_t k = sp->span_log2[s];
+    const uint32_t e0 = sp->row_start[s * nu];
+    const uint32_t e1 = sp->row_start[(s + 1u) * nu];
+    const uint32_t n_coef = sp->coef_start[s + 1u] - sp->coef_start[s];
+    uint32_t stride;
+    uint32_t i;
+    if ((k > STSP_QSPLINE_MAX_SPAN_LOG2) || (stage_start[s + 1u] <= stage_start[s])) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    /* (S + 3) per entry, without forming the product (it could wrap) */
+    stride = stsp_qspline_spans(stage_start[s + 1u] - stage_start[s], k) + 3u;
+    if (((n_coef % stride) != 0u) || ((n_coef / stride) != (e1 - e0))) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    for (i = 0u; i < nu; ++i) {
+        uint32_t e;
+        for (e = sp->row_start[(s * nu) + i]; e < sp->row_start[(s * nu) + i + 1u]; ++e) {
+            if ((sp->col[e] >= nz) || ((e > sp->row_start[(s * nu) + i]) &&
+                                       (sp->col[e] <= sp->col[e - 1u]))) {
+                return STSP_ERR_BAD_DIMS;
+            }
+            if ((sp->shift[e] < 1u) || (sp->shift[e] > STSP_QSPLINE_MAX_SHIFT)) {
+                return STSP_ERR_BAD_DIMS;
+            }
+        }
+    }
+    return STSP_OK;
+}
+
+stsp_status_t stsp_qspline_check(const stsp_qspline_t *sp, const uint32_t *stage_start,
+                                 uint32_t n_stages, uint32_t nu, uint32_t nz)
+{
+    const uint32_t rows = n_stages * nu;
+    uint32_t i;
+    if ((sp == NULL) || (stage_start == NULL) || (sp->span_log2 == NULL) ||
+        (sp->row_start == NULL) || (sp->col == NULL) || (sp->shift == NULL) ||
+        (sp->coef_start == NULL) || (sp->coef == NULL)) {
+        return STSP_ERR_NULL;
+    }
+    if ((n_stages == 0u) || (nu == 0u) || (nz > 256u) || (sp->row_start[0] != 0u) ||
+        (sp->row_start[rows] != sp->n_entries) || (sp->coef_start[0] != 0u) ||
+        (sp->coef_start[n_stages] != sp->n_coef)) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    for (i = 0u; i < rows; ++i) {
+        if (sp->row_start[i + 1u] < sp->row_start[i]) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    for (i = 0u; i < n_stages; ++i) {
+        if (sp->coef_start[i + 1u] < sp->coef_start[i]) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    for (i = 0u; i < n_stages; ++i) {
+        const stsp_status_t st = stsp_qspline_check_stage(sp, stage_start, i, nu, nz);
+        if (st != STSP_OK) {
+            return st;
+        }
+    }
+    return STSP_OK;
+}
+
+void stsp_qspline_gains(const stsp_qspline_t *sp, const uint32_t *stage_start, uint32_t s,
+                        uint32_t nu, uint32_t nz, uint32_t tau, stsp_scalar_t *g)
+{
+    const uint32_t k = sp->span_log2[s];
+    const uint32_t k3 = 3u * k;
+    const uint32_t ticks = stage_start[s + 1u] - stage_start[s];
+    const uint32_t stride = stsp_qspline_spans(ticks, k) + 3u;
+    const uint16_t *rows = &sp->row_start[s * nu];
+    const uint8_t *col = sp->col;
+    const uint8_t *shift = sp->shift;
+    uint32_t p[4];
+    const uint32_t sigma = stsp_qspline_basis(k, tau, p);
+    /* entry e's four coefficients of the span: c, then stride further for the next entry */
+    const stsp_scalar_t *c = &sp->coef[sp->coef_start[s] + sigma];
+    uint32_t e = rows[0];
+    uint32_t i;
+    for (i = 0u; i < (nu * nz); ++i) {
+        g[i] = 0;
+    }
+    for (i = 0u; i < nu; ++i) {
+        stsp_scalar_t *gi = &g[i * nz];
+        const uint32_t end = rows[i + 1u];
+        for (; e < end; ++e) {
+            /* in the scalar's range for a table whose row sums are (stsp_qspline.h) */
+            gi[col[e]] = stsp_qspline_narrow(c, p, k3 + shift[e]);
+            c = &c[stride];
+        }
+    }
+}
+
+#endif /* STSP_ARITH_FIXED_POINT */

@@ -360,18 +360,10 @@ def summary_text(result: SearchResult) -> str:
     lines = [f"corridor {result.corridor}, epsilon {result.epsilon:g}: {n} grid points, the "
              f"original design J0 = {result.J0:.6g}; screened cheapest first: "
              f"{len(result.screened)} of {n}, certified: {len(result.certified)}"]
-    for cd in result.screened:
+    for label, cd in ([("", cd) for cd in result.screened]
+                      + [("refined ", cd) for cd in result.refined]):
         s, c = cd.screening, cd.certification
-        line = (f"  w = {cd.w:g}, wv = {cd.wv:g}: J = {cd.J:.6g} ({cd.J - result.J0:+.4g}); "
-                f"screening {s.exits} of {s.paths} paths left, upper99 {s.upper:.4g}"
-                f" -> {'pass' if s.upper <= result.epsilon else 'fail'}")
-        if c is not None:
-            line += (f"; certification {c.exits} of {c.paths}, upper99 {c.upper:.4g} -> "
-                     f"{'certified' if c.upper <= result.epsilon else 'FAILED'}")
-        lines.append(line)
-    for cd in result.refined:
-        s, c = cd.screening, cd.certification
-        line = (f"  refined w = {cd.w:.6g}, wv = {cd.wv:.6g}: J = {cd.J:.6g} "
+        line = (f"  {label}w = {cd.w:g}, wv = {cd.wv:g}: J = {cd.J:.6g} "
                 f"({cd.J - result.J0:+.4g}); screening {s.exits} of {s.paths} paths left, "
                 f"upper99 {s.upper:.4g} -> {'pass' if s.upper <= result.epsilon else 'fail'}")
         if c is not None:
@@ -380,7 +372,7 @@ def summary_text(result: SearchResult) -> str:
         lines.append(line)
     c = result.chosen
     if c is not None:
-        lines.append(f"chosen: w = {c.w:.6g}, wv = {c.wv:.6g}, J = {c.J:.6g} "
+        lines.append(f"chosen: w = {c.w:g}, wv = {c.wv:g}, J = {c.J:.6g} "
                      f"({100 * (c.J / result.J0 - 1) if result.J0 else 0.0:+.3g} % over J0); "
                      f"P(leave) <= {c.certification.upper:.4g} (one-sided 99 %, "
                      f"{c.certification.paths} fresh paths) <= epsilon {result.epsilon:g}")

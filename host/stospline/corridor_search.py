@@ -322,8 +322,8 @@ def work_estimate(problem, *, grid: int, search_paths: int, certify_paths: int,
                   attempts: int = ATTEMPTS, substeps: int = 1, refine: int = 0,
                   **design_options) -> Estimate:
     """The most the search can take: every grid point designed and screened, `refine`
-    bisection points designed and screened, `attempts` certifications. The Monte Carlo terms are path-ticks at the harness throughput measured
-    for `stospline.budget` (one core; `tools/bench/harness_throughput.py`)."""
+    bisection points designed and screened, `attempts` certifications. The Monte Carlo terms
+    are path-ticks at the harness throughput measured for `stospline.budget` (one core; `tools/bench/harness_throughput.py`)."""
     opts = {k: v for k, v in design_options.items() if k in ("mode", "discretization")}
     design = estimate(problem, command="design", **opts)
     per_design = sum(t.seconds for t in design.terms

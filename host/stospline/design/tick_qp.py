@@ -157,9 +157,7 @@ class TickQPDesign:
 
     def summary_terms(self) -> dict:
         return {"tick_qp": {"rows": len(self.rows),
-                            "active_region_rows": int(sum(1 for r, a in zip(self.rows,
-                                                          self.active)
-                                                          if r.kind == "region" and a != 0)),
+                            "active_region_rows": len(self.active_ticks()),
                             "arcs": self.arcs(),
                             "optimality_gap": self.optimality_gap}}
         # (Not the interior point's iterations or the corrections: they can differ in the
@@ -385,8 +383,9 @@ def _interior_point(g: _Grid, x0, eq: np.ndarray) -> tuple:
     """A guess of the active set (+1 upper, -1 lower per constraint row) from a primal-dual
     interior-point method (Mehrotra's predictor-corrector) on the QP, its iterations, and a
     lower bound on the optimal objective. Each iteration solves one sparse augmented system
-    ``[[P, E', G'], [E, 0, 0], [G, 0, -(S/Z + delta)]]`` (banded in time), and their number hardly grows with the ticks (15-17 on the robot from
-    100 Hz to 5 kHz, `tools/bench/tick_qp.py`), where ADMM's grew with the horizon.
+    ``[[P, E', G'], [E, 0, 0], [G, 0, -(S/Z + delta)]]`` (banded in time), and their number
+    hardly grows with the ticks (15-17 on the robot from 100 Hz to 5 kHz,
+    `tools/bench/tick_qp.py`), where ADMM's grew with the horizon.
     The rows with a bound (``lower < upper``) are ``G w <= h``, ``G = [C; -C]``; the knots'
     equalities join ``E``. The exact KKT loop corrects the guess."""
     from scipy import sparse
@@ -544,7 +543,6 @@ def _kkt(g: _Grid, active: np.ndarray):
     from scipy.sparse.linalg import splu
     idx = np.flatnonzero(active)
     Ea = sparse.vstack([g.E, g.C[idx]], format="csc")
-    k = Ea.shape[0]
     # The active rows' block is regularised by -KKT_REGULARIZATION: rows that depend on others
     # through the dynamics (along an arc where a position stays at its bound, its values at the
     # ticks and the middle coefficients between them fix more than the commands can) then share
@@ -554,7 +552,7 @@ def _kkt(g: _Grid, active: np.ndarray):
                                                                  -KKT_REGULARIZATION)]))
     M = sparse.bmat([[g.P, Ea.T], [Ea, reg]], format="csc")
     try:
-        return _Refined(splu(M), sparse.bmat([[g.P, Ea.T], [Ea, None]], format="csr")), idx, k
+        return _Refined(splu(M), sparse.bmat([[g.P, Ea.T], [Ea, None]], format="csr")), idx
     except RuntimeError:
         raise DesignError("regions", "the active constraint rows of the tick-grid QP are "
                                      "linearly dependent (contradictory bands?)") from None
@@ -576,7 +574,7 @@ class _Refined:
         return z
 
 
-def _solve(lu, g: _Grid, idx, k, active, rhs_eq):
+def _solve(lu, g: _Grid, idx, active, rhs_eq):
     bound = np.where(active[idx] > 0, g.hi[idx], g.lo[idx])
     z = lu.solve(np.concatenate([np.zeros(g.nv), rhs_eq, bound]))
     return z[:g.nv], z[g.nv:]
@@ -604,8 +602,8 @@ def design_tick_qp(problem: Problem, *, noise: bool = True,
     rounds = 0
     for rounds in range(1, MAX_ROUNDS + 1):
         active = _independent_rows(g, rows, active)
-        lu, idx, k = _kkt(g, active)
-        w, y = _solve(lu, g, idx, k, active, g.rhs(x0))
+        lu, idx = _kkt(g, active)
+        w, y = _solve(lu, g, idx, active, g.rhs(x0))
         mult = np.zeros(len(rows))
         mult[idx] = y[g.n_eq:]
         val = g.C @ w
@@ -637,7 +635,7 @@ def design_tick_qp(problem: Problem, *, noise: bool = True,
                                          f"did not reach a feasible iterate")
         w = primal
         active = _independent_rows(g, rows, guess)
-        lu, idx, k = _kkt(g, active)
+        lu, idx = _kkt(g, active)
         mult = np.zeros(len(rows))
         val = g.C @ w
         gap = max(0.0, 0.5 * float(w @ (g.P @ w)) - lower)

@@ -11,13 +11,14 @@ carries their band dual and the firmware re-solves it from the measured start. O
 more, the table would latch the affine map of the active set anyway, and each added row would
 cost a stage and worsen ``W``'s conditioning (an arc of contact costs a row per tick): the design
 then switches to `stospline.design.tick_qp`, which poses every row at every tick in one sparse
-QP with no stage or conditioning limit, and gives the same optimum. Each iterate is the exact optimum of a relaxation of the
-every-tick problem (a subset of its constraints), so the first iterate that meets them all is
-the every-tick optimum; the cost rises strictly with each cut, and there are finitely many
-ticks, so the loop ends. ``docs/theory/math-notes.md`` ("Regions at every tick").
+QP with no stage or conditioning limit, and gives the same optimum. Each iterate of constraint
+generation is the exact optimum of a relaxation of the every-tick problem (a subset of its
+constraints), so the first iterate that meets them all is the every-tick optimum; the cost
+rises strictly with each cut, and there are finitely many ticks, so the loop ends. ``docs/theory/math-notes.md`` ("Regions at every tick").
 
 Between ticks the command is held, so the mean follows the plant's free response plus the
-held input; `between_ticks` measures how far it leaves the band there (not enforced).
+held input; `between_ticks` measures how far it leaves the band there (enforced only with a
+region's ``between_ticks = true``, by the tick-grid QP).
 """
 from __future__ import annotations
 
@@ -36,8 +37,8 @@ from stospline.problem.regions import with_bands
 from stospline.sim.oracle import evaluate_table
 from stospline.table.format import table_of
 
-__all__ = ["EveryTick", "design_every_tick", "tick_grid", "every_tick_check", "tick_violation", "between_ticks", "active_ticks",
-           "MAX_ITERATIONS", "TOLERANCE"]
+__all__ = ["EveryTick", "design_every_tick", "tick_grid", "every_tick_check", "tick_violation",
+           "between_ticks", "active_ticks", "MAX_ITERATIONS", "TOLERANCE"]
 
 MAX_ITERATIONS = 60
 # A tick violates when it is beyond its band by more than this times max(1, |bounds|): the

@@ -120,6 +120,9 @@ def test_two_runs_write_the_same_bytes(designed):
     (("--strip", "1,nan"), None, "--strip: must be distinct"),
     (("--certify-seed", "20261126"), None, "--certify-seed: must differ from --seed"),
     (("--table", "spline"), None, "--table: corridor-design writes per-tick tables"),
+    (("--refine", "-1"), None, "--refine: must be an integer in 0..20"),
+    (("--refine", "2.5"), None, "--refine: must be an integer in 0..20"),
+    (("--refine", "1e9"), None, "--refine: must be an integer in 0..20"),
     (("--certify", "1000000", "--max-time", "5"), None,
      "--certify: the corridor-design would take"),
 ])

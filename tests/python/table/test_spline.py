@@ -314,10 +314,11 @@ def _parse(text):
 FAST = edit(BASE, ("tick_hz = 10", "tick_hz = 100"))
 # Knot 0 penalised only, knots 1 and 2 constrained (one row each): stage 0 latches nothing in
 # the stage-wise design, and the joint vector (2 rows) is no wider than the state.
-THREE = edit(FAST, ("constraint = { C = [[1, 0]], value = [1.0] }\n", ""),
-             ("constraint = { C = [[1, 0], [0, 1]], value = [0.0, 0.0] }",
-              "constraint = { C = [[1, 0]], value = [0.0] }\n\n[[knots]]\nt = 3.0\n"
-              "constraint = { C = [[0, 1]], value = [0.5] }"))
+THREE_EDITS = (("constraint = { C = [[1, 0]], value = [1.0] }\n", ""),
+               ("constraint = { C = [[1, 0], [0, 1]], value = [0.0, 0.0] }",
+                "constraint = { C = [[1, 0]], value = [0.0] }\n\n[[knots]]\nt = 3.0\n"
+                "constraint = { C = [[0, 1]], value = [0.5] }"))
+THREE = edit(FAST, *THREE_EDITS)
 
 
 def _residual(problem, table) -> float:
@@ -346,6 +347,53 @@ def test_the_re_solve_makes_a_perturbed_law_meet_its_constraints(text, mode):
     assert _residual(problem, replace(off, Lambda=Lam, lambda0=-lam0)) > 1e-3
 
 
+# Time-varying data (A, B and the drift f change within the stages, A with a kink inside
+# stage 0) and a law designed for a one-tick delay (its state [x; p] carries the command).
+VARYING = edit(FAST, ("A = [[0, 1], [0, 0]]",
+                      "A = { t = [0, 0.4, 3], values = [[[0, 1], [0, 0]], [[0, 1], [-3, -0.5]], "
+                      "[[0, 1], [1, 0]]] }"),
+               ("B = [[0], [1]]", "B = { t = [0, 3], values = [[[0], [1]], [[0], [2.5]]] }\n"
+                                  "f = { t = [0, 3], values = [[0, -1], [0.5, 0]] }"))
+
+
+@pytest.mark.parametrize("text, mode, delay", [(VARYING, "stagewise", 0),
+                                               (edit(VARYING, *THREE_EDITS), "joint", 0),
+                                               (FAST, "stagewise", 1), (THREE, "joint", 1)],
+                         ids=["time-varying", "time-varying joint", "delay", "delay joint"])
+def test_the_re_solve_is_exact_for_time_varying_data_and_a_delay(text, mode, delay):
+    """The mean over a tick is the oracle's: for time-varying data its Gauss-point
+    discretisation tick by tick (`design.varying.mean_maps`), with a delay the map of the state
+    ``[x; p]``. The design's own gains give back the design's latch maps (found by the
+    designer's own recursion), and a perturbed law meets its constraints to rounding."""
+    problem = _parse(text)
+    exact = table_of(design_zoh(problem, mode=mode, delay_ticks=delay), quantize=False)
+    assert exact.delay_ticks == delay and exact.dims[0] == 2 + delay
+    Lam, lam0 = resolve_latch(problem, exact)
+    np.testing.assert_allclose(Lam, exact.Lambda, rtol=1e-8, atol=1e-9)
+    np.testing.assert_allclose(lam0, exact.lambda0, rtol=1e-8, atol=1e-9)
+    off = replace(exact, K=exact.K * 1.02, k0=exact.k0 + 0.01, L=exact.L * 0.98)
+    assert _residual(problem, off) > 1e-3
+    Lam, lam0 = resolve_latch(problem, off)
+    assert _residual(problem, replace(off, Lambda=Lam, lambda0=lam0)) < 1e-11
+    assert _residual(problem, replace(off, Lambda=Lam, lambda0=-lam0)) > 1e-3
+
+
+def test_the_varying_mean_maps_are_the_exact_ones_of_data_linear_on_each_tick():
+    """Data linear in time on each tick are their own Gauss-point interpolant, so the maps of
+    `mean_maps` are the exact mean maps, here integrated independently (DOP853 on the data,
+    `tick_moments._tick_varying`); 5 Hz with |A| up to 9 makes the series take sub-steps."""
+    from stospline.design.varying import mean_maps
+    from stospline.sim.tick_moments import _tick_varying
+    problem = _parse(edit(VARYING, ("tick_hz = 100", "tick_hz = 5"),
+                          ("[[0, 1], [-3, -0.5]]", "[[0, 1], [-9, -2]]")))
+    stage, h = problem.stages[0], 0.2
+    F = mean_maps(stage, 0.0, h, 5)
+    assert F.shape == (5, 2, 4)
+    for j in range(5):
+        _, _, want = _tick_varying(stage, np.zeros((4, 4)), j * h, h, 2, 1)
+        np.testing.assert_allclose(F[j], want, rtol=1e-10, atol=1e-11)
+
+
 @pytest.mark.parametrize("mode", ["stagewise", "joint"])
 def test_the_table_latch_groups_are_the_designers(mode):
     problem = _parse(THREE)
@@ -366,15 +414,11 @@ def test_what_is_not_re_solved_exactly_is_refused():
     problem = _parse(FAST)
     cases = {
         "latches the state": (problem, table_of(design_zoh(problem, mode="joint"))),
-        "delay": (problem, table_of(design_zoh(problem, delay_ticks=1))),
     }
     plain = table_of(design_zoh(problem))
     cases["band"] = (problem, replace(plain, band_qp=BandQP(np.zeros((1, 2)), np.zeros(1),
                                                             np.eye(1), np.zeros(1),
                                                             np.zeros(1))))
-    varying = _parse(edit(FAST, ("B = [[0], [1]]", "B = [[0], [1]]\n"
-                                 "f = { t = [0, 2], values = [[0, -1], [0, 0]] }")))
-    cases["time-varying"] = (varying, plain)
     cases["stages do not match"] = (_parse(edit(FAST, ("\nt = 2.0", "\nt = 2.5"))), plain)
     for words, (p, table) in cases.items():
         with pytest.raises(DesignError) as exc:

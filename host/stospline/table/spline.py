@@ -421,17 +421,24 @@ def _refined(breaks: np.ndarray, excess: np.ndarray) -> np.ndarray:
 
     A one-tick span that misses cannot be split: its error comes from the coefficients it
     shares with the spans around it (a cubic's basis reaches three spans each way), so
-    those are halved instead.
+    those are halved instead. The last span keeps two ticks at least: its last basis
+    function is zero at the span's first tick and the stage's end T is no tick, so in a
+    one-tick last span no tick reaches it (and its neighbour barely): the least squares would
+    be singular there but for the ridge, its coefficients amplifying the last bits of the
+    gains a billion times (the Schoenberg-Whitney condition; a design for a one-tick delay
+    ends its stages on a jump that refines the last spans down to single ticks).
     """
     length = np.diff(breaks)
+    most = length.copy()                       # pieces a span may be split into
+    most[-1] = max(1, length[-1] // 2)         # the last one's of two ticks at least
     pieces = np.zeros(length.size, dtype=np.int64)
     for s in np.flatnonzero(excess > 1):
-        if length[s] > 1:
+        if most[s] > 1:
             pieces[s] = max(pieces[s], 2, int(np.ceil(_SPLIT_MARGIN * excess[s] ** 0.25)))
         else:
             near = slice(max(0, s - 3), s + 4)
             pieces[near] = np.maximum(pieces[near], 2)
-    pieces = np.minimum(pieces, length)
+    pieces = np.minimum(pieces, most)
     # The inner points of ``numpy.linspace(b_s, b_s+1, pieces + 1)`` for every split span at
     # once, in its arithmetic (k * (delta / pieces) + b_s): one call instead of one a span.
     split = np.flatnonzero(pieces > 1)

@@ -248,17 +248,46 @@ def test_the_refined_breakpoints_are_linspaces(T, spans, seed):
     breaks = np.unique(np.r_[0, inner, T]).astype(np.int64)
     excess = rng.uniform(0, 2, breaks.size - 1) ** rng.uniform(1, 30)
     length = np.diff(breaks)
+    most = np.r_[length[:-1], max(1, length[-1] // 2)]  # the last span: pieces of 2 ticks
     pieces = np.zeros(length.size, dtype=np.int64)     # as _refined decides them
     for s in np.flatnonzero(excess > 1):
-        if length[s] > 1:
+        if most[s] > 1:
             pieces[s] = max(pieces[s], 2, int(np.ceil(1.25 * excess[s] ** 0.25)))
         else:
             pieces[max(0, s - 3):s + 4] = np.maximum(pieces[max(0, s - 3):s + 4], 2)
-    pieces = np.minimum(pieces, length)
+    pieces = np.minimum(pieces, most)
     want = np.unique(np.concatenate(
         [breaks] + [np.rint(np.linspace(breaks[s], breaks[s + 1], pieces[s] + 1)[1:-1])
                     .astype(np.int64) for s in np.flatnonzero(pieces > 1)]))
-    np.testing.assert_array_equal(_refined(breaks, excess), want)
+    got = _refined(breaks, excess)
+    np.testing.assert_array_equal(got, want)
+    assert got[-1] - got[-2] >= min(2, T - breaks[-2])   # the last span keeps two ticks
+
+
+def test_a_jump_at_the_last_tick_leaves_the_fit_well_posed():
+    """A stage ending on a jump (a delayed design's last tick outputs the safe command): the
+    refinement keeps two ticks in the last span, whose last basis function a tick then
+    reaches, so the least squares is well posed: last bits of the gains (1e-14) move the
+    coefficients by as little (relative to the entry), not by the 1e-5 of a one-tick last
+    span, where only the ridge holds two coefficients."""
+    T = 1000
+    t = np.arange(T, dtype=float)
+    YT = np.vstack([np.where(t < T - 1, 1.0 - t / T, 0.0), np.where(t < T - 1, -5.0, -9.81)])
+    breaks, C, G = _fit_stage(YT, 1e-5, 1024, 8, 0)
+    assert breaks[-1] - breaks[-2] == 2 and np.any(np.diff(breaks)[-10:] == 1)
+    assert np.all(np.abs(G.T - YT) <= 1e-5 * np.abs(YT).max(axis=1)[:, None])
+    _, _, N64, band = _Bases().get(T, breaks)
+    rng = np.random.default_rng(3)
+    C0 = _lsq(breaks, N64, YT, band)
+    C1 = _lsq(breaks, N64, YT * (1 + 1e-14 * rng.uniform(-1, 1, YT.shape)), band)
+    assert np.max(np.abs(C1 - C0) / np.abs(YT).max(axis=1)[:, None]) < 1e-11
+    # One-tick spans to the end instead (what the refinement made before): two directions
+    # held by the ridge only.
+    one = np.r_[breaks[breaks < T - 8], np.arange(T - 8, T + 1)]
+    _, _, N64, band = _Bases().get(T, one)
+    C0 = _lsq(one, N64, YT, band)
+    C1 = _lsq(one, N64, YT * (1 + 1e-14 * rng.uniform(-1, 1, YT.shape)), band)
+    assert np.max(np.abs(C1 - C0) / np.abs(YT).max(axis=1)[:, None]) > 1e-8
 
 
 @pytest.mark.parametrize("nb", [4, 5, 27, 400])

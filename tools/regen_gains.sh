@@ -3,7 +3,7 @@
 # fixed-point (Q15, Q31) tables of the robot example (<name>_q15.*, <name>_q31.*), and the spline
 # tables (<name>_spline.*) beside the per-tick ones of the robots, investment (time-varying
 # data), quadrotor (a one-tick delay) and population (4-tick stages: its spline table is 1.47x
-# LARGER than the per-tick one; the summary says so). robot_patrol_60s has only its spline
+# larger than the per-tick one; the summary says so). robot_patrol_60s has only its spline
 # table, its file's [design] table. None for the band examples (robot_bands, robot_monotone,
 # robot_narrow_corridor: no spline table), nor for coupled_axes: it compresses 1.39x only,
 # and three of its coefficients lie within reach of a float32 rounding boundary, so its table

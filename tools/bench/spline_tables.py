@@ -46,10 +46,10 @@ from stospline.table.flash import flash_bytes                      # noqa: E402
 from stospline.table.format import table_of                        # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
-# investment (time-varying data), robot_bands and robot_narrow_corridor (bands) and quadrotor
-# (a one-tick delay) have no spline table (docs/guide/problem-file.md, `table`).
+# robot_bands, robot_monotone and robot_narrow_corridor (bands) have no spline table
+# (docs/guide/problem-file.md, `table`).
 EXAMPLES = ["robot_corridor.toml", "robot_corridor_eps01.toml", "robot_patrol_60s.toml",
-            "coupled_axes.toml", "population.toml"]
+            "coupled_axes.toml", "population.toml", "investment.toml", "quadrotor.toml"]
 _COLD = """
 import os, sys, time
 for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):

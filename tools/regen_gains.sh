@@ -5,9 +5,10 @@
 # data), quadrotor (a one-tick delay) and population (4-tick stages: its spline table is 1.47x
 # larger than the per-tick one; the summary says so). robot_patrol_60s has only its spline
 # table, its file's [design] table. None for the band examples (robot_bands, robot_monotone,
-# robot_narrow_corridor: no spline table), nor for coupled_axes: it compresses 1.39x only,
-# and three of its coefficients lie within reach of a float32 rounding boundary, so its table
-# would not regenerate byte for byte elsewhere (docs/evidence/spline-tables.md).
+# robot_narrow_corridor: no spline table), nor for coupled_axes, whose spline table is
+# certified but not reproducible byte for byte elsewhere: its re-solved latch maps move
+# with the design's last bits across float32 rounding boundaries
+# (docs/evidence/spline-tables.md).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"

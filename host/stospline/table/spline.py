@@ -449,6 +449,17 @@ def _refined(breaks: np.ndarray, excess: np.ndarray) -> np.ndarray:
     return _distinct(np.concatenate([breaks, np.rint(new).astype(np.int64)]))
 
 
+def _coefficients(C: np.ndarray, peak: np.ndarray) -> np.ndarray:
+    """The float32 coefficients of a least-squares fit `C` (entries, S + 3): each entry's
+    rounded to a multiple of the float32 spacing at its largest gain `peak` (the spacing of
+    the binade of `peak`), not to its own float32 neighbours. The tolerance is relative to
+    the peak, so nothing is lost; but a coefficient far below the peak (a gain that tends to
+    zero at the plan's end) keeps no digits that the last bits of the gains reach: rounded
+    to its own float32 neighbours, its value would move with the design's round-off."""
+    Q = np.ldexp(1.0, np.frexp(peak)[1] - 24)[:, None]
+    return (np.rint(C / Q) * Q).astype(np.float32)
+
+
 def _fit_stage(YT: np.ndarray, tolerance: float, max_spans: int, initial_spans: int, s: int,
                bases: _Bases | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One stage: breakpoints, float32 coefficients (entries, S + 3) and the values the
@@ -460,11 +471,12 @@ def _fit_stage(YT: np.ndarray, tolerance: float, max_spans: int, initial_spans: 
     if E == 0:
         return breaks[[0, -1]], np.zeros((0, 4), np.float32), np.zeros((T, 0), np.float32)
     YT = np.ascontiguousarray(YT, dtype=float)
-    scale = 1.0 / (tolerance * np.abs(YT).max(axis=1))
+    peak = np.abs(YT).max(axis=1)
+    scale = 1.0 / (tolerance * peak)
     bases = bases or _Bases()
     while True:
         sigma, N, N64, band = bases.get(T, breaks)
-        C = _lsq(breaks, N64, YT, band).astype(np.float32)
+        C = _coefficients(_lsq(breaks, N64, YT, band), peak)
         G = _combine(sigma, N, C)
         worst = _span_excess(G, YT, scale, breaks)
         if worst.max() <= 1.0:

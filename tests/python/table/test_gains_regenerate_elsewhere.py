@@ -173,53 +173,36 @@ def test_no_table_entry_is_near_a_rounding_boundary(monkeypatch, example):
 
 @pytest.mark.parametrize("example", SPLINE_SHIPPED)
 def test_no_spline_entry_is_near_a_rounding_boundary(monkeypatch, example):
-    """The same for the shipped spline tables: every coefficient (rounded from the least
-    squares fit) and every re-solved latch entry (rounded after the flush of round-off zeros)
-    is clear of where its float32 rounding changes.
-
-    A fit's rows are a stage's entries of K, k0 and L, each a linear function of its own
-    gains only. The perturbation above moves each of the design's arrays by ``ABS`` of that
-    array's largest entry, so a coefficient's absolute reach is ``ABS`` of the largest gain of
-    its kind (K, k0 or L) over the stage, not of the fit's largest coefficient: a delayed
-    design's gain on the applied command (5e-3) shares no array with its k0 (80)."""
+    """The same for the shipped spline tables: every coefficient (the least squares fit's,
+    rounded to the float32 spacing at its entry's largest gain, `spline._coefficients`) and
+    every re-solved latch entry (rounded after the flush of round-off zeros) is clear of
+    where its rounding changes."""
     from stospline.table import spline, spline_compress
     rounded = {"coef": [], "latch": []}
-    scale = {}                      # the current stage's largest gain of each row's kind
-    stage_entries, lsq, to_float32 = (spline._stage_entries, spline._lsq,
-                                      spline_compress._to_float32)
 
-    def entries(table, a, b):
-        keep, YT = stage_entries(table, a, b)
-        col = np.nonzero(keep)[1]
-        n = table.dims[0]
-        kind = np.where(col < n, 0, np.where(col == n, 1, 2))
-        top = [np.abs(YT[kind == k]).max(initial=0.0) for k in range(3)]
-        scale["rows"] = np.array([top[k] for k in kind])
-        return keep, YT
-
-    def fit(*args):
-        out = lsq(*args)
-        assert out.shape[0] == scale["rows"].size
-        rounded["coef"].append((np.array(out, dtype=float), scale["rows"][:, None]))
-        return out
-
-    def latch(*args):
-        a = np.array(args[0], dtype=float)
-        rounded["latch"].append((a, np.abs(a).max(initial=0.0)))
-        return to_float32(*args)
-    monkeypatch.setattr(spline, "_stage_entries", entries)
-    monkeypatch.setattr(spline, "_lsq", fit)
-    monkeypatch.setattr(spline_compress, "_to_float32", latch)
+    def capture(kind, fn):
+        def wrapped(*args):
+            rounded[kind].append(tuple(np.array(a, dtype=float) for a in args[:2]))
+            return fn(*args)
+        return wrapped
+    monkeypatch.setattr(spline, "_coefficients", capture("coef", spline._coefficients))
+    monkeypatch.setattr(spline_compress, "_to_float32",
+                        capture("latch", spline_compress._to_float32))
     problem = load_problem(EXAMPLES / f"{example}.toml")
     pipeline.design_problem(problem, table="spline")
     assert rounded["coef"] and rounded["latch"]
     # Every fit is checked, the refinement's discarded ones too (a superset of those kept).
-    for what, arrays in (("coefficient", rounded["coef"]), ("latch", rounded["latch"])):
-        for a, top in (p for p in arrays if np.any(p[0])):
-            kept = np.abs(a) >= (1e-12 * np.abs(a).max() if what == "latch" else 0)
-            reach = REL[1] * np.abs(a) + ABS * top
-            near = int(np.sum(np.where(kept, _f32_boundary_distance(a), np.inf) <= reach))
-            assert near == 0, f"{near} spline {what} entries within reach of a rounding boundary"
+    for a, peak in (p for p in rounded["coef"] if np.any(p[0])):
+        # The grid of each entry: the float32 spacing in the binade of its peak; a
+        # coefficient changes where it crosses a midpoint of that grid.
+        q = np.ldexp(1.0, np.frexp(peak)[1] - 24)[:, None]
+        distance = np.abs(a / q - np.floor(a / q) - 0.5) * q
+        near = int(np.sum(distance <= _reach(a)))
+        assert near == 0, f"{near} spline coefficients within reach of a rounding boundary"
+    for a, *_ in (p for p in rounded["latch"] if np.any(p[0])):
+        kept = np.abs(a) >= 1e-12 * np.abs(a).max()
+        near = int(np.sum(np.where(kept, _f32_boundary_distance(a), np.inf) <= _reach(a)))
+        assert near == 0, f"{near} spline latch entries within reach of a rounding boundary"
 
 
 def test_written_bound_is_rounded_up_never_down(robot_zoh):

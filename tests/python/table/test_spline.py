@@ -26,7 +26,8 @@ from stospline.problem import parse_problem
 from stospline.sim.oracle import evaluate_table
 from stospline.table.format import BandQP, table_of
 from stospline.table.spline import (MIN_TOLERANCE, SplineBudgetError, SplineGains, _Bases,
-                                    _basis, _column_peaks, _fit_stage, _lsq, _refined,
+                                    _basis, _coefficients, _column_peaks, _fit_stage, _lsq,
+                                    _refined,
                                     _solve_banded, _span_excess, _stage_entries, command,
                                     evaluate, fit_spline, max_relative_error)
 from stospline.table.spline_compress import compress
@@ -262,6 +263,25 @@ def test_the_refined_breakpoints_are_linspaces(T, spans, seed):
     got = _refined(breaks, excess)
     np.testing.assert_array_equal(got, want)
     assert got[-1] - got[-2] >= min(2, T - breaks[-2])   # the last span keeps two ticks
+
+
+def test_the_coefficients_are_on_the_float32_grid_of_their_entrys_peak():
+    """Each entry's coefficients are the nearest multiples of the float32 spacing at its
+    peak (in the peak's binade, float32 rounding itself; below it, coarser than their own
+    float32 neighbours), so a coefficient far below the peak moves only when the fit's value
+    crosses a midpoint of that grid, not with its own last bits."""
+    rng = np.random.default_rng(5)
+    peak = np.array([4.7e-3, 78.0, 1.0])
+    C = rng.normal(size=(3, 40)) * peak[:, None] * 10.0 ** rng.uniform(-9, 0.2, (3, 40))
+    got = _coefficients(C, peak)
+    assert got.dtype == np.float32
+    q = np.ldexp(1.0, np.frexp(peak)[1] - 24)[:, None]       # 2^-31, 2^-17, 2^-23
+    np.testing.assert_array_equal(q[:, 0], [2.0 ** -31, 2.0 ** -17, 2.0 ** -23])
+    np.testing.assert_array_equal(got.astype(float), np.rint(C / q) * q)
+    inside = np.abs(C) >= np.ldexp(1.0, np.frexp(peak)[1] - 1)[:, None]   # the peak's binade
+    np.testing.assert_array_equal(got[inside], C[inside].astype(np.float32))
+    tiny = np.abs(C) < q / 2
+    assert tiny.any() and np.all(got[tiny] == 0)
 
 
 def test_a_jump_at_the_last_tick_leaves_the_fit_well_posed():

@@ -117,10 +117,10 @@ def design_problem(problem: Problem, *, noise: bool = True,
     table : {"per-tick", "spline"}, optional
         The table the firmware runs: one row of gains per tick, or cubic B-splines of the
         gains per stage, with the latch maps re-solved so that the expected constraints hold
-        for the law as the firmware evaluates it (`stospline.table.spline`; float32,
-        time-invariant stage data, no bands, no delay). ``implemented`` is then the spline
-        law's and ``certificate`` says what it costs. Default: the problem's ``[design]
-        table``, else "per-tick".
+        for the law as the firmware evaluates it (`stospline.table.spline`; float32, no
+        bands, time-varying data and a one-tick delay included). ``implemented`` is then the
+        spline law's and ``certificate`` says what it costs. Default: the problem's
+        ``[design] table``, else "per-tick".
     spline_tolerance : float, optional
         The spline's budget: the largest relative error of a gain entry (default: the
         problem's ``[design] spline_tolerance``, else 1e-5).

@@ -19,9 +19,10 @@ from stospline.expm import NonFiniteMatrix
 from stospline.problem.model import Stage
 
 __all__ = ["POINTS", "TickSamples", "tick_samples", "zoh_ticks",
-           "oracle_ticks"]
+           "oracle_ticks", "mean_maps"]
 
 POINTS = 2            # Gauss points per tick (order 4), designer and oracle alike
+MEAN_TERMS = 60        # `mean_maps`: Taylor terms at most (as the C kernel's TV_MAX_TERMS)
 CHUNK = 512            # ticks sampled and handed to C at once (bounds the memory)
 
 
@@ -250,3 +251,81 @@ def euler_oracle_ticks(stage: Stage, t_start: float, h: float, substeps: int, K,
             Jp, *out, _ptr(ffi, work), _ptr(ffi, iwork, "int[]"))
         _check(status, "stsp_tv_euler_oracle_ticks", a, b)
     return (M, float(Jp[0]), *(rec if record else (None,) * 4))
+
+
+def mean_maps(stage: Stage, t_start: float, h: float, T: int) -> np.ndarray:
+    """The mean map of each of `T` ticks from `t_start` of a time-varying stage, as the oracle
+    (`oracle_ticks`) and the designer discretise it: ``F`` (T, n, n + m + 1) with ``E x+ =
+    F_j [x; u; 1]`` over tick j, the command held, for the generator interpolated through the
+    `POINTS` Gauss points of the tick, solved to rounding by its Taylor series (the C
+    kernel's MEAN series, here batched over the ticks).
+
+    The data are sampled chunk by chunk as the oracle samples them (`cached_samples`: the
+    same times, and the oracle's cached samples when it has run). Over a sub-step r in [0, 1]
+    of a tick, ``dF/dr = hs (A(r) F + [0, B(r), f(r)])`` with ``[A, B, f](r) = sum_l Arl[l]
+    r^l``; a chunk's sub-steps keep ``hs sum_l |Arl[l]| <= 1/2``, so a few tens of terms
+    reach rounding. Raises `NonFiniteMatrix` when the series does not converge (non-finite
+    or overflowing data)."""
+    n, m = stage.B.shape
+    d = n + m + 1
+    nodes, coef, _ = _gauss(POINTS)
+    out = np.empty((T, n, d))
+    for a, b in _chunks(T):
+        smp = cached_samples(stage, t_start + a * h, h, b - a, nodes)
+        if smp.same[0]:             # one drift for the chunk, held once: a constant
+            Arl = np.zeros((1, POINTS) + smp.Ar.shape[2:])
+            Arl[:, 0] = smp.Ar[:, 0]
+        else:                       # sum_i coef[i, l] Ar[t, i]: a polynomial in s per tick
+            Arl = np.einsum("il,tiab->tlab", coef, smp.Ar)
+        bound = np.abs(Arl).sum(axis=3).max(axis=2).sum(axis=1).max()
+        need = 2.0 * h * bound
+        if not np.isfinite(need) or need > 1 << 16:
+            raise NonFiniteMatrix(f"mean_maps: the tick series does not converge at ticks "
+                                  f"{a}..{b} (non-finite or overflowing data)")
+        sub = 1 if need <= 1.0 else int(need) + 1
+        F = np.zeros((Arl.shape[0], n, d))
+        F[:, :, :n] = np.eye(n)
+        for j in range(sub):
+            F = _mean_substep(F, _shifted(Arl, j, sub), h / sub, n, a, b)
+        out[a:b] = F                      # one map for every tick when the data are constant
+    return out
+
+
+def _shifted(Arl: np.ndarray, j: int, sub: int) -> np.ndarray:
+    """The coefficients of `Arl` (in s) in the variable r of sub-step j of `sub`, ``s = (j +
+    r) / sub``: ``sum_l Arl[l] ((j + r) / sub)^l = sum_e out[e] r^e``."""
+    if sub == 1:
+        return Arl
+    P = Arl.shape[1]
+    out = np.zeros_like(Arl)
+    from math import comb
+    for e in range(P):
+        for l in range(e, P):
+            out[:, e] += Arl[:, l] * (comb(l, e) * float(j) ** (l - e) / float(sub) ** l)
+    return out
+
+
+def _mean_substep(F: np.ndarray, Arl: np.ndarray, hs: float, n: int, a: int, b: int
+                  ) -> np.ndarray:
+    """``F(1)`` of ``dF/dr = hs Ar(r) [F; 0, I]`` from ``F(0) = F`` (batched over ticks):
+    Taylor terms ``(k+1) c_{k+1} = hs sum_l Arl[l] [c_{k-l}; delta_{k-l,0} [0, I]]``."""
+    P = Arl.shape[1]
+    A, rest = Arl[..., :n], Arl[..., n:]          # the columns on x, and on [u; 1]
+    terms = [F]
+    total = F.copy()
+    scale = np.abs(F).max()
+    for k in range(MEAN_TERMS):
+        nxt = np.zeros_like(F)
+        for l in range(min(k, P - 1) + 1):
+            nxt += A[:, l] @ terms[k - l]
+            if k == l:                             # the identity rows below c_0
+                nxt[..., n:] += rest[:, l]
+        nxt *= hs / (k + 1)
+        terms.append(nxt)
+        total += nxt
+        scale = max(scale, np.abs(total).max())
+        # hs |Ar| <= 1/2: once P terms in a row are below rounding, so are all later ones.
+        if k >= P - 1 and max(np.abs(t).max() for t in terms[-P:]) <= 2.0 ** -56 * scale:
+            return total
+    raise NonFiniteMatrix(f"mean_maps: the tick series did not converge at ticks {a}..{b} "
+                          f"(non-finite or overflowing data)")

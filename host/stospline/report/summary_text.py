@@ -50,8 +50,12 @@ def design_summary_text(d, arith: str = "float32") -> str:
                        for a in ariths)
     lines.append(f"  flash of the tables            {sizes}   (* this run's arithmetic)")
     if cert is not None:
-        lines.append(f"  spline table                   {cert['compression_ratio']:.0f}x smaller "
-                     f"than per-tick ({cert['per_tick_flash_bytes']:,} B); spans per stage "
+        ratio = cert["compression_ratio"]
+        # Short stages hardly compress, and a stage of a few ticks takes more as a spline.
+        size = (f"{ratio:.0f}x smaller" if ratio >= 100 else f"{ratio:.3g}x smaller"
+                if ratio >= 1 else f"{1 / ratio:.3g}x larger")
+        lines.append(f"  spline table                   {size} than per-tick "
+                     f"({cert['per_tick_flash_bytes']:,} B); spans per stage "
                      f"{cert['spans']}, tolerance {cert['spline_tolerance']:g}")
         lines.append(f"  its cost over J0               {cert['excess_over_J0']:+.3g} relative "
                      f"(oracle, as the firmware evaluates it)")

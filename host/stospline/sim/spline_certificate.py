@@ -25,8 +25,8 @@ def spline_table(problem: Problem, exact: GainTable, per_tick: GainTable,
                  tolerance: float) -> GainTable:
     """The float32 spline table of a design: `exact` is its per-tick table in double
     precision (``table_of(design, quantize=False)``), `per_tick` the float32 one. Raises
-    DesignError naming ``design.table`` for what has no spline table (bands, a delay,
-    time-varying stage data, a latched state) or ``design.spline_tolerance`` when the budget
+    DesignError naming ``design.table`` for what has no spline table (bands, a latched
+    state) or ``design.spline_tolerance`` when the budget
     cannot be met within the firmware's limits."""
     spline, K, k0, L, Lam, lam0 = compress(problem, exact, per_tick, tolerance)
     return replace(per_tick, name=f"{per_tick.name}_spline", K=K, k0=k0, L=L, Lambda=Lam,

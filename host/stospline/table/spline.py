@@ -421,17 +421,24 @@ def _refined(breaks: np.ndarray, excess: np.ndarray) -> np.ndarray:
 
     A one-tick span that misses cannot be split: its error comes from the coefficients it
     shares with the spans around it (a cubic's basis reaches three spans each way), so
-    those are halved instead.
+    those are halved instead. The last span keeps two ticks at least: its last basis
+    function is zero at the span's first tick and the stage's end T is no tick, so in a
+    one-tick last span no tick reaches it (and its neighbour barely): the least squares would
+    be singular there but for the ridge, its coefficients amplifying the last bits of the
+    gains a billion times (the Schoenberg-Whitney condition; a design for a one-tick delay
+    ends its stages on a jump that refines the last spans down to single ticks).
     """
     length = np.diff(breaks)
+    most = length.copy()                       # pieces a span may be split into
+    most[-1] = max(1, length[-1] // 2)         # the last one's of two ticks at least
     pieces = np.zeros(length.size, dtype=np.int64)
     for s in np.flatnonzero(excess > 1):
-        if length[s] > 1:
+        if most[s] > 1:
             pieces[s] = max(pieces[s], 2, int(np.ceil(_SPLIT_MARGIN * excess[s] ** 0.25)))
         else:
             near = slice(max(0, s - 3), s + 4)
             pieces[near] = np.maximum(pieces[near], 2)
-    pieces = np.minimum(pieces, length)
+    pieces = np.minimum(pieces, most)
     # The inner points of ``numpy.linspace(b_s, b_s+1, pieces + 1)`` for every split span at
     # once, in its arithmetic (k * (delta / pieces) + b_s): one call instead of one a span.
     split = np.flatnonzero(pieces > 1)
@@ -440,6 +447,17 @@ def _refined(breaks: np.ndarray, excess: np.ndarray) -> np.ndarray:
     step = (breaks[split + 1] - breaks[split]).astype(float) / pieces[split]
     new = k * np.repeat(step, inner) + np.repeat(breaks[split].astype(float), inner)
     return _distinct(np.concatenate([breaks, np.rint(new).astype(np.int64)]))
+
+
+def _coefficients(C: np.ndarray, peak: np.ndarray) -> np.ndarray:
+    """The float32 coefficients of a least-squares fit `C` (entries, S + 3): each entry's
+    rounded to a multiple of the float32 spacing at its largest gain `peak` (the spacing of
+    the binade of `peak`), not to its own float32 neighbours. The tolerance is relative to
+    the peak, so nothing is lost; but a coefficient far below the peak (a gain that tends to
+    zero at the plan's end) keeps no digits that the last bits of the gains reach: rounded
+    to its own float32 neighbours, its value would move with the design's round-off."""
+    Q = np.ldexp(1.0, np.frexp(peak)[1] - 24)[:, None]
+    return (np.rint(C / Q) * Q).astype(np.float32)
 
 
 def _fit_stage(YT: np.ndarray, tolerance: float, max_spans: int, initial_spans: int, s: int,
@@ -453,11 +471,12 @@ def _fit_stage(YT: np.ndarray, tolerance: float, max_spans: int, initial_spans: 
     if E == 0:
         return breaks[[0, -1]], np.zeros((0, 4), np.float32), np.zeros((T, 0), np.float32)
     YT = np.ascontiguousarray(YT, dtype=float)
-    scale = 1.0 / (tolerance * np.abs(YT).max(axis=1))
+    peak = np.abs(YT).max(axis=1)
+    scale = 1.0 / (tolerance * peak)
     bases = bases or _Bases()
     while True:
         sigma, N, N64, band = bases.get(T, breaks)
-        C = _lsq(breaks, N64, YT, band).astype(np.float32)
+        C = _coefficients(_lsq(breaks, N64, YT, band), peak)
         G = _combine(sigma, N, C)
         worst = _span_excess(G, YT, scale, breaks)
         if worst.max() <= 1.0:

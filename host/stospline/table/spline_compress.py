@@ -48,9 +48,8 @@ def compress(problem, exact, quantized, tolerance: float, *,
     SplineBudgetError
         The tolerance cannot be met (`fit_spline`).
     DesignError
-        (field ``design.table``) The re-solve is not exact for this table (band, delayed,
-        state-latching tables, time-varying data): pass ``resolve=False`` to keep the design's
-        latch maps.
+        (field ``design.table``) The re-solve is not exact for this table (band or
+        state-latching tables): pass ``resolve=False`` to keep the design's latch maps.
     """
     if exact.dims != quantized.dims or not np.array_equal(exact.stage_start,
                                                           quantized.stage_start):

@@ -10,8 +10,13 @@ square in ``v``: ``G = C2 Gamma``, ``Lambda = -G^-1 C2 Phi``, ``lambda0 = G^-1 (
 
 The groups are read off the table (a latch at every stage with ``stage_n_latch > 0``,
 covering the constrained knots up to the next latch), which is what
-`stospline.design.latch.latch_groups` makes of both modes; the table layer imports no
-designer, so the tick's mean map is computed here too (as ``design.zoh._tick_data``'s ``F``).
+`stospline.design.latch.latch_groups` makes of both modes. The tick's mean map ``F`` is the
+oracle's: for time-invariant data one exponential per stage, computed here (as
+``design.zoh._tick_data``'s ``F``); for time-varying data one map per tick, of the generator
+interpolated through the tick's Gauss points as the designer and the oracle discretise it
+(`stospline.design.varying.mean_maps`, imported when needed). A law designed for a one-tick
+delay has the state ``xi = [x; p]`` (p the command being applied): its ``F`` maps ``[x; p; u;
+1]`` (`delayed_map`), the latch maps act on ``xi`` and the constraints on its x.
 """
 from __future__ import annotations
 
@@ -20,7 +25,8 @@ import numpy as np
 from stospline.errors import DesignError
 from stospline.expm import expm
 
-__all__ = ["resolve_latch", "latch_groups_of_table", "mean_tick_map"]
+__all__ = ["resolve_latch", "latch_groups_of_table", "mean_tick_map", "delayed_map",
+           "stage_mean_maps"]
 
 FIELD = "design.table"
 
@@ -73,10 +79,6 @@ def _refuse_unsupported(problem, table) -> None:
     elif getattr(table, "band_qp", None) is not None or any(
             kn.constraint is not None and kn.constraint.is_band for kn in problem.knots):
         why = "a band table (the firmware re-solves the band dual, not an affine latch)"
-    elif getattr(table, "delay_ticks", 0):
-        why = "a table designed for a one-tick delay (its state carries the command)"
-    elif any(st.varying is not None for st in problem.stages):
-        why = "time-varying stage data (the mean map is not one exponential per stage)"
     elif len(table.stage_start) != len(problem.knots) + 1 or not np.array_equal(
             np.diff(np.asarray(table.stage_start, dtype=np.int64)),
             np.rint(np.diff(problem.times) * table.tick_hz).astype(np.int64)):
@@ -126,12 +128,44 @@ def _gain_columns(table, s: int, width: int, spline) -> tuple[np.ndarray, np.nda
     return kind[used][order], inputs[used][order], operand[used][order]
 
 
+def delayed_map(F: np.ndarray, m: int) -> np.ndarray:
+    """The mean map of a tick of a law designed for a one-tick delay, from the plant's `F`
+    (..., n, n + m + 1): its state is ``xi = [x; p]``, p the command applied over the tick
+    (decided one tick earlier), and its command u is applied over the next one, so ``E xi+ =
+    [[Ad, Bd, 0, fd], [0, 0, I, 0]] [x; p; u; 1]`` (``design.zoh._delayed_tick_data``'s F)."""
+    n = F.shape[-2]
+    out = np.zeros(F.shape[:-2] + (n + m, n + 2 * m + 1))
+    out[..., :n, :n + m] = F[..., :n + m]
+    out[..., :n, -1] = F[..., -1]
+    out[..., n:, n + m:n + 2 * m] = np.eye(m)
+    return out
+
+
+def stage_mean_maps(stage, table, s: int, h: float) -> np.ndarray:
+    """The mean maps of stage s's ticks, (1, n, n + m + 1) for time-invariant data (every
+    tick's) or (T, n, n + m + 1) one per tick, over the law's state (n the table's: with a
+    delay ``[x; p]``, `delayed_map`). Time-varying data: the oracle's own discretisation,
+    `stospline.design.varying.mean_maps`."""
+    a, b = int(table.stage_start[s]), int(table.stage_start[s + 1])
+    if stage.varying is None:
+        F = mean_tick_map(stage, h)[None]
+    else:
+        from stospline.design.varying import mean_maps
+        F = mean_maps(stage, table.t0 + a * h, h, b - a)
+    if getattr(table, "delay_ticks", 0):
+        F = delayed_map(F, table.dims[1])
+    return F
+
+
 def _stage_map(stage, table, s: int, width: int, h: float, spline=None) -> np.ndarray:
     """The mean over stage s as an affine block (n, n + width + 1): ``m_end = A m_start + C
     [v; 1]`` under the table's gains (its first `width` multiplier columns)."""
     n, m, _ = table.dims
     a, b = int(table.stage_start[s]), int(table.stage_start[s + 1])
-    F = mean_tick_map(stage, h)
+    F = stage_mean_maps(stage, table, s, h)
+    if F.shape[0] > 1:
+        return _affine_product(_varying_ticks(F, table, a, b, width))
+    F = F[0]
     Bd, d = F[:, n:n + m], n + width + 1
     # Per tick P = [Ad | 0 | fd] - Bd [K | L | k0] (u = -K m - L v - k0), every tick in one
     # matrix product (numpy is slow on arrays of 4-wide rows, fast on one product): the
@@ -151,6 +185,18 @@ def _stage_map(stage, table, s: int, width: int, h: float, spline=None) -> np.nd
     spread[-1, :, :n] = F[:, :n]
     spread[-1, :, -1] = F[:, -1]
     return _affine_product((gains @ spread.reshape(-1, n * d)).reshape(T, n, d))
+
+
+def _varying_ticks(F: np.ndarray, table, a: int, b: int, width: int) -> np.ndarray:
+    """The affine blocks (T, n, n + width + 1) of ticks a..b-1, one mean map per tick (`F`,
+    (T, n, n + m + 1)): ``[Ad | 0 | fd] - Bd [K | L | k0]``, batched."""
+    n, m, _ = table.dims
+    gains = np.concatenate([table.K[a:b], table.L[a:b, :, :width], table.k0[a:b, :, None]],
+                           axis=2).astype(float)
+    P = -np.matmul(F[:, :, n:n + m], gains)
+    P[:, :, :n] += F[:, :, :n]
+    P[:, :, -1] += F[:, :, -1]
+    return P
 
 
 def resolve_latch(problem, table, spline=None) -> tuple[np.ndarray, np.ndarray]:
@@ -176,9 +222,9 @@ def resolve_latch(problem, table, spline=None) -> tuple[np.ndarray, np.ndarray]:
     Raises
     ------
     DesignError
-        (field ``design.table``) For what is not re-solved exactly: fixed-point, band or
-        delayed tables, tables that latch the state, time-varying stage data, or gains under
-        which the multipliers do not move the constraints (a singular ``C2 Gamma``).
+        (field ``design.table``) For what is not re-solved exactly: fixed-point or band
+        tables, tables that latch the state, or gains under which the multipliers do not
+        move the constraints (a singular ``C2 Gamma``).
 
     Notes
     -----
@@ -198,9 +244,9 @@ def resolve_latch(problem, table, spline=None) -> tuple[np.ndarray, np.ndarray]:
             P = _stage_map(problem.stages[s], table, s, width, h, spline)
             W = P[:, :n] @ W
             W[:, n:] += P[:, n:]
-            if s in knots:
+            if s in knots:               # C2 on the plant's state, the first of the law's
                 con = problem.knots[s].constraint
-                rows.append(con.C @ W)
+                rows.append(con.C @ W[:con.C.shape[1]])
                 zeta.append(con.value)
         CW, zeta = np.vstack(rows), np.concatenate(zeta)
         G = CW[:, n:n + width]

@@ -173,30 +173,36 @@ def test_no_table_entry_is_near_a_rounding_boundary(monkeypatch, example):
 
 @pytest.mark.parametrize("example", SPLINE_SHIPPED)
 def test_no_spline_entry_is_near_a_rounding_boundary(monkeypatch, example):
-    """The same for the shipped spline tables: every coefficient (rounded from the least
-    squares fit) and every re-solved latch entry (rounded after the flush of round-off zeros)
-    is clear of where its float32 rounding changes."""
+    """The same for the shipped spline tables: every coefficient (the least squares fit's,
+    rounded to the float32 spacing at its entry's largest gain, `spline._coefficients`) and
+    every re-solved latch entry (rounded after the flush of round-off zeros) is clear of
+    where its rounding changes."""
     from stospline.table import spline, spline_compress
     rounded = {"coef": [], "latch": []}
 
     def capture(kind, fn):
         def wrapped(*args):
-            out = fn(*args)
-            rounded[kind].append(np.array(out if kind == "coef" else args[0], dtype=float))
-            return out
+            rounded[kind].append(tuple(np.array(a, dtype=float) for a in args[:2]))
+            return fn(*args)
         return wrapped
-    monkeypatch.setattr(spline, "_lsq", capture("coef", spline._lsq))
+    monkeypatch.setattr(spline, "_coefficients", capture("coef", spline._coefficients))
     monkeypatch.setattr(spline_compress, "_to_float32",
                         capture("latch", spline_compress._to_float32))
     problem = load_problem(EXAMPLES / f"{example}.toml")
     pipeline.design_problem(problem, table="spline")
     assert rounded["coef"] and rounded["latch"]
     # Every fit is checked, the refinement's discarded ones too (a superset of those kept).
-    for what, arrays in (("coefficient", rounded["coef"]), ("latch", rounded["latch"])):
-        for a in (a for a in arrays if np.any(a)):
-            kept = np.abs(a) >= (1e-12 * np.abs(a).max() if what == "latch" else 0)
-            near = int(np.sum(np.where(kept, _f32_boundary_distance(a), np.inf) <= _reach(a)))
-            assert near == 0, f"{near} spline {what} entries within reach of a rounding boundary"
+    for a, peak in (p for p in rounded["coef"] if np.any(p[0])):
+        # The grid of each entry: the float32 spacing in the binade of its peak; a
+        # coefficient changes where it crosses a midpoint of that grid.
+        q = np.ldexp(1.0, np.frexp(peak)[1] - 24)[:, None]
+        distance = np.abs(a / q - np.floor(a / q) - 0.5) * q
+        near = int(np.sum(distance <= _reach(a)))
+        assert near == 0, f"{near} spline coefficients within reach of a rounding boundary"
+    for a, *_ in (p for p in rounded["latch"] if np.any(p[0])):
+        kept = np.abs(a) >= 1e-12 * np.abs(a).max()
+        near = int(np.sum(np.where(kept, _f32_boundary_distance(a), np.inf) <= _reach(a)))
+        assert near == 0, f"{near} spline latch entries within reach of a rounding boundary"
 
 
 def test_written_bound_is_rounded_up_never_down(robot_zoh):

@@ -26,7 +26,8 @@ from stospline.problem import parse_problem
 from stospline.sim.oracle import evaluate_table
 from stospline.table.format import BandQP, table_of
 from stospline.table.spline import (MIN_TOLERANCE, SplineBudgetError, SplineGains, _Bases,
-                                    _basis, _column_peaks, _fit_stage, _lsq, _refined,
+                                    _basis, _coefficients, _column_peaks, _fit_stage, _lsq,
+                                    _refined,
                                     _solve_banded, _span_excess, _stage_entries, command,
                                     evaluate, fit_spline, max_relative_error)
 from stospline.table.spline_compress import compress
@@ -248,17 +249,65 @@ def test_the_refined_breakpoints_are_linspaces(T, spans, seed):
     breaks = np.unique(np.r_[0, inner, T]).astype(np.int64)
     excess = rng.uniform(0, 2, breaks.size - 1) ** rng.uniform(1, 30)
     length = np.diff(breaks)
+    most = np.r_[length[:-1], max(1, length[-1] // 2)]  # the last span: pieces of 2 ticks
     pieces = np.zeros(length.size, dtype=np.int64)     # as _refined decides them
     for s in np.flatnonzero(excess > 1):
-        if length[s] > 1:
+        if most[s] > 1:
             pieces[s] = max(pieces[s], 2, int(np.ceil(1.25 * excess[s] ** 0.25)))
         else:
             pieces[max(0, s - 3):s + 4] = np.maximum(pieces[max(0, s - 3):s + 4], 2)
-    pieces = np.minimum(pieces, length)
+    pieces = np.minimum(pieces, most)
     want = np.unique(np.concatenate(
         [breaks] + [np.rint(np.linspace(breaks[s], breaks[s + 1], pieces[s] + 1)[1:-1])
                     .astype(np.int64) for s in np.flatnonzero(pieces > 1)]))
-    np.testing.assert_array_equal(_refined(breaks, excess), want)
+    got = _refined(breaks, excess)
+    np.testing.assert_array_equal(got, want)
+    assert got[-1] - got[-2] >= min(2, T - breaks[-2])   # the last span keeps two ticks
+
+
+def test_the_coefficients_are_on_the_float32_grid_of_their_entrys_peak():
+    """Each entry's coefficients are the nearest multiples of the float32 spacing at its
+    peak (in the peak's binade, float32 rounding itself; below it, coarser than their own
+    float32 neighbours), so a coefficient far below the peak moves only when the fit's value
+    crosses a midpoint of that grid, not with its own last bits."""
+    rng = np.random.default_rng(5)
+    peak = np.array([4.7e-3, 78.0, 1.0])
+    C = rng.normal(size=(3, 40)) * peak[:, None] * 10.0 ** rng.uniform(-9, 0.2, (3, 40))
+    got = _coefficients(C, peak)
+    assert got.dtype == np.float32
+    q = np.ldexp(1.0, np.frexp(peak)[1] - 24)[:, None]       # 2^-31, 2^-17, 2^-23
+    np.testing.assert_array_equal(q[:, 0], [2.0 ** -31, 2.0 ** -17, 2.0 ** -23])
+    np.testing.assert_array_equal(got.astype(float), np.rint(C / q) * q)
+    inside = np.abs(C) >= np.ldexp(1.0, np.frexp(peak)[1] - 1)[:, None]   # the peak's binade
+    np.testing.assert_array_equal(got[inside], C[inside].astype(np.float32))
+    tiny = np.abs(C) < q / 2
+    assert tiny.any() and np.all(got[tiny] == 0)
+
+
+def test_a_jump_at_the_last_tick_leaves_the_fit_well_posed():
+    """A stage ending on a jump (a delayed design's last tick outputs the safe command): the
+    refinement keeps two ticks in the last span, whose last basis function a tick then
+    reaches, so the least squares is well posed: last bits of the gains (1e-14) move the
+    coefficients by as little (relative to the entry), not by the 1e-5 of a one-tick last
+    span, where only the ridge holds two coefficients."""
+    T = 1000
+    t = np.arange(T, dtype=float)
+    YT = np.vstack([np.where(t < T - 1, 1.0 - t / T, 0.0), np.where(t < T - 1, -5.0, -9.81)])
+    breaks, C, G = _fit_stage(YT, 1e-5, 1024, 8, 0)
+    assert breaks[-1] - breaks[-2] == 2 and np.any(np.diff(breaks)[-10:] == 1)
+    assert np.all(np.abs(G.T - YT) <= 1e-5 * np.abs(YT).max(axis=1)[:, None])
+    _, _, N64, band = _Bases().get(T, breaks)
+    rng = np.random.default_rng(3)
+    C0 = _lsq(breaks, N64, YT, band)
+    C1 = _lsq(breaks, N64, YT * (1 + 1e-14 * rng.uniform(-1, 1, YT.shape)), band)
+    assert np.max(np.abs(C1 - C0) / np.abs(YT).max(axis=1)[:, None]) < 1e-11
+    # One-tick spans to the end instead (what the refinement made before): two directions
+    # held by the ridge only.
+    one = np.r_[breaks[breaks < T - 8], np.arange(T - 8, T + 1)]
+    _, _, N64, band = _Bases().get(T, one)
+    C0 = _lsq(one, N64, YT, band)
+    C1 = _lsq(one, N64, YT * (1 + 1e-14 * rng.uniform(-1, 1, YT.shape)), band)
+    assert np.max(np.abs(C1 - C0) / np.abs(YT).max(axis=1)[:, None]) > 1e-8
 
 
 @pytest.mark.parametrize("nb", [4, 5, 27, 400])
@@ -314,10 +363,11 @@ def _parse(text):
 FAST = edit(BASE, ("tick_hz = 10", "tick_hz = 100"))
 # Knot 0 penalised only, knots 1 and 2 constrained (one row each): stage 0 latches nothing in
 # the stage-wise design, and the joint vector (2 rows) is no wider than the state.
-THREE = edit(FAST, ("constraint = { C = [[1, 0]], value = [1.0] }\n", ""),
-             ("constraint = { C = [[1, 0], [0, 1]], value = [0.0, 0.0] }",
-              "constraint = { C = [[1, 0]], value = [0.0] }\n\n[[knots]]\nt = 3.0\n"
-              "constraint = { C = [[0, 1]], value = [0.5] }"))
+THREE_EDITS = (("constraint = { C = [[1, 0]], value = [1.0] }\n", ""),
+               ("constraint = { C = [[1, 0], [0, 1]], value = [0.0, 0.0] }",
+                "constraint = { C = [[1, 0]], value = [0.0] }\n\n[[knots]]\nt = 3.0\n"
+                "constraint = { C = [[0, 1]], value = [0.5] }"))
+THREE = edit(FAST, *THREE_EDITS)
 
 
 def _residual(problem, table) -> float:
@@ -346,6 +396,53 @@ def test_the_re_solve_makes_a_perturbed_law_meet_its_constraints(text, mode):
     assert _residual(problem, replace(off, Lambda=Lam, lambda0=-lam0)) > 1e-3
 
 
+# Time-varying data (A, B and the drift f change within the stages, A with a kink inside
+# stage 0) and a law designed for a one-tick delay (its state [x; p] carries the command).
+VARYING = edit(FAST, ("A = [[0, 1], [0, 0]]",
+                      "A = { t = [0, 0.4, 3], values = [[[0, 1], [0, 0]], [[0, 1], [-3, -0.5]], "
+                      "[[0, 1], [1, 0]]] }"),
+               ("B = [[0], [1]]", "B = { t = [0, 3], values = [[[0], [1]], [[0], [2.5]]] }\n"
+                                  "f = { t = [0, 3], values = [[0, -1], [0.5, 0]] }"))
+
+
+@pytest.mark.parametrize("text, mode, delay", [(VARYING, "stagewise", 0),
+                                               (edit(VARYING, *THREE_EDITS), "joint", 0),
+                                               (FAST, "stagewise", 1), (THREE, "joint", 1)],
+                         ids=["time-varying", "time-varying joint", "delay", "delay joint"])
+def test_the_re_solve_is_exact_for_time_varying_data_and_a_delay(text, mode, delay):
+    """The mean over a tick is the oracle's: for time-varying data its Gauss-point
+    discretisation tick by tick (`design.varying.mean_maps`), with a delay the map of the state
+    ``[x; p]``. The design's own gains give back the design's latch maps (found by the
+    designer's own recursion), and a perturbed law meets its constraints to rounding."""
+    problem = _parse(text)
+    exact = table_of(design_zoh(problem, mode=mode, delay_ticks=delay), quantize=False)
+    assert exact.delay_ticks == delay and exact.dims[0] == 2 + delay
+    Lam, lam0 = resolve_latch(problem, exact)
+    np.testing.assert_allclose(Lam, exact.Lambda, rtol=1e-8, atol=1e-9)
+    np.testing.assert_allclose(lam0, exact.lambda0, rtol=1e-8, atol=1e-9)
+    off = replace(exact, K=exact.K * 1.02, k0=exact.k0 + 0.01, L=exact.L * 0.98)
+    assert _residual(problem, off) > 1e-3
+    Lam, lam0 = resolve_latch(problem, off)
+    assert _residual(problem, replace(off, Lambda=Lam, lambda0=lam0)) < 1e-11
+    assert _residual(problem, replace(off, Lambda=Lam, lambda0=-lam0)) > 1e-3
+
+
+def test_the_varying_mean_maps_are_the_exact_ones_of_data_linear_on_each_tick():
+    """Data linear in time on each tick are their own Gauss-point interpolant, so the maps of
+    `mean_maps` are the exact mean maps, here integrated independently (DOP853 on the data,
+    `tick_moments._tick_varying`); 5 Hz with |A| up to 9 makes the series take sub-steps."""
+    from stospline.design.varying import mean_maps
+    from stospline.sim.tick_moments import _tick_varying
+    problem = _parse(edit(VARYING, ("tick_hz = 100", "tick_hz = 5"),
+                          ("[[0, 1], [-3, -0.5]]", "[[0, 1], [-9, -2]]")))
+    stage, h = problem.stages[0], 0.2
+    F = mean_maps(stage, 0.0, h, 5)
+    assert F.shape == (5, 2, 4)
+    for j in range(5):
+        _, _, want = _tick_varying(stage, np.zeros((4, 4)), j * h, h, 2, 1)
+        np.testing.assert_allclose(F[j], want, rtol=1e-10, atol=1e-11)
+
+
 @pytest.mark.parametrize("mode", ["stagewise", "joint"])
 def test_the_table_latch_groups_are_the_designers(mode):
     problem = _parse(THREE)
@@ -366,15 +463,11 @@ def test_what_is_not_re_solved_exactly_is_refused():
     problem = _parse(FAST)
     cases = {
         "latches the state": (problem, table_of(design_zoh(problem, mode="joint"))),
-        "delay": (problem, table_of(design_zoh(problem, delay_ticks=1))),
     }
     plain = table_of(design_zoh(problem))
     cases["band"] = (problem, replace(plain, band_qp=BandQP(np.zeros((1, 2)), np.zeros(1),
                                                             np.eye(1), np.zeros(1),
                                                             np.zeros(1))))
-    varying = _parse(edit(FAST, ("B = [[0], [1]]", "B = [[0], [1]]\n"
-                                 "f = { t = [0, 2], values = [[0, -1], [0, 0]] }")))
-    cases["time-varying"] = (varying, plain)
     cases["stages do not match"] = (_parse(edit(FAST, ("\nt = 2.0", "\nt = 2.5"))), plain)
     for words, (p, table) in cases.items():
         with pytest.raises(DesignError) as exc:

@@ -12,6 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from stospline.design.varying import mean_maps
 from stospline.problem.model import Problem
 from stospline.sim.tick_moments import Moments
 from stospline.table.flash import flash_bytes, spline_bytes
@@ -28,7 +29,8 @@ def spline_table(problem: Problem, exact: GainTable, per_tick: GainTable,
     DesignError naming ``design.table`` for what has no spline table (bands, a latched
     state) or ``design.spline_tolerance`` when the budget
     cannot be met within the firmware's limits."""
-    spline, K, k0, L, Lam, lam0 = compress(problem, exact, per_tick, tolerance)
+    spline, K, k0, L, Lam, lam0 = compress(problem, exact, per_tick, tolerance,
+                                           varying_maps=mean_maps)
     return replace(per_tick, name=f"{per_tick.name}_spline", K=K, k0=k0, L=L, Lambda=Lam,
                    lambda0=lam0, spline=spline)
 

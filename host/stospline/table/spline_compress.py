@@ -13,7 +13,7 @@ __all__ = ["compress"]
 
 def compress(problem, exact, quantized, tolerance: float, *,
              max_spans: int = DEFAULT_MAX_SPANS, initial_spans: int = INITIAL_SPANS,
-             resolve: bool = True
+             resolve: bool = True, varying_maps=None
              ) -> tuple[SplineGains, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Fit, evaluate as the firmware does, re-solve the latch maps, round to float32.
 
@@ -34,6 +34,8 @@ def compress(problem, exact, quantized, tolerance: float, *,
         Re-solve ``Lambda, lambda0`` for the spline's gains (`spline_latch.resolve_latch`), so
         that the constraints hold in expectation as they do for the per-tick table; False keeps
         the design's, which then miss them by about the tolerance.
+    varying_maps : callable, optional
+        The per-tick mean maps of time-varying stage data (`spline_latch.resolve_latch`).
 
     Returns
     -------
@@ -57,5 +59,6 @@ def compress(problem, exact, quantized, tolerance: float, *,
     spline, K, k0, L = _fit(exact, tolerance, max_spans, initial_spans)
     if not resolve:
         return spline, K, k0, L, quantized.Lambda, quantized.lambda0
-    Lam, lam0 = resolve_latch(problem, quantized.with_arrays(K=K, k0=k0, L=L), spline)
+    Lam, lam0 = resolve_latch(problem, quantized.with_arrays(K=K, k0=k0, L=L), spline,
+                              varying_maps)
     return spline, K, k0, L, _to_float32(Lam), _to_float32(lam0)

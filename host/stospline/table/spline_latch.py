@@ -14,7 +14,8 @@ covering the constrained knots up to the next latch), which is what
 oracle's: for time-invariant data one exponential per stage, computed here (as
 ``design.zoh._tick_data``'s ``F``); for time-varying data one map per tick, of the generator
 interpolated through the tick's Gauss points as the designer and the oracle discretise it
-(`stospline.design.varying.mean_maps`, imported when needed). A law designed for a one-tick
+(`stospline.design.varying.mean_maps`, handed in by the caller as ``varying_maps``: the table
+layer imports no designer). A law designed for a one-tick
 delay has the state ``xi = [x; p]`` (p the command being applied): its ``F`` maps ``[x; p; u;
 1]`` (`delayed_map`), the latch maps act on ``xi`` and the constraints on its x.
 """
@@ -141,28 +142,31 @@ def delayed_map(F: np.ndarray, m: int) -> np.ndarray:
     return out
 
 
-def stage_mean_maps(stage, table, s: int, h: float) -> np.ndarray:
+def stage_mean_maps(stage, table, s: int, h: float, varying_maps=None) -> np.ndarray:
     """The mean maps of stage s's ticks, (1, n, n + m + 1) for time-invariant data (every
     tick's) or (T, n, n + m + 1) one per tick, over the law's state (n the table's: with a
     delay ``[x; p]``, `delayed_map`). Time-varying data: the oracle's own discretisation,
-    `stospline.design.varying.mean_maps`."""
+    ``varying_maps(stage, t_start, h, T)`` (`stospline.design.varying.mean_maps`)."""
     a, b = int(table.stage_start[s]), int(table.stage_start[s + 1])
     if stage.varying is None:
         F = mean_tick_map(stage, h)[None]
+    elif varying_maps is None:
+        raise DesignError(FIELD, f"the latch maps cannot be re-solved for stage {s}'s "
+                                 f"time-varying data without the per-tick mean maps")
     else:
-        from stospline.design.varying import mean_maps
-        F = mean_maps(stage, table.t0 + a * h, h, b - a)
+        F = varying_maps(stage, table.t0 + a * h, h, b - a)
     if getattr(table, "delay_ticks", 0):
         F = delayed_map(F, table.dims[1])
     return F
 
 
-def _stage_map(stage, table, s: int, width: int, h: float, spline=None) -> np.ndarray:
+def _stage_map(stage, table, s: int, width: int, h: float, spline=None, varying_maps=None
+               ) -> np.ndarray:
     """The mean over stage s as an affine block (n, n + width + 1): ``m_end = A m_start + C
     [v; 1]`` under the table's gains (its first `width` multiplier columns)."""
     n, m, _ = table.dims
     a, b = int(table.stage_start[s]), int(table.stage_start[s + 1])
-    F = stage_mean_maps(stage, table, s, h)
+    F = stage_mean_maps(stage, table, s, h, varying_maps)
     if F.shape[0] > 1:
         return _affine_product(_varying_ticks(F, table, a, b, width))
     F = F[0]
@@ -199,7 +203,8 @@ def _varying_ticks(F: np.ndarray, table, a: int, b: int, width: int) -> np.ndarr
     return P
 
 
-def resolve_latch(problem, table, spline=None) -> tuple[np.ndarray, np.ndarray]:
+def resolve_latch(problem, table, spline=None, varying_maps=None
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """The latch maps that make `table`'s law meet every knot constraint in expectation.
 
     Parameters
@@ -212,6 +217,9 @@ def resolve_latch(problem, table, spline=None) -> tuple[np.ndarray, np.ndarray]:
     spline : SplineGains, optional
         The spline whose evaluation `table`'s K, k0, L are (`stospline.table.spline.evaluate`):
         the entries it does not store are then taken as zero, unread.
+    varying_maps : callable, optional
+        ``varying_maps(stage, t_start, h, T)``: the per-tick mean maps of time-varying stage
+        data (`stospline.design.varying.mean_maps`); needed only for such data.
 
     Returns
     -------
@@ -241,7 +249,7 @@ def resolve_latch(problem, table, spline=None) -> tuple[np.ndarray, np.ndarray]:
         W = np.eye(n, n + width + 1)             # m = W [x; v; 1], from the latch tick
         rows, zeta = [], []
         for s in range(latch, knots[-1] + 1):
-            P = _stage_map(problem.stages[s], table, s, width, h, spline)
+            P = _stage_map(problem.stages[s], table, s, width, h, spline, varying_maps)
             W = P[:, :n] @ W
             W[:, n:] += P[:, n:]
             if s in knots:               # C2 on the plant's state, the first of the law's

@@ -31,6 +31,7 @@ from stospline.table.format import table_of
 from stospline.table.spline import command, max_relative_error
 from stospline.table.spline_compress import compress
 from stospline.table.spline_latch import resolve_latch
+from stospline.design.varying import mean_maps
 
 from conftest import EXAMPLES
 from test_spline_monte_carlo import _frozen_at_span_starts
@@ -71,7 +72,7 @@ def test_the_certificate_holds(example):
     # The re-solve is exact before rounding; rounded to float32, the residual is at the
     # float32 floor: below one epsilon of the constraints' largest value.
     sp = d.table.spline
-    Lam, lam0 = resolve_latch(p, d.table, sp)
+    Lam, lam0 = resolve_latch(p, d.table, sp, varying_maps=mean_maps)
     exact_latch = evaluate_table(p, replace(d.table, Lambda=Lam, lambda0=lam0), path=False)
     assert constraint_residual(p, exact_latch) < 1e-11
     scale = max(float(np.abs(kn.constraint.value).max()) for kn in p.knots
@@ -126,7 +127,7 @@ def test_monte_carlo_agrees_with_the_oracle_and_has_power(example):
     per_tick = table_of(d.design)
     tol, spans = COARSE[name]
     spline, K, k0, L, Lam, lam0 = compress(p, exact, per_tick, tol, max_spans=spans,
-                                           initial_spans=2)
+                                           initial_spans=2, varying_maps=mean_maps)
     table = replace(per_tick.with_arrays(K=K, k0=k0, L=L, Lambda=Lam, lambda0=lam0),
                     spline=spline)
     mc = simulate(p, build_controller(table), paths=PATHS, seed=SEED, substeps=SUBSTEPS,

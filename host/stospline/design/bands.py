@@ -283,5 +283,11 @@ def target_latch(qp: BandQP, x0: np.ndarray, *, float32: bool = True) -> np.ndar
     to float32 as the controller stores them. ``float32=False``: in double precision (for an
     unquantized table)."""
     x = np.asarray(x0, dtype=np.float32 if float32 else float).astype(float)
+    if not np.array_equal(qp.W, qp.W.T):
+        # A spline table's dual, re-solved for its gains: W not symmetric, the conditions a
+        # box LCP, solved as the firmware does (`stospline.table.spline_band`).
+        from stospline.table.spline_band import solve_band_lcp
+        lam = solve_band_lcp(qp.e(x), qp.W, qp.lo, qp.hi)[0]
+        return lam.astype(np.float32) if float32 else lam
     lam = solve_band_dual(qp.e(x), qp.W, qp.lo, qp.hi).lam
     return lam.astype(np.float32) if float32 else lam

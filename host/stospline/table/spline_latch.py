@@ -70,9 +70,10 @@ def _refuse_unsupported(problem, table) -> None:
     if getattr(table, "arith", "float32") != "float32" or not np.issubdtype(table.K.dtype,
                                                                              np.floating):
         why = "a fixed-point table"
-    elif getattr(table, "band_qp", None) is not None or any(
+    elif getattr(table, "band_qp", None) is None and any(
             kn.constraint is not None and kn.constraint.is_band for kn in problem.knots):
-        why = "a band table (the firmware re-solves the band dual, not an affine latch)"
+        why = "a band table without its band dual (more than 8 rows: an affine latch of one " \
+              "active set)"
     elif getattr(table, "delay_ticks", 0):
         why = "a table designed for a one-tick delay (its state carries the command)"
     elif any(st.varying is not None for st in problem.stages):

@@ -9,7 +9,7 @@ EXAMPLES = REPO / "examples"
 GAINS = REPO / "gains"
 # Examples whose spline tables (`--table spline`, <name>_spline.*) are shipped beside the
 # per-tick ones (tools/regen_gains.sh).
-SPLINE_EXAMPLES = ("robot_corridor", "robot_corridor_eps01")
+SPLINE_EXAMPLES = ("robot_corridor", "robot_corridor_eps01", "robot_bands")
 
 
 def gains_stem(example: str) -> str:

@@ -12,6 +12,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from stospline.errors import DesignError
+from stospline.limits import BANDQP_MAX
 from stospline.problem.model import Problem
 from stospline.sim.tick_moments import Moments
 from stospline.table.flash import flash_bytes, spline_bytes
@@ -24,11 +26,19 @@ __all__ = ["spline_table", "certificate", "q_certificate", "constraint_residual"
 def spline_table(problem: Problem, exact: GainTable, per_tick: GainTable,
                  tolerance: float) -> GainTable:
     """The float32 spline table of a design: `exact` is its per-tick table in double
-    precision (``table_of(design, quantize=False)``), `per_tick` the float32 one. Raises
-    DesignError naming ``design.table`` for what has no spline table (bands, a delay,
+    precision (``table_of(design, quantize=False)``), `per_tick` the float32 one; a band
+    table's dual is re-solved for the spline's gains (`spline_compress.compress_band`). Raises
+    DesignError naming ``design.table`` for what has no spline table (bands beyond the 8 rows
+    of a band dual, a W' that is not a P-matrix, a delay,
     time-varying stage data, a latched state) or ``design.spline_tolerance`` when the budget
     cannot be met within the firmware's limits."""
     band_qp = per_tick.band_qp
+    if band_qp is None and any(kn.constraint is not None and kn.constraint.is_band
+                               for kn in problem.knots):
+        raise DesignError("design.table", f"a band design with more than {BANDQP_MAX} "
+                                          f"constraint rows carries no band dual (its tables "
+                                          f"latch the affine map of one active set): no exact "
+                                          f"spline table")
     if band_qp is not None:
         spline, K, k0, L, Lam, lam0, band_qp = compress_band(problem, exact, per_tick, tolerance)
     else:

@@ -133,7 +133,7 @@ def resolve_band(problem, table, spline=None):
         raise DesignError(FIELD, f"a band table with more than {BANDQP_MAX} constraint rows "
                                  f"carries no band dual (it latches the affine map of one "
                                  f"active set): no exact spline re-solve")
-    _refuse_unsupported(problem, table)
+    _refuse_unsupported(problem, table, band=True)
     Nt, mt, W = band_rows(problem, table, spline)
     if Nt.shape[0] != base.q:
         raise DesignError(FIELD, f"the knots' constraints have {Nt.shape[0]} rows, the band "

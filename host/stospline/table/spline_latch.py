@@ -64,16 +64,16 @@ def latch_groups_of_table(problem, table) -> list[tuple[int, list[int]]]:
     return groups
 
 
-def _refuse_unsupported(problem, table) -> None:
-    """What the re-solve cannot do exactly is refused, naming the reason."""
+def _refuse_unsupported(problem, table, *, band: bool = False) -> None:
+    """What the re-solve cannot do exactly is refused, naming the reason. ``band=True``: the
+    caller re-solves the band dual (`stospline.table.spline_band`), not an affine latch."""
     why = None
     if getattr(table, "arith", "float32") != "float32" or not np.issubdtype(table.K.dtype,
                                                                              np.floating):
         why = "a fixed-point table"
-    elif getattr(table, "band_qp", None) is None and any(
-            kn.constraint is not None and kn.constraint.is_band for kn in problem.knots):
-        why = "a band table without its band dual (more than 8 rows: an affine latch of one " \
-              "active set)"
+    elif not band and (getattr(table, "band_qp", None) is not None or any(
+            kn.constraint is not None and kn.constraint.is_band for kn in problem.knots)):
+        why = "a band table (the firmware re-solves the band dual, not an affine latch)"
     elif getattr(table, "delay_ticks", 0):
         why = "a table designed for a one-tick delay (its state carries the command)"
     elif any(st.varying is not None for st in problem.stages):

@@ -68,7 +68,7 @@ def test_bad_file_options(capsys, tmp_path, key, value, field):
 
 
 @pytest.mark.parametrize("example, extra, field", [
-    ("robot_bands", [], "design.table"),            # the band dual is re-solved on target
+    ("robot_narrow_corridor", [], "design.table"),  # bands beyond the 8 rows of a band dual
     ("quadrotor", [], "design.table"),              # designed for a one-tick delay
     ("investment", [], "design.table"),             # time-varying data
     ("robot_corridor", ["--arith", "q15"], "--table"),

@@ -884,7 +884,7 @@ static void test_init_refusals(void **state_)
         stsp_status_t expect;
     } cases[] = {
         {ch_none, STSP_OK},
-        {ch_band, STSP_ERR_BAD_DIMS},
+        {ch_band, STSP_ERR_BAD_DIMS}, /* a band dual, but table S latches at stage 1 too */
         {ch_K, STSP_ERR_BAD_DIMS},
         {ch_k0, STSP_ERR_BAD_DIMS},
         {ch_L, STSP_ERR_BAD_DIMS},

@@ -113,7 +113,8 @@ def test_target_solver_on_non_symmetric_p_matrices(bandqp, seed):
     q, n = 2 + seed, 3
     G = rng.normal(size=(q, q))
     S = rng.normal(size=(q, q))
-    W = G @ G.T + 0.5 * np.eye(q) + (0.05 + 0.03 * seed) * np.linalg.norm(G, 2) ** 2 * (S - S.T) / q
+    skew = (0.05 + 0.03 * seed) * np.linalg.norm(G, 2) ** 2 * (S - S.T) / q
+    W = G @ G.T + 0.5 * np.eye(q) + skew
     assert not np.array_equal(W, W.T) and is_p_matrix(W)[0]
     Nt, mt = rng.normal(size=(q, n)), rng.normal(size=q)
     a, b = rng.normal(scale=2, size=q), rng.normal(scale=2, size=q)

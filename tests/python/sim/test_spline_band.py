@@ -195,3 +195,18 @@ def test_p_matrix_check_and_no_solution():
     with pytest.raises(DesignError, match="design.table"):
         solve_band_lcp(np.array([5.0, 0.0]), np.array([[0.0, 0.0], [0.0, 1.0]]),
                        np.array([-1.0, -1.0]), np.array([1.0, 1.0]))
+
+
+def test_the_fallback_latch_is_exact_at_the_design_start(designed):
+    """Stage 0's Lambda, lambda0 (what the firmware latches when its solve fails) are the
+    affine latch of the design x0's active set under W': at x0 the law without its band dual
+    meets every row at the float32 floor too (latch maps rounded to float32 as well)."""
+    d, _ = designed
+    t = d.table
+    x0 = np.asarray(d.problem.x0, dtype=np.float32).astype(float)
+    moved = replace(d.problem, x0=x0)
+    viol = _violations(moved, evaluate_table(moved, replace(t, band_qp=None), path=False))
+    # v = Lambda x0 + lambda0 from float32-rounded maps: off by up to 2^-24 of each term
+    dv = EPS32 * (np.abs(t.Lambda[0].astype(float)) @ np.abs(x0) + np.abs(t.lambda0[0]))
+    bound = _floor(t.band_qp, x0) + 2 * np.abs(t.band_qp.W) @ dv[:t.band_qp.q]
+    assert np.all(viol <= bound), (viol, bound)

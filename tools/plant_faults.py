@@ -196,6 +196,14 @@ FAULTS = [
           "    const stsp_scalar_t *c = &sp->coef[sp->coef_start[s] + sigma];",
           "    const stsp_scalar_t *c =\n"
           "        &sp->coef[(sp->coef_start[s] + sigma) - ((sigma > 0u) ? 1u : 0u)];"),
+    # The band solver's non-symmetric path (a spline band table's W', stsp_bandqp.c).
+    Fault("F58", "band solver, non-symmetric W: no partial pivoting (the diagonal pivot kept)",
+          CTL, "                piv = i;\n", "                piv = k;\n"),
+    Fault("F59", "band solver: a non-symmetric W taken for symmetric (Cholesky of its lower "
+          "triangle)", CTL, "            if (!(W[(i * q) + j] == W[(j * q) + i])) {\n                sym = 0u;",
+          "            if (!(W[(i * q) + j] == W[(j * q) + i])) {\n                sym = 1u;"),
+    Fault("F60", "band solver, non-symmetric W: an overflowed solution accepted", CTL,
+          "            if ((r[row] - r[row]) != 0.0) {", "            if ((r[row] - r[row]) > 1.0) {"),
 ]
 
 

@@ -90,6 +90,103 @@ static uint32_t stsp_bandqp_chol(const double *W, uint32_t q, const uint32_t *id
     return pd;
 }
 
+/* 1 when W (q x q) is exactly symmetric: the solver then factors each candidate's W_AA by
+ * Cholesky (W > 0, a per-tick band table's dual); otherwise by Gaussian elimination with
+ * partial pivoting (a spline band table's W', a P-matrix: stsp_bandqp.h). A NaN entry makes W
+ * non-symmetric (NaN != NaN); init refuses non-finite band data anyway. */
+static uint32_t stsp_bandqp_symmetric(const double *W, uint32_t q)
+{
+    uint32_t sym = 1u;
+    uint32_t i;
+    for (i = 0u; i < q; ++i) {
+        uint32_t j;
+        for (j = 0u; j < i; ++j) {
+            if (!(W[(i * q) + j] == W[(j * q) + i])) {
+                sym = 0u;
+            }
+        }
+    }
+    return sym;
+}
+
+/* lam_A = W_AA^-1 (e_A - b_A) in work->rhs[0..na) for a general (non-symmetric) W, by
+ * Gaussian elimination with partial pivoting on the copy W_AA in work->chol (row swaps applied
+ * to the copy and to the right-hand side together), then back substitution. Returns 1, or 0
+ * when a pivot is zero or not finite (W_AA singular in double precision, or an overflow): the
+ * candidate is then skipped, as one whose Cholesky factor does not exist. Bounded: na <=
+ * STSP_BANDQP_MAX, O(na^3). */
+static uint32_t stsp_bandqp_gauss(const stsp_bandqp_t *qp, uint32_t q, const uint32_t *idx,
+                                  uint32_t na, stsp_bandqp_work_t *work)
+{
+    double *M = work->chol;
+    double *r = work->rhs;
+    uint32_t ok = 1u;
+    uint32_t a;
+    uint32_t k;
+    for (a = 0u; a < na; ++a) {
+        const uint32_t row = idx[a];
+        uint32_t b;
+        for (b = 0u; b < na; ++b) {
+            M[(a * na) + b] = qp->W[(row * q) + idx[b]];
+        }
+        r[a] = work->e[row] - ((work->state[row] > 0) ? qp->hi[row] : qp->lo[row]);
+    }
+    for (k = 0u; (k < na) && (ok != 0u); ++k) {
+        uint32_t piv = k;
+        double best = (M[(k * na) + k] < 0.0) ? -M[(k * na) + k] : M[(k * na) + k];
+        uint32_t i;
+        for (i = k + 1u; i < na; ++i) {
+            const double v = M[(i * na) + k];
+            const double mag = (v < 0.0) ? -v : v;
+            if (mag > best) {
+                best = mag;
+                piv = i;
+            }
+        }
+        /* A zero (or NaN, or infinite) pivot: no unique solution in double precision. */
+        if (!((best > 0.0) && (best <= DBL_MAX))) {
+            ok = 0u;
+        } else {
+            if (piv != k) {
+                uint32_t c;
+                double t;
+                for (c = 0u; c < na; ++c) {
+                    t = M[(k * na) + c];
+                    M[(k * na) + c] = M[(piv * na) + c];
+                    M[(piv * na) + c] = t;
+                }
+                t = r[k];
+                r[k] = r[piv];
+                r[piv] = t;
+            }
+            for (i = k + 1u; i < na; ++i) {
+                const double f = M[(i * na) + k] / M[(k * na) + k];
+                uint32_t c;
+                for (c = k + 1u; c < na; ++c) {
+                    M[(i * na) + c] -= f * M[(k * na) + c];
+                }
+                r[i] -= f * r[k];
+            }
+        }
+    }
+    if (ok != 0u) {
+        for (a = 0u; a < na; ++a) {
+            const uint32_t row = na - 1u - a;
+            double s = r[row];
+            uint32_t b;
+            for (b = row + 1u; b < na; ++b) {
+                s -= M[(row * na) + b] * r[b];
+            }
+            r[row] = s / M[(row * na) + row];
+            /* An overflowed solution is no solution (the sign checks would pass a NaN). */
+            if ((r[row] - r[row]) != 0.0) {
+                ok = 0u;
+            }
+        }
+    }
+    return ok;
+}
+
 /* lam_A = W_AA^-1 (e_A - b_A) in work->rhs[0..na) (forward then backward substitution with
  * the factor in work->chol); b_A is hi at an upper bound (and on equality rows), lo at a
  * lower one. */
@@ -185,6 +282,7 @@ stsp_bandqp_status_t stsp_bandqp_solve(const stsp_bandqp_t *qp, const float *x0,
     uint32_t n_cand = 1u;
     uint32_t tried = 0u;
     uint32_t found = 0u;
+    uint32_t sym;
     uint32_t idx[STSP_BANDQP_MAX];
 
     if (candidates != NULL) {
@@ -228,12 +326,22 @@ stsp_bandqp_status_t stsp_bandqp_solve(const stsp_bandqp_t *qp, const float *x0,
         }
     }
 
-    /* Each candidate active set once, in counter order, until one meets the conditions. */
+    /* Each candidate active set once, in counter order, until one meets the conditions:
+     * W_AA by Cholesky when W is symmetric, by Gaussian elimination otherwise. */
+    sym = stsp_bandqp_symmetric(qp->W, q);
     for (tried = 0u; (tried < n_cand) && (found == 0u); ++tried) {
         const uint32_t na = stsp_bandqp_active(work->state, q, idx);
-        if (stsp_bandqp_chol(qp->W, q, idx, na, work->chol) != 0u) {
+        uint32_t solved;
+        if (sym != 0u) {
+            solved = stsp_bandqp_chol(qp->W, q, idx, na, work->chol);
+            if (solved != 0u) {
+                stsp_bandqp_subst(qp, idx, na, work);
+            }
+        } else {
+            solved = stsp_bandqp_gauss(qp, q, idx, na, work);
+        }
+        if (solved != 0u) {
             uint32_t a;
-            stsp_bandqp_subst(qp, idx, na, work);
             for (i = 0u; i < q; ++i) {
                 lam[i] = 0.0;
             }

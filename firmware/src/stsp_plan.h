@@ -52,8 +52,8 @@ typedef struct {
  * lambda0 (or a copy of the v kept) into the caller's scratch: the instance changes only on
  * success, in stsp_commit(). Returns a negative error, or the tick warning (or STSP_OK).
  * Inlined into both cold paths (as a call it costs each cold tick some 20 instructions). The
- * band dual's latch only where STSP_PLAN_BAND is 1 (stsp_controller.c, which defines
- * stsp_band_latch): a spline table has no band dual (init refuses both together). */
+ * band dual's latch only where STSP_PLAN_BAND is 1 (both cold paths: stsp_controller.c and,
+ * for a spline band table, stsp_spline.c; each gets its own copy of stsp_band_latch). */
 static STSP_ALWAYS_INLINE stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick,
                                                   const stsp_scalar_t *x, stsp_scalar_t *v_new,
                                                   stsp_plan_t *plan)

@@ -12,7 +12,7 @@
 #define STSP_LAW_ALARM_ONLY 1
 #include "stsp_law.h"
 #include "stsp_law_spline.h"
-#define STSP_PLAN_BAND 0
+#define STSP_PLAN_BAND 1
 #include "stsp_plan.h"
 #endif
 

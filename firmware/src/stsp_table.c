@@ -140,9 +140,9 @@ static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, i
         return STSP_ERR_BAD_DIMS;
     }
 #endif
-    /* A spline table's gains are the splines': no per-tick arrays, and no band dual. */
-    if ((has_spline != 0) &&
-        ((has_band != 0) || (t->K != NULL) || (t->k0 != NULL) || (t->L != NULL))) {
+    /* A spline table's gains are the splines': no per-tick arrays. It may carry a band dual
+     * (then the W re-solved for the spline's gains, stsp_bandqp.h). */
+    if ((has_spline != 0) && ((t->K != NULL) || (t->k0 != NULL) || (t->L != NULL))) {
         return STSP_ERR_BAD_DIMS;
     }
     /* Every per-tick offset is computed in uint32_t: the largest array must stay addressable. */
@@ -180,7 +180,12 @@ static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, i
         if (stsp_spline_linked() == 0) {
             return STSP_ERR_BAD_DIMS; /* a program without the spline code: stsp_internal.h */
         }
-        return stsp_spline_check_dims(t);
+        {
+            const stsp_status_t st = stsp_spline_check_dims(t);
+            if ((st != STSP_OK) || (has_band == 0)) {
+                return st;
+            }
+        }
     }
     return (has_band != 0) ? stsp_check_band_dims(t) : STSP_OK;
 #endif

@@ -13,9 +13,11 @@
  * coefficients, modest, huge or subnormal; stages of up to 2^24 - 1 ticks now and then) or
  * with one corruption (knots out of order, equal, not integers, T wrong at either end,
  * row_start decreasing, a col out of range, a NaN/Inf coefficient, coef_start inconsistent,
- * lengths lying, too few knots, a NULL array, per-tick gains or a band dual next to it, raw
+ * lengths lying, too few knots, a NULL array, per-tick gains next to it, raw
  * index bits, a stage of 2^24 ticks or more), and now and then a knot or coefficient bit
- * changed after the CRC. The arrays always have room for the dimensions the
+ * changed after the CRC; now and then with a band dual too (a spline band table: its stage-0
+ * latch the band solver's, the command the spline model's with that latch; W sometimes not
+ * symmetric, the solver's Gaussian-elimination path). The arrays always have room for the dimensions the
  * table declares: that is the documented precondition of stsp_init() (the generated tables
  * satisfy it by construction). The calls: init, init_expect, reset, verify and step, with
  * ticks in order, repeated, skipped, backwards or past the end, states with
@@ -362,6 +364,11 @@ static uint32_t fz_build_band(fuzz_in_t *in, stsp_table_t *t)
                         w += G[i * n + k] * G[j * n + k];
                     }
                     w += (i == j) ? 0.01 + (double)(wsel % 16u) / 16.0 : 0.0;
+                    /* Now and then not symmetric (a spline table's W': Gaussian elimination),
+                     * the upper triangle moved: a P-matrix when the move is small. */
+                    if (((wsel / 8u) % 2u == 1u) && (i < j)) {
+                        w += 0.25 * G[j * n + i];
+                    }
                     break;
                 case 3u: w = (i == j) ? 0.1 + G[i * n + i] * G[i * n + i] : 0.0; break;
                 case 4u: w = (i <= j) ? G[i * n + j] : G[j * n + i]; break;  /* indefinite */
@@ -470,7 +477,7 @@ static float fz_spline_value(uint32_t *seed, uint32_t vsel)
  * equal, not integers, the stage's tick count T wrong at either end, row_start decreasing or
  * not from 0, a col beyond nx + 1 + n_latch, a NaN/Inf coefficient, coef_start inconsistent,
  * lengths (n_knots, n_entries, n_coef) lying, fewer than 8 knots or knot_start decreasing, a
- * NULL array, K/k0/L or a band dual next to the spline, raw bits in an index array or the
+ * NULL array, K/k0/L next to the spline, raw bits in an index array or the
  * knots, a stage of 2^24 ticks or more, a stage's coefficient count off by its entries. Stages
  * are long (up to 2^24 - 1 ticks: a spline table has no per-tick arrays) now and then.
  * Sets t->spline (K, k0, L NULL); returns 1 + the corruption, or 0. */
@@ -798,7 +805,7 @@ typedef struct {
 } fz_spline_model_t;
 
 static void fz_spline_model(const stsp_table_t *t, const stsp_ctrl_t *before, uint32_t tick,
-                            const float *x, fz_spline_model_t *m)
+                            const float *x, const float *band_v, fz_spline_model_t *m)
 {
     const stsp_spline_t *sp = t->spline;
     const uint32_t nx = t->nx, nu = t->nu, n_latch = t->n_latch;
@@ -814,7 +821,9 @@ static void fz_spline_model(const stsp_table_t *t, const stsp_ctrl_t *before, ui
     m->v_finite = 1;
     for (i = 0u; i < n_latch; ++i) {
         float v = before->v[i];
-        if (m->relatch) {
+        if (m->relatch && (band_v != NULL)) {
+            v = band_v[i];                 /* a spline band table's stage-0 latch */
+        } else if (m->relatch) {
             v = 0.0f;
             if (i < t->stage_n_latch[s]) {
                 const uint32_t row = s * n_latch + i;
@@ -932,8 +941,8 @@ static void fz_build_table(fuzz_in_t *in, stsp_table_t *t, fz_table_info_t *info
 {
     const uint32_t shape = fuzz_u8(in), lim = fuzz_u8(in), sel = fuzz_u8(in), bsel = fuzz_u8(in);
     const uint32_t ssel = fuzz_u8(in);
-    /* Spline gains (one table in three; never with a band dual but now and then, which init
-     * must refuse) or a band dual (one in three). */
+    /* Spline gains (one table in three; now and then with a band dual, a spline band table)
+     * or a band dual (one in three). */
     const int spline = FZ_SPLINE_PICK(ssel);
     const int band = FZ_BAND_PICK(bsel) && (!spline || (ssel >= 240u));
     uint32_t band_corrupt = 0u;
@@ -1120,8 +1129,7 @@ static int fz_expected_init(const stsp_table_t *t, const fz_table_info_t *info,
     if (info->main_corrupt != 0u) {
         return 0;
     }
-    if ((t->spline != NULL) &&
-        ((b != NULL) || (t->K != NULL) || (t->k0 != NULL) || (t->L != NULL))) {
+    if ((t->spline != NULL) && ((t->K != NULL) || (t->k0 != NULL) || (t->L != NULL))) {
         *st = STSP_ERR_BAD_DIMS;
         return 1;
     }
@@ -1241,7 +1249,7 @@ static int fz_spline_invalid(const stsp_table_t *t)
     if (t->spline == NULL) {
         return 0;
     }
-    return (t->band_qp != NULL) || (t->K != NULL) || (t->k0 != NULL) || (t->L != NULL) ||
+    return (t->K != NULL) || (t->k0 != NULL) || (t->L != NULL) ||
            (fz_spline_check(t) != STSP_OK) || !fz_spline_coef_finite(t->spline);
 }
 #else
@@ -1350,9 +1358,10 @@ static void fz_band_latch_model(const stsp_table_t *t, uint32_t tick, const floa
         }
         m->v[i] = v;
     }
-    /* The law with that v (the table stores -K, -k0, -L). */
+    /* The law with that v (the table stores -K, -k0, -L); a spline table's is its own model's
+     * (fz_spline_model, with this v). */
     m->y_finite = 1;
-    for (i = 0u; i < nu; ++i) {
+    for (i = 0u; (i < nu) && (t->spline == NULL); ++i) {
         const float *K = &t->K[(tick * nu + i) * nx];
         float acc = (-(K[0] * x[0])) - t->k0[(tick * nu) + i];
         for (j = 1u; j < nx; ++j) {
@@ -1539,7 +1548,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             if (ready && (t.spline != NULL) && finite && (tick < t.n_ticks) &&
                 !((model_next > 0u) && (tick + 1u < model_next))) {
                 spline_step = 1;
-                fz_spline_model(&t, &before, tick, x, &sm);
+                fz_spline_model(&t, &before, tick, x, band_latch ? latch.v : NULL, &sm);
             }
 #endif
             st = stsp_step(&c, tick, x, u);
@@ -1595,7 +1604,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             tick_st = ((model_next > 0u) && (tick + 1u == model_next)) ? STSP_WARN_TICK_REPEATED
                       : (tick > model_next) ? STSP_WARN_TICK_SKIPPED : STSP_OK;
 #ifndef STSP_ARITH_FIXED_POINT
-            if (band_latch) {
+            if (band_latch && !spline_step) {
                 fz_check_band_step(&t, &c, st, tick_st, u, &latch);
             }
             if (spline_step) {
@@ -1612,7 +1621,10 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 if (t.stage_start[sm.stage + 1u] - t.stage_start[sm.stage] > 4096u) {
                     FZS(FZS_SPL_LONG);
                 }
-                fz_check_spline_step(&t, &c, st, tick_st, u, &sm);
+                fz_check_spline_step(&t, &c, st,
+                                     (band_latch && latch.fallback) ? STSP_WARN_BAND_FALLBACK
+                                                                    : tick_st,
+                                     u, &sm);
             }
 #endif
             if (tick >= t.n_ticks) {

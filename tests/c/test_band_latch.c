@@ -268,6 +268,116 @@ static void test_bandqp_candidate_bound(void **state)
     assert_int_equal(cand, 729u);
 }
 
+/* ---- Non-symmetric W (a spline table's dual): Gaussian elimination with partial pivoting. */
+
+/* Independent check of a solution: y = e - W lam (computed here) meets the conditions, with
+ * active rows at their bound to 1e-12. For a P-matrix W the solution is unique, so a lam
+ * that meets them is the solution (stsp_bandqp.h). Counts the band rows at an upper / lower
+ * bound into up/down. */
+static void check_lcp(const stsp_bandqp_t *qp, const float *x0, const double *lam, uint32_t *up,
+                      uint32_t *down)
+{
+    uint32_t i, j;
+    for (i = 0u; i < qp->q; ++i) {
+        double y = qp->mt[i];
+        for (j = 0u; j < qp->nx; ++j) {
+            y += qp->Nt[i * qp->nx + j] * (double)x0[j];
+        }
+        for (j = 0u; j < qp->q; ++j) {
+            y -= qp->W[i * qp->q + j] * lam[j];
+        }
+        if (qp->lo[i] == qp->hi[i]) {
+            assert_true(fabs(y - qp->hi[i]) <= 1e-12);
+        } else if (lam[i] > 0.0) {
+            assert_true(fabs(y - qp->hi[i]) <= 1e-12);
+            ++*up;
+        } else if (lam[i] < 0.0) {
+            assert_true(fabs(y - qp->lo[i]) <= 1e-12);
+            ++*down;
+        } else {
+            assert_true((y <= qp->hi[i] + 1e-12) && (y >= qp->lo[i] - 1e-12));
+        }
+    }
+}
+
+/* A non-symmetric, strictly row-diagonally dominant W with a positive diagonal (so every
+ * principal submatrix is too: a P-matrix); row 0 an equality, rows 1-3 bands. On a lattice
+ * of 81 start states the solver's multipliers meet the conditions (checked independently,
+ * check_lcp), with upper and lower bounds both reached somewhere. */
+static void test_bandqp_nonsymmetric_p_matrix(void **state)
+{
+    static const double Nt[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    static const double mt[4] = {0.0, 0.125, -0.25, 0.5};
+    static const double W[16] = {2.0,  0.7,  -0.3, 0.2,  0.4, 1.5,  0.5, -0.1,
+                                 -0.2, 0.3,  1.8,  0.6,  0.1, -0.4, 0.2, 1.2};
+    static const double lo[4] = {0.5, -1.0, -0.5, 0.0};
+    static const double hi[4] = {0.5, 1.0, 0.25, 2.0};
+    const stsp_bandqp_t qp = {4u, 4u, Nt, mt, W, lo, hi};
+    static const float grid[3] = {-3.0f, 0.5f, 3.5f};
+    stsp_bandqp_work_t work;
+    double lam[4];
+    float x0[4];
+    uint32_t a, up = 0u, down = 0u, cand;
+    (void)state;
+    for (a = 0u; a < 81u; ++a) {
+        x0[0] = grid[a % 3u];
+        x0[1] = grid[(a / 3u) % 3u];
+        x0[2] = grid[(a / 9u) % 3u];
+        x0[3] = grid[(a / 27u) % 3u];
+        assert_int_equal(stsp_bandqp_solve(&qp, x0, lam, &work, &cand), STSP_BANDQP_OK);
+        assert_true((cand >= 1u) && (cand <= 27u));
+        check_lcp(&qp, x0, lam, &up, &down);
+    }
+    assert_true((up > 0u) && (down > 0u));
+}
+
+/* Partial pivoting: W = [[0, 1], [2, 0]] (both rows equalities) has a zero leading pivot;
+ * W lam = e - b = (2, 3) gives lam = (1.5, 2) exactly. */
+static void test_bandqp_nonsymmetric_pivoting(void **state)
+{
+    static const double Nt[4] = {1, 0, 0, 1};
+    static const double mt[2] = {0.0, 0.0};
+    static const double W[4] = {0.0, 1.0, 2.0, 0.0};
+    static const double b[2] = {1.0, 2.0};
+    const stsp_bandqp_t qp = {2u, 2u, Nt, mt, W, b, b};
+    const float x0[2] = {3.0f, 5.0f};
+    stsp_bandqp_work_t work;
+    double lam[2];
+    uint32_t cand;
+    (void)state;
+    assert_int_equal(stsp_bandqp_solve(&qp, x0, lam, &work, &cand), STSP_BANDQP_OK);
+    assert_int_equal(cand, 1u);
+    assert_true((lam[0] == 1.5) && (lam[1] == 2.0));
+}
+
+/* Defined statuses of a non-symmetric W with no solution in double precision: a singular
+ * W_AA ([[2, 4], [1, 2]]: a zero pivot) and one whose solution overflows ([[1e-300, 0], [1,
+ * 1]], e - b = (1e10, 0): lam[0] = 1e310): STSP_BANDQP_ERR_INFEASIBLE, lam all zeros. */
+static void test_bandqp_nonsymmetric_singular_and_overflow(void **state)
+{
+    static const double Nt[4] = {1, 0, 0, 1};
+    static const double mt[2] = {0.0, 0.0};
+    static const double singular[4] = {2.0, 4.0, 1.0, 2.0};
+    static const double tiny[4] = {1e-300, 0.0, 1.0, 1.0};
+    static const double b[2] = {0.0, 0.0};
+    stsp_bandqp_t qp = {2u, 2u, Nt, mt, singular, b, b};
+    const float x0[2] = {1.0f, 1.0f}, big[2] = {1e10f, 0.0f};
+    stsp_bandqp_work_t work;
+    double lam[2] = {7.0, 7.0};
+    float v[2] = {7.0f, 7.0f};
+    uint32_t cand;
+    (void)state;
+    assert_int_equal(stsp_bandqp_solve(&qp, x0, lam, &work, &cand), STSP_BANDQP_ERR_INFEASIBLE);
+    assert_int_equal(cand, 1u);
+    assert_true((lam[0] == 0.0) && (lam[1] == 0.0));
+    qp.W = tiny;
+    lam[0] = 7.0;
+    assert_int_equal(stsp_bandqp_solve(&qp, big, lam, &work, &cand), STSP_BANDQP_ERR_INFEASIBLE);
+    assert_true((lam[0] == 0.0) && (lam[1] == 0.0));
+    assert_int_equal(stsp_bandqp_solve_f32(&qp, big, v), STSP_BANDQP_ERR_INFEASIBLE);
+    assert_true((v[0] == 7.0f) && (v[1] == 7.0f));
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -276,6 +386,9 @@ int main(void)
         cmocka_unit_test(test_band_tables_are_checked),
         cmocka_unit_test(test_band_header_change_after_init),
         cmocka_unit_test(test_bandqp_candidate_bound),
+        cmocka_unit_test(test_bandqp_nonsymmetric_p_matrix),
+        cmocka_unit_test(test_bandqp_nonsymmetric_pivoting),
+        cmocka_unit_test(test_bandqp_nonsymmetric_singular_and_overflow),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

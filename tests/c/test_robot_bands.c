@@ -5,7 +5,8 @@
  * From the design's start and from a moved one the bands hold; the same table with the band
  * dual removed (the design's affine latch map) misses E{y} <= 1.5 from the moved start. Built
  * against the generic controller and the one fixed to the table's shape, each also under ASan
- * + UBSan. */
+ * + UBSan; with ROBOT_BANDS_SPLINE defined, the same tests on the spline table
+ * (gains/robot_bands_spline.*). */
 #include <math.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -14,7 +15,18 @@
 
 #include <cmocka.h>
 
+#ifdef ROBOT_BANDS_SPLINE
+/* The spline table of the same design (gains/robot_bands_spline.*): its band dual re-solved for
+ * the spline's gains (W non-symmetric, the solver's Gaussian-elimination path), the same plan. */
+#include "robot_bands_spline.h"
+#define robot_bands_table robot_bands_spline_table
+#define ROBOT_BANDS_TICK_HZ ROBOT_BANDS_SPLINE_TICK_HZ
+#define ROBOT_BANDS_N_TICKS ROBOT_BANDS_SPLINE_N_TICKS
+#define ROBOT_BANDS_BAND_ROWS ROBOT_BANDS_SPLINE_BAND_ROWS
+#define ROBOT_BANDS_N_LATCH ROBOT_BANDS_SPLINE_N_LATCH
+#else
 #include "robot_bands.h"
+#endif
 
 /* Noise-free closed loop from x0 (exact ZOH of x'' = u per axis) over the whole plan; returns
  * the state at the first knot (t = 3) in at3 and the final state in x. */
@@ -68,6 +80,21 @@ static void test_header_and_band_dual(void **state)
     assert_int_equal(robot_bands_table.stage_n_latch[0], ROBOT_BANDS_BAND_ROWS);
     assert_int_equal(robot_bands_table.n_latch, ROBOT_BANDS_N_LATCH);
     assert_int_equal(stsp_table_crc32(&robot_bands_table), robot_bands_table.crc32);
+#ifdef ROBOT_BANDS_SPLINE
+    {
+        /* A spline table, and its W is not symmetric (what the host re-solved). */
+        const stsp_bandqp_t *b = robot_bands_table.band_qp;
+        uint32_t i, j, asym = 0u;
+        assert_non_null(robot_bands_table.spline);
+        assert_null(robot_bands_table.K);
+        for (i = 0u; i < b->q; ++i) {
+            for (j = 0u; j < b->q; ++j) {
+                asym += (b->W[i * b->q + j] != b->W[j * b->q + i]) ? 1u : 0u;
+            }
+        }
+        assert_true(asym > 0u);
+    }
+#endif
 }
 
 static void test_design_start_meets_bands(void **state)

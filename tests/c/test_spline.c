@@ -819,6 +819,61 @@ static void ch_stage_longest(stsp_table_t *t, spline_buf_t *b)
     t->n_ticks = b->stage_start[2];
 }
 
+/* A spline band table (format 5 with a band dual): table S latching both multipliers once, at
+ * stage 0, through a non-symmetric band dual (W = [[2, 1], [0, 1]], triangular with a
+ * positive diagonal: a P-matrix; row 0 the equality 0.5, row 1 the band [-1, 1]; e = x0).
+ * From x0 = (1.5, 3) by hand: row 1 inactive gives y1 = 3 > 1; at its lower bound lam1 = 4 > 0
+ * (wrong sign); at its upper bound W lam = (1, 2): lam = (-0.5, 2). Every command of the run
+ * equals, bit for bit, that of the same spline table without the band dual whose stage-0
+ * latch is the constant v = (-0.5, 2); the band table's CRC covers the dual (W changed: a
+ * different CRC). A table latching at two stages is refused (ch_band, test_init_refusals). */
+static const uint16_t sb_n_latch[S_NS] = {2u, 0u};
+static const double sb_Nt[4] = {1.0, 0.0, 0.0, 1.0}, sb_mt[2] = {0.0, 0.0};
+static const double sb_W[4] = {2.0, 1.0, 0.0, 1.0}, sb_W_other[4] = {2.0, 1.0, 0.0, 1.5};
+static const double sb_lo[2] = {0.5, -1.0}, sb_hi[2] = {0.5, 1.0};
+static const float sb_Lambda[S_NS * S_N_LATCH * S_NX] = {0.0f,  0.0f,  0.0f,   0.0f,
+                                                         -1.0f, 0.75f, 100.0f, 2.0f};
+static const float sb_lambda0[S_NS * S_N_LATCH] = {-0.5f, 2.0f, 0.3f, -0.2f};
+
+static void test_spline_band_table(void **state_)
+{
+    const stsp_bandqp_t qp = {2u, S_NX, sb_Nt, sb_mt, sb_W, sb_lo, sb_hi};
+    const stsp_bandqp_t other = {2u, S_NX, sb_Nt, sb_mt, sb_W_other, sb_lo, sb_hi};
+    stsp_table_t band = make_s(&s_spline, s_no_min, s_no_max);
+    stsp_table_t plain = make_s(&s_spline, s_no_min, s_no_max);
+    stsp_ctrl_t cb, cp;
+    float x[S_NX], ub[S_NU], up[S_NU];
+    uint32_t tick, i, crc;
+    (void)state_;
+    band.stage_n_latch = sb_n_latch;
+    band.band_qp = &qp;
+    band.crc32 = stsp_table_crc32(&band);
+    plain.stage_n_latch = sb_n_latch;
+    plain.Lambda = sb_Lambda;
+    plain.lambda0 = sb_lambda0;
+    plain.crc32 = stsp_table_crc32(&plain);
+    assert_int_equal(stsp_init(&cb, &band), STSP_OK);
+    assert_int_equal(stsp_init(&cp, &plain), STSP_OK);
+    for (tick = 0u; tick < S_NT; ++tick) {
+        if (tick == 0u) {
+            x[0] = 1.5f;
+            x[1] = 3.0f;
+        } else {
+            state(tick, x);
+        }
+        assert_int_equal(stsp_step(&cb, tick, x, ub), STSP_OK);
+        assert_int_equal(stsp_step(&cp, tick, x, up), STSP_OK);
+        for (i = 0u; i < S_NU; ++i) {
+            assert_int_equal(f32_bits(ub[i]), f32_bits(up[i]));
+        }
+        assert_true((cb.v[0] == -0.5f) && (cb.v[1] == 2.0f));
+    }
+    crc = band.crc32;
+    band.band_qp = &other;
+    assert_int_not_equal(stsp_table_crc32(&band), crc);
+    assert_int_equal(stsp_init(&cb, &band), STSP_ERR_BAD_CRC);
+}
+
 /* Every refusal of a spline table's layout and values, each with its status; the CRC is
  * recomputed (but over NULL arrays: stsp_table_crc32() needs valid ones, and init refuses
  * them before the CRC), so the status is the check's. */
@@ -829,7 +884,7 @@ static void test_init_refusals(void **state_)
         stsp_status_t expect;
     } cases[] = {
         {ch_none, STSP_OK},
-        {ch_band, STSP_ERR_BAD_DIMS},
+        {ch_band, STSP_ERR_BAD_DIMS}, /* a band dual, but table S latches at stage 1 too */
         {ch_K, STSP_ERR_BAD_DIMS},
         {ch_k0, STSP_ERR_BAD_DIMS},
         {ch_L, STSP_ERR_BAD_DIMS},
@@ -1138,6 +1193,7 @@ int main(void)
         cmocka_unit_test_setup(test_saturation, setup),
         cmocka_unit_test_setup(test_state_and_command_share_a_buffer, setup),
         cmocka_unit_test(test_init_refusals),
+        cmocka_unit_test(test_spline_band_table),
         cmocka_unit_test(test_long_stage),
         cmocka_unit_test(test_crc_mismatch),
         cmocka_unit_test(test_verify_spline_header),

@@ -9,8 +9,8 @@ EXAMPLES = REPO / "examples"
 GAINS = REPO / "gains"
 # Examples whose spline tables (`--table spline`, <name>_spline.*) are shipped beside the
 # per-tick ones (tools/regen_gains.sh).
-SPLINE_EXAMPLES = ("robot_corridor", "robot_corridor_eps01", "investment", "quadrotor",
-                   "population")
+SPLINE_EXAMPLES = ("robot_corridor", "robot_corridor_eps01", "robot_bands", "investment",
+                   "quadrotor", "population")
 
 
 def gains_stem(example: str) -> str:

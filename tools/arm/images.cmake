@@ -91,6 +91,22 @@ if(STSP_REPLAY_RECORDS_SPLINE AND TARGET stsp_gains_robot_corridor_spline)
   endforeach()
 endif()
 
+# The replay of robot_bands' spline table (its band dual re-solved for the spline's gains: the
+# band solver's Gaussian-elimination path at the t0 latch), generic and shaped.
+set(STSP_REPLAY_RECORDS_BANDS_SPLINE "" CACHE FILEPATH
+    "robot_bands spline records (make_replay.py --table spline --problem examples/robot_bands.toml)")
+if(STSP_REPLAY_RECORDS_BANDS_SPLINE AND TARGET stsp_gains_robot_bands_spline)
+  stsp_add_image(replay_bands_spline stsp_float32 stsp_gains_robot_bands_spline
+                 "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c"
+                 "${STSP_REPLAY_RECORDS_BANDS_SPLINE}")
+  stsp_add_image(replay_bands_spline_fixed stsp_fixed_robot_bands_spline
+                 stsp_gains_robot_bands_spline "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c"
+                 "${STSP_REPLAY_RECORDS_BANDS_SPLINE}")
+  foreach(image replay_bands_spline replay_bands_spline_fixed)
+    target_compile_definitions(${image} PRIVATE ROBOT_SPLINE ROBOT_BANDS_SPLINE)
+  endforeach()
+endif()
+
 # The spline bench: a hand-made spline table of the robot's shape (make_spline_bench_table.py)
 # with the float32 controller, generic and built for the robot's shape.
 add_library(stsp_spline_bench_table STATIC ${arm_dir}/spline_bench_table.c)

@@ -37,6 +37,12 @@ so an unchanged ARM build is not relinked. It belongs in the build directory, no
 
     .venv/bin/python tools/arm/make_replay.py --out build/arm-m4f/replay_records.c
     .venv/bin/python tools/arm/make_replay.py --table spline --out build/arm-m4f/replay_records_spline.c
+    .venv/bin/python tools/arm/make_replay.py --table spline --problem examples/robot_bands.toml \
+        --out build/arm-m4f/replay_records_bands_spline.c
+
+The band spline table (``gains/robot_bands_spline.c``) gets the same spline schedule: its
+stage-0 latch solves the band dual (W non-symmetric: the solver's Gaussian elimination), with
+the NaN probe before it and the repeat after it.
 """
 from __future__ import annotations
 
@@ -333,8 +339,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--problem", type=Path, default=ROOT / "examples" / "robot_corridor.toml")
     ap.add_argument("--gains", type=Path, default=None,
                     help="committed tables the ARM image links (their CRC must match); default "
-                         "gains/robot_corridor.c, gains/robot_corridor_<arith>.c or "
-                         "gains/robot_corridor_spline.c")
+                         "gains/<name>.c, gains/<name>_<arith>.c or gains/<name>_spline.c of "
+                         "the problem's name")
     ap.add_argument("--arith", choices=["float32", "q15", "q31"], default="float32")
     ap.add_argument("--table", choices=["per-tick", "spline"], default="per-tick",
                     help="the table kind (spline: float32, every call of two runs)")
@@ -352,13 +358,14 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--table spline is float32 only")
 
     problem = load_problem(args.problem)
-    designed = design_problem(problem, table="spline" if spline else None)
+    designed = design_problem(problem, table="spline" if spline else None,
+                              mode=problem.options.get("mode", "stagewise"))
     table = designed.table if args.arith == "float32" else fixed_point_table(designed, args.arith)
     if spline and getattr(table, "spline", None) is None:
         raise SystemExit("make_replay: the design gave no spline table")
     if args.gains is None:
         suffix = "_spline" if spline else ("" if args.arith == "float32" else f"_{args.arith}")
-        args.gains = ROOT / "gains" / f"robot_corridor{suffix}.c"
+        args.gains = ROOT / "gains" / f"{problem.name}{suffix}.c"
     want = committed_crc(args.gains, table.name)
     got = table_crc32(table)
     if want != got:

@@ -17,7 +17,8 @@ For every example and tolerance: the per-tick float32 table's flash and the spli
 (`stospline.table.flash.flash_bytes`, what the generated C takes on a 32-bit target), their
 ratio; the exact oracle's cost of each law as the firmware runs it (J per-tick, J spline) and
 the spline's excess over the per-tick table's and over the designed optimum J0; the worst
-E-constraint residual of each (|E{C2 x} - value| at the knots, oracle); and the compression
+E-constraint residual of each (|E{C2 x} - value| at the knots, for a band row the distance
+outside it, oracle); and the compression
 time (fit + evaluation + latch re-solve, `spline_table`) against the time of
 `design_problem` with a per-tick table (the design, the float32 table and the oracle on both
 laws: what `stospline design` computes), twice: "warm", medians of `--repeat` runs after a
@@ -46,10 +47,12 @@ from stospline.table.flash import flash_bytes                      # noqa: E402
 from stospline.table.format import table_of                        # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
-# robot_bands, robot_monotone and robot_narrow_corridor (bands) have no spline table
-# (docs/guide/problem-file.md, `table`).
+# robot_monotone (regions at every tick) and robot_narrow_corridor (bands beyond the 8 rows of
+# a band dual) have no spline table (docs/guide/problem-file.md, `table`); robot_bands has one
+# (its band dual re-solved for the spline's gains).
 EXAMPLES = ["robot_corridor.toml", "robot_corridor_eps01.toml", "robot_patrol_60s.toml",
-            "coupled_axes.toml", "population.toml", "investment.toml", "quadrotor.toml"]
+            "coupled_axes.toml", "population.toml", "investment.toml", "quadrotor.toml",
+            "robot_bands.toml"]
 _COLD = """
 import os, sys, time
 for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -59,7 +62,7 @@ from stospline.sim.spline_certificate import spline_table
 from stospline.table.format import table_of
 p = stospline.load_problem(sys.argv[1])
 t = time.perf_counter()
-d = stospline.design_problem(p, table="per-tick")
+d = stospline.design_problem(p, table="per-tick", mode=p.options.get("mode", "stagewise"))
 t_design = time.perf_counter() - t
 exact = table_of(d.design, quantize=False)
 t = time.perf_counter()
@@ -165,7 +168,9 @@ def main() -> None:
     print("|---|" + "---|" * 18)
     for name in args.examples.split(","):
         problem = stospline.load_problem(str(ROOT / "examples" / name))
-        d, t_design = _median_time(lambda: stospline.design_problem(problem, table="per-tick"),
+        mode = problem.options.get("mode", "stagewise")       # the file's: joint for bands
+        d, t_design = _median_time(lambda: stospline.design_problem(problem, table="per-tick",
+                                                                    mode=mode),
                                    args.repeat)
         exact = table_of(d.design, quantize=False)
         for tol in tolerances:

@@ -17,6 +17,22 @@
  * the KKT conditions. Proven bound: at most 3^(band rows) candidate sets, each O(q^3); the
  * solver refuses more than STSP_BANDQP_MAX rows. No allocation, no recursion; the caller
  * provides the work buffer.
+ *
+ * Spline tables (non-symmetric W). For a law whose gains are a spline's evaluation, the
+ * expected outputs are y = e - W lam with W = -C2 Gamma' computed under the evaluated gains
+ * (host: stospline.table.spline_band): close to the design's SPD W, but not symmetric. The
+ * conditions above are then a (mixed, box-constrained) linear complementarity problem, no
+ * longer the optimality conditions of a concave dual. The host accepts such a table only when
+ * W is a P-matrix (every principal minor positive); then, for every e, exactly one active set
+ * meets the conditions (the box LCP of a P-matrix has a unique solution), every candidate's
+ * W_AA is nonsingular, and the enumeration finds that set. The solver needs no flag for it:
+ * when W is not exactly symmetric (W[i][j] != W[j][i] for some i, j; a symmetric P-matrix is
+ * positive definite, so the Cholesky path covers it) each candidate is solved by Gaussian
+ * elimination with partial pivoting instead, and a candidate with a zero or non-finite pivot
+ * (or an overflowed solution) is skipped; if no candidate meets the conditions the status is
+ * STSP_BANDQP_ERR_INFEASIBLE, as for a W that is not positive definite. Per-tick band tables
+ * (W symmetric) take exactly the Cholesky path they always did. The bounds are the same:
+ * 3^(band rows) candidates, O(q^3) each.
  */
 #ifndef STSP_BANDQP_H
 #define STSP_BANDQP_H
@@ -38,7 +54,8 @@ typedef enum {
     STSP_BANDQP_ERR_NULL = -1,        /**< a pointer argument is NULL */
     STSP_BANDQP_ERR_DIMS = -2,        /**< q == 0, q > STSP_BANDQP_MAX or nx == 0 */
     STSP_BANDQP_ERR_NONFINITE = -3,   /**< x0 holds NaN or +-Inf, or Nt x0 + mt overflowed */
-    STSP_BANDQP_ERR_INFEASIBLE = -4,  /**< no active set meets the conditions (W not > 0) */
+    STSP_BANDQP_ERR_INFEASIBLE = -4,  /**< no active set meets the conditions (W not > 0, or
+                                           a non-symmetric W that is not a P-matrix) */
     STSP_BANDQP_ERR_RANGE = -5        /**< stsp_bandqp_solve_f32(): a multiplier lies beyond
                                            the binary32 range (+-FLT_MAX) */
 } stsp_bandqp_status_t;
@@ -49,14 +66,15 @@ typedef struct {
     uint16_t nx;             /**< states */
     const double *Nt;        /**< [q][nx]: e = Nt x0 + mt */
     const double *mt;        /**< [q] */
-    const double *W;         /**< [q][q], symmetric positive definite */
+    const double *W;         /**< [q][q]: symmetric positive definite (Cholesky), or a
+                                  non-symmetric P-matrix (a spline table: Gaussian elimination) */
     const double *lo;        /**< [q] lower bounds (lo == hi: an equality row) */
     const double *hi;        /**< [q] upper bounds */
 } stsp_bandqp_t;
 
 /** Caller-owned scratch: q*q + 3*q doubles and q bytes at most. */
 typedef struct {
-    double chol[STSP_BANDQP_MAX * STSP_BANDQP_MAX];
+    double chol[STSP_BANDQP_MAX * STSP_BANDQP_MAX]; /**< Cholesky factor, or eliminated W_AA */
     double e[STSP_BANDQP_MAX];
     double rhs[STSP_BANDQP_MAX];
     double y[STSP_BANDQP_MAX];

@@ -292,9 +292,12 @@ typedef struct {
                                       s > 0 (one latch, at t0). float32 only: a fixed-point
                                       build refuses a table with one (STSP_ERR_BAD_DIMS) */
     const stsp_spline_t *spline;  /**< NULL (gains per tick: K, k0, L), or the spline gains
-                                      (K, k0, L then NULL; not with band_qp: otherwise
-                                      STSP_ERR_BAD_DIMS). float32 only: a fixed-point build
-                                      refuses a table with one (STSP_ERR_BAD_DIMS) */
+                                      (K, k0, L then NULL). With band_qp too, the band
+                                      dual is the one re-solved for the spline's gains
+                                      (W non-symmetric, a P-matrix: stsp_bandqp.h); the
+                                      same stage-0 latch and checks. float32 only: a
+                                      fixed-point build refuses a table with one
+                                      (STSP_ERR_BAD_DIMS) */
     uint32_t crc32;              /**< CRC-32 of dims and arrays, see stsp_table_crc32() */
     uint8_t problem_sha256[32];  /**< hash of the problem file the tables came from */
 } stsp_table_t;

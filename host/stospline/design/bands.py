@@ -37,7 +37,7 @@ if TYPE_CHECKING:
     from stospline.table.format import BandQP
 
 __all__ = ["BandSolution", "BandDesign", "solve_band_dual", "enumerate_active_sets",
-           "design_bands", "has_bands", "target_latch"]
+           "design_bands", "has_bands"]
 
 # Significant digits, of each array's largest entry, of the band dual (Nt, mt, W) in the tables:
 # between machines those arrays agree to ~1e-15 of that entry, and the firmware solves the dual
@@ -275,13 +275,3 @@ def design_bands(problem: Problem, *, discretization: str = "exact-zoh", noise: 
     stages[0] = replace(st0, Lambda=Lam, lambda0=lam0)
     base = replace(base, stages=stages, problem=problem)
     return BandDesign(problem, base, sol, J0, rows, lo, hi)
-
-
-def target_latch(qp: BandQP, x0: np.ndarray, *, float32: bool = True) -> np.ndarray:
-    """The multipliers the firmware latches at t0 from the measured state: the optimum of the
-    band dual at ``float32(x0)`` (what ``stsp_step`` hands to ``stsp_bandqp_solve``), rounded
-    to float32 as the controller stores them. ``float32=False``: in double precision (for an
-    unquantized table)."""
-    x = np.asarray(x0, dtype=np.float32 if float32 else float).astype(float)
-    lam = solve_band_dual(qp.e(x), qp.W, qp.lo, qp.hi).lam
-    return lam.astype(np.float32) if float32 else lam

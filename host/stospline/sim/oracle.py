@@ -105,7 +105,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             if k == 0 and table.band_qp is not None:
                 # The firmware solves the band dual for the (deterministic) start state, in
                 # float32 for a quantized table.
-                from stospline.design.bands import target_latch
+                from stospline.sim.band_latch import target_latch
                 Lam = np.zeros_like(Lam)
                 lam0 = np.zeros(n_latch)
                 lam0[:table.band_qp.q] = target_latch(table.band_qp, x0,

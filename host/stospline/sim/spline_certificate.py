@@ -13,37 +13,65 @@ from dataclasses import replace
 import numpy as np
 
 from stospline.design.varying import mean_maps
+from stospline.errors import DesignError
+from stospline.limits import BANDQP_MAX
 from stospline.problem.model import Problem
 from stospline.sim.tick_moments import Moments
 from stospline.table.flash import flash_bytes, spline_bytes
 from stospline.table.format import GainTable
-from stospline.table.spline_compress import compress
+from stospline.table.spline_compress import compress, compress_band
 
-__all__ = ["spline_table", "certificate", "q_certificate", "constraint_residual"]
+__all__ = ["spline_table", "certificate", "q_certificate", "constraint_residual", "band_terms"]
 
 
 def spline_table(problem: Problem, exact: GainTable, per_tick: GainTable,
                  tolerance: float) -> GainTable:
     """The float32 spline table of a design: `exact` is its per-tick table in double
-    precision (``table_of(design, quantize=False)``), `per_tick` the float32 one. Raises
-    DesignError naming ``design.table`` for what has no spline table (bands, a latched
-    state) or ``design.spline_tolerance`` when the budget
-    cannot be met within the firmware's limits."""
-    spline, K, k0, L, Lam, lam0 = compress(problem, exact, per_tick, tolerance,
-                                           varying_maps=mean_maps)
+    precision (``table_of(design, quantize=False)``), `per_tick` the float32 one; a band
+    table's dual is re-solved for the spline's gains (`spline_compress.compress_band`). Raises
+    DesignError naming ``design.table`` for what has no spline table (bands beyond the 8 rows
+    of a band dual, a W' that is not a P-matrix, a latched state) or
+    ``design.spline_tolerance`` when the budget cannot be met within the firmware's limits."""
+    band_qp = per_tick.band_qp
+    if band_qp is None and any(kn.constraint is not None and kn.constraint.is_band
+                               for kn in problem.knots):
+        raise DesignError("design.table", f"a band design with more than {BANDQP_MAX} "
+                                          f"constraint rows carries no band dual (its tables "
+                                          f"latch the affine map of one active set): no exact "
+                                          f"spline table")
+    if band_qp is not None:
+        spline, K, k0, L, Lam, lam0, band_qp = compress_band(problem, exact, per_tick, tolerance)
+    else:
+        spline, K, k0, L, Lam, lam0 = compress(problem, exact, per_tick, tolerance,
+                                               varying_maps=mean_maps)
     return replace(per_tick, name=f"{per_tick.name}_spline", K=K, k0=k0, L=L, Lambda=Lam,
-                   lambda0=lam0, spline=spline)
+                   lambda0=lam0, spline=spline, band_qp=band_qp)
 
 
 def constraint_residual(problem: Problem, moments: Moments) -> float:
-    """Largest |E{C2 x} - value| over the constrained knots (0 without constraints)."""
+    """Largest |E{C2 x} - value| of an equality row, or distance of E{C2 x} outside its band,
+    over the constrained knots (0 without constraints)."""
     worst = 0.0
     for k, kn in enumerate(problem.knots):
         if kn.constraint is not None:
-            lo, _ = kn.constraint.bounds
+            lo, hi = kn.constraint.bounds
             y = np.asarray(moments.knot_constraint[k], dtype=float)
-            worst = max(worst, float(np.max(np.abs(y - lo), initial=0.0)))
+            r = np.where(lo == hi, np.abs(y - lo), np.maximum(np.maximum(y - hi, lo - y), 0.0))
+            worst = max(worst, float(np.max(r, initial=0.0)))
     return worst
+
+
+def band_terms(table: GainTable, per_tick: GainTable) -> dict:
+    """A spline band table's dual against the per-tick table's: rows, how far W' is from
+    symmetric and from the design's W (largest entry difference over W's largest entry), and
+    its P-matrix margin (`stospline.table.spline_band.is_p_matrix`)."""
+    from stospline.table.spline_band import is_p_matrix
+    W, W0 = table.band_qp.W, per_tick.band_qp.W
+    scale = float(np.abs(W0).max())
+    return {"rows": table.band_qp.q,
+            "w_asymmetry": float(np.abs(W - W.T).max()) / scale,
+            "w_change": float(np.abs(W - W0).max()) / scale,
+            "p_margin": is_p_matrix(W)[2]}
 
 
 def _cov_change(reference: Moments, implemented: Moments) -> float:
@@ -63,7 +91,8 @@ def certificate(problem: Problem, table: GainTable, per_tick: GainTable, J0: flo
     spline compresses in double precision (`compressed`: the oracle of
     ``table_of(design, quantize=False)``, which for a continuous-time design is its gains
     sampled at the ticks, not the continuous law, whose difference is the cost of sampling),
-    the worst expected-constraint residual, the knot covariances' change against the same
+    the worst expected-constraint residual (for a band, the distance outside it), the knot
+    covariances' change against the same
     per-tick law, the flash and the compression ratio against the per-tick float32 table, the
     spans per stage."""
     sp = table.spline
@@ -83,6 +112,7 @@ def certificate(problem: Problem, table: GainTable, per_tick: GainTable, J0: flo
         "gain_bytes": spline_bytes(sp),
         "per_tick_flash_bytes": per_tick_total,
         "compression_ratio": per_tick_total / total,
+        **({"band_dual": band_terms(table, per_tick)} if table.band_qp is not None else {}),
     }
 
 

@@ -44,10 +44,12 @@ class BandQP:
     """The band dual of a joint design, as the firmware solves it at the t0 latch
     (``stsp_bandqp.h``): multipliers ``lam`` maximising
     ``2 lam'e - lam'W lam - 2 sum(lam_i > 0 ? lam_i hi_i : lam_i lo_i)``, ``e = Nt x0 + mt``.
-    Stored in float64 (the solver works in double precision)."""
+    Stored in float64 (the solver works in double precision). In a spline table W is not
+    symmetric: the multipliers then solve the box LCP of `stospline.table.spline_band`."""
     Nt: np.ndarray   # (q, n)
     mt: np.ndarray   # (q,)
-    W: np.ndarray    # (q, q), symmetric positive definite
+    W: np.ndarray    # (q, q), symmetric positive definite; a spline table's, re-solved for
+                     # its gains (`stospline.table.spline_band`): a non-symmetric P-matrix
     lo: np.ndarray   # (q,) lower bounds (lo == hi: an equality row)
     hi: np.ndarray   # (q,)
 

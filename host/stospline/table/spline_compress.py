@@ -6,9 +6,10 @@ import numpy as np
 
 from stospline.table.spline import DEFAULT_MAX_SPANS, INITIAL_SPANS, SplineGains, _fit
 from stospline.table.format import _to_float32   # flushes round-off zeros, as per-tick tables
+from stospline.errors import DesignError
 from stospline.table.spline_latch import resolve_latch
 
-__all__ = ["compress"]
+__all__ = ["compress", "compress_band"]
 
 
 def compress(problem, exact, quantized, tolerance: float, *,
@@ -59,6 +60,29 @@ def compress(problem, exact, quantized, tolerance: float, *,
     spline, K, k0, L = _fit(exact, tolerance, max_spans, initial_spans)
     if not resolve:
         return spline, K, k0, L, quantized.Lambda, quantized.lambda0
+    if quantized.band_qp is not None:
+        raise DesignError("design.table", "a band table's spline re-solves its band dual: "
+                                          "use compress_band")
     Lam, lam0 = resolve_latch(problem, quantized.with_arrays(K=K, k0=k0, L=L), spline,
                               varying_maps)
     return spline, K, k0, L, _to_float32(Lam), _to_float32(lam0)
+
+
+def compress_band(problem, exact, quantized, tolerance: float, *,
+                  max_spans: int = DEFAULT_MAX_SPANS, initial_spans: int = INITIAL_SPANS):
+    """`compress` for a table that carries a band dual (``quantized.band_qp``): the spline fit
+    and its evaluation as `compress`, then the band dual re-solved for those gains
+    (`stospline.table.spline_band.resolve_band`), which the firmware's stage-0 latch solves
+    for the measured x0, and the stage-0 latch maps of the design x0's active set under it
+    (the firmware's fallback), rounded to float32. Returns ``(spline, K, k0, L, Lambda,
+    lambda0, band_qp)``. Raises DesignError (``design.table``) as `resolve_band` does, or
+    SplineBudgetError as `compress`."""
+    from stospline.table.spline_band import resolve_band
+    if exact.dims != quantized.dims or not np.array_equal(exact.stage_start,
+                                                          quantized.stage_start):
+        raise ValueError("the exact and the quantized tables are of different designs")
+    if quantized.band_qp is None:
+        raise ValueError("compress_band: the table carries no band dual")
+    spline, K, k0, L = _fit(exact, tolerance, max_spans, initial_spans)
+    band_qp, Lam, lam0 = resolve_band(problem, quantized.with_arrays(K=K, k0=k0, L=L), spline)
+    return spline, K, k0, L, _to_float32(Lam), _to_float32(lam0), band_qp

@@ -71,14 +71,15 @@ def latch_groups_of_table(problem, table) -> list[tuple[int, list[int]]]:
     return groups
 
 
-def _refuse_unsupported(problem, table) -> None:
-    """What the re-solve cannot do exactly is refused, naming the reason."""
+def _refuse_unsupported(problem, table, *, band: bool = False) -> None:
+    """What the re-solve cannot do exactly is refused, naming the reason. ``band=True``: the
+    caller re-solves the band dual (`stospline.table.spline_band`), not an affine latch."""
     why = None
     if getattr(table, "arith", "float32") != "float32" or not np.issubdtype(table.K.dtype,
                                                                              np.floating):
         why = "a fixed-point table"
-    elif getattr(table, "band_qp", None) is not None or any(
-            kn.constraint is not None and kn.constraint.is_band for kn in problem.knots):
+    elif not band and (getattr(table, "band_qp", None) is not None or any(
+            kn.constraint is not None and kn.constraint.is_band for kn in problem.knots)):
         why = "a band table (the firmware re-solves the band dual, not an affine latch)"
     elif len(table.stage_start) != len(problem.knots) + 1 or not np.array_equal(
             np.diff(np.asarray(table.stage_start, dtype=np.int64)),

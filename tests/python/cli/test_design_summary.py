@@ -71,13 +71,15 @@ def symbol_bytes(c_file, defines, tmp_path) -> int:
                                          ("robot_corridor_q31", "q31"),
                                          ("robot_bands", "float32"),
                                          ("robot_corridor_spline", "float32"),
-                                         ("robot_patrol_60s_spline", "float32")])
+                                         ("robot_patrol_60s_spline", "float32"),
+                                         ("robot_bands_spline", "float32")])
 def test_flash_bytes_match_the_compiled_tables(name, arith, robot_zoh, tmp_path):
     if name.endswith("_spline"):
         from stospline.pipeline import design_problem
         from stospline.problem import load_problem
         problem = load_problem(EXAMPLES / f"{name.removesuffix('_spline')}.toml")
-        table = design_problem(problem, table="spline").table
+        table = design_problem(problem, table="spline",
+                               mode=problem.options.get("mode", "stagewise")).table
         assert table.spline is not None
     elif name == "robot_bands":
         from stospline.pipeline import design_problem

@@ -68,7 +68,8 @@ def test_bad_file_options(capsys, tmp_path, key, value, field):
 
 
 @pytest.mark.parametrize("example, extra, field", [
-    ("robot_bands", [], "design.table"),            # the band dual is re-solved on target
+    ("robot_narrow_corridor", [], "design.table"),  # bands beyond the 8 rows of a band dual
+    ("robot_monotone", [], "design.table"),         # regions at every tick
     ("robot_corridor", ["--arith", "q15"], "--table"),
     ("robot_corridor", ["--mode", "joint"], "design.table"),   # 5 multipliers > 4 states
     ("robot_corridor", ["--spline-tolerance", "1e-9"], "design.spline_tolerance"),

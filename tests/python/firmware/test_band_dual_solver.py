@@ -99,3 +99,42 @@ def test_target_solver_on_robot_bands_and_bad_inputs(bandqp):
     bad[1] = np.nan
     status, lam, _ = solve_c(bandqp, st0, b.lower, b.upper, bad)
     assert status == -3 and not np.any(lam)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_target_solver_on_non_symmetric_p_matrices(bandqp, seed):
+    """A spline table's W' (not symmetric, a P-matrix: `stospline.table.spline_band`): the
+    C solver's Gaussian-elimination path against the host's numpy enumeration, and both
+    against the conditions (a P-matrix: the solution is unique). W' = SPD + a skew-symmetric
+    part (x'W'x = x'(SPD)x > 0: every principal submatrix positive definite in that sense, so a
+    P-matrix); q = 2..7 rows, some of them equalities."""
+    from types import SimpleNamespace
+    from stospline.table.spline_band import is_p_matrix, solve_band_lcp
+    rng = np.random.default_rng(700 + seed)
+    q, n = 2 + seed, 3
+    G = rng.normal(size=(q, q))
+    S = rng.normal(size=(q, q))
+    skew = (0.05 + 0.03 * seed) * np.linalg.norm(G, 2) ** 2 * (S - S.T) / q
+    W = G @ G.T + 0.5 * np.eye(q) + skew
+    assert not np.array_equal(W, W.T) and is_p_matrix(W)[0]
+    Nt, mt = rng.normal(size=(q, n)), rng.normal(size=q)
+    a, b = rng.normal(scale=2, size=q), rng.normal(scale=2, size=q)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    eq = rng.random(q) < 0.3
+    lo[eq] = hi[eq]
+    stage = SimpleNamespace(N0=Nt.T, m0=mt, W0=W)
+    active_seen = set()
+    for trial in range(10):
+        x0 = (3 * rng.normal(size=n)).astype(np.float32)
+        e = Nt @ x0.astype(float) + mt
+        status, lam, cand = solve_c(bandqp, stage, lo, hi, x0)
+        assert status == 0 and 1 <= cand <= 3 ** int(np.sum(~eq))
+        host, active = solve_band_lcp(e, W, lo, hi)
+        np.testing.assert_allclose(lam, host, rtol=0, atol=1e-10 * max(1.0, np.abs(host).max()))
+        y = e - W @ lam
+        tol = 1e-9 * (1 + np.abs(hi))
+        assert np.all(y >= lo - tol) and np.all(y <= hi + tol)
+        at_hi, at_lo = np.abs(y - hi) <= tol, np.abs(y - lo) <= tol
+        assert np.all(lam[~eq & ~at_hi] <= 1e-12) and np.all(lam[~eq & ~at_lo] >= -1e-12)
+        active_seen.update(int(v) for v in active[~eq])
+    assert active_seen >= {-1, 1} or q < 3        # both bounds reached somewhere

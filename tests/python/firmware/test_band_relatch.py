@@ -9,7 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from stospline.design.bands import design_bands, target_latch
+from stospline.design.bands import design_bands
+from stospline.sim.band_latch import target_latch
 from stospline.sim.controller import STATUS, build_controller
 from stospline.sim.montecarlo import compare_to_oracle, simulate
 from stospline.sim.oracle import evaluate_table

@@ -176,9 +176,10 @@ def test_no_spline_entry_is_near_a_rounding_boundary(monkeypatch, example):
     """The same for the shipped spline tables: every coefficient (the least squares fit's,
     rounded to the float32 spacing at its entry's largest gain, `spline._coefficients`) and
     every re-solved latch entry (rounded after the flush of round-off zeros) is clear of
-    where its rounding changes."""
-    from stospline.table import spline, spline_compress
-    rounded = {"coef": [], "latch": []}
+    where its rounding changes; a band table's re-solved dual (10 digits) clear of where its
+    decimal rounding changes."""
+    from stospline.table import spline, spline_band, spline_compress
+    rounded = {"coef": [], "latch": [], "band": []}
 
     def capture(kind, fn):
         def wrapped(*args):
@@ -188,9 +189,20 @@ def test_no_spline_entry_is_near_a_rounding_boundary(monkeypatch, example):
     monkeypatch.setattr(spline, "_coefficients", capture("coef", spline._coefficients))
     monkeypatch.setattr(spline_compress, "_to_float32",
                         capture("latch", spline_compress._to_float32))
+
+    def band_capture(a, digits):
+        rounded["band"].append(np.array(a, dtype=float))
+        return round_to_scale(a, digits)
+    round_to_scale = spline_band.round_to_scale
+    monkeypatch.setattr(spline_band, "round_to_scale", band_capture)
     problem = load_problem(EXAMPLES / f"{example}.toml")
-    pipeline.design_problem(problem, table="spline")
+    pipeline.design_problem(problem, table="spline",
+                            mode=problem.options.get("mode", "stagewise"))
     assert rounded["coef"] and rounded["latch"]
+    for a in (a for a in rounded["band"] if np.any(a)):
+        q = 10.0 ** (np.floor(np.log10(np.abs(a).max())) - spline_band.BANDQP_DIGITS + 1)
+        near = int(np.sum(np.abs(a / q - np.floor(a / q) - 0.5) * q <= _reach(a)))
+        assert near == 0, f"{near} band dual entries within reach of a rounding boundary"
     # Every fit is checked, the refinement's discarded ones too (a superset of those kept).
     for a, peak in (p for p in rounded["coef"] if np.any(p[0])):
         # The grid of each entry: the float32 spacing in the binade of its peak; a

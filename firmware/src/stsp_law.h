@@ -89,10 +89,18 @@ static inline void stsp_rows_at(const stsp_header_t *h, uint32_t tick, stsp_rows
  * addition is commutative, signs of zero included (as for VNMLA, stsp_nmla). Writes y[0 ..
  * nu) (never the caller's u: x and u may overlap) and moves r past the tick's rows (to the
  * next tick's: nu nx, nu and nu n_latch entries on; L stays when n_latch == 0); returns the
- * inputs' sum in order, -0 + y[0] + y[1] + ... (stsp_unlimited_alarm's). */
-static STSP_ALWAYS_INLINE stsp_f32_t stsp_law_on_rows(const stsp_header_t *h, stsp_rows_t *r,
-                                                      const stsp_f32_t *x, const stsp_f32_t *v,
-                                                      stsp_f32_t *y)
+ * inputs' sum in order, -0 + y[0] + y[1] + ... (stsp_unlimited_alarm's). Inlined into the
+ * ordinary tick and the cold path's stsp_law_rows on a single-precision VFP (one asm
+ * statement); elsewhere (soft float, the host) once, out of line: inlined twice, its C loops
+ * cost the Cortex-M0+ some 650 B of flash. */
+#if STSP_VFP_MAC
+#define STSP_LAW_ON_ROWS STSP_ALWAYS_INLINE
+#else
+#define STSP_LAW_ON_ROWS STSP_NOINLINE
+#endif
+static STSP_LAW_ON_ROWS stsp_f32_t stsp_law_on_rows(const stsp_header_t *h, stsp_rows_t *r,
+                                                    const stsp_f32_t *x, const stsp_f32_t *v,
+                                                    stsp_f32_t *y)
 {
     const uint32_t nx = stsp_nx(h);
     const uint32_t nu = stsp_nu(h);

@@ -3,8 +3,9 @@
  *
  * Hot path. An ordinary tick (the expected tick, inside the stage already latched) runs
  * straight through stsp_step(): two compares select it, the law is evaluated from the tick's
- * rows of K, k0, L and the latched v, and one check says whether the command needs the cold
- * path. With limits, that check is a compare pair per input against [u_min, u_max], false
+ * rows of K, k0, L (in the float32 build with run-time dimensions the rows the instance keeps
+ * for next_tick, stsp_ctrl_t.rows, in a tail-called stsp_step_ordinary) and the latched v,
+ * and one check says whether the command needs the cold path. With limits, that check is a compare pair per input against [u_min, u_max], false
  * for NaN and for +-Inf (the limits are finite); without, it is whether the sum of the inputs
  * is finite. Either also serves as the finiteness check of the state: a NaN or infinite x[j]
  * reaches every input (each input sums K[i][j] x[j] over all j, and 0 * Inf is NaN), as does
@@ -54,7 +55,7 @@
 #include <string.h>
 
 /* float32 with run-time dimensions: the instance keeps the rows of tick next_tick
- * (stsp_ctrl_t.rows), and the ordinary tick is a function of its own (stsp_step_rows). */
+ * (stsp_ctrl_t.rows), and the ordinary tick is a function of its own (stsp_step_ordinary). */
 #if !defined(STSP_ARITH_FIXED_POINT) && !defined(STSP_FIXED_NX)
 #define STSP_ROW_CACHE 1
 #else

@@ -129,8 +129,8 @@ static STSP_ALWAYS_INLINE uint32_t stsp_law_kept(const stsp_header_t *h, stsp_ro
 
 /* The law at `tick` (< n_ticks) on the cold path (stsp_step_cold): the rows from the tick's
  * index in the validated copy h; *next then holds the rows of tick + 1 (stsp_law_on_rows).
- * Out of line; the ordinary tick (stsp_step_rows) has its own copy, on the rows the instance
- * keeps. */
+ * Out of line; the ordinary tick (stsp_step_ordinary) runs stsp_law_kept() on the rows the
+ * instance keeps. */
 static STSP_NOINLINE stsp_f32_t stsp_law_rows(const stsp_header_t *h, uint32_t tick,
                                               const stsp_f32_t *x, const stsp_f32_t *v,
                                               stsp_f32_t *y, stsp_rows_t *next)

@@ -128,9 +128,9 @@ FAULTS = [
           "    return (end < h->n_ticks) ? end : h->n_ticks;",
           "    return end;"),
     Fault("F25", "ordinary tick writes u before classifying a non-finite command", CTL,
-          "    out = stsp_law(&ctrl->checked, tick, x, ctrl->v, y, ctrl->limited);\n",
-          "    out = stsp_law(&ctrl->checked, tick, x, ctrl->v, y, ctrl->limited);\n"
-          "    stsp_copy(u, y, stsp_nu(&ctrl->checked));\n"),
+          "#endif\n#ifndef STSP_ARITH_FIXED_POINT\n    /* A NaN/Inf command: which error",
+          "#endif\n    stsp_copy(u, y, stsp_nu(&ctrl->checked));\n"
+          "#ifndef STSP_ARITH_FIXED_POINT\n    /* A NaN/Inf command: which error"),
     Fault("F26", "the command is written for the header's nu, not the validated one", CTL,
           "    stsp_copy_command(u, y, stsp_nu(&ctrl->checked));\n    if (out != 0u) {",
           "    stsp_copy_command(u, y, ctrl->table->nu);\n    if (out != 0u) {"),
@@ -180,7 +180,30 @@ FAULTS = [
           "            r1 = stsp_mls(r1, kp[nx + c], x[c]);",
           "            r1 = stsp_mls(r1, kp[c], x[c]);"),
     Fault("F44", "generic float32 law: an odd last row starts from +k0 (k0 added, not subtracted)",
-          CTL, "        stsp_f32_t acc = -k0[0];", "        stsp_f32_t acc = k0[0];"),
+          CTL, "        stsp_f32_t acc = -bp[0];", "        stsp_f32_t acc = bp[0];"),
+    # The rows the generic float32 build keeps for tick next_tick (stsp_ctrl_t.rows).
+    Fault("F55", "generic float32: a cold tick leaves the kept rows where they were (not the "
+          "rows of tick + 1 its law moved on to)", CTL,
+          "    ctrl->rows = next;\n", "\n"),
+    Fault("F56", "generic float32: an odd last row does not move K on (the next ordinary tick "
+          "reads this tick's last K row)", CTL,
+          "        kp = &kp[nx];\n", "\n"),
+    Fault("F57", "generic float32: an ordinary tick with a non-finite command keeps the moved "
+          "rows (the refused step changes the instance)", CTL,
+          "    if ((out != 0u) && (stsp_command_finite(&ctrl->checked, y) == 0)) {\n"
+          "        return stsp_step_nonfinite(ctrl, x, u);\n"
+          "    }\n"
+          "#endif\n"
+          "#if STSP_ROW_CACHE\n"
+          "    ctrl->rows = rows;\n"
+          "#endif\n",
+          "#if STSP_ROW_CACHE\n"
+          "    ctrl->rows = rows;\n"
+          "#endif\n"
+          "    if ((out != 0u) && (stsp_command_finite(&ctrl->checked, y) == 0)) {\n"
+          "        return stsp_step_nonfinite(ctrl, x, u);\n"
+          "    }\n"
+          "#endif\n"),
     # The fixed-point spline evaluation (stsp_qspline.c).
     Fault("F45", "fixed-point spline gain floored instead of rounded half up", CTL,
           "    const uint64_t up = halves + 1u;", "    const uint64_t up = halves;"),

@@ -3,8 +3,9 @@
  *
  * Hot path. An ordinary tick (the expected tick, inside the stage already latched) runs
  * straight through stsp_step(): two compares select it, the law is evaluated from the tick's
- * rows of K, k0, L and the latched v, and one check says whether the command needs the cold
- * path. With limits, that check is a compare pair per input against [u_min, u_max], false
+ * rows of K, k0, L (in the float32 build with run-time dimensions the rows the instance keeps
+ * for next_tick, stsp_ctrl_t.rows, in a tail-called stsp_step_ordinary) and the latched v,
+ * and one check says whether the command needs the cold path. With limits, that check is a compare pair per input against [u_min, u_max], false
  * for NaN and for +-Inf (the limits are finite); without, it is whether the sum of the inputs
  * is finite. Either also serves as the finiteness check of the state: a NaN or infinite x[j]
  * reaches every input (each input sums K[i][j] x[j] over all j, and 0 * Inf is NaN), as does
@@ -53,6 +54,25 @@
 #include <float.h>
 #include <string.h>
 
+/* float32 with run-time dimensions: the instance keeps the rows of tick next_tick
+ * (stsp_ctrl_t.rows), and the ordinary tick is a function of its own (stsp_step_ordinary). */
+#if !defined(STSP_ARITH_FIXED_POINT) && !defined(STSP_FIXED_NX)
+#define STSP_ROW_CACHE 1
+#else
+#define STSP_ROW_CACHE 0
+#endif
+
+#if STSP_ROW_CACHE
+/* The rows of tick 0 into the instance, from the validated copy: where init and reset leave
+ * next_tick (stage_end 0: the first tick takes the cold path, which sets them again). */
+static void stsp_rows_first(stsp_ctrl_t *ctrl)
+{
+    ctrl->rows.K = ctrl->checked.K;
+    ctrl->rows.k0 = ctrl->checked.k0;
+    ctrl->rows.L = ctrl->checked.L;
+}
+#endif
+
 /* A refused init: the instance all zeros (not ready), as before it was given a table. */
 static stsp_status_t stsp_refuse(stsp_ctrl_t *ctrl, stsp_status_t status)
 {
@@ -86,6 +106,9 @@ stsp_status_t stsp_init(stsp_ctrl_t *ctrl, const stsp_table_t *table)
     ctrl->table = table;
     stsp_copy(ctrl->hold, table->u_hold, ctrl->checked.nu);
     ctrl->limited = stsp_has_limits(&ctrl->checked);
+#if STSP_ROW_CACHE
+    stsp_rows_first(ctrl);
+#endif
     ctrl->ready = STSP_CTRL_READY;
     return STSP_OK;
 }
@@ -133,6 +156,9 @@ stsp_status_t stsp_reset(stsp_ctrl_t *ctrl)
 #ifndef STSP_ARITH_FIXED_POINT
     (void)memset(&ctrl->span, 0, sizeof ctrl->span);
 #endif
+#if STSP_ROW_CACHE
+    stsp_rows_first(ctrl);
+#endif
     return STSP_OK;
 }
 
@@ -166,10 +192,18 @@ static STSP_NOINLINE stsp_status_t stsp_step_cold(stsp_ctrl_t *ctrl, uint32_t ti
     stsp_plan_t plan = {0u, 0u};
     stsp_status_t status;
     uint16_t mask = 0u;
+#if STSP_ROW_CACHE
+    stsp_rows_t next = ctrl->rows;
+#endif
     stsp_zero(v_new, STSP_MAX_LATCH);
     status = stsp_plan(ctrl, tick, x, v_new, &plan);
     if (status >= STSP_OK) {
-        if (stsp_law(h, tick, x, v_new, y, ctrl->limited) != 0u) {
+#if STSP_ROW_CACHE
+        const uint32_t alarm = stsp_law(h, tick, x, v_new, y, ctrl->limited, &next);
+#else
+        const uint32_t alarm = stsp_law(h, tick, x, v_new, y, ctrl->limited);
+#endif
+        if (alarm != 0u) {
             const stsp_status_t st = stsp_limit(h, x, y, &mask);
             if (st != STSP_OK) {
                 status = st; /* an error, or STSP_WARN_SATURATED over a tick warning */
@@ -183,6 +217,11 @@ static STSP_NOINLINE stsp_status_t stsp_step_cold(stsp_ctrl_t *ctrl, uint32_t ti
     stsp_copy(u, y, stsp_nu(h));
     ctrl->sat_mask = mask;
     stsp_commit(ctrl, tick, &plan, v_new);
+#if STSP_ROW_CACHE
+    /* A successful cold tick leaves next_tick == tick + 1 (stsp_plan refuses tick + 1 <
+     * next_tick, stsp_commit raises next_tick to tick + 1): the law's next rows are its rows. */
+    ctrl->rows = next;
+#endif
     return status;
 }
 
@@ -206,11 +245,69 @@ static STSP_NOINLINE stsp_status_t stsp_step_null_state(const stsp_ctrl_t *ctrl,
 }
 
 
-stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
-                        stsp_scalar_t *u)
+/* The ordinary tick of a per-tick table (tick == next_tick < stage_end): the law, the
+ * classification of a non-finite command (before u is written: x and u may overlap), the
+ * command, and the tick. Inlined into stsp_step(), except in the float32 build with run-time
+ * dimensions (STSP_ROW_CACHE): there the law runs on the rows the instance keeps for
+ * next_tick, which move on to the next tick's only when the step succeeds (a non-finite
+ * command leaves the instance unchanged), and the function is tail-called (stsp_step() then
+ * needs no frame). */
+#if STSP_ROW_CACHE
+#define STSP_ORDINARY_TICK STSP_NOINLINE
+#else
+#define STSP_ORDINARY_TICK STSP_ALWAYS_INLINE
+#endif
+static STSP_ORDINARY_TICK stsp_status_t stsp_step_ordinary(stsp_ctrl_t *ctrl, uint32_t now,
+                                                           const stsp_scalar_t *x,
+                                                           stsp_scalar_t *u)
 {
     stsp_scalar_t y[STSP_MAX_NU];
     uint32_t out;
+    uint32_t tick;
+#if STSP_ROW_CACHE
+    stsp_rows_t rows = ctrl->rows;
+    (void)now;
+    out = stsp_law_kept(&ctrl->checked, &rows, x, ctrl->v, y, ctrl->limited);
+    tick = ctrl->next_tick; /* == now, read after the law: one register fewer across it */
+#else
+    tick = now;
+    out = stsp_law(&ctrl->checked, tick, x, ctrl->v, y, ctrl->limited);
+#endif
+#ifndef STSP_ARITH_FIXED_POINT
+    /* A NaN/Inf command: which error it is depends on x, read before u is written. */
+    if ((out != 0u) && (stsp_command_finite(&ctrl->checked, y) == 0)) {
+        return stsp_step_nonfinite(ctrl, x, u);
+    }
+#endif
+#if STSP_ROW_CACHE
+    ctrl->rows = rows;
+#endif
+    stsp_copy_command(u, y, stsp_nu(&ctrl->checked));
+    if (out != 0u) {
+        return stsp_step_fixup(ctrl, tick, u);
+    }
+    ctrl->next_tick = tick + 1u;
+    return STSP_OK;
+}
+
+#if STSP_ROW_CACHE
+/* Every tick but the ordinary one of a per-tick table: a spline table's (stsp_spline.c: init
+ * accepted the table, so that code is linked), or the cold path. Out of line, so that
+ * stsp_step() tail-calls everything and needs no frame (GCC does not tail-call the weak
+ * stsp_spline_step). */
+static STSP_NOINLINE stsp_status_t stsp_step_other(stsp_ctrl_t *ctrl, uint32_t tick,
+                                                   const stsp_f32_t *x, stsp_f32_t *u)
+{
+    if (ctrl->checked.spline != NULL) {
+        return stsp_spline_step(ctrl, tick, x, u);
+    }
+    return stsp_step_cold(ctrl, tick, x, u);
+}
+#endif
+
+stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
+                        stsp_scalar_t *u)
+{
     if ((u == NULL) || (ctrl == NULL)) {
         return STSP_ERR_NULL;
     }
@@ -224,6 +321,9 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x
      * first latch, and never above n_ticks). Anything else takes the cold path; every tick
      * of a spline table (stage_end 0) its own, stsp_spline_step. */
     if ((tick != ctrl->next_tick) || (tick >= ctrl->stage_end)) {
+#if STSP_ROW_CACHE
+        return stsp_step_other(ctrl, tick, x, u);
+#else
 #ifndef STSP_ARITH_FIXED_POINT
         /* A spline table's tick (stsp_spline.c: init accepted the table, so that code is
          * linked). */
@@ -232,20 +332,9 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x
         }
 #endif
         return stsp_step_cold(ctrl, tick, x, u);
-    }
-    out = stsp_law(&ctrl->checked, tick, x, ctrl->v, y, ctrl->limited);
-#ifndef STSP_ARITH_FIXED_POINT
-    /* A NaN/Inf command: which error it is depends on x, read before u is written. */
-    if ((out != 0u) && (stsp_command_finite(&ctrl->checked, y) == 0)) {
-        return stsp_step_nonfinite(ctrl, x, u);
-    }
 #endif
-    stsp_copy_command(u, y, stsp_nu(&ctrl->checked));
-    if (out != 0u) {
-        return stsp_step_fixup(ctrl, tick, u);
     }
-    ctrl->next_tick = tick + 1u;
-    return STSP_OK;
+    return stsp_step_ordinary(ctrl, tick, x, u);
 }
 
 #ifdef STSP_HOST_MESSAGES

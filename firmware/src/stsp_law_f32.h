@@ -41,20 +41,22 @@ typedef stsp_f32_t stsp_row_acc_t;
 #define stsp_row_mac stsp_mls
 #define stsp_row_end(acc, k0) (acc)
 #else
-/* The pairs of rows of the generic law (stsp_law.h), np >= 1 of them: for each, acc0 = -k0[0]
- * and acc1 = -k0[1], acc0 -= K[c] x[c] and acc1 -= K[nx + c] x[c] for c = 0 .. nx - 1 in order,
- * then acc0 -= L[c] v[c] and acc1 -= L[nl + c] v[c] for c = 0 .. nl - 1, each step the bits of
- * stsp_mls; y[0] = acc0, y[1] = acc1, and *total + acc0 + acc1 in that order; then k0, y, K and
- * L move to the next pair (*k0, *y, *K, *L: where the rows after the pairs are). On a
- * single-precision VFP one asm statement: per pair, per four columns one VLDM each of x (v)
- * and of the two rows and eight VMLS (11 instructions for 8 multiply-adds where separate
- * loads take 20), then the n % 4 last columns one at a time; the accumulators in s12-s13
- * (VLDM of k0, VSTM to y), the operands in s0-s11 (caller-saved, declared clobbered); no
- * loop count or pointer for GCC to keep in a register around it. nl == 0: no access to L and
- * no C pointer arithmetic on it (it may be NULL). */
+/* The rows of the generic law (stsp_law.h), nu >= 1 of them, two at a time and an odd last row
+ * alone. A pair: acc0 = -k0[0] and acc1 = -k0[1], acc0 -= K[c] x[c] and acc1 -= K[nx + c] x[c]
+ * for c = 0 .. nx - 1 in order, then acc0 -= L[c] v[c] and acc1 -= L[nl + c] v[c] for c = 0 ..
+ * nl - 1, each step the bits of stsp_mls; y[0] = acc0, y[1] = acc1, and *total + acc0 + acc1 in
+ * that order; then k0, y, K and L move to the next pair. The odd last row the same with acc0
+ * alone. On return *k0, *y, *K and *L point past the rows (K nu nx, k0 nu and L nu nl entries
+ * on: where the next tick's rows start; L unchanged when nl == 0). On a single-precision VFP
+ * one asm statement: per pair (row), per four columns one VLDM each of x (v) and of the two
+ * rows (the row) and eight (four) VMLS (11 instructions for 8 multiply-adds where separate
+ * loads take 20), then the n % 4 last columns one at a time; the accumulators in s12-s13 (VLDM
+ * of k0, VSTM to y), the operands in s0-s11 (caller-saved, declared clobbered); no loop count
+ * or pointer for GCC to keep in a register around it. nl == 0: no access to L and no C pointer
+ * arithmetic on it (it may be NULL). */
 static STSP_ALWAYS_INLINE void
 /* cppcheck-suppress misra-c2012-2.7 ; deviation D5: the parameters are asm operands */
-stsp_law_pairs(const stsp_f32_t *x, const stsp_f32_t *v, uint32_t nx, uint32_t nl, uint32_t np,
+stsp_law_pairs(const stsp_f32_t *x, const stsp_f32_t *v, uint32_t nx, uint32_t nl, uint32_t nu,
                const stsp_f32_t **k0, stsp_f32_t **y, const stsp_f32_t **K,
                const stsp_f32_t **L, stsp_f32_t *total)
 {
@@ -67,10 +69,13 @@ stsp_law_pairs(const stsp_f32_t *x, const stsp_f32_t *v, uint32_t nx, uint32_t n
     const stsp_f32_t *p1;
     const stsp_f32_t *q;
     uint32_t k;
-    uint32_t n = np;
-    /* Per pair (loop 1): rows against x (labels 2-5), then against v (6-9); per four columns
-     * one VLDM each and eight VMLS (loops 2, 6), then the n % 4 last columns (4, 8). */
-    __asm__ volatile("1:\n"
+    uint32_t n = nu;
+    /* n counts the rows left, less two: per pair (loop 1) the rows against x (labels 2-5), then
+     * against v (6-9); per four columns one VLDM each and eight VMLS (loops 2, 6), then the
+     * n % 4 last columns (4, 8). An odd last row (label 10 on): the same, one row (11-18). */
+    __asm__ volatile("subs %[n], %[n], #2\n\t"
+                     "bmi 10f\n\t"
+                     "1:\n"
                      "vldmia %[k0]!, {s12-s13}\n\t"
                      "vneg.f32 s12, s12\n\t"
                      "vneg.f32 s13, s13\n\t"
@@ -139,19 +144,71 @@ stsp_law_pairs(const stsp_f32_t *x, const stsp_f32_t *v, uint32_t nx, uint32_t n
                      "vstmia %[y]!, {s12-s13}\n\t"
                      "vadd.f32 %[t], %[t], s12\n\t"
                      "vadd.f32 %[t], %[t], s13\n\t"
-                     "subs %[np], %[np], #1\n\t"
-                     "bne 1b"
-                     : [kp] "+&r"(kp), [lp] "+&r"(lp), [k0] "+&r"(bp), [y] "+&r"(yp), [np] "+&r"(n),
+                     "subs %[n], %[n], #2\n\t"
+                     "bpl 1b\n\t"
+                     "10:\n"
+                     "adds %[n], %[n], #1\n\t"
+                     "bne 18f\n\t"
+                     "vldmia %[k0]!, {s12}\n\t"
+                     "vneg.f32 s12, s12\n\t"
+                     "mov %[q], %[x]\n\t"
+                     "lsrs %[k], %[nx], #2\n\t"
+                     "beq 12f\n\t"
+                     "11:\n"
+                     "vldmia %[q]!, {s0-s3}\n\t"
+                     "vldmia %[kp]!, {s4-s7}\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "vmls.f32 s12, s5, s1\n\t"
+                     "vmls.f32 s12, s6, s2\n\t"
+                     "vmls.f32 s12, s7, s3\n\t"
+                     "subs %[k], %[k], #1\n\t"
+                     "bne 11b\n\t"
+                     "12:\n"
+                     "ands %[k], %[nx], #3\n\t"
+                     "beq 14f\n\t"
+                     "13:\n"
+                     "vldmia %[q]!, {s0}\n\t"
+                     "vldmia %[kp]!, {s4}\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "subs %[k], %[k], #1\n\t"
+                     "bne 13b\n\t"
+                     "14:\n"
+                     "mov %[q], %[v]\n\t"
+                     "lsrs %[k], %[nl], #2\n\t"
+                     "beq 16f\n\t"
+                     "15:\n"
+                     "vldmia %[q]!, {s0-s3}\n\t"
+                     "vldmia %[lp]!, {s4-s7}\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "vmls.f32 s12, s5, s1\n\t"
+                     "vmls.f32 s12, s6, s2\n\t"
+                     "vmls.f32 s12, s7, s3\n\t"
+                     "subs %[k], %[k], #1\n\t"
+                     "bne 15b\n\t"
+                     "16:\n"
+                     "ands %[k], %[nl], #3\n\t"
+                     "beq 17f\n\t"
+                     "161:\n"
+                     "vldmia %[q]!, {s0}\n\t"
+                     "vldmia %[lp]!, {s4}\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "subs %[k], %[k], #1\n\t"
+                     "bne 161b\n\t"
+                     "17:\n"
+                     "vstmia %[y]!, {s12}\n\t"
+                     "vadd.f32 %[t], %[t], s12\n\t"
+                     "18:"
+                     : [kp] "+&r"(kp), [lp] "+&r"(lp), [k0] "+&r"(bp), [y] "+&r"(yp), [n] "+&r"(n),
                        [t] "+t"(t), [p1] "=&r"(p1), [q] "=&r"(q), [k] "=&r"(k)
                      : [x] "r"(x), [v] "r"(v), [nx] "r"(nx), [nl] "r"(nl)
                      : "s0", "s1", "s2", "s3", "s4", "s5", "s6", "s7", "s8", "s9", "s10",
                        "s11", "s12", "s13", "cc", "memory");
 #else
     uint32_t n;
-    for (n = 0u; n < np; ++n) {
+    uint32_t c;
+    for (n = 0u; n < (nu >> 1); ++n) {
         stsp_f32_t r0 = -bp[0];
         stsp_f32_t r1 = -bp[1];
-        uint32_t c;
         for (c = 0u; c < nx; ++c) {
             r0 = stsp_mls(r0, kp[c], x[c]);
             r1 = stsp_mls(r1, kp[nx + c], x[c]);
@@ -169,6 +226,23 @@ stsp_law_pairs(const stsp_f32_t *x, const stsp_f32_t *v, uint32_t nx, uint32_t n
         t = (t + r0) + r1;
         bp = &bp[2];
         yp = &yp[2];
+    }
+    if ((nu & 1u) != 0u) {
+        stsp_f32_t acc = -bp[0];
+        for (c = 0u; c < nx; ++c) {
+            acc = stsp_mls(acc, kp[c], x[c]);
+        }
+        kp = &kp[nx];
+        if (nl > 0u) {
+            for (c = 0u; c < nl; ++c) {
+                acc = stsp_mls(acc, lp[c], v[c]);
+            }
+            lp = &lp[nl];
+        }
+        yp[0] = acc;
+        t = t + acc;
+        bp = &bp[1];
+        yp = &yp[1];
     }
 #endif
     *K = kp;

@@ -3,8 +3,10 @@
  * generic law evaluates as one pair of rows and whole groups of four columns. Here every shape
  * with nx 1..9, nu 1..5 and n_latch 0..6 (odd nu: a last row alone; nx, n_latch not multiples
  * of 4: the columns one at a time after the groups of four; n_latch 0: no L, passed as NULL)
- * steps a one-stage table of random gains through the latch (tick 0, cold path), an ordinary
- * tick (tick 1) and a repeat (tick 1 again, cold path), without limits and with limits that are
+ * steps a one-stage table of random gains through the latch (tick 0, cold path), two ordinary
+ * ticks (ticks 1 and 2: on the rows the cold path, then the ordinary tick, moved on to), a
+ * repeat (tick 2 again, cold path), an ordinary tick after it (tick 3, the table's last) and
+ * tick 4 (past the end: STSP_ERR_TICK_RANGE, u_hold), without limits and with limits that are
  * never reached, and compares every command bit for bit with the law written out here in the
  * documented order (stsp_controller.h), compiled with -ffp-contract=off like the firmware:
  *     v[c] = lambda0[c] + Lambda[c][0] x0[0] + ...,
@@ -20,7 +22,7 @@
 #define SHAPES_MAX_NX 9u
 #define SHAPES_MAX_NU 5u
 #define SHAPES_MAX_LATCH 6u
-#define SHAPES_TICKS 2u
+#define SHAPES_TICKS 4u
 
 static uint32_t rng_state = 12345u;
 
@@ -104,6 +106,7 @@ int main(void)
                 for (limited = 0; limited <= 1; ++limited) {
                     float x0[SHAPES_MAX_NX];
                     float x1[SHAPES_MAX_NX];
+                    float x2[SHAPES_MAX_NX];
                     float v[SHAPES_MAX_LATCH];
                     float u[SHAPES_MAX_NU];
                     float ref[SHAPES_MAX_NU];
@@ -128,11 +131,12 @@ int main(void)
                     for (i = 0u; i < nu; ++i) {
                         u_min[i] = (limited != 0) ? -1.0e6f : -FLT_MAX;
                         u_max[i] = (limited != 0) ? 1.0e6f : FLT_MAX;
-                        u_hold[i] = 0.0f;
+                        u_hold[i] = 0.25f;
                     }
                     for (j = 0u; j < nx; ++j) {
                         x0[j] = rnd();
                         x1[j] = rnd();
+                        x2[j] = rnd();
                     }
                     stage_n_latch[0] = (uint16_t)nl;
                     (void)memset(&t, 0, sizeof t);
@@ -170,8 +174,8 @@ int main(void)
                         }
                         v[i] = acc;
                     }
-                    /* Tick 0: the latch (cold path); tick 1: an ordinary tick; tick 1 again:
-                     * a repeat (cold path). */
+                    /* Tick 0: the latch (cold path); ticks 1, 2: ordinary; tick 2 again: a
+                     * repeat (cold path); tick 3: ordinary; tick 4: past the end. */
                     st = stsp_step(&ctrl, 0u, x0, u);
                     reference(nx, nu, nl, 0u, x0, v, ref);
                     failures += (uint32_t)check("latch", nx, nu, nl, limited, st, STSP_OK, u, ref);
@@ -179,10 +183,24 @@ int main(void)
                     reference(nx, nu, nl, 1u, x1, v, ref);
                     failures +=
                         (uint32_t)check("ordinary", nx, nu, nl, limited, st, STSP_OK, u, ref);
-                    st = stsp_step(&ctrl, 1u, x0, u);
-                    reference(nx, nu, nl, 1u, x0, v, ref);
+                    st = stsp_step(&ctrl, 2u, x2, u);
+                    reference(nx, nu, nl, 2u, x2, v, ref);
+                    failures +=
+                        (uint32_t)check("ordinary 2", nx, nu, nl, limited, st, STSP_OK, u, ref);
+                    st = stsp_step(&ctrl, 2u, x0, u);
+                    reference(nx, nu, nl, 2u, x0, v, ref);
                     failures += (uint32_t)check("repeat", nx, nu, nl, limited, st,
                                                 STSP_WARN_TICK_REPEATED, u, ref);
+                    st = stsp_step(&ctrl, 3u, x1, u);
+                    reference(nx, nu, nl, 3u, x1, v, ref);
+                    failures +=
+                        (uint32_t)check("ordinary 3", nx, nu, nl, limited, st, STSP_OK, u, ref);
+                    st = stsp_step(&ctrl, 4u, x2, u);
+                    for (i = 0u; i < nu; ++i) {
+                        ref[i] = u_hold[i];
+                    }
+                    failures += (uint32_t)check("past the end", nx, nu, nl, limited, st,
+                                                STSP_ERR_TICK_RANGE, u, ref);
                     ++shapes;
                 }
             }

@@ -837,6 +837,31 @@ static void test_shared_buffer_overflow_is_an_output_error(void **state)
  * and both limit settings, against a model of the documented contract: the status, the
  * command (double-precision reference, clamped), zeros on errors, the instance untouched by
  * errors. */
+/* The generic float32 build keeps the rows of K, k0 and L of tick next_tick in the instance
+ * (stsp_ctrl_t.rows). Between calls they are always those of next_tick in the arrays `t` (the
+ * table as init validated it) holds: one past the end of each after the last tick, L NULL
+ * without multipliers. A fixed-shape build has no such state. */
+#ifndef STSP_FIXED_NX
+static void assert_rows_of_next_tick(const stsp_ctrl_t *c, const stsp_table_t *t)
+{
+    const uint32_t n = c->next_tick;
+    assert_true(n <= t->n_ticks);
+    assert_ptr_equal(c->rows.K, &t->K[n * t->nu * t->nx]);
+    assert_ptr_equal(c->rows.k0, &t->k0[n * t->nu]);
+    if (t->n_latch > 0u) {
+        assert_ptr_equal(c->rows.L, &t->L[n * t->nu * t->n_latch]);
+    } else {
+        assert_null(c->rows.L);
+    }
+}
+#else
+static void assert_rows_of_next_tick(const stsp_ctrl_t *c, const stsp_table_t *t)
+{
+    (void)c;
+    (void)t;
+}
+#endif
+
 static uint32_t lcg(uint32_t *s)
 {
     *s = *s * 1664525u + 1013904223u;
@@ -885,6 +910,7 @@ static void test_random_walk_against_model(void **state)
             double ref, tol;
             if (r < 3u) {
                 assert_int_equal(stsp_reset(&c), STSP_OK);
+                assert_rows_of_next_tick(&c, t);
                 m_next = 0u; m_stage = 0u; m_latched = 0u;
                 continue;
             }
@@ -898,6 +924,7 @@ static void test_random_walk_against_model(void **state)
             }
             memcpy(&before, &c, sizeof c);
             st = stsp_step(&c, tick, x, u);
+            assert_rows_of_next_tick(&c, t);
             if (st < STSP_OK) {
                 /* every error: zeros, and the instance as it was */
                 assert_true(f32_bits(u[0]) == 0u);
@@ -960,6 +987,136 @@ static void test_random_walk_against_model(void **state)
     }
 }
 
+/* The rows the generic float32 build keeps (stsp_ctrl_t.rows) through every kind of step:
+ * init, ordinary ticks, a stage change (latch), a repeat, a skip, refused steps (order, range,
+ * a non-finite state on an ordinary tick), the end of the plan, reset, a re-init of the same
+ * instance with another table (no multipliers: L NULL), and a header changed after init (the
+ * rows come from the validated copy: those of the original arrays). */
+static void test_kept_rows_follow_next_tick(void **state)
+{
+    const float x[NX] = {0.5f, -0.25f}, bad[NX] = {NAN, 1.0f}, xb[1] = {2.0f};
+    const stsp_table_t orig = heap_table(make_table());
+    stsp_table_t t = orig, tb = make_table_b();
+    float u[NU], ub[2];
+    stsp_ctrl_t c, before;
+    uint32_t tick;
+    (void)state;
+    assert_int_equal(stsp_init(&c, &table), STSP_OK);
+    assert_rows_of_next_tick(&c, &table);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);      /* stage 0 latch */
+    assert_rows_of_next_tick(&c, &table);
+    assert_int_equal(stsp_step(&c, 1u, x, u), STSP_OK);      /* ordinary */
+    assert_int_equal(stsp_step(&c, 2u, x, u), STSP_OK);
+    assert_rows_of_next_tick(&c, &table);
+    memcpy(&before, &c, sizeof c);
+    assert_int_equal(stsp_step(&c, 1u, x, u), STSP_ERR_TICK_ORDER);
+    assert_int_equal(stsp_step(&c, NT, x, u), STSP_ERR_TICK_RANGE);
+    assert_memory_equal(&c, &before, sizeof c);
+    assert_int_equal(stsp_step(&c, 3u, x, u), STSP_OK);      /* stage 1 latch */
+    assert_rows_of_next_tick(&c, &table);
+    assert_int_equal(stsp_step(&c, 3u, x, u), STSP_WARN_TICK_REPEATED);
+    assert_rows_of_next_tick(&c, &table);
+    memcpy(&before, &c, sizeof c);
+    assert_int_equal(stsp_step(&c, 4u, bad, u), STSP_ERR_NONFINITE_STATE); /* ordinary tick */
+    assert_memory_equal(&c, &before, sizeof c);
+    assert_int_equal(stsp_step(&c, 4u, x, u), STSP_OK);      /* the table's last tick */
+    assert_int_equal(c.next_tick, NT);
+    assert_rows_of_next_tick(&c, &table);                     /* one past the end */
+    assert_int_equal(stsp_step(&c, NT, x, u), STSP_ERR_TICK_RANGE);
+    assert_rows_of_next_tick(&c, &table);
+    assert_int_equal(stsp_reset(&c), STSP_OK);
+    assert_rows_of_next_tick(&c, &table);
+    assert_int_equal(stsp_step(&c, 2u, x, u), STSP_WARN_TICK_SKIPPED);
+    assert_rows_of_next_tick(&c, &table);
+    /* Re-init with table B (two inputs, no multipliers) in the same instance. */
+    if (stsp_init(&c, &tb) == STSP_OK) {
+        assert_rows_of_next_tick(&c, &tb);
+        for (tick = 0u; tick < 3u; ++tick) {
+            assert_int_equal(stsp_step(&c, tick, xb, ub), STSP_OK);
+            assert_rows_of_next_tick(&c, &tb);
+            assert_true(ub[0] == -2.0f && ub[1] == -2.0f);
+        }
+    } else {
+        assert_int_equal(EXPECT_TABLE_B, STSP_ERR_BAD_DIMS);
+    }
+    /* A header changed after init: K moved to another array, more inputs, more ticks. */
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    assert_int_equal(stsp_step(&c, 0u, x, u), STSP_OK);
+    t.K = t.k0;
+    t.nu = NU + 1u;
+    t.n_ticks = NT + 1u;
+    for (tick = 1u; tick < NT; ++tick) {
+        assert_true(stsp_step(&c, tick, x, u) >= STSP_OK);
+        assert_rows_of_next_tick(&c, &orig);
+        assert_float_equal(u[0], reference_u(tick, x, x), 1e-5);
+    }
+    assert_int_equal(stsp_reset(&c), STSP_OK);
+    assert_rows_of_next_tick(&c, &orig);
+    free_heap_table(&orig);
+}
+
+/* Table C: nx 3, nu 3 (a pair of rows and an odd last row), n_latch 2, two stages of 3 ticks
+ * (stage 1 keeps stage 0's multipliers: stage_n_latch 0), random gains. An ordinary tick (on
+ * the rows the instance moved on to) gives the bits of the same tick stepped again (a repeat:
+ * the cold path, the rows from the tick index), and the rows kept stay those of next_tick. */
+#define C_NX 3u
+#define C_NU 3u
+#define C_NL 2u
+#define C_NT 6u
+static void test_ordinary_rows_equal_cold_rows(void **state)
+{
+    static const uint32_t c_start[3] = {0u, 3u, C_NT};
+    static const uint16_t c_n_latch[2] = {2u, 0u};
+    static float cK[C_NT * C_NU * C_NX], ck0[C_NT * C_NU], cL[C_NT * C_NU * C_NL];
+    static float cLambda[2u * C_NL * C_NX], clambda0[2u * C_NL];
+    static const float c_min[C_NU] = {-FLT_MAX, -FLT_MAX, -FLT_MAX};
+    static const float c_max[C_NU] = {FLT_MAX, FLT_MAX, FLT_MAX};
+    static const float c_hold[C_NU] = {0.0f, 0.0f, 0.0f};
+    uint32_t seed = 777u, i, tick;
+    stsp_table_t t = table_header(C_NX, C_NU, C_NL, 2u, C_NT, 10u);
+    stsp_ctrl_t c, ref;
+    (void)state;
+    for (i = 0u; i < C_NT * C_NU * C_NX; ++i) {
+        cK[i] = (float)((int32_t)(lcg(&seed) % 2001u) - 1000) / 337.0f;
+    }
+    for (i = 0u; i < C_NT * C_NU; ++i) {
+        ck0[i] = (float)((int32_t)(lcg(&seed) % 2001u) - 1000) / 411.0f;
+    }
+    for (i = 0u; i < C_NT * C_NU * C_NL; ++i) {
+        cL[i] = (float)((int32_t)(lcg(&seed) % 2001u) - 1000) / 293.0f;
+    }
+    for (i = 0u; i < 2u * C_NL * C_NX; ++i) {
+        cLambda[i] = (float)((int32_t)(lcg(&seed) % 2001u) - 1000) / 513.0f;
+    }
+    for (i = 0u; i < 2u * C_NL; ++i) {
+        clambda0[i] = (float)((int32_t)(lcg(&seed) % 2001u) - 1000) / 129.0f;
+    }
+    t.stage_start = c_start; t.stage_n_latch = c_n_latch;
+    t.K = cK; t.k0 = ck0; t.L = cL; t.Lambda = cLambda; t.lambda0 = clambda0;
+    t.u_min = c_min; t.u_max = c_max; t.u_hold = c_hold;
+    t.crc32 = stsp_table_crc32(&t);
+    if (stsp_init(&c, &t) != STSP_OK) {
+        assert_int_equal(stsp_init(&c, &t), STSP_ERR_BAD_DIMS); /* a fixed-shape build */
+        return;
+    }
+    assert_int_equal(stsp_init(&ref, &t), STSP_OK);
+    for (tick = 0u; tick < C_NT; ++tick) {
+        float x[C_NX], u[C_NU], u_ref[C_NU];
+        for (i = 0u; i < C_NX; ++i) {
+            x[i] = (float)((int32_t)(lcg(&seed) % 2001u) - 1000) / 97.0f;
+        }
+        assert_int_equal(stsp_step(&c, tick, x, u), STSP_OK);
+        assert_rows_of_next_tick(&c, &t);
+        assert_int_equal(stsp_step(&ref, tick, x, u_ref), STSP_OK);
+        if (tick > 0u) {
+            assert_int_equal(stsp_step(&ref, tick, x, u_ref), STSP_WARN_TICK_REPEATED);
+        }
+        for (i = 0u; i < C_NU; ++i) {
+            assert_int_equal(f32_bits(u[i]), f32_bits(u_ref[i]));
+        }
+    }
+}
+
 static void test_status_strings(void **state)
 {
     (void)state;
@@ -1003,6 +1160,8 @@ int main(void)
         cmocka_unit_test_setup(test_state_and_command_may_share_a_buffer, setup),
         cmocka_unit_test_setup(test_shared_buffer_overflow_is_an_output_error, setup),
         cmocka_unit_test_setup(test_random_walk_against_model, setup),
+        cmocka_unit_test_setup(test_kept_rows_follow_next_tick, setup),
+        cmocka_unit_test_setup(test_ordinary_rows_equal_cold_rows, setup),
         cmocka_unit_test_setup(test_status_strings, setup),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -365,6 +365,25 @@ typedef struct {
 } stsp_span_t;
 #endif
 
+#if !defined(STSP_ARITH_FIXED_POINT) && !defined(STSP_FIXED_NX)
+/**
+ * Private to the controller (float32, generic dimensions): where the rows of K, k0 and L of
+ * tick `next_tick` start, so that an ordinary tick reads them instead of multiplying its tick
+ * index by the row lengths. Derived from the validated header copy (stsp_header_t) at init,
+ * reset and every successful cold tick (stage change, latch, skip, repeat), and advanced by
+ * one tick's rows (nu nx, nu, nu n_latch entries: where the law's last row ends) by each
+ * successful ordinary tick; a refused step leaves them as they were. An ordinary tick
+ * (tick == next_tick < stage_end <= n_ticks) is the only reader, so they always point at rows
+ * inside the arrays init checked (at most one past the end, never read, after the table's
+ * last tick). L is the table's L (NULL allowed) when n_latch == 0.
+ */
+typedef struct {
+    const stsp_f32_t *K;
+    const stsp_f32_t *k0;
+    const stsp_f32_t *L;
+} stsp_rows_t;
+#endif
+
 /**
  * One controller instance; caller-owned (stack, static or a struct of the application).
  * Read-only for the caller: `sat_mask`, `stage`, `next_tick`, `latched`; the rest is private.
@@ -388,6 +407,9 @@ typedef struct {
                                           offsets are unchanged */
 #ifndef STSP_ARITH_FIXED_POINT
     stsp_span_t span;        /**< a spline table's current span (private) */
+#endif
+#if !defined(STSP_ARITH_FIXED_POINT) && !defined(STSP_FIXED_NX)
+    stsp_rows_t rows;        /**< the rows of tick next_tick (private; generic float32) */
 #endif
 } stsp_ctrl_t;
 

@@ -224,13 +224,11 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x
      * first latch, and never above n_ticks). Anything else takes the cold path; every tick
      * of a spline table (stage_end 0) its own, stsp_spline_step. */
     if ((tick != ctrl->next_tick) || (tick >= ctrl->stage_end)) {
-#ifndef STSP_ARITH_FIXED_POINT
         /* A spline table's tick (stsp_spline.c: init accepted the table, so that code is
          * linked). */
         if (ctrl->checked.spline != NULL) {
             return stsp_spline_step(ctrl, tick, x, u);
         }
-#endif
         return stsp_step_cold(ctrl, tick, x, u);
     }
     out = stsp_law(&ctrl->checked, tick, x, ctrl->v, y, ctrl->limited);

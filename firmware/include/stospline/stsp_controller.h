@@ -207,6 +207,7 @@ typedef enum {
                                          validated */
 } stsp_status_t;
 
+#ifndef STSP_ARITH_FIXED_POINT
 /**
  * Spline gains (format 5, float32 builds only): each stage's gains as cubic B-splines of the
  * tick, instead of one row per tick. Arrays concatenated over the stages s = 0..n_stages-1:
@@ -237,6 +238,50 @@ typedef struct {
     const uint32_t *coef_start;   /**< [n_stages + 1] */
     const stsp_f32_t *coef;       /**< [n_coef] */
 } stsp_spline_t;
+#endif
+
+#ifdef STSP_ARITH_FIXED_POINT
+/**
+ * Fixed-point spline gains (Q15/Q31 builds; issue 13's compressed format, host
+ * stospline.table.qspline): each stage's gains as uniform cubic B-splines of the tick, with
+ * integer coefficients in the per-tick format's scaling (negated, stsp_table_t). Stage s of
+ * T_s ticks has spans of D = 2^k ticks (k = span_log2[s] <= 9), S = ceil(T_s / D) spans and
+ * S + 3 coefficients per stored entry. Arrays concatenated over the stages s = 0..n_stages-1:
+ *   span_log2[s]: k of stage s;
+ *   col[row_start[s*nu + i] .. row_start[s*nu + i + 1]): the stored (nonzero) entries of stage
+ *     s, input i, each the index of its operand in z = [x, 1, v]: j < nx is K[i][j], j == nx
+ *     k0[i], j = nx + 1 + c is L[i][c]; an entry not stored is exactly 0;
+ *   shift[e]: entry e's scale s_e, in [1, 30];
+ *   coef[coef_start[s] .. coef_start[s+1]): the stage's S + 3 coefficients of each entry,
+ *     entry after entry in col order.
+ * At tick tau of the stage, sigma = tau >> k, d = tau & (D - 1), P0 = (D - d)^3,
+ * P1 = 4 D^3 - 3 d^2 (2 D - d), P3 = d^3, P2 = 6 D^3 - P0 - P1 - P3, and entry e's gain is
+ *     g = floor((c[sigma] P0 + c[sigma+1] P1 + c[sigma+2] P2 + c[sigma+3] P3) / 2^(3k + s_e)
+ *               + 1/2)
+ * exactly (one rounding; the sum in 64-bit integers), the per-tick table's stored gain.
+ * stsp_init() checks: the six arrays not NULL (else STSP_ERR_NULL); row_start[0] == 0,
+ * coef_start[0] == 0, both nondecreasing and ending at n_entries and n_coef; span_log2[s] <= 9;
+ * shift[e] in [1, 30]; col[e] < nx + 1 + n_latch and strictly increasing within each (stage,
+ * input) row; coef_start[s+1] - coef_start[s] == (entries of stage s) x (S_s + 3) (else
+ * STSP_ERR_BAD_DIMS); and, at every tick of the plan, every input's row of gains as evaluated
+ * with |k0| + sum|K| + sum|L| <= 2^F - 1, the per-tick format's row bound
+ * (STSP_ERR_BAD_VALUES): the law then cannot overflow (stsp_step).
+ */
+typedef struct {
+    uint32_t n_entries;          /**< length of col and shift */
+    uint32_t n_coef;             /**< length of coef */
+    const uint8_t *span_log2;    /**< [n_stages] */
+    const uint16_t *row_start;   /**< [n_stages * nu + 1] */
+    const uint8_t *col;          /**< [n_entries] */
+    const uint8_t *shift;        /**< [n_entries] */
+    const uint32_t *coef_start;  /**< [n_stages + 1] */
+    const stsp_scalar_t *coef;   /**< [n_coef] */
+} stsp_qspline_t;
+/** The spline gains of the build's arithmetic (stsp_table_t.spline). */
+typedef stsp_qspline_t stsp_spline_gains_t;
+#else
+typedef stsp_spline_t stsp_spline_gains_t;
+#endif
 
 /**
  * Generated gain tables plus the header that stsp_init() verifies.
@@ -291,10 +336,10 @@ typedef struct {
                                       requires q == stage_n_latch[0] and stage_n_latch[s] == 0 for
                                       s > 0 (one latch, at t0). float32 only: a fixed-point
                                       build refuses a table with one (STSP_ERR_BAD_DIMS) */
-    const stsp_spline_t *spline;  /**< NULL (gains per tick: K, k0, L), or the spline gains
-                                      (K, k0, L then NULL; not with band_qp: otherwise
-                                      STSP_ERR_BAD_DIMS). float32 only: a fixed-point build
-                                      refuses a table with one (STSP_ERR_BAD_DIMS) */
+    const stsp_spline_gains_t *spline; /**< NULL (gains per tick: K, k0, L), or the spline
+                                      gains (K, k0, L then NULL; not with band_qp: otherwise
+                                      STSP_ERR_BAD_DIMS): stsp_spline_t in a float32 build,
+                                      stsp_qspline_t in a Q15/Q31 build */
     uint32_t crc32;              /**< CRC-32 of dims and arrays, see stsp_table_crc32() */
     uint8_t problem_sha256[32];  /**< hash of the problem file the tables came from */
 } stsp_table_t;
@@ -330,10 +375,8 @@ typedef struct {
     uint16_t n_latch;
     uint16_t n_stages;
     const stsp_scalar_t *u_hold; /* last: the ordinary tick's offsets stay as they were */
-#ifndef STSP_ARITH_FIXED_POINT
-    const stsp_spline_t *spline;  /**< the table's pointer (NULL: gains per tick) */
-    stsp_spline_t sp;             /**< copy of *spline (all zero without one) */
-#endif
+    const stsp_spline_gains_t *spline; /**< the table's pointer (NULL: gains per tick) */
+    stsp_spline_gains_t sp;       /**< copy of *spline (all zero without one) */
 } stsp_header_t;
 
 #ifndef STSP_ARITH_FIXED_POINT

@@ -157,6 +157,9 @@ extern stsp_status_t stsp_spline_check_dims(const stsp_header_t *h) STSP_WEAK_SP
 /* init's value check of a fixed-point spline table (after its layout and CRC): every row of
  * gains at every tick within the law's bound (stsp_qspline_t). */
 extern stsp_status_t stsp_spline_check_values(const stsp_header_t *h) STSP_WEAK_SPLINE;
+/* The spline part of stsp_table_crc32()'s serialization (ns stages, nu inputs). */
+extern uint32_t stsp_spline_crc(uint32_t crc, const stsp_qspline_t *sp, uint32_t ns,
+                                uint32_t nu) STSP_WEAK_SPLINE;
 #endif
 #if (defined(__GNUC__) || defined(__clang__)) && defined(__ELF__)
 /* 1 when the spline code is linked into the program (its weak references resolved). */

@@ -12,6 +12,7 @@
 #define STSP_CLAMP_NO_FIXUP 1
 #include "stsp_law_q.h"
 #include "stsp_qspline.h"
+#include "stsp_crc32.h"
 #endif
 /* Of stsp_law.h only the alarm (stsp_law_alarm): not the per-tick law's out-of-line rows. */
 #define STSP_LAW_ALARM_ONLY 1
@@ -27,6 +28,31 @@
 const uint32_t stsp_spline_code = STSP_FORMAT_VERSION;
 
 #ifdef STSP_ARITH_FIXED_POINT
+/* The fixed-point spline part of stsp_table_crc32()'s serialization (called by stsp_crc_of):
+ * counts, then the six arrays, index arrays (span_log2, row_start, col, shift, coef_start) as
+ * u32 each, the coefficients as the table's scalars (little-endian int16 or int32). */
+uint32_t stsp_spline_crc(uint32_t crc, const stsp_qspline_t *sp, uint32_t ns, uint32_t nu)
+{
+    const uint32_t rows = (ns * nu) + 1u;
+    uint32_t c = crc;
+    uint32_t i;
+    c = stsp_crc32_u32(c, sp->n_entries);
+    c = stsp_crc32_u32(c, sp->n_coef);
+    for (i = 0u; i < ns; ++i) {
+        c = stsp_crc32_u32(c, (uint32_t)sp->span_log2[i]);
+    }
+    for (i = 0u; i < rows; ++i) {
+        c = stsp_crc32_u32(c, (uint32_t)sp->row_start[i]);
+    }
+    for (i = 0u; i < sp->n_entries; ++i) {
+        c = stsp_crc32_u32(c, (uint32_t)sp->col[i]);
+    }
+    for (i = 0u; i < sp->n_entries; ++i) {
+        c = stsp_crc32_u32(c, (uint32_t)sp->shift[i]);
+    }
+    c = stsp_crc32_u32s(c, sp->coef_start, ns + 1u);
+    return stsp_crc32_scalars(c, sp->coef, sp->n_coef);
+}
 /* A fixed-point spline table's layout (stsp_qspline_t): stsp_qspline_check with the validated
  * copy's dimensions. */
 stsp_status_t stsp_spline_check_dims(const stsp_header_t *h)

@@ -320,6 +320,7 @@ static void bad_tables_are_refused(void **state)
 static void crc_and_verify(void **state)
 {
     static stsp_scalar_t c2[48];
+    static uint8_t s2[6];
     stsp_table_t t = spline_table(no_min, no_max);
     stsp_qspline_t other = q_gains;
     const stsp_scalar_t x[NX] = {0, 0};
@@ -346,6 +347,17 @@ static void crc_and_verify(void **state)
     c2[20] = (stsp_scalar_t)(c2[20] + 1);    /* a coefficient changed after init */
     assert_int_equal(stsp_verify(&c), STSP_ERR_BAD_CRC);
     q_gains.coef = coef;
+    /* the shifts: covered by the CRC, and their array's address by the header check */
+    t.crc32 = stsp_table_crc32(&t);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    shift[0] = (uint8_t)(shift[0] + 1u);
+    assert_int_equal(stsp_verify(&c), STSP_ERR_BAD_CRC);
+    shift[0] = (uint8_t)(shift[0] - 1u);
+    assert_int_equal(stsp_init(&c, &t), STSP_OK);
+    memcpy(s2, shift, sizeof s2);
+    q_gains.shift = s2;                      /* the same shifts at another address */
+    assert_int_equal(stsp_verify(&c), STSP_ERR_TABLE_CHANGED);
+    q_gains.shift = shift;
 }
 
 int main(void)

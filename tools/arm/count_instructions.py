@@ -207,8 +207,15 @@ def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
         # float32: also the spline table of the robot's shape (tools/arm/spline_bench_table.c).
         links.append(("controller + spline bench table linked", ["spline_bench_table"],
                       [build / "libstsp_spline_bench_table.a", ctl]))
+    else:
+        # Q15/Q31: also the robot's spline table of that arithmetic (and the spline code it links).
+        links.append(("controller + spline tables linked",
+                      [f"robot_corridor{sfx}_spline_table",
+                       f"robot_corridor{sfx}_spline_spline_code"],
+                      [build / f"libstsp_gains_robot_corridor{sfx}_spline.a", ctl]))
     for what, extra_roots, libs in links:
         kind = ("spline" if "spline_bench_table" in extra_roots else
+                "qspline" if any(r.endswith("_spline_table") for r in extra_roots) else
                 "tables" if extra_roots else "ctl")
         elf = build / f"footprint_{Path(controller).stem}_{kind}.elf"
         cmd = (["arm-none-eabi-gcc", *CPU_FLAGS[cpu], "-nostdlib", "-nostartfiles",

@@ -64,6 +64,18 @@ def test_file_option_selects_the_spline(tmp_path, capsys):
     assert cert["spline_tolerance"] == 1e-3 and cert["kind"] == "spline"
 
 
+def test_file_options_select_the_fixed_point_spline(tmp_path, capsys):
+    text = (EXAMPLES / "robot_corridor.toml").read_text().replace(
+        'tick_hz = 1000\n', 'tick_hz = 1000\n\n[design]\narith = "q15"\ntable = "spline"\n', 1)
+    f = tmp_path / "robot.toml"
+    f.write_text(text)
+    assert main(["design", str(f), "--out", str(tmp_path / "out")]) == 0
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
+        f"robot_corridor_q15_spline.{s}" for s in ("c", "h", "json")]
+    cert = json.loads((tmp_path / "out" / "robot_corridor_q15_spline.json").read_text())["table"]
+    assert cert["kind"] == "spline" and cert["arith"] == "q15"
+
+
 @pytest.mark.parametrize("value", ["abc", "0", "1", "nan", "-1e-5"])
 def test_bad_tolerance_option(capsys, tmp_path, value):
     out = tmp_path / "out"

@@ -44,7 +44,8 @@ CRC = "firmware/src"
 PY_TESTS = ["tests/python/firmware/test_c_step_equals_law.py",
             "tests/python/sim/test_monte_carlo_vs_oracle.py",
             "tests/python/firmware/test_table_limits.py", "tests/python/firmware/test_fixed_point.py",
-            "tests/python/firmware/test_band_relatch.py", "tests/python/table/test_qspline_c.py"]
+            "tests/python/firmware/test_band_relatch.py", "tests/python/table/test_qspline_c.py",
+            "tests/python/firmware/test_qspline_controller.py"]
 CTEST_EXCLUDE = r"^(clang_|arm_|misra|consumer_)"
 
 
@@ -219,6 +220,21 @@ FAULTS = [
           "    const stsp_scalar_t *c = &sp->coef[sp->coef_start[s] + sigma];",
           "    const stsp_scalar_t *c =\n"
           "        &sp->coef[(sp->coef_start[s] + sigma) - ((sigma > 0u) ? 1u : 0u)];"),
+    # The fixed-point spline controller (stsp_spline.c, Q15/Q31 builds).
+    Fault("F50", "fixed-point spline row bound not checked at each stage's last tick", CTL,
+          "        for (tau = 0u; tau < ticks; ++tau) {",
+          "        for (tau = 0u; (tau + 1u) < ticks; ++tau) {"),
+    Fault("F51", "fixed-point spline law takes the first L gain for k0", CTL,
+          "            k0 = (j == nx) ? g : k0;", "            k0 = (j > nx) ? g : k0;"),
+    Fault("F52", "fixed-point spline step leaves stage_end set (next tick on the per-tick path)",
+          CTL, "    ctrl->stage_end = 0u;\n    return status;",
+          "    return status;"),
+    Fault("F53", "fixed-point spline CRC leaves out the coefficient scales", CTL,
+          "        c = stsp_crc32_u32(c, (uint32_t)sp->shift[i]);\n", ""),
+    Fault("F54", "stsp_verify misses a fixed-point spline's moved shift array", CTL,
+          "            (p->col != q->col) || (p->shift != q->shift) ||"
+          " (p->coef_start != q->coef_start) ||",
+          "            (p->col != q->col) || (p->coef_start != q->coef_start) ||"),
     # The band solver's non-symmetric path (a spline band table's W', stsp_bandqp.c).
     Fault("F58", "band solver, non-symmetric W: no partial pivoting (the diagonal pivot kept)",
           CTL, "                piv = i;\n", "                piv = k;\n"),

@@ -9,7 +9,8 @@
 # 8 rows of a band dual): no spline table; nor for coupled_axes, whose spline table is
 # certified but not reproducible byte for byte elsewhere: its re-solved latch maps move
 # with the design's last bits across float32 rounding boundaries
-# (docs/evidence/spline-tables.md).
+# (docs/evidence/spline-tables.md);
+# and the robot's fixed-point spline tables (<name>_q15_spline.*, <name>_q31_spline.*).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -21,4 +22,8 @@ for arith in q15 q31; do
 done
 for f in robot_corridor robot_corridor_eps01 robot_bands investment quadrotor population; do
   "$root/.venv/bin/stospline" design "examples/$f.toml" --table spline --out gains/
+done
+for arith in q15 q31; do
+  "$root/.venv/bin/stospline" design examples/robot_corridor.toml --arith "$arith" --table spline \
+    --out gains/
 done

@@ -324,13 +324,11 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x
 #if STSP_ROW_CACHE
         return stsp_step_other(ctrl, tick, x, u);
 #else
-#ifndef STSP_ARITH_FIXED_POINT
         /* A spline table's tick (stsp_spline.c: init accepted the table, so that code is
          * linked). */
         if (ctrl->checked.spline != NULL) {
             return stsp_spline_step(ctrl, tick, x, u);
         }
-#endif
         return stsp_step_cold(ctrl, tick, x, u);
 #endif
     }

@@ -54,7 +54,6 @@ uint32_t stsp_crc32_scalars(uint32_t crc, const stsp_scalar_t *values, uint32_t 
     return c;
 }
 
-#ifndef STSP_ARITH_FIXED_POINT
 uint32_t stsp_crc32_u32s(uint32_t crc, const uint32_t *values, uint32_t count)
 {
     uint32_t c = crc;
@@ -64,6 +63,8 @@ uint32_t stsp_crc32_u32s(uint32_t crc, const uint32_t *values, uint32_t count)
     }
     return c;
 }
+
+#ifndef STSP_ARITH_FIXED_POINT
 
 uint32_t stsp_crc32_f32s(uint32_t crc, const stsp_f32_t *values, uint32_t count)
 {

@@ -12,9 +12,9 @@ uint32_t stsp_crc32_u32(uint32_t crc, uint32_t value);
 /* Feed `count` table entries of the build's variant (stsp_table_crc32's serialization):
  * binary32 bit patterns, or Q15/Q31 integers as little-endian two's complement. */
 uint32_t stsp_crc32_scalars(uint32_t crc, const stsp_scalar_t *values, uint32_t count);
-#ifndef STSP_ARITH_FIXED_POINT
 /* Feed `count` u32 values (spline tables). */
 uint32_t stsp_crc32_u32s(uint32_t crc, const uint32_t *values, uint32_t count);
+#ifndef STSP_ARITH_FIXED_POINT
 /* Feed `count` binary32 values by their bit patterns (spline tables). */
 uint32_t stsp_crc32_f32s(uint32_t crc, const stsp_f32_t *values, uint32_t count);
 #endif

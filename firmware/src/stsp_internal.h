@@ -134,23 +134,33 @@ static inline int stsp_band_solver_linked(void) { return 1; }
 #endif
 #endif
 
-#ifndef STSP_ARITH_FIXED_POINT
 /* The spline tables' code (stsp_spline.c, about 4 KB on a Cortex-M4F) is linked only into
  * programs with a spline table, as the band solver: with GCC or clang on an ELF target the
- * controller refers to its two entry points weakly, and a generated spline table refers to
+ * controller refers to its entry points weakly, and a generated spline table refers to
  * stsp_spline_code (same object) strongly (<name>_spline_code). Without it stsp_init()
  * refuses a spline table (STSP_ERR_BAD_DIMS), so stsp_step() calls stsp_spline_step only when
- * it is linked. Elsewhere the references are ordinary ones. */
+ * it is linked. Elsewhere the references are ordinary ones. The same in the fixed-point builds
+ * (stsp_qspline_t tables; the object then holds the Q spline tick and checks, on
+ * stsp_qspline.c's evaluation). */
 #if (defined(__GNUC__) || defined(__clang__)) && defined(__ELF__)
 #define STSP_WEAK_SPLINE __attribute__((weak))
 #else
 #define STSP_WEAK_SPLINE
 #endif
 /* Every tick of a spline table (stsp_step() after its argument and ready checks). */
-extern stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_t *x,
-                                      stsp_f32_t *u) STSP_WEAK_SPLINE;
-/* init's checks of a spline table's layout (stsp_spline_t), on the header copy. */
+extern stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
+                                      stsp_scalar_t *u) STSP_WEAK_SPLINE;
+/* init's checks of a spline table's layout (stsp_spline_t, stsp_qspline_t), on the header
+ * copy. */
 extern stsp_status_t stsp_spline_check_dims(const stsp_header_t *h) STSP_WEAK_SPLINE;
+#ifdef STSP_ARITH_FIXED_POINT
+/* init's value check of a fixed-point spline table (after its layout and CRC): every row of
+ * gains at every tick within the law's bound (stsp_qspline_t). */
+extern stsp_status_t stsp_spline_check_values(const stsp_header_t *h) STSP_WEAK_SPLINE;
+/* The spline part of stsp_table_crc32()'s serialization (ns stages, nu inputs). */
+extern uint32_t stsp_spline_crc(uint32_t crc, const stsp_qspline_t *sp, uint32_t ns,
+                                uint32_t nu) STSP_WEAK_SPLINE;
+#endif
 #if (defined(__GNUC__) || defined(__clang__)) && defined(__ELF__)
 /* 1 when the spline code is linked into the program (its weak references resolved). */
 static inline int stsp_spline_linked(void)
@@ -159,7 +169,6 @@ static inline int stsp_spline_linked(void)
 }
 #else
 static inline int stsp_spline_linked(void) { return 1; }
-#endif
 #endif
 
 /* Value of stsp_ctrl_t.ready after a successful stsp_init(): a Thumb-2 immediate that no

@@ -17,45 +17,12 @@ uint32_t stsp_qspline_basis(uint32_t k, uint32_t tau, uint32_t *p)
     return tau >> k;
 }
 
-/* The gain biased by 2^(62 - sh): floor(acc / 2^sh + 1/2) + 2^(62 - sh), with acc the exact
- * sum. No signed shift: acc + 2^62 is in (0, 2^63) as |acc| < 2^61 (the unsigned sum wraps to
- * exactly that); floor((a + 2^(sh-1)) / 2^sh) = floor((floor(a / 2^(sh-1)) + 1) / 2) for
- * a >= 0, one variable shift; and 2^62 / 2^sh is an integer (sh <= 57). */
-static inline uint64_t stsp_qspline_biased(const stsp_scalar_t *c, const uint32_t *p,
-                                           uint32_t sh)
-{
-    /* p[r] <= 2^29: an int32, so each product is one 32 x 32 -> 64 multiply */
-    const int64_t t0 = (int64_t)c[0] * (int64_t)(int32_t)p[0];
-    const int64_t t1 = (int64_t)c[1] * (int64_t)(int32_t)p[1];
-    const int64_t t2 = (int64_t)c[2] * (int64_t)(int32_t)p[2];
-    const int64_t t3 = (int64_t)c[3] * (int64_t)(int32_t)p[3];
-    const int64_t acc = ((t0 + t1) + t2) + t3;
-    const uint64_t lifted = (uint64_t)acc + ((uint64_t)1u << 62u);
-    const uint32_t down = sh - 1u;
-    const uint64_t halves = lifted >> down;
-    const uint64_t up = halves + 1u;
-    return up >> 1u;
-}
-
 int64_t stsp_qspline_value(const stsp_scalar_t *c, const uint32_t *p, uint32_t sh)
 {
     const uint64_t biased = stsp_qspline_biased(c, p, sh);
     const uint32_t bias_bit = 62u - sh;
     const uint64_t bias = (uint64_t)1u << bias_bit;
     return (int64_t)biased - (int64_t)bias;
-}
-
-/* stsp_qspline_value's low 32 bits, as a stsp_scalar_t: the value itself when it fits (the
- * table's row sums ensure it), from 32-bit arithmetic for the bias. */
-static inline stsp_scalar_t stsp_qspline_narrow(const stsp_scalar_t *c, const uint32_t *p,
-                                                uint32_t sh)
-{
-    const uint64_t biased = stsp_qspline_biased(c, p, sh);
-    const uint32_t bias_bit = 62u - sh;
-    const uint32_t bias = (bias_bit < 32u) ? ((uint32_t)1u << bias_bit) : 0u;
-    const uint32_t low = (uint32_t)biased;
-    const uint32_t value = low - bias;
-    return (stsp_scalar_t)(int32_t)value;
 }
 
 /* Stage s's spans: S = ceil(T / 2^k). */

@@ -1,8 +1,8 @@
 /* Fixed-point (Q15/Q31) spline gains: the evaluation of issue 13's compressed format in the
  * fixed-point builds (host: stospline/table/qspline.py, whose evaluate_q it reproduces bit for
- * bit). Private: not installed. stsp_init() does not take such a table yet: this is the
- * per-tick evaluation the controller will call, tested on its own (tests/c/test_qspline.c,
- * tests/python/table/test_qspline_c.py).
+ * bit). Private: not installed. The per-tick evaluation, tested on its own
+ * (tests/c/test_qspline.c, tests/python/table/test_qspline_c.py); the controller's Q spline
+ * tick (stsp_spline.c) uses stsp_qspline_basis and stsp_qspline_narrow below.
  *
  * Per stage s of T_s ticks, spans of D = 2^k ticks (k = span_log2[s] <= 9), S = ceil(T_s / D)
  * spans, S + 3 coefficients per stored entry. At tick tau of the stage, sigma = tau >> k,
@@ -24,30 +24,49 @@
 #define STSP_QSPLINE_MAX_SPAN_LOG2 9u
 #define STSP_QSPLINE_MAX_SHIFT 30u
 
-/* The arrays of stospline.table.qspline.QSplineGains, concatenated over the stages:
- *   span_log2[s]: k of stage s;
- *   col[row_start[s*nu + i] .. row_start[s*nu + i + 1]): stage s, input i's stored entries,
- *     each the index of its operand in z = [x, 1, v] (increasing);
- *   shift[e]: entry e's s_e, in [1, STSP_QSPLINE_MAX_SHIFT];
- *   coef[coef_start[s] .. coef_start[s+1]): (S + 3) integers per entry, entry after entry. */
-typedef struct {
-    uint32_t n_entries;          /* length of col and shift */
-    uint32_t n_coef;             /* length of coef */
-    const uint8_t *span_log2;    /* [n_stages] */
-    const uint16_t *row_start;   /* [n_stages * nu + 1] */
-    const uint8_t *col;          /* [n_entries] */
-    const uint8_t *shift;        /* [n_entries] */
-    const uint32_t *coef_start;  /* [n_stages + 1] */
-    const stsp_scalar_t *coef;   /* [n_coef] */
-} stsp_qspline_t;
+/* stsp_qspline_t (the arrays of stospline.table.qspline.QSplineGains) is public: a Q15/Q31
+ * table's spline member (stospline/stsp_controller.h). */
 
 /* sigma of tick tau in a stage of spans 2^k, and P[0..3] (k <= 9). */
 uint32_t stsp_qspline_basis(uint32_t k, uint32_t tau, uint32_t *p);
 
+/* The gain biased by 2^(62 - sh): floor(acc / 2^sh + 1/2) + 2^(62 - sh), with acc the exact
+ * sum. No signed shift: acc + 2^62 is in (0, 2^63) as |acc| < 2^61 (the unsigned sum wraps to
+ * exactly that); floor((a + 2^(sh-1)) / 2^sh) = floor((floor(a / 2^(sh-1)) + 1) / 2) for
+ * a >= 0, one variable shift; and 2^62 / 2^sh is an integer (sh <= 57). */
+static inline uint64_t stsp_qspline_biased(const stsp_scalar_t *c, const uint32_t *p,
+                                           uint32_t sh)
+{
+    /* p[r] <= 2^29: an int32, so each product is one 32 x 32 -> 64 multiply */
+    const int64_t t0 = (int64_t)c[0] * (int64_t)(int32_t)p[0];
+    const int64_t t1 = (int64_t)c[1] * (int64_t)(int32_t)p[1];
+    const int64_t t2 = (int64_t)c[2] * (int64_t)(int32_t)p[2];
+    const int64_t t3 = (int64_t)c[3] * (int64_t)(int32_t)p[3];
+    const int64_t acc = ((t0 + t1) + t2) + t3;
+    const uint64_t lifted = (uint64_t)acc + ((uint64_t)1u << 62u);
+    const uint32_t down = sh - 1u;
+    const uint64_t halves = lifted >> down;
+    const uint64_t up = halves + 1u;
+    return up >> 1u;
+}
+
+/* stsp_qspline_value's low 32 bits, as a stsp_scalar_t: the value itself when it fits (the
+ * table's row sums ensure it), from 32-bit arithmetic for the bias. */
+static inline stsp_scalar_t stsp_qspline_narrow(const stsp_scalar_t *c, const uint32_t *p,
+                                                uint32_t sh)
+{
+    const uint64_t biased = stsp_qspline_biased(c, p, sh);
+    const uint32_t bias_bit = 62u - sh;
+    const uint32_t bias = (bias_bit < 32u) ? ((uint32_t)1u << bias_bit) : 0u;
+    const uint32_t low = (uint32_t)biased;
+    const uint32_t value = low - bias;
+    return (stsp_scalar_t)(int32_t)value;
+}
+
 /* One gain from its four coefficients of the span c[0..3] and P[0..3], sh = 3k + s_e in
  * [1, 57]: the exact rounded value (at most 3 2^31 in magnitude). It fits stsp_scalar_t when
  * the table's rows sum to at most 2^F - 1 in magnitude, as every valid table's do (the host
- * checks it; stsp_init() will, once it takes these tables). */
+ * checks it, and stsp_init() at every tick). */
 int64_t stsp_qspline_value(const stsp_scalar_t *c, const uint32_t *p, uint32_t sh);
 
 /* 0 (STSP_OK) when the layout of `sp` for n_stages stages (first ticks stage_start[0..

@@ -8,17 +8,196 @@
 
 #ifndef STSP_ARITH_FIXED_POINT
 #include "stsp_law_f32.h"
+#else
+#define STSP_CLAMP_NO_FIXUP 1
+#include "stsp_law_q.h"
+#include "stsp_qspline.h"
+#include "stsp_crc32.h"
+#endif
 /* Of stsp_law.h only the alarm (stsp_law_alarm): not the per-tick law's out-of-line rows. */
 #define STSP_LAW_ALARM_ONLY 1
 #include "stsp_law.h"
+#ifndef STSP_ARITH_FIXED_POINT
 #include "stsp_law_spline.h"
+#endif
 #define STSP_PLAN_BAND 1
 #include "stsp_plan.h"
-#endif
 
-/* The symbol a generated spline table refers to (also in fixed-point builds, which refuse
- * spline tables: a table generated for float32 then still links, and init says why). */
+/* The symbol a generated spline table refers to (float32: stsp_spline_t, Q15/Q31:
+ * stsp_qspline_t tables). */
 const uint32_t stsp_spline_code = STSP_FORMAT_VERSION;
+
+#ifdef STSP_ARITH_FIXED_POINT
+/* The fixed-point spline part of stsp_table_crc32()'s serialization (called by stsp_crc_of):
+ * counts, then the six arrays, index arrays (span_log2, row_start, col, shift, coef_start) as
+ * u32 each, the coefficients as the table's scalars (little-endian int16 or int32). */
+uint32_t stsp_spline_crc(uint32_t crc, const stsp_qspline_t *sp, uint32_t ns, uint32_t nu)
+{
+    const uint32_t rows = (ns * nu) + 1u;
+    uint32_t c = crc;
+    uint32_t i;
+    c = stsp_crc32_u32(c, sp->n_entries);
+    c = stsp_crc32_u32(c, sp->n_coef);
+    for (i = 0u; i < ns; ++i) {
+        c = stsp_crc32_u32(c, (uint32_t)sp->span_log2[i]);
+    }
+    for (i = 0u; i < rows; ++i) {
+        c = stsp_crc32_u32(c, (uint32_t)sp->row_start[i]);
+    }
+    for (i = 0u; i < sp->n_entries; ++i) {
+        c = stsp_crc32_u32(c, (uint32_t)sp->col[i]);
+    }
+    for (i = 0u; i < sp->n_entries; ++i) {
+        c = stsp_crc32_u32(c, (uint32_t)sp->shift[i]);
+    }
+    c = stsp_crc32_u32s(c, sp->coef_start, ns + 1u);
+    return stsp_crc32_scalars(c, sp->coef, sp->n_coef);
+}
+/* A fixed-point spline table's layout (stsp_qspline_t): stsp_qspline_check with the validated
+ * copy's dimensions. */
+stsp_status_t stsp_spline_check_dims(const stsp_header_t *h)
+{
+    const uint32_t nz = (uint32_t)h->nx + 1u + h->n_latch;
+    return stsp_qspline_check(&h->sp, h->stage_start, h->n_stages, h->nu, nz);
+}
+
+/* Stage s's coefficients per entry, S + 3 (the layout check made the stage's count that
+ * times its `entries`), or 0 for a stage without entries. */
+static uint32_t stsp_qspline_stride(const stsp_qspline_t *sp, uint32_t s, uint32_t entries)
+{
+    uint32_t stride = 0u;
+    if (entries > 0u) {
+        stride = (sp->coef_start[s + 1u] - sp->coef_start[s]) / entries;
+    }
+    return stride;
+}
+
+/* Every law row of a fixed-point spline table, at every tick of every stage: the gains as
+ * evaluated (exact, stsp_qspline_value) with |k0| + sum|K| + sum|L| <= 2^F - 1, the per-tick
+ * format's row bound (stsp_check_values), so that stsp_spline_step's law cannot overflow and
+ * every gain fits stsp_scalar_t. One evaluation per stored entry and tick (init only). */
+stsp_status_t stsp_spline_check_values(const stsp_header_t *h)
+{
+    const stsp_qspline_t *sp = &h->sp;
+    const uint64_t row_max = (uint64_t)STSP_Q_ONE - 1u;
+    const uint32_t nu = h->nu;
+    uint32_t s;
+    for (s = 0u; s < h->n_stages; ++s) {
+        const uint32_t k = sp->span_log2[s];
+        const uint32_t ticks = h->stage_start[s + 1u] - h->stage_start[s];
+        const uint32_t entries = (uint32_t)sp->row_start[(s + 1u) * nu] - sp->row_start[s * nu];
+        const uint32_t stride = stsp_qspline_stride(sp, s, entries);
+        uint32_t tau;
+        for (tau = 0u; tau < ticks; ++tau) {
+            uint32_t p[4];
+            const uint32_t sigma = stsp_qspline_basis(k, tau, p);
+            const stsp_scalar_t *c =
+                (entries > 0u) ? &sp->coef[sp->coef_start[s] + sigma] : sp->coef;
+            uint32_t e = sp->row_start[s * nu];
+            uint32_t i;
+            for (i = 0u; i < nu; ++i) {
+                const uint32_t end = sp->row_start[(s * nu) + i + 1u];
+                uint64_t sum = 0u;
+                for (; e < end; ++e) {
+                    const int64_t g = stsp_qspline_value(c, p, (3u * k) + sp->shift[e]);
+                    /* |g| <= 3 2^31: the sum of at most 256 cannot wrap */
+                    sum += (uint64_t)((g < 0) ? -g : g);
+                    c = &c[stride];
+                }
+                if (sum > row_max) {
+                    return STSP_ERR_BAD_VALUES;
+                }
+            }
+        }
+    }
+    return STSP_OK;
+}
+
+/* The fixed-point spline law at tick tau of stage s with multipliers v, into y (never the
+ * caller's u): per input i, over its stored entries e in order, the gain g_e (stsp_qspline.h,
+ * exact, one rounding) and
+ *     acc = 2^(2F) + 2^(F-1) + sum_e g_e z[col_e],  z = [x, 0, v],
+ *     y[i] = (acc >> F) - 2^F + g_k0     (g_k0: the gain of col nx, k0[i]; 0 if not stored)
+ * the per-tick law (stsp_law_q.h) with the evaluated gains, bit for bit (the sum is exact, so
+ * its order does not matter). Returns stsp_law_alarm(). Time: the same at every tick of a
+ * stage (its entries), the largest stage's at most. */
+static STSP_ALWAYS_INLINE uint32_t stsp_qspline_law(const stsp_header_t *h, uint32_t s,
+                                                    uint32_t tau, const stsp_scalar_t *x,
+                                                    const stsp_scalar_t *v, stsp_scalar_t *y,
+                                                    uint32_t limited)
+{
+    const stsp_qspline_t *sp = &h->sp;
+    const uint32_t nx = stsp_nx(h);
+    const uint32_t nu = stsp_nu(h);
+    const uint32_t n_latch = stsp_n_latch(h);
+    const uint32_t k = sp->span_log2[s];
+    const uint32_t k3 = 3u * k;
+    const uint32_t entries = (uint32_t)sp->row_start[(s + 1u) * nu] - sp->row_start[s * nu];
+    const uint32_t stride = stsp_qspline_stride(sp, s, entries);
+    stsp_scalar_t z[STSP_MAX_NX + 1u + STSP_MAX_LATCH];
+    uint32_t p[4];
+    const uint32_t sigma = stsp_qspline_basis(k, tau, p);
+    const uint8_t *col = sp->col;
+    const uint8_t *shift = sp->shift;
+    /* no pointer arithmetic past the array when the stage has no entries */
+    const stsp_scalar_t *c = (entries > 0u) ? &sp->coef[sp->coef_start[s] + sigma] : sp->coef;
+    uint32_t e = sp->row_start[s * nu];
+    uint32_t i;
+    for (i = 0u; i < nx; ++i) {
+        z[i] = x[i];
+    }
+    z[nx] = (stsp_scalar_t)0;
+    for (i = 0u; i < n_latch; ++i) {
+        z[nx + 1u + i] = v[i];
+    }
+    for (i = 0u; i < nu; ++i) {
+        const uint32_t end = sp->row_start[(s * nu) + i + 1u];
+        stsp_uacc_t acc = stsp_q_start();
+        stsp_scalar_t k0 = (stsp_scalar_t)0;
+        for (; e < end; ++e) {
+            const uint32_t j = col[e];
+            const stsp_scalar_t g = stsp_qspline_narrow(c, p, k3 + shift[e]);
+            acc = stsp_q_mac(acc, g, z[j]);
+            k0 = (j == nx) ? g : k0;
+            c = &c[stride];
+        }
+        y[i] = stsp_q_round(acc, k0);
+    }
+    return stsp_law_alarm(h, y, limited);
+}
+
+/* Every tick of a fixed-point spline table (its stage_end stays 0, so each leaves stsp_step's
+ * ordinary path): the per-tick cold path's plan (range, order, stage, latch) and commit, the
+ * spline law at the tick, the clamp. There is no non-finite case (integers). */
+stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
+                               stsp_scalar_t *u)
+{
+    const stsp_header_t *h = &ctrl->checked;
+    stsp_scalar_t v_new[STSP_MAX_LATCH];
+    stsp_scalar_t y[STSP_MAX_NU];
+    stsp_plan_t plan = {0u, 0u};
+    stsp_status_t status;
+    uint16_t mask = 0u;
+    stsp_zero(v_new, STSP_MAX_LATCH);
+    status = stsp_plan(ctrl, tick, x, v_new, &plan);
+    if (status < STSP_OK) {
+        stsp_hold(ctrl, u);
+        return status;
+    }
+    if (stsp_qspline_law(h, plan.stage, tick - h->stage_start[plan.stage], x, v_new, y,
+                         ctrl->limited) != 0u) {
+        const stsp_status_t st = stsp_limit(h, x, y, &mask);
+        if (st != STSP_OK) {
+            status = st; /* STSP_WARN_SATURATED over a tick warning */
+        }
+    }
+    stsp_copy(u, y, stsp_nu(h));
+    ctrl->sat_mask = mask;
+    stsp_commit(ctrl, tick, &plan, v_new);
+    ctrl->stage_end = 0u;
+    return status;
+}
+#endif
 
 #ifndef STSP_ARITH_FIXED_POINT
 

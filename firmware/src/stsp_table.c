@@ -31,11 +31,11 @@ void stsp_copy_header(stsp_header_t *h, const stsp_table_t *t)
     if (t->band_qp != NULL) {
         h->band = *t->band_qp;
     }
+#endif
     h->spline = t->spline;
     if (t->spline != NULL) {
         h->sp = *t->spline;
     }
-#endif
     h->n_ticks = t->n_ticks;
     h->nx = t->nx;
     h->nu = t->nu;
@@ -62,8 +62,22 @@ int stsp_header_changed(const stsp_header_t *h, const stsp_table_t *t)
     }
 #ifdef STSP_ARITH_FIXED_POINT
     if ((t->x_exp != h->x_exp) || (t->u_exp != h->u_exp) || (t->v_exp != h->v_exp) ||
-        (t->band_qp != NULL) || (t->spline != NULL)) {
+        (t->band_qp != NULL)) {
         changed = 1;
+    }
+    if (t->spline != h->spline) {
+        changed = 1;
+    } else if (t->spline != NULL) {
+        const stsp_qspline_t *p = t->spline;
+        const stsp_qspline_t *q = &h->sp;
+        if ((p->n_entries != q->n_entries) || (p->n_coef != q->n_coef) ||
+            (p->span_log2 != q->span_log2) || (p->row_start != q->row_start) ||
+            (p->col != q->col) || (p->shift != q->shift) || (p->coef_start != q->coef_start) ||
+            (p->coef != q->coef)) {
+            changed = 1;
+        }
+    } else {
+        /* gains per tick, as validated */
     }
 #else
     if (t->band_qp != h->band_qp) {
@@ -171,10 +185,11 @@ static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, i
         }
     }
 #ifdef STSP_ARITH_FIXED_POINT
-    /* The band solver latches binary32 multipliers, and spline gains are binary32: float32
-     * tables only. */
-    return ((has_band != 0) || (has_spline != 0)) ? STSP_ERR_BAD_DIMS : STSP_OK;
-#else
+    /* The band solver latches binary32 multipliers: float32 tables only. */
+    if (has_band != 0) {
+        return STSP_ERR_BAD_DIMS;
+    }
+#endif
     if (has_spline != 0) {
         /* cppcheck-suppress knownConditionTrueFalse ; link-dependent (a weak reference) */
         if (stsp_spline_linked() == 0) {
@@ -187,6 +202,9 @@ static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, i
             }
         }
     }
+#ifdef STSP_ARITH_FIXED_POINT
+    return STSP_OK;
+#else
     return (has_band != 0) ? stsp_check_band_dims(t) : STSP_OK;
 #endif
 }
@@ -219,7 +237,9 @@ static int stsp_q_exps_ok(const int8_t *e, uint32_t count)
 /* Fixed point: exponents in range; every law row (tick, input) with
  * |k0| + sum_j |K| + sum_c |L| <= 2^F - 1 and every latch row with |lambda0| + sum_j |Lambda|
  * <= 2^F - 1, the condition under which stsp_law and the latch cannot overflow or leave the
- * Q range (stsp_step); limits with u_min <= u_hold <= u_max. */
+ * Q range (stsp_step); limits with u_min <= u_hold <= u_max. A spline table's law rows are its
+ * gains as evaluated at each tick (stsp_spline_check_values, stsp_spline.c: linked, as its
+ * layout check passed). */
 static stsp_status_t stsp_check_values(const stsp_header_t *t)
 {
     const stsp_uacc_t row_max = (stsp_uacc_t)STSP_Q_ONE - 1u;
@@ -231,7 +251,13 @@ static stsp_status_t stsp_check_values(const stsp_header_t *t)
         ((n_latch > 0u) && (stsp_q_exps_ok(t->v_exp, n_latch) == 0))) {
         return STSP_ERR_BAD_VALUES;
     }
-    for (r = 0u; r < (t->n_ticks * nu); ++r) {
+    if (t->spline != NULL) {
+        const stsp_status_t st = stsp_spline_check_values(t);
+        if (st != STSP_OK) {
+            return st;
+        }
+    }
+    for (r = 0u; (t->spline == NULL) && (r < (t->n_ticks * nu)); ++r) {
         stsp_uacc_t sum = stsp_q_abs_sum(&t->k0[r], 1u) + stsp_q_abs_sum(&t->K[r * nx], nx);
         if (n_latch > 0u) {
             sum += stsp_q_abs_sum(&t->L[r * n_latch], n_latch);
@@ -394,15 +420,12 @@ static uint32_t stsp_crc_spline(uint32_t crc, const stsp_spline_t *sp, uint32_t 
 uint32_t stsp_crc_of(const stsp_header_t *table, const stsp_table_t *scalars)
 {
 #ifdef STSP_ARITH_FIXED_POINT
-    /* Only stsp_table_crc32() of a table init would refuse can have a band dual here. A spline
-     * table is refused before its CRC: its arrays are not serialised (K, k0, L, which it need
-     * not have, are left out as in a float32 build). */
+    /* Only stsp_table_crc32() of a table init would refuse can have a band dual here. */
     const stsp_bandqp_t *b = scalars->band_qp;
-    const stsp_spline_t *sp = scalars->spline;
 #else
     const stsp_bandqp_t *b = (table->band_qp != NULL) ? &table->band : NULL;
-    const stsp_spline_t *sp = (table->spline != NULL) ? &table->sp : NULL;
 #endif
+    const stsp_spline_gains_t *sp = (table->spline != NULL) ? &table->sp : NULL;
     const uint32_t nx = table->nx;
     const uint32_t nu = table->nu;
     const uint32_t n_latch = table->n_latch;
@@ -444,6 +467,12 @@ uint32_t stsp_crc_of(const stsp_header_t *table, const stsp_table_t *scalars)
     crc = stsp_crc32_i8s(crc, table->u_exp, nu);
     if (n_latch > 0u) {
         crc = stsp_crc32_i8s(crc, table->v_exp, n_latch);
+    }
+    /* In stsp_spline.c (linked only with a spline table): a program without it refuses a
+     * spline table at init, before its CRC, and its stsp_table_crc32() leaves the spline out. */
+    /* cppcheck-suppress knownConditionTrueFalse ; link-dependent (a weak reference) */
+    if ((sp != NULL) && (stsp_spline_linked() != 0)) {
+        crc = stsp_spline_crc(crc, sp, ns, nu);
     }
 #else
     if (sp != NULL) {

@@ -16,6 +16,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse                                                  # noqa: E402
+import json                                                      # noqa: E402
 import math                                                      # noqa: E402
 import re                                                        # noqa: E402
 import sys                                                       # noqa: E402
@@ -65,9 +66,6 @@ def _design(args) -> int:
     problem = load_problem(args.problem)
     arith = args.arith or problem.options.get("arith", "float32")
     spline = _options(args, problem)["table"] == "spline"
-    if spline and arith != "float32":
-        raise ProblemError("--table" if args.table else "design.table",
-                           f"spline tables are float32 only, not {arith}")
     if args.out:
         stem = (problem.name if arith == "float32" else f"{problem.name}_{arith}") \
             + ("_spline" if spline else "")
@@ -82,7 +80,10 @@ def _design(args) -> int:
         print(files[next(k for k in files if k.endswith(".json"))], end="")
     else:
         from stospline.report.summary_text import design_summary_text
-        print(design_summary_text(d, arith), end="")
+        q_cert = None
+        if spline and arith != "float32":
+            q_cert = json.loads(files[next(k for k in files if k.endswith(".json"))])["table"]
+        print(design_summary_text(d, arith, q_cert), end="")
         for path in written if args.out else []:
             print(f"wrote {path}")
     return 0

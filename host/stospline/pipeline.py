@@ -403,8 +403,8 @@ def fixed_point_table(d: Designed, arith: str, *, sigmas: float = DEFAULT_SIGMAS
 def fixed_point_spline(d: Designed, arith: str, *, tolerance: float | None = None,
                        sigmas: float = DEFAULT_SIGMAS, x_range=None
                        ) -> tuple[FixedPointTable, dict]:
-    """A Q15/Q31 spline table of a design and its certificate (host side: the firmware and
-    the C code generation do not take it yet, `generated_files` refuses it).
+    """A Q15/Q31 spline table of a design and its certificate (`generated_files` writes it as
+    ``<name>_<arith>_spline.{h,c,json}``; the firmware runs it, stsp_qspline_t).
 
     The gains of the per-tick Q table (`fixed_point_table`, same scales) as uniform cubic
     B-splines with integer coefficients, evaluated in exact integer arithmetic
@@ -463,7 +463,13 @@ def generated_files(d: Designed, source_name: str, arith: str = "float32", *,
     if arith == "float32":
         table, n = d.table, d.table.name
     elif d.table.spline is not None:
-        raise DesignError("design.table", f"spline tables are float32 only, not {arith}")
+        # The Q15/Q31 spline table (`fixed_point_spline`): its scales and error bound, and its
+        # own certificate in place of the float32 spline's.
+        table, q_cert = fixed_point_spline(d, arith)
+        limits.check_table(table)
+        n = table.name
+        summary["fixed"] = _r({**table.summary(), "state_sigmas": DEFAULT_SIGMAS})
+        summary["table"] = q_cert
     else:
         try:
             table = fixed_point_table(d, arith)

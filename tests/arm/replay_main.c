@@ -17,7 +17,8 @@
  * in units in the last place; 0 means bit-identical.
  *
  * Testing the test: REPLAY_PERTURB_COEF=<n> (spline images; run_replay.sh --perturb-coef) binds
- * every run to a RAM copy of the spline whose coefficient n is one ulp larger, with the table's
+ * every run to a RAM copy of the spline whose coefficient n is one ulp (fixed point: one unit)
+ * larger (smaller at the top of the range), with the table's
  * CRC-32 recomputed on the target so that init accepts it: the commands must then differ. */
 #include <stdint.h>
 #include <stdio.h>
@@ -69,26 +70,40 @@ static uint32_t ulp_distance(stsp_f32_t a, stsp_f32_t b)
 #error "REPLAY_PERTURB_COEF: spline images only"
 #endif
 #define REPLAY_MAX_COEF 4096u
-static stsp_spline_t perturbed_spline;
-static stsp_f32_t perturbed_coef[REPLAY_MAX_COEF];
+static stsp_spline_gains_t perturbed_spline;
+static stsp_scalar_t perturbed_coef[REPLAY_MAX_COEF];
 
 /* t with its spline replaced by a RAM copy whose coefficient REPLAY_PERTURB_COEF is one ulp
- * up, and the CRC recomputed (0 if the table does not allow it). */
+ * (fixed point: one unit) up, or down at the top of the range, and the CRC recomputed (0 if
+ * the table does not allow it). */
 static int perturb_table(stsp_table_t *t)
 {
-    const stsp_spline_t *sp = t->spline;
-    uint32_t bits;
+    const stsp_spline_gains_t *sp = t->spline;
     if ((sp == NULL) || (sp->n_coef > REPLAY_MAX_COEF) ||
         ((uint32_t)(REPLAY_PERTURB_COEF) >= sp->n_coef)) {
         return 0;
     }
     perturbed_spline = *sp;
-    (void)memcpy(perturbed_coef, sp->coef, sizeof(stsp_f32_t) * sp->n_coef);
-    (void)memcpy(&bits, &perturbed_coef[REPLAY_PERTURB_COEF], sizeof bits);
-    printf("replay: PERTURBED coefficient %u: 0x%08lX -> 0x%08lX\n",
-           (unsigned)(REPLAY_PERTURB_COEF), (unsigned long)bits, (unsigned long)(bits + 1u));
-    bits += 1u; /* one ulp away from zero */
-    (void)memcpy(&perturbed_coef[REPLAY_PERTURB_COEF], &bits, sizeof bits);
+    (void)memcpy(perturbed_coef, sp->coef, sizeof(stsp_scalar_t) * sp->n_coef);
+#ifdef STSP_ARITH_FIXED_POINT
+    {
+        const stsp_scalar_t c = perturbed_coef[REPLAY_PERTURB_COEF];
+        const stsp_scalar_t d = (c < (stsp_scalar_t)(((uint32_t)1u << STSP_Q_FRAC_BITS) - 1u))
+                                    ? (stsp_scalar_t)(c + 1) : (stsp_scalar_t)(c - 1);
+        printf("replay: PERTURBED coefficient %u: %ld -> %ld\n", (unsigned)(REPLAY_PERTURB_COEF),
+               (long)c, (long)d);
+        perturbed_coef[REPLAY_PERTURB_COEF] = d;
+    }
+#else
+    {
+        uint32_t bits;
+        (void)memcpy(&bits, &perturbed_coef[REPLAY_PERTURB_COEF], sizeof bits);
+        printf("replay: PERTURBED coefficient %u: 0x%08lX -> 0x%08lX\n",
+               (unsigned)(REPLAY_PERTURB_COEF), (unsigned long)bits, (unsigned long)(bits + 1u));
+        bits += 1u; /* one ulp away from zero */
+        (void)memcpy(&perturbed_coef[REPLAY_PERTURB_COEF], &bits, sizeof bits);
+    }
+#endif
     perturbed_spline.coef = perturbed_coef;
     t->spline = &perturbed_spline;
     t->crc32 = stsp_table_crc32(t);

@@ -50,8 +50,17 @@
  * there is no non-finite value. A fixed-point build has no band solver: about one table in
  * eight carries a band dual all the same (the generator above), and init must never return
  * STSP_OK for it, and return exactly STSP_ERR_BAD_DIMS when the rest of the table is valid
- * (or has any main-table corruption but magic, version and NULL arrays, which come first);
- * the same for about one table in eight with spline gains. */
+ * (or has any main-table corruption but magic, version and NULL arrays, which come first).
+ * About one table in three carries fixed-point spline gains (stsp_qspline_t; the Q
+ * fz_build_spline): valid (spans of 2^k ticks, k in 0..9, shifts 1..30, modest coefficients,
+ * or full-range ones that break the row bound at some tick) or with one corruption
+ * (span_log2 beyond 9, a shift of 0 or beyond 30, row_start, col, coef_start or a length
+ * wrong, a NULL array, per-tick gains next to it, raw index bits), and now and then a
+ * coefficient or shift bit changed after the CRC; init returns exactly the status of the
+ * contract's checks (fz_spline_check, every row at every tick by exact __int128 gains from
+ * the B-spline's power form, the CRC, exponents, latch rows, limits), and every step of an
+ * accepted one at a tick in range and order gives the command (clamped), status, stage,
+ * latch and mask of that model (fz_spline_model). */
 #include <float.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -77,7 +86,7 @@ typedef stsp_scalar_t fz_val_t;
 #define FZ_SENTINEL ((stsp_scalar_t)12345)
 #define FZ_GEN_NL 5u   /* n_latch of a table without bands: a row of 1 + 7 + 5 small gains */
 #define FZ_BAND_PICK(sel) (((sel) % 8u) == 7u) /* not an exhausted input's 0: refused */
-#define FZ_SPLINE_PICK(sel) (((sel) % 8u) == 6u) /* refused as well */
+#define FZ_SPLINE_PICK(sel) (((sel) % 3u) == 1u) /* stsp_qspline_t */
 #else
 typedef float fz_val_t;
 #define FZ_SENTINEL 1234.5f
@@ -435,6 +444,7 @@ static uint32_t fz_build_band(fuzz_in_t *in, stsp_table_t *t)
 }
 
 
+#ifndef STSP_ARITH_FIXED_POINT
 /* Spline gains (format 5): storage with room for every layout the input can declare (up to
  * FZ_SPL_SPANS spans per stage, every operand of every (stage, input) stored). */
 #define FZ_SPL_SPANS 8u
@@ -471,8 +481,7 @@ static float fz_spline_value(uint32_t *seed, uint32_t vsel)
     return f;
 }
 
-/* A spline table's gains from the input (float32 values in every build: a fixed-point build
- * must refuse whatever it is). Valid unless the selector asks for one corruption, all applied
+/* A spline table's gains from the input. Valid unless the selector asks for one corruption, all applied
  * before the CRC (so that init's status is the one of that check): knots out of order or
  * equal, not integers, the stage's tick count T wrong at either end, row_start decreasing or
  * not from 0, a col beyond nx + 1 + n_latch, a NaN/Inf coefficient, coef_start inconsistent,
@@ -686,6 +695,214 @@ static uint32_t fz_build_spline(fuzz_in_t *in, stsp_table_t *t)
     }
     return corrupt;
 }
+
+/* The spline arrays stsp_table_crc32() reads are there (its precondition). */
+static int fz_spline_arrays_ok(void)
+{
+    return (g_spline.knot_start != NULL) && (g_spline.knot != NULL) &&
+           (g_spline.row_start != NULL) && (g_spline.col != NULL) &&
+           (g_spline.coef_start != NULL) && (g_spline.coef != NULL);
+}
+
+/* A bit of a knot or coefficient changed after the CRC. */
+static void fz_spline_flip(fuzz_in_t *in)
+{
+    const uint32_t k = fuzz_u8(in), bit = fuzz_u8(in) % 32u;
+    uint32_t bits;
+    float *a = ((k & 1u) != 0u) ? &g_knot[(k >> 1) % FZ_SPL_KNOTS]
+                                : &g_coef[(k >> 1) % FZ_SPL_COEF];
+    memcpy(&bits, a, sizeof bits);
+    bits ^= 1u << bit;
+    memcpy(a, &bits, sizeof bits);
+}
+#else
+/* Fixed-point spline gains (stsp_qspline_t): storage with room for every layout the input can
+ * declare (spans of 1 tick: at most FZ_MAX_STAGE_TICKS + 3 coefficients per entry). */
+#define FZ_SPL_NZ (FZ_MAX_NX + 1u + FZ_MAX_NL)
+#define FZ_SPL_ENTRIES (FZ_MAX_NS * FZ_MAX_NU * FZ_SPL_NZ + 8u)
+#define FZ_SPL_COEF (FZ_MAX_NS * FZ_MAX_NU * FZ_SPL_NZ * (FZ_MAX_STAGE_TICKS + 3u) + 16u)
+#define FZ_SPL_KINDS 10u  /* corruptions of fz_build_spline */
+static uint8_t g_log2[FZ_MAX_NS];
+static uint16_t g_row_start[FZ_MAX_NS * FZ_MAX_NU + 1u];
+static uint8_t g_col[FZ_SPL_ENTRIES];
+static uint8_t g_shift[FZ_SPL_ENTRIES];
+static uint32_t g_coef_start[FZ_MAX_NS + 1u];
+static fz_val_t g_coef[FZ_SPL_COEF];
+static stsp_qspline_t g_spline;
+
+/* A coefficient: within +-2^F/64 (a gain is at most 3 of them: a row of 13 stays below
+ * 2^F - 1), or, for vsel % 8 == 6, anywhere in the Q range (rows that break the bound). */
+static fz_val_t fz_spline_value(uint32_t *seed, uint32_t vsel)
+{
+    const uint32_t r = fz_lcg(seed);
+    if ((vsel % 8u) == 6u) {
+        return (fz_val_t)((int64_t)(r % 65536u) * (FZ_Q_ONE / 32768) - FZ_Q_ONE);
+    }
+    return (fz_val_t)(((int64_t)(r % 4096u) - 2048) * FZ_Q_ONE / 131072);
+}
+
+/* A fixed-point spline table's gains from the input. Valid unless the selector asks for one
+ * corruption, applied before the CRC: span_log2 beyond 9, a shift of 0 or beyond 30, row_start
+ * decreasing or not from 0, a col beyond nx + 1 + n_latch, a col not increasing in its row,
+ * coef_start inconsistent, a length (n_entries, n_coef) lying, a NULL array, K/k0/L next to
+ * the spline, raw bits in an index array. Spans of 2^k ticks, k in 0..9 (mostly 0..3: several
+ * spans per stage). Sets t->spline (K, k0, L NULL); returns 1 + the corruption, or 0. */
+static uint32_t fz_build_spline(fuzz_in_t *in, stsp_table_t *t)
+{
+    const uint32_t lsel = fuzz_u8(in), csel = fuzz_u8(in), vsel = fuzz_u8(in);
+    const uint32_t corrupt = (csel >= 160u) ? 1u + csel % FZ_SPL_KINDS : 0u;
+    uint32_t seed = fuzz_u32(in);
+    const uint32_t ns = t->n_stages, nu = t->nu, nz = (uint32_t)t->nx + 1u + t->n_latch;
+    uint32_t s, i, ne = 0u, nc = 0u;
+    memset(g_log2, 0, sizeof g_log2);
+    memset(g_row_start, 0, sizeof g_row_start);
+    memset(g_col, 0, sizeof g_col);
+    memset(g_shift, 0, sizeof g_shift);
+    memset(g_coef_start, 0, sizeof g_coef_start);
+    memset(g_coef, 0, sizeof g_coef);
+    for (s = 0u; s < ns; ++s) {
+        const uint32_t T = g_start[s + 1u] - g_start[s];
+        const uint32_t k = ((lsel & 1u) != 0u) ? fz_lcg(&seed) % 10u : fz_lcg(&seed) % 4u;
+        const uint32_t spans = (T + (1u << k) - 1u) >> k;
+        g_log2[s] = (uint8_t)k;
+        g_coef_start[s] = nc;
+        for (i = 0u; i < nu; ++i) {
+            const uint32_t pick = fz_lcg(&seed);
+            const uint32_t bits = fz_lcg(&seed);
+            uint32_t c;
+            for (c = 0u; c < nz; ++c) {
+                const int stored = ((pick % 8u) == 0u) ? 0 : ((pick % 8u) == 1u) ? 1
+                                   : (int)((bits >> c) & 1u);
+                if (stored) {
+                    uint32_t e;
+                    g_col[ne] = (uint8_t)c;
+                    g_shift[ne] = (uint8_t)(1u + fz_lcg(&seed) % 30u);
+                    for (e = 0u; e < spans + 3u; ++e) {
+                        g_coef[nc++] = fz_spline_value(&seed, vsel);
+                    }
+                    ++ne;
+                }
+            }
+            g_row_start[s * nu + i + 1u] = (uint16_t)ne;
+        }
+    }
+    g_coef_start[ns] = nc;
+    g_spline.n_entries = ne;
+    g_spline.n_coef = nc;
+    g_spline.span_log2 = g_log2;
+    g_spline.row_start = g_row_start;
+    g_spline.col = g_col;
+    g_spline.shift = g_shift;
+    g_spline.coef_start = g_coef_start;
+    g_spline.coef = g_coef;
+    t->spline = &g_spline;
+    t->K = NULL;
+    t->k0 = NULL;
+    t->L = NULL;
+    {
+        const uint32_t s0 = fz_lcg(&seed) % ns;
+        const uint32_t r = fz_lcg(&seed);
+        switch (corrupt) {
+        case 1u + 0u:                                /* spans beyond 2^9 ticks */
+            g_log2[s0] = (uint8_t)(10u + r % 246u);
+            break;
+        case 1u + 1u:                                /* a shift of 0 or beyond 30 */
+            if (ne > 0u) {
+                g_shift[r % ne] = (uint8_t)(((r >> 8) & 1u) ? 0u : 31u + (r >> 9) % 225u);
+            }
+            break;
+        case 1u + 2u: {                              /* row_start decreasing, or not from 0 */
+            const uint32_t j = r % (ns * nu);
+            g_row_start[j] = (uint16_t)(g_row_start[j + 1u] + 1u);
+            break;
+        }
+        case 1u + 3u:                                /* a col out of range */
+            if (ne > 0u) {
+                g_col[r % ne] = (uint8_t)(nz + (r >> 8) % (256u - nz));
+            } else {
+                g_spline.n_entries = 1u;             /* and a lying length */
+            }
+            break;
+        case 1u + 4u:                                /* a col not increasing in its row */
+            for (i = 0u; i < ns * nu; ++i) {
+                if (g_row_start[i + 1u] >= g_row_start[i] + 2u) {
+                    const uint32_t e = g_row_start[i] + 1u + r % (g_row_start[i + 1u] - g_row_start[i] - 1u);
+                    g_col[e] = ((r >> 8) & 1u) ? g_col[e - 1u] : (uint8_t)(g_col[e - 1u] / 2u);
+                    break;
+                }
+            }
+            break;
+        case 1u + 5u:                                /* coef_start inconsistent */
+            g_coef_start[r % (ns + 1u)] += ((r >> 8) & 1u) ? 1u : (uint32_t)-1;
+            break;
+        case 1u + 6u: {                              /* a length lying (within the storage) */
+            const uint32_t d = 1u + (r >> 2) % 8u;
+            const int up = ((r >> 5) & 1u) != 0u;
+            if ((r & 1u) != 0u) {
+                g_spline.n_entries = up ? ne + d : ((ne > d) ? ne - d : 0u);
+            } else {
+                g_spline.n_coef = up ? nc + d : ((nc > d) ? nc - d : 0u);
+            }
+            break;
+        }
+        case 1u + 7u:                                /* a NULL array */
+            switch (r % 6u) {
+            case 0u: g_spline.span_log2 = NULL; break;
+            case 1u: g_spline.row_start = NULL; break;
+            case 2u: g_spline.col = NULL; break;
+            case 3u: g_spline.shift = NULL; break;
+            case 4u: g_spline.coef_start = NULL; break;
+            default: g_spline.coef = NULL; break;
+            }
+            break;
+        case 1u + 8u:                                /* per-tick gains next to the spline */
+            switch (r % 3u) {
+            case 0u: t->K = g_K; break;
+            case 1u: t->k0 = g_k0; break;
+            default: t->L = g_L; break;
+            }
+            break;
+        case 1u + 9u:                                /* raw bits */
+            switch (r % 3u) {
+            case 0u: g_row_start[r % (ns * nu + 1u)] = (uint16_t)(r >> 8); break;
+            case 1u: g_coef_start[r % (ns + 1u)] = fz_lcg(&seed); break;
+            default: g_log2[r % ns] = (uint8_t)(r >> 8); break;
+            }
+            break;
+        default:                                     /* valid */
+            break;
+        }
+    }
+    /* Declared lengths never beyond the storage (init's precondition). */
+    if (g_spline.n_entries > FZ_SPL_ENTRIES) {
+        g_spline.n_entries = FZ_SPL_ENTRIES;
+    }
+    if (g_spline.n_coef > FZ_SPL_COEF) {
+        g_spline.n_coef = FZ_SPL_COEF;
+    }
+    return corrupt;
+}
+
+/* The spline arrays stsp_table_crc32() reads are there (its precondition). */
+static int fz_spline_arrays_ok(void)
+{
+    return (g_spline.span_log2 != NULL) && (g_spline.row_start != NULL) &&
+           (g_spline.col != NULL) && (g_spline.shift != NULL) &&
+           (g_spline.coef_start != NULL) && (g_spline.coef != NULL);
+}
+
+/* A bit of a coefficient or a shift changed after the CRC. */
+static void fz_spline_flip(fuzz_in_t *in)
+{
+    const uint32_t k = fuzz_u8(in), bit = fuzz_u8(in);
+    if ((k & 1u) != 0u) {
+        g_shift[(k >> 1) % FZ_SPL_ENTRIES] ^= (uint8_t)(1u << (bit % 8u));
+    } else {
+        fz_val_t *a = &g_coef[(k >> 1) % FZ_SPL_COEF];
+        *a = (fz_val_t)(*a ^ (fz_val_t)(1u << (bit % (8u * sizeof *a - 1u))));
+    }
+}
+#endif
 
 #ifndef STSP_ARITH_FIXED_POINT
 /* Whether a binary32 value is an integer (from its bits: no conversion). */
@@ -1072,9 +1289,7 @@ static void fz_build_table(fuzz_in_t *in, stsp_table_t *t, fz_table_info_t *info
 #endif
         ((t->spline == NULL)
          ? ((t->K != NULL) && (t->L != NULL) && (t->n_ticks <= FZ_MAX_NT))
-         : ((g_spline.knot_start != NULL) && (g_spline.knot != NULL) &&
-            (g_spline.row_start != NULL) && (g_spline.col != NULL) &&
-            (g_spline.coef_start != NULL) && (g_spline.coef != NULL))) &&
+         : fz_spline_arrays_ok()) &&
         ((t->band_qp == NULL) ||
          ((g_band.Nt != NULL) && (g_band.mt != NULL) && (g_band.W != NULL) &&
           (g_band.lo != NULL) && (g_band.hi != NULL) && (g_band.q <= FZ_BAND_STORE) &&
@@ -1102,15 +1317,9 @@ static void fz_build_table(fuzz_in_t *in, stsp_table_t *t, fz_table_info_t *info
         /* CRC as computed */
     }
     if ((t->spline != NULL) && (fuzz_u8(in) >= 240u)) {
-        /* A bit of a knot or coefficient changed after the CRC (covered by it when within
-         * the declared lengths). */
-        const uint32_t k = fuzz_u8(in), bit = fuzz_u8(in) % 32u;
-        uint32_t bits;
-        float *a = ((k & 1u) != 0u) ? &g_knot[(k >> 1) % FZ_SPL_KNOTS]
-                                    : &g_coef[(k >> 1) % FZ_SPL_COEF];
-        memcpy(&bits, a, sizeof bits);
-        bits ^= 1u << bit;
-        memcpy(a, &bits, sizeof bits);
+        /* A bit of the spline data changed after the CRC (covered by it when within the
+         * declared lengths). */
+        fz_spline_flip(in);
         info->band_crc_ok = 0u;
     }
 }
@@ -1253,20 +1462,207 @@ static int fz_spline_invalid(const stsp_table_t *t)
            (fz_spline_check(t) != STSP_OK) || !fz_spline_coef_finite(t->spline);
 }
 #else
-/* Fixed point: the layout check refuses any band_qp or spline with STSP_ERR_BAD_DIMS, after
- * magic, version, dimensions, NULL main arrays and the stage layout, and before the CRC and
- * the values. So a band or spline table gets exactly that status when its main part is
- * valid, and also with a broken dimension or layout (BAD_DIMS either way), special gains or
- * exponents, or a flipped CRC bit: every main corruption but magic (0), version (1) and NULL
- * arrays (8), which may come first. Tables without either are not modelled. */
+__extension__ typedef __int128 fz_i128; /* clang: the spline model's exact arithmetic */
+
+/* floor(a / 2^sh + 1/2), exact. */
+static int64_t fz_round_shift(fz_i128 a, uint32_t sh)
+{
+    const fz_i128 one = (fz_i128)1 << sh;
+    const fz_i128 n = a + (one >> 1);
+    fz_i128 q = n / one;
+    if ((n % one) < 0) {
+        --q;
+    }
+    return (int64_t)q;
+}
+
+/* A gain of a fixed-point spline (stsp_qspline_t, written from the contract and the uniform
+ * cubic B-spline's pieces in the power form, not the firmware's): at d of D = 2^k,
+ * 6 D^3 N = ((D - d)^3, 3 d^3 - 6 d^2 D + 4 D^3, -3 d^3 + 3 d^2 D + 3 d D^2 + D^3, d^3). */
+static int64_t fz_qgain(const fz_val_t *c, uint32_t k, uint32_t tau, uint32_t sh)
+{
+    const int64_t D = (int64_t)1 << k, d = (int64_t)(tau & ((1u << k) - 1u));
+    const int64_t P[4] = {(D - d) * (D - d) * (D - d), 3 * d * d * d - 6 * d * d * D + 4 * D * D * D,
+                          -3 * d * d * d + 3 * d * d * D + 3 * d * D * D + D * D * D, d * d * d};
+    fz_i128 acc = 0;
+    uint32_t r;
+    for (r = 0u; r < 4u; ++r) {
+        acc += (fz_i128)c[r] * P[r];
+    }
+    return fz_round_shift(acc, 3u * k + sh);
+}
+
+/* init's verdict on a fixed-point spline table's own arrays (the header's dimensions and
+ * stage layout already valid), from stsp_controller.h (stsp_qspline_t): STSP_ERR_NULL,
+ * STSP_ERR_BAD_DIMS or STSP_OK. */
+static stsp_status_t fz_spline_check(const stsp_table_t *t)
+{
+    const stsp_qspline_t *p = t->spline;
+    const uint32_t ns = t->n_stages, nu = t->nu, rows = ns * nu;
+    const uint32_t nz = (uint32_t)t->nx + 1u + t->n_latch;
+    uint32_t s, i;
+    if ((p->span_log2 == NULL) || (p->row_start == NULL) || (p->col == NULL) ||
+        (p->shift == NULL) || (p->coef_start == NULL) || (p->coef == NULL)) {
+        return STSP_ERR_NULL;
+    }
+    if ((p->row_start[0] != 0u) || (p->row_start[rows] != p->n_entries) ||
+        (p->coef_start[0] != 0u) || (p->coef_start[ns] != p->n_coef)) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    for (i = 0u; i < rows; ++i) {
+        if (p->row_start[i + 1u] < p->row_start[i]) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    for (s = 0u; s < ns; ++s) {
+        if (p->coef_start[s + 1u] < p->coef_start[s]) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    for (s = 0u; s < ns; ++s) {
+        const uint32_t T = t->stage_start[s + 1u] - t->stage_start[s];
+        const uint32_t k = p->span_log2[s];
+        uint64_t spans, entries, coefs;
+        if (k > 9u) {
+            return STSP_ERR_BAD_DIMS;
+        }
+        spans = ((uint64_t)T + (1u << k) - 1u) >> k;
+        entries = (uint64_t)p->row_start[(s + 1u) * nu] - p->row_start[s * nu];
+        coefs = (uint64_t)p->coef_start[s + 1u] - p->coef_start[s];
+        if (coefs != entries * (spans + 3u)) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    for (i = 0u; i < rows; ++i) {
+        uint32_t e;
+        for (e = p->row_start[i]; e < p->row_start[i + 1u]; ++e) {
+            if ((p->col[e] >= nz) || ((e > p->row_start[i]) && (p->col[e] <= p->col[e - 1u])) ||
+                (p->shift[e] < 1u) || (p->shift[e] > 30u)) {
+                return STSP_ERR_BAD_DIMS;
+            }
+        }
+    }
+    return STSP_OK;
+}
+
+/* Every row of gains, at every tick of a table whose layout passed fz_spline_check, within
+ * |k0| + sum|K| + sum|L| <= 2^F - 1. */
+static int fz_spline_rows_ok(const stsp_table_t *t)
+{
+    const stsp_qspline_t *p = t->spline;
+    const uint32_t nu = t->nu;
+    uint32_t s, tau, i, e;
+    for (s = 0u; s < t->n_stages; ++s) {
+        const uint32_t k = p->span_log2[s];
+        const uint32_t T = t->stage_start[s + 1u] - t->stage_start[s];
+        const uint32_t stride = ((T + (1u << k) - 1u) >> k) + 3u;
+        for (tau = 0u; tau < T; ++tau) {
+            for (i = 0u; i < nu; ++i) {
+                int64_t sum = 0;
+                for (e = p->row_start[s * nu + i]; e < p->row_start[s * nu + i + 1u]; ++e) {
+                    const uint32_t at = p->coef_start[s] + (e - p->row_start[s * nu]) * stride +
+                                        (tau >> k);
+                    const int64_t g = fz_qgain(&p->coef[at], k, tau, p->shift[e]);
+                    sum += (g < 0) ? -g : g;
+                }
+                if (sum > FZ_Q_ONE - 1) {
+                    return 0;
+                }
+            }
+        }
+    }
+    return 1;
+}
+
+/* The table's stage layout is the contract's (so the spline checks can be modelled). */
+static int fz_stages_ok(const stsp_table_t *t)
+{
+    uint32_t s;
+    if ((t->n_stages == 0u) || (t->n_stages > FZ_MAX_NS) || (t->stage_start == NULL) ||
+        (t->stage_n_latch == NULL) || (t->nu == 0u) || (t->nu > FZ_MAX_NU) ||
+        (t->stage_start[0] != 0u) || (t->stage_start[t->n_stages] != t->n_ticks)) {
+        return 0;
+    }
+    for (s = 0u; s < t->n_stages; ++s) {
+        if (t->stage_start[s + 1u] <= t->stage_start[s]) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* Fixed point: the layout check refuses any band_qp with STSP_ERR_BAD_DIMS, after magic,
+ * version, dimensions, NULL main arrays and the stage layout, and before the CRC and the
+ * values. So a band table gets exactly that status when its main part is valid, and also
+ * with a broken dimension or layout (BAD_DIMS either way), special gains or exponents, or a
+ * flipped CRC bit: every main corruption but magic (0), version (1) and NULL arrays (8),
+ * which may come first. A spline table (stsp_qspline_t) without a main corruption: per-tick
+ * gains next to it, stage_n_latch beyond n_latch (BAD_DIMS), its layout (fz_spline_check), the
+ * CRC, then the values: exponents within +-60, every spline row at every tick, every latch
+ * row within 2^F - 1, u_min <= u_hold <= u_max (BAD_VALUES). Other tables are not
+ * modelled. */
 static int fz_expected_init(const stsp_table_t *t, const fz_table_info_t *info,
                             stsp_status_t *st)
 {
-    if (((t->band_qp == NULL) && (t->spline == NULL)) || (info->main_corrupt == 1u + 0u) ||
-        (info->main_corrupt == 1u + 1u) || (info->main_corrupt == 1u + 8u)) {
+    uint32_t s, i, j;
+    if ((t->band_qp != NULL) || (t->spline == NULL)) {
+        if ((t->band_qp == NULL) || (info->main_corrupt == 1u + 0u) ||
+            (info->main_corrupt == 1u + 1u) || (info->main_corrupt == 1u + 8u)) {
+            return 0;
+        }
+        *st = STSP_ERR_BAD_DIMS;
+        return 1;
+    }
+    if (info->main_corrupt != 0u) {
         return 0;
     }
-    *st = STSP_ERR_BAD_DIMS;
+    if ((t->K != NULL) || (t->k0 != NULL) || (t->L != NULL)) {
+        *st = STSP_ERR_BAD_DIMS;
+        return 1;
+    }
+    for (s = 0u; s < t->n_stages; ++s) {
+        if (t->stage_n_latch[s] > t->n_latch) {
+            *st = STSP_ERR_BAD_DIMS;
+            return 1;
+        }
+    }
+    *st = fz_spline_check(t);
+    if (*st != STSP_OK) {
+        return 1;
+    }
+    if ((info->band_crc_ok == 0u) && (stsp_table_crc32(t) != t->crc32)) {
+        *st = STSP_ERR_BAD_CRC;
+        return 1;
+    }
+    if (!fz_spline_rows_ok(t)) {
+        *st = STSP_ERR_BAD_VALUES;
+    }
+    for (i = 0u; i < t->nx; ++i) {
+        if ((t->x_exp[i] > 60) || (t->x_exp[i] < -60)) {
+            *st = STSP_ERR_BAD_VALUES;
+        }
+    }
+    for (i = 0u; i < t->nu; ++i) {
+        if ((t->u_exp[i] > 60) || (t->u_exp[i] < -60) || (t->u_min[i] > t->u_hold[i]) ||
+            (t->u_max[i] < t->u_hold[i])) {
+            *st = STSP_ERR_BAD_VALUES;
+        }
+    }
+    for (i = 0u; i < t->n_latch; ++i) {
+        if ((t->v_exp[i] > 60) || (t->v_exp[i] < -60)) {
+            *st = STSP_ERR_BAD_VALUES;
+        }
+    }
+    for (i = 0u; i < (uint32_t)t->n_stages * t->n_latch; ++i) {
+        int64_t sum = (t->lambda0[i] < 0) ? -(int64_t)t->lambda0[i] : t->lambda0[i];
+        for (j = 0u; j < t->nx; ++j) {
+            const int64_t a = t->Lambda[i * t->nx + j];
+            sum += (a < 0) ? -a : a;
+        }
+        if (sum > FZ_Q_ONE - 1) {
+            *st = STSP_ERR_BAD_VALUES;
+        }
+    }
     return 1;
 }
 
@@ -1276,10 +1672,109 @@ static int fz_band_invalid(const stsp_table_t *t)
     return t->band_qp != NULL;
 }
 
-/* Every spline table too. */
+/* 1 if the spline gains are invalid by the contract (with the dimensions the header
+ * declares): init must then never return STSP_OK. */
 static int fz_spline_invalid(const stsp_table_t *t)
 {
-    return t->spline != NULL;
+    if (t->spline == NULL) {
+        return 0;
+    }
+    if ((t->band_qp != NULL) || (t->K != NULL) || (t->k0 != NULL) || (t->L != NULL)) {
+        return 1;
+    }
+    if (!fz_stages_ok(t) || (t->nx == 0u) || (t->nx > FZ_MAX_NX) ||
+        (t->n_latch > FZ_MAX_NL)) {
+        return 0; /* init refuses the main table: not a spline question */
+    }
+    return (fz_spline_check(t) != STSP_OK) || !fz_spline_rows_ok(t);
+}
+
+/* What a step of a valid fixed-point spline table at a tick in range and order must do
+ * (from the contract): the stage (searched from the last one), the latch (the first step, or
+ * a new stage with stage_n_latch > 0: v = round(lambda0 2^F + Lambda x) / 2^F, zero beyond
+ * stage_n_latch), and each input's command round((g_k0 2^F + sum g x + sum g v) / 2^F) with
+ * the gains of fz_qgain, before the clamp. */
+typedef struct {
+    uint32_t stage;
+    int relatch;
+    fz_val_t v[FZ_MAX_NL];
+    int64_t y[FZ_MAX_NU];
+} fz_spline_model_t;
+
+static void fz_spline_model(const stsp_table_t *t, const stsp_ctrl_t *before, uint32_t tick,
+                            const fz_val_t *x, fz_spline_model_t *m)
+{
+    const stsp_qspline_t *p = t->spline;
+    const uint32_t nx = t->nx, nu = t->nu, n_latch = t->n_latch;
+    uint32_t s = before->stage, i, j, e;
+    uint32_t k, T, stride, tau;
+    while ((s + 1u < t->n_stages) && (t->stage_start[s + 1u] <= tick)) {
+        ++s;
+    }
+    m->stage = s;
+    m->relatch = (before->latched == 0u) || ((s != before->stage) && (t->stage_n_latch[s] > 0u));
+    for (i = 0u; i < n_latch; ++i) {
+        fz_val_t v = before->v[i];
+        if (m->relatch) {
+            v = 0;
+            if (i < t->stage_n_latch[s]) {
+                const uint32_t row = s * n_latch + i;
+                fz_i128 acc = (fz_i128)t->lambda0[row] * FZ_Q_ONE;
+                for (j = 0u; j < nx; ++j) {
+                    acc += (fz_i128)t->Lambda[row * nx + j] * x[j];
+                }
+                v = (fz_val_t)fz_round_shift(acc, STSP_Q_FRAC_BITS);
+            }
+        }
+        m->v[i] = v;
+    }
+    k = p->span_log2[s];
+    T = t->stage_start[s + 1u] - t->stage_start[s];
+    stride = ((T + (1u << k) - 1u) >> k) + 3u;
+    tau = tick - t->stage_start[s];
+    for (i = 0u; i < nu; ++i) {
+        fz_i128 acc = 0;
+        for (e = p->row_start[s * nu + i]; e < p->row_start[s * nu + i + 1u]; ++e) {
+            const uint32_t at = p->coef_start[s] + (e - p->row_start[s * nu]) * stride + (tau >> k);
+            const int64_t g = fz_qgain(&p->coef[at], k, tau, p->shift[e]);
+            const uint32_t col = p->col[e];
+            const int64_t z = (col < nx) ? (int64_t)x[col]
+                              : (col == nx) ? FZ_Q_ONE : (int64_t)m->v[col - nx - 1u];
+            acc += (fz_i128)g * z;
+        }
+        m->y[i] = fz_round_shift(acc, STSP_Q_FRAC_BITS);
+    }
+}
+
+/* A step of a fixed-point spline table that the model covers: status, command (clamped, bit
+ * for bit), stage, latch and saturation mask as the model says. */
+static void fz_check_spline_step(const stsp_table_t *t, const stsp_ctrl_t *c, stsp_status_t st,
+                                 stsp_status_t tick_st, const fz_val_t *u,
+                                 const fz_spline_model_t *m)
+{
+    uint32_t i, sat = 0u;
+    for (i = 0u; i < t->nu; ++i) {
+        int64_t want = m->y[i];
+        fuzz_check((want >= -(FZ_Q_ONE - 1)) && (want <= FZ_Q_ONE - 1));
+        if (want > t->u_max[i]) {
+            want = t->u_max[i];
+            sat |= 1u << i;
+        } else if (want < t->u_min[i]) {
+            want = t->u_min[i];
+            sat |= 1u << i;
+        } else {
+            /* within the limits */
+        }
+        fuzz_check((int64_t)u[i] == want);
+    }
+    fuzz_check(st == ((sat != 0u) ? STSP_WARN_SATURATED : tick_st));
+    if (sat != 0u) {
+        fuzz_check(c->sat_mask == sat);
+    }
+    fuzz_check((c->latched != 0u) && (c->stage == m->stage));
+    for (i = 0u; i < t->n_latch; ++i) {
+        fuzz_check(c->v[i] == m->v[i]);
+    }
 }
 #endif
 
@@ -1506,10 +2001,11 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             uint32_t tick, i;
             int finite = 1;
             stsp_status_t st, tick_st;
-#ifndef STSP_ARITH_FIXED_POINT
-            int band_latch = 0, spline_step = 0;
-            fz_latch_t latch;
+            int spline_step = 0;
             fz_spline_model_t sm;
+#ifndef STSP_ARITH_FIXED_POINT
+            int band_latch = 0;
+            fz_latch_t latch;
 #endif
             switch (how) {
             case 0u: case 1u: case 2u: tick = model_next; break;
@@ -1543,6 +2039,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 band_latch = 1;
                 fz_band_latch_model(&t, tick, x, &latch);
             }
+#endif
             /* A spline table's step at a tick in range and order with a finite state: the
              * model says what it must do. */
             if (ready && (t.spline != NULL) && finite && (tick < t.n_ticks) &&
@@ -1550,7 +2047,6 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 spline_step = 1;
                 fz_spline_model(&t, &before, tick, x, band_latch ? latch.v : NULL, &sm);
             }
-#endif
             st = stsp_step(&c, tick, x, u);
             fuzz_check(fz_known_status(st));
 #ifndef STSP_ARITH_FIXED_POINT
@@ -1607,6 +2103,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             if (band_latch && !spline_step) {
                 fz_check_band_step(&t, &c, st, tick_st, u, &latch);
             }
+#endif
             if (spline_step) {
                 FZS(FZS_SPL_STEPS);
                 if (sm.relatch) {
@@ -1626,7 +2123,6 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                                                                     : tick_st,
                                      u, &sm);
             }
-#endif
             if (tick >= t.n_ticks) {
                 fuzz_check(st == STSP_ERR_TICK_RANGE);
             } else if ((model_next > 0u) && (tick + 1u < model_next)) {

@@ -3,7 +3,8 @@
  * fuzz_step_verify, fuzz_step_verify_q15 and fuzz_step_verify_q31 run it for a bounded time).
  *
  * Each input builds a valid table whose header, band dual or spline gains (float32: one table
- * in three has spline gains, 1..8 spans per stage of up to 40 ticks) and every array live in
+ * in three has spline gains, 1..8 spans per stage of up to 40 ticks; the Q15/Q31 builds have no
+ * spline tables here, only a spline header appearing after init) and every array live in
  * heap blocks of exactly the size init validates (so ASan reports any access beyond them),
  * inits two instances (one on the table, one, the reference, on an untouched copy of its
  * header and band dual or spline header: same arrays), steps both, then changes the table:
@@ -154,8 +155,8 @@ typedef struct {
     stsp_table_t *orig;     /* its header as init saw it (heap; the reference's table) */
     stsp_bandqp_t *band;    /* the table's band dual (heap), or NULL */
     stsp_bandqp_t *band0;   /* its header as init saw it (the reference's band dual) */
-    stsp_spline_t *spline;  /* the table's spline gains (heap), or NULL */
-    stsp_spline_t *spline0; /* their header as init saw it (the reference's) */
+    stsp_spline_gains_t *spline;  /* the table's spline gains (heap), or NULL */
+    stsp_spline_gains_t *spline0; /* their header as init saw it (the reference's) */
     uint32_t spline_arrays; /* arrays[spline_arrays..] are the spline's (data changes) */
     void *arrays[24];       /* every array block, for data changes */
     size_t sizes[24];
@@ -452,7 +453,7 @@ static void fv_build(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
     }
     tb->spline0 = NULL;
     if (tb->spline != NULL) {
-        tb->spline0 = (stsp_spline_t *)fv_alloc(blocks, sizeof *tb->spline0);
+        tb->spline0 = (stsp_spline_gains_t *)fv_alloc(blocks, sizeof *tb->spline0);
         *tb->spline0 = *tb->spline;
         tb->orig->spline = tb->spline0;
     }
@@ -545,6 +546,7 @@ static void fv_change(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
             case 2u: b->W = ((value & 1u) != 0u) ? b->mt : NULL; break;
             default: b->Nt = (const double *)fv_alloc(blocks, sizeof(double)); break;
             }
+#ifndef STSP_ARITH_FIXED_POINT
         } else if (tb->spline != NULL) {
             /* a length by a small step or to anything, or an array address: NULL, another of
              * the spline's arrays, or a one-entry block */
@@ -567,6 +569,7 @@ static void fv_change(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
             case 7u: p->coef_start = (const uint32_t *)q; break;
             default: p->coef = (const float *)q; break;
             }
+#endif
         } else {
             fv_change_data(tb, which, value);
         }
@@ -598,7 +601,7 @@ static void fv_change(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
         switch (value % 3u) {
         case 0u: t->spline = NULL; break;
         case 1u: {
-            stsp_spline_t *p = (stsp_spline_t *)fv_alloc(blocks, sizeof *p);
+            stsp_spline_gains_t *p = (stsp_spline_gains_t *)fv_alloc(blocks, sizeof *p);
             if (tb->spline0 != NULL) {
                 *p = *tb->spline0;
             }

@@ -379,20 +379,21 @@ static void test_band_table_is_refused(void **state)
     assert_int_equal(stsp_init(&c, &t), STSP_OK);
 }
 
-/* Spline gains are float32 only: a fixed-point build refuses a table with spline, with its
+/* A fixed-point spline table (stsp_qspline_t) in a program without the spline code (this test
+ * does not link stsp_spline.c: nothing refers to stsp_spline_code) is refused, with its
  * per-tick arrays (a valid Q table otherwise) or without them (K, k0, L NULL: BAD_DIMS, not
  * STSP_ERR_NULL), the CRC recomputed over the spline data; stsp_verify() of an instance whose
- * table gains a spline afterwards reports the header change. */
+ * table gains a spline afterwards reports the header change. tests/c/test_qspline_ctrl.c runs
+ * such tables with the code linked. */
 static void test_spline_table_is_refused(void **state)
 {
-    static const uint32_t knot_start[NS + 1u] = {0u, 8u, 16u};
-    static const float knot[16] = {0.0f, 0.0f, 0.0f, 0.0f, 3.0f, 3.0f, 3.0f, 3.0f,
-                                   0.0f, 0.0f, 0.0f, 0.0f, 2.0f, 2.0f, 2.0f, 2.0f};
+    static const uint8_t span_log2[NS] = {1u, 0u};
     static const uint16_t row_start[NS * NU + 1u] = {0u, 1u, 2u};
     static const uint8_t col[2] = {0u, 2u};
-    static const uint32_t coef_start[NS + 1u] = {0u, 4u, 8u};
-    static const float coef[8] = {0.5f, 0.5f, 0.5f, 0.5f, 0.25f, 0.25f, 0.25f, 0.25f};
-    const stsp_spline_t sp = {16u, 2u, 8u, knot_start, knot, row_start, col, coef_start, coef};
+    static const uint8_t shift[2] = {3u, 3u};
+    static const uint32_t coef_start[NS + 1u] = {0u, 5u, 10u};
+    static const stsp_scalar_t coef[10] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10};
+    const stsp_qspline_t sp = {2u, 10u, span_log2, row_start, col, shift, coef_start, coef};
     const stsp_scalar_t x[NX] = {0, 0};
     stsp_scalar_t u[NU] = {7};
     stsp_ctrl_t c;

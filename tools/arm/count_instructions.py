@@ -207,8 +207,15 @@ def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
         # float32: also the spline table of the robot's shape (tools/arm/spline_bench_table.c).
         links.append(("controller + spline bench table linked", ["spline_bench_table"],
                       [build / "libstsp_spline_bench_table.a", ctl]))
+    else:
+        # Q15/Q31: also the robot's spline table of that arithmetic (and the spline code it links).
+        links.append(("controller + spline tables linked",
+                      [f"robot_corridor{sfx}_spline_table",
+                       f"robot_corridor{sfx}_spline_spline_code"],
+                      [build / f"libstsp_gains_robot_corridor{sfx}_spline.a", ctl]))
     for what, extra_roots, libs in links:
         kind = ("spline" if "spline_bench_table" in extra_roots else
+                "qspline" if any(r.endswith("_spline_table") for r in extra_roots) else
                 "tables" if extra_roots else "ctl")
         elf = build / f"footprint_{Path(controller).stem}_{kind}.elf"
         cmd = (["arm-none-eabi-gcc", *CPU_FLAGS[cpu], "-nostdlib", "-nostartfiles",
@@ -262,6 +269,15 @@ def images(cpu: str):
         yield (f"bench{sfx}.elf", f"{arith}, generic dimensions (libstsp_{arith.lower()}.a)")
         yield (f"bench_fixed{sfx}.elf",
                f"{arith}, STSP_FIXED 4/2/4 (libstsp_fixed_robot_corridor{sfx}.a)")
+    # The robot's Q15/Q31 spline tables (gains/robot_corridor_<arith>_spline.c).
+    for sfx, arith in VARIANTS:
+        if not sfx:
+            continue
+        yield (f"bench{sfx}_spline.elf", f"{arith} spline table (gains/robot_corridor{sfx}_spline.c), "
+               f"generic dimensions (libstsp_{arith.lower()}.a)")
+        yield (f"bench{sfx}_spline_fixed.elf", f"{arith} spline table "
+               f"(gains/robot_corridor{sfx}_spline.c), STSP_FIXED 4/2/4 "
+               f"(libstsp_fixed_robot_corridor{sfx}_spline.a)")
     # The spline table of tools/arm/spline_bench_table.c (float32; soft float on the M0+).
     yield ("bench_spline.elf", "float32 spline table (tools/arm/spline_bench_table.c), "
            "generic dimensions (libstsp_float32.a)")
@@ -307,7 +323,8 @@ def main() -> int:
                              "max": max(n), "min": min(n), "macs": macs,
                              "statuses": sorted({c["status"] for c in sel})})
 
-            spline = "spline" in image
+            spline = image.startswith("bench_spline")          # float32: spans cached
+            qspline = "spline" in image and not spline          # Q15/Q31: every tick alike
             for tab, tlabel in TABLES.items():
                 for latch in (False, True):
                     kind = "latch" if latch else "ordinary"
@@ -317,7 +334,8 @@ def main() -> int:
                         sel = [c for c in calls
                                if c["table"] == tab and c["latch"] == latch and c["stage"] == st
                                and not c["span"]]
-                        row(tlabel, f"{kind}, stage {st} (np={p})", sel, 0 if spline else macs)
+                        row(tlabel, f"{kind}, stage {st} (np={p})", sel,
+                            0 if (spline or qspline) else macs)
                 if spline:
                     sel = [c for c in calls if c["table"] == tab and c["span"]]
                     row(tlabel, "new span, stage 0", sel, 0)
@@ -329,6 +347,10 @@ def main() -> int:
                       "multiply-adds each, plus 1 per gain of x for the command) after the "
                       "basis (5 divisions); 'new span': the first tick of a span (it folds "
                       "the span's k0 + L v), once per 100 ticks here.")
+            elif qspline:
+                print("   Fixed-point spline table: every tick evaluates each stored entry of "
+                      "its stage (4 products of 32 x 32 -> 64 bits and one rounding shift) and "
+                      "multiplies it into the command (one multiply-accumulate); no span cache.")
             else:
                 print("   MACs = nu*nx + nu*np (+ np*nx on a latch tick): the multiply-adds the law "
                       f"needs; the firmware runs nu*(nx + n_latch) = {nu * (nx + nl)} on every "

@@ -16,6 +16,10 @@
 #                                           STSP_REPLAY_RECORDS_SPLINE (make_replay.py --table
 #                                           spline); STSP_REPLAY_PERTURB_COEF=<n> nudges a
 #                                           coefficient (the test must then fail)
+#   replay_<q15|q31>_spline[_fixed].elf  the same on gains/robot_corridor_<arith>_spline.c (the
+#                                           fixed-point controller, both cores), records
+#                                           STSP_REPLAY_RECORDS_<Q15|Q31>_SPLINE
+#   bench_<q15|q31>_spline[_fixed].elf  bench_main.c on gains/robot_corridor_<arith>_spline.c
 #   bench_spline.elf, bench_spline_fixed.elf  bench_main.c with BENCH_SPLINE: the spline table of
 #                                           tools/arm/spline_bench_table.c (float32; on both
 #                                           cores, soft float on the M0+)
@@ -107,6 +111,40 @@ if(STSP_REPLAY_RECORDS_BANDS_SPLINE AND TARGET stsp_gains_robot_bands_spline)
   endforeach()
 endif()
 
+# The replay of the robot's Q15/Q31 spline tables (gains/robot_corridor_<arith>_spline.c; the
+# fixed-point controller, generic and built for the robot's shape), records
+# STSP_REPLAY_RECORDS_<ARITH>_SPLINE (make_replay.py --arith <arith> --table spline).
+foreach(arith q15 q31)
+  string(TOUPPER "${arith}" ARITH)
+  set(STSP_REPLAY_RECORDS_${ARITH}_SPLINE "" CACHE FILEPATH
+      "${ARITH} spline records (make_replay.py --arith ${arith} --table spline)")
+  set(records "${STSP_REPLAY_RECORDS_${ARITH}_SPLINE}")
+  if(records AND TARGET stsp_gains_robot_corridor_${arith}_spline)
+    stsp_add_image(replay_${arith}_spline stsp_${arith} stsp_gains_robot_corridor_${arith}_spline
+                   "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c" "${records}")
+    stsp_add_image(replay_${arith}_spline_fixed stsp_fixed_robot_corridor_${arith}_spline
+                   stsp_gains_robot_corridor_${arith}_spline
+                   "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c" "${records}")
+    foreach(image replay_${arith}_spline replay_${arith}_spline_fixed)
+      target_compile_definitions(${image} PRIVATE ROBOT_SPLINE)
+      if(NOT STSP_REPLAY_PERTURB_COEF STREQUAL "")
+        target_compile_definitions(${image} PRIVATE REPLAY_PERTURB_COEF=${STSP_REPLAY_PERTURB_COEF}u)
+      endif()
+    endforeach()
+  endif()
+endforeach()
+# The instruction-count bench (bench_main.c) on the robot's Q15/Q31 spline tables
+# (count_instructions.sh), generic and built for the robot's shape.
+foreach(arith q15 q31)
+  if(TARGET stsp_gains_robot_corridor_${arith}_spline)
+    stsp_add_image(bench_${arith}_spline stsp_${arith} stsp_gains_robot_corridor_${arith}_spline
+                   ${arm_dir}/bench_main.c)
+    stsp_add_image(bench_${arith}_spline_fixed stsp_fixed_robot_corridor_${arith}_spline
+                   stsp_gains_robot_corridor_${arith}_spline ${arm_dir}/bench_main.c)
+    target_compile_definitions(bench_${arith}_spline PRIVATE ROBOT_SPLINE)
+    target_compile_definitions(bench_${arith}_spline_fixed PRIVATE ROBOT_SPLINE)
+  endif()
+endforeach()
 # The spline bench: a hand-made spline table of the robot's shape (make_spline_bench_table.py)
 # with the float32 controller, generic and built for the robot's shape.
 add_library(stsp_spline_bench_table STATIC ${arm_dir}/spline_bench_table.c)

@@ -32,6 +32,14 @@ last. The first run uses the table as committed (no limits: the robot's); the se
 table with limits at about the 90th percentile of the first run's |u| (so that commands
 saturate, at latch ticks too), and enters stage 1 late (by a skip).
 
+Fixed-point spline tables (``--arith q15|q31 --table spline``;
+``gains/robot_corridor_<arith>_spline.c``, ``stospline.pipeline.fixed_point_spline``): the same
+two runs, every call in order, with the state converted to the Q format as for per-tick Q tables;
+repeats at both latch ticks and at a span's first and last tick, skips inside a span, across a
+span boundary and over a whole span, probes with states at the ends of the Q range (a large
+command, clamped in the second run; the real call is then a repeat), and the calls after the
+plan. The second run has limits at about the 90th percentile of the first run's |u_q|.
+
 The output is deterministic (no time stamps) and is only rewritten when its content changes,
 so an unchanged ARM build is not relinked. It belongs in the build directory, not in git.
 
@@ -56,7 +64,7 @@ import numpy as np
 
 from stospline.design.discretize import zoh
 from stospline.sim.controller import build_controller
-from stospline.pipeline import design_problem, fixed_point_table
+from stospline.pipeline import design_problem, fixed_point_spline, fixed_point_table
 from stospline.problem import load_problem
 from stospline.table.format import table_crc32
 
@@ -250,20 +258,89 @@ def spline_events(table, *, late_stage_entry: bool) -> dict:
     return ev
 
 
+def q_spline_events(table, *, late_stage_entry: bool) -> dict:
+    """`spline_events` for a fixed-point spline table (spans of 2^k ticks): the same repeats
+    and skips, and probes with states at the ends of the Q range instead of non-finite or huge
+    ones (a fixed-point state is always valid)."""
+    sp = table.spline
+    start = [int(s) for s in table.stage_start]
+    F = table.frac_bits
+    lo, hi = -(1 << F), (1 << F) - 1
+    bps = []
+    for s in range(table.n_stages):
+        D = 1 << int(sp.span_log2[s])
+        bps.append(list(range(start[s] + D, start[s + 1], D)))
+    b0, b1 = bps[0], bps[1]
+    ev: dict[int, dict] = {}
+
+    def add(tick, kind, value=True):
+        d = ev.setdefault(tick, {})
+        if kind == "probe":
+            d.setdefault("probe", []).append(value)
+        else:
+            d[kind] = value
+    add(start[0], "repeat")
+    add(start[1], "probe", {3: hi})
+    add(start[1], "repeat")
+    add(b0[0], "repeat")
+    add(b0[1] - 1, "repeat")
+    add(b0[2], "probe", {2: lo})
+    add((b0[3] + b0[4]) // 2, "probe", {0: hi, 1: lo, 2: hi, 3: lo})
+    add(b1[2], "probe", {0: lo, 1: hi})
+    mid = (b0[4] + b0[5]) // 2
+    for t in range(mid, mid + 4):
+        add(t, "skip")
+    for t in (b0[6] - 1, b0[6]):
+        add(t, "skip")
+    for t in range(b0[8] - 1, b0[9] + 1):
+        add(t, "skip")
+    for t in range(b1[4] - 2, b1[4] + 3):
+        add(t, "skip")
+    if late_stage_entry:
+        for t in range(start[1] - 2, start[1] + 2):
+            ev.pop(t, None)
+            add(t, "skip")
+    return ev
+
+
 def simulate_calls(problem, table, *, seed: int, substeps: int,
                    late_stage_entry: bool) -> list[Record]:
-    """A spline run: every call of the closed loop (`spline_events`), in order."""
+    """A spline run: every call of the closed loop (`spline_events`, `q_spline_events`), in
+    order."""
     host = HostController(table)
-    events = spline_events(table, late_stage_entry=late_stage_entry)
+    fixed = getattr(table, "arith", "float32") != "float32"
+    events = (q_spline_events if fixed else spline_events)(table,
+                                                            late_stage_entry=late_stage_entry)
     advance = plant_stepper(problem, table, seed=seed, substeps=substeps)
+    if fixed:
+        F = table.frac_bits
+
+        def to_input(x):
+            q = np.clip(np.floor(x / table.x_lsb + 0.5), -(1 << F), (1 << F) - 1)
+            return q.astype(host.ctl.dtype)
+
+        def off(xq):     # the state measured again, one LSB off (no new latch)
+            return np.clip(xq.astype(np.int64) + 1, -(1 << F), (1 << F) - 1).astype(xq.dtype)
+
+        def to_command(U):
+            return U * table.u_lsb
+    else:
+        def to_input(x):
+            return x.astype(np.float32)
+
+        def off(x32):    # the state measured again, slightly off (no new latch)
+            return (x32 * np.float32(1.001) + np.float32(1e-3)).astype(np.float32)
+
+        def to_command(U):
+            return U.astype(float)
     x = np.array(problem.x0, dtype=float)
-    u = np.asarray(table.u_hold, dtype=np.float32).copy()   # held until the first command
+    u = np.asarray(table.u_hold).copy()                     # held until the first command
     rows: list[Record] = []
     last = 0
     for k in range(table.n_stages):
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             ev = events.get(j, {})
-            x32 = x.astype(np.float32)
+            x32 = to_input(x)
             for probe in ev.get("probe", []):
                 xp = x32.copy()
                 for i, value in probe.items():
@@ -272,13 +349,11 @@ def simulate_calls(problem, table, *, seed: int, substeps: int,
             if not ev.get("skip"):
                 rows.append(host.call(j, x32))
                 if ev.get("repeat"):
-                    # the state measured again, slightly off (another command, no new latch)
-                    rows.append(host.call(j, (x32 * np.float32(1.001)
-                                              + np.float32(1e-3)).astype(np.float32)))
+                    rows.append(host.call(j, off(x32)))
                 u = rows[-1].u
                 last = j
-            x = advance(k, x, u.astype(float))
-    x32 = x.astype(np.float32)
+            x = advance(k, x, to_command(u))
+    x32 = to_input(x)
     n_ticks = int(table.stage_start[-1])
     for tick in (n_ticks, n_ticks + 1000, last - 10, last):  # range, range, order, repeat
         rows.append(host.call(tick, x32))
@@ -286,10 +361,15 @@ def simulate_calls(problem, table, *, seed: int, substeps: int,
 
 
 def saturating_limits(table, rows: list[Record], quantile: float = 0.9):
-    """u_min/u_max that clamp the larger commands of `rows` (0 = u_hold stays inside)."""
+    """u_min/u_max that clamp the larger commands of `rows` (0 = u_hold stays inside); in Q
+    units for a fixed-point table."""
     U = np.array([r.u for r in rows if r.status >= 0], dtype=float)
     hi = np.quantile(np.maximum(U, 0.0), quantile, axis=0)
     lo = np.quantile(np.maximum(-U, 0.0), quantile, axis=0)
+    if getattr(table, "arith", "float32") != "float32":
+        dtype = np.asarray(table.u_min).dtype
+        return (-np.maximum(np.ceil(lo), 1.0)).astype(dtype), \
+            np.maximum(np.ceil(hi), 1.0).astype(dtype)
     # round outwards to 1/64, at least 1/64, so the limits are short exact literals
     hi = np.maximum(np.ceil(hi * 64.0), 1.0) / 64.0
     lo = np.maximum(np.ceil(lo * 64.0), 1.0) / 64.0
@@ -339,11 +419,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--problem", type=Path, default=ROOT / "examples" / "robot_corridor.toml")
     ap.add_argument("--gains", type=Path, default=None,
                     help="committed tables the ARM image links (their CRC must match); default "
-                         "gains/<name>.c, gains/<name>_<arith>.c or gains/<name>_spline.c of "
-                         "the problem's name")
+                         "gains/<name>.c, gains/<name>_<arith>.c, gains/<name>_spline.c or "
+                         "gains/<name>_<arith>_spline.c of the problem's name")
     ap.add_argument("--arith", choices=["float32", "q15", "q31"], default="float32")
     ap.add_argument("--table", choices=["per-tick", "spline"], default="per-tick",
-                    help="the table kind (spline: float32, every call of two runs)")
+                    help="the table kind (spline: every call of two runs)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--substeps", type=int, default=4)
     ap.add_argument("--head", type=int, default=50, help="first ticks of each stage")
@@ -354,17 +434,21 @@ def main(argv: list[str] | None = None) -> int:
                          "ulp (one unit)")
     args = ap.parse_args(argv)
     spline = args.table == "spline"
-    if spline and args.arith != "float32":
-        ap.error("--table spline is float32 only")
 
     problem = load_problem(args.problem)
     designed = design_problem(problem, table="spline" if spline else None,
                               mode=problem.options.get("mode", "stagewise"))
-    table = designed.table if args.arith == "float32" else fixed_point_table(designed, args.arith)
+    if args.arith == "float32":
+        table = designed.table
+    elif spline:
+        table = fixed_point_spline(designed, args.arith)[0]
+    else:
+        table = fixed_point_table(designed, args.arith)
     if spline and getattr(table, "spline", None) is None:
         raise SystemExit("make_replay: the design gave no spline table")
     if args.gains is None:
-        suffix = "_spline" if spline else ("" if args.arith == "float32" else f"_{args.arith}")
+        suffix = ("" if args.arith == "float32" else f"_{args.arith}") + \
+            ("_spline" if spline else "")
         args.gains = ROOT / "gains" / f"{problem.name}{suffix}.c"
     want = committed_crc(args.gains, table.name)
     got = table_crc32(table)

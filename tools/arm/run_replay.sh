@@ -9,21 +9,26 @@
 #
 # 1. tools/arm/make_replay.py writes DIR/replay_records[_q15|_q31|_spline].c (per call: tick,
 #    host x, status, u, instance fields) for each variant of LIST (default:
-#    float32,q15,q31,spline,bands_spline on arm-m4f; q15,q31,spline,bands_spline on
-#    arm-m0plus, which has no per-tick float32 images); `spline` is the robot's spline table
+#    float32,q15,q31,spline,bands_spline,q15_spline,q31_spline on arm-m4f; the same but float32
+#    on arm-m0plus, which has no per-tick float32 images); `spline` is the robot's spline table
 #    (float32, make_replay.py --table spline: every call of two closed-loop runs, with skips,
 #    repeats, non-finite states and limits), `bands_spline` the same calls on the spline table
-#    of examples/robot_bands.toml (gains/robot_bands_spline.c: the band dual's t0 latch);
+#    of examples/robot_bands.toml (gains/robot_bands_spline.c: the band dual's t0 latch),
+#    `q15_spline`/`q31_spline` the robot's Q15/Q31 spline tables (make_replay.py --arith
+#    q15|q31 --table spline: the same two runs, states at the ends of the Q range instead of
+#    non-finite ones);
 # 2. tools/arm/build.sh builds DIR/replay<sfx>.elf (generic firmware + gains/robot_corridor<sfx>.c
 #    + records) and DIR/replay_fixed<sfx>.elf (the firmware built for the robot's dimensions;
 #    for spline: replay_spline.elf, replay_spline_fixed.elf; for bands_spline:
-#    replay_bands_spline.elf, replay_bands_spline_fixed.elf);
+#    replay_bands_spline.elf, replay_bands_spline_fixed.elf; for q15_spline:
+#    replay_q15_spline.elf, replay_q15_spline_fixed.elf);
 # 3. qemu-system-arm runs each: -M mps2-an386 (Cortex-M4F) for arm-m4f; for arm-m0plus
 #    -M mps2-an385, a Cortex-M3 (QEMU has no Cortex-M0+ board; the -mcpu=cortex-m0plus code is
 #    ARMv6-M, a subset of what the M3 runs). Semihosting prints the summary and returns the
 #    exit status, 0 only if every command matched.
 # --perturb moves one recorded u by one ulp / one unit (the test must then fail);
-# --perturb-coef N builds the spline images with spline coefficient N one ulp larger (and the
+# --perturb-coef N builds the spline images with spline coefficient N one ulp (Q: one unit)
+# larger (and the
 # table's CRC recomputed on the target), so that their commands differ from the host's (the
 # spline test must then fail); --fp-contract fast lets GCC fuse multiply-adds on the target,
 # with the float law compiled as plain C instead of the VMLS/VNMLA asm that contraction cannot
@@ -53,8 +58,8 @@ while [ $# -gt 0 ]; do
   esac
 done
 case "$preset" in
-  arm-m4f) machine=mps2-an386; : "${ariths:=float32,q15,q31,spline,bands_spline}" ;;
-  arm-m0plus) machine=mps2-an385; : "${ariths:=q15,q31,spline,bands_spline}" ;;
+  arm-m4f) machine=mps2-an386; : "${ariths:=float32,q15,q31,spline,bands_spline,q15_spline,q31_spline}" ;;
+  arm-m0plus) machine=mps2-an385; : "${ariths:=q15,q31,spline,bands_spline,q15_spline,q31_spline}" ;;
   *) echo "run_replay: --preset must be arm-m4f or arm-m0plus" >&2; exit 2 ;;
 esac
 : "${build:=$root/build/$preset}"
@@ -76,6 +81,9 @@ for arith in ${ariths//,/ }; do
     spline) sfx="_spline"; var=STSP_REPLAY_RECORDS_SPLINE; gen=(--table spline) ;;
     bands_spline) sfx="_bands_spline"; var=STSP_REPLAY_RECORDS_BANDS_SPLINE
                   gen=(--table spline --problem "$root/examples/robot_bands.toml") ;;
+    q15_spline|q31_spline)
+      sfx="_$arith"; var="STSP_REPLAY_RECORDS_${arith^^}"
+      gen=(--arith "${arith%_spline}" --table spline) ;;
     *) echo "run_replay: unknown variant $arith" >&2; exit 2 ;;
   esac
   [ "$preset" = arm-m4f ] || [ "$arith" != float32 ] || {
@@ -85,6 +93,8 @@ for arith in ${ariths//,/ }; do
   defs+=("-D$var=$records")
   if [ "$arith" = spline ] || [ "$arith" = bands_spline ]; then
     images+=("replay$sfx" "replay${sfx/_spline/}_spline_fixed")
+  elif [ "$arith" != "${arith%_spline}" ]; then
+    images+=("replay_$arith" "replay_${arith}_fixed")
   else
     images+=("replay$sfx" "replay_fixed$sfx")
   fi

@@ -16,8 +16,9 @@
  *     every tick:                 u = sat(-K[j] x - k0[j] - L[j] v)
  *
  * where sat() clamps input i to [u_min[i], u_max[i]] (STSP_WARN_SATURATED says it did). A
- * spline table (stsp_spline_t, float32 only) has the same law with K[j], k0[j], L[j] the
- * stage's cubic B-splines evaluated at tick j (the order below).
+ * spline table (stsp_spline_t in float32 builds, stsp_qspline_t in Q15/Q31 builds) has the
+ * same law with K[j], k0[j], L[j] the stage's cubic B-splines evaluated at tick j (the order
+ * below).
  * Stage-wise designs latch at every constrained stage; joint designs latch once, at stage 0
  * (stage_n_latch[s] = 0 afterwards keeps v). Entries of v beyond stage_n_latch[s] are set to zero.
  * The caller holds u until the next tick (zero-order hold).
@@ -45,12 +46,25 @@
  * with z = [x, 1, v]; then the limit and finiteness checks and the clamp of the per-tick law.
  * On the M4F each step is one VMLA.F32 or VMLS.F32 (chained, as above).
  *
+ * Fixed-point spline tables (stsp_qspline_t, Q15/Q31), integers only: at tick j of stage s,
+ * tau = j - stage_start[s], k = span_log2[s], sigma = tau >> k, d = tau & (2^k - 1), the basis
+ * numerators P0..P3 of stsp_qspline_t, and each stored entry e of (s, i) the gain
+ * g_e = floor((c[sigma] P0 + c[sigma+1] P1 + c[sigma+2] P2 + c[sigma+3] P3) / 2^(3k + s_e)
+ * + 1/2), exact; then for each input i, over its entries in order, with z = [x_q, 0, v_q]:
+ *     acc = 2^(2F) + 2^(F-1) + sum_e g_e z[col_e],   u_q[i] = (acc >> F) - 2^F + g_k0
+ * (g_k0 the gain of col nx, k0[i], 0 if not stored): the per-tick fixed-point law (see
+ * stsp_step) with the gains as evaluated, bit for bit (every sum exact: any order gives the
+ * same bits). Then the clamp. Every tick goes through the cold path's plan and commit (range,
+ * order, stage, latch); its cost is the stage's entries times one 4-term evaluation, the same
+ * at every tick of a stage.
+ *
  * Buffers: stsp_ctrl_t holds STSP_MAX_LATCH scalars for v, STSP_MAX_NU for the copy of
  * u_hold, 24 bytes of state, the validated copy of the table header (stsp_header_t) and, in
- * float32 builds, a spline table's current span (stsp_span_t); on 32-bit targets 336 bytes
- * with the default STSP_MAX_LATCH = STSP_MAX_NU = 16 (float32), 152 (Q15), 216 (Q31).
+ * float32 builds, a spline table's current span (stsp_span_t); on 32-bit targets 692 bytes
+ * with the default STSP_MAX_LATCH = STSP_MAX_NU = 16 (float32), 188 (Q15), 252 (Q31)
+ * (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_ctrl_t)).
  * stsp_step() uses STSP_MAX_LATCH + STSP_MAX_NU scalars of stack (a spline table: also
- * z = [x, 1, v], STSP_MAX_NX + 1 + STSP_MAX_LATCH floats), plus, on the stage-0 latch of a
+ * z = [x, 1, v], STSP_MAX_NX + 1 + STSP_MAX_LATCH scalars), plus, on the stage-0 latch of a
  * band table only, the band solver's work area and multipliers (sizeof(stsp_bandqp_work_t) +
  * STSP_BANDQP_MAX doubles, about 0.8 KB with STSP_BANDQP_MAX = 8; docs/guide/firmware.md). The
  * tables stay where the caller put them (const, normally flash) and are never copied; their
@@ -198,7 +212,9 @@ typedef enum {
                                          +-Inf, u_min > u_max, or
                                          u_hold outside [u_min, u_max]; fixed point: a scale
                                          exponent beyond +-STSP_Q_EXP_MAX, or a row whose
-                                         absolute sum exceeds 2^F - 1 (see stsp_step) */
+                                         absolute sum exceeds 2^F - 1 (see stsp_step; a
+                                         spline table's rows of gains as evaluated, at every
+                                         tick) */
     STSP_ERR_BAD_PROBLEM = -12,     /**< stsp_init_problem(): the table's problem_sha256 is not
                                          the expected one (tables from another problem file) */
     STSP_ERR_TABLE_CHANGED = -13    /**< stsp_verify(): the table header (magic, version, kind,
@@ -207,6 +223,7 @@ typedef enum {
                                          validated */
 } stsp_status_t;
 
+#ifndef STSP_ARITH_FIXED_POINT
 /**
  * Spline gains (format 5, float32 builds only): each stage's gains as cubic B-splines of the
  * tick, instead of one row per tick. Arrays concatenated over the stages s = 0..n_stages-1:
@@ -237,6 +254,50 @@ typedef struct {
     const uint32_t *coef_start;   /**< [n_stages + 1] */
     const stsp_f32_t *coef;       /**< [n_coef] */
 } stsp_spline_t;
+#endif
+
+#ifdef STSP_ARITH_FIXED_POINT
+/**
+ * Fixed-point spline gains (Q15/Q31 builds; issue 13's compressed format, host
+ * stospline.table.qspline): each stage's gains as uniform cubic B-splines of the tick, with
+ * integer coefficients in the per-tick format's scaling (negated, stsp_table_t). Stage s of
+ * T_s ticks has spans of D = 2^k ticks (k = span_log2[s] <= 9), S = ceil(T_s / D) spans and
+ * S + 3 coefficients per stored entry. Arrays concatenated over the stages s = 0..n_stages-1:
+ *   span_log2[s]: k of stage s;
+ *   col[row_start[s*nu + i] .. row_start[s*nu + i + 1]): the stored (nonzero) entries of stage
+ *     s, input i, each the index of its operand in z = [x, 1, v]: j < nx is K[i][j], j == nx
+ *     k0[i], j = nx + 1 + c is L[i][c]; an entry not stored is exactly 0;
+ *   shift[e]: entry e's scale s_e, in [1, 30];
+ *   coef[coef_start[s] .. coef_start[s+1]): the stage's S + 3 coefficients of each entry,
+ *     entry after entry in col order.
+ * At tick tau of the stage, sigma = tau >> k, d = tau & (D - 1), P0 = (D - d)^3,
+ * P1 = 4 D^3 - 3 d^2 (2 D - d), P3 = d^3, P2 = 6 D^3 - P0 - P1 - P3, and entry e's gain is
+ *     g = floor((c[sigma] P0 + c[sigma+1] P1 + c[sigma+2] P2 + c[sigma+3] P3) / 2^(3k + s_e)
+ *               + 1/2)
+ * exactly (one rounding; the sum in 64-bit integers), the per-tick table's stored gain.
+ * stsp_init() checks: the six arrays not NULL (else STSP_ERR_NULL); row_start[0] == 0,
+ * coef_start[0] == 0, both nondecreasing and ending at n_entries and n_coef; span_log2[s] <= 9;
+ * shift[e] in [1, 30]; col[e] < nx + 1 + n_latch and strictly increasing within each (stage,
+ * input) row; coef_start[s+1] - coef_start[s] == (entries of stage s) x (S_s + 3) (else
+ * STSP_ERR_BAD_DIMS); and, at every tick of the plan, every input's row of gains as evaluated
+ * with |k0| + sum|K| + sum|L| <= 2^F - 1, the per-tick format's row bound
+ * (STSP_ERR_BAD_VALUES): the law then cannot overflow (stsp_step).
+ */
+typedef struct {
+    uint32_t n_entries;          /**< length of col and shift */
+    uint32_t n_coef;             /**< length of coef */
+    const uint8_t *span_log2;    /**< [n_stages] */
+    const uint16_t *row_start;   /**< [n_stages * nu + 1] */
+    const uint8_t *col;          /**< [n_entries] */
+    const uint8_t *shift;        /**< [n_entries] */
+    const uint32_t *coef_start;  /**< [n_stages + 1] */
+    const stsp_scalar_t *coef;   /**< [n_coef] */
+} stsp_qspline_t;
+/** The spline gains of the build's arithmetic (stsp_table_t.spline). */
+typedef stsp_qspline_t stsp_spline_gains_t;
+#else
+typedef stsp_spline_t stsp_spline_gains_t;
+#endif
 
 /**
  * Generated gain tables plus the header that stsp_init() verifies.
@@ -291,13 +352,12 @@ typedef struct {
                                       requires q == stage_n_latch[0] and stage_n_latch[s] == 0 for
                                       s > 0 (one latch, at t0). float32 only: a fixed-point
                                       build refuses a table with one (STSP_ERR_BAD_DIMS) */
-    const stsp_spline_t *spline;  /**< NULL (gains per tick: K, k0, L), or the spline gains
-                                      (K, k0, L then NULL). With band_qp too, the band
-                                      dual is the one re-solved for the spline's gains
-                                      (W non-symmetric, a P-matrix: stsp_bandqp.h); the
-                                      same stage-0 latch and checks. float32 only: a
-                                      fixed-point build refuses a table with one
-                                      (STSP_ERR_BAD_DIMS) */
+    const stsp_spline_gains_t *spline; /**< NULL (gains per tick: K, k0, L), or the spline
+                                      gains (K, k0, L then NULL): stsp_spline_t in a float32
+                                      build, stsp_qspline_t in a Q15/Q31 build. With band_qp
+                                      too (float32 only), the band dual is the one re-solved
+                                      for the spline's gains (W non-symmetric, a P-matrix:
+                                      stsp_bandqp.h); the same stage-0 latch and checks */
     uint32_t crc32;              /**< CRC-32 of dims and arrays, see stsp_table_crc32() */
     uint8_t problem_sha256[32];  /**< hash of the problem file the tables came from */
 } stsp_table_t;
@@ -333,10 +393,8 @@ typedef struct {
     uint16_t n_latch;
     uint16_t n_stages;
     const stsp_scalar_t *u_hold; /* last: the ordinary tick's offsets stay as they were */
-#ifndef STSP_ARITH_FIXED_POINT
-    const stsp_spline_t *spline;  /**< the table's pointer (NULL: gains per tick) */
-    stsp_spline_t sp;             /**< copy of *spline (all zero without one) */
-#endif
+    const stsp_spline_gains_t *spline; /**< the table's pointer (NULL: gains per tick) */
+    stsp_spline_gains_t sp;       /**< copy of *spline (all zero without one) */
 } stsp_header_t;
 
 #ifndef STSP_ARITH_FIXED_POINT
@@ -414,7 +472,8 @@ typedef struct {
 } stsp_ctrl_t;
 
 /**
- * Defined by the spline tables' code (firmware/src/stsp_spline.c; value STSP_FORMAT_VERSION),
+ * Defined by the spline tables' code (firmware/src/stsp_spline.c, in every arithmetic: the
+ * float32 or the fixed-point spline tick; value STSP_FORMAT_VERSION),
  * which a program links only when something refers to it strongly: a generated spline table
  * does (`<name>_spline_code`, a pointer to this). The controller refers to that code only
  * weakly (GCC or clang, ELF), so that programs with per-tick tables do not carry it; without
@@ -432,7 +491,9 @@ extern const uint32_t stsp_spline_code;
  * as a u32 after tick_hz, the same arrays as little-endian int16 (Q15) or int32 (Q31), then
  * x_exp, u_exp and v_exp (when n_latch > 0) one byte each. Then, for a spline table, n_knots,
  * n_entries and n_coef as u32, knot_start as u32 each, knot as binary32 bit patterns,
- * row_start, col and coef_start as u32 each, coef as binary32 bit patterns (all little-endian).
+ * row_start, col and coef_start as u32 each, coef as binary32 bit patterns (all little-endian);
+ * fixed point, after the exponents: n_entries and n_coef as u32, span_log2, row_start, col,
+ * shift and coef_start as u32 each, coef as little-endian int16 (Q15) or int32 (Q31).
  * Then, when band_qp is not NULL,
  * its q and nx as u32 and Nt, mt, W, lo, hi as little-endian binary64 bit patterns. Last,
  * the 32 bytes of problem_sha256. Independent of the

@@ -25,9 +25,11 @@ def worst_constraint_residual(d) -> tuple[float, int, int] | None:
     return worst
 
 
-def design_summary_text(d, arith: str = "float32") -> str:
+def design_summary_text(d, arith: str = "float32", q_cert: dict | None = None) -> str:
     """A few lines: J0, the oracle's cost of the implemented (float32) table, ticks, stages,
-    the flash the tables take in each arithmetic, and the worst constraint residual."""
+    the flash the tables take in each arithmetic, and the worst constraint residual; with
+    `q_cert` (a Q15/Q31 spline table's certificate, `pipeline.fixed_point_spline`) its flash,
+    cost, residual and error bound."""
     t, p = d.table, d.problem
     n, m, _ = t.dims
     delay = getattr(t, "delay_ticks", 0)
@@ -59,6 +61,16 @@ def design_summary_text(d, arith: str = "float32") -> str:
                      f"{cert['spans']}, tolerance {cert['spline_tolerance']:g}")
         lines.append(f"  its cost over J0               {cert['excess_over_J0']:+.3g} relative "
                      f"(oracle, as the firmware evaluates it)")
+    if q_cert is not None:
+        lines.append(f"  {q_cert['arith']} spline table               {q_cert['flash_bytes']:,} B, "
+                     f"{q_cert['compression_ratio']:.0f}x smaller than the {q_cert['arith']} "
+                     f"per-tick table ({q_cert['per_tick_flash_bytes']:,} B); spans of "
+                     f"{q_cert['span_ticks']} ticks")
+        lines.append(f"  its J (oracle, as evaluated)   {q_cert['oracle_J']:.10g}   "
+                     f"({q_cert['excess_over_J0']:+.3g} relative to J0); worst constraint "
+                     f"residual {q_cert['constraint_residual']:.3g}")
+        lines.append(f"  its error bound |u - u_double| {q_cert['u_error_bound']} "
+                     f"({q_cert['u_error_bound_lsb']} LSB)")
     worst = worst_constraint_residual(d)
     if worst is None:
         lines.append("  worst constraint residual      - (no constraints)")

@@ -33,7 +33,7 @@ typedef struct {
     uint16_t q; uint16_t nx; const double *Nt; const double *mt; const double *W;
     const double *lo; const double *hi;
 } stsp_bandqp_t;
-typedef struct { ...; } stsp_spline_t;
+typedef struct { ...; } %(spline_t)s;
 typedef struct {
     uint32_t magic; uint16_t format_version; uint16_t scalar_kind;
     uint16_t nx; uint16_t nu; uint16_t n_latch; uint16_t n_stages;
@@ -42,7 +42,7 @@ typedef struct {
     const stsp_scalar_t *K; const stsp_scalar_t *k0; const stsp_scalar_t *L;
     const stsp_scalar_t *Lambda; const stsp_scalar_t *lambda0;
     const stsp_scalar_t *u_min; const stsp_scalar_t *u_max; const stsp_scalar_t *u_hold;%(exps)s
-    const stsp_bandqp_t *band_qp; const stsp_spline_t *spline;
+    const stsp_bandqp_t *band_qp; const %(spline_t)s *spline;
     uint32_t crc32; uint8_t problem_sha256[32];
 } stsp_table_t;
 typedef struct {
@@ -280,6 +280,8 @@ def _cdef(arith: str) -> str:
     fixed = arith != "float32"
     return _CDEF % {"scalar": VARIANTS[arith][0], "exps": _EXPS if fixed else "",
                     "plant": _PLANT_PROTOTYPE,
+                    # the spline gains' type of the arithmetic (stsp_table_t.spline)
+                    "spline_t": "stsp_qspline_t" if fixed else "stsp_spline_t",
                     "conv": _CONV if fixed else ""}
 
 # -O3 as the host CMake build (Release); ISO C keeps floating-point contraction off, so the

@@ -110,9 +110,6 @@ extern const stsp_table_t {p}_table;
     u32 = lambda x: f"{int(x)}u"  # noqa: E731
     T, e, lit, neg = table.n_ticks, v.element, v.literal, v.negated
     spline = getattr(table, "spline", None)
-    if spline is not None and hasattr(spline, "span_log2"):
-        raise ValueError("fixed-point spline tables (stospline.table.qspline) have no C form "
-                         "yet: write the per-tick table, or float32 spline tables")
     gains = [] if spline is not None else [
         _array(e, f"{p}_K", table.K, lit, f"{neg.format('K')}[n_ticks][nu][nx] = [{T}][{m}][{n}]"),
         _array(e, f"{p}_k0", table.k0, lit, f"{neg.format('k0')}[n_ticks][nu] = [{T}][{m}]"),
@@ -251,11 +248,50 @@ def _fixed_point_variant(table, p: str) -> _Variant:
         _array("int8_t", f"{p}_u_exp", table.u_exp, d, "[nu] command scale exponents"),
         _array("int8_t", f"{p}_v_exp", table.v_exp, d, "[n_latch] multiplier scale exponents"),
     ]
+    spline, declarations = "NULL, /* spline: spline gains are float32 only */", ""
+    if getattr(table, "spline", None) is not None:
+        extra += _q_spline_arrays(table.spline, p, table.arith)
+        spline = f"&{p}_spline,"
+        code = f"const uint32_t *const {p}_spline_code"
+        extra.append(f"/* The controller refers to the spline code only weakly, so that programs without a\n"
+                     f" * spline table do not link it: this reference links it with the table. */\n"
+                     f"{code} = &stsp_spline_code;\n")
+        declarations = f"extern {code};\n"
+        layout = layout.replace(
+            "; layout as in stsp_controller.h, gains stored negated and\n * pre-scaled:",
+            "; the gains K, k0, L as integer uniform cubic B-splines per\n"
+            " * stage (stsp_qspline_t, docs/guide/firmware.md \"Spline tables\"), evaluating to the\n"
+            " * per-tick format's negated, pre-scaled gains; the rest as in\n * stsp_controller.h:")
     tail = (f"\n    {p}_x_exp, {p}_u_exp, {p}_v_exp,\n"
             "    NULL, /* band_qp: the band re-solve is float32 only */\n"
-            "    NULL, /* spline: spline gains are float32 only */")
+            f"    {spline}")
     return _Variant(guard, f"ARITH_{kind} 1", layout, f"stsp_{table.arith}_t", _qlit(F),
-                    "-{} scaled, ", " (command units)", extra, "", table.scalar_kind, tail)
+                    "-{} scaled, ", " (command units)", extra, declarations, table.scalar_kind,
+                    tail)
+
+
+def _q_spline_arrays(sp, p: str, arith: str) -> list[str]:
+    """The arrays and the `stsp_qspline_t` of a fixed-point spline table
+    (`stospline.table.qspline.QSplineGains`)."""
+    u32 = lambda x: f"{int(x)}u"  # noqa: E731
+    F = 15 if arith == "q15" else 31
+    return [
+        _array("uint8_t", f"{p}_span_log2", sp.span_log2, u32,
+               "[n_stages]: each stage's spans are 2^span_log2 ticks"),
+        _array("uint16_t", f"{p}_row_start", sp.row_start, u32,
+               "[n_stages * nu + 1]: each (stage, input)'s entries in col[]"),
+        _array("uint8_t", f"{p}_col", sp.col, u32,
+               "[n_entries]: j < nx: K[i][j]; nx: k0[i]; nx + 1 + c: L[i][c]"),
+        _array("uint8_t", f"{p}_shift", sp.shift, u32,
+               "[n_entries]: each entry's coefficient scale s_e"),
+        _array("uint32_t", f"{p}_coef_start", sp.coef_start, u32,
+               "[n_stages + 1]: each stage's coefficients in coef[]"),
+        _array(f"stsp_{arith}_t", f"{p}_coef", sp.coef, _qlit(F),
+               "[n_coef]: per entry, its stage's spans + 3 B-spline coefficients"),
+        f"/* The gains as integer cubic B-splines per stage (stsp_controller.h, stsp_qspline_t). */\n"
+        f"static const stsp_qspline_t {p}_spline = {{\n    {sp.col.size}u, {sp.coef.size}u,\n"
+        f"    {p}_span_log2, {p}_row_start, {p}_col, {p}_shift, {p}_coef_start, {p}_coef\n}};\n",
+    ]
 
 
 def _qlit(F: int):

@@ -329,9 +329,17 @@ def table_crc32(table: GainTable) -> int:
 
 
 def _spline_crc_parts(sp) -> list[bytes]:
-    """A spline's part of the CRC serialization (`table_crc32`)."""
+    """A spline's part of the CRC serialization (`table_crc32`): float32
+    (`stospline.table.spline`) or fixed point (`stospline.table.qspline`: n_entries, n_coef as
+    u32, span_log2, row_start, col, shift, coef_start as u32 each, coef as little-endian int16
+    or int32, after the scale exponents)."""
     u32 = lambda a: np.asarray(a).astype("<u4").tobytes()  # noqa: E731
     f32 = lambda a: np.asarray(a, "<f4").tobytes()         # noqa: E731
+    if hasattr(sp, "span_log2"):
+        coef = np.asarray(sp.coef)
+        return [struct.pack("<2I", sp.col.size, coef.size), u32(sp.span_log2),
+                u32(sp.row_start), u32(sp.col), u32(sp.shift), u32(sp.coef_start),
+                coef.astype(f"<i{coef.dtype.itemsize}").tobytes()]
     return [struct.pack("<3I", sp.knot.size, sp.col.size, sp.coef.size),
             u32(sp.knot_start), f32(sp.knot), u32(sp.row_start), u32(sp.col),
             u32(sp.coef_start), f32(sp.coef)]

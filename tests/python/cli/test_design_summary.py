@@ -72,9 +72,20 @@ def symbol_bytes(c_file, defines, tmp_path) -> int:
                                          ("robot_bands", "float32"),
                                          ("robot_corridor_spline", "float32"),
                                          ("robot_patrol_60s_spline", "float32"),
-                                         ("robot_bands_spline", "float32")])
+                                         ("robot_bands_spline", "float32"),
+                                         ("robot_corridor_q15_spline", "q15"),
+                                         ("robot_corridor_q31_spline", "q31")])
 def test_flash_bytes_match_the_compiled_tables(name, arith, robot_zoh, tmp_path):
-    if name.endswith("_spline"):
+    if name.endswith("_spline") and arith != "float32":
+        from stospline.pipeline import design_problem, fixed_point_spline
+        from stospline.problem import load_problem
+        d = design_problem(load_problem(EXAMPLES / "robot_corridor.toml"), table="spline")
+        table = fixed_point_spline(d, arith)[0]
+        assert table.spline is not None
+        # the target for the Q15 robot table: at most 3 KB in compiled symbols
+        if arith == "q15":
+            assert flash_bytes(table, arith) <= 3072
+    elif name.endswith("_spline"):
         from stospline.pipeline import design_problem
         from stospline.problem import load_problem
         problem = load_problem(EXAMPLES / f"{name.removesuffix('_spline')}.toml")

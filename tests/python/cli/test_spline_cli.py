@@ -29,6 +29,30 @@ def test_robot_spline_files_and_certificate(capsys, tmp_path, robot_zoh):
     assert "robot_corridor_spline_K" not in source and "&robot_corridor_spline_spline" in source
 
 
+@pytest.mark.parametrize("arith", ["q15", "q31"])
+def test_robot_fixed_point_spline_files_and_certificate(capsys, tmp_path, arith):
+    """`--arith q15|q31 --table spline`: <name>_<arith>_spline.{c,h,json}; the certificate of
+    the table as the firmware evaluates it, its error bound computed, its flash (the issue's
+    target for Q15: at most 3 KB)."""
+    assert main(["design", ROBOT, "--arith", arith, "--table", "spline",
+                 "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    stem = f"robot_corridor_{arith}_spline"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f"{stem}.{s}" for s in ("c", "h", "json")]
+    summary = json.loads((tmp_path / f"{stem}.json").read_text())
+    cert, fixed = summary["table"], summary["fixed"]
+    assert cert["kind"] == "spline" and cert["arith"] == arith
+    assert cert["flash_bytes"] < cert["per_tick_flash_bytes"] / 50
+    if arith == "q15":
+        assert cert["flash_bytes"] <= 3072
+    assert abs(cert["excess_over_law"]) <= 1e-3 and cert["knot_cov_change"] <= 1e-3
+    assert cert["u_error_bound"] == fixed["u_error_bound"] and len(cert["u_error_bound"]) == 2
+    assert f"{arith} spline table" in out and "error bound" in out
+    source = (tmp_path / f"{stem}.c").read_text()
+    assert f"{stem}_K" not in source and f"&{stem}_spline" in source
+    assert "stsp_qspline_t" in source and "&stsp_spline_code" in source
+
+
 def test_file_option_selects_the_spline(tmp_path, capsys):
     text = (EXAMPLES / "robot_corridor.toml").read_text().replace(
         'tick_hz = 1000\n', 'tick_hz = 1000\n\n[design]\ntable = "spline"\n'
@@ -38,6 +62,18 @@ def test_file_option_selects_the_spline(tmp_path, capsys):
     assert main(["design", str(f), "--json"]) == 0
     cert = json.loads(capsys.readouterr().out)["table"]
     assert cert["spline_tolerance"] == 1e-3 and cert["kind"] == "spline"
+
+
+def test_file_options_select_the_fixed_point_spline(tmp_path, capsys):
+    text = (EXAMPLES / "robot_corridor.toml").read_text().replace(
+        'tick_hz = 1000\n', 'tick_hz = 1000\n\n[design]\narith = "q15"\ntable = "spline"\n', 1)
+    f = tmp_path / "robot.toml"
+    f.write_text(text)
+    assert main(["design", str(f), "--out", str(tmp_path / "out")]) == 0
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
+        f"robot_corridor_q15_spline.{s}" for s in ("c", "h", "json")]
+    cert = json.loads((tmp_path / "out" / "robot_corridor_q15_spline.json").read_text())["table"]
+    assert cert["kind"] == "spline" and cert["arith"] == "q15"
 
 
 @pytest.mark.parametrize("value", ["abc", "0", "1", "nan", "-1e-5"])
@@ -70,7 +106,6 @@ def test_bad_file_options(capsys, tmp_path, key, value, field):
 @pytest.mark.parametrize("example, extra, field", [
     ("robot_narrow_corridor", [], "design.table"),  # bands beyond the 8 rows of a band dual
     ("robot_monotone", [], "design.table"),         # regions at every tick
-    ("robot_corridor", ["--arith", "q15"], "--table"),
     ("robot_corridor", ["--mode", "joint"], "design.table"),   # 5 multipliers > 4 states
     ("robot_corridor", ["--spline-tolerance", "1e-9"], "design.spline_tolerance"),
 ])

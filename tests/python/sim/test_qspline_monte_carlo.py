@@ -1,8 +1,8 @@
-"""Monte Carlo through a compiled fixed-point controller running a Q15/Q31 spline table's law:
-the spline's integer gains at every tick (`stospline.table.qspline.evaluate_q`, which the
-firmware's `stsp_qspline_gains` reproduces bit for bit, test_qspline_c.py) in the per-tick
-form (`replace(table, spline=None)`), with the re-solved latch maps as stored; states rounded to
-the Q format, commands times their LSB (`CompiledController.real_stepper`). The cost, knot
+"""Monte Carlo through the compiled fixed-point controller running a Q15/Q31 spline table (the
+firmware evaluates the spline's integer gains at every tick, stsp_qspline_t; bit for bit the
+host's `stospline.table.qspline.evaluate_q`, test_qspline_controller.py), with the re-solved
+latch maps as stored; states rounded to the Q format, commands times their LSB
+(`CompiledController.real_stepper`). The cost, knot
 means and knot variances agree with the exact oracle of that law (integer gains and latch maps
 in real units, the plant's scheme), 99 % jointly; and the same run rejects the oracle of the
 law with the gains frozen at each span's start (the check has power). Fixed seeds. The
@@ -45,7 +45,7 @@ def test_monte_carlo_agrees_with_the_q_splines_oracle_and_has_power(robot_proble
                                                                   robot_spline, arith):
     p = robot_problem
     ft, _ = fixed_point_spline(robot_spline, arith, tolerance=1e-3)   # spans of 256 ticks
-    mc = simulate(p, build_controller(replace(ft, spline=None)), paths=PATHS, seed=SEED,
+    mc = simulate(p, build_controller(ft), paths=PATHS, seed=SEED,
                   substeps=SUBSTEPS, faults=Faults())
     assert mc.worst_status == 0
     law = dequantized(ft)

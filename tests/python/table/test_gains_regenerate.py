@@ -38,6 +38,16 @@ def test_regenerating_fixed_point_gains_changes_no_byte(tmp_path, arith):
             f"gains/{name} differs from a fresh `stospline design --arith {arith}`"
 
 
+@pytest.mark.parametrize("arith", ["q15", "q31"])
+def test_regenerating_fixed_point_spline_gains_changes_no_byte(tmp_path, arith):
+    assert main(["design", str(EXAMPLES / "robot_corridor.toml"), "--arith", arith,
+                 "--table", "spline", "--out", str(tmp_path)]) == 0
+    for suffix in ("c", "h", "json"):
+        name = f"robot_corridor_{arith}_spline.{suffix}"
+        assert filecmp.cmp(tmp_path / name, GAINS / name, shallow=False), \
+            f"gains/{name} differs from a fresh `stospline design --arith {arith} --table spline`"
+
+
 def test_generated_source_carries_input_hash_and_no_time():
     import hashlib
     import re

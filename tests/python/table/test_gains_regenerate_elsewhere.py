@@ -54,6 +54,9 @@ def _regenerate(out) -> None:
     for example in SPLINE_EXAMPLES:
         assert main(["design", str(EXAMPLES / f"{example}.toml"), "--table", "spline",
                      "--out", str(out)]) == 0
+    for arith in ("q15", "q31"):
+        assert main(["design", str(EXAMPLES / "robot_corridor.toml"), "--arith", arith,
+                     "--table", "spline", "--out", str(out)]) == 0
 
 
 def _assert_same_as_gains(out) -> None:
@@ -215,6 +218,60 @@ def test_no_spline_entry_is_near_a_rounding_boundary(monkeypatch, example):
         kept = np.abs(a) >= 1e-12 * np.abs(a).max()
         near = int(np.sum(np.where(kept, _f32_boundary_distance(a), np.inf) <= _reach(a)))
         assert near == 0, f"{near} spline latch entries within reach of a rounding boundary"
+
+
+@pytest.mark.parametrize("arith", ["q15", "q31"])
+def test_no_fixed_point_spline_entry_is_near_a_rounding_boundary(monkeypatch, arith):
+    """The same for the robot's shipped Q15/Q31 spline tables: every integer coefficient
+    (``floor(c 2^s_e / 6 + 1/2)`` of the least squares fit, with the shift kept), every shift
+    (``floor(log2(...))`` of the entry's peak) and every re-solved latch entry (``_rhu``) is
+    clear of where its rounding changes, for every fit tried (a superset of those kept)."""
+    from stospline.table import qformat, qspline
+    fits, shifts, latch = [], [], []
+    lsq, fit_uniform, shifts_fn, rhu = (qspline._lsq, qspline._fit_uniform, qspline._shifts,
+                                        qformat._rhu)
+
+    def capture_lsq(*args):
+        out = lsq(*args)
+        fits.append(np.array(out, dtype=float))
+        return out
+
+    def capture_fit(*args):
+        out = fit_uniform(*args)
+        if out is not None:
+            fits[-1] = (fits[-1], out[1])         # the coefficients in LSB and the shift kept
+        return out
+
+    def capture_shifts(peak, bits, k):
+        top = float(2 ** (bits - 1) - 1)
+        with np.errstate(divide="ignore"):
+            shifts.append(np.log2(top * 6.0 / (qspline._COEF_HEADROOM
+                                               * np.maximum(np.asarray(peak), 1e-300))))
+        return shifts_fn(peak, bits, k)
+
+    def capture_rhu(a):
+        latch.append(np.array(a, dtype=float))
+        return rhu(a)
+    monkeypatch.setattr(qspline, "_lsq", capture_lsq)
+    monkeypatch.setattr(qspline, "_fit_uniform", capture_fit)
+    monkeypatch.setattr(qspline, "_shifts", capture_shifts)
+    monkeypatch.setattr(qformat, "_rhu", capture_rhu)
+    problem = load_problem(EXAMPLES / "robot_corridor.toml")
+    pipeline.fixed_point_spline(pipeline.design_problem(problem, table="spline"), arith)
+    kept = [f for f in fits if isinstance(f, tuple)]
+    assert kept and shifts and latch
+
+    def assert_clear(distance, a, what):
+        near = int(np.sum(distance <= _reach(a)))
+        assert near == 0, f"{near} {what} within reach of a rounding boundary"
+    for Cf, shift in kept:
+        a = Cf * (np.ldexp(1.0, shift) / 6.0)[:, None]
+        assert_clear(np.abs(a - np.floor(a) - 0.5), a, "Q spline coefficients")
+    for a in (a[np.isfinite(a)] for a in shifts):
+        if a.size:
+            assert_clear(np.abs(a - np.round(a)), a, "Q spline shifts")
+    for a in (a for a in latch if np.any(a)):
+        assert_clear(np.abs(a - np.floor(a) - 0.5), a, "Q latch entries")
 
 
 def test_written_bound_is_rounded_up_never_down(robot_zoh):

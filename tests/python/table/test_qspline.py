@@ -189,10 +189,12 @@ def test_bad_input(robot_spline):
         fixed_point_spline(robot_spline, "q15", tolerance=0.5)
     assert err.value.field == "spline_tolerance"
     ft, _ = fixed_point_spline(robot_spline, "q15", tolerance=1e-3)
-    with pytest.raises(ValueError, match="no C form"):
-        generate_c(ft)
-    # the per-tick form of the same integer gains is a table the firmware takes
-    generate_c(replace(ft, spline=None))
+    # the C of a Q spline table holds the spline (stsp_qspline_t), not the per-tick gains
+    _, source = generate_c(ft)
+    assert "stsp_qspline_t" in source and f"{ft.name}_K" not in source
+    # the per-tick form of the same integer gains is a table the firmware takes too
+    _, per_tick = generate_c(replace(ft, spline=None))
+    assert f"{ft.name}_K" in per_tick and "stsp_qspline_t" not in per_tick
 
 
 def test_band_tables_are_refused():

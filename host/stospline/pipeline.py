@@ -12,6 +12,7 @@ import numpy as np
 from stospline.table.codegen import GENERATOR, generate_c
 from stospline.design.bands import design_bands, has_bands
 from stospline.design.continuous import DesignError, design_continuous
+from stospline.design.varying import mean_maps
 from stospline.design.zoh import check_delay, design_zoh
 from stospline.sim.controller import build_controller
 from stospline.sim.montecarlo import MonteCarloResult, joint_verdict, simulate, z_value
@@ -435,7 +436,8 @@ def fixed_point_spline(d: Designed, arith: str, *, tolerance: float | None = Non
         x_range = state_range(d.problem, d.table, sigmas=sigmas)
     per_tick = quantize_table(exact, arith, x_range)
     try:
-        ft = q_spline_table(d.problem, exact, arith, x_range, tolerance)
+        ft = q_spline_table(d.problem, exact, arith, x_range, tolerance,
+                            varying_maps=mean_maps)
     except DesignError:
         raise
     except ValueError as exc:            # scale exponents beyond STSP_Q_EXP_MAX

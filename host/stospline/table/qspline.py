@@ -320,7 +320,8 @@ def dequantized(ft):
 
 
 def q_spline_table(problem, exact, arith: str, x_range, tolerance: float, *,
-                   name: str | None = None, max_spans: int = 1024, resolve: bool = True):
+                   name: str | None = None, max_spans: int = 1024, resolve: bool = True,
+                   varying_maps=None):
     """The Q15/Q31 spline table of a design: a `qformat.FixedPointTable` whose ``spline`` is
     the `QSplineGains` the firmware stores and whose K, k0, L are their evaluation, tick by
     tick (`evaluate_q`), with the latch maps re-solved for those gains and then rounded, and
@@ -341,6 +342,8 @@ def q_spline_table(problem, exact, arith: str, x_range, tolerance: float, *,
     resolve : bool
         Re-solve the latch maps for the spline's gains (`spline_latch.resolve_latch`); False
         keeps the design's.
+    varying_maps : callable, optional
+        The per-tick mean maps of time-varying stage data (`spline_latch.resolve_latch`).
 
     Raises
     ------
@@ -367,7 +370,7 @@ def q_spline_table(problem, exact, arith: str, x_range, tolerance: float, *,
         if resolve:
             shape = assemble(exact, arith, x_range, (x_exp, u_exp, v_exp),
                              (Kq, k0q, Lq, _rhu(scaled[3]), _rhu(scaled[4])), scaled)
-            Lam, lam0 = resolve_latch(problem, dequantized(shape))
+            Lam, lam0 = resolve_latch(problem, dequantized(shape), varying_maps=varying_maps)
             Lamq = _rhu(Lam * np.ldexp(1.0, x_exp[None, None, :] - v_exp[None, :, None] + F))
             lam0q = _rhu(lam0 * np.ldexp(1.0, F - v_exp[None, :]))
         else:

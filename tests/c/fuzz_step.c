@@ -2045,7 +2045,11 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             if (ready && (t.spline != NULL) && finite && (tick < t.n_ticks) &&
                 !((model_next > 0u) && (tick + 1u < model_next))) {
                 spline_step = 1;
+#ifndef STSP_ARITH_FIXED_POINT
                 fz_spline_model(&t, &before, tick, x, band_latch ? latch.v : NULL, &sm);
+#else
+                fz_spline_model(&t, &before, tick, x, &sm);
+#endif
             }
             st = stsp_step(&c, tick, x, u);
             fuzz_check(fz_known_status(st));
@@ -2118,10 +2122,14 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                 if (t.stage_start[sm.stage + 1u] - t.stage_start[sm.stage] > 4096u) {
                     FZS(FZS_SPL_LONG);
                 }
+#ifndef STSP_ARITH_FIXED_POINT
                 fz_check_spline_step(&t, &c, st,
                                      (band_latch && latch.fallback) ? STSP_WARN_BAND_FALLBACK
                                                                     : tick_st,
                                      u, &sm);
+#else
+                fz_check_spline_step(&t, &c, st, tick_st, u, &sm);
+#endif
             }
             if (tick >= t.n_ticks) {
                 fuzz_check(st == STSP_ERR_TICK_RANGE);

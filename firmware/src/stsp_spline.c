@@ -19,8 +19,10 @@
 #include "stsp_law.h"
 #ifndef STSP_ARITH_FIXED_POINT
 #include "stsp_law_spline.h"
+#define STSP_PLAN_BAND 1 /* a spline table may carry a band dual (float32 only) */
+#else
+#define STSP_PLAN_BAND 0
 #endif
-#define STSP_PLAN_BAND 1
 #include "stsp_plan.h"
 
 /* The symbol a generated spline table refers to (float32: stsp_spline_t, Q15/Q31:

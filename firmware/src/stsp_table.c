@@ -197,9 +197,13 @@ static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, i
         }
         {
             const stsp_status_t st = stsp_spline_check_dims(t);
+#ifdef STSP_ARITH_FIXED_POINT
+            return st; /* no band dual in a fixed-point build (refused above) */
+#else
             if ((st != STSP_OK) || (has_band == 0)) {
                 return st;
             }
+#endif
         }
     }
 #ifdef STSP_ARITH_FIXED_POINT

@@ -190,17 +190,24 @@ def _float32_variant(table, p: str) -> _Variant:
     if getattr(table, "spline", None) is not None:
         extra += _spline_arrays(table.spline, p)
         spline = f"&{p}_spline"
-        code = f"const uint32_t *const {p}_spline_code"
-        extra.append(f"/* The controller refers to the spline code only weakly, so that programs without a\n"
-                     f" * spline table do not link it: this reference links it with the table. */\n"
-                     f"{code} = &stsp_spline_code;\n")
-        declarations += f"extern {code};\n"
+        definition, declaration = _spline_code_reference(p)
+        extra.append(definition)
+        declarations += declaration
         layout = ("/* Tables in flash: the gains K, k0, L as cubic B-splines per stage (stsp_spline_t,\n"
                   " * docs/guide/firmware.md \"Spline tables\"); Lambda[stage][c*NX + j],\n"
                   " * lambda0[stage][c], u_min[i], u_max[i], u_hold[i] as in stsp_controller.h\n"
                   " * (+-3.4028235e+38f = +-FLT_MAX: unlimited). */")
     return _Variant("", f"BAND_ROWS {q}u", layout, "stsp_f32_t", _f32_literal, "",
                     "", extra, declarations, SCALAR_FLOAT32, f" {band}, {spline},")
+
+
+def _spline_code_reference(p: str) -> tuple[str, str]:
+    """``(definition, declaration)`` of a spline table's strong reference to the spline code
+    (``stsp_spline_code``, any arithmetic): the controller refers to that code only weakly."""
+    code = f"const uint32_t *const {p}_spline_code"
+    return (f"/* The controller refers to the spline code only weakly, so that programs without a\n"
+            f" * spline table do not link it: this reference links it with the table. */\n"
+            f"{code} = &stsp_spline_code;\n", f"extern {code};\n")
 
 
 def _spline_arrays(sp, p: str) -> list[str]:
@@ -252,11 +259,8 @@ def _fixed_point_variant(table, p: str) -> _Variant:
     if getattr(table, "spline", None) is not None:
         extra += _q_spline_arrays(table.spline, p, table.arith)
         spline = f"&{p}_spline,"
-        code = f"const uint32_t *const {p}_spline_code"
-        extra.append(f"/* The controller refers to the spline code only weakly, so that programs without a\n"
-                     f" * spline table do not link it: this reference links it with the table. */\n"
-                     f"{code} = &stsp_spline_code;\n")
-        declarations = f"extern {code};\n"
+        definition, declarations = _spline_code_reference(p)
+        extra.append(definition)
         layout = layout.replace(
             "; layout as in stsp_controller.h, gains stored negated and\n * pre-scaled:",
             "; the gains K, k0, L as integer uniform cubic B-splines per\n"

@@ -178,10 +178,6 @@ def _design_problem(problem: Problem, *, noise: bool, discretization: str,
         if discretization != "exact-zoh":
             raise DesignError(first, 'a region at every tick is met for the law held over '
                                      'each tick: use --discretization exact-zoh')
-        if spline_tolerance is not None:   # its ticks are checked for the per-tick gains
-            raise DesignError("design.table", 'a spline table does not carry the band dual '
-                                              'of a region at every tick: use table '
-                                              '"per-tick"')
         every_tick = design_every_tick(problem, noise=noise)
         # From here on the problem is the one the tables are for: the file's knots plus the
         # working set's band knots (its tick regions kept, so it says what it was made for).
@@ -216,7 +212,9 @@ def _design_problem(problem: Problem, *, noise: bool, discretization: str,
         table = spline_table(problem, exact, per_tick, spline_tolerance)
     def evaluate_exact():
         return evaluate_table(problem, exact, path=False)
-    evaluations = [evaluate_exact, lambda: evaluate_table(problem, table, path=False)]
+    # A spline's certificate checks every row of a region at every tick: the mean path.
+    path = spline_tolerance is not None and bool(problem.tick_regions)
+    evaluations = [evaluate_exact, lambda: evaluate_table(problem, table, path=path)]
     if discretization == "continuous":
         # The law is the continuous-time one; a spline's certificate is still measured
         # against the sampled table it compresses (the law the firmware would otherwise run).
@@ -425,8 +423,10 @@ def fixed_point_spline(d: Designed, arith: str, *, tolerance: float | None = Non
         raise DesignError("design.delay_ticks", f"a design for a one-tick delay has float32 "
                                                 f"tables only, not {arith}")
     if has_bands(d.problem) or d.every_tick is not None:
-        raise DesignError("design.table", "a spline table does not carry the band dual: use "
-                                          'table "per-tick"')
+        raise DesignError("design.table", f"a {arith} spline table does not carry the band "
+                                          f"dual nor restores the constraints of a table that "
+                                          f"latches the state: use float32 or table "
+                                          f'"per-tick"')
     if tolerance is None:
         tolerance = (d.certificate["spline_tolerance"] if d.certificate is not None else
                      d.problem.options.get("spline_tolerance", DEFAULT_SPLINE_TOLERANCE))

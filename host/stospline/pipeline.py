@@ -20,6 +20,7 @@ from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table, s
 from stospline.sim.plant_scheme import SubstepChoice, choose_substeps, scheme_moments
 from stospline.sim.fault_oracle import evaluate_with_faults, has_exact_oracle
 from stospline.sim.spline_certificate import certificate, spline_table
+from stospline.table.spline_restore import is_state_latching
 from stospline.sim.every_tick import EveryTick, design_every_tick, every_tick_check
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem, ProblemError
@@ -209,6 +210,13 @@ def _design_problem(problem: Problem, *, noise: bool, discretization: str,
              if discretization != "continuous" or spline_tolerance is not None else None)
     per_tick = table
     if spline_tolerance is not None:
+        if every_tick is not None and not is_state_latching(per_tick):
+            # Constraint generation's band dual re-plans its working set only; the other
+            # ticks' slack is not restored for the spline's gains (the tick-grid QP's tables
+            # latch the state and are: `spline_restore`).
+            raise DesignError("design.table", "a region at every tick met by a band dual (at "
+                                              "most 8 rows) has no spline table: its other "
+                                              "ticks are not restored; use table \"per-tick\"")
         table = spline_table(problem, exact, per_tick, spline_tolerance)
     def evaluate_exact():
         return evaluate_table(problem, exact, path=False)

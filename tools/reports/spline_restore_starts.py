@@ -1,7 +1,8 @@
 """Spline tables of designs that latch the state (`stospline.table.spline_restore`): the worst
 constraint violation over every row (knot rows, region rows at every tick) from the design's
-x0 and from other starts, for the per-tick float32 table and the spline table, by the exact
-oracle; also as a multiple of each row's float32 floor (`spline_restore.float32_floor`).
+x0 and from other starts, for the per-tick float32 table, the spline table and the plain fit
+(the restoration skipped), by the exact oracle; also as a multiple of each row's float32 floor
+(`spline_restore.float32_floor`).
 
 The restoration holds the rows for the design's x0 only (as the per-tick table's active-set
 latch does: the latched state enters the feed-forward through L, the design's active set's
@@ -46,8 +47,9 @@ def main() -> None:
     ap.add_argument("--scales", default="0.01,0.1")
     ap.add_argument("--seed", type=int, default=3)
     args = ap.parse_args()
-    print("| example | tolerance | start | per-tick worst | / floor | spline worst | / floor |")
-    print("|---|---|---|---|---|---|---|")
+    print("| example | tolerance | start | per-tick worst | / floor | spline worst | / floor | "
+          "plain fit worst | / floor |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for name in args.examples.split(","):
         p = stospline.load_problem(ROOT / "examples" / f"{name}.toml")
         d = stospline.design_problem(p, mode="joint")
@@ -60,13 +62,15 @@ def main() -> None:
                 starts.append((f"x0 + N(0, {scale:g}^2) #{k + 1}",
                                np.asarray(x, np.float32).astype(float)))
         for tol in (float(t) for t in args.tolerances.split(",")):
-            spline, K, k0, L, _ = sr.restore(d.problem, exact, d.table, tol)
-            t = replace(d.table.with_arrays(K=K, k0=k0, L=L), spline=spline)
+            tables = []
+            for correct in (True, False):
+                spline, K, k0, L, _ = sr.restore(d.problem, exact, d.table, tol,
+                                                 correct=correct)
+                tables.append(replace(d.table.with_arrays(K=K, k0=k0, L=L), spline=spline))
             for label, x0 in starts:
-                a, ar = worst(d.problem, d.table, x0)
-                b, br = worst(d.problem, t, x0)
-                print(f"| {name} | {tol:g} | {label} | {a:.2e} | {ar:.3g} | {b:.2e} | {br:.3g} |",
-                      flush=True)
+                cells = [worst(d.problem, t, x0) for t in (d.table, *tables)]
+                print(f"| {name} | {tol:g} | {label} | "
+                      + " | ".join(f"{a:.2e} | {r:.3g}" for a, r in cells) + " |", flush=True)
 
 
 if __name__ == "__main__":

@@ -123,10 +123,10 @@ def _maps(problem, table, varying_maps=None):
 
 def _k0_basis(spline: SplineGains, stage_start) -> tuple[np.ndarray, list]:
     """The correction's columns: for every stored k0 entry, its S + 3 coefficients
-    (``(stage, entry index in the stage, input, coefficient)``), and per tick the (m, P)
-    matrix ``N_j`` of the k0 values' derivatives with respect to them (float64 basis)."""
+    (``(stage, entry index in the stage, input, coefficient)``), and (ticks, m, P): per tick
+    the matrix ``N_j`` of the k0 values' derivatives with respect to them (float64 basis)."""
     nx = spline.nx
-    columns, per_tick = [], []
+    columns = []
     P = 0
     offsets = []
     for s in range(spline.n_stages):
@@ -138,16 +138,15 @@ def _k0_basis(spline: SplineGains, stage_start) -> tuple[np.ndarray, list]:
                 columns.append((s, int(e), int(inputs[e]), c))
             P += spline.spans(s) + 3
         offsets.append(mine)
+    out = np.zeros((int(stage_start[-1]), spline.nu, P))
     for s in range(spline.n_stages):
-        T = int(stage_start[s + 1] - stage_start[s])
+        a = int(stage_start[s])
+        T = int(stage_start[s + 1]) - a
         sigma, N = _basis(spline.knots(s).astype(float), np.arange(T, dtype=float))
-        for j in range(T):
-            Nj = np.zeros((spline.nu, P))
-            for i, (_, p0) in offsets[s].items():
-                for r in range(4):
-                    Nj[i, p0 + sigma[j] + r] = N[r][j]
-            per_tick.append(Nj)
-    return np.asarray(columns, dtype=np.int64).reshape(-1, 4), per_tick
+        for i, (_, p0) in offsets[s].items():
+            for r in range(4):
+                out[a + np.arange(T), i, p0 + sigma + r] = N[r]
+    return np.asarray(columns, dtype=np.int64).reshape(-1, 4), out
 
 
 def mean_rows(problem, table, rows: Rows, v, *, N=None, varying_maps=None):
@@ -157,7 +156,7 @@ def mean_rows(problem, table, rows: Rows, v, *, N=None, varying_maps=None):
     n, m, _ = table.dims
     K = np.asarray(table.K, float)
     ff = np.asarray(table.k0, float) + np.asarray(table.L, float) @ np.asarray(v, float)
-    P = 0 if N is None else N[0].shape[1]
+    P = 0 if N is None else N.shape[2]
     M = np.zeros((n, 1 + P))
     M[:, 0] = problem.x0
     T = int(table.stage_start[-1])
@@ -264,9 +263,11 @@ def restore(problem, exact, quantized, tolerance: float, *,
     h = 1.0 / exact.tick_hz
     Q = np.zeros((columns.shape[0],) * 2)
     for s in range(exact.n_stages):
-        R = problem.stages[s].R
-        for j in range(start[s], start[s + 1]):
-            Q += h * (N[j].T @ R @ N[j])
+        Ns = N[start[s]:start[s + 1]]                       # (ticks, m, P)
+        own = np.flatnonzero(np.any(Ns != 0, axis=(0, 1)))  # the stage's own coefficients
+        Ns = Ns[:, :, own]
+        RN = np.einsum("ik,tkp->tip", problem.stages[s].R, Ns)
+        Q[np.ix_(own, own)] += h * np.einsum("tip,tiq->pq", Ns, RN, optimize=True)
     Q += _RIDGE * max(float(np.diag(Q).max()), 1e-300) * np.eye(Q.shape[0])
     Qi = np.linalg.inv(Q)
     target = np.where(act > 0, rows.hi, rows.lo)

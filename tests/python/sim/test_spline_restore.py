@@ -17,6 +17,7 @@ from stospline.problem.faults import Faults
 from stospline.sim.controller import build_controller
 from stospline.sim.montecarlo import compare_to_oracle, simulate
 from stospline.sim.oracle import evaluate_table
+from stospline.table.flash import flash_bytes
 from stospline.table.format import table_of
 from stospline.table.spline import command
 from stospline.table import spline_restore as sr
@@ -81,6 +82,9 @@ def test_certificate_every_row_at_the_float32_floor(designed):
     assert abs(d.certificate["excess_over_law"]) < 1e-6
     assert abs(d.certificate["excess_over_J0"]) < 1e-6
     assert d.certificate["knot_cov_change"] < 1e-6
+    assert d.certificate["flash_bytes"] == flash_bytes(d.table)
+    assert d.certificate["compression_ratio"] == flash_bytes(per_tick.table) / flash_bytes(
+        d.table)
 
 
 def test_the_restoration_is_what_meets_the_rows(monotone):

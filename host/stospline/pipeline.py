@@ -119,8 +119,11 @@ def design_problem(problem: Problem, *, noise: bool = True,
     table : {"per-tick", "spline"}, optional
         The table the firmware runs: one row of gains per tick, or cubic B-splines of the
         gains per stage, with the latch maps re-solved so that the expected constraints hold
-        for the law as the firmware evaluates it (`stospline.table.spline`; float32, no
-        bands, time-varying data and a one-tick delay included). ``implemented`` is then the
+        for the law as the firmware evaluates it (`stospline.table.spline`; time-varying data,
+        a one-tick delay and a band dual of at most 8 rows included), or, for a table that
+        latches the state (bands beyond a band dual, regions at every tick by the tick-grid
+        QP), its k0 coefficients corrected so that every constraint row holds for the
+        design's x0 (`stospline.table.spline_restore`). ``implemented`` is then the
         spline law's and ``certificate`` says what it costs. Default: the problem's
         ``[design] table``, else "per-tick".
     spline_tolerance : float, optional

@@ -167,3 +167,13 @@ def test_a_region_enforced_between_ticks_is_refused(monotone):
     moved = replace(p, tick_regions=tuple(replace(r, between=True) for r in p.tick_regions))
     with pytest.raises(stospline.DesignError, match="design.table"):
         sr.restore(moved, table_of(monotone.design, quantize=False), monotone.table, 1e-5)
+
+
+def test_the_robot_in_joint_mode_latches_the_state_and_is_restored(robot_problem):
+    """5 equality rows against 4 states: the joint robot's table latches the state (refused
+    before); its spline meets every row within the float32 floor at x0, at 1e-6 of the law."""
+    d = stospline.design_problem(robot_problem, mode="joint", table="spline")
+    assert sr.is_state_latching(d.table) and d.certificate["restored"]["active"] == 5
+    viol, floor, _ = _row_violations(d.problem, d.table)
+    assert np.all(viol <= floor), (viol, floor)
+    assert abs(d.certificate["excess_over_law"]) < 1e-6

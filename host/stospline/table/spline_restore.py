@@ -238,8 +238,11 @@ def restore(problem, exact, quantized, tolerance: float, *,
 
     Raises DesignError (``design.table``) when the active rows cannot be met by any correction
     of the stored k0 coefficients, or the loop does not settle in `MAX_ROUNDS` rounds; and for
-    a region checked between ticks (not restored there).
+    a region checked between ticks (not restored there) or a law designed for a delay.
     """
+    if getattr(quantized, "delay_ticks", 0):
+        raise DesignError(FIELD, "a table that latches the state is restored without a delay "
+                                 "only (delay_ticks = 0)")
     if any(reg.between for reg in problem.tick_regions):
         raise DesignError(FIELD, "a region enforced between ticks (between_ticks = true) is "
                                  "not restored by a spline table: use table \"per-tick\"")

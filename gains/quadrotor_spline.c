@@ -222,7 +222,7 @@ static const stsp_f32_t quadrotor_spline_coef[1512] = {
     -1.778822e+01f, -1.7765781e+01f, -1.7743204e+01f, -1.7720491e+01f, -1.7697641e+01f, -1.7674658e+01f,
     -1.7651539e+01f, -1.7628286e+01f, -1.7604904e+01f, -1.758139e+01f, -1.7557747e+01f, -1.7533976e+01f,
     -1.7510078e+01f, -1.7486053e+01f, -1.7461905e+01f, -1.742954e+01f, -1.7388783e+01f, -1.7339396e+01f,
-    -1.7306143e+01f, -1.7642775e+01f, 1.1532396e-01f, 1.17183745e-01f, 1.2100324e-01f, 1.2722626e-01f,
+    -1.7306143e+01f, -1.7642776e+01f, 1.1532396e-01f, 1.17183745e-01f, 1.2100324e-01f, 1.2722626e-01f,
     1.3396311e-01f, 1.4126638e-01f, 1.4917511e-01f, 1.5697846e-01f, 1.6459715e-01f, 1.7187628e-01f,
     1.7955786e-01f, 1.8711847e-01f, 1.9436201e-01f, 2.0128256e-01f, 2.0838436e-01f, 2.1562055e-01f,
     2.2292629e-01f, 2.3021394e-01f, 2.3736799e-01f, 2.4423903e-01f, 2.5063732e-01f, 2.560235e-01f,
@@ -383,6 +383,6 @@ const stsp_table_t quadrotor_spline_table = {
     quadrotor_spline_stage_start, quadrotor_spline_stage_n_latch,
     NULL, NULL, NULL, quadrotor_spline_Lambda, quadrotor_spline_lambda0,
     quadrotor_spline_u_min, quadrotor_spline_u_max, quadrotor_spline_u_hold, NULL, &quadrotor_spline_spline,
-    0x7244D118u,
+    0x3A990C48u,
     {0x7au, 0x5bu, 0x41u, 0x4cu, 0xa4u, 0x1bu, 0xfbu, 0x96u, 0x48u, 0x6du, 0xf7u, 0xc5u, 0x0au, 0xfau, 0xfbu, 0xe0u, 0xdcu, 0x0eu, 0xf2u, 0x15u, 0x12u, 0x82u, 0x49u, 0x4eu, 0xa4u, 0x9eu, 0x2eu, 0xe4u, 0xf6u, 0x66u, 0xebu, 0x71u}
 };

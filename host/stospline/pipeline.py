@@ -20,6 +20,7 @@ from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table, s
 from stospline.sim.plant_scheme import SubstepChoice, choose_substeps, scheme_moments
 from stospline.sim.fault_oracle import evaluate_with_faults, has_exact_oracle
 from stospline.sim.spline_certificate import certificate, spline_table
+from stospline.table.spline_restore import is_state_latching
 from stospline.sim.every_tick import EveryTick, design_every_tick, every_tick_check
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem, ProblemError
@@ -118,8 +119,11 @@ def design_problem(problem: Problem, *, noise: bool = True,
     table : {"per-tick", "spline"}, optional
         The table the firmware runs: one row of gains per tick, or cubic B-splines of the
         gains per stage, with the latch maps re-solved so that the expected constraints hold
-        for the law as the firmware evaluates it (`stospline.table.spline`; float32, no
-        bands, time-varying data and a one-tick delay included). ``implemented`` is then the
+        for the law as the firmware evaluates it (`stospline.table.spline`; time-varying data,
+        a one-tick delay and a band dual of at most 8 rows included), or, for a table that
+        latches the state (bands beyond a band dual, regions at every tick by the tick-grid
+        QP), its k0 coefficients corrected so that every constraint row holds for the
+        design's x0 (`stospline.table.spline_restore`). ``implemented`` is then the
         spline law's and ``certificate`` says what it costs. Default: the problem's
         ``[design] table``, else "per-tick".
     spline_tolerance : float, optional
@@ -178,10 +182,6 @@ def _design_problem(problem: Problem, *, noise: bool, discretization: str,
         if discretization != "exact-zoh":
             raise DesignError(first, 'a region at every tick is met for the law held over '
                                      'each tick: use --discretization exact-zoh')
-        if spline_tolerance is not None:   # its ticks are checked for the per-tick gains
-            raise DesignError("design.table", 'a spline table does not carry the band dual '
-                                              'of a region at every tick: use table '
-                                              '"per-tick"')
         every_tick = design_every_tick(problem, noise=noise)
         # From here on the problem is the one the tables are for: the file's knots plus the
         # working set's band knots (its tick regions kept, so it says what it was made for).
@@ -213,10 +213,19 @@ def _design_problem(problem: Problem, *, noise: bool, discretization: str,
              if discretization != "continuous" or spline_tolerance is not None else None)
     per_tick = table
     if spline_tolerance is not None:
+        if every_tick is not None and not is_state_latching(per_tick):
+            # Constraint generation's band dual re-plans its working set only; the other
+            # ticks' slack is not restored for the spline's gains (the tick-grid QP's tables
+            # latch the state and are: `spline_restore`).
+            raise DesignError("design.table", "a region at every tick met by a band dual (at "
+                                              "most 8 rows) has no spline table: its other "
+                                              "ticks are not restored; use table \"per-tick\"")
         table = spline_table(problem, exact, per_tick, spline_tolerance)
     def evaluate_exact():
         return evaluate_table(problem, exact, path=False)
-    evaluations = [evaluate_exact, lambda: evaluate_table(problem, table, path=False)]
+    # A spline's certificate checks every row of a region at every tick: the mean path.
+    path = spline_tolerance is not None and bool(problem.tick_regions)
+    evaluations = [evaluate_exact, lambda: evaluate_table(problem, table, path=path)]
     if discretization == "continuous":
         # The law is the continuous-time one; a spline's certificate is still measured
         # against the sampled table it compresses (the law the firmware would otherwise run).
@@ -425,8 +434,10 @@ def fixed_point_spline(d: Designed, arith: str, *, tolerance: float | None = Non
         raise DesignError("design.delay_ticks", f"a design for a one-tick delay has float32 "
                                                 f"tables only, not {arith}")
     if has_bands(d.problem) or d.every_tick is not None:
-        raise DesignError("design.table", "a spline table does not carry the band dual: use "
-                                          'table "per-tick"')
+        raise DesignError("design.table", f"a {arith} spline table does not carry the band "
+                                          f"dual nor restores the constraints of a table that "
+                                          f"latches the state: use float32 or table "
+                                          f'"per-tick"')
     if tolerance is None:
         tolerance = (d.certificate["spline_tolerance"] if d.certificate is not None else
                      d.problem.options.get("spline_tolerance", DEFAULT_SPLINE_TOLERANCE))

@@ -20,6 +20,7 @@ from stospline.sim.tick_moments import Moments
 from stospline.table.flash import flash_bytes, spline_bytes
 from stospline.table.format import GainTable
 from stospline.table.spline_compress import compress, compress_band
+from stospline.table.spline_restore import constraint_rows, is_state_latching, restore
 
 __all__ = ["spline_table", "certificate", "q_certificate", "constraint_residual", "band_terms"]
 
@@ -30,9 +31,17 @@ def spline_table(problem: Problem, exact: GainTable, per_tick: GainTable,
     precision (``table_of(design, quantize=False)``), `per_tick` the float32 one; a band
     table's dual is re-solved for the spline's gains (`spline_compress.compress_band`). Raises
     DesignError naming ``design.table`` for what has no spline table (bands beyond the 8 rows
-    of a band dual, a W' that is not a P-matrix, a latched state) or
+    of a band dual that do not latch the state, a W' that is not a P-matrix, a region enforced
+    between ticks) or
     ``design.spline_tolerance`` when the budget cannot be met within the firmware's limits."""
     band_qp = per_tick.band_qp
+    if is_state_latching(per_tick):
+        # The state latched at t0 (every-tick regions, bands beyond a band dual, more
+        # constraint rows than states): the feed-forward restored for the design's x0.
+        spline, K, k0, L, info = restore(problem, exact, per_tick, tolerance,
+                                         varying_maps=mean_maps)
+        return replace(per_tick, name=f"{per_tick.name}_spline", K=K, k0=k0, L=L,
+                       spline=spline, restored=info)
     if band_qp is None and any(kn.constraint is not None and kn.constraint.is_band
                                for kn in problem.knots):
         raise DesignError("design.table", f"a band design with more than {BANDQP_MAX} "
@@ -50,8 +59,16 @@ def spline_table(problem: Problem, exact: GainTable, per_tick: GainTable,
 
 def constraint_residual(problem: Problem, moments: Moments) -> float:
     """Largest |E{C2 x} - value| of an equality row, or distance of E{C2 x} outside its band,
-    over the constrained knots (0 without constraints)."""
+    over the constrained knots (0 without constraints), and over every row of every tick
+    region at each of its ticks when `moments` carries the mean path (``path=True``; t0, the
+    start's, excluded)."""
     worst = 0.0
+    if problem.tick_regions and moments.path_mean.shape[0] > 1:
+        for reg in problem.tick_regions:
+            j = reg.ticks(problem.t0, problem.tick_hz)
+            y = moments.path_mean[j[j > 0]] @ reg.C.T
+            worst = max(worst, float(np.max(np.maximum(y - reg.upper, reg.lower - y),
+                                            initial=0.0)))
     for k, kn in enumerate(problem.knots):
         if kn.constraint is not None:
             lo, hi = kn.constraint.bounds
@@ -113,6 +130,9 @@ def certificate(problem: Problem, table: GainTable, per_tick: GainTable, J0: flo
         "per_tick_flash_bytes": per_tick_total,
         "compression_ratio": per_tick_total / total,
         **({"band_dual": band_terms(table, per_tick)} if table.band_qp is not None else {}),
+        **({"restored": {"rows": table.restored["rows"], "active": table.restored["active"],
+                         "rounds": table.restored["rounds"]}}
+           if getattr(table, "restored", None) is not None else {}),
     }
 
 

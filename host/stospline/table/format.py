@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import struct
 import zlib
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
@@ -126,6 +126,9 @@ class GainTable(TableShape):
     # from it at every tick; the arrays K, k0, L above are that evaluation (bit for bit), so
     # the oracle, the fault oracle and the summaries read them as for a per-tick table.
     spline: object | None = None
+    # A spline table of a design that latches the state: how its constraints were restored
+    # for the design's x0 (`stospline.table.spline_restore.restore`: rows, active, rounds).
+    restored: dict | None = field(default=None, compare=False)
 
     def __post_init__(self):
         m = self.K.shape[1]

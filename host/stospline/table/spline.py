@@ -43,6 +43,13 @@ _INITIAL_TICKS_PER_SPAN = 16
 # error of a cubic fit falls like h^4; the margin saves a round of refits for most spans.
 _SPLIT_MARGIN = 1.25
 _DENSE_SOLVE_MAX = 400        # normal equations up to this size by numpy's dense solver
+# Stages under _SHORT_SPAN ticks, or with _SHORT_RUN consecutive one-tick spans, are
+# fitted by the minimum-norm least squares (`_min_norm`), whose singular values below _RCOND
+# of the largest count as zero: k one-tick spans amplify the rounding by ~(2 + sqrt 3)^k, 1e4
+# at k = 7.
+_SHORT_SPAN = 4
+_SHORT_RUN = 8
+_RCOND = 1e-10
 
 
 class SplineBudgetError(DesignError):
@@ -331,6 +338,39 @@ def _lsq(breaks: np.ndarray, N: list[np.ndarray], YT: np.ndarray,
     return _solve_banded(band, rhs.T).T
 
 
+def _ill_conditioned(breaks: np.ndarray) -> bool:
+    """A stage the normal equations fit badly (`_min_norm`): under `_SHORT_SPAN` ticks, or a
+    run of `_SHORT_RUN` consecutive one-tick spans."""
+    short = np.diff(breaks) == 1
+    if int(breaks[-1]) < _SHORT_SPAN:
+        return True
+    run = 0
+    for flag in short:
+        run = run + 1 if flag else 0
+        if run >= _SHORT_RUN:
+            return True
+    return False
+
+
+def _min_norm(breaks: np.ndarray, sigma: np.ndarray, N64: list[np.ndarray],
+              YT: np.ndarray) -> np.ndarray:
+    """Least squares of minimum norm (SVD, dense, singular values below `_RCOND` of the
+    largest dropped), for stages with spans shorter than `_SHORT_SPAN` ticks. Their ticks
+    may not determine every coefficient (a stage under 4 ticks), or barely: k one-tick spans
+    have their ticks on the knots, where the basis is ``[1/6, 2/3, 1/6]`` shifted by one, a
+    triangular system whose inverse grows like ``(2 + sqrt 3)^k`` (22 of them at the start
+    of robot_monotone: a singular value 6e-13 of the largest). The normal equations' ridge
+    leaves that direction to their rounding, amplified up to 1e-5 of a coefficient and moving
+    with the design's last bits (and the float32 coefficients with it); here it gets 0, which
+    changes the values at the ticks by that singular value's fraction only."""
+    T, nb = int(breaks[-1]), breaks.size + 2
+    B = np.zeros((T, nb))
+    rows = np.arange(T)
+    for r in range(4):
+        B[rows, sigma + r] = N64[r]
+    return np.linalg.lstsq(B, YT.T, rcond=_RCOND)[0].T
+
+
 def _solve_banded(band: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """Solve ``A x = rhs`` for the symmetric positive definite A given by its upper band
     (``band[d, j] = A[j, j + d]``): dense for small systems (numpy's LAPACK), else a banded
@@ -476,7 +516,10 @@ def _fit_stage(YT: np.ndarray, tolerance: float, max_spans: int, initial_spans: 
     bases = bases or _Bases()
     while True:
         sigma, N, N64, band = bases.get(T, breaks)
-        C = _coefficients(_lsq(breaks, N64, YT, band), peak)
+        if not _ill_conditioned(breaks):
+            C = _coefficients(_lsq(breaks, N64, YT, band), peak)
+        else:
+            C = _coefficients(_min_norm(breaks, sigma, N64, YT), peak)
         G = _combine(sigma, N, C)
         worst = _span_excess(G, YT, scale, breaks)
         if worst.max() <= 1.0:

@@ -104,9 +104,8 @@ def test_bad_file_options(capsys, tmp_path, key, value, field):
 
 
 @pytest.mark.parametrize("example, extra, field", [
-    ("robot_narrow_corridor", [], "design.table"),  # bands beyond the 8 rows of a band dual
-    ("robot_monotone", [], "design.table"),         # regions at every tick
-    ("robot_corridor", ["--mode", "joint"], "design.table"),   # 5 multipliers > 4 states
+    # A table that latches the state (bands beyond the 8 rows of a band dual): float32 only
+    ("robot_narrow_corridor", ["--arith", "q15"], "design.table"),
     ("robot_corridor", ["--spline-tolerance", "1e-9"], "design.spline_tolerance"),
 ])
 def test_refused_spline_tables(capsys, tmp_path, example, extra, field):

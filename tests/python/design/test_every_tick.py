@@ -194,9 +194,14 @@ def test_bad_input_exits_2_naming_the_field_and_writes_nothing(tmp_path, capsys,
     assert os.listdir(out) == []
 
 
-def test_a_spline_table_is_refused():
+def test_a_spline_table_of_a_band_dual_is_refused():
+    """Constraint generation's table (a band dual of at most 8 rows) re-plans its working set
+    only: no spline table, naming design.table. (The tick-grid QP's tables latch the state and
+    have one: tests/python/sim/test_spline_restore.py.)"""
+    problem = parse_problem(narrow_corridor_at_every_tick())
+    assert design_problem(problem, mode="joint").every_tick.method == "constraint-generation"
     with pytest.raises(DesignError) as err:
-        design_problem(load_problem(MONOTONE), mode="joint", table="spline")
+        design_problem(problem, mode="joint", table="spline")
     assert err.value.field == "design.table"
 
 

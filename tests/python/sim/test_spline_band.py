@@ -176,11 +176,12 @@ def test_cli_writes_a_spline_band_table(tmp_path):
     assert "robot_bands_spline_band_W" in (tmp_path / "robot_bands_spline.c").read_text()
 
 
-def test_cli_refuses_a_band_table_without_its_dual(tmp_path):
-    """More than 8 rows (the firmware's solver bound): no dual to re-solve, exit 2 naming
-    design.table, nothing written."""
+def test_cli_refuses_a_fixed_point_band_table_without_its_dual(tmp_path):
+    """More than 8 rows (the firmware's solver bound): the table latches the state, whose
+    constraints only the float32 spline restores (tests/python/sim/test_spline_restore.py);
+    in Q15 exit 2 naming design.table, nothing written."""
     r = _cli("design", str(EXAMPLES / "robot_narrow_corridor.toml"), "--table", "spline",
-             "--out", str(tmp_path))
+             "--arith", "q15", "--out", str(tmp_path))
     assert r.returncode == 2
     assert "design.table" in r.stderr and "band dual" in r.stderr, r.stderr
     assert list(tmp_path.iterdir()) == []

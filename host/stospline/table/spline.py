@@ -331,6 +331,23 @@ def _lsq(breaks: np.ndarray, N: list[np.ndarray], YT: np.ndarray,
     return _solve_banded(band, rhs.T).T
 
 
+def _lsq_min_norm(sigma: np.ndarray, N: list[np.ndarray], YT: np.ndarray, nb: int
+                  ) -> np.ndarray:
+    """The least-squares coefficients (entries, nb) of least norm, for a stage with more
+    coefficients than ticks (one-tick spans up to its end): its basis matrix has a null space
+    (the ridge of `_lsq` would pick a point in it by a solve of condition ~1e13, whose digits
+    move with the design's last bits), so the fit is the pseudo-inverse's, by the SVD of the
+    (ticks, nb) basis matrix; the singular values are either 0 (the null space) or of order
+    0.1-1 (coupled_axes' last stage: 0.27 and up), far on either side of the cut."""
+    T = YT.shape[1]
+    B = np.zeros((T, nb))
+    for r in range(4):
+        B[np.arange(T), sigma + r] = N[r]
+    U, sv, Vt = np.linalg.svd(B, full_matrices=False)
+    kept = sv > 1e-8 * sv[0]
+    return ((YT @ U[:, kept]) / sv[kept]) @ Vt[kept]
+
+
 def _solve_banded(band: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """Solve ``A x = rhs`` for the symmetric positive definite A given by its upper band
     (``band[d, j] = A[j, j + d]``): dense for small systems (numpy's LAPACK), else a banded
@@ -476,7 +493,10 @@ def _fit_stage(YT: np.ndarray, tolerance: float, max_spans: int, initial_spans: 
     bases = bases or _Bases()
     while True:
         sigma, N, N64, band = bases.get(T, breaks)
-        C = _coefficients(_lsq(breaks, N64, YT, band), peak)
+        if breaks.size + 2 > T:                  # more coefficients than ticks
+            C = _coefficients(_lsq_min_norm(sigma, N64, YT, breaks.size + 2), peak)
+        else:
+            C = _coefficients(_lsq(breaks, N64, YT, band), peak)
         G = _combine(sigma, N, C)
         worst = _span_excess(G, YT, scale, breaks)
         if worst.max() <= 1.0:

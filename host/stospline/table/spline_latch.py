@@ -18,6 +18,10 @@ interpolated through the tick's Gauss points as the designer and the oracle disc
 layer imports no designer). A law designed for a one-tick
 delay has the state ``xi = [x; p]`` (p the command being applied): its ``F`` maps ``[x; p; u;
 1]`` (`delayed_map`), the latch maps act on ``xi`` and the constraints on its x.
+
+`round_latch` stores the exact maps in float32, chosen on the float32 grid so that the law as
+stored meets the constraints at the design's planned start (x0 and the planned means at the
+later latches) far below the float32 floor that rounding each map to nearest leaves.
 """
 from __future__ import annotations
 
@@ -302,9 +306,9 @@ def resolve_latch(problem, table, spline=None, varying_maps=None, *, rounded: bo
 # their nearest float32, lambda0 take the grid points next to its target; the best options
 # of each row (smallest error of its multiplier at the planned start) enter the joint choice
 # over the group's rows, at most JOINT_MAX combinations.
-FLIP_ENTRIES = 6
+FLIP_ENTRIES = 4
 FINE_STEPS = 128
-JOINT_MAX = 100_000
+JOINT_MAX = 4096
 # The numbers the rounding's choices read (the planned state, the exact multipliers at it,
 # C2 Gamma) are first rounded to SNAP_BITS bits of their scale (`_snap`): the choices are then
 # exact functions of digits that the design's last bits (1e-14 relative) do not reach,

@@ -328,8 +328,15 @@ def _snap(a: np.ndarray, scale: float) -> np.ndarray:
 
 
 def _dot(A: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``A @ x`` over the last axis by numpy's own sum (no BLAS: the same on every machine)."""
-    return np.sum(A * x, axis=-1)
+    """``A @ x`` over the last axis, summed left to right by elementwise operations (no BLAS,
+    no reduction whose order could depend on the machine: the same bits everywhere)."""
+    P = np.asarray(A * x, dtype=float)
+    if P.shape[-1] == 0:
+        return np.zeros(P.shape[:-1])
+    acc = P[..., 0].copy()
+    for j in range(1, P.shape[-1]):
+        acc += P[..., j]
+    return acc
 
 
 def start_state(problem, table) -> np.ndarray:

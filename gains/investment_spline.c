@@ -14,12 +14,12 @@ static const uint16_t investment_spline_stage_n_latch[2] = {
 
 /* [n_stages][n_latch][nx] */
 static const stsp_f32_t investment_spline_Lambda[2] = {
-    1.898895e-01f, 1.9444078e-01f,
+    1.8988952e-01f, 1.9444081e-01f,
 };
 
 /* [n_stages][n_latch] */
 static const stsp_f32_t investment_spline_lambda0[2] = {
-    -7.2361507e+00f, -1.9709572e+01f,
+    -7.2361507e+00f, -1.9709574e+01f,
 };
 
 /* [nu] lower actuator limits */
@@ -124,6 +124,6 @@ const stsp_table_t investment_spline_table = {
     investment_spline_stage_start, investment_spline_stage_n_latch,
     NULL, NULL, NULL, investment_spline_Lambda, investment_spline_lambda0,
     investment_spline_u_min, investment_spline_u_max, investment_spline_u_hold, NULL, &investment_spline_spline,
-    0x2BDD0F24u,
+    0x0874BD29u,
     {0x39u, 0x96u, 0x1bu, 0x81u, 0xfau, 0x42u, 0x96u, 0x6eu, 0xadu, 0xf4u, 0x3eu, 0x5du, 0x1du, 0xafu, 0xb5u, 0x3au, 0x23u, 0x7cu, 0x17u, 0x8au, 0x4fu, 0xd1u, 0x02u, 0xfau, 0x08u, 0x05u, 0x08u, 0x06u, 0x77u, 0x8au, 0x8bu, 0xc8u}
 };

@@ -14,14 +14,14 @@ static const uint16_t quadrotor_spline_stage_n_latch[3] = {
 
 /* [n_stages][n_latch][nx] */
 static const stsp_f32_t quadrotor_spline_Lambda[18] = {
-    1.5104884e+00f, 1.5120779e+00f, 3.021135e-03f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
-    1.5119219e+00f, 1.5130352e+00f, 3.0230465e-03f, -1.5108085e+00f, -1.0087394e+00f, -2.014457e-03f,
-    1.5089197e+00f, 1.5111232e+00f, 3.0192283e-03f, -1.5067165e+00f, -1.0063206e+00f, -2.0096276e-03f,
+    1.5104883e+00f, 1.5120779e+00f, 3.0211564e-03f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
+    1.5119218e+00f, 1.5130352e+00f, 3.023021e-03f, -1.5108086e+00f, -1.0087395e+00f, -2.0144314e-03f,
+    1.5089196e+00f, 1.5111232e+00f, 3.0192006e-03f, -1.5067166e+00f, -1.0063206e+00f, -2.0096127e-03f,
 };
 
 /* [n_stages][n_latch] */
 static const stsp_f32_t quadrotor_spline_lambda0[6] = {
-    -3.0506306e+00f, 0.0e+00f, 1.4810555e+00f, 7.5509114e+00f, -7.5878286e+00f, -2.2841854e+00f,
+    -3.0506308e+00f, 0.0e+00f, 1.481056e+00f, 7.5509114e+00f, -7.587828e+00f, -2.2841854e+00f,
 };
 
 /* [nu] lower actuator limits */
@@ -383,6 +383,6 @@ const stsp_table_t quadrotor_spline_table = {
     quadrotor_spline_stage_start, quadrotor_spline_stage_n_latch,
     NULL, NULL, NULL, quadrotor_spline_Lambda, quadrotor_spline_lambda0,
     quadrotor_spline_u_min, quadrotor_spline_u_max, quadrotor_spline_u_hold, NULL, &quadrotor_spline_spline,
-    0x3A990C48u,
+    0x6C1DB6D3u,
     {0x7au, 0x5bu, 0x41u, 0x4cu, 0xa4u, 0x1bu, 0xfbu, 0x96u, 0x48u, 0x6du, 0xf7u, 0xc5u, 0x0au, 0xfau, 0xfbu, 0xe0u, 0xdcu, 0x0eu, 0xf2u, 0x15u, 0x12u, 0x82u, 0x49u, 0x4eu, 0xa4u, 0x9eu, 0x2eu, 0xe4u, 0xf6u, 0x66u, 0xebu, 0x71u}
 };

@@ -14,18 +14,18 @@ static const uint16_t robot_corridor_eps01_spline_stage_n_latch[2] = {
 
 /* [n_stages][n_latch][nx] */
 static const stsp_f32_t robot_corridor_eps01_spline_Lambda[32] = {
-    1.007686e+00f, 5.857818e-01f, 5.1172124e-03f, 4.010684e-02f, 0.0e+00f, 0.0e+00f,
+    1.0076859e+00f, 5.857818e-01f, 5.117213e-03f, 4.010684e-02f, 0.0e+00f, 0.0e+00f,
     0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
-    0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 8.6665675e-03f, 9.350428e-02f,
-    0.0e+00f, 0.0e+00f, -1.3517892e-01f, -1.12797506e-01f, 0.0e+00f, 0.0e+00f,
-    0.0e+00f, 0.0e+00f, 1.3037469e+00f, 8.504905e-01f, 0.0e+00f, 0.0e+00f,
-    -8.956563e-01f, -5.4837203e-01f,
+    0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 8.666565e-03f, 9.350427e-02f,
+    0.0e+00f, 0.0e+00f, -1.3517891e-01f, -1.1279751e-01f, 0.0e+00f, 0.0e+00f,
+    0.0e+00f, 0.0e+00f, 1.303747e+00f, 8.5049045e-01f, 0.0e+00f, 0.0e+00f,
+    -8.956563e-01f, -5.483715e-01f,
 };
 
 /* [n_stages][n_latch] */
 static const stsp_f32_t robot_corridor_eps01_spline_lambda0[8] = {
-    4.470449e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 8.6665675e-03f, -1.3517892e-01f,
-    -6.518735e+00f, 4.4782815e+00f,
+    4.470448e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 8.6665675e-03f, -1.351789e-01f,
+    -6.518735e+00f, 4.478281e+00f,
 };
 
 /* [nu] lower actuator limits */
@@ -213,6 +213,6 @@ const stsp_table_t robot_corridor_eps01_spline_table = {
     robot_corridor_eps01_spline_stage_start, robot_corridor_eps01_spline_stage_n_latch,
     NULL, NULL, NULL, robot_corridor_eps01_spline_Lambda, robot_corridor_eps01_spline_lambda0,
     robot_corridor_eps01_spline_u_min, robot_corridor_eps01_spline_u_max, robot_corridor_eps01_spline_u_hold, NULL, &robot_corridor_eps01_spline_spline,
-    0x911C5F11u,
+    0xF531D20Cu,
     {0x5au, 0x2au, 0x8au, 0xc7u, 0x93u, 0xa9u, 0xe8u, 0xe5u, 0xa2u, 0x05u, 0x2fu, 0x4du, 0x8du, 0x44u, 0x65u, 0x5eu, 0x69u, 0x13u, 0xbdu, 0x19u, 0xc4u, 0x06u, 0xd8u, 0x7bu, 0x33u, 0x6bu, 0x18u, 0xbbu, 0x0du, 0x45u, 0xe2u, 0xc3u}
 };

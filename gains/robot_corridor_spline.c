@@ -14,18 +14,18 @@ static const uint16_t robot_corridor_spline_stage_n_latch[2] = {
 
 /* [n_stages][n_latch][nx] */
 static const stsp_f32_t robot_corridor_spline_Lambda[32] = {
-    6.716282e-01f, 4.5109856e-01f, 6.716282e-01f, 4.5109856e-01f, 0.0e+00f, 0.0e+00f,
+    6.716281e-01f, 4.5109856e-01f, 6.7162836e-01f, 4.5109856e-01f, 0.0e+00f, 0.0e+00f,
     0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
-    0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 1.0357447e+00f, 7.924524e-01f,
-    0.0e+00f, 0.0e+00f, -8.3838063e-01f, -5.7755315e-01f, 0.0e+00f, 0.0e+00f,
-    0.0e+00f, 0.0e+00f, 1.0357447e+00f, 7.924524e-01f, 0.0e+00f, 0.0e+00f,
-    -8.3838063e-01f, -5.7755315e-01f,
+    0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 1.0357448e+00f, 7.9245245e-01f,
+    0.0e+00f, 0.0e+00f, -8.383806e-01f, -5.775533e-01f, 0.0e+00f, 0.0e+00f,
+    0.0e+00f, 0.0e+00f, 1.0357448e+00f, 7.924526e-01f, 0.0e+00f, 0.0e+00f,
+    -8.383806e-01f, -5.775533e-01f,
 };
 
 /* [n_stages][n_latch] */
 static const stsp_f32_t robot_corridor_spline_lambda0[8] = {
-    2.0985734e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 1.0357447e+00f, -8.3838063e-01f,
-    -5.1787233e+00f, 4.191903e+00f,
+    2.098573e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 1.0357448e+00f, -8.3838046e-01f,
+    -5.178724e+00f, 4.191903e+00f,
 };
 
 /* [nu] lower actuator limits */
@@ -184,6 +184,6 @@ const stsp_table_t robot_corridor_spline_table = {
     robot_corridor_spline_stage_start, robot_corridor_spline_stage_n_latch,
     NULL, NULL, NULL, robot_corridor_spline_Lambda, robot_corridor_spline_lambda0,
     robot_corridor_spline_u_min, robot_corridor_spline_u_max, robot_corridor_spline_u_hold, NULL, &robot_corridor_spline_spline,
-    0x3748A231u,
+    0xABC7CAF8u,
     {0x06u, 0x7bu, 0xdcu, 0x13u, 0xfau, 0x63u, 0x21u, 0x2au, 0x99u, 0x10u, 0x64u, 0x27u, 0x1fu, 0x47u, 0x12u, 0xc2u, 0x43u, 0xbau, 0x19u, 0x7bu, 0xc3u, 0x2du, 0x2du, 0xe1u, 0x90u, 0x4fu, 0xc6u, 0xefu, 0x5du, 0xbdu, 0x9fu, 0x57u}
 };

@@ -4,14 +4,13 @@
 # tables (<name>_spline.*) beside the per-tick ones of the robots, robot_bands (its band dual
 # re-solved for the spline's gains), investment (time-varying data), quadrotor (a one-tick
 # delay), population (4-tick stages: its spline table is 1.47x larger than the per-tick one;
-# the summary says so), robot_monotone (a region at every tick) and robot_narrow_corridor (bands
-# beyond the 8 rows of a band dual; 2-tick stages: its spline table is 1.3x larger), both of
-# which latch the state: their feed-forward is restored so that every constraint row holds for
-# the design's x0 (host/stospline/table/spline_restore.py). robot_patrol_60s has only its
-# spline table, its file's [design] table. None for coupled_axes, whose spline table is
-# certified but not reproducible byte for byte elsewhere: its re-solved latch maps move
-# with the design's last bits across float32 rounding boundaries
-# (docs/evidence/spline-tables.md);
+# the summary says so), coupled_axes (12 states, 20 latches: its re-solved lambda0 holds
+# exact zeros as 1e-10 that the latch grid rounds to 0, spline_latch.latch_grid),
+# robot_monotone (a region at every tick) and robot_narrow_corridor (bands beyond the 8 rows
+# of a band dual; 2-tick stages: its spline table is 1.3x larger), both of which latch the
+# state: their feed-forward is restored so that every constraint row holds for the design's
+# x0 (host/stospline/table/spline_restore.py). robot_patrol_60s has only its spline table,
+# its file's [design] table;
 # and the robot's fixed-point spline tables (<name>_q15_spline.*, <name>_q31_spline.*).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -23,7 +22,7 @@ for arith in q15 q31; do
   "$root/.venv/bin/stospline" design examples/robot_corridor.toml --arith "$arith" --out gains/
 done
 for f in robot_corridor robot_corridor_eps01 robot_bands investment quadrotor population \
-         robot_monotone robot_narrow_corridor; do
+         coupled_axes robot_monotone robot_narrow_corridor; do
   "$root/.venv/bin/stospline" design "examples/$f.toml" --table spline --out gains/
 done
 for arith in q15 q31; do

@@ -10,7 +10,8 @@ GAINS = REPO / "gains"
 # Examples whose spline tables (`--table spline`, <name>_spline.*) are shipped beside the
 # per-tick ones (tools/regen_gains.sh).
 SPLINE_EXAMPLES = ("robot_corridor", "robot_corridor_eps01", "robot_bands", "investment",
-                   "quadrotor", "population", "robot_monotone", "robot_narrow_corridor")
+                   "quadrotor", "population", "coupled_axes", "robot_monotone",
+                   "robot_narrow_corridor")
 
 
 def gains_stem(example: str) -> str:

@@ -10,6 +10,10 @@ Q table and over J0, the residuals, the error bound of each (|u_fixed - u_double
 the largest over the inputs, in the command's LSBs and in its units), the span length per
 stage and the time of `fixed_point_spline` (fit, latch re-solve, three oracle evaluations).
 
+`--rounding N`: instead, the latch maps' float32 rounding (`spline_latch.round_latch`) against
+rounding them to nearest and against the per-tick table: the residual at x0, the worst over N
+other starts (seed 0), with the t0 latch in binary32, and the cost against the exact re-solve.
+
 `--profile`: instead of the table, where the warm compression of the first example at the
 first tolerance spends its time (cProfile, the functions of `stospline.table`).
 
@@ -18,7 +22,9 @@ For every example and tolerance: the per-tick float32 table's flash and the spli
 ratio; the exact oracle's cost of each law as the firmware runs it (J per-tick, J spline) and
 the spline's excess over the per-tick table's and over the designed optimum J0; the worst
 E-constraint residual of each (|E{C2 x} - value| at the knots, for a band row the distance
-outside it, oracle); and the compression
+outside it, oracle), also with the t0 latch as the firmware computes it (``v = lambda0 +
+Lambda x0`` in binary32, `first_latch_in_float32`; the oracle takes it in float64); and the
+compression
 time (fit + evaluation + latch re-solve, `spline_table`) against the time of
 `design_problem` with a per-tick table (the design, the float32 table and the oracle on both
 laws: what `stospline design` computes), twice: "warm", medians of `--repeat` runs after a
@@ -36,13 +42,14 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse                                                    # noqa: E402
+import numpy as np                                                 # noqa: E402
 import statistics                                                  # noqa: E402
 import time                                                        # noqa: E402
 from pathlib import Path                                           # noqa: E402
 
 import stospline                                                   # noqa: E402
 from stospline.sim.spline_certificate import (constraint_residual,  # noqa: E402
-                                               spline_table)
+                                               first_latch_in_float32, spline_table)
 from stospline.table.flash import flash_bytes                      # noqa: E402
 from stospline.table.format import table_of                        # noqa: E402
 
@@ -85,6 +92,16 @@ def _cold(path: Path, tolerance: float, repeat: int) -> tuple[float, float]:
     return tuple(statistics.median(float(r[i]) for r in runs) for i in (0, 1))
 
 
+def _f32_latch_residual(problem, table, path: bool = False) -> str:
+    """The residual with the t0 latch as the firmware computes it, in binary32 from x0
+    (`first_latch_in_float32`); "n/a" for a band table (its t0 latch solves the band dual).
+    ``path``: regions at every tick, whose rows need the mean path."""
+    if table.band_qp is not None:
+        return "n/a"
+    m = stospline.evaluate_table(problem, first_latch_in_float32(problem, table), path=path)
+    return f"{constraint_residual(problem, m):.2e}"
+
+
 def _ratio(r: float) -> str:
     """A compression ratio: whole above 100, three digits below (a spline larger than the
     per-tick table shows below 1)."""
@@ -122,6 +139,45 @@ def _profile(name: str, tolerance: float, repeat: int) -> None:
         print(f"{ms:8.2f}  {where}")
 
 
+def _rounding(examples: list[str], tolerances: list[float], n_starts: int) -> None:
+    """The latch maps' float32 rounding: the residual at x0, the worst over `n_starts` other
+    starts (x0 plus normal noise of 0.1 (1 + max|x0|) per entry, seed 0) and the cost of
+    the per-tick table, of the spline table with its re-solved maps rounded to nearest, and
+    of the shipped rounding (`spline_latch.round_latch`); costs relative to the oracle's of
+    the spline with the exact (float64) re-solved maps."""
+    from dataclasses import replace
+    from stospline.design.varying import mean_maps
+    from stospline.table.spline_latch import resolve_latch
+    print("| example | tolerance | per-tick: x0 | others | t0 f32 | J | nearest: x0 | others | "
+          "t0 f32 | J | shipped: x0 | others | t0 f32 | J |")
+    print("|---|" + "---|" * 13)
+    for name in examples:
+        problem = stospline.load_problem(str(ROOT / "examples" / name))
+        d = stospline.design_problem(problem, table="per-tick",
+                                     mode=problem.options.get("mode", "stagewise"))
+        exact = table_of(d.design, quantize=False)
+        rng = np.random.default_rng(0)
+        x0 = np.asarray(problem.x0, dtype=float)
+        starts = [x0 + rng.normal(0.0, 0.1 * (1 + np.abs(x0).max()), x0.shape)
+                  for _ in range(n_starts)]
+        for tol in tolerances:
+            sp = spline_table(problem, exact, d.table, tol)
+            Lam, lam0 = resolve_latch(problem, sp, sp.spline, mean_maps)
+            J64 = stospline.evaluate_table(problem, replace(sp, Lambda=Lam, lambda0=lam0),
+                                           path=False).J
+            nearest = replace(sp, Lambda=Lam.astype(np.float32),
+                              lambda0=lam0.astype(np.float32))
+            cells = []
+            for t in (d.table, nearest, sp):
+                m = stospline.evaluate_table(problem, t, path=False)
+                others = max(constraint_residual(problem, stospline.evaluate_table(
+                    replace(problem, x0=x), t, path=False)) for x in starts)
+                cells += [f"{constraint_residual(problem, m):.2e}", f"{others:.2e}",
+                          _f32_latch_residual(problem, t), f"{(m.J - J64) / abs(J64):+.1e}"]
+            print(f"| {name.removesuffix('.toml')} | {tol:g} | " + " | ".join(cells) + " |",
+                  flush=True)
+
+
 def _fixed_point(examples: list[str], tolerances: list[float], ariths: list[str]) -> None:
     print("| example | arith | tolerance | span ticks per stage | per-tick B | spline B | ratio | "
           "J per-tick | J spline | excess vs per-tick | excess vs J0 | residual per-tick | "
@@ -154,19 +210,24 @@ def main() -> None:
     ap.add_argument("--tolerances", default="1e-5")
     ap.add_argument("--profile", action="store_true")
     ap.add_argument("--arith", default=None)
+    ap.add_argument("--rounding", type=int, default=0, metavar="STARTS",
+                    help="instead, the latch maps' rounding at x0 and STARTS other starts")
     args = ap.parse_args()
     tolerances = [float(t) for t in args.tolerances.split(",")]
     if args.arith:
         _fixed_point(args.examples.split(","), tolerances, args.arith.split(","))
+        return
+    if args.rounding:
+        _rounding(args.examples.split(","), tolerances, args.rounding)
         return
     if args.profile:
         _profile(args.examples.split(",")[0], tolerances[0], args.repeat)
         return
     print("| example | ticks | tolerance | spans per stage | per-tick B | spline B | ratio | "
           "J per-tick | J spline | excess vs per-tick | excess vs J0 | residual per-tick | "
-          "residual spline | warm: design s | compress s | ratio | cold: design s | compress s "
-          "| ratio |")
-    print("|---|" + "---|" * 18)
+          "residual spline | residual per-tick, t0 latch f32 | residual spline, t0 latch f32 | "
+          "warm: design s | compress s | ratio | cold: design s | compress s | ratio |")
+    print("|---|" + "---|" * 20)
     for name in args.examples.split(","):
         problem = stospline.load_problem(str(ROOT / "examples" / name))
         mode = problem.options.get("mode", "stagewise")       # the file's: joint for bands
@@ -182,6 +243,7 @@ def main() -> None:
             m = stospline.evaluate_table(d.problem, sp, path=path)
             per_tick = (stospline.evaluate_table(d.problem, d.table, path=True) if path
                         else d.implemented)
+            f32 = [_f32_latch_residual(d.problem, t, path) for t in (d.table, sp)]
             c_design, c_comp = _cold(ROOT / "examples" / name, tol, args.repeat)
             print(f"| {name.removesuffix('.toml')} | {d.table.n_ticks} | {tol:g} | "
                   f"{[int(sp.spline.spans(s)) for s in range(sp.n_stages)]} | "
@@ -191,6 +253,7 @@ def main() -> None:
                   f"{(m.J - d.design.J0) / abs(d.design.J0):+.2e} | "
                   f"{constraint_residual(d.problem, per_tick):.2e} | "
                   f"{constraint_residual(d.problem, m):.2e} | "
+                  f"{f32[0]} | {f32[1]} | "
                   f"{t_design:.3f} | {t_comp:.3f} | {t_comp / t_design:.0%} | "
                   f"{c_design:.3f} | {c_comp:.3f} | {c_comp / c_design:.0%} |", flush=True)
 

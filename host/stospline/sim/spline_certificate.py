@@ -22,7 +22,8 @@ from stospline.table.format import GainTable
 from stospline.table.spline_compress import compress, compress_band
 from stospline.table.spline_restore import constraint_rows, is_state_latching, restore
 
-__all__ = ["spline_table", "certificate", "q_certificate", "constraint_residual", "band_terms"]
+__all__ = ["spline_table", "certificate", "q_certificate", "constraint_residual", "band_terms",
+           "first_latch_in_float32"]
 
 
 def spline_table(problem: Problem, exact: GainTable, per_tick: GainTable,
@@ -78,6 +79,28 @@ def constraint_residual(problem: Problem, moments: Moments) -> float:
     return worst
 
 
+def first_latch_in_float32(problem: Problem, table: GainTable) -> GainTable:
+    """`table` with its t0 latch as the firmware computes it from the design's start: the
+    oracle takes ``v = lambda0 + Lambda x0`` exactly (float64 of the stored values), the
+    firmware ``acc = lambda0; acc += Lambda_j x0_j`` in binary32, one rounding per
+    operation (`stsp_latch_row`), so its v is a float32 vector. The copy's ``lambda0[0]``
+    (float64) is ``v_32 - Lambda[0] x0``, so that the oracle of the copy latches exactly
+    ``v_32`` at x0 (the law's state: with a delay ``[x0; u_hold]``); its residual is what
+    the firmware's t0 latch leaves, at x0 only. Not for band tables (their t0 latch solves
+    the band dual): ValueError."""
+    from stospline.table.spline_latch import start_state
+    if table.band_qp is not None:
+        raise ValueError("a band table's t0 latch is its band dual, not Lambda x + lambda0")
+    x = start_state(problem, table).astype(np.float32)
+    Lam = np.asarray(table.Lambda[0], dtype=np.float32)
+    acc = np.asarray(table.lambda0[0], dtype=np.float32).copy()
+    for j in range(x.size):
+        acc = (acc + (Lam[:, j] * x[j]).astype(np.float32)).astype(np.float32)
+    lam0 = np.array(table.lambda0, dtype=float)
+    lam0[0] = acc.astype(float) - Lam.astype(float) @ x.astype(float)
+    return replace(table, Lambda=np.array(table.Lambda, dtype=float), lambda0=lam0)
+
+
 def band_terms(table: GainTable, per_tick: GainTable) -> dict:
     """A spline band table's dual against the per-tick table's: rows, how far W' is from
     symmetric and from the design's W (largest entry difference over W's largest entry), and
@@ -92,13 +115,16 @@ def band_terms(table: GainTable, per_tick: GainTable) -> dict:
 
 
 def _cov_change(reference: Moments, implemented: Moments) -> float:
-    """Largest change of a knot covariance, relative to its norm (Frobenius)."""
+    """Largest change of a knot covariance, relative to its norm (Frobenius), to 2
+    significant digits: a difference of two nearly equal covariances, it keeps few of the
+    design's digits (investment's, 5.6e-8, moves by 7.5e-12 between the compiled and the
+    numpy tick loop of the designer), and the summary must not print the rest."""
     worst = 0.0
     for a, b in zip(reference.knot_cov, implemented.knot_cov):
         scale = float(np.linalg.norm(a))
         if scale > 0:
             worst = max(worst, float(np.linalg.norm(b - a)) / scale)
-    return worst
+    return float(f"{worst:.2g}")
 
 
 def certificate(problem: Problem, table: GainTable, per_tick: GainTable, J0: float,

@@ -339,10 +339,11 @@ def _lsq(breaks: np.ndarray, N: list[np.ndarray], YT: np.ndarray,
 
 
 def _ill_conditioned(breaks: np.ndarray) -> bool:
-    """A stage the normal equations fit badly (`_min_norm`): under `_SHORT_SPAN` ticks, or a
-    run of `_SHORT_RUN` consecutive one-tick spans."""
+    """A stage the normal equations fit badly (`_min_norm`): under `_SHORT_SPAN` ticks, more
+    coefficients than ticks (one-tick spans up to its end: a null space, coupled_axes' last
+    stage), or a run of `_SHORT_RUN` consecutive one-tick spans."""
     short = np.diff(breaks) == 1
-    if int(breaks[-1]) < _SHORT_SPAN:
+    if int(breaks[-1]) < _SHORT_SPAN or breaks.size + 2 > int(breaks[-1]):
         return True
     run = 0
     for flag in short:

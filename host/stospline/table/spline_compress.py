@@ -16,7 +16,8 @@ def compress(problem, exact, quantized, tolerance: float, *,
              max_spans: int = DEFAULT_MAX_SPANS, initial_spans: int = INITIAL_SPANS,
              resolve: bool = True, varying_maps=None
              ) -> tuple[SplineGains, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Fit, evaluate as the firmware does, re-solve the latch maps, round to float32.
+    """Fit, evaluate as the firmware does, re-solve the latch maps, round them to float32 on
+    the grid that meets the constraints at the design's start (`spline_latch.round_latch`).
 
     Parameters
     ----------
@@ -44,7 +45,7 @@ def compress(problem, exact, quantized, tolerance: float, *,
     K, k0, L : ndarray
         float32 per-tick gains, exactly `stospline.table.spline.evaluate` of `spline`.
     Lambda, lambda0 : ndarray
-        float32 latch maps, shaped as the table's.
+        float32 latch maps, shaped as the table's (the quantized table's when ``resolve=False``).
 
     Raises
     ------
@@ -64,8 +65,8 @@ def compress(problem, exact, quantized, tolerance: float, *,
         raise DesignError("design.table", "a band table's spline re-solves its band dual: "
                                           "use compress_band")
     Lam, lam0 = resolve_latch(problem, quantized.with_arrays(K=K, k0=k0, L=L), spline,
-                              varying_maps)
-    return spline, K, k0, L, _to_float32(Lam), _to_float32(lam0)
+                              varying_maps, rounded=True)
+    return spline, K, k0, L, Lam, lam0
 
 
 def compress_band(problem, exact, quantized, tolerance: float, *,

@@ -18,6 +18,10 @@ interpolated through the tick's Gauss points as the designer and the oracle disc
 layer imports no designer). A law designed for a one-tick
 delay has the state ``xi = [x; p]`` (p the command being applied): its ``F`` maps ``[x; p; u;
 1]`` (`delayed_map`), the latch maps act on ``xi`` and the constraints on its x.
+
+`round_latch` stores the exact maps in float32, chosen on the float32 grid so that the law as
+stored meets the constraints at the design's planned start (x0 and the planned means at the
+later latches) far below the float32 floor that rounding each map to nearest leaves.
 """
 from __future__ import annotations
 
@@ -26,8 +30,8 @@ import numpy as np
 from stospline.errors import DesignError
 from stospline.expm import expm
 
-__all__ = ["resolve_latch", "latch_groups_of_table", "mean_tick_map", "delayed_map",
-           "stage_mean_maps"]
+__all__ = ["resolve_latch", "round_latch", "latch_grid", "start_state", "latch_groups_of_table",
+           "mean_tick_map", "delayed_map", "stage_mean_maps"]
 
 FIELD = "design.table"
 
@@ -204,7 +208,40 @@ def _varying_ticks(F: np.ndarray, table, a: int, b: int, width: int) -> np.ndarr
     return P
 
 
-def resolve_latch(problem, table, spline=None, varying_maps=None
+def _groups(problem, table, spline, varying_maps):
+    """Per latch group: ``(latch, width, knots, blocks, CW, zeta)``: the stage blocks
+    (`_stage_map`) of the stages it governs (from its latch to the next one), and the
+    constraint rows ``C2 W`` over ``[x; v; 1]`` at the latch with their values. Stages
+    before the first latch, if any, come first as a group with latch None."""
+    n = table.dims[0]
+    h = 1.0 / table.tick_hz
+    groups = latch_groups_of_table(problem, table)
+    out = []
+    if groups and groups[0][0] > 0:          # before the first latch v = 0 (width 0)
+        out.append((None, 0, [], [_stage_map(problem.stages[s], table, s, 0, h, spline,
+                                             varying_maps) for s in range(groups[0][0])],
+                    None, None))
+    for g, (latch, knots) in enumerate(groups):
+        width = int(table.stage_n_latch[latch])
+        end = groups[g + 1][0] if g + 1 < len(groups) else table.n_stages
+        W = np.eye(n, n + width + 1)             # m = W [x; v; 1], from the latch tick
+        rows, zeta, blocks = [], [], []
+        for s in range(latch, end):
+            P = _stage_map(problem.stages[s], table, s, width, h, spline, varying_maps)
+            blocks.append(P)
+            if s > knots[-1]:
+                continue
+            W = P[:, :n] @ W
+            W[:, n:] += P[:, n:]
+            if s in knots:               # C2 on the plant's state, the first of the law's
+                con = problem.knots[s].constraint
+                rows.append(con.C @ W[:con.C.shape[1]])
+                zeta.append(con.value)
+        out.append((latch, width, knots, blocks, np.vstack(rows), np.concatenate(zeta)))
+    return out
+
+
+def resolve_latch(problem, table, spline=None, varying_maps=None, *, rounded: bool = False
                   ) -> tuple[np.ndarray, np.ndarray]:
     """The latch maps that make `table`'s law meet every knot constraint in expectation.
 
@@ -221,12 +258,16 @@ def resolve_latch(problem, table, spline=None, varying_maps=None
     varying_maps : callable, optional
         ``varying_maps(stage, t_start, h, T)``: the per-tick mean maps of time-varying stage
         data (`stospline.design.varying.mean_maps`); needed only for such data.
+    rounded : bool
+        Return the maps rounded to float32 by `round_latch` (at the design's start), instead
+        of the exact float64 ones.
 
     Returns
     -------
     Lambda, lambda0 : ndarray
-        float64, the table's shapes (n_stages, n_latch, n) and (n_stages, n_latch): re-solved
-        rows at the latching stages, the table's values elsewhere.
+        float64 (float32 when `rounded`), the table's shapes (n_stages, n_latch, n) and
+        (n_stages, n_latch): re-solved rows at the latching stages, the table's values
+        elsewhere.
 
     Raises
     ------
@@ -242,22 +283,12 @@ def resolve_latch(problem, table, spline=None, varying_maps=None
     """
     _refuse_unsupported(problem, table)
     n = table.dims[0]
-    h = 1.0 / table.tick_hz
     Lam = np.array(table.Lambda, dtype=float)
     lam0 = np.array(table.lambda0, dtype=float)
-    for latch, knots in latch_groups_of_table(problem, table):
-        width = int(table.stage_n_latch[latch])
-        W = np.eye(n, n + width + 1)             # m = W [x; v; 1], from the latch tick
-        rows, zeta = [], []
-        for s in range(latch, knots[-1] + 1):
-            P = _stage_map(problem.stages[s], table, s, width, h, spline, varying_maps)
-            W = P[:, :n] @ W
-            W[:, n:] += P[:, n:]
-            if s in knots:               # C2 on the plant's state, the first of the law's
-                con = problem.knots[s].constraint
-                rows.append(con.C @ W[:con.C.shape[1]])
-                zeta.append(con.value)
-        CW, zeta = np.vstack(rows), np.concatenate(zeta)
+    groups = _groups(problem, table, spline, varying_maps)
+    for latch, width, _, _, CW, zeta in groups:
+        if latch is None:
+            continue
         G = CW[:, n:n + width]
         if np.linalg.cond(G) > 1e12:
             raise DesignError(FIELD, f"the multipliers latched at stage {latch} hardly move "
@@ -265,4 +296,178 @@ def resolve_latch(problem, table, spline=None, varying_maps=None
                                      f"{np.linalg.cond(G):.2g})")
         Lam[latch, :width] = -np.linalg.solve(G, CW[:, :n])
         lam0[latch, :width] = np.linalg.solve(G, zeta - CW[:, -1])
+    if rounded:
+        return round_latch(problem, table, groups, Lam, lam0)
     return Lam, lam0
+
+
+# The rounding of the latch maps (`round_latch`): per latched row, the Lambda entries that
+# move its multiplier at the planned start (at most FLIP_ENTRIES, `_row_options`) may leave
+# their nearest float32, lambda0 take the grid points next to its target; the best options
+# of each row (smallest error of its multiplier at the planned start) enter the joint choice
+# over the group's rows, at most JOINT_MAX combinations.
+FLIP_ENTRIES = 4
+FINE_STEPS = 128
+JOINT_MAX = 4096
+# The numbers the rounding's choices read (the planned state, the exact multipliers at it,
+# C2 Gamma) are first rounded to SNAP_BITS bits of their scale (`_snap`): the choices are then
+# exact functions of digits that the design's last bits (1e-14 relative) do not reach,
+# computed without BLAS (whose summation order varies between machines and thread counts)
+# from there on; the float32 neighbours of Lambda are those of its exact values.
+SNAP_BITS = 28
+
+
+def _snap(a: np.ndarray, scale: float) -> np.ndarray:
+    """`a` rounded to a multiple of 2^-SNAP_BITS of the binade of `scale` (its largest
+    magnitude, or the scale it is compared at): the digits the choices read."""
+    a = np.asarray(a, dtype=float)
+    if not scale > 0:
+        return a + 0.0
+    quantum = np.ldexp(1.0, int(np.frexp(scale)[1]) - SNAP_BITS)
+    return np.rint(a / quantum) * quantum + 0.0
+
+
+def _dot(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``A @ x`` over the last axis, summed left to right by elementwise operations (no BLAS,
+    no reduction whose order could depend on the machine: the same bits everywhere)."""
+    P = np.asarray(A * x, dtype=float)
+    if P.shape[-1] == 0:
+        return np.zeros(P.shape[:-1])
+    acc = P[..., 0].copy()
+    for j in range(1, P.shape[-1]):
+        acc += P[..., j]
+    return acc
+
+
+def start_state(problem, table) -> np.ndarray:
+    """The law's state at t0 as the oracle starts it: ``x0``, with a delay ``[x0; u_hold]``."""
+    x0 = np.asarray(problem.x0, dtype=float)
+    if getattr(table, "delay_ticks", 0):
+        x0 = np.concatenate([x0, np.asarray(table.u_hold, dtype=float)[:table.dims[1]]])
+    return x0
+
+
+def latch_grid(lam0: np.ndarray, Lam: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """The grid of each latched row's ``lambda0`` (width,): the float32 spacing in the binade
+    of the row's largest term at the planned state m, ``max(|lambda0_i|, |Lambda_ij m_j|)``
+    (the scale of the multiplier it latches). A ``lambda0`` far below it (an exact zero the
+    re-solve leaves at 1e-10, whose digits move with the design's last bits) keeps none of
+    those digits, as the spline's coefficients on the grid of their entry's peak."""
+    peak = np.maximum(np.abs(lam0), np.abs(Lam * m).max(axis=1, initial=0.0))
+    return np.ldexp(1.0, np.frexp(np.where(peak > 0, peak, 1.0))[1] - 24)
+
+
+def _row_options(v_i: float, Lam_i: np.ndarray, m: np.ndarray, q: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A latched row's candidates, best first: ``(e, rows, z)``: the Lambda rows (float32
+    values), the lambda0 values and ``e``, the error of the multiplier latched at m,
+    ``lambda0_32 + Lambda_32 m - v_i``, in units of the row's grid q; ``v_i = lambda0 +
+    Lambda m`` is the exact multiplier at m (snapped), `Lam_i` the exact row.
+
+    The entries that move the multiplier at m (a nonzero planned state; their effect: one
+    float32 step times ``|m_j|``), at most FLIP_ENTRIES: the finest that can still move it by
+    half a grid step within FINE_STEPS steps may move by k float32 steps, ``|k|`` at most
+    FINE_STEPS and ``max(1, q / its effect)`` (its term moves by at most one grid step q),
+    the three k nearest the one that cancels the rest of the error; the others, the largest
+    effect first (ties by index), take their nearest float32 or either neighbour; lambda0
+    the three grid points next to its target ``lambda0 + (Lambda - Lambda_32) m``."""
+    near32 = Lam_i.astype(np.float32)
+    near = near32.astype(float)
+    ulp = np.spacing(np.abs(near32)).astype(float)
+    effect = np.where(Lam_i != 0, ulp * np.abs(m), 0.0)
+    movers = [int(j) for j in np.lexsort((np.arange(m.size), -effect)) if effect[j] > 0]
+    # The finest entry that can still cancel half a grid step within FINE_STEPS steps.
+    able = [j for j in movers if effect[j] * FINE_STEPS >= q / 2]
+    fine = np.array(able[-1:], dtype=int)
+    coarse = np.array([j for j in movers if j not in able[-1:]][:FLIP_ENTRIES - fine.size],
+                      dtype=int)
+    digits = (np.arange(3 ** coarse.size)[:, None] // 3 ** np.arange(coarse.size)) % 3 - 1
+    rows = np.repeat(near[None], digits.shape[0], axis=0)
+    rows[:, coarse] += digits * ulp[coarse]
+    target = v_i - _dot(rows, m)
+    z = (np.rint(target / q)[:, None] + np.array([-1.0, 0.0, 1.0])[None]) * q   # (combos, 3)
+    rows = np.repeat(rows, 3, axis=0)
+    z = z.ravel()
+    if fine.size:
+        f = int(fine[0])
+        per_step = ulp[f] * m[f]              # the multiplier at m, per step of entry f
+        most = float(min(FINE_STEPS, max(1.0, np.floor(q / abs(per_step)))))
+        rest = z - np.repeat(target, 3)       # lambda0's error before entry f moves
+        k = np.clip(np.rint(-rest / per_step)[:, None] + np.array([-1.0, 0.0, 1.0])[None],
+                    -most, most)
+        rows = np.repeat(rows, 3, axis=0)
+        rows[:, f] += k.ravel() * ulp[f]
+        z = np.repeat(z, 3)
+    rows = rows.astype(np.float32).astype(float)       # float32 values, as stored
+    e = (z + _dot(rows, m) - v_i) / q
+    order = np.lexsort((np.arange(e.size), np.abs(e)))
+    return e[order], rows[order], z[order]
+
+
+def _row_keep(width: int) -> int:
+    """How many of each row's best options enter the joint choice: as many as keep the
+    combinations within JOINT_MAX (all of them for one or two rows)."""
+    k = int(np.floor(JOINT_MAX ** (1.0 / width) * (1 + 1e-12)))
+    return max(1, k)
+
+
+def _choose(G: np.ndarray, q: np.ndarray, errors: list[np.ndarray]) -> np.ndarray:
+    """The index of each row's option (errors[i], in units of q_i) whose combination makes
+    the group's constraints' worst error ``max |G (q e)|`` smallest; ties to the first
+    (each row's options are best first, so the product order is deterministic)."""
+    grids = np.meshgrid(*[np.arange(e.size) for e in errors], indexing="ij")
+    idx = np.stack([g.ravel() for g in grids], axis=1)                  # (combos, width)
+    E = np.stack([errors[i][idx[:, i]] for i in range(len(errors))], axis=1) * q
+    worst = np.abs(_dot(E[:, None, :], G[None])).max(axis=1)
+    return idx[int(np.argmin(worst))]
+
+
+def round_latch(problem, table, groups, Lam: np.ndarray, lam0: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The exact latch maps rounded to float32, chosen on the float32 grid to meet the
+    design's constraints at its planned start.
+
+    Group by group, in order: the state m planned at the latch (x0 at the first; the mean
+    under the law as stored, earlier groups rounded, at later ones) is where the design
+    meets its constraints. Each Lambda entry takes its nearest float32 or a neighbour (the
+    finest that moves the multiplier, a few float32 steps), each lambda0 a point of its
+    row's grid (`latch_grid`) next to its target ``lambda0 + (Lambda - Lambda_32) m`` (the
+    rounding of Lambda compensated at m), so that
+    each latched multiplier at m misses its exact value by a fraction of a grid step; of
+    these, the combination of the group's rows that makes the worst constraint error at m,
+    ``max |C2 Gamma (v_32(m) - v(m))|``, smallest (`_row_options`, `_choose`). No term
+    ``Lambda_ij m_j`` moves by more than one grid step of its row (or one float32 step of
+    its entry), so the residual at other starts moves by about that. Entries of exactly
+    zero stay zero. The choices read their inputs rounded to SNAP_BITS bits (`_snap`), so
+    that they do not flip with the design's last bits."""
+    n = table.dims[0]
+    # Round-off of exact zeros (below 1e-12 of the array's largest) is flushed first, as in
+    # a per-tick table (`format._to_float32`); rows outside the groups (padding, stages
+    # without a latch) are then rounded to nearest, as ever.
+    Lam, lam0 = (np.where(np.abs(a) < 1e-12 * np.abs(a).max(initial=0.0), 0.0, a)
+                 for a in (np.asarray(Lam, dtype=float), np.asarray(lam0, dtype=float)))
+    L32 = Lam.astype(np.float32).astype(float)
+    l032 = lam0.astype(np.float32).astype(float)
+    m = start_state(problem, table)
+    for latch, width, _, blocks, CW, _ in groups:
+        if latch is None:                        # stages before the first latch: v = 0
+            for P in blocks:
+                m = P[:, :n] @ m + P[:, -1]
+            continue
+        Li, li = Lam[latch, :width], lam0[latch, :width]
+        q = latch_grid(li, Li, m)
+        ms = _snap(m, np.abs(m).max(initial=0.0))
+        # The exact multipliers at m, on their rows' scales (the grids' binades).
+        v = np.array([_snap(li[i] + _dot(Li[i], ms), q[i] * 2.0 ** 24) for i in range(width)])
+        options = [_row_options(v[i], Li[i], ms, q[i]) for i in range(width)]
+        best = _row_keep(width)
+        keep = [tuple(a[:best] for a in opt) for opt in options]
+        G = CW[:, n:n + width]
+        pick = _choose(_snap(G, np.abs(G).max()), q, [k[0] for k in keep])
+        for i in range(width):
+            L32[latch, i] = keep[i][1][pick[i]]
+            l032[latch, i] = keep[i][2][pick[i]]
+        v = l032[latch, :width] + L32[latch, :width] @ m
+        for P in blocks:                         # the planned mean to the next latch
+            m = P[:, :n] @ m + P[:, n:n + width] @ v + P[:, -1]
+    return L32.astype(np.float32), l032.astype(np.float32)

@@ -181,11 +181,15 @@ def test_no_table_entry_is_near_a_rounding_boundary(monkeypatch, example):
 def test_no_spline_entry_is_near_a_rounding_boundary(monkeypatch, example):
     """The same for the shipped spline tables: every coefficient (the least squares fit's,
     rounded to the float32 spacing at its entry's largest gain, `spline._coefficients`) and
-    every re-solved latch entry (rounded after the flush of round-off zeros) is clear of
-    where its rounding changes; a band table's re-solved dual (10 digits) clear of where its
-    decimal rounding changes."""
-    from stospline.table import spline, spline_band, spline_compress
-    rounded = {"coef": [], "latch": [], "band": []}
+    every re-solved latch entry of a band table (rounded after the flush of round-off zeros)
+    is clear of where its rounding changes; a band table's re-solved dual (10 digits) clear of
+    where its decimal rounding changes. The other tables' latch maps are chosen by
+    `spline_latch.round_latch` from its inputs snapped to SNAP_BITS bits (the exact maps, the
+    planned means, C2 Gamma): every snapped number is clear of where its snapping changes,
+    and every exact map entry clear of the flush of round-off zeros; the choices are exact
+    functions of the snapped numbers from there on (BLAS-free)."""
+    from stospline.table import spline, spline_band, spline_compress, spline_latch
+    rounded = {"coef": [], "latch": [], "band": [], "snap": [], "flush": []}
 
     def capture(kind, fn):
         def wrapped(*args):
@@ -195,6 +199,25 @@ def test_no_spline_entry_is_near_a_rounding_boundary(monkeypatch, example):
     monkeypatch.setattr(spline, "_coefficients", capture("coef", spline._coefficients))
     monkeypatch.setattr(spline_compress, "_to_float32",
                         capture("latch", spline_compress._to_float32))
+    snap, round_latch, latch_grid = (spline_latch._snap, spline_latch.round_latch,
+                                     spline_latch.latch_grid)
+
+    def snap_capture(a, scale):
+        rounded["snap"].append((np.array(a, dtype=float), float(scale)))
+        return snap(a, scale)
+
+    def round_capture(problem, table, groups, Lam, lam0):
+        rounded["flush"].append((np.array(Lam, dtype=float), np.array(lam0, dtype=float)))
+        return round_latch(problem, table, groups, Lam, lam0)
+
+    def grid_capture(lam0, Lam, m):
+        rounded["grid"].append(np.maximum(np.abs(lam0), np.abs(Lam * m).max(axis=1,
+                                                                           initial=0.0)))
+        return latch_grid(lam0, Lam, m)
+    rounded["grid"] = []
+    monkeypatch.setattr(spline_latch, "_snap", snap_capture)
+    monkeypatch.setattr(spline_latch, "round_latch", round_capture)
+    monkeypatch.setattr(spline_latch, "latch_grid", grid_capture)
 
     def band_capture(a, digits):
         rounded["band"].append(np.array(a, dtype=float))
@@ -206,7 +229,30 @@ def test_no_spline_entry_is_near_a_rounding_boundary(monkeypatch, example):
                             mode=problem.options.get("mode", "stagewise"))
     # The state-latching tables keep the per-tick latch (Lambda = I, lambda0 = 0) and restore
     # their constraints through the k0 coefficients, rounded by `_coefficients` too.
-    assert rounded["coef"] and (rounded["latch"] or example in STATE_LATCHING)
+    assert rounded["coef"] and (rounded["latch"] or rounded["snap"]
+                                or example in STATE_LATCHING)
+    # The latch rounding (spline_latch.round_latch): what it reads is snapped to a multiple
+    # of 2^-SNAP_BITS of the binade of a scale (the planned state's largest entry, the
+    # multiplier's grid binade, C2 Gamma's largest), whose last bits move by REL[1] of it.
+    for a, scale in (p for p in rounded["snap"] if p[1] > 0):
+        quantum = np.ldexp(1.0, int(np.frexp(scale)[1]) - spline_latch.SNAP_BITS)
+        distance = np.abs(a / quantum - np.floor(a / quantum) - 0.5) * quantum
+        near = int(np.sum(distance <= REL[1] * scale))
+        assert near == 0, f"{near} latch rounding inputs within reach of a snapping boundary"
+    for Lam, lam0 in rounded["flush"]:
+        for a in (a for a in (Lam, lam0) if np.any(a)):
+            flush = 1e-12 * np.abs(a).max()
+            near = int(np.sum(np.abs(np.abs(a) - flush) <= _reach(a)))
+            assert near == 0, f"{near} latch entries within reach of the flush of round-off zeros"
+        # Lambda's candidates are its exact entries' float32 neighbours.
+        kept = np.abs(Lam) >= 1e-12 * np.abs(Lam).max(initial=0.0)
+        near = int(np.sum(np.where(kept, _f32_boundary_distance(Lam), np.inf) <= _reach(Lam)))
+        assert near == 0, f"{near} spline latch entries within reach of a rounding boundary"
+    for peak in (p[p > 0] for p in rounded["grid"]):
+        # lambda0's grid is the float32 spacing in the binade of its row's peak.
+        binade = np.ldexp(1.0, np.frexp(peak)[1] - 1)
+        near = int(np.sum(np.minimum(peak - binade, 2 * binade - peak) <= REL[1] * peak))
+        assert near == 0, f"{near} latch rows' peaks within reach of a binade boundary"
     for a in (a for a in rounded["band"] if np.any(a)):
         q = 10.0 ** (np.floor(np.log10(np.abs(a).max())) - spline_band.BANDQP_DIGITS + 1)
         near = int(np.sum(np.abs(a / q - np.floor(a / q) - 0.5) * q <= _reach(a)))

@@ -115,14 +115,73 @@ stsp_status_t stsp_spline_check_values(const stsp_header_t *h)
     return STSP_OK;
 }
 
+/* Stage s's layout at tick tau, re-read from the spline arrays on every tick and bounded by
+ * the lengths init validated, whatever the arrays hold now (a table changed after init, until
+ * stsp_verify() notices): span_log2 at most 9; the row ends from row_start[s nu] nondecreasing
+ * and at most n_entries; coef_start[s] <= coef_start[s+1] <= n_coef; and the tick's span
+ * inside each entry's stride (sigma + 4 <= stride), so that the last coefficient read,
+ * coef_start[s] + (entries - 1) stride + sigma + 3, is below coef_start[s+1]. A stage that no
+ * longer fits gets no entries (every input's command 0, then clamped): a wrong command, but no
+ * access outside the validated arrays and no undefined shift. On a table that passed init it
+ * always fits. Fills the span's basis p and returns the entries (0 if it does not fit), with
+ * *k3 = 3k, *stride and *c the first coefficient the law reads. */
+static STSP_ALWAYS_INLINE uint32_t stsp_qspline_layout(const stsp_header_t *h, uint32_t s,
+                                                       uint32_t tau, uint32_t *p, uint32_t *k3,
+                                                       uint32_t *stride,
+                                                       const stsp_scalar_t **c)
+{
+    const stsp_qspline_t *sp = &h->sp;
+    const uint32_t nu = stsp_nu(h);
+    const uint32_t k_raw = sp->span_log2[s];
+    const uint32_t k = (k_raw <= STSP_QSPLINE_MAX_SPAN_LOG2) ? k_raw : 0u;
+    const uint32_t e0 = sp->row_start[s * nu];
+    const uint32_t c0 = sp->coef_start[s];
+    const uint32_t c1 = sp->coef_start[s + 1u];
+    const uint32_t sigma = stsp_qspline_basis(k, tau, p);
+    uint32_t fits = 1u;
+    uint32_t prev = e0;
+    uint32_t entries = 0u;
+    uint32_t i;
+    if ((k != k_raw) || (e0 > sp->n_entries) || (c0 > c1) || (c1 > sp->n_coef)) {
+        fits = 0u;
+    }
+    for (i = 0u; i < nu; ++i) {
+        const uint32_t end = sp->row_start[(s * nu) + i + 1u];
+        if ((end < prev) || (end > sp->n_entries)) {
+            fits = 0u;
+        } else {
+            prev = end;
+        }
+    }
+    *stride = 0u;
+    *c = sp->coef; /* no pointer arithmetic past the array when the stage has no entries */
+    if (fits != 0u) {
+        entries = prev - e0;
+    }
+    if (entries > 0u) {
+        const uint32_t st = (c1 - c0) / entries;
+        if ((st >= 4u) && (sigma <= (st - 4u))) {
+            *stride = st;
+            *c = &sp->coef[c0 + sigma];
+        } else {
+            entries = 0u;
+        }
+    }
+    *k3 = 3u * k;
+    return entries;
+}
+
 /* The fixed-point spline law at tick tau of stage s with multipliers v, into y (never the
  * caller's u): per input i, over its stored entries e in order, the gain g_e (stsp_qspline.h,
  * exact, one rounding) and
  *     acc = 2^(2F) + 2^(F-1) + sum_e g_e z[col_e],  z = [x, 0, v],
  *     y[i] = (acc >> F) - 2^F + g_k0     (g_k0: the gain of col nx, k0[i]; 0 if not stored)
  * the per-tick law (stsp_law_q.h) with the evaluated gains, bit for bit (the sum is exact, so
- * its order does not matter). Returns stsp_law_alarm(). Time: the same at every tick of a
- * stage (its entries), the largest stage's at most. */
+ * its order does not matter). The stage's layout as stsp_qspline_layout bounds it; an entry's
+ * operand index and scale are bounded too (a table changed after init: an index beyond z
+ * contributes nothing, a scale outside 1..30 is taken as 30; on a table that passed init
+ * neither happens). Returns stsp_law_alarm(). Time: the same at every tick of a stage (its
+ * entries), the largest stage's at most. */
 static STSP_ALWAYS_INLINE uint32_t stsp_qspline_law(const stsp_header_t *h, uint32_t s,
                                                     uint32_t tau, const stsp_scalar_t *x,
                                                     const stsp_scalar_t *v, stsp_scalar_t *y,
@@ -132,17 +191,15 @@ static STSP_ALWAYS_INLINE uint32_t stsp_qspline_law(const stsp_header_t *h, uint
     const uint32_t nx = stsp_nx(h);
     const uint32_t nu = stsp_nu(h);
     const uint32_t n_latch = stsp_n_latch(h);
-    const uint32_t k = sp->span_log2[s];
-    const uint32_t k3 = 3u * k;
-    const uint32_t entries = (uint32_t)sp->row_start[(s + 1u) * nu] - sp->row_start[s * nu];
-    const uint32_t stride = stsp_qspline_stride(sp, s, entries);
+    const uint32_t nz = nx + 1u + n_latch;
     stsp_scalar_t z[STSP_MAX_NX + 1u + STSP_MAX_LATCH];
     uint32_t p[4];
-    const uint32_t sigma = stsp_qspline_basis(k, tau, p);
+    uint32_t k3;
+    uint32_t stride;
+    const stsp_scalar_t *c;
+    const uint32_t entries = stsp_qspline_layout(h, s, tau, p, &k3, &stride, &c);
     const uint8_t *col = sp->col;
     const uint8_t *shift = sp->shift;
-    /* no pointer arithmetic past the array when the stage has no entries */
-    const stsp_scalar_t *c = (entries > 0u) ? &sp->coef[sp->coef_start[s] + sigma] : sp->coef;
     uint32_t e = sp->row_start[s * nu];
     uint32_t i;
     for (i = 0u; i < nx; ++i) {
@@ -153,13 +210,16 @@ static STSP_ALWAYS_INLINE uint32_t stsp_qspline_law(const stsp_header_t *h, uint
         z[nx + 1u + i] = v[i];
     }
     for (i = 0u; i < nu; ++i) {
-        const uint32_t end = sp->row_start[(s * nu) + i + 1u];
+        const uint32_t end = (entries > 0u) ? sp->row_start[(s * nu) + i + 1u] : e;
         stsp_uacc_t acc = stsp_q_start();
         stsp_scalar_t k0 = (stsp_scalar_t)0;
         for (; e < end; ++e) {
             const uint32_t j = col[e];
-            const stsp_scalar_t g = stsp_qspline_narrow(c, p, k3 + shift[e]);
-            acc = stsp_q_mac(acc, g, z[j]);
+            const uint32_t se = shift[e];
+            const uint32_t sh = k3 + (((se - 1u) < STSP_QSPLINE_MAX_SHIFT) ? se
+                                                                          : STSP_QSPLINE_MAX_SHIFT);
+            const stsp_scalar_t g = stsp_qspline_narrow(c, p, sh);
+            acc = stsp_q_mac(acc, g, z[(j < nz) ? j : nx]);
             k0 = (j == nx) ? g : k0;
             c = &c[stride];
         }

@@ -245,10 +245,14 @@ FAULTS = [
     Fault("F70", "fixed-point spline tick takes a changed operand index beyond z as the last one",
           CTL, "acc = stsp_q_mac(acc, g, z[(j < nz) ? j : nx]);",
           "acc = stsp_q_mac(acc, g, z[(j < nz) ? j : (nz - 1u)]);"),
-    Fault("F71", "fixed-point spline tick uses a changed coefficient scale outside 1..30", CTL,
-          "            const uint32_t sh = k3 + (((se - 1u) < STSP_QSPLINE_MAX_SHIFT) ? se\n"
-          "                                                                          : STSP_QSPLINE_MAX_SHIFT);",
-          "            const uint32_t sh = k3 + se;"),
+    Fault("F71", "fixed-point spline gain shifts by a changed scale outside 1..30 unmasked "
+          "(undefined shifts)", CTL,
+          "    const uint32_t down = (sh - 1u) & 63u;", "    const uint32_t down = sh - 1u;"),
+    # The fixed-point spline ordinary tick (stsp_spline_step, stsp_spline.c).
+    Fault("F72", "fixed-point spline ordinary tick taken at the first tick of the next stage "
+          "(no relatch, the old stage's gains)", CTL,
+          "        (tick >= stsp_stage_end(h, stage))) {\n        return stsp_qspline_step_cold(",
+          "        (tick > stsp_stage_end(h, stage))) {\n        return stsp_qspline_step_cold("),
     # The band solver's non-symmetric path (a spline band table's W', stsp_bandqp.c).
     Fault("F58", "band solver, non-symmetric W: no partial pivoting (the diagonal pivot kept)",
           CTL, "                piv = i;\n", "                piv = k;\n"),

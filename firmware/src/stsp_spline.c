@@ -178,9 +178,9 @@ static STSP_ALWAYS_INLINE uint32_t stsp_qspline_layout(const stsp_header_t *h, u
  *     y[i] = (acc >> F) - 2^F + g_k0     (g_k0: the gain of col nx, k0[i]; 0 if not stored)
  * the per-tick law (stsp_law_q.h) with the evaluated gains, bit for bit (the sum is exact, so
  * its order does not matter). The stage's layout as stsp_qspline_layout bounds it; an entry's
- * operand index and scale are bounded too (a table changed after init: an index beyond z
- * contributes nothing, a scale outside 1..30 is taken as 30; on a table that passed init
- * neither happens). Returns stsp_law_alarm(). Time: the same at every tick of a stage (its
+ * operand index is bounded too (a table changed after init: an index beyond z contributes
+ * nothing; a scale outside 1..30 gives a wrong gain, its shifts taken modulo 64 by
+ * stsp_qspline_biased, no undefined shift; on a table that passed init neither happens). Returns stsp_law_alarm(). Time: the same at every tick of a stage (its
  * entries), the largest stage's at most. */
 static STSP_ALWAYS_INLINE uint32_t stsp_qspline_law(const stsp_header_t *h, uint32_t s,
                                                     uint32_t tau, const stsp_scalar_t *x,
@@ -215,10 +215,7 @@ static STSP_ALWAYS_INLINE uint32_t stsp_qspline_law(const stsp_header_t *h, uint
         stsp_scalar_t k0 = (stsp_scalar_t)0;
         for (; e < end; ++e) {
             const uint32_t j = col[e];
-            const uint32_t se = shift[e];
-            const uint32_t sh = k3 + (((se - 1u) < STSP_QSPLINE_MAX_SHIFT) ? se
-                                                                          : STSP_QSPLINE_MAX_SHIFT);
-            const stsp_scalar_t g = stsp_qspline_narrow(c, p, sh);
+            const stsp_scalar_t g = stsp_qspline_narrow(c, p, k3 + shift[e]);
             acc = stsp_q_mac(acc, g, z[(j < nz) ? j : nx]);
             k0 = (j == nx) ? g : k0;
             c = &c[stride];
@@ -228,11 +225,13 @@ static STSP_ALWAYS_INLINE uint32_t stsp_qspline_law(const stsp_header_t *h, uint
     return stsp_law_alarm(h, y, limited);
 }
 
-/* Every tick of a fixed-point spline table (its stage_end stays 0, so each leaves stsp_step's
- * ordinary path): the per-tick cold path's plan (range, order, stage, latch) and commit, the
- * spline law at the tick, the clamp. There is no non-finite case (integers). */
-stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
-                               stsp_scalar_t *u)
+/* Every tick of a fixed-point spline table but its ordinary one (stsp_spline_step): the
+ * per-tick cold path's plan (range, order, stage, latch) and commit, the spline law at the
+ * tick, the clamp. There is no non-finite case (integers). Out of line, so that the ordinary
+ * tick keeps its registers. */
+static STSP_NOINLINE stsp_status_t stsp_qspline_step_cold(stsp_ctrl_t *ctrl, uint32_t tick,
+                                                          const stsp_scalar_t *x,
+                                                          stsp_scalar_t *u)
 {
     const stsp_header_t *h = &ctrl->checked;
     stsp_scalar_t v_new[STSP_MAX_LATCH];
@@ -257,6 +256,36 @@ stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scal
     ctrl->sat_mask = mask;
     stsp_commit(ctrl, tick, &plan, v_new);
     ctrl->stage_end = 0u;
+    return status;
+}
+
+/* Every tick of a fixed-point spline table (its stage_end stays 0, so each leaves stsp_step's
+ * ordinary path). The ordinary one is here: the expected tick (next_tick) of a latched
+ * instance before the end of its stage (stsp_stage_end, as the plan reads it now). For it the
+ * plan's checks all pass with STSP_OK, its stage search stays in the instance's stage and it
+ * keeps the latched v, so this is the cold path's step without them: the spline law at the
+ * tick on the kept v, the clamp, next_tick; the same status, command, mask and instance state
+ * (test_qspline_ctrl.c runs both paths against the per-tick law). Anything else takes
+ * stsp_qspline_step_cold. */
+stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
+                               stsp_scalar_t *u)
+{
+    const stsp_header_t *h = &ctrl->checked;
+    const uint16_t stage = ctrl->stage;
+    stsp_scalar_t y[STSP_MAX_NU];
+    stsp_status_t status = STSP_OK;
+    uint16_t mask = 0u;
+    if ((tick != ctrl->next_tick) || (ctrl->latched == 0u) ||
+        (tick >= stsp_stage_end(h, stage))) {
+        return stsp_qspline_step_cold(ctrl, tick, x, u);
+    }
+    if (stsp_qspline_law(h, stage, tick - h->stage_start[stage], x, ctrl->v, y,
+                         ctrl->limited) != 0u) {
+        status = stsp_limit(h, x, y, &mask);
+    }
+    stsp_copy(u, y, stsp_nu(h));
+    ctrl->sat_mask = mask;
+    ctrl->next_tick = tick + 1u;
     return status;
 }
 #endif

@@ -376,8 +376,10 @@ static void crc_and_verify(void **state)
  * too (the _san builds abort on any read beyond one). A stage whose layout no longer fits the
  * validated lengths (span_log2 beyond 9, a row end beyond n_entries or decreasing, coef_start
  * beyond n_coef, the tick's span beyond an entry's stride) commands 0; an operand index
- * beyond z contributes nothing; a scale outside 1..30 is taken as 30 (entry 4's is 30: the
- * commands are the reference's). Every tick in order, then verify: STSP_ERR_BAD_CRC. */
+ * beyond z contributes nothing; a scale outside 1..30 gives a wrong gain with no undefined
+ * shift (the _san builds trap one): entry 4's scale 0 gives gain 0, as the reference's at
+ * every tick of stage 1, so the commands are the reference's; 255 is not pinned. Every tick
+ * in order, then verify: STSP_ERR_BAD_CRC. */
 enum { CH_LOG2, CH_ROW_BEYOND, CH_ROW_DECREASING, CH_COEF_BEYOND, CH_STRIDE, CH_COL_255,
        CH_COL_NZ, CH_SHIFT_0, CH_SHIFT_255, CH_N };
 
@@ -393,6 +395,7 @@ static int32_t changed_expect(uint32_t kase, uint32_t tick)
     case CH_COEF_BEYOND: return -1;
     case CH_STRIDE: return (stage == 0u) ? (int32_t)NZ : ((tick == 16u) ? -1 : -2);
     case CH_COL_255: case CH_COL_NZ: return (stage == 1u) ? 3 : (int32_t)NZ;
+    case CH_SHIFT_255: return (stage == 1u) ? -2 : (int32_t)NZ;
     default: return (int32_t)NZ;
     }
 }

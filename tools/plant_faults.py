@@ -235,6 +235,24 @@ FAULTS = [
           "            (p->col != q->col) || (p->shift != q->shift) ||"
           " (p->coef_start != q->coef_start) ||",
           "            (p->col != q->col) || (p->coef_start != q->coef_start) ||"),
+    # The fixed-point spline tick on a table changed after init (stsp_qspline_layout and
+    # stsp_qspline_law, stsp_spline.c): the bounds by the validated lengths.
+    Fault("F68", "fixed-point spline tick keeps a changed row end beyond the validated n_entries",
+          CTL, "        if ((end < prev) || (end > sp->n_entries)) {",
+          "        if (end < prev) {"),
+    Fault("F69", "fixed-point spline tick reads a span beyond a changed entry stride", CTL,
+          "        if ((st >= 4u) && (sigma <= (st - 4u))) {", "        if (st >= 4u) {"),
+    Fault("F70", "fixed-point spline tick takes a changed operand index beyond z as the last one",
+          CTL, "acc = stsp_q_mac(acc, g, z[(j < nz) ? j : nx]);",
+          "acc = stsp_q_mac(acc, g, z[(j < nz) ? j : (nz - 1u)]);"),
+    Fault("F71", "fixed-point spline gain shifts by a changed scale outside 1..30 unmasked "
+          "(undefined shifts)", CTL,
+          "    const uint32_t down = (sh - 1u) & 63u;", "    const uint32_t down = sh - 1u;"),
+    # The fixed-point spline ordinary tick (stsp_spline_step, stsp_spline.c).
+    Fault("F72", "fixed-point spline ordinary tick taken at the first tick of the next stage "
+          "(no relatch, the old stage's gains)", CTL,
+          "        (tick >= stsp_stage_end(h, stage))) {\n        return stsp_qspline_step_cold(",
+          "        (tick > stsp_stage_end(h, stage))) {\n        return stsp_qspline_step_cold("),
     # The band solver's non-symmetric path (a spline band table's W', stsp_bandqp.c).
     Fault("F58", "band solver, non-symmetric W: no partial pivoting (the diagonal pivot kept)",
           CTL, "                piv = i;\n", "                piv = k;\n"),

@@ -30,8 +30,8 @@ static STSP_ALWAYS_INLINE stsp_status_t stsp_clamp(const stsp_header_t *h, stsp_
 
 #ifndef STSP_CLAMP_NO_FIXUP
 /* An ordinary tick whose finite command (already in u) is out of range, or a false alarm
- * (stsp_controller.c, stsp_spline.c's float32 ticks; the Q spline tick, which has no ordinary
- * path of its own, defines STSP_CLAMP_NO_FIXUP). */
+ * (stsp_controller.c, stsp_spline.c's float32 ticks; the Q spline ticks, which clamp their
+ * command before writing u, define STSP_CLAMP_NO_FIXUP). */
 static STSP_NOINLINE stsp_status_t stsp_step_fixup(stsp_ctrl_t *ctrl, uint32_t tick,
                                                    stsp_scalar_t *u)
 {

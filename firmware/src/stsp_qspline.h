@@ -33,7 +33,9 @@ uint32_t stsp_qspline_basis(uint32_t k, uint32_t tau, uint32_t *p);
 /* The gain biased by 2^(62 - sh): floor(acc / 2^sh + 1/2) + 2^(62 - sh), with acc the exact
  * sum. No signed shift: acc + 2^62 is in (0, 2^63) as |acc| < 2^61 (the unsigned sum wraps to
  * exactly that); floor((a + 2^(sh-1)) / 2^sh) = floor((floor(a / 2^(sh-1)) + 1) / 2) for
- * a >= 0, one variable shift; and 2^62 / 2^sh is an integer (sh <= 57). */
+ * a >= 0, one variable shift; and 2^62 / 2^sh is an integer (sh <= 57). The shift count is
+ * taken modulo 64: the same for sh in [1, 57], and for any other sh (a scale changed after
+ * init, which the controller's tick reads unchecked) a wrong value but no undefined shift. */
 static inline uint64_t stsp_qspline_biased(const stsp_scalar_t *c, const uint32_t *p,
                                            uint32_t sh)
 {
@@ -44,7 +46,7 @@ static inline uint64_t stsp_qspline_biased(const stsp_scalar_t *c, const uint32_
     const int64_t t3 = (int64_t)c[3] * (int64_t)(int32_t)p[3];
     const int64_t acc = ((t0 + t1) + t2) + t3;
     const uint64_t lifted = (uint64_t)acc + ((uint64_t)1u << 62u);
-    const uint32_t down = sh - 1u;
+    const uint32_t down = (sh - 1u) & 63u;
     const uint64_t halves = lifted >> down;
     const uint64_t up = halves + 1u;
     return up >> 1u;

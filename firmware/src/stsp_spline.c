@@ -115,14 +115,73 @@ stsp_status_t stsp_spline_check_values(const stsp_header_t *h)
     return STSP_OK;
 }
 
+/* Stage s's layout at tick tau, re-read from the spline arrays on every tick and bounded by
+ * the lengths init validated, whatever the arrays hold now (a table changed after init, until
+ * stsp_verify() notices): span_log2 at most 9; the row ends from row_start[s nu] nondecreasing
+ * and at most n_entries; coef_start[s] <= coef_start[s+1] <= n_coef; and the tick's span
+ * inside each entry's stride (sigma + 4 <= stride), so that the last coefficient read,
+ * coef_start[s] + (entries - 1) stride + sigma + 3, is below coef_start[s+1]. A stage that no
+ * longer fits gets no entries (every input's command 0, then clamped): a wrong command, but no
+ * access outside the validated arrays and no undefined shift. On a table that passed init it
+ * always fits. Fills the span's basis p and returns the entries (0 if it does not fit), with
+ * *k3 = 3k, *stride and *c the first coefficient the law reads. */
+static STSP_ALWAYS_INLINE uint32_t stsp_qspline_layout(const stsp_header_t *h, uint32_t s,
+                                                       uint32_t tau, uint32_t *p, uint32_t *k3,
+                                                       uint32_t *stride,
+                                                       const stsp_scalar_t **c)
+{
+    const stsp_qspline_t *sp = &h->sp;
+    const uint32_t nu = stsp_nu(h);
+    const uint32_t k_raw = sp->span_log2[s];
+    const uint32_t k = (k_raw <= STSP_QSPLINE_MAX_SPAN_LOG2) ? k_raw : 0u;
+    const uint32_t e0 = sp->row_start[s * nu];
+    const uint32_t c0 = sp->coef_start[s];
+    const uint32_t c1 = sp->coef_start[s + 1u];
+    const uint32_t sigma = stsp_qspline_basis(k, tau, p);
+    uint32_t fits = 1u;
+    uint32_t prev = e0;
+    uint32_t entries = 0u;
+    uint32_t i;
+    if ((k != k_raw) || (e0 > sp->n_entries) || (c0 > c1) || (c1 > sp->n_coef)) {
+        fits = 0u;
+    }
+    for (i = 0u; i < nu; ++i) {
+        const uint32_t end = sp->row_start[(s * nu) + i + 1u];
+        if ((end < prev) || (end > sp->n_entries)) {
+            fits = 0u;
+        } else {
+            prev = end;
+        }
+    }
+    *stride = 0u;
+    *c = sp->coef; /* no pointer arithmetic past the array when the stage has no entries */
+    if (fits != 0u) {
+        entries = prev - e0;
+    }
+    if (entries > 0u) {
+        const uint32_t st = (c1 - c0) / entries;
+        if ((st >= 4u) && (sigma <= (st - 4u))) {
+            *stride = st;
+            *c = &sp->coef[c0 + sigma];
+        } else {
+            entries = 0u;
+        }
+    }
+    *k3 = 3u * k;
+    return entries;
+}
+
 /* The fixed-point spline law at tick tau of stage s with multipliers v, into y (never the
  * caller's u): per input i, over its stored entries e in order, the gain g_e (stsp_qspline.h,
  * exact, one rounding) and
  *     acc = 2^(2F) + 2^(F-1) + sum_e g_e z[col_e],  z = [x, 0, v],
  *     y[i] = (acc >> F) - 2^F + g_k0     (g_k0: the gain of col nx, k0[i]; 0 if not stored)
  * the per-tick law (stsp_law_q.h) with the evaluated gains, bit for bit (the sum is exact, so
- * its order does not matter). Returns stsp_law_alarm(). Time: the same at every tick of a
- * stage (its entries), the largest stage's at most. */
+ * its order does not matter). The stage's layout as stsp_qspline_layout bounds it; an entry's
+ * operand index is bounded too (a table changed after init: an index beyond z contributes
+ * nothing; a scale outside 1..30 gives a wrong gain, its shifts taken modulo 64 by
+ * stsp_qspline_biased, no undefined shift; on a table that passed init neither happens). Returns stsp_law_alarm(). Time: the same at every tick of a stage (its
+ * entries), the largest stage's at most. */
 static STSP_ALWAYS_INLINE uint32_t stsp_qspline_law(const stsp_header_t *h, uint32_t s,
                                                     uint32_t tau, const stsp_scalar_t *x,
                                                     const stsp_scalar_t *v, stsp_scalar_t *y,
@@ -132,17 +191,15 @@ static STSP_ALWAYS_INLINE uint32_t stsp_qspline_law(const stsp_header_t *h, uint
     const uint32_t nx = stsp_nx(h);
     const uint32_t nu = stsp_nu(h);
     const uint32_t n_latch = stsp_n_latch(h);
-    const uint32_t k = sp->span_log2[s];
-    const uint32_t k3 = 3u * k;
-    const uint32_t entries = (uint32_t)sp->row_start[(s + 1u) * nu] - sp->row_start[s * nu];
-    const uint32_t stride = stsp_qspline_stride(sp, s, entries);
+    const uint32_t nz = nx + 1u + n_latch;
     stsp_scalar_t z[STSP_MAX_NX + 1u + STSP_MAX_LATCH];
     uint32_t p[4];
-    const uint32_t sigma = stsp_qspline_basis(k, tau, p);
+    uint32_t k3;
+    uint32_t stride;
+    const stsp_scalar_t *c;
+    const uint32_t entries = stsp_qspline_layout(h, s, tau, p, &k3, &stride, &c);
     const uint8_t *col = sp->col;
     const uint8_t *shift = sp->shift;
-    /* no pointer arithmetic past the array when the stage has no entries */
-    const stsp_scalar_t *c = (entries > 0u) ? &sp->coef[sp->coef_start[s] + sigma] : sp->coef;
     uint32_t e = sp->row_start[s * nu];
     uint32_t i;
     for (i = 0u; i < nx; ++i) {
@@ -153,13 +210,13 @@ static STSP_ALWAYS_INLINE uint32_t stsp_qspline_law(const stsp_header_t *h, uint
         z[nx + 1u + i] = v[i];
     }
     for (i = 0u; i < nu; ++i) {
-        const uint32_t end = sp->row_start[(s * nu) + i + 1u];
+        const uint32_t end = (entries > 0u) ? sp->row_start[(s * nu) + i + 1u] : e;
         stsp_uacc_t acc = stsp_q_start();
         stsp_scalar_t k0 = (stsp_scalar_t)0;
         for (; e < end; ++e) {
             const uint32_t j = col[e];
             const stsp_scalar_t g = stsp_qspline_narrow(c, p, k3 + shift[e]);
-            acc = stsp_q_mac(acc, g, z[j]);
+            acc = stsp_q_mac(acc, g, z[(j < nz) ? j : nx]);
             k0 = (j == nx) ? g : k0;
             c = &c[stride];
         }
@@ -168,11 +225,13 @@ static STSP_ALWAYS_INLINE uint32_t stsp_qspline_law(const stsp_header_t *h, uint
     return stsp_law_alarm(h, y, limited);
 }
 
-/* Every tick of a fixed-point spline table (its stage_end stays 0, so each leaves stsp_step's
- * ordinary path): the per-tick cold path's plan (range, order, stage, latch) and commit, the
- * spline law at the tick, the clamp. There is no non-finite case (integers). */
-stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
-                               stsp_scalar_t *u)
+/* Every tick of a fixed-point spline table but its ordinary one (stsp_spline_step): the
+ * per-tick cold path's plan (range, order, stage, latch) and commit, the spline law at the
+ * tick, the clamp. There is no non-finite case (integers). Out of line, so that the ordinary
+ * tick keeps its registers. */
+static STSP_NOINLINE stsp_status_t stsp_qspline_step_cold(stsp_ctrl_t *ctrl, uint32_t tick,
+                                                          const stsp_scalar_t *x,
+                                                          stsp_scalar_t *u)
 {
     const stsp_header_t *h = &ctrl->checked;
     stsp_scalar_t v_new[STSP_MAX_LATCH];
@@ -197,6 +256,36 @@ stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scal
     ctrl->sat_mask = mask;
     stsp_commit(ctrl, tick, &plan, v_new);
     ctrl->stage_end = 0u;
+    return status;
+}
+
+/* Every tick of a fixed-point spline table (its stage_end stays 0, so each leaves stsp_step's
+ * ordinary path). The ordinary one is here: the expected tick (next_tick) of a latched
+ * instance before the end of its stage (stsp_stage_end, as the plan reads it now). For it the
+ * plan's checks all pass with STSP_OK, its stage search stays in the instance's stage and it
+ * keeps the latched v, so this is the cold path's step without them: the spline law at the
+ * tick on the kept v, the clamp, next_tick; the same status, command, mask and instance state
+ * (test_qspline_ctrl.c runs both paths against the per-tick law). Anything else takes
+ * stsp_qspline_step_cold. */
+stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
+                               stsp_scalar_t *u)
+{
+    const stsp_header_t *h = &ctrl->checked;
+    const uint16_t stage = ctrl->stage;
+    stsp_scalar_t y[STSP_MAX_NU];
+    stsp_status_t status = STSP_OK;
+    uint16_t mask = 0u;
+    if ((tick != ctrl->next_tick) || (ctrl->latched == 0u) ||
+        (tick >= stsp_stage_end(h, stage))) {
+        return stsp_qspline_step_cold(ctrl, tick, x, u);
+    }
+    if (stsp_qspline_law(h, stage, tick - h->stage_start[stage], x, ctrl->v, y,
+                         ctrl->limited) != 0u) {
+        status = stsp_limit(h, x, y, &mask);
+    }
+    stsp_copy(u, y, stsp_nu(h));
+    ctrl->sat_mask = mask;
+    ctrl->next_tick = tick + 1u;
     return status;
 }
 #endif

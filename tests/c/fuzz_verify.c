@@ -2,17 +2,20 @@
  * with clang, -fsanitize=fuzzer,address,undefined, once per arithmetic variant; the tests
  * fuzz_step_verify, fuzz_step_verify_q15 and fuzz_step_verify_q31 run it for a bounded time).
  *
- * Each input builds a valid table whose header, band dual or spline gains (float32: one table
- * in three has spline gains, 1..8 spans per stage of up to 40 ticks; the Q15/Q31 builds have no
- * spline tables here, only a spline header appearing after init) and every array live in
+ * Each input builds a valid table whose header, band dual or spline gains (one table in three
+ * has spline gains, stages of up to 40 ticks: float32 stsp_spline_t, 1..8 spans per stage;
+ * Q15/Q31 stsp_qspline_t, spans of 2^k ticks, k mostly 0..3, now and then up to 9, shifts
+ * 1..30, coefficients that keep init's row bound) and every array live in
  * heap blocks of exactly the size init validates (so ASan reports any access beyond them),
  * inits two instances (one on the table, one, the reference, on an untouched copy of its
  * header and band dual or spline header: same arrays), steps both, then changes the table:
  * header fields (dimensions, magic, version, kind, tick_hz, crc32, problem hash), array
  * addresses (NULL, another array, a one-element block), the band dual's header, its address,
  * the spline's header (a length by a step or to anything, an array address: NULL, another of
- * its arrays, a one-entry block), its address (gone, another header, back), and bytes of any
- * array (the spline's knots, index arrays, cols and coefficients too); then
+ * its arrays, a one-entry block; Q15/Q31: n_entries, n_coef and the six arrays span_log2,
+ * row_start, col, shift, coef_start, coef), its address (gone, another header, back), and bytes
+ * of any array (the spline's knots, span_log2, index arrays, cols, shifts and coefficients
+ * too: the steps must stay inside the validated arrays, stsp_spline.c); then
  * interleaves steps (ticks in order, repeated, skipped, backwards, past the end; states with
  * NaN/Inf/huge entries; x and u in separate, shared or overlapping blocks of exactly the
  * validated nx and nu), resets, conversions and stsp_verify().
@@ -183,13 +186,90 @@ static void *fv_array(fv_table_t *tb, fv_blocks_t *blocks, size_t size)
     return p;
 }
 
-#ifndef STSP_ARITH_FIXED_POINT
 /* An array of the spline gains: a block of exactly `size` bytes, registered for data changes
  * unless empty (a stage may store no entry: col and coef may be empty, but not NULL). */
 static void *fv_spline_array(fv_table_t *tb, fv_blocks_t *blocks, size_t size)
 {
     return (size > 0u) ? fv_array(tb, blocks, size) : fv_alloc(blocks, 0u);
 }
+
+#ifdef STSP_ARITH_FIXED_POINT
+/* Valid fixed-point spline gains for t (stsp_qspline_t): per stage spans of 2^k ticks (k
+ * mostly 0..3, so several spans in a stage of up to 40 ticks, now and then up to 9: one span),
+ * per (stage, input) none, all or a random subset of the operands stored, shifts 1..30, and
+ * coefficients within +-2^F/64 (a gain is at most 3 of them plus the rounding, so a row of at
+ * most 12 stays below 2^F - 1: init's row bound holds at every tick); every array in its own
+ * block of exactly its size. */
+static void fv_build_qspline(fv_blocks_t *blocks, fv_table_t *tb, stsp_table_t *t,
+                             uint32_t *seed)
+{
+    const uint32_t ns = t->n_stages, nu = t->nu, nz = (uint32_t)t->nx + 1u + t->n_latch;
+    const int64_t one = (int64_t)1 << STSP_Q_FRAC_BITS;
+    uint32_t kk[FV_MAX_NS], stride[FV_MAX_NS], mask[FV_MAX_NS * FV_MAX_NU];
+    uint32_t ne = 0u, nc = 0u, s, i, k, c;
+    uint8_t *span_log2, *col, *shift;
+    uint16_t *row_start;
+    uint32_t *coef_start;
+    stsp_scalar_t *coef;
+    stsp_qspline_t *sp;
+    for (s = 0u; s < ns; ++s) {
+        const uint32_t T = t->stage_start[s + 1u] - t->stage_start[s];
+        const uint32_t pick = fv_lcg(seed) % 8u;
+        kk[s] = (pick == 0u) ? fv_lcg(seed) % 10u : fv_lcg(seed) % 4u;
+        stride[s] = ((T + (1u << kk[s]) - 1u) >> kk[s]) + 3u;
+        for (i = 0u; i < nu; ++i) {
+            const uint32_t sel = fv_lcg(seed) % 8u;    /* none, all, or a random subset */
+            const uint32_t m = ((sel == 0u) ? 0u : (sel == 1u) ? ~0u : fv_lcg(seed)) &
+                               ((1u << nz) - 1u);
+            mask[s * nu + i] = m;
+            for (c = 0u; c < nz; ++c) {
+                if ((m >> c) & 1u) {
+                    ++ne;
+                    nc += stride[s];
+                }
+            }
+        }
+    }
+    span_log2 = (uint8_t *)fv_spline_array(tb, blocks, ns);
+    row_start = (uint16_t *)fv_spline_array(tb, blocks, sizeof(uint16_t) * (ns * nu + 1u));
+    col = (uint8_t *)fv_spline_array(tb, blocks, ne);
+    shift = (uint8_t *)fv_spline_array(tb, blocks, ne);
+    coef_start = (uint32_t *)fv_spline_array(tb, blocks, sizeof(uint32_t) * (ns + 1u));
+    coef = (stsp_scalar_t *)fv_spline_array(tb, blocks, sizeof(stsp_scalar_t) * nc);
+    ne = nc = 0u;
+    row_start[0] = 0u;
+    for (s = 0u; s < ns; ++s) {
+        span_log2[s] = (uint8_t)kk[s];
+        coef_start[s] = nc;
+        for (i = 0u; i < nu; ++i) {
+            for (c = 0u; c < nz; ++c) {
+                if ((mask[s * nu + i] >> c) & 1u) {
+                    col[ne] = (uint8_t)c;
+                    shift[ne] = (uint8_t)(1u + fv_lcg(seed) % 30u);
+                    ++ne;
+                    for (k = 0u; k < stride[s]; ++k) {
+                        coef[nc++] = (stsp_scalar_t)(((int64_t)(fv_lcg(seed) % 4096u) - 2048) *
+                                                     one / 131072);
+                    }
+                }
+            }
+            row_start[s * nu + i + 1u] = (uint16_t)ne;
+        }
+    }
+    coef_start[ns] = nc;
+    sp = (stsp_qspline_t *)fv_alloc(blocks, sizeof *sp);
+    sp->n_entries = ne;
+    sp->n_coef = nc;
+    sp->span_log2 = span_log2;
+    sp->row_start = row_start;
+    sp->col = col;
+    sp->shift = shift;
+    sp->coef_start = coef_start;
+    sp->coef = coef;
+    t->spline = sp;
+    tb->spline = sp;
+}
+#else
 
 /* Valid spline gains for t (float32): per stage 1..8 spans on distinct integer breakpoints,
  * per (stage, input) none, all or a random subset of the operands stored, small
@@ -306,10 +386,8 @@ static void fv_build(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
     stsp_scalar_t *hi = FV_ARRAY(tb, blocks, stsp_scalar_t, nu);
     stsp_scalar_t *hold = FV_ARRAY(tb, blocks, stsp_scalar_t, nu);
     uint32_t s, i, nt = 0u;
-    int band = 0, spline = 0;
-#ifndef STSP_ARITH_FIXED_POINT
-    spline = (fuzz_u8(in) % 3u) == 1u;
-#endif
+    const int spline = (fuzz_u8(in) % 3u) == 1u;
+    int band = 0;
     for (s = 0u; s < ns; ++s) {
         start[s] = nt;
         nt += 1u + fuzz_u8(in) % (spline ? FV_MAX_SPLINE_STAGE_TICKS : FV_MAX_STAGE_TICKS);
@@ -397,11 +475,13 @@ static void fv_build(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
     tb->band = NULL;
     tb->spline = NULL;
     tb->spline_arrays = tb->n_arrays;
-#ifndef STSP_ARITH_FIXED_POINT
     if (spline) {
+#ifdef STSP_ARITH_FIXED_POINT
+        fv_build_qspline(blocks, tb, t, &seed);
+#else
         fv_build_spline(blocks, tb, t, &seed);
-    }
 #endif
+    }
     if (band) {
         const uint32_t q = stage_n_latch[0];
         stsp_bandqp_t *b = (stsp_bandqp_t *)fv_alloc(blocks, sizeof *b);
@@ -546,7 +626,29 @@ static void fv_change(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
             case 2u: b->W = ((value & 1u) != 0u) ? b->mt : NULL; break;
             default: b->Nt = (const double *)fv_alloc(blocks, sizeof(double)); break;
             }
-#ifndef STSP_ARITH_FIXED_POINT
+#ifdef STSP_ARITH_FIXED_POINT
+        } else if (tb->spline != NULL) {
+            /* a length by a small step or to anything, or an array address: NULL, another of
+             * the spline's arrays, or a one-entry block (of the largest element type) */
+            stsp_qspline_t *p = tb->spline;
+            const uint32_t v = ((value & 1u) != 0u) ? (value >> 24) : (value >> 1);
+            const uint32_t step = (value >> 8) % 5u;  /* -2..2 as an offset */
+            const void *arrays[6] = {p->span_log2, p->row_start, p->col, p->shift,
+                                     p->coef_start, p->coef};
+            const uint32_t pick = (value >> 12) % 8u;
+            const void *q = (pick < 6u) ? arrays[pick]
+                            : (pick == 6u) ? fv_alloc(blocks, sizeof(uint32_t)) : NULL;
+            switch (which % 8u) {
+            case 0u: p->n_entries = ((which & 16u) != 0u) ? v : p->n_entries + step - 2u; break;
+            case 1u: p->n_coef = ((which & 16u) != 0u) ? v : p->n_coef + step - 2u; break;
+            case 2u: p->span_log2 = (const uint8_t *)q; break;
+            case 3u: p->row_start = (const uint16_t *)q; break;
+            case 4u: p->col = (const uint8_t *)q; break;
+            case 5u: p->shift = (const uint8_t *)q; break;
+            case 6u: p->coef_start = (const uint32_t *)q; break;
+            default: p->coef = (const stsp_scalar_t *)q; break;
+            }
+#else
         } else if (tb->spline != NULL) {
             /* a length by a small step or to anything, or an array address: NULL, another of
              * the spline's arrays, or a one-entry block */
@@ -630,7 +732,18 @@ static int fv_header_changed(const fv_table_t *tb)
                   (t->u_min != o->u_min) || (t->u_max != o->u_max) || (t->u_hold != o->u_hold);
 #ifdef STSP_ARITH_FIXED_POINT
     changed = changed || (t->x_exp != o->x_exp) || (t->u_exp != o->u_exp) ||
-              (t->v_exp != o->v_exp) || (t->band_qp != NULL) || (t->spline != NULL);
+              (t->v_exp != o->v_exp) || (t->band_qp != NULL);
+    if (t->spline != tb->spline) {
+        changed = 1;
+    } else if (tb->spline != NULL) {
+        const stsp_qspline_t *p = tb->spline, *p0 = tb->spline0;
+        changed = changed || (p->n_entries != p0->n_entries) || (p->n_coef != p0->n_coef) ||
+                  (p->span_log2 != p0->span_log2) || (p->row_start != p0->row_start) ||
+                  (p->col != p0->col) || (p->shift != p0->shift) ||
+                  (p->coef_start != p0->coef_start) || (p->coef != p0->coef);
+    } else {
+        /* gains per tick, as init saw */
+    }
 #else
     if (t->spline != tb->spline) {
         changed = 1;

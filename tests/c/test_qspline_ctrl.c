@@ -111,11 +111,22 @@ static int64_t round_half_up(int64_t a)
     return q;
 }
 
-/* The law written out: u[i] = round(k0 2^F + K x + L v) / 2^F, gains from the reference. */
+/* The law written out: u[i] = round(k0 2^F + K x + L v) / 2^F, gains from the reference;
+ * without the term of operand `skip` (NZ: none). */
+static int64_t law_ref_skip(uint32_t tick, uint32_t i, const stsp_scalar_t *x, stsp_scalar_t v,
+                            uint32_t skip)
+{
+    int64_t g[NZ];
+    uint32_t j;
+    for (j = 0u; j < NZ; ++j) {
+        g[j] = (j == skip) ? 0 : gains[tick][i * NZ + j];
+    }
+    return round_half_up(g[2] * ONE + g[0] * x[0] + g[1] * x[1] + g[3] * v);
+}
+
 static int64_t law_ref(uint32_t tick, uint32_t i, const stsp_scalar_t *x, stsp_scalar_t v)
 {
-    const int64_t *g = &gains[tick][i * NZ];
-    return round_half_up(g[2] * ONE + g[0] * x[0] + g[1] * x[1] + g[3] * v);
+    return law_ref_skip(tick, i, x, v, NZ);
 }
 
 static stsp_scalar_t latch_ref(uint32_t stage, const stsp_scalar_t *x)
@@ -360,6 +371,100 @@ static void crc_and_verify(void **state)
     q_gains.shift = shift;
 }
 
+/* The spline arrays changed after init (until stsp_verify() notices; stsp_spline.c,
+ * stsp_qspline_layout and stsp_qspline_law): every array a heap block of its exact size, x
+ * too (the _san builds abort on any read beyond one). A stage whose layout no longer fits the
+ * validated lengths (span_log2 beyond 9, a row end beyond n_entries or decreasing, coef_start
+ * beyond n_coef, the tick's span beyond an entry's stride) commands 0; an operand index
+ * beyond z contributes nothing; a scale outside 1..30 gives a wrong gain with no undefined
+ * shift (the _san builds trap one): entry 4's scale 0 gives gain 0, as the reference's at
+ * every tick of stage 1, so the commands are the reference's; 255 is not pinned. Every tick
+ * in order, then verify: STSP_ERR_BAD_CRC. */
+enum { CH_LOG2, CH_ROW_BEYOND, CH_ROW_DECREASING, CH_COEF_BEYOND, CH_STRIDE, CH_COL_255,
+       CH_COL_NZ, CH_SHIFT_0, CH_SHIFT_255, CH_N };
+
+/* -1: the command is 0 (the stage does not fit); -2: not pinned (in bounds only); else the
+ * operand left out of the reference law (NZ: none). */
+static int32_t changed_expect(uint32_t kase, uint32_t tick)
+{
+    const uint32_t stage = (tick >= stage_start[1]) ? 1u : 0u;
+    switch (kase) {
+    case CH_LOG2: return (stage == 0u) ? -1 : (int32_t)NZ;
+    case CH_ROW_BEYOND: return (stage == 1u) ? -1 : (int32_t)NZ;
+    case CH_ROW_DECREASING: return ((stage == 0u) || (tick >= 13u)) ? -1 : -2;
+    case CH_COEF_BEYOND: return -1;
+    case CH_STRIDE: return (stage == 0u) ? (int32_t)NZ : ((tick == 16u) ? -1 : -2);
+    case CH_COL_255: case CH_COL_NZ: return (stage == 1u) ? 3 : (int32_t)NZ;
+    case CH_SHIFT_255: return (stage == 1u) ? -2 : (int32_t)NZ;
+    default: return (int32_t)NZ;
+    }
+}
+
+static void changed_arrays_stay_in_bounds(void **state)
+{
+    uint8_t *hl = (uint8_t *)heap_copy(span_log2, sizeof span_log2);
+    uint16_t *hr = (uint16_t *)heap_copy(row_start, sizeof row_start);
+    uint8_t *hc = (uint8_t *)heap_copy(col, sizeof col);
+    uint8_t *hs = (uint8_t *)heap_copy(shift, sizeof shift);
+    uint32_t *hcs = (uint32_t *)heap_copy(coef_start, sizeof coef_start);
+    stsp_scalar_t *hco = (stsp_scalar_t *)heap_copy(coef, sizeof coef);
+    stsp_scalar_t *x = (stsp_scalar_t *)heap_copy(Lambda, sizeof(stsp_scalar_t) * NX);
+    stsp_qspline_t q = q_gains;
+    stsp_table_t t = common(no_min, no_max);
+    uint32_t kase, seed = 7u;
+    (void)state;
+    q.span_log2 = hl; q.row_start = hr; q.col = hc; q.shift = hs;
+    q.coef_start = hcs; q.coef = hco;
+    t.spline = &q;
+    t.crc32 = stsp_table_crc32(&t);
+    for (kase = 0u; kase < (uint32_t)CH_N; ++kase) {
+        stsp_ctrl_t c;
+        stsp_scalar_t u[NU], v = 0;
+        uint32_t tick, i;
+        memcpy(hl, span_log2, sizeof span_log2);
+        memcpy(hr, row_start, sizeof row_start);
+        memcpy(hc, col, sizeof col);
+        memcpy(hs, shift, sizeof shift);
+        memcpy(hcs, coef_start, sizeof coef_start);
+        assert_int_equal(stsp_init(&c, &t), STSP_OK);
+        switch (kase) {
+        case CH_LOG2: hl[0] = 200u; break;
+        case CH_ROW_BEYOND: hr[4] = 9u; break;
+        case CH_ROW_DECREASING: hr[2] = 1u; break;
+        case CH_COEF_BEYOND: hcs[1] = 49u; break;
+        case CH_STRIDE: hcs[1] = 20u; break;     /* stage 1: 28 / 3 entries, stride 9 of 10 */
+        case CH_COL_255: hc[5] = 255u; break;    /* stage 1, input 1: L */
+        case CH_COL_NZ: hc[5] = (uint8_t)NZ; break;
+        case CH_SHIFT_0: hs[4] = 0u; break;      /* stage 1, input 1: K[0], scale 30 */
+        default: hs[4] = 255u; break;
+        }
+        for (tick = 0u; tick < N_TICKS; ++tick) {
+            for (i = 0u; i < NX; ++i) {
+                x[i] = (stsp_scalar_t)((int64_t)(lcg(&seed) % 65536u) * (ONE / 32768) - ONE);
+            }
+            if ((tick == 0u) || (tick == stage_start[1])) {
+                v = latch_ref((tick == 0u) ? 0u : 1u, x);
+            }
+            assert_int_equal(stsp_step(&c, tick, x, u), STSP_OK);
+            for (i = 0u; i < NU; ++i) {
+                const int32_t want = changed_expect(kase, tick);
+                if (want == -1) {
+                    assert_int_equal(u[i], 0);
+                } else if (want >= 0) {
+                    assert_int_equal(u[i], law_ref_skip(tick, i, x, v,
+                                                         (i == 1u) ? (uint32_t)want : NZ));
+                } else {
+                    /* a wrong command, in bounds */
+                }
+            }
+        }
+        assert_int_equal(stsp_verify(&c), STSP_ERR_BAD_CRC);
+        assert_int_equal(stsp_step(&c, 0u, x, u), STSP_ERR_NOT_INITIALIZED);
+        assert_int_equal(u[0], hold[0]);
+    }
+    free(hl); free(hr); free(hc); free(hs); free(hcs); free(hco); free(x);
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -367,6 +472,7 @@ int main(void)
         cmocka_unit_test(tick_statuses),
         cmocka_unit_test(bad_tables_are_refused),
         cmocka_unit_test(crc_and_verify),
+        cmocka_unit_test(changed_arrays_stay_in_bounds),
     };
     fill();
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -111,7 +111,10 @@ FAULTS = [
     Fault("F14", "Q15 rounding: the half-LSB bias dropped (rounds down)", CTL,
           "    return 1073758208u;", "    return 1073741824u;"),
     Fault("F15", "Q: law row-sum check off by one (a row summing to 2^F is accepted)", CTL,
-          "        if (sum > row_max) {", "        if (sum > (row_max + 1u)) {"),
+          "            sum += stsp_q_abs_sum(&t->L[r * n_latch], n_latch);\n        }\n"
+          "        if (sum > row_max) {",
+          "            sum += stsp_q_abs_sum(&t->L[r * n_latch], n_latch);\n        }\n"
+          "        if (sum > (row_max + 1u)) {"),
     Fault("F16", "Q: CRC does not cover v_exp", CTL,
           "        crc = stsp_crc32_i8s(crc, table->v_exp, n_latch);\n", ""),
     Fault("F17", "Q: latch rows not checked at init", CTL,

@@ -415,11 +415,18 @@ def _choose(G: np.ndarray, q: np.ndarray, errors: list[np.ndarray]) -> np.ndarra
     """The index of each row's option (errors[i], in units of q_i) whose combination makes
     the group's constraints' worst error ``max |G (q e)|`` smallest; ties to the first
     (each row's options are best first, so the product order is deterministic)."""
-    grids = np.meshgrid(*[np.arange(e.size) for e in errors], indexing="ij")
-    idx = np.stack([g.ravel() for g in grids], axis=1)                  # (combos, width)
-    E = np.stack([errors[i][idx[:, i]] for i in range(len(errors))], axis=1) * q
-    worst = np.abs(_dot(E[:, None, :], G[None])).max(axis=1)
-    return idx[int(np.argmin(worst))]
+    # On the grid of the rows' options (axis i: row i's), the constraints' errors summed
+    # left to right, row by row: the products and sums of `_dot` over the combinations
+    # (row-major, as the grid's ravel), without building them.
+    width = len(errors)
+    acc = None
+    for i, e in enumerate(errors):
+        shape = [1] * width + [G.shape[0]]
+        shape[i] = e.size
+        term = ((e * q[i])[:, None] * G[None, :, i]).reshape(shape)
+        acc = term if acc is None else acc + term
+    worst = np.abs(acc).max(axis=-1)
+    return np.array(np.unravel_index(int(np.argmin(worst)), worst.shape))
 
 
 def round_latch(problem, table, groups, Lam: np.ndarray, lam0: np.ndarray

@@ -23,6 +23,7 @@ from stospline.table.spline import command
 from stospline.table import spline_restore as sr
 
 from conftest import EXAMPLES
+from test_spline_monte_carlo import _frozen_at_span_starts
 
 SEED, PATHS, SUBSTEPS = 20261128, 4000, 2
 EXAMPLES_LATCHING = ("robot_monotone", "robot_narrow_corridor")
@@ -128,17 +129,6 @@ def test_the_c_controller_is_the_host_evaluation_bit_for_bit(designed):
         mismatches += int(not np.array_equal(
             u[0].view(np.uint32), command(t.spline, t.stage_start, tick, x, v).view(np.uint32)))
     assert mismatches == 0
-
-
-def _frozen_at_span_starts(table):
-    """A wrong controller that holds each span's first-tick gains for the whole span."""
-    sp, first = table.spline, []
-    for s in range(table.n_stages):
-        U = sp.knots(s).astype(np.int64)[3:-3]
-        a, b = int(table.stage_start[s]), int(table.stage_start[s + 1])
-        first.append(a + U[np.searchsorted(U, np.arange(b - a), side="right") - 1])
-    idx = np.concatenate(first)
-    return table.with_arrays(K=table.K[idx], k0=table.k0[idx], L=table.L[idx])
 
 
 def test_monte_carlo_through_the_c_controller_agrees_with_the_oracle(monotone):

@@ -70,6 +70,22 @@ def _frozen_at_span_starts(table):
     return table.with_arrays(K=table.K[idx], k0=table.k0[idx], L=table.L[idx])
 
 
+def assert_agrees_and_rejects_frozen(p, table, *, paths: int, seed: int, substeps: int):
+    """Monte Carlo through the compiled controller of spline `table` agrees with the oracle of
+    the law as implemented (cost, knot means and covariances, 99 % jointly), and rejects the
+    oracle of a controller that freezes the gains at each span's start (the check has power)."""
+    mc = simulate(p, build_controller(table), paths=paths, seed=seed, substeps=substeps,
+                  faults=Faults())
+    assert mc.worst_status == 0
+    own = evaluate_table(p, table, propagator="euler", substeps=substeps, path=False)
+    agree = compare_to_oracle(mc, own.J, own.knot_mean, knot_covs=own.knot_cov)
+    assert agree.ok, agree.verdict
+    frozen = evaluate_table(p, _frozen_at_span_starts(table), propagator="euler",
+                            substeps=substeps, path=False)
+    other = compare_to_oracle(mc, frozen.J, frozen.knot_mean, knot_covs=frozen.knot_cov)
+    assert not other.ok, other.verdict
+
+
 def test_monte_carlo_agrees_with_the_certificate_and_has_power(robot_problem, robot_zoh):
     """A coarse spline (two spans per stage), whose gains move a lot within a span: Monte
     Carlo through the compiled controller agrees with its oracle, and rejects the oracle of
@@ -80,16 +96,7 @@ def test_monte_carlo_agrees_with_the_certificate_and_has_power(robot_problem, ro
                                            initial_spans=2)
     table = replace(robot_zoh.table.with_arrays(K=K, k0=k0, L=L, Lambda=Lam, lambda0=lam0),
                     spline=spline)
-    mc = simulate(p, build_controller(table), paths=PATHS, seed=SEED, substeps=SUBSTEPS,
-                  faults=Faults())
-    assert mc.worst_status == 0
-    own = evaluate_table(p, table, propagator="euler", substeps=SUBSTEPS, path=False)
-    agree = compare_to_oracle(mc, own.J, own.knot_mean, knot_covs=own.knot_cov)
-    assert agree.ok, agree.verdict
-    frozen = evaluate_table(p, _frozen_at_span_starts(table), propagator="euler",
-                            substeps=SUBSTEPS, path=False)
-    other = compare_to_oracle(mc, frozen.J, frozen.knot_mean, knot_covs=frozen.knot_cov)
-    assert not other.ok, other.verdict
+    assert_agrees_and_rejects_frozen(p, table, paths=PATHS, seed=SEED, substeps=SUBSTEPS)
 
 
 def test_the_pipeline_runs_the_spline_controller(robot_spline):

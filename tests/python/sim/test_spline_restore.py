@@ -13,9 +13,7 @@ import numpy as np
 import pytest
 
 import stospline
-from stospline.problem.faults import Faults
 from stospline.sim.controller import build_controller
-from stospline.sim.montecarlo import compare_to_oracle, simulate
 from stospline.sim.oracle import evaluate_table
 from stospline.table.flash import flash_bytes
 from stospline.table.format import table_of
@@ -23,7 +21,7 @@ from stospline.table.spline import command
 from stospline.table import spline_restore as sr
 
 from conftest import EXAMPLES
-from test_spline_monte_carlo import _frozen_at_span_starts
+from test_spline_monte_carlo import assert_agrees_and_rejects_frozen
 
 SEED, PATHS, SUBSTEPS = 20261128, 4000, 2
 EXAMPLES_LATCHING = ("robot_monotone", "robot_narrow_corridor")
@@ -139,16 +137,7 @@ def test_monte_carlo_through_the_c_controller_agrees_with_the_oracle(monotone):
     p = d.problem
     spline, K, k0, L, _ = sr.restore(p, table_of(d.design, quantize=False), d.table, 1e-2)
     table = replace(d.table.with_arrays(K=K, k0=k0, L=L), spline=spline)
-    mc = simulate(p, build_controller(table), paths=PATHS, seed=SEED, substeps=SUBSTEPS,
-                  faults=Faults())
-    assert mc.worst_status == 0
-    own = evaluate_table(p, table, propagator="euler", substeps=SUBSTEPS, path=False)
-    agree = compare_to_oracle(mc, own.J, own.knot_mean, knot_covs=own.knot_cov)
-    assert agree.ok, agree.verdict
-    frozen = evaluate_table(p, _frozen_at_span_starts(table), propagator="euler",
-                            substeps=SUBSTEPS, path=False)
-    other = compare_to_oracle(mc, frozen.J, frozen.knot_mean, knot_covs=frozen.knot_cov)
-    assert not other.ok, other.verdict
+    assert_agrees_and_rejects_frozen(p, table, paths=PATHS, seed=SEED, substeps=SUBSTEPS)
 
 
 def test_a_region_enforced_between_ticks_is_refused(monotone):

@@ -21,9 +21,7 @@ import pytest
 
 import stospline
 from stospline.problem import load_problem
-from stospline.problem.faults import Faults
 from stospline.sim.controller import build_controller
-from stospline.sim.montecarlo import compare_to_oracle, simulate
 from stospline.sim.oracle import evaluate_table
 from stospline.sim.spline_certificate import _cov_change, constraint_residual
 from stospline.table.flash import flash_bytes
@@ -34,7 +32,7 @@ from stospline.table.spline_latch import resolve_latch
 from stospline.design.varying import mean_maps
 
 from conftest import EXAMPLES
-from test_spline_monte_carlo import _frozen_at_span_starts
+from test_spline_monte_carlo import assert_agrees_and_rejects_frozen
 
 EPS32 = float(np.finfo(np.float32).eps)
 PATHS, SEED, SUBSTEPS = 20000, 20261127, 2
@@ -130,13 +128,4 @@ def test_monte_carlo_agrees_with_the_oracle_and_has_power(example):
                                            initial_spans=2, varying_maps=mean_maps)
     table = replace(per_tick.with_arrays(K=K, k0=k0, L=L, Lambda=Lam, lambda0=lam0),
                     spline=spline)
-    mc = simulate(p, build_controller(table), paths=PATHS, seed=SEED, substeps=SUBSTEPS,
-                  faults=Faults())
-    assert mc.worst_status == 0
-    own = evaluate_table(p, table, propagator="euler", substeps=SUBSTEPS, path=False)
-    agree = compare_to_oracle(mc, own.J, own.knot_mean, knot_covs=own.knot_cov)
-    assert agree.ok, agree.verdict
-    frozen = evaluate_table(p, _frozen_at_span_starts(table), propagator="euler",
-                            substeps=SUBSTEPS, path=False)
-    other = compare_to_oracle(mc, frozen.J, frozen.knot_mean, knot_covs=frozen.knot_cov)
-    assert not other.ok, other.verdict
+    assert_agrees_and_rejects_frozen(p, table, paths=PATHS, seed=SEED, substeps=SUBSTEPS)

@@ -20,7 +20,7 @@ from stospline.sim.tick_moments import Moments
 from stospline.table.flash import flash_bytes, spline_bytes
 from stospline.table.format import GainTable
 from stospline.table.spline_compress import compress, compress_band
-from stospline.table.spline_restore import constraint_rows, is_state_latching, restore
+from stospline.table.spline_restore import is_state_latching, restore
 
 __all__ = ["spline_table", "certificate", "q_certificate", "constraint_residual", "band_terms",
            "first_latch_in_float32"]

@@ -99,21 +99,41 @@ class SplineGains:
             raise ValueError("coef_start must run from 0 to the number of coefficients")
         if self.col.size and int(self.col.max()) > self.nx + self.n_latch:
             raise ValueError("an entry's column is beyond nx + 1 + n_latch")
-        for r in range(ns * self.nu):
-            if np.any(np.diff(self.col[rows[r]:rows[r + 1]].astype(np.int64)) <= 0):
-                raise ValueError("the columns of a (stage, input) row must increase")
-        for s in range(ns):
-            U = self.knots(s).astype(float)
-            S = U.size - 7
-            if S < 1 or np.any(U[:4] != 0) or np.any(U[-4:] != U[-1]) \
-                    or np.any(np.diff(U[3:-3]) <= 0) or np.any(U != np.rint(U)) \
-                    or U[-1] >= 2 ** 24:
-                raise ValueError(f"stage {s}: the knots must be [0,0,0,0, b_1 < ... < b_(S-1), "
-                                 f"T,T,T,T] with integer breakpoints, 0 < b < T < 2^24")
-            cols = self.col[self.entry_slice(s)]
-            if self.coef_start[s + 1] - self.coef_start[s] != cols.size * (S + 3):
-                raise ValueError(f"stage {s}: {cols.size} entries need {cols.size * (S + 3)} "
-                                 f"coefficients")
+        # Checked over all rows and stages at once (a table of 60 short stages has 120
+        # rows): the first offending one is named.
+        col = self.col.astype(np.int64)
+        inside = np.ones(max(col.size - 1, 0), bool)    # consecutive entries of one row
+        inside[rows[1:-1][(rows[1:-1] > 0) & (rows[1:-1] < col.size)] - 1] = False
+        if np.any((np.diff(col) <= 0) & inside):
+            raise ValueError("the columns of a (stage, input) row must increase")
+        ks = self.knot_start.astype(np.int64)
+        S = np.diff(ks) - 7
+        U = self.knot.astype(float)
+        bad = S < 1
+        if not bad.any():
+            last = U[ks[1:] - 1]
+            four = np.arange(4)
+            bad |= np.any(U[ks[:-1, None] + four] != 0, axis=1)
+            bad |= np.any(U[ks[1:, None] - 1 - four] != last[:, None], axis=1)
+            bad |= last >= 2 ** 24
+            stage = np.repeat(np.arange(ns), np.diff(ks))
+            pos = np.arange(U.size) - ks[stage]      # index within its stage's knots
+            # Breakpoints U[3..S+3] increase: the pair (i, i+1) with 3 <= i < S + 3.
+            pair = (pos[:-1] >= 3) & (pos[:-1] < S[stage[:-1]] + 3) \
+                & (stage[:-1] == stage[1:])
+            np.logical_or.at(bad, stage[:-1][pair & (np.diff(U) <= 0)], True)
+            np.logical_or.at(bad, stage[U != np.rint(U)], True)
+        if bad.any():
+            s = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"stage {s}: the knots must be [0,0,0,0, b_1 < ... < b_(S-1), "
+                             f"T,T,T,T] with integer breakpoints, 0 < b < T < 2^24")
+        entries = rows[np.arange(ns + 1) * self.nu]
+        need = np.diff(entries) * (S + 3)
+        wrong = np.flatnonzero(np.diff(self.coef_start.astype(np.int64)) != need)
+        if wrong.size:
+            s = int(wrong[0])
+            raise ValueError(f"stage {s}: {int(np.diff(entries)[s])} entries need "
+                             f"{int(need[s])} coefficients")
 
     @property
     def n_stages(self) -> int:
@@ -183,10 +203,19 @@ def _combine(sigma: np.ndarray, N: list[np.ndarray], C: np.ndarray) -> np.ndarra
     return g
 
 
-def _stage_values(knots: np.ndarray, C: np.ndarray, T: int) -> np.ndarray:
-    """A stage's entries at its ticks 0..T-1 as the firmware evaluates them (float32)."""
-    tau = np.arange(T, dtype=np.float32)
-    sigma, N = _basis(np.asarray(knots, np.float32), tau)
+def _stage_values(knots: np.ndarray, C: np.ndarray, T: int, bases: dict | None = None
+                  ) -> np.ndarray:
+    """A stage's entries at its ticks 0..T-1 as the firmware evaluates them (float32).
+    ``bases``: a dict the caller keeps across stages, the float32 basis of each knot vector
+    computed once (robot_narrow_corridor's 60 stages share one)."""
+    knots = np.asarray(knots, np.float32)
+    key = (T, knots.tobytes())
+    hit = None if bases is None else bases.get(key)
+    if hit is None:
+        hit = _basis(knots, np.arange(T, dtype=np.float32))
+        if bases is not None:
+            bases[key] = hit
+    sigma, N = hit
     return _combine(sigma, N, np.asarray(C, np.float32))
 
 
@@ -211,6 +240,7 @@ def evaluate(spline: SplineGains, stage_start: np.ndarray
         raise ValueError(f"{start.size - 1} stages in the table, {spline.n_stages} in the spline")
     nx, nu = spline.nx, spline.nu
     Z = np.zeros((int(start[-1]), nu, nx + 1 + spline.n_latch), dtype=np.float32)
+    bases = {}
     for s in range(spline.n_stages):
         a, b = int(start[s]), int(start[s + 1])
         U = spline.knots(s)
@@ -219,7 +249,7 @@ def evaluate(spline: SplineGains, stage_start: np.ndarray
                              f"{b - a}")
         inputs, cols = spline.entries(s)
         if cols.size:
-            Z[a:b, inputs, cols] = _stage_values(U, spline.coefficients(s), b - a)
+            Z[a:b, inputs, cols] = _stage_values(U, spline.coefficients(s), b - a, bases)
     return Z[:, :, :nx].copy(), Z[:, :, nx].copy(), Z[:, :, nx + 1:].copy()
 
 

@@ -53,7 +53,7 @@ MAX_ROUNDS = 10
 # Relative residual of the least-norm solve above which the active rows are not met exactly by
 # any correction of the stored k0 coefficients (refused).
 SOLVE_TOLERANCE = 1e-9
-_RIDGE = 1e-12      # of the energy matrix's largest diagonal: coefficients no tick reaches
+_RIDGE = 1e-12      # of a stage's Gram matrix's largest eigenvalue: directions no tick reaches
 EPS32 = 2.0 ** -24
 
 
@@ -108,51 +108,125 @@ def constraint_rows(problem, table) -> Rows:
 
 
 def _maps(problem, table, varying_maps=None):
-    """Per tick ``(Ad, Bd, fd)`` of the oracle's mean map (`stage_mean_maps`)."""
+    """Per tick ``(Ad, Bd, fd)`` of the oracle's mean map (`stage_mean_maps`). Stages with
+    the same time-invariant data share one exponential (robot_narrow_corridor: 60 stages,
+    one plant)."""
     n, m, _ = table.dims
     h = 1.0 / table.tick_hz
-    out = []
+    out, seen = [], {}
     for s in range(table.n_stages):
-        F = stage_mean_maps(problem.stages[s], table, s, h, varying_maps)
+        stage = problem.stages[s]
+        key = None
+        if stage.varying is None:
+            key = (stage.A.tobytes(), stage.B.tobytes(),
+                   None if stage.f is None else np.asarray(stage.f, float).tobytes())
+        if key is None or key not in seen:
+            F = stage_mean_maps(stage, table, s, h, varying_maps)
+            per_tick = [(Fj[:, :n], Fj[:, n:n + m], Fj[:, -1]) for Fj in F]
+            if key is not None:
+                seen[key] = per_tick
+        else:
+            per_tick = seen[key]
         T = int(table.stage_start[s + 1] - table.stage_start[s])
-        for j in range(T):
-            Fj = F[j if F.shape[0] > 1 else 0]
-            out.append((Fj[:, :n], Fj[:, n:n + m], Fj[:, -1]))
+        out.extend(per_tick[j if len(per_tick) > 1 else 0] for j in range(T))
     return out
 
 
-def _k0_basis(spline: SplineGains, stage_start) -> tuple[np.ndarray, list]:
-    """The correction's columns: for every stored k0 entry, its S + 3 coefficients
-    (``(stage, entry index in the stage, input, coefficient)``), and (ticks, m, P): per tick
-    the matrix ``N_j`` of the k0 values' derivatives with respect to them (float64 basis)."""
+@dataclass
+class _Correction:
+    """The correction's coordinates: every stored k0 entry's S + 3 coefficients, stage by
+    stage, entry by entry (a stage's columns are contiguous).
+
+    ``where`` (P,): each column's index in the spline's ``coef``; ``entry`` (P,): its entry's
+    number among the corrected ones (for its peak); ``N`` (ticks, m, P): per tick the
+    derivatives of the k0 values with respect to the columns (the float64 basis);
+    ``blocks``: per stage with corrected entries ``(first column, inputs of its entries,
+    Gram matrix of the basis over its ticks)``."""
+    where: np.ndarray
+    entry: np.ndarray
+    entries: list          # (stage, input) of each corrected entry
+    N: np.ndarray
+    blocks: list
+
+
+def _k0_basis(spline: SplineGains, stage_start) -> _Correction:
+    """`_Correction` of `spline`'s stored k0 entries. Stages with the same knots share one
+    basis (robot_narrow_corridor's 60 stages of 2 ticks)."""
     nx = spline.nx
-    columns = []
+    stages, bases = [], {}
     P = 0
-    offsets = []
     for s in range(spline.n_stages):
         inputs, cols = spline.entries(s)
-        mine = {}
-        for e in np.flatnonzero(cols == nx):
-            mine[int(inputs[e])] = (int(e), P)
-            for c in range(spline.spans(s) + 3):
-                columns.append((s, int(e), int(inputs[e]), c))
-            P += spline.spans(s) + 3
-        offsets.append(mine)
-    out = np.zeros((int(stage_start[-1]), spline.nu, P))
-    for s in range(spline.n_stages):
+        mine = np.flatnonzero(cols == nx)
+        if mine.size == 0:
+            continue
         a = int(stage_start[s])
         T = int(stage_start[s + 1]) - a
-        sigma, N = _basis(spline.knots(s).astype(float), np.arange(T, dtype=float))
-        for i, (_, p0) in offsets[s].items():
-            for r in range(4):
-                out[a + np.arange(T), i, p0 + sigma + r] = N[r]
-    return np.asarray(columns, dtype=np.int64).reshape(-1, 4), out
+        knots = spline.knots(s)
+        key = (T, knots.tobytes())
+        if key not in bases:
+            nc = knots.size - 4
+            sigma, N = _basis(knots.astype(float), np.arange(T, dtype=float))
+            B = np.zeros((T, nc))
+            B[np.arange(T)[:, None], sigma[:, None] + np.arange(4)] = np.stack(N, axis=1)
+            bases[key] = B, B.T @ B
+        stages.append((s, a, mine, inputs[mine], P) + bases[key])
+        P += mine.size * (knots.size - 4)
+    N = np.zeros((int(stage_start[-1]), spline.nu, P))
+    where, entry, entries, blocks = [], [], [], []
+    for s, a, mine, inputs, p0, B, gram in stages:
+        T, nc = B.shape
+        for k, (e, i) in enumerate(zip(mine, inputs)):
+            N[a:a + T, i, p0 + k * nc:p0 + (k + 1) * nc] = B
+            where.append(int(spline.coef_start[s]) + int(e) * nc + np.arange(nc))
+            entry.append(np.full(nc, len(entries)))
+            entries.append((s, int(i)))
+        blocks.append((p0, inputs, gram))
+    cat = (lambda x: np.concatenate(x)) if where else (lambda x: np.zeros(0, np.int64))
+    return _Correction(cat(where), cat(entry), entries, N, blocks)
 
 
-def mean_rows(problem, table, rows: Rows, v, *, N=None, varying_maps=None):
+def _energy_inverse(problem, corr: _Correction, h: float):
+    """The pseudo-inverse of the correction's command energy ``Q = sum_j h N_j' R N_j``, as
+    blocks to apply (`_apply`). Q is block diagonal (a stage's coefficients move its own
+    ticks only) and each block is ``h R_i ⊗ Gram`` (the entries' inputs' R, and the basis's
+    Gram matrix, which every entry of the stage shares); its pseudo-inverse is ``R_i^-1 ⊗
+    Gram^+ / h``. Directions of the Gram below `_RIDGE` of its largest eigenvalue (the
+    coefficients no tick reaches: a 2-tick stage's 4) are dropped: the least-norm
+    correction leaves them at 0, where a ridge would leave them to round-off amplified by
+    its inverse."""
+    by_size, seen = {}, {}
+    for p0, inputs, gram in corr.blocks:
+        s = corr.entries[int(corr.entry[p0])][0]
+        R = np.asarray(problem.stages[s].R, float)[np.ix_(inputs, inputs)]
+        key = (gram.tobytes(), R.tobytes(), gram.shape[0])   # stages that repeat, once
+        if key not in seen:
+            w, V = np.linalg.eigh(gram)
+            keep = w > _RIDGE * w.max()
+            Gp = (V[:, keep] / w[keep]) @ V[:, keep].T
+            seen[key] = np.kron(np.linalg.inv(R), Gp) / h
+        inv = seen[key]
+        size = inv.shape[0]
+        idx, mats = by_size.setdefault(size, ([], []))
+        idx.append(p0 + np.arange(size))
+        mats.append(inv)
+    return [(np.array(idx), np.array(mats)) for idx, mats in by_size.values()]
+
+
+def _apply(blocks, X: np.ndarray) -> np.ndarray:
+    """The block-diagonal matrix of `_energy_inverse` times `X` (P, k), blocks of one size
+    at once."""
+    out = np.zeros_like(X)
+    for idx, mats in blocks:
+        out[idx] = np.matmul(mats, X[idx])
+    return out
+
+
+def mean_rows(problem, table, rows: Rows, v, *, N=None, varying_maps=None, maps=None):
     """``(y, A)``: the rows' expected values under `table`'s law from x0 with the latched
     vector `v`, and (with the per-tick correction matrices `N`) their derivatives with
-    respect to the correction (``A`` (R, P); None without `N`). Float64, tick by tick."""
+    respect to the correction (``A`` (R, P); None without `N`). Float64, tick by tick.
+    ``maps``: `_maps` of the problem when the caller has them already."""
     n, m, _ = table.dims
     K = np.asarray(table.K, float)
     ff = np.asarray(table.k0, float) + np.asarray(table.L, float) @ np.asarray(v, float)
@@ -161,7 +235,9 @@ def mean_rows(problem, table, rows: Rows, v, *, N=None, varying_maps=None):
     M[:, 0] = problem.x0
     T = int(table.stage_start[-1])
     at = {}
-    for j, (Ad, Bd, fd) in enumerate(_maps(problem, table, varying_maps)):
+    if maps is None:
+        maps = _maps(problem, table, varying_maps)
+    for j, (Ad, Bd, fd) in enumerate(maps):
         if j == 0:
             at[0] = M.copy()
         U = -K[j] @ M
@@ -214,17 +290,6 @@ def _active(rows: Rows, y: np.ndarray) -> np.ndarray:
     return act
 
 
-def _peaks(exact, spline: SplineGains, columns: np.ndarray) -> np.ndarray:
-    """The largest |k0| of each corrected entry's stage in the design's law (the fit's grid)."""
-    start = np.asarray(exact.stage_start, dtype=np.int64)
-    out = {}
-    for s, _, i, _ in columns:
-        if (s, i) not in out:
-            out[(s, i)] = float(np.abs(np.asarray(exact.k0[start[s]:start[s + 1], i],
-                                                  float)).max())
-    return out
-
-
 def restore(problem, exact, quantized, tolerance: float, *,
             max_spans: int = DEFAULT_MAX_SPANS, initial_spans: int = INITIAL_SPANS,
             correct: bool = True, varying_maps=None):
@@ -251,36 +316,26 @@ def restore(problem, exact, quantized, tolerance: float, *,
     info = {"rows": int(rows.tick.size), "active": 0, "rounds": 0, "correction": 0.0}
     if not correct or rows.tick.size == 0:
         return spline, K, k0, L, info
-    n = exact.dims[0]
     v = np.asarray(problem.x0, float)          # the latch: Lambda = I, lambda0 = 0
-    y_design, _ = mean_rows(problem, exact, rows, v, varying_maps=varying_maps)
+    maps = _maps(problem, exact, varying_maps)
+    y_design, _ = mean_rows(problem, exact, rows, v, maps=maps)
     act = _active(rows, y_design)
     start = np.asarray(exact.stage_start, dtype=np.int64)
-    columns, N = _k0_basis(spline, start)
-    if columns.shape[0] == 0:
+    corr = _k0_basis(spline, start)
+    if corr.where.size == 0:
         raise DesignError(FIELD, "the spline stores no k0 entry to restore the constraints with")
     table = quantized.with_arrays(K=K, k0=k0, L=L)
-    y, A = mean_rows(problem, table, rows, v, N=N, varying_maps=varying_maps)
-    # Energy of the command's change, sum_j h N_j' R N_j, and a ridge for coefficients no
-    # tick reaches (a 2-tick stage's 4 coefficients).
-    h = 1.0 / exact.tick_hz
-    Q = np.zeros((columns.shape[0],) * 2)
-    for s in range(exact.n_stages):
-        Ns = N[start[s]:start[s + 1]]                       # (ticks, m, P)
-        own = np.flatnonzero(np.any(Ns != 0, axis=(0, 1)))  # the stage's own coefficients
-        Ns = Ns[:, :, own]
-        RN = np.einsum("ik,tkp->tip", problem.stages[s].R, Ns)
-        Q[np.ix_(own, own)] += h * np.einsum("tip,tiq->pq", Ns, RN, optimize=True)
-    Q += _RIDGE * max(float(np.diag(Q).max()), 1e-300) * np.eye(Q.shape[0])
-    Qi = np.linalg.inv(Q)
+    y, A = mean_rows(problem, table, rows, v, N=corr.N, maps=maps)
+    # The correction of least command energy sum_j h |N_j d|_R^2 (`_energy_inverse`).
+    Qi = _energy_inverse(problem, corr, 1.0 / exact.tick_hz)
     target = np.where(act > 0, rows.hi, rows.lo)
     scale = np.maximum(1.0, np.maximum(np.abs(rows.lo), np.abs(rows.hi)))
     for rounds in range(1, MAX_ROUNDS + 1):
         on = np.flatnonzero(act != 0)
         Aa, b = A[on], target[on] - y[on]
-        S = Aa @ Qi @ Aa.T
-        lam = np.linalg.lstsq(S, b, rcond=1e-13)[0]
-        d = Qi @ Aa.T @ lam
+        QiAt = _apply(Qi, Aa.T)
+        lam = np.linalg.lstsq(Aa @ QiAt, b, rcond=1e-13)[0]
+        d = QiAt @ lam
         miss = np.abs(Aa @ d - b) / scale[on]
         if miss.size and miss.max() > SOLVE_TOLERANCE:
             r = on[int(np.argmax(miss))]
@@ -297,19 +352,14 @@ def restore(problem, exact, quantized, tolerance: float, *,
     else:
         raise DesignError(FIELD, f"the spline's constraint restoration did not settle in "
                                  f"{MAX_ROUNDS} rounds")
+    # The corrected coefficients on the fit's grid (`spline._coefficients`): each entry's
+    # float32 spacing at its largest |k0| over the stage in the design's law.
+    peaks = np.array([np.abs(np.asarray(exact.k0[start[s]:start[s + 1], i], float)).max()
+                      for s, i in corr.entries])
+    peak = peaks[corr.entry]
+    worst = float(np.max(np.abs(d) / np.where(peak > 0, peak, 1.0)))
     coef = spline.coef.astype(float)
-    peaks = _peaks(exact, spline, columns)
-    worst = 0.0
-    for p, (s, e, i, c) in enumerate(columns):
-        where = int(spline.coef_start[s]) + e * (spline.spans(s) + 3) + c
-        coef[where] += d[p]
-        worst = max(worst, abs(d[p]) / peaks[(s, i)] if peaks[(s, i)] else abs(d[p]))
-    for (s, i), peak in peaks.items():         # the fit's grid, entry by entry
-        inputs, cols = spline.entries(s)
-        e = int(np.flatnonzero((inputs == i) & (cols == n))[0])
-        a = int(spline.coef_start[s]) + e * (spline.spans(s) + 3)
-        b = a + spline.spans(s) + 3
-        coef[a:b] = _spline._coefficients(coef[a:b][None], np.array([peak]))[0]
+    coef[corr.where] = _spline._coefficients((coef[corr.where] + d)[:, None], peak)[:, 0]
     spline = SplineGains(spline.knot_start, spline.knot, spline.row_start, spline.col,
                          spline.coef_start, coef.astype(np.float32), spline.nu, spline.nx,
                          spline.n_latch)

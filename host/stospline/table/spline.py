@@ -410,18 +410,24 @@ def _min_norm(breaks: np.ndarray, sigma: np.ndarray, N64: list[np.ndarray],
     return np.linalg.lstsq(B, YT.T, rcond=_RCOND)[0].T
 
 
+def _dense_normal(band: np.ndarray) -> np.ndarray:
+    """The symmetric matrix of an upper band (``band[d, j] = A[j, j + d]``), dense."""
+    w, nb = band.shape
+    A = np.zeros((nb, nb))
+    flat = A.reshape(-1)                      # diagonal d from (0, d) and from (d, 0)
+    for d in range(w):
+        flat[d:(nb - d) * nb:nb + 1] = band[d, :nb - d]
+        flat[d * nb::nb + 1] = band[d, :nb - d]
+    return A
+
+
 def _solve_banded(band: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """Solve ``A x = rhs`` for the symmetric positive definite A given by its upper band
     (``band[d, j] = A[j, j + d]``): dense for small systems (numpy's LAPACK), else a banded
     LDL' in a loop (no scipy.linalg: importing it costs more than the compression)."""
     w, nb = band.shape
     if nb <= _DENSE_SOLVE_MAX:
-        A = np.zeros((nb, nb))
-        flat = A.reshape(-1)                  # diagonal d from (0, d) and from (d, 0)
-        for d in range(w):
-            flat[d:(nb - d) * nb:nb + 1] = band[d, :nb - d]
-            flat[d * nb::nb + 1] = band[d, :nb - d]
-        return np.linalg.solve(A, rhs)
+        return np.linalg.solve(_dense_normal(band), rhs)
     # A = L D L' with unit lower L of bandwidth w - 1: lw[d][j] = L[j + d, j].
     a = band.tolist()
     Dg = [0.0] * nb
@@ -512,12 +518,12 @@ def _refined(breaks: np.ndarray, excess: np.ndarray) -> np.ndarray:
     most = length.copy()                       # pieces a span may be split into
     most[-1] = max(1, length[-1] // 2)         # the last one's of two ticks at least
     pieces = np.zeros(length.size, dtype=np.int64)
-    for s in np.flatnonzero(excess > 1):
-        if most[s] > 1:
-            pieces[s] = max(pieces[s], 2, int(np.ceil(_SPLIT_MARGIN * excess[s] ** 0.25)))
-        else:
-            near = slice(max(0, s - 3), s + 4)
-            pieces[near] = np.maximum(pieces[near], 2)
+    over = excess > 1
+    split = over & (most > 1)
+    pieces[split] = np.maximum(2, np.ceil(_SPLIT_MARGIN * excess[split] ** 0.25))
+    for s in np.flatnonzero(over & (most <= 1)):   # every update is a max: in any order
+        near = slice(max(0, s - 3), s + 4)
+        pieces[near] = np.maximum(pieces[near], 2)
     pieces = np.minimum(pieces, most)
     # The inner points of ``numpy.linspace(b_s, b_s+1, pieces + 1)`` for every split span at
     # once, in its arithmetic (k * (delta / pieces) + b_s): one call instead of one a span.
@@ -548,6 +554,26 @@ def _fit_stage(YT: np.ndarray, tolerance: float, max_spans: int, initial_spans: 
     out = _fit_stages([YT], [s], tolerance, max_spans, initial_spans, bases or _Bases())[s]
     if isinstance(out, Exception):
         raise out
+    return out
+
+
+def _solve_stages(band: np.ndarray, rhs: np.ndarray, rows: np.ndarray) -> list[np.ndarray]:
+    """`_solve_banded` of each stage's rows ``rhs[rows[k]:rows[k + 1]]`` (entries, S + 3),
+    separately: the dense ones of equally many entries in one batched call of numpy's
+    solver, which makes the same LAPACK call per stage as a call of its own."""
+    nb = band.shape[1]
+    spans = list(zip(rows[:-1], rows[1:]))
+    if nb > _DENSE_SOLVE_MAX or len(spans) == 1:
+        return [_solve_banded(band, rhs[a:b].T).T for a, b in spans]
+    A = _dense_normal(band)
+    out = [None] * len(spans)
+    sizes = np.diff(rows)
+    for size in _distinct(sizes):
+        mine = np.flatnonzero(sizes == size)
+        idx = rows[mine][:, None] + np.arange(size)               # (stages, entries)
+        X = np.linalg.solve(A, rhs[idx].transpose(0, 2, 1))       # (stages, nb, entries)
+        for k, x in zip(mine, X):
+            out[k] = x.T
     return out
 
 
@@ -583,8 +609,7 @@ def _fit_stages(YTs: list[np.ndarray], stages: list[int], tolerance: float, max_
                 else live[group[0]][0]
             rows = np.cumsum([0] + [live[s][0].shape[0] for s in group])
             if not _ill_conditioned(breaks):
-                rhs = _normal_rhs(breaks, N64, YT)
-                C = [_solve_banded(band, rhs[a:b].T).T for a, b in zip(rows, rows[1:])]
+                C = _solve_stages(band, _normal_rhs(breaks, N64, YT), rows)
             else:
                 C = [_min_norm(breaks, sigma, N64, YT[a:b]) for a, b in zip(rows, rows[1:])]
             C = _coefficients(np.concatenate(C), np.concatenate([live[s][1] for s in group]))

@@ -50,8 +50,9 @@ _DENSE_SOLVE_MAX = 400        # normal equations up to this size by numpy's dens
 _SHORT_SPAN = 4
 _SHORT_RUN = 8
 _RCOND = 1e-10
-# Gain values of the stages fitted together (`_fit`), at most: 16 MB of float64.
-_WINDOW_VALUES = 1 << 21
+# Gain values of the stages fitted together (`_fit`), at most (512 KB of float64: a long
+# stage is fitted alone, while its values are in the cache).
+_WINDOW_VALUES = 1 << 16
 
 
 class SplineBudgetError(DesignError):

@@ -353,10 +353,15 @@ JOINT_MAX = 4096
 SNAP_BITS = 28
 
 
-def _snap(a: np.ndarray, scale: float) -> np.ndarray:
+def _snap(a: np.ndarray, scale: float | np.ndarray) -> np.ndarray:
     """`a` rounded to a multiple of 2^-SNAP_BITS of the binade of `scale` (its largest
-    magnitude, or the scale it is compared at): the digits the choices read."""
+    magnitude, or the scale it is compared at): the digits the choices read. `scale` an
+    array (a's shape): each entry at its own; unchanged where a scale is not positive."""
     a = np.asarray(a, dtype=float)
+    if np.ndim(scale):
+        scale = np.asarray(scale, dtype=float)
+        quantum = np.ldexp(1.0, np.frexp(scale)[1] - SNAP_BITS)
+        return np.where(scale > 0, np.rint(a / quantum) * quantum, a) + 0.0
     if not scale > 0:
         return a + 0.0
     quantum = np.float64(math.ldexp(1.0, math.frexp(scale)[1] - SNAP_BITS))
@@ -419,9 +424,10 @@ _TEMPLATES = {(c, f): _option_template(c, f) for c in range(FLIP_ENTRIES + 1)
 
 
 def _latch_options(v: np.ndarray, Lam: np.ndarray, m: np.ndarray, q: np.ndarray, keep: int
-                   ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """Each latched row's `keep` best candidates, best first: ``(e, rows, z)`` per row: the
-    Lambda rows (float32 values), the lambda0 values and ``e``, the error of the multiplier
+                   ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray, np.ndarray]:
+    """Each latched row's `keep` best candidates, best first: ``(e, rows, z, start)``, the
+    rows' candidates one after the other (row i's from ``start[i]``), ``e`` split per row:
+    the Lambda rows (float32 values), the lambda0 values and ``e``, the error of the multiplier
     latched at m, ``lambda0_32 + Lambda_32 m - v_i``, in units of the row's grid ``q_i``;
     ``v_i = lambda0 + Lambda m`` is the exact multiplier at m (snapped), `Lam` the exact
     rows (width, n).
@@ -486,9 +492,10 @@ def _latch_options(v: np.ndarray, Lam: np.ndarray, m: np.ndarray, q: np.ndarray,
     else:
         pick = np.concatenate([a + np.argsort(np.abs(e[a:b]), kind="stable")[:keep]
                                for a, b in spans])
-    e, rows, z = e[pick], cand[:, pick].T.copy(), z[pick]
+    e = e[pick]
     at = np.cumsum([0] + [min(keep, size) for size in sizes]).tolist()
-    return [(e[a:b], rows[a:b], z[a:b]) for a, b in zip(at[:-1], at[1:])]
+    return ([e[a:b] for a, b in zip(at[:-1], at[1:])], cand[:, pick].T, z[pick],
+            np.array(at[:-1]))
 
 
 def _row_keep(width: int) -> int:
@@ -554,14 +561,12 @@ def round_latch(problem, table, groups, Lam: np.ndarray, lam0: np.ndarray
         q = latch_grid(li, Li, m)
         ms = _snap(m, np.abs(m).max(initial=0.0))
         # The exact multipliers at m, on their rows' scales (the grids' binades).
-        exact = li + _dot(Li, ms)
-        v = np.array([_snap(exact[i], q[i] * 2.0 ** 24) for i in range(width)])
-        keep = _latch_options(v, Li, ms, q, _row_keep(width))
+        v = _snap(li + _dot(Li, ms), q * 2.0 ** 24)
+        errors, rows, z, start = _latch_options(v, Li, ms, q, _row_keep(width))
         G = CW[:, n:n + width]
-        pick = _choose(_snap(G, np.abs(G).max()), q, [k[0] for k in keep])
-        for i in range(width):
-            L32[latch, i] = keep[i][1][pick[i]]
-            l032[latch, i] = keep[i][2][pick[i]]
+        pick = start + _choose(_snap(G, np.abs(G).max()), q, errors)
+        L32[latch, :width] = rows[pick]
+        l032[latch, :width] = z[pick]
         v = l032[latch, :width] + L32[latch, :width] @ m
         for P in blocks:                         # the planned mean to the next latch
             m = P[:, :n] @ m + P[:, n:n + width] @ v + P[:, -1]

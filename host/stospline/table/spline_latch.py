@@ -25,13 +25,15 @@ later latches) far below the float32 floor that rounding each map to nearest lea
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from stospline.errors import DesignError
 from stospline.expm import expm
 
 __all__ = ["resolve_latch", "round_latch", "latch_grid", "start_state", "latch_groups_of_table",
-           "mean_tick_map", "delayed_map", "stage_mean_maps"]
+           "mean_tick_map", "delayed_map", "stage_mean_maps", "mean_maps_by_stage"]
 
 FIELD = "design.table"
 
@@ -165,16 +167,40 @@ def stage_mean_maps(stage, table, s: int, h: float, varying_maps=None) -> np.nda
     return F
 
 
-def _stage_map(stage, table, s: int, width: int, h: float, spline=None, varying_maps=None
-               ) -> np.ndarray:
+def mean_maps_by_stage(problem, table, h: float, varying_maps=None) -> list[np.ndarray]:
+    """`stage_mean_maps` of every stage of `table`, in order. Stages with the same
+    time-invariant data (A, B, f) share one exponential (and one array: read only)."""
+    out, seen = [], {}
+    for s in range(table.n_stages):
+        stage = problem.stages[s]
+        key = None
+        if stage.varying is None:
+            key = (stage.A.tobytes(), stage.B.tobytes(),
+                   None if stage.f is None else np.asarray(stage.f, float).tobytes())
+        if key is None or key not in seen:
+            F = stage_mean_maps(stage, table, s, h, varying_maps)
+            if key is not None:
+                seen[key] = F
+        else:
+            F = seen[key]
+        out.append(F)
+    return out
+
+
+def _stage_map(stage, table, s: int, width: int, h: float, spline=None, varying_maps=None,
+               F=None, spreads: dict | None = None) -> np.ndarray:
     """The mean over stage s as an affine block (n, n + width + 1): ``m_end = A m_start + C
-    [v; 1]`` under the table's gains (its first `width` multiplier columns)."""
+    [v; 1]`` under the table's gains (its first `width` multiplier columns). `F`: the
+    stage's `stage_mean_maps`, when the caller has them (`mean_maps_by_stage`, whose stages
+    with the same data share one array); `spreads`: a dict the caller keeps for one set of
+    maps, where stages with the same map and gain columns share their `spread`."""
     n, m, _ = table.dims
     a, b = int(table.stage_start[s]), int(table.stage_start[s + 1])
-    F = stage_mean_maps(stage, table, s, h, varying_maps)
+    if F is None:
+        F = stage_mean_maps(stage, table, s, h, varying_maps)
     if F.shape[0] > 1:
         return _affine_product(_varying_ticks(F, table, a, b, width))
-    F = F[0]
+    maps, F = F, F[0]
     Bd, d = F[:, n:n + m], n + width + 1
     # Per tick P = [Ad | 0 | fd] - Bd [K | L | k0] (u = -K m - L v - k0), every tick in one
     # matrix product (numpy is slow on arrays of 4-wide rows, fast on one product): the
@@ -188,11 +214,17 @@ def _stage_map(stage, table, s: int, width: int, h: float, spline=None, varying_
         gains[:, np.flatnonzero(mine)] = g.reshape(T, -1)[:, inputs[mine] * g.shape[2]
                                                           + operand[mine]]
     gains[:, -1] = 1.0
-    column = np.where(kind == 0, operand, np.where(kind == 1, n + operand, d - 1))
-    spread = np.zeros((kind.size + 1, n, d))
-    spread[np.arange(kind.size), :, column] = -Bd[:, inputs].T
-    spread[-1, :, :n] = F[:, :n]
-    spread[-1, :, -1] = F[:, -1]
+    key = None if spreads is None else (id(maps), width, kind.tobytes(), inputs.tobytes(),
+                                        operand.tobytes())
+    spread = None if key is None else spreads.get(key)
+    if spread is None:
+        column = np.where(kind == 0, operand, np.where(kind == 1, n + operand, d - 1))
+        spread = np.zeros((kind.size + 1, n, d))
+        spread[np.arange(kind.size), :, column] = -Bd[:, inputs].T
+        spread[-1, :, :n] = F[:, :n]
+        spread[-1, :, -1] = F[:, -1]
+        if key is not None:
+            spreads[key] = spread
     return _affine_product((gains @ spread.reshape(-1, n * d)).reshape(T, n, d))
 
 
@@ -216,10 +248,13 @@ def _groups(problem, table, spline, varying_maps):
     n = table.dims[0]
     h = 1.0 / table.tick_hz
     groups = latch_groups_of_table(problem, table)
+    maps = mean_maps_by_stage(problem, table, h, varying_maps)
+    spreads: dict = {}
     out = []
     if groups and groups[0][0] > 0:          # before the first latch v = 0 (width 0)
         out.append((None, 0, [], [_stage_map(problem.stages[s], table, s, 0, h, spline,
-                                             varying_maps) for s in range(groups[0][0])],
+                                             F=maps[s], spreads=spreads)
+                                  for s in range(groups[0][0])],
                     None, None))
     for g, (latch, knots) in enumerate(groups):
         width = int(table.stage_n_latch[latch])
@@ -227,7 +262,8 @@ def _groups(problem, table, spline, varying_maps):
         W = np.eye(n, n + width + 1)             # m = W [x; v; 1], from the latch tick
         rows, zeta, blocks = [], [], []
         for s in range(latch, end):
-            P = _stage_map(problem.stages[s], table, s, width, h, spline, varying_maps)
+            P = _stage_map(problem.stages[s], table, s, width, h, spline, F=maps[s],
+                           spreads=spreads)
             blocks.append(P)
             if s > knots[-1]:
                 continue
@@ -302,7 +338,7 @@ def resolve_latch(problem, table, spline=None, varying_maps=None, *, rounded: bo
 
 
 # The rounding of the latch maps (`round_latch`): per latched row, the Lambda entries that
-# move its multiplier at the planned start (at most FLIP_ENTRIES, `_row_options`) may leave
+# move its multiplier at the planned start (at most FLIP_ENTRIES, `_latch_options`) may leave
 # their nearest float32, lambda0 take the grid points next to its target; the best options
 # of each row (smallest error of its multiplier at the planned start) enter the joint choice
 # over the group's rows, at most JOINT_MAX combinations.
@@ -317,13 +353,18 @@ JOINT_MAX = 4096
 SNAP_BITS = 28
 
 
-def _snap(a: np.ndarray, scale: float) -> np.ndarray:
+def _snap(a: np.ndarray, scale: float | np.ndarray) -> np.ndarray:
     """`a` rounded to a multiple of 2^-SNAP_BITS of the binade of `scale` (its largest
-    magnitude, or the scale it is compared at): the digits the choices read."""
+    magnitude, or the scale it is compared at): the digits the choices read. `scale` an
+    array (a's shape): each entry at its own; unchanged where a scale is not positive."""
     a = np.asarray(a, dtype=float)
+    if np.ndim(scale):
+        scale = np.asarray(scale, dtype=float)
+        quantum = np.ldexp(1.0, np.frexp(scale)[1] - SNAP_BITS)
+        return np.where(scale > 0, np.rint(a / quantum) * quantum, a) + 0.0
     if not scale > 0:
         return a + 0.0
-    quantum = np.ldexp(1.0, int(np.frexp(scale)[1]) - SNAP_BITS)
+    quantum = np.float64(math.ldexp(1.0, math.frexp(scale)[1] - SNAP_BITS))
     return np.rint(a / quantum) * quantum + 0.0
 
 
@@ -357,12 +398,39 @@ def latch_grid(lam0: np.ndarray, Lam: np.ndarray, m: np.ndarray) -> np.ndarray:
     return np.ldexp(1.0, np.frexp(np.where(peak > 0, peak, 1.0))[1] - 24)
 
 
-def _row_options(v_i: float, Lam_i: np.ndarray, m: np.ndarray, q: float
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A latched row's candidates, best first: ``(e, rows, z)``: the Lambda rows (float32
-    values), the lambda0 values and ``e``, the error of the multiplier latched at m,
-    ``lambda0_32 + Lambda_32 m - v_i``, in units of the row's grid q; ``v_i = lambda0 +
-    Lambda m`` is the exact multiplier at m (snapped), `Lam_i` the exact row.
+def _sum_columns(P: np.ndarray) -> np.ndarray:
+    """``P``'s rows (n, N) summed left to right (row 0 first), elementwise: `_dot`'s sums."""
+    acc = P[0].copy()
+    for j in range(1, P.shape[0]):
+        acc += P[j]
+    return acc
+
+
+def _option_template(coarse: int, fine: bool) -> np.ndarray:
+    """The steps of a row's candidates in `_latch_options`' order, (coarse + 2, size): the
+    coarse entries' (-1, 0, 1 each, the first fastest), lambda0's (the grid point below,
+    at or above its nearest) and the fine entry's (0 without one); the first the slowest
+    axis, then lambda0's, then the fine entry's."""
+    digits = (np.arange(3 ** coarse)[:, None] // 3 ** np.arange(coarse)) % 3 - 1
+    reps = 9 if fine else 3
+    steps = np.repeat(digits, reps, axis=0).T
+    shift = np.tile(np.repeat([-1.0, 0.0, 1.0], reps // 3), 3 ** coarse)
+    fine_k = np.tile([-1.0, 0.0, 1.0], 3 ** (coarse + 1)) if fine else np.zeros(shift.size)
+    return np.vstack([steps, shift, fine_k]).astype(float)
+
+
+_TEMPLATES = {(c, f): _option_template(c, f) for c in range(FLIP_ENTRIES + 1)
+              for f in (False, True)}
+
+
+def _latch_options(v: np.ndarray, Lam: np.ndarray, m: np.ndarray, q: np.ndarray, keep: int
+                   ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray, np.ndarray]:
+    """Each latched row's `keep` best candidates, best first: ``(e, rows, z, start)``, the
+    rows' candidates one after the other (row i's from ``start[i]``), ``e`` split per row:
+    the Lambda rows (float32 values), the lambda0 values and ``e``, the error of the multiplier
+    latched at m, ``lambda0_32 + Lambda_32 m - v_i``, in units of the row's grid ``q_i``;
+    ``v_i = lambda0 + Lambda m`` is the exact multiplier at m (snapped), `Lam` the exact
+    rows (width, n).
 
     The entries that move the multiplier at m (a nonzero planned state; their effect: one
     float32 step times ``|m_j|``), at most FLIP_ENTRIES: the finest that can still move it by
@@ -370,38 +438,64 @@ def _row_options(v_i: float, Lam_i: np.ndarray, m: np.ndarray, q: float
     FINE_STEPS and ``max(1, q / its effect)`` (its term moves by at most one grid step q),
     the three k nearest the one that cancels the rest of the error; the others, the largest
     effect first (ties by index), take their nearest float32 or either neighbour; lambda0
-    the three grid points next to its target ``lambda0 + (Lambda - Lambda_32) m``."""
-    near32 = Lam_i.astype(np.float32)
+    the three grid points next to its target ``lambda0 + (Lambda - Lambda_32) m``.
+
+    Every row's candidates are the columns of one matrix (n, N), a row's contiguous and in
+    the order of `_option_template`; each number is computed by the elementwise operations
+    of a row on its own, the sums over the entries left to right as `_dot`'s (the same bits
+    as one row at a time); ties keep that order (a stable sort)."""
+    width, n = Lam.shape
+    near32 = Lam.astype(np.float32)
     near = near32.astype(float)
     ulp = np.spacing(np.abs(near32)).astype(float)
-    effect = np.where(Lam_i != 0, ulp * np.abs(m), 0.0)
-    movers = [int(j) for j in np.lexsort((np.arange(m.size), -effect)) if effect[j] > 0]
-    # The finest entry that can still cancel half a grid step within FINE_STEPS steps.
-    able = [j for j in movers if effect[j] * FINE_STEPS >= q / 2]
-    fine = np.array(able[-1:], dtype=int)
-    coarse = np.array([j for j in movers if j not in able[-1:]][:FLIP_ENTRIES - fine.size],
-                      dtype=int)
-    digits = (np.arange(3 ** coarse.size)[:, None] // 3 ** np.arange(coarse.size)) % 3 - 1
-    rows = np.repeat(near[None], digits.shape[0], axis=0)
-    rows[:, coarse] += digits * ulp[coarse]
-    target = v_i - _dot(rows, m)
-    z = (np.rint(target / q)[:, None] + np.array([-1.0, 0.0, 1.0])[None]) * q   # (combos, 3)
-    rows = np.repeat(rows, 3, axis=0)
-    z = z.ravel()
-    if fine.size:
-        f = int(fine[0])
-        per_step = ulp[f] * m[f]              # the multiplier at m, per step of entry f
-        most = float(min(FINE_STEPS, max(1.0, np.floor(q / abs(per_step)))))
-        rest = z - np.repeat(target, 3)       # lambda0's error before entry f moves
-        k = np.clip(np.rint(-rest / per_step)[:, None] + np.array([-1.0, 0.0, 1.0])[None],
-                    -most, most)
-        rows = np.repeat(rows, 3, axis=0)
-        rows[:, f] += k.ravel() * ulp[f]
-        z = np.repeat(z, 3)
-    rows = rows.astype(np.float32).astype(float)       # float32 values, as stored
-    e = (z + _dot(rows, m) - v_i) / q
-    order = np.lexsort((np.arange(e.size), np.abs(e)))
-    return e[order], rows[order], z[order]
+    effect = np.where(Lam != 0, ulp * np.abs(m), 0.0)
+    # The movers of each row, the largest effect first, ties by index (a stable sort): the
+    # first n_movers of its order; the finest entry that can still cancel half a grid step
+    # within FINE_STEPS steps, the last of the first n_able (the able ones are a prefix).
+    order = np.argsort(-effect, axis=1, kind="stable").tolist()
+    moves = effect > 0
+    n_movers = moves.sum(axis=1).tolist()
+    n_able = (moves & (effect * FINE_STEPS >= q[:, None] / 2)).sum(axis=1).tolist()
+    slots, fine, parts = [], [], []
+    for i in range(width):
+        movers = order[i][:n_movers[i]]
+        f = movers[n_able[i] - 1] if n_able[i] else -1
+        coarse = [j for j in movers if j != f][:FLIP_ENTRIES - (f >= 0)]
+        slots.append(coarse)
+        fine.append(f)
+        parts.append(_TEMPLATES[len(coarse), f >= 0])
+    sizes = [p.shape[1] for p in parts]
+    ends = np.cumsum(sizes).tolist()
+    spans = [(e - size, e) for e, size in zip(ends, sizes)]
+    steps = np.concatenate([p[-2:] for p in parts], axis=1)   # lambda0's, the fine entry's
+    cand = np.repeat(near.T, sizes, axis=1)                    # (n, N), a row's contiguous
+    for i, (a, b) in enumerate(spans):
+        for k, j in enumerate(slots[i]):
+            cand[j, a:b] += parts[i][k] * ulp[i, j]
+    row = np.repeat(np.arange(width), sizes)
+    vr, qr, mc = v[row], q[row], m[:, None]
+    target = vr - _sum_columns(cand * mc)
+    z = (np.rint(target / qr) + steps[0]) * qr
+    if any(f >= 0 for f in fine):
+        per_step = np.array([ulp[i, f] * m[f] if f >= 0 else 1.0 for i, f in enumerate(fine)])
+        most = np.minimum(float(FINE_STEPS), np.maximum(1.0, np.floor(q / np.abs(per_step))))
+        k = np.clip(np.rint(-(z - target) / per_step[row]) + steps[1], -most[row], most[row])
+        for i, (a, b) in enumerate(spans):
+            if fine[i] >= 0:
+                cand[fine[i], a:b] += k[a:b] * ulp[i, fine[i]]
+    cand = cand.astype(np.float32).astype(float)       # float32 values, as stored
+    e = (z + _sum_columns(cand * mc) - vr) / qr
+    # Each row's best first, ties in the row's order (a stable sort).
+    if len(set(sizes)) == 1:
+        best = np.argsort(np.abs(e).reshape(width, -1), axis=1, kind="stable")[:, :keep]
+        pick = (best + np.arange(0, e.size, sizes[0])[:, None]).ravel()
+    else:
+        pick = np.concatenate([a + np.argsort(np.abs(e[a:b]), kind="stable")[:keep]
+                               for a, b in spans])
+    e = e[pick]
+    at = np.cumsum([0] + [min(keep, size) for size in sizes]).tolist()
+    return ([e[a:b] for a, b in zip(at[:-1], at[1:])], cand[:, pick].T, z[pick],
+            np.array(at[:-1]))
 
 
 def _row_keep(width: int) -> int:
@@ -418,14 +512,16 @@ def _choose(G: np.ndarray, q: np.ndarray, errors: list[np.ndarray]) -> np.ndarra
     # On the grid of the rows' options (axis i: row i's), the constraints' errors summed
     # left to right, row by row: the products and sums of `_dot` over the combinations
     # (row-major, as the grid's ravel), without building them.
+    # The constraints' axis first: the worst error is then the elementwise maximum of
+    # contiguous slabs (exact in any order).
     width = len(errors)
     acc = None
     for i, e in enumerate(errors):
-        shape = [1] * width + [G.shape[0]]
-        shape[i] = e.size
-        term = ((e * q[i])[:, None] * G[None, :, i]).reshape(shape)
+        shape = [G.shape[0]] + [1] * width
+        shape[1 + i] = e.size
+        term = (G[:, i][:, None] * (e * q[i])[None, :]).reshape(shape)
         acc = term if acc is None else acc + term
-    worst = np.abs(acc).max(axis=-1)
+    worst = np.abs(acc, out=acc).max(axis=0)
     return np.array(np.unravel_index(int(np.argmin(worst)), worst.shape))
 
 
@@ -442,7 +538,7 @@ def round_latch(problem, table, groups, Lam: np.ndarray, lam0: np.ndarray
     rounding of Lambda compensated at m), so that
     each latched multiplier at m misses its exact value by a fraction of a grid step; of
     these, the combination of the group's rows that makes the worst constraint error at m,
-    ``max |C2 Gamma (v_32(m) - v(m))|``, smallest (`_row_options`, `_choose`). No term
+    ``max |C2 Gamma (v_32(m) - v(m))|``, smallest (`_latch_options`, `_choose`). No term
     ``Lambda_ij m_j`` moves by more than one grid step of its row (or one float32 step of
     its entry), so the residual at other starts moves by about that. Entries of exactly
     zero stay zero. The choices read their inputs rounded to SNAP_BITS bits (`_snap`), so
@@ -465,15 +561,12 @@ def round_latch(problem, table, groups, Lam: np.ndarray, lam0: np.ndarray
         q = latch_grid(li, Li, m)
         ms = _snap(m, np.abs(m).max(initial=0.0))
         # The exact multipliers at m, on their rows' scales (the grids' binades).
-        v = np.array([_snap(li[i] + _dot(Li[i], ms), q[i] * 2.0 ** 24) for i in range(width)])
-        options = [_row_options(v[i], Li[i], ms, q[i]) for i in range(width)]
-        best = _row_keep(width)
-        keep = [tuple(a[:best] for a in opt) for opt in options]
+        v = _snap(li + _dot(Li, ms), q * 2.0 ** 24)
+        errors, rows, z, start = _latch_options(v, Li, ms, q, _row_keep(width))
         G = CW[:, n:n + width]
-        pick = _choose(_snap(G, np.abs(G).max()), q, [k[0] for k in keep])
-        for i in range(width):
-            L32[latch, i] = keep[i][1][pick[i]]
-            l032[latch, i] = keep[i][2][pick[i]]
+        pick = start + _choose(_snap(G, np.abs(G).max()), q, errors)
+        L32[latch, :width] = rows[pick]
+        l032[latch, :width] = z[pick]
         v = l032[latch, :width] + L32[latch, :width] @ m
         for P in blocks:                         # the planned mean to the next latch
             m = P[:, :n] @ m + P[:, n:n + width] @ v + P[:, -1]

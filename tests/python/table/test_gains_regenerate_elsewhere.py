@@ -202,8 +202,9 @@ def test_no_spline_entry_is_near_a_rounding_boundary(monkeypatch, example):
     snap, round_latch, latch_grid = (spline_latch._snap, spline_latch.round_latch,
                                      spline_latch.latch_grid)
 
-    def snap_capture(a, scale):
-        rounded["snap"].append((np.array(a, dtype=float), float(scale)))
+    def snap_capture(a, scale):                  # scale: one, or one per entry of a
+        rounded["snap"].append((np.array(a, dtype=float),
+                                np.broadcast_to(np.array(scale, dtype=float), np.shape(a))))
         return snap(a, scale)
 
     def round_capture(problem, table, groups, Lam, lam0):
@@ -234,8 +235,9 @@ def test_no_spline_entry_is_near_a_rounding_boundary(monkeypatch, example):
     # The latch rounding (spline_latch.round_latch): what it reads is snapped to a multiple
     # of 2^-SNAP_BITS of the binade of a scale (the planned state's largest entry, the
     # multiplier's grid binade, C2 Gamma's largest), whose last bits move by REL[1] of it.
-    for a, scale in (p for p in rounded["snap"] if p[1] > 0):
-        quantum = np.ldexp(1.0, int(np.frexp(scale)[1]) - spline_latch.SNAP_BITS)
+    for a, scale in rounded["snap"]:
+        a, scale = a[scale > 0], scale[scale > 0]
+        quantum = np.ldexp(1.0, np.frexp(scale)[1] - spline_latch.SNAP_BITS)
         distance = np.abs(a / quantum - np.floor(a / quantum) - 0.5) * quantum
         near = int(np.sum(distance <= REL[1] * scale))
         assert near == 0, f"{near} latch rounding inputs within reach of a snapping boundary"

@@ -39,7 +39,7 @@ from stospline.errors import DesignError
 from stospline.table import spline as _spline
 from stospline.table.spline import (DEFAULT_MAX_SPANS, INITIAL_SPANS, SplineGains, _basis,
                                     _fit, evaluate)
-from stospline.table.spline_latch import FIELD, stage_mean_maps
+from stospline.table.spline_latch import FIELD, mean_maps_by_stage
 
 __all__ = ["is_state_latching", "restore", "constraint_rows", "mean_rows", "float32_floor",
            "Rows", "ACTIVE_TOLERANCE", "MAX_ROUNDS"]
@@ -108,25 +108,13 @@ def constraint_rows(problem, table) -> Rows:
 
 
 def _maps(problem, table, varying_maps=None):
-    """Per tick ``(Ad, Bd, fd)`` of the oracle's mean map (`stage_mean_maps`). Stages with
-    the same time-invariant data share one exponential (robot_narrow_corridor: 60 stages,
-    one plant)."""
+    """Per tick ``(Ad, Bd, fd)`` of the oracle's mean map (`mean_maps_by_stage`: stages with
+    the same time-invariant data share one exponential, robot_narrow_corridor's 60)."""
     n, m, _ = table.dims
-    h = 1.0 / table.tick_hz
-    out, seen = [], {}
-    for s in range(table.n_stages):
-        stage = problem.stages[s]
-        key = None
-        if stage.varying is None:
-            key = (stage.A.tobytes(), stage.B.tobytes(),
-                   None if stage.f is None else np.asarray(stage.f, float).tobytes())
-        if key is None or key not in seen:
-            F = stage_mean_maps(stage, table, s, h, varying_maps)
-            per_tick = [(Fj[:, :n], Fj[:, n:n + m], Fj[:, -1]) for Fj in F]
-            if key is not None:
-                seen[key] = per_tick
-        else:
-            per_tick = seen[key]
+    out = []
+    for s, F in enumerate(mean_maps_by_stage(problem, table, 1.0 / table.tick_hz,
+                                             varying_maps)):
+        per_tick = [(Fj[:, :n], Fj[:, n:n + m], Fj[:, -1]) for Fj in F]
         T = int(table.stage_start[s + 1] - table.stage_start[s])
         out.extend(per_tick[j if len(per_tick) > 1 else 0] for j in range(T))
     return out

@@ -31,6 +31,7 @@ import numpy as np
 
 from stospline.errors import DesignError
 from stospline.expm import expm
+from stospline.table.kernels import affine_compose
 
 __all__ = ["resolve_latch", "round_latch", "latch_grid", "start_state", "latch_groups_of_table",
            "mean_tick_map", "delayed_map", "stage_mean_maps", "mean_maps_by_stage"]
@@ -97,9 +98,18 @@ def _refuse_unsupported(problem, table, *, band: bool = False) -> None:
 
 def _affine_product(P: np.ndarray) -> np.ndarray:
     """The composition ``P[-1] o ... o P[0]`` of affine blocks ``P[j] = [A_j | C_j]`` (n, d),
-    each the map ``[m; c] -> [A_j m + C_j c; c]`` (c the constants ``[v; 1]``), by pairwise
-    products: a dozen batched matmuls instead of one Python step per tick. Each level is
-    written into a new array, the odd block last, unpaired until the next level."""
+    each the map ``[m; c] -> [A_j m + C_j c; c]`` (c the constants ``[v; 1]``): tick by tick
+    in C (`stospline.table.kernels.affine_compose`, the sums left to right: the same bits on
+    every machine; 5x faster on the 60 s patrol's 6 000-tick stages), else by pairwise
+    products in numpy (`_affine_product_numpy`)."""
+    out = affine_compose(P)
+    return _affine_product_numpy(P) if out is None else out
+
+
+def _affine_product_numpy(P: np.ndarray) -> np.ndarray:
+    """`_affine_product` by pairwise products: a dozen batched matmuls instead of one Python
+    step per tick. Each level is written into a new array, the odd block last, unpaired until
+    the next level."""
     n, d = P.shape[1:]
     while P.shape[0] > 1:
         k = P.shape[0]

@@ -1,0 +1,54 @@
+/* Host-side kernel of the table layer (stospline.table.spline_latch): the composition of a
+ * stage's affine tick maps under a law as implemented.  Not firmware: it runs on the design
+ * host, in double precision, called from Python through cffi (stospline.table.kernels).
+ *
+ * Each tick's block P[t] = [A_t | C_t] (n x d, row-major; A_t is n x n) is the map
+ * [m; c] -> [A_t m + C_t c; c] (c the constants [v; 1]).  The stage's block is
+ * P[T-1] o ... o P[0], composed tick by tick:
+ *
+ *     M = P[0];   M <- [A_t M_A | A_t M_C + C_t]   for t = 1 .. T-1
+ *
+ * each entry summed left to right over j = 0 .. n-1, then C_t added (no BLAS: the same bits
+ * on every machine).  Caller-owned arrays, nothing allocated; work holds 2 n d doubles.
+ * Returns 0, or -1 for dimensions it does not take (n < 1, d < n, T < 1).
+ */
+#include <stddef.h>
+#include <string.h>
+
+int stsp_affine_compose(int n, int d, long T, const double *P, double *out, double *work)
+{
+    size_t nd, i, j, c, un, ud;
+    long t;
+    double *cur, *next, *swap;
+
+    if (n < 1 || d < n || T < 1) {
+        return -1;
+    }
+    un = (size_t)n;
+    ud = (size_t)d;
+    nd = un * ud;
+    cur = work;
+    next = work + nd;
+    memcpy(cur, P, nd * sizeof(double));
+    for (t = 1; t < T; ++t) {
+        const double *B = P + (size_t)t * nd;
+        for (i = 0; i < un; ++i) {
+            const double *row = B + i * ud;
+            for (c = 0; c < ud; ++c) {
+                double acc = row[0] * cur[c];
+                for (j = 1; j < un; ++j) {
+                    acc += row[j] * cur[j * ud + c];
+                }
+                if (c >= un) {
+                    acc += row[c];
+                }
+                next[i * ud + c] = acc;
+            }
+        }
+        swap = cur;
+        cur = next;
+        next = swap;
+    }
+    memcpy(out, cur, nd * sizeof(double));
+    return 0;
+}

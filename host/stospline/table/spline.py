@@ -515,17 +515,35 @@ def _refined(breaks: np.ndarray, excess: np.ndarray) -> np.ndarray:
     gains a billion times (the Schoenberg-Whitney condition; a design for a one-tick delay
     ends its stages on a jump that refines the last spans down to single ticks).
     """
+    return _refined_rows(breaks, excess[None])[0]
+
+
+def _refined_rows(breaks: np.ndarray, excess: np.ndarray) -> list[np.ndarray]:
+    """`_refined` of stages at the same `breaks`, one row of `excess` (stages, S) each: the
+    pieces of every row at once, each distinct row's breakpoints computed once (coupled_axes'
+    20 stages refine alike)."""
     length = np.diff(breaks)
     most = length.copy()                       # pieces a span may be split into
     most[-1] = max(1, length[-1] // 2)         # the last one's of two ticks at least
-    pieces = np.zeros(length.size, dtype=np.int64)
+    pieces = np.zeros(excess.shape, dtype=np.int64)
     over = excess > 1
     split = over & (most > 1)
     pieces[split] = np.maximum(2, np.ceil(_SPLIT_MARGIN * excess[split] ** 0.25))
-    for s in np.flatnonzero(over & (most <= 1)):   # every update is a max: in any order
+    for r, s in zip(*np.nonzero(over & (most <= 1))):   # every update a max: in any order
         near = slice(max(0, s - 3), s + 4)
-        pieces[near] = np.maximum(pieces[near], 2)
+        pieces[r, near] = np.maximum(pieces[r, near], 2)
     pieces = np.minimum(pieces, most)
+    out, seen = [], {}
+    for row in pieces:
+        key = row.tobytes()
+        if key not in seen:
+            seen[key] = _split(breaks, row)
+        out.append(seen[key])
+    return out
+
+
+def _split(breaks: np.ndarray, pieces: np.ndarray) -> np.ndarray:
+    """`breaks` with span s split into ``pieces[s]`` (0 or 1: kept) integer pieces."""
     # The inner points of ``numpy.linspace(b_s, b_s+1, pieces + 1)`` for every split span at
     # once, in its arithmetic (k * (delta / pieces) + b_s): one call instead of one a span.
     split = np.flatnonzero(pieces > 1)
@@ -617,13 +635,15 @@ def _fit_stages(YTs: list[np.ndarray], stages: list[int], tolerance: float, max_
             G = _combine(sigma, N, C)
             excess = _span_excess(G, YT, np.concatenate([live[s][2] for s in group]), breaks)
             worst = np.maximum.reduceat(excess, rows[:-1], axis=0)
+            done = worst.max(axis=1) <= 1.0
+            finer_rows = iter(_refined_rows(breaks, worst[~done]) if not done.all() else [])
             for k, s in enumerate(group):
                 a, b = rows[k], rows[k + 1]
-                if worst[k].max() <= 1.0:
+                if done[k]:
                     out[s] = (breaks, C[a:b], G[:, a:b])
                     del live[s]
                     continue
-                finer = _refined(breaks, worst[k])
+                finer = next(finer_rows)
                 if finer.size == breaks.size:
                     out[s] = SplineBudgetError(
                         FIELD, f"stage {s}: the float32 spline misses the tolerance "

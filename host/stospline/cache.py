@@ -17,7 +17,8 @@ import os
 from pathlib import Path
 from typing import Callable, Iterable
 
-__all__ = ["cache_root", "source_key", "cached_build", "compile_cffi", "load_module"]
+__all__ = ["cache_root", "source_key", "cached_build", "compile_cffi", "load_module",
+           "build_source_module"]
 
 
 def cache_root() -> Path:
@@ -106,3 +107,17 @@ def load_module(path: Path):
         spec.loader.exec_module(mod)
         sys.modules[modname] = mod
     return mod
+
+
+def build_source_module(prefix: str, source: bytes, cdef: str, cflags: list[str], *,
+                        root: str | Path | None = None, quiet: bool = True) -> Path:
+    """The path of the cffi module of one C `source` (wrapped as is, `cdef` its declarations),
+    cached under the hash of source, declarations and flags (`cached_build`) as
+    ``<prefix>_<key>``: the host kernels of the designer and of the table layer."""
+    key = source_key([source, cdef, " ".join(cflags)])
+    modname = f"{prefix}_{key}"
+
+    def build(out: Path) -> Path:
+        return compile_cffi(out, modname, cdef, source.decode(), cflags=cflags, quiet=quiet)
+
+    return cached_build(key, modname, build, root=root)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from stospline.cache import cached_build, compile_cffi, load_module, source_key
+from stospline.cache import build_source_module, load_module
 
 __all__ = ["build_kernels", "load_kernels", "zoh_stage_ticks", "oracle_stage_ticks",
            "pack_oracle_maps", "KernelBuildError"]
@@ -67,14 +67,9 @@ class KernelBuildError(RuntimeError):
 def build_kernels(build_dir: str | Path | None = None, *, quiet: bool = True) -> Path:
     """Compile the kernels (if not cached) and return the path of the extension module."""
     source = b"\n".join(p.read_bytes() for p in (_SOURCE, _ORACLE_SOURCE, _VARYING_SOURCE))
-    key = source_key([source, _CDEF, " ".join(_CFLAGS)])
-    modname = f"_stsp_kernels_{key}"
-
-    def build(out: Path) -> Path:
-        return compile_cffi(out, modname, _CDEF, source.decode(), cflags=_CFLAGS, quiet=quiet)
-
     try:
-        return cached_build(key, modname, build, root=build_dir)
+        return build_source_module("_stsp_kernels", source, _CDEF, _CFLAGS, root=build_dir,
+                                   quiet=quiet)
     except Exception as exc:  # noqa: BLE001 - any failure here means "no compiled kernel"
         names = ", ".join(p.name for p in (_SOURCE, _ORACLE_SOURCE, _VARYING_SOURCE))
         raise KernelBuildError(f"cannot build {names}: {exc}") from exc

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from stospline.cache import cached_build, compile_cffi, load_module, source_key
+from stospline.cache import build_source_module, load_module
 
 __all__ = ["affine_compose", "build_kernel", "KernelBuildError"]
 
@@ -37,15 +37,9 @@ class KernelBuildError(RuntimeError):
 
 def build_kernel(build_dir: str | Path | None = None, *, quiet: bool = True) -> Path:
     """Compile the kernel (if not cached) and return the path of the extension module."""
-    source = _SOURCE.read_bytes()
-    key = source_key([source, _CDEF, " ".join(_CFLAGS)])
-    modname = f"_stsp_table_kernel_{key}"
-
-    def build(out: Path) -> Path:
-        return compile_cffi(out, modname, _CDEF, source.decode(), cflags=_CFLAGS, quiet=quiet)
-
     try:
-        return cached_build(key, modname, build, root=build_dir)
+        return build_source_module("_stsp_table_kernel", _SOURCE.read_bytes(), _CDEF, _CFLAGS,
+                                   root=build_dir, quiet=quiet)
     except Exception as exc:  # noqa: BLE001 - any failure here means "no compiled kernel"
         raise KernelBuildError(f"cannot build {_SOURCE.name}: {exc}") from exc
 

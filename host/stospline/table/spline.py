@@ -311,6 +311,8 @@ def _column_peaks(g: np.ndarray) -> np.ndarray:
     stage), of 64 k columns in long ones."""
     x = np.abs(g)
     T, k = x.shape
+    if k == 0:                                # no column (a law without multipliers)
+        return np.zeros(0)
     q = T - T % 64
     top = x[:q].reshape(-1, 64 * k).max(axis=0, initial=0.0).reshape(64, k).max(axis=0)
     return np.maximum(top, x[q:].max(axis=0, initial=0.0))

@@ -5,13 +5,15 @@ latch maps re-solved for the fitted gains.
   scalar transcription of the spec (numpy float32 scalars, one rounding per operation), and
   scipy's float64 B-splines to float32 precision; its basis sums to 1 within rounding;
 * `fit_spline` meets its tolerance on every stored entry, stores no structural zero, and
-  refuses what it cannot meet;
+  refuses what it cannot meet, naming the first stage that misses; stages fitted together
+  are fitted bit for bit as alone; a law without multipliers is fitted too;
 * `resolve_latch` makes a perturbed law meet its constraints again (by the oracle, to float64
   rounding), reproduces the design's latch maps for the design's own gains, and refuses what it
   cannot do exactly; the oracle check catches a wrong re-solve.
 """
 import tomllib
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -19,6 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.interpolate import BSpline
 
+import stospline
 from stospline.design.latch import latch_groups
 from stospline.design.varying import mean_maps
 from stospline.design.zoh import _tick_data, design_zoh
@@ -27,9 +30,8 @@ from stospline.problem import parse_problem
 from stospline.sim.oracle import evaluate_table
 from stospline.table.format import BandQP, table_of
 from stospline.table.spline import (MIN_TOLERANCE, SplineBudgetError, SplineGains, _Bases,
-                                    _basis, _coefficients, _column_peaks, _fit_stage, _lsq,
-                                    _refined,
-                                    _solve_banded, _span_excess, _stage_entries, command,
+                                    _basis, _coefficients, _column_peaks, _fit_stage,
+                                    _fit_stages, _lsq, _refined, _solve_banded, _span_excess, _stage_entries, command,
                                     evaluate, fit_spline, max_relative_error)
 from stospline.table.spline_compress import compress
 from stospline.table.spline_latch import latch_groups_of_table, mean_tick_map, resolve_latch
@@ -352,6 +354,54 @@ def test_the_bases_kept_across_stages_change_no_fit(robot_exact):
     for T in (40, 60, 30, 200):
         small.get(T, np.array([0, T]))
     assert [T for T, _ in small._cache] == [60, 30]
+
+
+
+def test_stages_fitted_together_are_fitted_as_alone():
+    """`_fit_stages` (stages of one length at the same breakpoints batched) gives each stage
+    bit for bit what `_fit_stage` gives it alone, whatever the other stages refine to."""
+    t = np.arange(25.0)
+    YTs = [np.vstack([np.sin(t / (3 + k) + j) * (1 + j) for j in range(6)]) for k in range(7)]
+    YTs.append(np.zeros((0, 25)))                       # a stage that stores nothing
+    YTs.append(YTs[0][:3, :20].copy())                  # another length
+    together = _fit_stages(YTs, list(range(len(YTs))), 1e-5, 1024, 8, _Bases())
+    assert len({together[s][0].tobytes() for s in range(7)}) > 1   # they refine differently
+    for s, YT in enumerate(YTs):
+        for got, want in zip(together[s], _fit_stage(YT, 1e-5, 1024, 8, s)):
+            np.testing.assert_array_equal(got, want)
+
+
+def test_the_first_stage_that_misses_is_named():
+    """Stages are fitted in windows and together, but the error is the first failing
+    stage's, as when they were fitted one after the other."""
+    T, stages = 40, 6
+    tau = np.arange(stages * T) % T / T
+    K = np.stack([1 + tau + tau ** 3, 2 - tau ** 2], axis=1)[:, None, :]   # cubics: 1 span
+    noise = np.random.default_rng(5).normal(size=(T, 1, 2))
+    for s in (2, 4):
+        K[s * T:(s + 1) * T] += noise
+    table = SimpleNamespace(dims=(2, 1, 0), stage_start=np.arange(stages + 1) * T,
+                            n_stages=stages, K=K, k0=np.ones((stages * T, 1)),
+                            L=np.zeros((stages * T, 1, 0)))
+    with pytest.raises(SplineBudgetError, match="^.*stage 2: the gains need more than 4 spans"):
+        fit_spline(table, 1e-5, max_spans=4)
+    K[2 * T:3 * T] -= noise
+    with pytest.raises(SplineBudgetError, match="stage 4: "):
+        fit_spline(table, 1e-5, max_spans=4)
+    K[4 * T:5 * T] -= noise
+    assert fit_spline(table, 1e-5, max_spans=4).n_stages == stages
+
+
+
+def test_a_law_without_multipliers_gets_a_spline_table():
+    """A problem with penalties and no constraint latches nothing (n_latch = 0): its spline
+    table is fitted (an entry kind with no column once failed to reshape) and costs J0."""
+    text = edit(BASE, ("constraint = { C = [[1, 0]], value = [1.0] }\n", ""),
+                ("constraint = { C = [[1, 0], [0, 1]], value = [0.0, 0.0] }\n",
+                 "penalty = { C = [[1, 0]], target = [0.0], weight = 1.0 }\n"))
+    d = stospline.design_problem(parse_problem(tomllib.loads(text)), table="spline")
+    assert d.table.dims[2] == 0 and d.table.spline is not None
+    assert abs(d.certificate["excess_over_J0"]) <= 1e-9
 
 
 # ---------------------------------------------------------------------------------------

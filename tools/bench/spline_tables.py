@@ -8,7 +8,10 @@ against the per-tick Q tables of the same scales: flash, ratio, the oracle's cos
 as stored (integer gains and latch maps in real units), the spline's excess over the per-tick
 Q table and over J0, the residuals, the error bound of each (|u_fixed - u_double| per input,
 the largest over the inputs, in the command's LSBs and in its units), the span length per
-stage and the time of `fixed_point_spline` (fit, latch re-solve, three oracle evaluations).
+stage and the time of `fixed_point_spline` (fit, latch re-solve, three oracle evaluations);
+and, cold as below, the compression step alone (`qspline.q_spline_table`: scales, fit,
+evaluation, latch re-solve, error bound; after the per-tick Q table, as
+`pipeline.fixed_point_spline` runs it) against the design (medians of `--repeat` processes).
 
 `--rounding N`: instead, the latch maps' float32 rounding (`spline_latch.round_latch`) against
 rounding them to nearest and against the per-tick table: the residual at x0, the worst over N
@@ -79,15 +82,40 @@ print(t_design, time.perf_counter() - t)
 """
 
 
-def _cold(path: Path, tolerance: float, repeat: int) -> tuple[float, float]:
+_COLD_Q = """
+import os, sys, time
+for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(v, "1")
+import stospline
+from stospline.design.varying import mean_maps
+from stospline.table.format import table_of
+from stospline.sim.oracle import state_range
+from stospline.table.qformat import quantize_table
+from stospline.table.qspline import q_spline_table
+p = stospline.load_problem(sys.argv[1])
+t = time.perf_counter()
+d = stospline.design_problem(p, table="per-tick", mode=p.options.get("mode", "stagewise"))
+t_design = time.perf_counter() - t
+exact = table_of(d.design, quantize=False)
+x_range = state_range(p, d.table)
+quantize_table(exact, sys.argv[3], x_range)       # the per-tick Q table comes first, as in
+t = time.perf_counter()                           # `pipeline.fixed_point_spline`
+q_spline_table(p, exact, sys.argv[3], x_range, float(sys.argv[2]), varying_maps=mean_maps)
+print(t_design, time.perf_counter() - t)
+"""
+
+
+def _cold(path: Path, tolerance: float, repeat: int, arith: str | None = None
+          ) -> tuple[float, float]:
     """``(design s, compress s)``, each the first call in a fresh process (the C kernels are
     built already, the caches empty): what one `stospline design` run spends on each; the
     medians of `repeat` processes."""
     import subprocess
     import sys
     env = {**os.environ, "PYTHONPATH": str(ROOT / "host")}
-    runs = [subprocess.run([sys.executable, "-c", _COLD, str(path), repr(tolerance)], env=env,
-                           check=True, capture_output=True, text=True).stdout.split()
+    script, extra = (_COLD, []) if arith is None else (_COLD_Q, [arith])
+    runs = [subprocess.run([sys.executable, "-c", script, str(path), repr(tolerance), *extra],
+                           env=env, check=True, capture_output=True, text=True).stdout.split()
             for _ in range(repeat)]
     return tuple(statistics.median(float(r[i]) for r in runs) for i in (0, 1))
 
@@ -178,12 +206,13 @@ def _rounding(examples: list[str], tolerances: list[float], n_starts: int) -> No
                   flush=True)
 
 
-def _fixed_point(examples: list[str], tolerances: list[float], ariths: list[str]) -> None:
+def _fixed_point(examples: list[str], tolerances: list[float], ariths: list[str],
+                 repeat: int) -> None:
     print("| example | arith | tolerance | span ticks per stage | per-tick B | spline B | ratio | "
           "J per-tick | J spline | excess vs per-tick | excess vs J0 | residual per-tick | "
           "residual spline | bound per-tick LSB | bound spline LSB | bound spline (units) | "
-          "time s |")
-    print("|---|" + "---|" * 16)
+          "time s | cold: design s | compress s | ratio |")
+    print("|---|" + "---|" * 19)
     for name in examples:
         problem = stospline.load_problem(str(ROOT / "examples" / name))
         d = stospline.design_problem(problem, table="spline")
@@ -192,6 +221,7 @@ def _fixed_point(examples: list[str], tolerances: list[float], ariths: list[str]
                 start = time.perf_counter()
                 _, c = stospline.pipeline.fixed_point_spline(d, arith, tolerance=tol)
                 took = time.perf_counter() - start
+                c_design, c_comp = _cold(ROOT / "examples" / name, tol, repeat, arith)
                 print(f"| {name.removesuffix('.toml')} | {arith} | {tol:g} | {c['span_ticks']} | "
                       f"{c['per_tick_flash_bytes']:,} | {c['flash_bytes']:,} | "
                       f"{c['compression_ratio']:.0f} | {c['per_tick_oracle_J']:.10g} | "
@@ -200,7 +230,8 @@ def _fixed_point(examples: list[str], tolerances: list[float], ariths: list[str]
                       f"{c['constraint_residual']:.2e} | "
                       f"{max(c['per_tick_u_error_bound_lsb']):g} | "
                       f"{max(c['u_error_bound_lsb']):g} | {max(c['u_error_bound']):.3g} | "
-                      f"{took:.2f} |", flush=True)
+                      f"{took:.2f} | {c_design:.3f} | {c_comp:.3f} | {c_comp / c_design:.0%} |",
+                      flush=True)
 
 
 def main() -> None:
@@ -215,7 +246,8 @@ def main() -> None:
     args = ap.parse_args()
     tolerances = [float(t) for t in args.tolerances.split(",")]
     if args.arith:
-        _fixed_point(args.examples.split(","), tolerances, args.arith.split(","))
+        _fixed_point(args.examples.split(","), tolerances, args.arith.split(","),
+                     args.repeat)
         return
     if args.rounding:
         _rounding(args.examples.split(","), tolerances, args.rounding)

@@ -52,8 +52,10 @@ from stospline import limits
 from stospline.firmware_interface import ARITHS, FRAC_BITS, SCALAR_KIND
 from stospline.precision import RoundedUp, ceil_significant
 from stospline.table.format import F32_MAX, GainTable, TableShape
+from stospline.table.spline import _column_peaks
 
-__all__ = ["FixedPointTable", "quantize_table", "scaled_entries", "row_sums", "assemble",
+__all__ = ["FixedPointTable", "quantize_table", "scale_exponents", "scaled_entries",
+           "row_sums", "assemble",
            "state_range", "law_q", "latch_q", "law_double",
            "ARITHS", "FRAC_BITS", "SCALAR_KIND", "EXP_MAX", "DEFAULT_SIGMAS"]
 
@@ -194,6 +196,53 @@ def _exponent(r: np.ndarray, terms: int, F: int) -> np.ndarray:
     return np.where(r > 0, e, 0).astype(int)
 
 
+def _abs_times(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``|A| @ x`` over the last axis, summed left to right elementwise: a stacked product
+    with a vector costs numpy a call per matrix (60 000 on the 60 s patrol)."""
+    acc = np.abs(A[..., 0]) * x[0]
+    for j in range(1, A.shape[-1]):
+        acc += np.abs(A[..., j]) * x[j]
+    return acc
+
+
+def scale_exponents(table: GainTable, arith: str, x_range
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``x_exp, u_exp, v_exp``: the scales `quantize_table` gives `table` (the module
+    docstring), without quantizing it (a spline table starts from them). Raises ValueError
+    as `quantize_table`."""
+    if arith not in FRAC_BITS:
+        raise ValueError(f"arith must be one of {list(FRAC_BITS)}, got {arith!r}")
+    F = FRAC_BITS[arith]
+    n, _, n_latch = table.dims
+    x_range = np.asarray(x_range, dtype=float).reshape(-1)
+    if x_range.shape != (n,) or not np.all(np.isfinite(x_range)) or np.any(x_range <= 0):
+        raise ValueError(f"x_range must hold {n} positive finite magnitudes")
+    x_exp = np.ceil(np.log2(x_range)).astype(int)
+    x_exp = np.maximum(x_exp, x_exp.max() - _EXP_SPAN)
+    K, k0, L = (np.asarray(a, dtype=float) for a in (table.K, table.k0, table.L))
+    Lam, lam0 = np.asarray(table.Lambda, dtype=float), np.asarray(table.lambda0, dtype=float)
+    sx = np.ldexp(1.0, x_exp)
+
+    # v scale: one exponent per column over the whole plan (v keeps its meaning across stages).
+    r_v = (np.abs(lam0) + _abs_times(Lam, sx)).max(axis=0) if n_latch else np.zeros(0)
+    v_exp = _exponent(r_v, n + 1, F)
+    sv = np.ldexp(1.0, v_exp)
+    # (A column's maximum over the ticks by `_column_peaks`: numpy reduces the first axis of
+    # a few columns row by row, 8x slower on the 60 s patrol.)
+    r_u = _column_peaks(np.abs(k0) + _abs_times(K, sx)
+                        + (_abs_times(L, sv) if n_latch else 0.0))
+    # The safe command must be representable too (a hover thrust may exceed every command).
+    r_u = np.maximum(r_u, 2.0 * np.abs(np.asarray(table.u_hold, dtype=float)))
+    u_exp = _exponent(r_u, n + n_latch + 1, F)
+    for what, e in (("state", x_exp), ("command", u_exp), ("multiplier", v_exp)):
+        if e.size and np.abs(e).max() > EXP_MAX:
+            worst = int(e[np.argmax(np.abs(e))])
+            raise ValueError(f"a {what} scale exponent would be {worst}, beyond the firmware's "
+                             f"+-{EXP_MAX} (STSP_Q_EXP_MAX): gains or state range too extreme "
+                             f"for the fixed-point format")
+    return x_exp, u_exp, v_exp
+
+
 def quantize_table(table: GainTable, arith: str, x_range, *, name: str | None = None
                    ) -> FixedPointTable:
     """Quantize a double-precision table (``build_table(..., quantize=False)``) to Q15/Q31.
@@ -216,35 +265,9 @@ def quantize_table(table: GainTable, arith: str, x_range, *, name: str | None = 
         Unknown `arith`, a non-positive or non-finite range, or a scale exponent beyond
         +-EXP_MAX (gains or ranges too extreme for the format).
     """
-    if arith not in FRAC_BITS:
-        raise ValueError(f"arith must be one of {list(FRAC_BITS)}, got {arith!r}")
+    x_exp, u_exp, v_exp = scale_exponents(table, arith, x_range)
     F = FRAC_BITS[arith]
-    n, m, n_latch = table.dims
-    x_range = np.asarray(x_range, dtype=float).reshape(-1)
-    if x_range.shape != (n,) or not np.all(np.isfinite(x_range)) or np.any(x_range <= 0):
-        raise ValueError(f"x_range must hold {n} positive finite magnitudes")
-    x_exp = np.ceil(np.log2(x_range)).astype(int)
-    x_exp = np.maximum(x_exp, x_exp.max() - _EXP_SPAN)
-    K, k0, L = (np.asarray(a, dtype=float) for a in (table.K, table.k0, table.L))
-    Lam, lam0 = np.asarray(table.Lambda, dtype=float), np.asarray(table.lambda0, dtype=float)
-    sx = np.ldexp(1.0, x_exp)
     qmax = (1 << F) - 1
-
-    # v scale: one exponent per column over the whole plan (v keeps its meaning across stages).
-    r_v = (np.abs(lam0) + np.abs(Lam) @ sx).max(axis=0) if n_latch else np.zeros(0)
-    v_exp = _exponent(r_v, n + 1, F)
-    sv = np.ldexp(1.0, v_exp)
-    r_u = (np.abs(k0) + np.abs(K) @ sx + (np.abs(L) @ sv if n_latch else 0.0)).max(axis=0)
-    # The safe command must be representable too (a hover thrust may exceed every command).
-    r_u = np.maximum(r_u, 2.0 * np.abs(np.asarray(table.u_hold, dtype=float)))
-    u_exp = _exponent(r_u, n + n_latch + 1, F)
-    for what, e in (("state", x_exp), ("command", u_exp), ("multiplier", v_exp)):
-        if e.size and np.abs(e).max() > EXP_MAX:
-            worst = int(e[np.argmax(np.abs(e))])
-            raise ValueError(f"a {what} scale exponent would be {worst}, beyond the firmware's "
-                             f"+-{EXP_MAX} (STSP_Q_EXP_MAX): gains or state range too extreme "
-                             f"for the fixed-point format")
-
     Ks, k0s, Ls, Lams, lam0s = scaled_entries(table, F, x_exp, u_exp, v_exp)
     Kq, k0q, Lq, Lamq, lam0q = (_rhu(a) for a in (Ks, k0s, Ls, Lams, lam0s))
     law_rows, latch_rows = row_sums(Kq, k0q, Lq, Lamq, lam0q)

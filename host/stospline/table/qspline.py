@@ -258,6 +258,12 @@ def fit_q_spline(scaled: tuple[np.ndarray, np.ndarray, np.ndarray], stage_start,
     Every stored entry is within ``tolerance * peak + 3 / 2^s_e + 1/2`` LSB of its exact value
     at every tick (peak: its largest magnitude over the stage); entries whose magnitude stays
     below 1/2 LSB over a stage (which a per-tick table rounds to 0) are not stored."""
+    return _fit_q(scaled, stage_start, arith, tolerance, max_spans)[0]
+
+
+def _fit_q(scaled, stage_start, arith: str, tolerance: float, max_spans: int):
+    """`fit_q_spline` and the integer gains K, k0, L it evaluated at every tick (int64, the
+    table's shapes: `evaluate_q` of the result, computed once)."""
     if arith not in COEF_BITS:
         raise ValueError(f"arith must be q15 or q31, not {arith!r}")
     Ks, k0s, Ls = (np.asarray(a, dtype=float) for a in scaled)
@@ -267,6 +273,7 @@ def fit_q_spline(scaled: tuple[np.ndarray, np.ndarray, np.ndarray], stage_start,
         raise ValueError("a spline table addresses at most 256 gain columns (uint8)")
     Z = np.concatenate([Ks, k0s[:, :, None], Ls], axis=2)       # (ticks, m, cols)
     start = np.asarray(stage_start, dtype=np.int64)
+    G_all = np.zeros(Z.shape, dtype=np.int64)
     logs, counts, cols, shifts, coefs = [], [], [], [], []
     for s in range(start.size - 1):
         a, b = int(start[s]), int(start[s + 1])
@@ -274,7 +281,8 @@ def fit_q_spline(scaled: tuple[np.ndarray, np.ndarray, np.ndarray], stage_start,
         keep = peak >= 0.5
         inputs, col = np.nonzero(keep)
         YT = np.ascontiguousarray(Z[a:b][:, inputs, col].T)
-        k, C, shift, _ = _fit_stage(YT, float(tolerance), COEF_BITS[arith], max_spans, s)
+        k, C, shift, G = _fit_stage(YT, float(tolerance), COEF_BITS[arith], max_spans, s)
+        G_all[a:b, inputs, col] = G
         logs.append(k)
         counts.extend(keep.sum(axis=1))
         cols.append(col)
@@ -282,11 +290,12 @@ def fit_q_spline(scaled: tuple[np.ndarray, np.ndarray, np.ndarray], stage_start,
         coefs.append(C.ravel())
     if sum(counts) > np.iinfo(np.uint16).max:
         raise ValueError(f"{sum(counts)} stored entries: row_start (uint16) holds 65535")
-    return QSplineGains(
+    spline = QSplineGains(
         span_log2=np.array(logs), row_start=np.concatenate([[0], np.cumsum(counts)]),
         col=np.concatenate(cols), shift=np.concatenate(shifts),
         coef_start=np.concatenate([[0], np.cumsum([c.size for c in coefs])]),
         coef=np.concatenate(coefs), arith=arith, nu=m, nx=n, n_latch=n_latch)
+    return spline, G_all[:, :, :n].copy(), G_all[:, :, n].copy(), G_all[:, :, n + 1:].copy()
 
 
 _PTR = 4
@@ -306,17 +315,24 @@ def dequantized(ft):
     gains and latch maps in real units (exact in float64), as a float64 `GainTable` the moment
     oracle and the latch re-solve read; the command's final rounding, which is not linear, is
     the error bound's."""
+    return _real_law(ft.source, ft.name, ft.frac_bits, (ft.x_exp, ft.u_exp, ft.v_exp),
+                     (ft.K, ft.k0, ft.L, ft.Lambda, ft.lambda0))
+
+
+def _real_law(source, name: str, F: int, exponents, q_entries):
+    """`dequantized` of the integer entries ``Kq, k0q, Lq, Lamq, lam0q`` in the scales
+    ``x_exp, u_exp, v_exp``, without assembling their table (the re-solve reads the law
+    only)."""
     from dataclasses import replace
-    F = ft.frac_bits
-    x_exp, u_exp, v_exp = (np.asarray(e, dtype=int) for e in (ft.x_exp, ft.u_exp, ft.v_exp))
-    K = -np.asarray(ft.K, float) * np.ldexp(1.0, u_exp[None, :, None] - x_exp[None, None, :] - F)
-    k0 = -np.asarray(ft.k0, float) * np.ldexp(1.0, u_exp[None, :] - F)
-    L = -np.asarray(ft.L, float) * np.ldexp(1.0, u_exp[None, :, None] - v_exp[None, None, :] - F)
-    Lam = np.asarray(ft.Lambda, float) * np.ldexp(1.0, v_exp[None, :, None]
-                                                  - x_exp[None, None, :] - F)
-    lam0 = np.asarray(ft.lambda0, float) * np.ldexp(1.0, v_exp[None, :] - F)
-    return replace(ft.source, name=ft.name, K=K, k0=k0, L=L, Lambda=Lam, lambda0=lam0,
-                   spline=None)
+    x_exp, u_exp, v_exp = (np.asarray(e, dtype=int) for e in exponents)
+    Kq, k0q, Lq, Lamq, lam0q = q_entries
+    K = -np.asarray(Kq, float) * np.ldexp(1.0, u_exp[None, :, None] - x_exp[None, None, :] - F)
+    k0 = -np.asarray(k0q, float) * np.ldexp(1.0, u_exp[None, :] - F)
+    L = -np.asarray(Lq, float) * np.ldexp(1.0, u_exp[None, :, None] - v_exp[None, None, :] - F)
+    Lam = np.asarray(Lamq, float) * np.ldexp(1.0, v_exp[None, :, None]
+                                             - x_exp[None, None, :] - F)
+    lam0 = np.asarray(lam0q, float) * np.ldexp(1.0, v_exp[None, :] - F)
+    return replace(source, name=name, K=K, k0=k0, L=L, Lambda=Lam, lambda0=lam0, spline=None)
 
 
 def q_spline_table(problem, exact, arith: str, x_range, tolerance: float, *,
@@ -354,23 +370,22 @@ def q_spline_table(problem, exact, arith: str, x_range, tolerance: float, *,
     ValueError
         As `qformat.quantize_table` (scales beyond the firmware's exponents).
     """
-    from stospline.table.qformat import (_rhu, assemble, quantize_table, row_sums,
+    from stospline.table.qformat import (_rhu, assemble, row_sums, scale_exponents,
                                          scaled_entries, EXP_MAX)
     from stospline.table.spline_latch import resolve_latch
-    base = quantize_table(exact, arith, x_range)
+    # The per-tick Q table's scales (`qformat.quantize_table`), without quantizing it.
+    x_exp, u_exp, v_exp = (np.asarray(e, dtype=int).copy()
+                           for e in scale_exponents(exact, arith, x_range))
     F = FRAC_BITS[arith]
     qmax = (1 << F) - 1
-    x_exp, u_exp, v_exp = (np.asarray(e, dtype=int).copy()
-                           for e in (base.x_exp, base.u_exp, base.v_exp))
     start = np.asarray(exact.stage_start, dtype=np.int64)
     for _ in range(8):
         scaled = scaled_entries(exact, F, x_exp, u_exp, v_exp)
-        spline = fit_q_spline(scaled[:3], start, arith, tolerance, max_spans=max_spans)
-        Kq, k0q, Lq = evaluate_q(spline, start)
+        spline, Kq, k0q, Lq = _fit_q(scaled[:3], start, arith, tolerance, max_spans)
         if resolve:
-            shape = assemble(exact, arith, x_range, (x_exp, u_exp, v_exp),
-                             (Kq, k0q, Lq, _rhu(scaled[3]), _rhu(scaled[4])), scaled)
-            Lam, lam0 = resolve_latch(problem, dequantized(shape), varying_maps=varying_maps)
+            law = _real_law(exact, f"{exact.name}_{arith}", F, (x_exp, u_exp, v_exp),
+                            (Kq, k0q, Lq, _rhu(scaled[3]), _rhu(scaled[4])))
+            Lam, lam0 = resolve_latch(problem, law, varying_maps=varying_maps)
             Lamq = _rhu(Lam * np.ldexp(1.0, x_exp[None, None, :] - v_exp[None, :, None] + F))
             lam0q = _rhu(lam0 * np.ldexp(1.0, F - v_exp[None, :]))
         else:

@@ -69,43 +69,31 @@ import os, sys, time
 for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(v, "1")
 import stospline
+from stospline.design.varying import mean_maps
+from stospline.sim.oracle import state_range
 from stospline.sim.spline_certificate import spline_table
 from stospline.table.format import table_of
-p = stospline.load_problem(sys.argv[1])
-t = time.perf_counter()
-d = stospline.design_problem(p, table="per-tick", mode=p.options.get("mode", "stagewise"))
-t_design = time.perf_counter() - t
-exact = table_of(d.design, quantize=False)
-t = time.perf_counter()
-spline_table(p, exact, d.table, float(sys.argv[2]))
-print(t_design, time.perf_counter() - t)
-"""
-
-
-_COLD_Q = """
-import os, sys, time
-for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(v, "1")
-import stospline
-from stospline.design.varying import mean_maps
-from stospline.table.format import table_of
-from stospline.sim.oracle import state_range
 from stospline.table.qformat import quantize_table
 from stospline.table.qspline import q_spline_table
 p = stospline.load_problem(sys.argv[1])
+tolerance, arith = float(sys.argv[2]), sys.argv[3]
 t = time.perf_counter()
 d = stospline.design_problem(p, table="per-tick", mode=p.options.get("mode", "stagewise"))
 t_design = time.perf_counter() - t
 exact = table_of(d.design, quantize=False)
-x_range = state_range(p, d.table)
-quantize_table(exact, sys.argv[3], x_range)       # the per-tick Q table comes first, as in
-t = time.perf_counter()                           # `pipeline.fixed_point_spline`
-q_spline_table(p, exact, sys.argv[3], x_range, float(sys.argv[2]), varying_maps=mean_maps)
+if arith == "float32":
+    t = time.perf_counter()
+    spline_table(p, exact, d.table, tolerance)
+else:                   # after the per-tick Q table, as `pipeline.fixed_point_spline` runs it
+    x_range = state_range(p, d.table)
+    quantize_table(exact, arith, x_range)
+    t = time.perf_counter()
+    q_spline_table(p, exact, arith, x_range, tolerance, varying_maps=mean_maps)
 print(t_design, time.perf_counter() - t)
 """
 
 
-def _cold(path: Path, tolerance: float, repeat: int, arith: str | None = None
+def _cold(path: Path, tolerance: float, repeat: int, arith: str = "float32"
           ) -> tuple[float, float]:
     """``(design s, compress s)``, each the first call in a fresh process (the C kernels are
     built already, the caches empty): what one `stospline design` run spends on each; the
@@ -113,8 +101,7 @@ def _cold(path: Path, tolerance: float, repeat: int, arith: str | None = None
     import subprocess
     import sys
     env = {**os.environ, "PYTHONPATH": str(ROOT / "host")}
-    script, extra = (_COLD, []) if arith is None else (_COLD_Q, [arith])
-    runs = [subprocess.run([sys.executable, "-c", script, str(path), repr(tolerance), *extra],
+    runs = [subprocess.run([sys.executable, "-c", _COLD, str(path), repr(tolerance), arith],
                            env=env, check=True, capture_output=True, text=True).stdout.split()
             for _ in range(repeat)]
     return tuple(statistics.median(float(r[i]) for r in runs) for i in (0, 1))

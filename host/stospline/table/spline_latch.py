@@ -100,8 +100,8 @@ def _affine_product(P: np.ndarray) -> np.ndarray:
     """The composition ``P[-1] o ... o P[0]`` of affine blocks ``P[j] = [A_j | C_j]`` (n, d),
     each the map ``[m; c] -> [A_j m + C_j c; c]`` (c the constants ``[v; 1]``): tick by tick
     in C (`stospline.table.kernels.affine_compose`, the sums left to right: the same bits on
-    every machine; 3x faster on the 60 s patrol's 6 000-tick stages), else by pairwise
-    products in numpy (`_affine_product_numpy`)."""
+    every machine; 3x faster on a 6 000-tick stage, `tools/bench/table_kernel.py`), else by
+    pairwise products in numpy (`_affine_product_numpy`)."""
     out = affine_compose(P)
     return _affine_product_numpy(P) if out is None else out
 

@@ -1,0 +1,55 @@
+"""The table kernel's composition of a stage's tick maps against numpy's pairwise products.
+
+Usage: PYTHONPATH=host .venv/bin/python tools/bench/table_kernel.py [--ticks 6000] [--repeat 50]
+
+Prints, for random affine blocks of the patrol's shape (a stage of `--ticks` ticks, n = 4
+states, 4 multipliers: blocks 4 x 9), the median time of `stospline.table.kernels.
+affine_compose` (C) and of `spline_latch._affine_product_numpy`, their ratio and the largest
+difference of the results relative to their largest entry. BLAS on one thread.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import statistics  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from stospline.table.kernels import affine_compose  # noqa: E402
+from stospline.table.spline_latch import _affine_product_numpy  # noqa: E402
+
+
+def _median(work, repeat: int) -> float:
+    work()
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        work()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--ticks", type=int, default=6000)
+    ap.add_argument("--repeat", type=int, default=50)
+    args = ap.parse_args()
+    rng = np.random.default_rng(0)
+    P = rng.normal(size=(args.ticks, 4, 9)) * 0.1
+    P[:, :, :4] += 0.99 * np.eye(4)
+    if affine_compose(P) is None:
+        raise SystemExit("the table kernel is not available on this host")
+    c = _median(lambda: affine_compose(P), args.repeat)
+    py = _median(lambda: _affine_product_numpy(P), args.repeat)
+    a, b = affine_compose(P), _affine_product_numpy(P)
+    print(f"{args.ticks} ticks, blocks 4x9: C {c * 1e3:.3f} ms, numpy {py * 1e3:.3f} ms, "
+          f"ratio {py / c:.1f}x; largest difference {np.abs(a - b).max() / np.abs(b).max():.1e} "
+          f"of the largest entry")
+
+
+if __name__ == "__main__":
+    main()

@@ -131,10 +131,12 @@ def basis_numerators(k: int, tau: np.ndarray) -> tuple[np.ndarray, list[np.ndarr
     return sigma, [P0, P1, P2, P3]
 
 
-def _stage_gains(k: int, C: np.ndarray, shift: np.ndarray, T: int) -> np.ndarray:
+def _stage_gains(k: int, C: np.ndarray, shift: np.ndarray, T: int, numerators=None
+                 ) -> np.ndarray:
     """A stage's entries at its ticks 0..T-1 as the firmware computes them: (T, entries) int64;
-    `C` (entries, S + 3) integers, `shift` (entries,)."""
-    sigma, P = basis_numerators(k, np.arange(T))
+    `C` (entries, S + 3) integers, `shift` (entries,); `numerators`: ``basis_numerators(k,
+    arange(T))`` when the caller has them."""
+    sigma, P = numerators if numerators is not None else basis_numerators(k, np.arange(T))
     Ct = np.asarray(C, dtype=np.int64).T
     acc = np.zeros((T, Ct.shape[1]), dtype=np.int64)
     for r in range(4):
@@ -195,14 +197,30 @@ def _shifts(peak: np.ndarray, bits: int, k: int) -> np.ndarray:
     return np.clip(s, 1, min(MAX_SHIFT, 62 - 3 * k)).astype(np.int64)
 
 
-def _fit_uniform(YT: np.ndarray, k: int, bits: int, peak: np.ndarray):
+_KEEP_TICKS = 1 << 19     # longer stages keep no basis (80 bytes a tick), as `spline._Bases`
+
+
+def _uniform_basis(k: int, T: int, bases: dict | None):
+    """``(breaks, N, band, numerators)`` of spans of 2^k ticks over T ticks (`_float_basis`,
+    its normal band with the curvature penalty, `basis_numerators`), kept in `bases` for the
+    next stage of the same length (the 60 s patrol's ten)."""
+    hit = None if bases is None else bases.get((k, T))
+    if hit is None:
+        breaks, _, N = _float_basis(k, T)
+        band = _normal_band(breaks, N) + _curvature_band(breaks.size + 2)
+        hit = breaks, N, band, basis_numerators(k, np.arange(T))
+        if bases is not None and T <= _KEEP_TICKS:
+            bases[(k, T)] = hit
+    return hit
+
+
+def _fit_uniform(YT: np.ndarray, k: int, bits: int, peak: np.ndarray, bases=None):
     """Least squares on spans of 2^k ticks, coefficients rounded to their integer grid; a
     coefficient beyond `bits` lowers its entry's shift and refits. Returns (C, shift, G), or
     None when a coefficient exceeds `bits` even at shift 1 (a last, partial span that its
-    basis functions barely reach can ask for that)."""
+    basis functions barely reach can ask for that). `bases`: `_uniform_basis`'s store."""
     E, T = YT.shape
-    breaks, sigma, N = _float_basis(k, T)
-    band = _normal_band(breaks, N) + _curvature_band(breaks.size + 2)
+    breaks, N, band, numerators = _uniform_basis(k, T, bases)
     Cf = _lsq(breaks, N, YT, band)                      # (E, S + 3), in LSB
     shift = _shifts(peak, bits, k)
     top = 2 ** (bits - 1) - 1
@@ -215,10 +233,11 @@ def _fit_uniform(YT: np.ndarray, k: int, bits: int, peak: np.ndarray):
             return None                 # not with spans this long: the caller tries shorter
         shift = np.where(over, shift - 1, shift)
     C = C.astype(np.int64)
-    return C, shift, _stage_gains(k, C, shift, T)
+    return C, shift, _stage_gains(k, C, shift, T, numerators)
 
 
-def _fit_stage(YT: np.ndarray, tolerance: float, bits: int, max_spans: int, s: int):
+def _fit_stage(YT: np.ndarray, tolerance: float, bits: int, max_spans: int, s: int,
+               bases: dict | None = None):
     """One stage: the largest span length 2^k whose integer spline meets, for every entry,
     ``|g - y| <= tolerance * peak + 3 / 2^s_e + 1/2`` (the fit's budget, the coefficient grid's
     half step and the gain's rounding). Returns (k, C, shift, G)."""
@@ -231,7 +250,7 @@ def _fit_stage(YT: np.ndarray, tolerance: float, bits: int, max_spans: int, s: i
     for k in range(top_k, -1, -1):
         if -(-T // (1 << k)) > max_spans:
             break
-        fit = _fit_uniform(YT, k, bits, peak)
+        fit = _fit_uniform(YT, k, bits, peak, bases)
         if fit is None:
             continue
         C, shift, G = fit
@@ -274,6 +293,7 @@ def _fit_q(scaled, stage_start, arith: str, tolerance: float, max_spans: int):
     Z = np.concatenate([Ks, k0s[:, :, None], Ls], axis=2)       # (ticks, m, cols)
     start = np.asarray(stage_start, dtype=np.int64)
     G_all = np.zeros(Z.shape, dtype=np.int64)
+    bases = {}                          # (k, T) -> `_uniform_basis`: equal stages share it
     logs, counts, cols, shifts, coefs = [], [], [], [], []
     for s in range(start.size - 1):
         a, b = int(start[s]), int(start[s + 1])
@@ -281,7 +301,8 @@ def _fit_q(scaled, stage_start, arith: str, tolerance: float, max_spans: int):
         keep = peak >= 0.5
         inputs, col = np.nonzero(keep)
         YT = np.ascontiguousarray(Z[a:b][:, inputs, col].T)
-        k, C, shift, G = _fit_stage(YT, float(tolerance), COEF_BITS[arith], max_spans, s)
+        k, C, shift, G = _fit_stage(YT, float(tolerance), COEF_BITS[arith], max_spans, s,
+                                    bases)
         G_all[a:b, inputs, col] = G
         logs.append(k)
         counts.extend(keep.sum(axis=1))

@@ -38,6 +38,12 @@ def main() -> None:
     ap.add_argument("--ticks", type=int, default=6000)
     ap.add_argument("--repeat", type=int, default=50)
     args = ap.parse_args()
+    for name in ("ticks", "repeat"):
+        if getattr(args, name) < 1:
+            ap.error(f"--{name} must be at least 1, not {getattr(args, name)}")
+    if args.ticks > 2_000_000:      # 36 doubles a tick, the numpy products twice that
+        ap.error(f"--ticks {args.ticks} would hold {args.ticks * 36 * 8 * 3 / 1e9:.1f} GB of "
+                 f"blocks; at most 2000000")
     rng = np.random.default_rng(0)
     P = rng.normal(size=(args.ticks, 4, 9)) * 0.1
     P[:, :, :4] += 0.99 * np.eye(4)

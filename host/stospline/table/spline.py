@@ -663,6 +663,21 @@ def _fit_stages(YTs: list[np.ndarray], stages: list[int], tolerance: float, max_
     return out
 
 
+def _windows(exact, start: np.ndarray, per_tick: int):
+    """The stages in order as windows of ``(stage, keep, YT)`` (`_stage_entries`), each of at
+    most `_WINDOW_VALUES` gain values (`per_tick` a tick) but one stage at least."""
+    window, held = [], 0
+    for s in range(exact.n_stages):
+        size = int(start[s + 1] - start[s]) * per_tick
+        if window and held + size > _WINDOW_VALUES:
+            yield window
+            window, held = [], 0
+        window.append((s,) + _stage_entries(exact, int(start[s]), int(start[s + 1])))
+        held += size
+    if window:
+        yield window
+
+
 def fit_spline(exact, tolerance: float, *, max_spans: int = DEFAULT_MAX_SPANS,
                initial_spans: int = INITIAL_SPANS) -> SplineGains:
     """Compress a table's per-tick gains to cubic B-splines, one knot vector per stage.
@@ -727,35 +742,25 @@ def _fit(exact, tolerance: float, max_spans: int, initial_spans: int = INITIAL_S
     flat = (K.reshape(ticks, m * n), k0, L.reshape(ticks, m * n_latch))
     knots, counts, cols, coefs = [], [], [], []
     bases = _Bases()
-    fitted, window = {}, []
-    for s in range(exact.n_stages):
-        # Stages are fitted a window at a time (`_fit_stages`: equal stages together), at
-        # most `_WINDOW_VALUES` gain values held; a failing stage raises, the first first.
-        if s not in fitted:
-            window, held = [], 0
-            for w in range(s, exact.n_stages):
-                size = int(start[w + 1] - start[w]) * m * (n + 1 + n_latch)
-                if window and held + size > _WINDOW_VALUES:
-                    break
-                window.append((w,) + _stage_entries(exact, int(start[w]), int(start[w + 1])))
-                held += size
-            fitted = _fit_stages([YT for _, _, YT in window], [w for w, _, _ in window],
-                                 tolerance, int(max_spans), int(initial_spans), bases)
-            failed = [w for w, _, _ in window if isinstance(fitted[w], Exception)]
-            if failed:
-                raise fitted[failed[0]]
-            keeps = {w: keep for w, keep, _ in window}
-        a, b = int(start[s]), int(start[s + 1])
-        keep = keeps[s]
-        breaks, C, G = fitted[s]
-        inputs, col = np.nonzero(keep)              # the entries of G, in order
-        for kind, (first, width) in enumerate(((0, n), (n, 1), (n + 1, n_latch))):
-            mine = (col >= first) & (col < first + width)
-            flat[kind][a:b, inputs[mine] * width + col[mine] - first] = G[:, mine]
-        knots.append(_clamped(breaks.astype(float)))
-        counts.extend(keep.sum(axis=1))
-        cols.extend(np.flatnonzero(row) for row in keep)
-        coefs.append(C.ravel())
+    for window in _windows(exact, start, m * (n + 1 + n_latch)):
+        # A window's stages fitted together (`_fit_stages`); a failing stage raises, the
+        # first first.
+        fitted = _fit_stages([YT for _, _, YT in window], [w for w, _, _ in window],
+                             tolerance, int(max_spans), int(initial_spans), bases)
+        failed = [w for w, _, _ in window if isinstance(fitted[w], Exception)]
+        if failed:
+            raise fitted[failed[0]]
+        for s, keep, _ in window:
+            a, b = int(start[s]), int(start[s + 1])
+            breaks, C, G = fitted[s]
+            inputs, col = np.nonzero(keep)              # the entries of G, in order
+            for kind, (first, width) in enumerate(((0, n), (n, 1), (n + 1, n_latch))):
+                mine = (col >= first) & (col < first + width)
+                flat[kind][a:b, inputs[mine] * width + col[mine] - first] = G[:, mine]
+            knots.append(_clamped(breaks.astype(float)))
+            counts.extend(keep.sum(axis=1))
+            cols.extend(np.flatnonzero(row) for row in keep)
+            coefs.append(C.ravel())
     if sum(counts) > np.iinfo(np.uint16).max:
         raise ValueError(f"{sum(counts)} stored entries: row_start (uint16) holds 65535")
     spline = SplineGains(

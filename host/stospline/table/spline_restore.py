@@ -128,8 +128,8 @@ class _Correction:
     ``where`` (P,): each column's index in the spline's ``coef``; ``entry`` (P,): its entry's
     number among the corrected ones (for its peak); ``N`` (ticks, m, P): per tick the
     derivatives of the k0 values with respect to the columns (the float64 basis);
-    ``blocks``: per stage with corrected entries ``(first column, inputs of its entries,
-    Gram matrix of the basis over its ticks)``."""
+    ``blocks``: per stage with corrected entries ``(stage, first column, inputs of its
+    entries, Gram matrix of the basis over its ticks)``."""
     where: np.ndarray
     entry: np.ndarray
     entries: list          # (stage, input) of each corrected entry
@@ -169,7 +169,7 @@ def _k0_basis(spline: SplineGains, stage_start) -> _Correction:
             where.append(int(spline.coef_start[s]) + int(e) * nc + np.arange(nc))
             entry.append(np.full(nc, len(entries)))
             entries.append((s, int(i)))
-        blocks.append((p0, inputs, gram))
+        blocks.append((s, p0, inputs, gram))
     cat = (lambda x: np.concatenate(x)) if where else (lambda x: np.zeros(0, np.int64))
     return _Correction(cat(where), cat(entry), entries, N, blocks)
 
@@ -184,8 +184,7 @@ def _energy_inverse(problem, corr: _Correction, h: float):
     correction leaves them at 0, where a ridge would leave them to round-off amplified by
     its inverse."""
     by_size, seen = {}, {}
-    for p0, inputs, gram in corr.blocks:
-        s = corr.entries[int(corr.entry[p0])][0]
+    for s, p0, inputs, gram in corr.blocks:
         R = np.asarray(problem.stages[s].R, float)[np.ix_(inputs, inputs)]
         key = (gram.tobytes(), R.tobytes(), gram.shape[0])   # stages that repeat, once
         if key not in seen:

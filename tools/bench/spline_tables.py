@@ -11,7 +11,10 @@ the largest over the inputs, in the command's LSBs and in its units), the span l
 stage and the time of `fixed_point_spline` (fit, latch re-solve, three oracle evaluations);
 and, cold as below, the compression step alone (`qspline.q_spline_table`: scales, fit,
 evaluation, latch re-solve, error bound; after the per-tick Q table, as
-`pipeline.fixed_point_spline` runs it) against the design (medians of `--repeat` processes).
+`pipeline.fixed_point_spline` runs it) against the design alone and against the design in
+that arithmetic: the design, its double table, the state range that sets the scales and the
+per-tick Q table (what `pipeline.fixed_point_table` and `stospline design --arith q15`
+compute before a spline exists; medians of `--repeat` processes).
 
 `--rounding N`: instead, the latch maps' float32 rounding (`spline_latch.round_latch`) against
 rounding them to nearest and against the per-tick table: the residual at x0, the worst over N
@@ -80,31 +83,36 @@ tolerance, arith = float(sys.argv[2]), sys.argv[3]
 t = time.perf_counter()
 d = stospline.design_problem(p, table="per-tick", mode=p.options.get("mode", "stagewise"))
 t_design = time.perf_counter() - t
+t = time.perf_counter()
 exact = table_of(d.design, quantize=False)
 if arith == "float32":
+    t_arith = t_design
     t = time.perf_counter()
     spline_table(p, exact, d.table, tolerance)
 else:                   # after the per-tick Q table, as `pipeline.fixed_point_spline` runs it
     x_range = state_range(p, d.table)
     quantize_table(exact, arith, x_range)
+    t_arith = t_design + time.perf_counter() - t      # `pipeline.fixed_point_table`'s design
     t = time.perf_counter()
     q_spline_table(p, exact, arith, x_range, tolerance, varying_maps=mean_maps)
-print(t_design, time.perf_counter() - t)
+print(t_design, t_arith, time.perf_counter() - t)
 """
 
 
 def _cold(path: Path, tolerance: float, repeat: int, arith: str = "float32"
-          ) -> tuple[float, float]:
-    """``(design s, compress s)``, each the first call in a fresh process (the C kernels are
-    built already, the caches empty): what one `stospline design` run spends on each; the
-    medians of `repeat` processes."""
+          ) -> tuple[float, float, float]:
+    """``(design s, design in arith s, compress s)``, each the first call in a fresh process
+    (the C kernels are built already, the caches empty): what one `stospline design` run
+    spends on each; the medians of `repeat` processes. The design in Q15/Q31 adds to the
+    design what `pipeline.fixed_point_table` computes (the double table, the state range
+    that sets the scales, the per-tick Q table); in float32 it is the design."""
     import subprocess
     import sys
     env = {**os.environ, "PYTHONPATH": str(ROOT / "host")}
     runs = [subprocess.run([sys.executable, "-c", _COLD, str(path), repr(tolerance), arith],
                            env=env, check=True, capture_output=True, text=True).stdout.split()
             for _ in range(repeat)]
-    return tuple(statistics.median(float(r[i]) for r in runs) for i in (0, 1))
+    return tuple(statistics.median(float(r[i]) for r in runs) for i in (0, 1, 2))
 
 
 def _f32_latch_residual(problem, table, path: bool = False) -> str:
@@ -198,8 +206,9 @@ def _fixed_point(examples: list[str], tolerances: list[float], ariths: list[str]
     print("| example | arith | tolerance | span ticks per stage | per-tick B | spline B | ratio | "
           "J per-tick | J spline | excess vs per-tick | excess vs J0 | residual per-tick | "
           "residual spline | bound per-tick LSB | bound spline LSB | bound spline (units) | "
-          "time s | cold: design s | compress s | ratio |")
-    print("|---|" + "---|" * 19)
+          "time s | cold: design s | design in arith s | compress s | vs design | "
+          "vs design in arith |")
+    print("|---|" + "---|" * 21)
     for name in examples:
         problem = stospline.load_problem(str(ROOT / "examples" / name))
         d = stospline.design_problem(problem, table="spline")
@@ -208,7 +217,8 @@ def _fixed_point(examples: list[str], tolerances: list[float], ariths: list[str]
                 start = time.perf_counter()
                 _, c = stospline.pipeline.fixed_point_spline(d, arith, tolerance=tol)
                 took = time.perf_counter() - start
-                c_design, c_comp = _cold(ROOT / "examples" / name, tol, repeat, arith)
+                c_design, c_arith, c_comp = _cold(ROOT / "examples" / name, tol, repeat,
+                                                  arith)
                 print(f"| {name.removesuffix('.toml')} | {arith} | {tol:g} | {c['span_ticks']} | "
                       f"{c['per_tick_flash_bytes']:,} | {c['flash_bytes']:,} | "
                       f"{c['compression_ratio']:.0f} | {c['per_tick_oracle_J']:.10g} | "
@@ -217,7 +227,8 @@ def _fixed_point(examples: list[str], tolerances: list[float], ariths: list[str]
                       f"{c['constraint_residual']:.2e} | "
                       f"{max(c['per_tick_u_error_bound_lsb']):g} | "
                       f"{max(c['u_error_bound_lsb']):g} | {max(c['u_error_bound']):.3g} | "
-                      f"{took:.2f} | {c_design:.3f} | {c_comp:.3f} | {c_comp / c_design:.0%} |",
+                      f"{took:.2f} | {c_design:.3f} | {c_arith:.3f} | {c_comp:.3f} | "
+                      f"{c_comp / c_design:.0%} | {c_comp / c_arith:.0%} |",
                       flush=True)
 
 
@@ -263,7 +274,7 @@ def main() -> None:
             per_tick = (stospline.evaluate_table(d.problem, d.table, path=True) if path
                         else d.implemented)
             f32 = [_f32_latch_residual(d.problem, t, path) for t in (d.table, sp)]
-            c_design, c_comp = _cold(ROOT / "examples" / name, tol, args.repeat)
+            c_design, _, c_comp = _cold(ROOT / "examples" / name, tol, args.repeat)
             print(f"| {name.removesuffix('.toml')} | {d.table.n_ticks} | {tol:g} | "
                   f"{[int(sp.spline.spans(s)) for s in range(sp.n_stages)]} | "
                   f"{flash_bytes(d.table):,} | {flash_bytes(sp):,} | "

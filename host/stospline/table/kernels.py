@@ -1,12 +1,13 @@
-"""Compiled host kernel of the table layer (double precision C, loaded through cffi): the
-composition of a stage's affine tick maps (`compose_kernel.c`), which `spline_latch` needs for
-every latch re-solve of a spline table.
+"""Compiled host kernels of the table layer (C, loaded through cffi): the composition of a
+stage's affine tick maps (`compose_kernel.c`), which `spline_latch` needs for every latch
+re-solve of a spline table, and the exact evaluation of a fixed-point spline stage with its
+error (`qspline_kernel.c`), which `qspline` needs for every span length it tries.
 
 Built and cached as the designer's kernels are (`stospline.cache`: the user cache directory,
 ``STOSPLINE_CACHE_DIR`` overrides, keyed by a hash of the source, declarations and flags).
-`affine_compose` returns None where the kernel cannot be built (no C compiler) or
-``STOSPLINE_TABLE_KERNEL=numpy`` asks for the numpy reference (`spline_latch`'s pairwise
-products).
+`affine_compose` and `qspline_stage` return None where the kernels cannot be built (no C
+compiler) or ``STOSPLINE_TABLE_KERNEL=numpy`` asks for the numpy references
+(`spline_latch`'s pairwise products, `qspline._stage_gains`).
 """
 from __future__ import annotations
 
@@ -19,11 +20,13 @@ import numpy as np
 
 from stospline.cache import build_source_module, load_module
 
-__all__ = ["affine_compose", "build_kernel", "KernelBuildError"]
+__all__ = ["affine_compose", "qspline_stage", "build_kernel", "KernelBuildError"]
 
-_SOURCE = Path(__file__).with_name("compose_kernel.c")
+_SOURCES = [Path(__file__).with_name(f) for f in ("compose_kernel.c", "qspline_kernel.c")]
 _CDEF = """
 int stsp_affine_compose(int n, int d, long T, const double *P, double *out, double *work);
+int stsp_qspline_stage(int k, long T, long E, long nb, const int64_t *C, const int64_t *shift,
+                       const double *YT, const double *allowed, int64_t *G, double *err);
 """
 _CFLAGS = ["-std=c99", "-O3", "-Wall", "-Wextra"]
 _loaded = None
@@ -38,10 +41,12 @@ class KernelBuildError(RuntimeError):
 def build_kernel(build_dir: str | Path | None = None, *, quiet: bool = True) -> Path:
     """Compile the kernel (if not cached) and return the path of the extension module."""
     try:
-        return build_source_module("_stsp_table_kernel", _SOURCE.read_bytes(), _CDEF, _CFLAGS,
+        source = b"\n".join(p.read_bytes() for p in _SOURCES)
+        return build_source_module("_stsp_table_kernel", source, _CDEF, _CFLAGS,
                                    root=build_dir, quiet=quiet)
     except Exception as exc:  # noqa: BLE001 - any failure here means "no compiled kernel"
-        raise KernelBuildError(f"cannot build {_SOURCE.name}: {exc}") from exc
+        names = " and ".join(p.name for p in _SOURCES)
+        raise KernelBuildError(f"cannot build {names}: {exc}") from exc
 
 
 def _kernel():
@@ -56,7 +61,7 @@ def _kernel():
                 _loaded = load_module(build_kernel())
             except KernelBuildError as exc:
                 _failed = True
-                warnings.warn(f"{exc}; composing tick maps in numpy (slower)", RuntimeWarning,
+                warnings.warn(f"{exc}; the table layer runs its numpy references (slower)", RuntimeWarning,
                               stacklevel=3)
     return _loaded
 
@@ -77,3 +82,37 @@ def affine_compose(P: np.ndarray) -> np.ndarray | None:
     if status != 0:
         raise ValueError(f"affine blocks of shape {P.shape}: not composable")
     return out
+
+
+def qspline_stage(k: int, C: np.ndarray, shift: np.ndarray, YT: np.ndarray,
+                  allowed: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray] | bool | None:
+    """``(G, err)`` of a fixed-point spline stage (`qspline_kernel.c`): its E entries'
+    integer gains at ticks 0..T-1 as the firmware evaluates them, G (T, E) int64 (a view of
+    an (E, T) array), from coefficients `C` (E, nb) and scales `shift` (E,) on spans of 2^k
+    ticks, and each entry's worst ``|G - YT|`` against the values fitted `YT` (E, T).
+    With `allowed` (E,): False as soon as an entry's error exceeds its allowance. None where
+    the kernel is not available."""
+    mod = _kernel()
+    if mod is None:
+        return None
+    YT = np.ascontiguousarray(YT, dtype=np.float64)
+    E, T = YT.shape
+    C = np.ascontiguousarray(C, dtype=np.int64)
+    shift = np.ascontiguousarray(shift, dtype=np.int64)
+    if C.ndim != 2 or C.shape[0] != E or shift.shape != (E,):
+        raise ValueError(f"coefficients {C.shape} and shifts {shift.shape} for {E} entries")
+    G = np.empty((E, T), dtype=np.int64)
+    err = np.empty(E)
+    ffi, lib = mod.ffi, mod.lib
+    if allowed is not None:
+        allowed = np.ascontiguousarray(np.broadcast_to(allowed, (E,)), dtype=np.float64)
+    limit = ffi.NULL if allowed is None else ffi.from_buffer("double[]", allowed)
+    status = lib.stsp_qspline_stage(
+        int(k), T, E, C.shape[1], ffi.from_buffer("int64_t[]", C),
+        ffi.from_buffer("int64_t[]", shift), ffi.from_buffer("double[]", YT), limit,
+        ffi.from_buffer("int64_t[]", G), ffi.from_buffer("double[]", err))
+    if status < 0:
+        raise ValueError(f"a fixed-point spline stage of {T} ticks, spans of 2^{k}, "
+                         f"coefficients {C.shape}: not evaluable")
+    return (G.T, err) if status == 0 else False

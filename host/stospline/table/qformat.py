@@ -309,6 +309,25 @@ def row_sums(Kq, k0q, Lq, Lamq, lam0q) -> tuple[np.ndarray, np.ndarray]:
     return law_rows, latch_rows
 
 
+# The bound's sums run left to right over the last axis, a column at a time: the same bits on
+# every machine and numpy version (numpy's reductions and einsum choose their own order), and
+# temporaries of one column (ticks, m) that stay in the cache, not of the whole table.
+def _abs_error_sums(q: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """``sum_j |q[..., j] - s[..., j]|`` (float64), j = 0, 1, ... in turn."""
+    acc = np.zeros(q.shape[:-1])
+    for j in range(q.shape[-1]):
+        acc += np.abs(q[..., j] - s[..., j])
+    return acc
+
+
+def _latch_error_sums(Ls: np.ndarray, eps_t: np.ndarray) -> np.ndarray:
+    """``sum_c |Ls[t, i, c]| eps_t[t, c]`` (ticks, m), c = 0, 1, ... in turn."""
+    acc = np.zeros(Ls.shape[:-1])
+    for c in range(Ls.shape[-1]):
+        acc += np.abs(Ls[..., c]) * eps_t[:, c, None]
+    return acc
+
+
 def assemble(table: GainTable, arith: str, x_range, exponents, q_entries, scaled,
              *, name: str | None = None) -> FixedPointTable:
     """The `FixedPointTable` of integer entries `q_entries` (``Kq, k0q, Lq, Lamq, lam0q``) in
@@ -341,9 +360,10 @@ def assemble(table: GainTable, arith: str, x_range, exponents, q_entries, scaled
     eps = np.where(np.arange(n_latch)[None, :] < np.asarray(table.stage_n_latch)[:, None], eps, 0.0)
     ls = ft.latch_stage(stage_of)
     eps_t = np.where((ls >= 0)[:, None], eps[np.maximum(ls, 0)], 0.0)            # (T, n_latch)
-    bound = (0.5 + np.abs(k0q - k0s) + np.abs(Kq - Ks).sum(axis=2)
-             + np.abs(Lq - Ls).sum(axis=2)
-             + np.einsum("tic,tc->ti", np.abs(Ls), eps_t) / one)
+    bound = 0.5 + np.abs(k0q - k0s)
+    bound += _abs_error_sums(Kq, Ks)
+    bound += _abs_error_sums(Lq, Ls)
+    bound += _latch_error_sums(Ls, eps_t) / one
     object.__setattr__(ft, "bound_lsb", bound)
     return ft
 

@@ -243,8 +243,9 @@ def _evaluated(k: int, C: np.ndarray, shift: np.ndarray, YT: np.ndarray, bases,
                allowed: np.ndarray | None = None):
     """The stage's gains as the firmware evaluates them, G (T, entries) int64, and each
     entry's worst ``|G - y|`` against the values fitted `YT` (entries, T): the table kernel
-    (`kernels.qspline_stage`, 3x faster), else numpy (`_stage_gains`), the same bits. With
-    `allowed`: None when an entry's error exceeds it (the kernel stops there)."""
+    (`kernels.qspline_stage`; `tools/bench/table_kernel.py` times it), else numpy
+    (`_stage_gains`), the same bits. With `allowed`: None when an entry's error exceeds it
+    (the kernel stops there)."""
     out = qspline_stage(k, C, shift, YT, allowed)
     if out is None:
         numerators = _uniform_basis(k, YT.shape[1], bases)[3]
@@ -378,10 +379,11 @@ def _real_law(source, name: str, F: int, exponents, q_entries):
     from dataclasses import replace
     x_exp, u_exp, v_exp = (np.asarray(e, dtype=int) for e in exponents)
     Kq, k0q, Lq, Lamq, lam0q = q_entries
-    # Integers times minus a power of two: exact, and one pass each (numpy casts as it goes).
-    K = np.multiply(Kq, -np.ldexp(1.0, u_exp[None, :, None] - x_exp[None, None, :] - F))
-    k0 = np.multiply(k0q, -np.ldexp(1.0, u_exp[None, :] - F))
-    L = np.multiply(Lq, -np.ldexp(1.0, u_exp[None, :, None] - v_exp[None, None, :] - F))
+    # Integers times minus a power of two (exact): cast, then scaled in place.
+    K, k0, L = (np.asarray(a).astype(float) for a in (Kq, k0q, Lq))
+    K *= -np.ldexp(1.0, u_exp[None, :, None] - x_exp[None, None, :] - F)
+    k0 *= -np.ldexp(1.0, u_exp[None, :] - F)
+    L *= -np.ldexp(1.0, u_exp[None, :, None] - v_exp[None, None, :] - F)
     Lam = np.asarray(Lamq, float) * np.ldexp(1.0, v_exp[None, :, None]
                                              - x_exp[None, None, :] - F)
     lam0 = np.asarray(lam0q, float) * np.ldexp(1.0, v_exp[None, :] - F)

@@ -21,7 +21,8 @@ rounding them to nearest and against the per-tick table: the residual at x0, the
 other starts (seed 0), with the t0 latch in binary32, and the cost against the exact re-solve.
 
 `--profile`: instead of the table, where the warm compression of the first example at the
-first tolerance spends its time (cProfile, the functions of `stospline.table`).
+first tolerance spends its time (cProfile, the functions of `stospline.table`); with
+`--arith`, the first arithmetic's (`qspline.q_spline_table`).
 
 For every example and tolerance: the per-tick float32 table's flash and the spline table's
 (`stospline.table.flash.flash_bytes`, what the generated C takes on a 32-bit target), their
@@ -141,19 +142,31 @@ def _median_time(work, repeat: int):
     return out, statistics.median(times)
 
 
-def _profile(name: str, tolerance: float, repeat: int) -> None:
+def _profile(name: str, tolerance: float, repeat: int, arith: str = "float32") -> None:
     import cProfile
     import pstats
     problem = stospline.load_problem(str(ROOT / "examples" / name))
     d = stospline.design_problem(problem, table="per-tick")
     exact = table_of(d.design, quantize=False)
-    spline_table(problem, exact, d.table, tolerance)           # warm-up
+    if arith == "float32":
+        def compress():
+            spline_table(problem, exact, d.table, tolerance)
+    else:
+        from stospline.design.varying import mean_maps
+        from stospline.sim.oracle import state_range
+        from stospline.table.qspline import q_spline_table
+        x_range = state_range(problem, d.table)
+
+        def compress():
+            q_spline_table(problem, exact, arith, x_range, tolerance, varying_maps=mean_maps)
+    compress()                                                  # warm-up
     profile = cProfile.Profile()
     profile.enable()
     for _ in range(repeat):
-        spline_table(problem, exact, d.table, tolerance)
+        compress()
     profile.disable()
-    print(f"{name} at {tolerance:g}: cumulative ms per compression (cProfile adds overhead)")
+    print(f"{name} at {tolerance:g}, {arith}: cumulative ms per compression (cProfile adds "
+          f"overhead)")
     stats = pstats.Stats(profile).stats
     rows = [(ct / repeat * 1e3, f"{Path(file).name}:{func}")
             for (file, _, func), (_, _, _, ct, _) in stats.items()
@@ -243,15 +256,16 @@ def main() -> None:
                     help="instead, the latch maps' rounding at x0 and STARTS other starts")
     args = ap.parse_args()
     tolerances = [float(t) for t in args.tolerances.split(",")]
+    if args.profile:
+        _profile(args.examples.split(",")[0], tolerances[0], args.repeat,
+                 (args.arith or "float32").split(",")[0])
+        return
     if args.arith:
         _fixed_point(args.examples.split(","), tolerances, args.arith.split(","),
                      args.repeat)
         return
     if args.rounding:
         _rounding(args.examples.split(","), tolerances, args.rounding)
-        return
-    if args.profile:
-        _profile(args.examples.split(",")[0], tolerances[0], args.repeat)
         return
     print("| example | ticks | tolerance | spans per stage | per-tick B | spline B | ratio | "
           "J per-tick | J spline | excess vs per-tick | excess vs J0 | residual per-tick | "

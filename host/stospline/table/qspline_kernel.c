@@ -16,7 +16,7 @@
  * (qspline._stage_gains) and of the firmware.  Caller-owned arrays, nothing allocated.
  *
  * allowed (E doubles, or NULL): stop after the first entry whose err exceeds allowed[e] (or
- * is NaN) and return 1 (G and err of the later entries are then not computed): a span length the fit
+ * either is NaN) and return 1 (G and err of the later entries are then not computed): a span length the fit
  * tries in vain is given up at its first entry that misses.
  *
  * Returns 0 (every value within allowed, or allowed NULL), 1 (a miss), or -1 for arguments it
@@ -80,8 +80,8 @@ int stsp_qspline_stage(int k, long T, long E, long nb, const int64_t *C, const i
             worst = diff > worst ? diff : worst;
             nan |= diff != diff;
         }
-        if (nan ? allowed != NULL : worst > limit) {
-            return 1;                             /* NaN is within no allowance */
+        if (nan ? allowed != NULL : !(worst <= limit)) {
+            return 1;                 /* NaN is within no allowance, nor anything within NaN */
         }
         err[e] = nan ? NAN : worst;
     }

@@ -140,6 +140,8 @@ def test_the_qspline_kernel_stops_at_a_miss():
     YT[2, 17] = np.nan
     assert np.isnan(kernels.qspline_stage(6, C, shift, YT)[1][2])
     assert kernels.qspline_stage(6, C, shift, YT, np.full(6, np.inf)) is False
+    YT[2, 17] = 0.0
+    assert kernels.qspline_stage(6, C, shift, YT, np.full(6, np.nan)) is False
 
 
 @pytest.mark.parametrize("k,shift,nb,c", [(10, 1, 4, 0), (-1, 1, 4, 0), (0, 0, 4, 0),

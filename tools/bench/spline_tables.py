@@ -245,6 +245,29 @@ def _fixed_point(examples: list[str], tolerances: list[float], ariths: list[str]
                       flush=True)
 
 
+def _checked_arguments(ap: argparse.ArgumentParser, args) -> list[float]:
+    """The tolerances; any bad value ends the run with one line naming it (exit 2)."""
+    from stospline.errors import ProblemError
+    from stospline.table_options import check_spline_tolerance
+    if args.repeat < 1:
+        ap.error(f"--repeat must be at least 1, not {args.repeat}")
+    if args.rounding < 0:
+        ap.error(f"--rounding must be at least 0, not {args.rounding}")
+    for name in args.examples.split(","):
+        if not (ROOT / "examples" / name).is_file():
+            ap.error(f"--examples: no examples/{name}")
+    for arith in (args.arith.split(",") if args.arith else []):
+        if arith not in ("q15", "q31"):
+            ap.error(f"--arith: {arith!r} is not q15 or q31")
+    try:
+        return [check_spline_tolerance(float(t), "--tolerances")
+                for t in args.tolerances.split(",")]
+    except ProblemError as exc:               # a ValueError too: first
+        ap.error(str(exc))
+    except ValueError:
+        ap.error(f"--tolerances: {args.tolerances!r} is not a list of numbers")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
@@ -255,7 +278,7 @@ def main() -> None:
     ap.add_argument("--rounding", type=int, default=0, metavar="STARTS",
                     help="instead, the latch maps' rounding at x0 and STARTS other starts")
     args = ap.parse_args()
-    tolerances = [float(t) for t in args.tolerances.split(",")]
+    tolerances = _checked_arguments(ap, args)
     if args.profile:
         _profile(args.examples.split(",")[0], tolerances[0], args.repeat,
                  (args.arith or "float32").split(",")[0])

@@ -11,8 +11,10 @@
  * each entry summed left to right over j = 0 .. n-1, then C_t added (no BLAS: the same bits
  * on every machine).  Caller-owned arrays, nothing allocated; work holds 2 n d doubles.
  * Returns 0, or -1 for dimensions it does not take (n < 1, d < n, T < 1).
+ * stsp_affine_compose_gains (below) forms each P[t] from the law's gains itself.
  */
 #include <stddef.h>
+#include <stdint.h>
 #include <string.h>
 
 int stsp_affine_compose(int n, int d, long T, const double *P, double *out, double *work)
@@ -34,6 +36,78 @@ int stsp_affine_compose(int n, int d, long T, const double *P, double *out, doub
         const double *B = P + (size_t)t * nd;
         for (i = 0; i < un; ++i) {
             const double *row = B + i * ud;
+            for (c = 0; c < ud; ++c) {
+                double acc = row[0] * cur[c];
+                for (j = 1; j < un; ++j) {
+                    acc += row[j] * cur[j * ud + c];
+                }
+                if (c >= un) {
+                    acc += row[c];
+                }
+                next[i * ud + c] = acc;
+            }
+        }
+        swap = cur;
+        cur = next;
+        next = swap;
+    }
+    memcpy(out, cur, nd * sizeof(double));
+    return 0;
+}
+
+/* The composition of a stage's tick maps under a law given by its gains (spline_latch's
+ * _stage_map), without forming the blocks: tick t's block is
+ *
+ *     P[t] = base;   P[t][r][col[k]] += g[t][k] * vec[k][r]   for k = 0 .. K-1, in turn
+ *
+ * (base = [Ad | 0 | fd], n x d; vec[k] = -Bd[:, input of gain k], n; col[k] its column in
+ * [x | v | 1]; g (T x K) the tick's gains), each a product then a sum (no fused multiply-add
+ * in ISO C: the bits of the numpy reference, spline_latch._tick_blocks), then composed as
+ * stsp_affine_compose does.  work holds 3 n d doubles.  Returns 0, or -1 for dimensions or
+ * columns it does not take (n < 1, d < n, T < 1, K < 0, a column outside [0, d)).
+ */
+static void tick_block(size_t un, size_t ud, long K, const double *g, const int64_t *col,
+                       const double *vec, const double *base, double *P)
+{
+    long k;
+    size_t r;
+
+    memcpy(P, base, un * ud * sizeof(double));
+    for (k = 0; k < K; ++k) {
+        const double *v = vec + (size_t)k * un;
+        for (r = 0; r < un; ++r) {
+            P[r * ud + (size_t)col[k]] += g[k] * v[r];
+        }
+    }
+}
+
+int stsp_affine_compose_gains(int n, int d, long T, long K, const double *g, const int64_t *col,
+                              const double *vec, const double *base, double *out,
+                              double *work)
+{
+    size_t nd, i, j, c, un, ud;
+    long t, k;
+    double *cur, *next, *P, *swap;
+
+    if (n < 1 || d < n || T < 1 || K < 0) {
+        return -1;
+    }
+    for (k = 0; k < K; ++k) {
+        if (col[k] < 0 || col[k] >= d) {
+            return -1;
+        }
+    }
+    un = (size_t)n;
+    ud = (size_t)d;
+    nd = un * ud;
+    cur = work;
+    next = work + nd;
+    P = work + 2 * nd;
+    tick_block(un, ud, K, g, col, vec, base, cur);
+    for (t = 1; t < T; ++t) {
+        tick_block(un, ud, K, g + (size_t)t * (size_t)K, col, vec, base, P);
+        for (i = 0; i < un; ++i) {
+            const double *row = P + i * ud;
             for (c = 0; c < ud; ++c) {
                 double acc = row[0] * cur[c];
                 for (j = 1; j < un; ++j) {

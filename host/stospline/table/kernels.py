@@ -20,11 +20,15 @@ import numpy as np
 
 from stospline.cache import build_source_module, load_module
 
-__all__ = ["affine_compose", "qspline_stage", "build_kernel", "KernelBuildError"]
+__all__ = ["affine_compose", "affine_compose_gains", "qspline_stage", "build_kernel",
+           "KernelBuildError"]
 
 _SOURCES = [Path(__file__).with_name(f) for f in ("compose_kernel.c", "qspline_kernel.c")]
 _CDEF = """
 int stsp_affine_compose(int n, int d, long T, const double *P, double *out, double *work);
+int stsp_affine_compose_gains(int n, int d, long T, long K, const double *g, const int64_t *col,
+                              const double *vec, const double *base, double *out,
+                              double *work);
 int stsp_qspline_stage(int k, long T, long E, long nb, const int64_t *C, const int64_t *shift,
                        const double *YT, const double *allowed, int64_t *G, double *err);
 """
@@ -81,6 +85,37 @@ def affine_compose(P: np.ndarray) -> np.ndarray | None:
                                                 for a in (P, out, work)))
     if status != 0:
         raise ValueError(f"affine blocks of shape {P.shape}: not composable")
+    return out
+
+
+def affine_compose_gains(base: np.ndarray, col: np.ndarray, vec: np.ndarray, g: np.ndarray
+                         ) -> np.ndarray | None:
+    """The composition of the blocks ``P[t] = base`` plus ``g[t, k] vec[k]`` in column
+    ``col[k]`` (k in turn), ``P[-1] o ... o P[0]`` (`compose_kernel.c`), without forming them:
+    `base` (n, d), `col` (K,), `vec` (K, n), `g` (T, K). None where the kernel is not
+    available."""
+    mod = _kernel()
+    if mod is None:
+        return None
+    base = np.ascontiguousarray(base, dtype=np.float64)
+    n, d = base.shape
+    g = np.ascontiguousarray(g, dtype=np.float64)
+    T, K = g.shape
+    col = np.ascontiguousarray(col, dtype=np.int64)
+    vec = np.ascontiguousarray(vec, dtype=np.float64)
+    if col.shape != (K,) or vec.shape != (K, n):
+        raise ValueError(f"columns {col.shape} and vectors {vec.shape} for {K} gains of "
+                         f"blocks {base.shape}")
+    out = np.empty((n, d))
+    work = np.empty(3 * n * d)
+    ffi, lib = mod.ffi, mod.lib
+    status = lib.stsp_affine_compose_gains(
+        n, d, T, K, ffi.from_buffer("double[]", g), ffi.from_buffer("int64_t[]", col),
+        ffi.from_buffer("double[]", vec), ffi.from_buffer("double[]", base),
+        ffi.from_buffer("double[]", out), ffi.from_buffer("double[]", work))
+    if status != 0:
+        raise ValueError(f"{T} ticks of blocks {base.shape} with gain columns {col.tolist()}: "
+                         f"not composable")
     return out
 
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from stospline.errors import DesignError
 from stospline.expm import expm
-from stospline.table.kernels import affine_compose
+from stospline.table.kernels import affine_compose, affine_compose_gains
 
 __all__ = ["resolve_latch", "round_latch", "latch_grid", "start_state", "latch_groups_of_table",
            "mean_tick_map", "delayed_map", "stage_mean_maps", "mean_maps_by_stage"]
@@ -198,44 +198,48 @@ def mean_maps_by_stage(problem, table, h: float, varying_maps=None) -> list[np.n
 
 
 def _stage_map(stage, table, s: int, width: int, h: float, spline=None, varying_maps=None,
-               F=None, spreads: dict | None = None) -> np.ndarray:
+               F=None) -> np.ndarray:
     """The mean over stage s as an affine block (n, n + width + 1): ``m_end = A m_start + C
     [v; 1]`` under the table's gains (its first `width` multiplier columns). `F`: the
     stage's `stage_mean_maps`, when the caller has them (`mean_maps_by_stage`, whose stages
-    with the same data share one array); `spreads`: a dict the caller keeps for one set of
-    maps, where stages with the same map and gain columns share their `spread`."""
+    with the same data share one array)."""
     n, m, _ = table.dims
     a, b = int(table.stage_start[s]), int(table.stage_start[s + 1])
     if F is None:
         F = stage_mean_maps(stage, table, s, h, varying_maps)
     if F.shape[0] > 1:
         return _affine_product(_varying_ticks(F, table, a, b, width))
-    maps, F = F, F[0]
+    F = F[0]
     Bd, d = F[:, n:n + m], n + width + 1
-    # Per tick P = [Ad | 0 | fd] - Bd [K | L | k0] (u = -K m - L v - k0), every tick in one
-    # matrix product (numpy is slow on arrays of 4-wide rows, fast on one product): the
-    # tick's gains side by side, then 1, times `spread`, whose row for the gain of input i on
-    # operand j holds -Bd[:, i] in column j, and whose last row the constant part.
+    # Per tick P = [Ad | 0 | fd] - Bd [K | L | k0] (u = -K m - L v - k0): the base [Ad | 0 |
+    # fd], plus, for the gain of input i on operand j, -Bd[:, i] times the gain in column j.
     kind, inputs, operand = _gain_columns(table, s, width, spline)
     T, sources = b - a, (table.K[a:b], table.L[a:b], table.k0[a:b, :, None])
-    gains = np.empty((T, kind.size + 1))
+    gains = np.empty((T, kind.size))
     for k, g in enumerate(sources):
         mine = kind == k
         gains[:, np.flatnonzero(mine)] = g.reshape(T, -1)[:, inputs[mine] * g.shape[2]
                                                           + operand[mine]]
-    gains[:, -1] = 1.0
-    key = None if spreads is None else (id(maps), width, kind.tobytes(), inputs.tobytes(),
-                                        operand.tobytes())
-    spread = None if key is None else spreads.get(key)
-    if spread is None:
-        column = np.where(kind == 0, operand, np.where(kind == 1, n + operand, d - 1))
-        spread = np.zeros((kind.size + 1, n, d))
-        spread[np.arange(kind.size), :, column] = -Bd[:, inputs].T
-        spread[-1, :, :n] = F[:, :n]
-        spread[-1, :, -1] = F[:, -1]
-        if key is not None:
-            spreads[key] = spread
-    return _affine_product((gains @ spread.reshape(-1, n * d)).reshape(T, n, d))
+    column = np.where(kind == 0, operand, np.where(kind == 1, n + operand, d - 1))
+    base = np.zeros((n, d))
+    base[:, :n] = F[:, :n]
+    base[:, -1] = F[:, -1]
+    vec = -Bd[:, inputs].T
+    out = affine_compose_gains(base, column, vec, gains)
+    return _affine_product_numpy(_tick_blocks(base, column, vec, gains)) if out is None \
+        else out
+
+
+def _tick_blocks(base: np.ndarray, column: np.ndarray, vec: np.ndarray, gains: np.ndarray
+                 ) -> np.ndarray:
+    """The blocks (T, n, d) of `kernels.affine_compose_gains`: ``base`` plus, gain k in turn,
+    ``gains[:, k] vec[k]`` in column ``column[k]`` (a product, then a sum: the kernel's
+    bits)."""
+    T = gains.shape[0]
+    P = np.broadcast_to(base, (T, *base.shape)).copy()
+    for k in range(gains.shape[1]):
+        P[:, :, column[k]] += gains[:, k, None] * vec[k][None, :]
+    return P
 
 
 def _varying_ticks(F: np.ndarray, table, a: int, b: int, width: int) -> np.ndarray:
@@ -259,11 +263,10 @@ def _groups(problem, table, spline, varying_maps):
     h = 1.0 / table.tick_hz
     groups = latch_groups_of_table(problem, table)
     maps = mean_maps_by_stage(problem, table, h, varying_maps)
-    spreads: dict = {}
     out = []
     if groups and groups[0][0] > 0:          # before the first latch v = 0 (width 0)
         out.append((None, 0, [], [_stage_map(problem.stages[s], table, s, 0, h, spline,
-                                             F=maps[s], spreads=spreads)
+                                             F=maps[s])
                                   for s in range(groups[0][0])],
                     None, None))
     for g, (latch, knots) in enumerate(groups):
@@ -272,8 +275,7 @@ def _groups(problem, table, spline, varying_maps):
         W = np.eye(n, n + width + 1)             # m = W [x; v; 1], from the latch tick
         rows, zeta, blocks = [], [], []
         for s in range(latch, end):
-            P = _stage_map(problem.stages[s], table, s, width, h, spline, F=maps[s],
-                           spreads=spreads)
+            P = _stage_map(problem.stages[s], table, s, width, h, spline, F=maps[s])
             blocks.append(P)
             if s > knots[-1]:
                 continue

@@ -1,5 +1,7 @@
-"""The table layer's compiled kernels (`stospline.table.kernels`): `affine_compose`, the
-composition of a stage's affine tick maps, which every latch re-solve of a spline table uses,
+"""The table layer's compiled kernels (`stospline.table.kernels`): `affine_compose` and
+`affine_compose_gains`, the composition of a stage's affine tick maps (given as blocks, or
+by the law's gains without forming the blocks), which every latch re-solve of a spline table
+uses,
 and `qspline_stage`, the exact evaluation of a fixed-point spline stage and its error, which
 the Q15/Q31 fit runs for every span length it tries.
 
@@ -52,6 +54,38 @@ def test_the_constant_columns_are_carried():
     np.testing.assert_array_equal(kernels.affine_compose(P), [[2.0, 4.0]])
 
 
+@pytest.mark.parametrize("T,n,d,K", [(1, 4, 9, 12), (2, 4, 9, 12), (6000, 4, 9, 14),
+                                     (25, 6, 13, 20), (40, 2, 3, 0)])
+def test_the_kernel_composes_a_law_given_by_its_gains(T, n, d, K):
+    # Blocks base + gains[t, k] vec[k] in column col[k]: composed without forming them, the
+    # same bits as composing the blocks `_tick_blocks` forms (which the numpy path does).
+    rng = np.random.default_rng(T + K)
+    base = rng.normal(size=(n, d)) * 0.1
+    base[:, :n] += 0.99 * np.eye(n)
+    col = rng.integers(0, d, size=K)
+    vec = rng.normal(size=(K, n)) * 0.01
+    g = rng.normal(size=(T, K))
+    got = kernels.affine_compose_gains(base, col, vec, g)
+    blocks = spline_latch._tick_blocks(base, col, vec, g)
+    np.testing.assert_array_equal(got, kernels.affine_compose(blocks))
+    want = spline_latch._affine_product_numpy(blocks)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
+    if T == 1:
+        np.testing.assert_array_equal(got, blocks[0])
+
+
+def test_a_law_given_by_its_gains_is_refused_where_it_does_not_fit():
+    base, vec, g = np.eye(2, 3), np.ones((1, 2)), np.ones((4, 1))
+    with pytest.raises(ValueError, match="not composable"):
+        kernels.affine_compose_gains(base, np.array([3]), vec, g)           # column >= d
+    with pytest.raises(ValueError, match="not composable"):
+        kernels.affine_compose_gains(base, np.array([-1]), vec, g)
+    with pytest.raises(ValueError, match="not composable"):
+        kernels.affine_compose_gains(base, np.array([0]), vec, np.ones((0, 1)))   # no tick
+    with pytest.raises(ValueError, match="for 1 gains"):
+        kernels.affine_compose_gains(base, np.array([0, 1]), vec, g)
+
+
 def test_blocks_it_does_not_take_are_refused():
     with pytest.raises(ValueError, match="not composable"):
         kernels.affine_compose(np.zeros((3, 4, 2)))          # d < n
@@ -94,6 +128,8 @@ def test_a_host_that_cannot_build_it_falls_back_with_a_warning(monkeypatch):
                                   spline_latch._affine_product_numpy(P))
     assert kernels.qspline_stage(0, np.zeros((1, 4), np.int64), np.ones(1, np.int64),
                                  np.zeros((1, 1))) is None
+    assert kernels.affine_compose_gains(np.eye(1, 2), np.zeros(0, np.int64), np.zeros((0, 1)),
+                                        np.zeros((3, 0))) is None
 
 
 def _q_stage(rng, k, T, E, bits=16, shift_range=(1, 31)):

@@ -17,9 +17,33 @@
 #include <stdint.h>
 #include <string.h>
 
+/* Row i of [A | C] o M: out[c] = row[0] M[0][c] + row[1] M[1][c] + ... (left to right), plus
+ * row[c] for the constant columns c >= n; the row's entries `stride` apart.  Column c
+ * innermost: the same sum per entry as looping over j innermost, and the columns' sums
+ * independent, which the compiler vectorises. */
+static void compose_row(const double *row, size_t stride, const double *cur, size_t un,
+                        size_t ud, double *out)
+{
+    size_t j, c;
+
+    for (c = 0; c < ud; ++c) {
+        out[c] = row[0] * cur[c];
+    }
+    for (j = 1; j < un; ++j) {
+        const double r = row[j * stride];
+        const double *m = cur + j * ud;
+        for (c = 0; c < ud; ++c) {
+            out[c] += r * m[c];
+        }
+    }
+    for (c = un; c < ud; ++c) {
+        out[c] += row[c * stride];
+    }
+}
+
 int stsp_affine_compose(int n, int d, long T, const double *P, double *out, double *work)
 {
-    size_t nd, i, j, c, un, ud;
+    size_t nd, i, un, ud;
     long t;
     double *cur, *next, *swap;
 
@@ -35,17 +59,7 @@ int stsp_affine_compose(int n, int d, long T, const double *P, double *out, doub
     for (t = 1; t < T; ++t) {
         const double *B = P + (size_t)t * nd;
         for (i = 0; i < un; ++i) {
-            const double *row = B + i * ud;
-            for (c = 0; c < ud; ++c) {
-                double acc = row[0] * cur[c];
-                for (j = 1; j < un; ++j) {
-                    acc += row[j] * cur[j * ud + c];
-                }
-                if (c >= un) {
-                    acc += row[c];
-                }
-                next[i * ud + c] = acc;
-            }
+            compose_row(B + i * ud, 1, cur, un, ud, next + i * ud);
         }
         swap = cur;
         cur = next;
@@ -63,20 +77,22 @@ int stsp_affine_compose(int n, int d, long T, const double *P, double *out, doub
  * (base = [Ad | 0 | fd], n x d; vec[k] = -Bd[:, input of gain k], n; col[k] its column in
  * [x | v | 1]; g (T x K) the tick's gains), each a product then a sum (no fused multiply-add
  * in ISO C: the bits of the numpy reference, spline_latch._tick_blocks), then composed as
- * stsp_affine_compose does.  work holds 3 n d doubles.  Returns 0, or -1 for dimensions or
+ * stsp_affine_compose does.  work holds 4 n d doubles.  Returns 0, or -1 for dimensions or
  * columns it does not take (n < 1, d < n, T < 1, K < 0, a column outside [0, d)).
  */
 static void tick_block(size_t un, size_t ud, long K, const double *g, const int64_t *col,
-                       const double *vec, const double *base, double *P)
+                       const double *vec, const double *baseT, double *PT)
 {
+    /* The block transposed (PT[c][r] = P[r][c]): a gain's n terms land side by side. */
     long k;
     size_t r;
 
-    memcpy(P, base, un * ud * sizeof(double));
+    memcpy(PT, baseT, un * ud * sizeof(double));
     for (k = 0; k < K; ++k) {
         const double *v = vec + (size_t)k * un;
+        double *column = PT + (size_t)col[k] * un;
         for (r = 0; r < un; ++r) {
-            P[r * ud + (size_t)col[k]] += g[k] * v[r];
+            column[r] += g[k] * v[r];
         }
     }
 }
@@ -85,9 +101,9 @@ int stsp_affine_compose_gains(int n, int d, long T, long K, const double *g, con
                               const double *vec, const double *base, double *out,
                               double *work)
 {
-    size_t nd, i, j, c, un, ud;
+    size_t nd, i, c, un, ud;
     long t, k;
-    double *cur, *next, *P, *swap;
+    double *cur, *next, *PT, *baseT, *swap;
 
     if (n < 1 || d < n || T < 1 || K < 0) {
         return -1;
@@ -102,22 +118,23 @@ int stsp_affine_compose_gains(int n, int d, long T, long K, const double *g, con
     nd = un * ud;
     cur = work;
     next = work + nd;
-    P = work + 2 * nd;
-    tick_block(un, ud, K, g, col, vec, base, cur);
+    PT = work + 2 * nd;
+    baseT = work + 3 * nd;
+    for (i = 0; i < un; ++i) {
+        for (c = 0; c < ud; ++c) {
+            baseT[c * un + i] = base[i * ud + c];
+        }
+    }
+    tick_block(un, ud, K, g, col, vec, baseT, PT);
+    for (i = 0; i < un; ++i) {
+        for (c = 0; c < ud; ++c) {
+            cur[i * ud + c] = PT[c * un + i];
+        }
+    }
     for (t = 1; t < T; ++t) {
-        tick_block(un, ud, K, g + (size_t)t * (size_t)K, col, vec, base, P);
+        tick_block(un, ud, K, g + (size_t)t * (size_t)K, col, vec, baseT, PT);
         for (i = 0; i < un; ++i) {
-            const double *row = P + i * ud;
-            for (c = 0; c < ud; ++c) {
-                double acc = row[0] * cur[c];
-                for (j = 1; j < un; ++j) {
-                    acc += row[j] * cur[j * ud + c];
-                }
-                if (c >= un) {
-                    acc += row[c];
-                }
-                next[i * ud + c] = acc;
-            }
+            compose_row(PT + i, un, cur, un, ud, next + i * ud);
         }
         swap = cur;
         cur = next;

@@ -107,7 +107,7 @@ def affine_compose_gains(base: np.ndarray, col: np.ndarray, vec: np.ndarray, g: 
         raise ValueError(f"columns {col.shape} and vectors {vec.shape} for {K} gains of "
                          f"blocks {base.shape}")
     out = np.empty((n, d))
-    work = np.empty(3 * n * d)
+    work = np.empty(4 * n * d)
     ffi, lib = mod.ffi, mod.lib
     status = lib.stsp_affine_compose_gains(
         n, d, T, K, ffi.from_buffer("double[]", g), ffi.from_buffer("int64_t[]", col),

@@ -25,6 +25,7 @@
  * (|acc| < 6 D^3 2^31 <= 2^61 then holds).
  */
 #include <math.h>
+#include <stddef.h>
 #include <stdint.h>
 
 static int64_t floor_shift(int64_t q, int s)

@@ -5,9 +5,10 @@ error (`qspline_kernel.c`), which `qspline` needs for every span length it tries
 
 Built and cached as the designer's kernels are (`stospline.cache`: the user cache directory,
 ``STOSPLINE_CACHE_DIR`` overrides, keyed by a hash of the source, declarations and flags).
-`affine_compose` and `qspline_stage` return None where the kernels cannot be built (no C
-compiler) or ``STOSPLINE_TABLE_KERNEL=numpy`` asks for the numpy references
-(`spline_latch`'s pairwise products, `qspline._stage_gains`).
+`affine_compose`, `affine_compose_gains` and `qspline_stage` return None where the kernels
+cannot be built (no C compiler) or ``STOSPLINE_TABLE_KERNEL=numpy`` asks for the numpy
+references (`spline_latch`'s pairwise products of `spline_latch._tick_blocks`,
+`qspline._stage_gains`).
 """
 from __future__ import annotations
 
@@ -65,8 +66,8 @@ def _kernel():
                 _loaded = load_module(build_kernel())
             except KernelBuildError as exc:
                 _failed = True
-                warnings.warn(f"{exc}; the table layer runs its numpy references (slower)", RuntimeWarning,
-                              stacklevel=3)
+                warnings.warn(f"{exc}; the table layer runs its numpy references (slower)",
+                              RuntimeWarning, stacklevel=3)
     return _loaded
 
 

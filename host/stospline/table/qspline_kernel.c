@@ -16,8 +16,8 @@
  * (qspline._stage_gains) and of the firmware.  Caller-owned arrays, nothing allocated.
  *
  * allowed (E doubles, or NULL): stop after the first entry whose err exceeds allowed[e] (or
- * either is NaN) and return 1 (G and err of the later entries are then not computed): a span length the fit
- * tries in vain is given up at its first entry that misses.
+ * either is NaN) and return 1 (G and err of the later entries are then not computed): a span
+ * length the fit tries in vain is given up at its first entry that misses.
  *
  * Returns 0 (every value within allowed, or allowed NULL), 1 (a miss), or -1 for arguments it
  * does not take: k outside [0, 9], T < 1, E < 0, too few coefficients (nb < sigma_max + 4),

@@ -41,9 +41,20 @@ static void compose_row(const double *row, size_t stride, const double *cur, siz
     }
 }
 
+/* next = B o cur, B's row i at rows + i * row_step, its entries entry_step apart. */
+static void apply_block(const double *rows, size_t row_step, size_t entry_step,
+                        const double *cur, double *next, size_t un, size_t ud)
+{
+    size_t i;
+
+    for (i = 0; i < un; ++i) {
+        compose_row(rows + i * row_step, entry_step, cur, un, ud, next + i * ud);
+    }
+}
+
 int stsp_affine_compose(int n, int d, long T, const double *P, double *out, double *work)
 {
-    size_t nd, i, un, ud;
+    size_t nd, un, ud;
     long t;
     double *cur, *next, *swap;
 
@@ -57,10 +68,7 @@ int stsp_affine_compose(int n, int d, long T, const double *P, double *out, doub
     next = work + nd;
     memcpy(cur, P, nd * sizeof(double));
     for (t = 1; t < T; ++t) {
-        const double *B = P + (size_t)t * nd;
-        for (i = 0; i < un; ++i) {
-            compose_row(B + i * ud, 1, cur, un, ud, next + i * ud);
-        }
+        apply_block(P + (size_t)t * nd, ud, 1, cur, next, un, ud);
         swap = cur;
         cur = next;
         next = swap;
@@ -133,9 +141,7 @@ int stsp_affine_compose_gains(int n, int d, long T, long K, const double *g, con
     }
     for (t = 1; t < T; ++t) {
         tick_block(un, ud, K, g + (size_t)t * (size_t)K, col, vec, baseT, PT);
-        for (i = 0; i < un; ++i) {
-            compose_row(PT + i, un, cur, un, ud, next + i * ud);
-        }
+        apply_block(PT, 1, un, cur, next, un, ud);
         swap = cur;
         cur = next;
         next = swap;

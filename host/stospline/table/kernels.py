@@ -71,6 +71,12 @@ def _kernel():
     return _loaded
 
 
+def _buffers(ffi, *arrays: np.ndarray) -> list:
+    """C pointers to contiguous float64 / int64 arrays, for one kernel call."""
+    return [ffi.from_buffer("int64_t[]" if a.dtype == np.int64 else "double[]", a)
+            for a in arrays]
+
+
 def affine_compose(P: np.ndarray) -> np.ndarray | None:
     """``P[-1] o ... o P[0]`` of the affine blocks `P` (T, n, d) (`compose_kernel.c`), or None
     where the kernel is not available."""
@@ -81,9 +87,7 @@ def affine_compose(P: np.ndarray) -> np.ndarray | None:
     P = np.ascontiguousarray(P, dtype=np.float64)
     out = np.empty((n, d))
     work = np.empty(2 * n * d)
-    ffi, lib = mod.ffi, mod.lib
-    status = lib.stsp_affine_compose(n, d, T, *(ffi.from_buffer("double[]", a)
-                                                for a in (P, out, work)))
+    status = mod.lib.stsp_affine_compose(n, d, T, *_buffers(mod.ffi, P, out, work))
     if status != 0:
         raise ValueError(f"affine blocks of shape {P.shape}: not composable")
     return out
@@ -109,11 +113,8 @@ def affine_compose_gains(base: np.ndarray, col: np.ndarray, vec: np.ndarray, g: 
                          f"blocks {base.shape}")
     out = np.empty((n, d))
     work = np.empty(4 * n * d)
-    ffi, lib = mod.ffi, mod.lib
-    status = lib.stsp_affine_compose_gains(
-        n, d, T, K, ffi.from_buffer("double[]", g), ffi.from_buffer("int64_t[]", col),
-        ffi.from_buffer("double[]", vec), ffi.from_buffer("double[]", base),
-        ffi.from_buffer("double[]", out), ffi.from_buffer("double[]", work))
+    status = mod.lib.stsp_affine_compose_gains(
+        n, d, T, K, *_buffers(mod.ffi, g, col, vec, base, out, work))
     if status != 0:
         raise ValueError(f"{T} ticks of blocks {base.shape} with gain columns {col.tolist()}: "
                          f"not composable")
@@ -140,14 +141,12 @@ def qspline_stage(k: int, C: np.ndarray, shift: np.ndarray, YT: np.ndarray,
         raise ValueError(f"coefficients {C.shape} and shifts {shift.shape} for {E} entries")
     G = np.empty((E, T), dtype=np.int64)
     err = np.empty(E)
-    ffi, lib = mod.ffi, mod.lib
+    ffi = mod.ffi
     if allowed is not None:
         allowed = np.ascontiguousarray(np.broadcast_to(allowed, (E,)), dtype=np.float64)
-    limit = ffi.NULL if allowed is None else ffi.from_buffer("double[]", allowed)
-    status = lib.stsp_qspline_stage(
-        int(k), T, E, C.shape[1], ffi.from_buffer("int64_t[]", C),
-        ffi.from_buffer("int64_t[]", shift), ffi.from_buffer("double[]", YT), limit,
-        ffi.from_buffer("int64_t[]", G), ffi.from_buffer("double[]", err))
+    limit = ffi.NULL if allowed is None else _buffers(ffi, allowed)[0]
+    c, sh, y, g, e = _buffers(ffi, C, shift, YT, G, err)
+    status = mod.lib.stsp_qspline_stage(int(k), T, E, C.shape[1], c, sh, y, limit, g, e)
     if status < 0:
         raise ValueError(f"a fixed-point spline stage of {T} ticks, spans of 2^{k}, "
                          f"coefficients {C.shape}: not evaluable")

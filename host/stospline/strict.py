@@ -31,8 +31,21 @@ __all__ = ["dumps", "first_nonfinite", "culprit", "check_table_finite", "check_s
 
 def dumps(obj) -> str:
     """``json.dumps(obj, indent=2, sort_keys=True)`` that raises instead of writing NaN or
-    Infinity (which ``json.dumps`` writes by default, and strict parsers reject)."""
-    return json.dumps(obj, indent=2, sort_keys=True, allow_nan=False)
+    Infinity (which ``json.dumps`` writes by default, and strict parsers reject), and writes
+    every zero as ``0.0``: the sign of a computed zero depends on the machine's round-off
+    (`stospline.table.format.positive_zeros`), and ``-0.0`` would make the bytes do too."""
+    return json.dumps(_positive_zeros(obj), indent=2, sort_keys=True, allow_nan=False)
+
+
+def _positive_zeros(obj):
+    """`obj` (nested dicts, lists, tuples) with every float ``-0.0`` as ``0.0``."""
+    if isinstance(obj, float):
+        return obj + 0.0
+    if isinstance(obj, dict):
+        return {key: _positive_zeros(val) for key, val in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_positive_zeros(val) for val in obj]
+    return obj
 
 
 def first_nonfinite(obj, path: str = ""):

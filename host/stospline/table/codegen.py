@@ -26,8 +26,8 @@ def _f32_literal(x: np.float32) -> str:
     x = np.float32(x)
     if not np.isfinite(x):   # `inff`/`nanf` do not compile; the pipeline refuses these earlier
         raise ValueError(f"a table entry is {x}: generated C holds finite numbers only")
-    s = np.format_float_scientific(x, unique=True, trim="0", exp_digits=2)
-    return f"{s}f"
+    s = np.format_float_scientific(x + np.float32(0), unique=True, trim="0", exp_digits=2)
+    return f"{s}f"   # + 0: a zero is +0.0 whatever the sign of its round-off (positive_zeros)
 
 
 def _f64_literal(v) -> str:
@@ -35,7 +35,7 @@ def _f64_literal(v) -> str:
     v = float(v)
     if not np.isfinite(v):
         raise ValueError(f"a table entry is {v}: generated C holds finite numbers only")
-    return repr(v)
+    return repr(v + 0.0)
 
 
 def _array(ctype: str, name: str, values: np.ndarray, fmt, dims: str) -> str:

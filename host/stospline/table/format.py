@@ -32,11 +32,23 @@ from stospline import limits
 from stospline.firmware_interface import ELEMENT_BYTES, FORMAT_VERSION, MAGIC, SCALAR_KIND
 
 __all__ = ["GainTable", "TableShape", "BandQP", "build_table", "table_of", "TickGains",
-           "table_crc32", "FORMAT_VERSION", "MAGIC", "SCALAR_FLOAT32", "F32_MAX", "BANDQP_MAX"]
+           "table_crc32", "positive_zeros", "FORMAT_VERSION", "MAGIC", "SCALAR_FLOAT32", "F32_MAX", "BANDQP_MAX"]
 
 BANDQP_MAX = limits.BANDQP_MAX  # rows the firmware's band solver takes (3^8 active sets)
 SCALAR_FLOAT32 = SCALAR_KIND["float32"]
 F32_MAX = float(np.finfo(np.float32).max)  # the firmware's "unlimited" (FLT_MAX)
+
+
+def positive_zeros(a) -> np.ndarray:
+    """`a` with every zero stored as +0.0, in its own floating dtype.
+
+    Whether a computed zero comes out as +0.0 or -0.0 depends on the sign of round-off that
+    the value no longer shows: the BLAS kernel OpenBLAS picks for the CPU, the thread count,
+    the summation order. The sign is part of the bytes (the C literal, the CRC), so every
+    float a table stores is written with +0.0. Adding +0.0 is exact for every other value
+    (x + 0 = x in round-to-nearest) and maps -0.0 to +0.0 (IEEE 754, 6.3)."""
+    a = np.asarray(a)
+    return a + a.dtype.type(0) if a.dtype.kind == "f" else a
 
 
 @dataclass(frozen=True)
@@ -55,7 +67,8 @@ class BandQP:
 
     def __post_init__(self):
         for name in ("Nt", "mt", "W", "lo", "hi"):
-            object.__setattr__(self, name, np.ascontiguousarray(getattr(self, name), float))
+            object.__setattr__(self, name,
+                               positive_zeros(np.ascontiguousarray(getattr(self, name), float)))
         q = self.mt.shape[0]
         if not 1 <= q <= BANDQP_MAX:
             raise ValueError(f"the firmware's band solver takes 1..{BANDQP_MAX} rows, not {q}")
@@ -131,11 +144,13 @@ class GainTable(TableShape):
     restored: dict | None = field(default=None, compare=False)
 
     def __post_init__(self):
+        for name in ("K", "k0", "L", "Lambda", "lambda0"):
+            object.__setattr__(self, name, positive_zeros(getattr(self, name)))
         m = self.K.shape[1]
         for name, default in (("u_min", -F32_MAX), ("u_max", F32_MAX), ("u_hold", 0.0)):
             val = getattr(self, name)
             arr = (np.full(m, default, dtype=np.float32) if val is None
-                   else np.asarray(val, dtype=np.float32).reshape(-1))
+                   else positive_zeros(np.asarray(val, dtype=np.float32).reshape(-1)))
             if arr.shape != (m,):
                 raise ValueError(f"{name} must have one entry per input ({m}), not {arr.shape}")
             if not np.all(np.isfinite(arr)):
@@ -311,7 +326,7 @@ def table_crc32(table: GainTable) -> int:
     arrays = [table.K, table.k0, table.L, table.Lambda, table.lambda0, table.u_min, table.u_max,
               table.u_hold]
     if arith == "float32":
-        parts += [np.asarray(a, "<f4").tobytes() for a in arrays]
+        parts += [positive_zeros(np.asarray(a, "<f4")).tobytes() for a in arrays]
     else:
         dtype = f"<i{ELEMENT_BYTES[arith]}"
         parts += [np.asarray(a).astype(dtype).tobytes() for a in arrays]
@@ -323,7 +338,8 @@ def table_crc32(table: GainTable) -> int:
         parts += _spline_crc_parts(table.spline)
     if b is not None:
         parts.append(struct.pack("<2I", b.q, b.Nt.shape[1]))
-        parts += [np.asarray(a, "<f8").tobytes() for a in (b.Nt, b.mt, b.W, b.lo, b.hi)]
+        parts += [positive_zeros(np.asarray(a, "<f8")).tobytes()
+                  for a in (b.Nt, b.mt, b.W, b.lo, b.hi)]
     parts.append(bytes.fromhex(table.problem_sha256 or "0" * 64))
     crc = 0
     for part in parts:
@@ -337,7 +353,7 @@ def _spline_crc_parts(sp) -> list[bytes]:
     u32, span_log2, row_start, col, shift, coef_start as u32 each, coef as little-endian int16
     or int32, after the scale exponents)."""
     u32 = lambda a: np.asarray(a).astype("<u4").tobytes()  # noqa: E731
-    f32 = lambda a: np.asarray(a, "<f4").tobytes()         # noqa: E731
+    f32 = lambda a: positive_zeros(np.asarray(a, "<f4")).tobytes()  # noqa: E731
     if hasattr(sp, "span_log2"):
         coef = np.asarray(sp.coef)
         return [struct.pack("<2I", sp.col.size, coef.size), u32(sp.span_log2),

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from stospline.errors import DesignError
+from stospline.table.format import positive_zeros
 
 __all__ = ["SplineGains", "SplineBudgetError", "evaluate", "command", "fit_spline",
            "max_relative_error",
@@ -82,7 +83,8 @@ class SplineGains:
 
     def __post_init__(self):
         for name, dtype in self._DTYPES.items():
-            object.__setattr__(self, name, np.ascontiguousarray(getattr(self, name), dtype))
+            object.__setattr__(self, name,
+                               positive_zeros(np.ascontiguousarray(getattr(self, name), dtype)))
         for name in ("nu", "nx", "n_latch"):
             object.__setattr__(self, name, int(getattr(self, name)))
         self._check()
@@ -564,7 +566,7 @@ def _coefficients(C: np.ndarray, peak: np.ndarray) -> np.ndarray:
     zero at the plan's end) keeps no digits that the last bits of the gains reach: rounded
     to its own float32 neighbours, its value would move with the design's round-off."""
     Q = np.ldexp(1.0, np.frexp(peak)[1] - 24)[:, None]
-    return (np.rint(C / Q) * Q).astype(np.float32)
+    return positive_zeros((np.rint(C / Q) * Q).astype(np.float32))
 
 
 def _fit_stage(YT: np.ndarray, tolerance: float, max_spans: int, initial_spans: int, s: int,

@@ -9,7 +9,8 @@ not reach (docs/guide/firmware.md, "Reproducible tables"). These tests regenerat
 * every double the design and the oracle hand on is multiplied by ``1 + r``, ``|r|`` drawn
   log-uniformly in [1e-15, 1e-14] (5 to 45 ulps), with a random sign (seeded);
 * the numpy reference tick loop instead of the compiled one (another summation order);
-* one BLAS thread instead of the default (a subprocess: OpenBLAS reads it at load time).
+* other CPUs' OpenBLAS kernels (forced with ``OPENBLAS_CORETYPE``) and one or two BLAS
+  threads (a subprocess each: OpenBLAS reads both at load time).
 
 `test_no_table_entry_is_near_a_rounding_boundary` makes the first one a proof for the tables:
 no entry of a shipped table is within reach of such a perturbation of its rounding boundary.
@@ -112,14 +113,57 @@ def test_numpy_tick_loop_changes_no_byte(tmp_path, monkeypatch):
     _assert_same_as_gains(tmp_path)
 
 
-def test_one_blas_thread_changes_no_byte(tmp_path):
+# OpenBLAS picks its kernels for the CPU it runs on; OPENBLAS_CORETYPE forces another one's,
+# so this machine computes as those would (each pair: the kernel asked for, the one OpenBLAS
+# reports, the CPU flag it needs). Zen runs Haswell's kernels; Nehalem's are SSE only.
+BLAS_KERNELS = [("Haswell", "Haswell", "avx2", 1), ("SkylakeX", "SkylakeX", "avx512f", 2),
+                ("Sandybridge", "Sandybridge", "avx", 2), ("Zen", "Haswell", "avx2", 1),
+                ("Nehalem", "Nehalem", "sse4_2", 2)]
+_CORENAMES = """
+import ctypes, sys
+names = []
+for line in open("/proc/self/maps"):
+    path = line.split()[-1]
+    if "openblas" in path and path.endswith(".so") and path not in names:
+        names.append(path)
+for path in names:
+    lib = ctypes.CDLL(path)
+    for sym in ("scipy_openblas_get_corename64_", "scipy_openblas_get_corename",
+                "openblas_get_corename64_", "openblas_get_corename"):
+        if hasattr(lib, sym):
+            fn = getattr(lib, sym); fn.restype = ctypes.c_char_p
+            print("corename", fn().decode()); break
+"""
+
+
+def _cpu_flags() -> set[str]:
+    try:
+        with open("/proc/cpuinfo") as f:
+            return next((set(line.split(":")[1].split()) for line in f
+                         if line.startswith("flags")), set())
+    except OSError:
+        return set()
+
+
+@pytest.mark.parametrize("coretype,corename,flag,threads", BLAS_KERNELS,
+                         ids=[f"{k[0]}-{k[3]}thread" for k in BLAS_KERNELS])
+def test_other_blas_kernels_change_no_byte(tmp_path, coretype, corename, flag, threads):
+    """gains/ as another CPU's OpenBLAS kernels and thread count compute it, in a subprocess
+    (OpenBLAS reads both when it loads), which reports the kernels it ran so that a kernel
+    silently not taken cannot pass."""
+    if flag not in _cpu_flags():
+        pytest.skip(f"this CPU lacks {flag}: it cannot run OpenBLAS's {coretype} kernels")
     code = ("import sys; from pathlib import Path; sys.path[:0] = sys.argv[1:3]; "
-            "import test_gains_regenerate_elsewhere as t; t._regenerate(Path(sys.argv[3]))")
-    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+            "import test_gains_regenerate_elsewhere as t; t._regenerate(Path(sys.argv[3])); "
+            "exec(t._CORENAMES)")
+    env = {**os.environ, "OPENBLAS_CORETYPE": coretype, "OPENBLAS_NUM_THREADS": str(threads),
+           "OMP_NUM_THREADS": str(threads)}
     here = os.path.dirname(os.path.abspath(__file__))   # this file's folder and conftest.py's
     proc = subprocess.run([sys.executable, "-c", code, here, os.path.dirname(here), str(tmp_path)],
-                          env=env, capture_output=True, text=True, timeout=600)
+                          env=env, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr
+    ran = [line.split()[1] for line in proc.stdout.splitlines() if line.startswith("corename ")]
+    assert ran and set(ran) == {corename}, f"OpenBLAS ran {ran}, not {corename}"
     _assert_same_as_gains(tmp_path)
 
 

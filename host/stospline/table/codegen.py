@@ -10,6 +10,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from stospline.table import kernels
 from stospline.table.format import FORMAT_VERSION, MAGIC, SCALAR_FLOAT32, GainTable, table_crc32
 
 __all__ = ["generate_c", "GENERATOR"]
@@ -40,12 +41,20 @@ def _f64_literal(v) -> str:
 
 def _array(ctype: str, name: str, values: np.ndarray, fmt, dims: str) -> str:
     flat = np.asarray(values).ravel()
-    lines = []
-    for i in range(0, len(flat), _PER_LINE):
-        lines.append("    " + ", ".join(fmt(v) for v in flat[i:i + _PER_LINE]) + ",")
-    body = "\n".join(lines) if lines else "    0"
+    body = _f32_body(flat) if fmt is _f32_literal else None
+    if body is None:
+        lines = []
+        for i in range(0, len(flat), _PER_LINE):
+            lines.append("    " + ", ".join(fmt(v) for v in flat[i:i + _PER_LINE]) + ",")
+        body = "\n".join(lines)
     count = max(len(flat), 1)
-    return f"/* {dims} */\nstatic const {ctype} {name}[{count}] = {{\n{body}\n}};\n"
+    return f"/* {dims} */\nstatic const {ctype} {name}[{count}] = {{\n{body or '    0'}\n}};\n"
+
+
+def _f32_body(flat: np.ndarray) -> str | None:
+    """The lines of float32 literals from the table kernel (`kernels.f32_array_text`: the
+    same bytes, written in C), or None where it is not built."""
+    return kernels.f32_array_text(flat, _PER_LINE)
 
 
 def _sha_initializer(sha: str) -> str:

@@ -1,14 +1,15 @@
 """Compiled host kernels of the table layer (C, loaded through cffi): the composition of a
 stage's affine tick maps (`compose_kernel.c`), which `spline_latch` needs for every latch
-re-solve of a spline table, and the exact evaluation of a fixed-point spline stage with its
-error (`qspline_kernel.c`), which `qspline` needs for every span length it tries.
+re-solve of a spline table, the exact evaluation of a fixed-point spline stage with its
+error (`qspline_kernel.c`), which `qspline` needs for every span length it tries, and the
+shortest float32 literals of a table's C text (`literal_kernel.c`, `codegen`).
 
 Built and cached as the designer's kernels are (`stospline.cache`: the user cache directory,
 ``STOSPLINE_CACHE_DIR`` overrides, keyed by a hash of the source, declarations and flags).
-`affine_compose`, `affine_compose_gains` and `qspline_stage` return None where the kernels
-cannot be built (no C compiler) or ``STOSPLINE_TABLE_KERNEL=numpy`` asks for the numpy
-references (`spline_latch`'s pairwise products of `spline_latch._tick_blocks`,
-`qspline._stage_gains`).
+`affine_compose`, `affine_compose_gains`, `qspline_stage` and `f32_array_text` return None
+where the kernels cannot be built (no C compiler) or ``STOSPLINE_TABLE_KERNEL=numpy`` asks for
+the numpy references (`spline_latch`'s pairwise products of `spline_latch._tick_blocks`,
+`qspline._stage_gains`, numpy's `format_float_scientific`).
 """
 from __future__ import annotations
 
@@ -21,10 +22,11 @@ import numpy as np
 
 from stospline.cache import build_source_module, load_module
 
-__all__ = ["affine_compose", "affine_compose_gains", "qspline_stage", "build_kernel",
-           "KernelBuildError"]
+__all__ = ["affine_compose", "affine_compose_gains", "qspline_stage", "f32_array_text",
+           "build_kernel", "KernelBuildError"]
 
-_SOURCES = [Path(__file__).with_name(f) for f in ("compose_kernel.c", "qspline_kernel.c")]
+_SOURCES = [Path(__file__).with_name(f)
+            for f in ("compose_kernel.c", "qspline_kernel.c", "literal_kernel.c")]
 _CDEF = """
 int stsp_affine_compose(int n, int d, long T, const double *P, double *out, double *work);
 int stsp_affine_compose_gains(int n, int d, long T, long K, const double *g, const int64_t *col,
@@ -32,7 +34,10 @@ int stsp_affine_compose_gains(int n, int d, long T, long K, const double *g, con
                               double *work);
 int stsp_qspline_stage(int k, long T, long E, long nb, const int64_t *C, const int64_t *shift,
                        const double *YT, const double *allowed, int64_t *G, double *err);
+long stsp_f32_array_text(long N, const float *x, long per_line, char *out, long cap,
+                         long *flagged, long *n_flagged);
 """
+_LITERAL_SLOT = 16   # literal_kernel.c's STSP_LITERAL_SLOT
 _CFLAGS = ["-std=c99", "-O3", "-Wall", "-Wextra"]
 _loaded = None
 _failed = False
@@ -151,3 +156,38 @@ def qspline_stage(k: int, C: np.ndarray, shift: np.ndarray, YT: np.ndarray,
         raise ValueError(f"a fixed-point spline stage of {T} ticks, spans of 2^{k}, "
                          f"coefficients {C.shape}: not evaluable")
     return (G.T, err) if status == 0 else False
+
+
+def f32_array_text(values: np.ndarray, per_line: int) -> str | None:
+    """The body of a C array of float32 `values`: lines of `per_line` literals
+    (``"    -1.2573022e-01f, 1.0e+00f,"``), each the shortest that reads back, as numpy's
+    ``format_float_scientific(unique=True, trim="0", exp_digits=2)`` writes it
+    (`literal_kernel.c`; the values it cannot vouch for are written by numpy here). None
+    where the kernel is not available; ValueError for a non-finite value."""
+    mod = _kernel()
+    if mod is None:
+        return None
+    x = np.ascontiguousarray(np.ravel(values), dtype=np.float32)
+    if x.size == 0:
+        return ""
+    cap = x.size * (_LITERAL_SLOT + 2) + 4 * (x.size // per_line + 1) + 8
+    out = np.empty(cap, dtype=np.uint8)
+    flagged = np.empty(x.size, dtype=np.dtype("l"))     # C long
+    n_flagged = np.zeros(1, dtype=np.dtype("l"))
+    ffi = mod.ffi
+    n = mod.lib.stsp_f32_array_text(x.size, ffi.from_buffer("float[]", x), per_line,
+                                    ffi.from_buffer("char[]", out), cap,
+                                    ffi.from_buffer("long[]", flagged),
+                                    ffi.from_buffer("long[]", n_flagged))
+    if n < 0:
+        bad = x[~np.isfinite(x)]
+        if bad.size:
+            raise ValueError(f"a table entry is {bad[0]}: generated C holds finite numbers only")
+        raise ValueError(f"{x.size} literals, {per_line} a line: not written")
+    text = out[:n].tobytes().decode("ascii")
+    if not n_flagged[0]:
+        return text
+    pieces = text.split("?")
+    literals = [np.format_float_scientific(v, unique=True, trim="0", exp_digits=2) + "f"
+                for v in x[flagged[:n_flagged[0]]] + np.float32(0)]
+    return "".join(p + lit for p, lit in zip(pieces, literals)) + pieces[-1]

@@ -65,6 +65,7 @@ def test_wheel_and_sdist_carry_the_firmware(wheel):
         assert "stospline/design/tick_kernel.c" in names and "stospline/sim/plant.c" in names
         assert "stospline/table/compose_kernel.c" in names
         assert "stospline/table/qspline_kernel.c" in names
+        assert "stospline/table/literal_kernel.c" in names
     with tarfile.open(sdist) as tar:
         members = [m.split("stospline/_firmware/", 1)[1] for m in tar.getnames()
                    if "stospline/_firmware/" in m and m.endswith((".c", ".h"))]

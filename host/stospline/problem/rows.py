@@ -28,8 +28,8 @@ def check_no_subnormal(M: np.ndarray, path: str) -> None:
         at = "".join(f"[{int(k)}]" for k in bad[0])
         v = float(M[tuple(bad[0])])
         raise ProblemError(f"{path}{at}", f"{v:g} is subnormal (below {TINY:.4g}, the smallest "
-                                          f"normal double): it has lost precision; scale its "
-                                          f"row up")
+                                          f"normal double): it has lost precision; write 0 or "
+                                          f"scale its row up")
 
 
 def _row_exponents(C: np.ndarray) -> np.ndarray:

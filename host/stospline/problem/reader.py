@@ -26,6 +26,7 @@ from stospline.problem.model import (Constraint, Knot, Penalty, Problem, Series,
                                      TickRegion)
 from stospline.problem.names import check_name
 from stospline.problem.regions import merge_constraints
+from stospline.problem.rows import check_no_subnormal, normalise_rows
 
 __all__ = ["load_problem", "parse_problem"]
 
@@ -46,6 +47,7 @@ _C_KEYWORDS = frozenset(
 _U32_MAX = 2**32 - 1  # the C table stores tick counts and the tick rate as uint32_t
 _F32_MAX = float(np.finfo(np.float32).max)  # the table stores limits as float32 (FLT_MAX)
 _N_IS_LEN_X0 = " (n, the length of x0)"
+_OUTPUT_SCALE = (1e-150, 1e150)   # a corridor output row's largest coefficient
 _MAX_GRID_POINTS = 100_000  # [[regions]] band points over all regions (parse-time work bound)
 # [[corridors]]: outputs and walls the harness checks per path and tick (its C keeps y on the
 # stack); enough for any corridor drawn by hand, and a bound on the per-tick work.
@@ -459,7 +461,8 @@ def _parse_knot(raw: Any, path: str, n: int) -> Knot:
                     raise ProblemError(_join(cp, key), "give either value (an equality) or "
                                                        "lower and upper (a band), not both")
             value = _vector(con["value"], _join(cp, "value"), C.shape[0], rows)
-            constraint = Constraint(C, value)
+            C, b = normalise_rows(C, _join(cp, "C"), {_join(cp, "value"): value})
+            constraint = Constraint(C, b[_join(cp, "value")])
         else:
             for key in ("lower", "upper"):
                 if key not in con:
@@ -472,6 +475,8 @@ def _parse_knot(raw: Any, path: str, n: int) -> Knot:
                 i = int(bad[0])
                 raise ProblemError(_join(cp, "lower"), f"row {i}: lower {lo[i]:g} > upper "
                                                        f"{hi[i]:g}; the band is empty")
+            C, lo, hi = _normalised_band(C, _join(cp, "C"), _join(cp, "lower"), lo,
+                                         _join(cp, "upper"), hi)
             constraint = Constraint(C, None, lo, hi)
     return Knot(t, penalty, constraint)
 
@@ -663,6 +668,8 @@ def _parse_regions(raw: Any, n: int, t0: float, t_end: float, tick_hz: int,
         hi = _vector(reg["upper"], _join(rp, "upper"), C.shape[0], " (one entry per row of C)")
         if np.any(lo > hi):
             raise ProblemError(_join(rp, "lower"), "lower > upper: the band is empty")
+        C, lo, hi = _normalised_band(C, _join(rp, "C"), _join(rp, "lower"), lo,
+                                     _join(rp, "upper"), hi)
         between = reg.get("between_ticks", False)
         if not isinstance(between, bool):
             raise ProblemError(_join(rp, "between_ticks"), f"must be true or false, got "
@@ -688,6 +695,29 @@ def _parse_regions(raw: Any, n: int, t0: float, t_end: float, tick_hz: int,
     return out
 
 
+def _check_output_scale(C: np.ndarray, path: str) -> None:
+    """A corridor's outputs ``y = C x`` are measured in the file's units (walls, reports and
+    plots use them), so their rows are not rescaled: a subnormal coefficient, or a row whose
+    largest coefficient is outside [1e-150, 1e150] (beyond which the outputs' covariance
+    ``C P C'`` under- or overflows), is refused."""
+    check_no_subnormal(C, path)
+    top = np.abs(C).max(axis=1)
+    bad = np.flatnonzero((top > 0) & ((top < _OUTPUT_SCALE[0]) | (top > _OUTPUT_SCALE[1])))
+    if bad.size:
+        i = int(bad[0])
+        raise ProblemError(f"{path}[{i}]", f"has largest coefficient {top[i]:g}, outside "
+                                           f"[{_OUTPUT_SCALE[0]:g}, {_OUTPUT_SCALE[1]:g}] (the "
+                                           f"outputs' covariance would under- or overflow); "
+                                           f"measure the output in other units")
+
+
+def _normalised_band(C, c_path, lo_path, lo, hi_path, hi):
+    """``(C, lower, upper)`` with every row scaled to a largest coefficient in [1, 2)
+    (`stospline.problem.rows`)."""
+    C, b = normalise_rows(C, c_path, {lo_path: lo, hi_path: hi})
+    return C, b[lo_path], b[hi_path]
+
+
 def _parse_corridors(raw: Any, n: int, t0: float, t_end: float,
                      tick_hz: int) -> tuple[Corridor, ...]:
     """``[[corridors]]``: ``C x(t)`` inside a union of convex polygons ``{A y <= b}`` at every
@@ -711,6 +741,7 @@ def _parse_corridors(raw: Any, n: int, t0: float, t_end: float,
                                                    f"corridor is checked at the ticks")
         C = _matrix(cor["C"], _join(cp, "C"), (None, n), (" (one row per output)",
                                                           _N_IS_LEN_X0))
+        _check_output_scale(C, _join(cp, "C"))
         p = C.shape[0]
         if p > _MAX_CORRIDOR_OUTPUTS:
             raise ProblemError(_join(cp, "C"), f"has {p} rows; at most {_MAX_CORRIDOR_OUTPUTS} "
@@ -731,6 +762,8 @@ def _parse_corridors(raw: Any, n: int, t0: float, t_end: float,
             if zero.size:
                 raise ProblemError(f"{kp}.A[{int(zero[0])}]", "is all zeros: a wall needs a "
                                                               "direction")
+            A, scaled = normalise_rows(A, _join(kp, "A"), {_join(kp, "b"): bv})
+            bv = scaled[_join(kp, "b")]
             walls += A.shape[0]
             if walls > _MAX_CORRIDOR_WALLS:
                 raise ProblemError(_join(kp, "A"), f"gives {walls} walls (rows of A) in the "

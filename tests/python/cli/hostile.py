@@ -324,6 +324,47 @@ MUTATIONS: dict[str, Callable] = {
 }
 
 
+# ---------------------------------------------------------------------------------------
+# Row scale: a constraint row ``lower <= c'x <= upper`` (knot constraints, regions, corridor
+# walls) means the same for any positive multiple of c and its bounds. Scaled rows must give
+# the same design, or, where the scaled numbers cannot be held to full precision (subnormal,
+# a bound beyond the range of doubles beside its row), a clean refusal naming the key.
+
+ROW_SCALES = [10.0 ** k for k in (-320, -307, -300, -150, -12, -9, -6, 6, 9, 12, 150, 300, 307)]
+
+
+def _scale_row(row: list, bounds: list, i: int, f: float) -> None:
+    row[:] = [f * c for c in row]
+    for b in bounds:
+        b[i] *= f
+
+
+def scale_rows(doc: dict, factor: Callable[[], float]) -> None:
+    """Every constraint, region and corridor-wall row of `doc` with its bounds multiplied by
+    ``factor()`` (called once per row), in place."""
+    for kn in doc.get("knots", []):
+        con = kn.get("constraint") if isinstance(kn, dict) else None
+        if isinstance(con, dict):
+            bounds = [con[k] for k in ("value", "lower", "upper") if k in con]
+            for i, row in enumerate(con.get("C", [])):
+                _scale_row(row, bounds, i, factor())
+    for reg in doc.get("regions", []):
+        for i, row in enumerate(reg["C"]):
+            _scale_row(row, [reg["lower"], reg["upper"]], i, factor())
+    for cor in doc.get("corridors", []):
+        for poly in cor["polygons"]:
+            for i, row in enumerate(poly["A"]):
+                _scale_row(row, [poly["b"]], i, factor())
+
+
+def m_row_scale(doc, draw):
+    """Constraint, region and wall rows scaled by 10^k, |k| up to 320 (one factor per row)."""
+    scale_rows(doc, lambda: draw(st.sampled_from(ROW_SCALES)))
+
+
+MUTATIONS["row_scale"] = m_row_scale
+
+
 @st.composite
 def problem_cases(draw):
     """(classes, base name, TOML text): a base problem with 1-2 mutations applied."""

@@ -31,6 +31,7 @@ import sys
 import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, Phase, given, settings
 
@@ -263,6 +264,31 @@ def test_mutated_problem_files_broke_no_contract():
         "\n\n".join(FAILURES)
     if EXAMPLES_N >= 100:
         assert set(CLASS_COUNTS) == set(MUTATIONS), "a mutation class was never generated"
+
+
+@pytest.mark.parametrize("base", sorted(BASES))
+def test_scaled_rows_give_the_same_design_or_a_refusal(base, tmp_path, firmware_libs):
+    """The `row_scale` class with its verdict checked: every constraint, region and wall row
+    of a base scaled by its own 10^k (seeded) designs the same J0 to 1e-9, or, beyond
+    |k| = 12, is refused cleanly (the contract) when a scaled number leaves the normal
+    doubles."""
+    from hostile import ROW_SCALES, scale_rows
+    rng = np.random.default_rng(2024)
+    runs = []
+    for trial, pool in enumerate([[1.0], [10.0 ** k for k in range(-12, 13)], ROW_SCALES]):
+        doc = json.loads(json.dumps(BASES[base]))
+        scale_rows(doc, lambda: float(rng.choice(pool)))
+        cwd = tmp_path / str(trial)
+        cwd.mkdir()
+        (cwd / "p.toml").write_text(to_toml(doc))
+        rc = check_contract(["design", "p.toml", "--out", "out"], cwd, firmware_libs,
+                            f"{base} row scale {trial}", out_dir=cwd / "out")
+        assert rc == 0 or trial == 2, f"{base}: rows scaled by 10^k, |k| <= 12, refused"
+        runs.append(json.loads(next((cwd / "out").glob("*.json")).read_text())
+                    if rc == 0 else None)
+    for got in runs[1:]:
+        if got is not None:
+            assert abs(got["J0"] - runs[0]["J0"]) <= 1e-9 * max(1.0, abs(runs[0]["J0"]))
 
 
 @pytest.mark.parametrize("base", sorted(BASES))

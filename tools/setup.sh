@@ -31,7 +31,7 @@ minor="$(python3 -c 'import sys; print("%d.%d" % sys.version_info[:2]
 lock="$root/host/requirements-py$minor.lock"
 if [ ! -f "$lock" ]; then
   supported="$(cd "$root/host" && ls requirements-py3.*.lock | sed 's/requirements-py//; s/\.lock$//' \
-               | sort -V | paste -sd, | sed 's/,/, /g')"
+               | sort -V | paste -sd, | sed 's/,/, /g; s/, \([^,]*\)$/ or \1/')"
   echo "setup: needs CPython $supported as python3 (host/requirements-py<version>.lock);" \
        "python3 is $(python3 -c 'import platform; print(platform.python_implementation(),
                                                        platform.python_version())' 2>&1)" >&2

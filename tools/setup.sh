@@ -30,8 +30,11 @@ minor="$(python3 -c 'import sys; print("%d.%d" % sys.version_info[:2]
                                        if sys.implementation.name == "cpython" else "none")')"
 lock="$root/host/requirements-py$minor.lock"
 if [ ! -f "$lock" ]; then
-  supported="$(cd "$root/host" && ls requirements-py3.*.lock | sed 's/requirements-py//; s/\.lock$//' \
-               | sort -V | paste -sd, | sed 's/,/, /g; s/, \([^,]*\)$/ or \1/')"
+  supported=""  # the versions there are locks for: "3.11, 3.12 or 3.13"
+  for f in "$root"/host/requirements-py*.lock; do
+    v="${f##*-py}"; supported+="${supported:+, }${v%.lock}"
+  done
+  supported="${supported%, *} or ${supported##*, }"
   echo "setup: needs CPython $supported as python3 (host/requirements-py<version>.lock);" \
        "python3 is $(python3 -c 'import platform; print(platform.python_implementation(),
                                                        platform.python_version())' 2>&1)" >&2

@@ -14,6 +14,7 @@ def test_installed_packages_are_exactly_the_locked_ones():
     locked = {n: v for n, (v, _) in read_lock(LOCK).items()}
     # The venv's own site-packages only (setuptools puts its vendored packages on sys.path).
     site = [sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]]
-    installed = {normalise(d.metadata["Name"]): d.version for d in metadata.distributions(path=site)}
+    installed = {normalise(d.metadata["Name"]): d.version
+                 for d in metadata.distributions(path=site)}
     installed.pop("stospline")
     assert installed == locked, f"the venv is not {LOCK.name}: run tools/setup.sh"

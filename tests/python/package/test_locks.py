@@ -52,7 +52,8 @@ def test_every_declared_dependency_is_locked_within_its_range(version):
                 + META["build-system"]["requires"])
     for req in map(Requirement, declared):
         name = re.sub(r"[-_.]+", "-", req.name).lower()
-        assert name in locked, f"{req.name} is not in {lock_path(version).name}: run tools/lock_deps.sh"
+        assert name in locked, \
+            f"{req.name} is not in {lock_path(version).name}: run tools/lock_deps.sh"
         assert req.specifier.contains(locked[name]), \
             f"{req.name}=={locked[name]} is outside {req.specifier} ({lock_path(version).name})"
 

@@ -2,7 +2,8 @@
 (tools/lock_deps.sh): each pins every declared dependency within its range, with hashes; a package
 in two locks has one version (the same numeric libraries are what make gains/ regenerate byte for
 byte on every Python); each lock's wheels download from PyPI for its Python on x86-64 and arm64
-and match its hashes (the last test needs the network: about 20 s with pip's cache warm)."""
+and match its hashes (the last test needs PyPI: 7-11 s per lock and machine, about 1 min for all
+six on a busy 2-core machine, pip's cache warm or not)."""
 import itertools
 import re
 import subprocess

@@ -1,33 +1,46 @@
 #!/usr/bin/env bash
-# Refresh host/requirements.lock: exact versions and SHA-256 hashes of every Python package the
-# repository's venv installs (host/pyproject.toml's dependencies and `test` extra, its build
-# backend, pip), resolved today for CPython 3.11 on Linux. The lock lists the wheel of each
-# version for x86-64 and for arm64 (manylinux up to glibc 2.36, Debian 12), so one lock serves
-# both kinds of machine; tools/setup.sh installs from it with `pip install --require-hashes`.
+# Refresh host/requirements-py3.11.lock, -py3.12.lock and -py3.13.lock: exact versions and
+# SHA-256 hashes of every Python package the repository's venv installs (host/pyproject.toml's
+# dependencies and `test` extra, its build backend, pip), one lock per CPython minor version on
+# Linux. Each lock lists the wheel of each version for x86-64 and for arm64 (manylinux up to
+# glibc 2.36, Debian 12), so one lock serves both kinds of machine; tools/setup.sh installs the
+# lock of the machine's python3 with `pip install --require-hashes`.
 #
-#   bash tools/lock_deps.sh         # then run tools/setup.sh and the tests, commit the lock
-#   bash tools/lock_deps.sh --keep  # the same, but every package already locked keeps its
-#                                   # version (to add a dependency without moving the others)
+#   bash tools/lock_deps.sh         # then run tools/setup.sh and the tests, commit the locks
+#   bash tools/lock_deps.sh --keep  # the same, but every package already in the 3.11 lock keeps
+#                                   # its version (to add a dependency without moving the others)
 #
-# Resolution runs once, for x86-64, on this machine's CPython 3.11 (environment markers are
-# evaluated for it; none of the locked packages has a machine-specific dependency); the arm64
-# wheels are then fetched for exactly the same versions, and a version with no wheel for
-# either machine stops the script. Only wheels are accepted (nothing is built from source).
+# Needs the three interpreters: python3.11, python3.12 and python3.13 on PATH, or PYTHON311,
+# PYTHON312, PYTHON313 set to them. Each lock is resolved by pip running on its own Python,
+# because pip evaluates environment markers (`python_version < "3.12"`) for the interpreter it
+# runs on, not for --python-version. 3.11 is resolved first; 3.12 and 3.13 are resolved with its
+# pins as constraints, so a package in two locks has the same version in both (the same numeric
+# libraries are what make gains/ byte-identical on every Python); a pin with no wheel for a
+# newer Python stops the script. Resolution is for x86-64 (none of the locked packages has a
+# machine-specific dependency); the arm64 wheels are then fetched for exactly the same versions,
+# and a version with no wheel for either machine stops the script. Only wheels are accepted
+# (nothing is built from source). The locks are replaced only when all three are made.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-py="${PYTHON:-python3}"
-lock="$root/host/requirements.lock"
+versions=(3.11 3.12 3.13)
 keep=0
 [ "${1:-}" = "--keep" ] && keep=1
 
-"$py" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' || {
-  echo "lock_deps: needs CPython 3.11 (the version the lock is for); set PYTHON" >&2; exit 2; }
+lock_of() { echo "$root/host/requirements-py$1.lock"; }
+declare -A pys
+for v in "${versions[@]}"; do
+  var="PYTHON${v/./}"
+  pys[$v]="${!var:-python$v}"
+  "${pys[$v]}" -c "import sys; sys.exit(sys.implementation.name != 'cpython' or
+                   '%d.%d' % sys.version_info[:2] != '$v')" 2>/dev/null || {
+    echo "lock_deps: needs CPython $v as python$v on PATH or in $var" >&2; exit 2; }
+done
 
 tmp="$(mktemp -d)"
 trap 'rm -rf "$tmp"' EXIT
 
 # Top-level requirements, straight from host/pyproject.toml (its ranges stay the package's own).
-"$py" - "$root/host/pyproject.toml" > "$tmp/top.txt" <<'EOF'
+"${pys[3.11]}" - "$root/host/pyproject.toml" > "$tmp/top.txt" <<'EOF'
 import sys, tomllib
 meta = tomllib.load(open(sys.argv[1], "rb"))
 reqs = (meta["project"]["dependencies"] + meta["project"]["optional-dependencies"]["test"]
@@ -41,52 +54,64 @@ platforms() {
   for minor in $(seq 36 -1 17); do printf -- '--platform manylinux_2_%s_%s ' "$minor" "$arch"; done
   printf -- '--platform manylinux2014_%s' "$arch"
 }
-fetch() {  # fetch ARCH REQUIREMENTS [pip options]: wheels for CPython 3.11 on ARCH into $tmp/ARCH
-  local arch="$1" reqs="$2"; shift 2
+fetch() {  # fetch VERSION ARCH REQUIREMENTS [pip options]: wheels into $tmp/VERSION/ARCH
+  local v="$1" arch="$2" reqs="$3"; shift 3
   # shellcheck disable=SC2046
-  "$py" -m pip download -q --disable-pip-version-check --no-cache-dir --dest "$tmp/$arch" \
-    --only-binary=:all: --implementation cp --python-version 3.11 $(platforms "$arch") \
-    "$@" -r "$reqs"
+  "${pys[$v]}" -m pip download -q --disable-pip-version-check --no-cache-dir \
+    --dest "$tmp/$v/$arch" --only-binary=:all: --implementation cp --python-version "$v" \
+    $(platforms "$arch") "$@" -r "$reqs"
+}
+dist() {  # dist WHEEL: the wheel's normalised distribution name (<dist>-<version>-...whl)
+  cut -d- -f1 <<<"$(basename "$1")" | tr '_.' '--' | tr '[:upper:]' '[:lower:]'
+}
+pins() {  # pins FILE: the name==version lines of a lock
+  grep -E '^[A-Za-z0-9._-]+==' "$1" | sed 's/ .*//'
 }
 
-echo "lock_deps: resolving for x86_64 (CPython 3.11)"
-if [ "$keep" -eq 1 ]; then
-  grep -E '^[A-Za-z0-9._-]+==' "$lock" | sed 's/ .*//' > "$tmp/keep.txt"
-  fetch x86_64 "$tmp/top.txt" -c "$tmp/keep.txt"
-else
-  fetch x86_64 "$tmp/top.txt"
-fi
-# name==version of every wheel (wheel names: <dist>-<version>-<python>-<abi>-<platform>.whl).
-for whl in "$tmp"/x86_64/*.whl; do
-  base="$(basename "$whl")"
-  echo "$(cut -d- -f1 <<<"$base" | tr '_' '-' | tr '[:upper:]' '[:lower:]')==$(cut -d- -f2 <<<"$base")"
-done | sort > "$tmp/pins.txt"
-echo "lock_deps: fetching the same $(wc -l < "$tmp/pins.txt") versions for aarch64"
-fetch aarch64 "$tmp/pins.txt" --no-deps
+for v in "${versions[@]}"; do
+  echo "lock_deps: resolving for x86_64 (CPython $v)"
+  if [ "$v" != 3.11 ]; then
+    fetch "$v" x86_64 "$tmp/top.txt" -c "$tmp/3.11/pins.txt" || {
+      echo "lock_deps: the 3.11 pins do not resolve for CPython $v (a version with no wheel" \
+           "for it?); pin one that has in host/pyproject.toml" >&2; exit 1; }
+  elif [ "$keep" -eq 1 ]; then
+    pins "$(lock_of 3.11)" > "$tmp/keep.txt"
+    fetch "$v" x86_64 "$tmp/top.txt" -c "$tmp/keep.txt"
+  else
+    fetch "$v" x86_64 "$tmp/top.txt"
+  fi
+  for whl in "$tmp/$v"/x86_64/*.whl; do
+    echo "$(dist "$whl")==$(cut -d- -f2 <<<"$(basename "$whl")")"
+  done | sort > "$tmp/$v/pins.txt"
+  n="$(wc -l < "$tmp/$v/pins.txt")"
+  echo "lock_deps: fetching the same $n versions for aarch64 (CPython $v)"
+  fetch "$v" aarch64 "$tmp/$v/pins.txt" --no-deps
+  for arch in x86_64 aarch64; do
+    m="$(find "$tmp/$v/$arch" -name '*.whl' | wc -l)"
+    [ "$m" -eq "$n" ] || {
+      echo "lock_deps: CPython $v $arch has $m wheels for $n packages" >&2; exit 1; }
+  done
 
-{
-  echo "# Generated by tools/lock_deps.sh: do not edit. Exact versions and hashes of the wheels"
-  echo "# for CPython 3.11 on Linux x86-64 and arm64 (manylinux, glibc <= 2.36). Install with"
-  echo "#   pip install --require-hashes --only-binary=:all: -r host/requirements.lock"
-  echo "#   pip install --no-deps --no-build-isolation -e host"
-  echo "# (tools/setup.sh does both). Ranges for installs elsewhere: host/pyproject.toml."
-  while IFS= read -r pin; do
-    name="${pin%%==*}"
-    printf '%s' "$pin"
-    # Both machines' wheels of this version (one file when the wheel is pure Python).
-    for whl in "$tmp"/x86_64/*.whl "$tmp"/aarch64/*.whl; do
-      base="$(basename "$whl")"
-      [ "$(cut -d- -f1 <<<"$base" | tr '_' '-' | tr '[:upper:]' '[:lower:]')" = "$name" ] || continue
-      sha256sum "$whl" | cut -d' ' -f1
-    done | sort -u | while IFS= read -r h; do printf ' \\\n    --hash=sha256:%s' "$h"; done
-    printf '\n'
-  done < "$tmp/pins.txt"
-} > "$tmp/requirements.lock"
-
-for arch in x86_64 aarch64; do
-  n="$(find "$tmp/$arch" -name '*.whl' | wc -l)"
-  [ "$n" -eq "$(wc -l < "$tmp/pins.txt")" ] || {
-    echo "lock_deps: $arch has $n wheels for $(wc -l < "$tmp/pins.txt") packages" >&2; exit 1; }
+  {
+    echo "# Generated by tools/lock_deps.sh: do not edit. Exact versions and hashes of the wheels"
+    echo "# for CPython $v on Linux x86-64 and arm64 (manylinux, glibc <= 2.36). Install with"
+    echo "#   pip install --require-hashes --only-binary=:all: -r host/requirements-py$v.lock"
+    echo "#   pip install --no-deps --no-build-isolation -e host"
+    echo "# (tools/setup.sh does both). Ranges for installs elsewhere: host/pyproject.toml."
+    while IFS= read -r pin; do
+      name="${pin%%==*}"
+      printf '%s' "$pin"
+      # Both machines' wheels of this version (one file when the wheel is pure Python).
+      for whl in "$tmp/$v"/x86_64/*.whl "$tmp/$v"/aarch64/*.whl; do
+        [ "$(dist "$whl")" = "$name" ] || continue
+        sha256sum "$whl" | cut -d' ' -f1
+      done | sort -u | while IFS= read -r h; do printf ' \\\n    --hash=sha256:%s' "$h"; done
+      printf '\n'
+    done < "$tmp/$v/pins.txt"
+  } > "$tmp/$v/lock"
 done
-mv "$tmp/requirements.lock" "$lock"
-echo "lock_deps: wrote $lock ($(wc -l < "$tmp/pins.txt") packages)"
+
+for v in "${versions[@]}"; do
+  mv "$tmp/$v/lock" "$(lock_of "$v")"
+  echo "lock_deps: wrote $(lock_of "$v") ($(wc -l < "$tmp/$v/pins.txt") packages)"
+done

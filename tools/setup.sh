@@ -19,22 +19,34 @@ if [ "${#missing[@]}" -gt 0 ]; then
   DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq "${missing[@]}" >/dev/null
 fi
 
-# The venv holds exactly host/requirements.lock (versions and hashes; refresh it with
-# tools/lock_deps.sh), then the package itself, editable, built by the locked setuptools. It is
-# made anew whenever the lock or host/pyproject.toml changes (the stamp holds their hash), so
-# nothing resolved on another day lingers in it.
+# The venv holds exactly the lock of python3's version, host/requirements-py3.X.lock (versions
+# and hashes; refresh them with tools/lock_deps.sh), then the package itself, editable, built by
+# the locked setuptools. It is made anew whenever that lock or host/pyproject.toml changes (the
+# stamp holds their hash), so nothing resolved on another day lingers in it.
 venv="$root/.venv"
 stamp="$venv/.stospline-lock"
-want="$(cat "$root/host/requirements.lock" "$root/host/pyproject.toml" | sha256sum | cut -d' ' -f1)"
+# "3.X" for CPython; other implementations get no lock (the locks hold CPython wheels).
+minor="$(python3 -c 'import sys; print("%d.%d" % sys.version_info[:2]
+                                       if sys.implementation.name == "cpython" else "none")')"
+lock="$root/host/requirements-py$minor.lock"
+if [ ! -f "$lock" ]; then
+  supported=""  # the versions there are locks for: "3.11, 3.12 or 3.13"
+  for f in "$root"/host/requirements-py*.lock; do
+    v="${f##*-py}"; supported+="${supported:+, }${v%.lock}"
+  done
+  supported="${supported%, *} or ${supported##*, }"
+  echo "setup: needs CPython $supported as python3 (host/requirements-py<version>.lock);" \
+       "python3 is $(python3 -c 'import platform; print(platform.python_implementation(),
+                                                       platform.python_version())' 2>&1)" >&2
+  exit 1
+fi
+want="$(cat "$lock" "$root/host/pyproject.toml" | sha256sum | cut -d' ' -f1)"
 if [ ! -x "$venv/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
-  echo "setup: Python venv from host/requirements.lock"
-  python3 -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' || {
-    echo "setup: host/requirements.lock is for CPython 3.11; python3 is $(python3 -V 2>&1)" >&2
-    exit 1; }
+  echo "setup: Python venv from host/requirements-py$minor.lock"
   rm -rf "$venv"
   python3 -m venv "$venv"
   "$venv/bin/python" -m pip install -q --disable-pip-version-check --require-hashes \
-    --only-binary=:all: -r "$root/host/requirements.lock"
+    --only-binary=:all: -r "$lock"
   "$venv/bin/python" -m pip install -q --disable-pip-version-check --no-deps \
     --no-build-isolation -e "$root/host"
   echo "$want" > "$stamp"

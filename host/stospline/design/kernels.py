@@ -30,7 +30,8 @@ int stsp_zoh_stage_ticks(int n, int m, int q, long T,
 size_t stsp_oracle_work_size(int n, int m, int n_latch);
 int stsp_oracle_stage_ticks(int n, int m, int n_latch, long T, const double *K, const double *L,
                             const double *k0, const double *Phi_x, const double *cost,
-                            const double *Fmean, double *M, double *J, double *work);
+                            const double *Fmean, double *M, double *J, double *work,
+                            double *xm, double *xv, double *um, double *uv);
 size_t stsp_tv_zoh_work_size(int n, int m, int q, int na, int mz);
 size_t stsp_tv_iwork_size(int n, int m, int na, int mz);
 int stsp_tv_zoh_ticks(int n, int m, int q, long T, int P, int na, int mz, const double *coef,
@@ -160,12 +161,14 @@ def pack_oracle_maps(Phi: np.ndarray, cost_row: np.ndarray, n: int):
 
 
 def oracle_stage_ticks(K: np.ndarray, L: np.ndarray, k0: np.ndarray, Phi_x: np.ndarray,
-                       cost: np.ndarray, Fmean: np.ndarray, M: np.ndarray, J: float):
+                       cost: np.ndarray, Fmean: np.ndarray, M: np.ndarray, J: float, *,
+                       path: bool = False):
     """The tick loop of `oracle.evaluate_table` over one time-invariant stage, in C
     (``oracle_kernel.c``): gains ``K`` (T, m, n), ``L`` (T, m, n_latch), ``k0`` (T, m), the tick's
     moment map and cost row packed by `pack_oracle_maps`, the mean map ``Fmean`` (n, n + m),
     the second moment ``M`` of ``[x; v; 1]`` before the stage; returns ``(M, J)`` after it
-    (a new array)."""
+    (a new array), and with `path` also the state's mean and variance after each tick (T, n)
+    and the command's over it (T, m): ``(M, J, xm, xv, um, uv)``."""
     mod = load_kernels()
     ffi, lib = mod.ffi, mod.lib
     T, m, n = K.shape
@@ -182,7 +185,10 @@ def oracle_stage_ticks(K: np.ndarray, L: np.ndarray, k0: np.ndarray, Phi_x: np.n
     work = np.empty(int(lib.stsp_oracle_work_size(n, m, n_latch)))
     Jp = ffi.new("double *", float(J))
     p = [ffi.from_buffer("double[]", a) for a in (K, L, k0, Phi_x, cost, Fmean, M)]
-    status = lib.stsp_oracle_stage_ticks(n, m, n_latch, T, *p, Jp, ffi.from_buffer("double[]", work))
+    rec = [np.empty((T, n)), np.empty((T, n)), np.empty((T, m)), np.empty((T, m))] if path else []
+    out = [ffi.from_buffer("double[]", a) for a in rec] if path else [ffi.NULL] * 4
+    status = lib.stsp_oracle_stage_ticks(n, m, n_latch, T, *p, Jp,
+                                         ffi.from_buffer("double[]", work), *out)
     if status != 0:
         raise ValueError(f"stsp_oracle_stage_ticks: bad dimensions (status {status})")
-    return M, float(Jp[0])
+    return (M, float(Jp[0]), *rec) if path else (M, float(Jp[0]))

@@ -19,7 +19,9 @@
  *
  * Row-major, caller-owned arrays: K (T x m x n), L (T x m x P), k0 (T x m), Phi_x
  * (n(n+1) x d_w(d_w+1)/2), cost (d_w(d_w+1)/2), Fmean (n x (n+m)), M (d_y x d_y, in/out),
- * J (in/out), work (stsp_oracle_work_size doubles).
+ * J (in/out), work (stsp_oracle_work_size doubles).  The path (all four NULL, or none): xm,
+ * xv (T x n) the state's mean and variance after each tick, um, uv (T x m) the command's
+ * over it (oracle.evaluate_table's path=True, which the Q scales read at every tick).
  */
 #include <stddef.h>
 
@@ -31,14 +33,17 @@ size_t stsp_oracle_work_size(int n, int m, int P)
 
 int stsp_oracle_stage_ticks(int n, int m, int P, long T, const double *K, const double *L,
                             const double *k0, const double *Phi_x, const double *cost,
-                            const double *Fmean, double *M, double *J, double *work)
+                            const double *Fmean, double *M, double *J, double *work,
+                            double *xm, double *xv, double *um, double *uv)
 {
     const int dy = n + P + 1, dw = n + m + 1, nv = dw * (dw + 1) / 2, nout = n * (n + 1);
     double *Tw = work, *TM = Tw + dw * dy, *vw = TM + dw * dy, *out = vw + nv;
     double acc = *J;
     long j;
     int a, b, c, k;
-    if (n < 1 || m < 1 || P < 0 || T < 0) {
+    const int record = xm != NULL;
+    if (n < 1 || m < 1 || P < 0 || T < 0 || (xv != NULL) != record || (um != NULL) != record
+        || (uv != NULL) != record) {
         return -2;
     }
     for (a = 0; a < dw * dy; ++a) {
@@ -80,6 +85,15 @@ int stsp_oracle_stage_ticks(int n, int m, int P, long T, const double *K, const 
                 ++k;
             }
         }
+        if (record) {                              /* u's moments: vech rows n..n+m-1 */
+            for (a = 0; a < m; ++a) {
+                const int row = n + a;            /* vech index of (row, q): row-major */
+                const int base = row * dw - row * (row - 1) / 2 - row;
+                const double mu = vw[base + dw - 1];
+                um[j * m + a] = mu;
+                uv[j * m + a] = vw[base + row] - mu * mu;
+            }
+        }
         for (a = 0; a < nout; ++a) {               /* the x rows of the moment map */
             double s = 0.0;
             for (c = 0; c < nv; ++c) {
@@ -103,6 +117,13 @@ int stsp_oracle_stage_ticks(int n, int m, int P, long T, const double *K, const 
             }
             M[a * dy + dy - 1] = out[a * (n + 1) + n];
             M[(dy - 1) * dy + a] = out[a * (n + 1) + n];
+        }
+        if (record) {
+            for (a = 0; a < n; ++a) {
+                const double mu = out[a * (n + 1) + n];
+                xm[j * n + a] = mu;
+                xv[j * n + a] = out[a * (n + 1) + a] - mu * mu;
+            }
         }
     }
     *J = acc;

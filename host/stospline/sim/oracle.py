@@ -119,7 +119,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         Tw[-1, -1] = 1.0
         ticks = range(int(table.stage_start[k]), int(table.stage_start[k + 1]))
         # The C loop carries the mean map without the constant column: not with a drift.
-        kernel = (None if varying or path or Cy is not None or _has_drift(problem)
+        kernel = (None if varying or Cy is not None or _has_drift(problem)
                   else _c_kernel())
         if varying and Cy is None and _c_kernel() is not None:
             # Time-varying data: the Gauss-point Taylor loop in C, or the plant scheme's steps
@@ -137,8 +137,13 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         elif kernel is not None:           # the same loop in C (oracle_kernel.c)
             sl = slice(ticks.start, ticks.stop)
             Phi_x, cost = _packed_maps(stage, n, m, h, propagator, substeps)
-            M, J = kernel(table.K[sl], table.L[sl], table.k0[sl], Phi_x, cost,
-                          np.ascontiguousarray(maps[2][:, :n + m]), M, J)
+            M, J, *tick_path = kernel(table.K[sl], table.L[sl], table.k0[sl], Phi_x, cost,
+                                      np.ascontiguousarray(maps[2][:, :n + m]), M, J,
+                                      path=path)
+            if path:
+                xm, xv, um, uv = tick_path
+                rec.extend(xm, xv, um, uv)
+                progress.advance(len(ticks))
             ticks = range(0)
         for j in ticks:
             Tw[n:n + m, :n] = -table.K[j]

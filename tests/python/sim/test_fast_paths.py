@@ -33,14 +33,20 @@ def test_expm_of_nilpotent_and_diagonal():
                                            ("robot_bands", "joint"),
                                            ("robot_narrow_corridor", "joint")])
 @pytest.mark.parametrize("propagator", ["exact", "euler"])
-def test_oracle_kernel_matches_numpy(example, mode, propagator, monkeypatch):
+@pytest.mark.parametrize("path", [False, True])
+def test_oracle_kernel_matches_numpy(example, mode, propagator, path, monkeypatch):
     p = load_problem(EXAMPLES / f"{example}.toml")
     d = design_problem(p, mode=mode)
     runs = {}
     for kernel in ("numpy", "c"):
         monkeypatch.setenv("STOSPLINE_ORACLE_KERNEL", kernel)
-        runs[kernel] = oracle.evaluate_table(p, d.table, path=False, propagator=propagator)
+        runs[kernel] = oracle.evaluate_table(p, d.table, path=path, propagator=propagator)
     a, b = runs["numpy"], runs["c"]
+    if path:     # every tick's state and command moments (the Q scales read them)
+        for name in ("path_t", "path_mean", "path_var", "path_u_mean", "path_u_var"):
+            x, y = getattr(a, name), getattr(b, name)
+            assert x.shape == y.shape and x.size, name
+            np.testing.assert_allclose(y, x, rtol=0, atol=1e-11 * max(1.0, np.abs(x).max()))
     assert b.J == pytest.approx(a.J, rel=1e-12)
     for x, y in zip(a.knot_mean + a.knot_cov + a.knot_constraint,
                     b.knot_mean + b.knot_cov + b.knot_constraint):

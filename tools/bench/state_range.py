@@ -1,0 +1,67 @@
+#!/usr/bin/env python3
+"""How fast a Q15/Q31 design finds its state scales (`oracle.state_range`: the exact moments
+at every tick of the plan): the oracle's C tick loop recording the path against its numpy
+loop (``STOSPLINE_ORACLE_KERNEL=numpy``), the baseline, timed in the same run on the same
+tables; the two ranges must agree to rounding.
+
+    PYTHONPATH=host .venv/bin/python tools/bench/state_range.py [--repeat 3] [EXAMPLE.toml ...]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _median_time(fn, repeat: int):
+    times, out = [], None
+    for _ in range(repeat):
+        t = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t)
+    return statistics.median(times), out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("examples", nargs="*",
+                    default=["robot_corridor.toml", "robot_patrol_60s.toml"])
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args(argv)
+    if args.repeat < 1:
+        print("state_range: --repeat must be at least 1", file=sys.stderr)
+        return 2
+    from stospline import design_problem, load_problem
+    from stospline.sim import oracle
+    if oracle._c_kernel() is None:
+        print("state_range: the oracle kernel is not built (no C compiler?)", file=sys.stderr)
+        return 2
+    print(f"{'example':<24}{'ticks':>8}{'numpy s':>10}{'C s':>9}{'ratio':>8}  max rel. diff")
+    for name in args.examples:
+        path = Path(name) if Path(name).exists() else ROOT / "examples" / name
+        if not path.is_file():
+            print(f"state_range: no problem file {name}", file=sys.stderr)
+            return 2
+        problem = load_problem(path)
+        table = design_problem(problem, table="per-tick").table
+        t_c, r_c = _median_time(lambda: oracle.state_range(problem, table), args.repeat)
+        os.environ["STOSPLINE_ORACLE_KERNEL"] = "numpy"
+        try:
+            t_np, r_np = _median_time(lambda: oracle.state_range(problem, table), args.repeat)
+        finally:
+            del os.environ["STOSPLINE_ORACLE_KERNEL"]
+        diff = float(np.max(np.abs(r_c - r_np) / np.abs(r_np)))
+        print(f"{path.stem:<24}{table.n_ticks:>8}{t_np:>10.3f}{t_c:>9.3f}{t_np / t_c:>8.1f}"
+              f"  {diff:.1e}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -279,9 +279,11 @@ def monte_carlo_terms(problem: Problem, *, paths: int, substeps: int = 2, worker
                 + 16.0 * len(problem.corridors))        # exit tick and wall, and their copies
     per_run = T * 3 * (8 * n + 112.0) + T * min(record, BLOCK_PATHS, paths) * (n + m) * 4.0
     terms = [Term(f"Monte Carlo ({paths} paths)", "--paths",
-                  seconds=SIM_TICK * T * blocks + SIM_PATH_TICK * paths * T * work
-                  + CORRIDOR_WALL * paths * watch,
+                  seconds=SIM_TICK * T * blocks + SIM_PATH_TICK * paths * T * work,
                   bytes=paths * per_path + per_run)]
+    if problem.corridors:
+        terms.append(Term(f"the paths' exit watch of {len(problem.corridors)} corridors",
+                          "corridors", seconds=CORRIDOR_WALL * paths * watch))
     if workers > 1:
         terms.append(Term(f"{workers} Monte Carlo worker processes", "--workers",
                           bytes=workers * (WORKER_BYTES + min(paths, BLOCK_PATHS) * per_path

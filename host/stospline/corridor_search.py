@@ -339,9 +339,9 @@ def work_estimate(problem, *, grid: int, search_paths: int, certify_paths: int,
                      workers=workers, **opts)
         mc_term = next(t for t in e.terms if t.what.startswith("Monte Carlo"))
         compiled = next(t for t in e.terms if t.what.startswith("C text"))
-        procs = [t for t in e.terms if t.key == "--workers"]
-        return Term(mc_term.what, mc_term.key, mc_term.seconds,
-                    mc_term.bytes + sum(t.bytes for t in procs)), compiled
+        more = [t for t in e.terms if t.key == "--workers" or t.what.startswith("the paths'")]
+        return Term(mc_term.what, mc_term.key, mc_term.seconds + sum(t.seconds for t in more),
+                    mc_term.bytes + sum(t.bytes for t in more)), compiled
 
     screen, compiled = mc(search_paths)
     cert, _ = mc(certify_paths)

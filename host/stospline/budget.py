@@ -22,7 +22,13 @@ What grows (n states, m inputs, d = n + m + 1, D = d^2, T ticks, S stages, q mul
   its per-tick recursion (with q^2 m terms for q joint multipliers);
 * the per-tick tables (several double copies) and their C text (about 14 bytes a number,
   formatted at about 2 us a number, and compiled by ``simulate``/``plot``);
-* Monte Carlo: per tick a Python step, per path and tick the C controller and plant.
+* Monte Carlo: per tick a Python step, per path and tick the C controller and plant, per path,
+  tick and corridor wall the exit watch; each forked worker process its own memory;
+* the corridors' exit bounds: one oracle pass recording output (or state) moments, then each
+  corridor's walls at its ticks;
+* the tick-grid QP of regions at every tick: its sparse LU per tick, growing with the square of
+  the rows per tick (those between ticks included), and the rows between ticks built in Python;
+* plot and report: matplotlib and the figures.
 """
 from __future__ import annotations
 

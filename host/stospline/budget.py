@@ -22,12 +22,19 @@ What grows (n states, m inputs, d = n + m + 1, D = d^2, T ticks, S stages, q mul
   its per-tick recursion (with q^2 m terms for q joint multipliers);
 * the per-tick tables (several double copies) and their C text (about 14 bytes a number,
   formatted at about 2 us a number, and compiled by ``simulate``/``plot``);
-* Monte Carlo: per tick a Python step, per path and tick the C controller and plant.
+* Monte Carlo: per tick a Python step, per path and tick the C controller and plant, per path,
+  tick and corridor wall the exit watch; each forked worker process its own memory;
+* the corridors' exit bounds: one oracle pass recording output (or state) moments, then each
+  corridor's walls at its ticks;
+* the tick-grid QP of regions at every tick: its sparse LU per tick, growing with the square of
+  the rows per tick (those between ticks included), and the rows between ticks built in Python;
+* plot and report: matplotlib and the figures.
 """
 from __future__ import annotations
 
 import math
 import os
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -35,14 +42,15 @@ import numpy as np
 from stospline.problem.model import Problem, ProblemError
 
 __all__ = ["BudgetError", "Term", "Estimate", "estimate", "check", "enforce",
-           "DEFAULT_MAX_SECONDS", "DEFAULT_MAX_BYTES", "machine_memory", "format_bytes",
-           "format_seconds"]
+           "monte_carlo_terms", "check_limits", "DEFAULT_MAX_SECONDS", "DEFAULT_MAX_BYTES",
+           "DEFAULT_MAX_GIB", "machine_memory", "format_bytes", "format_seconds"]
 
 DEFAULT_MAX_SECONDS = 600.0          # 10 minutes
 DEFAULT_MAX_BYTES = 4 * 1024 ** 3    # 4 GiB
+DEFAULT_MAX_GIB = DEFAULT_MAX_BYTES / 1024 ** 3     # the library's max_memory, in GiB
 
 # --- measured constants (tools/bench/calibrate_budget.py) --------------------------------------
-BASE_BYTES = 100e6          # interpreter, numpy, scipy, cffi modules
+BASE_BYTES = 140e6          # interpreter, numpy, scipy, cffi modules, the C kernels
 BASE_SECONDS = 3.0          # start-up: imports, the cached C kernel
 STAGE_SECONDS = 4e-3        # Python work per stage and oracle pass (maps, latches, knots)
 EXPM_S3 = 1.0e-9            # s: scipy expm of an s-square matrix ~ EXPM_S3 s^3 + EXPM_S2 s^2
@@ -60,6 +68,8 @@ COMPILE_NUMBER = 4.0e-6     # s for the C compiler per table number (simulate, p
 COMPILE_BYTES = 400         # compiler memory per table number
 TICK_QP_TICK = 6e-4         # s per tick of the tick-grid QP (regions at every tick), n + m = 6
 TICK_QP_BYTES = 15e3        # peak bytes per tick of it (sparse LU of the KKT matrix), n + m = 6
+TICK_QP_ROW = 2.5e-3        # s per row between ticks (its Bernstein form, built in Python)
+TICK_QP_ROW_BYTES = 1500    # bytes per row of the QP (the row object, its sparse entries)
 SIM_TICK = 10e-6            # s per Monte Carlo tick and block of paths: the Python step
 SIM_PATH_TICK = 1.0e-9      # s per path, tick and unit of work (below), on one core
                             # (tools/bench/harness_throughput.py: ~95 ns per robot path-tick)
@@ -67,6 +77,12 @@ SIM_PATH_BYTES = 64         # bytes per path besides states (instances, buffers)
 CONTINUOUS_STAGE = 0.5      # s per stage of the continuous-time design and its oracle
 CONTINUOUS_TICK = 20e-6     # s per tick to sample continuous gains
 BAND_Q3 = 5e-8              # s per q^3 of the band dual (OSQP on dense W)
+CORRIDOR_WALL = 10e-9       # s per path, tick and corridor wall: the C harness's exit watch
+CORRIDOR_BOUND_WALL = 1e-6  # s per tick and wall of a corridor's exit bounds (report)
+CORRIDOR_BOUND_COPIES = 12  # (ticks, walls) double arrays alive while one corridor is bounded
+WORKER_BYTES = 60e6         # a forked Monte Carlo worker's own memory besides its block
+FIGURE_BYTES = 150e6        # matplotlib and the figures of a plot or report
+FIGURE_SECONDS = 4.0        # importing matplotlib, drawing and encoding the figures
 
 
 class BudgetError(ProblemError):
@@ -163,7 +179,8 @@ def _widths(problem: Problem, mode: str) -> tuple[list[int], int]:
 def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewise",
              discretization: str = "exact-zoh", arith: str = "float32", paths: int = 0,
              substeps: int = 2, delay_ticks: int = 0, table: str = "per-tick",
-             spline_tolerance: float | None = None) -> Estimate:
+             spline_tolerance: float | None = None, workers: int = 1,
+             record: int = 0) -> Estimate:
     """Estimate the time and peak memory of ``stospline COMMAND`` on `problem`.
 
     A design for a one-tick delay (`delay_ticks` 1) is counted as one of ``n + m`` states.
@@ -172,9 +189,13 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
 
     Parameters
     ----------
-    command : {"design", "simulate", "plot"}
+    command : {"design", "simulate", "plot", "report"}
     paths, substeps : int
-        The Monte Carlo run of simulate and plot.
+        The Monte Carlo run of simulate, plot and report.
+    workers : int
+        Processes that run its blocks of paths at once (each counted with its own memory).
+    record : int
+        Paths whose states are kept at every tick (a report's percentile bands).
     """
     n, m, mz = problem.n, problem.m, problem.mz
     n += m * (delay_ticks == 1)
@@ -216,9 +237,7 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
                  seconds=KERNEL_FLOP * flops * (T - T_var) + VARYING_TICK * T_var
                  * (1 + (D + 1) ** 3 / 1e5)))
     if problem.tick_regions:
-        grow = ((n + m) / 6) ** 2
-        add(Term("regions at every tick (the QP on the tick grid, if needed)", "tick_hz",
-                 seconds=TICK_QP_TICK * T * grow, bytes=TICK_QP_BYTES * T * grow))
+        add(_tick_qp_term(problem, n, m, T))
     sec, byt = _expm(2 * D)
     add(Term("tick map of the oracle (matrix exponential per stage and pass)", dims,
              seconds=passes * sec * (S - sum(varying)), bytes=byt + 4 * 8.0 * D * D))
@@ -236,30 +255,131 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
         add(Term("C text of the tables, compiled", "tick_hz",
                  seconds=(CODEGEN_NUMBER + COMPILE_NUMBER) * numbers,
                  bytes=(CODEGEN_BYTES + COMPILE_BYTES) * numbers))
-        work = n * (m + n_latch) + substeps * (n * n + n * m + n * mz) + 8
-        blocks = -(-paths // 512)           # sim.montecarlo.BLOCK_PATHS, one core assumed
-        add(Term(f"Monte Carlo ({paths} paths)", "--paths",
-                 seconds=SIM_TICK * T * blocks + SIM_PATH_TICK * paths * T * work,
-                 bytes=paths * (8.0 * n * (S + 6) + 16.0 * substeps * mz + 16.0 * m
-                                + SIM_PATH_BYTES) + T * 3 * (8 * n + 112.0)))
-        sec, _ = _expm(D)
-        add(Term("the oracle of the plant scheme", "tick_hz",
-                 seconds=(ORACLE_TICK + ORACLE_TICK_D2 * D * D) * T
-                 + S * (substeps * 2e-9 * D ** 3 + sec)))
+        est.terms += monte_carlo_terms(problem, paths=paths, substeps=substeps,
+                                       workers=workers, record=record, n_latch=n_latch,
+                                       delay_ticks=delay_ticks)
+    if command in ("plot", "report"):
+        add(Term("figures (matplotlib)", "--out", seconds=FIGURE_SECONDS, bytes=FIGURE_BYTES))
     return est
 
 
+def monte_carlo_terms(problem: Problem, *, paths: int, substeps: int = 2, workers: int = 1,
+                      record: int = 0, n_latch: int | None = None,
+                      delay_ticks: int = 0) -> list[Term]:
+    """The Monte Carlo run's terms: its paths (with their corridor watch and `workers` forked
+    processes, each running a block of `sim.montecarlo.BLOCK_PATHS` paths), the oracle of the
+    plant scheme, and the corridors' exit bounds of its summary."""
+    from stospline.sim.montecarlo import BLOCK_PATHS
+    n, m, mz = problem.n, problem.m, problem.mz
+    n += m * (delay_ticks == 1)
+    if n_latch is None:
+        n_latch = _widths(problem, "joint" if problem.tick_regions else "stagewise")[1]
+    ticks = [int(t) for t in problem.ticks_per_stage]
+    T, S = sum(ticks), len(ticks)
+    D = (n + m + 1) ** 2
+    watch = _corridor_walls(problem)
+    work = n * (m + n_latch) + substeps * (n * n + n * m + n * mz) + 8
+    blocks = -(-paths // BLOCK_PATHS)
+    workers = max(1, min(int(workers), blocks))
+    per_path = (8.0 * n * (S + 6) + 16.0 * substeps * mz + 16.0 * m + SIM_PATH_BYTES
+                + 16.0 * len(problem.corridors))        # exit tick and wall, and their copies
+    per_run = T * 3 * (8 * n + 112.0) + T * min(record, BLOCK_PATHS, paths) * (n + m) * 4.0
+    terms = [Term(f"Monte Carlo ({paths} paths)", "--paths",
+                  seconds=SIM_TICK * T * blocks + SIM_PATH_TICK * paths * T * work,
+                  bytes=paths * per_path + per_run)]
+    if problem.corridors:
+        terms.append(Term(f"the paths' exit watch of {len(problem.corridors)} corridors",
+                          "corridors", seconds=CORRIDOR_WALL * paths * watch))
+    if workers > 1:
+        terms.append(Term(f"{workers} Monte Carlo worker processes", "--workers",
+                          bytes=workers * (WORKER_BYTES + min(paths, BLOCK_PATHS) * per_path
+                                           + per_run)))
+    sec, _ = _expm(D)
+    terms.append(Term("the oracle of the plant scheme", "tick_hz",
+                      seconds=(ORACLE_TICK + ORACLE_TICK_D2 * D * D) * T
+                      + S * (substeps * 2e-9 * D ** 3 + sec)))
+    if problem.corridors:
+        terms.append(_corridor_bounds_term(problem, n, m, T))
+    return terms
+
+
+def _corridor_walls(problem: Problem) -> float:
+    """Sum over the corridors of their ticks times their walls (each wall a p-vector)."""
+    from stospline.problem.corridors import corridor_ticks
+    total = 0.0
+    for c in problem.corridors:
+        lo, hi = corridor_ticks(c, problem.t0, problem.tick_hz)
+        total += (hi - lo + 1) * len(c.b) * max(1.0, c.p / 2)
+    return total
+
+
+def _corridor_bounds_term(problem: Problem, n: int, m: int, T: int) -> Term:
+    """The corridors' exit bounds (`sim.exit_bound.corridor_outputs`): one oracle pass that
+    records the outputs' (or, for more rows than states, the state's) moments at every
+    tick, then each corridor's walls at its ticks, one corridor at a time."""
+    from stospline.problem.corridors import corridor_ticks
+    D = (n + m + 1) ** 2
+    rows = sum(c.p for c in problem.corridors)
+    q = rows if rows <= n else n
+    widest = 0.0
+    for c in problem.corridors:
+        lo, hi = corridor_ticks(c, problem.t0, problem.tick_hz)
+        widest = max(widest, (hi - lo + 1) * (CORRIDOR_BOUND_COPIES * len(c.b) + 4 * c.p * c.p))
+    return Term(f"exit bounds of {len(problem.corridors)} corridors", "corridors",
+                seconds=(ORACLE_TICK + ORACLE_TICK_D2 * D * D) * T
+                + CORRIDOR_BOUND_WALL * _corridor_walls(problem),
+                bytes=T * (2 * 8.0 * (q * q + q) + 2 * 112.0) + 8.0 * widest)
+
+
+def _chain_degree(problem: Problem) -> int:
+    """The largest nilpotency index of the stages' A (n when one is not nilpotent): the
+    degree of the mean over a tick, whose interior Bernstein coefficients are rows between
+    ticks (`design.tick_qp`)."""
+    n = problem.n
+    worst = 1
+    for st in problem.stages:
+        A = np.asarray(st.A, float)
+        P, k = A.copy(), 1
+        while k < n and np.any(P):
+            P, k = P @ A, k + 1
+        worst = max(worst, k if not np.any(P) else n)
+    return worst
+
+
+def _tick_qp_term(problem: Problem, n: int, m: int, T: int) -> Term:
+    """The tick-grid QP of regions at every tick (`design.tick_qp`), when constraint
+    generation needs it: its KKT matrix has per tick the n + m variables, n dynamics rows and
+    two rows per bound row (at the tick and between ticks); its sparse LU grows with the square
+    of that width (calibrated at 14, the robot with two region rows)."""
+    t0, hz = problem.t0, problem.tick_hz
+    degree = _chain_degree(problem)
+    rows = between = 0
+    for reg in problem.tick_regions:
+        ticks = len(reg.ticks(t0, hz))
+        rows += ticks * len(reg.C)
+        if reg.between:
+            between += ticks * len(reg.C) * max(0, degree - 1)
+    width = 2 * n + m + 2 * (rows + between) / max(T, 1)
+    grow = (width / 14) ** 2
+    return Term("regions at every tick (the QP on the tick grid, if needed)", "tick_hz",
+                seconds=TICK_QP_TICK * T * grow + TICK_QP_ROW * between,
+                bytes=TICK_QP_BYTES * T * grow + TICK_QP_ROW_BYTES * (rows + between))
+
+
 def check(problem: Problem, *, max_seconds: float = DEFAULT_MAX_SECONDS,
-          max_bytes: float = DEFAULT_MAX_BYTES, **options) -> Estimate:
+          max_bytes: float = DEFAULT_MAX_BYTES, library: bool = False, **options) -> Estimate:
     """`estimate` and refuse (BudgetError) what exceeds `max_bytes` (capped at the machine's
     memory) or `max_seconds`. Returns the estimate."""
     return enforce(estimate(problem, **options), problem, max_seconds=max_seconds,
-                   max_bytes=max_bytes, **options)
+                   max_bytes=max_bytes, library=library, **options)
 
 
 def enforce(est: Estimate, problem: Problem, *, max_seconds: float = DEFAULT_MAX_SECONDS,
-            max_bytes: float = DEFAULT_MAX_BYTES, **options) -> Estimate:
-    """Refuse (BudgetError) an estimate `est` beyond the limits, as `check` does."""
+            max_bytes: float = DEFAULT_MAX_BYTES, library: bool = False,
+            **options) -> Estimate:
+    """Refuse (BudgetError) an estimate `est` beyond the limits, as `check` does. `library`:
+    name the library's arguments (``paths``, ``max_memory``) instead of the command line's
+    options (``--paths``, ``--max-memory``)."""
     limit = min(float(max_bytes), machine_memory())
     for kind, need, cap, fmt, what in (
             ("bytes", est.bytes, limit, format_bytes,
@@ -269,11 +389,32 @@ def enforce(est: Estimate, problem: Problem, *, max_seconds: float = DEFAULT_MAX
              "would take ~{need} (limit {cap}; --max-time raises it)")):
         if need > cap:
             top = est.top(kind)
-            raise BudgetError(top.key, f"the {est.command} "
-                                       + what.format(need=fmt(need), cap=fmt(cap))
-                                       + f", mostly for {top.what} (~{fmt(getattr(top, kind))}) "
-                                       f"{_sizes(problem, top.key, options)}")
+            message = (f"the {est.command} " + what.format(need=fmt(need), cap=fmt(cap))
+                       + f", mostly for {top.what} (~{fmt(getattr(top, kind))}) "
+                       f"{_sizes(problem, top.key, options)}")
+            if library:
+                message = re.sub(r"--([a-z-]+)", lambda g: g[1].replace("-", "_"), message)
+            raise BudgetError(_argument(top.key) if library else top.key, message)
     return est
+
+
+def _argument(key: str) -> str:
+    """A command-line option's library argument (``--max-time`` -> ``max_time``)."""
+    return key[2:].replace("-", "_") if key.startswith("--") else key
+
+
+def check_limits(max_memory, max_time) -> tuple[float, float]:
+    """The library's `max_memory` (GiB) and `max_time` (seconds) as ``(bytes, seconds)``;
+    ProblemError naming the argument unless each is a number > 0 (at most 1e6 GiB, 1e9 s,
+    as on the command line)."""
+    out = []
+    for name, value, hi in (("max_memory", max_memory, 1e6), ("max_time", max_time, 1e9)):
+        if (isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
+                                                              np.floating))
+                or not 0 < float(value) <= hi):
+            raise ProblemError(name, f"must be a number in (0, {hi:g}], got {value!r}")
+        out.append(float(value))
+    return out[0] * 1024 ** 3, out[1]
 
 
 def _sizes(problem: Problem, key: str, options: dict) -> str:
@@ -287,4 +428,11 @@ def _sizes(problem: Problem, key: str, options: dict) -> str:
         return f"with {options.get('paths')} paths over {T} ticks"
     if key in ("--search", "--certify"):          # corridor-design's Monte Carlo runs
         return f"over {T} ticks"
+    if key == "corridors":
+        walls = sum(len(c.b) for c in problem.corridors)
+        return f"with {len(problem.corridors)} corridors ({walls} walls) over {T} ticks"
+    if key == "--workers":
+        return f"({options.get('workers')} processes at once)"
+    if key == "--out":
+        return "for the figures"
     return f"with {len(problem.knots)} stages (knots and region band points)"

@@ -71,7 +71,8 @@ def _design(args) -> int:
             + ("_spline" if spline else "")
         check_target(args.out, [f"{stem}{ext}" for ext in (".h", ".c", ".json")])
     _check_budget(args, problem, "design", arith=arith)
-    d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem))
+    d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem),
+                       **_limits(args))
     _note_tables(d, "formatting")
     files = generated_files(d, Path(args.problem).name, arith, with_c=bool(args.out))
     if args.out:
@@ -119,18 +120,21 @@ def _corridor_design(args) -> int:
     if args.out:
         check_target(args.out, files)
     grid = len(args.strip) * len(args.rate)
+    workers = _workers(args)
     est = enforce(cs.work_estimate(problem, grid=grid, search_paths=args.search,
                                    certify_paths=args.certify, attempts=args.attempts,
-                                   refine=args.refine,
+                                   refine=args.refine, workers=workers,
                                    substeps=args.substeps, **opts),
-                  problem, max_seconds=args.max_time, max_bytes=args.max_memory * 1024 ** 3)
+                  problem, max_seconds=args.max_time, max_bytes=args.max_memory * 1024 ** 3,
+                  workers=workers)
     progress.note(f"corridor-design of {name}: at most ~{format_seconds(est.seconds)} "
                   f"({grid} grid points screened, {args.attempts} certifications)")
-    result = cs.evaluate_grid(problem, index, strip=args.strip, rate=args.rate, **opts)
+    checked = {**opts, "max_memory": None, "max_time": None}    # the whole search is checked
+    result = cs.evaluate_grid(problem, index, strip=args.strip, rate=args.rate, **checked)
     cs.search(problem, index, result, search_paths=args.search, certify_paths=args.certify,
               search_seed=args.seed, certify_seed=args.certify_seed, attempts=args.attempts,
-              refine=args.refine,
-              substeps=args.substeps, workers=args.workers, scheduler=args.scheduler, **opts)
+              refine=args.refine, substeps=args.substeps, workers=workers, force_workers=True,
+              scheduler=args.scheduler, **checked)
     c = result.chosen
     sha = "" if c is None else result.designed.problem.source_sha256
     cert = cs.certificate(result, problem_sha256=sha, design_options=opts,
@@ -167,6 +171,8 @@ def _check_budget(args, problem, command: str, **options) -> None:
     from stospline.budget import check, format_bytes, format_seconds
     substeps = options.pop("substeps", getattr(args, "substeps", 2))
     paths = options.pop("paths", getattr(args, "paths", 0))
+    if command != "design":
+        options.setdefault("workers", _workers(args))
     est = check(problem, command=command, max_seconds=args.max_time,
                 max_bytes=args.max_memory * 1024 ** 3, **_options(args, problem),
                 paths=paths,
@@ -175,6 +181,24 @@ def _check_budget(args, problem, command: str, **options) -> None:
     if est.seconds > 5:
         progress.note(f"{command} of {problem.name}: estimated ~{format_seconds(est.seconds)}"
                       f" and ~{format_bytes(est.bytes)} of memory")
+
+
+def _limits(args) -> dict:
+    """The command line's limits as the library's arguments."""
+    return {"max_memory": args.max_memory, "max_time": args.max_time}
+
+
+def _workers(args) -> int:
+    """The worker processes of the run: --workers (default: every core), at most the cores
+    this process may use unless --force-workers; a note on stderr when it limits them."""
+    from stospline.sim.montecarlo import usable_workers
+    workers = usable_workers(args.workers, args.force_workers)
+    if args.workers is not None and workers < args.workers and not getattr(args, "_workers_noted", False):
+        args._workers_noted = True
+        print(f"stospline: note: --workers {args.workers} limited to the {workers} cores this "
+              f"process may use (--force-workers starts them all; the numbers are the same)",
+              file=sys.stderr)
+    return workers
 
 
 def _note_tables(d, doing: str) -> None:
@@ -227,13 +251,15 @@ def _simulate(args) -> int:
     problem = _load_with_faults(args)
     x0 = args.x0
     _check_budget(args, problem, "simulate")
-    d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem))
+    d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem),
+                       **_limits(args))
     if x0 is not None:
         d = start_from(d, x0)
     _note_tables(d, "compiling")
     substeps = _planned_substeps(args, problem, d, "simulate")
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps,
-                          workers=args.workers, scheduler=args.scheduler)
+                          workers=_workers(args), force_workers=True,
+                          scheduler=args.scheduler, **_limits(args))
     s = simulation_summary(d, mc, seed=args.seed)
     _report_simulation(s, args.json)
     sat = s["saturation"]
@@ -245,7 +271,7 @@ def _simulate(args) -> int:
     return 0 if (s["verdict"]["agree"] or not args.check) else EXIT_DISAGREE
 
 
-def _planned_substeps(args, problem, d, command: str):
+def _planned_substeps(args, problem, d, command: str, **options):
     """`--substeps auto`: the choice for this run, its cost checked against the budget before
     the run starts (a given number was checked with the problem)."""
     if args.substeps != "auto":
@@ -253,7 +279,7 @@ def _planned_substeps(args, problem, d, command: str):
     from stospline.pipeline import plan_substeps
     choice = plan_substeps(d, paths=args.paths, seed=args.seed)
     if choice.substeps > 1:
-        _check_budget(args, problem, command, substeps=choice.substeps)
+        _check_budget(args, problem, command, substeps=choice.substeps, **options)
     return choice
 
 
@@ -328,12 +354,13 @@ def _monte_carlo(args, command: str, record: int = 0, extra_paths: int = 0):
     from stospline.pipeline import design_problem, simulate_problem
     check_file_target(args.out)
     problem = _load_with_faults(args)
-    _check_budget(args, problem, command, paths=args.paths + extra_paths)
-    d = design_problem(problem, **_options(args, problem))
+    _check_budget(args, problem, command, paths=args.paths + extra_paths, record=record)
+    d = design_problem(problem, **_options(args, problem), **_limits(args))
     _note_tables(d, "compiling")
-    substeps = _planned_substeps(args, problem, d, command)
+    substeps = _planned_substeps(args, problem, d, command, record=record)
     return d, simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps,
-                               workers=args.workers, record=record, scheduler=args.scheduler)
+                               workers=_workers(args), force_workers=True, record=record,
+                               scheduler=args.scheduler, **_limits(args))
 
 
 @quiet_numerics
@@ -353,7 +380,7 @@ def _report(args) -> int:
     from stospline.report.html import report_html
     from stospline.sim.fault_sweep import SWEEP_ROWS
     sweep_paths = SWEEP_ROWS * args.fault_paths
-    d, mc = _monte_carlo(args, "simulate", record=REPORT_RECORD, extra_paths=sweep_paths)
+    d, mc = _monte_carlo(args, "report", record=REPORT_RECORD, extra_paths=sweep_paths)
     summary = simulation_summary(d, mc, seed=args.seed)
     rows = None
     from stospline.sim.montecarlo import faults_unsupported
@@ -364,7 +391,7 @@ def _report(args) -> int:
         from stospline.pipeline import fault_sweep
         progress.note(f"fault table: {SWEEP_ROWS} runs of {args.fault_paths} paths")
         rows = fault_sweep(d, paths=args.fault_paths, seed=args.seed, substeps=mc.substeps,
-                           workers=args.workers, scheduler=args.scheduler)
+                           workers=_workers(args), scheduler=args.scheduler)
     page = report_html(d, mc, summary, rows, why_not if args.fault_paths else None)
     write_file(args.out, lambda tmp: Path(tmp).write_text(page, encoding="utf-8"))
     print(f"wrote {args.out}")
@@ -505,6 +532,12 @@ def _common(sp) -> None:
                          f"{DEFAULT_MAX_BYTES / 1024 ** 3:g} GiB, at most the machine's RAM)")
 
 
+def _force_workers(p) -> None:
+    p.add_argument("--force-workers", action="store_true",
+                   help="start --workers processes even beyond the cores this process may "
+                        "use (each is counted in the memory estimate)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(prog="stospline", description=__doc__.splitlines()[0])
     ap.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
@@ -535,8 +568,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "the fewest whose exact bias in the expected cost is at most 0.1 "
                         "Monte Carlo standard errors of this run")
     p.add_argument("--workers", type=_integer(1, MAX_WORKERS), default=None,
-                   help="processes that run the blocks of paths (default: every core); the "
+                   help="processes that run the blocks of paths (default: every core; at "
+                        "most the cores this process may use unless --force-workers); the "
                         "numbers are the same for any count")
+    _force_workers(p)
     p.add_argument("--scheduler", type=_scheduler, default=None, metavar="ADDRESS",
                    help="run the blocks of paths on a Dask cluster: its scheduler's address "
                         "(e.g. tcp://host:8786), or local for a local cluster of --workers "
@@ -586,6 +621,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--substeps", type=_integer(1, MAX_SUBSTEPS), default=1,
                    help="plant steps per controller tick (default 1)")
     p.add_argument("--workers", type=_integer(1, MAX_WORKERS), default=None)
+    _force_workers(p)
     p.add_argument("--scheduler", type=_scheduler, default=None, metavar="ADDRESS")
     p.add_argument("--out", type=_out_dir,
                    help="directory for <name>.toml (the designed problem), <name>.{c,h,json} "
@@ -608,6 +644,7 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--seed", type=_integer(0, SEED_MAX), default=1)
         p.add_argument("--substeps", type=_substeps, default="auto")
         p.add_argument("--workers", type=_integer(1, MAX_WORKERS), default=None)
+        _force_workers(p)
         p.add_argument("--scheduler", type=_scheduler, default=None, metavar="ADDRESS")
         p.add_argument("--fault", type=_fault, action="append", metavar="KEY=VALUE",
                        help="a fault of the loop (see simulate --help)")

@@ -196,19 +196,22 @@ def candidate(problem, corridor: int, polys: list[int], w: float, wv: float,
 
 
 def count_exits(problem, corridor: int, cand: Candidate, *, paths: int, seed: int,
-                substeps: int = 1, workers=None, scheduler=None, **design_options) -> Exits:
+                substeps: int = 1, workers=None, scheduler=None, force_workers: bool = False,
+                **design_options) -> Exits:
     """Monte Carlo of the candidate's compiled C controller with the problem's plant (and
     faults): how many of `paths` paths leave the corridor."""
     d = design_problem(cand.problem(), **design_options)
     mc = simulate(problem, build_controller(d.table), paths=paths, seed=seed,
-                  substeps=substeps, workers=workers, scheduler=scheduler)
+                  substeps=substeps, workers=workers, scheduler=scheduler,
+                  force_workers=force_workers)
     return Exits(int(np.sum(mc.exit_tick[corridor] >= 0)), int(paths), int(seed))
 
 
 def search(problem, corridor: int, result: SearchResult, *, search_paths: int,
            certify_paths: int, search_seed: int = SEARCH_SEED,
            certify_seed: int = CERTIFY_SEED, attempts: int = ATTEMPTS, substeps: int = 1,
-           workers=None, scheduler=None, refine: int = 0, **design_options) -> SearchResult:
+           workers=None, scheduler=None, refine: int = 0, force_workers: bool = False,
+           **design_options) -> SearchResult:
     """Screen `result.candidates` cheapest first and certify the first that passes (the
     next that passes if certification fails, at most `attempts` certifications). A
     candidate's `screening` already set (e.g. by a full-grid run with the same paths and
@@ -222,7 +225,8 @@ def search(problem, corridor: int, result: SearchResult, *, search_paths: int,
     the cheapest passing design is usually inside the segment, and the grid alone overpays
     by up to the cost step between them."""
     eps = result.epsilon
-    run = dict(substeps=substeps, workers=workers, scheduler=scheduler, **design_options)
+    run = dict(substeps=substeps, workers=workers, scheduler=scheduler,
+               force_workers=force_workers, **design_options)
     queue: list[Candidate] = []
     for i, cand in enumerate(result.candidates):
         if len(result.certified) >= attempts:
@@ -320,7 +324,7 @@ def certificate(result: SearchResult, *, problem_sha256: str, design_options: di
 
 def work_estimate(problem, *, grid: int, search_paths: int, certify_paths: int,
                   attempts: int = ATTEMPTS, substeps: int = 1, refine: int = 0,
-                  **design_options) -> Estimate:
+                  workers: int = 1, **design_options) -> Estimate:
     """The most the search can take: every grid point designed and screened, `refine`
     bisection points designed and screened, `attempts` certifications. The Monte Carlo terms
     are path-ticks at the harness throughput measured for `stospline.budget` (one core; `tools/bench/harness_throughput.py`)."""
@@ -331,10 +335,13 @@ def work_estimate(problem, *, grid: int, search_paths: int, certify_paths: int,
     tables = max((t.bytes for t in design.terms), default=0.0)
 
     def mc(paths: int):
-        e = estimate(problem, command="simulate", paths=paths, substeps=substeps, **opts)
+        e = estimate(problem, command="simulate", paths=paths, substeps=substeps,
+                     workers=workers, **opts)
         mc_term = next(t for t in e.terms if t.what.startswith("Monte Carlo"))
         compiled = next(t for t in e.terms if t.what.startswith("C text"))
-        return mc_term, compiled
+        more = [t for t in e.terms if t.key == "--workers" or t.what.startswith("the paths'")]
+        return Term(mc_term.what, mc_term.key, mc_term.seconds + sum(t.seconds for t in more),
+                    mc_term.bytes + sum(t.bytes for t in more)), compiled
 
     screen, compiled = mc(search_paths)
     cert, _ = mc(certify_paths)

@@ -15,7 +15,8 @@ from stospline.design.continuous import DesignError, design_continuous
 from stospline.design.varying import mean_maps
 from stospline.design.zoh import check_delay, design_zoh
 from stospline.sim.controller import build_controller
-from stospline.sim.montecarlo import MonteCarloResult, joint_verdict, simulate, z_value
+from stospline.sim.montecarlo import (MonteCarloResult, check_counts, joint_verdict, simulate,
+                                      usable_workers, z_value)
 from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table, state_range
 from stospline.sim.plant_scheme import SubstepChoice, choose_substeps, scheme_moments
 from stospline.sim.fault_oracle import evaluate_with_faults, has_exact_oracle
@@ -26,7 +27,7 @@ from stospline.problem.faults import Faults
 from stospline.problem.model import Problem, ProblemError
 from stospline.table.format import GainTable, TickGains, table_of
 from stospline.table.qformat import DEFAULT_SIGMAS, FixedPointTable, quantize_table
-from stospline import limits, progress, strict
+from stospline import budget, limits, progress, strict
 from stospline.precision import RoundedUp
 from stospline.table_options import (DEFAULT_SPLINE_TOLERANCE, TABLE_KINDS,
                                      check_spline_tolerance)
@@ -34,7 +35,7 @@ from stospline.table_options import (DEFAULT_SPLINE_TOLERANCE, TABLE_KINDS,
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
            "simulation_summary", "verdict", "plan_substeps", "write_outputs", "start_from",
            "double_table", "fixed_point_table", "fixed_point_spline", "check_implementable",
-           "loop_moments", "fault_sweep"]
+           "loop_moments", "fault_sweep", "simulation_estimate"]
 
 # JSON summaries keep 10 significant digits and an absolute quantum of 1e-10: the designs
 # agree to ~1e-14 however the arithmetic is ordered, so regenerated files stay byte-identical
@@ -96,7 +97,9 @@ class Designed:
 def design_problem(problem: Problem, *, noise: bool = True,
                    discretization: str = "exact-zoh", mode: str = "stagewise",
                    delay_ticks: int | None = None, table: str | None = None,
-                   spline_tolerance: float | None = None) -> Designed:
+                   spline_tolerance: float | None = None,
+                   max_memory: float | None = budget.DEFAULT_MAX_GIB,
+                   max_time: float | None = budget.DEFAULT_MAX_SECONDS) -> Designed:
     """Design at the problem's tick rate, quantize the table, evaluate both with the oracle.
 
     Parameters
@@ -129,6 +132,11 @@ def design_problem(problem: Problem, *, noise: bool = True,
     spline_tolerance : float, optional
         The spline's budget: the largest relative error of a gain entry (default: the
         problem's ``[design] spline_tolerance``, else 1e-5).
+    max_memory, max_time : float or None
+        Refuse (BudgetError, naming the key that costs most) a design estimated to need more
+        than `max_memory` GiB (at most the machine's RAM) or `max_time` seconds, before any
+        work (`stospline.budget`; the command line's ``--max-memory``/``--max-time`` and
+        defaults, 4 GiB and 600 s). None: no check (a caller that checked the whole run).
 
     Returns
     -------
@@ -141,6 +149,8 @@ def design_problem(problem: Problem, *, noise: bool = True,
     ------
     DesignError
         The problem has no solution (an infeasible constraint, no bounded solution).
+    BudgetError
+        The estimate exceeds `max_memory` or `max_time`.
 
     Examples
     --------
@@ -161,6 +171,9 @@ def design_problem(problem: Problem, *, noise: bool = True,
     if spline_tolerance is None:
         spline_tolerance = problem.options.get("spline_tolerance", DEFAULT_SPLINE_TOLERANCE)
     spline_tolerance = check_spline_tolerance(spline_tolerance, "spline_tolerance")
+    _within_budget(max_memory, max_time, lambda: budget.estimate(
+        problem, command="design", mode=mode, discretization=discretization,
+        delay_ticks=delay_ticks, table=table, spline_tolerance=spline_tolerance), problem)
     try:
         return _design_problem(problem, noise=noise, discretization=discretization, mode=mode,
                                delay_ticks=delay_ticks,
@@ -168,6 +181,18 @@ def design_problem(problem: Problem, *, noise: bool = True,
     except FloatingPointError:
         # Products of extreme data (B = 1e308, C'C of 1e300) overflowed to Inf or NaN.
         raise DesignError(*strict.overflow_failure(problem)) from None
+
+
+def _within_budget(max_memory, max_time, estimate, problem: Problem, **options) -> None:
+    """Refuse (BudgetError) the work `estimate()` describes when it exceeds the limits (None
+    for both: no check)."""
+    if max_memory is None and max_time is None:
+        return
+    max_bytes, max_seconds = budget.check_limits(
+        budget.DEFAULT_MAX_GIB if max_memory is None else max_memory,
+        budget.DEFAULT_MAX_SECONDS if max_time is None else max_time)
+    budget.enforce(estimate(), problem, max_seconds=max_seconds, max_bytes=max_bytes,
+                   library=True, **options)
 
 
 def _design_problem(problem: Problem, *, noise: bool, discretization: str,
@@ -521,7 +546,9 @@ def loop_moments(d: Designed, faults: Faults | None = None) -> Moments:
 def simulate_problem(d: Designed, *, paths: int, seed: int,
                      substeps: int | str | SubstepChoice = "auto", workers: int | None = None,
                      record: int = 0, scheduler: str | None = None,
-                     build_dir=None, faults: Faults | None = None) -> MonteCarloResult:
+                     build_dir=None, faults: Faults | None = None, force_workers: bool = False,
+                     max_memory: float | None = budget.DEFAULT_MAX_GIB,
+                     max_time: float | None = budget.DEFAULT_MAX_SECONDS) -> MonteCarloResult:
     """Monte Carlo of the compiled C controller built from `d.table` in closed loop with the
     stochastic plant (exponential Euler-Maruyama with `substeps` steps per tick).
 
@@ -539,7 +566,8 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
         in the result's ``substep_choice``.
     workers : int, optional
         Processes that run the blocks of paths (default: every core; the numbers are the same
-        for any count, `sim.montecarlo.simulate`).
+        for any count, `sim.montecarlo.simulate`); at most the cores this process may use
+        unless `force_workers`.
     record : int
         Keep the states of this many paths at every tick (``record_x``; for reports).
     scheduler : str, optional
@@ -549,6 +577,15 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
         Where the compiled module is cached (default: the user cache directory).
     faults : Faults, optional
         The loop's faults (default: the problem file's ``[faults]``; `problem.faults`).
+    force_workers : bool
+        Start `workers` processes even beyond the cores this process may use.
+    max_memory, max_time : float or None
+        Refuse (BudgetError, naming the argument that costs most, e.g. ``paths``) a run
+        estimated to need more than `max_memory` GiB or `max_time` seconds, before any work:
+        compiling the controller, the paths and their worker processes, the oracle of the
+        plant scheme and the corridors' exit bounds of `simulation_summary`
+        (`stospline.budget.monte_carlo_terms`). Defaults as on the command line (4 GiB,
+        600 s); None: no check. Monte Carlo memory grows with `paths`.
 
     Returns
     -------
@@ -560,6 +597,8 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
     ------
     ProblemError
         The firmware would refuse the table (`check_implementable`).
+    BudgetError
+        The estimate exceeds `max_memory` or `max_time`.
 
     Examples
     --------
@@ -573,17 +612,51 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
     True
     """
     check_implementable(d)
+    check_counts(paths=paths, **({} if isinstance(substeps, (str, SubstepChoice))
+                                 else {"substeps": substeps}))
+    workers = usable_workers(workers, force_workers)
+    choice = substeps if isinstance(substeps, SubstepChoice) else None
+
+    def within_budget(steps: int) -> None:
+        _within_budget(max_memory, max_time, lambda: simulation_estimate(
+            d, paths=paths, substeps=steps, workers=workers, record=record), d.problem,
+            paths=paths, workers=workers)
+    # "auto" chooses after a pilot run: checked at one step per tick, then at the choice.
+    within_budget(1 if substeps == "auto"
+                  else choice.substeps if choice is not None else substeps)
     ctl = build_controller(d.table, build_dir=build_dir)
     faults = d.problem.faults if faults is None else faults
-    choice = substeps if isinstance(substeps, SubstepChoice) else None
     if substeps == "auto":
         choice = choose_substeps(d.problem, ctl, loop_moments(d, faults).J, paths=paths,
                                  seed=seed, faults=faults)
+        if choice.substeps > 1:
+            within_budget(choice.substeps)
     mc = simulate(d.problem, ctl, paths=paths, seed=seed,
                   substeps=choice.substeps if choice is not None else substeps, workers=workers,
-                  record=record, scheduler=scheduler, faults=faults)
+                  record=record, scheduler=scheduler, faults=faults, force_workers=True)
     mc.substep_choice = choice
     return mc
+
+
+def simulation_estimate(d: Designed, *, paths: int, substeps: int, workers: int = 1,
+                        record: int = 0) -> budget.Estimate:
+    """What `simulate_problem` and `simulation_summary` of `d` will take: the controller's C
+    text compiled, and the Monte Carlo terms (`budget.monte_carlo_terms`)."""
+    t = d.table
+    numbers = (t.K.size + t.k0.size + t.L.size if t.spline is None
+               else t.spline.coef.size + t.spline.knot.size)
+    est = budget.Estimate("simulation")
+    est.terms.append(budget.Term("start-up (imports, compiled kernels)", "--max-time",
+                                 seconds=budget.BASE_SECONDS))
+    est.terms.append(budget.Term("C text of the tables, compiled", "tick_hz",
+                                 seconds=(budget.CODEGEN_NUMBER + budget.COMPILE_NUMBER)
+                                 * numbers,
+                                 bytes=(budget.CODEGEN_BYTES + budget.COMPILE_BYTES) * numbers))
+    est.terms += budget.monte_carlo_terms(d.problem, paths=paths, substeps=substeps,
+                                          workers=workers, record=record,
+                                          n_latch=t.dims[2],
+                                          delay_ticks=int(getattr(t, "delay_ticks", 0)))
+    return est
 
 
 def fault_sweep(d: Designed, *, paths: int, seed: int, substeps: int,

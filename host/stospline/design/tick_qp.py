@@ -389,7 +389,6 @@ def _interior_point(g: _Grid, x0, eq: np.ndarray) -> tuple:
     The rows with a bound (``lower < upper``) are ``G w <= h``, ``G = [C; -C]``; the knots'
     equalities join ``E``. The exact KKT loop corrects the guess."""
     from scipy import sparse
-    from scipy.sparse.linalg import splu
     ineq = np.flatnonzero(~eq)
     Ci = g.C[ineq]
     E = sparse.vstack([g.E, g.C[np.flatnonzero(eq)]], format="csr")
@@ -406,7 +405,7 @@ def _interior_point(g: _Grid, x0, eq: np.ndarray) -> tuple:
         return guess, 0, -np.inf, None
 
     # Start: the equality-constrained optimum, slacks pushed inside.
-    z0 = splu(sparse.bmat([[P, E.T], [E, None]], format="csc")).solve(
+    z0 = _lu(sparse.bmat([[P, E.T], [E, None]], format="csc")).solve(
         np.concatenate([np.zeros(nv), b]))
     w, y = z0[:nv], z0[nv:]
     scale = max(1.0, float(np.abs(h).max()))
@@ -434,7 +433,7 @@ def _interior_point(g: _Grid, x0, eq: np.ndarray) -> tuple:
         # stay solvable, as in the KKT matrix of the exact solve.
         M = sparse.bmat([[P, E.T, G.T], [E, None, None],
                          [G, None, -sparse.diags(s / z + KKT_REGULARIZATION)]], format="csc")
-        lu = splu(M)
+        lu = _lu(M)
 
         def step(rc):
             sol = lu.solve(np.concatenate([-rd, -re, rc / z - ri]))
@@ -537,10 +536,27 @@ def _independent_rows(g: _Grid, rows: list[TickRow], active: np.ndarray) -> np.n
     return out
 
 
+def _lu(M):
+    """SuperLU of the sparse matrix M. SuperLU reports running out of memory (or past its
+    32-bit sizes) as MemoryError, SystemError or a RuntimeError from its malloc: that is a
+    BudgetError naming tick_hz (one line, exit status 2), not a traceback; any other
+    RuntimeError (a singular matrix) is the caller's."""
+    from scipy.sparse.linalg import splu
+    from stospline.budget import BudgetError
+    try:
+        return splu(M)
+    except (MemoryError, SystemError, RuntimeError) as exc:
+        text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        if isinstance(exc, RuntimeError) and "malloc" not in text.lower():
+            raise
+        raise BudgetError("tick_hz", f"the tick-grid QP's sparse LU ({M.shape[0]} rows, "
+                                     f"{M.nnz} nonzeros) ran out of memory ({text}): lower "
+                                     f"tick_hz or shorten the regions at every tick") from None
+
+
 def _kkt(g: _Grid, active: np.ndarray):
     """LU of the KKT matrix of the equality rows and the active rows (at their bounds)."""
     from scipy import sparse
-    from scipy.sparse.linalg import splu
     idx = np.flatnonzero(active)
     Ea = sparse.vstack([g.E, g.C[idx]], format="csc")
     # The active rows' block is regularised by -KKT_REGULARIZATION: rows that depend on others
@@ -552,7 +568,7 @@ def _kkt(g: _Grid, active: np.ndarray):
                                                                  -KKT_REGULARIZATION)]))
     M = sparse.bmat([[g.P, Ea.T], [Ea, reg]], format="csc")
     try:
-        return _Refined(splu(M), sparse.bmat([[g.P, Ea.T], [Ea, None]], format="csr")), idx
+        return _Refined(_lu(M), sparse.bmat([[g.P, Ea.T], [Ea, None]], format="csr")), idx
     except RuntimeError:
         raise DesignError("regions", "the active constraint rows of the tick-grid QP are "
                                      "linearly dependent (contradictory bands?)") from None

@@ -105,17 +105,46 @@ def exit_bounds(corridor: Corridor, y_mean: np.ndarray, y_cov: np.ndarray, t0: f
             "gaussian": _bound(corridor, gauss, "gaussian", (lo, hi))}
 
 
-def corridor_outputs(problem, table, **oracle_options) -> list[tuple[np.ndarray, np.ndarray]]:
+def corridor_outputs(problem, table, **oracle_options) -> "_Outputs":
     """``(y_mean, y_cov)`` of each corridor's outputs at every tick, from one exact oracle
-    pass (`oracle.evaluate_table` with the corridors' rows stacked)."""
+    pass (`oracle.evaluate_table`), as a sequence indexed by corridor.
+
+    The pass records the corridors' rows stacked when they are no more than the states;
+    otherwise it records the state's moments and each corridor's are projected when asked
+    for: the stacked covariance grows with the square of all the corridors' rows (300
+    corridors of 2 rows over 6 000 ticks: 17 GB), the state's does not."""
     from stospline.sim.oracle import evaluate_table
     if not problem.corridors:
-        return []
+        return _Outputs([], None, None)
     C = np.vstack([c.C for c in problem.corridors])
-    mom = evaluate_table(problem, table, path=False, output=C, **oracle_options)
-    out, r = [], 0
-    for c in problem.corridors:
-        s = slice(r, r + c.p)
-        out.append((mom.path_y_mean[:, s], mom.path_y_cov[:, s, s]))
-        r += c.p
-    return out
+    stacked = C.shape[0] <= problem.n
+    mom = evaluate_table(problem, table, path=False,
+                         output=C if stacked else np.eye(problem.n), **oracle_options)
+    return _Outputs([c.C for c in problem.corridors], mom.path_y_mean, mom.path_y_cov,
+                    stacked)
+
+
+class _Outputs:
+    """Per corridor ``(y_mean, y_cov)``: slices of the stacked outputs' moments, or the
+    projection of the state's (`corridor_outputs`), made when indexed."""
+
+    def __init__(self, Cs: list, mean, cov, stacked: bool = True):
+        self._Cs, self._mean, self._cov, self._stacked = Cs, mean, cov, stacked
+        self._start = np.concatenate([[0], np.cumsum([C.shape[0] for C in Cs])]).astype(int)
+
+    def __len__(self) -> int:
+        return len(self._Cs)
+
+    def __getitem__(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        if not -len(self) <= i < len(self):
+            raise IndexError(i)
+        i %= len(self)
+        if self._stacked:
+            s = slice(self._start[i], self._start[i + 1])
+            return self._mean[:, s], self._cov[:, s, s]
+        C = self._Cs[i]
+        yc = C @ self._cov @ C.T
+        return self._mean @ C.T, 0.5 * (yc + np.swapaxes(yc, 1, 2))
+
+    def __iter__(self):
+        return (self[i] for i in range(len(self)))

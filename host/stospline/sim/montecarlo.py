@@ -32,7 +32,7 @@ if TYPE_CHECKING:
     from stospline.sim.plant_scheme import SubstepChoice
 
 __all__ = ["MonteCarloResult", "simulate", "z_value", "Agreement", "compare_to_oracle",
-           "BLOCK_PATHS", "block_seed", "default_workers",
+           "BLOCK_PATHS", "block_seed", "default_workers", "usable_workers", "check_counts",
            "JointVerdict", "joint_verdict", "DETERMINISTIC_RTOL", "faults_unsupported"]
 
 
@@ -160,9 +160,29 @@ def default_workers() -> int:
         return os.cpu_count() or 1
 
 
+def usable_workers(workers: int | None, force: bool = False) -> int:
+    """The worker processes a run starts: `workers` (default: every core), at most the cores
+    this process may use unless `force` (more only share those cores, each with its own
+    memory)."""
+    cores = default_workers()
+    if workers is None:
+        return cores
+    workers = max(1, int(workers))
+    return workers if force else min(workers, cores)
+
+
+def check_counts(**counts) -> None:
+    """ValueError unless each count (paths, substeps) is an integer >= 1, before anything is
+    allocated."""
+    for name, value in counts.items():
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+
+
 def simulate(problem: Problem, controller: CompiledController, *, paths: int, seed: int,
              substeps: int = 4, workers: int | None = None, record: int = 0,
-             scheduler: str | None = None, faults: Faults | None = None) -> MonteCarloResult:
+             scheduler: str | None = None, faults: Faults | None = None,
+             force_workers: bool = False) -> MonteCarloResult:
     """Run `paths` realisations of the plant with the compiled controller in the loop.
 
     Parameters
@@ -180,7 +200,8 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
         midpoint, a second-order error in the step).
     workers : int, optional
         Processes that run blocks at once (default: every core this process may use; runs
-        below ~2e6 path-ticks stay in this process). The result is the same for any number.
+        below ~2e6 path-ticks stay in this process); at most those cores unless
+        `force_workers`. The result is the same for any number.
     record : int
         Keep the states of the first ``min(record, paths, BLOCK_PATHS)`` paths at every tick
         (``record_x``, float32).
@@ -196,9 +217,7 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
         plant's are the same with or without faults. Float32 tables with time-invariant stage data only
         (ProblemError otherwise).
     """
-    for name, value in (("paths", paths), ("substeps", substeps)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-            raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+    check_counts(paths=paths, substeps=substeps)
     table = controller.table
     faults = problem.faults if faults is None else faults
     if getattr(table, "delay_ticks", 0) and faults.delay_ticks:
@@ -209,7 +228,7 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
         raise ProblemError("faults", "are simulated for float32 tables designed without a "
                                      "delay, with time-invariant stage data only")
     counts = [min(BLOCK_PATHS, paths - start) for start in range(0, paths, BLOCK_PATHS)]
-    workers = default_workers() if workers is None else max(1, int(workers))
+    workers = usable_workers(workers, force_workers)
     parallel = (workers > 1 and len(counts) > 1
                 and paths * table.n_ticks * substeps >= _PARALLEL_WORK)
     bar = progress.start(f"simulate ({paths} paths)", paths * table.n_ticks, unit="path-tick")

@@ -365,6 +365,29 @@ def m_row_scale(doc, draw):
 MUTATIONS["row_scale"] = m_row_scale
 
 
+
+# -- budget_everything: costs outside the tick grid's tables -----------------------------
+def m_budget_everything(doc, draw):
+    """Inputs whose work is in corridors or in the tick-grid QP: hundreds or thousands of
+    corridors, regions at every tick and between ticks at a high tick rate (the QP's sparse
+    LU), which the budget must refuse up front or finish."""
+    n = len(doc["x0"])
+    end = float(doc["knots"][-1]["t"])
+    first = [[1.0] + [0.0] * (n - 1)]
+    if draw(st.sampled_from(["corridors", "between_ticks"])) == "corridors":
+        corridor = {"t": [0.0, end], "C": first,
+                    "polygons": [{"A": [[1.0], [-1.0]], "b": [1e6, 1e6]}]}
+        doc["corridors"] = [copy.deepcopy(corridor)
+                            for _ in range(draw(st.sampled_from([300, 3000])))]
+    else:
+        doc.setdefault("design", {})["mode"] = "joint"
+        doc["tick_hz"] = draw(st.sampled_from([1000, 60000]))
+        doc["regions"] = [{"t": [0.0, end], "every": "tick", "C": first, "lower": [-1e3],
+                           "upper": [1e3], "between_ticks": True}]
+
+
+MUTATIONS["budget_everything"] = m_budget_everything
+
 @st.composite
 def problem_cases(draw):
     """(classes, base name, TOML text): a base problem with 1-2 mutations applied."""

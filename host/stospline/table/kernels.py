@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from stospline.cache import build_source_module, load_module
+from stospline.cache import FallbackWarning, build_source_module, load_module
 
 __all__ = ["affine_compose", "affine_compose_gains", "qspline_stage", "build_kernel",
            "KernelBuildError"]
@@ -67,7 +67,7 @@ def _kernel():
             except KernelBuildError as exc:
                 _failed = True
                 warnings.warn(f"{exc}; the table layer runs its numpy references (slower)",
-                              RuntimeWarning, stacklevel=3)
+                              FallbackWarning, stacklevel=3)
     return _loaded
 
 

@@ -432,7 +432,8 @@ class _VersionAction(argparse.Action):
     is slow to import)."""
 
     def __call__(self, parser, namespace, values, option_string=None):
-        parser.exit(0, f"{parser.prog} {_version()}\n")
+        print(f"{parser.prog} {_version()}")
+        parser.exit(0)
 
 
 class _Parser(argparse.ArgumentParser):

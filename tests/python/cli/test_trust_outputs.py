@@ -216,18 +216,22 @@ def test_own_committed_staging_is_published(tmp_path):
     assert (out / "a.c").read_text() == "new" and os.listdir(out) == ["a.c"]
 
 
-def test_copied_staging_directory_is_left_alone(tmp_path):
+@pytest.mark.parametrize("present", [True, False], ids=["replacing", "creating"])
+def test_copied_staging_directory_is_left_alone(tmp_path, present):
     """A committed staging directory that came from elsewhere (copied, checked out of version
-    control) lists a file of this directory: the next write must not replace that file."""
+    control) lists a file: the next write must neither replace that file of this directory nor
+    create it."""
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     stage = _committed_stage(elsewhere, {"notes.txt": b"theirs"})
     out = tmp_path / "o"
     out.mkdir()
-    (out / "notes.txt").write_text("mine")
+    if present:
+        (out / "notes.txt").write_text("mine")
     shutil.copytree(stage, out / stage.name)
     atomic.write_set(out, {"cart.c": "c"})
-    assert (out / "notes.txt").read_text() == "mine"
+    assert (out / "notes.txt").read_text() == "mine" if present else \
+        not (out / "notes.txt").exists()
     assert (out / stage.name / "notes.txt").read_bytes() == b"theirs"   # left as it was
 
 
@@ -414,3 +418,33 @@ def test_sigint_at_any_moment_ends_in_one_line(tmp_path, delay):
     assert p.returncode == 130, (p.returncode, p.stderr[-2000:])
     assert p.stderr.splitlines() == ["stospline: interrupted"] and p.stdout == "", p.stderr
     assert sorted(os.listdir(tmp_path)) == ["p.toml"]
+
+
+def test_cli_module_loads_nothing_heavy():
+    """The console entry point's module imports neither numpy nor importlib.metadata, so the
+    interpreter reaches `main` (and its SIGINT handling) at once."""
+    code = ("import sys, stospline.cli\n"
+            "print(sorted(m for m in ('numpy', 'scipy', 'importlib.metadata', 'cffi') "
+            "if m in sys.modules))")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env={**os.environ, "PYTHONPATH": str(REPO / "host")}, timeout=60)
+    assert p.returncode == 0 and p.stdout.strip() == "[]", p.stdout + p.stderr
+
+
+def test_interrupt_turned_into_another_error_still_ends_in_one_line(capsys, monkeypatch):
+    """numpy turns a SIGINT during its import into an ImportError: after a SIGINT, whatever
+    ends the run is reported as the interrupt."""
+    import time
+
+    from stospline import cli
+
+    def interrupted_import():
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(5)
+        except KeyboardInterrupt:
+            raise ImportError("could not import module 'datetime'") from None
+    monkeypatch.setattr(cli, "build_parser", interrupted_import)
+    assert main(["design", "p.toml"]) == 130
+    assert capsys.readouterr().err == "stospline: interrupted\n"
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler   # restored

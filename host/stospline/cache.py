@@ -18,7 +18,36 @@ from pathlib import Path
 from typing import Callable, Iterable
 
 __all__ = ["cache_root", "source_key", "cached_build", "compile_cffi", "load_module",
-           "build_source_module"]
+           "build_source_module", "CompilerMissing", "FallbackWarning", "c_compiler"]
+
+
+class CompilerMissing(RuntimeError):
+    """A C module had to be built and there is no C compiler (``CC``, else the one Python was
+    built with, not found on ``PATH``). ``compiler`` names what was looked for."""
+
+    def __init__(self, compiler: str):
+        super().__init__(f"no C compiler: {compiler!r} is not found (set CC, or install one, "
+                         f"e.g. apt-get install gcc)")
+        self.compiler = compiler
+
+
+class FallbackWarning(RuntimeWarning):
+    """A compiled host kernel could not be built, so its numpy reference runs instead (the
+    same computation, slower): information, not a numerical problem."""
+
+
+def c_compiler() -> tuple[str, bool]:
+    """``(compiler, found)``: the compiler cffi's build runs (``CC``, else Python's own) and
+    whether it is on ``PATH``."""
+    import shlex
+    import shutil
+    import sysconfig
+    cc = os.environ.get("CC") or sysconfig.get_config_var("CC") or "cc"
+    try:
+        exe = shlex.split(cc)[0]
+    except (ValueError, IndexError):
+        return cc, False
+    return exe, shutil.which(exe) is not None
 
 
 def cache_root() -> Path:
@@ -91,7 +120,13 @@ def compile_cffi(out: Path, modname: str, cdef: str, source: str, *, sources=(),
     ffib.cdef(cdef)
     ffib.set_source(modname, source, sources=[str(s) for s in sources],
                     include_dirs=[str(d) for d in include_dirs], extra_compile_args=list(cflags))
-    return Path(ffib.compile(tmpdir=str(out), verbose=not quiet))
+    try:
+        return Path(ffib.compile(tmpdir=str(out), verbose=not quiet))
+    except Exception:
+        compiler, found = c_compiler()
+        if not found:                # the usual cause on a bare machine: say so plainly
+            raise CompilerMissing(compiler) from None
+        raise
 
 
 def load_module(path: Path):

@@ -16,21 +16,42 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse                                                  # noqa: E402
+import functools                                                 # noqa: E402
 import json                                                      # noqa: E402
 import math                                                      # noqa: E402
 import re                                                        # noqa: E402
+import signal                                                    # noqa: E402
 import sys                                                       # noqa: E402
 from pathlib import Path                                         # noqa: E402
 
+# Only light modules here: numpy and the rest load inside `main`, where an interrupt is
+# caught (a Ctrl-C while they load ends in one line, not a traceback).
 from stospline import progress                                   # noqa: E402
 from stospline.errors import ProblemError                        # noqa: E402
 from stospline.firmware_interface import ARITHS                  # noqa: E402
-from stospline.problem.reader import load_problem                # noqa: E402
-from stospline.strict import dumps, quiet_numerics               # noqa: E402
 from stospline.table_options import (DEFAULT_SPLINE_TOLERANCE, TABLE_KINDS,  # noqa: E402
                                      check_spline_tolerance)
 
 __all__ = ["main"]
+
+
+def load_problem(path):
+    from stospline.problem.reader import load_problem as load
+    return load(path)
+
+
+def dumps(obj) -> str:
+    from stospline.strict import dumps as strict_dumps
+    return strict_dumps(obj)
+
+
+def quiet_numerics(func):
+    """`stospline.strict.quiet_numerics`, imported when the command runs."""
+    @functools.wraps(func)
+    def run(*args, **kwargs):
+        from stospline.strict import quiet_numerics as quiet
+        return quiet(func)(*args, **kwargs)
+    return run
 
 
 def _options(args, problem) -> dict:
@@ -61,6 +82,7 @@ def _options(args, problem) -> dict:
 def _design(args) -> int:
     from stospline.atomic import check_target
     from stospline.pipeline import design_problem, generated_files, write_outputs
+    inputs = [args.problem]
     if args.out:
         check_target(args.out)                  # before any work: nothing is created
     problem = load_problem(args.problem)
@@ -69,14 +91,14 @@ def _design(args) -> int:
     if args.out:
         stem = (problem.name if arith == "float32" else f"{problem.name}_{arith}") \
             + ("_spline" if spline else "")
-        check_target(args.out, [f"{stem}{ext}" for ext in (".h", ".c", ".json")])
+        check_target(args.out, [f"{stem}{ext}" for ext in (".h", ".c", ".json")], inputs)
     _check_budget(args, problem, "design", arith=arith)
     d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem),
                        **_limits(args))
     _note_tables(d, "formatting")
     files = generated_files(d, Path(args.problem).name, arith, with_c=bool(args.out))
     if args.out:
-        written = write_outputs(args.out, files)
+        written = write_outputs(args.out, files, inputs)
     if args.json:
         print(files[next(k for k in files if k.endswith(".json"))], end="")
     else:
@@ -118,7 +140,9 @@ def _corridor_design(args) -> int:
     name = problem.name
     files = [f"{name}{ext}" for ext in (".toml", ".c", ".h", ".json", "_corridor.json")]
     if args.out:
-        check_target(args.out, files)
+        check_target(args.out, files, [args.problem])
+    cs.check_reachable(problem, index, search_paths=args.search, certify_paths=args.certify,
+                       epsilon_option=args.epsilon is not None)
     grid = len(args.strip) * len(args.rate)
     workers = _workers(args)
     est = enforce(cs.work_estimate(problem, grid=grid, search_paths=args.search,
@@ -136,22 +160,22 @@ def _corridor_design(args) -> int:
               refine=args.refine, substeps=args.substeps, workers=workers, force_workers=True,
               scheduler=args.scheduler, **checked)
     c = result.chosen
-    sha = "" if c is None else result.designed.problem.source_sha256
-    cert = cs.certificate(result, problem_sha256=sha, design_options=opts,
-                          substeps=args.substeps)
+    if c is None:                # nothing on stdout: the error line says why
+        raise ProblemError(f"corridors[{index}].epsilon", cs.failure_reason(result))
+    cert = cs.certificate(result, problem_sha256=result.designed.problem.source_sha256,
+                          design_options=opts, substeps=args.substeps)
     text = dumps(cert) + "\n"
-    if c is not None and args.out:
+    written = []
+    if args.out:
         out = generated_files(result.designed, f"{name}.toml")
         written = write_outputs(args.out, {f"{name}.toml": c.toml, **out,
-                                           f"{name}_corridor.json": text})
+                                           f"{name}_corridor.json": text}, [args.problem])
     if args.json:
         print(text, end="")
     else:
         print(cs.summary_text(result))
-        for path in written if c is not None and args.out else []:
+        for path in written:
             print(f"wrote {path}")
-    if c is None:
-        raise ProblemError(f"corridors[{index}].epsilon", cs.failure_reason(result))
     return 0
 
 
@@ -245,11 +269,31 @@ def _load_with_faults(args):
                                                 prefix="--fault "))
 
 
+def _check_faults_runnable(args, problem) -> None:
+    """Refuse, before the design, faults the harness cannot run around this problem's table
+    (`sim.montecarlo.faults_unsupported`: what the table will be is known from the options)."""
+    from types import SimpleNamespace
+    from stospline.sim.montecarlo import faults_unsupported
+    if not problem.faults.any:
+        return
+    opts = _options(args, problem)
+    table = SimpleNamespace(arith="float32", delay_ticks=opts["delay_ticks"])
+    if opts["delay_ticks"] and problem.faults.delay_ticks:
+        raise ProblemError("faults.delay_ticks", "the table is designed for a one-tick delay "
+                                                 "and runs with it; a delay fault on top of it "
+                                                 "is not simulated")
+    why = faults_unsupported(problem, table)
+    if why:
+        field = "--fault" if getattr(args, "fault", None) else "faults"
+        raise ProblemError(field, f"cannot be simulated here: {why}")
+
+
 @quiet_numerics
 def _simulate(args) -> int:
     from stospline.pipeline import design_problem, simulate_problem, simulation_summary, start_from
     problem = _load_with_faults(args)
     x0 = args.x0
+    _check_faults_runnable(args, problem)
     _check_budget(args, problem, "simulate")
     d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem),
                        **_limits(args))
@@ -315,8 +359,8 @@ def _report_simulation(s: dict, as_json: bool) -> None:
     if sat["limited"]:
         print(f"  actuator limits: saturated on {100 * sat['tick_fraction']:.4g}% of ticks "
               f"({100 * sat['path_fraction']:.4g}% of paths); commands issued within "
-              f"[{', '.join(f'{v:.6g}' for v in sat['u_low'])}] .. "
-              f"[{', '.join(f'{v:.6g}' for v in sat['u_high'])}]")
+              f"[{', '.join(_number_text(v) for v in sat['u_low'])}] .. "
+              f"[{', '.join(_number_text(v) for v in sat['u_high'])}]")
     for i, c in enumerate(s.get("corridors", [])):
         mc = c["mc"]
         eps = "" if c["epsilon"] is None else f", epsilon {c['epsilon']:g}"
@@ -341,6 +385,11 @@ def _report_simulation(s: dict, as_json: bool) -> None:
     sys.stdout.flush()   # the saturation warning (stderr) comes after the numbers it qualifies
 
 
+def _number_text(v) -> str:
+    """A number, or "n/a" when it is undefined (JSON null)."""
+    return "n/a" if v is None else f"{v:.6g}"
+
+
 def _z_text(z) -> str:
     """A z-score, or "n/a" when it is undefined (zero standard error; JSON null)."""
     return "n/a" if z is None else f"{z:+.2f}"
@@ -352,8 +401,9 @@ def _monte_carlo(args, command: str, record: int = 0, extra_paths: int = 0):
     `extra_paths` more of the same kind)."""
     from stospline.atomic import check_file_target
     from stospline.pipeline import design_problem, simulate_problem
-    check_file_target(args.out)
+    check_file_target(args.out, [args.problem])
     problem = _load_with_faults(args)
+    _check_faults_runnable(args, problem)
     _check_budget(args, problem, command, paths=args.paths + extra_paths, record=record)
     d = design_problem(problem, **_options(args, problem), **_limits(args))
     _note_tables(d, "compiling")
@@ -368,7 +418,7 @@ def _plot(args) -> int:
     from stospline.atomic import write_file
     from stospline.report.plot import plot_corridor
     d, mc = _monte_carlo(args, "plot")
-    write_file(args.out, lambda tmp: plot_corridor(d, mc, tmp))
+    write_file(args.out, lambda tmp: plot_corridor(d, mc, tmp), [args.problem])
     print(f"wrote {args.out}")
     return 0
 
@@ -393,7 +443,8 @@ def _report(args) -> int:
         rows = fault_sweep(d, paths=args.fault_paths, seed=args.seed, substeps=mc.substeps,
                            workers=_workers(args), scheduler=args.scheduler)
     page = report_html(d, mc, summary, rows, why_not if args.fault_paths else None)
-    write_file(args.out, lambda tmp: Path(tmp).write_text(page, encoding="utf-8"))
+    write_file(args.out, lambda tmp: Path(tmp).write_text(page, encoding="utf-8"),
+               [args.problem])
     print(f"wrote {args.out}")
     return 0
 
@@ -401,6 +452,15 @@ def _report(args) -> int:
 def _version() -> str:
     from stospline import __version__
     return __version__
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: the installed version, looked up only when asked (importlib.metadata
+    is slow to import)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"{parser.prog} {_version()}")
+        parser.exit(0)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -540,7 +600,8 @@ def _force_workers(p) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(prog="stospline", description=__doc__.splitlines()[0])
-    ap.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    ap.add_argument("--version", action=_VersionAction, nargs=0,
+                    help="show the program's version number and exit")
     sub = ap.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("design", help="solve the design, write C gain tables and a summary")
@@ -671,7 +732,8 @@ def build_parser() -> argparse.ArgumentParser:
                              "<name>_spline.{c,h,json}). Default: the file's [design] table")
         sp.add_argument("--spline-tolerance", default=None, metavar="TOL",
                         help="the spline's budget: largest relative error of a gain entry, "
-                             "1e-9..0.1 (default: the file's [design] spline_tolerance, else "
+                             "2^-21 (4.77e-7, four float32 roundings)..0.1 (default: the file's "
+                             "[design] spline_tolerance, else "
                              f"{DEFAULT_SPLINE_TOLERANCE:g})")
         sp.add_argument("--delay-ticks", default=None, metavar="{0,1}",
                         help="1: design for a one-tick computation delay (the command computed "
@@ -682,7 +744,55 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command line; returns the exit status (module docstring)."""
+    restore = _catch_interrupts()     # first: a Ctrl-C from here on ends in one line
+    try:
+        return _main(argv)
+    except BaseException as exc:
+        # After a SIGINT, whatever ends the run is its consequence: numpy, for one, turns an
+        # interrupt during its import into an ImportError.
+        if not (isinstance(exc, KeyboardInterrupt) or _INTERRUPTED):
+            raise
+        print("stospline: interrupted", file=sys.stderr)
+        return 130
+    finally:
+        restore()
+
+
+_INTERRUPTED: list[int] = []     # SIGINTs received while `main` runs
+
+
+def _on_interrupt(signum, frame):
+    _INTERRUPTED.append(signum)
+    raise KeyboardInterrupt
+
+
+def _catch_interrupts():
+    """Record and raise on SIGINT while `main` runs, unless SIGINT is ignored (a background
+    job) or handled by someone else, or this is not the main thread; returns what restores
+    the previous handler."""
+    import threading
+    _INTERRUPTED.clear()
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    old = signal.getsignal(signal.SIGINT)
+    if old not in (signal.SIG_DFL, signal.default_int_handler):
+        return lambda: None
+    signal.signal(signal.SIGINT, _on_interrupt)
+    return lambda: signal.signal(signal.SIGINT, old)
+
+
+def _fault_option(args, exc: ProblemError) -> ProblemError:
+    """An error on ``faults.KEY`` names ``--fault KEY`` when the command line set that key."""
+    key = exc.field.partition(".")[2] if exc.field.startswith("faults.") else None
+    if key and key in dict(getattr(args, "fault", None) or []):
+        return ProblemError(f"--fault {key}", exc.reason)
+    return exc
+
+
+def _main(argv: list[str] | None) -> int:
     from stospline.atomic import Interrupted, OutputError
+    from stospline.cache import CompilerMissing
     args = build_parser().parse_args(argv)
     if getattr(args, "arith", None) not in (None, *ARITHS):
         print(f"stospline: error: --arith must be one of {list(ARITHS)}, "
@@ -692,11 +802,16 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except ProblemError as exc:
+        exc = _fault_option(args, exc)
         where = "" if exc.field.startswith("--") else f" in {args.problem}"
         print(f"stospline: error{where}: {exc}", file=sys.stderr)
         return 2
     except OutputError as exc:
         print(f"stospline: error: --out: {exc.reason}", file=sys.stderr)
+        return 2
+    except CompilerMissing as exc:
+        print(f"stospline: error: {args.command} needs a C compiler to build the controller "
+              f"it runs: {exc}", file=sys.stderr)
         return 2
     except FileNotFoundError as exc:
         print(f"stospline: error: {exc}", file=sys.stderr)
@@ -704,9 +819,6 @@ def main(argv: list[str] | None = None) -> int:
     except Interrupted as exc:
         print(f"stospline: {exc}; nothing was written", file=sys.stderr)
         return 128 + exc.signum
-    except KeyboardInterrupt:
-        print("stospline: interrupted", file=sys.stderr)
-        return 130
     except MemoryError:
         print("stospline: error: out of memory (the estimate of docs/guide/problem-file.md, "
               "Limits, was too low for this machine; try --max-memory lower or a smaller "

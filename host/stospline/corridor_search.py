@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import hashlib
 import itertools
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -46,7 +47,7 @@ from stospline.sim.oracle import evaluate_table
 __all__ = ["STRIP_WEIGHTS", "RATE_WEIGHTS", "SEARCH_SEED", "CERTIFY_SEED", "ATTEMPTS",
            "Candidate", "Exits", "SearchResult", "target_corridor", "with_weights", "candidate",
            "evaluate_grid", "count_exits", "search", "certificate", "work_estimate",
-           "summary_text", "failure_reason"]
+           "summary_text", "failure_reason", "check_reachable", "paths_to_certify"]
 
 STRIP_WEIGHTS = (0.0, 2.0, 5.0, 10.0, 20.0, 40.0)     # w, the centre-line pull
 RATE_WEIGHTS = (0.0, 0.5, 1.0, 2.0, 5.0)              # wv, the velocity damping
@@ -145,6 +146,55 @@ def target_corridor(problem, epsilon: float | None = None):
             raise ProblemError(f"stages[{k}]", "the corridor design adds constant weights to "
                                                "each stage: stage data must not vary in time")
     return problem, index
+
+
+def paths_to_certify(epsilon: float) -> float:
+    """The fewest Monte Carlo paths whose one-sided 99 % bound can be at most `epsilon`: with
+    no exit among n paths the bound is ``1 - 0.01**(1/n)``."""
+    return math.log(1.0 - CONFIDENCE) / math.log1p(-epsilon)
+
+
+def check_reachable(problem, corridor: int, *, search_paths: int, certify_paths: int,
+                    epsilon_option: bool = False) -> None:
+    """Refuse, before any design or screening, a search that cannot succeed: an epsilon
+    below what the path counts can certify even with no exit, or a polygon of the corridor
+    with no interior (no path can stay in it). Raises ProblemError."""
+    c = problem.corridors[corridor]
+    field = "--epsilon" if epsilon_option else f"corridors[{corridor}].epsilon"
+    need = paths_to_certify(c.epsilon)
+    for option, paths in (("--search", search_paths), ("--certify", certify_paths)):
+        if paths < need:
+            best = clopper_pearson_upper(0, paths)
+            raise ProblemError(field, f"{c.epsilon!r} cannot be certified: even with no path "
+                                      f"leaving, {paths} paths ({option}) bound the exit "
+                                      f"probability by {best:.3g} at best (one-sided 99 %); "
+                                      f"it takes {option} {need:.3g} or more "
+                                      f"paths, or a larger epsilon")
+    for k, (A, b) in enumerate(c.polygons):
+        if not _has_interior(A, b):
+            raise ProblemError(f"corridors[{corridor}].polygons[{k}]",
+                               "is empty (no output y lies strictly inside A y <= b), so no "
+                               "path can stay in it: check its A and b")
+
+
+def _has_interior(A: np.ndarray, b: np.ndarray) -> bool:
+    """Whether ``{y : A y <= b}`` has an interior point: the largest ball inside it (the
+    Chebyshev centre, an LP over rows scaled to unit length) has a positive radius."""
+    from scipy.optimize import linprog
+    A, b = np.asarray(A, float), np.asarray(b, float)
+    scale = np.max(np.abs(A), axis=1)
+    zero = scale == 0
+    if np.any(zero & (b < 0)):
+        return False                 # a row 0 <= b with b < 0
+    A, b, scale = A[~zero], b[~zero], scale[~zero]
+    if not len(b):
+        return True
+    A, b = A / scale[:, None], b / scale
+    norms = np.linalg.norm(A, axis=1)
+    p = A.shape[1]
+    res = linprog(np.r_[np.zeros(p), -1.0], A_ub=np.c_[A, norms], b_ub=b,
+                  bounds=[(None, None)] * p + [(None, 1.0)], method="highs")
+    return res.status == 0 and -res.fun > 1e-12 * max(1.0, float(np.max(np.abs(b))))
 
 
 def with_weights(problem, corridor: int, polygons: list[int], w: float, wv: float) -> str:

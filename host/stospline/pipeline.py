@@ -28,7 +28,7 @@ from stospline.problem.model import Problem, ProblemError
 from stospline.table.format import GainTable, TickGains, table_of
 from stospline.table.qformat import DEFAULT_SIGMAS, FixedPointTable, quantize_table
 from stospline import budget, limits, progress, strict
-from stospline.precision import RoundedUp
+from stospline.precision import RoundedUp, Verbatim, verbatim
 from stospline.table_options import (DEFAULT_SPLINE_TOLERANCE, TABLE_KINDS,
                                      check_spline_tolerance)
 
@@ -51,8 +51,8 @@ def _r(x):
         return [_r(v) for v in x]
     if isinstance(x, np.ndarray):
         return _r(x.tolist())
-    if isinstance(x, RoundedUp):  # a bound at its own precision, rounded up: rounding it to
-        return float(x)           # nearest here could lower it (fixed.BOUND_DIGITS)
+    if isinstance(x, (RoundedUp, Verbatim)):  # a bound at its own precision, rounded up:
+        return float(x)  # rounding it to nearest could lower it; an input: echoed as given
     if isinstance(x, (float, np.floating)):
         v = float(f"{round(float(x), _ABS):.{_SIG}g}")
         return 0.0 if v == 0 else v
@@ -340,7 +340,7 @@ def design_summary(d: Designed) -> dict:
     knots = []
     for k, kn in enumerate(p.knots):
         entry = {
-            "t": kn.t,
+            "t": verbatim(kn.t),
             "mean": d.law.knot_mean[k],
             "cov": _cov_digits(d.law.knot_cov[k], d.law.knot_mean[k]),
             "implemented_mean": d.implemented.knot_mean[k],
@@ -384,14 +384,15 @@ def _band_terms(d: Designed) -> dict:
     return terms
 
 
-def write_outputs(out_dir: str | Path, files: dict[str, str]) -> list[Path]:
+def write_outputs(out_dir: str | Path, files: dict[str, str], inputs=()) -> list[Path]:
     """Write every file or none, as one set (`stospline.atomic.write_set`): staged and fsynced
     in a directory inside `out_dir`, committed by a journal, then renamed into place with
     SIGINT/SIGTERM deferred; a writer killed with SIGKILL is completed or undone by the next
     write into `out_dir`. Raises `stospline.atomic.OutputError` (nothing changed) when the
-    directory cannot take the files, e.g. a target is a directory."""
+    directory cannot take the files, e.g. a target is a directory or one of `inputs` (the
+    files the run read, which are never replaced)."""
     from stospline.atomic import write_set
-    return write_set(out_dir, files)
+    return write_set(out_dir, files, inputs)
 
 
 def double_table(d: Designed) -> GainTable:
@@ -715,7 +716,7 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int,
         z, why = strict.ratio_or_null(m - exact.knot_mean[k], np.where(alike, 0.0, s),
                                       _ZERO_SE)
         knots.append({
-            "t": kn.t,
+            "t": verbatim(kn.t),
             "mc_mean": m, "mc_mean_stderr": s, "mc_cov": mc.knot_cov(k),
             "oracle_mean": exact.knot_mean[k], "oracle_cov": exact.knot_cov[k],
             "z": z, **({"z_undefined": why} if why else {}),
@@ -725,7 +726,7 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int,
     bias_z, bias_why = strict.ratio_or_null(euler.J - exact.J, se_z, _ZERO_SE)
     summary = _r({
         "name": d.problem.name, "paths": mc.paths, "seed": seed, "substeps": substeps,
-        "x0": d.problem.x0,
+        "x0": verbatim(d.problem.x0),
         "tick_hz": d.table.tick_hz, "worst_status": mc.worst_status,
         "cost": {
             "mc_mean": mean, "mc_stderr": se,
@@ -734,7 +735,7 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int,
             "z": cost_z, **({"z_undefined": cost_why} if cost_why else {}),
         },
         "faults": {
-            "levels": faults.as_dict(), "exact_oracle": exact_oracle,
+            "levels": verbatim(faults.as_dict()), "exact_oracle": exact_oracle,
             "oracle_cost": exact.J if exact_oracle else None,
             "nominal_cost": d.implemented.J,
         },
@@ -752,14 +753,29 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int,
             "tick_fraction": mc.saturated_fraction,
             "path_fraction": (float(np.mean(mc.saturated_ticks > 0))
                               if mc.saturated_ticks is not None else 0.0),
-            "u_low": mc.u_low, "u_high": mc.u_high,
+            **_command_range(mc),
         },
         **_limits(d),
         **_corridors(d, mc),
     })
     summary["verdict"] = verdict(summary, confidence)
-    strict.check_summary_finite(d.problem, summary, "simulated numbers")
+    strict.check_summary_finite(d.problem, summary, "simulated numbers",
+                                faults if faults.any else None)
     return summary
+
+
+def _command_range(mc: MonteCarloResult) -> dict:
+    """``u_low``/``u_high``: the least and greatest command issued per input; None (with a
+    reason) for an input the controller never commanded (every tick missed: the harness's
+    running minimum is still its initial +inf)."""
+    low, high = np.asarray(mc.u_low, float), np.asarray(mc.u_high, float)
+    issued = np.isfinite(low) & np.isfinite(high)
+    out = {"u_low": [float(v) if ok else None for v, ok in zip(low, issued)],
+           "u_high": [float(v) if ok else None for v, ok in zip(high, issued)]}
+    if not issued.all():
+        out["u_range_undefined"] = ("no command was issued on any path (every tick missed, "
+                                    "the actuator held u_hold throughout)")
+    return out
 
 
 def _corridors(d: Designed, mc: MonteCarloResult) -> dict:

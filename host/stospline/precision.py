@@ -14,12 +14,32 @@ from decimal import ROUND_CEILING, Decimal
 
 import numpy as np
 
-__all__ = ["RoundedUp", "ceil_significant", "round_to_scale"]
+__all__ = ["RoundedUp", "Verbatim", "verbatim", "ceil_significant", "round_to_scale"]
 
 
 class RoundedUp(float):
     """A bound already rounded up to the digits it is written with. JSON writers print it as it
     is (`pipeline._r` leaves it alone: rounding it again to nearest could lower it)."""
+
+
+class Verbatim(float):
+    """A number the user gave (a knot time, x0, epsilon, a fault level): JSON writers echo it
+    exactly (`pipeline._r` leaves it alone: rounding it to a computed number's quantum would
+    print 1e-300 as 0.0)."""
+
+
+def verbatim(x):
+    """`x` (a number, or nested lists/tuples/arrays of numbers) with every float a
+    `Verbatim`; other values unchanged."""
+    if isinstance(x, np.ndarray):
+        return verbatim(x.tolist())
+    if isinstance(x, (list, tuple)):
+        return [verbatim(v) for v in x]
+    if isinstance(x, dict):
+        return {k: verbatim(v) for k, v in x.items()}
+    if isinstance(x, (float, np.floating)) and not isinstance(x, bool):
+        return Verbatim(x)
+    return x
 
 
 def ceil_significant(x: float | Decimal, digits: int) -> RoundedUp:

@@ -90,8 +90,13 @@ def ratio_or_null(num, den, reason: str):
 # values; predicted moments and costs also on x0 and rho.
 _GAIN = ("dynamics.A", "dynamics.B", "dynamics.noise", "cost.Q", "cost.S", "cost.R",
          "penalty.weight", "penalty.C", "constraint.C")
-_OFFSET = _GAIN + ("cost.q", "cost.r", "penalty.target", "constraint.value")
+_OFFSET = _GAIN + ("cost.q", "cost.r", "penalty.target", "constraint.value", "dynamics.f")
 _MOMENTS = _OFFSET + ("x0", "cost.rho")
+# The corridor statistics of a summary also depend on the corridors' own numbers.
+_CORRIDOR = _MOMENTS + ("corridor.C", "corridor.A", "corridor.b")
+# Time-varying data are scored at this many times per stage at most (tick midpoints and the
+# stage's ends): a sample far from 1 between the ends is seen.
+_VARYING_POINTS = 4097
 _SMALL_MATTERS = ("dynamics.B", "cost.R", "constraint.C")  # gains scale with their inverse
 _EXTREME = 8.0   # orders of magnitude from 1 that make an input the likely cause
 
@@ -111,17 +116,11 @@ def _orders(values, small: bool) -> float:
 
 def _candidates(problem):
     """``(field, kind, values)`` for every numeric input of the problem."""
-    multi = len({id(s) for s in problem.stages}) > 1
+    uniform = {key: all(_same(_value(problem.stages[0], key), _value(st, key))
+                        for st in problem.stages) for key, _ in _STAGE_KEYS}
     for k, st in enumerate(problem.stages):
-        samples = [st] if st.varying is None else [st.at(t) for t in problem.times[k:k + 2]]
-        pre = f"stages[{k}]." if multi else ""
-        for s in samples:
-            for key in ("A", "B"):
-                yield f"{pre}dynamics.{key}", f"dynamics.{key}", getattr(s, key)
-            yield f"{pre}dynamics.noise", "dynamics.noise", s.noise_tensor
-            for key in ("Q", "S", "R", "q", "r"):
-                yield f"{pre}cost.{key}", f"cost.{key}", getattr(s, key)
-            yield f"{pre}cost.rho", "cost.rho", [s.rho]
+        for key, section in _STAGE_KEYS:
+            yield from _stage_values(problem, k, st, key, section, uniform[key])
     for k, kn in enumerate(problem.knots):
         if kn.penalty is not None:
             p = kn.penalty
@@ -135,6 +134,64 @@ def _candidates(problem):
             key = "value" if c.value is not None else "lower"
             yield f"knots[{k}].constraint.{key}", "constraint.value", np.concatenate([lo, hi])
     yield "x0", "x0", problem.x0
+    for i, c in enumerate(getattr(problem, "corridors", ())):
+        yield f"corridors[{i}].C", "corridor.C", c.C
+        for j, (A, b) in enumerate(c.polygons):
+            yield f"corridors[{i}].polygons[{j}].A", "corridor.A", A
+            yield f"corridors[{i}].polygons[{j}].b", "corridor.b", b
+
+
+_STAGE_KEYS = (("A", "dynamics"), ("B", "dynamics"), ("f", "dynamics"), ("noise", "dynamics"),
+               ("Q", "cost"), ("S", "cost"), ("R", "cost"), ("q", "cost"), ("r", "cost"),
+               ("rho", "cost"))
+
+
+def _value(st, key: str):
+    return st.noise_tensor if key == "noise" else getattr(st, key)
+
+
+def _stage_values(problem, k: int, st, key: str, section: str, uniform: bool):
+    """``(field, kind, values)`` of one key of stage k, named where the file writes it: each
+    sample of time-varying data as ``<path>.values[i]``; a constant as ``section.key``, with
+    ``stages[k].`` in front when the stages' values differ (`uniform`: they do not)."""
+    kind = f"{section}.{key}"
+    origin = getattr(st, "origin", None)
+    raw = [] if origin is None else (
+        [g for _, g, _ in origin.noise] if key == "noise" else [origin.fields.get(key)])
+    series = [v for v in raw if hasattr(v, "path") and hasattr(v, "values")]
+    for ser in series:
+        for i, sample in enumerate(ser.values):
+            yield f"{ser.path}.values[{i}]", kind, sample
+    if series and key != "noise":
+        return
+    if st.varying is not None and origin is None:     # built in Python: sample it in time
+        v = st.samples(_stage_times(problem, k))
+        values = [v["G"], v["H"]] if key == "noise" else [v[key]]
+    else:
+        values = [st.noise_tensor] if key == "noise" else [getattr(st, key)]
+    values = [np.atleast_1d(np.asarray(a, float)) for a in values if a is not None]
+    if not values:
+        return
+    field = kind if uniform else f"stages[{k}].{kind}"
+    for a in values:
+        yield field, kind, a
+
+
+def _same(a, b) -> bool:
+    if a is None or b is None:
+        return a is b
+    return np.shape(a) == np.shape(b) and bool(np.all(np.asarray(a) == np.asarray(b)))
+
+
+def _stage_times(problem, k: int) -> np.ndarray:
+    """Times at which stage k's time-varying data are scored: its ends and tick midpoints
+    (evenly thinned to `_VARYING_POINTS`)."""
+    a, b = float(problem.times[k]), float(problem.times[k + 1])
+    ticks = max(1, int(round((b - a) * problem.tick_hz)))
+    inner = a + (np.arange(ticks) + 0.5) * (b - a) / ticks
+    if inner.size > _VARYING_POINTS:
+        inner = inner[np.linspace(0, inner.size - 1, _VARYING_POINTS).astype(int)]
+    return np.concatenate([[a], inner, [b]])
 
 
 def culprit(problem, kinds=_MOMENTS) -> str | None:
@@ -238,8 +295,10 @@ _NOUN = {"K": "feedback gains K", "k0": "feed-forward terms k0", "L": "multiplie
          "band mt": "band dual offsets mt", "band lo/hi": "band bounds"}
 
 
-def check_summary_finite(problem, summary: dict, what: str = "predicted numbers") -> None:
-    """Refuse a summary holding a non-finite number (it could not be written as JSON)."""
+def check_summary_finite(problem, summary: dict, what: str = "predicted numbers",
+                         faults=None) -> None:
+    """Refuse a summary holding a non-finite number (it could not be written as JSON). With
+    the run's `faults` (a Monte Carlo run), a fault is blamed when no input is extreme."""
     hit = first_nonfinite(summary)
     if hit is None:
         return
@@ -247,23 +306,57 @@ def check_summary_finite(problem, summary: dict, what: str = "predicted numbers"
     stage = None
     if path.startswith("knots["):
         stage = int(path[6:path.index("]")])
-    field, advice = _cause(problem, _MOMENTS, stage)
+    kinds = _CORRIDOR if path.startswith("corridors[") else _MOMENTS
+    fault = None
+    if faults is not None and culprit(problem, kinds) is None:
+        fault = _fault_cause(faults)
+    if fault is not None:
+        key, level = fault
+        raise ProblemError(f"faults.{key}", f"the {what} overflow double precision ({path} is "
+                                            f"{value}): the loop with {key} = {level} grows "
+                                            f"beyond the double range (the designed loop "
+                                            f"does not): use a smaller fault")
+    field, advice = _cause(problem, kinds, stage)
     raise ProblemError(field, f"the {what} overflow double precision ({path} is {value}); "
                               f"{advice}")
 
 
+def _fault_cause(faults):
+    """``(key, level)`` of the fault that most likely drives a faulty loop's overflow (the
+    model mismatch furthest from 1, else the largest noise level), or None without one."""
+    scales = [(abs(math.log10(getattr(faults, k))), k) for k in
+              ("plant_A_scale", "plant_B_scale", "plant_noise_scale")
+              if getattr(faults, k) > 0 and getattr(faults, k) != 1.0]
+    if scales:
+        key = max(scales)[1]
+        return key, f"{getattr(faults, key):g}"
+    noises = [(float(np.max(getattr(faults, k))), k) for k in ("actuator_noise", "sensor_noise")
+              if np.size(getattr(faults, k)) and np.max(getattr(faults, k)) > 0]
+    if noises:
+        level, key = max(noises)
+        return key, f"{level:g}"
+    return None
+
+
 def quiet_numerics(func):
     """Run `func` with numpy's floating-point RuntimeWarnings collected: nothing when it
-    raises (its error explains the failure), one summary line on stderr when it succeeds."""
+    raises (its error explains the failure), one summary line on stderr when it succeeds.
+    A compiled kernel replaced by its numpy reference (`cache.FallbackWarning`) is one
+    informational line, not counted as a floating-point warning."""
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
+        from stospline.cache import FallbackWarning
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", RuntimeWarning)
             result = func(*args, **kwargs)
-        numeric = [w for w in caught if issubclass(w.category, RuntimeWarning)]
+        fallback = [w for w in caught if issubclass(w.category, FallbackWarning)]
+        numeric = [w for w in caught if issubclass(w.category, RuntimeWarning)
+                   and w not in fallback]
         for w in caught:
-            if w not in numeric:
+            if w not in numeric and w not in fallback:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        if fallback:
+            print(f"stospline: note: {_fallback_text(fallback)}", file=sys.stderr)
         if numeric:
             first = str(numeric[0].message).splitlines()[0]
             print(f"stospline: warning: {len(numeric)} floating-point warning(s) during the "
@@ -271,6 +364,16 @@ def quiet_numerics(func):
                   file=sys.stderr)
         return result
     return wrapper
+
+
+def _fallback_text(caught) -> str:
+    from stospline.cache import c_compiler
+    compiler, found = c_compiler()
+    if not found:
+        return (f"no C compiler ({compiler!r} is not found), so the design ran its numpy "
+                f"loops instead of the compiled kernels (slower); install one (e.g. apt-get "
+                f"install gcc) or set CC to make it faster")
+    return str(caught[0].message).splitlines()[0]
 
 
 def fixed_scale_error(problem, arith: str, exc: ValueError) -> ProblemError:

@@ -341,7 +341,8 @@ def _pick_kernel(kernel: str | None):
     except KernelBuildError as exc:
         if explicit:
             raise
-        warnings.warn(f"{exc}; using the numpy tick loop (much slower)", RuntimeWarning,
+        from stospline.cache import FallbackWarning
+        warnings.warn(f"{exc}; using the numpy tick loop (much slower)", FallbackWarning,
                       stacklevel=3)
         return _stage_ticks_numpy
     return _stage_ticks_c

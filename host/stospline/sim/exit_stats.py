@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from stospline.precision import verbatim
 from stospline.sim.exit_bound import exit_bounds
 
 __all__ = ["clopper_pearson_upper", "clopper_pearson_lower", "corridor_report",
@@ -65,7 +66,7 @@ def corridor_report(problem, table, exit_tick: np.ndarray | None,
         names = c.wall_names()
         physical = c.physical_walls()
         entry = {
-            "t": list(c.t), "epsilon": c.epsilon, "walls": names,
+            "t": verbatim(list(c.t)), "epsilon": verbatim(c.epsilon), "walls": names,
             "physical_walls": [{"wall": label, "rows": rows} for label, rows in physical],
             "bins_t": [[problem.t0 + a * h, problem.t0 + (b - 1) * h]
                        for a, b in zip(edges[:-1], edges[1:])],

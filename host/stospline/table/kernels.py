@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from stospline.cache import build_source_module, load_module
+from stospline.cache import FallbackWarning, build_source_module, load_module
 
 __all__ = ["affine_compose", "affine_compose_gains", "qspline_stage", "f32_array_text",
            "build_kernel", "KernelBuildError"]
@@ -72,7 +72,7 @@ def _kernel():
             except KernelBuildError as exc:
                 _failed = True
                 warnings.warn(f"{exc}; the table layer runs its numpy references (slower)",
-                              RuntimeWarning, stacklevel=3)
+                              FallbackWarning, stacklevel=3)
     return _loaded
 
 

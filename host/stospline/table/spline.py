@@ -23,6 +23,7 @@ import numpy as np
 
 from stospline.errors import DesignError
 from stospline.table.format import positive_zeros
+from stospline.table_options import MIN_SPLINE_TOLERANCE
 
 __all__ = ["SplineGains", "SplineBudgetError", "evaluate", "command", "fit_spline",
            "max_relative_error",
@@ -31,7 +32,7 @@ __all__ = ["SplineGains", "SplineBudgetError", "evaluate", "command", "fit_splin
 DEFAULT_MAX_SPANS = 1024
 # Below this the float32 coefficients and the float32 evaluation (a few roundings of values
 # up to the entry's largest) cannot promise the tolerance, whatever the knots.
-MIN_TOLERANCE = 2.0 ** -21
+MIN_TOLERANCE = MIN_SPLINE_TOLERANCE
 # Entries whose largest value over the stage is below this fraction of the largest of their
 # kind (K, k0 or L) are round-off of exact zeros: not stored.
 ZERO_FRACTION = 1e-12

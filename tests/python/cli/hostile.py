@@ -388,6 +388,80 @@ def m_budget_everything(doc, draw):
 
 MUTATIONS["budget_everything"] = m_budget_everything
 
+# Outputs and blame: well-formed extremes whose overflow must name them (not knots[0].t),
+# and output paths that must be refused before any work (tests: test_hostile_inputs.py,
+# "Outputs and blame").
+
+def _blame_edit(doc, how: str) -> None:
+    n = len(doc["x0"])
+    t_end = float(doc["knots"][-1]["t"])
+    if how == "corridor_A":       # a wall row of 1e308: its exit bounds overflow
+        doc["corridors"] = [{"t": [0.0, t_end], "C": [[1.0] + [0.0] * (n - 1)],
+                             "polygons": [{"A": [[1e308], [-1.0]], "b": [10.0, 10.0]}]}]
+    elif how == "drift":
+        doc["dynamics"]["f"] = [1e308] + [0.0] * (n - 1)
+    elif how == "varying_sample":  # one sample of B far out, between the stage ends
+        B = doc["dynamics"]["B"]
+        doc["dynamics"]["B"] = {"t": [0.0, t_end / 3, t_end],
+                                "values": [B, [[1e308 * v for v in row] for row in B], B]}
+    elif how in ("plant_A_scale", "plant_B_scale", "plant_noise_scale"):
+        doc["faults"] = {how: 1000.0}
+    elif how == "miss_probability":
+        doc["faults"] = {"miss_probability": 0.999999999}
+
+
+BLAME_KINDS = ["corridor_A", "drift", "varying_sample", "plant_A_scale", "plant_B_scale",
+               "plant_noise_scale", "miss_probability"]
+
+
+def m_blame(doc, draw):
+    _blame_edit(doc, draw(st.sampled_from(BLAME_KINDS)))
+
+
+MUTATIONS["blame"] = m_blame
+
+UNSTABLE = {  # an unstable mode over 20 s: a plant A 1000x the design's overflows the run
+    "name": "unstable", "x0": [1.0], "tick_hz": 10,
+    "dynamics": {"A": [[0.5]], "B": [[1.0]], "noise": [{"state": 0, "G": [[0.1]]}]},
+    "cost": {"R": [[1]]},
+    "knots": [{"t": 20.0, "penalty": {"C": [[1]], "target": [0.0], "weight": 1.0}}],
+}
+
+# name -> (base, edit, simulate arguments, the field the one-line refusal names; None: the
+# run succeeds). "robot" is examples/robot_corridor.toml, its edit `ROBOT_EDITS`.
+BLAME_CASES = {
+    "corridor_A_1e308": ("robot", "corridor_A", [], "corridors[0].polygons[0].A"),
+    "drift_1e308": ("noisy", "drift", [], "dynamics.f"),
+    "varying_sample_1e308": ("noisy", "varying_sample", [], "dynamics.B.values[1]"),
+    "plant_A_scale_1000": ("unstable", "plant_A_scale", ["--substeps", "1"],
+                           "faults.plant_A_scale"),
+    "plant_noise_scale_1000": ("robot", None, ["--fault", "plant_noise_scale=1000"],
+                               "--fault plant_noise_scale"),
+    "miss_probability_near_1": ("noisy", "miss_probability", [], None),
+}
+
+ROBOT_EDITS = {"corridor_A": ("{ A = [[0, -1], [0, 1], [1, 0]]",
+                              "{ A = [[0, -1e308], [0, 1], [1, 0]]")}
+
+# name -> (command, --out value, words of the refusal). Placeholders: {input} the problem
+# file itself, {here} its directory, {unwritable} a directory no one can create files in.
+OUTPUT_CASES = {
+    "design_name_300": ("design", "a" * 300, "longer than"),
+    "design_path_4k": ("design", "/".join(["d" * 200] * 21), "longer than"),
+    "design_unwritable": ("design", "{unwritable}/out", "not writable"),
+    "design_parent_is_input": ("design", "{input}/out", "not a directory"),
+    "design_out_holds_input": ("design", "{here}", "input file"),
+    "plot_name_300": ("plot", "p" * 300 + ".png", "longer than"),
+    "plot_unwritable": ("plot", "{unwritable}/p.png", "not writable"),
+    "plot_missing_parent": ("plot", "missing/p.png", "cannot be used"),
+    "plot_is_input": ("plot", "{input}", "input file"),
+    "report_name_300": ("report", "r" * 300 + ".html", "longer than"),
+    "report_path_4k": ("report", "/".join(["d" * 200] * 21) + ".html", "longer than"),
+    "report_unwritable": ("report", "{unwritable}/r.html", "not writable"),
+    "report_is_input": ("report", "{input}", "input file"),
+}
+
+
 @st.composite
 def problem_cases(draw):
     """(classes, base name, TOML text): a base problem with 1-2 mutations applied."""

@@ -263,10 +263,11 @@ def test_recovery_before_the_next_write(tmp_path, sets):
     committed = out / (atomic.STAGING_PREFIX + "a")
     committed.mkdir()
     names = sorted(new)
+    journal = atomic._journal_record(out, committed, {n: new[n].encode() for n in names})
     (committed / names[0]).write_text(new[names[0]])      # two of three already moved
     for n in names[1:]:
         (out / n).write_text(new[n])
-    (committed / atomic.JOURNAL).write_text(json.dumps(names))
+    (committed / atomic.JOURNAL).write_bytes(journal)
     stale = out / (atomic.STAGING_PREFIX + "b")
     stale.mkdir()
     (stale / names[0]).write_bytes(b"half")
@@ -277,7 +278,7 @@ def test_recovery_before_the_next_write(tmp_path, sets):
 def test_write_outputs_uses_the_atomic_writer(tmp_path, monkeypatch, sets):
     old, new = sets
     seen = []
-    monkeypatch.setattr(atomic, "write_set", lambda d, f: seen.append((d, f)) or [])
+    monkeypatch.setattr(atomic, "write_set", lambda d, f, i=(): seen.append((d, f)) or [])
     write_outputs(tmp_path, new)
     assert seen == [(tmp_path, new)]
 

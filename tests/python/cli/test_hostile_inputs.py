@@ -410,3 +410,67 @@ def test_command_line_values_keep_the_contract(command, extra, tmp_path, firmwar
         assert rc in (0, 2)   # root writes into a read-only directory
     else:
         assert rc == 2, f"{argv} was accepted"
+
+
+# ---------------------------------------------------------------------------------------
+# Outputs and blame (hostile.OUTPUT_CASES, hostile.BLAME_CASES): output paths refused before
+# any work, and overflows that name the extreme input or fault.
+
+def _unwritable_dir() -> str | None:
+    """A directory where even root cannot create a file (a pseudo file system), or None."""
+    for d in ("/sys", "/proc/sys"):
+        probe = os.path.join(d, ".stospline-hostile-probe")
+        try:
+            os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        except OSError:
+            if os.path.isdir(d):
+                return d
+            continue
+        os.unlink(probe)
+    return None
+
+
+@pytest.mark.parametrize("case", sorted(__import__("hostile").OUTPUT_CASES))
+def test_hostile_output_paths_are_refused_first(case, tmp_path, monkeypatch):
+    from hostile import OUTPUT_CASES
+    from stospline import pipeline
+    command, out, words = OUTPUT_CASES[case]
+    unwritable = _unwritable_dir()
+    if "{unwritable}" in out and unwritable is None:
+        pytest.skip("no pseudo file system here")
+    name = {"design": f"{NOISY['name']}.json", "plot": "p.png", "report": "p.html"}[command]
+    (tmp_path / name).write_text(to_toml(NOISY))     # a problem file named like an output
+    out = out.format(input=name, here=".", unwritable=unwritable)
+
+    def no_work(*a, **k):
+        raise AssertionError("design or Monte Carlo started before the refusal")
+    monkeypatch.setattr(pipeline, "design_problem", no_work)
+    before = _tree(tmp_path)
+    rc, stdout, err = run_cli([command, name, "--out", out], tmp_path)
+    check_refusal(rc, stdout, err, before, _tree(tmp_path), case)
+    assert words in err and "--out" in err, err
+
+
+@pytest.mark.parametrize("case", sorted(__import__("hostile").BLAME_CASES))
+def test_hostile_overflows_name_their_cause(case, tmp_path):
+    import copy
+    from hostile import BLAME_CASES, ROBOT_EDITS, UNSTABLE, _blame_edit
+    base, how, extra, field = BLAME_CASES[case]
+    if base == "robot":
+        text = (REPO / "examples" / "robot_corridor.toml").read_text()
+        if how is not None:
+            text = text.replace(*ROBOT_EDITS[how])
+    else:
+        doc = copy.deepcopy(NOISY if base == "noisy" else UNSTABLE)
+        _blame_edit(doc, how)
+        text = to_toml(doc)
+    (tmp_path / "p.toml").write_text(text)
+    argv = ["simulate", "p.toml", "--paths", "20", "--json", *extra]
+    before = _tree(tmp_path)
+    rc, stdout, err = run_cli_isolated(argv, tmp_path)
+    if field is None:
+        assert rc == 0, err
+        _strict_json(stdout)
+    else:
+        check_refusal(rc, stdout, err, before, _tree(tmp_path), case)
+        assert f": {field}:" in err and "no single input is extreme" not in err, err

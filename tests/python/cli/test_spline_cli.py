@@ -106,7 +106,7 @@ def test_bad_file_options(capsys, tmp_path, key, value, field):
 @pytest.mark.parametrize("example, extra, field", [
     # A table that latches the state (bands beyond the 8 rows of a band dual): float32 only
     ("robot_narrow_corridor", ["--arith", "q15"], "design.table"),
-    ("robot_corridor", ["--spline-tolerance", "1e-9"], "design.spline_tolerance"),
+    ("robot_corridor", ["--spline-tolerance", "1e-9"], "--spline-tolerance"),
 ])
 def test_refused_spline_tables(capsys, tmp_path, example, extra, field):
     out = tmp_path / "out"

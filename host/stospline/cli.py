@@ -745,8 +745,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """The command line; returns the exit status (module docstring)."""
-    restore = _catch_interrupts()     # first: a Ctrl-C from here on ends in one line
-    try:
+    restore = None
+    try:                              # first: a Ctrl-C from here on ends in one line, also
+        restore = _catch_interrupts()  # one that comes before the handler is in place
         return _main(argv)
     except BaseException as exc:
         # After a SIGINT, whatever ends the run is its consequence: numpy, for one, turns an
@@ -756,7 +757,8 @@ def main(argv: list[str] | None = None) -> int:
         print("stospline: interrupted", file=sys.stderr)
         return 130
     finally:
-        restore()
+        if restore is not None:
+            restore()
 
 
 _INTERRUPTED: list[int] = []     # SIGINTs received while `main` runs

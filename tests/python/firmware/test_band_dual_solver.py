@@ -1,9 +1,6 @@
 """The firmware's exact band-dual solver (firmware/src/stsp_bandqp.c), compiled through cffi,
 against the host's OSQP solution: from perturbed start states the target recomputes the
 multipliers so that a started trajectory still meets its bands."""
-import hashlib
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -27,26 +24,19 @@ stsp_bandqp_status_t stsp_bandqp_solve(const stsp_bandqp_t *qp, const float *x0,
 
 @pytest.fixture(scope="module")
 def bandqp():
-    import cffi
-    key = hashlib.sha256(SRC.read_bytes() + CDEF.encode()
-                         + (ROOT / "firmware/include/stospline/stsp_bandqp.h").read_bytes()
-                         ).hexdigest()[:16]
-    out = ROOT / "build" / "cffi" / f"bandqp_{key}"
-    out.mkdir(parents=True, exist_ok=True)
+    # Through the build cache (stospline.cache): built in a private directory and renamed into
+    # place, so that parallel test workers building the same module at once do not race.
+    from stospline.cache import cached_build, compile_cffi, load_module, source_key
+    header = ROOT / "firmware/include/stospline/stsp_bandqp.h"
+    key = source_key([SRC.read_bytes(), CDEF, header.read_bytes()])
     name = f"_stsp_bandqp_{key}"
-    so = list(out.glob(f"{name}*.so"))
-    if not so:
-        ffib = cffi.FFI()
-        ffib.cdef(CDEF)
-        ffib.set_source(name, '#include "stospline/stsp_bandqp.h"', sources=[str(SRC)],
-                        include_dirs=[str(ROOT / "firmware" / "include")],
-                        extra_compile_args=["-std=c99", "-O2"])
-        so = [Path(ffib.compile(tmpdir=str(out)))]
-    spec = importlib.util.spec_from_file_location(name, so[0])
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    sys.modules[name] = mod
-    return mod
+
+    def build(out: Path) -> Path:
+        return compile_cffi(out, name, CDEF, '#include "stospline/stsp_bandqp.h"',
+                            sources=[SRC], include_dirs=[ROOT / "firmware" / "include"],
+                            cflags=["-std=c99", "-O2"])
+
+    return load_module(cached_build(key, name, build))
 
 
 def solve_c(mod, base_stage0, lo, hi, x0):

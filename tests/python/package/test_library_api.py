@@ -3,6 +3,8 @@ numpy arrays / plain A, B, Q, R / a control.StateSpace with the file's checks an
 problem_to_toml round trips, and the gains as numpy arrays on a time axis."""
 import dataclasses
 import importlib.metadata
+import inspect
+import re
 import subprocess
 import sys
 import tomllib
@@ -14,7 +16,7 @@ import stospline
 from stospline.problem import ProblemError, load_problem, parse_problem
 from stospline.problem.toml_writer import ProblemTomlError, problem_to_toml
 
-from conftest import EXAMPLES
+from conftest import EXAMPLES, REPO
 import test_problem_file_doc as doc_snippets
 
 
@@ -27,9 +29,38 @@ def test_import_is_cheap_and_versioned():
     assert out[1].strip() == importlib.metadata.version("stospline")
 
 
-@pytest.mark.parametrize("name", stospline.__all__)
-def test_every_public_name_resolves(name):
-    assert getattr(stospline, name) is not None
+PUBLIC = sorted(set(stospline.__all__) - {"__version__"})
+
+
+def documented_public_names() -> list[str]:
+    """The names in the table under "Public names" in docs/guide/library.md."""
+    text = (REPO / "docs" / "guide" / "library.md").read_text(encoding="utf-8")
+    section = text.split("\n## Public names\n", 1)[1].split("\n## ", 1)[0]
+    first_cells = [row.split("|")[1] for row in section.splitlines() if row.startswith("| `")]
+    return re.findall(r"`(\w+)`", " ".join(first_cells))
+
+
+def test_all_is_the_documented_public_api():
+    documented = documented_public_names()
+    assert len(documented) == len(set(documented)), documented
+    assert len(stospline.__all__) == len(set(stospline.__all__)), stospline.__all__
+    assert sorted(documented) == PUBLIC
+
+
+@pytest.mark.parametrize("name", PUBLIC)
+def test_every_public_name_is_defined_in_the_package(name):
+    """Each name is the class or function of that name defined in a stospline module (not an
+    alias, a stub or a re-export of something else); the exceptions are ValueErrors."""
+    obj = getattr(stospline, name)
+    assert obj.__module__.startswith("stospline."), obj.__module__
+    assert obj.__name__ == name and obj.__qualname__ == name, obj
+    assert getattr(sys.modules[obj.__module__], name) is obj
+    if name[0].isupper():
+        assert isinstance(obj, type), obj
+        if issubclass(obj, BaseException):
+            assert issubclass(obj, ValueError), obj.__mro__
+    else:
+        assert inspect.isfunction(obj), obj
 
 
 def robot_doc(array):

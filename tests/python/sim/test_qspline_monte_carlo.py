@@ -6,7 +6,11 @@ latch maps as stored; states rounded to the Q format, commands times their LSB
 means and knot variances agree with the exact oracle of that law (integer gains and latch maps
 in real units, the plant's scheme), 99 % jointly; and the same run rejects the oracle of the
 law with the gains frozen at each span's start (the check has power). Fixed seeds. The
-command's rounding and the state's are not in the oracle: below the run's resolution."""
+command's rounding and the state's are not in the oracle: below the run's resolution.
+
+4000 paths: z-scores grow as the square root of the paths, and at 2000 paths the frozen law's
+worst |z| is already 44 against the joint limit of 3.44 (17 statistics, 99 %), so 4000 keep a
+wide margin of power at a fifth of the cost of 20 000."""
 from dataclasses import replace
 
 import numpy as np
@@ -20,7 +24,7 @@ from stospline.sim.montecarlo import compare_to_oracle, simulate
 from stospline.sim.oracle import evaluate_table
 from stospline.table.qspline import dequantized
 
-PATHS, SEED, SUBSTEPS = 20000, 20261126, 2
+PATHS, SEED, SUBSTEPS = 4000, 20261126, 2
 
 
 @pytest.fixture(scope="module")

@@ -2,7 +2,11 @@
 evaluates (`stospline.table.spline.evaluate`, the law in the spec's order), and Monte Carlo
 through it agrees with the exact oracle of that law. The check has power: the same run
 rejects the oracle of a controller that freezes the gains at each span's start. Fixed
-seeds; 99 % jointly (`compare_to_oracle`)."""
+seeds; 99 % jointly (`compare_to_oracle`).
+
+6000 paths: the frozen controller's worst |z| is 194 at 2000 paths against a joint limit of
+3.44 (z grows as the square root of the paths), so the power needs no more; the agreement's
+worst |z| is 2.6 here (3.3 at 4000 paths, 2.2 at 20 000)."""
 from dataclasses import replace
 
 import numpy as np
@@ -17,7 +21,7 @@ from stospline.table.format import table_of
 from stospline.table.spline import command
 from stospline.table.spline_compress import compress
 
-PATHS, SEED, SUBSTEPS = 20000, 20261125, 2
+PATHS, SEED, SUBSTEPS = 6000, 20261125, 2
 
 
 @pytest.fixture(scope="module")

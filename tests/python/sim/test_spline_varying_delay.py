@@ -12,7 +12,8 @@ interest rate varies) and designed for a one-tick delay (quadrotor: the controll
 * Monte Carlo through the compiled controller of a coarse spline (gains that move a lot
   within a span) agrees with its oracle and rejects the oracle of a controller that would
   freeze the gains at each span's start. Fixed seeds; 99 % jointly (`compare_to_oracle`),
-  as `test_spline_monte_carlo.py`.
+  as `test_spline_monte_carlo.py`. 4000 paths: the frozen controller's worst |z| is 138
+  (investment) and 92 (quadrotor) against joint limits of 3.09 and 3.36.
 """
 from dataclasses import replace
 
@@ -35,7 +36,7 @@ from conftest import EXAMPLES
 from test_spline_monte_carlo import assert_agrees_and_rejects_frozen
 
 EPS32 = float(np.finfo(np.float32).eps)
-PATHS, SEED, SUBSTEPS = 20000, 20261127, 2
+PATHS, SEED, SUBSTEPS = 4000, 20261127, 2
 # A coarse spline per example for the Monte Carlo: (tolerance, spans per stage at most).
 # The quadrotor's last tick outputs the safe command (its decision would be applied after the
 # plan), a jump its last stage's spline needs a few more spans for.

@@ -81,6 +81,7 @@ typedef struct {
 typedef struct {
     double cs[TV_MAX_POINTS * TV_MAX_POINTS];
     double nrm[TV_MAX_POINTS];
+    double gn;                    /* the diffusion's part of sum_l nrm[l] */
     int lb_count[TV_MAX_POINTS];  /* nonzero entries of Lbl[l], listed in lb_at[l] */
     double *Arl, *Lbl;            /* P x n x d, P x d x d */
     int *lb_at;                   /* P x d*d */
@@ -211,6 +212,7 @@ static void blend(const tv_tick *v, const double *coef, int j, int sub, tv_blend
         else
             for (i = 0; i < P; ++i) g += abs_d(bl->cs[i * P + l]) * v->gb[i];
         bl->nrm[l] = 2.0 * rmax + g;
+        bl->gn = l == 0 ? g : bl->gn + g;
     }
     bl->lb_done = v->lb_const;
 }
@@ -549,6 +551,7 @@ static int taylor(int kind, const tv_tick *v, const tv_blend *bl, double hs, dou
     double *ring = work, *next = ring + (size_t)P * D, *tmp = next + D,
            *ringN = tmp + noise_tmp_size(n, v->na, v->mz);
     double tmax[TV_MAX_POINTS], xmax = max_abs(X, D);
+    int live[TV_MAX_POINTS];      /* the term in this ring slot has its diffusion applied */
     int k, l, i;
     size_t e;
     if (D == 0) return TV_OK;
@@ -570,7 +573,10 @@ static int taylor(int kind, const tv_tick *v, const tv_blend *bl, double hs, dou
             }
             *J += hs * acc;
         }
-        if (noisy && v->path != TV_NOISE_PAIRS)
+        /* The diffusion of a term whose every contribution (this term's and the next P - 1
+         * terms') is below 2^-60 of the sum is left out, as a negligible drift lag is. */
+        live[k % P] = noisy && !(bl->gn * tmax[k % P] * hs <= 0x1p-60 * xmax * (double)(k + 1));
+        if (live[k % P] && v->path != TV_NOISE_PAIRS)
             for (i = 0; i < points; ++i)
                 point_noise(kind, v, i, term, ringN + ((size_t)(k % P) * P + i) * nb, tmp);
         /* The symmetric kinds gather half of the term in `next` (drift Z, half the noise and
@@ -582,7 +588,7 @@ static int taylor(int kind, const tv_tick *v, const tv_blend *bl, double hs, dou
                 continue;
             add_drift(kind, v, bl, l, ring + (size_t)s * D, cols,
                       kind == TV_MEAN && k - l > 0 ? n : d, next);
-            if (!noisy) continue;
+            if (!live[s]) continue;
             for (i = 0; i < points; ++i) {
                 const double w = v->g_same ? (l == 0 ? 0.5 : 0.0) : 0.5 * bl->cs[i * P + l];
                 if (w == 0.0) continue;

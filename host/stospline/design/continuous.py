@@ -82,8 +82,14 @@ class StageSolution(StageStart):
         The control is ``u = -K x - k0 - L v``.
         """
         P, pv, _, N, _, _ = self.riccati(t)
+        if P.shape[-1] == 1:              # one time (the oracle's right-hand side): no stacks
+            s = self.stage.at(float(np.ravel(t)[0]))
+            _, St, Rt = _effective_weights(s, P[..., 0], self.noise)
+            Rinv = np.linalg.inv(Rt)
+            return ((Rinv @ (P[..., 0] @ s.B + St).T)[None],
+                    (Rinv @ (s.B.T @ pv[:, 0] + s.r))[None], (Rinv @ (s.B.T @ N[..., 0]))[None])
         P, pv, N = np.moveaxis(P, -1, 0), pv.T, np.moveaxis(N, -1, 0)   # time first
-        d = self.stage.samples(np.atleast_1d(t))                        # all ticks at once
+        d = _stacked_data(self.stage, np.atleast_1d(t))
         n = P.shape[1]
         St, Rt = d["S"], d["R"]
         if self.noise:
@@ -121,13 +127,23 @@ class ContinuousDesign(StageValues):
                           st.Lambda, st.lambda0) for k, st in enumerate(self.stages)]
 
 
+def _stacked_data(stage: Stage, t: np.ndarray) -> dict:
+    """The stage's B, S, R, r, G, H at the times `t` on a first axis (`Stage.samples`), or, for
+    a stage whose data do not vary, once on an axis of length 1 that the products broadcast."""
+    if stage.varying is not None:
+        return stage.samples(t)
+    return {k: None if getattr(stage, k) is None else np.asarray(getattr(stage, k), float)[None]
+            for k in ("B", "S", "R", "r", "G", "H")}
+
+
 def _noise_operator_many(G: np.ndarray, P: np.ndarray) -> np.ndarray:
-    """`noise_operator` at every time of a stack: G (T, k, n, mz), P (T, n, n) -> (T, k, k)."""
+    """`noise_operator` at every time of a stack: G (T or 1, k, n, mz), P (T, n, n) -> (T, k,
+    k)."""
     k = G.shape[1]
     out = np.zeros((P.shape[0], k, k))
     live = np.flatnonzero(G.any(axis=(0, 2, 3)))
     if live.size:
-        Gl = np.moveaxis(G[:, live], 3, 1)                # (T, mz, na, n)
+        Gl = np.moveaxis(G[:, live], 3, 1)                # (T or 1, mz, na, n)
         prod = (Gl @ P[:, None] @ np.swapaxes(Gl, 2, 3)).sum(axis=1)
         out[:, live[:, None], live[None, :]] = prod
     return out

@@ -5,8 +5,9 @@ Usage: .venv/bin/python tools/bench/vs_drake.py [--repeat 3] [--sizes 4,12,24,32
 Drake (``pip install drake``) is an optional benchmark dependency, not a runtime one: when
 ``pydrake`` cannot be imported its column says "not installed" and only stospline is timed.
 Every time is the median of `--repeat` runs after one warm-up run (which also builds the
-cached C kernels), measured with ``time.perf_counter`` in one process; BLAS threads are pinned
-to 1 before numpy is imported. Ratios are taken within the run (the machine may be loaded).
+cached C kernels), measured with ``time.perf_counter`` in one process, each run cold (the tick
+maps and samples cached by the run before are dropped); BLAS threads are pinned to 1 before
+numpy is imported. Ratios are taken within the run (the machine may be loaded).
 
 Problem
 -------
@@ -116,10 +117,20 @@ def same_problem(n: int, drake_result, problem) -> float:
     return abs(j_drake - j_ours) / abs(j_ours)
 
 
+def cold():
+    """Forget the tick maps and samples cached by earlier runs, as a new process would."""
+    from stospline.design import varying
+    from stospline.sim import oracle
+    varying._CACHE.clear()
+    oracle._MAPS.clear()
+
+
 def median_time(fn, repeat: int) -> float:
+    cold()
     fn()
     times = []
     for _ in range(repeat):
+        cold()
         t = time.perf_counter()
         fn()
         times.append(time.perf_counter() - t)

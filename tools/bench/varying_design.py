@@ -1,6 +1,7 @@
 """Design-time benchmark of problems whose data vary in time, against a plain solve_ivp.
 
 Usage: .venv/bin/python tools/bench/varying_design.py [--repeat 3] [--accuracy] [--previous]
+       [--dense-only]
 
 Every time is the median of `--repeat` runs after one warm-up run (which also builds the
 cached C kernels), measured with ``time.perf_counter`` on one core: BLAS threads are pinned to
@@ -13,7 +14,13 @@ blocks states, m = blocks inputs) coupled by springs, over 3.3 s in 3 stages of 
 knot constraining the expected positions. The dampings, actuator rates and spring constants
 are scaled by 1 + 0.5 sin(1.7 t + phase) and the velocity noise (two Brownian components) by
 1 + 0.5 cos(1.1 t + phase), sampled every 0.1 s and interpolated linearly (`A` and the
-`noise` G are time-varying; seeded). blocks = 1 gives n = 3, blocks = 4 n = 12.
+`noise` G are time-varying; seeded). blocks = 1 gives n = 3, blocks = 4 n = 12. Its noise is
+sparse: one entry per velocity.
+
+`dense_chain(varying_noise)`: the dense case. The n = 12, m = 4 chain over 3.441 s (3 441
+ticks at 1 kHz) in 3 stages, its data sampled 5 times per stage (16 samples) and interpolated
+linearly, with state noise on every state and input noise on every input: 16 dense 12 x 8
+matrices G (mz = 8, seeded), constant, or (`varying_noise`) sampled with the drift.
 
 Measured
 --------
@@ -118,6 +125,36 @@ def varying_chain(blocks: int, hz: int = 1000, seed: int = 11):
         "knots": knots})
 
 
+DENSE_HORIZON, DENSE_MZ = 3.441, 8
+
+
+def dense_chain(varying_noise: bool, hz: int = 1000, seed: int = 5):
+    """The dense benchmark problem (see the module docstring)."""
+    rng = np.random.default_rng(seed)
+    base = varying_chain(4, hz)
+    n, m = 12, 4
+    ts = np.round(np.linspace(0.0, DENSE_HORIZON, 5 * STAGES + 1), 10)
+    noise = []
+    for i in range(n + m):
+        G0, G1 = rng.normal(scale=0.05, size=(2, n, DENSE_MZ))
+        vals = [(G0 * (1 + 0.5 * np.cos(1.1 * t)) + G1 * np.sin(0.7 * t)).tolist() for t in ts]
+        entry = {"G": {"t": ts.tolist(), "values": vals} if varying_noise else vals[0]}
+        entry["state" if i < n else "input"] = i if i < n else i - n
+        noise.append(entry)
+    A = [base.stages[0].at(min(t, HORIZON)).A.tolist() for t in ts]
+    C = np.zeros((4, n))
+    C[np.arange(4), 3 * np.arange(4)] = 1.0
+    knots = [{"t": round(DENSE_HORIZON / STAGES * (k + 1), 10),
+              "constraint": {"C": C.tolist(), "value": rng.normal(size=4).tolist()}}
+             for k in range(STAGES)]
+    return parse_problem({
+        "name": "dense", "x0": rng.normal(size=n).tolist(), "tick_hz": hz,
+        "dynamics": {"A": {"t": ts.tolist(), "values": A},
+                     "B": base.stages[0].B.tolist(), "noise": noise},
+        "cost": {"R": (0.1 * np.eye(m)).tolist(), "Q": (0.01 * np.eye(n)).tolist()},
+        "knots": knots})
+
+
 def riccati_baseline(problem) -> np.ndarray:
     """P(t0) of the continuous-time feedback Riccati equation by solve_ivp (the baseline)."""
     n = problem.n
@@ -179,6 +216,22 @@ def speed(repeat: int) -> None:
               f"| {t_cont * 1e3:.0f} ms | **{t_base / t_whole:.1f}x** |", flush=True)
 
 
+def dense(repeat: int) -> None:
+    """The dense case: the whole design against the baseline, timed in the same run."""
+    print("\n| dense problem (n 12, m 4, 16 noise terms, mz 8, 3 441 ticks at 1 kHz) | design "
+          "| whole (`design_problem`) | solve_ivp baseline | baseline / whole |")
+    print("|---|---|---|---|---|")
+    for varying_noise in (False, True):
+        p = dense_chain(varying_noise)
+        t_design = median_time(lambda: design_zoh(p), repeat)
+        t_whole = median_time(lambda: design_problem(p), repeat)
+        t_base = median_time(lambda: riccati_baseline(p), repeat)
+        ticks = int(round(DENSE_HORIZON * 1000))
+        print(f"| noise {'varying' if varying_noise else 'constant'} | {t_design * 1e3:.0f} ms "
+              f"({t_design / ticks * 1e6:.0f} us/tick) | {t_whole * 1e3:.0f} ms "
+              f"| {t_base * 1e3:.0f} ms | **{t_base / t_whole:.2f}x** |", flush=True)
+
+
 def end_to_end(repeat: int) -> None:
     """`stospline design` as a user runs it (a new process: imports, parsing, design, tables,
     oracle, files written), on the problem written as a TOML file."""
@@ -238,8 +291,13 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--accuracy", action="store_true")
     ap.add_argument("--previous", action="store_true")
+    ap.add_argument("--dense-only", action="store_true", help="only the dense case")
     args = ap.parse_args()
+    if args.dense_only:
+        dense(args.repeat)
+        return
     speed(args.repeat)
+    dense(args.repeat)
     end_to_end(args.repeat)
     if args.accuracy:
         accuracy()

@@ -31,8 +31,17 @@ __all__ = ["DesignError", "StageSolution", "ContinuousDesign", "design_continuou
 
 
 def noise_operator(G: np.ndarray, P: np.ndarray) -> np.ndarray:
-    """``Pi(P)_kl = tr(G_k' P G_l)``: the Ito correction of ``x'Px`` under ``sum x_i G_i dZ``."""
-    return np.einsum("kai,ab,lbi->kl", G, P, G)
+    """``Pi(P)_kl = tr(G_k' P G_l)``: the Ito correction of ``x'Px`` under ``sum x_i G_i dZ``.
+
+    Only the multipliers with a nonzero ``G_k`` contribute (none: zeros, no product), and those
+    column by column as matrix products, ``sum_i G[:, :, i] P G[:, :, i]'``: O(mz na n (n +
+    na)) for na live multipliers instead of a four-index loop over all of them."""
+    out = np.zeros((G.shape[0], G.shape[0]))
+    live = np.flatnonzero(G.any(axis=(1, 2)))
+    if live.size:
+        Gl = np.moveaxis(G[live], 2, 0)                   # (mz, na, n)
+        out[np.ix_(live, live)] = (Gl @ P @ np.swapaxes(Gl, 1, 2)).sum(axis=0)
+    return out
 
 
 @dataclass
@@ -72,18 +81,27 @@ class StageSolution(StageStart):
 
         The control is ``u = -K x - k0 - L v``.
         """
-        s = self.stage
         P, pv, _, N, _, _ = self.riccati(t)
-        T = P.shape[-1]
-        m, p = s.B.shape[1], N.shape[1]
-        K, k0, L = np.empty((T, m, s.A.shape[0])), np.empty((T, m)), np.empty((T, m, p))
-        for j, tj in enumerate(np.atleast_1d(t)):
-            sj = s.at(tj)
-            _, St, Rt = _effective_weights(sj, P[..., j], self.noise)
+        if P.shape[-1] == 1:              # one time (the oracle's right-hand side): no stacks
+            s = self.stage.at(float(np.ravel(t)[0]))
+            _, St, Rt = _effective_weights(s, P[..., 0], self.noise)
             Rinv = np.linalg.inv(Rt)
-            K[j] = Rinv @ (P[..., j] @ sj.B + St).T
-            k0[j] = Rinv @ (sj.B.T @ pv[:, j] + sj.r)
-            L[j] = Rinv @ (sj.B.T @ N[..., j])
+            return ((Rinv @ (P[..., 0] @ s.B + St).T)[None],
+                    (Rinv @ (s.B.T @ pv[:, 0] + s.r))[None], (Rinv @ (s.B.T @ N[..., 0]))[None])
+        P, pv, N = np.moveaxis(P, -1, 0), pv.T, np.moveaxis(N, -1, 0)   # time first
+        d = _stacked_data(self.stage, np.atleast_1d(t))
+        n = P.shape[1]
+        St, Rt = d["S"], d["R"]
+        if self.noise:
+            Pi = _noise_operator_many(np.concatenate(
+                [d["G"], d["H"] if d["H"] is not None else
+                 np.zeros(d["R"].shape[:2] + d["G"].shape[2:])], axis=1), P)
+            St, Rt = St + Pi[:, :n, n:], Rt + Pi[:, n:, n:]
+        Rinv = np.linalg.inv(Rt)
+        Bt = np.swapaxes(d["B"], 1, 2)
+        K = Rinv @ np.swapaxes(P @ d["B"] + St, 1, 2)
+        k0 = (Rinv @ (Bt @ pv[:, :, None] + d["r"][:, :, None]))[:, :, 0]
+        L = Rinv @ (Bt @ N)
         return K, k0, L
 
 
@@ -109,6 +127,28 @@ class ContinuousDesign(StageValues):
                           st.Lambda, st.lambda0) for k, st in enumerate(self.stages)]
 
 
+def _stacked_data(stage: Stage, t: np.ndarray) -> dict:
+    """The stage's B, S, R, r, G, H at the times `t` on a first axis (`Stage.samples`), or, for
+    a stage whose data do not vary, once on an axis of length 1 that the products broadcast."""
+    if stage.varying is not None:
+        return stage.samples(t)
+    return {k: None if getattr(stage, k) is None else np.asarray(getattr(stage, k), float)[None]
+            for k in ("B", "S", "R", "r", "G", "H")}
+
+
+def _noise_operator_many(G: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """`noise_operator` at every time of a stack: G (T or 1, k, n, mz), P (T, n, n) -> (T, k,
+    k)."""
+    k = G.shape[1]
+    out = np.zeros((P.shape[0], k, k))
+    live = np.flatnonzero(G.any(axis=(0, 2, 3)))
+    if live.size:
+        Gl = np.moveaxis(G[:, live], 3, 1)                # (T or 1, mz, na, n)
+        prod = (Gl @ P[:, None] @ np.swapaxes(Gl, 2, 3)).sum(axis=1)
+        out[:, live[:, None], live[None, :]] = prod
+    return out
+
+
 def _effective_weights(stage: Stage, P: np.ndarray, noise: bool):
     """``Q + Pi_xx(P)``, ``S + Pi_xu(P)``, ``R + Pi_uu(P)`` with ``Pi_ab = tr(Gh_a' P Gh_b)`` over
     the noise multipliers ``[x; u]``: the Ito term of ``x'Px`` under the full diffusion."""
@@ -120,6 +160,10 @@ def _effective_weights(stage: Stage, P: np.ndarray, noise: bool):
 
 
 def _stage_rhs(stage: Stage, n: int, p: int, noise: bool):
+    # Without noise and with constant data the weights, and so R^-1, are the same at every call.
+    fixed = stage.varying is None and not (noise and stage.noise_tensor.any())
+    Rinv_fixed = np.linalg.inv(stage.R) if fixed else None
+
     def rhs(t, y):
         st = stage.at(t)
         A, B, q, r, rho = st.A, st.B, st.q, st.r, st.rho
@@ -129,8 +173,11 @@ def _stage_rhs(stage: Stage, n: int, p: int, noise: bool):
         i += 1
         N = y[i:i + n * p].reshape(n, p); i += n * p
         i += p * p
-        Qt, St, Rt = _effective_weights(st, P, noise)
-        Rinv = np.linalg.inv(Rt)
+        if fixed:
+            Qt, St, Rinv = st.Q, st.S, Rinv_fixed
+        else:
+            Qt, St, Rt = _effective_weights(st, P, noise)
+            Rinv = np.linalg.inv(Rt)
         PBS = P @ B + St
         K = Rinv @ PBS.T
         Acl = A - B @ K

@@ -25,6 +25,13 @@ POINTS = 2            # Gauss points per tick (order 4), designer and oracle ali
 MEAN_TERMS = 60        # `mean_maps`: Taylor terms at most (as the C kernel's TV_MAX_TERMS)
 CHUNK = 512            # ticks sampled and handed to C at once (bounds the memory)
 
+# How the C loops apply the diffusion (``varying_kernel.c``, noise_lists): "auto" picks the
+# cheapest per tick; "pairs" (nonzero pairs), "columns" (Brownian column by column) and
+# "operator" (the packed na(na+1)/2 x n(n+1)/2 matrix of the diffusion operator) force one,
+# for tests and benchmarks. All give the same numbers to rounding.
+NOISE_PATHS = {"auto": 0, "pairs": 1, "columns": 2, "operator": 3}
+NOISE_PATH = "auto"
+
 
 def _gauss(P: int):
     """Gauss–Legendre nodes on [0, 1] and the coefficients of their Lagrange basis
@@ -152,6 +159,10 @@ def _ptr(ffi, a, kind="double[]"):
     return ffi.from_buffer(kind, a) if a.size else ffi.new(kind.replace("[]", "[1]"))
 
 
+def _noise_path() -> int:
+    return NOISE_PATHS[NOISE_PATH]
+
+
 def _data_args(ffi, smp: TickSamples):
     return (smp.act.size, smp.G.shape[-1]), (
         _ptr(ffi, smp.act, "int[]"), _ptr(ffi, smp.Ar), _ptr(ffi, smp.G), _ptr(ffi, smp.Lb),
@@ -178,7 +189,7 @@ def zoh_ticks(stage: Stage, t_start: float, h: float, V, N, W, mv, T: int, m: in
         status = lib.stsp_tv_zoh_ticks(
             n, m, q, b - a, POINTS, na, mz, _ptr(ffi, coef), h, *data,
             *(_ptr(ffi, x) for x in (V, N, W, mv, K[a:b], k0[a:b], L[a:b], work)),
-            _ptr(ffi, iwork, "int[]"), bad)
+            _ptr(ffi, iwork, "int[]"), _noise_path(), bad)
         if status == _ERR_NOT_PD:
             raise np.linalg.LinAlgError(f"Huu is not positive definite at tick {a + bad[0]}")
         _check(status, "stsp_tv_zoh_ticks", a, b)
@@ -209,7 +220,7 @@ def oracle_ticks(stage: Stage, t_start: float, h: float, K, L, k0, M, J: float,
         status = lib.stsp_tv_oracle_ticks(
             n, m, n_latch, b - a, _ptr(ffi, K[a:b]), _ptr(ffi, L[a:b]), _ptr(ffi, k0[a:b]),
             POINTS, na, mz, _ptr(ffi, coef), h, *data, _ptr(ffi, M), Jp,
-            *out, _ptr(ffi, work), _ptr(ffi, iwork, "int[]"))
+            *out, _ptr(ffi, work), _ptr(ffi, iwork, "int[]"), _noise_path())
         _check(status, "stsp_tv_oracle_ticks", a, b)
     return (M, float(Jp[0]), *(rec if record else (None,) * 4))
 

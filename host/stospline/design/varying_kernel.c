@@ -34,6 +34,20 @@ int stsp_zoh_tick_update(int n, int m, int q, const double *H, const double *F,
 enum { TV_FORWARD = 0, TV_ADJOINT = 1, TV_MEAN = 2, TV_MEAN_ADJ = 3 };
 enum { TV_MAX_POINTS = 3, TV_MAX_TERMS = 60, TV_MAX_SUB = 1 << 16, TV_MAX_DIM = 256 };
 enum { TV_OK = 0, TV_ERR_NOT_PD = -1, TV_ERR_DIMS = -2, TV_ERR_SERIES = -3 };
+/* How the diffusion term is applied (see noise_lists); TV_NOISE_AUTO picks the cheapest. */
+enum { TV_NOISE_AUTO = 0, TV_NOISE_PAIRS = 1, TV_NOISE_COLUMNS = 2, TV_NOISE_OPERATOR = 3 };
+enum { TV_TERMS_GUESS = 8 };          /* noisy series terms per sub-step, for the cost model */
+#define TV_MAX_OPERATOR ((size_t)1 << 18)  /* doubles of one point's operator matrix, at most */
+
+/* The packed diffusion operator of the points of the last tick that built it (kept from tick
+ * to tick: rebuilt only when the diffusion changes).  F[(p,q)][(a,b)], p <= q < na and
+ * a <= b < n packed row by row, = sum_k G_p[a,k] G_q[b,k] + G_q[a,k] G_p[b,k]; Ft its
+ * transpose; src the diffusion it was built from. */
+typedef struct {
+    double *F, *Ft, *src;
+    double *gram, *gcol;       /* scratch of build_operator: (na n)^2 and mz na n */
+    int points;                /* points held (0: none yet) */
+} tv_ops;
 
 /* The data of one tick at its P points, and which of them are known to be the same at every
  * point (the caller passes a field that is constant over the chunk once, with stride 0). */
@@ -44,16 +58,19 @@ typedef struct {
     const double *G;    /* P x na x n x mz */
     const double *Lb;   /* P x d x d */
     int ar_same, g_same, lb_same;
+    int g_const;           /* G is the same for every tick of the chunk */
     int lb_const;          /* Lb is the same for every tick of the chunk */
     const int *ar_nz;      /* positions (row-major in n x d) of Ar's possible nonzeros */
     int ar_cnt;
     double gb[TV_MAX_POINTS];   /* noise_bound of each point */
     /* The diffusion's nonzero entries, point by point and column by column (sparse: applied
      * pair by pair when that is cheaper than the dense products). */
-    int sparse;
+    int path;              /* TV_NOISE_PAIRS, _COLUMNS or _OPERATOR */
     const int *nz_start;   /* P*mz + 1 offsets into nz_p, nz_a, nz_g */
     const int *nz_p, *nz_a;
     const double *nz_g;
+    const double *ga, *gf;   /* columns: G point by point, [a][k][p] and [p][k][a] */
+    const tv_ops *ops;       /* operator: the packed operator of each point */
 } tv_tick;
 
 /* One sub-step's generator as a polynomial in r in [0, 1]: the coefficient of r^l is
@@ -64,6 +81,7 @@ typedef struct {
 typedef struct {
     double cs[TV_MAX_POINTS * TV_MAX_POINTS];
     double nrm[TV_MAX_POINTS];
+    double gn;                    /* the diffusion's part of sum_l nrm[l] */
     int lb_count[TV_MAX_POINTS];  /* nonzero entries of Lbl[l], listed in lb_at[l] */
     double *Arl, *Lbl;            /* P x n x d, P x d x d */
     int *lb_at;                   /* P x d*d */
@@ -112,16 +130,33 @@ static void shift_coefficients(int P, const double *coef, int j, int sub, double
         }
 }
 
-/* sum_k (sum_{p,a} |G_p[a,k]|)^2 of one point: bounds the diffusion term in both directions. */
+/* A bound of the diffusion term of one point in both directions, |term|max <= bound |X|max:
+ * ADJOINT |tr(G_p' X G_q)| <= |X|max sum_k s_pk s_qk with s_pk = sum_a |G_p[a,k]|, and FORWARD
+ * |(sum_pq X[p,q] G_p G_q')[a,b]| <= |X|max sum_k c_ak c_bk with c_ak = sum_p |G_p[a,k]|; by
+ * Cauchy-Schwarz both are at most max(max_p sum_k s_pk^2, max_a sum_k c_ak^2).  (A bound of all
+ * the entries at once would be na or n times larger: more sub-steps and terms for nothing.) */
 static double noise_bound(const tv_tick *v, int i)
 {
     const double *G = v->G + (size_t)i * v->na * v->n * v->mz;
     double out = 0.0;
-    int k, e;
-    for (k = 0; k < v->mz; ++k) {
-        double s = 0.0;
-        for (e = 0; e < v->na * v->n; ++e) s += abs_d(G[(size_t)e * v->mz + k]);
-        out += s * s;
+    int k, p, a;
+    for (p = 0; p < v->na; ++p) {                      /* max_p sum_k s_pk^2 */
+        double row = 0.0;
+        for (k = 0; k < v->mz; ++k) {
+            double s = 0.0;
+            for (a = 0; a < v->n; ++a) s += abs_d(G[((size_t)p * v->n + a) * v->mz + k]);
+            row += s * s;
+        }
+        out = row > out ? row : out;
+    }
+    for (a = 0; a < v->n; ++a) {                       /* max_a sum_k c_ak^2 */
+        double col = 0.0;
+        for (k = 0; k < v->mz; ++k) {
+            double c = 0.0;
+            for (p = 0; p < v->na; ++p) c += abs_d(G[((size_t)p * v->n + a) * v->mz + k]);
+            col += c * c;
+        }
+        out = col > out ? col : out;
     }
     return out;
 }
@@ -177,52 +212,160 @@ static void blend(const tv_tick *v, const double *coef, int j, int sub, tv_blend
         else
             for (i = 0; i < P; ++i) g += abs_d(bl->cs[i * P + l]) * v->gb[i];
         bl->nrm[l] = 2.0 * rmax + g;
+        bl->gn = l == 0 ? g : bl->gn + g;
     }
     bl->lb_done = v->lb_const;
 }
 
+/* Sizes of the packed operator: rows (p <= q < na) and columns (a <= b < n). */
+static size_t op_rows(int na) { return (size_t)na * (na + 1) / 2u; }
+static size_t op_cols(int n) { return (size_t)n * (n + 1) / 2u; }
+
+/* Whether the operator of one point fits TV_MAX_OPERATOR (else it is never built). */
+static int op_fits(int n, int na) { return op_rows(na) * op_cols(n) <= TV_MAX_OPERATOR; }
+
+/* point_noise from the packed operator of point i, O(na^2 n^2 / 4) whatever mz: ADJOINT
+ * out[p,q] = sum_{a<=b} F[(p,q),(a,b)] X~[a,b], FORWARD out[a,b] = sum_{p<=q} F[(p,q),(a,b)]
+ * X~[act p, act q], X~ the upper triangle with its diagonal halved (F counts it twice). */
+static void operator_noise(int kind, const tv_tick *v, int i, const double *X, double *out,
+                           double *tmp)
+{
+    const int n = v->n, d = v->d, na = v->na;
+    const size_t R = op_rows(na), C = op_cols(n);
+    const int side = kind == TV_FORWARD ? n : na, in = kind == TV_FORWARD ? na : n;
+    const double *M = (kind == TV_FORWARD ? v->ops->F : v->ops->Ft) + (size_t)i * R * C;
+    const size_t len = kind == TV_FORWARD ? C : R;
+    double *restrict acc = tmp;
+    size_t e, r;
+    int a, b;
+    for (e = 0; e < len; ++e) acc[e] = 0.0;
+    for (a = 0, r = 0; a < in; ++a)
+        for (b = a; b < in; ++b, ++r) {
+            const double x = kind == TV_FORWARD ? X[v->act[a] * d + v->act[b]] : X[a * d + b];
+            const double c = a == b ? 0.5 * x : x;
+            const double *restrict row = M + r * len;
+            if (c != 0.0)
+                for (e = 0; e < len; ++e) acc[e] += c * row[e];
+        }
+    for (a = 0, e = 0; a < side; ++a)
+        for (b = a; b < side; ++b, ++e) out[a * side + b] = out[b * side + a] = acc[e];
+}
+
+/* F and Ft of each point of the tick from its diffusion, unless the operator held was built
+ * from the same diffusion: through the Gram matrix of the rows of G, gram[(p,a)][(q,b)] =
+ * sum_k G_p[a,k] G_q[b,k] for q >= p (mz (na n)^2 / 2, long contiguous rows), then
+ * F[(p,q),(a,b)] = gram[(p,a)][(q,b)] + gram[(p,b)][(q,a)]. */
+static void build_operator(const tv_tick *v, int points, tv_ops *ops)
+{
+    const int n = v->n, na = v->na, mz = v->mz;
+    const size_t R = op_rows(na), C = op_cols(n), blk = (size_t)na * n * mz, w = (size_t)na * n;
+    size_t e, r, c;
+    int i, p, q, k, a, b;
+    if (ops->points == points) {
+        for (e = 0; e < (size_t)points * blk && ops->src[e] == v->G[e]; ++e) {}
+        if (e == (size_t)points * blk) return;
+    }
+    for (e = 0; e < (size_t)points * blk; ++e) ops->src[e] = v->G[e];
+    ops->points = points;
+    for (i = 0; i < points; ++i) {
+        const double *G = v->G + (size_t)i * blk;                 /* G[(p*n + a)*mz + k] */
+        double *F = ops->F + (size_t)i * R * C, *Ft = ops->Ft + (size_t)i * R * C;
+        double *gram = ops->gram, *gcol = ops->gcol;              /* gcol[k][(p,a)] */
+        for (e = 0; e < w; ++e)
+            for (k = 0; k < mz; ++k) gcol[(size_t)k * w + e] = G[e * mz + k];
+        for (p = 0; p < na; ++p)
+            for (a = 0; a < n; ++a) {
+                double *restrict row = gram + ((size_t)p * n + a) * w;
+                const double *restrict g = G + ((size_t)p * n + a) * mz;
+                for (e = (size_t)p * n; e < w; ++e) row[e] = 0.0;
+                for (k = 0; k < mz; ++k) {
+                    const double c1 = g[k];
+                    const double *restrict col = gcol + (size_t)k * w;
+                    if (c1 != 0.0)
+                        for (e = (size_t)p * n; e < w; ++e) row[e] += c1 * col[e];
+                }
+            }
+        for (p = 0, r = 0; p < na; ++p)
+            for (q = p; q < na; ++q, ++r)
+                for (a = 0, c = 0; a < n; ++a)
+                    for (b = a; b < n; ++b, ++c)
+                        F[r * C + c] = gram[((size_t)p * n + a) * w + (size_t)q * n + b]
+                                       + gram[((size_t)p * n + b) * w + (size_t)q * n + a];
+        for (r = 0; r < R; ++r)
+            for (c = 0; c < C; ++c) Ft[c * R + r] = F[r * C + c];
+    }
+}
+
 /* The diffusion term of point i on X, compactly: FORWARD the n x n block
  * sum_pq X[act p, act q] G_p G_q' (on the x rows and columns), ADJOINT the na x na block
- * tr(G_p' X G_q) (at act p, act q). */
+ * tr(G_p' X G_q) (at act p, act q); O(mz na n (n + na)) per call.  Every Brownian column at
+ * once, on the copies `noise_lists` made: ga[a][k][p] = gf[p][k][a] = G_p[a, k].  ADJOINT:
+ * tmp[b][k, p] = (X G_p)[b, k], then out = sum over (b, k) of the outer products
+ * tmp[b][k, :] ga[b][k, :]'.  FORWARD: tmp[p][k, b] = sum_q X[p, q] G_q[b, k], then out = sum
+ * over (p, k) of gf[p][k, :] tmp[p][k, :]'.  Each loop is an axpy over a contiguous row of
+ * mz na (or mz n) entries: it vectorises and carries no dependency chain. */
 static void point_noise(int kind, const tv_tick *v, int i, const double *X, double *out,
                         double *tmp)
 {
     const int n = v->n, d = v->d, na = v->na, mz = v->mz;
-    const double *G = v->G + (size_t)i * na * n * mz;
-    const int side = kind == TV_FORWARD ? n : na;
+    const size_t blk = (size_t)na * n * mz;
+    const double *ga = v->ga + (size_t)i * blk, *gf = v->gf + (size_t)i * blk;
     int k, a, b, p, q;
-    for (a = 0; a < side * side; ++a) out[a] = 0.0;
-    for (k = 0; k < mz; ++k) {
-        if (kind == TV_FORWARD) {
-            for (p = 0; p < na; ++p)
-                for (b = 0; b < n; ++b) {
-                    double s = 0.0;
-                    for (q = 0; q < na; ++q)
-                        s += X[v->act[p] * d + v->act[q]] * G[((size_t)q * n + b) * mz + k];
-                    tmp[p * n + b] = s;
+    if (v->path == TV_NOISE_OPERATOR) {
+        operator_noise(kind, v, i, X, out, tmp);
+        return;
+    }
+    if (kind == TV_FORWARD) {
+        const int row = mz * n;
+        for (a = 0; a < n * n; ++a) out[a] = 0.0;
+        for (p = 0; p < na; ++p) {
+            double *restrict t = tmp + (size_t)p * row;
+            for (b = 0; b < row; ++b) t[b] = 0.0;
+            for (q = 0; q < na; ++q) {
+                const double c = X[v->act[p] * d + v->act[q]];
+                const double *restrict g = gf + (size_t)q * row;
+                if (c != 0.0)
+                    for (b = 0; b < row; ++b) t[b] += c * g[b];
+            }
+            for (k = 0; k < mz; ++k) {
+                const double *restrict u = gf + (size_t)p * row + (size_t)k * n;
+                const double *restrict w = t + (size_t)k * n;
+                for (a = 0; a < n; ++a) {
+                    const double c = u[a];
+                    double *restrict o = out + (size_t)a * n;
+                    if (c != 0.0)
+                        for (b = a; b < n; ++b) o[b] += c * w[b];
                 }
-            for (a = 0; a < n; ++a)
-                for (b = a; b < n; ++b) {
-                    double s = 0.0;
-                    for (p = 0; p < na; ++p) s += G[((size_t)p * n + a) * mz + k] * tmp[p * n + b];
-                    out[a * n + b] += s;
-                    if (a != b) out[b * n + a] += s;
-                }
-        } else {
-            for (p = 0; p < na; ++p)
-                for (b = 0; b < n; ++b) {
-                    double s = 0.0;
-                    for (a = 0; a < n; ++a) s += G[((size_t)p * n + a) * mz + k] * X[a * d + b];
-                    tmp[p * n + b] = s;
-                }
-            for (p = 0; p < na; ++p)
-                for (q = p; q < na; ++q) {
-                    double s = 0.0;
-                    for (b = 0; b < n; ++b) s += tmp[p * n + b] * G[((size_t)q * n + b) * mz + k];
-                    out[p * na + q] += s;
-                    if (p != q) out[q * na + p] += s;
-                }
+            }
         }
+    } else {
+        const int row = mz * na;
+        for (a = 0; a < na * na; ++a) out[a] = 0.0;
+        for (b = 0; b < n; ++b) {
+            double *restrict t = tmp + (size_t)b * row;
+            for (p = 0; p < row; ++p) t[p] = 0.0;
+            for (a = 0; a < n; ++a) {
+                const double c = X[(size_t)b * d + a];
+                const double *restrict g = ga + (size_t)a * row;
+                if (c != 0.0)
+                    for (p = 0; p < row; ++p) t[p] += c * g[p];
+            }
+            for (k = 0; k < mz; ++k) {
+                const double *restrict u = t + (size_t)k * na;
+                const double *restrict w = ga + (size_t)b * row + (size_t)k * na;
+                for (p = 0; p < na; ++p) {
+                    const double c = u[p];
+                    double *restrict o = out + (size_t)p * na;
+                    if (c != 0.0)
+                        for (q = p; q < na; ++q) o[q] += c * w[q];
+                }
+            }
+        }
+    }
+    {
+        const int side = kind == TV_FORWARD ? n : na;
+        for (a = 0; a < side; ++a)                     /* the lower triangle */
+            for (b = 0; b < a; ++b) out[a * side + b] = out[b * side + a];
     }
 }
 
@@ -262,9 +405,17 @@ static void pair_noise(int kind, const tv_tick *v, int i, double w, const double
     }
 }
 
-/* The nonzero lists of the tick's diffusion (into the caller's arrays), and whether the pairs
- * cost less than the dense products. */
-static void noise_lists(tv_tick *v, int *start, int *np_, int *na_, double *g)
+/* The tick's diffusion laid out for the way it is applied, chosen by cost per point and
+ * noisy series term (`force`, if not TV_NOISE_AUTO, overrides the choice):
+ *   PAIRS     sum_k nnz_k^2 (nnz_k the nonzeros of Brownian column k): the nonzero lists;
+ *   COLUMNS   about mz na n (n + na) 3/4: G copied in the layouts of point_noise;
+ *   OPERATOR  na^2 n^2 / 4, plus 2 mz na^2 n^2 / 4 to build it (`build_operator`) when the
+ *             diffusion differs from the last tick's, spread over the tick's terms (guessed
+ *             TV_TERMS_GUESS per sub-step; over the chunk's `ticks` when the diffusion is
+ *             the same for all of them).  Only with `ops` (NULL: never).
+ * The pairs are taken whenever they cost at most na n (n + na) mz. */
+static void noise_lists(tv_tick *v, int *start, int *np_, int *na_, double *g, tv_ops *ops,
+                        int force, int sub, long ticks)
 {
     const int n = v->n, na = v->na, mz = v->mz, points = v->g_same ? 1 : v->P;
     long pairs = 0, dense = (long)na * n * (n + na) * mz;
@@ -282,7 +433,36 @@ static void noise_lists(tv_tick *v, int *start, int *np_, int *na_, double *g)
         }
     start[points * mz] = e;
     v->nz_start = start; v->nz_p = np_; v->nz_a = na_; v->nz_g = g;
-    v->sparse = pairs <= dense * points;
+    v->ops = ops;
+    v->path = force != TV_NOISE_AUTO ? force
+              : pairs <= dense * points ? TV_NOISE_PAIRS : TV_NOISE_COLUMNS;
+    if (v->path == TV_NOISE_OPERATOR && (ops == NULL || !op_fits(n, na)))
+        v->path = TV_NOISE_COLUMNS;
+    if (v->path != TV_NOISE_PAIRS) {
+        const size_t blk = (size_t)na * n * mz, cap = TV_MAX_POINTS * blk;
+        double *ga = g + cap, *gf = ga + cap;
+        for (i = 0; i < points; ++i)
+            for (p = 0; p < na; ++p)
+                for (a = 0; a < n; ++a)
+                    for (k = 0; k < mz; ++k) {
+                        const double x = v->G[(((size_t)i * na + p) * n + a) * mz + k];
+                        ga[i * blk + ((size_t)a * mz + k) * na + p] = x;
+                        gf[i * blk + ((size_t)p * mz + k) * n + a] = x;
+                    }
+        v->ga = ga; v->gf = gf;
+    }
+    if (force == TV_NOISE_AUTO && v->path == TV_NOISE_COLUMNS && ops != NULL && op_fits(n, na)) {
+        const double terms = (double)TV_TERMS_GUESS * sub, op = (double)op_rows(na) * op_cols(n);
+        const size_t len = (size_t)points * na * n * mz;
+        size_t at = 0;
+        double build = (2.0 * mz + 1.0) * op;
+        if (ops->points == points)
+            for (at = 0; at < len && ops->src[at] == v->G[at]; ++at) {}
+        if (at == len && ops->points == points) build = 0.0;
+        else if (v->g_const) build /= (double)ticks;     /* built once for the chunk */
+        if (terms * op + build < terms * 0.75 * (double)dense) v->path = TV_NOISE_OPERATOR;
+    }
+    if (v->path == TV_NOISE_OPERATOR) build_operator(v, points, ops);
 }
 
 /* acc += the drift part of G_(l) on X (d x cols; MEAN reads only its first `rows` rows, the
@@ -314,10 +494,40 @@ static void add_drift(int kind, const tv_tick *v, const tv_blend *bl, int l, con
 
 /* Work of `taylor` for matrices of d x cols (cols <= cmax), with the blended data of one
  * sub-step (`tv_blend`) after it. */
-static size_t taylor_size(int n, int m, int na, int cmax)
+/* Scratch of point_noise and operator_noise. */
+static size_t noise_tmp_size(int n, int na, int mz)
+{
+    size_t t = (size_t)na * n * mz;
+    if (op_rows(na) > t) t = op_rows(na);
+    if (op_cols(n) > t) t = op_cols(n);
+    return t;
+}
+
+static size_t taylor_size(int n, int m, int na, int mz, int cmax)
 {
     const size_t d = (size_t)n + (size_t)m + 1u, D = d * (size_t)(cmax > (int)d ? cmax : (int)d);
-    return (TV_MAX_POINTS + 2u) * D + (size_t)na * n + TV_MAX_POINTS * TV_MAX_POINTS * d * d;
+    return (TV_MAX_POINTS + 2u) * D + noise_tmp_size(n, na, mz)
+           + TV_MAX_POINTS * TV_MAX_POINTS * d * d;
+}
+
+/* The operators of `tv_ops` (when one fits) and the diffusion they were built from. */
+static size_t ops_size(int n, int na, int mz)
+{
+    const int fits = op_fits(n, na);
+    const size_t op = fits ? op_rows(na) * op_cols(n) : 0u, w = (size_t)na * n;
+    return TV_MAX_POINTS * (2u * op + w * mz) + (fits ? w * w + w * mz : 0u);
+}
+
+static double *ops_at(tv_ops *ops, double *at, int n, int na, int mz)
+{
+    const size_t op = op_fits(n, na) ? op_rows(na) * op_cols(n) : 0u;
+    ops->F = at;
+    ops->Ft = at + TV_MAX_POINTS * op;
+    ops->src = ops->Ft + TV_MAX_POINTS * op;
+    ops->gram = ops->src + TV_MAX_POINTS * (size_t)na * n * mz;
+    ops->gcol = ops->gram + (op ? (size_t)na * n * na * n : 0u);
+    ops->points = 0;
+    return at + ops_size(n, na, mz);
 }
 
 static size_t blend_size(int n, int m)
@@ -339,8 +549,9 @@ static int taylor(int kind, const tv_tick *v, const tv_blend *bl, double hs, dou
     const size_t D = (size_t)d * cols, nb = (size_t)d * d;
     const int sym = kind == TV_FORWARD || kind == TV_ADJOINT;
     double *ring = work, *next = ring + (size_t)P * D, *tmp = next + D,
-           *ringN = tmp + (size_t)v->na * n;
+           *ringN = tmp + noise_tmp_size(n, v->na, v->mz);
     double tmax[TV_MAX_POINTS], xmax = max_abs(X, D);
+    int live[TV_MAX_POINTS];      /* the term in this ring slot has its diffusion applied */
     int k, l, i;
     size_t e;
     if (D == 0) return TV_OK;
@@ -362,7 +573,10 @@ static int taylor(int kind, const tv_tick *v, const tv_blend *bl, double hs, dou
             }
             *J += hs * acc;
         }
-        if (noisy && !v->sparse)
+        /* The diffusion of a term whose every contribution (this term's and the next P - 1
+         * terms') is below 2^-60 of the sum is left out, as a negligible drift lag is. */
+        live[k % P] = noisy && !(bl->gn * tmax[k % P] * hs <= 0x1p-60 * xmax * (double)(k + 1));
+        if (live[k % P] && v->path != TV_NOISE_PAIRS)
             for (i = 0; i < points; ++i)
                 point_noise(kind, v, i, term, ringN + ((size_t)(k % P) * P + i) * nb, tmp);
         /* The symmetric kinds gather half of the term in `next` (drift Z, half the noise and
@@ -374,11 +588,12 @@ static int taylor(int kind, const tv_tick *v, const tv_blend *bl, double hs, dou
                 continue;
             add_drift(kind, v, bl, l, ring + (size_t)s * D, cols,
                       kind == TV_MEAN && k - l > 0 ? n : d, next);
-            if (!noisy) continue;
+            if (!live[s]) continue;
             for (i = 0; i < points; ++i) {
                 const double w = v->g_same ? (l == 0 ? 0.5 : 0.0) : 0.5 * bl->cs[i * P + l];
                 if (w == 0.0) continue;
-                if (v->sparse) pair_noise(kind, v, i, w, ring + (size_t)s * D, next);
+                if (v->path == TV_NOISE_PAIRS)
+                    pair_noise(kind, v, i, w, ring + (size_t)s * D, next);
                 else add_noise(kind, v, w, ringN + ((size_t)s * P + i) * nb, next);
             }
         }
@@ -453,6 +668,7 @@ static tv_tick tick_of(int n, int d, int na, int mz, int P, const int *act, cons
     v.g_same = same[1] || same_points(v.G, P, (size_t)na * n * mz);
     v.lb_same = same[2] || same_points(v.Lb, P, (size_t)d * d);
     v.lb_const = same[2];
+    v.g_const = same[1];
     v.ar_nz = ar_nz; v.ar_cnt = ar_cnt;
     for (i = 0; i < (v.g_same ? 1 : P); ++i) v.gb[i] = noise_bound(&v, i);
     return v;
@@ -466,11 +682,12 @@ size_t stsp_tv_iwork_size(int n, int m, int na, int mz)
            + TV_MAX_POINTS * d * d;
 }
 
-static void lists_of(tv_tick *v, int *iwork, double *gwork)
+static void lists_of(tv_tick *v, int *iwork, double *gwork, tv_ops *ops, int force, int sub,
+                     long ticks)
 {
     const size_t cap = TV_MAX_POINTS * (size_t)v->na * v->n * v->mz;
     int *start = iwork, *p = start + TV_MAX_POINTS * v->mz + 1, *a = p + cap;
-    noise_lists(v, start, p, a, gwork);
+    noise_lists(v, start, p, a, gwork, ops, force, sub, ticks);
 }
 
 /* The Lb nonzero lists of `bl` at the end of the integer work. */
@@ -498,8 +715,8 @@ size_t stsp_tv_zoh_work_size(int n, int m, int q, int na, int mz)
 {
     const size_t d = (size_t)n + (size_t)m + 1u, r = (size_t)n + 1u;
     return d * d + d * (size_t)q + (size_t)q * d + r * (r + 1u) / 2u
-           + stsp_zoh_update_size(n, m, q) + taylor_size(n, m, na, q) + blend_size(n, m)
-           + TV_MAX_POINTS * (size_t)na * n * mz;
+           + stsp_zoh_update_size(n, m, q) + taylor_size(n, m, na, mz, q) + blend_size(n, m)
+           + 3u * TV_MAX_POINTS * (size_t)na * n * mz + ops_size(n, na, mz);
 }
 
 /* The T ticks of one chunk of a time-varying stage, backward (as stsp_zoh_stage_ticks): the
@@ -512,27 +729,30 @@ int stsp_tv_zoh_ticks(int n, int m, int q, long T, int P, int na, int mz, const 
                       const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
                       double *V, double *N, double *W,
                       double *mv, double *K, double *k0, double *L, double *work,
-                      int *iwork, long *bad_tick)
+                      int *iwork, int noise_path, long *bad_tick)
 {
     const int d = n + m + 1, r = n + 1;
     double *Y, *U, *Hl, *vp, *up, *tw, *gw;
     tv_blend bl;
+    tv_ops ops;
     long t;
     int a, b, p, l, j, st;
     if (n < 1 || m < 1 || q < 0 || T < 0 || P < 1 || P > TV_MAX_POINTS || na < 0 ||
-        na > n + m || mz < 0 || d > TV_MAX_DIM || ar_cnt < 0 || ar_cnt > n * d)
+        na > n + m || mz < 0 || d > TV_MAX_DIM || ar_cnt < 0 || ar_cnt > n * d ||
+        noise_path < TV_NOISE_AUTO || noise_path > TV_NOISE_OPERATOR)
         return TV_ERR_DIMS;
     Y = work; U = Y + (size_t)d * d; Hl = U + (size_t)d * q; vp = Hl + (size_t)q * d;
     up = vp + (size_t)r * (r + 1) / 2; tw = up + stsp_zoh_update_size(n, m, q);
-    gw = blend_at(&bl, tw + taylor_size(n, m, na, q), iwork, n, m, na, mz);
+    gw = blend_at(&bl, tw + taylor_size(n, m, na, mz, q), iwork, n, m, na, mz);
+    ops_at(&ops, gw + 3u * TV_MAX_POINTS * (size_t)na * n * mz, n, na, mz);
 #define RS(a) ((a) < n ? (a) : d - 1)
     for (a = 0, p = 0; a < r; ++a)
         for (b = a; b < r; ++b, ++p) vp[p] = 0.5 * (V[a * r + b] + V[b * r + a]);
     for (t = T - 1; t >= 0; --t) {
         tv_tick v = tick_of(n, d, na, mz, P, act, Ar, G, Lb, same, ar_nz, ar_cnt, t);
         const int sub = sub_steps(&v, coef, h, &bl);
-        lists_of(&v, iwork, gw);
         if (sub == 0) return TV_ERR_SERIES;
+        lists_of(&v, iwork, gw, &ops, noise_path, sub, T);
         for (a = 0; a < d * d; ++a) Y[a] = 0.0;
         for (a = 0, p = 0; a < r; ++a)
             for (b = a; b < r; ++b, ++p) Y[RS(a) * d + RS(b)] = Y[RS(b) * d + RS(a)] = vp[p];
@@ -626,8 +846,8 @@ static void fold_back(int n, int m, int nl, const double *Mw, const double *Xv, 
 size_t stsp_tv_oracle_work_size(int n, int m, int n_latch, int na, int mz)
 {
     const size_t dw = (size_t)n + (size_t)m + 1u, dy = (size_t)n + (size_t)n_latch + 1u;
-    return dw * dy + dw * dw + dw * (size_t)n_latch + taylor_size(n, m, na, n_latch)
-           + blend_size(n, m) + TV_MAX_POINTS * (size_t)na * n * mz;
+    return dw * dy + dw * dw + dw * (size_t)n_latch + taylor_size(n, m, na, mz, n_latch)
+           + blend_size(n, m) + 3u * TV_MAX_POINTS * (size_t)na * n * mz + ops_size(n, na, mz);
 }
 
 /* The T ticks of one chunk of a time-varying stage, forward (as stsp_oracle_stage_ticks, M
@@ -640,20 +860,24 @@ int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, con
                          double h, const int *act, const double *Ar, const double *G,
                          const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
                          double *M, double *J, double *xm,
-                         double *xv, double *um, double *uv, double *work, int *iwork)
+                         double *xv, double *um, double *uv, double *work, int *iwork,
+                         int noise_path)
 {
     const int dy = n + n_latch + 1, dw = n + m + 1, nl = n_latch;
     double *TM, *Mw, *Xv, *tw, *gw;
     tv_blend bl;
+    tv_ops ops;
     double acc = *J;
     long t;
     int a, j, st;
     if (n < 1 || m < 1 || n_latch < 0 || T < 0 || P < 1 || P > TV_MAX_POINTS || na < 0 ||
-        na > n + m || mz < 0 || dw > TV_MAX_DIM || ar_cnt < 0 || ar_cnt > n * dw)
+        na > n + m || mz < 0 || dw > TV_MAX_DIM || ar_cnt < 0 || ar_cnt > n * dw ||
+        noise_path < TV_NOISE_AUTO || noise_path > TV_NOISE_OPERATOR)
         return TV_ERR_DIMS;
     TM = work; Mw = TM + (size_t)dw * dy; Xv = Mw + (size_t)dw * dw;
     tw = Xv + (size_t)dw * nl;
-    gw = blend_at(&bl, tw + taylor_size(n, m, na, nl), iwork, n, m, na, mz);
+    gw = blend_at(&bl, tw + taylor_size(n, m, na, mz, nl), iwork, n, m, na, mz);
+    ops_at(&ops, gw + 3u * TV_MAX_POINTS * (size_t)na * n * mz, n, na, mz);
     for (t = 0; t < T; ++t) {
         tv_tick v = tick_of(n, dw, na, mz, P, act, Ar, G, Lb, same, ar_nz, ar_cnt, t);
         int sub;
@@ -664,7 +888,7 @@ int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, con
             for (j = 0; j < nl; ++j) Xv[a * nl + j] = TM[a * dy + n + j];
         sub = sub_steps(&v, coef, h, &bl);
         if (sub == 0) return TV_ERR_SERIES;
-        lists_of(&v, iwork, gw);
+        lists_of(&v, iwork, gw, &ops, noise_path, sub, T);
         for (j = 0; j < sub; ++j) {
             if (sub > 1) blend(&v, coef, j, sub, &bl);
             st = taylor(TV_FORWARD, &v, &bl, h / sub, Mw, dw, &acc, tw);
@@ -701,7 +925,7 @@ int stsp_tv_euler_oracle_ticks(int n, int m, int n_latch, long T, const double *
         dw > TV_MAX_DIM)
         return TV_ERR_DIMS;
     TM = work; Mw = TM + (size_t)dw * dy; Mn = Mw + D; Xv = Mn + D; T1 = Xv + (size_t)dw * nl;
-    blk = T1 + D; tmp = blk + D; gw = tmp + (size_t)na * n;
+    blk = T1 + D; tmp = blk + D; gw = tmp + noise_tmp_size(n, na, mz);
     for (t = 0; t < T; ++t) {
         command_moments(n, m, nl, K + (size_t)t * m * n, L + (size_t)t * m * nl,
                         k0 + (size_t)t * m, M, TM, Mw, um ? um + t * m : NULL,
@@ -734,8 +958,8 @@ int stsp_tv_euler_oracle_ticks(int n, int m, int n_latch, long T, const double *
                     Mn[a * dw + b] = Mn[b * dw + a] = s;
                 }
             if (na > 0) {                              /* + dt sum Mw[p,q] G_p G_q' */
-                lists_of(&v, iwork, gw);
-                if (v.sparse) {
+                lists_of(&v, iwork, gw, NULL, TV_NOISE_AUTO, 1, 1);
+                if (v.path == TV_NOISE_PAIRS) {
                     pair_noise(TV_FORWARD, &v, 0, dt, Mw, Mn);
                 } else {
                     point_noise(TV_FORWARD, &v, 0, Mw, blk, tmp);
@@ -761,6 +985,6 @@ int stsp_tv_euler_oracle_ticks(int n, int m, int n_latch, long T, const double *
 size_t stsp_tv_euler_work_size(int n, int m, int n_latch, int na, int mz)
 {
     const size_t dw = (size_t)n + (size_t)m + 1u, dy = (size_t)n + (size_t)n_latch + 1u;
-    return dw * dy + 4u * dw * dw + dw * (size_t)n_latch + (size_t)na * n
-           + TV_MAX_POINTS * (size_t)na * n * mz;
+    return dw * dy + 4u * dw * dw + dw * (size_t)n_latch + noise_tmp_size(n, na, mz)
+           + 3u * TV_MAX_POINTS * (size_t)na * n * mz;
 }

@@ -207,13 +207,17 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
             if sd.f is not None:
                 Abar[:n, -1] += sd.f            # the drift multiplies the constant 1
             AM = Abar @ Mt
-            # The diffusion sum_i x_i G_i + sum_j u_j H_j with u = F y is sum_i y_i Geff_i dZ.
+            # The diffusion sum_i x_i G_i + sum_j u_j H_j with u = F y is sum_i y_i Geff_i dZ:
+            # sum_ij M_ij Geff_i Geff_j' over the live multipliers only (none: no product).
             Geff = np.zeros((d,) + sd.G.shape[1:])
             Geff[:n] = sd.G
-            if sd.H is not None:
+            if sd.H is not None and sd.H.any():
                 Geff += np.einsum("ji,jak->iak", F, sd.H)
             dM = AM + AM.T
-            dM[:n, :n] += np.einsum("ij,iak,jbk->ab", Mt, Geff, Geff)
+            live = np.flatnonzero(Geff.any(axis=(1, 2)))
+            if live.size:
+                Gk = np.moveaxis(Geff[live], 2, 0)          # (mz, na, n)
+                dM[:n, :n] += (np.swapaxes(Gk, 1, 2) @ Mt[np.ix_(live, live)] @ Gk).sum(axis=0)
             Lb = running_cost_matrix(sd, n, m, n + m + 1, n)
             Tw = np.zeros((n + m + 1, d))
             Tw[:n, :n] = np.eye(n)

@@ -179,9 +179,12 @@ def _tick_entry(stage, n: int, m: int, h: float, propagator: str, substeps: int)
     hit = _MAPS.get(key)
     if hit is not None and hit[0] is stage:
         return hit
-    prop = (exact_tick(stage, m + 1, h) if propagator == "exact"
-            else euler_tick(stage, m + 1, h, substeps))
-    cost_row = running_cost_matrix(stage, n, m, n + m + 1, n).ravel() @ prop.Psi
+    if propagator == "exact" and not stage.noise_tensor.any():
+        prop, cost_row = _noise_free_tick(stage, n, m, h)
+    else:
+        prop = (exact_tick(stage, m + 1, h) if propagator == "exact"
+                else euler_tick(stage, m + 1, h, substeps))
+        cost_row = running_cost_matrix(stage, n, m, n + m + 1, n).ravel() @ prop.Psi
     # Mean map of one tick: E x+ = Ad x + Bd u + fd = Fmean [x; u; 1] (exact for both
     # propagators).
     Fmean = expm(augmented_drift(stage, m + 1) * h)[:n]
@@ -189,6 +192,22 @@ def _tick_entry(stage, n: int, m: int, h: float, propagator: str, substeps: int)
         _MAPS.clear()
     entry = _MAPS[key] = (stage, (prop, cost_row, Fmean), {})
     return entry
+
+
+def _noise_free_tick(stage, n: int, m: int, h: float):
+    """`exact_tick`'s moment map and cost row for a stage without noise, from d-square
+    exponentials instead of a 2d²-square one: M+ = Phi M Phi' with ``Phi = exp(Ahat h)``, so
+    the map is ``Phi ⊗ Phi``, and the cost ``∫ <Lb, Phi(s) M Phi(s)'> ds = <C, M>`` with ``C
+    = ∫ Phi(s)' Lb Phi(s) ds`` from Van Loan's 2d-square exponential. (Psi, the integrated
+    map itself, is not formed: None.)"""
+    d = n + m + 1
+    Ahat = augmented_drift(stage, m + 1)
+    Lb = running_cost_matrix(stage, n, m, d, n)
+    big = np.zeros((2 * d, 2 * d))
+    big[:d, :d], big[:d, d:], big[d:, d:] = -Ahat.T * h, Lb * h, Ahat * h
+    E = expm(big)
+    Phi = E[d:, d:]
+    return TickPropagator(np.kron(Phi, Phi), None), (Phi.T @ E[:d, d:]).ravel()
 
 
 def _euler_varying_maps(stage, n: int, m: int, t0: float, h: float, substeps: int):

@@ -3,7 +3,7 @@ investment problems): the designers' extra Riccati terms against the oracle and 
 import numpy as np
 import pytest
 
-from stospline.design.continuous import design_continuous
+from stospline.design.continuous import design_continuous, noise_operator
 from stospline.design.zoh import design_zoh
 from stospline.sim.controller import build_controller
 from stospline.sim.montecarlo import compare_to_oracle, simulate
@@ -40,6 +40,22 @@ def two_state():
                   {"t": 3.0, "constraint": {"C": [[1.0, 0.0], [0.0, 1.0]], "value": [0.0, 0.0]},
                    "penalty": {"C": [[1.0, 0.0], [0.0, 1.0]], "target": [0.0, 0.0],
                                "weight": 1.0}}]})
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_noise_operator_is_the_trace_form(seed):
+    """`noise_operator` (live multipliers only, column-wise products) equals the definition
+    tr(G_k' P G_l), entry by entry, with some multipliers and all of them without noise."""
+    rng = np.random.default_rng(seed)
+    k, n, mz = rng.integers(1, 9), rng.integers(1, 7), rng.integers(1, 4)
+    G = rng.normal(size=(k, n, mz))
+    G[rng.random(k) < 0.4] = 0.0
+    P = rng.normal(size=(n, n))
+    P = P + P.T
+    want = np.array([[np.trace(G[a].T @ P @ G[b]) for b in range(k)] for a in range(k)])
+    np.testing.assert_allclose(noise_operator(G, P), want, rtol=0,
+                               atol=1e-14 * max(np.abs(want).max(), 1.0))
+    np.testing.assert_array_equal(noise_operator(np.zeros_like(G), P), np.zeros((k, k)))
 
 
 @pytest.mark.parametrize("make", [investment, two_state])

@@ -57,6 +57,57 @@ def test_c_loops_agree_with_the_references(mode, monkeypatch):
     assert abs(c.J - d.J0) <= 1e-12 * d.J0
 
 
+def _dense_noise_doc(varying_noise: bool, seed: int = 3):
+    """n = 3, m = 2, time-varying drift, a dense n x 3 noise matrix on every state and every
+    input (constant, or varying in time), seeded."""
+    rng = np.random.default_rng(seed)
+    n, m, mz = 3, 2, 3
+    ts = [0.0, 0.7, 1.4, 2.0]
+
+    def G():
+        if not varying_noise:
+            return rng.normal(scale=0.2, size=(n, mz)).tolist()
+        return {"t": ts, "values": rng.normal(scale=0.2, size=(len(ts), n, mz)).tolist()}
+
+    A = [(rng.normal(scale=0.5, size=(n, n)) - np.eye(n)).tolist() for _ in ts]
+    noise = ([{"state": i, "G": G()} for i in range(n)]
+             + [{"input": j, "G": G()} for j in range(m)])
+    return {"name": "dense", "x0": rng.normal(size=n).tolist(), "tick_hz": 40,
+            "dynamics": {"A": {"t": ts, "values": A}, "B": rng.normal(size=(n, m)).tolist(),
+                         "noise": noise},
+            "cost": {"R": np.eye(m).tolist(), "Q": (0.5 * np.eye(n)).tolist()},
+            "knots": [{"t": 1.0, "constraint": {"C": [[1, 0, 0]], "value": [0.5]}},
+                      {"t": 2.0, "penalty": {"C": np.eye(n).tolist(), "target": [0.0] * n,
+                                             "weight": 2.0}}]}
+
+
+@pytest.mark.parametrize("varying_noise", [True, False])
+def test_dense_noise_paths_equal_the_pair_formulation(varying_noise, monkeypatch):
+    """Every way the C loops apply a dense diffusion (Brownian columns, the packed operator,
+    and the automatic choice) gives the nonzero-pair formulation's design and oracle to
+    rounding."""
+    problem = parse_problem(_dense_noise_doc(varying_noise))
+    results = {}
+    for path in ("pairs", "columns", "operator", "auto"):
+        monkeypatch.setattr(varying, "NOISE_PATH", path)
+        d = design_zoh(problem)
+        table = table_of(d, quantize=False)
+        results[path] = (d, evaluate_table(problem, table, path=True))
+    ref, ref_oracle = results.pop("pairs")
+    assert abs(ref_oracle.J - ref.J0) <= 1e-12 * ref.J0      # designer and oracle agree
+    for path, (d, c) in results.items():
+        assert abs(d.J0 - ref.J0) <= 1e-13 * ref.J0, path
+        for a, b in zip(d.stages, ref.stages):
+            np.testing.assert_allclose(a.K, b.K, rtol=0, atol=1e-12 * np.abs(b.K).max())
+            np.testing.assert_allclose(a.k0, b.k0, rtol=0, atol=1e-12 * np.abs(b.k0).max())
+        assert abs(c.J - ref_oracle.J) <= 1e-13 * ref_oracle.J, path
+        np.testing.assert_allclose(c.path_var, ref_oracle.path_var, rtol=0,
+                                   atol=1e-13 * ref_oracle.path_var.max())
+    # ... and the numpy designer (Magnus exponential per tick) to its order-4 truncation.
+    numpy_design = design_zoh(problem, kernel="numpy")
+    assert abs(numpy_design.J0 - ref.J0) <= 1e-6 * ref.J0
+
+
 def test_oracle_error_falls_as_h_to_the_fourth(monkeypatch):
     errors = []
     for hz in (20, 40):
@@ -107,6 +158,22 @@ def test_sub_steps_keep_stiff_slow_ticks_exact(monkeypatch):
     assert abs(c.J - ref.J) <= 1e-6 * ref.J
     smp = varying.tick_samples(problem.stages[0], 0.0, 0.1, 3, varying._gauss(2)[0])
     assert smp.Ar.shape[0] == 3     # the data vary: one entry per tick
+
+
+def test_sub_steps_keep_noise_dominated_slow_ticks_exact(monkeypatch):
+    """Dense noise so strong at a slow tick rate that it, not the drift, sets the sub-steps
+    and the series' length: the loops still match DOP853 on every tick."""
+    doc = _dense_noise_doc(False)
+    doc["tick_hz"] = 5
+    doc["dynamics"]["A"]["values"] = [doc["dynamics"]["A"]["values"][0]] * 3 + [
+        (np.asarray(doc["dynamics"]["A"]["values"][0]) + 0.01).tolist()]
+    for entry in doc["dynamics"]["noise"]:
+        entry["G"] = (6.0 * np.asarray(entry["G"])).tolist()
+    problem = parse_problem(doc)
+    table = table_of(design_zoh(problem), quantize=False)
+    c = evaluate_table(problem, table, path=False)
+    ref = _reference_oracle(problem, table, monkeypatch, path=False)
+    assert abs(c.J - ref.J) <= 1e-10 * ref.J
 
 
 times = st.lists(st.floats(-1.0, 4.0, allow_nan=False), min_size=1, max_size=30)

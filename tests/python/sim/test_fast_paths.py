@@ -54,3 +54,27 @@ def test_oracle_kernel_matches_numpy(example, mode, propagator, path, monkeypatc
     # the C path really ran: the numpy one is the reference, not the code under test
     monkeypatch.setenv("STOSPLINE_ORACLE_KERNEL", "c")
     assert oracle._c_kernel() is not None
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_noise_free_tick_maps_equal_the_van_loan_map(seed):
+    """Without noise the oracle takes a tick's moment map as Phi ⊗ Phi and its cost row from a
+    2d-square exponential (`_noise_free_tick`): equal to rounding to the 2d²-square Van Loan
+    exponential of `moments.exact_tick`, drift and cross weights included."""
+    from stospline.design.moments import exact_tick, running_cost_matrix
+    from stospline.problem.build import problem_from_arrays
+    from stospline.sim.tick_moments import _noise_free_tick
+    rng = np.random.default_rng(seed)
+    n, m, h = 3, 2, 0.02
+    Q = rng.normal(size=(n, n))
+    stage = problem_from_arrays(
+        x0=rng.normal(size=n), A=rng.normal(size=(n, n)), B=rng.normal(size=(n, m)),
+        R=np.eye(m), Q=Q @ Q.T + np.eye(n), S=0.1 * rng.normal(size=(n, m)), q=rng.normal(size=n),
+        f=rng.normal(size=n), tick_hz=50,
+        knots=[{"t": 1.0, "penalty": {"C": np.eye(n), "target": np.zeros(n), "weight": 1.0}}]
+    ).stages[0]
+    prop, row = _noise_free_tick(stage, n, m, h)
+    ref = exact_tick(stage, m + 1, h)
+    ref_row = running_cost_matrix(stage, n, m, n + m + 1, n).ravel() @ ref.Psi
+    np.testing.assert_allclose(prop.Phi, ref.Phi, rtol=0, atol=1e-14 * np.abs(ref.Phi).max())
+    np.testing.assert_allclose(row, ref_row, rtol=0, atol=1e-14 * np.abs(ref_row).max())

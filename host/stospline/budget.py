@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from stospline.errors import BudgetError
 from stospline.problem.model import Problem, ProblemError
 
 __all__ = ["BudgetError", "Term", "Estimate", "estimate", "check", "enforce",
@@ -83,11 +84,6 @@ CORRIDOR_BOUND_COPIES = 12  # (ticks, walls) double arrays alive while one corri
 WORKER_BYTES = 60e6         # a forked Monte Carlo worker's own memory besides its block
 FIGURE_BYTES = 150e6        # matplotlib and the figures of a plot or report
 FIGURE_SECONDS = 4.0        # importing matplotlib, drawing and encoding the figures
-
-
-class BudgetError(ProblemError):
-    """The run would exceed the memory or time limit; `field` is the problem-file key (or
-    command-line option) whose value causes the largest part of the estimate."""
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
-"""The package's two exceptions; every layer raises them, so this module imports nothing of
-the package."""
+"""The package's exceptions; every layer raises them, so this module imports nothing of the
+package. The command line maps each to exit status 2."""
 
-__all__ = ["ProblemError", "DesignError"]
+__all__ = ["ProblemError", "DesignError", "BudgetError"]
 
 
 class ProblemError(ValueError):
@@ -24,3 +24,8 @@ class ProblemError(ValueError):
 
 class DesignError(ProblemError):
     """The problem is well-formed but has no solution (infeasible constraint, finite escape)."""
+
+
+class BudgetError(ProblemError):
+    """The run would exceed the memory or time limit; `field` is the problem-file key (or
+    command-line option) whose value causes the largest part of the estimate."""

@@ -542,7 +542,7 @@ def _lu(M):
     BudgetError naming tick_hz (one line, exit status 2), not a traceback; any other
     RuntimeError (a singular matrix) is the caller's."""
     from scipy.sparse.linalg import splu
-    from stospline.budget import BudgetError
+    from stospline.errors import BudgetError
     try:
         return splu(M)
     except (MemoryError, SystemError, RuntimeError) as exc:

@@ -403,12 +403,21 @@ SIGINT_AFTER = [0.005, 0.02, 0.05, 0.1, 0.2, 0.4]
 @pytest.mark.parametrize("delay", SIGINT_AFTER)
 def test_sigint_at_any_moment_ends_in_one_line(tmp_path, delay):
     """From main's first instruction on (its imports included) a SIGINT ends the run with
-    exit 130 and one line; the child starts the timer just before calling main."""
+    exit 130 and one line. The child arms the timer as main installs its handler (main's
+    first step), so a loaded machine cannot deliver the signal before main has begun; as from
+    an interactive shell, SIGINT starts at its default (a pytest-xdist worker, whose
+    disposition a child inherits, ignores it)."""
     (tmp_path / "p.toml").write_text(CART)
     code = ("import os, signal, sys, threading\n"
-            "from stospline.cli import main\n"
-            f"threading.Timer({delay}, os.kill, (os.getpid(), signal.SIGINT)).start()\n"
-            "rc = main(['simulate', 'p.toml', '--paths', '200000', '--substeps', '50',"
+            "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
+            "from stospline import cli\n"
+            "catch = cli._catch_interrupts\n"
+            "def armed():\n"
+            "    restore = catch()\n"
+            f"    threading.Timer({delay}, os.kill, (os.getpid(), signal.SIGINT)).start()\n"
+            "    return restore\n"
+            "cli._catch_interrupts = armed\n"
+            "rc = cli.main(['simulate', 'p.toml', '--paths', '200000', '--substeps', '50',"
             " '--workers', '1'])\n"
             "sys.exit(rc)\n")
     env = {**os.environ, "PYTHONPATH": str(REPO / "host")}
@@ -430,7 +439,17 @@ def test_cli_module_loads_nothing_heavy():
     assert p.returncode == 0 and p.stdout.strip() == "[]", p.stdout + p.stderr
 
 
-def test_interrupt_turned_into_another_error_still_ends_in_one_line(capsys, monkeypatch):
+@pytest.fixture
+def sigint_default():
+    """SIGINT at Python's default handler for the test, as in an interactive shell (a
+    pytest-xdist worker ignores it); restored after."""
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, old)
+
+
+def test_interrupt_turned_into_another_error_still_ends_in_one_line(capsys, monkeypatch,
+                                                                    sigint_default):
     """numpy turns a SIGINT during its import into an ImportError: after a SIGINT, whatever
     ends the run is reported as the interrupt."""
     import time

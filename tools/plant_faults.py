@@ -153,7 +153,7 @@ FAULTS = [
           "    stsp_copy(u, ctrl->hold, stsp_nu(&ctrl->checked));",
           "    stsp_copy(u, ctrl->checked.u_hold, stsp_nu(&ctrl->checked));"),
     Fault("F32", "init accepts a band table in a program without the band solver", CTL,
-          "    if (stsp_band_solver_linked() == 0) {", "    if (stsp_band_solver_linked() < 0) {"),
+          "    if (b->solve_f32 == NULL) {", "    if (b->solve_f32 != b->solve_f32) {"),
     Fault("F33", "band order check compares magnitudes only (lo = -1 > hi = 0.5)", CTL,
           "    return ((bits >> 63) != 0u) ? -magnitude : magnitude;",
           "    return magnitude;"),
@@ -178,7 +178,8 @@ FAULTS = [
           "    stsp_spline_fold(h, p, coef, ctrl->v, fold);",
           "    stsp_spline_fold(h, p, p->coef, ctrl->v, fold);"),
     Fault("F42", "init accepts a spline table in a program without the spline code", CTL,
-          "        if (stsp_spline_linked() == 0) {", "        if (stsp_spline_linked() < 0) {"),
+          "        if (stsp_spline_code_ok(t->sp.ops) == 0) {",
+          "        if (stsp_spline_code_ok(t->sp.ops) < 0) {"),
     # The generic float32 law (two rows at a time; the host runs the C branch of the M4F asm).
     Fault("F43", "generic float32 law: the second row of a pair uses the first row's gains", CTL,
           "            r1 = stsp_mls(r1, kp[nx + c], x[c]);",

@@ -15,7 +15,7 @@
  * paths in functions of their own.
  *
  * A spline table (float32) keeps stage_end at 0, so each of its ticks leaves that path for
- * stsp_spline_step (stsp_spline.c): its ordinary tick is again two compares (the expected
+ * stsp_spline_ops.step (stsp_spline.c): its ordinary tick is again two compares (the expected
  * tick, inside the recorded span), the spline law (stsp_law_spline.h) and the same checks, except that the
  * state is checked too (a sparse row need not use every x[j]); the first tick of the next
  * span is also evaluated without the cold path; everything else goes to stsp_step_cold_spline
@@ -31,7 +31,7 @@
  * step); stsp_table.c validates and serialises the table (CRC-32); stsp_law.h is the law,
  * inlined into stsp_step(), on the row primitives and latch row of stsp_law_f32.h or
  * stsp_law_q.h (one, by STSP_ARITH_FIXED_POINT); stsp_spline.c a spline table's ticks and
- * layout checks (linked only with a spline table), on the spline law of stsp_law_spline.h;
+ * layout checks (linked only with a spline table, through its ops), on the spline law of stsp_law_spline.h;
  * stsp_plan.h the cold paths' plan and commit;
  * stsp_clamp.h the actuator clamp; stsp_internal.h the compiler and VFP helpers, the
  * dimensions the law uses and the fixed-point accumulator; stsp_crc32.c, stsp_qconv.c (Q
@@ -291,15 +291,14 @@ static STSP_ORDINARY_TICK stsp_status_t stsp_step_ordinary(stsp_ctrl_t *ctrl, ui
 }
 
 #if STSP_ROW_CACHE
-/* Every tick but the ordinary one of a per-tick table: a spline table's (stsp_spline.c: init
- * accepted the table, so that code is linked), or the cold path. Out of line, so that
- * stsp_step() tail-calls everything and needs no frame (GCC does not tail-call the weak
- * stsp_spline_step). */
+/* Every tick but the ordinary one of a per-tick table: a spline table's (stsp_spline.c, through
+ * the table's ops, which init checked), or the cold path. Out of line, so that stsp_step()
+ * tail-calls everything and needs no frame. */
 static STSP_NOINLINE stsp_status_t stsp_step_other(stsp_ctrl_t *ctrl, uint32_t tick,
                                                    const stsp_f32_t *x, stsp_f32_t *u)
 {
     if (ctrl->checked.spline != NULL) {
-        return stsp_spline_step(ctrl, tick, x, u);
+        return ctrl->checked.sp.ops->step(ctrl, tick, x, u);
     }
     return stsp_step_cold(ctrl, tick, x, u);
 }
@@ -319,15 +318,15 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x
     }
     /* Ordinary tick: the expected one, inside the latched stage (stage_end is 0 until the
      * first latch, and never above n_ticks). Anything else takes the cold path; every tick
-     * of a spline table (stage_end 0) its own, stsp_spline_step. */
+     * of a spline table (stage_end 0) its own, stsp_spline_ops.step. */
     if ((tick != ctrl->next_tick) || (tick >= ctrl->stage_end)) {
 #if STSP_ROW_CACHE
         return stsp_step_other(ctrl, tick, x, u);
 #else
-        /* A spline table's tick (stsp_spline.c: init accepted the table, so that code is
-         * linked). */
+        /* A spline table's tick (stsp_spline.c, through the table's ops, which init
+         * checked). */
         if (ctrl->checked.spline != NULL) {
-            return stsp_spline_step(ctrl, tick, x, u);
+            return ctrl->checked.sp.ops->step(ctrl, tick, x, u);
         }
         return stsp_step_cold(ctrl, tick, x, u);
 #endif

@@ -12,8 +12,8 @@
  * fails with STSP_ERR_NONFINITE_STATE as for any table), Nt x + mt overflowed, no active set
  * met the optimality conditions (W not positive definite in double precision), or a
  * multiplier lies outside the binary32 range. The solver (stsp_bandqp_solve_f32, with its
- * ~0.8 KB of stack, used on this tick only) is linked only into programs with a band table:
- * init refuses a band table without it (stsp_internal.h). */
+ * ~0.8 KB of stack, used on this tick only) is the table's (stsp_bandqp_t.solve_f32), which
+ * init checked (stsp_internal.h). */
 static STSP_NOINLINE int stsp_band_latch(const stsp_header_t *h, const stsp_f32_t *x,
                                          stsp_f32_t *v_new)
 {
@@ -21,7 +21,7 @@ static STSP_NOINLINE int stsp_band_latch(const stsp_header_t *h, const stsp_f32_
     const uint32_t q = h->band.q;
     uint32_t i;
     /* The validated copy of the band dual's header, not the table's: q and nx as init checked. */
-    if (stsp_bandqp_solve_f32(&h->band, x, v) != STSP_BANDQP_OK) {
+    if (h->band.solve_f32(&h->band, x, v) != STSP_BANDQP_OK) {
         return 0;
     }
     for (i = 0u; i < stsp_n_latch(h); ++i) {

@@ -1,10 +1,10 @@
-/* Spline tables (stsp_spline_t, float32 builds): their every tick (stsp_spline_step, which
- * stsp_step() calls for a spline table) and their layout checks at init
- * (stsp_spline_check_dims). Its own translation unit so that a program without a spline table
- * does not link it: the controller refers to both functions weakly (stsp_internal.h), and a
- * generated spline table refers strongly to stsp_spline_code, defined here. The law itself is
- * stsp_law_spline.h. */
+/* Spline tables (stsp_spline_t in float32 builds, stsp_qspline_t in Q15/Q31 builds): their
+ * every tick, their layout (and fixed point: value) checks at init and their part of the
+ * CRC-32, reached only through the table's ops pointer (stsp_spline_ops, the last definition
+ * here), so that a program without a spline table does not link this object. The float32 law
+ * itself is stsp_law_spline.h. */
 #include "stsp_internal.h"
+#include "stsp_crc32.h"
 
 #ifndef STSP_ARITH_FIXED_POINT
 #include "stsp_law_f32.h"
@@ -12,7 +12,6 @@
 #define STSP_CLAMP_NO_FIXUP 1
 #include "stsp_law_q.h"
 #include "stsp_qspline.h"
-#include "stsp_crc32.h"
 #endif
 /* Of stsp_law.h only the alarm (stsp_law_alarm): not the per-tick law's out-of-line rows. */
 #define STSP_LAW_ALARM_ONLY 1
@@ -25,15 +24,11 @@
 #endif
 #include "stsp_plan.h"
 
-/* The symbol a generated spline table refers to (float32: stsp_spline_t, Q15/Q31:
- * stsp_qspline_t tables). */
-const uint32_t stsp_spline_code = STSP_FORMAT_VERSION;
-
 #ifdef STSP_ARITH_FIXED_POINT
 /* The fixed-point spline part of stsp_table_crc32()'s serialization (called by stsp_crc_of):
  * counts, then the six arrays, index arrays (span_log2, row_start, col, shift, coef_start) as
  * u32 each, the coefficients as the table's scalars (little-endian int16 or int32). */
-uint32_t stsp_spline_crc(uint32_t crc, const stsp_qspline_t *sp, uint32_t ns, uint32_t nu)
+static uint32_t stsp_spline_crc(uint32_t crc, const stsp_qspline_t *sp, uint32_t ns, uint32_t nu)
 {
     const uint32_t rows = (ns * nu) + 1u;
     uint32_t c = crc;
@@ -57,7 +52,7 @@ uint32_t stsp_spline_crc(uint32_t crc, const stsp_qspline_t *sp, uint32_t ns, ui
 }
 /* A fixed-point spline table's layout (stsp_qspline_t): stsp_qspline_check with the validated
  * copy's dimensions. */
-stsp_status_t stsp_spline_check_dims(const stsp_header_t *h)
+static stsp_status_t stsp_spline_check_dims(const stsp_header_t *h)
 {
     const uint32_t nz = (uint32_t)h->nx + 1u + h->n_latch;
     return stsp_qspline_check(&h->sp, h->stage_start, h->n_stages, h->nu, nz);
@@ -78,7 +73,7 @@ static uint32_t stsp_qspline_stride(const stsp_qspline_t *sp, uint32_t s, uint32
  * evaluated (exact, stsp_qspline_value) with |k0| + sum|K| + sum|L| <= 2^F - 1, the per-tick
  * format's row bound (stsp_check_values), so that stsp_spline_step's law cannot overflow and
  * every gain fits stsp_scalar_t. One evaluation per stored entry and tick (init only). */
-stsp_status_t stsp_spline_check_values(const stsp_header_t *h)
+static stsp_status_t stsp_spline_check_values(const stsp_header_t *h)
 {
     const stsp_qspline_t *sp = &h->sp;
     const uint64_t row_max = (uint64_t)STSP_Q_ONE - 1u;
@@ -267,7 +262,7 @@ static STSP_NOINLINE stsp_status_t stsp_qspline_step_cold(stsp_ctrl_t *ctrl, uin
  * tick on the kept v, the clamp, next_tick; the same status, command, mask and instance state
  * (test_qspline_ctrl.c runs both paths against the per-tick law). Anything else takes
  * stsp_qspline_step_cold. */
-stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
+static stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
                                stsp_scalar_t *u)
 {
     const stsp_header_t *h = &ctrl->checked;
@@ -338,7 +333,7 @@ static stsp_status_t stsp_check_spline_stage(const stsp_header_t *h, uint32_t s)
  * to their lengths and nondecreasing, at least 8 knots per stage (all checked before any
  * other element is read through them); every operand index below nx + 1 + n_latch; each stage
  * as stsp_check_spline_stage says. */
-stsp_status_t stsp_spline_check_dims(const stsp_header_t *h)
+static stsp_status_t stsp_spline_check_dims(const stsp_header_t *h)
 {
     const stsp_spline_t *p = &h->sp;
     const uint32_t ns = h->n_stages;
@@ -550,7 +545,7 @@ static STSP_NOINLINE stsp_status_t stsp_step_next_span(stsp_ctrl_t *ctrl, uint32
  * path). The ordinary one is here: the expected tick inside the span of the last step
  * (span.next is 0 until the first latch, and never beyond the stage or n_ticks). Anything
  * else takes stsp_step_next_span. */
-stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_t *x,
+static stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_t *x,
                                stsp_f32_t *u)
 {
     const stsp_span_t *p = &ctrl->span;
@@ -567,3 +562,36 @@ stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_f32_
 }
 
 #endif /* STSP_ARITH_FIXED_POINT */
+
+#ifndef STSP_ARITH_FIXED_POINT
+/* The spline part of stsp_table_crc32()'s serialization: counts, then the six arrays, index
+ * arrays as u32 each, knots and coefficients as binary32. */
+static uint32_t stsp_spline_crc(uint32_t crc, const stsp_spline_t *sp, uint32_t ns, uint32_t nu)
+{
+    const uint32_t rows = (ns * nu) + 1u;
+    uint32_t c = crc;
+    uint32_t i;
+    c = stsp_crc32_u32(c, sp->n_knots);
+    c = stsp_crc32_u32(c, sp->n_entries);
+    c = stsp_crc32_u32(c, sp->n_coef);
+    c = stsp_crc32_u32s(c, sp->knot_start, ns + 1u);
+    c = stsp_crc32_f32s(c, sp->knot, sp->n_knots);
+    for (i = 0u; i < rows; ++i) {
+        c = stsp_crc32_u32(c, (uint32_t)sp->row_start[i]);
+    }
+    for (i = 0u; i < sp->n_entries; ++i) {
+        c = stsp_crc32_u32(c, (uint32_t)sp->col[i]);
+    }
+    c = stsp_crc32_u32s(c, sp->coef_start, ns + 1u);
+    return stsp_crc32_f32s(c, sp->coef, sp->n_coef);
+}
+#endif
+
+const stsp_spline_ops_t stsp_spline_ops = {
+    STSP_SCALAR_KIND, stsp_spline_check_dims,
+#ifdef STSP_ARITH_FIXED_POINT
+    stsp_spline_check_values,
+#else
+    NULL, /* float32: init's value checks cover the coefficients (stsp_table.c) */
+#endif
+    stsp_spline_crc, stsp_spline_step};

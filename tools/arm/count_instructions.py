@@ -210,8 +210,7 @@ def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
     else:
         # Q15/Q31: also the robot's spline table of that arithmetic (and the spline code it links).
         links.append(("controller + spline tables linked",
-                      [f"robot_corridor{sfx}_spline_table",
-                       f"robot_corridor{sfx}_spline_spline_code"],
+                      [f"robot_corridor{sfx}_spline_table"],
                       [build / f"libstsp_gains_robot_corridor{sfx}_spline.a", ctl]))
     for what, extra_roots, libs in links:
         kind = ("spline" if "spline_bench_table" in extra_roots else
@@ -227,8 +226,8 @@ def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
         t, d, b = (int(v) for v in size_line.split()[:3])
         rows.append((what, t, d, b))
         if not extra_roots and not sfx:
-            # A program with a band table: the build adds --undefined=stsp_bandqp_solve
-            # (stospline_add_gains), which links the band solver the controller refers to weakly.
+            # A program with a band table links the band solver (stsp_bandqp_t.solve_f32): here
+            # forced by --undefined=stsp_bandqp_solve.
             band_elf = elf.with_name(elf.stem + "_band.elf")
             band_cmd = [str(band_elf) if c == str(elf) else c for c in cmd]
             band_cmd.insert(band_cmd.index(str(libs[0])), "-Wl,--undefined=stsp_bandqp_solve")

@@ -68,7 +68,7 @@ def table_source(ft) -> tuple[str, int]:
            f"const uint32_t qspline_nz = {nz}u;\n",
            f"const uint32_t qspline_expected_hash = {_fnv(G):#010x}u;\n",
            f"const stsp_qspline_t qspline_robot = {{{sp.n_entries}u, {sp.coef.size}u, span_log2, "
-           f"row_start, col, shift, coef_start, coef}};\n"]
+           f"row_start, col, shift, coef_start, coef, NULL}};\n"]
     return "".join(src), _fnv(G)
 
 

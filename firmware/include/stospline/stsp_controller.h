@@ -78,7 +78,7 @@ extern "C" {
  * One controller instance; caller-owned (stack, static or a struct of the application).
  * Read-only for the caller: `sat_mask`, `stage`, `next_tick`, `latched`; the rest is private.
  */
-typedef struct {
+typedef struct stsp_ctrl {
     const stsp_table_t *table;
     uint32_t ready;          /**< a magic value after a successful init (private) */
     uint32_t next_tick;      /**< tick expected at the next step */

@@ -22,7 +22,7 @@ extern "C" {
  * cannot move an access outside the arrays init checked. stsp_verify() compares the header
  * with it before it reads any array.
  */
-typedef struct {
+typedef struct stsp_header {
     const stsp_scalar_t *K;
     const stsp_scalar_t *k0;
     const stsp_scalar_t *L;

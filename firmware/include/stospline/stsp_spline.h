@@ -36,16 +36,32 @@
 extern "C" {
 #endif
 
+struct stsp_ctrl;   /* stsp_ctrl_t, stsp_controller.h */
+struct stsp_header; /* stsp_header_t, stsp_private.h (not API) */
+
 /**
- * Defined by the spline tables' code (firmware/src/stsp_spline.c, in every arithmetic: the
- * float32 or the fixed-point spline tick; value STSP_FORMAT_VERSION),
- * which a program links only when something refers to it strongly: a generated spline table
- * does (`<name>_spline_code`, a pointer to this). The controller refers to that code only
- * weakly (GCC or clang, ELF), so that programs with per-tick tables do not carry it; without
- * it stsp_init() refuses a spline table with STSP_ERR_BAD_DIMS. A hand-made spline table must
- * refer to it too (or link with -Wl,--undefined=stsp_spline_code).
+ * The code of a spline table in the build's arithmetic (firmware/src/stsp_spline.c): its layout
+ * and value checks for stsp_init(), its part of the CRC-32, and its every tick. A spline table
+ * points to stsp_spline_ops (stsp_spline_t.ops, stsp_qspline_t.ops; the generated C does), and
+ * the controller reaches that code only through the pointer: a program links it only with a
+ * spline table. stsp_init() refuses a spline table whose ops is NULL or of another arithmetic
+ * (STSP_ERR_BAD_DIMS). Private members: only the controller calls them.
  */
-extern const uint32_t stsp_spline_code;
+struct stsp_spline_ops {
+    uint32_t scalar_kind; /**< STSP_SCALAR_KIND of the code */
+    /** init: the layout of the validated header copy's spline */
+    stsp_status_t (*check_dims)(const struct stsp_header *h);
+    /** init, after the CRC: the gains as evaluated (fixed point; NULL: nothing to check) */
+    stsp_status_t (*check_values)(const struct stsp_header *h);
+    /** stsp_table_crc32(): the spline part of the serialization */
+    uint32_t (*crc)(uint32_t crc, const stsp_spline_gains_t *sp, uint32_t n_stages, uint32_t nu);
+    /** stsp_step() of a spline table, after its argument and ready checks */
+    stsp_status_t (*step)(struct stsp_ctrl *ctrl, uint32_t tick, const stsp_scalar_t *x,
+                          stsp_scalar_t *u);
+};
+
+/** The spline code of the build's arithmetic (stsp_spline_ops_f32, _q15 or _q31). */
+extern const stsp_spline_ops_t stsp_spline_ops;
 
 #ifdef __cplusplus
 }

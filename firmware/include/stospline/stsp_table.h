@@ -36,6 +36,9 @@ extern "C" {
 /** Fixed point: stsp_init() refuses scale exponents (x_exp, u_exp, v_exp) outside +-this. */
 #define STSP_Q_EXP_MAX 60
 
+/** The code of spline gains (stsp_spline.h): stsp_spline_t.ops, stsp_qspline_t.ops. */
+typedef struct stsp_spline_ops stsp_spline_ops_t;
+
 #ifndef STSP_ARITH_FIXED_POINT
 /**
  * Spline gains (format 5, float32 builds only): each stage's gains as cubic B-splines of the
@@ -66,6 +69,9 @@ typedef struct {
     const uint8_t *col;           /**< [n_entries] */
     const uint32_t *coef_start;   /**< [n_stages + 1] */
     const stsp_f32_t *coef;       /**< [n_coef] */
+    const stsp_spline_ops_t *ops; /**< &stsp_spline_ops: the code that checks and evaluates
+                                       it (stsp_spline.h); NULL: stsp_init() refuses the
+                                       table (STSP_ERR_BAD_DIMS) */
 } stsp_spline_t;
 #endif
 
@@ -105,6 +111,7 @@ typedef struct {
     const uint8_t *shift;        /**< [n_entries] */
     const uint32_t *coef_start;  /**< [n_stages + 1] */
     const stsp_scalar_t *coef;   /**< [n_coef] */
+    const stsp_spline_ops_t *ops; /**< &stsp_spline_ops, as stsp_spline_t.ops */
 } stsp_qspline_t;
 /** The spline gains of the build's arithmetic (stsp_table_t.spline). */
 typedef stsp_qspline_t stsp_spline_gains_t;

@@ -290,6 +290,21 @@ static STSP_ORDINARY_TICK stsp_status_t stsp_step_ordinary(stsp_ctrl_t *ctrl, ui
     return STSP_OK;
 }
 
+#if !STSP_ROW_CACHE
+/* A spline table's tick (stsp_spline.c, through the table's ops, which init checked), from
+ * stsp_step(). A call, not a tail call: stsp_step() then has a call and saves lr in its
+ * prologue, and its ordinary tick returns with one pop {..., pc} instead of pop and bx lr (one
+ * instruction less on the Cortex-M4F ordinary tick of the STSP_FIXED_* and Q15/Q31 builds). */
+static STSP_ALWAYS_INLINE stsp_status_t stsp_step_spline(stsp_ctrl_t *ctrl, uint32_t tick,
+                                                         const stsp_scalar_t *x,
+                                                         stsp_scalar_t *u)
+{
+    const stsp_status_t status = ctrl->checked.sp.ops->step(ctrl, tick, x, u);
+    STSP_NO_TAIL_CALL();
+    return status;
+}
+#endif
+
 #if STSP_ROW_CACHE
 /* Every tick but the ordinary one of a per-tick table: a spline table's (stsp_spline.c, through
  * the table's ops, which init checked), or the cold path. Out of line, so that stsp_step()
@@ -323,10 +338,8 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x
 #if STSP_ROW_CACHE
         return stsp_step_other(ctrl, tick, x, u);
 #else
-        /* A spline table's tick (stsp_spline.c, through the table's ops, which init
-         * checked). */
         if (ctrl->checked.spline != NULL) {
-            return ctrl->checked.sp.ops->step(ctrl, tick, x, u);
+            return stsp_step_spline(ctrl, tick, x, u);
         }
         return stsp_step_cold(ctrl, tick, x, u);
 #endif

@@ -25,6 +25,13 @@
 #define STSP_NOINLINE
 #define STSP_ALWAYS_INLINE inline
 #endif
+/* After a call in tail position: keeps it a call (an empty asm statement the compiler must
+ * emit after it), where a tail call would cost more than it saves (stsp_step_spline). */
+#if defined(__GNUC__) || defined(__clang__)
+#define STSP_NO_TAIL_CALL() __asm__ volatile("")
+#else
+#define STSP_NO_TAIL_CALL()
+#endif
 #if defined(STSP_FIXED_NX) && (defined(__GNUC__) || defined(__clang__))
 #define STSP_UNROLL _Pragma("GCC unroll 16")
 #else
@@ -253,6 +260,13 @@ static inline stsp_scalar_t stsp_q_round(stsp_uacc_t acc, stsp_scalar_t c)
     return (stsp_scalar_t)rounded;
 }
 #endif /* STSP_ARITH_FIXED_POINT */
+
+/* The functions between the sources below, named per arithmetic (STSP_NAME) as the API. */
+#define stsp_copy_header STSP_NAME(stsp_copy_header)
+#define stsp_header_changed STSP_NAME(stsp_header_changed)
+#define stsp_has_limits STSP_NAME(stsp_has_limits)
+#define stsp_crc_of STSP_NAME(stsp_crc_of)
+#define stsp_check_table STSP_NAME(stsp_check_table)
 
 /* The header fields every later call uses, read once from the table (init, CRC). */
 void stsp_copy_header(stsp_header_t *h, const stsp_table_t *t);

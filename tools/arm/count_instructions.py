@@ -103,12 +103,26 @@ def callees(elf: Path, syms: dict, root: str) -> list[str]:
     return seen
 
 
+# The suffix of the controller's external symbols (STSP_NAME: stsp_step_f32, stsp_step_q15, ...)
+# per variant suffix of VARIANTS.
+API_SUFFIX = {"": "_f32", "_q15": "_q15", "_q31": "_q31"}
+
+
+def api_symbol(syms: dict, base: str) -> str:
+    """The image's controller symbol `base` (one arithmetic per image: stsp_step_f32, ...)."""
+    names = [base + s for s in API_SUFFIX.values() if base + s in syms]
+    if len(names) != 1:
+        raise SystemExit(f"count: expected one of {base}_f32/_q15/_q31, found {names}")
+    return names[0]
+
+
 def trace_calls(build: Path, image: str, machine: str = "mps2-an386"
                 ) -> tuple[list[dict], list[str], dict]:
     elf = build / image
     trace = build / f"trace_{Path(image).stem}.log"
     syms = symbols(elf)
-    funcs = callees(elf, syms, "stsp_step")
+    step = api_symbol(syms, "stsp_step")
+    funcs = callees(elf, syms, step)
     ranges = {n: syms[n] for n in funcs + ["bench_step"]}
     insns: dict[int, str] = {}
     for n, (a, s) in ranges.items():
@@ -128,7 +142,7 @@ def trace_calls(build: Path, image: str, machine: str = "mps2-an386"
             calls.append({"table": int(m.group(2)), "tick": int(m.group(3)),
                           "stage": int(m.group(4)), "latch": m.group(5) == "1",
                           "status": int(m.group(6)), "span": m.group(7) == "1"})
-    entry = syms["stsp_step"][0]
+    entry = syms[step][0]
     in_caller = lambda pc: ranges["bench_step"][0] <= pc < sum(ranges["bench_step"])  # noqa: E731
     counts, current, lines, prev = [], None, 0, None
     # Multiplies: FP (vmul/vmla/vnmla/vfma...) and integer (mul/mla/mls, smull/smlal, smulxy/smlaxy).
@@ -200,7 +214,7 @@ def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
     rows.append(("controller objects (stsp_controller, stsp_table, stsp_crc32, stsp_qconv)",
                  *totals([ctl])))
     rows.append(("controller + robot tables objects", *totals([ctl, tables])))
-    roots = ["stsp_init", "stsp_reset", "stsp_step"]
+    roots = [f"stsp_{f}{API_SUFFIX[sfx]}" for f in ("init", "reset", "step")]
     links = [("controller linked (API roots)", [], [ctl]),
              ("controller + tables linked", [f"robot_corridor{sfx}_table"], [tables, ctl])]
     if not sfx:
@@ -218,7 +232,7 @@ def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
                 "tables" if extra_roots else "ctl")
         elf = build / f"footprint_{Path(controller).stem}_{kind}.elf"
         cmd = (["arm-none-eabi-gcc", *CPU_FLAGS[cpu], "-nostdlib", "-nostartfiles",
-                "-Wl,--gc-sections", "-Wl,-e,stsp_step", "-o", str(elf)]
+                "-Wl,--gc-sections", f"-Wl,-e,stsp_step{API_SUFFIX[sfx]}", "-o", str(elf)]
                + [f"-Wl,-u,{r}" for r in roots + extra_roots] + [str(p) for p in libs]
                + ["-lc", "-lgcc"])
         run(cmd)
@@ -381,7 +395,9 @@ def main() -> int:
                         continue
                     print(f"     {what:60.60s} flash {t + d:7d} B  static RAM {d + b:4d} B  "
                           f"(text {t}, data {d}, bss {b})")
-                stack = {k: su.get(k) for k in ("stsp_step", "stsp_law_rows", "stsp_step_cold",
+                api = API_SUFFIX[sfx]   # the external ones carry the arithmetic
+                stack = {k: su.get(k, su.get(k + api)) for k in ("stsp_step", "stsp_law_rows",
+                                                "stsp_step_cold",
                                                 "stsp_step_fixup",
                                                 "stsp_limit", "stsp_init", "stsp_table_crc32",
                                                 "stsp_spline_step", "stsp_step_next_span",

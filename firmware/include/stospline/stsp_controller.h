@@ -74,6 +74,18 @@
 extern "C" {
 #endif
 
+/* The API's symbols carry the arithmetic (STSP_NAME, stsp_types.h): stsp_init is stsp_init_f32,
+ * stsp_init_q15 or stsp_init_q31, and so on. */
+#define stsp_init STSP_NAME(stsp_init)
+#define stsp_init_expect STSP_NAME(stsp_init_expect)
+#define stsp_init_problem STSP_NAME(stsp_init_problem)
+#define stsp_reset STSP_NAME(stsp_reset)
+#define stsp_verify STSP_NAME(stsp_verify)
+#define stsp_step STSP_NAME(stsp_step)
+#define stsp_state_to_q STSP_NAME(stsp_state_to_q)
+#define stsp_command_to_f32 STSP_NAME(stsp_command_to_f32)
+#define stsp_status_str STSP_NAME(stsp_status_str)
+
 /**
  * One controller instance; caller-owned (stack, static or a struct of the application).
  * Read-only for the caller: `sat_mask`, `stage`, `next_tick`, `latched`; the rest is private.

@@ -47,7 +47,7 @@ struct stsp_header; /* stsp_header_t, stsp_private.h (not API) */
  * spline table. stsp_init() refuses a spline table whose ops is NULL or of another arithmetic
  * (STSP_ERR_BAD_DIMS). Private members: only the controller calls them.
  */
-struct stsp_spline_ops {
+struct stsp_spline_ops_s {
     uint32_t scalar_kind; /**< STSP_SCALAR_KIND of the code */
     /** init: the layout of the validated header copy's spline */
     stsp_status_t (*check_dims)(const struct stsp_header *h);
@@ -61,6 +61,7 @@ struct stsp_spline_ops {
 };
 
 /** The spline code of the build's arithmetic (stsp_spline_ops_f32, _q15 or _q31). */
+#define stsp_spline_ops STSP_NAME(stsp_spline_ops)
 extern const stsp_spline_ops_t stsp_spline_ops;
 
 #ifdef __cplusplus

@@ -37,7 +37,7 @@ extern "C" {
 #define STSP_Q_EXP_MAX 60
 
 /** The code of spline gains (stsp_spline.h): stsp_spline_t.ops, stsp_qspline_t.ops. */
-typedef struct stsp_spline_ops stsp_spline_ops_t;
+typedef struct stsp_spline_ops_s stsp_spline_ops_t;
 
 #ifndef STSP_ARITH_FIXED_POINT
 /**
@@ -181,6 +181,8 @@ typedef struct {
     uint32_t crc32;              /**< CRC-32 of dims and arrays, see stsp_table_crc32() */
     uint8_t problem_sha256[32];  /**< hash of the problem file the tables came from */
 } stsp_table_t;
+
+#define stsp_table_crc32 STSP_NAME(stsp_table_crc32) /* stsp_table_crc32_f32, _q15, _q31 */
 
 /**
  * CRC-32 (IEEE 802.3 polynomial, reflected, as zlib) of the table's canonical serialization:

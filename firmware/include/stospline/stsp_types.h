@@ -53,7 +53,11 @@ typedef stsp_q31_t stsp_scalar_t;
 typedef stsp_f32_t stsp_scalar_t;
 #endif
 
-/* The public symbol of `base` in this arithmetic: base_f32, base_q15 or base_q31. */
+/* The symbol of `base` in this arithmetic: base_f32, base_q15 or base_q31. Every external
+ * symbol of the controller (the API in stsp_controller.h, stsp_table.h and stsp_spline.h, and the
+ * private ones between its sources) is named through it, so that the controllers of several
+ * arithmetics link into one program. The band solver (stsp_bandqp.h) is float32 code with
+ * names of its own. */
 #if defined(STSP_ARITH_Q15)
 #define STSP_NAME(base) base##_q15
 #elif defined(STSP_ARITH_Q31)

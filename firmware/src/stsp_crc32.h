@@ -24,6 +24,7 @@ uint32_t stsp_crc32_scalars(uint32_t crc, const stsp_scalar_t *values, uint32_t 
 /* Feed `count` u32 values (spline tables). */
 uint32_t stsp_crc32_u32s(uint32_t crc, const uint32_t *values, uint32_t count);
 #ifndef STSP_ARITH_FIXED_POINT
+/* cppcheck-suppress misra-c2012-2.5 ; deviation D7: used by stsp_spline.c's float32 code */
 #define stsp_crc32_f32s STSP_NAME(stsp_crc32_f32s)
 /* Feed `count` binary32 values by their bit patterns (spline tables). */
 uint32_t stsp_crc32_f32s(uint32_t crc, const stsp_f32_t *values, uint32_t count);

@@ -261,6 +261,28 @@ static inline stsp_scalar_t stsp_q_round(stsp_uacc_t acc, stsp_scalar_t c)
 }
 #endif /* STSP_ARITH_FIXED_POINT */
 
+/* What a tick other than the ordinary one does: decided before anything is written. */
+typedef struct {
+    uint16_t stage;   /* stage of the tick */
+    uint16_t relatch; /* nonzero: v_new holds a fresh latch for `stage` */
+} stsp_plan_t;
+
+/* The first tick after stage s, capped at the validated n_ticks even if stage_start changed
+ * since init: the law never indexes a tick beyond the table. */
+static inline uint32_t stsp_stage_end(const stsp_header_t *h, uint16_t s)
+{
+    const uint32_t end = h->stage_start[(uint32_t)s + 1u];
+    return (end < h->n_ticks) ? end : h->n_ticks;
+}
+
+/* The cold paths' plan and commit (stsp_controller.c), for stsp_spline.c. */
+#define stsp_plan_tick STSP_NAME(stsp_plan_tick)
+#define stsp_commit_tick STSP_NAME(stsp_commit_tick)
+stsp_status_t stsp_plan_tick(const stsp_ctrl_t *c, uint32_t tick, const stsp_scalar_t *x,
+                             stsp_scalar_t *v_new, stsp_plan_t *plan);
+void stsp_commit_tick(stsp_ctrl_t *c, uint32_t tick, const stsp_plan_t *plan,
+                      const stsp_scalar_t *v_new);
+
 /* The functions between the sources below, named per arithmetic (STSP_NAME) as the API. */
 #define stsp_copy_header STSP_NAME(stsp_copy_header)
 #define stsp_header_changed STSP_NAME(stsp_header_changed)

@@ -1014,7 +1014,7 @@ static int fz_spline_coef_finite(const stsp_spline_t *p)
  * stage_n_latch > 0) and the v it then uses (Lambda x + lambda0 in that order, zero beyond
  * stage_n_latch), and the command of the spline law at that tick, by The NURBS Book A2.2
  * literally (every operation its own statement: no contraction), the feed-forward folded into
- * one spline per input first (stsp_law_spline.h). */
+ * one spline per input first (stsp_spline.c). */
 typedef struct {
     uint32_t stage;
     int relatch;

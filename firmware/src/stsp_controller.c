@@ -635,6 +635,9 @@ stsp_status_t stsp_init(stsp_ctrl_t *ctrl, const stsp_table_t *table)
     ctrl->table = table;
     stsp_copy(ctrl->hold, table->u_hold, ctrl->checked.nu);
     ctrl->limited = stsp_has_limits(&ctrl->checked);
+    /* init checked the ops (stsp_spline_code_ok): the spline tick stsp_step calls */
+    ctrl->checked.spline_step =
+        (ctrl->checked.spline != NULL) ? ctrl->checked.sp.ops->step : NULL;
 #if STSP_ROW_CACHE
     stsp_rows_first(ctrl);
 #endif
@@ -828,7 +831,7 @@ static STSP_ALWAYS_INLINE stsp_status_t stsp_step_spline(stsp_ctrl_t *ctrl, uint
                                                          const stsp_scalar_t *x,
                                                          stsp_scalar_t *u)
 {
-    const stsp_status_t status = ctrl->checked.sp.ops->step(ctrl, tick, x, u);
+    const stsp_status_t status = ctrl->checked.spline_step(ctrl, tick, x, u);
     STSP_NO_TAIL_CALL();
     return status;
 }
@@ -841,8 +844,8 @@ static STSP_ALWAYS_INLINE stsp_status_t stsp_step_spline(stsp_ctrl_t *ctrl, uint
 static STSP_NOINLINE stsp_status_t stsp_step_other(stsp_ctrl_t *ctrl, uint32_t tick,
                                                    const stsp_f32_t *x, stsp_f32_t *u)
 {
-    if (ctrl->checked.spline != NULL) {
-        return ctrl->checked.sp.ops->step(ctrl, tick, x, u);
+    if (ctrl->checked.spline_step != NULL) {
+        return ctrl->checked.spline_step(ctrl, tick, x, u);
     }
     return stsp_step_cold(ctrl, tick, x, u);
 }
@@ -867,7 +870,7 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x
 #if STSP_ROW_CACHE
         return stsp_step_other(ctrl, tick, x, u);
 #else
-        if (ctrl->checked.spline != NULL) {
+        if (ctrl->checked.spline_step != NULL) {
             return stsp_step_spline(ctrl, tick, x, u);
         }
         return stsp_step_cold(ctrl, tick, x, u);

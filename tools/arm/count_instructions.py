@@ -123,6 +123,11 @@ def trace_calls(build: Path, image: str, machine: str = "mps2-an386"
     syms = symbols(elf)
     step = api_symbol(syms, "stsp_step")
     funcs = callees(elf, syms, step)
+    # A spline table's tick is called through the table's ops pointer (blx to a register, which
+    # the scan above cannot follow): when linked, its code is a root of its own.
+    spline = [n for n in syms if n.split(".")[0] == "stsp_spline_step"]
+    for root in spline:
+        funcs += [f for f in callees(elf, syms, root) if f not in funcs]
     ranges = {n: syms[n] for n in funcs + ["bench_step"]}
     insns: dict[int, str] = {}
     for n, (a, s) in ranges.items():

@@ -48,6 +48,10 @@ typedef struct stsp_header {
     const stsp_scalar_t *u_hold; /* last: the ordinary tick's offsets stay as they were */
     const stsp_spline_gains_t *spline; /**< the table's pointer (NULL: gains per tick) */
     stsp_spline_gains_t sp;       /**< copy of *spline (all zero without one) */
+    /** sp.ops->step once init accepted a spline table, else NULL: the tick's one load and
+        test before the call (stsp_step) */
+    stsp_status_t (*spline_step)(struct stsp_ctrl *ctrl, uint32_t tick, const stsp_scalar_t *x,
+                                 stsp_scalar_t *u);
 } stsp_header_t;
 
 #ifndef STSP_ARITH_FIXED_POINT

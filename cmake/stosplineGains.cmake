@@ -17,13 +17,6 @@ include_guard(GLOBAL)
 #   <prefix>_FIXED_DEFS  STSP_FIXED_NX=<nx>u;STSP_FIXED_NU=<nu>u;STSP_FIXED_N_LATCH=<n>u, the
 #                        definitions of a controller built for this shape only
 #   <prefix>_BAND_ROWS   rows of the table's band dual (<NAME>_BAND_ROWS; 0: none)
-#   <prefix>_SPLINE      1 for a spline table (the header declares <name>_spline_code), else 0
-#   <prefix>_LINK_OPTIONS  what a program with this table must link with: for a band table,
-#                        the band solver (-Wl,--undefined=stsp_bandqp_solve), for a spline
-#                        table the spline code (-Wl,--undefined=stsp_spline_code): the controller
-#                        refers to both weakly (docs/guide/firmware.md), so that a link that
-#                        scans the controller's library before the table's still pulls them in;
-#                        else nothing
 # A relative <table.c> is taken relative to the calling directory (CMAKE_CURRENT_SOURCE_DIR).
 function(stospline_read_gains_header source prefix)
   get_filename_component(source "${source}" ABSOLUTE BASE_DIR "${CMAKE_CURRENT_SOURCE_DIR}")
@@ -37,7 +30,6 @@ function(stospline_read_gains_header source prefix)
   string(TOUPPER "${name}" uname)
   file(STRINGS "${header}" lines
        REGEX "^#define ${uname}_(NX|NU|N_LATCH|BAND_ROWS|ARITH_Q15|ARITH_Q31) ")
-  file(STRINGS "${header}" spline_lines REGEX "^extern const uint32_t \\*const ${name}_spline_code;$")
   set(arith float32)
   set(arith_defs "")
   set(band_rows 0)
@@ -66,17 +58,6 @@ function(stospline_read_gains_header source prefix)
   set(${prefix}_ARITH_DEFS "${arith_defs}" PARENT_SCOPE)
   set(${prefix}_FIXED_DEFS "${fixed_defs}" PARENT_SCOPE)
   set(${prefix}_BAND_ROWS "${band_rows}" PARENT_SCOPE)
-  set(link_options "")
-  if(band_rows GREATER 0)
-    list(APPEND link_options "LINKER:--undefined=stsp_bandqp_solve")
-  endif()
-  if(spline_lines)
-    set(${prefix}_SPLINE 1 PARENT_SCOPE)
-    list(APPEND link_options "LINKER:--undefined=stsp_spline_code")
-  else()
-    set(${prefix}_SPLINE 0 PARENT_SCOPE)
-  endif()
-  set(${prefix}_LINK_OPTIONS "${link_options}" PARENT_SCOPE)
 endfunction()
 
 # stospline_add_gains(<target> <path/to/name.c> [FIXED_SHAPE])
@@ -137,11 +118,6 @@ function(stospline_add_gains target source)
 
   add_library(${target} STATIC "${source}")
   target_include_directories(${target} PUBLIC "${dir}")
-  # A band or spline table: link the band solver or the spline code, which the controller
-  # refers to only weakly.
-  if(table_LINK_OPTIONS)
-    target_link_options(${target} INTERFACE ${table_LINK_OPTIONS})
-  endif()
   target_link_libraries(${target} PUBLIC ${controller})
   set_target_properties(${target} PROPERTIES C_STANDARD 99 C_STANDARD_REQUIRED ON
                         C_EXTENSIONS OFF STSP_ARITH "${table_ARITH}")

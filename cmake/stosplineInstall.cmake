@@ -8,7 +8,7 @@ include(CMakePackageConfigHelpers)
 
 # The arithmetic travels with the target: a property (read by stospline_add_gains, exported
 # into the package) and, for float32 too, a definition that every consumer compiles with
-# (stsp_controller.h refuses STSP_ARITH_FLOAT32 together with STSP_ARITH_Q15/Q31).
+# (stsp_types.h refuses STSP_ARITH_FLOAT32 together with STSP_ARITH_Q15/Q31).
 string(TOUPPER "STSP_ARITH_${STSP_ARITH}" _stsp_arith_def)
 if(STSP_ARITH STREQUAL "float32")  # (Q15/Q31: stsp_add_controller gave `stsp` the definition)
   target_compile_definitions(stsp PUBLIC ${_stsp_arith_def})

@@ -7059,15 +7059,13 @@ static const stsp_f32_t coupled_axes_spline_coef[37536] = {
     4.28316e+00f, 3.4069633e+00f, 2.4622507e+00f, 1.1973958e+00f, 3.7826538e-02f, -4.4090748e-02f,
 };
 
-/* The gains as cubic B-splines per stage (stsp_controller.h, stsp_spline_t). */
+/* The gains as cubic B-splines per stage (stsp_table.h, stsp_spline_t); the spline
+ * code's address (stsp_spline.h) links it with the table. */
 static const stsp_spline_t coupled_axes_spline_spline = {
     410u, 2276u, 37536u,
-    coupled_axes_spline_knot_start, coupled_axes_spline_knot, coupled_axes_spline_row_start, coupled_axes_spline_col, coupled_axes_spline_coef_start, coupled_axes_spline_coef
+    coupled_axes_spline_knot_start, coupled_axes_spline_knot, coupled_axes_spline_row_start, coupled_axes_spline_col, coupled_axes_spline_coef_start, coupled_axes_spline_coef,
+    &stsp_spline_ops
 };
-
-/* The controller refers to the spline code only weakly, so that programs without a
- * spline table do not link it: this reference links it with the table. */
-const uint32_t *const coupled_axes_spline_spline_code = &stsp_spline_code;
 
 const stsp_table_t coupled_axes_spline_table = {
     0x53545350u, 5u, 1u,

@@ -108,15 +108,13 @@ static const stsp_f32_t investment_spline_coef[186] = {
     3.7332267e-01f, 4.27388e-01f, 4.9249828e-01f, 6.454378e-01f, 7.0211715e-01f, 1.3030531e+00f,
 };
 
-/* The gains as cubic B-splines per stage (stsp_controller.h, stsp_spline_t). */
+/* The gains as cubic B-splines per stage (stsp_table.h, stsp_spline_t); the spline
+ * code's address (stsp_spline.h) links it with the table. */
 static const stsp_spline_t investment_spline_spline = {
     70u, 6u, 186u,
-    investment_spline_knot_start, investment_spline_knot, investment_spline_row_start, investment_spline_col, investment_spline_coef_start, investment_spline_coef
+    investment_spline_knot_start, investment_spline_knot, investment_spline_row_start, investment_spline_col, investment_spline_coef_start, investment_spline_coef,
+    &stsp_spline_ops
 };
-
-/* The controller refers to the spline code only weakly, so that programs without a
- * spline table do not link it: this reference links it with the table. */
-const uint32_t *const investment_spline_spline_code = &stsp_spline_code;
 
 const stsp_table_t investment_spline_table = {
     0x53545350u, 5u, 1u,

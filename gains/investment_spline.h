@@ -20,6 +20,5 @@
  * lambda0[stage][c], u_min[i], u_max[i], u_hold[i] as in stsp_controller.h
  * (+-3.4028235e+38f = +-FLT_MAX: unlimited). */
 extern const stsp_table_t investment_spline_table;
-extern const uint32_t *const investment_spline_spline_code;
 
 #endif /* INVESTMENT_SPLINE_GAINS_H */

@@ -97,15 +97,13 @@ static const stsp_f32_t population_spline_coef[68] = {
     -5.1469994e-01f, -9.2331874e-01f,
 };
 
-/* The gains as cubic B-splines per stage (stsp_controller.h, stsp_spline_t). */
+/* The gains as cubic B-splines per stage (stsp_table.h, stsp_spline_t); the spline
+ * code's address (stsp_spline.h) links it with the table. */
 static const stsp_spline_t population_spline_spline = {
     64u, 17u, 68u,
-    population_spline_knot_start, population_spline_knot, population_spline_row_start, population_spline_col, population_spline_coef_start, population_spline_coef
+    population_spline_knot_start, population_spline_knot, population_spline_row_start, population_spline_col, population_spline_coef_start, population_spline_coef,
+    &stsp_spline_ops
 };
-
-/* The controller refers to the spline code only weakly, so that programs without a
- * spline table do not link it: this reference links it with the table. */
-const uint32_t *const population_spline_spline_code = &stsp_spline_code;
 
 const stsp_table_t population_spline_table = {
     0x53545350u, 5u, 1u,

@@ -367,15 +367,13 @@ static const stsp_f32_t quadrotor_spline_coef[1512] = {
     9.999893e-01f, 9.9999505e-01f, 9.99999e-01f, 1.0000004e+00f, 9.9999946e-01f, -6.999998e+00f,
 };
 
-/* The gains as cubic B-splines per stage (stsp_controller.h, stsp_spline_t). */
+/* The gains as cubic B-splines per stage (stsp_table.h, stsp_spline_t); the spline
+ * code's address (stsp_spline.h) links it with the table. */
 static const stsp_spline_t quadrotor_spline_spline = {
     272u, 17u, 1512u,
-    quadrotor_spline_knot_start, quadrotor_spline_knot, quadrotor_spline_row_start, quadrotor_spline_col, quadrotor_spline_coef_start, quadrotor_spline_coef
+    quadrotor_spline_knot_start, quadrotor_spline_knot, quadrotor_spline_row_start, quadrotor_spline_col, quadrotor_spline_coef_start, quadrotor_spline_coef,
+    &stsp_spline_ops
 };
-
-/* The controller refers to the spline code only weakly, so that programs without a
- * spline table do not link it: this reference links it with the table. */
-const uint32_t *const quadrotor_spline_spline_code = &stsp_spline_code;
 
 const stsp_table_t quadrotor_spline_table = {
     0x53545350u, 5u, 1u,

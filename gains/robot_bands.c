@@ -2290,15 +2290,12 @@ static const double robot_bands_band_hi[6] = {
     0.1, 1.5, -1.0, 0.0, 5.0, 0.0,
 };
 
-/* Band dual, re-solved from the measured x0 at the t0 latch (stsp_bandqp.h). */
+/* Band dual, re-solved from the measured x0 at the t0 latch (stsp_bandqp.h); the
+ * solver's address links it with the table. */
 static const stsp_bandqp_t robot_bands_band_qp = {
-    6u, 4u, robot_bands_band_Nt, robot_bands_band_mt, robot_bands_band_W, robot_bands_band_lo, robot_bands_band_hi
+    6u, 4u, robot_bands_band_Nt, robot_bands_band_mt, robot_bands_band_W, robot_bands_band_lo, robot_bands_band_hi,
+    &stsp_bandqp_solve_f32
 };
-
-/* The controller refers to the band solver only weakly, so that programs without a
- * band table do not link it: this reference links it with the table. */
-stsp_bandqp_status_t (*const robot_bands_band_solver)(const stsp_bandqp_t *, const float *, float *) =
-    &stsp_bandqp_solve_f32;
 
 const stsp_table_t robot_bands_table = {
     0x53545350u, 5u, 1u,

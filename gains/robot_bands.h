@@ -19,6 +19,5 @@
  * Lambda[stage][c*NX + j], lambda0[stage][c], u_min[i], u_max[i], u_hold[i] (see
  * stsp_controller.h; +-3.4028235e+38f = +-FLT_MAX: unlimited). */
 extern const stsp_table_t robot_bands_table;
-extern stsp_bandqp_status_t (*const robot_bands_band_solver)(const stsp_bandqp_t *, const float *, float *);
 
 #endif /* ROBOT_BANDS_GAINS_H */

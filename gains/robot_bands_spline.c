@@ -78,15 +78,12 @@ static const double robot_bands_spline_band_hi[6] = {
     0.1, 1.5, -1.0, 0.0, 5.0, 0.0,
 };
 
-/* Band dual, re-solved from the measured x0 at the t0 latch (stsp_bandqp.h). */
+/* Band dual, re-solved from the measured x0 at the t0 latch (stsp_bandqp.h); the
+ * solver's address links it with the table. */
 static const stsp_bandqp_t robot_bands_spline_band_qp = {
-    6u, 4u, robot_bands_spline_band_Nt, robot_bands_spline_band_mt, robot_bands_spline_band_W, robot_bands_spline_band_lo, robot_bands_spline_band_hi
+    6u, 4u, robot_bands_spline_band_Nt, robot_bands_spline_band_mt, robot_bands_spline_band_W, robot_bands_spline_band_lo, robot_bands_spline_band_hi,
+    &stsp_bandqp_solve_f32
 };
-
-/* The controller refers to the band solver only weakly, so that programs without a
- * band table do not link it: this reference links it with the table. */
-stsp_bandqp_status_t (*const robot_bands_spline_band_solver)(const stsp_bandqp_t *, const float *, float *) =
-    &stsp_bandqp_solve_f32;
 
 /* [n_stages + 1]: each stage's clamped knot vector in knot[] */
 static const uint32_t robot_bands_spline_knot_start[3] = {
@@ -248,15 +245,13 @@ static const stsp_f32_t robot_bands_spline_coef[698] = {
     9.56706e-01f, 1.00001e+00f,
 };
 
-/* The gains as cubic B-splines per stage (stsp_controller.h, stsp_spline_t). */
+/* The gains as cubic B-splines per stage (stsp_table.h, stsp_spline_t); the spline
+ * code's address (stsp_spline.h) links it with the table. */
 static const stsp_spline_t robot_bands_spline_spline = {
     67u, 23u, 698u,
-    robot_bands_spline_knot_start, robot_bands_spline_knot, robot_bands_spline_row_start, robot_bands_spline_col, robot_bands_spline_coef_start, robot_bands_spline_coef
+    robot_bands_spline_knot_start, robot_bands_spline_knot, robot_bands_spline_row_start, robot_bands_spline_col, robot_bands_spline_coef_start, robot_bands_spline_coef,
+    &stsp_spline_ops
 };
-
-/* The controller refers to the spline code only weakly, so that programs without a
- * spline table do not link it: this reference links it with the table. */
-const uint32_t *const robot_bands_spline_spline_code = &stsp_spline_code;
 
 const stsp_table_t robot_bands_spline_table = {
     0x53545350u, 5u, 1u,

@@ -20,7 +20,5 @@
  * lambda0[stage][c], u_min[i], u_max[i], u_hold[i] as in stsp_controller.h
  * (+-3.4028235e+38f = +-FLT_MAX: unlimited). */
 extern const stsp_table_t robot_bands_spline_table;
-extern stsp_bandqp_status_t (*const robot_bands_spline_band_solver)(const stsp_bandqp_t *, const float *, float *);
-extern const uint32_t *const robot_bands_spline_spline_code;
 
 #endif /* ROBOT_BANDS_SPLINE_GAINS_H */

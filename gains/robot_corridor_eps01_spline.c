@@ -197,15 +197,13 @@ static const stsp_f32_t robot_corridor_eps01_spline_coef[660] = {
     7.6203537e-01f, 8.193294e-01f, 8.781547e-01f, 9.383077e-01f, 9.793343e-01f, 1.0000002e+00f,
 };
 
-/* The gains as cubic B-splines per stage (stsp_controller.h, stsp_spline_t). */
+/* The gains as cubic B-splines per stage (stsp_table.h, stsp_spline_t); the spline
+ * code's address (stsp_spline.h) links it with the table. */
 static const stsp_spline_t robot_corridor_eps01_spline_spline = {
     81u, 18u, 660u,
-    robot_corridor_eps01_spline_knot_start, robot_corridor_eps01_spline_knot, robot_corridor_eps01_spline_row_start, robot_corridor_eps01_spline_col, robot_corridor_eps01_spline_coef_start, robot_corridor_eps01_spline_coef
+    robot_corridor_eps01_spline_knot_start, robot_corridor_eps01_spline_knot, robot_corridor_eps01_spline_row_start, robot_corridor_eps01_spline_col, robot_corridor_eps01_spline_coef_start, robot_corridor_eps01_spline_coef,
+    &stsp_spline_ops
 };
-
-/* The controller refers to the spline code only weakly, so that programs without a
- * spline table do not link it: this reference links it with the table. */
-const uint32_t *const robot_corridor_eps01_spline_spline_code = &stsp_spline_code;
 
 const stsp_table_t robot_corridor_eps01_spline_table = {
     0x53545350u, 5u, 1u,

@@ -20,6 +20,5 @@
  * lambda0[stage][c], u_min[i], u_max[i], u_hold[i] as in stsp_controller.h
  * (+-3.4028235e+38f = +-FLT_MAX: unlimited). */
 extern const stsp_table_t robot_corridor_eps01_spline_table;
-extern const uint32_t *const robot_corridor_eps01_spline_spline_code;
 
 #endif /* ROBOT_CORRIDOR_EPS01_SPLINE_GAINS_H */

@@ -30,6 +30,5 @@
  * v_exp = {5, 4, 5, 5}.
  * |u_fixed - u_double| <= [0.00624, 0.0114] for every state within the range (docs/guide/firmware.md). */
 extern const stsp_table_t robot_corridor_q15_spline_table;
-extern const uint32_t *const robot_corridor_q15_spline_spline_code;
 
 #endif /* ROBOT_CORRIDOR_Q15_SPLINE_GAINS_H */

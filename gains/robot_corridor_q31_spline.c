@@ -203,15 +203,13 @@ static const stsp_q31_t robot_corridor_q31_spline_coef[670] = {
     -1185647782, -1350522402, -1533711811, -1749250710,
 };
 
-/* The gains as integer cubic B-splines per stage (stsp_controller.h, stsp_qspline_t). */
+/* The gains as integer cubic B-splines per stage (stsp_table.h, stsp_qspline_t); the
+ * spline code's address (stsp_spline.h) links it with the table. */
 static const stsp_qspline_t robot_corridor_q31_spline_spline = {
     18u, 670u,
-    robot_corridor_q31_spline_span_log2, robot_corridor_q31_spline_row_start, robot_corridor_q31_spline_col, robot_corridor_q31_spline_shift, robot_corridor_q31_spline_coef_start, robot_corridor_q31_spline_coef
+    robot_corridor_q31_spline_span_log2, robot_corridor_q31_spline_row_start, robot_corridor_q31_spline_col, robot_corridor_q31_spline_shift, robot_corridor_q31_spline_coef_start, robot_corridor_q31_spline_coef,
+    &stsp_spline_ops
 };
-
-/* The controller refers to the spline code only weakly, so that programs without a
- * spline table do not link it: this reference links it with the table. */
-const uint32_t *const robot_corridor_q31_spline_spline_code = &stsp_spline_code;
 
 const stsp_table_t robot_corridor_q31_spline_table = {
     0x53545350u, 5u, 3u,

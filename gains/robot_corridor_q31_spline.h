@@ -30,6 +30,5 @@
  * v_exp = {5, 4, 5, 5}.
  * |u_fixed - u_double| <= [0.000139, 0.000222] for every state within the range (docs/guide/firmware.md). */
 extern const stsp_table_t robot_corridor_q31_spline_table;
-extern const uint32_t *const robot_corridor_q31_spline_spline_code;
 
 #endif /* ROBOT_CORRIDOR_Q31_SPLINE_GAINS_H */

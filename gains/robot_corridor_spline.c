@@ -168,15 +168,13 @@ static const stsp_f32_t robot_corridor_spline_coef[504] = {
     6.62551e-01f, 7.465819e-01f, 8.2560784e-01f, 9.089104e-01f, 9.686719e-01f, 9.9999934e-01f,
 };
 
-/* The gains as cubic B-splines per stage (stsp_controller.h, stsp_spline_t). */
+/* The gains as cubic B-splines per stage (stsp_table.h, stsp_spline_t); the spline
+ * code's address (stsp_spline.h) links it with the table. */
 static const stsp_spline_t robot_corridor_spline_spline = {
     65u, 18u, 504u,
-    robot_corridor_spline_knot_start, robot_corridor_spline_knot, robot_corridor_spline_row_start, robot_corridor_spline_col, robot_corridor_spline_coef_start, robot_corridor_spline_coef
+    robot_corridor_spline_knot_start, robot_corridor_spline_knot, robot_corridor_spline_row_start, robot_corridor_spline_col, robot_corridor_spline_coef_start, robot_corridor_spline_coef,
+    &stsp_spline_ops
 };
-
-/* The controller refers to the spline code only weakly, so that programs without a
- * spline table do not link it: this reference links it with the table. */
-const uint32_t *const robot_corridor_spline_spline_code = &stsp_spline_code;
 
 const stsp_table_t robot_corridor_spline_table = {
     0x53545350u, 5u, 1u,

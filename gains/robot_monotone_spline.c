@@ -600,15 +600,13 @@ static const stsp_f32_t robot_monotone_spline_coef[2926] = {
     3.0390095e-04f, 3.4197062e-04f, 3.6631225e-04f, 3.7873047e-04f,
 };
 
-/* The gains as cubic B-splines per stage (stsp_controller.h, stsp_spline_t). */
+/* The gains as cubic B-splines per stage (stsp_table.h, stsp_spline_t); the spline
+ * code's address (stsp_spline.h) links it with the table. */
 static const stsp_spline_t robot_monotone_spline_spline = {
     217u, 28u, 2926u,
-    robot_monotone_spline_knot_start, robot_monotone_spline_knot, robot_monotone_spline_row_start, robot_monotone_spline_col, robot_monotone_spline_coef_start, robot_monotone_spline_coef
+    robot_monotone_spline_knot_start, robot_monotone_spline_knot, robot_monotone_spline_row_start, robot_monotone_spline_col, robot_monotone_spline_coef_start, robot_monotone_spline_coef,
+    &stsp_spline_ops
 };
-
-/* The controller refers to the spline code only weakly, so that programs without a
- * spline table do not link it: this reference links it with the table. */
-const uint32_t *const robot_monotone_spline_spline_code = &stsp_spline_code;
 
 const stsp_table_t robot_monotone_spline_table = {
     0x53545350u, 5u, 1u,

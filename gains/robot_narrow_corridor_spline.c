@@ -901,15 +901,13 @@ static const stsp_f32_t robot_narrow_corridor_spline_coef[2400] = {
     1.3655157e-01f, 4.551719e-02f, 6.6170074e-02f, 8.4637284e-02f, 8.4637284e-02f, 2.8212428e-02f,
 };
 
-/* The gains as cubic B-splines per stage (stsp_controller.h, stsp_spline_t). */
+/* The gains as cubic B-splines per stage (stsp_table.h, stsp_spline_t); the spline
+ * code's address (stsp_spline.h) links it with the table. */
 static const stsp_spline_t robot_narrow_corridor_spline_spline = {
     480u, 600u, 2400u,
-    robot_narrow_corridor_spline_knot_start, robot_narrow_corridor_spline_knot, robot_narrow_corridor_spline_row_start, robot_narrow_corridor_spline_col, robot_narrow_corridor_spline_coef_start, robot_narrow_corridor_spline_coef
+    robot_narrow_corridor_spline_knot_start, robot_narrow_corridor_spline_knot, robot_narrow_corridor_spline_row_start, robot_narrow_corridor_spline_col, robot_narrow_corridor_spline_coef_start, robot_narrow_corridor_spline_coef,
+    &stsp_spline_ops
 };
-
-/* The controller refers to the spline code only weakly, so that programs without a
- * spline table do not link it: this reference links it with the table. */
-const uint32_t *const robot_narrow_corridor_spline_spline_code = &stsp_spline_code;
 
 const stsp_table_t robot_narrow_corridor_spline_table = {
     0x53545350u, 5u, 1u,

@@ -519,15 +519,13 @@ static const stsp_f32_t robot_patrol_60s_spline_coef[2101] = {
     9.9998856e-01f,
 };
 
-/* The gains as cubic B-splines per stage (stsp_controller.h, stsp_spline_t). */
+/* The gains as cubic B-splines per stage (stsp_table.h, stsp_spline_t); the spline
+ * code's address (stsp_spline.h) links it with the table. */
 static const stsp_spline_t robot_patrol_60s_spline_spline = {
     306u, 79u, 2101u,
-    robot_patrol_60s_spline_knot_start, robot_patrol_60s_spline_knot, robot_patrol_60s_spline_row_start, robot_patrol_60s_spline_col, robot_patrol_60s_spline_coef_start, robot_patrol_60s_spline_coef
+    robot_patrol_60s_spline_knot_start, robot_patrol_60s_spline_knot, robot_patrol_60s_spline_row_start, robot_patrol_60s_spline_col, robot_patrol_60s_spline_coef_start, robot_patrol_60s_spline_coef,
+    &stsp_spline_ops
 };
-
-/* The controller refers to the spline code only weakly, so that programs without a
- * spline table do not link it: this reference links it with the table. */
-const uint32_t *const robot_patrol_60s_spline_spline_code = &stsp_spline_code;
 
 const stsp_table_t robot_patrol_60s_spline_table = {
     0x53545350u, 5u, 1u,

@@ -15,8 +15,8 @@
  * paths in functions of their own.
  *
  * A spline table (float32) keeps stage_end at 0, so each of its ticks leaves that path for
- * stsp_spline_step (stsp_spline.c): its ordinary tick is again two compares (the expected
- * tick, inside the recorded span), the spline law (stsp_law_spline.h) and the same checks, except that the
+ * stsp_spline_ops.step (stsp_spline.c): its ordinary tick is again two compares (the expected
+ * tick, inside the recorded span), the spline law (stsp_spline.c) and the same checks, except that the
  * state is checked too (a sparse row need not use every x[j]); the first tick of the next
  * span is also evaluated without the cold path; everything else goes to stsp_step_cold_spline
  * (the per-tick cold path's plan and commit, plus the span search).
@@ -27,32 +27,561 @@
  * stsp_verify() compares the two. x and u may overlap: each path computes the command into a
  * local array and writes u last, after every read of x.
  *
- * The sources, one job each: this file is the tick/latch state machine (init, reset, verify,
- * step); stsp_table.c validates and serialises the table (CRC-32); stsp_law.h is the law,
- * inlined into stsp_step(), on the row primitives and latch row of stsp_law_f32.h or
- * stsp_law_q.h (one, by STSP_ARITH_FIXED_POINT); stsp_spline.c a spline table's ticks and
- * layout checks (linked only with a spline table), on the spline law of stsp_law_spline.h;
- * stsp_plan.h the cold paths' plan and commit;
- * stsp_clamp.h the actuator clamp; stsp_internal.h the compiler and VFP helpers, the
- * dimensions the law uses and the fixed-point accumulator; stsp_crc32.c, stsp_qconv.c (Q
- * state/command conversions) and stsp_bandqp.c (the band dual) as named. Everything else here
+ * The sources, one job each: this file is the per-tick law (its row primitives in the build's
+ * arithmetic, then one definition of the law, inlined into stsp_step()), the cold paths' plan
+ * and commit, and the tick/latch state machine (init, reset, verify, step); stsp_table.c
+ * validates and serialises the table (CRC-32); stsp_spline.c a spline table's law, ticks and
+ * checks (linked only with a spline table, through its ops; it calls the plan and commit here
+ * through stsp_plan_tick and stsp_commit_tick); stsp_tick.h the checks on a command both ticks
+ * make (alarm, limits, clamp); stsp_internal.h the compiler and VFP helpers, the dimensions
+ * the law uses and the fixed-point accumulator; stsp_crc32.c, stsp_qconv.c (Q state/command
+ * conversions) and stsp_bandqp.c (the band dual) as named. Everything but the row primitives
  * (ticks, stages, latching order, statuses) is the same code in every arithmetic. */
 #include "stsp_internal.h"
-/* The law (stsp_law.h) on the row primitives of the configured arithmetic, inlined into
- * stsp_step(). */
-#ifdef STSP_ARITH_FIXED_POINT
-#include "stsp_law_q.h"
-#else
-#include "stsp_law_f32.h"
-#endif
-#include "stsp_law.h"
-/* The cold path's plan and commit, with the band dual's latch (stsp_spline.c has its own copy,
- * without). */
-#define STSP_PLAN_BAND 1
-#include "stsp_plan.h"
+#include "stsp_tick.h"
 
 #include <float.h>
 #include <string.h>
+
+/* The law's rows in the build's arithmetic: stsp_row_first, stsp_row_mac, stsp_row_end (and, for
+ * the generic float32 law, stsp_law_pairs), and the latch row. */
+#ifndef STSP_ARITH_FIXED_POINT
+/* The float32 row of the law (below), in the documented order:
+ *     u[i] = (((-(K[i][0] x[0]) - k0[i]) - K[i][1] x[1]) - ... ) - L[i][0] v[0] - ...
+ * which is -(k0[i] + K[i][0] x[0] + ... + L[i][c] v[c] ...) exactly (IEEE rounding is
+ * symmetric; a+b = b+a), up to the sign of an exactly zero result; starting from -(K x)
+ * folds the final negation away, and each step is one stsp_nmla()/stsp_mls() (one VNMLA or
+ * VMLS on the M4F, same bits). */
+#ifdef STSP_FIXED_NX
+typedef stsp_f32_t stsp_row_acc_t;
+/* Aliases, not wrappers: GCC schedules the law through inline wrappers differently (one
+ * more load on the M4F ordinary tick), so the law calls the VFP helpers by these names
+ * directly, and the end of a row is the accumulator itself (k0 was folded in first). */
+#define stsp_row_first stsp_nmla
+#define stsp_row_mac stsp_mls
+#define stsp_row_end(acc, k0) (acc)
+#else
+/* The rows of the generic law (below), nu >= 1 of them, two at a time and an odd last row
+ * alone. A pair: acc0 = -k0[0] and acc1 = -k0[1], acc0 -= K[c] x[c] and acc1 -= K[nx + c] x[c]
+ * for c = 0 .. nx - 1 in order, then acc0 -= L[c] v[c] and acc1 -= L[nl + c] v[c] for c = 0 ..
+ * nl - 1, each step the bits of stsp_mls; y[0] = acc0, y[1] = acc1, and *total + acc0 + acc1 in
+ * that order; then k0, y, K and L move to the next pair. The odd last row the same with acc0
+ * alone. On return *k0, *y, *K and *L point past the rows (K nu nx, k0 nu and L nu nl entries
+ * on: where the next tick's rows start; L unchanged when nl == 0). On a single-precision VFP
+ * one asm statement: per pair (row), per four columns one VLDM each of x (v) and of the two
+ * rows (the row) and eight (four) VMLS (11 instructions for 8 multiply-adds where separate
+ * loads take 20), then the n % 4 last columns one at a time; the accumulators in s12-s13 (VLDM
+ * of k0, VSTM to y), the operands in s0-s11 (caller-saved, declared clobbered); no loop count
+ * or pointer for GCC to keep in a register around it. nl == 0: no access to L and no C pointer
+ * arithmetic on it (it may be NULL). */
+static STSP_ALWAYS_INLINE void
+/* cppcheck-suppress misra-c2012-2.7 ; deviation D5: the parameters are asm operands */
+stsp_law_pairs(const stsp_f32_t *x, const stsp_f32_t *v, uint32_t nx, uint32_t nl, uint32_t nu,
+               const stsp_f32_t **k0, stsp_f32_t **y, const stsp_f32_t **K,
+               const stsp_f32_t **L, stsp_f32_t *total)
+{
+    const stsp_f32_t *kp = *K;
+    const stsp_f32_t *lp = *L;
+    const stsp_f32_t *bp = *k0;
+    stsp_f32_t *yp = *y;
+    stsp_f32_t t = *total;
+#if STSP_VFP_MAC
+    const stsp_f32_t *p1;
+    const stsp_f32_t *q;
+    uint32_t k;
+    uint32_t n = nu;
+    /* n counts the rows left, less two: per pair (loop 1) the rows against x (labels 2-5), then
+     * against v (6-9); per four columns one VLDM each and eight VMLS (loops 2, 6), then the
+     * n % 4 last columns (4, 8). An odd last row (label 10 on): the same, one row (11-18). */
+    __asm__ volatile("subs %[n], %[n], #2\n\t"
+                     "bmi 10f\n\t"
+                     "1:\n"
+                     "vldmia %[k0]!, {s12-s13}\n\t"
+                     "vneg.f32 s12, s12\n\t"
+                     "vneg.f32 s13, s13\n\t"
+                     "add %[p1], %[kp], %[nx], lsl #2\n\t"
+                     "mov %[q], %[x]\n\t"
+                     "lsrs %[k], %[nx], #2\n\t"
+                     "beq 3f\n\t"
+                     "2:\n"
+                     "vldmia %[q]!, {s0-s3}\n\t"
+                     "vldmia %[kp]!, {s4-s7}\n\t"
+                     "vldmia %[p1]!, {s8-s11}\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "vmls.f32 s13, s8, s0\n\t"
+                     "vmls.f32 s12, s5, s1\n\t"
+                     "vmls.f32 s13, s9, s1\n\t"
+                     "vmls.f32 s12, s6, s2\n\t"
+                     "vmls.f32 s13, s10, s2\n\t"
+                     "vmls.f32 s12, s7, s3\n\t"
+                     "vmls.f32 s13, s11, s3\n\t"
+                     "subs %[k], %[k], #1\n\t"
+                     "bne 2b\n\t"
+                     "3:\n"
+                     "ands %[k], %[nx], #3\n\t"
+                     "beq 5f\n\t"
+                     "4:\n"
+                     "vldmia %[q]!, {s0}\n\t"
+                     "vldmia %[kp]!, {s4}\n\t"
+                     "vldmia %[p1]!, {s8}\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "vmls.f32 s13, s8, s0\n\t"
+                     "subs %[k], %[k], #1\n\t"
+                     "bne 4b\n\t"
+                     "5:\n"
+                     "mov %[kp], %[p1]\n\t"
+                     "add %[p1], %[lp], %[nl], lsl #2\n\t"
+                     "mov %[q], %[v]\n\t"
+                     "lsrs %[k], %[nl], #2\n\t"
+                     "beq 7f\n\t"
+                     "6:\n"
+                     "vldmia %[q]!, {s0-s3}\n\t"
+                     "vldmia %[lp]!, {s4-s7}\n\t"
+                     "vldmia %[p1]!, {s8-s11}\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "vmls.f32 s13, s8, s0\n\t"
+                     "vmls.f32 s12, s5, s1\n\t"
+                     "vmls.f32 s13, s9, s1\n\t"
+                     "vmls.f32 s12, s6, s2\n\t"
+                     "vmls.f32 s13, s10, s2\n\t"
+                     "vmls.f32 s12, s7, s3\n\t"
+                     "vmls.f32 s13, s11, s3\n\t"
+                     "subs %[k], %[k], #1\n\t"
+                     "bne 6b\n\t"
+                     "7:\n"
+                     "ands %[k], %[nl], #3\n\t"
+                     "beq 9f\n\t"
+                     "8:\n"
+                     "vldmia %[q]!, {s0}\n\t"
+                     "vldmia %[lp]!, {s4}\n\t"
+                     "vldmia %[p1]!, {s8}\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "vmls.f32 s13, s8, s0\n\t"
+                     "subs %[k], %[k], #1\n\t"
+                     "bne 8b\n\t"
+                     "9:\n"
+                     "mov %[lp], %[p1]\n\t"
+                     "vstmia %[y]!, {s12-s13}\n\t"
+                     "vadd.f32 %[t], %[t], s12\n\t"
+                     "vadd.f32 %[t], %[t], s13\n\t"
+                     "subs %[n], %[n], #2\n\t"
+                     "bpl 1b\n\t"
+                     "10:\n"
+                     "adds %[n], %[n], #1\n\t"
+                     "bne 18f\n\t"
+                     "vldmia %[k0]!, {s12}\n\t"
+                     "vneg.f32 s12, s12\n\t"
+                     "mov %[q], %[x]\n\t"
+                     "lsrs %[k], %[nx], #2\n\t"
+                     "beq 12f\n\t"
+                     "11:\n"
+                     "vldmia %[q]!, {s0-s3}\n\t"
+                     "vldmia %[kp]!, {s4-s7}\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "vmls.f32 s12, s5, s1\n\t"
+                     "vmls.f32 s12, s6, s2\n\t"
+                     "vmls.f32 s12, s7, s3\n\t"
+                     "subs %[k], %[k], #1\n\t"
+                     "bne 11b\n\t"
+                     "12:\n"
+                     "ands %[k], %[nx], #3\n\t"
+                     "beq 14f\n\t"
+                     "13:\n"
+                     "vldmia %[q]!, {s0}\n\t"
+                     "vldmia %[kp]!, {s4}\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "subs %[k], %[k], #1\n\t"
+                     "bne 13b\n\t"
+                     "14:\n"
+                     "mov %[q], %[v]\n\t"
+                     "lsrs %[k], %[nl], #2\n\t"
+                     "beq 16f\n\t"
+                     "15:\n"
+                     "vldmia %[q]!, {s0-s3}\n\t"
+                     "vldmia %[lp]!, {s4-s7}\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "vmls.f32 s12, s5, s1\n\t"
+                     "vmls.f32 s12, s6, s2\n\t"
+                     "vmls.f32 s12, s7, s3\n\t"
+                     "subs %[k], %[k], #1\n\t"
+                     "bne 15b\n\t"
+                     "16:\n"
+                     "ands %[k], %[nl], #3\n\t"
+                     "beq 17f\n\t"
+                     "161:\n"
+                     "vldmia %[q]!, {s0}\n\t"
+                     "vldmia %[lp]!, {s4}\n\t"
+                     "vmls.f32 s12, s4, s0\n\t"
+                     "subs %[k], %[k], #1\n\t"
+                     "bne 161b\n\t"
+                     "17:\n"
+                     "vstmia %[y]!, {s12}\n\t"
+                     "vadd.f32 %[t], %[t], s12\n\t"
+                     "18:"
+                     : [kp] "+&r"(kp), [lp] "+&r"(lp), [k0] "+&r"(bp), [y] "+&r"(yp), [n] "+&r"(n),
+                       [t] "+t"(t), [p1] "=&r"(p1), [q] "=&r"(q), [k] "=&r"(k)
+                     : [x] "r"(x), [v] "r"(v), [nx] "r"(nx), [nl] "r"(nl)
+                     : "s0", "s1", "s2", "s3", "s4", "s5", "s6", "s7", "s8", "s9", "s10",
+                       "s11", "s12", "s13", "cc", "memory");
+#else
+    uint32_t n;
+    uint32_t c;
+    for (n = 0u; n < (nu >> 1); ++n) {
+        stsp_f32_t r0 = -bp[0];
+        stsp_f32_t r1 = -bp[1];
+        for (c = 0u; c < nx; ++c) {
+            r0 = stsp_mls(r0, kp[c], x[c]);
+            r1 = stsp_mls(r1, kp[nx + c], x[c]);
+        }
+        kp = &kp[2u * nx];
+        if (nl > 0u) {
+            for (c = 0u; c < nl; ++c) {
+                r0 = stsp_mls(r0, lp[c], v[c]);
+                r1 = stsp_mls(r1, lp[nl + c], v[c]);
+            }
+            lp = &lp[2u * nl];
+        }
+        yp[0] = r0;
+        yp[1] = r1;
+        t = (t + r0) + r1;
+        bp = &bp[2];
+        yp = &yp[2];
+    }
+    if ((nu & 1u) != 0u) {
+        stsp_f32_t acc = -bp[0];
+        for (c = 0u; c < nx; ++c) {
+            acc = stsp_mls(acc, kp[c], x[c]);
+        }
+        kp = &kp[nx];
+        if (nl > 0u) {
+            for (c = 0u; c < nl; ++c) {
+                acc = stsp_mls(acc, lp[c], v[c]);
+            }
+            lp = &lp[nl];
+        }
+        yp[0] = acc;
+        t = t + acc;
+        bp = &bp[1];
+        yp = &yp[1];
+    }
+#endif
+    *K = kp;
+    *L = lp;
+    *k0 = bp;
+    *y = yp;
+    *total = t;
+}
+#endif
+
+/* One latched multiplier: lambda0 + sum_j Lambda[j] x[j], in that order. */
+static STSP_ALWAYS_INLINE stsp_f32_t stsp_latch_row(const stsp_f32_t *lam, stsp_f32_t lambda0,
+                                                    const stsp_f32_t *x, uint32_t nx)
+{
+    stsp_f32_t acc = lambda0;
+    uint32_t j;
+    for (j = 0u; j < nx; ++j) {
+        acc += lam[j] * x[j];
+    }
+    return acc;
+}
+
+#else
+/* The fixed-point (Q15: 32-bit accumulator, Q31: 64-bit) row of the law (below):
+ *     u_q[i] = floor((k0[i] 2^F + sum_j K[i][j] x_q[j] + sum_c L[i][c] v_q[c]) / 2^F + 1/2)
+ * (the table stores -K, -k0, -L: one multiply-accumulate per term). Scaling: every term of
+ * row i is in units of 2^(u_exp[i] - 2F) (the gains carry x_exp, v_exp and u_exp), so the
+ * only shift is the final one by F. Overflow: none; the sum is exact (integer, any order
+ * gives the same bits) and bounded by (2^F - 1) 2^F, the accumulator by 2^(2F+1) (see
+ * stsp_uacc_t); u_q is within +-(2^F - 1) without saturation. */
+typedef stsp_uacc_t stsp_row_acc_t;
+/* Aliases, as for float32 above (inline wrappers change GCC's schedule of the law): the row
+ * starts from the accumulator's bias, and k0 is added after the shift. */
+#define stsp_row_first(a, b, k0) stsp_q_mac(stsp_q_start(), (a), (b))
+#define stsp_row_mac stsp_q_mac
+#define stsp_row_end stsp_q_round
+
+/* One latched multiplier: v_q = round half up of lambda0 + sum_j Lambda x_q / 2^F, exact in
+ * stsp_uacc_t and within +-(2^F - 1) (the row bound of stsp_check_values). */
+static STSP_ALWAYS_INLINE stsp_scalar_t stsp_latch_row(const stsp_scalar_t *lam,
+                                                       stsp_scalar_t lambda0,
+                                                       const stsp_scalar_t *x, uint32_t nx)
+{
+    stsp_uacc_t sum = stsp_q_start();
+    uint32_t j;
+    for (j = 0u; j < nx; ++j) {
+        sum = stsp_q_mac(sum, lam[j], x[j]);
+    }
+    return stsp_q_round(sum, lambda0);
+}
+
+#endif
+
+/* The law, one definition for every arithmetic on the row primitives above. Static, inlined
+ * into stsp_step. */
+#if defined(STSP_FIXED_NX) || defined(STSP_ARITH_FIXED_POINT)
+/* The law at `tick` with multipliers v, into y (never the caller's u: x and u may overlap):
+ * per input i, the row K[i][0] x[0] (with k0[i], as the arithmetic folds it in), the rest of
+ * K[i] x, then L[i] v over all n_latch columns (zero padded, so every tick costs the same).
+ * Returns stsp_law_alarm(). Inlined into callers whose y is a local array, so that in an
+ * STSP_FIXED_* build x, v and y stay in registers. */
+static STSP_ALWAYS_INLINE uint32_t stsp_law(const stsp_header_t *h, uint32_t tick,
+                                            const stsp_scalar_t *x, const stsp_scalar_t *v,
+                                            stsp_scalar_t *y, uint32_t limited)
+{
+    const uint32_t nx = stsp_nx(h);
+    const uint32_t nu = stsp_nu(h);
+    const uint32_t n_latch = stsp_n_latch(h);
+    const stsp_scalar_t *K = &h->K[tick * (nu * nx)];
+    const stsp_scalar_t *k0 = &h->k0[tick * nu];
+    /* L may be NULL when n_latch == 0: no pointer arithmetic on it then. */
+    const stsp_scalar_t *L = (n_latch > 0u) ? &h->L[tick * (nu * n_latch)] : h->L;
+    uint32_t i;
+    STSP_UNROLL
+    for (i = 0u; i < nu; ++i) {
+        stsp_row_acc_t acc = stsp_row_first(K[0], x[0], k0[i]);
+        uint32_t j;
+        STSP_UNROLL
+        for (j = 1u; j < nx; ++j) {
+            acc = stsp_row_mac(acc, K[j], x[j]);
+        }
+        K = &K[nx];
+        if (n_latch > 0u) {
+            STSP_UNROLL
+            for (j = 0u; j < n_latch; ++j) {
+                acc = stsp_row_mac(acc, L[j], v[j]);
+            }
+            L = &L[n_latch];
+        }
+        y[i] = stsp_row_end(acc, k0[i]);
+    }
+    return stsp_law_alarm(h, y, limited);
+}
+#else
+/* float32, generic dimensions. The rows of `tick` (< n_ticks, which the cold path checked
+ * first), from the validated copy h. */
+static inline void stsp_rows_at(const stsp_header_t *h, uint32_t tick, stsp_rows_t *r)
+{
+    const uint32_t nu = stsp_nu(h);
+    const uint32_t n_latch = stsp_n_latch(h);
+    r->K = &h->K[tick * (nu * stsp_nx(h))];
+    r->k0 = &h->k0[tick * nu];
+    /* L may be NULL when n_latch == 0: no pointer arithmetic on it then. */
+    r->L = (n_latch > 0u) ? &h->L[tick * (nu * n_latch)] : h->L;
+}
+
+/* The law on the rows r (those of one tick) with multipliers v, into y: two rows at a time,
+ * each x[j] (v[c]) loaded once for both (stsp_law_pairs: on the M4F VLDM of four columns and
+ * VMLS), an odd last row alone. Each row is still its own chain in the documented order: acc
+ * = -k0[i], then acc = stsp_mls(acc, K[i][j], x[j]) for j = 0 .. nx - 1 and stsp_mls(acc,
+ * L[i][c], v[c]) for c = 0 .. n_latch - 1. Its first step, -k0[i] - K[i][0] x[0], is the
+ * documented (-(K[i][0] x[0])) - k0[i]: both are (-k0[i]) + (-(K[i][0] x[0])), and binary32
+ * addition is commutative, signs of zero included (as for VNMLA, stsp_nmla). Writes y[0 ..
+ * nu) (never the caller's u: x and u may overlap) and moves r past the tick's rows (to the
+ * next tick's: nu nx, nu and nu n_latch entries on; L stays when n_latch == 0); returns the
+ * inputs' sum in order, -0 + y[0] + y[1] + ... (stsp_unlimited_alarm's). Inlined into the
+ * ordinary tick and the cold path's stsp_law_rows on a single-precision VFP (one asm
+ * statement); elsewhere (soft float, the host) once, out of line: inlined twice, its C loops
+ * cost the Cortex-M0+ some 650 B of flash. */
+#if STSP_VFP_MAC
+/* cppcheck-suppress misra-c2012-2.5 ; deviation D7: the host configuration uses the other */
+#define STSP_LAW_ON_ROWS STSP_ALWAYS_INLINE
+#else
+#define STSP_LAW_ON_ROWS STSP_NOINLINE
+#endif
+static STSP_LAW_ON_ROWS stsp_f32_t stsp_law_on_rows(const stsp_header_t *h, stsp_rows_t *r,
+                                                    const stsp_f32_t *x, const stsp_f32_t *v,
+                                                    stsp_f32_t *y)
+{
+    const uint32_t nx = stsp_nx(h);
+    const uint32_t nu = stsp_nu(h);
+    const uint32_t n_latch = stsp_n_latch(h);
+    const stsp_f32_t *K = r->K;
+    const stsp_f32_t *k0 = r->k0;
+    const stsp_f32_t *L = r->L;
+    stsp_f32_t total = -0.0f; /* -0 + a = a for every a */
+    stsp_f32_t *yp = y;
+    stsp_law_pairs(x, v, nx, n_latch, nu, &k0, &yp, &K, &L, &total);
+    r->K = K;
+    r->k0 = k0;
+    r->L = L;
+    return total;
+}
+
+/* The law of an ordinary tick on the rows the instance keeps (*rows: those of the tick),
+ * moving them on to the next tick's; as stsp_law() otherwise. */
+static STSP_ALWAYS_INLINE uint32_t stsp_law_kept(const stsp_header_t *h, stsp_rows_t *rows,
+                                                 const stsp_f32_t *x, const stsp_f32_t *v,
+                                                 stsp_f32_t *y, uint32_t limited)
+{
+    const stsp_f32_t total = stsp_law_on_rows(h, rows, x, v, y);
+    return (limited != 0u) ? stsp_law_alarm(h, y, limited) : stsp_total_alarm(total);
+}
+
+/* The law at `tick` (< n_ticks) on the cold path (stsp_step_cold): the rows from the tick's
+ * index in the validated copy h; *next then holds the rows of tick + 1 (stsp_law_on_rows).
+ * Out of line; the ordinary tick (stsp_step_ordinary) runs stsp_law_kept() on the rows the
+ * instance keeps. */
+static STSP_NOINLINE stsp_f32_t stsp_law_rows(const stsp_header_t *h, uint32_t tick,
+                                              const stsp_f32_t *x, const stsp_f32_t *v,
+                                              stsp_f32_t *y, stsp_rows_t *next)
+{
+    stsp_rows_t r;
+    stsp_f32_t total;
+    stsp_rows_at(h, tick, &r);
+    total = stsp_law_on_rows(h, &r, x, v, y);
+    *next = r;
+    return total;
+}
+
+/* The law at `tick` with multipliers v, into y (never the caller's u: x and u may overlap),
+ * and the rows of tick + 1 into *next. Returns the alarm of stsp_law_alarm(); without limits
+ * from the inputs' sum that stsp_law_rows took (same order: the same value). */
+static STSP_ALWAYS_INLINE uint32_t stsp_law(const stsp_header_t *h, uint32_t tick,
+                                            const stsp_f32_t *x, const stsp_f32_t *v,
+                                            stsp_f32_t *y, uint32_t limited, stsp_rows_t *next)
+{
+    const stsp_f32_t total = stsp_law_rows(h, tick, x, v, y, next);
+    return (limited != 0u) ? stsp_law_alarm(h, y, limited) : stsp_total_alarm(total);
+}
+#endif
+
+/* The cold paths' tick plan: range and order checks, the stage search, the latch into scratch,
+ * and the commit of a successful step. */
+#ifndef STSP_ARITH_FIXED_POINT
+/* The stage-0 latch of a band table: v = the band dual's multipliers for the measured x,
+ * rounded to binary32, zero beyond q. Returns 1 on success; 0 if the solver failed (v_new
+ * untouched): x not finite (the affine fallback then propagates the NaN/Inf, and the step
+ * fails with STSP_ERR_NONFINITE_STATE as for any table), Nt x + mt overflowed, no active set
+ * met the optimality conditions (W not positive definite in double precision), or a
+ * multiplier lies outside the binary32 range. The solver (stsp_bandqp_solve_f32, with its
+ * ~0.8 KB of stack, used on this tick only) is the table's (stsp_bandqp_t.solve_f32), which
+ * init checked (stsp_internal.h). */
+static STSP_NOINLINE int stsp_band_latch(const stsp_header_t *h, const stsp_f32_t *x,
+                                         stsp_f32_t *v_new)
+{
+    stsp_f32_t v[STSP_BANDQP_MAX];
+    const uint32_t q = h->band.q;
+    uint32_t i;
+    /* The validated copy of the band dual's header, not the table's: q and nx as init checked. */
+    if (h->band.solve_f32(&h->band, x, v) != STSP_BANDQP_OK) {
+        return 0;
+    }
+    for (i = 0u; i < stsp_n_latch(h); ++i) {
+        v_new[i] = (i < q) ? v[i] : 0.0f;
+    }
+    return 1;
+}
+#endif
+
+/* Stage containing `tick`, searching forward from `from` (ticks only move forward; at most
+ * n_stages steps, whatever stage_start holds now). */
+static uint16_t stsp_stage_of(const stsp_header_t *h, uint16_t from, uint32_t tick)
+{
+    uint32_t s = from;
+    while (((s + 1u) < h->n_stages) && (h->stage_start[s + 1u] <= tick)) {
+        ++s;
+    }
+    return (uint16_t)s;
+}
+
+/* Cold path, part 1: range and order checks, stage search, and the latch v_new = Lambda x +
+ * lambda0 (or a copy of the v kept) into the caller's scratch: the instance changes only on
+ * success, in stsp_commit(). Returns a negative error, or the tick warning (or STSP_OK).
+ * Inlined into the per-tick cold path (as a call it costs each cold tick some 20
+ * instructions); stsp_spline.c's cold paths call it through stsp_plan_tick. */
+static STSP_ALWAYS_INLINE stsp_status_t stsp_plan(const stsp_ctrl_t *c, uint32_t tick,
+                                                  const stsp_scalar_t *x, stsp_scalar_t *v_new,
+                                                  stsp_plan_t *plan)
+{
+    const stsp_header_t *h = &c->checked;
+    const uint32_t nx = stsp_nx(h);
+    const uint32_t n_latch = stsp_n_latch(h);
+    stsp_status_t status = STSP_OK;
+    uint32_t i;
+    uint32_t n_stage;
+    uint16_t stage;
+
+    if (tick >= h->n_ticks) {
+        return STSP_ERR_TICK_RANGE;
+    }
+    if (c->next_tick > 0u) {
+        if ((tick + 1u) < c->next_tick) {
+            return STSP_ERR_TICK_ORDER;
+        }
+        if ((tick + 1u) == c->next_tick) {
+            status = STSP_WARN_TICK_REPEATED;
+        }
+    }
+    if (tick > c->next_tick) {
+        status = STSP_WARN_TICK_SKIPPED;
+    }
+    stage = stsp_stage_of(h, c->stage, tick);
+    /* A stage with stage_n_latch > 0 latches a fresh v at its first tick; one with
+     * stage_n_latch == 0 keeps the v latched earlier (joint multipliers are latched once, at
+     * stage 0). Only columns below n_latch are ever touched, whatever stage_n_latch holds. */
+    n_stage = h->stage_n_latch[stage];
+    plan->stage = stage;
+    plan->relatch = 0u;
+    if ((c->latched == 0u) || ((stage != c->stage) && (n_stage > 0u))) {
+        plan->relatch = 1u;
+    }
+#ifndef STSP_ARITH_FIXED_POINT
+    if ((plan->relatch != 0u) && (stage == 0u) && (h->band_qp != NULL)) {
+        if (stsp_band_latch(h, x, v_new) != 0) {
+            return status;
+        }
+        status = STSP_WARN_BAND_FALLBACK; /* the affine map below, from the design's x0 */
+    }
+#endif
+    if (plan->relatch != 0u) {
+        for (i = 0u; i < n_latch; ++i) {
+            stsp_scalar_t acc = (stsp_scalar_t)0;
+            if (i < n_stage) {
+                const uint32_t row = ((uint32_t)stage * n_latch) + i;
+                acc = stsp_latch_row(&h->Lambda[row * nx], h->lambda0[row], x, nx);
+            }
+            v_new[i] = acc;
+        }
+    } else {
+        for (i = 0u; i < n_latch; ++i) {
+            v_new[i] = c->v[i];
+        }
+    }
+    return status;
+}
+
+/* Cold path, part 2: the step succeeded; record the stage, the latch and the tick. */
+static STSP_ALWAYS_INLINE void stsp_commit(stsp_ctrl_t *c, uint32_t tick,
+                                           const stsp_plan_t *plan, const stsp_scalar_t *v_new)
+{
+    const stsp_header_t *h = &c->checked;
+    if (plan->relatch != 0u) {
+        uint32_t i;
+        for (i = 0u; i < stsp_n_latch(h); ++i) {
+            c->v[i] = v_new[i];
+        }
+        c->latched = 1u;
+    }
+    c->stage = plan->stage;
+    c->stage_end = stsp_stage_end(h, plan->stage);
+    if ((tick + 1u) > c->next_tick) {
+        c->next_tick = tick + 1u;
+    }
+}
+
+
+/* The plan and the commit for stsp_spline.c's cold paths: the same code, out of line. */
+stsp_status_t stsp_plan_tick(const stsp_ctrl_t *c, uint32_t tick, const stsp_scalar_t *x,
+                             stsp_scalar_t *v_new, stsp_plan_t *plan)
+{
+    return stsp_plan(c, tick, x, v_new, plan);
+}
+
+void stsp_commit_tick(stsp_ctrl_t *c, uint32_t tick, const stsp_plan_t *plan,
+                      const stsp_scalar_t *v_new)
+{
+    stsp_commit(c, tick, plan, v_new);
+}
 
 /* float32 with run-time dimensions: the instance keeps the rows of tick next_tick
  * (stsp_ctrl_t.rows), and the ordinary tick is a function of its own (stsp_step_ordinary). */
@@ -106,6 +635,9 @@ stsp_status_t stsp_init(stsp_ctrl_t *ctrl, const stsp_table_t *table)
     ctrl->table = table;
     stsp_copy(ctrl->hold, table->u_hold, ctrl->checked.nu);
     ctrl->limited = stsp_has_limits(&ctrl->checked);
+    /* init checked the ops (stsp_spline_code_ok): the spline tick stsp_step calls */
+    ctrl->checked.spline_step =
+        (ctrl->checked.spline != NULL) ? ctrl->checked.sp.ops->step : NULL;
 #if STSP_ROW_CACHE
     stsp_rows_first(ctrl);
 #endif
@@ -290,16 +822,30 @@ static STSP_ORDINARY_TICK stsp_status_t stsp_step_ordinary(stsp_ctrl_t *ctrl, ui
     return STSP_OK;
 }
 
+#if !STSP_ROW_CACHE
+/* A spline table's tick (stsp_spline.c, through the table's ops, which init checked), from
+ * stsp_step(). A call, not a tail call: stsp_step() then has a call and saves lr in its
+ * prologue, and its ordinary tick returns with one pop {..., pc} instead of pop and bx lr (one
+ * instruction less on the Cortex-M4F ordinary tick of the STSP_FIXED_* and Q15/Q31 builds). */
+static STSP_ALWAYS_INLINE stsp_status_t stsp_step_spline(stsp_ctrl_t *ctrl, uint32_t tick,
+                                                         const stsp_scalar_t *x,
+                                                         stsp_scalar_t *u)
+{
+    const stsp_status_t status = ctrl->checked.spline_step(ctrl, tick, x, u);
+    STSP_NO_TAIL_CALL();
+    return status;
+}
+#endif
+
 #if STSP_ROW_CACHE
-/* Every tick but the ordinary one of a per-tick table: a spline table's (stsp_spline.c: init
- * accepted the table, so that code is linked), or the cold path. Out of line, so that
- * stsp_step() tail-calls everything and needs no frame (GCC does not tail-call the weak
- * stsp_spline_step). */
+/* Every tick but the ordinary one of a per-tick table: a spline table's (stsp_spline.c, through
+ * the table's ops, which init checked), or the cold path. Out of line, so that stsp_step()
+ * tail-calls everything and needs no frame. */
 static STSP_NOINLINE stsp_status_t stsp_step_other(stsp_ctrl_t *ctrl, uint32_t tick,
                                                    const stsp_f32_t *x, stsp_f32_t *u)
 {
-    if (ctrl->checked.spline != NULL) {
-        return stsp_spline_step(ctrl, tick, x, u);
+    if (ctrl->checked.spline_step != NULL) {
+        return ctrl->checked.spline_step(ctrl, tick, x, u);
     }
     return stsp_step_cold(ctrl, tick, x, u);
 }
@@ -319,15 +865,13 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x
     }
     /* Ordinary tick: the expected one, inside the latched stage (stage_end is 0 until the
      * first latch, and never above n_ticks). Anything else takes the cold path; every tick
-     * of a spline table (stage_end 0) its own, stsp_spline_step. */
+     * of a spline table (stage_end 0) its own, stsp_spline_ops.step. */
     if ((tick != ctrl->next_tick) || (tick >= ctrl->stage_end)) {
 #if STSP_ROW_CACHE
         return stsp_step_other(ctrl, tick, x, u);
 #else
-        /* A spline table's tick (stsp_spline.c: init accepted the table, so that code is
-         * linked). */
-        if (ctrl->checked.spline != NULL) {
-            return stsp_spline_step(ctrl, tick, x, u);
+        if (ctrl->checked.spline_step != NULL) {
+            return stsp_step_spline(ctrl, tick, x, u);
         }
         return stsp_step_cold(ctrl, tick, x, u);
 #endif

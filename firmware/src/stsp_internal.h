@@ -25,6 +25,13 @@
 #define STSP_NOINLINE
 #define STSP_ALWAYS_INLINE inline
 #endif
+/* After a call in tail position: keeps it a call (an empty asm statement the compiler must
+ * emit after it), where a tail call would cost more than it saves (stsp_step_spline). */
+#if defined(__GNUC__) || defined(__clang__)
+#define STSP_NO_TAIL_CALL() __asm__ volatile("")
+#else
+#define STSP_NO_TAIL_CALL()
+#endif
 #if defined(STSP_FIXED_NX) && (defined(__GNUC__) || defined(__clang__))
 #define STSP_UNROLL _Pragma("GCC unroll 16")
 #else
@@ -109,67 +116,17 @@ static inline int stsp_all_finite(const stsp_f32_t *values, uint32_t count)
 }
 #endif
 
-#ifndef STSP_ARITH_FIXED_POINT
-/* The band solver (stsp_bandqp.c and the double-precision routines it needs, about 4.5 KB on
- * a Cortex-M4F) is linked only into programs whose tables have a band dual: with GCC or clang
- * on an ELF target the controller refers to the solver (stsp_bandqp_solve_f32) weakly, so a
- * static link pulls it in only when something else refers to it (or to stsp_bandqp_solve, in
- * the same object) strongly. A band table's generated C does (<name>_band_solver, a constant
- * pointer to stsp_bandqp_solve_f32), and stospline_add_gains() (and the repository's gains
- * libraries) add -Wl,--undefined=stsp_bandqp_solve when the table's header says
- * <NAME>_BAND_ROWS > 0. Without the solver, stsp_init() refuses a band
- * table (STSP_ERR_BAD_DIMS, as a fixed-point build does), so the stage-0 latch of an accepted
- * band table always has it. Elsewhere (other compilers and object formats) the reference is
- * an ordinary one and the solver is always linked. */
-#if (defined(__GNUC__) || defined(__clang__)) && defined(__ELF__)
-extern stsp_bandqp_status_t stsp_bandqp_solve_f32(const stsp_bandqp_t *qp, const float *x0,
-                                                  float *v) __attribute__((weak));
-/* 1 when the band solver is linked into the program (its weak reference resolved). */
-static inline int stsp_band_solver_linked(void)
-{
-    return (&stsp_bandqp_solve_f32 != NULL) ? 1 : 0;
-}
-#else
-static inline int stsp_band_solver_linked(void) { return 1; }
-#endif
-#endif
+/* The optional code, linked only into programs whose tables refer to it: the band solver
+ * (stsp_bandqp.c, about 4.5 KB on a Cortex-M4F), through stsp_bandqp_t.solve_f32, and a spline
+ * table's code (stsp_spline.c, about 4 KB), through stsp_spline_t.ops (stsp_qspline_t.ops).
+ * stsp_init() refuses a table whose pointer is NULL (or, for the spline code, of another
+ * arithmetic), so every later call may use them. */
 
-/* The spline tables' code (stsp_spline.c, about 4 KB on a Cortex-M4F) is linked only into
- * programs with a spline table, as the band solver: with GCC or clang on an ELF target the
- * controller refers to its entry points weakly, and a generated spline table refers to
- * stsp_spline_code (same object) strongly (<name>_spline_code). Without it stsp_init()
- * refuses a spline table (STSP_ERR_BAD_DIMS), so stsp_step() calls stsp_spline_step only when
- * it is linked. Elsewhere the references are ordinary ones. The same in the fixed-point builds
- * (stsp_qspline_t tables; the object then holds the Q spline tick and checks, on
- * stsp_qspline.c's evaluation). */
-#if (defined(__GNUC__) || defined(__clang__)) && defined(__ELF__)
-#define STSP_WEAK_SPLINE __attribute__((weak))
-#else
-#define STSP_WEAK_SPLINE
-#endif
-/* Every tick of a spline table (stsp_step() after its argument and ready checks). */
-extern stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
-                                      stsp_scalar_t *u) STSP_WEAK_SPLINE;
-/* init's checks of a spline table's layout (stsp_spline_t, stsp_qspline_t), on the header
- * copy. */
-extern stsp_status_t stsp_spline_check_dims(const stsp_header_t *h) STSP_WEAK_SPLINE;
-#ifdef STSP_ARITH_FIXED_POINT
-/* init's value check of a fixed-point spline table (after its layout and CRC): every row of
- * gains at every tick within the law's bound (stsp_qspline_t). */
-extern stsp_status_t stsp_spline_check_values(const stsp_header_t *h) STSP_WEAK_SPLINE;
-/* The spline part of stsp_table_crc32()'s serialization (ns stages, nu inputs). */
-extern uint32_t stsp_spline_crc(uint32_t crc, const stsp_qspline_t *sp, uint32_t ns,
-                                uint32_t nu) STSP_WEAK_SPLINE;
-#endif
-#if (defined(__GNUC__) || defined(__clang__)) && defined(__ELF__)
-/* 1 when the spline code is linked into the program (its weak references resolved). */
-static inline int stsp_spline_linked(void)
+/* 1 when a spline table's ops pointer is this build's spline code. */
+static inline int stsp_spline_code_ok(const stsp_spline_ops_t *ops)
 {
-    return (&stsp_spline_step != NULL) ? 1 : 0;
+    return ((ops != NULL) && (ops->scalar_kind == STSP_SCALAR_KIND)) ? 1 : 0;
 }
-#else
-static inline int stsp_spline_linked(void) { return 1; }
-#endif
 
 /* Value of stsp_ctrl_t.ready after a successful stsp_init(): a Thumb-2 immediate that no
  * byte-fill pattern of uninitialised memory (0x00, 0xFF, 0xA5, 0xCC, ...) matches. */
@@ -303,6 +260,35 @@ static inline stsp_scalar_t stsp_q_round(stsp_uacc_t acc, stsp_scalar_t c)
     return (stsp_scalar_t)rounded;
 }
 #endif /* STSP_ARITH_FIXED_POINT */
+
+/* What a tick other than the ordinary one does: decided before anything is written. */
+typedef struct {
+    uint16_t stage;   /* stage of the tick */
+    uint16_t relatch; /* nonzero: v_new holds a fresh latch for `stage` */
+} stsp_plan_t;
+
+/* The first tick after stage s, capped at the validated n_ticks even if stage_start changed
+ * since init: the law never indexes a tick beyond the table. */
+static inline uint32_t stsp_stage_end(const stsp_header_t *h, uint16_t s)
+{
+    const uint32_t end = h->stage_start[(uint32_t)s + 1u];
+    return (end < h->n_ticks) ? end : h->n_ticks;
+}
+
+/* The cold paths' plan and commit (stsp_controller.c), for stsp_spline.c. */
+#define stsp_plan_tick STSP_NAME(stsp_plan_tick)
+#define stsp_commit_tick STSP_NAME(stsp_commit_tick)
+stsp_status_t stsp_plan_tick(const stsp_ctrl_t *c, uint32_t tick, const stsp_scalar_t *x,
+                             stsp_scalar_t *v_new, stsp_plan_t *plan);
+void stsp_commit_tick(stsp_ctrl_t *c, uint32_t tick, const stsp_plan_t *plan,
+                      const stsp_scalar_t *v_new);
+
+/* The functions between the sources below, named per arithmetic (STSP_NAME) as the API. */
+#define stsp_copy_header STSP_NAME(stsp_copy_header)
+#define stsp_header_changed STSP_NAME(stsp_header_changed)
+#define stsp_has_limits STSP_NAME(stsp_has_limits)
+#define stsp_crc_of STSP_NAME(stsp_crc_of)
+#define stsp_check_table STSP_NAME(stsp_check_table)
 
 /* The header fields every later call uses, read once from the table (init, CRC). */
 void stsp_copy_header(stsp_header_t *h, const stsp_table_t *t);

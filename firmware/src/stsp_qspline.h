@@ -19,6 +19,12 @@
 
 #include "stsp_internal.h"
 
+/* Named per arithmetic (STSP_NAME), as every external symbol of the controller. */
+#define stsp_qspline_basis STSP_NAME(stsp_qspline_basis)
+#define stsp_qspline_value STSP_NAME(stsp_qspline_value)
+#define stsp_qspline_check STSP_NAME(stsp_qspline_check)
+#define stsp_qspline_gains STSP_NAME(stsp_qspline_gains)
+
 #ifdef STSP_ARITH_FIXED_POINT
 
 #define STSP_QSPLINE_MAX_SPAN_LOG2 9u

@@ -73,7 +73,7 @@ int stsp_header_changed(const stsp_header_t *h, const stsp_table_t *t)
         if ((p->n_entries != q->n_entries) || (p->n_coef != q->n_coef) ||
             (p->span_log2 != q->span_log2) || (p->row_start != q->row_start) ||
             (p->col != q->col) || (p->shift != q->shift) || (p->coef_start != q->coef_start) ||
-            (p->coef != q->coef)) {
+            (p->coef != q->coef) || (p->ops != q->ops)) {
             changed = 1;
         }
     } else {
@@ -86,7 +86,7 @@ int stsp_header_changed(const stsp_header_t *h, const stsp_table_t *t)
         const stsp_bandqp_t *b = t->band_qp;
         if ((b->q != h->band.q) || (b->nx != h->band.nx) || (b->Nt != h->band.Nt) ||
             (b->mt != h->band.mt) || (b->W != h->band.W) || (b->lo != h->band.lo) ||
-            (b->hi != h->band.hi)) {
+            (b->hi != h->band.hi) || (b->solve_f32 != h->band.solve_f32)) {
             changed = 1;
         }
     } else {
@@ -100,7 +100,7 @@ int stsp_header_changed(const stsp_header_t *h, const stsp_table_t *t)
         if ((p->n_knots != q->n_knots) || (p->n_entries != q->n_entries) ||
             (p->n_coef != q->n_coef) || (p->knot_start != q->knot_start) ||
             (p->knot != q->knot) || (p->row_start != q->row_start) || (p->col != q->col) ||
-            (p->coef_start != q->coef_start) || (p->coef != q->coef)) {
+            (p->coef_start != q->coef_start) || (p->coef != q->coef) || (p->ops != q->ops)) {
             changed = 1;
         }
     } else {
@@ -116,9 +116,8 @@ static stsp_status_t stsp_check_band_dims(const stsp_header_t *h)
 {
     const stsp_bandqp_t *b = &h->band;
     uint32_t s;
-    /* cppcheck-suppress knownConditionTrueFalse ; link-dependent (a weak reference) */
-    if (stsp_band_solver_linked() == 0) {
-        return STSP_ERR_BAD_DIMS; /* a program without the solver: stsp_internal.h */
+    if (b->solve_f32 == NULL) {
+        return STSP_ERR_BAD_DIMS; /* the table does not link the solver: stsp_internal.h */
     }
     if ((b->Nt == NULL) || (b->mt == NULL) || (b->W == NULL) || (b->lo == NULL) ||
         (b->hi == NULL)) {
@@ -191,12 +190,11 @@ static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, i
     }
 #endif
     if (has_spline != 0) {
-        /* cppcheck-suppress knownConditionTrueFalse ; link-dependent (a weak reference) */
-        if (stsp_spline_linked() == 0) {
-            return STSP_ERR_BAD_DIMS; /* a program without the spline code: stsp_internal.h */
+        if (stsp_spline_code_ok(t->sp.ops) == 0) {
+            return STSP_ERR_BAD_DIMS; /* the table does not link its code: stsp_internal.h */
         }
         {
-            const stsp_status_t st = stsp_spline_check_dims(t);
+            const stsp_status_t st = t->sp.ops->check_dims(t);
 #ifdef STSP_ARITH_FIXED_POINT
             return st; /* no band dual in a fixed-point build (refused above) */
 #else
@@ -242,7 +240,7 @@ static int stsp_q_exps_ok(const int8_t *e, uint32_t count)
  * |k0| + sum_j |K| + sum_c |L| <= 2^F - 1 and every latch row with |lambda0| + sum_j |Lambda|
  * <= 2^F - 1, the condition under which stsp_law and the latch cannot overflow or leave the
  * Q range (stsp_step); limits with u_min <= u_hold <= u_max. A spline table's law rows are its
- * gains as evaluated at each tick (stsp_spline_check_values, stsp_spline.c: linked, as its
+ * gains as evaluated at each tick (stsp_spline_ops.check_values, stsp_spline.c: linked, as its
  * layout check passed). */
 static stsp_status_t stsp_check_values(const stsp_header_t *t)
 {
@@ -256,7 +254,7 @@ static stsp_status_t stsp_check_values(const stsp_header_t *t)
         return STSP_ERR_BAD_VALUES;
     }
     if (t->spline != NULL) {
-        const stsp_status_t st = stsp_spline_check_values(t);
+        const stsp_status_t st = t->sp.ops->check_values(t);
         if (st != STSP_OK) {
             return st;
         }
@@ -395,29 +393,6 @@ uint16_t stsp_has_limits(const stsp_header_t *t)
 }
 #endif /* STSP_ARITH_FIXED_POINT */
 
-#ifndef STSP_ARITH_FIXED_POINT
-/* The spline part of stsp_table_crc32()'s serialization: counts, then the six arrays, index
- * arrays as u32 each, knots and coefficients as binary32. */
-static uint32_t stsp_crc_spline(uint32_t crc, const stsp_spline_t *sp, uint32_t ns, uint32_t nu)
-{
-    const uint32_t rows = (ns * nu) + 1u;
-    uint32_t c = crc;
-    uint32_t i;
-    c = stsp_crc32_u32(c, sp->n_knots);
-    c = stsp_crc32_u32(c, sp->n_entries);
-    c = stsp_crc32_u32(c, sp->n_coef);
-    c = stsp_crc32_u32s(c, sp->knot_start, ns + 1u);
-    c = stsp_crc32_f32s(c, sp->knot, sp->n_knots);
-    for (i = 0u; i < rows; ++i) {
-        c = stsp_crc32_u32(c, (uint32_t)sp->row_start[i]);
-    }
-    for (i = 0u; i < sp->n_entries; ++i) {
-        c = stsp_crc32_u32(c, (uint32_t)sp->col[i]);
-    }
-    c = stsp_crc32_u32s(c, sp->coef_start, ns + 1u);
-    return stsp_crc32_f32s(c, sp->coef, sp->n_coef);
-}
-#endif
 
 /* The CRC of stsp_table_crc32(), with the dimensions and arrays of the header copy `table`
  * and the remaining scalars (tick_hz, scalar_kind, problem_sha256) of the table header. */
@@ -472,17 +447,12 @@ uint32_t stsp_crc_of(const stsp_header_t *table, const stsp_table_t *scalars)
     if (n_latch > 0u) {
         crc = stsp_crc32_i8s(crc, table->v_exp, n_latch);
     }
-    /* In stsp_spline.c (linked only with a spline table): a program without it refuses a
-     * spline table at init, before its CRC, and its stsp_table_crc32() leaves the spline out. */
-    /* cppcheck-suppress knownConditionTrueFalse ; link-dependent (a weak reference) */
-    if ((sp != NULL) && (stsp_spline_linked() != 0)) {
-        crc = stsp_spline_crc(crc, sp, ns, nu);
-    }
-#else
-    if (sp != NULL) {
-        crc = stsp_crc_spline(crc, sp, ns, nu);
-    }
 #endif
+    /* In stsp_spline.c, reached through the table (stsp_internal.h): init refuses a spline
+     * table without its code before the CRC, and stsp_table_crc32() leaves the spline out. */
+    if ((sp != NULL) && (stsp_spline_code_ok(sp->ops) != 0)) {
+        crc = sp->ops->crc(crc, sp, ns, nu);
+    }
     if (b != NULL) {
         const uint32_t q = b->q;
         crc = stsp_crc32_u32(crc, q);

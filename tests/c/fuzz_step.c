@@ -343,6 +343,7 @@ static uint32_t fz_build_band(fuzz_in_t *in, stsp_table_t *t)
     g_band.W = g_bW;
     g_band.lo = g_blo;
     g_band.hi = g_bhi;
+    g_band.solve_f32 = stsp_bandqp_solve_f32;
     /* Fill the whole storage, so that every size the table may declare reads set values. */
     {
         const uint32_t nt_special = ((wsel & 0xC0u) == 0xC0u) ? 1u + fz_lcg(&seed) % 32u : 0u;
@@ -582,6 +583,7 @@ static uint32_t fz_build_spline(fuzz_in_t *in, stsp_table_t *t)
     g_spline.col = g_col;
     g_spline.coef_start = g_coef_start;
     g_spline.coef = g_coef;
+    g_spline.ops = &stsp_spline_ops;
     t->spline = &g_spline;
     t->K = NULL;
     t->k0 = NULL;
@@ -795,6 +797,7 @@ static uint32_t fz_build_spline(fuzz_in_t *in, stsp_table_t *t)
     g_spline.shift = g_shift;
     g_spline.coef_start = g_coef_start;
     g_spline.coef = g_coef;
+    g_spline.ops = &stsp_spline_ops;
     t->spline = &g_spline;
     t->K = NULL;
     t->k0 = NULL;
@@ -1011,7 +1014,7 @@ static int fz_spline_coef_finite(const stsp_spline_t *p)
  * stage_n_latch > 0) and the v it then uses (Lambda x + lambda0 in that order, zero beyond
  * stage_n_latch), and the command of the spline law at that tick, by The NURBS Book A2.2
  * literally (every operation its own statement: no contraction), the feed-forward folded into
- * one spline per input first (stsp_law_spline.h). */
+ * one spline per input first (stsp_spline.c). */
 typedef struct {
     uint32_t stage;
     int relatch;

@@ -266,6 +266,7 @@ static void fv_build_qspline(fv_blocks_t *blocks, fv_table_t *tb, stsp_table_t *
     sp->shift = shift;
     sp->coef_start = coef_start;
     sp->coef = coef;
+    sp->ops = &stsp_spline_ops;
     t->spline = sp;
     tb->spline = sp;
 }
@@ -364,6 +365,7 @@ static void fv_build_spline(fv_blocks_t *blocks, fv_table_t *tb, stsp_table_t *t
     sp->col = col;
     sp->coef_start = coef_start;
     sp->coef = coef;
+    sp->ops = &stsp_spline_ops;
     t->spline = sp;
     tb->spline = sp;
 }
@@ -515,6 +517,7 @@ static void fv_build(fuzz_in_t *in, fv_blocks_t *blocks, fv_table_t *tb)
         b->W = W;
         b->lo = blo;
         b->hi = bhi;
+        b->solve_f32 = stsp_bandqp_solve_f32;
         t->band_qp = b;
         tb->band = b;
     }

@@ -63,6 +63,7 @@ static inline stsp_qspline_t table_q(void)
     q.shift = shift;
     q.coef_start = coef_start;
     q.coef = coef;
+    q.ops = &stsp_spline_ops;
     return q;
 }
 

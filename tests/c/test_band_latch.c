@@ -53,7 +53,7 @@ static stsp_table_t make_table_d(const stsp_bandqp_t *qp)
 
 static stsp_bandqp_t make_band_d(void)
 {
-    stsp_bandqp_t b = {2u, 2u, d_Nt, d_mt, d_W, d_lo, d_hi};
+    stsp_bandqp_t b = {2u, 2u, d_Nt, d_mt, d_W, d_lo, d_hi, stsp_bandqp_solve_f32};
     return b;
 }
 
@@ -180,7 +180,7 @@ static void test_band_header_change_after_init(void **state)
     for (which = 0; which < 4; ++which) {
         stsp_bandqp_t qp = {2u, 2u, heap_copy(d_Nt, sizeof d_Nt), heap_copy(d_mt, sizeof d_mt),
                             heap_copy(d_W, sizeof d_W), heap_copy(d_lo, sizeof d_lo),
-                            heap_copy(d_hi, sizeof d_hi)};
+                            heap_copy(d_hi, sizeof d_hi), stsp_bandqp_solve_f32};
         const stsp_bandqp_t heap = qp, ref_qp = make_band_d();
         const stsp_table_t t = make_table_d(&qp), tr = make_table_d(&ref_qp);
         float *x = heap_copy(upper, sizeof upper);
@@ -222,7 +222,7 @@ static void test_bandqp_candidate_bound(void **state)
     double neg_W[STSP_BANDQP_MAX * STSP_BANDQP_MAX], lo[STSP_BANDQP_MAX], hi[STSP_BANDQP_MAX];
     double lam[STSP_BANDQP_MAX];
     const float x0[1] = {1.0f};
-    stsp_bandqp_t qp = {(uint16_t)STSP_BANDQP_MAX, 1u, Nt, mt, W, lo, hi};
+    stsp_bandqp_t qp = {(uint16_t)STSP_BANDQP_MAX, 1u, Nt, mt, W, lo, hi, stsp_bandqp_solve_f32};
     stsp_bandqp_work_t work;
     uint32_t i, j, cand = 0u;
     (void)state;
@@ -312,7 +312,7 @@ static void test_bandqp_nonsymmetric_p_matrix(void **state)
                                  -0.2, 0.3,  1.8,  0.6,  0.1, -0.4, 0.2, 1.2};
     static const double lo[4] = {0.5, -1.0, -0.5, 0.0};
     static const double hi[4] = {0.5, 1.0, 0.25, 2.0};
-    const stsp_bandqp_t qp = {4u, 4u, Nt, mt, W, lo, hi};
+    const stsp_bandqp_t qp = {4u, 4u, Nt, mt, W, lo, hi, stsp_bandqp_solve_f32};
     static const float grid[3] = {-3.0f, 0.5f, 3.5f};
     stsp_bandqp_work_t work;
     double lam[4];
@@ -339,7 +339,7 @@ static void test_bandqp_nonsymmetric_pivoting(void **state)
     static const double mt[2] = {0.0, 0.0};
     static const double W[4] = {0.0, 1.0, 2.0, 0.0};
     static const double b[2] = {1.0, 2.0};
-    const stsp_bandqp_t qp = {2u, 2u, Nt, mt, W, b, b};
+    const stsp_bandqp_t qp = {2u, 2u, Nt, mt, W, b, b, stsp_bandqp_solve_f32};
     const float x0[2] = {3.0f, 5.0f};
     stsp_bandqp_work_t work;
     double lam[2];
@@ -360,7 +360,7 @@ static void test_bandqp_nonsymmetric_singular_and_overflow(void **state)
     static const double singular[4] = {2.0, 4.0, 1.0, 2.0};
     static const double tiny[4] = {1e-300, 0.0, 1.0, 1.0};
     static const double b[2] = {0.0, 0.0};
-    stsp_bandqp_t qp = {2u, 2u, Nt, mt, singular, b, b};
+    stsp_bandqp_t qp = {2u, 2u, Nt, mt, singular, b, b, stsp_bandqp_solve_f32};
     const float x0[2] = {1.0f, 1.0f}, big[2] = {1e10f, 0.0f};
     stsp_bandqp_work_t work;
     double lam[2] = {7.0, 7.0};

@@ -670,7 +670,7 @@ static void test_step_and_verify_after_a_header_change(void **state)
     static const double nt[2 * 3] = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0}, m3[3] = {0.0, 0.0, 0.0};
     static const double w3[3 * 3] = {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
     static const uint32_t two_starts[2] = {0u, 5u};
-    const stsp_bandqp_t band = {3u, 3u, nt, m3, w3, m3, m3};
+    const stsp_bandqp_t band = {3u, 3u, nt, m3, w3, m3, m3, stsp_bandqp_solve_f32};
     const float xs[NT][NX] = {{1.0f, -2.0f}, {0.5f, 0.25f}, {-1.0f, 3.0f},
                               {2.0f, 1.0f}, {-0.5f, -0.75f}};
     int which;

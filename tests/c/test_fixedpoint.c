@@ -354,7 +354,7 @@ static void test_band_table_is_refused(void **state)
     static const double W[2 * 2] = {2.0, 0.5, 0.5, 1.0};
     static const double lo[2] = {0.5, -1.0};
     static const double hi[2] = {0.5, 1.0};
-    const stsp_bandqp_t qp = {2u, (uint16_t)NX, Nt, mt, W, lo, hi};
+    const stsp_bandqp_t qp = {2u, (uint16_t)NX, Nt, mt, W, lo, hi, stsp_bandqp_solve_f32};
     const stsp_scalar_t x[NX] = {0, 0};
     stsp_scalar_t u[NU] = {7};
     stsp_ctrl_t c;
@@ -393,7 +393,7 @@ static void test_spline_table_is_refused(void **state)
     static const uint8_t shift[2] = {3u, 3u};
     static const uint32_t coef_start[NS + 1u] = {0u, 5u, 10u};
     static const stsp_scalar_t coef[10] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10};
-    const stsp_qspline_t sp = {2u, 10u, span_log2, row_start, col, shift, coef_start, coef};
+    const stsp_qspline_t sp = {2u, 10u, span_log2, row_start, col, shift, coef_start, coef, NULL};
     const stsp_scalar_t x[NX] = {0, 0};
     stsp_scalar_t u[NU] = {7};
     stsp_ctrl_t c;

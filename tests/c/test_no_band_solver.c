@@ -26,7 +26,7 @@ static const double mt[1] = {0.0};
 static const double W[1] = {1.0};
 static const double lo[1] = {-1.0};
 static const double hi[1] = {1.0};
-static const stsp_bandqp_t band = {1u, 2u, Nt, mt, W, lo, hi};
+static const stsp_bandqp_t band = {1u, 2u, Nt, mt, W, lo, hi, NULL};
 
 static stsp_table_t table_with(const stsp_bandqp_t *b)
 {

@@ -30,7 +30,7 @@ static const uint32_t coef_start[2] = {0u, 12u};
 static const float coef[12] = {1.0f, 1.0f, 1.0f, 1.0f, 0.5f, 0.5f,
                                0.5f, 0.5f, 1.0f, 1.0f, 1.0f, 1.0f};
 static const stsp_spline_t spline = {8u, 3u, 12u, knot_start, knot, row_start,
-                                     col, coef_start, coef};
+                                     col, coef_start, coef, NULL};
 
 static stsp_table_t table_with(const stsp_spline_t *sp)
 {

@@ -119,6 +119,7 @@ static void spline_buf_init(spline_buf_t *b)
     b->sp.col = b->col;
     b->sp.coef_start = b->coef_start;
     b->sp.coef = b->coef;
+    b->sp.ops = &stsp_spline_ops;
 }
 
 /* Table S with spline sp and limits lo/hi, CRC set. */
@@ -142,7 +143,7 @@ static stsp_table_t make_s(const stsp_spline_t *sp, const float *lo, const float
 }
 
 static const stsp_spline_t s_spline = {S_N_KNOTS, S_N_ENTRIES, S_N_COEF, s_knot_start, s_knot,
-                                       s_row_start, s_col, s_coef_start, s_coef};
+                                       s_row_start, s_col, s_coef_start, s_coef, &stsp_spline_ops};
 
 /* The state at tick t of the test runs (the same expression in spline_reference.py). */
 static void state(uint32_t t, float *x)
@@ -712,7 +713,7 @@ static void expect_init(change_fn change, stsp_status_t expect, int recompute_cr
 
 static const float any_gain[S_NT * S_NU * S_NX] = {0.0f};
 static const double band_Nt[2] = {1.0, 0.0}, band_one[1] = {1.0}, band_lo[1] = {-1.0};
-static const stsp_bandqp_t a_band = {1u, 2u, band_Nt, band_one, band_one, band_lo, band_one};
+static const stsp_bandqp_t a_band = {1u, 2u, band_Nt, band_one, band_one, band_lo, band_one, stsp_bandqp_solve_f32};
 
 static void ch_none(stsp_table_t *t, spline_buf_t *b) { (void)t; (void)b; }
 static void ch_band(stsp_table_t *t, spline_buf_t *b) { (void)b; t->band_qp = &a_band; }
@@ -837,8 +838,8 @@ static const float sb_lambda0[S_NS * S_N_LATCH] = {-0.5f, 2.0f, 0.3f, -0.2f};
 
 static void test_spline_band_table(void **state_)
 {
-    const stsp_bandqp_t qp = {2u, S_NX, sb_Nt, sb_mt, sb_W, sb_lo, sb_hi};
-    const stsp_bandqp_t other = {2u, S_NX, sb_Nt, sb_mt, sb_W_other, sb_lo, sb_hi};
+    const stsp_bandqp_t qp = {2u, S_NX, sb_Nt, sb_mt, sb_W, sb_lo, sb_hi, stsp_bandqp_solve_f32};
+    const stsp_bandqp_t other = {2u, S_NX, sb_Nt, sb_mt, sb_W_other, sb_lo, sb_hi, stsp_bandqp_solve_f32};
     stsp_table_t band = make_s(&s_spline, s_no_min, s_no_max);
     stsp_table_t plain = make_s(&s_spline, s_no_min, s_no_max);
     stsp_ctrl_t cb, cp;
@@ -972,14 +973,14 @@ static void test_crc_mismatch(void **state_)
     expect_init(ch_knot_value, STSP_OK, 1);
 }
 
-/* stsp_verify(): a changed spline header (a count, an address, the table's spline pointer,
- * even to an equal copy) is STSP_ERR_TABLE_CHANGED; changed spline data STSP_ERR_BAD_CRC; both
+/* stsp_verify(): a changed spline header (a count, an address, the code pointer, the table's
+ * spline pointer, even to an equal copy) is STSP_ERR_TABLE_CHANGED; changed spline data STSP_ERR_BAD_CRC; both
  * stop the instance, whose steps then write u_hold. */
 static void test_verify_spline_header(void **state_)
 {
     uint32_t k;
     (void)state_;
-    for (k = 0u; k < 12u; ++k) {
+    for (k = 0u; k < 13u; ++k) {
         spline_buf_t b;
         stsp_spline_t copy;
         stsp_table_t t;
@@ -1005,6 +1006,7 @@ static void test_verify_spline_header(void **state_)
         case 8u: b.sp.row_start = s_row_start; break;
         case 9u: b.sp.coef_start = s_coef_start; break;
         case 10u: t.spline = NULL; break;  /* the spline gone */
+        case 11u: b.sp.ops = NULL; break;  /* the code pointer */
         default: b.coef[3] = 0.75f; expect = STSP_ERR_BAD_CRC; break;
         }
         assert_int_equal(stsp_verify(&c), expect);
@@ -1031,7 +1033,7 @@ static void test_changed_arrays_stay_in_bounds(void **state_)
         float *coef = heap_copy(s_coef, sizeof s_coef);
         uint32_t *stage_start = heap_copy(s_stage_start, sizeof s_stage_start);
         stsp_spline_t sp = {S_N_KNOTS, S_N_ENTRIES, S_N_COEF, knot_start, knot, row_start,
-                            col, coef_start, coef};
+                            col, coef_start, coef, &stsp_spline_ops};
         stsp_table_t t = make_s(&sp, s_no_min, s_no_max);
         stsp_ctrl_t c;
         t.stage_start = stage_start;
@@ -1115,6 +1117,7 @@ static void test_no_wraparound(void **state_)
     sp.col = col;
     sp.coef_start = coef_start;
     sp.coef = coef;
+    sp.ops = &stsp_spline_ops;
     t.stage_start = stage_start;
     t.stage_n_latch = one_latch;
     t.Lambda = lam;
@@ -1141,7 +1144,7 @@ static void test_without_multipliers(void **state_)
     static const uint8_t cl[2] = {0u, 1u};
     static const float cf[8] = {1.0f, 2.0f, 3.0f, 4.0f, 0.5f, 0.5f, 0.5f, 0.5f};
     static const float lo[1] = {-FLT_MAX}, hi[1] = {FLT_MAX}, hold[1] = {0.0f};
-    const stsp_spline_t sp = {8u, 2u, 8u, ks, kn, rs, cl, cs, cf};
+    const stsp_spline_t sp = {8u, 2u, 8u, ks, kn, rs, cl, cs, cf, &stsp_spline_ops};
     stsp_table_t t = table_header(1u, 1u, 0u, 1u, 4u, 10u);
     stsp_ctrl_t c;
     uint32_t tick;

@@ -12,6 +12,8 @@
 #   add_subdirectory  the consumer with add_subdirectory(<this checkout>); checks that only the
 #                     library was built and cmocka was not looked for, and that a parent
 #                     project can call stsp_add_controller()
+#   two_arith         add_subdirectory, plus a Q15 controller (stsp_add_controller) and the Q15
+#                     table in one program with the float32 ones (two_arith.c, q15_robot.c)
 #   fetchcontent_fixed      FetchContent (FETCHCONTENT_SOURCE_DIR_STOSPLINE = this checkout),
 #                     FIXED_SHAPE
 #   pkg_config        cc main.c robot_corridor.c $(pkg-config --cflags --libs stospline), with
@@ -94,7 +96,9 @@ case "$mode" in
     no_tests_built "$work/build" "$work/build"
     "$cmake" --install "$work/build" --prefix "$prefix"
     (cd "$prefix" && find . -type f | sort) | tee "$work/installed.txt"
-    for f in include/stospline/stsp_controller.h include/stospline/stsp_bandqp.h lib/libstsp.a \
+    for f in include/stospline/stsp_controller.h include/stospline/stsp_bandqp.h \
+             include/stospline/stsp_types.h include/stospline/stsp_table.h \
+             include/stospline/stsp_spline.h include/stospline/stsp_private.h lib/libstsp.a \
              lib/cmake/stospline/stosplineConfig.cmake \
              lib/cmake/stospline/stosplineConfigVersion.cmake \
              lib/cmake/stospline/stosplineTargets.cmake lib/cmake/stospline/stosplineGains.cmake \
@@ -129,6 +133,25 @@ case "$mode" in
     "$cmake" -S "$work/parent" -B "$work/parent/build" -G "$generator" -DCMAKE_C_COMPILER="$cc" \
       >/dev/null
     "$cmake" --build "$work/parent/build" --target ctrl_4_2_4
+    ;;
+  two_arith)
+    # A float32 and a Q15 controller linked into one program (two_arith.c, q15_robot.c): the
+    # float32 commands are the harness's, the Q15 lines those of the Q15 controller alone.
+    configure_consumer -DSTOSPLINE_FROM=subdirectory -DSTOSPLINE_SOURCE_DIR="$src" \
+      -DCONSUMER_TABLE="$table" -DCONSUMER_Q15_TABLE="$src/gains/robot_corridor_q15.c"
+    "$cmake" --build "$work/build" --target robot_two_arith robot_q15
+    "$work/build/robot_two_arith" "$work/q15_two_arith.txt" >"$work/commands.txt"
+    echo "robot_two_arith: $(wc -l <"$work/commands.txt") float32 lines, $(wc -l \
+      <"$work/q15_two_arith.txt") Q15 lines"
+    "$python" "$here/compare_harness.py" "$work/commands.txt"
+    "$work/build/robot_q15" >"$work/q15_alone.txt"
+    cmp "$work/q15_two_arith.txt" "$work/q15_alone.txt" \
+      || fail "the Q15 commands differ when the float32 controller is linked too"
+    nm "$work/build/robot_two_arith" >"$work/symbols.txt"
+    for sym in stsp_step_f32 stsp_step_q15 stsp_init_f32 stsp_init_q15; do
+      grep -q " T $sym\$" "$work/symbols.txt" || fail "$sym not in the program"
+    done
+    echo "two_arith: float32 and Q15 controllers in one program, both bit for bit"
     ;;
   fetchcontent_fixed)
     # The override is FetchContent's documented way to use a local checkout; the URL below

@@ -9,7 +9,7 @@ if(NOT EXISTS ${STSP_VENV_PYTHON} OR NOT STSP_PKG_CONFIG)
   return()
 endif()
 set(consumer_dir ${CMAKE_CURRENT_BINARY_DIR}/consumer)
-set(consumer_modes install find_package find_package_fixed add_subdirectory fetchcontent_fixed
+set(consumer_modes install find_package find_package_fixed add_subdirectory two_arith fetchcontent_fixed
     pkg_config wrong_arith)
 find_program(STSP_ARM_READELF arm-none-eabi-readelf)
 if(STSP_ARM_GCC AND STSP_ARM_READELF)

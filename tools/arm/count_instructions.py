@@ -103,12 +103,31 @@ def callees(elf: Path, syms: dict, root: str) -> list[str]:
     return seen
 
 
+# The suffix of the controller's external symbols (STSP_NAME: stsp_step_f32, stsp_step_q15, ...)
+# per variant suffix of VARIANTS.
+API_SUFFIX = {"": "_f32", "_q15": "_q15", "_q31": "_q31"}
+
+
+def api_symbol(syms: dict, base: str) -> str:
+    """The image's controller symbol `base` (one arithmetic per image: stsp_step_f32, ...)."""
+    names = [base + s for s in API_SUFFIX.values() if base + s in syms]
+    if len(names) != 1:
+        raise SystemExit(f"count: expected one of {base}_f32/_q15/_q31, found {names}")
+    return names[0]
+
+
 def trace_calls(build: Path, image: str, machine: str = "mps2-an386"
                 ) -> tuple[list[dict], list[str], dict]:
     elf = build / image
     trace = build / f"trace_{Path(image).stem}.log"
     syms = symbols(elf)
-    funcs = callees(elf, syms, "stsp_step")
+    step = api_symbol(syms, "stsp_step")
+    funcs = callees(elf, syms, step)
+    # A spline table's tick is called through the table's ops pointer (blx to a register, which
+    # the scan above cannot follow): when linked, its code is a root of its own.
+    spline = [n for n in syms if n.split(".")[0] == "stsp_spline_step"]
+    for root in spline:
+        funcs += [f for f in callees(elf, syms, root) if f not in funcs]
     ranges = {n: syms[n] for n in funcs + ["bench_step"]}
     insns: dict[int, str] = {}
     for n, (a, s) in ranges.items():
@@ -128,7 +147,7 @@ def trace_calls(build: Path, image: str, machine: str = "mps2-an386"
             calls.append({"table": int(m.group(2)), "tick": int(m.group(3)),
                           "stage": int(m.group(4)), "latch": m.group(5) == "1",
                           "status": int(m.group(6)), "span": m.group(7) == "1"})
-    entry = syms["stsp_step"][0]
+    entry = syms[step][0]
     in_caller = lambda pc: ranges["bench_step"][0] <= pc < sum(ranges["bench_step"])  # noqa: E731
     counts, current, lines, prev = [], None, 0, None
     # Multiplies: FP (vmul/vmla/vnmla/vfma...) and integer (mul/mla/mls, smull/smlal, smulxy/smlaxy).
@@ -200,7 +219,7 @@ def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
     rows.append(("controller objects (stsp_controller, stsp_table, stsp_crc32, stsp_qconv)",
                  *totals([ctl])))
     rows.append(("controller + robot tables objects", *totals([ctl, tables])))
-    roots = ["stsp_init", "stsp_reset", "stsp_step"]
+    roots = [f"stsp_{f}{API_SUFFIX[sfx]}" for f in ("init", "reset", "step")]
     links = [("controller linked (API roots)", [], [ctl]),
              ("controller + tables linked", [f"robot_corridor{sfx}_table"], [tables, ctl])]
     if not sfx:
@@ -210,8 +229,7 @@ def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
     else:
         # Q15/Q31: also the robot's spline table of that arithmetic (and the spline code it links).
         links.append(("controller + spline tables linked",
-                      [f"robot_corridor{sfx}_spline_table",
-                       f"robot_corridor{sfx}_spline_spline_code"],
+                      [f"robot_corridor{sfx}_spline_table"],
                       [build / f"libstsp_gains_robot_corridor{sfx}_spline.a", ctl]))
     for what, extra_roots, libs in links:
         kind = ("spline" if "spline_bench_table" in extra_roots else
@@ -219,7 +237,7 @@ def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
                 "tables" if extra_roots else "ctl")
         elf = build / f"footprint_{Path(controller).stem}_{kind}.elf"
         cmd = (["arm-none-eabi-gcc", *CPU_FLAGS[cpu], "-nostdlib", "-nostartfiles",
-                "-Wl,--gc-sections", "-Wl,-e,stsp_step", "-o", str(elf)]
+                "-Wl,--gc-sections", f"-Wl,-e,stsp_step{API_SUFFIX[sfx]}", "-o", str(elf)]
                + [f"-Wl,-u,{r}" for r in roots + extra_roots] + [str(p) for p in libs]
                + ["-lc", "-lgcc"])
         run(cmd)
@@ -227,8 +245,8 @@ def size_rows(build: Path, cpu: str, controller: str, sfx: str = ""
         t, d, b = (int(v) for v in size_line.split()[:3])
         rows.append((what, t, d, b))
         if not extra_roots and not sfx:
-            # A program with a band table: the build adds --undefined=stsp_bandqp_solve
-            # (stospline_add_gains), which links the band solver the controller refers to weakly.
+            # A program with a band table links the band solver (stsp_bandqp_t.solve_f32): here
+            # forced by --undefined=stsp_bandqp_solve.
             band_elf = elf.with_name(elf.stem + "_band.elf")
             band_cmd = [str(band_elf) if c == str(elf) else c for c in cmd]
             band_cmd.insert(band_cmd.index(str(libs[0])), "-Wl,--undefined=stsp_bandqp_solve")
@@ -382,7 +400,9 @@ def main() -> int:
                         continue
                     print(f"     {what:60.60s} flash {t + d:7d} B  static RAM {d + b:4d} B  "
                           f"(text {t}, data {d}, bss {b})")
-                stack = {k: su.get(k) for k in ("stsp_step", "stsp_law_rows", "stsp_step_cold",
+                api = API_SUFFIX[sfx]   # the external ones carry the arithmetic
+                stack = {k: su.get(k, su.get(k + api)) for k in ("stsp_step", "stsp_law_rows",
+                                                "stsp_step_cold",
                                                 "stsp_step_fixup",
                                                 "stsp_limit", "stsp_init", "stsp_table_crc32",
                                                 "stsp_spline_step", "stsp_step_next_span",

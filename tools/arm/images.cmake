@@ -38,7 +38,8 @@ target_compile_options(stsp_startup PRIVATE ${STSP_WARNINGS})
 function(stsp_add_image name controller tables)
   add_executable(${name} ${ARGN} $<TARGET_OBJECTS:stsp_startup>)
   set_target_properties(${name} PROPERTIES SUFFIX ".elf" LINK_DEPENDS "${STSP_LINKER_SCRIPT}")
-  target_link_libraries(${name} PRIVATE ${controller} ${tables})
+  # the tables first: a table refers to the controller's optional code (stsp_internal.h)
+  target_link_libraries(${name} PRIVATE ${tables} ${controller})
   target_compile_options(${name} PRIVATE ${STSP_WARNINGS})
   target_include_directories(${name} PRIVATE "${PROJECT_SOURCE_DIR}/tests/arm")  # robot_variant.h
   target_link_options(${name} PRIVATE --specs=rdimon.specs -T "${STSP_LINKER_SCRIPT}"
@@ -151,9 +152,6 @@ add_library(stsp_spline_bench_table STATIC ${arm_dir}/spline_bench_table.c)
 target_include_directories(stsp_spline_bench_table PUBLIC ${arm_dir}
                            ${PROJECT_SOURCE_DIR}/firmware/include)
 target_compile_options(stsp_spline_bench_table PRIVATE ${STSP_WARNINGS})
-# The controller refers to the spline code weakly: link it (as stospline_add_gains does for a
-# generated spline table), also when the link scans the controller's library first.
-target_link_options(stsp_spline_bench_table INTERFACE "LINKER:--undefined=stsp_spline_code")
 stsp_add_image(bench_spline stsp_float32 stsp_spline_bench_table ${arm_dir}/bench_main.c)
 stsp_add_image(bench_spline_fixed stsp_fixed_robot_corridor stsp_spline_bench_table
                ${arm_dir}/bench_main.c)

@@ -81,7 +81,6 @@ def main() -> None:
 #define SPLINE_BENCH_SPAN_TICKS {SPAN_TICKS}u
 
 extern const stsp_table_t spline_bench_table;
-extern const uint32_t *const spline_bench_spline_code;
 
 #endif /* SPLINE_BENCH_TABLE_H */
 """
@@ -107,11 +106,9 @@ extern const uint32_t *const spline_bench_spline_code;
 {chr(10).join(arrays)}
 static const stsp_spline_t sb_spline = {{
     {len(knots)}u, {len(cols)}u, {len(coef)}u,
-    sb_knot_start, sb_knot, sb_row_start, sb_col, sb_coef_start, sb_coef
+    sb_knot_start, sb_knot, sb_row_start, sb_col, sb_coef_start, sb_coef,
+    &stsp_spline_ops
 }};
-
-/* The controller refers to the spline code only weakly: this reference links it. */
-const uint32_t *const spline_bench_spline_code = &stsp_spline_code;
 
 const stsp_table_t spline_bench_table = {{
     STSP_TABLE_MAGIC, STSP_FORMAT_VERSION, STSP_SCALAR_FLOAT32,

@@ -31,7 +31,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tools" / "arm"))
-from count_instructions import CPU_FLAGS, callees, symbols  # noqa: E402
+from count_instructions import CPU_FLAGS, api_symbol, callees, symbols  # noqa: E402
 
 MACHINE = {"cortex-m4": "mps2-an386", "cortex-m0plus": "mps2-an385"}
 COUNT_TICKS = 100
@@ -68,7 +68,7 @@ def table_source(ft) -> tuple[str, int]:
            f"const uint32_t qspline_nz = {nz}u;\n",
            f"const uint32_t qspline_expected_hash = {_fnv(G):#010x}u;\n",
            f"const stsp_qspline_t qspline_robot = {{{sp.n_entries}u, {sp.coef.size}u, span_log2, "
-           f"row_start, col, shift, coef_start, coef}};\n"]
+           f"row_start, col, shift, coef_start, coef, NULL}};\n"]
     return "".join(src), _fnv(G)
 
 
@@ -94,7 +94,8 @@ def qemu(elf: Path, cpu: str, extra=()) -> subprocess.CompletedProcess:
 
 def count(elf: Path, cpu: str, out: Path, stage_calls: list[int]) -> list[list[int]]:
     syms = symbols(elf)
-    funcs = callees(elf, syms, "stsp_qspline_gains")
+    gains = api_symbol(syms, "stsp_qspline_gains")   # stsp_qspline_gains_q15 or _q31
+    funcs = callees(elf, syms, gains)
     ranges = {n: syms[n] for n in funcs}
     trace = out / (elf.stem + ".trace")
     dfilter = ",".join(f"{a:#x}+{s:#x}" for a, s in ranges.values())
@@ -102,7 +103,7 @@ def count(elf: Path, cpu: str, out: Path, stage_calls: list[int]) -> list[list[i
                           "-dfilter", dfilter])
     if run.returncode != 0:
         raise SystemExit(f"qspline_bench: {elf.name} failed: {run.stdout}{run.stderr}")
-    entry = syms["stsp_qspline_gains"][0]
+    entry = syms[gains][0]
     per_call, lines = [], None
     for line in trace.read_text().splitlines():
         m = re.search(r"\[[0-9a-f]+/([0-9a-f]+)/", line)

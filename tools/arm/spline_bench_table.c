@@ -152,11 +152,9 @@ static const stsp_f32_t sb_coef[660] = {
 
 static const stsp_spline_t sb_spline = {
     74u, 20u, 660u,
-    sb_knot_start, sb_knot, sb_row_start, sb_col, sb_coef_start, sb_coef
+    sb_knot_start, sb_knot, sb_row_start, sb_col, sb_coef_start, sb_coef,
+    &stsp_spline_ops
 };
-
-/* The controller refers to the spline code only weakly: this reference links it. */
-const uint32_t *const spline_bench_spline_code = &stsp_spline_code;
 
 const stsp_table_t spline_bench_table = {
     STSP_TABLE_MAGIC, STSP_FORMAT_VERSION, STSP_SCALAR_FLOAT32,

@@ -11,6 +11,5 @@
 #define SPLINE_BENCH_SPAN_TICKS 100u
 
 extern const stsp_table_t spline_bench_table;
-extern const uint32_t *const spline_bench_spline_code;
 
 #endif /* SPLINE_BENCH_TABLE_H */

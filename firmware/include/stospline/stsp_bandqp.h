@@ -61,7 +61,7 @@ typedef enum {
 } stsp_bandqp_status_t;
 
 /** Const problem data, generated with the design (row-major). */
-typedef struct {
+typedef struct stsp_bandqp {
     uint16_t q;              /**< stacked constraint rows */
     uint16_t nx;             /**< states */
     const double *Nt;        /**< [q][nx]: e = Nt x0 + mt */
@@ -70,6 +70,10 @@ typedef struct {
                                   non-symmetric P-matrix (a spline table: Gaussian elimination) */
     const double *lo;        /**< [q] lower bounds (lo == hi: an equality row) */
     const double *hi;        /**< [q] upper bounds */
+    /** The controller's band latch calls this: &stsp_bandqp_solve_f32, so that a program links
+     * the solver only with a table that has a band dual; NULL: stsp_init() refuses the table
+     * (STSP_ERR_BAD_DIMS). The solvers below do not read it. */
+    stsp_bandqp_status_t (*solve_f32)(const struct stsp_bandqp *qp, const float *x0, float *v);
 } stsp_bandqp_t;
 
 /** Caller-owned scratch: q*q + 3*q doubles and q bytes at most. */
@@ -97,7 +101,7 @@ stsp_bandqp_status_t stsp_bandqp_solve(const stsp_bandqp_t *qp, const float *x0,
  * (v not written); or STSP_BANDQP_ERR_RANGE when a multiplier lies beyond +-FLT_MAX (v not
  * written). Its work area and multipliers are on its own stack frame (sizeof
  * (stsp_bandqp_work_t) + STSP_BANDQP_MAX doubles). In the same object as stsp_bandqp_solve():
- * linking either links both (the controller refers to this one weakly, stsp_controller.h).
+ * linking either links both (the controller calls this one through stsp_bandqp_t.solve_f32).
  */
 stsp_bandqp_status_t stsp_bandqp_solve_f32(const stsp_bandqp_t *qp, const float *x0, float *v);
 

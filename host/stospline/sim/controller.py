@@ -31,7 +31,7 @@ typedef %(scalar)s stsp_scalar_t;
 typedef int... stsp_status_t;
 typedef struct {
     uint16_t q; uint16_t nx; const double *Nt; const double *mt; const double *W;
-    const double *lo; const double *hi;
+    const double *lo; const double *hi; ...;
 } stsp_bandqp_t;
 typedef struct { ...; } %(spline_t)s;
 typedef struct {

@@ -175,22 +175,17 @@ def _float32_variant(table, p: str) -> _Variant:
     extra, band, declarations = [], "NULL", ""
     if table.band_qp is not None:
         b, f64 = table.band_qp, _f64_literal
-        solver_type = (f"stsp_bandqp_status_t (*const {p}_band_solver)(const stsp_bandqp_t *, "
-                       f"const float *, float *)")
         extra = [
             _array("double", f"{p}_band_Nt", b.Nt, f64, f"[q][nx] = [{b.q}][{n}]: e = Nt x0 + mt"),
             _array("double", f"{p}_band_mt", b.mt, f64, "[q]"),
             _array("double", f"{p}_band_W", b.W, f64, "[q][q]"),
             _array("double", f"{p}_band_lo", b.lo, f64, "[q] lower bounds"),
             _array("double", f"{p}_band_hi", b.hi, f64, "[q] upper bounds"),
-            f"/* Band dual, re-solved from the measured x0 at the t0 latch (stsp_bandqp.h). */\n"
+            f"/* Band dual, re-solved from the measured x0 at the t0 latch (stsp_bandqp.h); the\n"
+            f" * solver's address links it with the table. */\n"
             f"static const stsp_bandqp_t {p}_band_qp = {{\n    {b.q}u, {n}u, {p}_band_Nt, "
-            f"{p}_band_mt, {p}_band_W, {p}_band_lo, {p}_band_hi\n}};\n",
-            f"/* The controller refers to the band solver only weakly, so that programs without a\n"
-            f" * band table do not link it: this reference links it with the table. */\n"
-            f"{solver_type} =\n    &stsp_bandqp_solve_f32;\n",
+            f"{p}_band_mt, {p}_band_W, {p}_band_lo, {p}_band_hi,\n    &stsp_bandqp_solve_f32\n}};\n",
         ]
-        declarations = f"extern {solver_type};\n"
         band = f"&{p}_band_qp"
     layout = ("/* Tables in flash; layout K[tick][i*NX + j], k0[tick][i], L[tick][i*N_LATCH + c],\n"
               " * Lambda[stage][c*NX + j], lambda0[stage][c], u_min[i], u_max[i], u_hold[i] (see\n"
@@ -199,24 +194,12 @@ def _float32_variant(table, p: str) -> _Variant:
     if getattr(table, "spline", None) is not None:
         extra += _spline_arrays(table.spline, p)
         spline = f"&{p}_spline"
-        definition, declaration = _spline_code_reference(p)
-        extra.append(definition)
-        declarations += declaration
         layout = ("/* Tables in flash: the gains K, k0, L as cubic B-splines per stage (stsp_spline_t,\n"
                   " * docs/guide/firmware.md \"Spline tables\"); Lambda[stage][c*NX + j],\n"
                   " * lambda0[stage][c], u_min[i], u_max[i], u_hold[i] as in stsp_controller.h\n"
                   " * (+-3.4028235e+38f = +-FLT_MAX: unlimited). */")
     return _Variant("", f"BAND_ROWS {q}u", layout, "stsp_f32_t", _f32_literal, "",
                     "", extra, declarations, SCALAR_FLOAT32, f" {band}, {spline},")
-
-
-def _spline_code_reference(p: str) -> tuple[str, str]:
-    """``(definition, declaration)`` of a spline table's strong reference to the spline code
-    (``stsp_spline_code``, any arithmetic): the controller refers to that code only weakly."""
-    code = f"const uint32_t *const {p}_spline_code"
-    return (f"/* The controller refers to the spline code only weakly, so that programs without a\n"
-            f" * spline table do not link it: this reference links it with the table. */\n"
-            f"{code} = &stsp_spline_code;\n", f"extern {code};\n")
 
 
 def _spline_arrays(sp, p: str) -> list[str]:
@@ -235,10 +218,11 @@ def _spline_arrays(sp, p: str) -> list[str]:
                "[n_stages + 1]: each stage's coefficients in coef[]"),
         _array("stsp_f32_t", f"{p}_coef", sp.coef, _f32_literal,
                "[n_coef]: per entry, its stage's spans + 3 B-spline coefficients"),
-        f"/* The gains as cubic B-splines per stage (stsp_controller.h, stsp_spline_t). */\n"
+        f"/* The gains as cubic B-splines per stage (stsp_table.h, stsp_spline_t); the spline\n"
+        f" * code's address (stsp_spline.h) links it with the table. */\n"
         f"static const stsp_spline_t {p}_spline = {{\n    {sp.knot.size}u, {sp.col.size}u, "
         f"{sp.coef.size}u,\n    {p}_knot_start, {p}_knot, {p}_row_start, {p}_col, "
-        f"{p}_coef_start, {p}_coef\n}};\n",
+        f"{p}_coef_start, {p}_coef,\n    &stsp_spline_ops\n}};\n",
     ]
 
 
@@ -268,8 +252,6 @@ def _fixed_point_variant(table, p: str) -> _Variant:
     if getattr(table, "spline", None) is not None:
         extra += _q_spline_arrays(table.spline, p, table.arith)
         spline = f"&{p}_spline,"
-        definition, declarations = _spline_code_reference(p)
-        extra.append(definition)
         layout = layout.replace(
             "; layout as in stsp_controller.h, gains stored negated and\n * pre-scaled:",
             "; the gains K, k0, L as integer uniform cubic B-splines per\n"
@@ -301,9 +283,11 @@ def _q_spline_arrays(sp, p: str, arith: str) -> list[str]:
                "[n_stages + 1]: each stage's coefficients in coef[]"),
         _array(f"stsp_{arith}_t", f"{p}_coef", sp.coef, _qlit(F),
                "[n_coef]: per entry, its stage's spans + 3 B-spline coefficients"),
-        f"/* The gains as integer cubic B-splines per stage (stsp_controller.h, stsp_qspline_t). */\n"
+        f"/* The gains as integer cubic B-splines per stage (stsp_table.h, stsp_qspline_t); the\n"
+        f" * spline code's address (stsp_spline.h) links it with the table. */\n"
         f"static const stsp_qspline_t {p}_spline = {{\n    {sp.col.size}u, {sp.coef.size}u,\n"
-        f"    {p}_span_log2, {p}_row_start, {p}_col, {p}_shift, {p}_coef_start, {p}_coef\n}};\n",
+        f"    {p}_span_log2, {p}_row_start, {p}_col, {p}_shift, {p}_coef_start, {p}_coef,\n"
+        f"    &stsp_spline_ops\n}};\n",
     ]
 
 

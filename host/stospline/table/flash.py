@@ -50,7 +50,7 @@ def flash_bytes(table, arith: str = "float32") -> int:
         from stospline.table.qspline import q_spline_bytes
         total += q_spline_bytes(spline) + _PTR
     else:
-        # + the pointer that links the spline code with the table (`<name>_spline_code`)
+        # + the pointer that links the spline code with the table (stsp_spline_t.ops)
         total += spline_bytes(spline) + _PTR
     total += e * (_count(S * n_latch * n) + _count(S * n_latch) + 3 * _count(m))  # Lambda, lambda0, u_min/max/hold
     total += _HEADER_FIELDS + _PTR * _TABLE_POINTERS + _HEADER_TAIL
@@ -58,7 +58,7 @@ def flash_bytes(table, arith: str = "float32") -> int:
         band = getattr(table, "band_qp", None)
         if band is not None:
             q = band.q
-            # + the pointer that links the band solver with the table (`<name>_band_solver`)
+            # + the pointer that links the band solver with the table (stsp_bandqp_t.solve_f32)
             total += 8 * (_count(q * n) + 3 * _count(q) + _count(q * q)) + _BANDQP_HEADER + _PTR
     else:
         total += _count(n) + _count(m) + _count(n_latch) + _PTR * _FIXED_POINTERS   # int8 exponents

@@ -50,7 +50,7 @@ def test_robot_fixed_point_spline_files_and_certificate(capsys, tmp_path, arith)
     assert f"{arith} spline table" in out and "error bound" in out
     source = (tmp_path / f"{stem}.c").read_text()
     assert f"{stem}_K" not in source and f"&{stem}_spline" in source
-    assert "stsp_qspline_t" in source and "&stsp_spline_code" in source
+    assert "stsp_qspline_t" in source and "&stsp_spline_ops" in source
 
 
 def test_file_option_selects_the_spline(tmp_path, capsys):

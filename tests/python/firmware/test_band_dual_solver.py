@@ -15,7 +15,7 @@ SRC = ROOT / "firmware" / "src" / "stsp_bandqp.c"
 CDEF = """
 typedef int... stsp_bandqp_status_t;
 typedef struct { uint16_t q; uint16_t nx; const double *Nt; const double *mt; const double *W;
-                 const double *lo; const double *hi; } stsp_bandqp_t;
+                 const double *lo; const double *hi; ...; } stsp_bandqp_t;
 typedef struct { ...; } stsp_bandqp_work_t;
 stsp_bandqp_status_t stsp_bandqp_solve(const stsp_bandqp_t *qp, const float *x0, double *lam,
                                        stsp_bandqp_work_t *work, uint32_t *candidates);

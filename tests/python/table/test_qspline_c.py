@@ -16,7 +16,7 @@ CDEF = """
 typedef struct {
     uint32_t n_entries; uint32_t n_coef;
     const uint8_t *span_log2; const uint16_t *row_start; const uint8_t *col;
-    const uint8_t *shift; const uint32_t *coef_start; const %(s)s *coef;
+    const uint8_t *shift; const uint32_t *coef_start; const %(s)s *coef; ...;
 } stsp_qspline_t;
 int every_tick(const stsp_qspline_t *sp, const uint32_t *stage_start, uint32_t n_stages,
                uint32_t nu, uint32_t nz, %(s)s *out);
@@ -52,7 +52,7 @@ def _module(arith):
     key = source_key([cdef, SOURCE, *flags, *(p.read_bytes() for p in srcs),
                       (fw / "src" / "stsp_qspline.h").read_bytes(),
                       (fw / "src" / "stsp_internal.h").read_bytes(),
-                      (fw / "include" / "stospline" / "stsp_controller.h").read_bytes()])
+                      *(p.read_bytes() for p in sorted((fw / "include").rglob("*.h")))])
     mod = f"_qspline_{arith}_{key}"
     path = cached_build(key, mod, lambda out: compile_cffi(
         out, mod, cdef, SOURCE, sources=srcs,

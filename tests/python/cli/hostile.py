@@ -195,6 +195,15 @@ def m_unknown_key(doc, draw):
     target[draw(st.sampled_from(["Aa", "tick", "weight ", "x0", "é", "constraint", "G"]))] = 1.0
 
 
+def _copy(v):
+    """A deep copy, or `v` itself where it nests deeper than Python's recursion limit (a
+    `deep_nesting` value: the duplicate then shares it, which no later mutation minds)."""
+    try:
+        return copy.deepcopy(v)
+    except RecursionError:
+        return v
+
+
 def m_shape(doc, draw):
     """Drop, duplicate or append an element, or wrap/unwrap a value in a list."""
     p = _pick_path(doc, draw, lambda v: isinstance(v, list))
@@ -205,7 +214,7 @@ def m_shape(doc, draw):
     if how == "drop" and v:
         v.pop(draw(st.integers(0, len(v) - 1)))
     elif how == "dup" and v:
-        v.append(copy.deepcopy(v[-1]))
+        v.append(_copy(v[-1]))
     elif how == "append":
         v.append(0.0)
     elif how == "wrap":

@@ -36,12 +36,16 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[_var] = "1"
 
 import argparse                                     # noqa: E402
-import time                                         # noqa: E402
+import sys                                          # noqa: E402
+from pathlib import Path                            # noqa: E402
 
 import numpy as np                                  # noqa: E402
 
 from stospline.pipeline import design_problem       # noqa: E402
 from stospline.problem import parse_problem         # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from varying_design import median_time              # noqa: E402  (cold runs, as there)
 
 HORIZON, HZ, WEIGHT = 3.0, 1000, 10.0
 
@@ -115,26 +119,6 @@ def same_problem(n: int, drake_result, problem) -> float:
     j_drake = float(np.ravel(drake_result.s0.value(0.0))[0])
     j_ours = design_continuous(problem).J0
     return abs(j_drake - j_ours) / abs(j_ours)
-
-
-def cold():
-    """Forget the tick maps and samples cached by earlier runs, as a new process would."""
-    from stospline.design import varying
-    from stospline.sim import oracle
-    varying._CACHE.clear()
-    oracle._MAPS.clear()
-
-
-def median_time(fn, repeat: int) -> float:
-    cold()
-    fn()
-    times = []
-    for _ in range(repeat):
-        cold()
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return float(np.median(times))
 
 
 def main() -> None:

@@ -9,7 +9,7 @@
 # robot_monotone (a region at every tick) and robot_narrow_corridor (bands beyond the 8 rows
 # of a band dual; 2-tick stages: its spline table is 1.3x larger), both of which latch the
 # state: their feed-forward is restored so that every constraint row holds for the design's
-# x0 (host/stospline/table/spline_restore.py). robot_patrol_60s has only its spline table,
+# x0 (host/stospline/table/spline/restore.py). robot_patrol_60s has only its spline table,
 # its file's [design] table;
 # and the robot's fixed-point spline tables (<name>_q15_spline.*, <name>_q31_spline.*).
 set -euo pipefail

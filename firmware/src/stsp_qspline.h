@@ -1,5 +1,5 @@
 /* Fixed-point (Q15/Q31) spline gains: the evaluation of issue 13's compressed format in the
- * fixed-point builds (host: stospline/table/qspline.py, whose evaluate_q it reproduces bit for
+ * fixed-point builds (host: stospline/table/spline/fixed_point.py, whose evaluate_q it reproduces bit for
  * bit). Private: not installed. The per-tick evaluation, tested on its own
  * (tests/c/test_qspline.c, tests/python/table/test_qspline_c.py); the controller's Q spline
  * tick (stsp_spline.c) uses stsp_qspline_basis and stsp_qspline_narrow below.
@@ -30,7 +30,7 @@
 #define STSP_QSPLINE_MAX_SPAN_LOG2 9u
 #define STSP_QSPLINE_MAX_SHIFT 30u
 
-/* stsp_qspline_t (the arrays of stospline.table.qspline.QSplineGains) is public: a Q15/Q31
+/* stsp_qspline_t (the arrays of stospline.table.spline.fixed_point.QSplineGains) is public: a Q15/Q31
  * table's spline member (stospline/stsp_controller.h). */
 
 /* sigma of tick tau in a stage of spans 2^k, and P[0..3] (k <= 9). */

@@ -33,8 +33,8 @@ _EXPORTS = {
     "flash_bytes": "table.flash",
     # running the compiled firmware
     "simulate_problem": "pipeline", "simulation_summary": "pipeline",
-    "table_of": "table.format", "evaluate_table": "sim.oracle",
-    "build_controller": "sim.controller", "generate_c": "table.codegen", "plot_corridor": "report.plot",
+    "table_of": "table.format", "evaluate_table": "oracle.evaluate",
+    "build_controller": "harness.controller", "generate_c": "table.codegen", "plot_corridor": "report.plot",
 }
 
 __all__ = ["__version__", *_EXPORTS]

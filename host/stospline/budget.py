@@ -264,9 +264,9 @@ def monte_carlo_terms(problem: Problem, *, paths: int, substeps: int = 2, worker
                       record: int = 0, n_latch: int | None = None,
                       delay_ticks: int = 0) -> list[Term]:
     """The Monte Carlo run's terms: its paths (with their corridor watch and `workers` forked
-    processes, each running a block of `sim.montecarlo.BLOCK_PATHS` paths), the oracle of the
+    processes, each running a block of `harness.montecarlo.BLOCK_PATHS` paths), the oracle of the
     plant scheme, and the corridors' exit bounds of its summary."""
-    from stospline.sim.montecarlo import BLOCK_PATHS
+    from stospline.harness.montecarlo import BLOCK_PATHS
     n, m, mz = problem.n, problem.m, problem.mz
     n += m * (delay_ticks == 1)
     if n_latch is None:
@@ -311,7 +311,7 @@ def _corridor_walls(problem: Problem) -> float:
 
 
 def _corridor_bounds_term(problem: Problem, n: int, m: int, T: int) -> Term:
-    """The corridors' exit bounds (`sim.exit_bound.corridor_outputs`): one oracle pass that
+    """The corridors' exit bounds (`oracle.exit_bound.corridor_outputs`): one oracle pass that
     records the outputs' (or, for more rows than states, the state's) moments at every
     tick, then each corridor's walls at its ticks, one corridor at a time."""
     from stospline.problem.corridors import corridor_ticks

@@ -215,7 +215,7 @@ def _limits(args) -> dict:
 def _workers(args) -> int:
     """The worker processes of the run: --workers (default: every core), at most the cores
     this process may use unless --force-workers; a note on stderr when it limits them."""
-    from stospline.sim.montecarlo import usable_workers
+    from stospline.harness.montecarlo import usable_workers
     workers = usable_workers(args.workers, args.force_workers)
     if args.workers is not None and workers < args.workers and not getattr(args, "_workers_noted", False):
         args._workers_noted = True
@@ -271,9 +271,9 @@ def _load_with_faults(args):
 
 def _check_faults_runnable(args, problem) -> None:
     """Refuse, before the design, faults the harness cannot run around this problem's table
-    (`sim.montecarlo.faults_unsupported`: what the table will be is known from the options)."""
+    (`harness.montecarlo.faults_unsupported`: what the table will be is known from the options)."""
     from types import SimpleNamespace
-    from stospline.sim.montecarlo import faults_unsupported
+    from stospline.harness.montecarlo import faults_unsupported
     if not problem.faults.any:
         return
     opts = _options(args, problem)
@@ -428,12 +428,12 @@ def _report(args) -> int:
     from stospline.atomic import write_file
     from stospline.pipeline import simulation_summary
     from stospline.report.html import report_html
-    from stospline.sim.fault_sweep import SWEEP_ROWS
+    from stospline.harness.fault_sweep import SWEEP_ROWS
     sweep_paths = SWEEP_ROWS * args.fault_paths
     d, mc = _monte_carlo(args, "report", record=REPORT_RECORD, extra_paths=sweep_paths)
     summary = simulation_summary(d, mc, seed=args.seed)
     rows = None
-    from stospline.sim.montecarlo import faults_unsupported
+    from stospline.harness.montecarlo import faults_unsupported
     why_not = faults_unsupported(d.problem, d.table)
     if args.fault_paths and why_not:
         progress.note(f"no fault table: {why_not}")

@@ -38,11 +38,11 @@ from stospline.errors import ProblemError
 from stospline.pipeline import design_problem
 from stospline.problem.inputfile import decode_problem
 from stospline.problem.reader import parse_problem
-from stospline.sim.controller import build_controller
-from stospline.sim.exit_bound import exit_bounds
-from stospline.sim.exit_stats import CONFIDENCE, clopper_pearson_upper
-from stospline.sim.montecarlo import simulate
-from stospline.sim.oracle import evaluate_table
+from stospline.harness.controller import build_controller
+from stospline.oracle.exit_bound import exit_bounds
+from stospline.harness.exit_stats import CONFIDENCE, clopper_pearson_upper
+from stospline.harness.montecarlo import simulate
+from stospline.oracle.evaluate import evaluate_table
 
 __all__ = ["STRIP_WEIGHTS", "RATE_WEIGHTS", "SEARCH_SEED", "CERTIFY_SEED", "ATTEMPTS",
            "Candidate", "Exits", "SearchResult", "target_corridor", "with_weights", "candidate",

@@ -1,7 +1,7 @@
 """What Python shares with the firmware's public header, in one place: the arithmetics, the
 table's magic, format version and scalar kinds, and the status codes. `check_header` compares
 them with the header the firmware is compiled from, every time the harness compiles it
-(`stospline.sim.controller.build_controller`), so a header change that Python does not follow
+(`stospline.harness.controller.build_controller`), so a header change that Python does not follow
 stops the build naming the difference instead of running with stale numbers. (Struct layouts
 need no copy: the harness compiles against the header itself, in cffi's API mode.)"""
 from __future__ import annotations

@@ -14,15 +14,16 @@ from stospline.design.bands import design_bands, has_bands
 from stospline.design.continuous import DesignError, design_continuous
 from stospline.design.varying import mean_maps
 from stospline.design.zoh import check_delay, design_zoh
-from stospline.sim.controller import build_controller
-from stospline.sim.montecarlo import (MonteCarloResult, check_counts, joint_verdict, simulate,
+from stospline.harness.controller import build_controller
+from stospline.harness.montecarlo import (MonteCarloResult, check_counts, joint_verdict, simulate,
                                       usable_workers, z_value)
-from stospline.sim.oracle import Moments, evaluate_continuous, evaluate_table, state_range
-from stospline.sim.plant_scheme import SubstepChoice, choose_substeps, scheme_moments
-from stospline.sim.fault_oracle import evaluate_with_faults, has_exact_oracle
-from stospline.sim.spline_certificate import certificate, spline_table
-from stospline.table.spline_restore import is_state_latching
-from stospline.sim.every_tick import EveryTick, design_every_tick, every_tick_check
+from stospline.oracle.evaluate import Moments, evaluate_continuous, evaluate_table, state_range
+from stospline.harness.plant_scheme import SubstepChoice, choose_substeps, scheme_moments
+from stospline.oracle.faults import evaluate_with_faults, has_exact_oracle
+from stospline.refine.spline_certificate import certificate
+from stospline.table.spline import spline_table
+from stospline.table.spline.restore import is_state_latching
+from stospline.refine.every_tick import EveryTick, design_every_tick, every_tick_check
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem, ProblemError
 from stospline.table.format import GainTable, TickGains, table_of
@@ -79,10 +80,10 @@ class Designed:
     law: Moments
     implemented: Moments
     # With ``table="spline"``: what the spline table costs and saves, for the law exactly as
-    # the firmware evaluates it (`stospline.sim.spline_certificate.certificate`).
+    # the firmware evaluates it (`stospline.refine.spline_certificate.certificate`).
     certificate: dict | None = None
     # With [[regions]] at every tick: how they were met, by constraint generation or the
-    # tick-grid QP (`stospline.sim.every_tick.EveryTick`).
+    # tick-grid QP (`stospline.refine.every_tick.EveryTick`).
     every_tick: EveryTick | None = None
 
     def gains(self, *, quantized: bool = True):
@@ -122,11 +123,11 @@ def design_problem(problem: Problem, *, noise: bool = True,
     table : {"per-tick", "spline"}, optional
         The table the firmware runs: one row of gains per tick, or cubic B-splines of the
         gains per stage, with the latch maps re-solved so that the expected constraints hold
-        for the law as the firmware evaluates it (`stospline.table.spline`; time-varying data,
+        for the law as the firmware evaluates it (`stospline.table.spline.fit`; time-varying data,
         a one-tick delay and a band dual of at most 8 rows included), or, for a table that
         latches the state (bands beyond a band dual, regions at every tick by the tick-grid
         QP), its k0 coefficients corrected so that every constraint row holds for the
-        design's x0 (`stospline.table.spline_restore`). ``implemented`` is then the
+        design's x0 (`stospline.table.spline.restore`). ``implemented`` is then the
         spline law's and ``certificate`` says what it costs. Default: the problem's
         ``[design] table``, else "per-tick".
     spline_tolerance : float, optional
@@ -245,7 +246,8 @@ def _design_problem(problem: Problem, *, noise: bool, discretization: str,
             raise DesignError("design.table", "a region at every tick met by a band dual (at "
                                               "most 8 rows) has no spline table: its other "
                                               "ticks are not restored; use table \"per-tick\"")
-        table = spline_table(problem, exact, per_tick, spline_tolerance)
+        table = spline_table(problem, exact, spline_tolerance, per_tick=per_tick,
+                             varying_maps=mean_maps)
     def evaluate_exact():
         return evaluate_table(problem, exact, path=False)
     # A spline's certificate checks every row of a region at every tick: the mean path.
@@ -444,18 +446,18 @@ def fixed_point_spline(d: Designed, arith: str, *, tolerance: float | None = Non
 
     The gains of the per-tick Q table (`fixed_point_table`, same scales) as uniform cubic
     B-splines with integer coefficients, evaluated in exact integer arithmetic
-    (`stospline.table.qspline`); the latch maps re-solved for the gains as evaluated; the
+    (`stospline.table.spline.fixed_point`); the latch maps re-solved for the gains as evaluated; the
     error bound computed from them. ``tolerance``: the fit's relative budget per entry
     (default: the design's spline tolerance, else the problem's, else 1e-5).
 
     Returns ``(table, certificate)``: a `FixedPointTable` whose ``spline`` is the
     `QSplineGains` and whose K, k0, L its evaluation at every tick, bit for bit; the
-    certificate as `stospline.sim.spline_certificate.q_certificate`.
+    certificate as `stospline.refine.spline_certificate.q_certificate`.
 
     Raises DesignError naming ``design.table`` for what has no spline table (as for float32)
     or ``design.spline_tolerance`` when a stage cannot meet the tolerance."""
-    from stospline.sim.spline_certificate import q_certificate
-    from stospline.table.qspline import dequantized, q_spline_table
+    from stospline.refine.spline_certificate import q_certificate
+    from stospline.table.spline.fixed_point import dequantized
     if d.table.delay_ticks:
         raise DesignError("design.delay_ticks", f"a design for a one-tick delay has float32 "
                                                 f"tables only, not {arith}")
@@ -473,8 +475,8 @@ def fixed_point_spline(d: Designed, arith: str, *, tolerance: float | None = Non
         x_range = state_range(d.problem, d.table, sigmas=sigmas)
     per_tick = quantize_table(exact, arith, x_range)
     try:
-        ft = q_spline_table(d.problem, exact, arith, x_range, tolerance,
-                            varying_maps=mean_maps)
+        ft = spline_table(d.problem, exact, tolerance, arith=arith, x_range=x_range,
+                          varying_maps=mean_maps)
     except DesignError:
         raise
     except ValueError as exc:            # scale exponents beyond STSP_Q_EXP_MAX
@@ -534,7 +536,7 @@ def check_implementable(d: Designed) -> None:
 
 def loop_moments(d: Designed, faults: Faults | None = None) -> Moments:
     """The exact moments the Monte Carlo run is compared with: the implemented law's
-    (`Designed.implemented`) without faults, the fault oracle's (`sim.fault_oracle`) in a loop
+    (`Designed.implemented`) without faults, the fault oracle's (`oracle.faults`) in a loop
     with linear `faults` (default ``d.problem.faults``). Nonlinear faults (quantization, missed
     ticks) have none: the fault-free loop's moments are returned, and the verdict says the run
     is not comparable."""
@@ -563,11 +565,11 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
     substeps : int, "auto" or SubstepChoice
         Plant steps per controller tick. "auto" (default): the fewest (a power of two) whose
         exact bias in the expected cost is at most 0.1 Monte Carlo standard errors of this
-        run (`sim.plant_scheme.choose_substeps`, or `plan_substeps` beforehand); the choice is
+        run (`harness.plant_scheme.choose_substeps`, or `plan_substeps` beforehand); the choice is
         in the result's ``substep_choice``.
     workers : int, optional
         Processes that run the blocks of paths (default: every core; the numbers are the same
-        for any count, `sim.montecarlo.simulate`); at most the cores this process may use
+        for any count, `harness.montecarlo.simulate`); at most the cores this process may use
         unless `force_workers`.
     record : int
         Keep the states of this many paths at every tick (``record_x``; for reports).
@@ -662,10 +664,10 @@ def simulation_estimate(d: Designed, *, paths: int, substeps: int, workers: int 
 
 def fault_sweep(d: Designed, *, paths: int, seed: int, substeps: int,
                 workers: int | None = None, scheduler: str | None = None, build_dir=None):
-    """The fault table of the design (`sim.fault_sweep.fault_table`): each fault of the loop
+    """The fault table of the design (`harness.fault_sweep.fault_table`): each fault of the loop
     at a few levels relative to the plan, the fault oracle beside Monte Carlo through the
     compiled C controller (`paths` paths per level, the same `seed`)."""
-    from stospline.sim.fault_sweep import fault_table
+    from stospline.harness.fault_sweep import fault_table
     check_implementable(d)
     ctl = build_controller(d.table, build_dir=build_dir)
     return fault_table(d.problem, ctl, paths=paths, seed=seed, substeps=substeps,
@@ -675,7 +677,7 @@ def fault_sweep(d: Designed, *, paths: int, seed: int, substeps: int,
 def plan_substeps(d: Designed, *, paths: int, seed: int, build_dir=None,
                   faults: Faults | None = None) -> SubstepChoice:
     """The plant steps per tick ``simulate_problem(..., substeps="auto")`` would choose for
-    this run (`sim.plant_scheme.choose_substeps`); pass the result as its `substeps` to run
+    this run (`harness.plant_scheme.choose_substeps`); pass the result as its `substeps` to run
     with it, e.g. after checking that run's cost."""
     check_implementable(d)
     ctl = build_controller(d.table, build_dir=build_dir)
@@ -779,13 +781,13 @@ def _command_range(mc: MonteCarloResult) -> dict:
 
 
 def _corridors(d: Designed, mc: MonteCarloResult) -> dict:
-    """``{"corridors": [...]}`` when the problem has corridors (`sim.exit_stats`): the Monte
+    """``{"corridors": [...]}`` when the problem has corridors (`harness.exit_stats`): the Monte
     Carlo exit probability with its one-sided 99 % upper bound, and the exact oracle's
     Cantelli (valid) and Gaussian (assumed) union bounds, for the fault-free loop (None for a
     table designed for a delay)."""
     if not d.problem.corridors or mc.exit_tick is None:
         return {}
-    from stospline.sim.exit_stats import corridor_report
+    from stospline.harness.exit_stats import corridor_report
     # The oracle's output moments exist for tables designed without a delay.
     bounded = not getattr(d.table, "delay_ticks", 0)
     rep = corridor_report(d.problem, d.table, mc.exit_tick, mc.exit_wall,
@@ -806,7 +808,7 @@ def _substep_choice(mc: MonteCarloResult) -> dict:
 
 
 def verdict(summary: dict, confidence: float = 0.99) -> dict:
-    """Whether the Monte Carlo run agrees with the oracle (`sim.montecarlo.joint_verdict`):
+    """Whether the Monte Carlo run agrees with the oracle (`harness.montecarlo.joint_verdict`):
     the mean cost and every knot-mean component, each by its z-score in the summary, within
     the two-sided normal bound Bonferroni-corrected so that a correct controller passes all
     of them at once with probability `confidence`. Saturation makes the run incomparable: the

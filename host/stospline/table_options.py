@@ -16,7 +16,7 @@ TABLE_KINDS = ("per-tick", "spline")
 DEFAULT_SPLINE_TOLERANCE = 1e-5
 # 2^-21 = 4 float32 roundings (float32's epsilon is 2^-23, relative to the entry's largest):
 # the float32 coefficients and the float32 evaluation of the spline cannot promise less,
-# whatever the knots (`stospline.table.spline.fit_spline`).
+# whatever the knots (`stospline.table.spline.fit.fit_spline`).
 MIN_SPLINE_TOLERANCE = 2.0 ** -21
 _TOLERANCE_RANGE = (MIN_SPLINE_TOLERANCE, 0.1)
 

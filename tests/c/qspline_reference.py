@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Expected values for tests/c/test_qspline.c, computed independently of the firmware and of
-stospline.table.qspline: the fixed-point spline format's gains as exact rationals
+stospline.table.spline.fixed_point: the fixed-point spline format's gains as exact rationals
 (`fractions.Fraction`: the uniform cubic B-splines at t = d / D times the coefficients
 6 c / 2^s, rounded half up). Prints the C constants test_qspline.c pastes
 (QSPLINE_EXPECTED, QSPLINE_EXTREME_Q15, QSPLINE_EXTREME_Q31).

@@ -1,6 +1,6 @@
 /* Unit tests of the fixed-point spline gains (firmware/src/stsp_qspline.c) on a hand-made
  * table Q, against tests/c/qspline_reference.py (exact rationals, independent of the
- * firmware and of the host's stospline.table.qspline): every gain of every tick, bit for bit;
+ * firmware and of the host's stospline.table.spline.fixed_point): every gain of every tick, bit for bit;
  * the exact value at the format's extremes (int16/int32 coefficients alternating between the
  * type's ends, 512-tick spans, shifts 1 and 30), where the int64 sum is largest; the basis
  * numerators sum to 6 D^3; the layout check refuses each broken rule. Built for Q15 and Q31,

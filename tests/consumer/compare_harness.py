@@ -3,7 +3,7 @@
     .venv/bin/python tests/consumer/compare_harness.py OUTPUT
 
 OUTPUT holds main.c's lines ``tick status x0 x1 x2 x3 u0 u1`` (C99 hex floats). The harness
-(`stospline.sim.controller.build_controller`) compiles the firmware with the robot's table as the
+(`stospline.harness.controller.build_controller`) compiles the firmware with the robot's table as the
 designer makes it today, after checking that this is byte for byte the gains/robot_corridor.c
 the consumer linked; it then steps one instance with the same ticks and states. Every status
 and every command must be identical (float32 bit patterns, the sign of zero included), the run
@@ -36,7 +36,7 @@ def read_run(path: Path):
 
 def main(argv: list[str]) -> int:
     from stospline.table.codegen import generate_c
-    from stospline.sim.controller import build_controller
+    from stospline.harness.controller import build_controller
     from stospline.pipeline import design_problem
     from stospline.problem import load_problem
 

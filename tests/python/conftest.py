@@ -48,5 +48,5 @@ def robot_zoh(robot_problem):
 
 @pytest.fixture(scope="session")
 def robot_controller(robot, tmp_path_factory):
-    from stospline.sim.controller import build_controller
+    from stospline.harness.controller import build_controller
     return build_controller(robot.table)

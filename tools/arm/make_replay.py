@@ -63,7 +63,7 @@ from pathlib import Path
 import numpy as np
 
 from stospline.design.discretize import zoh
-from stospline.sim.controller import build_controller
+from stospline.harness.controller import build_controller
 from stospline.pipeline import design_problem, fixed_point_spline, fixed_point_table
 from stospline.problem import load_problem
 from stospline.table.format import table_crc32

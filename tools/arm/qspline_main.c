@@ -1,7 +1,7 @@
 /* Cortex-M image (tools/arm/qspline_bench.py): the fixed-point spline gains of the robot's Q15 or
  * Q31 spline table (qspline_data.c, generated from the host's table) evaluated at every tick by
  * stsp_qspline_gains; an FNV-1a hash of every gain (int32, little-endian, tick by tick) is
- * compared with the host's (stospline.table.qspline.evaluate_q). With BENCH_COUNT only the
+ * compared with the host's (stospline.table.spline.fixed_point.evaluate_q). With BENCH_COUNT only the
  * first BENCH_COUNT ticks of each stage, for the instruction count (QEMU -singlestep traces). */
 #include <stdint.h>
 #include <stdio.h>

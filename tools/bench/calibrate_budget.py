@@ -188,7 +188,7 @@ def case_estimate(text: str, cmd: list[str]):
     from stospline import budget
     from stospline.cli import REPORT_RECORD
     from stospline.problem import parse_problem
-    from stospline.sim.montecarlo import usable_workers
+    from stospline.harness.montecarlo import usable_workers
     problem = parse_problem(tomllib.loads(text))
 
     def option(name, default):

@@ -4,7 +4,7 @@
 Both simulate the robot corridor (examples/robot_corridor.toml, 6000 ticks at 1 kHz) with the
 same plant scheme (exponential Euler-Maruyama, 2 steps per tick, Gaussian increments):
 
-* **stospline**: `stospline.sim.montecarlo.simulate`, the compiled C controller of the
+* **stospline**: `stospline.harness.montecarlo.simulate`, the compiled C controller of the
   float32 table in the loop, blocks of paths spread over `--workers` processes (default:
   every core), the normal numbers from its C generator (xoshiro256++ and a ziggurat);
 * **numpy**: the same closed loop written as one would in numpy, in one process: the law
@@ -36,8 +36,8 @@ import numpy as np  # noqa: E402
 from stospline.expm import expm  # noqa: E402
 from stospline.pipeline import design_problem  # noqa: E402
 from stospline.problem import load_problem  # noqa: E402
-from stospline.sim.controller import build_controller  # noqa: E402
-from stospline.sim.montecarlo import default_workers, simulate  # noqa: E402
+from stospline.harness.controller import build_controller  # noqa: E402
+from stospline.harness.montecarlo import default_workers, simulate  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 SUBSTEPS = 2

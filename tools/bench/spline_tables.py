@@ -55,8 +55,10 @@ import time                                                        # noqa: E402
 from pathlib import Path                                           # noqa: E402
 
 import stospline                                                   # noqa: E402
-from stospline.sim.spline_certificate import (constraint_residual,  # noqa: E402
-                                               first_latch_in_float32, spline_table)
+from stospline.design.varying import mean_maps                     # noqa: E402
+from stospline.refine.spline_certificate import (constraint_residual,  # noqa: E402
+                                               first_latch_in_float32)
+from stospline.table.spline import spline_table                    # noqa: E402
 from stospline.table.flash import flash_bytes                      # noqa: E402
 from stospline.table.format import table_of                        # noqa: E402
 
@@ -74,11 +76,11 @@ for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(v, "1")
 import stospline
 from stospline.design.varying import mean_maps
-from stospline.sim.oracle import state_range
-from stospline.sim.spline_certificate import spline_table
+from stospline.oracle.evaluate import state_range
+from stospline.table.spline import spline_table
 from stospline.table.format import table_of
 from stospline.table.qformat import quantize_table
-from stospline.table.qspline import q_spline_table
+from stospline.table.spline.fixed_point import q_spline_table
 p = stospline.load_problem(sys.argv[1])
 tolerance, arith = float(sys.argv[2]), sys.argv[3]
 t = time.perf_counter()
@@ -89,7 +91,7 @@ exact = table_of(d.design, quantize=False)
 if arith == "float32":
     t_arith = t_design
     t = time.perf_counter()
-    spline_table(p, exact, d.table, tolerance)
+    spline_table(p, exact, tolerance, per_tick=d.table, varying_maps=mean_maps)
 else:                   # after the per-tick Q table, as `pipeline.fixed_point_spline` runs it
     x_range = state_range(p, d.table)
     quantize_table(exact, arith, x_range)
@@ -150,11 +152,10 @@ def _profile(name: str, tolerance: float, repeat: int, arith: str = "float32") -
     exact = table_of(d.design, quantize=False)
     if arith == "float32":
         def compress():
-            spline_table(problem, exact, d.table, tolerance)
+            spline_table(problem, exact, tolerance, per_tick=d.table, varying_maps=mean_maps)
     else:
-        from stospline.design.varying import mean_maps
-        from stospline.sim.oracle import state_range
-        from stospline.table.qspline import q_spline_table
+        from stospline.oracle.evaluate import state_range
+        from stospline.table.spline.fixed_point import q_spline_table
         x_range = state_range(problem, d.table)
 
         def compress():
@@ -183,7 +184,7 @@ def _rounding(examples: list[str], tolerances: list[float], n_starts: int) -> No
     the spline with the exact (float64) re-solved maps."""
     from dataclasses import replace
     from stospline.design.varying import mean_maps
-    from stospline.table.spline_latch import resolve_latch
+    from stospline.table.spline.latch import resolve_latch
     print("| example | tolerance | per-tick: x0 | others | t0 f32 | J | nearest: x0 | others | "
           "t0 f32 | J | shipped: x0 | others | t0 f32 | J |")
     print("|---|" + "---|" * 13)
@@ -197,7 +198,7 @@ def _rounding(examples: list[str], tolerances: list[float], n_starts: int) -> No
         starts = [x0 + rng.normal(0.0, 0.1 * (1 + np.abs(x0).max()), x0.shape)
                   for _ in range(n_starts)]
         for tol in tolerances:
-            sp = spline_table(problem, exact, d.table, tol)
+            sp = spline_table(problem, exact, tol, per_tick=d.table, varying_maps=mean_maps)
             Lam, lam0 = resolve_latch(problem, sp, sp.spline, mean_maps)
             J64 = stospline.evaluate_table(problem, replace(sp, Lambda=Lam, lambda0=lam0),
                                            path=False).J
@@ -303,7 +304,8 @@ def main() -> None:
                                    args.repeat)
         exact = table_of(d.design, quantize=False)
         for tol in tolerances:
-            sp, t_comp = _median_time(lambda: spline_table(problem, exact, d.table, tol),
+            sp, t_comp = _median_time(lambda: spline_table(problem, exact, tol, per_tick=d.table,
+                                                           varying_maps=mean_maps),
                                       args.repeat)
             # Regions at every tick: the residual over their rows needs the mean path.
             path = bool(d.problem.tick_regions)

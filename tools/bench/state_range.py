@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
         print("state_range: --repeat must be at least 1", file=sys.stderr)
         return 2
     from stospline import design_problem, load_problem
-    from stospline.sim import oracle
+    from stospline.oracle import evaluate as oracle
     if oracle._c_kernel() is None:
         print("state_range: the oracle kernel is not built (no C compiler?)", file=sys.stderr)
         return 2

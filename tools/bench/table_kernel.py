@@ -24,9 +24,9 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from stospline.table import qspline  # noqa: E402
+from stospline.table.spline import fixed_point as qspline  # noqa: E402
 from stospline.table.kernels import affine_compose, qspline_stage  # noqa: E402
-from stospline.table.spline_latch import _affine_product_numpy  # noqa: E402
+from stospline.table.spline.latch import _affine_product_numpy  # noqa: E402
 
 
 def _median(work, repeat: int) -> float:

@@ -77,8 +77,8 @@ from stospline.design.zoh import design_zoh         # noqa: E402
 from stospline.pipeline import design_problem       # noqa: E402
 from stospline.problem import parse_problem         # noqa: E402
 from stospline.problem.toml_writer import problem_to_toml   # noqa: E402
-from stospline.sim import oracle                    # noqa: E402
-from stospline.sim.oracle import evaluate_table     # noqa: E402
+from stospline.oracle import evaluate as oracle                    # noqa: E402
+from stospline.oracle.evaluate import evaluate_table     # noqa: E402
 from stospline.table.format import table_of         # noqa: E402
 
 HORIZON, STAGES, SAMPLE_DT = 3.3, 3, 0.1

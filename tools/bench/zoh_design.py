@@ -73,7 +73,7 @@ from stospline.design.kernels import load_kernels          # noqa: E402
 from stospline.design.moments import (augmented_drift, moment_generator,  # noqa: E402
                                running_cost_matrix)
 from stospline.design.latch import latch_groups      # noqa: E402
-from stospline.sim.oracle import evaluate_table         # noqa: E402
+from stospline.oracle.evaluate import evaluate_table         # noqa: E402
 from stospline.problem import load_problem, parse_problem   # noqa: E402
 from stospline.problem.model import ticks_per_stage        # noqa: E402
 from stospline.table.format import table_of                # noqa: E402

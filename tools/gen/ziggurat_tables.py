@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Write host/stospline/sim/ziggurat_tables.h: the 256-layer ziggurat of the standard normal
+"""Write host/stospline/harness/ziggurat_tables.h: the 256-layer ziggurat of the standard normal
 density (Marsaglia & Tsang, "The ziggurat method for generating random variables", J. Stat.
-Softw. 5(8), 2000) for the harness's normal numbers (host/stospline/sim/normals.c).
+Softw. 5(8), 2000) for the harness's normal numbers (host/stospline/harness/normals.c).
 
 Layer i (1 <= i < 256) is the rectangle [0, x_i] x [f(x_i), f(x_{i+1})] with
 x_1 = R, x_{i+1} = f^-1(V / x_i + f(x_i)), x_256 = 0, f(x) = exp(-x^2 / 2); layer 0 is the base
@@ -9,7 +9,7 @@ strip of width x_0 = V / f(R) (the tail beyond R folded in). R and V make every 
 V. For 52-bit magnitudes: ki[i] = 2^52 x_{i+1} / x_i (accept below it without evaluating f),
 wi[i] = x_i / 2^52, fi[i] = f(x_i) (and fi[256] = f(0) = 1, the top of layer 255).
 
-    .venv/bin/python tools/gen/ziggurat_tables.py > host/stospline/sim/ziggurat_tables.h
+    .venv/bin/python tools/gen/ziggurat_tables.py > host/stospline/harness/ziggurat_tables.h
 
 The header is committed (hex floats, so every compiler reads the same bits);
 tests/python/sim/test_normals.py checks that this script still writes it.

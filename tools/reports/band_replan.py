@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from stospline.design.bands import design_bands
-from stospline.sim.controller import build_controller
-from stospline.sim.montecarlo import compare_to_oracle, simulate
-from stospline.sim.oracle import evaluate_table
+from stospline.harness.controller import build_controller
+from stospline.harness.montecarlo import compare_to_oracle, simulate
+from stospline.oracle.evaluate import evaluate_table
 from stospline.table.format import table_of
 from stospline.problem import load_problem
 

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from stospline.sim.oracle import evaluate_table
+from stospline.oracle.evaluate import evaluate_table
 from stospline.pipeline import design_problem
 from stospline.problem import load_problem, parse_problem
-from stospline.sim.region_distance import distance_outside
+from stospline.oracle.region_distance import distance_outside
 
 ROOT = Path(__file__).resolve().parents[2]
 FILE = ROOT / "examples" / "robot_narrow_corridor.toml"

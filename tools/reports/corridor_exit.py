@@ -3,7 +3,7 @@ through the compiled C controller, for today's design of examples/robot_corridor
 
 Designs the file as `stospline design` does (exact zero-order hold at 1 kHz), takes the exact
 mean and covariance of the position at every tick (`evaluate_table(output=C)`), bounds the
-probability of leaving the L-shaped corridor (`sim.exit_bound`: Cantelli, valid; Gaussian, an
+probability of leaving the L-shaped corridor (`oracle.exit_bound`: Cantelli, valid; Gaussian, an
 assumption), then runs PATHS paths of the compiled controller against the stochastic plant
 and counts each path's first exit (tick and wall), with one-sided 99 % Clopper-Pearson upper
 bounds. Prints Markdown (the tables of docs/evidence/corridor-exit.md).
@@ -21,10 +21,10 @@ import numpy as np
 
 from stospline.pipeline import design_problem
 from stospline.problem import load_problem
-from stospline.sim.controller import build_controller
-from stospline.sim.exit_bound import corridor_outputs
-from stospline.sim.exit_stats import corridor_report
-from stospline.sim.montecarlo import simulate
+from stospline.harness.controller import build_controller
+from stospline.oracle.exit_bound import corridor_outputs
+from stospline.harness.exit_stats import corridor_report
+from stospline.harness.montecarlo import simulate
 
 ROOT = Path(__file__).resolve().parents[2]
 FILE = ROOT / "examples" / "robot_corridor.toml"

@@ -20,7 +20,7 @@ import numpy as np
 from stospline.pipeline import design_problem, simulate_problem, simulation_summary
 from stospline.problem import load_problem
 from stospline.problem.faults import Faults
-from stospline.sim.fault_oracle import evaluate_with_faults
+from stospline.oracle.faults import evaluate_with_faults
 
 ROOT = Path(__file__).resolve().parents[2]
 RATES = [100, 1000]

@@ -28,8 +28,8 @@ from stospline.pipeline import design_problem, every_tick_check, start_from
 from stospline.problem import parse_problem
 from stospline.problem.model import Constraint
 from stospline.problem.regions import with_bands
-from stospline.sim.every_tick import active_ticks, design_every_tick, tick_violation
-from stospline.sim.oracle import evaluate_table
+from stospline.refine.every_tick import active_ticks, design_every_tick, tick_violation
+from stospline.oracle.evaluate import evaluate_table
 from stospline.table.format import table_of
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """The fault table of every shipped example (docs/evidence/faults.md): each fault of the loop
-at a few levels relative to the plan (`stospline.sim.fault_sweep.default_levels`), the fault
+at a few levels relative to the plan (`stospline.harness.fault_sweep.default_levels`), the fault
 oracle's exact numbers where the fault is linear beside Monte Carlo through the compiled C
 controller, with the same seed for every row.
 
@@ -21,8 +21,8 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 from stospline.atomic import write_file  # noqa: E402
 from stospline.pipeline import design_problem, fault_sweep, plan_substeps  # noqa: E402
 from stospline.problem import load_problem  # noqa: E402
-from stospline.sim.fault_sweep import fault_table_markdown  # noqa: E402
-from stospline.sim.montecarlo import faults_unsupported  # noqa: E402
+from stospline.harness.fault_sweep import fault_table_markdown  # noqa: E402
+from stospline.harness.montecarlo import faults_unsupported  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 

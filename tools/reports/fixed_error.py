@@ -6,7 +6,7 @@ the table's documented bound, and the closed-loop distance to the float32 contro
     .venv/bin/python tools/reports/fixed_error.py [--samples N] [--seed S]
 
 The same computation as tests/python/firmware/test_fixed_point.py (which asserts on it),
-both through `stospline.sim.fixed_point_error`: for each sample a random tick, a random latch
+both through `stospline.harness.fixed_point_error`: for each sample a random tick, a random latch
 state and a random state over the whole Q range; a fresh C instance latches at the tick's
 latch stage and is stepped at the tick; u_double is the design's law in double precision at
 the same real states.
@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from stospline.table.qformat import latch_q, law_double, law_q
-from stospline.sim.fixed_point_error import noise_free_closed_loop, random_q_samples
-from stospline.sim.controller import build_controller
+from stospline.harness.fixed_point_error import noise_free_closed_loop, random_q_samples
+from stospline.harness.controller import build_controller
 from stospline.pipeline import design_problem, fixed_point_table
 from stospline.problem import load_problem
 

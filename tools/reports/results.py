@@ -11,8 +11,8 @@ import numpy as np
 
 from stospline.design.continuous import design_continuous
 from stospline.design.zoh import design_zoh
-from stospline.sim.montecarlo import compare_to_oracle
-from stospline.sim.oracle import evaluate_continuous, evaluate_table
+from stospline.harness.montecarlo import compare_to_oracle
+from stospline.oracle.evaluate import evaluate_continuous, evaluate_table
 from stospline.pipeline import design_problem, simulate_problem
 from stospline.problem import load_problem
 

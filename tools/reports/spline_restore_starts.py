@@ -1,4 +1,4 @@
-"""Spline tables of designs that latch the state (`stospline.table.spline_restore`): the worst
+"""Spline tables of designs that latch the state (`stospline.table.spline.restore`): the worst
 constraint violation over every row (knot rows, region rows at every tick) from the design's
 x0 and from other starts, for the per-tick float32 table, the spline table and the plain fit
 (the restoration skipped), by the exact oracle; also as a multiple of each row's float32 floor
@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 import stospline
-from stospline.sim.oracle import evaluate_table
-from stospline.table import spline_restore as sr
+from stospline.oracle.evaluate import evaluate_table
+from stospline.table.spline import restore as sr
 from stospline.table.format import table_of
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -25,10 +25,10 @@ import numpy as np
 
 from stospline.pipeline import design_problem
 from stospline.problem import load_problem
-from stospline.sim.oracle import evaluate_table
+from stospline.oracle.evaluate import evaluate_table
 from stospline.table.format import table_of
-from stospline.table.spline import INITIAL_SPANS, max_relative_error
-from stospline.table.spline_compress import compress
+from stospline.table.spline.fit import INITIAL_SPANS, max_relative_error
+from stospline.table.spline.compress import compress
 
 ROOT = Path(__file__).resolve().parents[2]
 TOLERANCES = [1e-2, 1e-3, 1e-4, 1e-5, 1e-6]

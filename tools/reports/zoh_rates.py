@@ -12,7 +12,7 @@ import numpy as np
 
 from stospline.design.continuous import design_continuous
 from stospline.design.zoh import design_zoh
-from stospline.sim.oracle import evaluate_table
+from stospline.oracle.evaluate import evaluate_table
 from stospline.problem import load_problem
 from stospline.table.format import table_of
 

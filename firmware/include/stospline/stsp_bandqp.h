@@ -20,7 +20,7 @@
  *
  * Spline tables (non-symmetric W). For a law whose gains are a spline's evaluation, the
  * expected outputs are y = e - W lam with W = -C2 Gamma' computed under the evaluated gains
- * (host: stospline.table.spline_band): close to the design's SPD W, but not symmetric. The
+ * (host: stospline.table.spline.band): close to the design's SPD W, but not symmetric. The
  * conditions above are then a (mixed, box-constrained) linear complementarity problem, no
  * longer the optimality conditions of a concave dual. The host accepts such a table only when
  * W is a P-matrix (every principal minor positive); then, for every e, exactly one active set

@@ -78,7 +78,7 @@ typedef struct {
 #ifdef STSP_ARITH_FIXED_POINT
 /**
  * Fixed-point spline gains (Q15/Q31 builds; issue 13's compressed format, host
- * stospline.table.qspline): each stage's gains as uniform cubic B-splines of the tick, with
+ * stospline.table.spline.fixed_point): each stage's gains as uniform cubic B-splines of the tick, with
  * integer coefficients in the per-tick format's scaling (negated, stsp_table_t). Stage s of
  * T_s ticks has spans of D = 2^k ticks (k = span_log2[s] <= 9), S = ceil(T_s / D) spans and
  * S + 3 coefficients per stored entry. Arrays concatenated over the stages s = 0..n_stages-1:

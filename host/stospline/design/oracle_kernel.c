@@ -1,4 +1,4 @@
-/* Host-side kernel of the exact moment oracle (stospline.sim.oracle.evaluate_table): the forward
+/* Host-side kernel of the exact moment oracle (stospline.oracle.evaluate.evaluate_table): the forward
  * second-moment recursion over the controller ticks of one time-invariant stage.  Not
  * firmware: it runs on the design host, in double precision, called through cffi
  * (stospline.design.kernels), and equals the numpy loop of evaluate_table to rounding.

@@ -4,7 +4,7 @@ A corridor says that over the ticks of ``t = [a, b]`` (both ends included) the o
 ``y = C x`` lies in a union of convex polygons, polygon ``P_k = {y : A_k y <= b_k}``, and
 optionally that a design must keep the probability of leaving it at any of those ticks at
 most ``epsilon``. The design ignores corridors unless asked; the oracle bounds
-(`stospline.sim.exit_bound`) and the Monte Carlo harness (`stospline.sim.montecarlo`) measure
+(`stospline.oracle.exit_bound`) and the Monte Carlo harness (`stospline.harness.montecarlo`) measure
 them.
 
 Walls. Every row of every polygon is a *wall*, numbered through the polygons in order (wall

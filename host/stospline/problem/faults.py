@@ -15,7 +15,7 @@ say how the loop it runs in differs. Per tick ``j`` (``docs/guide/problem-file.m
   ``plant_B_scale`` and ``plant_noise_scale`` (model mismatch).
 
 Sensor noise, delay, actuator noise and model mismatch keep the loop linear, so the fault
-oracle (`stospline.sim.fault_oracle`) predicts their moments exactly; quantization and missed
+oracle (`stospline.oracle.faults`) predicts their moments exactly; quantization and missed
 ticks do not, and are measured by Monte Carlo only.
 """
 from __future__ import annotations

@@ -143,7 +143,7 @@ class TickRegion:
     """A ``[[regions]]`` entry with ``every = "tick"``: ``lower <= E{C x(t)} <= upper`` at every
     controller tick of ``t = [a, b]``, both ends included, except t0 (where the mean is x0).
     It is not expanded into knots: the design adds band knots at the ticks that need them
-    (`stospline.sim.every_tick`)."""
+    (`stospline.refine.every_tick`)."""
     t: tuple[float, float]
     C: np.ndarray
     lower: np.ndarray

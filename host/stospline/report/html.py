@@ -171,7 +171,7 @@ def _regions(d, mc, exact):
 
 def _regions_text(d) -> str:
     """The every-tick check of the summary as a table (oracle, at every tick and between)."""
-    from stospline.sim.every_tick import every_tick_check
+    from stospline.refine.every_tick import every_tick_check
     s = every_tick_check(d)
     how = ("one sparse QP on the tick grid" if s["method"] == "tick-qp"
            else f"constraint generation ({s['iterations']} designs)")
@@ -229,9 +229,9 @@ def _faults_text(summary: dict) -> str:
 
 
 def _fault_table(rows) -> str:
-    """The fault sweep (`sim.fault_sweep.fault_table`) as an HTML table (the cells of
+    """The fault sweep (`harness.fault_sweep.fault_table`) as an HTML table (the cells of
     `fault_row_cells`; the first two, names, left-aligned)."""
-    from stospline.sim.fault_sweep import FAULT_COLUMNS, fault_row_cells
+    from stospline.harness.fault_sweep import FAULT_COLUMNS, fault_row_cells
     out = ['<table id="fault-table"><tr>' + "".join(f"<th>{html.escape(c)}</th>"
                                                     for c in FAULT_COLUMNS) + "</tr>"]
     for r in rows:
@@ -286,10 +286,10 @@ def _corridor_text(summary: dict) -> str:
 def report_html(d, mc, summary: dict, fault_rows=None, no_fault_table: str | None = None
                 ) -> str:
     """The page for design `d` (`pipeline.Designed`), its Monte Carlo run `mc` and that
-    run's `pipeline.simulation_summary`; `fault_rows` (`sim.fault_sweep.fault_table`) adds
+    run's `pipeline.simulation_summary`; `fault_rows` (`harness.fault_sweep.fault_table`) adds
     the fault table, `no_fault_table` says why there is none."""
-    from stospline.sim.fault_oracle import evaluate_with_faults
-    from stospline.sim.oracle import evaluate_table
+    from stospline.oracle.faults import evaluate_with_faults
+    from stospline.oracle.evaluate import evaluate_table
     p = d.problem
     faults = mc.faults
     exact = (evaluate_with_faults(p, d.table, faults, path=True)

@@ -28,7 +28,7 @@ def plot_corridor(d, mc, out: str | Path, exact=None) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from stospline.sim.oracle import evaluate_table
+    from stospline.oracle.evaluate import evaluate_table
 
     p = d.problem
     axes = plot_axes(p)

@@ -203,7 +203,7 @@ def _float32_variant(table, p: str) -> _Variant:
 
 
 def _spline_arrays(sp, p: str) -> list[str]:
-    """The arrays and the `stsp_spline_t` of a spline table (`stospline.table.spline`)."""
+    """The arrays and the `stsp_spline_t` of a spline table (`stospline.table.spline.fit`)."""
     u32 = lambda x: f"{int(x)}u"  # noqa: E731
     return [
         _array("uint32_t", f"{p}_knot_start", sp.knot_start, u32,
@@ -267,7 +267,7 @@ def _fixed_point_variant(table, p: str) -> _Variant:
 
 def _q_spline_arrays(sp, p: str, arith: str) -> list[str]:
     """The arrays and the `stsp_qspline_t` of a fixed-point spline table
-    (`stospline.table.qspline.QSplineGains`)."""
+    (`stospline.table.spline.fixed_point.QSplineGains`)."""
     u32 = lambda x: f"{int(x)}u"  # noqa: E731
     F = 15 if arith == "q15" else 31
     return [

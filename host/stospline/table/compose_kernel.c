@@ -1,4 +1,4 @@
-/* Host-side kernel of the table layer (stospline.table.spline_latch): the composition of a
+/* Host-side kernel of the table layer (stospline.table.spline.latch): the composition of a
  * stage's affine tick maps under a law as implemented.  Not firmware: it runs on the design
  * host, in double precision, called from Python through cffi (stospline.table.kernels).
  *

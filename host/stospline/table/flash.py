@@ -24,7 +24,7 @@ def _count(k: int) -> int:
 
 
 def spline_bytes(spline) -> int:
-    """Bytes of a spline table's gains (`stospline.table.spline.SplineGains`): its arrays, one
+    """Bytes of a spline table's gains (`stospline.table.spline.fit.SplineGains`): its arrays, one
     element at least each, and its `stsp_spline_t`; float32 only."""
     sizes = ((spline.knot_start, 4), (spline.knot, 4), (spline.row_start, 2), (spline.col, 1),
              (spline.coef_start, 4), (spline.coef, 4))
@@ -46,8 +46,8 @@ def flash_bytes(table, arith: str = "float32") -> int:
     if spline is None:
         total += e * (_count(T * m * n) + _count(T * m) + _count(T * m * n_latch))  # K, k0, L
     elif hasattr(spline, "span_log2"):
-        # a fixed-point spline (`stospline.table.qspline`), linked as a float32 one
-        from stospline.table.qspline import q_spline_bytes
+        # a fixed-point spline (`stospline.table.spline.fixed_point`), linked as a float32 one
+        from stospline.table.spline.fixed_point import q_spline_bytes
         total += q_spline_bytes(spline) + _PTR
     else:
         # + the pointer that links the spline code with the table (stsp_spline_t.ops)

@@ -11,7 +11,7 @@ Layout (all row-major, float32, padded to ``n_latch`` multipliers with zeros)::
     u_hold[i]            (m,)               the safe command of a refused step
     band_qp (optional)                      the band dual re-solved at the t0 latch (BandQP)
     spline (optional)                       the gains as cubic B-splines per stage
-                                            (`stospline.table.spline`); K, k0, L then hold
+                                            (`stospline.table.spline.fit`); K, k0, L then hold
                                             their evaluation, tick by tick, as the firmware
                                             computes it, and are not written to the C
 
@@ -57,11 +57,11 @@ class BandQP:
     (``stsp_bandqp.h``): multipliers ``lam`` maximising
     ``2 lam'e - lam'W lam - 2 sum(lam_i > 0 ? lam_i hi_i : lam_i lo_i)``, ``e = Nt x0 + mt``.
     Stored in float64 (the solver works in double precision). In a spline table W is not
-    symmetric: the multipliers then solve the box LCP of `stospline.table.spline_band`."""
+    symmetric: the multipliers then solve the box LCP of `stospline.table.spline.band`."""
     Nt: np.ndarray   # (q, n)
     mt: np.ndarray   # (q,)
     W: np.ndarray    # (q, q), symmetric positive definite; a spline table's, re-solved for
-                     # its gains (`stospline.table.spline_band`): a non-symmetric P-matrix
+                     # its gains (`stospline.table.spline.band`): a non-symmetric P-matrix
     lo: np.ndarray   # (q,) lower bounds (lo == hi: an equality row)
     hi: np.ndarray   # (q,)
 
@@ -135,12 +135,12 @@ class GainTable(TableShape):
     # now (the previous tick's output; u_hold at the first tick), and its output is applied at
     # the next tick. Not stored in the firmware's table: the caller's contract.
     delay_ticks: int = 0
-    # A spline table (`stospline.table.spline.SplineGains`): the firmware evaluates K, k0 and L
+    # A spline table (`stospline.table.spline.fit.SplineGains`): the firmware evaluates K, k0 and L
     # from it at every tick; the arrays K, k0, L above are that evaluation (bit for bit), so
     # the oracle, the fault oracle and the summaries read them as for a per-tick table.
     spline: object | None = None
     # A spline table of a design that latches the state: how its constraints were restored
-    # for the design's x0 (`stospline.table.spline_restore.restore`: rows, active, rounds).
+    # for the design's x0 (`stospline.table.spline.restore.restore`: rows, active, rounds).
     restored: dict | None = field(default=None, compare=False)
 
     def __post_init__(self):
@@ -349,7 +349,7 @@ def table_crc32(table: GainTable) -> int:
 
 def _spline_crc_parts(sp) -> list[bytes]:
     """A spline's part of the CRC serialization (`table_crc32`): float32
-    (`stospline.table.spline`) or fixed point (`stospline.table.qspline`: n_entries, n_coef as
+    (`stospline.table.spline.fit`) or fixed point (`stospline.table.spline.fixed_point`: n_entries, n_coef as
     u32, span_log2, row_start, col, shift, coef_start as u32 each, coef as little-endian int16
     or int32, after the scale exponents)."""
     u32 = lambda a: np.asarray(a).astype("<u4").tobytes()  # noqa: E731

@@ -52,7 +52,7 @@ from stospline import limits
 from stospline.firmware_interface import ARITHS, FRAC_BITS, SCALAR_KIND
 from stospline.precision import RoundedUp, ceil_significant
 from stospline.table.format import F32_MAX, GainTable, TableShape
-from stospline.table.spline import _column_peaks
+from stospline.table.spline.fit import _column_peaks
 
 __all__ = ["FixedPointTable", "quantize_table", "scale_exponents", "scaled_entries",
            "row_sums", "assemble",
@@ -111,7 +111,7 @@ class FixedPointTable(TableShape):
     source: GainTable = field(repr=False)
     x_range: np.ndarray = field(repr=False)
     bound_lsb: np.ndarray = field(repr=False)
-    # A fixed-point spline table (`stospline.table.qspline.QSplineGains`): K, k0, L are then
+    # A fixed-point spline table (`stospline.table.spline.fixed_point.QSplineGains`): K, k0, L are then
     # its evaluation, tick by tick, exactly as the firmware computes it.
     spline: object | None = field(default=None, repr=False)
 

@@ -1,4 +1,4 @@
-/* Host-side kernel of the fixed-point spline fit (stospline.table.qspline): a stage's integer
+/* Host-side kernel of the fixed-point spline fit (stospline.table.spline.fixed_point): a stage's integer
  * cubic B-splines evaluated at every tick exactly as the firmware evaluates them, and their
  * worst error against the values fitted.  Not firmware: it runs on the design host, called
  * from Python through cffi (stospline.table.kernels), once per span length the fit tries.

@@ -65,7 +65,7 @@ def test_forced_workers_are_counted_in_memory(tmp_path):
 
 
 def test_workers_beyond_the_cores_are_limited_with_a_note(tmp_path):
-    from stospline.sim.montecarlo import default_workers, usable_workers
+    from stospline.harness.montecarlo import default_workers, usable_workers
     cores = default_workers()
     assert usable_workers(1024) == cores and usable_workers(1024, force=True) == 1024
     assert usable_workers(None) == cores and usable_workers(1) == 1

@@ -336,7 +336,7 @@ def test_tiny_inputs_are_echoed_exactly(capsys, tmp_path, eps):
 
 
 def test_spline_tolerance_bound_is_float32s():
-    from stospline.table.spline import MIN_TOLERANCE
+    from stospline.table.spline.fit import MIN_TOLERANCE
     from stospline.table_options import check_spline_tolerance
     assert MIN_TOLERANCE == 4 * float(__import__("numpy").finfo("float32").eps)
     assert check_spline_tolerance(MIN_TOLERANCE, "x") == MIN_TOLERANCE

@@ -18,10 +18,10 @@ import stospline
 from stospline.errors import ProblemError
 from stospline.pipeline import predicted_cost
 from stospline.problem.reader import parse_problem
-from stospline.sim.controller import build_controller
-from stospline.sim.fault_oracle import evaluate_with_faults
-from stospline.sim.montecarlo import compare_to_oracle, simulate
-from stospline.sim.oracle import evaluate_table
+from stospline.harness.controller import build_controller
+from stospline.oracle.faults import evaluate_with_faults
+from stospline.harness.montecarlo import compare_to_oracle, simulate
+from stospline.oracle.evaluate import evaluate_table
 
 from conftest import EXAMPLES
 from support.problems import BASE, edit

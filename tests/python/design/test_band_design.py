@@ -7,9 +7,9 @@ import pytest
 
 from stospline.design.bands import design_bands, enumerate_active_sets, solve_band_dual
 from stospline.design.continuous import DesignError
-from stospline.sim.controller import build_controller
-from stospline.sim.montecarlo import compare_to_oracle, simulate
-from stospline.sim.oracle import evaluate_continuous, evaluate_table
+from stospline.harness.controller import build_controller
+from stospline.harness.montecarlo import compare_to_oracle, simulate
+from stospline.oracle.evaluate import evaluate_continuous, evaluate_table
 from stospline.table.format import table_of
 from stospline.pipeline import design_problem
 from stospline.problem import ProblemError, parse_problem

@@ -21,7 +21,7 @@ import pytest
 from scipy.special import hyp2f1
 
 from stospline.design.continuous import design_continuous
-from stospline.sim.oracle import evaluate_continuous
+from stospline.oracle.evaluate import evaluate_continuous
 from stospline.problem import parse_problem
 
 B, R = 1.3, 0.8

@@ -4,7 +4,7 @@ import numpy as np
 
 from stospline.design.corridor_design import stage_polygons, strip_weights_problem, strips
 from stospline.pipeline import design_problem
-from stospline.sim.exit_bound import corridor_outputs
+from stospline.oracle.exit_bound import corridor_outputs
 
 
 def test_strips_pair_opposite_walls():

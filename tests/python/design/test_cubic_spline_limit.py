@@ -4,7 +4,7 @@ import pytest
 from scipy.interpolate import CubicSpline
 
 from stospline.design.continuous import design_continuous
-from stospline.sim.oracle import evaluate_continuous
+from stospline.oracle.evaluate import evaluate_continuous
 from stospline.problem import parse_problem
 
 

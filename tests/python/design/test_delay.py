@@ -18,8 +18,8 @@ from stospline.design.zoh import design_zoh
 from stospline.errors import DesignError, ProblemError
 from stospline.problem.faults import Faults
 from stospline.problem.reader import parse_problem
-from stospline.sim.fault_oracle import evaluate_with_faults
-from stospline.sim.oracle import evaluate_table
+from stospline.oracle.faults import evaluate_with_faults
+from stospline.oracle.evaluate import evaluate_table
 from stospline.table.format import table_of
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))

@@ -7,7 +7,7 @@ import pytest
 
 from stospline.design.continuous import DesignError, design_continuous
 from stospline.design.zoh import design_zoh
-from stospline.sim.oracle import evaluate_continuous, evaluate_table
+from stospline.oracle.evaluate import evaluate_continuous, evaluate_table
 from stospline.table.format import table_of
 from stospline.problem import Knot, Problem, parse_problem
 

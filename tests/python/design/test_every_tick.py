@@ -1,6 +1,6 @@
 """[[regions]] with every = "tick": the band holds at every controller tick of the implemented
 law (issue 16, part 1), met by constraint generation while few rows are active and by the
-sparse QP on the tick grid beyond (`stospline.sim.every_tick`, `stospline.design.tick_qp`)."""
+sparse QP on the tick grid beyond (`stospline.refine.every_tick`, `stospline.design.tick_qp`)."""
 import copy
 import os
 import tomllib
@@ -16,8 +16,8 @@ from stospline.pipeline import design_problem, design_summary
 from stospline.problem import ProblemError, load_problem, parse_problem
 from stospline.problem.model import Constraint
 from stospline.problem.regions import with_bands
-from stospline.sim.every_tick import active_ticks, between_ticks, design_every_tick
-from stospline.sim.oracle import evaluate_table
+from stospline.refine.every_tick import active_ticks, between_ticks, design_every_tick
+from stospline.oracle.evaluate import evaluate_table
 from stospline.table.format import table_of
 
 MONOTONE = EXAMPLES / "robot_monotone.toml"

@@ -4,9 +4,9 @@ import pytest
 
 from stospline.design.continuous import design_continuous
 from stospline.design.zoh import design_zoh
-from stospline.sim.controller import build_controller
-from stospline.sim.montecarlo import compare_to_oracle, simulate
-from stospline.sim.oracle import evaluate_continuous, evaluate_table
+from stospline.harness.controller import build_controller
+from stospline.harness.montecarlo import compare_to_oracle, simulate
+from stospline.oracle.evaluate import evaluate_continuous, evaluate_table
 from stospline.table.format import table_of
 
 

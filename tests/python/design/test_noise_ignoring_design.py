@@ -3,7 +3,7 @@ measurably worse than the stochastic design (exact numbers from the oracle)."""
 import numpy as np
 
 from stospline.design.continuous import design_continuous
-from stospline.sim.oracle import evaluate_continuous
+from stospline.oracle.evaluate import evaluate_continuous
 
 
 def test_stochastic_design_beats_noise_ignoring_design(robot_problem, robot):

@@ -26,7 +26,7 @@ from scipy.linalg import expm
 
 from stospline.design.continuous import design_continuous
 from stospline.design.zoh import design_zoh
-from stospline.sim.oracle import evaluate_continuous, evaluate_table
+from stospline.oracle.evaluate import evaluate_continuous, evaluate_table
 from stospline.table.format import table_of
 from stospline.problem import parse_problem
 

@@ -5,10 +5,10 @@ import tomllib
 import numpy as np
 import pytest
 
-from stospline.sim.oracle import evaluate_table
+from stospline.oracle.evaluate import evaluate_table
 from stospline.pipeline import design_problem
 from stospline.problem import ProblemError, load_problem, parse_problem
-from stospline.sim.region_distance import distance_outside
+from stospline.oracle.region_distance import distance_outside
 
 from conftest import EXAMPLES
 

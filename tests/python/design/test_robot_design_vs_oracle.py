@@ -4,7 +4,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from stospline.sim.oracle import evaluate_continuous
+from stospline.oracle.evaluate import evaluate_continuous
 
 
 def test_predicted_cost_equals_oracle_of_continuous_law(robot):
@@ -40,7 +40,7 @@ def test_implemented_table_is_close_but_not_equal(robot):
 
 def test_oracle_of_the_table_converges_to_the_continuous_law(robot_problem, robot):
     """Halving h roughly halves the excess cost (first-order sampling error)."""
-    from stospline.sim.oracle import evaluate_table
+    from stospline.oracle.evaluate import evaluate_table
     from stospline.table.format import table_of
     excess = []
     for hz in (250, 500):

@@ -12,9 +12,9 @@ import pytest
 from stospline.cli import main
 from stospline.pipeline import design_problem
 from stospline.problem import parse_problem
-from stospline.sim.controller import build_controller
-from stospline.sim.exit_bound import corridor_outputs, exit_bounds
-from stospline.sim.montecarlo import simulate
+from stospline.harness.controller import build_controller
+from stospline.oracle.exit_bound import corridor_outputs, exit_bounds
+from stospline.harness.montecarlo import simulate
 
 # The guide's minimal cart with velocity noise, in joint mode, its speed within +-1.2 at every
 # tick: the band binds (J0 32 against 24.24 without it).

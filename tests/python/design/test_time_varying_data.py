@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from stospline.design.continuous import design_continuous
-from stospline.sim.controller import build_controller
+from stospline.harness.controller import build_controller
 from stospline.design.moments import exact_tick, running_cost_matrix, varying_tick
-from stospline.sim.montecarlo import compare_to_oracle, simulate
-from stospline.sim.oracle import _tick_varying, evaluate_continuous, evaluate_table
+from stospline.harness.montecarlo import compare_to_oracle, simulate
+from stospline.oracle.evaluate import _tick_varying, evaluate_continuous, evaluate_table
 from stospline.problem import ProblemError, parse_problem
 from stospline.table.format import table_of
 

@@ -14,7 +14,7 @@ from stospline.design.zoh import design_zoh
 from stospline.problem import parse_problem
 from stospline.problem.faults import Faults
 from stospline.problem.series import Series
-from stospline.sim.oracle import evaluate_table
+from stospline.oracle.evaluate import evaluate_table
 from stospline.table.format import table_of
 
 from test_time_varying_data import tv_doc

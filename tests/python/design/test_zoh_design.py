@@ -5,10 +5,10 @@ from scipy.integrate import solve_ivp
 
 from stospline.design.continuous import design_continuous
 from stospline.design.zoh import design_zoh
-from stospline.sim.controller import build_controller
+from stospline.harness.controller import build_controller
 from stospline.design.moments import exact_tick, moment_generator, augmented_drift
-from stospline.sim.montecarlo import compare_to_oracle, simulate
-from stospline.sim.oracle import evaluate_table
+from stospline.harness.montecarlo import compare_to_oracle, simulate
+from stospline.oracle.evaluate import evaluate_table
 from stospline.problem import parse_problem
 from stospline.table.format import table_of
 

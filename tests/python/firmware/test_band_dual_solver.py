@@ -93,13 +93,13 @@ def test_target_solver_on_robot_bands_and_bad_inputs(bandqp):
 
 @pytest.mark.parametrize("seed", range(6))
 def test_target_solver_on_non_symmetric_p_matrices(bandqp, seed):
-    """A spline table's W' (not symmetric, a P-matrix: `stospline.table.spline_band`): the
+    """A spline table's W' (not symmetric, a P-matrix: `stospline.table.spline.band`): the
     C solver's Gaussian-elimination path against the host's numpy enumeration, and both
     against the conditions (a P-matrix: the solution is unique). W' = SPD + a skew-symmetric
     part (x'W'x = x'(SPD)x > 0: every principal submatrix positive definite in that sense, so a
     P-matrix); q = 2..7 rows, some of them equalities."""
     from types import SimpleNamespace
-    from stospline.table.spline_band import is_p_matrix, solve_band_lcp
+    from stospline.table.spline.band import is_p_matrix, solve_band_lcp
     rng = np.random.default_rng(700 + seed)
     q, n = 2 + seed, 3
     G = rng.normal(size=(q, q))

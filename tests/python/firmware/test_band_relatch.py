@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from stospline.design.bands import design_bands
-from stospline.sim.band_latch import target_latch
-from stospline.sim.controller import STATUS, build_controller
-from stospline.sim.montecarlo import compare_to_oracle, simulate
-from stospline.sim.oracle import evaluate_table
+from stospline.oracle.band_latch import target_latch
+from stospline.harness.controller import STATUS, build_controller
+from stospline.harness.montecarlo import compare_to_oracle, simulate
+from stospline.oracle.evaluate import evaluate_table
 from stospline.problem import load_problem, parse_problem
 from stospline.table.format import BandQP, GainTable, table_crc32, table_of
 

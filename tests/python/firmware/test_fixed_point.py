@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from stospline.table.qformat import latch_q, law_double, law_q, quantize_table
-from stospline.sim.fixed_point_error import noise_free_closed_loop, random_q_samples
-from stospline.sim.controller import STATUS, build_controller
+from stospline.harness.fixed_point_error import noise_free_closed_loop, random_q_samples
+from stospline.harness.controller import STATUS, build_controller
 from stospline.pipeline import double_table, fixed_point_table
 from stospline.table.format import table_crc32
 

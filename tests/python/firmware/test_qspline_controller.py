@@ -12,8 +12,8 @@ import pytest
 
 import stospline
 from stospline.pipeline import fixed_point_spline
-from stospline.sim.controller import STATUS, build_controller
-from stospline.sim.fixed_point_error import random_q_samples
+from stospline.harness.controller import STATUS, build_controller
+from stospline.harness.fixed_point_error import random_q_samples
 from stospline.table.format import table_crc32
 from stospline.table.qformat import latch_q, law_double, law_q
 

@@ -5,7 +5,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from stospline.sim.controller import STATUS, build_controller
+from stospline.harness.controller import STATUS, build_controller
 from stospline.table.format import F32_MAX, FORMAT_VERSION, GainTable, table_crc32
 
 

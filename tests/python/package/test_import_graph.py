@@ -1,5 +1,5 @@
-"""The package's imports flow one way: problem -> {design, table} -> sim -> report -> the
-application modules (cli, pipeline, ...). Design and table are siblings: a design hands its
+"""The package's imports flow one way: problem -> {design, table} -> oracle -> refine ->
+harness -> report -> the application modules (cli, pipeline, ...). Design and table are siblings: a design hands its
 per-tick gains over an interface (`stospline.table.format.TickGains`), so neither imports the
 other. Cross-cutting modules at the top level (errors and
 the infrastructure: atomic writes, caches, strict JSON, firmware limits, ...) import none of
@@ -16,7 +16,8 @@ import pytest
 import stospline
 
 PACKAGE = Path(stospline.__file__).parent
-RANK = {"problem": 0, "design": 1, "table": 1, "sim": 2, "report": 3, "application": 4}
+RANK = {"problem": 0, "design": 1, "table": 1, "oracle": 2, "refine": 3, "harness": 4,
+        "report": 5, "application": 6}
 APPLICATION = {"cli", "pipeline", "budget", "gains", "corridor_search", "__init__",
                "__main__"}
 
@@ -175,8 +176,9 @@ def test_every_module_imports_alone_in_a_fresh_interpreter():
 
 @pytest.mark.parametrize("name", ["stospline.table.format", "stospline.problem"])
 def test_the_lower_layers_do_not_load_the_higher_ones(name):
-    """Importing the table format (or the problem) loads no designer, simulator or report."""
+    """Importing the table format (or the problem) loads no designer, oracle, harness or report."""
     code = (f"import sys, {name}; print(sorted(m for m in sys.modules "
-            f"if m.startswith(('stospline.design', 'stospline.sim', 'stospline.report'))))")
+            f"if m.startswith(('stospline.design', 'stospline.oracle', 'stospline.refine', "
+            f"'stospline.harness', 'stospline.report'))))")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert r.stdout.strip() == "[]"

@@ -62,7 +62,7 @@ def test_wheel_and_sdist_carry_the_firmware(wheel):
         have = sorted(n.split("stospline/_firmware/", 1)[1] for n in names
                       if "stospline/_firmware/" in n)
         assert have == FIRMWARE_FILES, w.name
-        assert "stospline/design/tick_kernel.c" in names and "stospline/sim/plant.c" in names
+        assert "stospline/design/tick_kernel.c" in names and "stospline/harness/plant.c" in names
         assert "stospline/table/compose_kernel.c" in names
         assert "stospline/table/qspline_kernel.c" in names
         assert "stospline/table/literal_kernel.c" in names

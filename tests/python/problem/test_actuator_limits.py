@@ -164,7 +164,7 @@ def test_safe_command_u_hold_from_the_file_to_the_firmware(capsys):
     _, source = generate_c(d.table)
     assert f"static const stsp_f32_t {p.name}_u_hold[2] = {{" in source
     assert design_summary(d)["actuator_limits"]["u_hold"] == pytest.approx([4.9, 0.0])
-    from stospline.sim.controller import STATUS, build_controller
+    from stospline.harness.controller import STATUS, build_controller
     step = build_controller(d.table).stepper(1)
     U, status = step(0, np.float32([[np.nan, 0.0]]))
     assert status[0] == STATUS["ERR_NONFINITE_STATE"]

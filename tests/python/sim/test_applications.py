@@ -31,7 +31,7 @@ def test_quadrotor_gravity_hover_hold_and_delay():
     assert s["cost"]["oracle_implemented"] == pytest.approx(s["cost"]["predicted_J0"], rel=1e-8)
     # ... and beats the ordinary design run a tick late (the fault oracle).
     from stospline.problem.faults import Faults
-    from stospline.sim.fault_oracle import evaluate_with_faults
+    from stospline.oracle.faults import evaluate_with_faults
     plain = stospline.design_problem(p, delay_ticks=0)
     late = evaluate_with_faults(p, plain.table, Faults(delay_ticks=1))
     assert d.implemented.J < late.J

@@ -68,7 +68,7 @@ def test_nothing_appears_in_place_before_the_build_is_complete(what, tmp_path, m
         from stospline.design.kernels import build_kernels
         path = build_kernels(tmp_path)
     else:
-        from stospline.sim.controller import build_controller
+        from stospline.harness.controller import build_controller
         build_controller(robot_zoh.table, build_dir=tmp_path)
         (path,) = tmp_path.glob("*/_stsp_robot_corridor_*.so")
     assert seen == [[]]
@@ -80,7 +80,7 @@ RACE = textwrap.dedent("""
     from pathlib import Path
     from stospline.pipeline import design_problem
     from stospline.problem import load_problem
-    from stospline.sim.controller import build_controller
+    from stospline.harness.controller import build_controller
     root, go = Path(sys.argv[1]), Path(sys.argv[2])
     d = design_problem(load_problem(sys.argv[3]))
     while not go.exists():

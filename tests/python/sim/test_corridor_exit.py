@@ -12,10 +12,10 @@ from scipy.stats import norm
 
 from stospline.pipeline import design_problem
 from stospline.problem import parse_problem
-from stospline.sim.controller import CorridorWatch, TickStats, build_controller
-from stospline.sim.exit_bound import corridor_outputs, exit_bounds
-from stospline.sim.exit_stats import clopper_pearson_lower, clopper_pearson_upper
-from stospline.sim.montecarlo import _zoh, simulate
+from stospline.harness.controller import CorridorWatch, TickStats, build_controller
+from stospline.oracle.exit_bound import corridor_outputs, exit_bounds
+from stospline.harness.exit_stats import clopper_pearson_lower, clopper_pearson_upper
+from stospline.harness.montecarlo import _zoh, simulate
 
 SIGMA, B, HZ = 0.5, 0.6, 100
 

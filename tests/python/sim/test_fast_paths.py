@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from stospline.sim import oracle
+from stospline.oracle import evaluate as oracle
 from stospline.expm import expm
 from stospline.pipeline import design_problem
 from stospline.problem import load_problem
@@ -63,7 +63,7 @@ def test_noise_free_tick_maps_equal_the_van_loan_map(seed):
     exponential of `moments.exact_tick`, drift and cross weights included."""
     from stospline.design.moments import exact_tick, running_cost_matrix
     from stospline.problem.build import problem_from_arrays
-    from stospline.sim.tick_moments import _noise_free_tick
+    from stospline.oracle.tick_moments import _noise_free_tick
     rng = np.random.default_rng(seed)
     n, m, h = 3, 2, 0.02
     Q = rng.normal(size=(n, n))

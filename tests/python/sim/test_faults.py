@@ -16,10 +16,10 @@ import stospline
 from stospline.errors import ProblemError
 from stospline.problem.faults import Faults, parse_faults
 from stospline.problem.reader import parse_problem
-from stospline.sim.controller import build_controller
-from stospline.sim.fault_oracle import FaultsNotExact, evaluate_with_faults
-from stospline.sim.montecarlo import compare_to_oracle, simulate
-from stospline.sim.oracle import evaluate_table
+from stospline.harness.controller import build_controller
+from stospline.oracle.faults import FaultsNotExact, evaluate_with_faults
+from stospline.harness.montecarlo import compare_to_oracle, simulate
+from stospline.oracle.evaluate import evaluate_table
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from support.problems import BASE  # noqa: E402

@@ -7,9 +7,9 @@ same check rejects a controller that is slightly wrong.
 import numpy as np
 import pytest
 
-from stospline.sim.controller import build_controller
-from stospline.sim.montecarlo import compare_to_oracle, simulate
-from stospline.sim.oracle import evaluate_table
+from stospline.harness.controller import build_controller
+from stospline.harness.montecarlo import compare_to_oracle, simulate
+from stospline.oracle.evaluate import evaluate_table
 
 PATHS, SEED, SUBSTEPS = 4000, 20261123, 2
 

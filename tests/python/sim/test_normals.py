@@ -1,4 +1,4 @@
-"""The harness's standard normal numbers (host/stospline/sim/normals.c: xoshiro256++ through a
+"""The harness's standard normal numbers (host/stospline/harness/normals.c: xoshiro256++ through a
 256-layer ziggurat): the distribution, checked with fixed seeds on 4·10^6 numbers, and the
 committed tables still what their generator writes.
 
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import stospline
-from stospline.sim.controller import build_controller
+from stospline.harness.controller import build_controller
 
 ROOT = Path(__file__).resolve().parents[3]
 COUNT = 4_000_000

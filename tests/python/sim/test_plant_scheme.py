@@ -9,7 +9,7 @@ import pytest
 
 from stospline.pipeline import design_problem, simulate_problem
 from stospline.problem import parse_problem
-from stospline.sim.plant_scheme import scheme_bias
+from stospline.harness.plant_scheme import scheme_bias
 
 from conftest import EXAMPLES
 
@@ -61,7 +61,7 @@ def test_the_pilot_leaves_the_run_stream_alone(robot_10hz):
 def test_block_streams_are_the_seed_sequence_children():
     """Block 0 draws from the seed's own stream, block i from child i - 1 of
     ``SeedSequence(seed).spawn`` (derived without spawning, so nothing is mutated)."""
-    from stospline.sim.montecarlo import block_seed
+    from stospline.harness.montecarlo import block_seed
     root = np.random.SeedSequence(SEED)
     children = np.random.SeedSequence(SEED).spawn(3)
     assert block_seed(SEED, 0).generate_state(4).tolist() == root.generate_state(4).tolist()
@@ -71,8 +71,8 @@ def test_block_streams_are_the_seed_sequence_children():
 
 def test_same_numbers_on_one_two_or_four_workers(robot_problem, robot_zoh):
     """The result for a seed does not depend on how many processes run the blocks."""
-    from stospline.sim.controller import build_controller
-    from stospline.sim.montecarlo import BLOCK_PATHS, simulate
+    from stospline.harness.controller import build_controller
+    from stospline.harness.montecarlo import BLOCK_PATHS, simulate
     ctl = build_controller(robot_zoh.table)
     paths = 2 * BLOCK_PATHS + 300                  # three blocks, the last one short
     runs = {w: simulate(robot_problem, ctl, paths=paths, seed=SEED, substeps=1, workers=w)
@@ -92,8 +92,8 @@ def test_dask_cluster_gives_the_same_numbers(robot_problem, robot_zoh):
     """The blocks on a Dask cluster, by address (threads in this process, one and two
     workers) and as a local cluster of processes: the numbers of the run on this machine."""
     from distributed import LocalCluster
-    from stospline.sim.controller import build_controller
-    from stospline.sim.montecarlo import BLOCK_PATHS, simulate
+    from stospline.harness.controller import build_controller
+    from stospline.harness.montecarlo import BLOCK_PATHS, simulate
     ctl = build_controller(robot_zoh.table)
     paths = 2 * BLOCK_PATHS + 100
     ref = simulate(robot_problem, ctl, paths=paths, seed=SEED, substeps=1, workers=1)

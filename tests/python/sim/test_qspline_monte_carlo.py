@@ -1,6 +1,6 @@
 """Monte Carlo through the compiled fixed-point controller running a Q15/Q31 spline table (the
 firmware evaluates the spline's integer gains at every tick, stsp_qspline_t; bit for bit the
-host's `stospline.table.qspline.evaluate_q`, test_qspline_controller.py), with the re-solved
+host's `stospline.table.spline.fixed_point.evaluate_q`, test_qspline_controller.py), with the re-solved
 latch maps as stored; states rounded to the Q format, commands times their LSB
 (`CompiledController.real_stepper`). The cost, knot
 means and knot variances agree with the exact oracle of that law (integer gains and latch maps
@@ -19,10 +19,10 @@ import pytest
 import stospline
 from stospline.pipeline import fixed_point_spline
 from stospline.problem.faults import Faults
-from stospline.sim.controller import build_controller
-from stospline.sim.montecarlo import compare_to_oracle, simulate
-from stospline.sim.oracle import evaluate_table
-from stospline.table.qspline import dequantized
+from stospline.harness.controller import build_controller
+from stospline.harness.montecarlo import compare_to_oracle, simulate
+from stospline.oracle.evaluate import evaluate_table
+from stospline.table.spline.fixed_point import dequantized
 
 PATHS, SEED, SUBSTEPS = 4000, 20261126, 2
 

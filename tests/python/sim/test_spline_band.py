@@ -1,5 +1,5 @@
 """Spline tables for band problems (issue 13): the band dual re-solved for the spline's gains
-(`stospline.table.spline_band`), which the compiled controller solves at the t0 latch
+(`stospline.table.spline.band`), which the compiled controller solves at the t0 latch
 (Gaussian elimination for its non-symmetric W'). Checked with the exact oracle at the design's
 x0 and at other start states (every band met to the float32 floor; the per-tick table's dual
 under the same spline gains misses them by far more), the compiled C controller's latch
@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 
 import stospline
-from stospline.sim.band_latch import target_latch
+from stospline.oracle.band_latch import target_latch
 from stospline.errors import DesignError
-from stospline.sim.controller import STATUS, build_controller
-from stospline.sim.montecarlo import compare_to_oracle, simulate
-from stospline.sim.oracle import evaluate_table
-from stospline.table.spline_band import is_p_matrix, solve_band_lcp
+from stospline.harness.controller import STATUS, build_controller
+from stospline.harness.montecarlo import compare_to_oracle, simulate
+from stospline.oracle.evaluate import evaluate_table
+from stospline.table.spline.band import is_p_matrix, solve_band_lcp
 
 from conftest import EXAMPLES
 

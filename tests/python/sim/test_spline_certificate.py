@@ -1,4 +1,4 @@
-"""The spline certificate (`stospline.sim.spline_certificate.certificate`) measures the spline
+"""The spline certificate (`stospline.refine.spline_certificate.certificate`) measures the spline
 against the per-tick law it compresses: the design's gains at the ticks in double precision
 (`table_of(design, quantize=False)`). For a zero-order-hold design that is the design's own
 law; for a continuous-time design it is the sampled law, not the continuous one, whose
@@ -6,8 +6,8 @@ difference (8e-4 of the robot's cost) is the cost of sampling, not of the spline
 import pytest
 
 import stospline
-from stospline.sim.oracle import evaluate_table
-from stospline.sim.spline_certificate import _cov_change
+from stospline.oracle.evaluate import evaluate_table
+from stospline.refine.spline_certificate import _cov_change
 from stospline.table.format import table_of
 
 

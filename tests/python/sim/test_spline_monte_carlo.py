@@ -1,5 +1,5 @@
 """The compiled spline controller computes, tick by tick, exactly the gains the certificate
-evaluates (`stospline.table.spline.evaluate`, the law in the spec's order), and Monte Carlo
+evaluates (`stospline.table.spline.fit.evaluate`, the law in the spec's order), and Monte Carlo
 through it agrees with the exact oracle of that law. The check has power: the same run
 rejects the oracle of a controller that freezes the gains at each span's start. Fixed
 seeds; 99 % jointly (`compare_to_oracle`).
@@ -14,12 +14,12 @@ import pytest
 
 import stospline
 from stospline.problem.faults import Faults
-from stospline.sim.controller import build_controller
-from stospline.sim.montecarlo import compare_to_oracle, simulate
-from stospline.sim.oracle import evaluate_table
+from stospline.harness.controller import build_controller
+from stospline.harness.montecarlo import compare_to_oracle, simulate
+from stospline.oracle.evaluate import evaluate_table
 from stospline.table.format import table_of
-from stospline.table.spline import command
-from stospline.table.spline_compress import compress
+from stospline.table.spline.fit import command
+from stospline.table.spline.compress import compress
 
 PATHS, SEED, SUBSTEPS = 6000, 20261125, 2
 
@@ -31,7 +31,7 @@ def robot_spline(robot_problem):
 
 def _law(table, x, v, tick):
     """u = -(K x + k0 + L v) in the firmware's order for a spline table
-    (`stospline.table.spline.command`: the folded feed-forward, then the gains of x)."""
+    (`stospline.table.spline.fit.command`: the folded feed-forward, then the gains of x)."""
     return command(table.spline, table.stage_start, tick, x, v)
 
 

@@ -1,4 +1,4 @@
-"""Spline tables of designs that latch the state (`stospline.table.spline_restore`):
+"""Spline tables of designs that latch the state (`stospline.table.spline.restore`):
 robot_monotone (a region at every tick, the tick-grid QP) and robot_narrow_corridor (122 band
 rows, beyond a band dual). The feed-forward's k0 coefficients are corrected so that, for the
 design's x0, every constraint row holds for the law as the firmware evaluates it. Checked with
@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 import stospline
-from stospline.sim.controller import build_controller
-from stospline.sim.oracle import evaluate_table
+from stospline.harness.controller import build_controller
+from stospline.oracle.evaluate import evaluate_table
 from stospline.table.flash import flash_bytes
 from stospline.table.format import table_of
-from stospline.table.spline import command
-from stospline.table import spline_restore as sr
+from stospline.table.spline.fit import command
+from stospline.table.spline import restore as sr
 
 from conftest import EXAMPLES
 from test_spline_monte_carlo import assert_agrees_and_rejects_frozen

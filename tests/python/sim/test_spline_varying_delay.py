@@ -8,7 +8,7 @@ interest rate varies) and designed for a one-tick delay (quadrotor: the controll
   constraints' values, the knot covariances unchanged to 1e-6, every stored gain within the
   tolerance, and the flash and ratio those of the tables;
 * the compiled C controller computes, every tick of the plan, the command of the host's
-  evaluation of the spline (`stospline.table.spline.command`), bit for bit;
+  evaluation of the spline (`stospline.table.spline.fit.command`), bit for bit;
 * Monte Carlo through the compiled controller of a coarse spline (gains that move a lot
   within a span) agrees with its oracle and rejects the oracle of a controller that would
   freeze the gains at each span's start. Fixed seeds; 99 % jointly (`compare_to_oracle`),
@@ -22,14 +22,14 @@ import pytest
 
 import stospline
 from stospline.problem import load_problem
-from stospline.sim.controller import build_controller
-from stospline.sim.oracle import evaluate_table
-from stospline.sim.spline_certificate import _cov_change, constraint_residual
+from stospline.harness.controller import build_controller
+from stospline.oracle.evaluate import evaluate_table
+from stospline.refine.spline_certificate import _cov_change, constraint_residual
 from stospline.table.flash import flash_bytes
 from stospline.table.format import table_of
-from stospline.table.spline import command, max_relative_error
-from stospline.table.spline_compress import compress
-from stospline.table.spline_latch import resolve_latch
+from stospline.table.spline.fit import command, max_relative_error
+from stospline.table.spline.compress import compress
+from stospline.table.spline.latch import resolve_latch
 from stospline.design.varying import mean_maps
 
 from conftest import EXAMPLES

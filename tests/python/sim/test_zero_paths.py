@@ -23,7 +23,7 @@ def cart(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def controller(cart):
-    from stospline.sim.controller import build_controller
+    from stospline.harness.controller import build_controller
     from stospline.pipeline import design_problem
     from stospline.problem import load_problem
     return build_controller(design_problem(load_problem(cart)).table)
@@ -46,7 +46,7 @@ def test_batch_helpers_with_no_instances_do_not_dereference(cart):
     proto->table (SIGSEGV). Run in a child process so that a crash fails only this test."""
     script = (
         "import sys\n"
-        "from stospline.sim.controller import build_controller\n"
+        "from stospline.harness.controller import build_controller\n"
         "from stospline.pipeline import design_problem\n"
         "from stospline.problem import load_problem\n"
         "c = build_controller(design_problem(load_problem(sys.argv[1])).table)\n"
@@ -69,7 +69,7 @@ def test_python_wrappers_refuse_no_instances(controller, count):
 
 
 def test_simulate_refuses_zero_paths_before_allocating(controller, cart):
-    from stospline.sim.montecarlo import simulate
+    from stospline.harness.montecarlo import simulate
     from stospline.problem import load_problem
     p = load_problem(cart)
     for kw in ({"paths": 0}, {"paths": -3}, {"paths": 4, "substeps": 0}):

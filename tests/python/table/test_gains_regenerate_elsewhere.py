@@ -25,7 +25,7 @@ import pytest
 
 from stospline import pipeline
 
-from stospline.sim import oracle
+from stospline.oracle import evaluate as oracle
 from stospline.cli import main
 from stospline.problem import load_problem
 
@@ -36,7 +36,7 @@ PER_TICK_EXAMPLES = sorted(p.stem for p in EXAMPLES.glob("*.toml") if gains_stem
 SPLINE_SHIPPED = sorted({*SPLINE_EXAMPLES, *(p.stem for p in EXAMPLES.glob("*.toml")
                                               if gains_stem(p.stem) != p.stem)})
 
-# Spline tables of designs that latch the state (`stospline.table.spline_restore`).
+# Spline tables of designs that latch the state (`stospline.table.spline.restore`).
 STATE_LATCHING = ("robot_monotone", "robot_narrow_corridor")
 
 # Relative size of the perturbation, and an absolute part relative to each array's largest
@@ -232,7 +232,8 @@ def test_no_spline_entry_is_near_a_rounding_boundary(monkeypatch, example):
     planned means, C2 Gamma): every snapped number is clear of where its snapping changes,
     and every exact map entry clear of the flush of round-off zeros; the choices are exact
     functions of the snapped numbers from there on (BLAS-free)."""
-    from stospline.table import spline, spline_band, spline_compress, spline_latch
+    from stospline.table.spline import band as spline_band, compress as spline_compress
+    from stospline.table.spline import fit as spline, latch as spline_latch
     rounded = {"coef": [], "latch": [], "band": [], "snap": [], "flush": []}
 
     def capture(kind, fn):
@@ -323,7 +324,8 @@ def test_no_fixed_point_spline_entry_is_near_a_rounding_boundary(monkeypatch, ar
     (``floor(c 2^s_e / 6 + 1/2)`` of the least squares fit, with the shift kept), every shift
     (``floor(log2(...))`` of the entry's peak) and every re-solved latch entry (``_rhu``) is
     clear of where its rounding changes, for every fit tried (a superset of those kept)."""
-    from stospline.table import qformat, qspline
+    from stospline.table import qformat
+    from stospline.table.spline import fixed_point as qspline
     fits, shifts, latch = [], [], []
     lsq, fit_uniform, shifts_fn, rhu = (qspline._lsq, qspline._fit_uniform, qspline._shifts,
                                         qformat._rhu)

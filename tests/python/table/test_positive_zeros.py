@@ -56,7 +56,7 @@ def test_a_table_differing_in_the_sign_of_zeros_only_is_the_same_table(robot_zoh
 
 
 def test_spline_coefficients_have_no_negative_zero(robot_zoh):
-    from stospline.table import spline
+    from stospline.table.spline import fit as spline
     C = np.array([[-1e-30, 1e-30, -0.0, 0.5]])
     coef = spline._coefficients(C, np.array([1.0]))
     assert not np.any(np.signbit(coef[0, :3])) and coef[0, 3] == 0.5

@@ -1,4 +1,4 @@
-"""Fixed-point (Q15/Q31) spline tables (issue 13, `stospline.table.qspline`): the exact integer
+"""Fixed-point (Q15/Q31) spline tables (issue 13, `stospline.table.spline.fixed_point`): the exact integer
 evaluation, the fit, the table with re-solved latch maps and its error bound, the certificate.
 
 * `basis_numerators` are the uniform cubic B-splines times 6 D^3, exactly (integers, summing
@@ -22,14 +22,14 @@ import pytest
 
 from stospline.errors import DesignError, ProblemError
 from stospline.pipeline import design_problem, fixed_point_spline
-from stospline.sim.fixed_point_error import random_q_samples
-from stospline.sim.oracle import evaluate_table
-from stospline.sim.spline_certificate import constraint_residual
+from stospline.harness.fixed_point_error import random_q_samples
+from stospline.oracle.evaluate import evaluate_table
+from stospline.refine.spline_certificate import constraint_residual
 from stospline.table.codegen import generate_c
 from stospline.table.qformat import _rhu, latch_q, law_double, law_q, row_sums, scaled_entries
-from stospline.table.qspline import (MAX_SPAN_LOG2, QSplineGains, basis_numerators,
+from stospline.table.spline.fixed_point import (MAX_SPAN_LOG2, QSplineGains, basis_numerators,
                                      dequantized, evaluate_q, fit_q_spline)
-from stospline.table.spline_latch import resolve_latch
+from stospline.table.spline.latch import resolve_latch
 
 ARITHS = ("q15", "q31")
 

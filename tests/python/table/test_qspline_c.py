@@ -1,5 +1,5 @@
 """The firmware's fixed-point spline evaluation (firmware/src/stsp_qspline.c) against the host's
-mirror (`stospline.table.qspline.evaluate_q`), bit for bit, at every tick of the robot's Q15
+mirror (`stospline.table.spline.fixed_point.evaluate_q`), bit for bit, at every tick of the robot's Q15
 and Q31 spline tables and of a random table at the format's extremes; its layout check takes
 both; and the compiled per-tick Q controller on the spline's gains is the host's integer law.
 (The controller does not run these tables yet: this is the evaluation it will call.)"""
@@ -9,7 +9,7 @@ import pytest
 from stospline.cache import cached_build, compile_cffi, load_module, source_key
 from stospline.firmware_files import firmware_dir
 from stospline.pipeline import design_problem, fixed_point_spline
-from stospline.table.qspline import MAX_SPAN_LOG2, QSplineGains, evaluate_q
+from stospline.table.spline.fixed_point import MAX_SPAN_LOG2, QSplineGains, evaluate_q
 
 SCALAR = {"q15": ("int16_t", np.int16), "q31": ("int32_t", np.int32)}
 CDEF = """
@@ -143,8 +143,8 @@ def test_compiled_q_law_on_the_splines_gains_is_the_hosts_and_within_the_bound(q
     the law the controller will run once it evaluates the splines itself."""
     from dataclasses import replace
 
-    from stospline.sim.controller import build_controller
-    from stospline.sim.fixed_point_error import random_q_samples
+    from stospline.harness.controller import build_controller
+    from stospline.harness.fixed_point_error import random_q_samples
     from stospline.table.qformat import latch_q, law_double, law_q
     ft = qtables[arith]
     ctl = build_controller(replace(ft, spline=None))

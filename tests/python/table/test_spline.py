@@ -27,14 +27,14 @@ from stospline.design.varying import mean_maps
 from stospline.design.zoh import _tick_data, design_zoh
 from stospline.errors import DesignError
 from stospline.problem import parse_problem
-from stospline.sim.oracle import evaluate_table
+from stospline.oracle.evaluate import evaluate_table
 from stospline.table.format import BandQP, table_of
-from stospline.table.spline import (MIN_TOLERANCE, SplineBudgetError, SplineGains, _Bases,
+from stospline.table.spline.fit import (MIN_TOLERANCE, SplineBudgetError, SplineGains, _Bases,
                                     _basis, _coefficients, _column_peaks, _fit_stage,
                                     _fit_stages, _lsq, _refined, _solve_banded, _span_excess, _stage_entries, command,
                                     evaluate, fit_spline, max_relative_error)
-from stospline.table.spline_compress import compress
-from stospline.table.spline_latch import latch_groups_of_table, mean_tick_map, resolve_latch
+from stospline.table.spline.compress import compress
+from stospline.table.spline.latch import latch_groups_of_table, mean_tick_map, resolve_latch
 
 from support.problems import BASE, edit
 
@@ -486,7 +486,7 @@ def test_the_varying_mean_maps_are_the_exact_ones_of_data_linear_on_each_tick():
     """Data linear in time on each tick are their own Gauss-point interpolant, so the maps of
     `mean_maps` are the exact mean maps, here integrated independently (DOP853 on the data,
     `tick_moments._tick_varying`); 5 Hz with |A| up to 9 makes the series take sub-steps."""
-    from stospline.sim.tick_moments import _tick_varying
+    from stospline.oracle.tick_moments import _tick_varying
     problem = _parse(edit(VARYING, ("tick_hz = 100", "tick_hz = 5"),
                           ("[[0, 1], [-3, -0.5]]", "[[0, 1], [-9, -2]]")))
     stage, h = problem.stages[0], 0.2

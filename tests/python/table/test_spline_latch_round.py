@@ -20,11 +20,11 @@ import pytest
 
 import stospline
 from stospline.design.varying import mean_maps
-from stospline.sim.spline_certificate import (constraint_residual, first_latch_in_float32,
-                                               spline_table)
-from stospline.table import spline_latch
+from stospline.refine.spline_certificate import constraint_residual, first_latch_in_float32
+from stospline.table.spline import spline_table
+from stospline.table.spline import latch as spline_latch
 from stospline.table.format import table_of
-from stospline.table.spline import _Bases, _coefficients, _ill_conditioned, _lsq, _min_norm
+from stospline.table.spline.fit import _Bases, _coefficients, _ill_conditioned, _lsq, _min_norm
 
 from conftest import EXAMPLES
 
@@ -47,7 +47,7 @@ def designs():
 
 def _tables(designs, example, tol):
     p, d, exact = designs(example)
-    sp = spline_table(p, exact, d.table, tol)
+    sp = spline_table(p, exact, tol, per_tick=d.table, varying_maps=mean_maps)
     Lam, lam0 = spline_latch.resolve_latch(p, sp, sp.spline, mean_maps)
     nearest = replace(sp, Lambda=Lam.astype(np.float32), lambda0=lam0.astype(np.float32))
     exact64 = replace(sp, Lambda=Lam, lambda0=lam0)
@@ -111,7 +111,7 @@ def test_first_latch_in_float32_reproduces_the_firmware_latch(designs):
 def test_coupled_axes_exact_zeros_are_stored_as_zero(designs):
     p, _, exact = designs("coupled_axes")
     _, d, _ = designs("coupled_axes")
-    sp = spline_table(p, exact, d.table, 1e-5)
+    sp = spline_table(p, exact, 1e-5, per_tick=d.table, varying_maps=mean_maps)
     Lam, lam0 = spline_latch.resolve_latch(p, sp, sp.spline, mean_maps)
     tiny = (np.abs(lam0) > 0) & (np.abs(lam0) < 1e-8 * np.abs(lam0).max())
     assert tiny.any()                     # the re-solve leaves them at 1e-10
@@ -165,6 +165,6 @@ def test_more_coefficients_than_ticks_fit_does_not_move_with_last_bits():
     # The ridge's solve (condition ~1e13) moves them: why the least-norm fit is used.
     assert not all(np.array_equal(r, ridge[0]) for r in ridge)
     # And it fits: the float32 values at the ticks within float32 rounding of the data.
-    from stospline.table.spline import _combine
+    from stospline.table.spline.fit import _combine
     G = _combine(sigma, N, fits[0]).astype(float)
     assert np.abs(G.T - YT).max() <= 1e-5 * peak.max()

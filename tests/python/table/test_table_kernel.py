@@ -21,8 +21,11 @@ import numpy as np
 import pytest
 
 import stospline
-from stospline.sim.spline_certificate import spline_table
-from stospline.table import kernels, qspline, spline_latch
+from stospline.design.varying import mean_maps
+from stospline.table.spline import spline_table
+from stospline.table import kernels
+from stospline.table.spline import fixed_point as qspline
+from stospline.table.spline import latch as spline_latch
 from stospline.table.format import table_of
 
 from conftest import EXAMPLES
@@ -108,7 +111,8 @@ def test_the_spline_tables_are_the_same_bits_either_way(example, tolerance, monk
     tables = []
     for kernel in ("c", "numpy"):
         monkeypatch.setenv("STOSPLINE_TABLE_KERNEL", kernel)
-        tables.append(spline_table(p, exact, d.table, tolerance))
+        tables.append(spline_table(p, exact, tolerance, per_tick=d.table,
+                                   varying_maps=mean_maps))
     for name in ("K", "k0", "L", "Lambda", "lambda0"):
         np.testing.assert_array_equal(getattr(tables[0], name), getattr(tables[1], name), name)
     np.testing.assert_array_equal(tables[0].spline.coef, tables[1].spline.coef)
@@ -198,7 +202,7 @@ def test_the_qspline_kernel_refuses_what_the_format_does_not_hold(k, shift, nb, 
 def test_the_q_spline_tables_are_the_same_bits_either_way(example, arith, tolerance,
                                                           monkeypatch):
     from stospline.design.varying import mean_maps
-    from stospline.sim.oracle import state_range
+    from stospline.oracle.evaluate import state_range
     p = stospline.load_problem(EXAMPLES / f"{example}.toml")
     d = stospline.design_problem(p, table="per-tick", mode=p.options.get("mode", "stagewise"))
     exact = table_of(d.design, quantize=False)

@@ -34,7 +34,7 @@ from stospline.design.tick_qp import TickQPDesign, design_tick_qp
 from stospline.limits import BANDQP_MAX, MAX_STAGES
 from stospline.problem.model import Constraint, Problem, TickRegion
 from stospline.problem.regions import with_bands
-from stospline.sim.oracle import evaluate_table
+from stospline.oracle.evaluate import evaluate_table
 from stospline.table.format import table_of
 
 __all__ = ["EveryTick", "design_every_tick", "tick_grid", "every_tick_check", "tick_violation",

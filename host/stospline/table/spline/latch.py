@@ -80,7 +80,7 @@ def latch_groups_of_table(problem, table) -> list[tuple[int, list[int]]]:
 
 def _refuse_unsupported(problem, table, *, band: bool = False) -> None:
     """What the re-solve cannot do exactly is refused, naming the reason. ``band=True``: the
-    caller re-solves the band dual (`stospline.table.spline_band`), not an affine latch."""
+    caller re-solves the band dual (`stospline.table.spline.band`), not an affine latch."""
     why = None
     if getattr(table, "arith", "float32") != "float32" or not np.issubdtype(table.K.dtype,
                                                                              np.floating):
@@ -301,7 +301,7 @@ def resolve_latch(problem, table, spline=None, varying_maps=None, *, rounded: bo
         The law as implemented: its K, k0 and L (float32 or float64) are taken as they are;
         its own Lambda and lambda0 are ignored where the table latches.
     spline : SplineGains, optional
-        The spline whose evaluation `table`'s K, k0, L are (`stospline.table.spline.evaluate`):
+        The spline whose evaluation `table`'s K, k0, L are (`stospline.table.spline.fit.evaluate`):
         the entries it does not store are then taken as zero, unread.
     varying_maps : callable, optional
         ``varying_maps(stage, t_start, h, T)``: the per-tick mean maps of time-varying stage
@@ -326,7 +326,7 @@ def resolve_latch(problem, table, spline=None, varying_maps=None, *, rounded: bo
 
     Notes
     -----
-    As the oracle (`stospline.sim.oracle.evaluate_table`), this assumes no command is
+    As the oracle (`stospline.oracle.evaluate.evaluate_table`), this assumes no command is
     clipped by the table's limits.
     """
     _refuse_unsupported(problem, table)

@@ -1,7 +1,7 @@
 """Fixed-point (Q15/Q31) spline tables: each stage's gains, in the per-tick Q table's own
 scaling (`stospline.table.qformat`), as uniform cubic B-splines with integer coefficients,
 evaluated by the firmware in exact integer arithmetic (issue 13's compressed format for the
-fixed-point arithmetics; the float32 format is `stospline.table.spline`).
+fixed-point arithmetics; the float32 format is `stospline.table.spline.fit`).
 
 Format, per stage s of T_s ticks (concatenated over stages as the float32 spline's arrays)::
 
@@ -36,7 +36,7 @@ import numpy as np
 from stospline.errors import DesignError
 from stospline.firmware_interface import FRAC_BITS
 from stospline.table.kernels import qspline_stage
-from stospline.table.spline import _lsq, _normal_band, _column_peaks
+from stospline.table.spline.fit import _lsq, _normal_band, _column_peaks
 
 __all__ = ["QSplineGains", "basis_numerators", "evaluate_q", "fit_q_spline", "q_spline_table",
            "dequantized", "q_spline_bytes", "MAX_SPAN_LOG2", "COEF_BITS"]
@@ -427,7 +427,7 @@ def q_spline_table(problem, exact, arith: str, x_range, tolerance: float, *,
     """
     from stospline.table.qformat import (_rhu, assemble, row_sums, scale_exponents,
                                          scaled_entries, EXP_MAX)
-    from stospline.table.spline_latch import resolve_latch
+    from stospline.table.spline.latch import resolve_latch
     # The per-tick Q table's scales (`qformat.quantize_table`), without quantizing it.
     x_exp, u_exp, v_exp = (np.asarray(e, dtype=int).copy()
                            for e in scale_exponents(exact, arith, x_range))

@@ -19,9 +19,9 @@ from stospline import progress
 from stospline.design.continuous import ContinuousDesign
 from stospline.design.moments import running_cost_matrix
 from stospline.problem.model import Problem
-from stospline.sim.fault_oracle import evaluate_delayed_table
+from stospline.oracle.faults import evaluate_delayed_table
 # The tick loops' building blocks; the private names stay importable from here.
-from stospline.sim.tick_moments import (_MAPS, Moments, _c_kernel, _euler_varying_maps,  # noqa: F401
+from stospline.oracle.tick_moments import (_MAPS, Moments, _c_kernel, _euler_varying_maps,  # noqa: F401
                                         _has_drift, _knot_terms, _latch_transform,
                                         _packed_maps, _PathRecord, _plant_tick, _stage_maps,
                                         _tick_maps, _tick_varying)
@@ -105,7 +105,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             if k == 0 and table.band_qp is not None:
                 # The firmware solves the band dual for the (deterministic) start state, in
                 # float32 for a quantized table.
-                from stospline.sim.band_latch import target_latch
+                from stospline.oracle.band_latch import target_latch
                 Lam = np.zeros_like(Lam)
                 lam0 = np.zeros(n_latch)
                 lam0[:table.band_qp.q] = target_latch(table.band_qp, x0,

@@ -36,16 +36,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from stospline.errors import DesignError
-from stospline.table import spline as _spline
-from stospline.table.spline import (DEFAULT_MAX_SPANS, INITIAL_SPANS, SplineGains, _basis,
+from stospline.table.spline import fit as _spline
+from stospline.table.spline.fit import (DEFAULT_MAX_SPANS, INITIAL_SPANS, SplineGains, _basis,
                                     _fit, evaluate)
-from stospline.table.spline_latch import FIELD, mean_maps_by_stage
+from stospline.table.spline.latch import FIELD, mean_maps_by_stage
 
 __all__ = ["is_state_latching", "restore", "constraint_rows", "mean_rows", "float32_floor",
            "Rows", "ACTIVE_TOLERANCE", "MAX_ROUNDS"]
 
 # A row is on its bound for the design when its expected value is within this times
-# max(1, |bound|) of it (as `stospline.sim.every_tick.TOLERANCE`: the design meets its rows to
+# max(1, |bound|) of it (as `stospline.refine.every_tick.TOLERANCE`: the design meets its rows to
 # ~1e-13 of that scale).
 ACTIVE_TOLERANCE = 1e-9
 # Rounds of the active-set loop: each adds the inactive rows the correction pushed out.

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from stospline.precision import verbatim
-from stospline.sim.exit_bound import exit_bounds
+from stospline.oracle.exit_bound import exit_bounds
 
 __all__ = ["clopper_pearson_upper", "clopper_pearson_lower", "corridor_report",
            "CONFIDENCE", "TIME_BINS"]
@@ -50,7 +50,7 @@ def corridor_report(problem, table, exit_tick: np.ndarray | None,
     `with_bounds` False: no oracle bounds (``bound`` None; a table designed for a delay has
     no output moments)."""
     from stospline.problem.corridors import corridor_ticks
-    from stospline.sim.exit_bound import corridor_outputs
+    from stospline.oracle.exit_bound import corridor_outputs
     if with_bounds and outputs is None:
         outputs = corridor_outputs(problem, table)
     h = 1.0 / problem.tick_hz

@@ -23,13 +23,13 @@ from stospline.expm import expm
 
 from stospline import progress
 from stospline.problem.faults import Faults
-from stospline.sim.controller import (STATUS, CompiledController, CorridorWatch, FaultDraws,
+from stospline.harness.controller import (STATUS, CompiledController, CorridorWatch, FaultDraws,
                                       TickStats)
 from stospline.errors import ProblemError
 from stospline.problem.model import Problem
 
 if TYPE_CHECKING:
-    from stospline.sim.plant_scheme import SubstepChoice
+    from stospline.harness.plant_scheme import SubstepChoice
 
 __all__ = ["MonteCarloResult", "simulate", "z_value", "Agreement", "compare_to_oracle",
            "BLOCK_PATHS", "block_seed", "default_workers", "usable_workers", "check_counts",
@@ -392,7 +392,7 @@ def _block_job(block: int, count: int) -> _Block:
 def _dask_block(problem, table, seed, substeps, record, faults, block: int,
                 count: int) -> _Block:
     """One block on a Dask worker: the controller of `table` from the worker's cache."""
-    from stospline.sim.controller import build_controller
+    from stospline.harness.controller import build_controller
     return _worker_block(problem, build_controller(table), seed, substeps, record, faults,
                          block, count)
 

@@ -32,7 +32,7 @@ import numpy as np
 from stospline.errors import DesignError
 from stospline.limits import BANDQP_MAX
 from stospline.precision import round_to_scale
-from stospline.table.spline_latch import (FIELD, _refuse_unsupported, _stage_map,
+from stospline.table.spline.latch import (FIELD, _refuse_unsupported, _stage_map,
                                           latch_groups_of_table)
 
 __all__ = ["resolve_band", "band_rows", "solve_band_lcp", "is_p_matrix", "BANDQP_DIGITS"]

@@ -113,7 +113,7 @@ def corridor_outputs(problem, table, **oracle_options) -> "_Outputs":
     otherwise it records the state's moments and each corridor's are projected when asked
     for: the stacked covariance grows with the square of all the corridors' rows (300
     corridors of 2 rows over 6 000 ticks: 17 GB), the state's does not."""
-    from stospline.sim.oracle import evaluate_table
+    from stospline.oracle.evaluate import evaluate_table
     if not problem.corridors:
         return _Outputs([], None, None)
     C = np.vstack([c.C for c in problem.corridors])

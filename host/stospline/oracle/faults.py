@@ -28,7 +28,7 @@ import numpy as np
 
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem
-from stospline.sim.tick_moments import (Moments, _knot_terms, _PathRecord, _plant_tick,
+from stospline.oracle.tick_moments import (Moments, _knot_terms, _PathRecord, _plant_tick,
                                         _stage_maps)
 from stospline.table.format import GainTable
 
@@ -132,7 +132,7 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
                 T = np.eye(D)
                 T[vs] = 0.0
                 if k == 0 and table.band_qp is not None:
-                    from stospline.sim.band_latch import target_latch
+                    from stospline.oracle.band_latch import target_latch
                     T[vs.start:vs.start + table.band_qp.q, -1] = target_latch(
                         table.band_qp, problem.x0, float32=table.K.dtype == np.float32)
                 else:

@@ -16,10 +16,10 @@ import numpy as np
 
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem
-from stospline.sim.controller import CompiledController
-from stospline.sim.fault_oracle import evaluate_with_faults, has_exact_oracle
-from stospline.sim.montecarlo import MonteCarloResult, simulate
-from stospline.sim.oracle import Moments, state_range
+from stospline.harness.controller import CompiledController
+from stospline.oracle.faults import evaluate_with_faults, has_exact_oracle
+from stospline.harness.montecarlo import MonteCarloResult, simulate
+from stospline.oracle.evaluate import Moments, state_range
 from stospline.table.format import GainTable
 
 __all__ = ["FaultRow", "default_levels", "fault_table", "fault_table_markdown", "SWEEP_ROWS",

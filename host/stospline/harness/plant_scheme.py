@@ -18,10 +18,10 @@ import numpy as np
 
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem
-from stospline.sim.controller import CompiledController
-from stospline.sim.fault_oracle import evaluate_with_faults, has_exact_oracle
-from stospline.sim.montecarlo import simulate
-from stospline.sim.oracle import Moments, evaluate_table
+from stospline.harness.controller import CompiledController
+from stospline.oracle.faults import evaluate_with_faults, has_exact_oracle
+from stospline.harness.montecarlo import simulate
+from stospline.oracle.evaluate import Moments, evaluate_table
 from stospline.table.format import GainTable
 
 __all__ = ["SubstepChoice", "choose_substeps", "scheme_bias", "scheme_moments", "PILOT_PATHS",

@@ -1,6 +1,6 @@
 """The multipliers the firmware latches at t0 from the measured state of a band table: the
 design's band dual (W symmetric, `stospline.design.bands.solve_band_dual`) or a spline table's,
-re-solved for its gains (W not symmetric: the box LCP, `stospline.table.spline_band`). Here,
+re-solved for its gains (W not symmetric: the box LCP, `stospline.table.spline.band`). Here,
 above both, because the oracles model the firmware whichever table it runs."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 
 from stospline.design.bands import solve_band_dual
 from stospline.table.format import BandQP
-from stospline.table.spline_band import solve_band_lcp
+from stospline.table.spline.band import solve_band_lcp
 
 __all__ = ["target_latch"]
 

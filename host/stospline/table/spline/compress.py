@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from stospline.table.spline import DEFAULT_MAX_SPANS, INITIAL_SPANS, SplineGains, _fit
+from stospline.table.spline.fit import DEFAULT_MAX_SPANS, INITIAL_SPANS, SplineGains, _fit
 from stospline.table.format import _to_float32   # flushes round-off zeros, as per-tick tables
 from stospline.errors import DesignError
-from stospline.table.spline_latch import resolve_latch
+from stospline.table.spline.latch import resolve_latch
 
 __all__ = ["compress", "compress_band"]
 
@@ -29,7 +29,7 @@ def compress(problem, exact, quantized, tolerance: float, *,
         Its float32 per-tick table (``table_of(design)``): the latch maps kept when
         ``resolve=False`` and everything the spline does not replace.
     tolerance : float
-        Relative tolerance of every gain entry (`stospline.table.spline.fit_spline`).
+        Relative tolerance of every gain entry (`stospline.table.spline.fit.fit_spline`).
     max_spans, initial_spans : int
         Spans allowed per stage, and of the first fit (`fit_spline`).
     resolve : bool
@@ -43,7 +43,7 @@ def compress(problem, exact, quantized, tolerance: float, *,
     -------
     spline : SplineGains
     K, k0, L : ndarray
-        float32 per-tick gains, exactly `stospline.table.spline.evaluate` of `spline`.
+        float32 per-tick gains, exactly `stospline.table.spline.fit.evaluate` of `spline`.
     Lambda, lambda0 : ndarray
         float32 latch maps, shaped as the table's (the quantized table's when ``resolve=False``).
 
@@ -73,12 +73,12 @@ def compress_band(problem, exact, quantized, tolerance: float, *,
                   max_spans: int = DEFAULT_MAX_SPANS, initial_spans: int = INITIAL_SPANS):
     """`compress` for a table that carries a band dual (``quantized.band_qp``): the spline fit
     and its evaluation as `compress`, then the band dual re-solved for those gains
-    (`stospline.table.spline_band.resolve_band`), which the firmware's stage-0 latch solves
+    (`stospline.table.spline.band.resolve_band`), which the firmware's stage-0 latch solves
     for the measured x0, and the stage-0 latch maps of the design x0's active set under it
     (the firmware's fallback), rounded to float32. Returns ``(spline, K, k0, L, Lambda,
     lambda0, band_qp)``. Raises DesignError (``design.table``) as `resolve_band` does, or
     SplineBudgetError as `compress`."""
-    from stospline.table.spline_band import resolve_band
+    from stospline.table.spline.band import resolve_band
     if exact.dims != quantized.dims or not np.array_equal(exact.stage_start,
                                                           quantized.stage_start):
         raise ValueError("the exact and the quantized tables are of different designs")

@@ -3,7 +3,7 @@ evaluates it (B-spline gains in binary32, re-solved latch maps, held per tick) c
 the uncompressed optimum, how well it meets the expected constraints, and the flash it saves.
 
 The table's K, k0 and L are the spline's evaluation tick by tick, bit for bit as the firmware
-computes them (`stospline.table.spline.evaluate`), so the exact moment oracle, the fault
+computes them (`stospline.table.spline.fit.evaluate`), so the exact moment oracle, the fault
 oracle and the Monte Carlo harness (which compiles the spline itself) all see the law the
 firmware runs."""
 from __future__ import annotations
@@ -12,50 +12,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from stospline.design.varying import mean_maps
-from stospline.errors import DesignError
-from stospline.limits import BANDQP_MAX
 from stospline.problem.model import Problem
-from stospline.sim.tick_moments import Moments
+from stospline.oracle.tick_moments import Moments
 from stospline.table.flash import flash_bytes, spline_bytes
 from stospline.table.format import GainTable
-from stospline.table.spline_compress import compress, compress_band
-from stospline.table.spline_restore import is_state_latching, restore
 
-__all__ = ["spline_table", "certificate", "q_certificate", "constraint_residual", "band_terms",
+__all__ = ["certificate", "q_certificate", "constraint_residual", "band_terms",
            "first_latch_in_float32"]
-
-
-def spline_table(problem: Problem, exact: GainTable, per_tick: GainTable,
-                 tolerance: float) -> GainTable:
-    """The float32 spline table of a design: `exact` is its per-tick table in double
-    precision (``table_of(design, quantize=False)``), `per_tick` the float32 one; a band
-    table's dual is re-solved for the spline's gains (`spline_compress.compress_band`). Raises
-    DesignError naming ``design.table`` for what has no spline table (bands beyond the 8 rows
-    of a band dual that do not latch the state, a W' that is not a P-matrix, a region enforced
-    between ticks) or
-    ``design.spline_tolerance`` when the budget cannot be met within the firmware's limits."""
-    band_qp = per_tick.band_qp
-    if is_state_latching(per_tick):
-        # The state latched at t0 (every-tick regions, bands beyond a band dual, more
-        # constraint rows than states): the feed-forward restored for the design's x0.
-        spline, K, k0, L, info = restore(problem, exact, per_tick, tolerance,
-                                         varying_maps=mean_maps)
-        return replace(per_tick, name=f"{per_tick.name}_spline", K=K, k0=k0, L=L,
-                       spline=spline, restored=info)
-    if band_qp is None and any(kn.constraint is not None and kn.constraint.is_band
-                               for kn in problem.knots):
-        raise DesignError("design.table", f"a band design with more than {BANDQP_MAX} "
-                                          f"constraint rows carries no band dual (its tables "
-                                          f"latch the affine map of one active set): no exact "
-                                          f"spline table")
-    if band_qp is not None:
-        spline, K, k0, L, Lam, lam0, band_qp = compress_band(problem, exact, per_tick, tolerance)
-    else:
-        spline, K, k0, L, Lam, lam0 = compress(problem, exact, per_tick, tolerance,
-                                               varying_maps=mean_maps)
-    return replace(per_tick, name=f"{per_tick.name}_spline", K=K, k0=k0, L=L, Lambda=Lam,
-                   lambda0=lam0, spline=spline, band_qp=band_qp)
 
 
 def constraint_residual(problem: Problem, moments: Moments) -> float:
@@ -88,7 +51,7 @@ def first_latch_in_float32(problem: Problem, table: GainTable) -> GainTable:
     ``v_32`` at x0 (the law's state: with a delay ``[x0; u_hold]``); its residual is what
     the firmware's t0 latch leaves, at x0 only. Not for band tables (their t0 latch solves
     the band dual): ValueError."""
-    from stospline.table.spline_latch import start_state
+    from stospline.table.spline.latch import start_state
     if table.band_qp is not None:
         raise ValueError("a band table's t0 latch is its band dual, not Lambda x + lambda0")
     x = start_state(problem, table).astype(np.float32)
@@ -104,8 +67,8 @@ def first_latch_in_float32(problem: Problem, table: GainTable) -> GainTable:
 def band_terms(table: GainTable, per_tick: GainTable) -> dict:
     """A spline band table's dual against the per-tick table's: rows, how far W' is from
     symmetric and from the design's W (largest entry difference over W's largest entry), and
-    its P-matrix margin (`stospline.table.spline_band.is_p_matrix`)."""
-    from stospline.table.spline_band import is_p_matrix
+    its P-matrix margin (`stospline.table.spline.band.is_p_matrix`)."""
+    from stospline.table.spline.band import is_p_matrix
     W, W0 = table.band_qp.W, per_tick.band_qp.W
     scale = float(np.abs(W0).max())
     return {"rows": table.band_qp.q,
@@ -164,7 +127,7 @@ def certificate(problem: Problem, table: GainTable, per_tick: GainTable, J0: flo
 
 def q_certificate(problem: Problem, ft, per_tick, J0: float, law: Moments,
                   implemented: Moments, per_tick_moments: Moments, *, tolerance: float) -> dict:
-    """The certificate of a fixed-point spline table `ft` (`stospline.table.qspline`): the
+    """The certificate of a fixed-point spline table `ft` (`stospline.table.spline.fixed_point`): the
     exact oracle's cost of its law as the firmware evaluates it (`implemented`: the gains the
     integer splines give at every tick and the re-solved latch maps, both as stored, in real
     units; the command's final rounding is the error bound's), its excess over ``J0``, over
@@ -173,7 +136,7 @@ def q_certificate(problem: Problem, ft, per_tick, J0: float, law: Moments,
     expected-constraint residual of both, the error bound of both (``|u_fixed - u_double|``
     per input in the command's LSBs, as written), the flash of both and the ratio."""
     from stospline.table.flash import flash_bytes as _flash
-    from stospline.table.qspline import q_spline_bytes
+    from stospline.table.spline.fixed_point import q_spline_bytes
     sp = ft.spline
     total, per_tick_total = _flash(ft, ft.arith), _flash(per_tick, per_tick.arith)
     start = np.asarray(ft.stage_start, dtype=np.int64)

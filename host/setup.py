@@ -5,7 +5,10 @@ The repository's ``firmware/`` is the single source of truth: nothing is committ
 ``host/``. A build from the repository copies ``../firmware`` into the build tree (wheel) or
 the release tree (sdist); a build from an unpacked sdist copies its ``stospline/_firmware``.
 An editable install copies nothing: the package then finds ``../firmware`` itself
-(`stospline.firmware_files`). Everything else is in ``pyproject.toml``.
+(`stospline.firmware_files`).
+
+The version is the repository's top-level ``VERSION`` file, which CMake's ``project()`` reads
+too; the sdist carries a copy at its root. Everything else is in ``pyproject.toml``.
 """
 import shutil
 from pathlib import Path
@@ -27,6 +30,15 @@ def firmware_source() -> Path:
             return candidate
     raise SystemExit(f"stospline: no firmware sources to package: neither "
                      f"{HERE.parent / 'firmware'} nor {HERE / PACKAGED} has {MARKER}")
+
+
+def package_version() -> str:
+    """The first line of ``../VERSION`` in a repository checkout, else of the sdist's copy."""
+    for candidate in (HERE.parent / "VERSION", HERE / "VERSION"):
+        if candidate.is_file():
+            return candidate.read_text().splitlines()[0].strip()
+    raise SystemExit(f"stospline: no VERSION file: neither {HERE.parent / 'VERSION'} "
+                     f"nor {HERE / 'VERSION'}")
 
 
 def copy_firmware(dest: Path) -> None:
@@ -52,6 +64,10 @@ class SdistWithFirmware(sdist):
     def make_release_tree(self, base_dir, files):
         super().make_release_tree(base_dir, files)
         copy_firmware(Path(base_dir) / PACKAGED)
+        version_file = Path(base_dir) / "VERSION"
+        version_file.unlink(missing_ok=True)
+        version_file.write_text(package_version() + "\n")
 
 
-setup(cmdclass={"build_py": BuildPyWithFirmware, "sdist": SdistWithFirmware})
+setup(version=package_version(),
+      cmdclass={"build_py": BuildPyWithFirmware, "sdist": SdistWithFirmware})

@@ -1,4 +1,4 @@
-/* Fixed-point (Q15/Q31) spline gains: the evaluation of issue 13's compressed format in the
+/* Fixed-point (Q15/Q31) spline gains: the evaluation of the compressed format in the
  * fixed-point builds (host: stospline/table/spline/fixed_point.py, whose evaluate_q it reproduces bit for
  * bit). Private: not installed. The per-tick evaluation, tested on its own
  * (tests/c/test_qspline.c, tests/python/table/test_qspline_c.py); the controller's Q spline

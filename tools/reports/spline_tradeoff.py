@@ -1,4 +1,4 @@
-"""Spline tables (issue 13): tolerance against size and accuracy, and the compression's time
+"""Spline tables: tolerance against size and accuracy, and the compression's time
 against the design's.
 
 For each tolerance: spans per stage, bytes of the spline arrays, the largest relative gain

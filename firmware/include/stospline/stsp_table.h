@@ -77,7 +77,7 @@ typedef struct {
 
 #ifdef STSP_ARITH_FIXED_POINT
 /**
- * Fixed-point spline gains (Q15/Q31 builds; issue 13's compressed format, host
+ * Fixed-point spline gains (Q15/Q31 builds; the compressed format, host
  * stospline.table.spline.fixed_point): each stage's gains as uniform cubic B-splines of the tick, with
  * integer coefficients in the per-tick format's scaling (negated, stsp_table_t). Stage s of
  * T_s ticks has spans of D = 2^k ticks (k = span_log2[s] <= 9), S = ceil(T_s / D) spans and

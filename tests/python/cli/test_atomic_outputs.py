@@ -1,4 +1,4 @@
-"""Issue 10, item 4: the files of one design appear together or not at all.
+"""The files of one design appear together or not at all.
 
 The old ``write_outputs`` renamed the files one by one with no journal: a SIGTERM/SIGINT
 between the renames left a new ``.h`` beside an old ``.c``/``.json`` and orphan ``.tmp``

@@ -1,4 +1,4 @@
-"""Issue 10, item 7: one-line exit-2 errors instead of tracebacks, for every command-line value
+"""One-line exit-2 errors instead of tracebacks, for every command-line value
 and every kind of problem FILE.
 
 Before: ``--paths -5``, ``--seed -1``, ``--substeps 0``, ``plot --out p.txt``, ``--out`` an

@@ -1,4 +1,4 @@
-"""Strict output (issue 10, item 3): every JSON the tool prints or writes is strict JSON (no
+"""Strict output: every JSON the tool prints or writes is strict JSON (no
 NaN/Infinity), every generated table is finite, and a design whose numbers overflow float32 or
 the fixed-point scales is refused with exit 2, one line naming the cause, and nothing written.
 Numpy's RuntimeWarnings never reach the user."""
@@ -82,7 +82,7 @@ def test_fixed_point_scale_overflow_is_refused(tmp_path):
 
 def test_state_that_stays_zero_gets_a_fixed_point_scale(tmp_path):
     """A state never driven and without noise has predicted range 0: it takes the smallest
-    scale instead of failing (was a ValueError traceback)."""
+    scale instead of failing."""
     f = tmp_path / "p.toml"
     f.write_text(variant(**{
         "x0 =": "x0 = [0.0, 0.0, 0.0]", "A =": "A = [[0, 1, 0], [0, 0, 0], [0, 0, 0]]",
@@ -98,8 +98,8 @@ def test_state_that_stays_zero_gets_a_fixed_point_scale(tmp_path):
 
 def test_noise_free_simulation_json_is_strict(tmp_path):
     """The minimal file has no noise: every path is the same, the standard errors are 0 and
-    the z-scores undefined. They are null with a reason; nothing on stderr (was Infinity in
-    the JSON and a numpy RuntimeWarning)."""
+    the z-scores undefined. They are null with a reason (not Infinity); nothing on stderr (no
+    numpy RuntimeWarning)."""
     f = tmp_path / "cart.toml"
     f.write_text(minimal_file())
     r = run("simulate", str(f), "--paths", "50", "--json")

@@ -1,4 +1,4 @@
-"""Issue 10, item 8 (and the MemoryError cases of item 7): work is bounded and announced.
+"""Work is bounded and announced (and MemoryError is one line, not a traceback).
 
 Before: ``tick_hz = 10^9`` over 1 s or n = 200 died in MemoryError asking for 15-193 GiB;
 10^7 ticks, 20 000 knots and a region grid of 200 000 points ran past 120 s with no progress

@@ -1,5 +1,5 @@
 """[[regions]] with every = "tick": the band holds at every controller tick of the implemented
-law (issue 16, part 1), met by constraint generation while few rows are active and by the
+law, met by constraint generation while few rows are active and by the
 sparse QP on the tick grid beyond (`stospline.refine.every_tick`, `stospline.design.tick_qp`)."""
 import copy
 import os

@@ -1,4 +1,4 @@
-"""Exact sampled-data design (issue 4): optimal for the controller as it really runs."""
+"""Exact sampled-data design: optimal for the controller as it really runs."""
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp

@@ -100,7 +100,7 @@ def test_limited_robot_table_saturates_in_c(robot):
 
 
 # ---------------------------------------------------------------------------------------
-# Dimension limits (issue 10, item 6): the designer refuses at parse time what stsp_init
+# Dimension limits: the designer refuses at parse time what stsp_init
 # refuses, naming the key that causes it; limits.py agrees with the firmware's header.
 
 from conftest import REPO  # noqa: E402

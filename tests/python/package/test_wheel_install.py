@@ -21,6 +21,7 @@ import pytest
 
 from conftest import EXAMPLES, REPO
 
+VERSION = (REPO / "VERSION").read_text().strip()
 FIRMWARE_FILES = sorted(
     str(p.relative_to(REPO / "firmware")) for p in
     [*(REPO / "firmware" / "src").glob("*.[ch]"), *(REPO / "firmware" / "include").rglob("*.h")])
@@ -42,6 +43,7 @@ def wheel(tmp_path_factory):
                     ignore=shutil.ignore_patterns("*.egg-info", "build", "__pycache__",
                                                   "_firmware"))
     shutil.copytree(REPO / "firmware", src / "firmware")
+    shutil.copy(REPO / "VERSION", src / "VERSION")
     pip = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
     run([*pip, "wheel", "--no-deps", "--no-build-isolation", "-w", str(tmp / "wheel"),
          str(src / "host")])
@@ -70,6 +72,8 @@ def test_wheel_and_sdist_carry_the_firmware(wheel):
         members = [m.split("stospline/_firmware/", 1)[1] for m in tar.getnames()
                    if "stospline/_firmware/" in m and m.endswith((".c", ".h"))]
     assert sorted(members) == FIRMWARE_FILES
+    for w in (whl, whl2):
+        assert w.name.startswith(f"stospline-{VERSION}-"), w.name
 
 
 def test_installed_wheel_designs_simulates_and_plots_outside_the_repo(wheel, tmp_path):
@@ -97,7 +101,7 @@ def test_installed_wheel_designs_simulates_and_plots_outside_the_repo(wheel, tmp
                  "print(stospline.__file__); print(f.firmware_dir())"], cwd=work, env=env)
     pkg, fw = (Path(line) for line in where.split())
     assert pkg.is_relative_to(venv) and fw.is_relative_to(venv), where
-    assert run([exe, "--version"], cwd=work, env=env).strip() == "stospline 0.1.0"
+    assert run([exe, "--version"], cwd=work, env=env).strip() == f"stospline {VERSION}"
 
     out = run([exe, "design", "robot.toml", "--out", "gains"], cwd=work, env=env)
     assert "J0 (designed)" in out and "flash of the tables" in out

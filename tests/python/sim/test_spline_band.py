@@ -1,4 +1,4 @@
-"""Spline tables for band problems (issue 13): the band dual re-solved for the spline's gains
+"""Spline tables for band problems: the band dual re-solved for the spline's gains
 (`stospline.table.spline.band`), which the compiled controller solves at the t0 latch
 (Gaussian elimination for its non-symmetric W'). Checked with the exact oracle at the design's
 x0 and at other start states (every band met to the float32 floor; the per-tick table's dual

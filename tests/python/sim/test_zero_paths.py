@@ -1,4 +1,4 @@
-"""Issue 10, item 2: zero Monte Carlo paths must not corrupt memory.
+"""Zero Monte Carlo paths must not corrupt memory.
 
 ``harness_init_batch`` used to initialise ``ctrls[0]`` whatever the count, so
 ``simulate --paths 0`` wrote a whole controller instance into a zero-length cffi array

@@ -1,4 +1,4 @@
-"""The problem name as a C prefix (issue 10, item 9): names whose generated identifiers, macros
+"""The problem name as a C prefix: names whose generated identifiers, macros
 or files collide with the firmware's, the harness's, the C library's or each other are refused
 at parse time, in one line naming `name`."""
 import re

@@ -1,4 +1,4 @@
-"""Fixed-point (Q15/Q31) spline tables (issue 13, `stospline.table.spline.fixed_point`): the exact integer
+"""Fixed-point (Q15/Q31) spline tables (`stospline.table.spline.fixed_point`): the exact integer
 evaluation, the fit, the table with re-solved latch maps and its error bound, the certificate.
 
 * `basis_numerators` are the uniform cubic B-splines times 6 D^3, exactly (integers, summing

@@ -1,4 +1,4 @@
-"""Spline tables (issue 13): the host's mirror of the firmware's evaluation, the fit, and the
+"""Spline tables: the host's mirror of the firmware's evaluation, the fit, and the
 latch maps re-solved for the fitted gains.
 
 * `evaluate` is the spec's binary32 evaluation (docs: ``spline_spec.md``): bit for bit a

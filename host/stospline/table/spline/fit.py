@@ -1,5 +1,5 @@
 """Spline tables: each stage's gains as cubic B-splines of the tick instead of one row per tick
-(issue 13's format, ``spline_spec.md``, which the firmware implements; this is the host side).
+(the format of ``spline_spec.md``, which the firmware implements; this is the host side).
 
 `SplineGains` holds the arrays the firmware reads; `evaluate` computes the per-tick gains
 exactly as the firmware does (binary32, one rounded operation at a time, the spec's order);

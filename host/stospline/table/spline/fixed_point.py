@@ -1,6 +1,6 @@
 """Fixed-point (Q15/Q31) spline tables: each stage's gains, in the per-tick Q table's own
 scaling (`stospline.table.qformat`), as uniform cubic B-splines with integer coefficients,
-evaluated by the firmware in exact integer arithmetic (issue 13's compressed format for the
+evaluated by the firmware in exact integer arithmetic (the compressed format for the
 fixed-point arithmetics; the float32 format is `stospline.table.spline.fit`).
 
 Format, per stage s of T_s ticks (concatenated over stages as the float32 spline's arrays)::

@@ -15,6 +15,7 @@ At the stage start the controller latches ``v = W^-1 (N' x + m)`` and applies
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,6 +73,30 @@ class StageSolution(StageStart):
         m = y[i:i + p]
         return P, pv, c, N, W, m
 
+    def gains_at(self, t: float):
+        """``K`` (m, n), ``k0`` (m,) and ``L`` (m, p) at one time ``t``: what the oracle's
+        right-hand side asks for at every step of its integrator, so the stage's fixed weights
+        and ``R^-1`` are computed once (`_fixed_weights`) and the dense output is evaluated at
+        a scalar (no stacks)."""
+        P, pv, _, N, _, _ = self._unpack(self._sol(t))
+        fixed = self._fixed_weights
+        if fixed is not None:
+            s, St, Rinv = self.stage, fixed[0], fixed[1]
+        else:
+            s = self.stage.at(t)
+            _, St, Rt = _effective_weights(s, P, self.noise)
+            Rinv = np.linalg.inv(Rt)
+        return Rinv @ (P @ s.B + St).T, Rinv @ (s.B.T @ pv + s.r), Rinv @ (s.B.T @ N)
+
+    @functools.cached_property
+    def _fixed_weights(self):
+        """``(S, R^-1)`` when they are the same at every time (constant data, and no noise the
+        design accounts for: the Ito term then adds exact zeros), else None."""
+        s = self.stage
+        if s.varying is not None or (self.noise and s.noise_tensor.any()):
+            return None
+        return s.S, np.linalg.inv(s.R)
+
     def riccati(self, t: np.ndarray):
         """P, p, c, N, W, m at times ``t`` (arrays with time as the last axis)."""
         return self._unpack(self._sol(np.atleast_1d(t)))
@@ -81,13 +106,9 @@ class StageSolution(StageStart):
 
         The control is ``u = -K x - k0 - L v``.
         """
+        if np.size(t) == 1:               # one time: no stacks
+            return tuple(g[None] for g in self.gains_at(float(np.ravel(t)[0])))
         P, pv, _, N, _, _ = self.riccati(t)
-        if P.shape[-1] == 1:              # one time (the oracle's right-hand side): no stacks
-            s = self.stage.at(float(np.ravel(t)[0]))
-            _, St, Rt = _effective_weights(s, P[..., 0], self.noise)
-            Rinv = np.linalg.inv(Rt)
-            return ((Rinv @ (P[..., 0] @ s.B + St).T)[None],
-                    (Rinv @ (s.B.T @ pv[:, 0] + s.r))[None], (Rinv @ (s.B.T @ N[..., 0]))[None])
         P, pv, N = np.moveaxis(P, -1, 0), pv.T, np.moveaxis(N, -1, 0)   # time first
         d = _stacked_data(self.stage, np.atleast_1d(t))
         n = P.shape[1]

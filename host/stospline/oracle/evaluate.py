@@ -196,36 +196,7 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
             keep = np.r_[0:n, M.shape[0] - 1]
             M = M[np.ix_(keep, keep)]
 
-        def rhs(t, y, st=st, stage=stage, d=d):
-            sd = stage.at(t)                     # the plant's data at t (may vary)
-            Mt = y[:-1].reshape(d, d)
-            K, k0, L = st.gains(np.array([t]))
-            F = np.concatenate([-K[0], -L[0], -k0[0][:, None]], axis=1)   # u = F y
-            Abar = np.zeros((d, d))
-            Abar[:n, :n] = sd.A
-            Abar[:n] += sd.B @ F
-            if sd.f is not None:
-                Abar[:n, -1] += sd.f            # the drift multiplies the constant 1
-            AM = Abar @ Mt
-            # The diffusion sum_i x_i G_i + sum_j u_j H_j with u = F y is sum_i y_i Geff_i dZ:
-            # sum_ij M_ij Geff_i Geff_j' over the live multipliers only (none: no product).
-            Geff = np.zeros((d,) + sd.G.shape[1:])
-            Geff[:n] = sd.G
-            if sd.H is not None and sd.H.any():
-                Geff += np.einsum("ji,jak->iak", F, sd.H)
-            dM = AM + AM.T
-            live = np.flatnonzero(Geff.any(axis=(1, 2)))
-            if live.size:
-                Gk = np.moveaxis(Geff[live], 2, 0)          # (mz, na, n)
-                dM[:n, :n] += (np.swapaxes(Gk, 1, 2) @ Mt[np.ix_(live, live)] @ Gk).sum(axis=0)
-            Lb = running_cost_matrix(sd, n, m, n + m + 1, n)
-            Tw = np.zeros((n + m + 1, d))
-            Tw[:n, :n] = np.eye(n)
-            Tw[n:n + m] = F
-            Tw[-1, -1] = 1.0
-            dJ = np.sum((Tw.T @ Lb @ Tw) * Mt)
-            return np.concatenate([dM.ravel(), [dJ]])
-
+        rhs = _moment_rhs(problem, st, stage, d)
         t_eval = (np.linspace(st.t_start, st.t_end, points_per_stage)
                   if points_per_stage else None)
         from scipy.integrate import solve_ivp
@@ -246,6 +217,58 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
     path_t = np.concatenate(pts_t) if pts_t else np.zeros(0)
     path_mean = np.concatenate(pts_m) if pts_m else np.zeros((0, n))
     return Moments(float(J), means, covs, cons, path_t, path_mean)
+
+
+def _moment_rhs(problem: Problem, st, stage, d: int):
+    """Right-hand side of ``[vec M; J]`` on one stage of a continuous design: the second moment
+    of ``y = [x; v; 1]`` under ``u = F y`` and the expected running cost. With constant data
+    everything but the gains is built once; the integrator calls this thousands of times."""
+    n, m = problem.n, problem.m
+    constant = stage.varying is None
+    parts = _closed_loop_parts(stage, n, m, d) if constant else None
+
+    def rhs(t, y):
+        sd, (Abar0, Geff0, Lb, Tw) = (stage, parts) if constant else \
+            (stage.at(t), _closed_loop_parts(stage.at(t), n, m, d))
+        Mt = y[:-1].reshape(d, d)
+        K, k0, L = st.gains_at(t)
+        F = np.concatenate([-K, -L, -k0[:, None]], axis=1)   # u = F y
+        Abar = Abar0.copy()
+        Abar[:n] += sd.B @ F
+        AM = Abar @ Mt
+        # The diffusion sum_i x_i G_i + sum_j u_j H_j with u = F y is sum_i y_i Geff_i dZ:
+        # sum_ij M_ij Geff_i Geff_j' over the live multipliers only (none: no product).
+        Geff = Geff0
+        if sd.H is not None and sd.H.any():
+            Geff = Geff0 + np.einsum("ji,jak->iak", F, sd.H)
+        dM = AM + AM.T
+        live = np.flatnonzero(Geff.any(axis=(1, 2)))
+        if live.size:
+            Gk = np.moveaxis(Geff[live], 2, 0)          # (mz, na, n)
+            dM[:n, :n] += (np.swapaxes(Gk, 1, 2) @ Mt[np.ix_(live, live)] @ Gk).sum(axis=0)
+        Tw[n:n + m] = F
+        dJ = np.sum((Tw.T @ Lb @ Tw) * Mt)
+        return np.concatenate([dM.ravel(), [dJ]])
+
+    return rhs
+
+
+def _closed_loop_parts(sd, n: int, m: int, d: int):
+    """What the moment equations take from the plant's data, before the gains: the drift of
+    ``y`` without the input (the drift f multiplies the constant 1), the state's diffusion
+    multipliers, the running cost matrix of ``[x; u; 1]`` and the map ``y -> [x; u; 1]`` with
+    its input rows left to fill."""
+    Abar0 = np.zeros((d, d))
+    Abar0[:n, :n] = sd.A
+    if sd.f is not None:
+        Abar0[:n, -1] += sd.f
+    Geff0 = np.zeros((d,) + sd.G.shape[1:])
+    Geff0[:n] = sd.G
+    Lb = running_cost_matrix(sd, n, m, n + m + 1, n)
+    Tw = np.zeros((n + m + 1, d))
+    Tw[:n, :n] = np.eye(n)
+    Tw[-1, -1] = 1.0
+    return Abar0, Geff0, Lb, Tw
 
 
 def state_range(problem: Problem, table: GainTable, *, sigmas: float = DEFAULT_SIGMAS

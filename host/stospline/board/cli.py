@@ -31,6 +31,27 @@ def add_commands(sub, integer, out_dir, seed_max: int, max_paths: int) -> None:
                    help="ticks between two stsp_verify() calls (default 1000)")
     p.set_defaults(func=_board)
 
+    p = sub.add_parser("hil", help="hardware in the loop: the plant on this host, the "
+                                   "controller on a board (or QEMU) over a serial line, one "
+                                   "frame per tick")
+    p.add_argument("problem", help="problem file (TOML)")
+    p.add_argument("--board", required=True, choices=sorted(BOARDS))
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--elf", help="run this image (`stospline board` project, qemu "
+                                     "preset) in QEMU and connect to its serial line")
+    where.add_argument("--port", help="the board's serial line: a device (/dev/ttyACM0) or "
+                                      "tcp:HOST:PORT")
+    p.add_argument("--paths", type=integer(1, 512), default=100,
+                   help="paths through the board, 1..512 (default 100)")
+    p.add_argument("--seed", type=integer(0, seed_max), default=1)
+    p.add_argument("--substeps", type=integer(1, 10_000), default=1,
+                   help="plant steps per controller tick (default 1)")
+    p.add_argument("--arith", default=None, metavar="{float32,q15,q31}",
+                   help="the tables' arithmetic on the board (default: the board's)")
+    p.add_argument("--ignore-noise", action="store_true")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_hil)
+
 
 def _board(args) -> int:
     from stospline.atomic import check_target
@@ -73,3 +94,78 @@ def _board(args) -> int:
 def _table_bytes(table, arith: str) -> int:
     from stospline.table.flash import flash_bytes
     return int(flash_bytes(table, arith))
+
+
+def _hil(args) -> int:
+    from stospline.board import hil
+    from stospline.board.project import BOARDS
+    from stospline.cli import _limits, _options, _report_simulation
+    from stospline.pipeline import design_problem, simulation_summary
+    from stospline.problem.reader import load_problem
+    from stospline.sim.controller import build_controller
+    from stospline.sim.montecarlo import simulate
+    board = BOARDS[args.board]
+    arith = args.arith or board.arith
+    if arith not in ("float32", "q15", "q31"):
+        raise ProblemError("--arith", f"must be one of ['float32', 'q15', 'q31'], got {arith!r}")
+    if args.elf is not None and not Path(args.elf).is_file():
+        raise ProblemError("--elf", f"{args.elf} is not a file")
+    problem = load_problem(args.problem)
+    if problem.faults.any:
+        raise ProblemError("faults", "the serial HIL run simulates the fault-free loop; "
+                                     "run `stospline simulate` for faults")
+    opts = _options(args, problem)
+    if opts["delay_ticks"]:
+        raise ProblemError("--delay-ticks", "the board runs tables designed without a delay")
+    if any(st.varying is not None for st in problem.stages):
+        raise ProblemError("stages", "the serial HIL run needs time-invariant stage data")
+    d = design_problem(problem, noise=not args.ignore_noise, **opts, **_limits(args))
+    table = hil.table_of(d, arith)
+    ctl = build_controller(table)
+    ref = simulate(problem, ctl, paths=args.paths, seed=args.seed, substeps=args.substeps,
+                   workers=1, record=args.paths)
+    proc = None
+    try:
+        if args.elf is not None:
+            proc, link = hil.start_qemu(board.name, args.elf)
+        else:
+            link = hil.open_port(args.port)
+        info = hil.hello(link)
+        if info.crc32 != int(ctl.c_table.crc32) or info.nx != table.dims[0]:
+            raise ProblemError("--board", f"the board runs a table with crc32 0x{info.crc32:08X} "
+                                          f"({info.arith}), this design's is "
+                                          f"0x{int(ctl.c_table.crc32):08X} ({arith}): regenerate "
+                                          f"its project with `stospline board`")
+        res = hil.run_hil(problem, ctl, link, paths=args.paths, seed=args.seed,
+                          substeps=args.substeps, reference=ref)
+        link.close()
+    except hil.HilError as exc:
+        print(f"stospline: error: --{'elf' if args.elf else 'port'}: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        if proc is not None:
+            proc.kill()
+            proc.wait()
+    ref.cost = res.cost
+    ref.knot_states = res.knot_states
+    s = simulation_summary(d, ref, seed=args.seed)
+    s["hil"] = {"board": board.name, "arith": arith, "seconds": res.seconds,
+                "bit_identical": res.mismatches == 0, "mismatches": res.mismatches,
+                "first_mismatch": res.first_mismatch,
+                "statuses": {str(k): v for k, v in sorted(res.statuses.items())},
+                "board_statuses": {str(k): v for k, v in sorted(res.board_statuses.items())},
+                "overruns": res.overruns, "timeouts": res.timeouts,
+                "bad_frames_board": res.bad_frames, "lost_frames": res.lost_frames,
+                "bad_frames_host": res.host_bad_frames,
+                "cycles_per_tick": info.cycles_per_tick, "clock_hz": info.clock_hz}
+    _report_simulation(s, args.json)
+    if not args.json:
+        hs = s["hil"]
+        print(f"  HIL on {board.name} ({arith}): {res.paths} paths x {res.ticks} ticks in "
+              f"{res.seconds:.1f} s; commands and states vs the host-compiled controller: "
+              + ("bit-identical" if res.mismatches == 0 else
+                 f"{res.mismatches} mismatches, first at (path, tick) {res.first_mismatch}"))
+        print(f"  board: overruns {hs['overruns']}, timeouts {hs['timeouts']}, bad frames "
+              f"{hs['bad_frames_board']} (host {hs['bad_frames_host']}), lost frames "
+              f"{hs['lost_frames']}; statuses {hs['statuses']}")
+    return 0 if res.mismatches == 0 else 1

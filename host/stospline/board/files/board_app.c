@@ -41,9 +41,9 @@
 #define STATE_PAYLOAD (4u + BOARD_NX * SCALAR_BYTES)
 #define COMMAND_PAYLOAD (6u + BOARD_NU * SCALAR_BYTES + 8u)
 
-#if STATE_PAYLOAD > STSP_FRAME_MAX_PAYLOAD || COMMAND_PAYLOAD > STSP_FRAME_MAX_PAYLOAD
-#error "the table's states or commands do not fit a frame (STSP_FRAME_MAX_PAYLOAD)"
-#endif
+/* Compile-time check: the table's states and commands fit a frame (STSP_FRAME_MAX_PAYLOAD). */
+typedef char board_frames_fit[(STATE_PAYLOAD <= STSP_FRAME_MAX_PAYLOAD &&
+                               COMMAND_PAYLOAD <= STSP_FRAME_MAX_PAYLOAD) ? 1 : -1];
 
 static stsp_ctrl_t ctrl;
 static stsp_frame_parser_t parser;

@@ -31,6 +31,10 @@
 #define USART_CR1_UE 0x2000u
 #define USART_CR1_TE 0x8u
 #define USART_CR1_RE 0x4u
+#define USART_CR1_RXNEIE 0x20u
+#define NVIC_ISER1 REG(0xE000E104u)
+#define USART1_IRQ 37u /* board-specific: the USART's interrupt number */
+#define RX_RING 256u   /* received bytes not yet read by the loop (a power of two) */
 #define SCB_CPACR REG(0xE000ED88u)
 
 #define BOARD_CLOCK_HZ 168000000u /* board-specific: SYSCLK after clock_init() */
@@ -40,6 +44,9 @@
 #define WAIT_LIMIT 1000000u       /* bounded waits for the oscillators */
 
 static uint32_t clock_hz = 16000000u; /* HSI at reset */
+/* Bytes from the USART interrupt to the loop: one writer (the interrupt), one reader. */
+static volatile uint8_t rx_ring[RX_RING];
+static volatile uint32_t rx_head, rx_tail;
 
 /* HSE 25 MHz -> PLL (M 25, N 336, P 2) = 168 MHz, AHB /1, APB1 /4, APB2 /2, 5 wait states.
  * Returns 0, or 1 when an oscillator did not become ready (the core stays on HSI). */
@@ -82,7 +89,23 @@ static void uart_init(void)
     GPIOA_MODER = (GPIOA_MODER & ~((3u << 18) | (3u << 20))) | (2u << 18) | (2u << 20);
     GPIOA_AFRH = (GPIOA_AFRH & ~((0xFu << 4) | (0xFu << 8))) | (7u << 4) | (7u << 8);
     USART1_BRR = (clock_hz == BOARD_CLOCK_HZ ? BOARD_APB2_HZ : clock_hz) / BOARD_BAUD;
-    USART1_CR1 = USART_CR1_UE | USART_CR1_TE | USART_CR1_RE;
+    USART1_CR1 = USART_CR1_UE | USART_CR1_TE | USART_CR1_RE | USART_CR1_RXNEIE;
+    NVIC_ISER1 = 1u << (USART1_IRQ - 32u);
+}
+
+/* A received byte into the ring; a byte that finds the ring full is dropped (the frame it
+ * belongs to then fails its CRC: BOARD_STATUS_BAD_FRAME). */
+void USART1_IRQHandler(void);
+void USART1_IRQHandler(void)
+{
+    if ((USART1_SR & USART_SR_RXNE) != 0u) {
+        const uint8_t byte = (uint8_t)(USART1_DR & 0xFFu);
+        const uint32_t head = rx_head;
+        if (head - rx_tail < RX_RING) {
+            rx_ring[head & (RX_RING - 1u)] = byte;
+            rx_head = head + 1u;
+        }
+    }
 }
 
 int board_init(void)
@@ -99,10 +122,12 @@ uint32_t board_clock_hz(void)
 
 int board_uart_read(uint8_t *byte)
 {
-    if ((USART1_SR & USART_SR_RXNE) == 0u) {
+    const uint32_t tail = rx_tail;
+    if (tail == rx_head) {
         return 0;
     }
-    *byte = (uint8_t)(USART1_DR & 0xFFu);
+    *byte = rx_ring[tail & (RX_RING - 1u)];
+    rx_tail = tail + 1u;
     return 1;
 }
 
@@ -126,8 +151,10 @@ void board_irq_enable(void)
     __asm__ volatile("cpsie i" ::: "memory");
 }
 
+/* Sleep until an interrupt: a received byte or the SysTick. */
 void board_idle(void)
 {
+    __asm__ volatile("wfi" ::: "memory");
 }
 
 /* Start-up. */
@@ -178,11 +205,14 @@ void Reset_Handler(void)
 typedef void (*vector_t)(void);
 typedef struct {
     uint32_t *initial_sp;
-    vector_t vectors[15];
+    vector_t core[15];
+    vector_t irq[USART1_IRQ + 1u];
 } vector_table_t;
 
-/* The core's exceptions; the STM32F405's 82 peripheral interrupts are not used. */
+/* The core's exceptions, then the peripheral interrupts up to USART1's (the others are
+ * never enabled; board-specific: the vector of the USART used). */
 __attribute__((section(".isr_vector"), used)) const vector_table_t board_vectors = {
     __StackTop,
     {Reset_Handler, Fault_Handler, Fault_Handler, Fault_Handler, Fault_Handler, Fault_Handler,
-     0, 0, 0, 0, Fault_Handler, Fault_Handler, 0, Fault_Handler, SysTick_Handler}};
+     0, 0, 0, 0, Fault_Handler, Fault_Handler, 0, Fault_Handler, SysTick_Handler},
+    {[USART1_IRQ] = USART1_IRQHandler}};

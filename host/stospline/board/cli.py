@@ -41,8 +41,8 @@ def add_commands(sub, integer, out_dir, seed_max: int, max_paths: int) -> None:
                                      "preset) in QEMU and connect to its serial line")
     where.add_argument("--port", help="the board's serial line: a device (/dev/ttyACM0) or "
                                       "tcp:HOST:PORT")
-    p.add_argument("--paths", type=integer(1, 512), default=100,
-                   help="paths through the board, 1..512 (default 100)")
+    p.add_argument("--paths", type=integer(2, 512), default=100,
+                   help="paths through the board, 2..512 (default 100)")
     p.add_argument("--seed", type=integer(0, seed_max), default=1)
     p.add_argument("--substeps", type=integer(1, 10_000), default=1,
                    help="plant steps per controller tick (default 1)")

@@ -715,7 +715,7 @@ def build_parser() -> argparse.ArgumentParser:
                                 "levels); 0: no fault table")
         p.set_defaults(func=func)
     from stospline.board.cli import add_commands as _board_commands    # board, hil
-    _board_commands(sub, _integer, _out_dir, SEED_MAX, MAX_PATHS)
+    _board_commands(sub, sys.modules[__name__])
     for name, sp in sub.choices.items():
         _common(sp)
         sp.add_argument("--discretization", choices=["exact-zoh", "continuous"],

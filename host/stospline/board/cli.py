@@ -9,9 +9,12 @@ from stospline.errors import ProblemError
 __all__ = ["add_commands"]
 
 
-def add_commands(sub, integer, out_dir, seed_max: int, max_paths: int) -> None:
-    """Add `board` and `hil` to the subparsers `sub` (helpers from `stospline.cli`)."""
+def add_commands(sub, cli) -> None:
+    """Add `board` and `hil` to the subparsers `sub`; `cli` is the `stospline.cli` module
+    (its option types and design options), passed in so that this module does not import
+    it."""
     from stospline.board.project import BOARDS
+    integer, out_dir, seed_max = cli._integer, cli._out_dir, cli.SEED_MAX
     p = sub.add_parser("board", help="write a firmware project for a board: start-up, linker "
                                      "script, SysTick tick, UART frames, tables, CMake presets")
     p.add_argument("problem", help="problem file (TOML)")
@@ -29,7 +32,7 @@ def add_commands(sub, integer, out_dir, seed_max: int, max_paths: int) -> None:
                         "u_hold and reports a timeout (default 1000)")
     p.add_argument("--verify-ticks", type=integer(1, 1_000_000), default=1000,
                    help="ticks between two stsp_verify() calls (default 1000)")
-    p.set_defaults(func=_board)
+    p.set_defaults(func=lambda args: _board(args, cli))
 
     p = sub.add_parser("hil", help="hardware in the loop: the plant on this host, the "
                                    "controller on a board (or QEMU) over a serial line, one "
@@ -50,13 +53,13 @@ def add_commands(sub, integer, out_dir, seed_max: int, max_paths: int) -> None:
                    help="the tables' arithmetic on the board (default: the board's)")
     p.add_argument("--ignore-noise", action="store_true")
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=_hil)
+    p.set_defaults(func=lambda args: _hil(args, cli))
 
 
-def _board(args) -> int:
+def _board(args, cli) -> int:
     from stospline.atomic import check_target
     from stospline.board.project import BOARDS, project_files, write_project
-    from stospline.cli import _check_budget, _limits, _options
+    _check_budget, _limits, _options = cli._check_budget, cli._limits, cli._options
     from stospline.pipeline import design_problem, generated_files
     from stospline.problem.reader import load_problem
     board = BOARDS[args.board]
@@ -96,10 +99,10 @@ def _table_bytes(table, arith: str) -> int:
     return int(flash_bytes(table, arith))
 
 
-def _hil(args) -> int:
+def _hil(args, cli) -> int:
     from stospline.board import hil
     from stospline.board.project import BOARDS
-    from stospline.cli import _limits, _options, _report_simulation
+    _limits, _options, _report_simulation = cli._limits, cli._options, cli._report_simulation
     from stospline.pipeline import design_problem, simulation_summary
     from stospline.problem.reader import load_problem
     from stospline.sim.controller import build_controller

@@ -17,7 +17,7 @@ import stospline
 
 PACKAGE = Path(stospline.__file__).parent
 RANK = {"problem": 0, "design": 1, "table": 1, "sim": 2, "report": 3, "application": 4}
-APPLICATION = {"cli", "pipeline", "budget", "gains", "corridor_search", "__init__",
+APPLICATION = {"cli", "pipeline", "budget", "gains", "corridor_search", "board", "__init__",
                "__main__"}
 
 

@@ -714,6 +714,8 @@ def build_parser() -> argparse.ArgumentParser:
                            help="paths of each run of the fault table (each fault at a few "
                                 "levels); 0: no fault table")
         p.set_defaults(func=func)
+    from stospline.board.cli import add_commands as _board_commands    # board, hil
+    _board_commands(sub, sys.modules[__name__])
     for name, sp in sub.choices.items():
         _common(sp)
         sp.add_argument("--discretization", choices=["exact-zoh", "continuous"],

@@ -18,7 +18,7 @@ import stospline
 PACKAGE = Path(stospline.__file__).parent
 RANK = {"problem": 0, "design": 1, "table": 1, "oracle": 2, "refine": 3, "harness": 4,
         "report": 5, "application": 6}
-APPLICATION = {"cli", "pipeline", "budget", "gains", "corridor_search", "__init__",
+APPLICATION = {"cli", "pipeline", "budget", "gains", "corridor_search", "board", "__init__",
                "__main__"}
 
 

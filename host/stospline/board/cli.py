@@ -1,0 +1,174 @@
+"""The `board` and `hil` subcommands (registered by `stospline.cli.build_parser`)."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from stospline.errors import ProblemError
+
+__all__ = ["add_commands"]
+
+
+def add_commands(sub, cli) -> None:
+    """Add `board` and `hil` to the subparsers `sub`; `cli` is the `stospline.cli` module
+    (its option types and design options), passed in so that this module does not import
+    it."""
+    from stospline.board.project import BOARDS
+    integer, out_dir, seed_max = cli._integer, cli._out_dir, cli.SEED_MAX
+    p = sub.add_parser("board", help="write a firmware project for a board: start-up, linker "
+                                     "script, SysTick tick, UART frames, tables, CMake presets")
+    p.add_argument("problem", help="problem file (TOML)")
+    p.add_argument("--board", required=True, choices=sorted(BOARDS),
+                   help="the board (a QEMU machine name)")
+    p.add_argument("--out", required=True, type=out_dir,
+                   help="directory for the project's files (created if missing; all are "
+                        "replaced together or not at all)")
+    p.add_argument("--arith", default=None, metavar="{float32,q15,q31}",
+                   help="arithmetic of the tables (default: the board's)")
+    p.add_argument("--ignore-noise", action="store_true",
+                   help="design as if there were no noise (the paper's Remark 2)")
+    p.add_argument("--timeout-ticks", type=integer(1, 1_000_000), default=1000,
+                   help="tick periods without a STATE frame after which the board applies "
+                        "u_hold and reports a timeout (default 1000)")
+    p.add_argument("--verify-ticks", type=integer(1, 1_000_000), default=1000,
+                   help="ticks between two stsp_verify() calls (default 1000)")
+    p.set_defaults(func=lambda args: _board(args, cli))
+
+    p = sub.add_parser("hil", help="hardware in the loop: the plant on this host, the "
+                                   "controller on a board (or QEMU) over a serial line, one "
+                                   "frame per tick")
+    p.add_argument("problem", help="problem file (TOML)")
+    p.add_argument("--board", required=True, choices=sorted(BOARDS))
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--elf", help="run this image (`stospline board` project, qemu "
+                                     "preset) in QEMU and connect to its serial line")
+    where.add_argument("--port", help="the board's serial line: a device (/dev/ttyACM0) or "
+                                      "tcp:HOST:PORT")
+    p.add_argument("--paths", type=integer(2, 512), default=100,
+                   help="paths through the board, 2..512 (default 100)")
+    p.add_argument("--seed", type=integer(0, seed_max), default=1)
+    p.add_argument("--substeps", type=integer(1, 10_000), default=1,
+                   help="plant steps per controller tick (default 1)")
+    p.add_argument("--arith", default=None, metavar="{float32,q15,q31}",
+                   help="the tables' arithmetic on the board (default: the board's)")
+    p.add_argument("--ignore-noise", action="store_true")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=lambda args: _hil(args, cli))
+
+
+def _board(args, cli) -> int:
+    from stospline.atomic import check_target
+    from stospline.board.project import BOARDS, project_files, write_project
+    _check_budget, _limits, _options = cli._check_budget, cli._limits, cli._options
+    from stospline.pipeline import design_problem, generated_files
+    from stospline.problem.reader import load_problem
+    board = BOARDS[args.board]
+    arith = args.arith or board.arith
+    if arith not in ("float32", "q15", "q31"):
+        raise ProblemError("--arith", f"must be one of ['float32', 'q15', 'q31'], got {arith!r}")
+    check_target(args.out, (), [args.problem])
+    problem = load_problem(args.problem)
+    opts = _options(args, problem)
+    if opts["delay_ticks"]:
+        raise ProblemError("--delay-ticks", "the board project runs tables designed without "
+                                            "a delay")
+    _check_budget(args, problem, "design", arith=arith)
+    d = design_problem(problem, noise=not args.ignore_noise, **opts, **_limits(args))
+    tables = generated_files(d, Path(args.problem).name, arith)
+    stem = next(k for k in tables if k.endswith(".c"))[:-2]
+    from stospline.board.hil import table_of
+    table = table_of(d, arith)
+    flash = _table_bytes(d.table, arith)
+    if flash > board.flash_bytes - 32 * 1024:
+        raise ProblemError("--board", f"the {stem} tables take {flash} B of flash; the "
+                                      f"{board.name} has {board.flash_bytes} B (less 32 KiB "
+                                      f"for the code): lower tick_hz, use --arith q15 or "
+                                      f"--table spline")
+    files = project_files(Path(args.problem).name, board, table, tables,
+                          timeout_ticks=args.timeout_ticks, verify_ticks=args.verify_ticks)
+    written = write_project(args.out, files, [args.problem])
+    print(f"{board.name} project for {stem} ({table.n_ticks} ticks at {table.tick_hz} Hz, "
+          f"{flash} B of tables): {len(written)} files in {args.out}")
+    print(f"build: STOSPLINE_PREFIX=<stospline installed for {board.cpu}> cmake --preset qemu "
+          f"&& cmake --build --preset qemu   (in {args.out}; README.md)")
+    return 0
+
+
+def _table_bytes(table, arith: str) -> int:
+    from stospline.table.flash import flash_bytes
+    return int(flash_bytes(table, arith))
+
+
+def _hil(args, cli) -> int:
+    from stospline.board import hil
+    from stospline.board.project import BOARDS
+    _limits, _options, _report_simulation = cli._limits, cli._options, cli._report_simulation
+    from stospline.pipeline import design_problem, simulation_summary
+    from stospline.problem.reader import load_problem
+    from stospline.harness.controller import build_controller
+    from stospline.harness.montecarlo import simulate
+    board = BOARDS[args.board]
+    arith = args.arith or board.arith
+    if arith not in ("float32", "q15", "q31"):
+        raise ProblemError("--arith", f"must be one of ['float32', 'q15', 'q31'], got {arith!r}")
+    if args.elf is not None and not Path(args.elf).is_file():
+        raise ProblemError("--elf", f"{args.elf} is not a file")
+    problem = load_problem(args.problem)
+    if problem.faults.any:
+        raise ProblemError("faults", "the serial HIL run simulates the fault-free loop; "
+                                     "run `stospline simulate` for faults")
+    opts = _options(args, problem)
+    if opts["delay_ticks"]:
+        raise ProblemError("--delay-ticks", "the board runs tables designed without a delay")
+    if any(st.varying is not None for st in problem.stages):
+        raise ProblemError("stages", "the serial HIL run needs time-invariant stage data")
+    d = design_problem(problem, noise=not args.ignore_noise, **opts, **_limits(args))
+    table = hil.table_of(d, arith)
+    ctl = build_controller(table)
+    ref = simulate(problem, ctl, paths=args.paths, seed=args.seed, substeps=args.substeps,
+                   workers=1, record=args.paths)
+    proc = None
+    try:
+        if args.elf is not None:
+            proc, link = hil.start_qemu(board.name, args.elf)
+        else:
+            link = hil.open_port(args.port)
+        info = hil.hello(link)
+        if info.crc32 != int(ctl.c_table.crc32) or info.nx != table.dims[0]:
+            raise ProblemError("--board", f"the board runs a table with crc32 0x{info.crc32:08X} "
+                                          f"({info.arith}), this design's is "
+                                          f"0x{int(ctl.c_table.crc32):08X} ({arith}): regenerate "
+                                          f"its project with `stospline board`")
+        res = hil.run_hil(problem, ctl, link, paths=args.paths, seed=args.seed,
+                          substeps=args.substeps, reference=ref)
+        link.close()
+    except hil.HilError as exc:
+        print(f"stospline: error: --{'elf' if args.elf else 'port'}: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        if proc is not None:
+            proc.kill()
+            proc.wait()
+    ref.cost = res.cost
+    ref.knot_states = res.knot_states
+    s = simulation_summary(d, ref, seed=args.seed)
+    s["hil"] = {"board": board.name, "arith": arith, "seconds": res.seconds,
+                "bit_identical": res.mismatches == 0, "mismatches": res.mismatches,
+                "first_mismatch": res.first_mismatch,
+                "statuses": {str(k): v for k, v in sorted(res.statuses.items())},
+                "board_statuses": {str(k): v for k, v in sorted(res.board_statuses.items())},
+                "overruns": res.overruns, "timeouts": res.timeouts,
+                "bad_frames_board": res.bad_frames, "lost_frames": res.lost_frames,
+                "bad_frames_host": res.host_bad_frames,
+                "cycles_per_tick": info.cycles_per_tick, "clock_hz": info.clock_hz}
+    _report_simulation(s, args.json)
+    if not args.json:
+        hs = s["hil"]
+        print(f"  HIL on {board.name} ({arith}): {res.paths} paths x {res.ticks} ticks in "
+              f"{res.seconds:.1f} s; commands and states vs the host-compiled controller: "
+              + ("bit-identical" if res.mismatches == 0 else
+                 f"{res.mismatches} mismatches, first at (path, tick) {res.first_mismatch}"))
+        print(f"  board: overruns {hs['overruns']}, timeouts {hs['timeouts']}, bad frames "
+              f"{hs['bad_frames_board']} (host {hs['bad_frames_host']}), lost frames "
+              f"{hs['lost_frames']}; statuses {hs['statuses']}")
+    return 0 if res.mismatches == 0 else 1

@@ -1,0 +1,30 @@
+/* The board support a generated project needs: one file per board (board_<name>.c) defines
+ * these, plus its vector table and start-up. Everything else (board_app.c, stsp_frame.c) is
+ * the same on every board. */
+#ifndef BOARD_H
+#define BOARD_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+/* Clocks, pins and the UART. Returns 0, or 1 when the clock did not start (the board then
+ * runs on its reset clock and says so in the HELLO frame). */
+int board_init(void);
+/* 1 and *byte when a received byte is waiting, else 0 (never blocks). */
+int board_uart_read(uint8_t *byte);
+/* Send n bytes (waits for the transmitter, at most n bytes long). */
+void board_uart_write(const uint8_t *data, size_t n);
+/* The core clock in Hz after board_init (the SysTick counts it). */
+uint32_t board_clock_hz(void);
+/* Interrupts off/on around data shared with the SysTick handler. */
+void board_irq_disable(void);
+void board_irq_enable(void);
+/* Wait for an interrupt (or return at once). */
+void board_idle(void);
+
+/* Called by board_app.c: the vector table's SysTick entry. */
+void board_systick_handler(void);
+/* The application, called by the start-up code after .data/.bss are set up. */
+int board_main(void);
+
+#endif /* BOARD_H */

@@ -32,7 +32,7 @@ __all__ = ["load_problem", "parse_problem"]
 
 _TOP_KEYS = {"name", "t0", "x0", "tick_hz", "u_min", "u_max", "u_hold", "dynamics", "cost",
              "knots",
-             "stages", "plot", "regions", "design", "faults", "corridors"}
+             "stages", "plot", "regions", "design", "faults", "corridors", "measurement"}
 _DESIGN_OPTIONS = {"mode": ("stagewise", "joint"), "discretization": ("exact-zoh", "continuous"),
                    "arith": ARITHS, "delay_ticks": (0, 1), "table": TABLE_KINDS,
                    "spline_tolerance": None}
@@ -895,8 +895,12 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     faults = parse_faults(doc.get("faults", {}), n, stages[0].B.shape[1])
     corridors = (_parse_corridors(doc["corridors"], n, t0, knots[-1].t, tick_hz)
                  if "corridors" in doc else ())
+    measurement = None
+    if "measurement" in doc:
+        from stospline.problem.measurement import parse_measurement  # it imports this module
+        measurement = parse_measurement(doc["measurement"], n)
     problem = Problem(name, t0, x0, tick_hz, stages, knots, source_sha256, plot, dict(options),
-                      u_min, u_max, faults, u_hold, corridors, tuple(ticked))
+                      u_min, u_max, faults, u_hold, corridors, tuple(ticked), measurement)
     check_problem(problem, B_path=default.B_path)   # the firmware's limits (limits.py)
     return problem
 

@@ -1,4 +1,4 @@
-"""The package's imports flow one way: problem -> {design, table} -> sim -> report -> the
+"""The package's imports flow one way: problem -> {design, table} -> sim -> estimator -> report -> the
 application modules (cli, pipeline, ...). Design and table are siblings: a design hands its
 per-tick gains over an interface (`stospline.table.format.TickGains`), so neither imports the
 other. Cross-cutting modules at the top level (errors and
@@ -16,7 +16,8 @@ import pytest
 import stospline
 
 PACKAGE = Path(stospline.__file__).parent
-RANK = {"problem": 0, "design": 1, "table": 1, "sim": 2, "report": 3, "application": 4}
+RANK = {"problem": 0, "design": 1, "table": 1, "sim": 2, "estimator": 3, "report": 4,
+        "application": 5}
 APPLICATION = {"cli", "pipeline", "budget", "gains", "corridor_search", "__init__",
                "__main__"}
 

@@ -2,9 +2,10 @@
 
 It shares no tick code with `stospline.estimator.oracle`: the loop's state is ``xi = [x; e; v;
 1]`` with the error ``e = x - x̂`` in place of the estimate, the predictor runs as the ODE
-``dx̂ = (A x̂ + B u + f) dt`` inside the tick, and one tick of ``E xi xi'`` is the Van Loan
-exponential of the whole moment generator, built with Kronecker products on ``vec E chi chi'``
-(row-major). Constant stage data only; small problems only (the generator is (d^2)^2).
+``dx̂ = (A x̂ + B u + f) dt`` inside the tick, and one tick is the Van Loan exponential of the
+whole moment generator of ``chi = [xi; u]`` (u held), built with Kronecker products on ``vec E
+chi chi'`` (row-major). Constant stage data only; small problems only (the generator is
+(d^2)^2).
 """
 from __future__ import annotations
 

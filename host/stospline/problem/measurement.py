@@ -12,6 +12,7 @@ The design ignores the table: the law it designs runs on the estimate ``x̂`` of
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -19,13 +20,12 @@ import numpy as np
 
 from stospline.errors import ProblemError
 from stospline.limits import MAX_NX
-from stospline.problem.reader import (_F32_MAX, _check_keys, _check_symmetric, _int, _join,
-                                      _kind, _matrix)
 
 __all__ = ["Measurement", "parse_measurement", "MEASUREMENT_KEYS"]
 
 MEASUREMENT_KEYS = {"C", "V", "every", "noise", "x0_cov"}
 _U32_MAX = 2**32 - 1
+_F32_MAX = float(np.finfo(np.float32).max)
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,6 +76,65 @@ class Measurement:
         return out
 
 
+# Field checks with the reader's messages. The reader calls this module, so these are its
+# own, as `faults.py` has its own (an import of the reader's would be a cycle).
+
+def _join(path: str, key: str) -> str:
+    return f"{path}.{key}"
+
+
+def _kind(value: Any) -> str:
+    for types, name in ((bool, "a boolean"), ((int, float), "a number"), (str, "a string"),
+                        (list, "an array"), (dict, "a table")):
+        if isinstance(value, types):
+            return name
+    return "a date/time"
+
+
+def _check_keys(table: Any, path: str, allowed: set[str], required: set[str]) -> dict:
+    if not isinstance(table, dict):
+        raise ProblemError(path, f"must be a table, got {_kind(table)}")
+    for key in table:
+        if key not in allowed:
+            raise ProblemError(_join(path, key), f"unknown key (allowed here: "
+                                                 f"{', '.join(sorted(allowed))})")
+    for key in sorted(required - set(table)):
+        raise ProblemError(_join(path, key), "is required")
+    return table
+
+
+def _int(value: Any, path: str, lo: int, hi: int, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise ProblemError(path, f"must be {what}, an integer in {lo}..{hi}, got {value!r}")
+    return value
+
+
+def _number(value: Any, path: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ProblemError(path, f"must be a number, got {_kind(value)} ({value!r})")
+    if not math.isfinite(value):
+        raise ProblemError(path, f"must be finite, got {value} (NaN and Inf are not allowed)")
+    return float(value)
+
+
+def _matrix(value: Any, path: str, shape: tuple, why: tuple[str, str]) -> np.ndarray:
+    if (not isinstance(value, list) or not value
+            or not all(isinstance(r, list) and r for r in value)):
+        raise ProblemError(path, "must be a matrix: a non-empty array of non-empty rows, "
+                                 f"e.g. [[1, 0], [0, 1]]; got {value!r}")
+    widths = {len(r) for r in value}
+    if len(widths) != 1:
+        raise ProblemError(path, f"rows have different lengths {sorted(widths)}")
+    out = np.array([[_number(v, f"{path}[{i}][{j}]") for j, v in enumerate(row)]
+                    for i, row in enumerate(value)])
+    for axis, (got, want) in enumerate(zip(out.shape, shape)):
+        if want is not None and got != want:
+            what = "rows" if axis == 0 else "columns"
+            raise ProblemError(path, f"has {got} {what}, expected {want}{why[axis]} "
+                                     f"(shape {out.shape[0]}x{out.shape[1]})")
+    return out
+
+
 def _bounded(M: np.ndarray, path: str) -> None:
     """Entries within float32 range: the controller measures in float32, and a larger
     covariance overflows the squared moments."""
@@ -89,7 +148,11 @@ def _bounded(M: np.ndarray, path: str) -> None:
 def _covariance(value: Any, path: str, size: int, why: str) -> np.ndarray:
     M = _matrix(value, path, (size, size), (why, why))
     _bounded(M, path)
-    _check_symmetric(M, path)
+    asym = np.abs(M - M.T)
+    if asym.max() > 1e-12 * max(1.0, float(np.abs(M).max())):
+        i, j = np.unravel_index(np.argmax(asym), M.shape)
+        raise ProblemError(path, f"must be symmetric: [{i}][{j}] = {M[i, j]:g} but "
+                                 f"[{j}][{i}] = {M[j, i]:g}")
     lo = float(np.linalg.eigvalsh(0.5 * (M + M.T)).min())
     if lo < -1e-12 * max(1.0, float(np.abs(M).max())):
         raise ProblemError(path, f"must be positive semidefinite (a covariance); its smallest "

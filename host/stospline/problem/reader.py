@@ -20,6 +20,7 @@ from stospline.firmware_interface import ARITHS
 from stospline.limits import check_problem, check_stage_count, check_state
 from stospline.table_options import TABLE_KINDS, check_spline_tolerance
 from stospline.problem.faults import parse_faults
+from stospline.problem.measurement import parse_measurement
 from stospline.problem.inputfile import decode_problem, read_problem_file
 from stospline.problem.corridors import Corridor
 from stospline.problem.model import (Constraint, Knot, Penalty, Problem, Series, Stage,
@@ -897,7 +898,6 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
                  if "corridors" in doc else ())
     measurement = None
     if "measurement" in doc:
-        from stospline.problem.measurement import parse_measurement  # it imports this module
         measurement = parse_measurement(doc["measurement"], n)
     problem = Problem(name, t0, x0, tick_hz, stages, knots, source_sha256, plot, dict(options),
                       u_min, u_max, faults, u_hold, corridors, tuple(ticked), measurement)

@@ -371,7 +371,17 @@ def design_summary(d: Designed) -> dict:
         **({"table": d.certificate} if d.certificate is not None else {}),
         **_band_terms(d),
         **_limits(d),
+        **_estimator(d),
     })
+
+
+def _estimator(d: Designed) -> dict:
+    """With a [measurement] table: the loop on the filter's estimate (docs/theory/estimator.md);
+    ``{}`` otherwise (summaries stay unchanged)."""
+    if d.problem.measurement is None:
+        return {}
+    from stospline.estimator.summary import estimator_summary
+    return {"estimator": estimator_summary(d.problem, d.table, _cov_digits)}
 
 
 def _band_terms(d: Designed) -> dict:

@@ -187,6 +187,9 @@ class Problem:
     # [[regions]] with every = "tick": bands at every tick, met by the design's constraint
     # generation rather than by knots written into the problem.
     tick_regions: tuple[TickRegion, ...] = ()
+    # [measurement]: the sensor the controller estimates the state from
+    # (`problem.measurement.Measurement`); None: it measures the whole state exactly.
+    measurement: Any = None
 
     @property
     def n(self) -> int:

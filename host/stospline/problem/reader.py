@@ -20,6 +20,7 @@ from stospline.firmware_interface import ARITHS
 from stospline.limits import check_problem, check_stage_count, check_state
 from stospline.table_options import TABLE_KINDS, check_spline_tolerance
 from stospline.problem.faults import parse_faults
+from stospline.problem.measurement import parse_measurement
 from stospline.problem.inputfile import decode_problem, read_problem_file
 from stospline.problem.corridors import Corridor
 from stospline.problem.model import (Constraint, Knot, Penalty, Problem, Series, Stage,
@@ -32,7 +33,7 @@ __all__ = ["load_problem", "parse_problem"]
 
 _TOP_KEYS = {"name", "t0", "x0", "tick_hz", "u_min", "u_max", "u_hold", "dynamics", "cost",
              "knots",
-             "stages", "plot", "regions", "design", "faults", "corridors"}
+             "stages", "plot", "regions", "design", "faults", "corridors", "measurement"}
 _DESIGN_OPTIONS = {"mode": ("stagewise", "joint"), "discretization": ("exact-zoh", "continuous"),
                    "arith": ARITHS, "delay_ticks": (0, 1), "table": TABLE_KINDS,
                    "spline_tolerance": None}
@@ -895,8 +896,11 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     faults = parse_faults(doc.get("faults", {}), n, stages[0].B.shape[1])
     corridors = (_parse_corridors(doc["corridors"], n, t0, knots[-1].t, tick_hz)
                  if "corridors" in doc else ())
+    measurement = None
+    if "measurement" in doc:
+        measurement = parse_measurement(doc["measurement"], n)
     problem = Problem(name, t0, x0, tick_hz, stages, knots, source_sha256, plot, dict(options),
-                      u_min, u_max, faults, u_hold, corridors, tuple(ticked))
+                      u_min, u_max, faults, u_hold, corridors, tuple(ticked), measurement)
     check_problem(problem, B_path=default.B_path)   # the firmware's limits (limits.py)
     return problem
 

@@ -10,8 +10,8 @@ What is written (``docs/guide/library.md``, "Writing a problem back"):
 * ``[[regions]]`` are written as the band knots they expand to, which is the same problem;
   a region with ``every = "tick"`` (`TickRegion`) as itself;
 * equal stages once as ``[dynamics]``/``[cost]``, different ones as ``[[stages]]``;
-* ``x0``, ``t0``, ``tick_hz``, actuator limits, ``[design]``, ``[plot]``, ``[faults]`` and
-  ``[[corridors]]`` as they are.
+* ``x0``, ``t0``, ``tick_hz``, actuator limits, ``[design]``, ``[plot]``, ``[faults]``,
+  ``[measurement]`` and ``[[corridors]]`` as they are.
 
 Floats are written as Python's shortest repr, which reads back to the same double.
 """
@@ -170,6 +170,8 @@ def problem_to_toml(problem: Problem) -> str:
         lines += _table("[plot]", dict(p.plot))
     if p.faults.any:
         lines += _table("[faults]", p.faults.as_dict())
+    if p.measurement is not None:
+        lines += _table("[measurement]", p.measurement.as_dict())
     for cor in p.corridors:
         items = {"t": [float(cor.t[0]), float(cor.t[1])], "C": cor.C,
                  "polygons": [{"A": A, "b": b} for A, b in cor.polygons]}

@@ -472,6 +472,65 @@ OUTPUT_CASES = {
 }
 
 
+# ---------------------------------------------------------------------------------------
+# Measurement: a [measurement] table (the sensor an estimator reads), valid, or with one key
+# broken: shapes, non-finite and beyond-float32 entries, covariances that are not symmetric
+# or not positive semidefinite, sample periods out of range, noise entries out of range,
+# repeated or of mixed widths, unknown keys.
+
+def _sensor(n: int) -> dict:
+    return {"C": [[1.0] + [0.0] * (n - 1)], "V": [[1e-4]], "every": 2,
+            "noise": [{"state": 0, "D": [[0.01]]}],
+            "x0_cov": [[1e-3 if i == j else 0.0 for j in range(n)] for i in range(n)]}
+
+
+MEASUREMENT_EDITS = {
+    "valid": lambda s, n: None,
+    "not_a_table": lambda s, n: s.clear() or s.update({"__replace__": [1.0]}),
+    "C_columns": lambda s, n: s.update(C=[[1.0] * (n + 1)]),
+    "C_zero_row": lambda s, n: s.update(C=[[0.0] * n]),
+    "C_nan": lambda s, n: s.update(C=[[float("nan")] + [0.0] * (n - 1)]),
+    "C_beyond_float32": lambda s, n: s.update(C=[[1e39] + [0.0] * (n - 1)]),
+    "C_too_many_rows": lambda s, n: s.update(C=[[1.0] + [0.0] * (n - 1)] * 40,
+                                             V=[[0.0] * 40] * 40),
+    "V_missing": lambda s, n: s.pop("V"),
+    "V_negative": lambda s, n: s.update(V=[[-1.0]]),
+    "V_size": lambda s, n: s.update(V=[[1.0, 0.0], [0.0, 1.0]]),
+    "V_inf": lambda s, n: s.update(V=[[float("inf")]]),
+    "V_not_psd": lambda s, n: s.update(C=[[1.0] + [0.0] * (n - 1)] * 2,
+                                       V=[[1.0, 2.0], [2.0, 1.0]]),
+    "V_asymmetric": lambda s, n: s.update(C=[[1.0] + [0.0] * (n - 1)] * 2,
+                                          V=[[1.0, 0.5], [0.0, 1.0]]),
+    "every_zero": lambda s, n: s.update(every=0),
+    "every_float": lambda s, n: s.update(every=2.5),
+    "every_huge": lambda s, n: s.update(every=2**32),
+    "every_bool": lambda s, n: s.update(every=True),
+    "noise_state": lambda s, n: s.update(noise=[{"state": n, "D": [[0.1]]}]),
+    "noise_repeated": lambda s, n: s.update(noise=[{"state": 0, "D": [[0.1]]}] * 2),
+    "noise_D_rows": lambda s, n: s.update(noise=[{"state": 0, "D": [[0.1], [0.1]]}]),
+    "noise_mixed_widths": lambda s, n: s.update(noise=[{"state": 0, "D": [[0.1]]},
+                                                       {"state": n - 1, "D": [[0.1, 0.2]]}]),
+    "noise_not_list": lambda s, n: s.update(noise={"state": 0, "D": [[0.1]]}),
+    "noise_unknown_key": lambda s, n: s.update(noise=[{"state": 0, "G": [[0.1]]}]),
+    "x0_cov_not_psd": lambda s, n: s.update(x0_cov=[[-1.0 if i == j else 0.0 for j in range(n)]
+                                                    for i in range(n)]),
+    "x0_cov_shape": lambda s, n: s.update(x0_cov=[[1.0]] if n > 1 else [[1.0, 0.0]]),
+    "x0_cov_huge": lambda s, n: s.update(x0_cov=[[1e39 if i == j else 0.0 for j in range(n)]
+                                                 for i in range(n)]),
+    "unknown_key": lambda s, n: s.update(R=[[1.0]]),
+}
+
+
+def m_measurement(doc, draw):
+    n = len(doc["x0"])
+    sensor = _sensor(n)
+    MEASUREMENT_EDITS[draw(st.sampled_from(sorted(MEASUREMENT_EDITS)))](sensor, n)
+    doc["measurement"] = sensor.get("__replace__", sensor)
+
+
+MUTATIONS["measurement"] = m_measurement
+
+
 @st.composite
 def problem_cases(draw):
     """(classes, base name, TOML text): a base problem with 1-2 mutations applied."""

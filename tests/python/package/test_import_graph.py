@@ -1,5 +1,6 @@
-"""The package's imports flow one way: problem -> {design, table} -> oracle -> refine ->
-harness -> report -> the application modules (cli, pipeline, ...). Design and table are siblings: a design hands its
+"""The package's imports flow one way: problem -> {design, table} -> oracle -> {refine,
+estimator} -> harness -> report -> the application modules (cli, pipeline, ...). Design and
+table are siblings: a design hands its
 per-tick gains over an interface (`stospline.table.format.TickGains`), so neither imports the
 other. Cross-cutting modules at the top level (errors and
 the infrastructure: atomic writes, caches, strict JSON, firmware limits, ...) import none of
@@ -16,8 +17,8 @@ import pytest
 import stospline
 
 PACKAGE = Path(stospline.__file__).parent
-RANK = {"problem": 0, "design": 1, "table": 1, "oracle": 2, "refine": 3, "harness": 4,
-        "report": 5, "application": 6}
+RANK = {"problem": 0, "design": 1, "table": 1, "oracle": 2, "refine": 3, "estimator": 3,
+        "harness": 4, "report": 5, "application": 6}
 APPLICATION = {"cli", "pipeline", "budget", "gains", "corridor_search", "board", "__init__",
                "__main__"}
 

@@ -89,6 +89,8 @@ def same_problem(a, b) -> bool:
         return False
     if len(a.knots) != len(b.knots) or len(a.stages) != len(b.stages):
         return False
+    if a.measurement != b.measurement:
+        return False
     if len(a.corridors) != len(b.corridors) or not all(
             ca.t == cb.t and ca.epsilon == cb.epsilon and eq(ca.C, cb.C)
             and len(ca.polygons) == len(cb.polygons)

@@ -117,6 +117,7 @@ def test_fragments_change_the_minimal_file():
                        or problem.faults.any
                        or problem.u_hold is not None
                        or problem.corridors
+                       or problem.measurement is not None
                        or any(s.varying is not None or not np.array_equal(s.R, b.R)
                               or s.f is not None
                               or not np.array_equal(s.A, b.A) or s.G.any()
@@ -131,7 +132,7 @@ def documented(key: str) -> bool:
 # Keys accepted below the top-level tables (the parser spells these inline).
 NESTED = ["state", "input", "G", "C", "target", "weight", "value", "lower", "upper", "t",
           "values", "interpolation", "y0", "every", "axes", "walls", "polygons", "epsilon",
-          "A", "b", *FAULT_KEYS]
+          "A", "b", "V", "D", "x0_cov", *FAULT_KEYS]
 
 
 @pytest.mark.parametrize("key", sorted(problem_module._TOP_KEYS | problem_module._DYN_KEYS

@@ -1,0 +1,215 @@
+"""The ``[measurement]`` table of a problem file: what the controller's sensor sees.
+
+    y_j = C x(t_j) + sum_i x_i(t_j) D_i nu_j + v_j        at the ticks j = 0, every, 2 every, ...
+
+with ``v_j ~ N(0, V)`` and ``nu_j ~ N(0, I)`` independent of each other, of the plant's noise and
+from tick to tick; ``D_i`` (p x mnu) scales a noise proportional to the state ``x_i`` (a range
+sensor's error grows with the range). ``x0_cov`` is the covariance of the start around ``x0``,
+which the controller does not know exactly once it estimates the state (zero by default).
+
+The design ignores the table: the law it designs runs on the estimate ``x̂`` of the filter of
+`stospline.estimator` (docs/theory/estimator.md).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from stospline.errors import ProblemError
+from stospline.limits import MAX_NX
+
+__all__ = ["Measurement", "parse_measurement", "MEASUREMENT_KEYS"]
+
+MEASUREMENT_KEYS = {"C", "V", "every", "noise", "x0_cov"}
+_U32_MAX = 2**32 - 1
+_F32_MAX = float(np.finfo(np.float32).max)
+
+
+@dataclass(frozen=True, eq=False)
+class Measurement:
+    """A validated sensor model (see the module docstring); ``D`` is (n, p, mnu) with zero
+    matrices for states without a noise entry (mnu = 0 without any)."""
+    C: np.ndarray                       # (p, n)
+    V: np.ndarray                       # (p, p), symmetric positive semidefinite
+    every: int = 1
+    D: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 0)))
+    x0_cov: np.ndarray | None = None    # (n, n); None: the start is known exactly
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Measurement) and self.as_dict() == other.as_dict()
+
+    def __hash__(self) -> int:
+        return hash(repr(self.as_dict()))
+
+    @property
+    def p(self) -> int:
+        return self.C.shape[0]
+
+    def prior_cov(self, n: int) -> np.ndarray:
+        return np.zeros((n, n)) if self.x0_cov is None else self.x0_cov
+
+    def noise_cov(self, Mxx: np.ndarray) -> np.ndarray:
+        """``E rr'`` of the sensor's noise ``r = y - C x`` given ``E xx' = Mxx``:
+        ``V + sum_ab E[x_a x_b] D_a D_b'`` (the state-proportional part is linear in Mxx)."""
+        if not self.D.size:
+            return self.V.copy()
+        R = self.V + np.einsum("ab,apk,bqk->pq", Mxx, self.D, self.D)
+        return 0.5 * (R + R.T)
+
+    def samples_at(self, tick: int) -> bool:
+        return tick % self.every == 0
+
+    def as_dict(self) -> dict[str, Any]:
+        """The ``[measurement]`` table that reads back as this model."""
+        out: dict[str, Any] = {"C": self.C.tolist(), "V": self.V.tolist()}
+        if self.every != 1:
+            out["every"] = self.every
+        noise = [{"state": i, "D": self.D[i].tolist()} for i in range(self.D.shape[0])
+                 if self.D[i].any()]
+        if noise:
+            out["noise"] = noise
+        if self.x0_cov is not None:
+            out["x0_cov"] = self.x0_cov.tolist()
+        return out
+
+
+# Field checks with the reader's messages. The reader calls this module, so these are its
+# own, as `faults.py` has its own (an import of the reader's would be a cycle).
+
+def _join(path: str, key: str) -> str:
+    return f"{path}.{key}"
+
+
+def _kind(value: Any) -> str:
+    for types, name in ((bool, "a boolean"), ((int, float), "a number"), (str, "a string"),
+                        (list, "an array"), (dict, "a table")):
+        if isinstance(value, types):
+            return name
+    return "a date/time"
+
+
+def _check_keys(table: Any, path: str, allowed: set[str], required: set[str]) -> dict:
+    if not isinstance(table, dict):
+        raise ProblemError(path, f"must be a table, got {_kind(table)}")
+    for key in table:
+        if key not in allowed:
+            raise ProblemError(_join(path, key), f"unknown key (allowed here: "
+                                                 f"{', '.join(sorted(allowed))})")
+    for key in sorted(required - set(table)):
+        raise ProblemError(_join(path, key), "is required")
+    return table
+
+
+def _int(value: Any, path: str, lo: int, hi: int, what: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        raise ProblemError(path, f"must be {what}, an integer in {lo}..{hi}, got {value!r}")
+    return value
+
+
+def _number(value: Any, path: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ProblemError(path, f"must be a number, got {_kind(value)} ({value!r})")
+    if not math.isfinite(value):
+        raise ProblemError(path, f"must be finite, got {value} (NaN and Inf are not allowed)")
+    return float(value)
+
+
+def _matrix(value: Any, path: str, shape: tuple, why: tuple[str, str]) -> np.ndarray:
+    if (not isinstance(value, list) or not value
+            or not all(isinstance(r, list) and r for r in value)):
+        raise ProblemError(path, "must be a matrix: a non-empty array of non-empty rows, "
+                                 f"e.g. [[1, 0], [0, 1]]; got {value!r}")
+    widths = {len(r) for r in value}
+    if len(widths) != 1:
+        raise ProblemError(path, f"rows have different lengths {sorted(widths)}")
+    out = np.array([[_number(v, f"{path}[{i}][{j}]") for j, v in enumerate(row)]
+                    for i, row in enumerate(value)])
+    for axis, (got, want) in enumerate(zip(out.shape, shape)):
+        if want is not None and got != want:
+            what = "rows" if axis == 0 else "columns"
+            raise ProblemError(path, f"has {got} {what}, expected {want}{why[axis]} "
+                                     f"(shape {out.shape[0]}x{out.shape[1]})")
+    return out
+
+
+def _bounded(M: np.ndarray, path: str) -> None:
+    """Entries within float32 range: the controller measures in float32, and a larger
+    covariance overflows the squared moments."""
+    big = np.argwhere(np.abs(M) > _F32_MAX)
+    if big.size:
+        idx = "".join(f"[{int(i)}]" for i in big[0])
+        raise ProblemError(f"{path}{idx}", f"{M[tuple(big[0])]:g} is beyond the float32 range "
+                                           f"(<= {_F32_MAX:.8g}) the controller measures in")
+
+
+def _covariance(value: Any, path: str, size: int, why: str) -> np.ndarray:
+    M = _matrix(value, path, (size, size), (why, why))
+    _bounded(M, path)
+    asym = np.abs(M - M.T)
+    if asym.max() > 1e-12 * max(1.0, float(np.abs(M).max())):
+        i, j = np.unravel_index(np.argmax(asym), M.shape)
+        raise ProblemError(path, f"must be symmetric: [{i}][{j}] = {M[i, j]:g} but "
+                                 f"[{j}][{i}] = {M[j, i]:g}")
+    lo = float(np.linalg.eigvalsh(0.5 * (M + M.T)).min())
+    if lo < -1e-12 * max(1.0, float(np.abs(M).max())):
+        raise ProblemError(path, f"must be positive semidefinite (a covariance); its smallest "
+                                 f"eigenvalue is {lo:.6g}")
+    return 0.5 * (M + M.T)
+
+
+def _parse_noise(value: Any, path: str, n: int, p: int) -> np.ndarray:
+    """``noise = [{state = i, D = (p x mnu)}, ...]`` as the (n, p, mnu) array."""
+    if not isinstance(value, list):
+        raise ProblemError(path, f"must be an array of {{state = i, D = matrix}} tables, got "
+                                 f"{_kind(value)}")
+    D = None
+    seen: dict[int, str] = {}
+    first = ""
+    for j, item in enumerate(value):
+        ip = f"{path}[{j}]"
+        _check_keys(item, ip, {"state", "D"}, {"state", "D"})
+        i = _int(item["state"], f"{ip}.state", 0, n - 1, "a 0-based state index")
+        if i in seen:
+            raise ProblemError(f"{ip}.state", f"state {i} already has a noise entry "
+                                              f"({seen[i]}); give one entry per state")
+        seen[i] = ip
+        want = None if D is None else D.shape[2]
+        why = "" if D is None else f" (as {first}: one column per sensor noise component)"
+        Di = _matrix(item["D"], f"{ip}.D", (p, want), (" (p, the rows of measurement.C)", why))
+        _bounded(Di, f"{ip}.D")
+        if D is None:
+            D, first = np.zeros((n, p, Di.shape[1])), f"{ip}.D"
+        D[i] = Di
+    return np.zeros((0, 0, 0)) if D is None else D
+
+
+def parse_measurement(raw: Any, n: int, *, path: str = "measurement") -> Measurement:
+    """Validate a ``[measurement]`` table for a problem with n states.
+
+    Raises
+    ------
+    ProblemError
+        Naming the key (``measurement.V``, ``measurement.noise[0].D[1][0]``) and the reason.
+    """
+    raw = _check_keys(raw, path, MEASUREMENT_KEYS, {"C", "V"})
+    C = _matrix(raw["C"], _join(path, "C"), (None, n), ("", " (n, the length of x0)"))
+    _bounded(C, _join(path, "C"))
+    p = C.shape[0]
+    if p > MAX_NX:
+        raise ProblemError(_join(path, "C"), f"has {p} rows (outputs); the firmware takes at "
+                                             f"most {MAX_NX} (STSP_MAX_NX)")
+    zero = np.flatnonzero(~C.any(axis=1))
+    if zero.size:
+        raise ProblemError(f"{path}.C[{int(zero[0])}]", "is a zero row: that output measures "
+                                                        "nothing; remove it")
+    V = _covariance(raw["V"], _join(path, "V"), p, " (p, the rows of measurement.C)")
+    every = (_int(raw["every"], _join(path, "every"), 1, _U32_MAX,
+                  "the ticks between two samples") if "every" in raw else 1)
+    D = (_parse_noise(raw["noise"], _join(path, "noise"), n, p) if "noise" in raw
+         else np.zeros((0, 0, 0)))
+    x0_cov = (_covariance(raw["x0_cov"], _join(path, "x0_cov"), n, " (n, the length of x0)")
+              if "x0_cov" in raw else None)
+    return Measurement(C, V, every, D, x0_cov)

@@ -48,6 +48,35 @@ def osqp_guess(eps: float):
     return guess
 
 
+def rates(text: str) -> list[int]:
+    """``--rates``: comma-separated tick rates, each a positive integer."""
+    try:
+        out = [int(r) for r in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be comma-separated integers, got {text!r}")
+    if any(r < 1 for r in out):
+        raise argparse.ArgumentTypeError(f"every rate must be at least 1 Hz, got {text!r}")
+    return out
+
+
+def tolerance(text: str) -> float:
+    """``--eps``: OSQP's absolute and relative tolerance, in (0, 1)."""
+    try:
+        eps = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}")
+    if not 0 < eps < 1:
+        raise argparse.ArgumentTypeError(f"must be in (0, 1), got {text!r}")
+    return eps
+
+
+def example(text: str) -> Path:
+    """``--example``: an existing problem file."""
+    if not Path(text).is_file():
+        raise argparse.ArgumentTypeError(f"no such file: {text!r}")
+    return Path(text)
+
+
 def timed(design, p):
     design(p)                                   # warm-up: caches, first-call imports
     t = time.perf_counter()
@@ -60,17 +89,18 @@ def main() -> None:
     import stospline
     from stospline.design import tick_qp
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--rates", default="100,1000")
-    ap.add_argument("--eps", type=float, default=1e-6)
-    ap.add_argument("--example", default=str(ROOT / "examples" / "robot_monotone.toml"))
+    ap.add_argument("--rates", type=rates, default="100,1000")
+    ap.add_argument("--eps", type=tolerance, default=1e-6)
+    ap.add_argument("--example", type=example,
+                    default=str(ROOT / "examples" / "robot_monotone.toml"))
     args = ap.parse_args()
-    print(f"{Path(args.example).name}: design_tick_qp, interior point (ours) vs OSQP "
+    print(f"{args.example.name}: design_tick_qp, interior point (ours) vs OSQP "
           f"(eps {args.eps:g}) as the active-set guess, exact corrections on top of both")
     print("| rate | ours: time | iterations | corrections | OSQP: time | iterations | "
           "corrections | identical design | J0 OSQP / ours - 1 |")
     print("|---|---|---|---|---|---|---|---|---|")
     ours_guess = tick_qp._interior_point
-    for rate in (int(r) for r in args.rates.split(",")):
+    for rate in args.rates:
         p = replace(stospline.load_problem(args.example), tick_hz=rate)
         tick_qp._interior_point = ours_guess
         a, ta = timed(tick_qp.design_tick_qp, p)

@@ -19,6 +19,15 @@ about 17 iterations at any rate) finds the active set; the KKT system of that se
 solved exactly and the set corrected until every row is inside its band and every
 multiplier has its sign.
 
+Why our own interior point and not OSQP (the QP solver in the lock) for the guess, with the
+same exact corrections on top (``tools/bench/tick_qp_osqp.py``, robot_monotone,
+docs/evidence/performance.md): OSQP's ADMM iterations grow with the ticks (200, 8 275 and
+25 550 at 100 Hz, 1 kHz and 2 kHz, against 15-17 here), so the design takes 1x, 11x and 23x
+the time (52 s against 4.8 s at 1 kHz); from 2 kHz its guess leads to another active set of
+degenerate rows (the design differs in the last bits); and where the corrections do not settle,
+the fallback needs the interior point's feasible iterate and its duality gap, which OSQP does
+not give.
+
 The table latches the state at t0: ``d = d_c + D x0`` is affine in ``x0`` for the optimal
 active set, so ``k0_j = k*_j + d_c,j`` and ``L_j = D_j`` with ``v = x(t0)``. Exact for the design's
 ``x0`` and every start with the same active set (as a band design with more rows than the

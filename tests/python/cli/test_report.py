@@ -153,3 +153,31 @@ def test_report_shows_the_regions_at_every_tick(tmp_path):
     for got, key in zip(cells.groups(), ("worst_at_ticks_design", "worst_at_ticks_implemented",
                                          "worst_over_interval")):
         assert float(got) == pytest.approx(reg[key], abs=1e-10)
+
+
+HOSTILE = '<script>alert("x")</script> & co'
+
+
+def test_text_from_the_problem_and_the_run_is_escaped():
+    """The page template autoescapes: a name, a verdict's reason and a no-fault-table reason
+    holding markup come out as text (unescaping gives them back), and the page's one script
+    is its own."""
+    import dataclasses
+    import html
+    import tomllib
+    from stospline.pipeline import design_problem, simulate_problem, simulation_summary
+    from stospline.problem import parse_problem
+    from stospline.report.html import report_html
+    d = design_problem(parse_problem(tomllib.loads(ONE_STATE)))
+    mc = simulate_problem(d, paths=20, seed=4, record=5)
+    summary = simulation_summary(d, mc, seed=4)
+    summary["verdict"]["reason"] = HOSTILE
+    # A name a problem file refuses (not a C identifier): set after the run, as a label.
+    d = dataclasses.replace(d, problem=dataclasses.replace(d.problem, name=HOSTILE))
+    page = report_html(d, mc, summary, None, HOSTILE)
+    assert page.count("<script>") == 1 and "</script> &" not in page
+    for pattern in (r"<title>stospline report: (.*?)</title>", r"<h1>(.*?)</h1>",
+                    r'id="verdict">.* jointly; (.*)\)\.</p>',
+                    r'id="no-fault-table">No fault table: (.*)\.</p>'):
+        shown = re.search(pattern, page).group(1)
+        assert shown != HOSTILE and html.unescape(shown) == HOSTILE, pattern

@@ -276,6 +276,17 @@ def test_a_python_callable_has_no_toml_form():
         problem_to_toml(p)
 
 
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -float("inf")])
+def test_a_number_toml_cannot_hold_is_refused(bad):
+    """TOML has nan and inf, a problem file does not: writing one would make a file that the
+    reader refuses."""
+    p = parse_problem(doc_snippets.minimal())
+    x0 = np.array(p.x0, dtype=float)
+    x0[-1] = bad
+    with pytest.raises(ProblemTomlError, match="not a valid problem-file number"):
+        problem_to_toml(dataclasses.replace(p, x0=x0))
+
+
 def test_gains_as_numpy_arrays(robot_zoh):
     g = robot_zoh.gains()
     t = robot_zoh.table

@@ -68,6 +68,7 @@ def test_wheel_and_sdist_carry_the_firmware(wheel):
         assert "stospline/table/compose_kernel.c" in names
         assert "stospline/table/qspline_kernel.c" in names
         assert "stospline/table/literal_kernel.c" in names
+        assert "stospline/report/templates/report.html.j2" in names     # the report page
     with tarfile.open(sdist) as tar:
         members = [m.split("stospline/_firmware/", 1)[1] for m in tar.getnames()
                    if "stospline/_firmware/" in m and m.endswith((".c", ".h"))]
@@ -115,6 +116,10 @@ def test_installed_wheel_designs_simulates_and_plots_outside_the_repo(wheel, tmp
     out = run([exe, "plot", "robot.toml", "--out", "robot.png", "--paths", "5"], cwd=work,
               env=env)
     assert (work / "robot.png").stat().st_size > 1000 and "wrote robot.png" in out
+
+    out = run([exe, "report", "robot.toml", "--out", "robot.html", "--paths", "5",
+               "--fault-paths", "0"], cwd=work, env=env)
+    assert "<h1>robot_bands</h1>" in (work / "robot.html").read_text(encoding="utf-8")
 
     cached = list((tmp_path / "xdg" / "stospline" / "cffi").iterdir())
     assert len(cached) >= 2, cached         # the design kernels and the firmware + table

@@ -1,6 +1,7 @@
-"""The table benches (`tools/bench/spline_tables.py`, `tools/bench/table_kernel.py`) refuse a
-bad argument with an error line naming it (after argparse's usage line) and exit status 2,
-before any work: no traceback, nothing on stdout."""
+"""The table benches (`tools/bench/spline_tables.py`, `tools/bench/table_kernel.py`) and the
+tick-grid QP's (`tools/bench/tick_qp_osqp.py`) refuse a bad argument with an error line naming
+it (after argparse's usage line) and exit status 2, before any work: no traceback, nothing on
+stdout."""
 import os
 import subprocess
 import sys
@@ -20,6 +21,11 @@ from conftest import REPO
     ("spline_tables.py", ["--tolerances", "1e-5,x"], "--tolerances"),
     ("table_kernel.py", ["--ticks", "0"], "--ticks"),
     ("table_kernel.py", ["--ticks", "999999999"], "--ticks"),
+    ("tick_qp_osqp.py", ["--rates", "100,fast"], "--rates"),
+    ("tick_qp_osqp.py", ["--rates", "0"], "--rates"),
+    ("tick_qp_osqp.py", ["--eps", "nan"], "--eps"),
+    ("tick_qp_osqp.py", ["--eps", "0"], "--eps"),
+    ("tick_qp_osqp.py", ["--example", "nope.toml"], "--example"),
 ])
 def test_a_bad_argument_is_named_and_refused(script, args, names):
     env = {**os.environ, "PYTHONPATH": str(REPO / "host")}

@@ -27,7 +27,7 @@ from pathlib import Path                                         # noqa: E402
 # Only light modules here: numpy and the rest load inside `main`, where an interrupt is
 # caught (a Ctrl-C while they load ends in one line, not a traceback).
 from stospline import progress                                   # noqa: E402
-from stospline.errors import ProblemError                        # noqa: E402
+from stospline.errors import ProblemError, StosplineError       # noqa: E402
 from stospline.firmware_interface import ARITHS                  # noqa: E402
 from stospline.table_options import (DEFAULT_SPLINE_TOLERANCE, TABLE_KINDS,  # noqa: E402
                                      check_spline_tolerance)
@@ -792,6 +792,11 @@ def _fault_option(args, exc: ProblemError) -> ProblemError:
     return exc
 
 
+def _one_line(text: str) -> str:
+    """`text` on one line (a compiler's message spans several)."""
+    return " ".join(line.strip() for line in text.splitlines() if line.strip())
+
+
 def _main(argv: list[str] | None) -> int:
     from stospline.atomic import Interrupted, OutputError
     from stospline.cache import CompilerMissing
@@ -821,6 +826,9 @@ def _main(argv: list[str] | None) -> int:
     except Interrupted as exc:
         print(f"stospline: {exc}; nothing was written", file=sys.stderr)
         return 128 + exc.signum
+    except StosplineError as exc:         # every other exception of the package
+        print(f"stospline: error: {_one_line(str(exc))}", file=sys.stderr)
+        return 2
     except MemoryError:
         print("stospline: error: out of memory (the estimate of docs/guide/problem-file.md, "
               "Limits, was too low for this machine; try --max-memory lower or a smaller "

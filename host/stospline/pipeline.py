@@ -35,6 +35,7 @@ from stospline.table_options import (DEFAULT_SPLINE_TOLERANCE, TABLE_KINDS,
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
            "simulation_summary", "verdict", "plan_substeps", "write_outputs", "start_from",
            "double_table", "fixed_point_table", "fixed_point_spline", "check_implementable",
+           "generated_files",
            "loop_moments", "fault_sweep", "simulation_estimate"]
 
 # JSON summaries keep 10 significant digits and an absolute quantum of 1e-10: the designs
@@ -492,7 +493,7 @@ def fixed_point_spline(d: Designed, arith: str, *, tolerance: float | None = Non
 def generated_files(d: Designed, source_name: str, arith: str = "float32", *,
                     with_c: bool = True) -> dict[str, str]:
     """``<name>.{h,c,json}`` for float32; ``<name>_<arith>.{h,c,json}`` for Q15/Q31, whose
-    summary adds the scales and the error bound (``fixed``). ``with_c=False``: only the
+    summary adds the scales and the error bound (the JSON key ``fixed``). ``with_c=False``: only the
     ``.json`` (formatting the C text is most of the time of a small design).
 
     Raises ProblemError, before any text exists, if the table exceeds the firmware's limits or

@@ -17,8 +17,8 @@ import stospline
 
 PACKAGE = Path(stospline.__file__).parent
 RANK = {"problem": 0, "design": 1, "table": 1, "sim": 2, "report": 3, "application": 4}
-APPLICATION = {"cli", "pipeline", "budget", "gains", "corridor_search", "__init__",
-               "__main__"}
+APPLICATION = {"cli", "pipeline", "design_method", "budget", "gains", "corridor_search",
+               "__init__", "__main__"}
 
 
 def module_name(path: Path) -> str:

@@ -20,7 +20,8 @@ DISCRETIZATIONS = ("exact-zoh", "continuous")
 
 @dataclass(frozen=True)
 class DesignOptions:
-    """How a problem is designed and written (docs/guide/problem-file.md, ``[design]``)."""
+    """How a problem is designed and written (docs/guide/problem-file.md, ``[design]``); the
+    field defaults are the defaults of the options."""
     noise: bool = True                 # False: design as if there were no noise
     mode: str = "stagewise"            # or "joint"
     discretization: str = "exact-zoh"  # or "continuous"
@@ -48,20 +49,21 @@ def resolve_options(problem, *, noise: bool = True, mode: str | None = None,
 
     Raises ValueError for an unknown table kind and ProblemError naming `tolerance_field`
     for a spline tolerance outside its range."""
-    file = problem.options
-    table = table or file.get("table", "per-tick")
+    file, default = problem.options, DesignOptions()
+    table = table or file.get("table", default.table)
     if table not in TABLE_KINDS:
         raise ValueError(f"table must be one of {TABLE_KINDS}, got {table!r}")
-    tolerance = file.get("spline_tolerance", DEFAULT_SPLINE_TOLERANCE) \
+    tolerance = file.get("spline_tolerance", default.spline_tolerance) \
         if spline_tolerance is None else spline_tolerance
     return DesignOptions(
         noise=noise,
-        mode=mode or file.get("mode", "stagewise"),
-        discretization=discretization or file.get("discretization", "exact-zoh"),
-        delay_ticks=file.get("delay_ticks", 0) if delay_ticks is None else delay_ticks,
+        mode=mode or file.get("mode", default.mode),
+        discretization=discretization or file.get("discretization", default.discretization),
+        delay_ticks=file.get("delay_ticks", default.delay_ticks) if delay_ticks is None
+        else delay_ticks,
         table=table,
         spline_tolerance=check_spline_tolerance(tolerance, tolerance_field),
-        arith=arith or file.get("arith", "float32"))
+        arith=arith or file.get("arith", default.arith))
 
 
 def with_file_options(problem, **values):

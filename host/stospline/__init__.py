@@ -27,12 +27,12 @@ _EXPORTS = {
     "problem_from_arrays": "problem.build", "problem_from_statespace": "problem.build",
     "problem_to_toml": "problem.toml_writer",
     # design and evaluation
-    "Designed": "pipeline", "design_problem": "pipeline", "design_summary": "pipeline",
+    "Designed": "pipeline", "design_problem": "pipeline", "design_summary": "report.design_summary",
     "generated_files": "pipeline", "write_outputs": "pipeline", "start_from": "pipeline",
     "fixed_point_table": "pipeline", "DesignError": "errors", "Gains": "gains",
     "flash_bytes": "table.flash",
     # running the compiled firmware
-    "simulate_problem": "pipeline", "simulation_summary": "pipeline",
+    "simulate_problem": "pipeline", "simulation_summary": "report.simulation_summary",
     "table_of": "table.format", "evaluate_table": "oracle.evaluate",
     "build_controller": "harness.controller", "generate_c": "table.codegen", "plot_corridor": "report.plot",
 }

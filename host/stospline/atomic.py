@@ -70,6 +70,8 @@ import threading
 from contextlib import contextmanager
 from pathlib import Path
 
+from stospline.errors import StosplineError
+
 __all__ = ["OutputError", "Interrupted", "STAGING_PREFIX", "JOURNAL", "write_set",
            "recover", "read_set", "check_target", "check_file_target", "write_file"]
 
@@ -82,7 +84,7 @@ _SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP
                  if hasattr(signal, name))
 
 
-class OutputError(OSError):
+class OutputError(StosplineError, OSError):
     """An output cannot be written (the CLI reports it on ``--out``). ``reason`` says why;
     nothing was created or changed unless the message says otherwise."""
 

@@ -17,11 +17,13 @@ import os
 from pathlib import Path
 from typing import Callable, Iterable
 
+from stospline.errors import StosplineError
+
 __all__ = ["cache_root", "source_key", "cached_build", "compile_cffi", "load_module",
            "build_source_module", "CompilerMissing", "FallbackWarning", "c_compiler"]
 
 
-class CompilerMissing(RuntimeError):
+class CompilerMissing(StosplineError, RuntimeError):
     """A C module had to be built and there is no C compiler (``CC``, else the one Python was
     built with, not found on ``PATH``). ``compiler`` names what was looked for."""
 

@@ -1,4 +1,4 @@
-"""``stospline`` command line: a thin layer over `stospline.pipeline`.
+"""``stospline`` command line: reads the arguments, calls `stospline.pipeline`, prints reports.
 
 Exit status: 0 success, 2 bad problem file, bad command-line value, unwritable output, a run
 beyond the memory/time limits, or an infeasible problem (one line on stderr naming the field
@@ -17,7 +17,6 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse                                                  # noqa: E402
 import functools                                                 # noqa: E402
-import json                                                      # noqa: E402
 import math                                                      # noqa: E402
 import re                                                        # noqa: E402
 import signal                                                    # noqa: E402
@@ -27,10 +26,9 @@ from pathlib import Path                                         # noqa: E402
 # Only light modules here: numpy and the rest load inside `main`, where an interrupt is
 # caught (a Ctrl-C while they load ends in one line, not a traceback).
 from stospline import progress                                   # noqa: E402
-from stospline.errors import ProblemError                        # noqa: E402
+from stospline.errors import ProblemError, StosplineError       # noqa: E402
 from stospline.firmware_interface import ARITHS                  # noqa: E402
-from stospline.table_options import (DEFAULT_SPLINE_TOLERANCE, TABLE_KINDS,  # noqa: E402
-                                     check_spline_tolerance)
+from stospline.table_options import DEFAULT_SPLINE_TOLERANCE, TABLE_KINDS  # noqa: E402
 
 __all__ = ["main"]
 
@@ -54,59 +52,55 @@ def quiet_numerics(func):
     return run
 
 
-def _options(args, problem) -> dict:
-    """Design options: command line first, then the file's [design] table, then defaults."""
-    delay = problem.options.get("delay_ticks", 0)
+def _design_options(args, problem):
+    """The run's `stospline.options.DesignOptions`: the command line first, then the file's
+    [design] table, then defaults (`resolve_options`); options given as text checked here."""
+    from stospline.options import resolve_options
+    delay = None
     if args.delay_ticks is not None:
         if args.delay_ticks not in ("0", "1"):
             raise ProblemError("--delay-ticks", f"must be 0 or 1 (ticks between measuring x "
                                                 f"and applying its command), got "
                                                 f"{args.delay_ticks!r}")
         delay = int(args.delay_ticks)
-    tolerance = problem.options.get("spline_tolerance", DEFAULT_SPLINE_TOLERANCE)
+    tolerance = None
     if args.spline_tolerance is not None:
         try:
-            value = float(args.spline_tolerance)
+            tolerance = float(args.spline_tolerance)
         except ValueError:
-            value = args.spline_tolerance
-        tolerance = check_spline_tolerance(value, "--spline-tolerance")
-    return {"mode": args.mode or problem.options.get("mode", "stagewise"),
-            "discretization": args.discretization
-            or problem.options.get("discretization", "exact-zoh"),
-            "delay_ticks": delay,
-            "table": args.table or problem.options.get("table", "per-tick"),
-            "spline_tolerance": tolerance}
+            tolerance = args.spline_tolerance       # refused, by name, as not a number
+    return resolve_options(problem, noise=not getattr(args, "ignore_noise", False),
+                           mode=args.mode, discretization=args.discretization,
+                           delay_ticks=delay, table=args.table, spline_tolerance=tolerance,
+                           arith=getattr(args, "arith", None),
+                           tolerance_field="--spline-tolerance")
 
 
 @quiet_numerics
 def _design(args) -> int:
     from stospline.atomic import check_target
-    from stospline.pipeline import design_problem, generated_files, write_outputs
+    from stospline.output_names import table_files
+    from stospline.pipeline import design_files, design_problem, write_outputs
     inputs = [args.problem]
     if args.out:
         check_target(args.out)                  # before any work: nothing is created
     problem = load_problem(args.problem)
-    arith = args.arith or problem.options.get("arith", "float32")
-    spline = _options(args, problem)["table"] == "spline"
+    opts = _design_options(args, problem)
+    names = table_files(problem.name, opts.arith, opts.spline)
     if args.out:
-        stem = (problem.name if arith == "float32" else f"{problem.name}_{arith}") \
-            + ("_spline" if spline else "")
-        check_target(args.out, [f"{stem}{ext}" for ext in (".h", ".c", ".json")], inputs)
-    _check_budget(args, problem, "design", arith=arith)
-    d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem),
-                       **_limits(args))
+        check_target(args.out, names, inputs)
+    _check_budget(args, problem, opts, "design", arith=opts.arith)
+    d = design_problem(problem, options=opts, **_limits(args))
     _note_tables(d, "formatting")
-    files = generated_files(d, Path(args.problem).name, arith, with_c=bool(args.out))
+    files, summary = design_files(d, Path(args.problem).name, opts.arith,
+                                  with_c=bool(args.out))
     if args.out:
         written = write_outputs(args.out, files, inputs)
     if args.json:
-        print(files[next(k for k in files if k.endswith(".json"))], end="")
+        print(files[names[-1]], end="")
     else:
-        from stospline.report.summary_text import design_summary_text
-        q_cert = None
-        if spline and arith != "float32":
-            q_cert = json.loads(files[next(k for k in files if k.endswith(".json"))])["table"]
-        print(design_summary_text(d, arith, q_cert), end="")
+        from stospline.report.summary_text import design_run_text
+        print(design_run_text(d, opts.arith, summary), end="")
         for path in written if args.out else []:
             print(f"wrote {path}")
     return 0
@@ -120,6 +114,8 @@ def _corridor_design(args) -> int:
     from stospline import corridor_search as cs
     from stospline.atomic import check_target
     from stospline.budget import enforce, format_seconds
+    from stospline.options import with_file_options
+    from stospline.output_names import corridor_design_files
     from stospline.pipeline import generated_files, write_outputs
     if args.out:
         check_target(args.out)                  # before any work: nothing is created
@@ -127,18 +123,17 @@ def _corridor_design(args) -> int:
         raise ProblemError("--certify-seed", f"must differ from --seed ({args.seed}): "
                                              f"certifying on the screening sample biases it")
     problem, index = cs.target_corridor(load_problem(args.problem), args.epsilon)
-    opts = _options(args, problem)
+    resolved = _design_options(args, problem)
     for key, option, bad in (("table", "--table", "spline"), ("delay_ticks", "--delay-ticks", 1)):
-        if opts[key] == bad:
+        if getattr(resolved, key) == bad:
             raise ProblemError(option if getattr(args, key) is not None else f"design.{key}",
                                "corridor-design writes per-tick tables without a delay")
-    opts = {k: opts[k] for k in ("mode", "discretization")}
+    opts = {"mode": resolved.mode, "discretization": resolved.discretization}
     if args.mode or args.discretization:      # the designed file says how it was designed
-        from dataclasses import replace
-        problem = replace(problem, options={**problem.options, **{
-            k: opts[k] for k in ("mode", "discretization") if getattr(args, k)}})
+        problem = with_file_options(problem, **{k: v for k, v in opts.items()
+                                                if getattr(args, k)})
     name = problem.name
-    files = [f"{name}{ext}" for ext in (".toml", ".c", ".h", ".json", "_corridor.json")]
+    files = corridor_design_files(name)
     if args.out:
         check_target(args.out, files, [args.problem])
     cs.check_reachable(problem, index, search_paths=args.search, certify_paths=args.certify,
@@ -189,7 +184,7 @@ def _start(arg: str | None):
         raise ProblemError("--x0", f"expected comma-separated numbers, got {arg!r}") from None
 
 
-def _check_budget(args, problem, command: str, **options) -> None:
+def _check_budget(args, problem, opts, command: str, **options) -> None:
     """Refuse (BudgetError, exit 2) a run beyond the limits before any work; announce a long
     one (when progress is shown)."""
     from stospline.budget import check, format_bytes, format_seconds
@@ -198,7 +193,7 @@ def _check_budget(args, problem, command: str, **options) -> None:
     if command != "design":
         options.setdefault("workers", _workers(args))
     est = check(problem, command=command, max_seconds=args.max_time,
-                max_bytes=args.max_memory * 1024 ** 3, **_options(args, problem),
+                max_bytes=args.max_memory * 1024 ** 3, **opts.workload(),
                 paths=paths,
                 substeps=1 if substeps == "auto" else substeps,   # "auto": checked again
                 **options)
@@ -215,7 +210,7 @@ def _limits(args) -> dict:
 def _workers(args) -> int:
     """The worker processes of the run: --workers (default: every core), at most the cores
     this process may use unless --force-workers; a note on stderr when it limits them."""
-    from stospline.harness.montecarlo import usable_workers
+    from stospline.pipeline import usable_workers
     workers = usable_workers(args.workers, args.force_workers)
     if args.workers is not None and workers < args.workers and not getattr(args, "_workers_noted", False):
         args._workers_noted = True
@@ -228,9 +223,8 @@ def _workers(args) -> int:
 def _note_tables(d, doing: str) -> None:
     """Announce a long step without a progress bar (formatting or compiling big tables)."""
     from stospline.budget import CODEGEN_NUMBER, COMPILE_NUMBER, format_seconds
-    t = d.table
-    numbers = (t.K.size + t.k0.size + t.L.size if t.spline is None
-               else t.spline.coef.size + t.spline.knot.size)
+    from stospline.pipeline import table_numbers
+    numbers = table_numbers(d)
     per = CODEGEN_NUMBER + (COMPILE_NUMBER if doing == "compiling" else 0.0)
     if numbers * per > 5:
         progress.note(f"{doing} the C tables ({numbers} numbers, estimated "
@@ -269,53 +263,42 @@ def _load_with_faults(args):
                                                 prefix="--fault "))
 
 
-def _check_faults_runnable(args, problem) -> None:
+def _check_faults_runnable(args, problem, opts) -> None:
     """Refuse, before the design, faults the harness cannot run around this problem's table
-    (`harness.montecarlo.faults_unsupported`: what the table will be is known from the options)."""
-    from types import SimpleNamespace
-    from stospline.harness.montecarlo import faults_unsupported
-    if not problem.faults.any:
-        return
-    opts = _options(args, problem)
-    table = SimpleNamespace(arith="float32", delay_ticks=opts["delay_ticks"])
-    if opts["delay_ticks"] and problem.faults.delay_ticks:
-        raise ProblemError("faults.delay_ticks", "the table is designed for a one-tick delay "
-                                                 "and runs with it; a delay fault on top of it "
-                                                 "is not simulated")
-    why = faults_unsupported(problem, table)
-    if why:
-        field = "--fault" if getattr(args, "fault", None) else "faults"
-        raise ProblemError(field, f"cannot be simulated here: {why}")
+    (`stospline.pipeline.check_faults_runnable`), naming ``--fault`` when the command line
+    set faults."""
+    from stospline.pipeline import check_faults_runnable
+    check_faults_runnable(problem, opts,
+                          field="--fault" if getattr(args, "fault", None) else "faults")
 
 
 @quiet_numerics
 def _simulate(args) -> int:
     from stospline.pipeline import design_problem, simulate_problem, simulation_summary, start_from
+    from stospline.report.summary_text import saturation_warning, simulation_summary_text
     problem = _load_with_faults(args)
+    opts = _design_options(args, problem)
     x0 = args.x0
-    _check_faults_runnable(args, problem)
-    _check_budget(args, problem, "simulate")
-    d = design_problem(problem, noise=not args.ignore_noise, **_options(args, problem),
-                       **_limits(args))
+    _check_faults_runnable(args, problem, opts)
+    _check_budget(args, problem, opts, "simulate")
+    d = design_problem(problem, options=opts, **_limits(args))
     if x0 is not None:
         d = start_from(d, x0)
     _note_tables(d, "compiling")
-    substeps = _planned_substeps(args, problem, d, "simulate")
+    substeps = _planned_substeps(args, problem, opts, d, "simulate")
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps,
                           workers=_workers(args), force_workers=True,
                           scheduler=args.scheduler, **_limits(args))
     s = simulation_summary(d, mc, seed=args.seed)
-    _report_simulation(s, args.json)
-    sat = s["saturation"]
-    if sat["tick_fraction"] > 0:
-        print(f"stospline: warning: the controller saturated (STSP_WARN_SATURATED) on "
-              f"{100 * sat['tick_fraction']:.4g}% of ticks, on {100 * sat['path_fraction']:.4g}% "
-              f"of paths; the oracle and predicted numbers assume no saturation (the design "
-              f"ignores the actuator limits), so they do not predict this run", file=sys.stderr)
+    # Flushed: the saturation warning (stderr) comes after the numbers it qualifies.
+    print(dumps(s) + "\n" if args.json else simulation_summary_text(s), end="", flush=True)
+    warning = saturation_warning(s)
+    if warning:
+        print(f"stospline: warning: {warning}", file=sys.stderr)
     return 0 if (s["verdict"]["agree"] or not args.check) else EXIT_DISAGREE
 
 
-def _planned_substeps(args, problem, d, command: str, **options):
+def _planned_substeps(args, problem, opts, d, command: str, **options):
     """`--substeps auto`: the choice for this run, its cost checked against the budget before
     the run starts (a given number was checked with the problem)."""
     if args.substeps != "auto":
@@ -323,76 +306,8 @@ def _planned_substeps(args, problem, d, command: str, **options):
     from stospline.pipeline import plan_substeps
     choice = plan_substeps(d, paths=args.paths, seed=args.seed)
     if choice.substeps > 1:
-        _check_budget(args, problem, command, substeps=choice.substeps, **options)
+        _check_budget(args, problem, opts, command, substeps=choice.substeps, **options)
     return choice
-
-
-def _report_simulation(s: dict, as_json: bool) -> None:
-    if as_json:
-        print(dumps(s), flush=True)
-        return
-    sat = s["saturation"]
-    c = s["cost"]
-    print(f"{s['name']}: {s['paths']} paths, seed {s['seed']}, compiled C controller at "
-          f"{s['tick_hz']} Hz, plant {s['substeps']} substeps/tick, from x0 = {s['x0']}")
-    print(f"  cost  MC {c['mc_mean']:.6g}  95% CI [{c['ci95'][0]:.6g}, {c['ci95'][1]:.6g}]"
-          f"   oracle {c['oracle_implemented']:.6g}   predicted J0 {c['predicted_J0']:.6g}"
-          f"   z {_z_text(c['z'])}")
-    bias = s["simulation_bias"]
-    ratio = ("n/a MC standard errors (all paths alike)" if bias["cost_over_stderr"] is None
-             else f"{bias['cost_over_stderr']:.3g} MC standard errors")
-    how = ""
-    if bias["substeps_chosen"] == "auto":
-        how = (f"; {s['substeps']} substeps/tick chosen: the fewest with |bias| <= "
-               f"{bias['target']:.3g}, under 0.1 of the standard error a "
-               f"{bias['pilot_paths']}-path pilot predicts"
-               + ("" if bias["target_met"] else " (NOT met at the largest allowed number)"))
-    print(f"  plant-scheme bias in cost {bias['cost']:.3g} = {ratio}{how}")
-    f = s.get("faults", {})
-    if f.get("levels"):
-        levels = " ".join(f"{k}={v}" for k, v in f["levels"].items())
-        print(f"  faults: {levels}; "
-              + (f"exact oracle of the faulty loop {f['oracle_cost']:.6g}" if f["exact_oracle"]
-                 else "no exact oracle (quantization, missed ticks, or sensor noise before "
-                      "the band latch): Monte Carlo only")
-              + f" (fault-free {f['nominal_cost']:.6g})")
-    if sat["limited"]:
-        print(f"  actuator limits: saturated on {100 * sat['tick_fraction']:.4g}% of ticks "
-              f"({100 * sat['path_fraction']:.4g}% of paths); commands issued within "
-              f"[{', '.join(_number_text(v) for v in sat['u_low'])}] .. "
-              f"[{', '.join(_number_text(v) for v in sat['u_high'])}]")
-    for i, c in enumerate(s.get("corridors", [])):
-        mc = c["mc"]
-        eps = "" if c["epsilon"] is None else f", epsilon {c['epsilon']:g}"
-        bounds = "no oracle bounds (a table designed for a delay)"
-        if c["bound"] is not None:
-            bc, bg = c["bound"]["cantelli"], c["bound"]["gaussian"]
-            bounds = (f"oracle union bounds over the ticks: Cantelli {bc['total']:.4g} (valid), "
-                      f"Gaussian {bg['total']:.4g} (assumes Gaussian outputs); worst tick "
-                      f"{bc['worst_tick']:.3g} / {bg['worst_tick']:.3g}")
-        print(f"  corridor {i} (t = [{c['t'][0]:g}, {c['t'][1]:g}]{eps}): left by "
-              f"{mc['exits']} of {mc['paths']} paths = {100 * mc['estimate']:.4g}%, one-sided "
-              f"99% upper bound {100 * mc['upper99']:.4g}%; {bounds}")
-    fmt = lambda v: "[" + ", ".join(f"{x:+.5f}" for x in v) + "]"  # noqa: E731
-    for k, kn in enumerate(s["knots"]):
-        print(f"  knot {k} (t = {kn['t']:g}): state mean, MC     {fmt(kn['mc_mean'])}")
-        print(f"  {'':>15}state mean, oracle {fmt(kn['oracle_mean'])}   "
-              f"z {'[' + ', '.join(_z_text(z) for z in kn['z']) + ']'}")
-    v = s["verdict"]
-    print(f"  verdict: {'agree' if v['agree'] else 'DISAGREE'}: max |z| {v['max_abs_z']:.3g}"
-          f" ({v['max_abs_z_of']}) against {v['z_limit']:.3g}, {v['correction']} over "
-          f"{v['statistics']} statistics at {100 * v['confidence']:g}% jointly; {v['reason']}")
-    sys.stdout.flush()   # the saturation warning (stderr) comes after the numbers it qualifies
-
-
-def _number_text(v) -> str:
-    """A number, or "n/a" when it is undefined (JSON null)."""
-    return "n/a" if v is None else f"{v:.6g}"
-
-
-def _z_text(z) -> str:
-    """A z-score, or "n/a" when it is undefined (zero standard error; JSON null)."""
-    return "n/a" if z is None else f"{z:+.2f}"
 
 
 def _monte_carlo(args, command: str, record: int = 0, extra_paths: int = 0):
@@ -403,11 +318,12 @@ def _monte_carlo(args, command: str, record: int = 0, extra_paths: int = 0):
     from stospline.pipeline import design_problem, simulate_problem
     check_file_target(args.out, [args.problem])
     problem = _load_with_faults(args)
-    _check_faults_runnable(args, problem)
-    _check_budget(args, problem, command, paths=args.paths + extra_paths, record=record)
-    d = design_problem(problem, **_options(args, problem), **_limits(args))
+    opts = _design_options(args, problem)
+    _check_faults_runnable(args, problem, opts)
+    _check_budget(args, problem, opts, command, paths=args.paths + extra_paths, record=record)
+    d = design_problem(problem, options=opts, **_limits(args))
     _note_tables(d, "compiling")
-    substeps = _planned_substeps(args, problem, d, command, record=record)
+    substeps = _planned_substeps(args, problem, opts, d, command, record=record)
     return d, simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps,
                                workers=_workers(args), force_workers=True, record=record,
                                scheduler=args.scheduler, **_limits(args))
@@ -426,20 +342,18 @@ def _plot(args) -> int:
 @quiet_numerics
 def _report(args) -> int:
     from stospline.atomic import write_file
-    from stospline.pipeline import simulation_summary
+    from stospline.pipeline import (fault_sweep, fault_sweep_runs, fault_table_unavailable,
+                                    simulation_summary)
     from stospline.report.html import report_html
-    from stospline.harness.fault_sweep import SWEEP_ROWS
-    sweep_paths = SWEEP_ROWS * args.fault_paths
-    d, mc = _monte_carlo(args, "report", record=REPORT_RECORD, extra_paths=sweep_paths)
+    runs = fault_sweep_runs()
+    d, mc = _monte_carlo(args, "report", record=REPORT_RECORD, extra_paths=runs * args.fault_paths)
     summary = simulation_summary(d, mc, seed=args.seed)
     rows = None
-    from stospline.harness.montecarlo import faults_unsupported
-    why_not = faults_unsupported(d.problem, d.table)
+    why_not = fault_table_unavailable(d)
     if args.fault_paths and why_not:
         progress.note(f"no fault table: {why_not}")
     elif args.fault_paths:
-        from stospline.pipeline import fault_sweep
-        progress.note(f"fault table: {SWEEP_ROWS} runs of {args.fault_paths} paths")
+        progress.note(f"fault table: {runs} runs of {args.fault_paths} paths")
         rows = fault_sweep(d, paths=args.fault_paths, seed=args.seed, substeps=mc.substeps,
                            workers=_workers(args), scheduler=args.scheduler)
     page = report_html(d, mc, summary, rows, why_not if args.fault_paths else None)
@@ -794,6 +708,11 @@ def _fault_option(args, exc: ProblemError) -> ProblemError:
     return exc
 
 
+def _one_line(text: str) -> str:
+    """`text` on one line (a compiler's message spans several)."""
+    return " ".join(line.strip() for line in text.splitlines() if line.strip())
+
+
 def _main(argv: list[str] | None) -> int:
     from stospline.atomic import Interrupted, OutputError
     from stospline.cache import CompilerMissing
@@ -823,6 +742,9 @@ def _main(argv: list[str] | None) -> int:
     except Interrupted as exc:
         print(f"stospline: {exc}; nothing was written", file=sys.stderr)
         return 128 + exc.signum
+    except StosplineError as exc:         # every other exception of the package
+        print(f"stospline: error: {_one_line(str(exc))}", file=sys.stderr)
+        return 2
     except MemoryError:
         print("stospline: error: out of memory (the estimate of docs/guide/problem-file.md, "
               "Limits, was too low for this machine; try --max-memory lower or a smaller "

@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from stospline.errors import StosplineError
+
 __all__ = ["expm", "expm_many", "NonFiniteMatrix", "require_finite"]
 
 
-class NonFiniteMatrix(FloatingPointError, ValueError):
+class NonFiniteMatrix(StosplineError, FloatingPointError, ValueError):
     """The matrix holds NaN or Inf (products of the problem's data overflowed)."""
 
 # Padé degree m -> the largest 1-norm for which [m/m] is accurate to unit roundoff (Table 2.3)

@@ -12,13 +12,15 @@ import os
 from importlib import resources
 from pathlib import Path
 
+from stospline.errors import StosplineError
+
 __all__ = ["firmware_dir", "FirmwareNotFoundError", "ENV_VAR"]
 
 ENV_VAR = "STOSPLINE_FIRMWARE"
 _MARKER = Path("include") / "stospline" / "stsp_controller.h"
 
 
-class FirmwareNotFoundError(FileNotFoundError):
+class FirmwareNotFoundError(StosplineError, FileNotFoundError):
     """No firmware source tree: the CLI reports it in one line, exit status 2."""
 
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from stospline.errors import StosplineError
+
 __all__ = ["ARITHS", "FIXED_POINT", "FRAC_BITS", "SCALAR_KIND", "ELEMENT_BYTES", "MAGIC",
            "FORMAT_VERSION", "STATUS", "header_facts", "check_header", "InterfaceMismatch"]
 
@@ -33,7 +35,7 @@ _DEFINE = re.compile(r"^\s*#\s*define\s+(STSP_\w+)\s+(0x[0-9A-Fa-f]+|\d+)u?\b", 
 _ENUM = re.compile(r"typedef enum\s*{(.*?)}\s*stsp_status_t;", re.S)
 
 
-class InterfaceMismatch(RuntimeError):
+class InterfaceMismatch(StosplineError, RuntimeError):
     """The firmware header and the package disagree on a shared constant."""
 
 

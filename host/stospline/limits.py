@@ -79,7 +79,7 @@ def check_stage_count(t_knots, band_times=()) -> None:
 def latch_width(problem, mode: str | None) -> int:
     """The table's n_latch for `mode` (None: the smallest over the modes, stage-wise): the
     multipliers latched at once, or n when more (the table then latches the state,
-    `tables.build_table`). A band design with at most BANDQP_MAX rows keeps all of them."""
+    `table.format.build_table`). A band design with at most BANDQP_MAX rows keeps all of them."""
     rows = [kn.n_constraints for kn in problem.knots]
     if mode == "joint":
         p = sum(rows)
@@ -154,7 +154,7 @@ def _check_sizes(ticks: int, n: int, m: int, p: int, scalar_bytes: int, field: s
 
 
 def check_table(table, *, mode_field: str = "design.mode") -> None:
-    """Refuse a finished table (float32 `GainTable` or `fixed.FixedPointTable`) that `stsp_init`
+    """Refuse a finished table (float32 `GainTable` or `table.qformat.FixedPointTable`) that `stsp_init`
     would refuse for its dimensions; `mode_field` names where the design mode came from."""
     n, m, p = table.dims
     if n > MAX_NX or m > MAX_NU or n < 1 or m < 1:   # parse_problem refuses these first

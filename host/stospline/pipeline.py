@@ -1,4 +1,6 @@
-"""The library calls behind the CLI: design a problem, evaluate it, simulate it, summarise.
+"""The library calls behind the CLI, as steps: design a problem (`design_problem`: options,
+the designer, its table, the oracle), write its tables (`generated_files`), simulate it
+(`simulate_problem`) and summarise (`stospline.report`).
 
 Everything the CLI does is one call here, so scripts and tests use the same path.
 """
@@ -6,63 +8,54 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from stospline.table.codegen import GENERATOR, generate_c
-from stospline.design.bands import design_bands, has_bands
-from stospline.design.continuous import DesignError, design_continuous
+from stospline import budget, limits, progress, strict
+from stospline.design.bands import has_bands
 from stospline.design.varying import mean_maps
-from stospline.design.zoh import check_delay, design_zoh
-from stospline.harness.controller import build_controller
-from stospline.harness.montecarlo import (MonteCarloResult, check_counts, joint_verdict, simulate,
-                                      usable_workers, z_value)
-from stospline.oracle.evaluate import Moments, evaluate_continuous, evaluate_table, state_range
-from stospline.harness.plant_scheme import SubstepChoice, choose_substeps, scheme_moments
-from stospline.oracle.faults import evaluate_with_faults, has_exact_oracle
-from stospline.refine.spline_certificate import certificate
-from stospline.table.spline import spline_table
-from stospline.table.spline.restore import is_state_latching
-from stospline.refine.every_tick import EveryTick, design_every_tick, every_tick_check
+from stospline.design.zoh import check_delay
+from stospline.design_method import DesignedLaw, design
+from stospline.errors import DesignError, ProblemError
+from stospline.options import DesignOptions, resolve_options
+from stospline.output_names import table_stem
 from stospline.problem.faults import Faults
-from stospline.problem.model import Problem, ProblemError
+from stospline.problem.model import Problem
+from stospline.report.design_summary import design_summary
+from stospline.report.json_numbers import rounded
+from stospline.oracle.evaluate import evaluate_continuous, evaluate_table, state_range
+from stospline.table.codegen import generate_c
 from stospline.table.format import GainTable, TickGains, table_of
 from stospline.table.qformat import DEFAULT_SIGMAS, FixedPointTable, quantize_table
-from stospline import budget, limits, progress, strict
-from stospline.precision import RoundedUp, Verbatim, verbatim
-from stospline.table_options import (DEFAULT_SPLINE_TOLERANCE, TABLE_KINDS,
-                                     check_spline_tolerance)
+from stospline.table_options import check_spline_tolerance
+
+if TYPE_CHECKING:
+    from stospline.refine.every_tick import EveryTick
+    from stospline.harness.montecarlo import MonteCarloResult
+    from stospline.oracle.evaluate import Moments
+    from stospline.harness.plant_scheme import SubstepChoice
 
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
            "simulation_summary", "verdict", "plan_substeps", "write_outputs", "start_from",
            "double_table", "fixed_point_table", "fixed_point_spline", "check_implementable",
-           "loop_moments", "fault_sweep", "simulation_estimate"]
-
-# JSON summaries keep 10 significant digits and an absolute quantum of 1e-10: the designs
-# agree to ~1e-14 however the arithmetic is ordered, so regenerated files stay byte-identical
-# (a residual of 1e-15, or a zero computed as 2e-18, prints as 0).
-_SIG, _ABS = 10, 10
+           "generated_files", "design_files", "loop_moments", "fault_sweep",
+           "simulation_estimate", "check_faults_runnable", "usable_workers",
+           "fault_table_unavailable", "fault_sweep_runs", "table_numbers"]
 
 
-def _r(x):
-    """Round floats (recursively) for stable, readable JSON (see _SIG, _ABS)."""
-    if isinstance(x, dict):
-        return {k: _r(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_r(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _r(x.tolist())
-    if isinstance(x, (RoundedUp, Verbatim)):  # a bound at its own precision, rounded up:
-        return float(x)  # rounding it to nearest could lower it; an input: echoed as given
-    if isinstance(x, (float, np.floating)):
-        v = float(f"{round(float(x), _ABS):.{_SIG}g}")
-        return 0.0 if v == 0 else v
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
+# Names of `stospline.report.simulation_summary` this module offers too, loaded on first use
+# (PEP 562): a design does not load the Monte Carlo harness.
+_SIMULATION_REPORT = ("simulation_summary", "verdict", "loop_moments", "predicted_cost")
 
 
-DISCRETIZATIONS = ("exact-zoh", "continuous")
+def __getattr__(name: str):
+    if name in _SIMULATION_REPORT:
+        from stospline.report import simulation_summary as report
+        value = getattr(report, name)
+        globals()[name] = value          # later look-ups skip this function
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclass
@@ -85,6 +78,8 @@ class Designed:
     # With [[regions]] at every tick: how they were met, by constraint generation or the
     # tick-grid QP (`stospline.refine.every_tick.EveryTick`).
     every_tick: EveryTick | None = None
+    # The options it was designed with (`stospline.options.resolve_options`).
+    options: DesignOptions | None = None
 
     def gains(self, *, quantized: bool = True):
         """``Gains(t, K, k0, L, Lambda, lambda0, stage_start)`` as numpy arrays: K is
@@ -100,7 +95,8 @@ def design_problem(problem: Problem, *, noise: bool = True,
                    delay_ticks: int | None = None, table: str | None = None,
                    spline_tolerance: float | None = None,
                    max_memory: float | None = budget.DEFAULT_MAX_GIB,
-                   max_time: float | None = budget.DEFAULT_MAX_SECONDS) -> Designed:
+                   max_time: float | None = budget.DEFAULT_MAX_SECONDS,
+                   options: DesignOptions | None = None) -> Designed:
     """Design at the problem's tick rate, quantize the table, evaluate both with the oracle.
 
     Parameters
@@ -138,6 +134,10 @@ def design_problem(problem: Problem, *, noise: bool = True,
         than `max_memory` GiB (at most the machine's RAM) or `max_time` seconds, before any
         work (`stospline.budget`; the command line's ``--max-memory``/``--max-time`` and
         defaults, 4 GiB and 600 s). None: no check (a caller that checked the whole run).
+    options : DesignOptions, optional
+        The options resolved already (`stospline.options.resolve_options`, as the command
+        line does); when given, `noise`, `discretization`, `mode`, `delay_ticks`, `table` and
+        `spline_tolerance` are not read.
 
     Returns
     -------
@@ -162,26 +162,26 @@ def design_problem(problem: Problem, *, noise: bool = True,
     >>> d.table.n_ticks, d.table.dims                        # ticks; (n, m, multipliers)
     (6000, (4, 2, 4))
     """
-    limits.check_mode(problem, mode)   # before the work: the firmware's STSP_MAX_LATCH
-    if delay_ticks is None:
-        delay_ticks = problem.options.get("delay_ticks", 0)
-    delay_ticks = check_delay(problem, delay_ticks, discretization)
-    table = table or problem.options.get("table", "per-tick")
-    if table not in TABLE_KINDS:
-        raise ValueError(f"table must be one of {TABLE_KINDS}, got {table!r}")
-    if spline_tolerance is None:
-        spline_tolerance = problem.options.get("spline_tolerance", DEFAULT_SPLINE_TOLERANCE)
-    spline_tolerance = check_spline_tolerance(spline_tolerance, "spline_tolerance")
+    if options is None:
+        options = resolve_options(problem, noise=noise, mode=mode,
+                                  discretization=discretization, delay_ticks=delay_ticks,
+                                  table=table, spline_tolerance=spline_tolerance)
+    options = _checked(problem, options)
     _within_budget(max_memory, max_time, lambda: budget.estimate(
-        problem, command="design", mode=mode, discretization=discretization,
-        delay_ticks=delay_ticks, table=table, spline_tolerance=spline_tolerance), problem)
+        problem, command="design", **options.workload()), problem)
     try:
-        return _design_problem(problem, noise=noise, discretization=discretization, mode=mode,
-                               delay_ticks=delay_ticks,
-                               spline_tolerance=spline_tolerance if table == "spline" else None)
+        return _design_problem(problem, options)
     except FloatingPointError:
         # Products of extreme data (B = 1e308, C'C of 1e300) overflowed to Inf or NaN.
         raise DesignError(*strict.overflow_failure(problem)) from None
+
+
+def _checked(problem: Problem, options: DesignOptions) -> DesignOptions:
+    """Refuse, before the work, a mode whose table latches more multipliers than the firmware
+    takes (STSP_MAX_LATCH) and a delay the design cannot make; the delay as an int."""
+    limits.check_mode(problem, options.mode)
+    return replace(options, delay_ticks=check_delay(problem, options.delay_ticks,
+                                                    options.discretization))
 
 
 def _within_budget(max_memory, max_time, estimate, problem: Problem, **options) -> None:
@@ -196,77 +196,68 @@ def _within_budget(max_memory, max_time, estimate, problem: Problem, **options) 
                    library=True, **options)
 
 
-def _design_problem(problem: Problem, *, noise: bool, discretization: str,
-                    mode: str, delay_ticks: int = 0,
-                    spline_tolerance: float | None = None) -> Designed:
-    every_tick = None
-    if problem.tick_regions:
-        first = f"regions[{problem.tick_regions[0].index}].every"
-        if mode != "joint":
-            raise DesignError(first, 'a region at every tick is a band: use mode joint '
-                                     '(--mode joint)')
-        if discretization != "exact-zoh":
-            raise DesignError(first, 'a region at every tick is met for the law held over '
-                                     'each tick: use --discretization exact-zoh')
-        every_tick = design_every_tick(problem, noise=noise)
-        # From here on the problem is the one the tables are for: the file's knots plus the
-        # working set's band knots (its tick regions kept, so it says what it was made for).
-        problem = every_tick.problem
-        design = continuous_law = every_tick.design
-    elif has_bands(problem):
-        if mode != "joint":
-            raise DesignError("knots", "band constraints (lower/upper) are exact only with one "
-                                       "multiplier vector for all knots: use mode joint "
-                                       "(--mode joint)")
-        if discretization not in DISCRETIZATIONS:
-            raise ValueError(f"discretization must be one of {DISCRETIZATIONS}")
-        design = design_bands(problem, discretization=discretization, noise=noise)
-        continuous_law = design.base
-    elif discretization == "exact-zoh":
-        design = continuous_law = design_zoh(problem, noise=noise, mode=mode,
-                                             delay_ticks=delay_ticks)
-    elif discretization == "continuous":
-        design = continuous_law = design_continuous(problem, noise=noise, mode=mode)
-    else:
-        raise ValueError(f"discretization must be one of {DISCRETIZATIONS}")
-    table = table_of(design)
+def _design_problem(problem: Problem, options: DesignOptions) -> Designed:
+    """The steps: the designer's law, its tables, the oracle of both, the spline's
+    certificate."""
+    law = design(problem, options)
+    table, per_tick, exact = _tables(law, options)
+    moments, implemented, compressed = _evaluate(law, table, exact, options)
+    d = Designed(law.problem, law.gains, options.discretization, table, moments, implemented,
+                 every_tick=law.every_tick, options=options)
+    if options.spline:
+        from stospline.refine.spline_certificate import certificate
+        d.certificate = certificate(d.problem, table, per_tick, d.design.J0, compressed,
+                                    implemented, tolerance=options.spline_tolerance)
+    return d
+
+
+def _tables(law: DesignedLaw, options: DesignOptions):
+    """``(table, per_tick, exact)``: the table the firmware runs (float32 per-tick, or the
+    spline of it), the float32 per-tick table, and the design's own law in double precision
+    (the oracle's reference for zero-order hold, what a spline is fitted to; None for a
+    continuous design without a spline, which needs neither)."""
+    table = table_of(law.gains)
     # A float32 entry that overflowed would make the oracle's moments non-finite: refuse it
     # here, naming the cause, before evaluating the table as implemented.
-    strict.check_table_finite(problem, table, exact=lambda: table_of(design, quantize=False))
-    # The design's own law in double precision: the oracle's reference (zero-order hold) and
-    # what a spline is fitted to; a continuous design without a spline needs neither.
-    exact = (table_of(design, quantize=False)
-             if discretization != "continuous" or spline_tolerance is not None else None)
-    per_tick = table
-    if spline_tolerance is not None:
-        if every_tick is not None and not is_state_latching(per_tick):
-            # Constraint generation's band dual re-plans its working set only; the other
-            # ticks' slack is not restored for the spline's gains (the tick-grid QP's tables
-            # latch the state and are: `spline_restore`).
-            raise DesignError("design.table", "a region at every tick met by a band dual (at "
-                                              "most 8 rows) has no spline table: its other "
-                                              "ticks are not restored; use table \"per-tick\"")
-        table = spline_table(problem, exact, spline_tolerance, per_tick=per_tick,
-                             varying_maps=mean_maps)
+    strict.check_table_finite(law.problem, table,
+                              exact=lambda: table_of(law.gains, quantize=False))
+    exact = (table_of(law.gains, quantize=False)
+             if options.discretization != "continuous" or options.spline else None)
+    if not options.spline:
+        return table, table, exact
+    from stospline.table.spline import spline_table
+    from stospline.table.spline.restore import is_state_latching
+    if law.every_tick is not None and not is_state_latching(table):
+        # Constraint generation's band dual re-plans its working set only; the other
+        # ticks' slack is not restored for the spline's gains (the tick-grid QP's tables
+        # latch the state and are: `spline_restore`).
+        raise DesignError("design.table", "a region at every tick met by a band dual (at "
+                                          "most 8 rows) has no spline table: its other "
+                                          "ticks are not restored; use table \"per-tick\"")
+    return (spline_table(law.problem, exact, options.spline_tolerance, per_tick=table,
+                         varying_maps=mean_maps), table, exact)
+
+
+def _evaluate(law: DesignedLaw, table: GainTable, exact: GainTable | None,
+              options: DesignOptions):
+    """``(law, implemented, compressed)``: the oracle's moments of the design's own law, of
+    the table as implemented, and of the law a spline compresses (the sampled per-tick table
+    for a continuous design, else the law itself)."""
+    problem = law.problem
+
     def evaluate_exact():
         return evaluate_table(problem, exact, path=False)
     # A spline's certificate checks every row of a region at every tick: the mean path.
-    path = spline_tolerance is not None and bool(problem.tick_regions)
+    path = options.spline and bool(problem.tick_regions)
     evaluations = [evaluate_exact, lambda: evaluate_table(problem, table, path=path)]
-    if discretization == "continuous":
+    if options.discretization == "continuous":
         # The law is the continuous-time one; a spline's certificate is still measured
         # against the sampled table it compresses (the law the firmware would otherwise run).
-        evaluations[0] = lambda: evaluate_continuous(problem, continuous_law)
-        if spline_tolerance is not None:
+        evaluations[0] = lambda: evaluate_continuous(problem, law.continuous)
+        if options.spline:
             evaluations.append(evaluate_exact)
-    law, implemented, *compressed = _concurrently(evaluations, 2 * table.n_ticks)
-    d = Designed(problem, design, discretization, table, law, implemented,
-                 every_tick=every_tick)
-    if spline_tolerance is not None:
-        d.certificate = certificate(d.problem, table, per_tick, d.design.J0,
-                                    compressed[0] if compressed else law, implemented,
-                                    tolerance=spline_tolerance)
-    return d
+    moments, implemented, *compressed = _concurrently(evaluations, 2 * table.n_ticks)
+    return moments, implemented, compressed[0] if compressed else moments
 
 
 def _concurrently(evaluations, ticks: int) -> list:
@@ -293,107 +284,6 @@ def start_from(d: Designed, x0) -> Designed:
     limits.check_state(x)   # the controller measures it in float32
     moved = replace(d.problem, x0=x)
     return replace(d, problem=moved, implemented=evaluate_table(moved, d.table, path=False))
-
-
-def predicted_cost(d: Designed) -> float:
-    """The designer's optimal expected cost from ``d.problem.x0`` (which `start_from` may have
-    moved away from the design's own start)."""
-    return d.design.cost_from(d.problem.x0)
-
-
-def _violation(y: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Signed distance outside [lo, hi] per row (0 inside; for an equality, y - value)."""
-    return np.where(lo == hi, y - lo, np.maximum(y - hi, 0) - np.maximum(lo - y, 0))
-
-
-def _limits(d: Designed) -> dict:
-    """``{"actuator_limits": {"u_min": [...] | None, "u_max": ...}}`` as the table stores them
-    (float32), when the problem sets limits; ``{}`` otherwise (summaries stay unchanged)."""
-    p = d.problem
-    if p.u_min is None and p.u_max is None and p.u_hold is None:
-        return {}
-    return {"actuator_limits": {
-        "u_min": None if p.u_min is None else d.table.u_min.astype(float),
-        "u_max": None if p.u_max is None else d.table.u_max.astype(float),
-        **({} if p.u_hold is None else {"u_hold": d.table.u_hold.astype(float)}),
-        "note": "the design ignores the limits: the firmware clips the unconstrained law, "
-                "and the oracle's numbers assume no command is clipped",
-    }}
-
-
-def _cov_digits(cov: np.ndarray, mean: np.ndarray) -> np.ndarray:
-    """A knot covariance for the summary. The oracle computes it as ``E xx' - mean mean'``, so
-    it keeps only the digits of ``E xx'``: rounded to `_SIG` significant digits of
-    ``max(|cov|, |mean|^2)`` (a wealth of 100 with a variance of 12 loses three digits, and
-    the last bits of the design would otherwise show)."""
-    cov, mean = np.asarray(cov, dtype=float), np.asarray(mean, dtype=float)
-    scale = max(float(np.abs(cov).max(initial=0.0)), float(np.max(mean ** 2, initial=0.0)))
-    if not np.isfinite(scale) or scale == 0.0:
-        return cov
-    # The decade rounded to nearest, not down: means at constrained knots are round numbers
-    # (a mean of 100 gives a scale of exactly 1e4), and the digits kept must not flip there.
-    return np.round(cov, _SIG - 1 - int(np.floor(np.log10(scale) + 0.5)))
-
-
-def design_summary(d: Designed) -> dict:
-    """Machine-readable summary: predicted J0 and per-knot predicted moments (and the
-    actuator limits, when the problem sets them)."""
-    p = d.problem
-    knots = []
-    for k, kn in enumerate(p.knots):
-        entry = {
-            "t": verbatim(kn.t),
-            "mean": d.law.knot_mean[k],
-            "cov": _cov_digits(d.law.knot_cov[k], d.law.knot_mean[k]),
-            "implemented_mean": d.implemented.knot_mean[k],
-            "implemented_cov": _cov_digits(d.implemented.knot_cov[k], d.implemented.knot_mean[k]),
-        }
-        if kn.constraint is not None:
-            lo, hi = kn.constraint.bounds
-            entry["constraint"] = {
-                "lower": lo, "upper": hi,
-                "design_violation": _violation(d.law.knot_constraint[k], lo, hi),
-                "implemented_violation": _violation(d.implemented.knot_constraint[k], lo, hi),
-            }
-        knots.append(entry)
-    return _r({
-        "name": p.name,
-        "generator": GENERATOR,
-        "problem_sha256": p.source_sha256,
-        "design": f"{d.design.mode}-{d.discretization}"
-                  + ("" if d.design.noise_aware else "-noise-ignoring"),
-        "tick_hz": d.table.tick_hz,
-        "n_ticks": d.table.n_ticks,
-        "J0": d.design.J0,
-        "oracle_J_design": d.law.J,
-        "oracle_J_implemented": d.implemented.J,
-        "knots": knots,
-        **({"table": d.certificate} if d.certificate is not None else {}),
-        **_band_terms(d),
-        **_limits(d),
-        **_estimator(d),
-    })
-
-
-def _estimator(d: Designed) -> dict:
-    """With a [measurement] table: the loop on the filter's estimate (docs/theory/estimator.md);
-    ``{}`` otherwise (summaries stay unchanged)."""
-    if d.problem.measurement is None:
-        return {}
-    from stospline.estimator.summary import estimator_summary
-    return {"estimator": estimator_summary(d.problem, d.table, _cov_digits)}
-
-
-def _band_terms(d: Designed) -> dict:
-    """The design's own summary entries; with bands also the rows of the dual the firmware
-    re-solves from the measured x0 (0: it latches the affine map of the design's active set,
-    see docs/theory/math-notes.md)."""
-    terms = d.design.summary_terms()
-    if has_bands(d.problem):
-        terms["band_qp_rows"] = 0 if d.table.band_qp is None else d.table.band_qp.q
-    if d.every_tick is not None:
-        terms["every_tick"] = every_tick_check(d)
-    return terms
 
 
 def write_outputs(out_dir: str | Path, files: dict[str, str], inputs=()) -> list[Path]:
@@ -467,6 +357,7 @@ def fixed_point_spline(d: Designed, arith: str, *, tolerance: float | None = Non
     Raises DesignError naming ``design.table`` for what has no spline table (as for float32)
     or ``design.spline_tolerance`` when a stage cannot meet the tolerance."""
     from stospline.refine.spline_certificate import q_certificate
+    from stospline.table.spline import spline_table
     from stospline.table.spline.fixed_point import dequantized
     if d.table.delay_ticks:
         raise DesignError("design.delay_ticks", f"a design for a one-tick delay has float32 "
@@ -478,7 +369,7 @@ def fixed_point_spline(d: Designed, arith: str, *, tolerance: float | None = Non
                                           f'"per-tick"')
     if tolerance is None:
         tolerance = (d.certificate["spline_tolerance"] if d.certificate is not None else
-                     d.problem.options.get("spline_tolerance", DEFAULT_SPLINE_TOLERANCE))
+                     _options_of(d).spline_tolerance)
     tolerance = check_spline_tolerance(tolerance, "spline_tolerance")
     exact = double_table(d)
     if x_range is None:
@@ -498,28 +389,40 @@ def fixed_point_spline(d: Designed, arith: str, *, tolerance: float | None = Non
         3 * exact.n_ticks)
     cert = q_certificate(d.problem, ft, per_tick, d.design.J0, law, implemented,
                          per_tick_moments, tolerance=tolerance)
-    return ft, _r(cert)
+    return ft, rounded(cert)
+
+
+def _options_of(d: Designed) -> DesignOptions:
+    """The options `d` was designed with; the problem file's for a `Designed` made without."""
+    return d.options if d.options is not None else resolve_options(d.problem)
 
 
 def generated_files(d: Designed, source_name: str, arith: str = "float32", *,
                     with_c: bool = True) -> dict[str, str]:
     """``<name>.{h,c,json}`` for float32; ``<name>_<arith>.{h,c,json}`` for Q15/Q31, whose
-    summary adds the scales and the error bound (``fixed``). ``with_c=False``: only the
+    summary adds the scales and the error bound (the JSON key ``fixed``); ``_spline`` after
+    the stem for a spline table (`stospline.output_names`). ``with_c=False``: only the
     ``.json`` (formatting the C text is most of the time of a small design).
 
     Raises ProblemError, before any text exists, if the table exceeds the firmware's limits or
     holds a number that overflows its format, or the summary a non-finite number."""
+    return design_files(d, source_name, arith, with_c=with_c)[0]
+
+
+def design_files(d: Designed, source_name: str, arith: str = "float32", *,
+                 with_c: bool = True) -> tuple[dict[str, str], dict]:
+    """``(files, summary)``: the files of `generated_files` and the JSON summary they hold,
+    as a dict (what the text summary is printed from)."""
     check_implementable(d)
     summary = design_summary(d)
     if arith == "float32":
-        table, n = d.table, d.table.name
+        table = d.table
     elif d.table.spline is not None:
         # The Q15/Q31 spline table (`fixed_point_spline`): its scales and error bound, and its
         # own certificate in place of the float32 spline's.
         table, q_cert = fixed_point_spline(d, arith)
         limits.check_table(table)
-        n = table.name
-        summary["fixed"] = _r({**table.summary(), "state_sigmas": DEFAULT_SIGMAS})
+        summary["fixed"] = rounded({**table.summary(), "state_sigmas": DEFAULT_SIGMAS})
         summary["table"] = q_cert
     else:
         try:
@@ -527,14 +430,14 @@ def generated_files(d: Designed, source_name: str, arith: str = "float32", *,
         except ValueError as exc:            # scale exponents beyond STSP_Q_EXP_MAX
             raise strict.fixed_scale_error(d.problem, arith, exc) from None
         limits.check_table(table)
-        n = table.name
-        summary["fixed"] = _r({**table.summary(), "state_sigmas": DEFAULT_SIGMAS})
+        summary["fixed"] = rounded({**table.summary(), "state_sigmas": DEFAULT_SIGMAS})
     strict.check_summary_finite(d.problem, summary)
+    n = table_stem(d.problem.name, arith, d.table.spline is not None)
     text = strict.dumps(summary) + "\n"
     if not with_c:
-        return {f"{n}.json": text}
+        return {f"{n}.json": text}, summary
     header, source = generate_c(table, source_name=source_name)
-    return {f"{n}.h": header, f"{n}.c": source, f"{n}.json": text}
+    return {f"{n}.h": header, f"{n}.c": source, f"{n}.json": text}, summary
 
 
 def check_implementable(d: Designed) -> None:
@@ -542,18 +445,6 @@ def check_implementable(d: Designed) -> None:
     (`limits.check_table`) and every entry finite (`strict.check_table_finite`)."""
     limits.check_table(d.table)
     strict.check_table_finite(d.problem, d.table, exact=lambda: double_table(d))
-
-
-def loop_moments(d: Designed, faults: Faults | None = None) -> Moments:
-    """The exact moments the Monte Carlo run is compared with: the implemented law's
-    (`Designed.implemented`) without faults, the fault oracle's (`oracle.faults`) in a loop
-    with linear `faults` (default ``d.problem.faults``). Nonlinear faults (quantization, missed
-    ticks) have none: the fault-free loop's moments are returned, and the verdict says the run
-    is not comparable."""
-    faults = d.problem.faults if faults is None else faults
-    if not faults.any or not has_exact_oracle(d.table, faults):
-        return d.implemented
-    return evaluate_with_faults(d.problem, d.table, faults)
 
 
 def simulate_problem(d: Designed, *, paths: int, seed: int,
@@ -624,6 +515,8 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
     >>> s["verdict"]["agree"]        # cost and knot means against the oracle, 99 % jointly
     True
     """
+    from stospline.harness.montecarlo import check_counts
+    from stospline.harness.plant_scheme import SubstepChoice
     check_implementable(d)
     check_counts(paths=paths, **({} if isinstance(substeps, (str, SubstepChoice))
                                  else {"substeps": substeps}))
@@ -637,6 +530,10 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
     # "auto" chooses after a pilot run: checked at one step per tick, then at the choice.
     within_budget(1 if substeps == "auto"
                   else choice.substeps if choice is not None else substeps)
+    from stospline.harness.controller import build_controller
+    from stospline.harness.montecarlo import simulate
+    from stospline.harness.plant_scheme import choose_substeps
+    from stospline.report.simulation_summary import loop_moments
     ctl = build_controller(d.table, build_dir=build_dir)
     faults = d.problem.faults if faults is None else faults
     if substeps == "auto":
@@ -656,8 +553,7 @@ def simulation_estimate(d: Designed, *, paths: int, substeps: int, workers: int 
     """What `simulate_problem` and `simulation_summary` of `d` will take: the controller's C
     text compiled, and the Monte Carlo terms (`budget.monte_carlo_terms`)."""
     t = d.table
-    numbers = (t.K.size + t.k0.size + t.L.size if t.spline is None
-               else t.spline.coef.size + t.spline.knot.size)
+    numbers = table_numbers(d)
     est = budget.Estimate("simulation")
     est.terms.append(budget.Term("start-up (imports, compiled kernels)", "--max-time",
                                  seconds=budget.BASE_SECONDS))
@@ -677,6 +573,7 @@ def fault_sweep(d: Designed, *, paths: int, seed: int, substeps: int,
     """The fault table of the design (`harness.fault_sweep.fault_table`): each fault of the loop
     at a few levels relative to the plan, the fault oracle beside Monte Carlo through the
     compiled C controller (`paths` paths per level, the same `seed`)."""
+    from stospline.harness.controller import build_controller
     from stospline.harness.fault_sweep import fault_table
     check_implementable(d)
     ctl = build_controller(d.table, build_dir=build_dir)
@@ -689,6 +586,9 @@ def plan_substeps(d: Designed, *, paths: int, seed: int, build_dir=None,
     """The plant steps per tick ``simulate_problem(..., substeps="auto")`` would choose for
     this run (`harness.plant_scheme.choose_substeps`); pass the result as its `substeps` to run
     with it, e.g. after checking that run's cost."""
+    from stospline.report.simulation_summary import loop_moments
+    from stospline.harness.controller import build_controller
+    from stospline.harness.plant_scheme import choose_substeps
     check_implementable(d)
     ctl = build_controller(d.table, build_dir=build_dir)
     faults = d.problem.faults if faults is None else faults
@@ -696,156 +596,47 @@ def plan_substeps(d: Designed, *, paths: int, seed: int, build_dir=None,
                            faults=faults)
 
 
-def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int,
-                       confidence: float = 0.99) -> dict:
-    """Monte Carlo statistics beside the oracle's exact numbers, the plant scheme's bias, and
-    the verdict (`verdict`) on whether they agree at the joint `confidence`.
-
-    ``saturation.tick_fraction`` is the fraction of (path, tick) steps on which the C controller
-    returned STSP_WARN_SATURATED; when it is nonzero the oracle's numbers (which assume the
-    law is never clipped) do not describe the simulated controller.
-
-    A ratio to a Monte Carlo standard error that is 0 (every path alike, as without noise) is
-    undefined: it is None (JSON null) and a sibling ``<key>_undefined`` says why. Raises
-    ProblemError if some other number is not finite.
-
-    With faults (``mc.faults``) the exact numbers are the fault oracle's (`loop_moments`) and
-    ``faults`` says which; faults without an oracle make the verdict "not comparable"."""
-    substeps = mc.substeps
-    choice = mc.substep_choice
-    faults = mc.faults
-    exact = loop_moments(d, faults)
-    exact_oracle = has_exact_oracle(d.table, faults)
-    euler = (choice.scheme if choice is not None and choice.substeps == substeps
-             else scheme_moments(d.problem, d.table, substeps, faults))
-    mean, hw95 = mc.cost_mean_ci(0.95)
-    _, hw99 = mc.cost_mean_ci(0.99)
-    se = hw95 / z_value(0.95)
-    knots = []
-    for k, kn in enumerate(d.problem.knots):
-        m, s = mc.knot_mean_se(k)
-        alike = np.ptp(mc.knot_states[k], axis=0) == 0   # s is then 0 or rounding error
-        z, why = strict.ratio_or_null(m - exact.knot_mean[k], np.where(alike, 0.0, s),
-                                      _ZERO_SE)
-        knots.append({
-            "t": verbatim(kn.t),
-            "mc_mean": m, "mc_mean_stderr": s, "mc_cov": mc.knot_cov(k),
-            "oracle_mean": exact.knot_mean[k], "oracle_cov": exact.knot_cov[k],
-            "z": z, **({"z_undefined": why} if why else {}),
-        })
-    se_z = 0.0 if np.ptp(mc.cost) == 0 else se
-    cost_z, cost_why = strict.ratio_or_null(mean - exact.J, se_z, _ZERO_SE)
-    bias_z, bias_why = strict.ratio_or_null(euler.J - exact.J, se_z, _ZERO_SE)
-    summary = _r({
-        "name": d.problem.name, "paths": mc.paths, "seed": seed, "substeps": substeps,
-        "x0": verbatim(d.problem.x0),
-        "tick_hz": d.table.tick_hz, "worst_status": mc.worst_status,
-        "cost": {
-            "mc_mean": mean, "mc_stderr": se,
-            "ci95": [mean - hw95, mean + hw95], "ci99": [mean - hw99, mean + hw99],
-            "oracle_implemented": exact.J, "predicted_J0": predicted_cost(d),
-            "z": cost_z, **({"z_undefined": cost_why} if cost_why else {}),
-        },
-        "faults": {
-            "levels": verbatim(faults.as_dict()), "exact_oracle": exact_oracle,
-            "oracle_cost": exact.J if exact_oracle else None,
-            "nominal_cost": d.implemented.J,
-        },
-        "simulation_bias": {
-            "cost": euler.J - exact.J,
-            "cost_over_stderr": bias_z,
-            **({"cost_over_stderr_undefined": bias_why} if bias_why else {}),
-            **_substep_choice(mc),
-            "knot_cov_max_abs": [float(np.abs(euler.knot_cov[k] - exact.knot_cov[k]).max())
-                                 for k in range(len(d.problem.knots))],
-        },
-        "knots": knots,
-        "saturation": {
-            "limited": d.table.limited,
-            "tick_fraction": mc.saturated_fraction,
-            "path_fraction": (float(np.mean(mc.saturated_ticks > 0))
-                              if mc.saturated_ticks is not None else 0.0),
-            **_command_range(mc),
-        },
-        **_limits(d),
-        **_corridors(d, mc),
-    })
-    summary["verdict"] = verdict(summary, confidence)
-    strict.check_summary_finite(d.problem, summary, "simulated numbers",
-                                faults if faults.any else None)
-    return summary
+def usable_workers(workers: int | None, force: bool = False) -> int:
+    """The worker processes a run starts: `workers` (default: every core), at most the cores
+    this process may use unless `force` (`harness.montecarlo.usable_workers`)."""
+    from stospline.harness.montecarlo import usable_workers as usable
+    return usable(workers, force)
 
 
-def _command_range(mc: MonteCarloResult) -> dict:
-    """``u_low``/``u_high``: the least and greatest command issued per input; None (with a
-    reason) for an input the controller never commanded (every tick missed: the harness's
-    running minimum is still its initial +inf)."""
-    low, high = np.asarray(mc.u_low, float), np.asarray(mc.u_high, float)
-    issued = np.isfinite(low) & np.isfinite(high)
-    out = {"u_low": [float(v) if ok else None for v, ok in zip(low, issued)],
-           "u_high": [float(v) if ok else None for v, ok in zip(high, issued)]}
-    if not issued.all():
-        out["u_range_undefined"] = ("no command was issued on any path (every tick missed, "
-                                    "the actuator held u_hold throughout)")
-    return out
+def check_faults_runnable(problem: Problem, options: DesignOptions, *,
+                          field: str = "faults") -> None:
+    """Refuse, before the design, faults the harness cannot run around this problem's table
+    (`harness.montecarlo.faults_unsupported`: what the table will be is known from the options);
+    `field` names where the faults came from."""
+    if not problem.faults.any:
+        return
+    from types import SimpleNamespace
+    from stospline.harness.montecarlo import faults_unsupported
+    table = SimpleNamespace(arith="float32", delay_ticks=options.delay_ticks)
+    if options.delay_ticks and problem.faults.delay_ticks:
+        raise ProblemError("faults.delay_ticks", "the table is designed for a one-tick delay "
+                                                 "and runs with it; a delay fault on top of it "
+                                                 "is not simulated")
+    why = faults_unsupported(problem, table)
+    if why:
+        raise ProblemError(field, f"cannot be simulated here: {why}")
 
 
-def _corridors(d: Designed, mc: MonteCarloResult) -> dict:
-    """``{"corridors": [...]}`` when the problem has corridors (`harness.exit_stats`): the Monte
-    Carlo exit probability with its one-sided 99 % upper bound, and the exact oracle's
-    Cantelli (valid) and Gaussian (assumed) union bounds, for the fault-free loop (None for a
-    table designed for a delay)."""
-    if not d.problem.corridors or mc.exit_tick is None:
-        return {}
-    from stospline.harness.exit_stats import corridor_report
-    # The oracle's output moments exist for tables designed without a delay.
-    bounded = not getattr(d.table, "delay_ticks", 0)
-    rep = corridor_report(d.problem, d.table, mc.exit_tick, mc.exit_wall,
-                          with_bounds=bounded)
-    for entry in rep:
-        if entry["bound"] is not None:
-            entry["bound"]["loop"] = ("fault-free (the bounds ignore [faults])"
-                                      if mc.faults.any else "the implemented table")
-    return {"corridors": rep}
+def fault_table_unavailable(d: Designed) -> str | None:
+    """Why the harness cannot run the fault table around `d`'s table (None: it can)."""
+    from stospline.harness.montecarlo import faults_unsupported
+    return faults_unsupported(d.problem, d.table)
 
 
-def _substep_choice(mc: MonteCarloResult) -> dict:
-    c = mc.substep_choice
-    if c is None:
-        return {"substeps_chosen": "given"}
-    return {"substeps_chosen": "auto", "target": c.target, "predicted_stderr": c.stderr,
-            "pilot_paths": c.pilot_paths, "target_met": c.met}
+def fault_sweep_runs() -> int:
+    """The Monte Carlo runs of `fault_sweep` (each fault at a few levels), each of its
+    `paths`."""
+    from stospline.harness.fault_sweep import SWEEP_ROWS
+    return SWEEP_ROWS
 
 
-def verdict(summary: dict, confidence: float = 0.99) -> dict:
-    """Whether the Monte Carlo run agrees with the oracle (`harness.montecarlo.joint_verdict`):
-    the mean cost and every knot-mean component, each by its z-score in the summary, within
-    the two-sided normal bound Bonferroni-corrected so that a correct controller passes all
-    of them at once with probability `confidence`. Saturation makes the run incomparable: the
-    oracle assumes the law is never clipped."""
-    c = summary["cost"]
-    stats = [("cost", c["z"], c["mc_mean"], c["oracle_implemented"])]
-    for k, kn in enumerate(summary["knots"]):
-        stats += [(f"knot {k} mean[{i}]", z, kn["mc_mean"][i], kn["oracle_mean"][i])
-                  for i, z in enumerate(kn["z"])]
-    v = joint_verdict(stats, confidence)
-    if not summary.get("faults", {}).get("exact_oracle", True):
-        agree, reason = False, ("not comparable: these faults have no exact oracle "
-                                "(quantization, missed ticks, or sensor noise before the band "
-                                "latch); the Monte Carlo numbers stand alone")
-    elif summary["saturation"]["tick_fraction"] > 0:
-        agree, reason = False, ("the controller saturated: the oracle assumes the law is never "
-                                "clipped, so it does not predict this run")
-    elif v.outside:
-        agree, reason = False, "outside the joint interval: " + ", ".join(v.outside)
-    else:
-        agree, reason = True, "every statistic inside the joint interval"
-    return {"agree": agree, "confidence": confidence, "correction": "Bonferroni",
-            "statistics": v.statistics, "z_limit": v.z_limit, "max_abs_z": v.max_abs_z,
-            "max_abs_z_of": v.max_abs_z_of, "reason": reason}
-
-
-# Why a z-score (or another ratio to a Monte Carlo standard error) is null.
-_ZERO_SE = ("every path gave the same value (a problem without noise, or a deterministic "
-            "quantity): the Monte Carlo standard error is 0 up to rounding, so the ratio is "
-            "undefined")
+def table_numbers(d: Designed) -> int:
+    """The numbers the C text of `d`'s table holds (what formatting and compiling it cost)."""
+    t = d.table
+    return (t.K.size + t.k0.size + t.L.size if t.spline is None
+            else t.spline.coef.size + t.spline.knot.size)

@@ -19,13 +19,14 @@ __all__ = ["RoundedUp", "Verbatim", "verbatim", "ceil_significant", "round_to_sc
 
 class RoundedUp(float):
     """A bound already rounded up to the digits it is written with. JSON writers print it as it
-    is (`pipeline._r` leaves it alone: rounding it again to nearest could lower it)."""
+    is (`report.json_numbers.rounded` leaves it alone: rounding it again to nearest could
+    lower it)."""
 
 
 class Verbatim(float):
     """A number the user gave (a knot time, x0, epsilon, a fault level): JSON writers echo it
-    exactly (`pipeline._r` leaves it alone: rounding it to a computed number's quantum would
-    print 1e-300 as 0.0)."""
+    exactly (`report.json_numbers.rounded` leaves it alone: rounding it to a computed number's
+    quantum would print 1e-300 as 0.0)."""
 
 
 def verbatim(x):

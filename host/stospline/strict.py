@@ -377,7 +377,7 @@ def _fallback_text(caught) -> str:
 
 
 def fixed_scale_error(problem, arith: str, exc: ValueError) -> ProblemError:
-    """A `fixed.quantize_table` refusal (scale exponents beyond the firmware's
+    """A `table.qformat.quantize_table` refusal (scale exponents beyond the firmware's
     +-STSP_Q_EXP_MAX) as a ProblemError naming the most extreme input, else design.arith."""
     field = culprit(problem, _MOMENTS)
     advice = ("use float32 tables" if field is None else

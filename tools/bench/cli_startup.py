@@ -1,28 +1,38 @@
 #!/usr/bin/env python3
-"""How fast `stospline design examples/robot_corridor.toml --json` answers.
+"""How fast `stospline design examples/robot_corridor.toml --json --out DIR` answers.
 
-Prints the median (and min) wall time of N runs of the installed `stospline` command, the CPU
-time the runs took (user + sys: what the command costs on an idle machine), the time of each
-phase in one process (import, load, design, JSON), and where import time goes
-(`python -X importtime`, cumulative microseconds of the biggest top-level imports).
+Prints the median (and min) wall time of N whole-process runs of ``python -m stospline``
+(imports, design, oracle, C text, JSON), the CPU time the runs took (user + sys: what the
+command costs on an idle machine), the same for ``python -c "import numpy"`` as the floor and
+the ratio of the two medians, the time of each phase in one process (import, load, design,
+JSON), and where import time goes (`python -X importtime`, cumulative microseconds of the
+biggest top-level imports).
 
     .venv/bin/python tools/bench/cli_startup.py [--runs 10] [PROBLEM]
 
 Only the standard library and the installed stospline are used. Run it on an idle machine:
-wall time on a loaded one measures the other processes too (the CPU column does not).
+wall time on a loaded one measures the other processes too (the CPU column does not). The runs
+cache their bytecode (in a temporary ``PYTHONPYCACHEPREFIX``, even where
+``PYTHONDONTWRITEBYTECODE`` is set), as an installed package does: otherwise every run would
+compile the package's sources first.
 """
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import resource
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
+# Bytecode cached as for an installed package (see the module docstring).
+ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+ENV["PYTHONPYCACHEPREFIX"] = tempfile.mkdtemp(prefix="stospline-startup-pyc-")
 
 PHASES = r"""
 import sys, time
@@ -41,22 +51,32 @@ print(f"{t1 - t0:.4f} {t2 - t1:.4f} {t3 - t2:.4f} {t4 - t3:.4f}")
 """
 
 
-def timed_runs(cmd: list[str], runs: int) -> tuple[list[float], list[float]]:
-    walls, cpus = [], []
+def timed_run(cmd: list[str]) -> tuple[float, float]:
+    """Wall and CPU (user + sys) seconds of one run of `cmd`."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t = time.perf_counter()
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, env=ENV)
+    wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
+
+
+def timed_runs(commands: list[list[str]], runs: int) -> list[tuple[list[float], list[float]]]:
+    """``(walls, cpus)`` of each command, the commands taking turns so that a change in the
+    machine's load weighs on all of them alike."""
+    times = [([], []) for _ in commands]
     for _ in range(runs):
-        before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        t = time.perf_counter()
-        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-        walls.append(time.perf_counter() - t)
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cpus.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
-    return walls, cpus
+        for cmd, (walls, cpus) in zip(commands, times):
+            wall, cpu = timed_run(cmd)
+            walls.append(wall)
+            cpus.append(cpu)
+    return times
 
 
 def import_breakdown(python: str, problem: str, top: int) -> list[tuple[int, str]]:
     """Cumulative import time (us) of the imports at nesting depth <= 1, largest first."""
-    res = subprocess.run([python, "-X", "importtime", "-m", "stospline.cli", "design", problem,
-                          "--json"], capture_output=True, text=True, check=True)
+    res = subprocess.run([python, "-X", "importtime", "-m", "stospline", "design", problem,
+                          "--json"], capture_output=True, text=True, check=True, env=ENV)
     rows = []
     for line in res.stderr.splitlines():
         m = re.match(r"import time:\s+(\d+) \|\s+(\d+) \|( *)(\S+)", line)
@@ -72,19 +92,21 @@ def main() -> int:
     ap.add_argument("--top", type=int, default=12, help="import rows to show")
     args = ap.parse_args()
     python = sys.executable
-    exe = str(Path(python).parent / "stospline")
-    cmd = [exe, "design", args.problem, "--json"]
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)     # warm: kernels built, disk cache
-    walls, cpus = timed_runs(cmd, args.runs)
-    print(f"{' '.join(Path(c).name if i < 2 else c for i, c in enumerate(cmd))}")
+    out = tempfile.mkdtemp(prefix="stospline-startup-")    # each run replaces the same files
+    cmd = [python, "-m", "stospline", "design", args.problem, "--json", "--out", out]
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, env=ENV)   # warm: kernels, bytecode
+    (walls, cpus), (base, base_cpu) = timed_runs([cmd, [python, "-c", "import numpy"]],
+                                                 args.runs)
+    print(" ".join(["python", *cmd[1:-1], "DIR"]))
     print(f"  wall   median {statistics.median(walls):.3f} s   min {min(walls):.3f} s   "
           f"({args.runs} runs)")
     print(f"  cpu    median {statistics.median(cpus):.3f} s   (user + sys)")
-    base, base_cpu = timed_runs([python, "-c", "import numpy"], max(3, args.runs // 2))
-    print(f"  floor  python + import numpy: median {statistics.median(base):.3f} s wall, "
+    print(f"  floor  python -c 'import numpy': median {statistics.median(base):.3f} s wall, "
           f"{statistics.median(base_cpu):.3f} s cpu")
+    print(f"  ratio  {statistics.median(walls) / statistics.median(base):.2f}x the floor (wall), "
+          f"{statistics.median(cpus) / statistics.median(base_cpu):.2f}x (cpu)")
     phases = [subprocess.run([python, "-c", PHASES, args.problem], capture_output=True,
-                             text=True, check=True).stdout.split() for _ in range(3)]
+                             text=True, check=True, env=ENV).stdout.split() for _ in range(3)]
     med = [statistics.median(float(p[i]) for p in phases) for i in range(4)]
     print("  phases (one process, median of 3): " + ", ".join(
         f"{name} {v * 1e3:.0f} ms" for name, v in

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from stospline.errors import ProblemError
@@ -59,7 +60,7 @@ def add_commands(sub, cli) -> None:
 def _board(args, cli) -> int:
     from stospline.atomic import check_target
     from stospline.board.project import BOARDS, project_files, write_project
-    _check_budget, _limits, _options = cli._check_budget, cli._limits, cli._options
+    _check_budget, _limits, _options = cli._check_budget, cli._limits, cli._design_options
     from stospline.pipeline import design_problem, generated_files
     from stospline.problem.reader import load_problem
     board = BOARDS[args.board]
@@ -68,12 +69,12 @@ def _board(args, cli) -> int:
         raise ProblemError("--arith", f"must be one of ['float32', 'q15', 'q31'], got {arith!r}")
     check_target(args.out, (), [args.problem])
     problem = load_problem(args.problem)
-    opts = _options(args, problem)
-    if opts["delay_ticks"]:
+    opts = replace(_options(args, problem), arith=arith)
+    if opts.delay_ticks:
         raise ProblemError("--delay-ticks", "the board project runs tables designed without "
                                             "a delay")
-    _check_budget(args, problem, "design", arith=arith)
-    d = design_problem(problem, noise=not args.ignore_noise, **opts, **_limits(args))
+    _check_budget(args, problem, opts, "design", arith=arith)
+    d = design_problem(problem, options=opts, **_limits(args))
     tables = generated_files(d, Path(args.problem).name, arith)
     stem = next(k for k in tables if k.endswith(".c"))[:-2]
     from stospline.board.hil import table_of
@@ -102,7 +103,8 @@ def _table_bytes(table, arith: str) -> int:
 def _hil(args, cli) -> int:
     from stospline.board import hil
     from stospline.board.project import BOARDS
-    _limits, _options, _report_simulation = cli._limits, cli._options, cli._report_simulation
+    _limits, _options = cli._limits, cli._design_options
+    from stospline.report.summary_text import simulation_summary_text
     from stospline.pipeline import design_problem, simulation_summary
     from stospline.problem.reader import load_problem
     from stospline.harness.controller import build_controller
@@ -117,12 +119,12 @@ def _hil(args, cli) -> int:
     if problem.faults.any:
         raise ProblemError("faults", "the serial HIL run simulates the fault-free loop; "
                                      "run `stospline simulate` for faults")
-    opts = _options(args, problem)
-    if opts["delay_ticks"]:
+    opts = replace(_options(args, problem), arith=arith)
+    if opts.delay_ticks:
         raise ProblemError("--delay-ticks", "the board runs tables designed without a delay")
     if any(st.varying is not None for st in problem.stages):
         raise ProblemError("stages", "the serial HIL run needs time-invariant stage data")
-    d = design_problem(problem, noise=not args.ignore_noise, **opts, **_limits(args))
+    d = design_problem(problem, options=opts, **_limits(args))
     table = hil.table_of(d, arith)
     ctl = build_controller(table)
     ref = simulate(problem, ctl, paths=args.paths, seed=args.seed, substeps=args.substeps,
@@ -161,7 +163,7 @@ def _hil(args, cli) -> int:
                 "bad_frames_board": res.bad_frames, "lost_frames": res.lost_frames,
                 "bad_frames_host": res.host_bad_frames,
                 "cycles_per_tick": info.cycles_per_tick, "clock_hz": info.clock_hz}
-    _report_simulation(s, args.json)
+    print(cli.dumps(s) + "\n" if args.json else simulation_summary_text(s), end="", flush=True)
     if not args.json:
         hs = s["hil"]
         print(f"  HIL on {board.name} ({arith}): {res.paths} paths x {res.ticks} ticks in "

@@ -1,6 +1,6 @@
 """Compiled host kernels of the designers (double precision C, loaded through cffi).
 
-Build and load are separate steps, as in `harness`: `build_kernels` compiles ``tick_kernel.c``
+Build and load are separate steps, as for the firmware (`stospline.harness.controller`): `build_kernels` compiles ``tick_kernel.c``
 into a cffi API-mode module cached (`stospline.cache`: the user cache directory,
 ``STOSPLINE_CACHE_DIR`` overrides) by a hash of the source, the declarations and the flags,
 and `load_kernels` returns the loaded module, building it on first use. `zoh_stage_ticks` runs the per-tick loop of one stage
@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from stospline.cache import build_source_module, load_module
+from stospline.errors import KernelBuildError
 
 __all__ = ["build_kernels", "load_kernels", "zoh_stage_ticks", "oracle_stage_ticks",
            "pack_oracle_maps", "KernelBuildError"]
@@ -60,10 +61,6 @@ _CFLAGS = ["-std=c99", "-O3", "-Wall", "-Wextra"]
 _ERR_NOT_PD, _ERR_DIMS = -1, -2
 _loaded = None
 _load_lock = threading.Lock()
-
-
-class KernelBuildError(RuntimeError):
-    """The C kernels could not be compiled or loaded (no C compiler, no cffi)."""
 
 
 def build_kernels(build_dir: str | Path | None = None, *, quiet: bool = True) -> Path:

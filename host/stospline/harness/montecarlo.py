@@ -3,7 +3,7 @@
 Between ticks the command is held and the plant advances by `substeps` exponential
 Euler–Maruyama steps ``x+ = e^{A dt} x + Gamma u + sum_i x_i G_i dZ`` (exact for the mean,
 O(dt) weak error in the second moments). The oracle evaluates the same scheme exactly
-(`oracle.euler_tick`), so the simulation bias is a computed number, not a guess.
+(`design.moments.euler_tick`), so the simulation bias is a computed number, not a guess.
 
 The paths run in blocks of `BLOCK_PATHS`, each with its own random stream (`block_seed`), on
 every core by default (forked workers) or on a Dask cluster (`scheduler`); for a float32
@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 from stospline.expm import expm
@@ -28,8 +27,6 @@ from stospline.harness.controller import (STATUS, CompiledController, CorridorWa
 from stospline.errors import ProblemError
 from stospline.problem.model import Problem
 
-if TYPE_CHECKING:
-    from stospline.harness.plant_scheme import SubstepChoice
 
 __all__ = ["MonteCarloResult", "simulate", "z_value", "Agreement", "compare_to_oracle",
            "BLOCK_PATHS", "block_seed", "default_workers", "usable_workers", "check_counts",
@@ -61,8 +58,9 @@ class MonteCarloResult:
     # the commands applied to them (ticks, record, m); None unless asked for
     # (simulate(record=...)): for percentile bands in reports.
     record_x: np.ndarray | None = None
-    # How `substeps` was chosen (pipeline.simulate_problem with substeps="auto"), else None.
-    substep_choice: "SubstepChoice | None" = None
+    # How `substeps` was chosen (pipeline.simulate_problem with substeps="auto"), else None:
+    # a `plant_scheme.SubstepChoice` (not imported: that module imports this one).
+    substep_choice: object = None
     faults: Faults = field(default_factory=Faults)     # the loop's faults in this run
     record_u: np.ndarray | None = None
     # With corridors (problem.corridors): each path's first state tick outside corridor i

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from stospline.errors import StosplineError
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem
 from stospline.oracle.tick_moments import (Moments, _knot_terms, _PathRecord, _plant_tick,
@@ -35,7 +36,7 @@ from stospline.table.format import GainTable
 __all__ = ["evaluate_with_faults", "FaultsNotExact", "has_exact_oracle"]
 
 
-class FaultsNotExact(ValueError):
+class FaultsNotExact(StosplineError, ValueError):
     """The faults make the loop nonlinear (quantization, missed ticks, a band latch from a
     noisy measurement): no exact moments; Monte Carlo only."""
 

@@ -29,19 +29,20 @@ from __future__ import annotations
 
 import json
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from stospline.problem.series import Series
+from stospline.errors import StosplineError
 
-if TYPE_CHECKING:   # the model calls this module (Problem.to_toml): no import at run time
-    from stospline.problem.model import Problem, Stage
+# `Problem` and `Stage` (stospline.problem.model) are annotations only: the model calls this
+# module (Problem.to_toml), so importing it here, even for type checking, would be a cycle.
 
 __all__ = ["problem_to_toml", "ProblemTomlError"]
 
 
-class ProblemTomlError(ValueError):
+class ProblemTomlError(StosplineError, ValueError):
     """The problem holds something a problem file cannot say (a Python callable)."""
 
 

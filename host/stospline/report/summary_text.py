@@ -1,11 +1,13 @@
-"""The short human summary `stospline design` prints (``--json`` prints the full one)."""
+"""The human summaries `stospline design` and `stospline simulate` print (``--json`` prints
+the full ones)."""
 from __future__ import annotations
 
 import numpy as np
 
 from stospline.table.flash import ARITH_ELEMENT_BYTES, flash_bytes
 
-__all__ = ["worst_constraint_residual", "design_summary_text"]
+__all__ = ["worst_constraint_residual", "design_summary_text", "design_run_text",
+           "simulation_summary_text", "saturation_warning"]
 
 
 def worst_constraint_residual(d) -> tuple[float, int, int] | None:
@@ -91,3 +93,91 @@ def design_summary_text(d, arith: str = "float32", q_cert: dict | None = None) -
                          f"at {ticks} ticks "
                          f"(--json: every_tick has each region checked by the oracle)")
     return "\n".join(lines) + "\n"
+
+
+def design_run_text(d, arith: str, summary: dict) -> str:
+    """What ``stospline design`` prints for `d` written in `arith`, whose JSON summary is
+    `summary` (`stospline.pipeline.design_files`): a Q15/Q31 spline table's certificate is
+    there, under ``table``."""
+    return design_summary_text(d, arith, None if arith == "float32" else summary.get("table"))
+
+
+def simulation_summary_text(s: dict) -> str:
+    """What ``stospline simulate`` prints: the cost and knot means of Monte Carlo beside the
+    oracle's, the plant scheme's bias, faults, saturation, corridors and the verdict, from
+    the run's summary (`stospline.report.simulation_summary.simulation_summary`)."""
+    lines = []
+    sat = s["saturation"]
+    c = s["cost"]
+    lines.append(f"{s['name']}: {s['paths']} paths, seed {s['seed']}, compiled C controller at "
+                 f"{s['tick_hz']} Hz, plant {s['substeps']} substeps/tick, from x0 = {s['x0']}")
+    lines.append(f"  cost  MC {c['mc_mean']:.6g}  95% CI [{c['ci95'][0]:.6g}, {c['ci95'][1]:.6g}]"
+                 f"   oracle {c['oracle_implemented']:.6g}   predicted J0 {c['predicted_J0']:.6g}"
+                 f"   z {_z_text(c['z'])}")
+    bias = s["simulation_bias"]
+    ratio = ("n/a MC standard errors (all paths alike)" if bias["cost_over_stderr"] is None
+             else f"{bias['cost_over_stderr']:.3g} MC standard errors")
+    how = ""
+    if bias["substeps_chosen"] == "auto":
+        how = (f"; {s['substeps']} substeps/tick chosen: the fewest with |bias| <= "
+               f"{bias['target']:.3g}, under 0.1 of the standard error a "
+               f"{bias['pilot_paths']}-path pilot predicts"
+               + ("" if bias["target_met"] else " (NOT met at the largest allowed number)"))
+    lines.append(f"  plant-scheme bias in cost {bias['cost']:.3g} = {ratio}{how}")
+    f = s.get("faults", {})
+    if f.get("levels"):
+        levels = " ".join(f"{k}={v}" for k, v in f["levels"].items())
+        oracle = (f"exact oracle of the faulty loop {f['oracle_cost']:.6g}" if f["exact_oracle"]
+                  else "no exact oracle (quantization, missed ticks, or sensor noise before "
+                       "the band latch): Monte Carlo only")
+        lines.append(f"  faults: {levels}; {oracle} (fault-free {f['nominal_cost']:.6g})")
+    if sat["limited"]:
+        lines.append(f"  actuator limits: saturated on {100 * sat['tick_fraction']:.4g}% of ticks "
+                     f"({100 * sat['path_fraction']:.4g}% of paths); commands issued within "
+                     f"[{', '.join(_number_text(v) for v in sat['u_low'])}] .. "
+                     f"[{', '.join(_number_text(v) for v in sat['u_high'])}]")
+    for i, c in enumerate(s.get("corridors", [])):
+        mc = c["mc"]
+        eps = "" if c["epsilon"] is None else f", epsilon {c['epsilon']:g}"
+        bounds = "no oracle bounds (a table designed for a delay)"
+        if c["bound"] is not None:
+            bc, bg = c["bound"]["cantelli"], c["bound"]["gaussian"]
+            bounds = (f"oracle union bounds over the ticks: Cantelli {bc['total']:.4g} (valid), "
+                      f"Gaussian {bg['total']:.4g} (assumes Gaussian outputs); worst tick "
+                      f"{bc['worst_tick']:.3g} / {bg['worst_tick']:.3g}")
+        lines.append(f"  corridor {i} (t = [{c['t'][0]:g}, {c['t'][1]:g}]{eps}): left by "
+                     f"{mc['exits']} of {mc['paths']} paths = {100 * mc['estimate']:.4g}%, "
+                     f"one-sided 99% upper bound {100 * mc['upper99']:.4g}%; {bounds}")
+    fmt = lambda v: "[" + ", ".join(f"{x:+.5f}" for x in v) + "]"  # noqa: E731
+    for k, kn in enumerate(s["knots"]):
+        lines.append(f"  knot {k} (t = {kn['t']:g}): state mean, MC     {fmt(kn['mc_mean'])}")
+        lines.append(f"  {'':>15}state mean, oracle {fmt(kn['oracle_mean'])}   "
+                     f"z {'[' + ', '.join(_z_text(z) for z in kn['z']) + ']'}")
+    v = s["verdict"]
+    lines.append(f"  verdict: {'agree' if v['agree'] else 'DISAGREE'}: max |z| "
+                 f"{v['max_abs_z']:.3g} ({v['max_abs_z_of']}) against {v['z_limit']:.3g}, "
+                 f"{v['correction']} over {v['statistics']} statistics at "
+                 f"{100 * v['confidence']:g}% jointly; {v['reason']}")
+    return "\n".join(lines) + "\n"
+
+
+def _number_text(v) -> str:
+    """A number, or "n/a" when it is undefined (JSON null)."""
+    return "n/a" if v is None else f"{v:.6g}"
+
+
+def _z_text(z) -> str:
+    """A z-score, or "n/a" when it is undefined (zero standard error; JSON null)."""
+    return "n/a" if z is None else f"{z:+.2f}"
+
+
+def saturation_warning(s: dict) -> str | None:
+    """The warning a run whose controller saturated deserves (None when it never did): the
+    oracle's and the predicted numbers assume the law is never clipped."""
+    sat = s["saturation"]
+    if not sat["tick_fraction"] > 0:
+        return None
+    return (f"the controller saturated (STSP_WARN_SATURATED) on "
+            f"{100 * sat['tick_fraction']:.4g}% of ticks, on {100 * sat['path_fraction']:.4g}% "
+            f"of paths; the oracle and predicted numbers assume no saturation (the design "
+            f"ignores the actuator limits), so they do not predict this run")

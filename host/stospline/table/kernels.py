@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from stospline.cache import FallbackWarning, build_source_module, load_module
+from stospline.errors import KernelBuildError
 
 __all__ = ["affine_compose", "affine_compose_gains", "qspline_stage", "f32_array_text",
            "build_kernel", "KernelBuildError"]
@@ -42,10 +43,6 @@ _CFLAGS = ["-std=c99", "-O3", "-Wall", "-Wextra"]
 _loaded = None
 _failed = False
 _load_lock = threading.Lock()
-
-
-class KernelBuildError(RuntimeError):
-    """The table kernel could not be compiled or loaded (no C compiler, no cffi)."""
 
 
 def build_kernel(build_dir: str | Path | None = None, *, quiet: bool = True) -> Path:

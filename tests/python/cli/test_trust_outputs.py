@@ -65,11 +65,14 @@ def _one_line_refusal(rc, out, err, *words):
 @pytest.fixture
 def no_work(monkeypatch):
     """Any design or Monte Carlo run fails the test: a refusal must come before them."""
+    # Imported before the patch: it binds pipeline.design_problem when first imported, and
+    # would keep the patched one for the tests that run after this one.
+    from stospline import corridor_search
+
     def boom(*a, **k):
         raise AssertionError("work started before the refusal")
     monkeypatch.setattr(pipeline, "design_problem", boom)
     monkeypatch.setattr(pipeline, "simulate_problem", boom)
-    from stospline import corridor_search
     monkeypatch.setattr(corridor_search, "evaluate_grid", boom)
 
 

@@ -1,0 +1,95 @@
+"""The machine-readable summary of a design (``stospline design --json``, ``<name>.json``).
+
+``d`` is a `stospline.pipeline.Designed` throughout (not imported: the pipeline imports this)."""
+from __future__ import annotations
+
+import numpy as np
+
+from stospline.design.bands import has_bands
+from stospline.precision import verbatim
+from stospline.report.json_numbers import cov_digits, rounded
+from stospline.table.codegen import GENERATOR
+
+__all__ = ["design_summary", "actuator_limits"]
+
+
+def design_summary(d) -> dict:
+    """Machine-readable summary: predicted J0 and per-knot predicted moments (and the
+    actuator limits, when the problem sets them)."""
+    p = d.problem
+    knots = []
+    for k, kn in enumerate(p.knots):
+        entry = {
+            "t": verbatim(kn.t),
+            "mean": d.law.knot_mean[k],
+            "cov": cov_digits(d.law.knot_cov[k], d.law.knot_mean[k]),
+            "implemented_mean": d.implemented.knot_mean[k],
+            "implemented_cov": cov_digits(d.implemented.knot_cov[k], d.implemented.knot_mean[k]),
+        }
+        if kn.constraint is not None:
+            lo, hi = kn.constraint.bounds
+            entry["constraint"] = {
+                "lower": lo, "upper": hi,
+                "design_violation": _violation(d.law.knot_constraint[k], lo, hi),
+                "implemented_violation": _violation(d.implemented.knot_constraint[k], lo, hi),
+            }
+        knots.append(entry)
+    return rounded({
+        "name": p.name,
+        "generator": GENERATOR,
+        "problem_sha256": p.source_sha256,
+        "design": f"{d.design.mode}-{d.discretization}"
+                  + ("" if d.design.noise_aware else "-noise-ignoring"),
+        "tick_hz": d.table.tick_hz,
+        "n_ticks": d.table.n_ticks,
+        "J0": d.design.J0,
+        "oracle_J_design": d.law.J,
+        "oracle_J_implemented": d.implemented.J,
+        "knots": knots,
+        **({"table": d.certificate} if d.certificate is not None else {}),
+        **_band_terms(d),
+        **actuator_limits(d),
+        **_estimator(d),
+    })
+
+
+def _estimator(d) -> dict:
+    """With a [measurement] table: the loop on the filter's estimate (docs/theory/estimator.md);
+    ``{}`` otherwise (summaries stay unchanged)."""
+    if d.problem.measurement is None:
+        return {}
+    from stospline.estimator.summary import estimator_summary
+    return {"estimator": estimator_summary(d.problem, d.table, cov_digits)}
+
+
+def _violation(y: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Signed distance outside [lo, hi] per row (0 inside; for an equality, y - value)."""
+    return np.where(lo == hi, y - lo, np.maximum(y - hi, 0) - np.maximum(lo - y, 0))
+
+
+def actuator_limits(d) -> dict:
+    """``{"actuator_limits": {"u_min": [...] | None, "u_max": ...}}`` as the table stores them
+    (float32), when the problem sets limits; ``{}`` otherwise (summaries stay unchanged)."""
+    p = d.problem
+    if p.u_min is None and p.u_max is None and p.u_hold is None:
+        return {}
+    return {"actuator_limits": {
+        "u_min": None if p.u_min is None else d.table.u_min.astype(float),
+        "u_max": None if p.u_max is None else d.table.u_max.astype(float),
+        **({} if p.u_hold is None else {"u_hold": d.table.u_hold.astype(float)}),
+        "note": "the design ignores the limits: the firmware clips the unconstrained law, "
+                "and the oracle's numbers assume no command is clipped",
+    }}
+
+
+def _band_terms(d) -> dict:
+    """The design's own summary entries; with bands also the rows of the dual the firmware
+    re-solves from the measured x0 (0: it latches the affine map of the design's active set,
+    see docs/theory/math-notes.md)."""
+    terms = d.design.summary_terms()
+    if has_bands(d.problem):
+        terms["band_qp_rows"] = 0 if d.table.band_qp is None else d.table.band_qp.q
+    if d.every_tick is not None:
+        from stospline.refine.every_tick import every_tick_check   # loaded when a design has them
+        terms["every_tick"] = every_tick_check(d)
+    return terms

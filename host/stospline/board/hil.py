@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from stospline.board import frames as fr
+from stospline.errors import StosplineError
 
 __all__ = ["table_of", "HilResult", "run_hil", "open_port", "start_qemu", "QEMU_MACHINES"]
 
@@ -36,7 +37,7 @@ def table_of(d, arith: str):
     return fixed_point_table(d, arith)
 
 
-class HilError(Exception):
+class HilError(StosplineError, RuntimeError):
     """The serial line or the board failed (a lost or corrupted answer, a timeout)."""
 
 

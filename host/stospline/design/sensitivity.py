@@ -73,7 +73,7 @@ def unit_problem(problem: Problem, j: int) -> Problem:
     f = [np.zeros(n) for _ in problem.stages]
     for t in problem.parameters[j].targets:
         if t.kind == "value":
-            knots[t.at].constraint.value[t.index] = 1.0
+            knots[t.at].constraint.value[t.index] = t.scale   # the row as the reader scaled it
         elif t.kind == "target":
             knots[t.at].penalty.target[t.index] = 1.0
         elif t.kind == "f":

@@ -9,7 +9,7 @@ A ``[[parameters]]`` entry names one scalar ``theta`` and the values of the file
 
 The file's values are the nominal: every value a parameter sets must be equal in the file,
 and the range must contain it. Supported values (`Target`): a knot constraint's equality
-``value[i]`` (on a row already at the reader's scale, its largest coefficient in ``[1, 2)``),
+``value[i]`` (in the row's units as written, whatever scale the reader gives the row),
 a knot penalty's ``target[i]``, the affine drift ``f[i]`` (constant, at the top level or in a
 ``[[stages]]`` entry) and the start state ``x0[i]``. The feedback does not depend on any of
 them and the feed-forward is affine in them (`stospline.design.sensitivity`). Band limits,
@@ -41,10 +41,12 @@ _SUPPORTED = ("x0[i], knots[k].constraint.value[i], knots[k].penalty.target[i], 
 class Target:
     """One value a parameter sets: ``kind`` "x0", "value" (knot constraint), "target" (knot
     penalty) or "f" (a stage's drift); ``at`` the knot or stage (-1 for x0); ``index`` the
-    component."""
+    component; ``scale`` the power of two the reader scaled a constraint row by
+    (`stospline.problem.rows`): the problem holds ``scale * theta``."""
     kind: str
     at: int
     index: int
+    scale: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -110,12 +112,7 @@ def _targets(path: str, field: str, doc: dict, problem) -> list[Target]:
         raw_top = float(np.abs(np.asarray(doc["knots"][k]["constraint"]["C"][i],
                                           dtype=float)).max())
         scale = float(np.abs(con.C[i]).max()) / raw_top if raw_top > 0 else 1.0
-        if scale != 1.0:
-            raise ProblemError(field, f"row {i} of knots[{k}].constraint.C is read scaled by "
-                                      f"{scale:g} (its largest coefficient brought into [1, 2)); "
-                                      f"write the row and its value scaled so, to set the "
-                                      f"value in the row's own units")
-        return [Target("value", k, i)]
+        return [Target("value", k, i, scale)]
     top_f = shape == ["dynamics", "f", 0]
     if top_f or shape == ["stages", 0, "dynamics", "f", 0]:
         where = "dynamics" if top_f else f"stages[{tok[1]}].dynamics"
@@ -143,7 +140,7 @@ def _nominal_of(problem, t: Target) -> float:
     if t.kind == "x0":
         return float(problem.x0[t.index])
     if t.kind == "value":
-        return float(problem.knots[t.at].constraint.value[t.index])
+        return float(problem.knots[t.at].constraint.value[t.index]) / t.scale
     if t.kind == "target":
         return float(problem.knots[t.at].penalty.target[t.index])
     return float(problem.stages[t.at].f[t.index])
@@ -263,7 +260,7 @@ def problem_at(problem, theta):
                 x0[t.index] = v
             elif t.kind == "value":
                 kn = knots[t.at]
-                val = kn.constraint.value.copy(); val[t.index] = v
+                val = kn.constraint.value.copy(); val[t.index] = v * t.scale
                 knots[t.at] = replace(kn, constraint=replace(kn.constraint, value=val))
             elif t.kind == "target":
                 kn = knots[t.at]

@@ -222,7 +222,7 @@ def check_theta(parameters, theta) -> np.ndarray:
                          f"{th.size}")
     for v, par in zip(th, parameters):
         if not (math.isfinite(v) and par.lower <= v <= par.upper):
-            raise ValueError(f"{par.name}: {v!r} is outside its range [{par.lower:g}, "
+            raise ValueError(f"{par.name}: {float(v)!r} is outside its range [{par.lower:g}, "
                              f"{par.upper:g}]")
     return th
 

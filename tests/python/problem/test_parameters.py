@@ -156,3 +156,20 @@ def test_bad_parameters_name_their_field(case):
     assert err.value.field == field, err.value
     assert reason in err.value.reason, err.value
     assert "\n" not in str(err.value)
+
+
+def test_written_back_reads_the_same_parameters():
+    """The TOML writer keeps the parameters, their paths and the units of a scaled row; a
+    drift set on one stage only makes it write the stages one by one."""
+    import tomllib
+    p = parse_problem(base_doc())
+    q = parse_problem(tomllib.loads(p.to_toml()))
+    assert q.parameters == p.parameters
+    assert np.array_equal(q.knots[0].constraint.C, p.knots[0].constraint.C)
+    doc = base_doc()
+    del doc["stages"]
+    doc["parameters"][4] = {"name": "v1", "sets": ["x0[0]"], "range": [-1.0, 1.0]}
+    p = parse_problem(doc)
+    text = p.to_toml()
+    assert "[[stages]]" not in text and '"dynamics.f[1]"' in text
+    assert parse_problem(tomllib.loads(text)).parameters == p.parameters

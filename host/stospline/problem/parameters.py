@@ -146,11 +146,12 @@ def _nominal_of(problem, t: Target) -> float:
     return float(problem.stages[t.at].f[t.index])
 
 
-def parse_parameters(raw: Any, doc: dict, problem) -> tuple[Parameter, ...]:
+def parse_parameters(raw: Any, doc: dict, problem, *, check_keys, number,
+                     kind) -> tuple[Parameter, ...]:
     """Validate ``[[parameters]]`` (`raw`) against the decoded file `doc` and the `problem`
-    read from it; ProblemError naming ``parameters[i].<key>`` and the reason."""
-    from stospline.problem.reader import _check_keys, _kind, _number
-
+    read from it; ProblemError naming ``parameters[i].<key>`` and the reason. The reader
+    passes its helpers (`check_keys`, `number`, `kind`), so messages match its own."""
+    _check_keys, _number, _kind = check_keys, number, kind
     if not isinstance(raw, list) or not raw:
         raise ProblemError("parameters", f"must be a non-empty array of tables "
                                          f"([[parameters]]), got {_kind(raw)}")

@@ -905,7 +905,8 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
                       u_min, u_max, faults, u_hold, corridors, tuple(ticked), measurement)
     check_problem(problem, B_path=default.B_path)   # the firmware's limits (limits.py)
     if "parameters" in doc:
-        problem = replace(problem, parameters=parse_parameters(doc["parameters"], doc, problem))
+        problem = replace(problem, parameters=parse_parameters(
+            doc["parameters"], doc, problem, check_keys=_check_keys, number=_number, kind=_kind))
     return problem
 
 

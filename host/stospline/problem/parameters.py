@@ -32,7 +32,7 @@ __all__ = ["Target", "Parameter", "parse_parameters", "apply_to_doc", "problem_a
            "check_theta", "MAX_PARAMETERS"]
 
 MAX_PARAMETERS = 32          # parameters per problem: a table's sensitivity columns
-_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,31}")
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,15}")
 _SUPPORTED = ("x0[i], knots[k].constraint.value[i], knots[k].penalty.target[i], "
               "dynamics.f[i], stages[k].dynamics.f[i]")
 
@@ -170,7 +170,7 @@ def parse_parameters(raw: Any, doc: dict, problem, *, check_keys, number,
         _check_keys(entry, path, {"name", "sets", "range"}, {"name", "sets", "range"})
         name = entry["name"]
         if not isinstance(name, str) or not _NAME.fullmatch(name):
-            raise ProblemError(f"{path}.name", f"must be a C identifier of at most 32 "
+            raise ProblemError(f"{path}.name", f"must be a C identifier of at most 16 "
                                                f"characters, got {name!r}")
         if name.lower() in names:
             raise ProblemError(f"{path}.name", f"{name!r} names an earlier parameter "

@@ -17,7 +17,8 @@ from stospline.oracle.evaluate import Moments, evaluate_table
 from stospline.problem.parameters import problem_at
 from stospline.table.parametric import ParametricTable, parametric_table
 
-__all__ = ["ParametricDesign", "design_parametric", "evaluate_at", "cost_quadratic"]
+__all__ = ["ParametricDesign", "design_parametric", "evaluate_at", "cost_quadratic",
+           "parametric_c_files"]
 
 
 @dataclass
@@ -97,3 +98,17 @@ def cost_quadratic(problem, table: ParametricTable, *, quantize: bool = False):
             d = np.zeros(P); d[i], d[j] = step[i], step[j]
             H[i, j] = H[j, i] = (J(d) - plus[i] - plus[j] + J0) / (2 * step[i] * step[j])
     return J0, g, H
+
+
+def parametric_c_files(problem, source_name: str = "") -> dict[str, str]:
+    """``{"<name>_params.h": ..., "<name>_params.c": ...}``: the sensitivity columns of the
+    problem's design with its ``[design]`` options (mode, discretization, delay) as C text
+    (`stospline.table.parametric_c`), beside the ``<name>.{c,h}`` that `stospline design`
+    writes for the nominal."""
+    from stospline.table.parametric_c import generate_parametric_c
+    opts = problem.options
+    pd = design_parametric(problem, discretization=opts.get("discretization", "exact-zoh"),
+                           mode=opts.get("mode", "stagewise"),
+                           delay_ticks=opts.get("delay_ticks", 0))
+    header, source = generate_parametric_c(pd.table, source_name=source_name)
+    return {f"{problem.name}_params.h": header, f"{problem.name}_params.c": source}

@@ -110,6 +110,10 @@ def test_robot_goal(mode, discretization):
     check_against_fresh(robot_goal_doc(), mode=mode, discretization=discretization)
 
 
+def test_shipped_robot_goal():
+    check_against_fresh(tomllib.loads((EXAMPLES / "robot_goal.toml").read_text()), draws=2)
+
+
 def test_robot_goal_at_its_own_rate():
     check_against_fresh(robot_goal_doc(1000), draws=2)
 

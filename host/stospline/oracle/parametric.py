@@ -107,6 +107,13 @@ def parametric_c_files(problem, source_name: str = "") -> dict[str, str]:
     writes for the nominal."""
     from stospline.table.parametric_c import generate_parametric_c
     opts = problem.options
+    # The columns are those of the float32 per-tick law: a spline table re-solves its latch
+    # for its own gains, and fixed-point tables scale k0; neither has columns yet.
+    for key, plain in (("table", "per-tick"), ("arith", "float32")):
+        if opts.get(key, plain) != plain:
+            raise DesignError(f"design.{key}", f"runtime parameters have sensitivity columns "
+                                               f"for {key} = \"{plain}\" only, got "
+                                               f"{opts[key]!r}")
     pd = design_parametric(problem, discretization=opts.get("discretization", "exact-zoh"),
                            mode=opts.get("mode", "stagewise"),
                            delay_ticks=opts.get("delay_ticks", 0))

@@ -224,3 +224,29 @@ def test_sensitivity_columns_are_not_differences():
     assert np.array_equal(a.S_k0, b.S_k0) and np.array_equal(a.S_lambda0, b.S_lambda0)
     assert not np.array_equal(a.table.k0, b.table.k0)
     assert np.abs(a.S_k0[..., 0]).max() > 0 and not a.S_k0[..., 2].any()   # x0: no column
+
+
+@pytest.mark.parametrize("key, value", [("table", "spline"), ("arith", "q15")])
+def test_columns_only_for_float32_per_tick_tables(key, value):
+    from stospline.errors import DesignError
+    from stospline.oracle.parametric import parametric_c_files
+    doc = robot_goal_doc(20)
+    doc["design"] = {key: value}
+    with pytest.raises(DesignError) as err:
+        parametric_c_files(parse_problem(doc))
+    assert err.value.field == f"design.{key}"
+
+
+def test_bands_are_refused_for_a_problem_built_in_python():
+    """The reader refuses bands with parameters; a problem assembled in Python is refused by
+    the designer, naming parameters."""
+    from dataclasses import replace
+    from stospline.errors import DesignError
+    from stospline.problem.model import Constraint
+    p = parse_problem(robot_goal_doc(20))
+    kn = p.knots[0]
+    band = Constraint(kn.constraint.C, None, kn.constraint.value - 1, kn.constraint.value + 1)
+    q = replace(p, knots=(replace(kn, constraint=band),) + p.knots[1:])
+    with pytest.raises(DesignError) as err:
+        design_parametric(q, mode="joint")
+    assert err.value.field == "parameters"

@@ -250,3 +250,17 @@ def test_bands_are_refused_for_a_problem_built_in_python():
     with pytest.raises(DesignError) as err:
         design_parametric(q, mode="joint")
     assert err.value.field == "parameters"
+
+
+def test_float32_table_at_theta_costs_what_a_fresh_float32_table_costs():
+    """As flashed: the parametric table at theta rounded to float32 against a fresh design's
+    float32 table, both through the exact oracle (float32 rounding of k0 and lambda0 only)."""
+    doc = tomllib.loads((EXAMPLES / "robot_goal.toml").read_text())
+    p = parse_problem(doc)
+    pd = design_parametric(p)
+    theta = [-0.6, 5.4]
+    q, fd = _fresh(doc, p, theta, "exact-zoh", "stagewise", 0)
+    mine = evaluate_at(p, pd.table, theta, quantize=True)
+    ref = evaluate_table(q, table_of(fd))
+    assert abs(mine.J - ref.J) <= 1e-7 * ref.J
+    assert _rel(mine.knot_mean, ref.knot_mean) <= 1e-6

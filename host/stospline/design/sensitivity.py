@@ -25,7 +25,6 @@ from stospline.problem.series import sample_varying
 
 __all__ = ["unit_problem", "source_designs", "check_parametric"]
 
-_SOURCES = ("q", "r", "rho", "f")     # the stage's affine terms (rho moves only the cost)
 
 
 class _Fixed:

@@ -29,3 +29,5 @@ for arith in q15 q31; do
   "$root/.venv/bin/stospline" design examples/robot_corridor.toml --arith "$arith" --table spline \
     --out gains/
 done
+# The sensitivity columns of the examples with [[parameters]] (gains/<name>_params.{c,h}).
+"$root/.venv/bin/python" tools/params_tables.py --out gains/

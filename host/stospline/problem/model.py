@@ -190,6 +190,9 @@ class Problem:
     # [measurement]: the sensor the controller estimates the state from
     # (`problem.measurement.Measurement`); None: it measures the whole state exactly.
     measurement: Any = None
+    # [[parameters]]: values set on the device within a range
+    # (`problem.parameters.Parameter`); the design is for their nominal values.
+    parameters: tuple = ()
 
     @property
     def n(self) -> int:

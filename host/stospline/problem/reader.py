@@ -26,6 +26,7 @@ from stospline.problem.corridors import Corridor
 from stospline.problem.model import (Constraint, Knot, Penalty, Problem, Series, Stage,
                                      TickRegion)
 from stospline.problem.names import check_name
+from stospline.problem.parameters import parse_parameters
 from stospline.problem.regions import merge_constraints
 from stospline.problem.rows import check_no_subnormal, normalise_rows
 
@@ -33,7 +34,8 @@ __all__ = ["load_problem", "parse_problem"]
 
 _TOP_KEYS = {"name", "t0", "x0", "tick_hz", "u_min", "u_max", "u_hold", "dynamics", "cost",
              "knots",
-             "stages", "plot", "regions", "design", "faults", "corridors", "measurement"}
+             "stages", "plot", "regions", "design", "faults", "corridors", "measurement",
+             "parameters"}
 _DESIGN_OPTIONS = {"mode": ("stagewise", "joint"), "discretization": ("exact-zoh", "continuous"),
                    "arith": ARITHS, "delay_ticks": (0, 1), "table": TABLE_KINDS,
                    "spline_tolerance": None}
@@ -902,6 +904,9 @@ def parse_problem(doc: dict, *, source_sha256: str = "") -> Problem:
     problem = Problem(name, t0, x0, tick_hz, stages, knots, source_sha256, plot, dict(options),
                       u_min, u_max, faults, u_hold, corridors, tuple(ticked), measurement)
     check_problem(problem, B_path=default.B_path)   # the firmware's limits (limits.py)
+    if "parameters" in doc:
+        problem = replace(problem, parameters=parse_parameters(
+            doc["parameters"], doc, problem, check_keys=_check_keys, number=_number, kind=_kind))
     return problem
 
 

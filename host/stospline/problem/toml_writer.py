@@ -11,7 +11,9 @@ What is written (``docs/guide/library.md``, "Writing a problem back"):
   a region with ``every = "tick"`` (`TickRegion`) as itself;
 * equal stages once as ``[dynamics]``/``[cost]``, different ones as ``[[stages]]``;
 * ``x0``, ``t0``, ``tick_hz``, actuator limits, ``[design]``, ``[plot]``, ``[faults]``,
-  ``[measurement]`` and ``[[corridors]]`` as they are.
+  ``[measurement]`` and ``[[corridors]]`` as they are;
+* ``[[parameters]]`` with their paths in the file as written; a constraint row a parameter
+  sets is written in the units the parameter has (the reader scales it again).
 
 Floats are written as Python's shortest repr, which reads back to the same double; NaN and
 infinities are refused (a problem file cannot hold them).
@@ -129,7 +131,9 @@ def _same(a: Stage, b: Stage) -> bool:
         a.H is None or np.array_equal(a.H, b.H))
 
 
-def _knot(kn) -> dict:
+def _knot(kn, row_scale: dict | None = None) -> dict:
+    """A knot's table; `row_scale` (row -> power of two) writes those constraint rows back
+    in the units a runtime parameter sets them in (the reader scales them again, exactly)."""
     out: dict = {"t": float(kn.t)}
     if kn.penalty is not None:
         p = kn.penalty
@@ -138,7 +142,44 @@ def _knot(kn) -> dict:
         c = kn.constraint
         out["constraint"] = ({"C": c.C, "value": c.value} if c.value is not None
                              else {"C": c.C, "lower": c.lower, "upper": c.upper})
+        if row_scale and c.value is not None:
+            C, value = c.C.copy(), c.value.copy()
+            for i, sc in row_scale.items():
+                C[i] /= sc
+                value[i] /= sc
+            out["constraint"] = {"C": C, "value": value}
     return out
+
+
+def _partial_drift(p) -> bool:
+    """Some parameter sets the drift of some stages only: the stages are then written one by
+    one, so that its paths exist."""
+    every = set(range(len(p.stages)))
+    return any({t.at for t in par.targets if t.kind == "f"} not in (set(), every)
+               for par in p.parameters)
+
+
+def _parameters(p, top_level: bool) -> list[str]:
+    """``[[parameters]]`` tables, their paths in the file as written (``dynamics.f[i]`` when
+    the stages are written once, else ``stages[k].dynamics.f[i]``)."""
+    lines = []
+    for par in p.parameters:
+        sets: list[str] = []
+        for t in par.targets:
+            if t.kind == "x0":
+                path = f"x0[{t.index}]"
+            elif t.kind == "value":
+                path = f"knots[{t.at}].constraint.value[{t.index}]"
+            elif t.kind == "target":
+                path = f"knots[{t.at}].penalty.target[{t.index}]"
+            else:
+                path = (f"dynamics.f[{t.index}]" if top_level
+                        else f"stages[{t.at}].dynamics.f[{t.index}]")
+            if path not in sets:
+                sets.append(path)
+        lines += _table("[[parameters]]", {"name": par.name, "sets": sets,
+                                           "range": [float(par.lower), float(par.upper)]})
+    return lines
 
 
 def problem_to_toml(problem: Problem) -> str:
@@ -161,7 +202,8 @@ def problem_to_toml(problem: Problem) -> str:
     if p.options:
         lines += _table("[design]", dict(p.options))
     tables = [_stage_tables(s, k, p.mz) for k, s in enumerate(p.stages)]
-    if all(_same(s, p.stages[0]) for s in p.stages):
+    top_level = all(_same(s, p.stages[0]) for s in p.stages) and not _partial_drift(p)
+    if top_level:
         dyn, cost = tables[0]
         lines += _table("[dynamics]", dyn) + _table("[cost]", cost)
     else:
@@ -171,8 +213,13 @@ def problem_to_toml(problem: Problem) -> str:
         for dyn, cost in tables:
             lines += ["", "[[stages]]"] + _table("[stages.dynamics]", dyn)[1:]
             lines += _table("[stages.cost]", cost)[1:]
-    for kn in p.knots:
-        lines += _table("[[knots]]", _knot(kn))
+    scales: dict = {}
+    for par in p.parameters:
+        for t in par.targets:
+            if t.kind == "value" and t.scale != 1.0:
+                scales.setdefault(t.at, {})[t.index] = t.scale
+    for k, kn in enumerate(p.knots):
+        lines += _table("[[knots]]", _knot(kn, scales.get(k)))
     for reg in p.tick_regions:
         lines += _table("[[regions]]", {"t": [float(reg.t[0]), float(reg.t[1])], "every": "tick",
                                         "C": reg.C, "lower": reg.lower, "upper": reg.upper,
@@ -189,4 +236,5 @@ def problem_to_toml(problem: Problem) -> str:
         if cor.epsilon is not None:
             items["epsilon"] = float(cor.epsilon)
         lines += _table("[[corridors]]", items)
+    lines += _parameters(p, top_level)
     return "\n".join(lines) + "\n"

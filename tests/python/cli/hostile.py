@@ -531,6 +531,62 @@ def m_measurement(doc, draw):
 MUTATIONS["measurement"] = m_measurement
 
 
+# ---------------------------------------------------------------------------------------
+# Parameters: a [[parameters]] array (runtime parameters set on the device), valid, or with
+# one entry broken: not an array, names, paths that are junk, missing, out of range, band
+# limits or tracking paths, a value set twice, ranges that are empty, non-finite, beyond
+# float32 or miss the nominal, unknown keys, too many entries. Bases with bands refuse any.
+
+def _parameter(doc: dict) -> dict:
+    x = float(doc["x0"][0])
+    return {"name": "p0", "sets": ["x0[0]"], "range": [x - 1.0, x + 1.0]}
+
+
+PARAMETER_EDITS = {
+    "valid": lambda ps, d: None,
+    "not_array": lambda ps, d: ps.clear() or ps.append("__replace__"),
+    "empty": lambda ps, d: ps.clear(),
+    "entry_not_table": lambda ps, d: ps.__setitem__(0, 1.5),
+    "name_not_identifier": lambda ps, d: ps[0].update(name="p 0"),
+    "name_repeated": lambda ps, d: ps.append({**ps[0], "name": "P0", "sets": ["x0[0]"]}),
+    "sets_not_array": lambda ps, d: ps[0].update(sets="x0[0]"),
+    "sets_junk": lambda ps, d: ps[0].update(sets=["x0[0]]]"]),
+    "sets_not_string": lambda ps, d: ps[0].update(sets=[[0]]),
+    "sets_index_beyond": lambda ps, d: ps[0].update(sets=[f"x0[{len(d['x0'])}]"]),
+    "sets_knot_beyond": lambda ps, d: ps[0].update(sets=["knots[9].penalty.target[0]"]),
+    "sets_band_limit": lambda ps, d: ps[0].update(sets=["knots[0].constraint.upper[0]"]),
+    "sets_tracking": lambda ps, d: ps[0].update(sets=["cost.tracking.y0[0][0]"]),
+    "sets_weight": lambda ps, d: ps[0].update(sets=["knots[0].penalty.weight"]),
+    "sets_absent_drift": lambda ps, d: ps[0].update(sets=["dynamics.f[0]"]),
+    "set_twice": lambda ps, d: ps[0].update(sets=["x0[0]", "x0[0]"]),
+    "range_nan": lambda ps, d: ps[0].update(range=[float("nan"), 1.0]),
+    "range_inf": lambda ps, d: ps[0].update(range=[0.0, float("inf")]),
+    "range_reversed": lambda ps, d: ps[0].update(range=ps[0]["range"][::-1]),
+    "range_misses_nominal": lambda ps, d: ps[0].update(range=[1e3, 2e3]),
+    "range_beyond_float32": lambda ps, d: ps[0].update(range=[-1e39, 1e39]),
+    "range_string": lambda ps, d: ps[0].update(range=["0", "1"]),
+    "range_three": lambda ps, d: ps[0].update(range=[0.0, 1.0, 2.0]),
+    "unknown_key": lambda ps, d: ps[0].update(nominal=0.0),
+    "missing_sets": lambda ps, d: ps[0].pop("sets"),
+    "too_many": lambda ps, d: ps.extend({**ps[0], "name": f"q{i}"} for i in range(40)),
+}
+
+
+def parameters_doc(doc: dict, edit: str) -> dict:
+    """`doc` with a [[parameters]] array broken by `edit` (a key of PARAMETER_EDITS)."""
+    params = [_parameter(doc)]
+    PARAMETER_EDITS[edit](params, doc)
+    doc["parameters"] = 7 if params == ["__replace__"] else params
+    return doc
+
+
+def m_parameters(doc, draw):
+    parameters_doc(doc, draw(st.sampled_from(sorted(PARAMETER_EDITS))))
+
+
+MUTATIONS["parameters"] = m_parameters
+
+
 @st.composite
 def problem_cases(draw):
     """(classes, base name, TOML text): a base problem with 1-2 mutations applied."""

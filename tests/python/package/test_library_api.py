@@ -89,7 +89,7 @@ def same_problem(a, b) -> bool:
         return False
     if len(a.knots) != len(b.knots) or len(a.stages) != len(b.stages):
         return False
-    if a.measurement != b.measurement:
+    if a.measurement != b.measurement or a.parameters != b.parameters:
         return False
     if len(a.corridors) != len(b.corridors) or not all(
             ca.t == cb.t and ca.epsilon == cb.epsilon and eq(ca.C, cb.C)

@@ -118,6 +118,7 @@ def test_fragments_change_the_minimal_file():
                        or problem.u_hold is not None
                        or problem.corridors
                        or problem.measurement is not None
+                       or problem.parameters
                        or any(s.varying is not None or not np.array_equal(s.R, b.R)
                               or s.f is not None
                               or not np.array_equal(s.A, b.A) or s.G.any()

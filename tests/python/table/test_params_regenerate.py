@@ -1,0 +1,25 @@
+"""gains/<name>_params.{c,h} of every example with [[parameters]] are regenerated
+byte-for-byte (tools/params_tables.py, run by tools/regen_gains.sh)."""
+import pytest
+
+from conftest import EXAMPLES, GAINS
+
+from stospline.oracle.parametric import parametric_c_files
+from stospline.problem import load_problem
+
+WITH_PARAMETERS = sorted(p.stem for p in EXAMPLES.glob("*.toml")
+                         if load_problem(p).parameters)
+
+
+def test_an_example_has_parameters():
+    assert "robot_goal" in WITH_PARAMETERS
+
+
+@pytest.mark.parametrize("example", WITH_PARAMETERS)
+def test_regenerating_parameter_columns_changes_no_byte(example):
+    files = parametric_c_files(load_problem(EXAMPLES / f"{example}.toml"),
+                               source_name=f"{example}.toml")
+    assert sorted(files) == [f"{example}_params.c", f"{example}_params.h"]
+    for name, text in files.items():
+        assert (GAINS / name).read_text() == text, \
+            f"gains/{name} differs (regenerate with tools/regen_gains.sh)"

@@ -105,17 +105,17 @@ def parametric_c_files(problem, source_name: str = "") -> dict[str, str]:
     problem's design with its ``[design]`` options (mode, discretization, delay) as C text
     (`stospline.table.parametric_c`), beside the ``<name>.{c,h}`` that `stospline design`
     writes for the nominal."""
+    from stospline.options import resolve_options
     from stospline.table.parametric_c import generate_parametric_c
-    opts = problem.options
+    opts = resolve_options(problem)
     # The columns are those of the float32 per-tick law: a spline table re-solves its latch
     # for its own gains, and fixed-point tables scale k0; neither has columns yet.
     for key, plain in (("table", "per-tick"), ("arith", "float32")):
-        if opts.get(key, plain) != plain:
+        if getattr(opts, key) != plain:
             raise DesignError(f"design.{key}", f"runtime parameters have sensitivity columns "
                                                f"for {key} = \"{plain}\" only, got "
-                                               f"{opts[key]!r}")
-    pd = design_parametric(problem, discretization=opts.get("discretization", "exact-zoh"),
-                           mode=opts.get("mode", "stagewise"),
-                           delay_ticks=opts.get("delay_ticks", 0))
+                                               f"{getattr(opts, key)!r}")
+    pd = design_parametric(problem, discretization=opts.discretization, mode=opts.mode,
+                           delay_ticks=opts.delay_ticks)
     header, source = generate_parametric_c(pd.table, source_name=source_name)
     return {f"{problem.name}_params.h": header, f"{problem.name}_params.c": source}

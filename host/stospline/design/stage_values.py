@@ -84,13 +84,9 @@ def cost_at_start(st, x: np.ndarray, v) -> float:
     return float(val)
 
 
-def check_latch(W: np.ndarray, C2: np.ndarray, k: int) -> None:
-    """Reject a constraint that the stage cannot meet: W(t_k) singular or ill-conditioned.
-
-    Two causes, told apart: rows of ``C2`` that are linearly dependent (then ``W = C2 X C2'``
-    is singular whatever the dynamics), or a combination of the constrained outputs that the
-    input cannot steer over the stage (``B`` zero, or not reaching that direction).
-    """
+def check_rows(C2: np.ndarray, k: int) -> None:
+    """Reject a knot's constraint rows that are zero or linearly dependent: no input meets
+    them (W = C2 X C2' is singular whatever the dynamics)."""
     path = f"knots[{k}].constraint.C"
     p, n = C2.shape
     zero = np.flatnonzero(~C2.any(axis=1))
@@ -104,6 +100,17 @@ def check_latch(W: np.ndarray, C2: np.ndarray, k: int) -> None:
         more = f" ({p} rows but only n = {n} states)" if p > n else ""
         raise DesignError(path, f"rows {rows} are linearly dependent{more}: {combo} = 0; "
                                 f"remove redundant rows")
+
+
+def check_latch(W: np.ndarray, C2: np.ndarray, k: int) -> None:
+    """Reject a constraint that the stage cannot meet: W(t_k) singular or ill-conditioned.
+
+    Two causes, told apart: rows of ``C2`` that are linearly dependent (then ``W = C2 X C2'``
+    is singular whatever the dynamics), or a combination of the constrained outputs that the
+    input cannot steer over the stage (``B`` zero, or not reaching that direction).
+    """
+    path = f"knots[{k}].constraint.C"
+    check_rows(C2, k)
     w, vecs = np.linalg.eigh(W)
     if w[-1] <= np.finfo(float).tiny:
         raise DesignError(path, f"cannot be met on stage {k}: the input has no effect on "

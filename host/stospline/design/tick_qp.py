@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from stospline.design.stage_values import knot_terminal
+from stospline.design.stage_values import check_rows, knot_terminal
 from stospline.design.zoh import _stage_ticks_numpy, _tick_data
 from stospline.errors import DesignError
 from stospline.problem.model import Problem, ticks_per_stage
@@ -414,8 +414,13 @@ def _interior_point(g: _Grid, x0, eq: np.ndarray) -> tuple:
         return guess, 0, -np.inf, None
 
     # Start: the equality-constrained optimum, slacks pushed inside.
-    z0 = _lu(sparse.bmat([[P, E.T], [E, None]], format="csc")).solve(
-        np.concatenate([np.zeros(nv), b]))
+    try:
+        start_lu = _lu(sparse.bmat([[P, E.T], [E, None]], format="csc"))
+    except RuntimeError:                 # SuperLU: "Factor is exactly singular"
+        raise DesignError("regions", "the tick-grid QP's equality rows (knot constraints and "
+                                     "the region rows they fix) are linearly dependent: "
+                                     "remove redundant rows") from None
+    z0 = start_lu.solve(np.concatenate([np.zeros(nv), b]))
     w, y = z0[:nv], z0[nv:]
     scale = max(1.0, float(np.abs(h).max()))
     s = np.maximum(h - G @ w, 1e-2 * scale)
@@ -614,6 +619,11 @@ def design_tick_qp(problem: Problem, *, noise: bool = True,
     active set does not settle in `MAX_ROUNDS` corrections, or a stage's data vary in
     time."""
     start = time.perf_counter()
+    for k, kn in enumerate(problem.knots):
+        # Dependent equality rows make the QP's equality block singular: named, as for the
+        # other designs (`check_latch`), before any factorisation.
+        if kn.constraint is not None and not kn.constraint.is_band:
+            check_rows(kn.constraint.C, k)
     tick_hz = problem.tick_hz if tick_hz is None else int(tick_hz)
     K, ks, H, F, stage_of, V0 = _backward(problem, tick_hz, noise)
     rows = _rows(problem, tick_hz, K, ks, stage_of)

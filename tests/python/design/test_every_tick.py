@@ -425,3 +425,22 @@ def test_between_ticks_where_a_waypoint_touches_the_band():
     ticks_only = design_problem(parse_problem(doc), mode="joint")
     assert ticks_only.design.J0 <= d.design.J0 + d.design.optimality_gap
     assert design_summary(ticks_only)["every_tick"]["regions"][0]["worst_over_interval"] > 1e-7
+
+
+@pytest.mark.parametrize("rows", [2, 3])
+def test_dependent_knot_rows_are_refused_before_the_tick_grid_qp(rows):
+    """Identical equality rows make the QP's equality block singular: refused, naming the
+    knot's rows, as the other designs refuse them (not SuperLU's "exactly singular")."""
+    from stospline.design.tick_qp import design_tick_qp
+    from stospline.errors import DesignError
+    p = parse_problem({
+        "name": "cart", "x0": [0.0, 0.0], "tick_hz": 100,
+        "dynamics": {"A": [[0, 1], [0, 0]], "B": [[0], [1]]}, "cost": {"R": [[1]]},
+        "design": {"mode": "joint"},
+        "knots": [{"t": 1.0, "constraint": {"C": [[1, 0]], "value": [1.0]}},
+                  {"t": 2.0, "constraint": {"C": [[1.0, 0.0]] * rows, "value": [0.0] * rows}}],
+        "regions": [{"t": [0.0, 2.0], "every": "tick", "C": [[1.0, 0.0]], "lower": [-1000.0],
+                     "upper": [1000.0], "between_ticks": True}]})
+    with pytest.raises(DesignError, match=r"linearly dependent") as exc:
+        design_tick_qp(p)
+    assert exc.value.field == "knots[1].constraint.C"

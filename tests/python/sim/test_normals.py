@@ -73,5 +73,5 @@ def test_streams_are_seeded_and_independent(robot):
 def test_the_committed_tables_are_the_generators():
     r = subprocess.run([sys.executable, str(ROOT / "tools" / "gen" / "ziggurat_tables.py")],
                        capture_output=True, text=True, check=True)
-    committed = (Path(stospline.__file__).parent / "sim" / "ziggurat_tables.h").read_text()
+    committed = (Path(stospline.__file__).parent / "harness" / "ziggurat_tables.h").read_text()
     assert r.stdout == committed

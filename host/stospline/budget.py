@@ -23,7 +23,8 @@ What grows (n states, m inputs, d = n + m + 1, D = d^2, T ticks, S stages, q mul
 * the per-tick tables (several double copies) and their C text (about 14 bytes a number,
   formatted at about 2 us a number, and compiled by ``simulate``/``plot``);
 * Monte Carlo: per tick a Python step, per path and tick the C controller and plant, per path,
-  tick and corridor wall the exit watch; each forked worker process its own memory;
+  tick and corridor wall the exit watch; each forked worker process its own memory; memory
+  for a block of paths at a time, not for the run's paths (the statistics stream);
 * the corridors' exit bounds: one oracle pass recording output (or state) moments, then each
   corridor's walls at its ticks;
 * the tick-grid QP of regions at every tick: its sparse LU per tick, growing with the square of
@@ -265,8 +266,10 @@ def monte_carlo_terms(problem: Problem, *, paths: int, substeps: int = 2, worker
                       delay_ticks: int = 0) -> list[Term]:
     """The Monte Carlo run's terms: its paths (with their corridor watch and `workers` forked
     processes, each running a block of `sim.montecarlo.BLOCK_PATHS` paths), the oracle of the
-    plant scheme, and the corridors' exit bounds of its summary."""
-    from stospline.sim.montecarlo import BLOCK_PATHS
+    plant scheme, and the corridors' exit bounds of its summary. Its memory does not grow
+    with `paths`: one block's paths at a time per process, and the statistics of the blocks
+    handed out ahead (`sim.montecarlo`) waiting to be merged."""
+    from stospline.sim.montecarlo import _AHEAD_PER_WORKER, BLOCK_PATHS
     n, m, mz = problem.n, problem.m, problem.mz
     n += m * (delay_ticks == 1)
     if n_latch is None:
@@ -281,9 +284,11 @@ def monte_carlo_terms(problem: Problem, *, paths: int, substeps: int = 2, worker
     per_path = (8.0 * n * (S + 6) + 16.0 * substeps * mz + 16.0 * m + SIM_PATH_BYTES
                 + 16.0 * len(problem.corridors))        # exit tick and wall, and their copies
     per_run = T * 3 * (8 * n + 112.0) + T * min(record, BLOCK_PATHS, paths) * (n + m) * 4.0
+    block = min(paths, BLOCK_PATHS) * per_path
+    waiting = (_AHEAD_PER_WORKER * workers if workers > 1 else 1) * 8.0 * (T + 1) * n
     terms = [Term(f"Monte Carlo ({paths} paths)", "--paths",
                   seconds=SIM_TICK * T * blocks + SIM_PATH_TICK * paths * T * work,
-                  bytes=paths * per_path + per_run)]
+                  bytes=block + per_run + waiting)]
     if problem.corridors:
         terms.append(Term(f"the paths' exit watch of {len(problem.corridors)} corridors",
                           "corridors", seconds=CORRIDOR_WALL * paths * watch))

@@ -549,7 +549,8 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
                      record: int = 0, scheduler: str | None = None,
                      build_dir=None, faults: Faults | None = None, force_workers: bool = False,
                      max_memory: float | None = budget.DEFAULT_MAX_GIB,
-                     max_time: float | None = budget.DEFAULT_MAX_SECONDS) -> MonteCarloResult:
+                     max_time: float | None = budget.DEFAULT_MAX_SECONDS,
+                     per_path: bool = False) -> MonteCarloResult:
     """Monte Carlo of the compiled C controller built from `d.table` in closed loop with the
     stochastic plant (exponential Euler-Maruyama with `substeps` steps per tick).
 
@@ -586,13 +587,17 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
         compiling the controller, the paths and their worker processes, the oracle of the
         plant scheme and the corridors' exit bounds of `simulation_summary`
         (`stospline.budget.monte_carlo_terms`). Defaults as on the command line (4 GiB,
-        600 s); None: no check. Monte Carlo memory grows with `paths`.
+        600 s); None: no check.
+    per_path : bool
+        Also keep every path's cost, knot states, saturated ticks and corridor exits
+        (`sim.montecarlo.simulate`; refused beyond ``PER_PATH_MAX_BYTES``).
 
     Returns
     -------
     MonteCarloResult
-        Per-path costs (``cost``, ``cost_mean_ci()``), knot states, saturation counts, the
-        plant steps per tick (``substeps``, ``substep_choice``).
+        The run's statistics (``cost_mean_ci()``, ``knot_mean_se(k)``, saturation and exit
+        counts; streamed, so memory does not grow with `paths`), the plant steps per tick
+        (``substeps``, ``substep_choice``).
 
     Raises
     ------
@@ -634,7 +639,8 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
             within_budget(choice.substeps)
     mc = simulate(d.problem, ctl, paths=paths, seed=seed,
                   substeps=choice.substeps if choice is not None else substeps, workers=workers,
-                  record=record, scheduler=scheduler, faults=faults, force_workers=True)
+                  record=record, scheduler=scheduler, faults=faults, force_workers=True,
+                  per_path=per_path)
     mc.substep_choice = choice
     return mc
 
@@ -712,7 +718,7 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int,
     knots = []
     for k, kn in enumerate(d.problem.knots):
         m, s = mc.knot_mean_se(k)
-        alike = np.ptp(mc.knot_states[k], axis=0) == 0   # s is then 0 or rounding error
+        alike = mc.knot_moments[k].alike()   # s is then 0 or rounding error
         z, why = strict.ratio_or_null(m - exact.knot_mean[k], np.where(alike, 0.0, s),
                                       _ZERO_SE)
         knots.append({
@@ -721,7 +727,7 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int,
             "oracle_mean": exact.knot_mean[k], "oracle_cov": exact.knot_cov[k],
             "z": z, **({"z_undefined": why} if why else {}),
         })
-    se_z = 0.0 if np.ptp(mc.cost) == 0 else se
+    se_z = 0.0 if mc.cost_moments.alike()[0] else se
     cost_z, cost_why = strict.ratio_or_null(mean - exact.J, se_z, _ZERO_SE)
     bias_z, bias_why = strict.ratio_or_null(euler.J - exact.J, se_z, _ZERO_SE)
     summary = _r({
@@ -751,8 +757,7 @@ def simulation_summary(d: Designed, mc: MonteCarloResult, *, seed: int,
         "saturation": {
             "limited": d.table.limited,
             "tick_fraction": mc.saturated_fraction,
-            "path_fraction": (float(np.mean(mc.saturated_ticks > 0))
-                              if mc.saturated_ticks is not None else 0.0),
+            "path_fraction": mc.saturated_path_fraction,
             **_command_range(mc),
         },
         **_limits(d),
@@ -783,13 +788,12 @@ def _corridors(d: Designed, mc: MonteCarloResult) -> dict:
     Carlo exit probability with its one-sided 99 % upper bound, and the exact oracle's
     Cantelli (valid) and Gaussian (assumed) union bounds, for the fault-free loop (None for a
     table designed for a delay)."""
-    if not d.problem.corridors or mc.exit_tick is None:
+    if not d.problem.corridors or mc.exits is None:
         return {}
     from stospline.sim.exit_stats import corridor_report
     # The oracle's output moments exist for tables designed without a delay.
     bounded = not getattr(d.table, "delay_ticks", 0)
-    rep = corridor_report(d.problem, d.table, mc.exit_tick, mc.exit_wall,
-                          with_bounds=bounded)
+    rep = corridor_report(d.problem, d.table, mc.exits, with_bounds=bounded)
     for entry in rep:
         if entry["bound"] is not None:
             entry["bound"]["loop"] = ("fault-free (the bounds ignore [faults])"

@@ -117,7 +117,7 @@ def main() -> None:
             base_text, ratio_text = f"{base:12.3e} p-t/s", f"{ours / base:6.2f}"
             base_cost = f", {c.mean():.4f}"
         print(f"{paths:>9} {ours:12.3e} p-t/s {base_text} {ratio_text} "
-              f"{t_ours / paths * 1e3:14.3f} ms  {mc.cost.mean():.4f}{base_cost}")
+              f"{t_ours / paths * 1e3:14.3f} ms  {mc.cost_mean_ci()[0]:.4f}{base_cost}")
 
 
 if __name__ == "__main__":

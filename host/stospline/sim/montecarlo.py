@@ -449,9 +449,18 @@ def _simulate_block(problem: Problem, controller: CompiledController, paths: int
         dZ = np.empty((paths, substeps, mz))       # standard normal; the C scales by sqrt(dt)
         fill_dZ = normals(dZ)
         tick = None
-        if fused and plant is not None:
+        ticks = range(int(table.stage_start[k]), int(table.stage_start[k + 1]))
+        if fused and plant is not None and draws is None:
+            # the whole stage in one C call: normals, controllers, plant, statistics
+            run = controller.runner(step.instances, paths, normals, dZ, X, cost, stats, watch,
+                                    x_sum, sample_x, sample_u, record_x, record_u)
+            worst = min(worst, run(ticks.start, ticks.stop, plant))
+            if report:
+                progress.advance(paths * len(ticks))
+            ticks = range(0)
+        elif fused and plant is not None:
             tick = controller.ticker(step.instances, paths, dZ, X, cost, stats, draws, watch)
-        for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
+        for j in ticks:
             fill_dZ()
             if draws is not None:
                 draws.draw(fault_rng)

@@ -15,8 +15,13 @@
 #define PLANT_M (pl->m)
 #endif
 
-double harness_plant_path(const harness_plant_t *pl, const double *u, const double *dz,
-                          double *x)
+/* The body of harness_plant_path, inlined where the harness's tick loop is compiled with
+ * it (sim/controller.py includes this file), so the compiler schedules it with the loop. */
+#if defined(__GNUC__)
+__attribute__((always_inline))
+#endif
+static inline double plant_path(const harness_plant_t *pl, const double *u, const double *dz,
+                                double *x)
 {
     const size_t n = PLANT_N, m = PLANT_M, mz = pl->mz;
     double xs[64], xn[64];
@@ -78,6 +83,12 @@ double harness_plant_path(const harness_plant_t *pl, const double *u, const doub
         x[i] = xs[i];
     }
     return c;
+}
+
+double harness_plant_path(const harness_plant_t *pl, const double *u, const double *dz,
+                          double *x)
+{
+    return plant_path(pl, u, dz, x);
 }
 
 void harness_plant_tick(const harness_plant_t *pl, size_t paths, const double *dZ,

@@ -74,6 +74,7 @@ TICK_QP_BYTES = 15e3        # peak bytes per tick of it (sparse LU of the KKT ma
 TICK_QP_ROW = 2.5e-3        # s per row between ticks (its Bernstein form, built in Python)
 TICK_QP_ROW_BYTES = 1500    # bytes per row of the QP (the row object, its sparse entries)
 SIM_TICK = 10e-6            # s per Monte Carlo tick and block of paths: the Python step
+SIM_BLOCK = 0.5e-3          # s per block of paths: its instances, stream and statistics
 SIM_PATH_TICK = 1.0e-9      # s per path, tick and unit of work (below), on one core
                             # (tools/bench/harness_throughput.py: ~95 ns per robot path-tick)
 SIM_PATH_BYTES = 64         # bytes per path besides states (instances, buffers)
@@ -287,7 +288,7 @@ def monte_carlo_terms(problem: Problem, *, paths: int, substeps: int = 2, worker
     block = min(paths, BLOCK_PATHS) * per_path
     waiting = (_AHEAD_PER_WORKER * workers if workers > 1 else 1) * 8.0 * (T + 1) * n
     terms = [Term(f"Monte Carlo ({paths} paths)", "--paths",
-                  seconds=SIM_TICK * T * blocks + SIM_PATH_TICK * paths * T * work,
+                  seconds=(SIM_TICK * T + SIM_BLOCK) * blocks + SIM_PATH_TICK * paths * T * work,
                   bytes=block + per_run + waiting)]
     if problem.corridors:
         terms.append(Term(f"the paths' exit watch of {len(problem.corridors)} corridors",

@@ -368,7 +368,7 @@ def _cdef(arith: str) -> str:
 
 # -O3 as the host CMake build (Release); ISO C keeps floating-point contraction off, so the
 # bits are those of any other build.
-_CFLAGS = ["-std=c99", "-O3", "-Wall", "-Wextra", "-DSTSP_HOST_MESSAGES"]
+_CFLAGS = ["-std=c99", "-O3", "-fno-tree-slp-vectorize", "-fno-tree-loop-vectorize", "-Wall", "-Wextra", "-DSTSP_HOST_MESSAGES"]
 
 
 def firmware_dir() -> Path:

@@ -221,10 +221,10 @@ def check_per_path(problem: Problem, paths: int) -> None:
     `PER_PATH_MAX_BYTES`, before anything is allocated."""
     need = per_path_bytes(problem, paths)
     if need > PER_PATH_MAX_BYTES:
-        from stospline.budget import format_bytes
-        raise ProblemError("per_path", f"the records of {paths} paths need ~{format_bytes(need)} "
-                                       f"(limit {format_bytes(PER_PATH_MAX_BYTES)}); without "
-                                       f"per_path the run's statistics stream in bounded memory")
+        raise ProblemError("per_path", f"the records of {paths} paths need ~{need / 2**30:.3g} "
+                                       f"GiB (limit {PER_PATH_MAX_BYTES / 2**30:.3g} GiB); "
+                                       f"without per_path the run's statistics stream in "
+                                       f"bounded memory")
 
 
 def simulate(problem: Problem, controller: CompiledController, *, paths: int, seed: int,

@@ -204,14 +204,19 @@ def part_seconds(problem, ctl, paths: int) -> dict:
     return out
 
 
-def command_seconds(paths: int) -> float:
-    """Wall seconds of the whole `stospline simulate` command."""
+def command_seconds(paths: int) -> tuple[float, float]:
+    """Wall and CPU seconds (user + system, the command and its workers) of the whole
+    `stospline simulate` command."""
+    import resource
     env = {**os.environ, "PYTHONPATH": str(ROOT / "host")}
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     subprocess.run([sys.executable, "-m", "stospline", "simulate",
                     str(ROOT / "examples" / "robot_corridor.toml"), "--paths", str(paths),
                     "--json"], check=True, env=env, stdout=subprocess.DEVNULL)
-    return time.perf_counter() - t
+    wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
 def one_core_and_baseline(problem, d, ctl, paths: int, repeat: int) -> None:
@@ -291,11 +296,19 @@ def main() -> None:
     one_core_and_baseline(problem, d, ctl, args.baseline_paths, args.repeat)
     if args.command_paths:
         command_seconds(2)                      # warm the caches (the compiled controller)
-        wall = statistics.median(command_seconds(args.command_paths)
-                                 for _ in range(args.repeat))
+        runs = [command_seconds(args.command_paths) for _ in range(args.repeat)]
+        wall = statistics.median(r[0] for r in runs)
+        cpu = statistics.median(r[1] for r in runs)
+        fixed = statistics.median(command_seconds(2)[1] for _ in range(args.repeat))
+        work = args.command_paths * ticks
         print(f"\nwhole command, stospline simulate examples/robot_corridor.toml --paths "
-              f"{args.command_paths} --json: {wall:.2f} s wall (median of {args.repeat}), "
-              f"{args.command_paths * ticks / wall:.3e} path-ticks/s")
+              f"{args.command_paths} --json (median of {args.repeat}):")
+        print(f"  {wall:.2f} s wall, {work / wall:.3e} path-ticks/s of wall time")
+        print(f"  {cpu:.2f} s CPU (command and workers), of which {fixed:.2f} s the command "
+              f"with 2 paths (imports, design, oracle, bounds, in series)")
+        idle = fixed + (cpu - fixed) / workers
+        print(f"  on {workers} idle cores: ~{idle:.2f} s wall, {work / idle:.3e} path-ticks/s "
+              f"(the rest of the CPU time spread over the cores)")
 
 
 if __name__ == "__main__":

@@ -123,8 +123,9 @@ def build_c_loop(tmp: str):
         const float *Lambda, const float *lambda0, const uint32_t *stage_start,
         uint32_t n_stages, double h, size_t paths, uint64_t *rng, int draw, double *z,
         double *X, float *V, double *cost, double *x_sum);""")
-    ffib.set_source("_robot_loop", _LOOP_PROTOTYPE, sources=[str(ROOT / "tools" / "bench" / "robot_loop.c"),
-                                                 str(SIM / "normals.c")],
+    ffib.set_source("_robot_loop", _LOOP_PROTOTYPE,
+                    sources=[str(ROOT / "tools" / "bench" / "robot_loop.c"),
+                             str(SIM / "normals.c")],
                     include_dirs=[str(SIM)], extra_compile_args=["-std=c99", "-O3"])
     path = ffib.compile(tmpdir=tmp)
     spec = importlib.util.spec_from_file_location("_robot_loop", path)

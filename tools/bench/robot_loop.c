@@ -37,9 +37,10 @@ void robot_loop(const float *K, const float *k0, const float *L, const float *La
                 float xf[4], u[2];
                 for (i = 0; i < 4; ++i) xf[i] = (float)x[i];
                 if (j == stage_start[s]) {
+                    const float *Ls = Lambda + 16u * s;
                     for (k = 0; k < 4; ++k) {
                         float a = lambda0[4u * s + (unsigned)k];
-                        for (i = 0; i < 4; ++i) a += Lambda[16u * s + 4u * (unsigned)k + (unsigned)i] * xf[i];
+                        for (i = 0; i < 4; ++i) a += Ls[4 * k + i] * xf[i];
                         v[k] = a;
                     }
                 }

@@ -162,3 +162,21 @@ def test_the_memory_estimate_is_flat_in_the_paths(robot_problem):
     def total(paths):
         return sum(t.bytes for t in monte_carlo_terms(robot_problem, paths=paths, workers=2))
     assert total(10**9) == total(10**5) < total(10**3) + 16e6
+
+
+def test_the_stage_call_equals_the_tick_calls(robot_problem, robot_zoh):
+    """A stage per C call (`harness_run_ticks`, no faults) against a tick per call (the
+    fault tick with a fault of zero size, which is the fault-free loop): the same sample
+    path, records, mean path, statistics and exits, bit for bit."""
+    from stospline.problem.faults import Faults
+    ctl = build_controller(robot_zoh.table)
+    runs = [simulate(robot_problem, ctl, paths=BLOCK_PATHS + 40, seed=SEED, substeps=2,
+                     workers=1, record=30, per_path=True, faults=f)
+            for f in (Faults(), Faults(miss_probability=1e-300))]
+    stage, tick = runs
+    for name in ("sample_x", "sample_u", "record_x", "record_u", "mean_x", "cost",
+                 "exit_tick", "exit_wall", "record_exit_tick", "u_low", "u_high"):
+        np.testing.assert_array_equal(getattr(stage, name), getattr(tick, name), err_msg=name)
+    for a, b in zip(stage.knot_states, tick.knot_states):
+        np.testing.assert_array_equal(a, b)
+    assert stage.record_x.shape == (len(stage.sample_t), 30, robot_problem.n)

@@ -23,7 +23,8 @@ What grows (n states, m inputs, d = n + m + 1, D = d^2, T ticks, S stages, q mul
 * the per-tick tables (several double copies) and their C text (about 14 bytes a number,
   formatted at about 2 us a number, and compiled by ``simulate``/``plot``);
 * Monte Carlo: per tick a Python step, per path and tick the C controller and plant, per path,
-  tick and corridor wall the exit watch; each forked worker process its own memory;
+  tick and corridor wall the exit watch; each forked worker process its own memory; memory
+  for a block of paths at a time, not for the run's paths (the statistics stream);
 * the corridors' exit bounds: one oracle pass recording output (or state) moments, then each
   corridor's walls at its ticks;
 * the tick-grid QP of regions at every tick: its sparse LU per tick, growing with the square of
@@ -73,6 +74,7 @@ TICK_QP_BYTES = 15e3        # peak bytes per tick of it (sparse LU of the KKT ma
 TICK_QP_ROW = 2.5e-3        # s per row between ticks (its Bernstein form, built in Python)
 TICK_QP_ROW_BYTES = 1500    # bytes per row of the QP (the row object, its sparse entries)
 SIM_TICK = 10e-6            # s per Monte Carlo tick and block of paths: the Python step
+SIM_BLOCK = 0.5e-3          # s per block of paths: its instances, stream and statistics
 SIM_PATH_TICK = 1.0e-9      # s per path, tick and unit of work (below), on one core
                             # (tools/bench/harness_throughput.py: ~95 ns per robot path-tick)
 SIM_PATH_BYTES = 64         # bytes per path besides states (instances, buffers)
@@ -265,8 +267,10 @@ def monte_carlo_terms(problem: Problem, *, paths: int, substeps: int = 2, worker
                       delay_ticks: int = 0) -> list[Term]:
     """The Monte Carlo run's terms: its paths (with their corridor watch and `workers` forked
     processes, each running a block of `harness.montecarlo.BLOCK_PATHS` paths), the oracle of the
-    plant scheme, and the corridors' exit bounds of its summary."""
-    from stospline.harness.montecarlo import BLOCK_PATHS
+    plant scheme, and the corridors' exit bounds of its summary. Its memory does not grow
+    with `paths`: one block's paths at a time per process, and the statistics of the blocks
+    handed out ahead (`harness.montecarlo`) waiting to be merged."""
+    from stospline.harness.montecarlo import _AHEAD_PER_WORKER, BLOCK_PATHS
     n, m, mz = problem.n, problem.m, problem.mz
     n += m * (delay_ticks == 1)
     if n_latch is None:
@@ -281,9 +285,11 @@ def monte_carlo_terms(problem: Problem, *, paths: int, substeps: int = 2, worker
     per_path = (8.0 * n * (S + 6) + 16.0 * substeps * mz + 16.0 * m + SIM_PATH_BYTES
                 + 16.0 * len(problem.corridors))        # exit tick and wall, and their copies
     per_run = T * 3 * (8 * n + 112.0) + T * min(record, BLOCK_PATHS, paths) * (n + m) * 4.0
+    block = min(paths, BLOCK_PATHS) * per_path
+    waiting = (_AHEAD_PER_WORKER * workers if workers > 1 else 1) * 8.0 * (T + 1) * n
     terms = [Term(f"Monte Carlo ({paths} paths)", "--paths",
-                  seconds=SIM_TICK * T * blocks + SIM_PATH_TICK * paths * T * work,
-                  bytes=paths * per_path + per_run)]
+                  seconds=(SIM_TICK * T + SIM_BLOCK) * blocks + SIM_PATH_TICK * paths * T * work,
+                  bytes=block + per_run + waiting)]
     if problem.corridors:
         terms.append(Term(f"the paths' exit watch of {len(problem.corridors)} corridors",
                           "corridors", seconds=CORRIDOR_WALL * paths * watch))

@@ -254,7 +254,7 @@ def count_exits(problem, corridor: int, cand: Candidate, *, paths: int, seed: in
     mc = simulate(problem, build_controller(d.table), paths=paths, seed=seed,
                   substeps=substeps, workers=workers, scheduler=scheduler,
                   force_workers=force_workers)
-    return Exits(int(np.sum(mc.exit_tick[corridor] >= 0)), int(paths), int(seed))
+    return Exits(mc.exit_count(corridor), int(paths), int(seed))
 
 
 def search(problem, corridor: int, result: SearchResult, *, search_paths: int,

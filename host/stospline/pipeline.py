@@ -452,7 +452,8 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
                      record: int = 0, scheduler: str | None = None,
                      build_dir=None, faults: Faults | None = None, force_workers: bool = False,
                      max_memory: float | None = budget.DEFAULT_MAX_GIB,
-                     max_time: float | None = budget.DEFAULT_MAX_SECONDS) -> MonteCarloResult:
+                     max_time: float | None = budget.DEFAULT_MAX_SECONDS,
+                     per_path: bool = False) -> MonteCarloResult:
     """Monte Carlo of the compiled C controller built from `d.table` in closed loop with the
     stochastic plant (exponential Euler-Maruyama with `substeps` steps per tick).
 
@@ -489,13 +490,17 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
         compiling the controller, the paths and their worker processes, the oracle of the
         plant scheme and the corridors' exit bounds of `simulation_summary`
         (`stospline.budget.monte_carlo_terms`). Defaults as on the command line (4 GiB,
-        600 s); None: no check. Monte Carlo memory grows with `paths`.
+        600 s); None: no check.
+    per_path : bool
+        Also keep every path's cost, knot states, saturated ticks and corridor exits
+        (`harness.montecarlo.simulate`; refused beyond ``PER_PATH_MAX_BYTES``).
 
     Returns
     -------
     MonteCarloResult
-        Per-path costs (``cost``, ``cost_mean_ci()``), knot states, saturation counts, the
-        plant steps per tick (``substeps``, ``substep_choice``).
+        The run's statistics (``cost_mean_ci()``, ``knot_mean_se(k)``, saturation and exit
+        counts; streamed, so memory does not grow with `paths`), the plant steps per tick
+        (``substeps``, ``substep_choice``).
 
     Raises
     ------
@@ -543,7 +548,8 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
             within_budget(choice.substeps)
     mc = simulate(d.problem, ctl, paths=paths, seed=seed,
                   substeps=choice.substeps if choice is not None else substeps, workers=workers,
-                  record=record, scheduler=scheduler, faults=faults, force_workers=True)
+                  record=record, scheduler=scheduler, faults=faults, force_workers=True,
+                  per_path=per_path)
     mc.substep_choice = choice
     return mc
 

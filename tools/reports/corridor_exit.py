@@ -50,12 +50,12 @@ def main() -> None:
     start = time.perf_counter()
     mc = simulate(p, ctl, paths=a.paths, seed=a.seed, substeps=a.substeps, workers=a.workers)
     wall_s = time.perf_counter() - start
-    rep = corridor_report(p, d.table, mc.exit_tick, mc.exit_wall, outputs=outputs)
-    rep_scheme = corridor_report(p, d.table, None, None, outputs=scheme)
+    rep = corridor_report(p, d.table, mc.exits, outputs=outputs)
+    rep_scheme = corridor_report(p, d.table, None, outputs=scheme)
     print(f"# {p.name}: design J = {d.implemented.J:.6g} (oracle), {mc.paths} Monte Carlo "
           f"paths, seed {a.seed}, {a.substeps} plant step(s) per tick, {wall_s:.0f} s "
           f"({mc.paths * d.table.n_ticks / wall_s:.3g} path-ticks/s), mean cost "
-          f"{mc.cost.mean():.6g}\n")
+          f"{mc.cost_mean_ci()[0]:.6g}\n")
     for i, (r, rs) in enumerate(zip(rep, rep_scheme)):
         m, bc, bg = r["mc"], r["bound"]["cantelli"], r["bound"]["gaussian"]
         print(f"## Corridor {i}: t = [{r['t'][0]:g}, {r['t'][1]:g}] s, epsilon "
@@ -88,10 +88,8 @@ def main() -> None:
                   f"{_pct(mw['upper99'])} | {gw:.3g} |")
         print("\nFirst exiting paths (index, time, wall): "
               + ", ".join(f"({e['path']}, {e['t']:.3f} s, {e['wall']})" for e in m["examples"]))
-        ticks = mc.exit_tick[i]
-        out = ticks[ticks >= 0]
-        if out.size:
-            q = np.percentile(out, [5, 50, 95]) / p.tick_hz + p.t0
+        if mc.exit_count(i):
+            q = np.array([mc.exits.tick_percentile(i, v) for v in (5, 50, 95)]) / p.tick_hz + p.t0
             print(f"\nExit times of the paths that leave: 5/50/95 % at {q[0]:.3f} / "
                   f"{q[1]:.3f} / {q[2]:.3f} s")
 

@@ -35,7 +35,7 @@ def residual(problem, moments) -> float:
 def mc_cell(d, faults, paths, seed, substeps):
     """The Monte Carlo run and its cell: mean cost ± 95 % half-width, z, the verdict."""
     mc = simulate_problem(d, paths=paths, seed=seed, substeps=substeps, workers=1,
-                          faults=faults)
+                          faults=faults, per_path=True)
     s = simulation_summary(d, mc, seed=seed)
     c, v = s["cost"], s["verdict"]
     half = (c["ci95"][1] - c["ci95"][0]) / 2

@@ -57,8 +57,8 @@ def main() -> None:
     print(f"predicted J0 {d.design.J0:.10f}   oracle of the float64 law {d.law.J:.10f}   "
           f"oracle of the float32 table {d.implemented.J:.10f}")
     sim = simulate_problem(d, paths=args.paths, seed=args.seed)
-    mean = sim.cost.mean()
-    se = sim.cost.std(ddof=1) / np.sqrt(sim.paths)
+    mean = sim.cost_mean_ci()[0]
+    se = sim.cost_std() / np.sqrt(sim.paths)
     agree = compare_to_oracle(sim, d.implemented.J, d.implemented.knot_mean)
     print(f"Monte Carlo through the compiled C controller, {sim.paths} paths, seed {args.seed}: "
           f"mean cost {mean:.4f} ± {1.96 * se:.4f} (95%), z = {(mean - d.implemented.J) / se:+.2f}; "

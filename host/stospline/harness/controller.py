@@ -59,6 +59,12 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x
                         stsp_scalar_t *u);
 const char *stsp_status_str(stsp_status_t status);%(conv)s
 const stsp_table_t *harness_table(void);
+int harness_run_ticks(stsp_ctrl_t *ctrls, size_t count, uint32_t j0, uint32_t j1,
+                      const harness_plant_t *pl, uint64_t *rng, double *dZ, double *X,
+                      double *cost, int64_t *saturated, double *u_low, double *u_high,
+                      double *x_sum, float *u_rec, size_t n_rec,
+                      const harness_corridor_t *cor, size_t n_cor, double *sample_x,
+                      double *sample_u, float *rec_x, float *rec_u, size_t n_keep);
 int harness_init_batch(stsp_ctrl_t *ctrls, size_t count, const stsp_table_t *table);
 int harness_step_batch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
                        const stsp_scalar_t *x, stsp_scalar_t *u, int *status);
@@ -84,7 +90,8 @@ int harness_tick_watch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
 # Harness-only C: loops over instances so one Python call serves every Monte Carlo path.
 _BATCH = """
 #include <math.h>
-#include "plant.h"
+/* The plant in this translation unit, so that its step inlines into the tick loop. */
+#include "plant.c"
 const stsp_table_t *harness_table(void) { return &%(p)s_table; }
 /* One tick of every path, float32 tables only (else STSP_ERR_BAD_DIMS, nothing touched):
  * the controller of path p steps with x = (float)X[p], the plant advances X[p] with the
@@ -98,6 +105,47 @@ const stsp_table_t *harness_table(void) { return &%(p)s_table; }
  * u_rec the applied ones. Returns the worst status. Inlined into both entry points, so the
  * fault-free one compiles without the fault branches. */
 #ifndef STSP_ARITH_FIXED_POINT
+/* Whether x (n) is inside corridor c by corridor_wall's rule (a polygon whose largest
+ * a y - b is not > 0), without branches on the data: the outcome varies from path to path,
+ * and mispredicted branches cost more than the few rows. */
+#if defined(__GNUC__)
+__attribute__((always_inline))
+#endif
+static inline int corridor_inside(const harness_corridor_t *c, size_t n, const double *x) {
+    double y[32];
+    size_t i, j, k, r;
+    int inside = 0;
+    if (c->p == 2u) {          /* planar corridors: straight-line code, the same sums */
+        const double *A = c->A, *b = c->b;
+        double y0 = 0.0, y1 = 0.0;
+        for (j = 0; j < n; ++j) y0 += c->C[j] * x[j];
+        for (j = 0; j < n; ++j) y1 += c->C[n + j] * x[j];
+        for (k = 0; k < c->n_poly; ++k) {
+            double worst = 0.0;
+            for (r = c->row_start[k]; r < c->row_start[k + 1]; ++r) {
+                const double e = (-b[r] + A[2u * r] * y0) + A[2u * r + 1u] * y1;
+                worst = (r == c->row_start[k] || e > worst) ? e : worst;
+            }
+            inside |= !(worst > 0.0);
+        }
+        return inside;
+    }
+    for (i = 0; i < c->p; ++i) {
+        double s = 0.0;
+        for (j = 0; j < n; ++j) s += c->C[i * n + j] * x[j];
+        y[i] = s;
+    }
+    for (k = 0; k < c->n_poly; ++k) {
+        double worst = 0.0;
+        for (r = c->row_start[k]; r < c->row_start[k + 1]; ++r) {
+            double e = -c->b[r];
+            for (i = 0; i < c->p; ++i) e += c->A[r * c->p + i] * y[i];
+            worst = (r == c->row_start[k] || e > worst) ? e : worst;
+        }
+        inside |= !(worst > 0.0);
+    }
+    return inside;
+}
 /* The wall a state x (n) leaves corridor c through, -1 inside (plant.h's rule). */
 static int corridor_wall(const harness_corridor_t *c, size_t n, const double *x) {
     double y[32], best = 0.0;
@@ -138,12 +186,13 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
     (void)sensor_z; (void)actuator_z; (void)miss_u; (void)held; (void)cor; (void)n_cor;
     return (int)STSP_ERR_BAD_DIMS;
 #else
-    const size_t n = pl->n, m = pl->m, dz_stride = pl->substeps * pl->mz;
+    const size_t n = PLANT_N, m = PLANT_M, dz_stride = pl->substeps * pl->mz;
     float xf[STSP_MAX_NX], uf[STSP_MAX_NU];
     double ud[STSP_MAX_NU];
     size_t p, i;
     int worst = 0;
-    if (n + (f != NULL && f->feed_held ? m : 0u) > STSP_MAX_NX || m > STSP_MAX_NU) {
+    if (n + (f != NULL && f->feed_held ? m : 0u) > STSP_MAX_NX || m > STSP_MAX_NU
+        || n != pl->n || m != pl->m) {
         return (int)STSP_ERR_BAD_DIMS;
     }
     for (i = 0; i < n_cor; ++i) if (cor[i].p > 32u) return (int)STSP_ERR_BAD_DIMS;
@@ -179,11 +228,12 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
             for (i = 0; i < m; ++i) ud[i] += f->actuator_std[i] * actuator_z[p * m + i];
         }
         if (p < n_rec) for (i = 0; i < m; ++i) u_rec[p * m + i] = (float)ud[i];
-        cost[p] += harness_plant_path(pl, ud, dZ + p * dz_stride, x);
+        cost[p] += plant_path(pl, ud, dZ + p * dz_stride, x);
         for (i = 0; i < n; ++i) x_sum[i] += x[i];
         for (i = 0; i < n_cor; ++i) {             /* the state after the tick: tick + 1 */
             const harness_corridor_t *c = &cor[i];
-            if (tick + 1u >= c->first && tick + 1u <= c->last && c->exit_tick[p] < 0) {
+            if (tick + 1u >= c->first && tick + 1u <= c->last && c->exit_tick[p] < 0
+                    && !corridor_inside(c, n, x)) {
                 const int w = corridor_wall(c, n, x);
                 if (w >= 0) { c->exit_tick[p] = (int32_t)(tick + 1u); c->exit_wall[p] = w; }
             }
@@ -222,6 +272,38 @@ int harness_tick_watch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
     }
     return tick_paths(ctrls, count, tick, pl, dZ, X, cost, saturated, u_low, u_high, x_sum,
                       u_rec, n_rec, f, sensor_z, actuator_z, miss_u, held, cor, n_cor);
+}
+/* Ticks j0 .. j1 - 1 of `count` paths in one call, without faults: per tick the plant's
+ * standard normal numbers into dZ (count x substeps x mz) from the generator `rng`
+ * (harness_normals), then harness_tick_watch's work, which leaves the sum of the states in
+ * row j + 1 of x_sum ((ticks + 1) x n) and the first n_rec (>= 1) paths' commands in u_rec.
+ * Path 0's state and command go to row j + 1 of sample_x and row j of sample_u, and the
+ * first n_keep (<= n_rec) paths' states (float) to row j + 1 of rec_x ((ticks + 1) x n_keep
+ * x n) and their commands to row j of rec_u (ticks x n_keep x m). Returns the worst status. */
+int harness_run_ticks(stsp_ctrl_t *ctrls, size_t count, uint32_t j0, uint32_t j1,
+                      const harness_plant_t *pl, uint64_t *rng, double *dZ, double *X,
+                      double *cost, int64_t *saturated, double *u_low, double *u_high,
+                      double *x_sum, float *u_rec, size_t n_rec,
+                      const harness_corridor_t *cor, size_t n_cor, double *sample_x,
+                      double *sample_u, float *rec_x, float *rec_u, size_t n_keep) {
+    const size_t n = pl->n, m = pl->m, draws = count * pl->substeps * pl->mz;
+    uint32_t j;
+    size_t i;
+    int worst = 0;
+    if ((cor == NULL && n_cor > 0u) || n_rec < 1u || n_keep > n_rec) return (int)STSP_ERR_NULL;
+    for (j = j0; j < j1; ++j) {
+        int st;
+        harness_normals(rng, dZ, draws);
+        st = tick_paths(ctrls, count, j, pl, dZ, X, cost, saturated, u_low, u_high,
+                        x_sum + (size_t)(j + 1u) * n, u_rec, n_rec, NULL, NULL, NULL, NULL,
+                        NULL, cor, n_cor);
+        if (st < worst) worst = st;
+        for (i = 0; i < n; ++i) sample_x[(size_t)(j + 1u) * n + i] = X[i];
+        for (i = 0; i < m; ++i) sample_u[(size_t)j * m + i] = (double)u_rec[i];
+        for (i = 0; i < n_keep * n; ++i) rec_x[((size_t)(j + 1u) * n_keep) * n + i] = (float)X[i];
+        for (i = 0; i < n_keep * m; ++i) rec_u[((size_t)j * n_keep) * m + i] = u_rec[i];
+    }
+    return worst;
 }
 /* Verify the table once (the CRC covers every byte), then clone the fresh instance.
  * count == 0 (or NULL ctrls) touches no memory and returns STSP_ERR_NULL: there is no
@@ -285,8 +367,11 @@ def _cdef(arith: str) -> str:
                     "conv": _CONV if fixed else ""}
 
 # -O3 as the host CMake build (Release); ISO C keeps floating-point contraction off, so the
-# bits are those of any other build.
-_CFLAGS = ["-std=c99", "-O3", "-Wall", "-Wextra", "-DSTSP_HOST_MESSAGES"]
+# bits are those of any other build. Without the vectorizers: they moved the plant's small
+# fixed-size state through the stack in 16-byte pieces written as 8-byte ones (a failed
+# store-to-load forwarding per path, a third of the plant's time); they reorder no sums.
+_CFLAGS = ["-std=c99", "-O3", "-fno-tree-slp-vectorize", "-fno-tree-loop-vectorize", "-Wall",
+           "-Wextra", "-DSTSP_HOST_MESSAGES"]
 
 
 def firmware_dir() -> Path:
@@ -430,7 +515,40 @@ class CompiledController:
             fill.keep = (state, out)
             return fill
 
+        into.state = state                     # the generator's words (`runner` draws too)
         return into
+
+    def runner(self, ctrls, count: int, normals, dZ: np.ndarray, X: np.ndarray,
+               cost: np.ndarray, stats: "TickStats", watch: "CorridorWatch | None",
+               x_sum: np.ndarray, sample_x: np.ndarray, sample_u: np.ndarray,
+               record_x: np.ndarray | None, record_u: np.ndarray | None):
+        """``run(j0, j1, plant) -> worst status``: ticks j0 .. j1 - 1 of `count` paths in one
+        C call (``harness_run_ticks``; float32 tables, no faults): per tick the plant's
+        normal numbers from `normals` (a `normals` generator) into dZ, then what a `ticker`
+        tick does, the state sum written to row j + 1 of `x_sum`, path 0 to `sample_x` and
+        `sample_u`, the first ``record_x.shape[1]`` paths to `record_x` and `record_u`."""
+        ffi, lib = self.ffi, self.lib
+
+        def buf(a, kind="double[]"):
+            return ffi.NULL if a is None else ffi.from_buffer(kind, a)
+
+        keep = [normals.state, dZ, X, cost, stats, x_sum, sample_x, sample_u, record_x,
+                record_u]
+        cors = watch.c_structs(ffi) if watch is not None else (ffi.NULL, None)
+        keep.append(cors)
+        args = [ffi.from_buffer("uint64_t[]", normals.state), buf(dZ), buf(X), buf(cost),
+                ffi.cast("int64_t *", ffi.from_buffer(stats.saturated)),
+                buf(stats.u_low), buf(stats.u_high), buf(x_sum),
+                buf(stats.u_rec, "float[]"), len(stats.u_rec), cors[0],
+                0 if watch is None else len(watch.corridors), buf(sample_x), buf(sample_u),
+                buf(record_x, "float[]"), buf(record_u, "float[]"),
+                0 if record_x is None else record_x.shape[1]]
+
+        def run(j0: int, j1: int, plant) -> int:
+            return lib.harness_run_ticks(ctrls, count, j0, j1, plant.c, *args)
+
+        run.keep = keep
+        return run
 
     def plant(self, stage, Ad, Bd, fd, dt: float, substeps: int):
         """The plant of one stage for `plant_tick`/`tick` (a ``harness_plant_t`` that keeps
@@ -710,10 +828,10 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     check_header(fw / "include")   # the shared constants are still the header's
     fw_sources = sorted((fw / "src").glob("*.c"))
     here = Path(__file__).parent
-    harness = [here / "plant.c", here / "normals.c"]      # the harness's own C
+    harness = [here / "normals.c"]      # the harness's own C (plant.c: included by _BATCH)
     key = source_key([header, source, cdef, _BATCH, " ".join(cflags)]
                      + [p.read_bytes() for p in sorted(fw.rglob("*.[ch]")) + harness
-                        + [_PLANT_H, here / "ziggurat_tables.h"]])
+                        + [_PLANT_H, here / "plant.c", here / "ziggurat_tables.h"]])
     modname = f"_stsp_{table.name}_{key}"
 
     def build(out: Path) -> Path:

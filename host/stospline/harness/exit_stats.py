@@ -1,8 +1,8 @@
 """Corridor exits of a Monte Carlo run beside the oracle's bounds: counts, one-sided
 Clopper-Pearson bounds overall, by time bin and by wall, as plain numbers for JSON.
 
-The exits are those of the compiled C controller's paths (`montecarlo.simulate` records each
-path's first exit tick and wall); the bounds are `exit_bound.exit_bounds` from the exact
+The exits are those of the compiled C controller's paths (`montecarlo.simulate` counts each
+path's first exit by tick and wall, `path_stats.CorridorExits`); the bounds are `exit_bound.exit_bounds` from the exact
 moments of the implemented law. Clopper-Pearson intervals are exact for a binomial count
 (conservative), so ``upper`` is a valid one-sided bound at its confidence for each number
 on its own (the bins and walls are not corrected for being many).
@@ -13,6 +13,7 @@ import numpy as np
 
 from stospline.precision import verbatim
 from stospline.oracle.exit_bound import exit_bounds
+from stospline.harness.path_stats import EXIT_EXAMPLES, CorridorExits
 
 __all__ = ["clopper_pearson_upper", "clopper_pearson_lower", "corridor_report",
            "CONFIDENCE", "TIME_BINS"]
@@ -38,15 +39,15 @@ def _counted(k: int, n: int) -> dict:
     return {"exits": int(k), "estimate": k / n, "upper99": clopper_pearson_upper(k, n)}
 
 
-def corridor_report(problem, table, exit_tick: np.ndarray | None,
-                    exit_wall: np.ndarray | None, *, outputs=None, with_bounds: bool = True,
-                    bins: int = TIME_BINS, examples: int = 10) -> list[dict]:
+def corridor_report(problem, table, exits: "CorridorExits | None", *, outputs=None,
+                    with_bounds: bool = True, bins: int = TIME_BINS,
+                    examples: int = EXIT_EXAMPLES) -> list[dict]:
     """One dict per corridor: its interval, epsilon, the analytic bounds (Cantelli: valid;
     Gaussian: an assumption) overall, at the worst tick, by time bin and by wall (each row of
     each polygon, and by physical wall: the rows on one line together), and, with a
-    run (`exit_tick`/`exit_wall`, corridors x paths), the Monte Carlo exits likewise with
-    one-sided 99 % Clopper-Pearson upper bounds and the first `examples` exiting paths
-    (index, time, wall). `outputs`: `exit_bound.corridor_outputs` if already computed;
+    run's exits (`path_stats.CorridorExits`, ``MonteCarloResult.exits``), the Monte Carlo
+    exits likewise with one-sided 99 % Clopper-Pearson upper bounds and the first `examples`
+    (at most `EXIT_EXAMPLES`) exiting paths (index, time, wall). `outputs`: `exit_bound.corridor_outputs` if already computed;
     `with_bounds` False: no oracle bounds (``bound`` None; a table designed for a delay has
     no output moments)."""
     from stospline.problem.corridors import corridor_ticks
@@ -78,19 +79,17 @@ def corridor_report(problem, table, exit_tick: np.ndarray | None,
                        "by_physical_wall": [float(b.per_wall[rows].sum()) for _, rows in physical]}
                 for tail, b in bounds.items()},
         }
-        if exit_tick is not None:
-            et, ew = exit_tick[i], exit_wall[i]
-            n = et.shape[0]
-            out_idx = np.flatnonzero(et >= 0)
-            bin_of = np.searchsorted(edges, et[out_idx], side="right") - 1
+        if exits is not None:
+            n, by_tick, by_wall = exits.paths, exits.by_tick[i], exits.by_wall[i]
             entry["mc"] = {
-                "paths": int(n), "confidence": CONFIDENCE, **_counted(len(out_idx), n),
-                "by_bin": [_counted(int(np.sum(bin_of == b)), n) for b in range(len(edges) - 1)],
-                "by_wall": [_counted(int(np.sum(ew[out_idx] == w)), n) for w in range(len(names))],
-                "by_physical_wall": [_counted(int(np.isin(ew[out_idx], rows).sum()), n)
+                "paths": int(n), "confidence": CONFIDENCE, **_counted(int(by_tick.sum()), n),
+                "by_bin": [_counted(int(by_tick[a:b].sum()), n)
+                           for a, b in zip(edges[:-1], edges[1:])],
+                "by_wall": [_counted(int(by_wall[w]), n) for w in range(len(names))],
+                "by_physical_wall": [_counted(int(by_wall[rows].sum()), n)
                                      for _, rows in physical],
-                "examples": [{"path": int(p), "t": problem.t0 + int(et[p]) * h,
-                              "wall": int(ew[p])} for p in out_idx[:examples]],
+                "examples": [{"path": p, "t": problem.t0 + tick * h, "wall": wall}
+                             for p, tick, wall in exits.examples[i][:examples]],
             }
             if c.epsilon is not None:
                 entry["mc"]["meets_epsilon"] = entry["mc"]["upper99"] <= c.epsilon

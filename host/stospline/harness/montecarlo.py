@@ -6,11 +6,20 @@ O(dt) weak error in the second moments). The oracle evaluates the same scheme ex
 (`design.moments.euler_tick`), so the simulation bias is a computed number, not a guess.
 
 The paths run in blocks of `BLOCK_PATHS`, each with its own random stream (`block_seed`), on
-every core by default (forked workers) or on a Dask cluster (`scheduler`); for a float32
-table one C call per tick and block does the controllers, the plant and the statistics
-(`CompiledController.ticker`). The plant's standard normal numbers come from a generator in
-C seeded by the block's stream (`CompiledController.normals`: xoshiro256++ and a ziggurat,
-about twice as fast here as numpy's, which took half the run's time).
+every core by default (forked workers) or on a Dask cluster (`scheduler`). For a float32
+table without faults one C call per stage and block draws the normal numbers and runs the
+controllers, the plant and the statistics (`CompiledController.runner`); with faults one
+call per tick (`CompiledController.ticker`). Each block summarises itself (`path_stats`) and
+the summaries merge in block order as they arrive, at most a few blocks per worker ahead, so
+a run's memory does not grow with its paths and its numbers do not depend on which process
+ran which block. Per-path records are kept only when asked for (`per_path`).
+
+The plant's standard normal numbers come from a generator in C seeded by the block's stream
+(`CompiledController.normals`, `normals.c`: xoshiro256++ and a ziggurat), not from numpy's C
+library (``libnpyrandom.a``): ``tools/bench/normal_generators.py`` measures 5.3 ns a number
+for ours against 9.5 ns for numpy's ``random_standard_normal`` on its default PCG64 (7.4 ns
+even fed by our xoshiro256++ through a ``bitgen_t``: the call per word through a pointer),
+which would add about 8 ns to the robot's ~45 ns path-tick (two numbers a tick).
 """
 from __future__ import annotations
 
@@ -24,13 +33,15 @@ from stospline import progress
 from stospline.problem.faults import Faults
 from stospline.harness.controller import (STATUS, CompiledController, CorridorWatch, FaultDraws,
                                       TickStats)
+from stospline.harness.path_stats import COST_SAMPLE, CorridorExits, Moments, RunStats
 from stospline.errors import ProblemError
 from stospline.problem.model import Problem
 
 
 __all__ = ["MonteCarloResult", "simulate", "z_value", "Agreement", "compare_to_oracle",
            "BLOCK_PATHS", "block_seed", "default_workers", "usable_workers", "check_counts",
-           "JointVerdict", "joint_verdict", "DETERMINISTIC_RTOL", "faults_unsupported"]
+           "JointVerdict", "joint_verdict", "DETERMINISTIC_RTOL", "faults_unsupported",
+           "per_path_bytes", "check_per_path", "PER_PATH_MAX_BYTES"]
 
 
 def z_value(confidence: float, comparisons: int = 1) -> float:
@@ -41,16 +52,21 @@ def z_value(confidence: float, comparisons: int = 1) -> float:
 
 @dataclass
 class MonteCarloResult:
-    cost: np.ndarray                 # (paths,) realised cost of every path
-    knot_states: list[np.ndarray]    # per knot (paths, n)
+    """A run's statistics (`path_stats`: streamed over blocks of paths, so their size does
+    not grow with `paths`), one sample path, and per-path records only when asked for
+    (``simulate(per_path=True)``; else None)."""
+    paths: int
+    cost_moments: Moments            # of each path's realised cost (d = 1)
+    knot_moments: list[Moments]      # of the state at each knot
     sample_t: np.ndarray             # tick times, (ticks + 1,)
     sample_x: np.ndarray             # one realisation (ticks + 1, n)
     sample_u: np.ndarray             # its commands (ticks, m)
     mean_x: np.ndarray               # Monte Carlo mean path (ticks + 1, n)
     worst_status: int
-    # Ticks on which the C controller returned STSP_WARN_SATURATED, per path (paths,), and
-    # the smallest and largest command it issued per input over all paths and ticks (m,).
-    saturated_ticks: np.ndarray | None = None
+    # (path, tick) steps on which the C controller returned STSP_WARN_SATURATED, the paths
+    # with at least one, and the smallest and largest command it issued per input (m,).
+    saturated_tick_count: int = 0
+    saturated_path_count: int = 0
     u_low: np.ndarray | None = None
     u_high: np.ndarray | None = None
     substeps: int = 0                # plant steps per tick of this run
@@ -63,34 +79,49 @@ class MonteCarloResult:
     substep_choice: object = None
     faults: Faults = field(default_factory=Faults)     # the loop's faults in this run
     record_u: np.ndarray | None = None
-    # With corridors (problem.corridors): each path's first state tick outside corridor i
-    # (corridors, paths; -1: never) and the wall it left through (`CorridorWatch`).
+    # With corridors (problem.corridors): the exits by tick and wall (`CorridorExits`), and
+    # the first exit tick of the recorded paths (corridors, record; -1: never).
+    exits: CorridorExits | None = None
+    record_exit_tick: np.ndarray | None = None
+    cost_sample: np.ndarray | None = None    # the costs of the first COST_SAMPLE paths
+    # Per path, with per_path=True only: realised cost (paths,), the state at each knot
+    # (paths, n), saturated ticks (paths,), first exit tick and wall (corridors, paths).
+    cost: np.ndarray | None = None
+    knot_states: list[np.ndarray] | None = None
+    saturated_ticks: np.ndarray | None = None
     exit_tick: np.ndarray | None = None
     exit_wall: np.ndarray | None = None
-
-    @property
-    def paths(self) -> int:
-        return self.cost.shape[0]
 
     @property
     def saturated_fraction(self) -> float:
         """Fraction of all (path, tick) steps on which the controller clamped a command."""
         ticks = self.sample_u.shape[0]
-        if self.saturated_ticks is None or ticks == 0:
-            return 0.0
-        return float(self.saturated_ticks.sum()) / (self.paths * ticks)
+        return 0.0 if ticks == 0 else self.saturated_tick_count / (self.paths * ticks)
+
+    @property
+    def saturated_path_fraction(self) -> float:
+        """Fraction of the paths on which the controller clamped a command at least once."""
+        return self.saturated_path_count / self.paths
 
     def cost_mean_ci(self, confidence: float = 0.95) -> tuple[float, float]:
         """Mean cost and the half-width of its normal-approximation confidence interval."""
-        se = self.cost.std(ddof=1) / np.sqrt(self.paths)
-        return float(self.cost.mean()), z_value(confidence) * float(se)
+        return (float(self.cost_moments.mean[0]),
+                z_value(confidence) * float(self.cost_moments.mean_se()[0]))
+
+    def cost_std(self) -> float:
+        """Sample standard deviation of the paths' costs (ddof 1)."""
+        return float(self.cost_moments.std()[0])
 
     def knot_mean_se(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        X = self.knot_states[k]
-        return X.mean(axis=0), X.std(axis=0, ddof=1) / np.sqrt(X.shape[0])
+        return self.knot_moments[k].mean, self.knot_moments[k].mean_se()
 
     def knot_cov(self, k: int) -> np.ndarray:
-        return np.cov(self.knot_states[k], rowvar=False)
+        cov = self.knot_moments[k].cov()
+        return cov[0, 0] if cov.shape == (1, 1) else cov     # np.cov's shape for n = 1
+
+    def exit_count(self, corridor: int) -> int:
+        """Paths that left corridor `corridor` (`problem.corridors`)."""
+        return int(self.exits.count[corridor])
 
 
 def _zoh(stage, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
@@ -177,10 +208,36 @@ def check_counts(**counts) -> None:
             raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
 
 
+# Per-path records (simulate(per_path=True)) are refused beyond this many bytes: the
+# statistics stream without them.
+PER_PATH_MAX_BYTES = 1 << 30
+# Blocks handed out to workers ahead of the one merged next: enough to keep every worker
+# busy, few enough that waiting results stay small.
+_AHEAD_PER_WORKER = 4
+
+
+def per_path_bytes(problem: Problem, paths: int) -> float:
+    """Memory of the per-path records of a `paths`-path run (``simulate(per_path=True)``):
+    cost, knot states, saturated ticks, exit tick and wall per corridor."""
+    per = 8.0 * (2 + problem.n * len(problem.knots)) + 8.0 * len(problem.corridors)
+    return paths * per
+
+
+def check_per_path(problem: Problem, paths: int) -> None:
+    """ProblemError naming ``per_path`` when its records of `paths` paths would exceed
+    `PER_PATH_MAX_BYTES`, before anything is allocated."""
+    need = per_path_bytes(problem, paths)
+    if need > PER_PATH_MAX_BYTES:
+        raise ProblemError("per_path", f"the records of {paths} paths need ~{need / 2**30:.3g} "
+                                       f"GiB (limit {PER_PATH_MAX_BYTES / 2**30:.3g} GiB); "
+                                       f"without per_path the run's statistics stream in "
+                                       f"bounded memory")
+
+
 def simulate(problem: Problem, controller: CompiledController, *, paths: int, seed: int,
              substeps: int = 4, workers: int | None = None, record: int = 0,
              scheduler: str | None = None, faults: Faults | None = None,
-             force_workers: bool = False) -> MonteCarloResult:
+             force_workers: bool = False, per_path: bool = False) -> MonteCarloResult:
     """Run `paths` realisations of the plant with the compiled controller in the loop.
 
     Parameters
@@ -214,8 +271,15 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
         mismatch. Their random numbers come from a stream of their own (`fault_seed`), so the
         plant's are the same with or without faults. Float32 tables with time-invariant stage data only
         (ProblemError otherwise).
+    per_path : bool
+        Also keep every path's cost, knot states, saturated ticks and corridor exit
+        (``cost``, ``knot_states``, ...); refused (ProblemError) beyond
+        `PER_PATH_MAX_BYTES`. Without it the run's memory does not grow with `paths`: its
+        statistics stream over the blocks (`path_stats`), merged in block order.
     """
     check_counts(paths=paths, substeps=substeps)
+    if per_path:
+        check_per_path(problem, paths)
     table = controller.table
     faults = problem.faults if faults is None else faults
     if getattr(table, "delay_ticks", 0) and faults.delay_ticks:
@@ -225,65 +289,128 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
     if faults.any and faults_unsupported(problem, table):
         raise ProblemError("faults", "are simulated for float32 tables designed without a "
                                      "delay, with time-invariant stage data only")
-    counts = [min(BLOCK_PATHS, paths - start) for start in range(0, paths, BLOCK_PATHS)]
+    blocks = -(-paths // BLOCK_PATHS)
     workers = usable_workers(workers, force_workers)
-    parallel = (workers > 1 and len(counts) > 1
+    parallel = (workers > 1 and blocks > 1
                 and paths * table.n_ticks * substeps >= _PARALLEL_WORK)
+    job = _Job(problem, seed, substeps, record, faults, per_path)
     bar = progress.start(f"simulate ({paths} paths)", paths * table.n_ticks, unit="path-tick")
     try:
         if scheduler is not None:
-            parts = _run_dask(scheduler, problem, controller.table, counts, seed, substeps,
-                              workers, record, faults)
+            parts = _dask_blocks(scheduler, job, controller.table, paths, workers)
         elif parallel:
-            parts = _run_parallel(problem, controller, counts, seed, substeps, workers, record,
-                                  faults)
+            parts = _parallel_blocks(job, controller, paths, workers)
         else:
-            parts = [_run_block(problem, controller, count, block_seed(seed, i), substeps,
-                                first=i == 0, record=record, faults=faults)
-                     for i, count in enumerate(counts)]
+            parts = (_run_block(job, controller, i, paths) for i in range(blocks))
+        run = _Gather(per_path)
+        for part in parts:
+            run.add(part)
     finally:
         progress.finish(bar)
-    first = parts[0]
-    h = 1.0 / table.tick_hz
-    t = problem.t0 + np.arange(table.n_ticks + 1) * h
-    x_sum = first.x_sum
-    for part in parts[1:]:
-        x_sum = x_sum + part.x_sum
-    return MonteCarloResult(
-        np.concatenate([p.cost for p in parts]),
-        [np.concatenate([p.knots[k] for p in parts]) for k in range(len(first.knots))],
-        t, first.sample_x, first.sample_u, x_sum / paths, min(p.worst for p in parts),
-        np.concatenate([p.saturated for p in parts]),
-        np.min([p.u_low for p in parts], axis=0), np.max([p.u_high for p in parts], axis=0),
-        substeps, first.record_x, faults=faults, record_u=first.record_u,
-        exit_tick=(None if first.exit_tick is None
-                   else np.concatenate([p.exit_tick for p in parts], axis=1)),
-        exit_wall=(None if first.exit_wall is None
-                   else np.concatenate([p.exit_wall for p in parts], axis=1)))
+    return run.result(problem, table, substeps, faults)
+
+
+def block_counts(paths: int):
+    """``(block, first path, paths)`` of each block of a `paths`-path run, in order."""
+    for i, start in enumerate(range(0, paths, BLOCK_PATHS)):
+        yield i, start, min(BLOCK_PATHS, paths - start)
+
+
+@dataclass(frozen=True)
+class _Job:
+    """What every block of a run shares."""
+    problem: Problem
+    seed: object
+    substeps: int
+    record: int
+    faults: Faults
+    per_path: bool
 
 
 @dataclass
 class _Block:
-    """One block's share of a run: per-path arrays, the sum of its states at every tick, and
-    (block 0) the sample path."""
-    cost: np.ndarray
-    knots: list
-    x_sum: np.ndarray
-    sample_x: np.ndarray | None
-    sample_u: np.ndarray | None
-    worst: int
-    saturated: np.ndarray
-    u_low: np.ndarray
-    u_high: np.ndarray
+    """One block's share of a run: its statistics (`RunStats`), block 0's sample path and
+    records, and its per-path arrays when the run keeps them."""
+    stats: RunStats
+    sample_x: np.ndarray | None = None
+    sample_u: np.ndarray | None = None
     record_x: np.ndarray | None = None
     record_u: np.ndarray | None = None
+    record_exit_tick: np.ndarray | None = None
+    cost: np.ndarray | None = None
+    knots: list | None = None
+    saturated: np.ndarray | None = None
     exit_tick: np.ndarray | None = None
     exit_wall: np.ndarray | None = None
 
 
-def _run_block(problem: Problem, controller: CompiledController, paths: int, seed,
-               substeps: int, *, first: bool, report: bool = True, record: int = 0,
-               faults: Faults | None = None) -> _Block:
+class _Gather:
+    """Merges the blocks of a run as they arrive, in block order, keeping block 0's sample
+    path and records and (per_path) the per-path arrays."""
+
+    def __init__(self, per_path: bool):
+        self.per_path = per_path
+        self.first: _Block | None = None
+        self.stats: RunStats | None = None
+        self.kept: list[_Block] = []
+
+    def add(self, block: _Block) -> None:
+        if self.first is None:
+            self.first, self.stats = block, block.stats
+        else:
+            self.stats = self.stats.merge(block.stats)
+        if self.per_path:
+            self.kept.append(block)
+
+    def result(self, problem: Problem, table, substeps: int, faults: Faults) -> MonteCarloResult:
+        first, st = self.first, self.stats
+        t = problem.t0 + np.arange(table.n_ticks + 1) / table.tick_hz
+        mc = MonteCarloResult(
+            st.paths, st.cost, st.knots, t, first.sample_x, first.sample_u,
+            st.x_sum / st.paths, st.worst, st.saturated_ticks, st.saturated_paths,
+            st.u_low, st.u_high, substeps, first.record_x, faults=faults,
+            record_u=first.record_u, exits=st.exits, record_exit_tick=first.record_exit_tick,
+            cost_sample=st.cost_sample)
+        if self.per_path:
+            parts = self.kept
+            mc.cost = np.concatenate([p.cost for p in parts])
+            mc.knot_states = [np.concatenate([p.knots[k] for p in parts])
+                              for k in range(len(first.knots))]
+            mc.saturated_ticks = np.concatenate([p.saturated for p in parts])
+            if first.exit_tick is not None:
+                mc.exit_tick = np.concatenate([p.exit_tick for p in parts], axis=1)
+                mc.exit_wall = np.concatenate([p.exit_wall for p in parts], axis=1)
+        return mc
+
+
+def _block_stats(problem: Problem, table, cost, knots, x_sum, worst, stats: TickStats,
+                 watch, start: int) -> RunStats:
+    """A block's `RunStats` from its per-path arrays; its first path is path `start`."""
+    exits = None
+    if watch is not None:
+        exits = CorridorExits.of(watch.exit_tick, watch.exit_wall,
+                                 [len(c.wall_names()) for c in problem.corridors],
+                                 table.n_ticks, start)
+    return RunStats(len(cost), Moments.of(cost), [Moments.of(X) for X in knots], x_sum, worst,
+                    int(stats.saturated.sum()), int(np.count_nonzero(stats.saturated)),
+                    stats.u_low.copy(), stats.u_high.copy(),
+                    cost[:max(0, min(len(cost), COST_SAMPLE - start))].copy(), exits)
+
+
+def _run_block(job: _Job, controller: CompiledController, block: int, paths: int, *,
+               report: bool = True) -> _Block:
+    """Block `block` of a `paths`-path run (`block_counts`)."""
+    start = block * BLOCK_PATHS
+    count = min(BLOCK_PATHS, paths - start)
+    return _simulate_block(job.problem, controller, count, block_seed(job.seed, block),
+                           job.substeps, first=block == 0, report=report, record=job.record,
+                           faults=job.faults, start=start, per_path=job.per_path)
+
+
+def _simulate_block(problem: Problem, controller: CompiledController, paths: int, seed,
+                    substeps: int, *, first: bool, report: bool = True, record: int = 0,
+                    faults: Faults | None = None, start: int = 0,
+                    per_path: bool = False) -> _Block:
     table = controller.table
     faults = Faults() if faults is None else faults
     plant_of = faults.plant_of(problem)         # the plant the loop really has
@@ -329,9 +456,18 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
         dZ = np.empty((paths, substeps, mz))       # standard normal; the C scales by sqrt(dt)
         fill_dZ = normals(dZ)
         tick = None
-        if fused and plant is not None:
+        ticks = range(int(table.stage_start[k]), int(table.stage_start[k + 1]))
+        if fused and plant is not None and draws is None:
+            # the whole stage in one C call: normals, controllers, plant, statistics
+            run = controller.runner(step.instances, paths, normals, dZ, X, cost, stats, watch,
+                                    x_sum, sample_x, sample_u, record_x, record_u)
+            worst = min(worst, run(ticks.start, ticks.stop, plant))
+            if report:
+                progress.advance(paths * len(ticks))
+            ticks = range(0)
+        elif fused and plant is not None:
             tick = controller.ticker(step.instances, paths, dZ, X, cost, stats, draws, watch)
-        for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
+        for j in ticks:
             fill_dZ()
             if draws is not None:
                 draws.draw(fault_rng)
@@ -364,11 +500,17 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
             r = X @ knot.penalty.C.T - knot.penalty.target
             cost += knot.penalty.weight * np.einsum("pi,pi->p", r, r)
         knots.append(X.copy())
-    return _Block(cost, knots, x_sum, sample_x if first else None,
-                  sample_u if first else None, worst, stats.saturated, stats.u_low,
-                  stats.u_high, record_x, record_u,
-                  None if watch is None else watch.exit_tick,
-                  None if watch is None else watch.exit_wall)
+    out = _Block(_block_stats(problem, table, cost, knots, x_sum, worst, stats, watch, start))
+    if first:
+        out.sample_x, out.sample_u, out.record_x, out.record_u = (sample_x, sample_u,
+                                                                  record_x, record_u)
+        if watch is not None:
+            out.record_exit_tick = watch.exit_tick[:, :kept].copy()
+    if per_path:
+        out.cost, out.knots, out.saturated = cost, knots, stats.saturated
+        if watch is not None:
+            out.exit_tick, out.exit_wall = watch.exit_tick, watch.exit_wall
+    return out
 
 
 # What the forked workers run (set before the pool starts; inherited, never pickled: the
@@ -376,29 +518,41 @@ def _run_block(problem: Problem, controller: CompiledController, paths: int, see
 _JOB: tuple | None = None
 
 
-def _worker_block(problem, controller, seed, substeps, record, faults, block: int,
-                  count: int) -> _Block:
-    """Block `block` of a run, on a worker (its progress is counted by the caller)."""
-    return _run_block(problem, controller, count, block_seed(seed, block), substeps,
-                      first=block == 0, report=False, record=record, faults=faults)
+def _block_job(block: int, paths: int) -> _Block:
+    job, controller = _JOB
+    return _run_block(job, controller, block, paths, report=False)
 
 
-def _block_job(block: int, count: int) -> _Block:
-    return _worker_block(*_JOB, block, count)
-
-
-def _dask_block(problem, table, seed, substeps, record, faults, block: int,
-                count: int) -> _Block:
+def _dask_block(job: _Job, table, block: int, paths: int) -> _Block:
     """One block on a Dask worker: the controller of `table` from the worker's cache."""
     from stospline.harness.controller import build_controller
-    return _worker_block(problem, build_controller(table), seed, substeps, record, faults,
-                         block, count)
+    return _run_block(job, build_controller(table), block, paths, report=False)
 
 
-def _run_dask(scheduler: str, problem, table, counts, seed, substeps, workers,
-              record, faults) -> list[_Block]:
+def _in_order(submit, paths: int, ahead: int, ticks: int):
+    """Each block's result in block order, with at most `ahead` blocks submitted and not yet
+    yielded (`submit(block)` returns a future with ``result()``)."""
+    from collections import deque
+    blocks = iter(block_counts(paths))
+    waiting: deque = deque()
+    for _ in range(ahead):
+        nxt = next(blocks, None)
+        if nxt is None:
+            break
+        waiting.append((nxt[2], submit(nxt[0])))
+    while waiting:
+        count, fut = waiting.popleft()
+        nxt = next(blocks, None)
+        if nxt is not None:
+            waiting.append((nxt[2], submit(nxt[0])))
+        part = fut.result()
+        progress.advance(count * ticks)
+        yield part
+
+
+def _dask_blocks(scheduler: str, job: _Job, table, paths: int, workers: int):
     """The blocks on a Dask cluster (`scheduler`: an address, or "local"), in block order."""
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import Client, LocalCluster
     cluster = None
     if scheduler == "local":
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
@@ -413,33 +567,29 @@ def _run_dask(scheduler: str, problem, table, counts, seed, substeps, workers,
             raise ProblemError("--scheduler", f"cannot reach the Dask scheduler at {address!r} "
                                               f"({exc})") from None
         with client:
-            futures = {client.submit(_dask_block, problem, table, seed, substeps, record, faults,
-                                     i, c, pure=False): c for i, c in enumerate(counts)}
-            for fut in as_completed(futures):
-                progress.advance(futures[fut] * table.n_ticks)
-            return client.gather(list(futures))
+            ahead = _AHEAD_PER_WORKER * max(workers, len(client.scheduler_info()["workers"]))
+            job_ref = client.scatter(job, broadcast=True)
+            table_ref = client.scatter(table, broadcast=True)
+            yield from _in_order(lambda i: client.submit(_dask_block, job_ref, table_ref, i,
+                                                         paths, pure=False),
+                                 paths, ahead, table.n_ticks)
     finally:
         if cluster is not None:
             cluster.close()
 
 
-def _run_parallel(problem, controller, counts, seed, substeps, workers,
-                  record, faults) -> list[_Block]:
-    """The blocks on `workers` forked processes, in block order; progress per finished
-    block."""
+def _parallel_blocks(job: _Job, controller, paths: int, workers: int):
+    """The blocks on `workers` forked processes, in block order; progress per block."""
     global _JOB
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
-    _JOB = (problem, controller, seed, substeps, record, faults)
+    _JOB = (job, controller)
     try:
         ctx = multiprocessing.get_context("fork")
-        with ProcessPoolExecutor(max_workers=min(workers, len(counts)), mp_context=ctx) as pool:
-            futures = [pool.submit(_block_job, i, c) for i, c in enumerate(counts)]
-            parts = []
-            for fut, count in zip(futures, counts):
-                parts.append(fut.result())
-                progress.advance(count * controller.table.n_ticks)
-            return parts
+        blocks = -(-paths // BLOCK_PATHS)
+        with ProcessPoolExecutor(max_workers=min(workers, blocks), mp_context=ctx) as pool:
+            yield from _in_order(lambda i: pool.submit(_block_job, i, paths), paths,
+                                 _AHEAD_PER_WORKER * workers, controller.table.n_ticks)
     finally:
         _JOB = None
 
@@ -523,7 +673,7 @@ def compare_to_oracle(mc: MonteCarloResult, J: float, knot_means: list[np.ndarra
     the mean of the squared deviations): faults such as sensor noise move the spread, not
     the mean."""
     mean, _ = mc.cost_mean_ci()
-    se = mc.cost.std(ddof=1) / np.sqrt(mc.paths)
+    se = float(mc.cost_moments.mean_se()[0])
     cost_z = float((mean - J) / se) if se > 0 else None
     stats = [("cost", cost_z, mean, J)]
     zs = []
@@ -533,9 +683,8 @@ def compare_to_oracle(mc: MonteCarloResult, J: float, knot_means: list[np.ndarra
         stats += [(f"knot {k} mean[{i}]", z[i], m[i], exact[i]) for i in range(len(m))]
         zs.append(np.array([0.0 if v is None else v for v in z]))
         if knot_covs is not None:
-            X = mc.knot_states[k]
-            var = np.var(X, axis=0, ddof=1)
-            se_var = np.std((X - m) ** 2, axis=0, ddof=1) / np.sqrt(X.shape[0])
+            var = np.diag(mc.knot_moments[k].cov())
+            se_var = mc.knot_moments[k].var_se()
             exact_var = np.diag(knot_covs[k])
             stats += [(f"knot {k} var[{i}]",
                        float((var[i] - exact_var[i]) / se_var[i]) if se_var[i] > 0 else None,

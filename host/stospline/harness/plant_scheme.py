@@ -84,7 +84,7 @@ def choose_substeps(problem: Problem, controller: CompiledController, exact_cost
     pilot_seed = np.random.SeedSequence(seed, spawn_key=(_PILOT_STREAM,))
     pilot = simulate(problem, controller, paths=pilot_paths, seed=pilot_seed, substeps=1,
                      faults=faults)
-    spread = float(pilot.cost.std(ddof=1)) if pilot_paths > 1 else 0.0
+    spread = pilot.cost_std() if pilot_paths > 1 else 0.0
     stderr = spread / math.sqrt(paths)
     target = max(tolerance * _SAFETY * stderr, 1e-9 * max(1.0, abs(exact_cost)))
 

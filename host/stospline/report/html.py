@@ -165,12 +165,13 @@ def _regions_check(d) -> dict:
 def _histogram(mc, oracle_J: float):
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(7, 3.2))
-    ax.hist(mc.cost, bins=min(80, max(10, mc.paths // 20)), color="tab:blue", alpha=0.7)
+    costs = mc.cost_sample          # the first paths' costs: a bounded sample of the run
+    ax.hist(costs, bins=min(80, max(10, len(costs) // 20)), color="tab:blue", alpha=0.7)
     ax.axvline(oracle_J, color="tab:orange", lw=2, label=f"oracle expected cost {oracle_J:.5g}")
-    ax.axvline(float(mc.cost.mean()), color="k", ls="--", lw=1,
-               label=f"Monte Carlo mean {mc.cost.mean():.5g}")
+    mean = mc.cost_mean_ci()[0]
+    ax.axvline(mean, color="k", ls="--", lw=1, label=f"Monte Carlo mean {mean:.5g}")
     ax.set_xlabel("cost of a path")
-    ax.set_ylabel("paths")
+    ax.set_ylabel("paths" if len(costs) == mc.paths else f"paths (the first {len(costs)})")
     ax.legend(fontsize=8)
     fig.tight_layout()
     return _png(fig)

@@ -71,12 +71,13 @@ def plot_corridor(d, mc, out: str | Path, exact=None) -> None:
 
 
 def _exiting_paths(ax, mc, ia: int, ib: int, most: int = 20) -> None:
-    """The recorded paths that leave a corridor (`mc.exit_tick`), in red up to their exit,
+    """The recorded paths that leave a corridor (`mc.record_exit_tick`), in red up to their exit,
     with the exit point marked: the realisations a corridor report is about."""
-    if mc.exit_tick is None or mc.record_x is None:
+    if mc.record_exit_tick is None or mc.record_x is None:
         return
-    kept = mc.record_x.shape[1]
-    first = np.where(mc.exit_tick[:, :kept] >= 0, mc.exit_tick[:, :kept], np.iinfo(np.int32).max)
+    ticks = mc.record_exit_tick
+    kept = ticks.shape[1]
+    first = np.where(ticks >= 0, ticks, np.iinfo(np.int32).max)
     first = first.min(axis=0)
     out = np.flatnonzero(first < np.iinfo(np.int32).max)
     for q in out[:most]:
@@ -102,7 +103,7 @@ def _controls_and_save(d, mc, a_u, fig, out, plt) -> None:
     a_u.legend()
     a_u.grid(alpha=0.3)
     fig.suptitle(f"{p.name}: J0 = {d.design.J0:.4g}, MC mean cost "
-                 f"{mc.cost.mean():.4g} ± {1.96 * mc.cost.std(ddof=1) / np.sqrt(mc.paths):.2g}")
+                 f"{mc.cost_mean_ci(0.95)[0]:.4g} ± {mc.cost_mean_ci(0.95)[1]:.2g}")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     plt.close(fig)

@@ -71,7 +71,7 @@ def simulation_summary(d, mc: MonteCarloResult, *, seed: int,
     knots = []
     for k, kn in enumerate(d.problem.knots):
         m, s = mc.knot_mean_se(k)
-        alike = np.ptp(mc.knot_states[k], axis=0) == 0   # s is then 0 or rounding error
+        alike = mc.knot_moments[k].alike()   # s is then 0 or rounding error
         z, why = strict.ratio_or_null(m - exact.knot_mean[k], np.where(alike, 0.0, s),
                                       _ZERO_SE)
         knots.append({
@@ -80,7 +80,7 @@ def simulation_summary(d, mc: MonteCarloResult, *, seed: int,
             "oracle_mean": exact.knot_mean[k], "oracle_cov": exact.knot_cov[k],
             "z": z, **({"z_undefined": why} if why else {}),
         })
-    se_z = 0.0 if np.ptp(mc.cost) == 0 else se
+    se_z = 0.0 if mc.cost_moments.alike()[0] else se
     cost_z, cost_why = strict.ratio_or_null(mean - exact.J, se_z, _ZERO_SE)
     bias_z, bias_why = strict.ratio_or_null(euler.J - exact.J, se_z, _ZERO_SE)
     summary = rounded({
@@ -110,8 +110,7 @@ def simulation_summary(d, mc: MonteCarloResult, *, seed: int,
         "saturation": {
             "limited": d.table.limited,
             "tick_fraction": mc.saturated_fraction,
-            "path_fraction": (float(np.mean(mc.saturated_ticks > 0))
-                              if mc.saturated_ticks is not None else 0.0),
+            "path_fraction": mc.saturated_path_fraction,
             **_command_range(mc),
         },
         **actuator_limits(d),
@@ -142,13 +141,12 @@ def _corridors(d, mc: MonteCarloResult) -> dict:
     Carlo exit probability with its one-sided 99 % upper bound, and the exact oracle's
     Cantelli (valid) and Gaussian (assumed) union bounds, for the fault-free loop (None for a
     table designed for a delay)."""
-    if not d.problem.corridors or mc.exit_tick is None:
+    if not d.problem.corridors or mc.exits is None:
         return {}
     from stospline.harness.exit_stats import corridor_report
     # The oracle's output moments exist for tables designed without a delay.
     bounded = not getattr(d.table, "delay_ticks", 0)
-    rep = corridor_report(d.problem, d.table, mc.exit_tick, mc.exit_wall,
-                          with_bounds=bounded)
+    rep = corridor_report(d.problem, d.table, mc.exits, with_bounds=bounded)
     for entry in rep:
         if entry["bound"] is not None:
             entry["bound"]["loop"] = ("fault-free (the bounds ignore [faults])"

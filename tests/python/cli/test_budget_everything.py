@@ -14,6 +14,7 @@ import stospline
 from conftest import EXAMPLES
 from stospline import budget
 from stospline.budget import BudgetError
+from stospline.pipeline import simulation_estimate
 from stospline.problem.reader import parse_problem
 
 
@@ -76,10 +77,14 @@ def test_workers_beyond_the_cores_are_limited_with_a_note(tmp_path):
 
 
 def test_library_simulation_has_the_budget(robot_zoh):
-    """A billion paths through the library: refused at once naming `paths`."""
+    """A billion paths through the library: refused at once naming `paths`, for its time (its
+    memory does not grow with the paths)."""
     with pytest.raises(BudgetError) as exc:
         stospline.simulate_problem(robot_zoh, paths=10 ** 9, seed=0)
-    assert exc.value.field == "paths" and "max_memory raises it" in str(exc.value)
+    assert exc.value.field == "paths" and "max_time raises it" in str(exc.value)
+    flat = simulation_estimate(robot_zoh, paths=10 ** 9, substeps=1, workers=2)
+    assert flat.bytes == simulation_estimate(robot_zoh, paths=10 ** 4, substeps=1,
+                                             workers=2).bytes < 1024 ** 3
     with pytest.raises(BudgetError) as exc:
         stospline.simulate_problem(robot_zoh, paths=20_000, seed=0, max_time=1)
     assert exc.value.field == "paths" and "max_time raises it" in str(exc.value)

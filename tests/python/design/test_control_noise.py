@@ -95,4 +95,4 @@ def test_input_noise_monte_carlo_through_c():
     agree = compare_to_oracle(mc, exact.J, exact.knot_mean)
     assert agree.ok, (agree.cost_z, agree.knot_mean_z)
     euler = evaluate_table(problem, table, propagator="euler", substeps=100, path=False)
-    assert abs(euler.J - exact.J) < 0.05 * mc.cost.std(ddof=1) / np.sqrt(mc.paths)
+    assert abs(euler.J - exact.J) < 0.05 * mc.cost_std() / np.sqrt(mc.paths)

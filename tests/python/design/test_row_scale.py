@@ -105,7 +105,8 @@ def corridor_cart(s: float) -> dict:
 def corridor_figures(s: float):
     p = parse_problem(corridor_cart(s))
     d = design_problem(p)
-    mc = simulate(p, build_controller(d.table), paths=2000, seed=7, substeps=1, workers=1)
+    mc = simulate(p, build_controller(d.table), paths=2000, seed=7, substeps=1, workers=1,
+                  per_path=True)
     ((ym, yc),) = corridor_outputs(p, d.table)
     return mc, exit_bounds(p.corridors[0], ym, yc, p.t0, p.tick_hz)
 

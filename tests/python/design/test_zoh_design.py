@@ -115,4 +115,4 @@ def test_mc_through_c_at_10hz_agrees_with_oracle(robot_problem):
     assert agree.ok, (agree.cost_z, agree.knot_mean_z)
     # The plant scheme's own bias at 200 substeps per 0.1 s tick, next to the MC error.
     euler = evaluate_table(robot_problem, table, propagator="euler", substeps=200, path=False)
-    assert abs(euler.J - exact.J) < 0.05 * mc.cost.std(ddof=1) / np.sqrt(mc.paths)
+    assert abs(euler.J - exact.J) < 0.05 * mc.cost_std() / np.sqrt(mc.paths)

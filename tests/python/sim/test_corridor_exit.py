@@ -69,11 +69,11 @@ def test_monte_carlo_exits_at_one_tick_match_the_gaussian_probability(walk):
     p = scalar(corridor_t=(1.0, 1.0))
     _, d = walk
     mc = simulate(p, build_controller(d.table), paths=20000, seed=11, substeps=1, workers=1)
-    k = int(np.sum(mc.exit_tick[0] >= 0))
+    k = mc.exit_count(0)
     exact = norm.sf(B / SIGMA)
     assert clopper_pearson_lower(k, 20000, 0.9995) <= exact <= clopper_pearson_upper(k, 20000,
                                                                                    0.9995)
-    assert set(mc.exit_tick[0][mc.exit_tick[0] >= 0]) == {HZ}
+    assert set(np.flatnonzero(mc.exits.by_tick[0])) == {HZ}
 
 
 def test_cantelli_bound_holds_over_the_interval(walk):
@@ -81,7 +81,7 @@ def test_cantelli_bound_holds_over_the_interval(walk):
     Cantelli union bound must not fall below the Monte Carlo lower confidence bound."""
     p, d = walk
     mc = simulate(p, build_controller(d.table), paths=20000, seed=12, substeps=1, workers=1)
-    k = int(np.sum(mc.exit_tick[0] >= 0))
+    k = mc.exit_count(0)
     ((ym, yc),) = corridor_outputs(p, d.table)
     b = exit_bounds(p.corridors[0], ym, yc, p.t0, p.tick_hz)
     assert b["cantelli"].total >= clopper_pearson_lower(k, 20000)
@@ -126,7 +126,7 @@ def test_corridors_change_nothing_else_and_not_the_worker_count(robot_problem, r
     from dataclasses import replace
     ctl = build_controller(robot_zoh.table)
     bare = replace(robot_problem, corridors=())
-    runs = [simulate(prob, ctl, paths=1100, seed=3, substeps=1, workers=w)
+    runs = [simulate(prob, ctl, paths=1100, seed=3, substeps=1, workers=w, per_path=True)
             for prob, w in ((bare, 1), (robot_problem, 1), (robot_problem, 2))]
     for mc in runs[1:]:
         np.testing.assert_array_equal(mc.cost, runs[0].cost)
@@ -188,9 +188,10 @@ def test_corridors_with_faults_change_nothing_else(robot_problem, robot_zoh):
     ctl = build_controller(robot_zoh.table)
     faults = parse_faults({"sensor_noise": 0.02, "actuator_noise": 0.1}, 4, 2)
     bare = replace(robot_problem, corridors=())
-    a = simulate(bare, ctl, paths=300, seed=9, substeps=1, workers=1, faults=faults)
+    a = simulate(bare, ctl, paths=300, seed=9, substeps=1, workers=1, faults=faults,
+                 per_path=True)
     b = simulate(robot_problem, ctl, paths=300, seed=9, substeps=1, workers=1, faults=faults,
-                 record=300)
+                 record=300, per_path=True)
     np.testing.assert_array_equal(a.cost, b.cost)
     np.testing.assert_array_equal(a.knot_states[1], b.knot_states[1])
     (c,) = robot_problem.corridors

@@ -78,14 +78,14 @@ def test_faults_draw_from_their_own_stream(di):
     """Common random numbers: a fault of zero size is the fault-free run, bit for bit, and
     the plant's numbers do not move when a fault draws its own."""
     p, _, ctl = di
-    base = simulate(p, ctl, paths=500, seed=SEED, substeps=1, faults=Faults())
-    tiny = simulate(p, ctl, paths=500, seed=SEED, substeps=1,
+    base = simulate(p, ctl, paths=500, seed=SEED, substeps=1, faults=Faults(), per_path=True)
+    tiny = simulate(p, ctl, paths=500, seed=SEED, substeps=1, per_path=True,
                     faults=Faults(miss_probability=1e-300, sensor_quantum=np.zeros(2)))
     np.testing.assert_array_equal(tiny.cost, base.cost)
     quiet = p.without_noise()
-    a = simulate(quiet, ctl, paths=3, seed=SEED, substeps=1,
+    a = simulate(quiet, ctl, paths=3, seed=SEED, substeps=1, per_path=True,
                  faults=_faults(p, actuator_noise=0.0, sensor_noise=1e-300))
-    b = simulate(quiet, ctl, paths=3, seed=SEED, substeps=1, faults=Faults())
+    b = simulate(quiet, ctl, paths=3, seed=SEED, substeps=1, faults=Faults(), per_path=True)
     np.testing.assert_allclose(a.cost, b.cost, rtol=1e-12)
 
 
@@ -127,8 +127,8 @@ def test_missed_ticks_are_skipped_ticks_to_the_firmware(di):
     """A missed tick is a tick the firmware never sees: the next call is a skipped tick, which
     it accepts (no error status, a stage entered late latches then), and the run moves."""
     p, _, ctl = di
-    base = simulate(p, ctl, paths=2000, seed=SEED, substeps=1, faults=Faults())
-    missed = simulate(p, ctl, paths=2000, seed=SEED, substeps=1,
+    base = simulate(p, ctl, paths=2000, seed=SEED, substeps=1, faults=Faults(), per_path=True)
+    missed = simulate(p, ctl, paths=2000, seed=SEED, substeps=1, per_path=True,
                       faults=_faults(p, miss_probability=0.3))
     assert missed.worst_status == 0 and not np.array_equal(missed.cost, base.cost)
 
@@ -136,9 +136,9 @@ def test_missed_ticks_are_skipped_ticks_to_the_firmware(di):
 def test_fault_runs_are_the_same_on_any_number_of_workers(robot_problem, robot_controller):
     faults = _faults(robot_problem, sensor_noise=0.01, miss_probability=0.05, delay_ticks=1)
     one = simulate(robot_problem, robot_controller, paths=2100, seed=SEED, substeps=1,
-                   workers=1, faults=faults)
+                   workers=1, faults=faults, per_path=True)
     two = simulate(robot_problem, robot_controller, paths=2100, seed=SEED, substeps=1,
-                   workers=2, faults=faults)
+                   workers=2, faults=faults, per_path=True)
     np.testing.assert_array_equal(one.cost, two.cost)
     np.testing.assert_array_equal(one.knot_states[-1], two.knot_states[-1])
 

@@ -30,7 +30,7 @@ def test_plant_scheme_bias_is_far_below_mc_error(robot_problem, robot, robot_mc)
     the Monte Carlo standard error (here < 5% of it), so agreement tests the controller."""
     euler = evaluate_table(robot_problem, robot.table, propagator="euler", substeps=SUBSTEPS,
                            path=False)
-    se = robot_mc.cost.std(ddof=1) / np.sqrt(robot_mc.paths)
+    se = robot_mc.cost_std() / np.sqrt(robot_mc.paths)
     assert abs(euler.J - robot.implemented.J) < 0.05 * se
     for k in range(len(robot_problem.knots)):
         np.testing.assert_allclose(euler.knot_mean[k], robot.implemented.knot_mean[k], atol=1e-9)
@@ -38,7 +38,7 @@ def test_plant_scheme_bias_is_far_below_mc_error(robot_problem, robot, robot_mc)
 
 def test_noise_free_plant_reproduces_oracle_to_float32(robot_problem, robot, robot_controller):
     quiet = robot_problem.without_noise()
-    mc = simulate(quiet, robot_controller, paths=2, seed=1, substeps=SUBSTEPS)
+    mc = simulate(quiet, robot_controller, paths=2, seed=1, substeps=SUBSTEPS, per_path=True)
     exact = evaluate_table(quiet, robot.table, path=False)
     assert mc.cost[0] == pytest.approx(exact.J, rel=1e-6)
     for k in range(2):

@@ -35,7 +35,7 @@ def test_auto_substeps_keep_the_plant_bias_under_a_tenth_of_the_standard_error(h
     mc = simulate_problem(d, paths=paths, seed=SEED)
     choice = mc.substep_choice
     assert choice is not None and choice.substeps == mc.substeps and choice.met
-    se = mc.cost.std(ddof=1) / np.sqrt(paths)
+    se = mc.cost_std() / np.sqrt(paths)
     bias = scheme_bias(problem, d.table, mc.substeps, d.implemented.J)
     assert bias == pytest.approx(choice.bias, rel=1e-12)
     assert abs(bias) <= 0.1 * se, (mc.substeps, bias, se)
@@ -55,7 +55,18 @@ def test_the_pilot_leaves_the_run_stream_alone(robot_10hz):
     auto = simulate_problem(d, paths=500, seed=SEED)
     fixed = simulate_problem(d, paths=500, seed=SEED, substeps=auto.substeps)
     assert fixed.substep_choice is None
-    assert np.array_equal(auto.cost, fixed.cost)
+    assert np.array_equal(auto.cost_moments.mean, fixed.cost_moments.mean)
+    assert np.array_equal(auto.cost_moments.comoment, fixed.cost_moments.comoment)
+
+
+def assert_same_statistics(a, b):
+    """The streamed statistics of two runs, bit for bit (they merge in block order)."""
+    for x, y in zip([a.cost_moments, *a.knot_moments], [b.cost_moments, *b.knot_moments]):
+        for name in ("mean", "comoment", "m3", "m4", "low", "high"):
+            assert np.array_equal(getattr(x, name), getattr(y, name)), name
+    assert (a.saturated_tick_count, a.saturated_path_count) == (b.saturated_tick_count,
+                                                                b.saturated_path_count)
+    assert np.array_equal(a.cost_sample, b.cost_sample)
 
 
 def test_block_streams_are_the_seed_sequence_children():
@@ -75,7 +86,8 @@ def test_same_numbers_on_one_two_or_four_workers(robot_problem, robot_zoh):
     from stospline.harness.montecarlo import BLOCK_PATHS, simulate
     ctl = build_controller(robot_zoh.table)
     paths = 2 * BLOCK_PATHS + 300                  # three blocks, the last one short
-    runs = {w: simulate(robot_problem, ctl, paths=paths, seed=SEED, substeps=1, workers=w)
+    runs = {w: simulate(robot_problem, ctl, paths=paths, seed=SEED, substeps=1, workers=w,
+                     per_path=True)
             for w in (1, 2, 4)}
     for w in (2, 4):
         assert np.array_equal(runs[w].cost, runs[1].cost)
@@ -83,6 +95,7 @@ def test_same_numbers_on_one_two_or_four_workers(robot_problem, robot_zoh):
         assert all(np.array_equal(a, b) for a, b in zip(runs[w].knot_states, runs[1].knot_states))
         assert np.array_equal(runs[w].saturated_ticks, runs[1].saturated_ticks)
         assert runs[w].worst_status == runs[1].worst_status
+        assert_same_statistics(runs[w], runs[1])
     # and the blocks are really different streams: no two blocks repeat each other's paths
     c = runs[1].cost
     assert len(np.unique(c)) == paths
@@ -96,16 +109,18 @@ def test_dask_cluster_gives_the_same_numbers(robot_problem, robot_zoh):
     from stospline.harness.montecarlo import BLOCK_PATHS, simulate
     ctl = build_controller(robot_zoh.table)
     paths = 2 * BLOCK_PATHS + 100
-    ref = simulate(robot_problem, ctl, paths=paths, seed=SEED, substeps=1, workers=1)
+    ref = simulate(robot_problem, ctl, paths=paths, seed=SEED, substeps=1, workers=1,
+                   per_path=True)
     runs = []
     for n in (1, 2):
         with LocalCluster(n_workers=n, processes=False, threads_per_worker=1,
                           dashboard_address=None) as cluster:
             runs.append(simulate(robot_problem, ctl, paths=paths, seed=SEED, substeps=1,
-                                 scheduler=cluster.scheduler_address))
+                                 scheduler=cluster.scheduler_address, per_path=True))
     runs.append(simulate(robot_problem, ctl, paths=paths, seed=SEED, substeps=1, workers=2,
-                         scheduler="local"))
+                         scheduler="local", per_path=True))
     for run in runs:
         assert np.array_equal(run.cost, ref.cost)
         assert np.array_equal(run.mean_x, ref.mean_x)
         assert all(np.array_equal(a, b) for a, b in zip(run.knot_states, ref.knot_states))
+        assert_same_statistics(run, ref)

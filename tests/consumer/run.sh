@@ -16,6 +16,11 @@
 #                     table in one program with the float32 ones (two_arith.c, q15_robot.c)
 #   fetchcontent_fixed      FetchContent (FETCHCONTENT_SOURCE_DIR_STOSPLINE = this checkout),
 #                     FIXED_SHAPE
+#   hostile_flags     the consumer compiled with flags of its own that break bit-exactness
+#                     (-O3 -march=native -mfma -ffp-contract=fast -ffast-math: fused
+#                     multiply-adds, fast math), twice: add_subdirectory and find_package
+#                     FIXED_SHAPE (the controller compiled in the consumer's build both times);
+#                     the options stospline::stsp carries must give the harness's bits anyway
 #   pkg_config        cc main.c robot_corridor.c $(pkg-config --cflags --libs stospline), with
 #                     PKG_CONFIG_PATH into the installed prefix
 #   wrong_arith       a Q15 table against the float32 package must fail: stospline_add_gains at
@@ -111,6 +116,9 @@ case "$mode" in
     grep -q 'INTERFACE_COMPILE_DEFINITIONS "STSP_HOST_MESSAGES;STSP_ARITH_FLOAT32"' \
       "$prefix/lib/cmake/stospline/stosplineTargets.cmake" \
       || fail "stospline::stsp does not carry STSP_ARITH_FLOAT32"
+    grep -q 'INTERFACE_COMPILE_OPTIONS ".*-fno-fast-math;-ffp-contract=off' \
+      "$prefix/lib/cmake/stospline/stosplineTargets.cmake" \
+      || fail "stospline::stsp does not carry -fno-fast-math -ffp-contract=off"
     ;;
   find_package|find_package_fixed)
     fixed=OFF
@@ -162,6 +170,37 @@ case "$mode" in
       -DCONSUMER_FIXED_SHAPE=ON
     build_run_compare
     no_tests_built "$work/build/_deps/stospline-build" "$work/build"
+    ;;
+  hostile_flags)
+    # FMA where the machine has it (x86-64 with fma): contraction then changes bits for real.
+    hostile="-O3 -march=native -ffp-contract=fast -ffast-math"
+    if [ "$(uname -m)" = x86_64 ] && grep -qw fma /proc/cpuinfo; then
+      hostile="$hostile -mfma"
+      # The flags do fuse: a*b+c alone compiles to a fused multiply-add.
+      printf 'double f(double a, double b, double c) { return a * b + c; }\n' >"$work/probe.c"
+      # shellcheck disable=SC2086 # the flags are words
+      "$cc" $hostile -c "$work/probe.c" -o "$work/probe.o"
+      objdump -d "$work/probe.o" | grep -q vfmadd || fail "$hostile does not fuse a*b+c"
+    else
+      echo "hostile_flags: no FMA on this machine; -ffast-math and -O3 only"
+    fi
+    for how in subdirectory package; do
+      if [ "$how" = subdirectory ]; then
+        from=(-DSTOSPLINE_FROM=subdirectory -DSTOSPLINE_SOURCE_DIR="$src")
+      else
+        from=(-DCMAKE_PREFIX_PATH="$prefix" -DCONSUMER_FIXED_SHAPE=ON)
+      fi
+      rm -rf "$work/build"
+      configure_consumer "${from[@]}" -DCONSUMER_TABLE="$table" -DCMAKE_C_FLAGS="$hostile"
+      build_run_compare
+      # The controller's objects carry no fused multiply-add.
+      find "$work/build" -name 'stsp_*.c.o' -exec objdump -d {} + >"$work/controller.dis"
+      [ -s "$work/controller.dis" ] || fail "no controller objects in $work/build"
+      if grep -Eq 'vf(n)?m(add|sub)' "$work/controller.dis"; then
+        fail "$how: the controller was compiled with fused multiply-adds"
+      fi
+      echo "hostile_flags ($how): '$hostile' on the consumer, the harness's bits"
+    done
     ;;
   pkg_config)
     export PKG_CONFIG_PATH="$prefix/lib/pkgconfig"

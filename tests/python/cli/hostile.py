@@ -553,11 +553,20 @@ def _hello(crc32: int, payload_len: int = 28) -> bytes:
     return frames.encode(frames.HELLO, 0, payload[:payload_len])
 
 
+def _short_command(crc32: int) -> bytes:
+    """The right table's HELLO (to QUERY, then to RESET), then a COMMAND of 2 bytes."""
+    from stospline.board import frames
+    return _hello(crc32) + _hello(crc32) + frames.encode(frames.COMMAND, 1, b"\x00\x00")
+
+
+# name -> what the fake board sends: bytes, None (hangs up), or a function of the CRC-32 of
+# NOISY's float32 table (a board that runs the right table).
 BOARD_PEERS = {
     "hangup": None,
     "garbage": bytes(range(256)) * 4,                   # no frame: the 5 s timeout
     "short_hello": _hello(0, 27),                       # a HELLO of the wrong length
     "other_table": _hello(0xDEADBEEF),                  # another table's CRC
+    "short_command": _short_command,
 }
 
 
@@ -630,6 +639,8 @@ BOARD_CASES = {
                               "--paths", "2"], "--port"),
     "hil_peer_other_table": (["hil", "{problem}", *_B, "--port", "{peer:other_table}",
                               "--paths", "2"], "--board"),
+    "hil_peer_short_command": (["hil", "{problem}", *_B, "--port", "{peer:short_command}",
+                                "--paths", "2"], "--port: a frame from the board too short"),
 }
 
 

@@ -553,7 +553,13 @@ def test_board_and_hil_inputs_are_refused_naming_the_option(case, tmp_path):
              "{file}": "FILE", "{dir}": "dir", "{fifo}": "fifo", "{text}": "text.elf",
              "{elf64}": "x86.elf", "{arm_stub}": "stub.elf",
              "{closed}": f"tcp:127.0.0.1:{_closed_port()}"}
-    with (_fake_board(BOARD_PEERS[peer]) if peer else contextlib.nullcontext()) as port:
+    data = BOARD_PEERS.get(peer)
+    if callable(data):
+        from stospline.pipeline import design_problem
+        from stospline.problem.reader import load_problem
+        from stospline.table.format import table_crc32
+        data = data(table_crc32(design_problem(load_problem(tmp_path / "p.toml")).table))
+    with (_fake_board(data) if peer else contextlib.nullcontext()) as port:
         names[f"{{peer:{peer}}}"] = f"tcp:127.0.0.1:{port}"
         args = [names.get(a, a.replace("{file}", "FILE")) for a in argv] + ["--quiet"]
         before = _tree(tmp_path)

@@ -21,6 +21,10 @@
 #                     multiply-adds, fast math), twice: add_subdirectory and find_package
 #                     FIXED_SHAPE (the controller compiled in the consumer's build both times);
 #                     the options stospline::stsp carries must give the harness's bits anyway
+#   qemu_nano         main.c, the robot's table and the firmware cross-compiled for the
+#                     Cortex-M4F with newlib-nano (--specs=nano.specs, semihosting), linked with
+#                     tools/arm's start-up and linker script, run on QEMU's mps2-an386: its
+#                     output must be the host's (compare_harness.py), printf without %a or %f
 #   pkg_config        cc main.c robot_corridor.c $(pkg-config --cflags --libs stospline), with
 #                     PKG_CONFIG_PATH into the installed prefix
 #   wrong_arith       a Q15 table against the float32 package must fail: stospline_add_gains at
@@ -201,6 +205,23 @@ case "$mode" in
       fi
       echo "hostile_flags ($how): '$hostile' on the consumer, the harness's bits"
     done
+    ;;
+  qemu_nano)
+    cpu=(-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard)
+    arm-none-eabi-gcc "${cpu[@]}" -std=c99 -O2 -Wall -Wextra -Wpedantic -Wconversion -Werror \
+      -fno-fast-math -ffp-contract=off -DSTSP_ARITH_FLOAT32 -I"$src/firmware/include" \
+      -I"$src/firmware/src" -I"$src/gains" "$here/main.c" "$table" "$src"/firmware/src/*.c \
+      "$src/tools/arm/startup.c" --specs=nano.specs --specs=rdimon.specs \
+      -T "$src/tools/arm/mps2-an386.ld" -Wl,--gc-sections -o "$work/robot.elf"
+    status=0
+    timeout 300 qemu-system-arm -M mps2-an386 -nographic -monitor none \
+      -semihosting-config enable=on,target=native -kernel "$work/robot.elf" \
+      >"$work/commands.txt" 2>"$work/stderr.txt" || status=$?
+    [ "$status" -eq 0 ] || { cat "$work/stderr.txt"; fail "QEMU: exit status $status"; }
+    echo "main.c on QEMU: $(wc -l <"$work/commands.txt") lines; last: $(tail -n 1 "$work/commands.txt")"
+    grep -q "^final state (micro-units) -1000000 0 5000000 0$" "$work/stderr.txt" \
+      || { cat "$work/stderr.txt"; fail "the final state line"; }
+    "$python" "$here/compare_harness.py" "$work/commands.txt"
     ;;
   pkg_config)
     export PKG_CONFIG_PATH="$prefix/lib/pkgconfig"

@@ -16,6 +16,9 @@ find_program(STSP_ARM_READELF arm-none-eabi-readelf)
 if(STSP_ARM_GCC AND STSP_ARM_READELF)
   list(APPEND consumer_modes presets)
 endif()
+if(STSP_ARM_GCC AND STSP_QEMU_ARM AND IS_ABSOLUTE "${STSP_ARM_NEWLIB}")
+  list(APPEND consumer_modes qemu_nano)
+endif()
 foreach(mode ${consumer_modes})
   add_test(NAME consumer_${mode}
            COMMAND ${CMAKE_CURRENT_SOURCE_DIR}/tests/consumer/run.sh ${mode} ${consumer_dir}/${mode}

@@ -20,7 +20,9 @@
 #                     (-O3 -march=native -mfma -ffp-contract=fast -ffast-math: fused
 #                     multiply-adds, fast math), twice: add_subdirectory and find_package
 #                     FIXED_SHAPE (the controller compiled in the consumer's build both times);
-#                     the options stospline::stsp carries must give the harness's bits anyway
+#                     the options stospline::stsp carries must give the harness's bits anyway;
+#                     with arm-none-eabi-gcc, the FIXED_SHAPE controller cross-compiled for the
+#                     Cortex-M4F under -O3 -ffp-contract=fast -ffast-math has no vfma
 #   qemu_nano         main.c, the robot's table and the firmware cross-compiled for the
 #                     Cortex-M4F with newlib-nano (--specs=nano.specs, semihosting), linked with
 #                     tools/arm's start-up and linker script, run on QEMU's mps2-an386: its
@@ -205,6 +207,30 @@ case "$mode" in
       fi
       echo "hostile_flags ($how): '$hostile' on the consumer, the harness's bits"
     done
+    # The same on the Cortex-M4F (FPv4-SP has vfma): a cross-compiled consumer (add_subdirectory,
+    # FIXED_SHAPE) whose flags fuse; its controller must have no fused multiply-add.
+    if command -v arm-none-eabi-gcc >/dev/null; then
+      # (CMAKE_C_FLAGS replaces the toolchain file's CPU flags: they are spelled out here.)
+      arm_cpu="-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard"
+      arm_hostile="-O3 -ffp-contract=fast -ffast-math"
+      printf 'float f(float a, float b, float c) { return a * b + c; }\n' >"$work/probe.c"
+      # shellcheck disable=SC2086 # the flags are words
+      arm-none-eabi-gcc $arm_cpu $arm_hostile -c "$work/probe.c" -o "$work/probe_arm.o"
+      arm-none-eabi-objdump -d "$work/probe_arm.o" | grep -q vfma \
+        || fail "$arm_hostile does not fuse a*b+c on the Cortex-M4F"
+      rm -rf "$work/arm"
+      "$cmake" -S "$here" -B "$work/arm" -G "$generator" \
+        -DCMAKE_TOOLCHAIN_FILE="$src/tools/arm/arm-none-eabi.cmake" -DCMAKE_BUILD_TYPE=Release \
+        -DSTOSPLINE_FROM=subdirectory -DSTOSPLINE_SOURCE_DIR="$src" -DCONSUMER_TABLE="$table" \
+        -DCONSUMER_FIXED_SHAPE=ON -DCMAKE_C_FLAGS="$arm_cpu $arm_hostile" >/dev/null
+      "$cmake" --build "$work/arm" --target robot_gains_stsp robot_gains >/dev/null
+      arm-none-eabi-objdump -d "$work/arm/librobot_gains_stsp.a" >"$work/arm/controller.dis"
+      grep -q vmls "$work/arm/controller.dis" || fail "no Cortex-M4F controller code found"
+      if grep -Eq 'vfn?m[as]' "$work/arm/controller.dis"; then
+        fail "cortex-m4: the controller was compiled with fused multiply-adds"
+      fi
+      echo "hostile_flags (cortex-m4): '$arm_hostile' on the consumer, no fused multiply-add"
+    fi
     ;;
   qemu_nano)
     cpu=(-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard)

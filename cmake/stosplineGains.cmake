@@ -110,8 +110,13 @@ function(stospline_add_gains target source)
       PRIVATE "${src_dir}")
     target_compile_definitions(${controller}
       PUBLIC $<TARGET_PROPERTY:stospline::stsp,INTERFACE_COMPILE_DEFINITIONS> ${table_FIXED_DEFS})
-    # ISO C99: also keeps GCC from contracting a*b+c into a fused multiply-add, which would
-    # change the commands' bits (docs/guide/firmware.md).
+    # The bit-exact contract's options that stospline::stsp carries (-fno-fast-math
+    # -ffp-contract=off): after the project's own flags, whatever those are.
+    target_compile_options(${controller}
+      PUBLIC $<TARGET_PROPERTY:stospline::stsp,INTERFACE_COMPILE_OPTIONS>)
+    target_link_options(${controller}
+      INTERFACE $<TARGET_PROPERTY:stospline::stsp,INTERFACE_LINK_OPTIONS>)
+    # ISO C99 too: GCC's -std=c99 keeps contraction off even without the option.
     set_target_properties(${controller} PROPERTIES C_STANDARD 99 C_STANDARD_REQUIRED ON
                           C_EXTENSIONS OFF STSP_ARITH "${lib_arith}")
   endif()

@@ -2,7 +2,8 @@
 
     .venv/bin/python tests/consumer/compare_harness.py OUTPUT
 
-OUTPUT holds main.c's lines ``tick status x0 x1 x2 x3 u0 u1`` (C99 hex floats). The harness
+OUTPUT holds main.c's lines ``tick status x0 x1 x2 x3 u0 u1`` (each float as the 8 hex
+digits of its bits). The harness
 (`stospline.harness.controller.build_controller`) compiles the firmware with the robot's table as the
 designer makes it today, after checking that this is byte for byte the gains/robot_corridor.c
 the consumer linked; it then steps one instance with the same ticks and states. Every status
@@ -27,11 +28,12 @@ def read_run(path: Path):
             raise SystemExit(f"compare_harness: {path}: not a main.c line: {line!r}")
         ticks.append(int(fields[0]))
         status.append(int(fields[1]))
-        x.append([float.fromhex(f) for f in fields[2:6]])
-        u.append([float.fromhex(f) for f in fields[6:8]])
-    # Every value printed is a float32 widened to double: the conversion back is exact.
-    return (np.array(ticks), np.array(status), np.array(x, dtype=np.float32),
-            np.array(u, dtype=np.float32))
+        if not all(len(f) == 8 for f in fields[2:]):
+            raise SystemExit(f"compare_harness: {path}: not 8 hex digits per float: {line!r}")
+        x.append([int(f, 16) for f in fields[2:6]])
+        u.append([int(f, 16) for f in fields[6:8]])
+    return (np.array(ticks), np.array(status), np.array(x, dtype=np.uint32).view(np.float32),
+            np.array(u, dtype=np.uint32).view(np.float32))
 
 
 def main(argv: list[str]) -> int:

@@ -4,9 +4,11 @@
  * on_tick() runs from the timer interrupt at ROBOT_CORRIDOR_TICK_HZ; here the plant is the
  * noise-free robot (a double integrator per axis, held command, exact) so that the run is
  * deterministic. Prints one line per tick: tick, status, the state x given to stsp_step and
- * the command u, as C99 hex floats (exact). docs/guide/integration.md explains each step. */
+ * the command u, each float as the 8 hex digits of its IEEE 754 bits (exact, and portable:
+ * newlib-nano's printf has neither %a nor %f). docs/guide/integration.md explains each step. */
 #include <stdint.h>
 #include <stdio.h>
+#include <string.h>
 
 #include "robot_corridor.h" /* generated; includes stospline/stsp_controller.h */
 
@@ -38,6 +40,20 @@ static void plant_apply(const float u[NU])
     }
 }
 
+/* The bits of v, for printing: memcpy is the defined way to read a float's representation. */
+static unsigned long float_bits(float v)
+{
+    uint32_t bits;
+    memcpy(&bits, &v, sizeof bits);
+    return (unsigned long)bits;
+}
+
+/* Micro-units, rounded, for printing a double without %f. */
+static long micro(double v)
+{
+    return (long)(v * 1e6 + ((v < 0.0) ? -0.5 : 0.5));
+}
+
 /* One tick: measure, compute the command from this tick's state, apply it at once. */
 static stsp_status_t on_tick(uint32_t tick)
 {
@@ -48,8 +64,9 @@ static stsp_status_t on_tick(uint32_t tick)
     status = stsp_step(&controller, tick, x, u);
     /* status < 0: u is all zeros, the safe hold value, and is applied like any command. */
     plant_apply(u);
-    printf("%lu %d %a %a %a %a %a %a\n", (unsigned long)tick, (int)status, (double)x[0],
-           (double)x[1], (double)x[2], (double)x[3], (double)u[0], (double)u[1]);
+    printf("%lu %d %08lx %08lx %08lx %08lx %08lx %08lx\n", (unsigned long)tick, (int)status,
+           float_bits(x[0]), float_bits(x[1]), float_bits(x[2]), float_bits(x[3]),
+           float_bits(u[0]), float_bits(u[1]));
     return status;
 }
 
@@ -74,7 +91,7 @@ int main(void)
         }
     }
     /* The plan is over: x should be the goal (-1, 0, 5, 0). */
-    fprintf(stderr, "final state %.6f %.6f %.6f %.6f\n", plant_x[0], plant_x[1], plant_x[2],
-            plant_x[3]);
+    fprintf(stderr, "final state (micro-units) %ld %ld %ld %ld\n", micro(plant_x[0]),
+            micro(plant_x[1]), micro(plant_x[2]), micro(plant_x[3]));
     return 0;
 }

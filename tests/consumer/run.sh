@@ -16,6 +16,17 @@
 #                     table in one program with the float32 ones (two_arith.c, q15_robot.c)
 #   fetchcontent_fixed      FetchContent (FETCHCONTENT_SOURCE_DIR_STOSPLINE = this checkout),
 #                     FIXED_SHAPE
+#   hostile_flags     the consumer compiled with flags of its own that break bit-exactness
+#                     (-O3 -march=native -mfma -ffp-contract=fast -ffast-math: fused
+#                     multiply-adds, fast math), twice: add_subdirectory and find_package
+#                     FIXED_SHAPE (the controller compiled in the consumer's build both times);
+#                     the options stospline::stsp carries must give the harness's bits anyway;
+#                     with arm-none-eabi-gcc, the FIXED_SHAPE controller cross-compiled for the
+#                     Cortex-M4F under -O3 -ffp-contract=fast -ffast-math has no vfma
+#   qemu_nano         main.c, the robot's table and the firmware cross-compiled for the
+#                     Cortex-M4F with newlib-nano (--specs=nano.specs, semihosting), linked with
+#                     tools/arm's start-up and linker script, run on QEMU's mps2-an386: its
+#                     output must be the host's (compare_harness.py), printf without %a or %f
 #   pkg_config        cc main.c robot_corridor.c $(pkg-config --cflags --libs stospline), with
 #                     PKG_CONFIG_PATH into the installed prefix
 #   wrong_arith       a Q15 table against the float32 package must fail: stospline_add_gains at
@@ -111,6 +122,9 @@ case "$mode" in
     grep -q 'INTERFACE_COMPILE_DEFINITIONS "STSP_HOST_MESSAGES;STSP_ARITH_FLOAT32"' \
       "$prefix/lib/cmake/stospline/stosplineTargets.cmake" \
       || fail "stospline::stsp does not carry STSP_ARITH_FLOAT32"
+    grep -q 'INTERFACE_COMPILE_OPTIONS ".*-fno-fast-math;-ffp-contract=off' \
+      "$prefix/lib/cmake/stospline/stosplineTargets.cmake" \
+      || fail "stospline::stsp does not carry -fno-fast-math -ffp-contract=off"
     ;;
   find_package|find_package_fixed)
     fixed=OFF
@@ -162,6 +176,78 @@ case "$mode" in
       -DCONSUMER_FIXED_SHAPE=ON
     build_run_compare
     no_tests_built "$work/build/_deps/stospline-build" "$work/build"
+    ;;
+  hostile_flags)
+    # FMA where the machine has it (x86-64 with fma): contraction then changes bits for real.
+    hostile="-O3 -march=native -ffp-contract=fast -ffast-math"
+    if [ "$(uname -m)" = x86_64 ] && grep -qw fma /proc/cpuinfo; then
+      hostile="$hostile -mfma"
+      # The flags do fuse: a*b+c alone compiles to a fused multiply-add.
+      printf 'double f(double a, double b, double c) { return a * b + c; }\n' >"$work/probe.c"
+      # shellcheck disable=SC2086 # the flags are words
+      "$cc" $hostile -c "$work/probe.c" -o "$work/probe.o"
+      objdump -d "$work/probe.o" | grep -q vfmadd || fail "$hostile does not fuse a*b+c"
+    else
+      echo "hostile_flags: no FMA on this machine; -ffast-math and -O3 only"
+    fi
+    for how in subdirectory package; do
+      if [ "$how" = subdirectory ]; then
+        from=(-DSTOSPLINE_FROM=subdirectory -DSTOSPLINE_SOURCE_DIR="$src")
+      else
+        from=(-DCMAKE_PREFIX_PATH="$prefix" -DCONSUMER_FIXED_SHAPE=ON)
+      fi
+      rm -rf "$work/build"
+      configure_consumer "${from[@]}" -DCONSUMER_TABLE="$table" -DCMAKE_C_FLAGS="$hostile"
+      build_run_compare
+      # The controller's objects carry no fused multiply-add.
+      find "$work/build" -name 'stsp_*.c.o' -exec objdump -d {} + >"$work/controller.dis"
+      [ -s "$work/controller.dis" ] || fail "no controller objects in $work/build"
+      if grep -Eq 'vf(n)?m(add|sub)' "$work/controller.dis"; then
+        fail "$how: the controller was compiled with fused multiply-adds"
+      fi
+      echo "hostile_flags ($how): '$hostile' on the consumer, the harness's bits"
+    done
+    # The same on the Cortex-M4F (FPv4-SP has vfma): a cross-compiled consumer (add_subdirectory,
+    # FIXED_SHAPE) whose flags fuse; its controller must have no fused multiply-add.
+    if command -v arm-none-eabi-gcc >/dev/null; then
+      # (CMAKE_C_FLAGS replaces the toolchain file's CPU flags: they are spelled out here.)
+      arm_cpu="-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard"
+      arm_hostile="-O3 -ffp-contract=fast -ffast-math"
+      printf 'float f(float a, float b, float c) { return a * b + c; }\n' >"$work/probe.c"
+      # shellcheck disable=SC2086 # the flags are words
+      arm-none-eabi-gcc $arm_cpu $arm_hostile -c "$work/probe.c" -o "$work/probe_arm.o"
+      arm-none-eabi-objdump -d "$work/probe_arm.o" | grep -q vfma \
+        || fail "$arm_hostile does not fuse a*b+c on the Cortex-M4F"
+      rm -rf "$work/arm"
+      "$cmake" -S "$here" -B "$work/arm" -G "$generator" \
+        -DCMAKE_TOOLCHAIN_FILE="$src/tools/arm/arm-none-eabi.cmake" -DCMAKE_BUILD_TYPE=Release \
+        -DSTOSPLINE_FROM=subdirectory -DSTOSPLINE_SOURCE_DIR="$src" -DCONSUMER_TABLE="$table" \
+        -DCONSUMER_FIXED_SHAPE=ON -DCMAKE_C_FLAGS="$arm_cpu $arm_hostile" >/dev/null
+      "$cmake" --build "$work/arm" --target robot_gains_stsp robot_gains >/dev/null
+      arm-none-eabi-objdump -d "$work/arm/librobot_gains_stsp.a" >"$work/arm/controller.dis"
+      grep -q vmls "$work/arm/controller.dis" || fail "no Cortex-M4F controller code found"
+      if grep -Eq 'vfn?m[as]' "$work/arm/controller.dis"; then
+        fail "cortex-m4: the controller was compiled with fused multiply-adds"
+      fi
+      echo "hostile_flags (cortex-m4): '$arm_hostile' on the consumer, no fused multiply-add"
+    fi
+    ;;
+  qemu_nano)
+    cpu=(-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard)
+    arm-none-eabi-gcc "${cpu[@]}" -std=c99 -O2 -Wall -Wextra -Wpedantic -Wconversion -Werror \
+      -fno-fast-math -ffp-contract=off -DSTSP_ARITH_FLOAT32 -I"$src/firmware/include" \
+      -I"$src/firmware/src" -I"$src/gains" "$here/main.c" "$table" "$src"/firmware/src/*.c \
+      "$src/tools/arm/startup.c" --specs=nano.specs --specs=rdimon.specs \
+      -T "$src/tools/arm/mps2-an386.ld" -Wl,--gc-sections -o "$work/robot.elf"
+    status=0
+    timeout 300 qemu-system-arm -M mps2-an386 -nographic -monitor none \
+      -semihosting-config enable=on,target=native -kernel "$work/robot.elf" \
+      >"$work/commands.txt" 2>"$work/stderr.txt" || status=$?
+    [ "$status" -eq 0 ] || { cat "$work/stderr.txt"; fail "QEMU: exit status $status"; }
+    echo "main.c on QEMU: $(wc -l <"$work/commands.txt") lines; last: $(tail -n 1 "$work/commands.txt")"
+    grep -q "^final state (micro-units) -1000000 0 5000000 0$" "$work/stderr.txt" \
+      || { cat "$work/stderr.txt"; fail "the final state line"; }
+    "$python" "$here/compare_harness.py" "$work/commands.txt"
     ;;
   pkg_config)
     export PKG_CONFIG_PATH="$prefix/lib/pkgconfig"

@@ -10,10 +10,14 @@ if(NOT EXISTS ${STSP_VENV_PYTHON} OR NOT STSP_PKG_CONFIG)
 endif()
 set(consumer_dir ${CMAKE_CURRENT_BINARY_DIR}/consumer)
 set(consumer_modes install find_package find_package_fixed add_subdirectory two_arith fetchcontent_fixed
+    hostile_flags
     pkg_config wrong_arith)
 find_program(STSP_ARM_READELF arm-none-eabi-readelf)
 if(STSP_ARM_GCC AND STSP_ARM_READELF)
   list(APPEND consumer_modes presets)
+endif()
+if(STSP_ARM_GCC AND STSP_QEMU_ARM AND IS_ABSOLUTE "${STSP_ARM_NEWLIB}")
+  list(APPEND consumer_modes qemu_nano)
 endif()
 foreach(mode ${consumer_modes})
   add_test(NAME consumer_${mode}
@@ -29,4 +33,5 @@ if(TEST consumer_presets)
 endif()
 set_tests_properties(consumer_install PROPERTIES FIXTURES_SETUP stsp_prefix)
 set_tests_properties(consumer_find_package consumer_find_package_fixed consumer_pkg_config
+                     consumer_hostile_flags
                      consumer_wrong_arith PROPERTIES FIXTURES_REQUIRED stsp_prefix)

@@ -5,6 +5,7 @@
  * to the file argv[1] (run.sh compares them with q15_main.c's, the Q15 controller alone). */
 #include <stdint.h>
 #include <stdio.h>
+#include <string.h>
 
 #include "q15_robot.h"
 #include "robot_corridor.h" /* generated; includes stospline/stsp_controller.h */
@@ -14,6 +15,14 @@
 
 static stsp_ctrl_t controller;
 static double plant_x[NX] = {-5.0, 0.0, 1.0, 0.0}; /* x0 of examples/robot_corridor.toml */
+
+/* The bits of v, printed as main.c prints them. */
+static unsigned long float_bits(float v)
+{
+    uint32_t bits;
+    memcpy(&bits, &v, sizeof bits);
+    return (unsigned long)bits;
+}
 
 /* One float32 tick of main.c: measure, step, apply (double integrator), print. */
 static stsp_status_t f32_tick(uint32_t tick)
@@ -31,8 +40,9 @@ static stsp_status_t f32_tick(uint32_t tick)
         plant_x[2u * j] += plant_x[2u * j + 1u] * h + 0.5 * (double)u[j] * h * h;
         plant_x[2u * j + 1u] += (double)u[j] * h;
     }
-    printf("%lu %d %a %a %a %a %a %a\n", (unsigned long)tick, (int)status, (double)x[0],
-           (double)x[1], (double)x[2], (double)x[3], (double)u[0], (double)u[1]);
+    printf("%lu %d %08lx %08lx %08lx %08lx %08lx %08lx\n", (unsigned long)tick, (int)status,
+           float_bits(x[0]), float_bits(x[1]), float_bits(x[2]), float_bits(x[3]),
+           float_bits(u[0]), float_bits(u[1]));
     return status;
 }
 

@@ -1,6 +1,11 @@
 """The `board` and `hil` subcommands (registered by `stospline.cli.build_parser`)."""
 from __future__ import annotations
 
+import argparse
+import os
+import re
+import stat
+import struct
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -8,6 +13,47 @@ from pathlib import Path
 from stospline.errors import ProblemError
 
 __all__ = ["add_commands"]
+
+EM_ARM = 40   # e_machine of an ARM ELF file
+
+
+def _elf(text: str) -> str:
+    """An existing 32-bit little-endian ARM ELF file (what QEMU's -kernel loads)."""
+    path = Path(text)
+    if not text or not path.is_file():
+        raise argparse.ArgumentTypeError(f"{text!r} is not a file")
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(20)
+    except OSError as exc:
+        raise argparse.ArgumentTypeError(f"cannot read {text}: {exc.strerror}") from None
+    if (len(head) < 20 or head[:4] != b"\x7fELF" or head[4] != 1 or head[5] != 1
+            or struct.unpack_from("<H", head, 18)[0] != EM_ARM):
+        raise argparse.ArgumentTypeError(f"{text} is not a 32-bit ARM ELF image (the "
+                                         f"build/qemu/firmware.elf of a `stospline board` "
+                                         f"project)")
+    return text
+
+
+def _port(text: str) -> str:
+    """``tcp:HOST:PORT`` (PORT 1..65535) or an existing character device."""
+    if text.startswith("tcp:"):
+        host, sep, num = text[4:].rpartition(":")
+        if not (sep and re.fullmatch(r"[0-9]{1,5}", num) and 1 <= int(num) <= 65535
+                and re.fullmatch(r"[^\s/]*", host)):
+            raise argparse.ArgumentTypeError(f"must be tcp:HOST:PORT with PORT in 1..65535, "
+                                             f"got {text!r}")
+        return text
+    try:
+        mode = os.stat(text).st_mode
+    except (OSError, ValueError) as exc:
+        why = exc.strerror if isinstance(exc, OSError) else str(exc)
+        raise argparse.ArgumentTypeError(f"{text!r} is neither tcp:HOST:PORT nor a serial "
+                                         f"device: {why}") from None
+    if not stat.S_ISCHR(mode):
+        raise argparse.ArgumentTypeError(f"{text} is not a serial device (a character device "
+                                         f"such as /dev/ttyACM0) nor tcp:HOST:PORT")
+    return text
 
 
 def add_commands(sub, cli) -> None:
@@ -41,9 +87,9 @@ def add_commands(sub, cli) -> None:
     p.add_argument("problem", help="problem file (TOML)")
     p.add_argument("--board", required=True, choices=sorted(BOARDS))
     where = p.add_mutually_exclusive_group(required=True)
-    where.add_argument("--elf", help="run this image (`stospline board` project, qemu "
+    where.add_argument("--elf", type=_elf, help="run this image (`stospline board` project, qemu "
                                      "preset) in QEMU and connect to its serial line")
-    where.add_argument("--port", help="the board's serial line: a device (/dev/ttyACM0) or "
+    where.add_argument("--port", type=_port, help="the board's serial line: a device (/dev/ttyACM0) or "
                                       "tcp:HOST:PORT")
     p.add_argument("--paths", type=integer(2, 512), default=100,
                    help="paths through the board, 2..512 (default 100)")
@@ -71,8 +117,8 @@ def _board(args, cli) -> int:
     problem = load_problem(args.problem)
     opts = replace(_options(args, problem), arith=arith)
     if opts.delay_ticks:
-        raise ProblemError("--delay-ticks", "the board project runs tables designed without "
-                                            "a delay")
+        raise ProblemError(_delay_field(args), "the board project runs tables designed "
+                                               "without a delay")
     _check_budget(args, problem, opts, "design", arith=arith)
     d = design_problem(problem, options=opts, **_limits(args))
     tables = generated_files(d, Path(args.problem).name, arith)
@@ -95,6 +141,21 @@ def _board(args, cli) -> int:
     return 0
 
 
+def _exited(proc, seconds: float = 1.0) -> bool:
+    """Whether `proc` ends within `seconds` (a line QEMU closed as it exits)."""
+    import subprocess
+    try:
+        proc.wait(timeout=seconds)
+    except subprocess.TimeoutExpired:
+        return False
+    return True
+
+
+def _delay_field(args) -> str:
+    """Where a delay came from: the command line, or the file's [design] table."""
+    return "--delay-ticks" if args.delay_ticks is not None else "design.delay_ticks"
+
+
 def _table_bytes(table, arith: str) -> int:
     from stospline.table.flash import flash_bytes
     return int(flash_bytes(table, arith))
@@ -113,15 +174,14 @@ def _hil(args, cli) -> int:
     arith = args.arith or board.arith
     if arith not in ("float32", "q15", "q31"):
         raise ProblemError("--arith", f"must be one of ['float32', 'q15', 'q31'], got {arith!r}")
-    if args.elf is not None and not Path(args.elf).is_file():
-        raise ProblemError("--elf", f"{args.elf} is not a file")
     problem = load_problem(args.problem)
     if problem.faults.any:
         raise ProblemError("faults", "the serial HIL run simulates the fault-free loop; "
                                      "run `stospline simulate` for faults")
     opts = replace(_options(args, problem), arith=arith)
     if opts.delay_ticks:
-        raise ProblemError("--delay-ticks", "the board runs tables designed without a delay")
+        raise ProblemError(_delay_field(args), "the board runs tables designed without a "
+                                               "delay")
     if any(st.varying is not None for st in problem.stages):
         raise ProblemError("stages", "the serial HIL run needs time-invariant stage data")
     d = design_problem(problem, options=opts, **_limits(args))
@@ -129,13 +189,19 @@ def _hil(args, cli) -> int:
     ctl = build_controller(table)
     ref = simulate(problem, ctl, paths=args.paths, seed=args.seed, substeps=args.substeps,
                    workers=1, record=args.paths)
-    proc = None
+    # A line that cannot be opened, fails or carries what is not the protocol: exit 2, one
+    # line naming the option that chose the line.
+    option = "--elf" if args.elf is not None else "--port"
+    proc = link = None
     try:
         if args.elf is not None:
             proc, link = hil.start_qemu(board.name, args.elf)
         else:
             link = hil.open_port(args.port)
-        info = hil.hello(link)
+        try:
+            info = hil.hello(link)
+        except ValueError as exc:
+            raise hil.HilError(f"the board's HELLO frame is not one: {exc}") from None
         if info.crc32 != int(ctl.c_table.crc32) or info.nx != table.dims[0]:
             raise ProblemError("--board", f"the board runs a table with crc32 0x{info.crc32:08X} "
                                           f"({info.arith}), this design's is "
@@ -143,14 +209,33 @@ def _hil(args, cli) -> int:
                                           f"its project with `stospline board`")
         res = hil.run_hil(problem, ctl, link, paths=args.paths, seed=args.seed,
                           substeps=args.substeps, reference=ref)
-        link.close()
     except hil.HilError as exc:
-        print(f"stospline: error: --{'elf' if args.elf else 'port'}: {exc}", file=sys.stderr)
-        return 1
+        why = str(exc)
+        if proc is not None and _exited(proc):   # QEMU gave up: the first line it said
+            said = proc.stderr.read().decode(errors="replace").strip().splitlines()
+            why += f" (qemu-system-arm: {said[0].strip()})" if said else ""
+        print(f"stospline: error: {option}: {why}", file=sys.stderr)
+        return 2
+    except struct.error as exc:
+        print(f"stospline: error: {option}: a frame from the board too short for its type "
+              f"({exc})", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        if link is None and proc is None and args.elf is not None:
+            what = "cannot start qemu-system-arm"
+        elif link is None:
+            what = f"cannot open {args.port}"
+        else:
+            what = "the serial line failed"
+        print(f"stospline: error: {option}: {what}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     finally:
+        if link is not None:
+            link.close()
         if proc is not None:
             proc.kill()
             proc.wait()
+            proc.stderr.close()
     ref.cost = res.cost
     ref.knot_states = res.knot_states
     s = simulation_summary(d, ref, seed=args.seed)

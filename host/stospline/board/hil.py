@@ -111,10 +111,14 @@ def open_port(port: str, timeout: float = 5.0) -> Link:
     import termios
     import tty
     fd = os.open(port, os.O_RDWR | os.O_NOCTTY)
-    tty.setraw(fd)
-    attrs = termios.tcgetattr(fd)
-    attrs[4] = attrs[5] = termios.B115200
-    termios.tcsetattr(fd, termios.TCSANOW, attrs)
+    try:
+        tty.setraw(fd)
+        attrs = termios.tcgetattr(fd)
+        attrs[4] = attrs[5] = termios.B115200
+        termios.tcsetattr(fd, termios.TCSANOW, attrs)
+    except termios.error as exc:
+        os.close(fd)
+        raise HilError(f"{port} is not a serial line: {exc.args[-1]}") from None
     return Link(fd=fd, timeout=timeout)
 
 

@@ -586,6 +586,117 @@ def m_parameters(doc, draw):
 
 MUTATIONS["parameters"] = m_parameters
 
+# Board and HIL: options, files and serial peers of `stospline board` and `stospline hil`.
+# Each case is refused with exit status 2, one line naming the option (or key) and nothing on
+# disk; `None` instead of the words: the control case, accepted. The test's placeholders:
+#   {problem} NOISY as a file   {delayed} NOISY with [design] delay_ticks = 1
+#   {faulty}  NOISY with [faults]   {file} a regular file   {dir} a directory
+#   {fifo}    a named pipe      {text} a text file named .elf   {elf64} an x86-64 ELF header
+#   {arm_stub} an ARM ELF header with nothing to load (QEMU starts and gives up; needs QEMU)
+#   {closed}  tcp: to a port nobody listens on
+#   {peer:NAME} tcp: to a fake board that sends BOARD_PEERS[NAME] (None: hangs up at once)
+# The hil cases that get past the options to the serial line say --paths 2 (a short reference
+# run of the host-compiled controller first); the test runs those in a child process.
+
+def _hello(crc32: int, payload_len: int = 28) -> bytes:
+    """A HELLO frame from a float32 board with NOISY's shape (nx 2, nu 1, 40 ticks at 20 Hz)."""
+    import struct
+    from stospline.board import frames
+    payload = struct.pack("<BBBBIIIbbBBII", frames.PROTOCOL, 0, 2, 1, 40, 20, crc32, 0, 0, 1,
+                          1, 168_000_000, 8_400_000)
+    return frames.encode(frames.HELLO, 0, payload[:payload_len])
+
+
+def _short_command(crc32: int) -> bytes:
+    """The right table's HELLO (to QUERY, then to RESET), then a COMMAND of 2 bytes."""
+    from stospline.board import frames
+    return _hello(crc32) + _hello(crc32) + frames.encode(frames.COMMAND, 1, b"\x00\x00")
+
+
+# name -> what the fake board sends: bytes, None (hangs up), or a function of the CRC-32 of
+# NOISY's float32 table (a board that runs the right table).
+BOARD_PEERS = {
+    "hangup": None,
+    "garbage": bytes(range(256)) * 4,                   # no frame: the 5 s timeout
+    "short_hello": _hello(0, 27),                       # a HELLO of the wrong length
+    "other_table": _hello(0xDEADBEEF),                  # another table's CRC
+    "short_command": _short_command,
+}
+
+
+def arm_stub_elf() -> bytes:
+    """An ELF header for 32-bit little-endian ARM (e_machine 40) with no program headers."""
+    import struct
+    return (b"\x7fELF" + bytes((1, 1, 1, 0)) + bytes(8)
+            + struct.pack("<HHIIIIIHHHHHH", 2, 40, 1, 0x08000001, 0, 0, 0x05000400, 52, 0, 0,
+                          0, 0, 0))
+
+
+_B = ["--board", "netduinoplus2"]
+BOARD_CASES = {
+    "board_valid": (["board", "{problem}", *_B, "--out", "o"], None),
+    "board_unknown": (["board", "{problem}", "--board", "nope", "--out", "o"], "--board"),
+    "board_none": (["board", "{problem}", "--out", "o"], "--board"),
+    "board_out_file": (["board", "{problem}", *_B, "--out", "{file}"], "--out"),
+    "board_out_under_file": (["board", "{problem}", *_B, "--out", "{file}/sub"], "--out"),
+    "board_out_is_problem": (["board", "{problem}", *_B, "--out", "{problem}"], "--out"),
+    "board_out_empty": (["board", "{problem}", *_B, "--out", ""], "--out"),
+    "board_out_proc": (["board", "{problem}", *_B, "--out", "/proc/forbidden/x"], "--out"),
+    "board_arith": (["board", "{problem}", *_B, "--out", "o", "--arith", "q7"], "--arith"),
+    "board_timeout_zero": (["board", "{problem}", *_B, "--out", "o", "--timeout-ticks", "0"],
+                           "--timeout-ticks"),
+    "board_verify_float": (["board", "{problem}", *_B, "--out", "o", "--verify-ticks", "1e3"],
+                           "--verify-ticks"),
+    "board_delay_option": (["board", "{problem}", *_B, "--out", "o", "--delay-ticks", "1"],
+                           "--delay-ticks"),
+    "board_delay_in_file": (["board", "{delayed}", *_B, "--out", "o"], "design.delay_ticks"),
+    "board_problem_dir": (["board", "{dir}", *_B, "--out", "o"], "not a problem file"),
+    "board_problem_missing": (["board", "missing.toml", *_B, "--out", "o"], "missing.toml"),
+    "hil_unknown": (["hil", "{problem}", "--board", "nope", "--port", "{closed}"], "--board"),
+    "hil_no_line": (["hil", "{problem}", *_B], "--elf --port"),
+    "hil_both_lines": (["hil", "{problem}", *_B, "--port", "{closed}", "--elf", "{arm_stub}"],
+                       "--elf: not allowed with argument --port"),
+    "hil_paths_one": (["hil", "{problem}", *_B, "--port", "{closed}", "--paths", "1"],
+                      "--paths"),
+    "hil_paths_513": (["hil", "{problem}", *_B, "--port", "{closed}", "--paths", "513"],
+                      "--paths"),
+    "hil_seed": (["hil", "{problem}", *_B, "--port", "{closed}", "--seed", "-1"], "--seed"),
+    "hil_substeps": (["hil", "{problem}", *_B, "--port", "{closed}", "--substeps", "0"],
+                     "--substeps"),
+    "hil_arith": (["hil", "{problem}", *_B, "--port", "{closed}", "--arith", "q7"], "--arith"),
+    "hil_faults": (["hil", "{faulty}", *_B, "--port", "{closed}"], "faults"),
+    "hil_elf_missing": (["hil", "{problem}", *_B, "--elf", "missing.elf"], "--elf"),
+    "hil_elf_dir": (["hil", "{problem}", *_B, "--elf", "{dir}"], "--elf"),
+    "hil_elf_dev_zero": (["hil", "{problem}", *_B, "--elf", "/dev/zero"], "--elf"),
+    "hil_elf_text": (["hil", "{problem}", *_B, "--elf", "{text}"], "--elf"),
+    "hil_elf_x86_64": (["hil", "{problem}", *_B, "--elf", "{elf64}"], "--elf"),
+    "hil_elf_nothing_to_load": (["hil", "{problem}", *_B, "--elf", "{arm_stub}", "--paths", "2"],
+                                "--elf"),
+    "hil_port_missing": (["hil", "{problem}", *_B, "--port", "/dev/nonexistent-tty"], "--port"),
+    "hil_port_empty": (["hil", "{problem}", *_B, "--port", ""], "--port"),
+    "hil_port_file": (["hil", "{problem}", *_B, "--port", "{file}"], "--port"),
+    "hil_port_fifo": (["hil", "{problem}", *_B, "--port", "{fifo}"], "--port"),
+    "hil_port_not_a_tty": (["hil", "{problem}", *_B, "--port", "/dev/null", "--paths", "2"],
+                           "--port"),
+    "hil_port_tcp_letters": (["hil", "{problem}", *_B, "--port", "tcp:127.0.0.1:x"], "--port"),
+    "hil_port_tcp_range": (["hil", "{problem}", *_B, "--port", "tcp::99999"], "--port"),
+    "hil_port_tcp_zero": (["hil", "{problem}", *_B, "--port", "tcp::0"], "--port"),
+    "hil_port_tcp_bare": (["hil", "{problem}", *_B, "--port", "tcp:"], "--port"),
+    "hil_port_tcp_space": (["hil", "{problem}", *_B, "--port", "tcp:a b:80"], "--port"),
+    "hil_port_refused": (["hil", "{problem}", *_B, "--port", "{closed}", "--paths", "2"],
+                         "--port"),
+    "hil_peer_hangup": (["hil", "{problem}", *_B, "--port", "{peer:hangup}", "--paths", "2"],
+                        "--port"),
+    "hil_peer_garbage": (["hil", "{problem}", *_B, "--port", "{peer:garbage}", "--paths", "2"],
+                         "--port"),
+    "hil_peer_short_hello": (["hil", "{problem}", *_B, "--port", "{peer:short_hello}",
+                              "--paths", "2"], "--port"),
+    "hil_peer_other_table": (["hil", "{problem}", *_B, "--port", "{peer:other_table}",
+                              "--paths", "2"], "--board"),
+    "hil_peer_short_command": (["hil", "{problem}", *_B, "--port", "{peer:short_command}",
+                                "--paths", "2"], "--port: a frame from the board too short"),
+}
+
 
 @st.composite
 def problem_cases(draw):

@@ -474,3 +474,99 @@ def test_hostile_overflows_name_their_cause(case, tmp_path):
     else:
         check_refusal(rc, stdout, err, before, _tree(tmp_path), case)
         assert f": {field}:" in err and "no single input is extreme" not in err, err
+
+
+# ---------------------------------------------------------------------------------------
+# Board and HIL (hostile.BOARD_CASES): `stospline board` and `stospline hil` options, files
+# and serial peers, each refused in one line naming its option, nothing on disk.
+
+@contextlib.contextmanager
+def _fake_board(data):
+    """A local TCP server playing a board: accepts one connection, sends `data` (None: hangs
+    up at once), then waits until the client hangs up. Yields its port."""
+    import socket
+    import threading
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    srv.settimeout(TIME_LIMIT_S)
+
+    def serve():
+        try:
+            conn, _ = srv.accept()
+        except OSError:
+            return
+        with conn:
+            if data is None:
+                return
+            conn.sendall(data)
+            conn.settimeout(TIME_LIMIT_S)
+            try:
+                while conn.recv(4096):
+                    pass
+            except OSError:
+                pass
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    port = srv.getsockname()[1]
+    try:
+        yield port
+    finally:
+        if thread.is_alive():   # no client came (refused before the line): wake accept()
+            with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port)):
+                pass
+        thread.join(timeout=5)
+        srv.close()
+
+
+def _closed_port() -> int:
+    import socket
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.parametrize("case", sorted(__import__("hostile").BOARD_CASES))
+def test_board_and_hil_inputs_are_refused_naming_the_option(case, tmp_path):
+    import copy
+    from hostile import BOARD_CASES, BOARD_PEERS, arm_stub_elf
+    argv, words = BOARD_CASES[case]
+    reaches_line = argv[0] == "hil" and "--paths" in argv and "2" in argv
+    if "{arm_stub}" in argv and reaches_line and shutil.which("qemu-system-arm") is None:
+        pytest.skip("needs qemu-system-arm (tools/setup.sh installs it)")
+    (tmp_path / "p.toml").write_text(to_toml(NOISY))
+    delayed = copy.deepcopy(NOISY)
+    delayed["design"] = {"delay_ticks": 1}
+    (tmp_path / "delayed.toml").write_text(to_toml(delayed))
+    faulty = copy.deepcopy(NOISY)
+    faulty["faults"] = {"sensor_noise": [0.01, 0.01]}
+    (tmp_path / "faulty.toml").write_text(to_toml(faulty))
+    (tmp_path / "FILE").write_text("not a directory, not a serial line")
+    (tmp_path / "dir").mkdir()
+    os.mkfifo(tmp_path / "fifo")
+    (tmp_path / "text.elf").write_text("not an image\n")
+    (tmp_path / "x86.elf").write_bytes(b"\x7fELF\x02\x01\x01" + bytes(9) + b"\x02\x00\x3e\x00"
+                                       + bytes(44))
+    (tmp_path / "stub.elf").write_bytes(arm_stub_elf())
+    peer = next((a[len("{peer:"):-1] for a in argv if a.startswith("{peer:")), None)
+    names = {"{problem}": "p.toml", "{delayed}": "delayed.toml", "{faulty}": "faulty.toml",
+             "{file}": "FILE", "{dir}": "dir", "{fifo}": "fifo", "{text}": "text.elf",
+             "{elf64}": "x86.elf", "{arm_stub}": "stub.elf",
+             "{closed}": f"tcp:127.0.0.1:{_closed_port()}"}
+    data = BOARD_PEERS.get(peer)
+    if callable(data):
+        from stospline.pipeline import design_problem
+        from stospline.problem.reader import load_problem
+        from stospline.table.format import table_crc32
+        data = data(table_crc32(design_problem(load_problem(tmp_path / "p.toml")).table))
+    with (_fake_board(data) if peer else contextlib.nullcontext()) as port:
+        names[f"{{peer:{peer}}}"] = f"tcp:127.0.0.1:{port}"
+        args = [names.get(a, a.replace("{file}", "FILE")) for a in argv] + ["--quiet"]
+        before = _tree(tmp_path)
+        rc, stdout, err = (run_cli_isolated if reaches_line else run_cli)(args, tmp_path)
+    if words is None:
+        assert rc == 0, err
+        assert (tmp_path / "o" / "CMakeLists.txt").is_file()
+        return
+    check_refusal(rc, stdout, err, before, _tree(tmp_path), f"{case}: {args}")
+    assert words in err, f"{case}: the refusal does not name {words!r}: {err}"

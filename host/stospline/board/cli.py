@@ -49,6 +49,11 @@ def add_commands(sub, cli) -> None:
     p.add_argument("--seed", type=integer(0, seed_max), default=1)
     p.add_argument("--substeps", type=integer(1, 10_000), default=1,
                    help="plant steps per controller tick (default 1)")
+    p.add_argument("--batch", type=integer(1, 255), default=None,
+                   help="paths a frame carries: 1 sends one path's state a tick (STATE "
+                        "frames, a real board's loop); b > 1 the states of b paths in one "
+                        "BATCH frame, stepped by b controller instances on the board "
+                        "(default: as many as the board's HELLO offers)")
     p.add_argument("--arith", default=None, metavar="{float32,q15,q31}",
                    help="the tables' arithmetic on the board (default: the board's)")
     p.add_argument("--ignore-noise", action="store_true")
@@ -139,8 +144,12 @@ def _hil(args, cli) -> int:
                                           f"({info.arith}), this design's is "
                                           f"0x{int(ctl.c_table.crc32):08X} ({arith}): regenerate "
                                           f"its project with `stospline board`")
+        batch = info.batch if args.batch is None else args.batch
+        if batch > max(1, info.batch):
+            raise ProblemError("--batch", f"the board steps at most {info.batch} paths a "
+                                          f"frame, got {batch}")
         res = hil.run_hil(problem, ctl, link, paths=args.paths, seed=args.seed,
-                          substeps=args.substeps, reference=ref)
+                          substeps=args.substeps, reference=ref, batch=batch)
         link.close()
     except hil.HilError as exc:
         print(f"stospline: error: --{'elf' if args.elf else 'port'}: {exc}", file=sys.stderr)
@@ -152,7 +161,7 @@ def _hil(args, cli) -> int:
     ref.cost = res.cost
     ref.knot_states = res.knot_states
     s = simulation_summary(d, ref, seed=args.seed)
-    s["hil"] = {"board": board.name, "arith": arith, "seconds": res.seconds,
+    s["hil"] = {"board": board.name, "arith": arith, "seconds": res.seconds, "batch": batch,
                 "bit_identical": res.mismatches == 0, "mismatches": res.mismatches,
                 "first_mismatch": res.first_mismatch,
                 "statuses": {str(k): v for k, v in sorted(res.statuses.items())},
@@ -165,7 +174,9 @@ def _hil(args, cli) -> int:
     if not args.json:
         hs = s["hil"]
         print(f"  HIL on {board.name} ({arith}): {res.paths} paths x {res.ticks} ticks in "
-              f"{res.seconds:.1f} s; commands and states vs the host-compiled controller: "
+              f"{res.seconds:.1f} s ({batch} a frame, "
+              f"{1e3 * res.seconds / (res.paths * res.ticks):.3f} ms a path-tick); commands "
+              "and states vs the host-compiled controller: "
               + ("bit-identical" if res.mismatches == 0 else
                  f"{res.mismatches} mismatches, first at (path, tick) {res.first_mismatch}"))
         print(f"  board: overruns {hs['overruns']}, timeouts {hs['timeouts']}, bad frames "

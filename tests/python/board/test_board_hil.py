@@ -1,5 +1,6 @@
-"""The generated netduinoplus2 project cross-builds under -Werror, and two paths through it in
-QEMU over the serial line equals the host-compiled controller's path bit for bit."""
+"""The generated netduinoplus2 project cross-builds under -Werror, and paths through it in QEMU
+over the serial line (BATCH frames of two paths, then one) equal the host-compiled
+controller's paths bit for bit."""
 import os
 import shutil
 import subprocess
@@ -28,7 +29,7 @@ def test_frame_crc_and_parser_resync():
 @pytest.mark.skipif(any(shutil.which(t) is None for t in TOOLS),
                     reason="needs arm-none-eabi-gcc, qemu-system-arm, cmake, ninja "
                            "(tools/setup.sh installs them)")
-def test_generated_project_builds_and_one_hil_path_is_bit_identical(tmp_path):
+def test_generated_project_builds_and_hil_paths_are_bit_identical(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(ROOT / "host")}
     prefix = tmp_path / "stsp"
     build = tmp_path / "lib"
@@ -54,12 +55,13 @@ def test_generated_project_builds_and_one_hil_path_is_bit_identical(tmp_path):
     assert r.returncode == 0, r.stdout + r.stderr                # -Werror inside
     r = subprocess.run([sys.executable, "-m", "stospline", "hil",
                         str(ROOT / "examples/robot_corridor.toml"), "--board", "netduinoplus2",
-                        "--elf", str(proj / "build/qemu/firmware.elf"), "--paths", "2",
+                        "--elf", str(proj / "build/qemu/firmware.elf"), "--paths", "3",
+                        "--batch", "2",
                         "--seed", "3", "--json", "--quiet"], env=env, capture_output=True,
                        text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     import json
     s = json.loads(r.stdout)
     assert s["hil"]["bit_identical"] and s["hil"]["mismatches"] == 0
-    assert s["hil"]["statuses"] == {"0": 12000}
+    assert s["hil"]["statuses"] == {"0": 18000} and s["hil"]["batch"] == 2
     assert s["hil"]["bad_frames_board"] == 0 and s["hil"]["lost_frames"] == 0

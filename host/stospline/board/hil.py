@@ -23,7 +23,7 @@ from stospline.board import frames as fr
 
 __all__ = ["table_of", "HilResult", "run_hil", "open_port", "start_qemu", "QEMU_MACHINES"]
 
-QEMU_MACHINES = {"netduinoplus2": "netduinoplus2"}
+QEMU_MACHINES = {"netduinoplus2": "netduinoplus2", "microbit": "microbit"}
 
 
 def table_of(d, arith: str):

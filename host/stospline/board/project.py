@@ -2,7 +2,7 @@
 
 `project_files` returns every file of the project (flat, one directory): the board's start-up
 and linker script, the controller loop (``board_app.c``), the frame protocol
-(``stsp_frame.c/.h``), ``board_config.h`` (the table, its tick rate and the SysTick reload at
+(``stsp_frame.c/.h``), ``board_config.h`` (the table, its tick rate and the tick timer's reload at
 the board's clock), the tables, a CMake project with presets that use the installed
 stospline package and its toolchain file, and a README that says which lines are
 board-specific. `write_project` writes them all or none (`stospline.atomic.write_set`).
@@ -18,7 +18,7 @@ __all__ = ["Board", "BOARDS", "project_files", "write_project", "board_config"]
 
 _FILES = Path(__file__).with_name("files")
 _ARITH_CODE = {"float32": 0, "q15": 1, "q31": 2}
-SYSTICK_MAX = 1 << 24           # SysTick's 24-bit reload register
+TIMER_MAX = 1 << 24             # the tick timer's reload: the SysTick's 24 bits
 FRAME_MAX_PAYLOAD = 160         # STSP_FRAME_MAX_PAYLOAD (files/stsp_frame.h)
 BATCH_MAX = 16                  # controller instances for BATCH frames, at most
 
@@ -36,7 +36,7 @@ class Board:
     name: str                   # QEMU's machine name
     board_id: int               # in the HELLO frame
     cpu: str                    # STSP_ARM_CPU of the installed toolchain file
-    clock_hz: int               # the core clock the SysTick counts
+    clock_hz: int               # the core clock the tick timer counts
     flash_bytes: int
     ram_bytes: int
     arith: str                  # the arithmetic the board's project uses by default
@@ -47,6 +47,8 @@ BOARDS = {
     "netduinoplus2": Board("netduinoplus2", 1, "cortex-m4", 168_000_000, 1024 * 1024,
                            128 * 1024, "float32",
                            "Netduino Plus 2: STM32F405RG, Cortex-M4F at 168 MHz, USART1"),
+    "microbit": Board("microbit", 2, "cortex-m0", 16_000_000, 256 * 1024, 16 * 1024, "q15",
+                      "BBC micro:bit: nRF51822, Cortex-M0 at 16 MHz, UART0, TIMER0 ticks"),
 }
 
 
@@ -54,7 +56,7 @@ def board_config(board: Board, table, *, timeout_ticks: int, verify_ticks: int) 
     """``board_config.h``: the table the project runs and the tick's timer set-up."""
     name = table.name
     cycles = board.clock_hz // int(table.tick_hz)
-    per = max(1, math.ceil(cycles / SYSTICK_MAX))     # SysTick interrupts per tick period
+    per = max(1, math.ceil(cycles / TIMER_MAX))       # timer interrupts per tick period
     reload = cycles // per - 1
     arith = getattr(table, "arith", "float32")
     nx, nu = int(table.dims[0]), int(table.dims[1])
@@ -73,11 +75,11 @@ def board_config(board: Board, table, *, timeout_ticks: int, verify_ticks: int) 
 #define BOARD_PACED 1 /* a tick is the arrival of a STATE frame (board_app.c) */
 /* Controller instances, and paths a BATCH frame carries at most (board_app.c). */
 #define BOARD_BATCH {batch_size(arith, nx, nu)}u
-/* {table.tick_hz} Hz at {board.clock_hz} Hz: {cycles} cycles a tick, {per} SysTick period(s) of
+/* {table.tick_hz} Hz at {board.clock_hz} Hz: {cycles} cycles a tick, {per} timer period(s) of
  * {reload + 1} cycles each */
 #define BOARD_CYCLES_PER_TICK {cycles}u
-#define BOARD_SYSTICK_PER_TICK {per}u
-#define BOARD_SYSTICK_RELOAD {reload}u
+#define BOARD_TIMER_PER_TICK {per}u
+#define BOARD_TIMER_RELOAD {reload}u
 /* No STATE frame for this many tick periods during a run: u_hold and an EVENT frame. */
 #define BOARD_TIMEOUT_TICKS {timeout_ticks}u
 /* stsp_verify() after every this many ticks (and at boot and at each RESET). */
@@ -170,14 +172,14 @@ On the board: `stospline hil {problem_name} --board {board.name} --port /dev/tty
 | `board_{board.name}.c` | vector table, start-up, clock, UART | the clock set-up (`clock_init`: crystal, PLL), the UART and its pins (`uart_init`), the baud rate, `Fault_Handler` (set the actuators safe) |
 | `{board.name}.ld` | linker script | `MEMORY` (flash and RAM of the part), `STACK_SIZE` |
 | `board_app.c` | the loop: frames in, `stsp_step`, frames out; `stsp_verify`; u_hold on any error; overruns | the line marked `board-specific` in `run_tick`: write the command to the actuators |
-| `board_config.h` | the table, SysTick reload for {table.tick_hz} Hz at {board.clock_hz} Hz, timeout, verify period | generated: regenerate for another clock or table |
+| `board_config.h` | the table, the tick timer's reload for {table.tick_hz} Hz at {board.clock_hz} Hz, timeout, verify period | generated: regenerate for another clock or table |
 | `stsp_frame.c`, `stsp_frame.h` | the frame protocol (docs/guide/board.md) | none |
 | `{table.name}.c`, `{table.name}.h` | the tables (`stospline design`) | none |
 | `CMakeLists.txt`, `CMakePresets.json` | the build, with the installed toolchain file | `STSP_ARM_CPU` in the presets |
 
 The loop is *paced*: a tick is the arrival of a STATE frame, so an emulator, whose timer does
 not keep real time, runs it at whatever speed the host feeds it. On a real board the tick is
-the SysTick at {table.tick_hz} Hz: the state frame must arrive before it (docs/guide/board.md,
+the tick timer at {table.tick_hz} Hz: the state frame must arrive before it (docs/guide/board.md,
 "From the emulator to a real board").
 """
 

@@ -5,11 +5,11 @@
  *
  * Two tick sources (board_config.h, BOARD_PACED):
  *   1 (paced, the HIL default, and what QEMU runs): a tick is the arrival of a STATE frame;
- *     the step runs at once and its COMMAND frame goes back. The SysTick still runs at
+ *     the step runs at once and its COMMAND frame goes back. The tick timer still runs at
  *     tick_hz and measures: a step that takes longer than one tick period counts an overrun,
  *     and no STATE frame for BOARD_TIMEOUT_TICKS tick periods during a run applies u_hold and
  *     sends an EVENT frame (BOARD_STATUS_TIMEOUT).
- *   0 (real time): the SysTick interrupt at tick_hz is the tick: it steps with the newest
+ *   0 (real time): the tick-timer interrupt at tick_hz is the tick: it steps with the newest
  *     STATE frame, which must have arrived since the previous tick (else u_hold,
  *     BOARD_STATUS_TIMEOUT); the COMMAND frame is queued and sent by the main loop.
  * A BATCH frame carries the states of up to BOARD_BATCH paths at one tick: BOARD_BATCH
@@ -33,13 +33,6 @@
 #define BOARD_STATUS_NOT_RUNNING 5u /* a STATE frame before RESET: u_hold applied */
 #define BOARD_STATUS_BAD_TYPE 6u    /* a frame of an unknown type: ignored */
 
-/* Cortex-M SysTick (the same on every Cortex-M core). */
-#define SYST_CSR (*(volatile uint32_t *)0xE000E010u)
-#define SYST_RVR (*(volatile uint32_t *)0xE000E014u)
-#define SYST_CVR (*(volatile uint32_t *)0xE000E018u)
-#define SYST_CSR_ENABLE 0x1u
-#define SYST_CSR_TICKINT 0x2u
-#define SYST_CSR_CLKSOURCE 0x4u /* the processor clock */
 
 #define SCALAR_BYTES ((uint32_t)sizeof(stsp_scalar_t))
 #define STATE_PAYLOAD (4u + BOARD_NX * SCALAR_BYTES)
@@ -73,9 +66,9 @@ static uint32_t ticks_since_verify;
 /* Counters since the last RESET (saturate at 0xFFFF in the frames). */
 static uint32_t overruns, timeouts, bad_frames, lost_frames;
 static stsp_scalar_t applied[BOARD_NU];
-/* SysTick interrupts since boot (BOARD_SYSTICK_PER_TICK per tick period). */
-static volatile uint32_t systicks;
-static volatile uint32_t last_state_systick;
+/* Tick-timer interrupts since boot (BOARD_TIMER_PER_TICK per tick period). */
+static volatile uint32_t timer_irqs;
+static volatile uint32_t last_state_irq;
 
 static void put_u16(uint8_t *b, uint32_t v)
 {
@@ -162,17 +155,17 @@ static void send_event(uint8_t board_status, stsp_status_t st)
     send(STSP_FRAME_EVENT, b, sizeof b);
 }
 
-/* Processor cycles since boot, read consistently with the SysTick count. */
+/* Processor cycles since boot, read consistently with the tick-timer interrupt count. */
 static uint32_t cycles_now(void)
 {
     uint32_t s0, s1, v;
-    s0 = systicks;
-    v = SYST_CVR;
-    s1 = systicks;
+    s0 = timer_irqs;
+    v = board_timer_elapsed();
+    s1 = timer_irqs;
     if (s1 != s0) {
-        v = SYST_CVR;
+        v = board_timer_elapsed();
     }
-    return s1 * (BOARD_SYSTICK_RELOAD + 1u) + (BOARD_SYSTICK_RELOAD - v);
+    return s1 * (BOARD_TIMER_RELOAD + 1u) + v;
 }
 
 /* One controller step: the command into u (the table's u_hold on a negative status); a step
@@ -269,11 +262,11 @@ static void on_frame(void)
         overruns = timeouts = bad_frames = lost_frames = 0u;
         apply_hold();
         running = 1;
-        last_state_systick = systicks;
+        last_state_irq = timer_irqs;
         send_hello();
     } else if (parser.type == STSP_FRAME_STATE) {
         stsp_scalar_t x[BOARD_NX];
-        last_state_systick = systicks;
+        last_state_irq = timer_irqs;
         if (parser.len != STATE_PAYLOAD) {
             apply_hold();
             send_event(BOARD_STATUS_BAD_STATE, STSP_OK);
@@ -289,7 +282,7 @@ static void on_frame(void)
         }
     } else if (parser.type == STSP_FRAME_BATCH) {
         const uint32_t b = (parser.len >= 5u) ? parser.payload[4] : 0u;
-        last_state_systick = systicks;
+        last_state_irq = timer_irqs;
         if (b < 1u || b > BOARD_BATCH || parser.len != BATCH_PAYLOAD(b)) {
             send_event(BOARD_STATUS_BAD_STATE, STSP_OK);
         } else if (!running) {
@@ -305,9 +298,9 @@ static void on_frame(void)
     }
 }
 
-void board_systick_handler(void)
+void board_timer_handler(void)
 {
-    systicks = systicks + 1u;
+    timer_irqs = timer_irqs + 1u;
 }
 
 int board_main(void)
@@ -325,9 +318,7 @@ int board_main(void)
     }
     verify_now();
     apply_hold();
-    SYST_RVR = BOARD_SYSTICK_RELOAD;
-    SYST_CVR = 0u;
-    SYST_CSR = SYST_CSR_ENABLE | SYST_CSR_TICKINT | SYST_CSR_CLKSOURCE;
+    board_timer_start(BOARD_TIMER_RELOAD);
     send_hello();
     for (;;) {
         /* At most one frame's worth of bytes per pass, so the timeout check below runs. */
@@ -343,11 +334,10 @@ int board_main(void)
                 send_event(BOARD_STATUS_BAD_FRAME, STSP_OK);
             }
         }
-        if (running && systicks - last_state_systick >
-                           BOARD_TIMEOUT_TICKS * BOARD_SYSTICK_PER_TICK) {
+        if (running && timer_irqs - last_state_irq > BOARD_TIMEOUT_TICKS * BOARD_TIMER_PER_TICK) {
             ++timeouts;
             apply_hold();
-            last_state_systick = systicks;
+            last_state_irq = timer_irqs;
             send_event(BOARD_STATUS_TIMEOUT, STSP_OK);
         }
         if (budget == STSP_FRAME_MAX_BYTES) {

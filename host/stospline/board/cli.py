@@ -16,7 +16,7 @@ def add_commands(sub, cli) -> None:
     from stospline.board.project import BOARDS
     integer, out_dir, seed_max = cli._integer, cli._out_dir, cli.SEED_MAX
     p = sub.add_parser("board", help="write a firmware project for a board: start-up, linker "
-                                     "script, SysTick tick, UART frames, tables, CMake presets")
+                                     "script, tick timer, UART frames, tables, CMake presets")
     p.add_argument("problem", help="problem file (TOML)")
     p.add_argument("--board", required=True, choices=sorted(BOARDS),
                    help="the board (a QEMU machine name)")

@@ -169,7 +169,7 @@ On the board: `stospline hil {problem_name} --board {board.name} --port /dev/tty
 
 | file | what | board-specific |
 |---|---|---|
-| `board_{board.name}.c` | vector table, start-up, clock, UART | the clock set-up (`clock_init`: crystal, PLL), the UART and its pins (`uart_init`), the baud rate, `Fault_Handler` (set the actuators safe) |
+| `board_{board.name}.c` | vector table, start-up, clock, UART, tick timer | the clock set-up (`clock_init`: crystal, PLL), the UART and its pins (`uart_init`), the baud rate, the tick timer (`board_timer_start`), `Fault_Handler` (set the actuators safe) |
 | `{board.name}.ld` | linker script | `MEMORY` (flash and RAM of the part), `STACK_SIZE` |
 | `board_app.c` | the loop: frames in, `stsp_step`, frames out; `stsp_verify`; u_hold on any error; overruns | the line marked `board-specific` in `run_tick`: write the command to the actuators |
 | `board_config.h` | the table, the tick timer's reload for {table.tick_hz} Hz at {board.clock_hz} Hz, timeout, verify period | generated: regenerate for another clock or table |

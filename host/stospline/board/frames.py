@@ -14,7 +14,7 @@ __all__ = ["crc16", "encode", "Parser", "Frame", "QUERY", "RESET", "STATE", "HEL
            "MAX_PAYLOAD", "BOARD_STATUS"]
 
 SYNC = b"\xa5\x5a"
-MAX_PAYLOAD = 160
+MAX_PAYLOAD = 252
 PROTOCOL = 2
 QUERY, RESET, STATE, BATCH = 0x51, 0x52, 0x53, 0x42
 HELLO, COMMAND, EVENT, BATCH_COMMANDS = 0x48, 0x43, 0x45, 0x44

@@ -19,7 +19,7 @@ __all__ = ["Board", "BOARDS", "project_files", "write_project", "board_config"]
 _FILES = Path(__file__).with_name("files")
 _ARITH_CODE = {"float32": 0, "q15": 1, "q31": 2}
 TIMER_MAX = 1 << 24             # the tick timer's reload: the SysTick's 24 bits
-FRAME_MAX_PAYLOAD = 160         # STSP_FRAME_MAX_PAYLOAD (files/stsp_frame.h)
+FRAME_MAX_PAYLOAD = 252         # STSP_FRAME_MAX_PAYLOAD (files/stsp_frame.h)
 BATCH_MAX = 16                  # controller instances for BATCH frames, at most
 
 

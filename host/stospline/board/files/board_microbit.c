@@ -47,7 +47,7 @@
 #define TIMER0_IRQ 8u
 #define PIN_TXD 24u /* board-specific: the micro:bit's UART pins */
 #define PIN_RXD 25u
-#define RX_RING 256u /* received bytes not yet read by the loop (a power of two) */
+#define RX_RING 512u /* received bytes not yet read by the loop (a power of two, > a frame) */
 
 #define BOARD_CLOCK_HZ 16000000u /* HFCLK: the core, and TIMER0 with prescaler 0 */
 #define WAIT_LIMIT 1000000u      /* bounded waits: the crystal, a byte's transmission */

@@ -34,7 +34,7 @@
 #define USART_CR1_RXNEIE 0x20u
 #define NVIC_ISER1 REG(0xE000E104u)
 #define USART1_IRQ 37u /* board-specific: the USART's interrupt number */
-#define RX_RING 256u   /* received bytes not yet read by the loop (a power of two) */
+#define RX_RING 512u   /* received bytes not yet read by the loop (a power of two, > a frame) */
 #define SCB_CPACR REG(0xE000ED88u)
 /* The core's SysTick: the tick timer. */
 #define SYST_CSR REG(0xE000E010u)

@@ -2,7 +2,7 @@
  * built by CMakeLists.txt with clang, -fsanitize=fuzzer,address,undefined).
  *
  * Each input describes a byte stream as a sequence of chunks: whole frames made by
- * stsp_frame_encode() (any type, seq and payload, length 0..160), sent intact, with one bit
+ * stsp_frame_encode() (any type, seq and payload, length 0..STSP_FRAME_MAX_PAYLOAD), sent intact, with one bit
  * flipped, with one byte dropped, cut short, or with a length byte above the maximum; runs of
  * raw garbage; and runs of sync bytes (0xA5, 0x5A). The parser gets the stream one byte at a
  * time, in a heap block of exactly its size (ASan sees a read or write outside it).

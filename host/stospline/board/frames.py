@@ -5,29 +5,28 @@ CRC-16/CCITT-FALSE of type, seq, len and payload; docs/guide/board.md, "Frame pr
 """
 from __future__ import annotations
 
+import binascii
 import struct
 from dataclasses import dataclass
 
 __all__ = ["crc16", "encode", "Parser", "Frame", "QUERY", "RESET", "STATE", "HELLO",
-           "COMMAND", "EVENT", "Hello", "parse_hello", "MAX_PAYLOAD", "BOARD_STATUS"]
+           "COMMAND", "EVENT", "BATCH", "BATCH_COMMANDS", "Hello", "parse_hello",
+           "MAX_PAYLOAD", "BOARD_STATUS"]
 
 SYNC = b"\xa5\x5a"
-MAX_PAYLOAD = 160
-PROTOCOL = 1
-QUERY, RESET, STATE = 0x51, 0x52, 0x53
-HELLO, COMMAND, EVENT = 0x48, 0x43, 0x45
+MAX_PAYLOAD = 252
+PROTOCOL = 2
+QUERY, RESET, STATE, BATCH = 0x51, 0x52, 0x53, 0x42
+HELLO, COMMAND, EVENT, BATCH_COMMANDS = 0x48, 0x43, 0x45, 0x44
 BOARD_STATUS = {0: "ok", 1: "seq-gap", 2: "bad-frame", 3: "bad-state", 4: "timeout",
                 5: "not-running", 6: "bad-type"}
 ARITH_NAMES = {0: "float32", 1: "q15", 2: "q31"}
 
 
 def crc16(data: bytes, crc: int = 0xFFFF) -> int:
-    """CRC-16/CCITT-FALSE (polynomial 0x1021, initial 0xFFFF)."""
-    for b in data:
-        crc ^= b << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
-    return crc
+    """CRC-16/CCITT-FALSE (polynomial 0x1021, initial 0xFFFF): binascii's CRC-CCITT (XMODEM's
+    polynomial, unreflected) started at 0xFFFF."""
+    return binascii.crc_hqx(data, crc)
 
 
 def encode(kind: int, seq: int, payload: bytes = b"") -> bytes:
@@ -95,13 +94,14 @@ class Hello:
     clock_failed: bool
     clock_hz: int
     cycles_per_tick: int
+    batch: int                  # paths a BATCH frame carries at most
 
 
 def parse_hello(payload: bytes) -> Hello:
-    if len(payload) != 28:
-        raise ValueError(f"a HELLO frame has 28 payload bytes, got {len(payload)}")
+    if len(payload) != 29:
+        raise ValueError(f"a HELLO frame has 29 payload bytes, got {len(payload)}")
     (proto, arith, nx, nu, n_ticks, tick_hz, crc, init_st, ver_st, board, flags, clock,
-     cycles) = struct.unpack("<BBBBIIIbbBBII", payload)
+     cycles, batch) = struct.unpack("<BBBBIIIbbBBIIB", payload)
     return Hello(proto, ARITH_NAMES.get(arith, f"unknown ({arith})"), nx, nu, n_ticks,
                  tick_hz, crc, init_st, ver_st, board, bool(flags & 1), bool(flags & 2), clock,
-                 cycles)
+                 cycles, batch)

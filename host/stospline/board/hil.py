@@ -24,7 +24,7 @@ from stospline.errors import StosplineError
 
 __all__ = ["table_of", "HilResult", "run_hil", "open_port", "start_qemu", "QEMU_MACHINES"]
 
-QEMU_MACHINES = {"netduinoplus2": "netduinoplus2"}
+QEMU_MACHINES = {"netduinoplus2": "netduinoplus2", "microbit": "microbit"}
 
 
 def table_of(d, arith: str):
@@ -158,10 +158,12 @@ def hello(link: Link) -> fr.Hello:
 
 
 def run_hil(problem, ctl, link: Link, *, paths: int, seed: int, substeps: int = 1,
-            reference=None) -> HilResult:
+            reference=None, batch: int = 1) -> HilResult:
     """`paths` paths of the plant with the board in the loop (block 0 of `seed`: at most
     `montecarlo.BLOCK_PATHS`), compared tick by tick with `reference`, the harness's run of the
-    same paths (`montecarlo.simulate(..., record=paths)`)."""
+    same paths (`montecarlo.simulate(..., record=paths)`). `batch` 1: one path at a time, a
+    STATE frame a tick (the loop of a real board); `batch` b > 1 (at most the HELLO's): b paths
+    at a time, their states in one BATCH frame a tick, stepped by b controller instances."""
     from stospline.harness.montecarlo import _zoh, block_seed
     table = ctl.table
     n, m = problem.n, problem.m
@@ -181,65 +183,81 @@ def run_hil(problem, ctl, link: Link, *, paths: int, seed: int, substeps: int = 
             fill()
             noise.append(dZ.copy())
     if arith == "float32":
-        pack = struct.Struct(f"<I{n}f")
-        to_q = None
+        xcode = ucode = "<f4"
     else:
         F = table.frac_bits
         to_q = np.ldexp(1.0, F - np.asarray(table.x_exp, dtype=int))
         lo, hi = -(1 << F), (1 << F) - 1
         lsb = np.asarray(table.u_lsb, dtype=float)
-        pack = struct.Struct(f"<I{n}{'h' if arith == 'q15' else 'i'}")
-    ucode = "f" if arith == "float32" else ("h" if arith == "q15" else "i")
-    ubytes = struct.calcsize(ucode) * m
+        xcode = ucode = "<i2" if arith == "q15" else "<i4"
+    entry = np.dtype([("st", "i1"), ("u", ucode, (m,))])       # BATCH_COMMANDS, per path
+    ubytes = np.dtype(ucode).itemsize * m
     res = HilResult(paths, ticks, np.zeros(paths), [np.empty((paths, n)) for _ in problem.knots],
                     0, None)
     t_start = time.monotonic()
-    for p in range(paths):
+    for p0 in range(0, paths, batch):
+        p1 = min(paths, p0 + batch)
+        b = p1 - p0
         link.send(fr.RESET)
-        while True:
-            f = link.recv()
-            if f.kind == fr.HELLO:
-                break
-        X = np.ascontiguousarray(problem.x0, dtype=float).reshape(1, n).copy()
-        cost = np.zeros(1)
-        U = np.zeros((1, m), np.float32)
+        while link.recv().kind != fr.HELLO:
+            pass
+        X = np.repeat(np.asarray(problem.x0, dtype=float).reshape(1, n), b, axis=0)
+        cost = np.zeros(b)
+        U = np.zeros((b, m), np.float32)
         for k in range(table.n_stages):
             for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
-                if to_q is None:
-                    link.send(fr.STATE, pack.pack(j, *X[0].astype(np.float32)))
+                if arith == "float32":
+                    xs = X.astype(xcode).tobytes()
                 else:
-                    xq = np.clip(np.floor(X[0] * to_q + 0.5), lo, hi).astype(int)
-                    link.send(fr.STATE, pack.pack(j, *xq))
+                    xs = np.clip(np.floor(X * to_q + 0.5), lo, hi).astype(xcode).tobytes()
+                if batch == 1:
+                    link.send(fr.STATE, struct.pack("<I", j) + xs)
+                    want = fr.COMMAND
+                else:
+                    link.send(fr.BATCH, struct.pack("<IB", j, b) + xs)
+                    want = fr.BATCH_COMMANDS
                 while True:
                     f = link.recv()
-                    if f.kind == fr.COMMAND:
+                    if f.kind == want:
                         break
                     res.events += 1
-                tick = struct.unpack_from("<I", f.payload)[0]
+                if batch == 1:
+                    tick, st, bst = struct.unpack_from("<IbB", f.payload)
+                    sts = (st,)
+                    u = np.frombuffer(f.payload, ucode, m, 6)
+                    at = 6 + ubytes
+                else:
+                    tick, got, bst = struct.unpack_from("<IBB", f.payload)
+                    if got != b:
+                        raise HilError(f"paths {p0}..{p1 - 1}: the board answered {got} "
+                                       f"paths to {b}")
+                    rec = np.frombuffer(f.payload, entry, b, 6)
+                    sts = rec["st"].tolist()
+                    u = rec["u"]
+                    at = 6 + b * entry.itemsize
                 if tick != j:
-                    raise HilError(f"path {p}: the board answered tick {tick} to tick {j}")
-                st, bst = struct.unpack_from("<bB", f.payload, 4)
-                u = np.array(struct.unpack_from(f"<{m}{ucode}", f.payload, 6))
-                res.statuses[st] = res.statuses.get(st, 0) + 1
+                    raise HilError(f"path {p0}: the board answered tick {tick} to tick {j}")
+                for st in sts:
+                    res.statuses[st] = res.statuses.get(st, 0) + 1
                 res.board_statuses[bst] = res.board_statuses.get(bst, 0) + 1
-                U[0] = u if to_q is None else (u * lsb)
-                ctl.plant_tick(plants[k], np.ascontiguousarray(noise[j][p:p + 1]), U, X, cost)
+                U[:] = u if arith == "float32" else u * lsb
+                ctl.plant_tick(plants[k], noise[j][p0:p1], U, X, cost)
                 if reference is not None:
-                    same = (np.array_equal(U[0].view(np.uint32),
-                                           reference.record_u[j, p].view(np.uint32))
-                            and np.array_equal(X[0].astype(np.float32).view(np.uint32),
-                                               reference.record_x[j + 1, p].view(np.uint32)))
-                    if not same:
-                        res.mismatches += 1
+                    bad = ((U.view(np.uint32) != reference.record_u[j, p0:p1].view(np.uint32))
+                           .any(axis=1)
+                           | (X.astype(np.float32).view(np.uint32)
+                              != reference.record_x[j + 1, p0:p1].view(np.uint32)).any(axis=1))
+                    if bad.any():
+                        res.mismatches += int(bad.sum())
                         if res.first_mismatch is None:
-                            res.first_mismatch = (p, j)
+                            res.first_mismatch = (p0 + int(np.argmax(bad)), j)
             knot = problem.knots[k]
             if knot.penalty is not None:
                 r = X @ knot.penalty.C.T - knot.penalty.target
                 cost += knot.penalty.weight * np.einsum("pi,pi->p", r, r)
-            res.knot_states[k][p] = X[0]
-        res.cost[p] = cost[0]
-        counters = struct.unpack_from("<4H", f.payload, 6 + ubytes)
+            res.knot_states[k][p0:p1] = X
+        res.cost[p0:p1] = cost
+        counters = struct.unpack_from("<4H", f.payload, at)
         res.overruns += counters[0]
         res.timeouts += counters[1]
         res.bad_frames += counters[2]

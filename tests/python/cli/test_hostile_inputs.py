@@ -413,6 +413,32 @@ def test_command_line_values_keep_the_contract(command, extra, tmp_path, firmwar
 
 
 # ---------------------------------------------------------------------------------------
+# `hil` and `board` values, refused before any design, QEMU or serial line.
+
+BOARD_CLI_CASES = [
+    ("hil", ["--board", "netduinoplus2", "--elf", "FILE", "--batch", "0"]),
+    ("hil", ["--board", "netduinoplus2", "--elf", "FILE", "--batch", "256"]),
+    ("hil", ["--board", "netduinoplus2", "--elf", "FILE", "--batch", "x"]),
+    ("hil", ["--board", "netduinoplus2", "--elf", "FILE", "--paths", "1"]),
+    ("hil", ["--board", "nosuch", "--elf", "FILE"]),
+    ("hil", ["--board", "microbit", "--elf", "missing.elf"]),
+    ("hil", ["--board", "microbit", "--elf", "FILE", "--arith", "q7"]),
+    ("board", ["--board", "microbit", "--out", "FILE"]),
+    ("board", ["--board", "microbit", "--out", "o", "--timeout-ticks", "0"]),
+]
+
+
+@pytest.mark.parametrize("command,extra", BOARD_CLI_CASES, ids=lambda v: "_".join(v)
+                         if isinstance(v, list) else v)
+def test_board_command_values_keep_the_contract(command, extra, tmp_path, firmware_libs):
+    (tmp_path / "p.toml").write_text(to_toml(NOISY))
+    (tmp_path / "FILE").write_text("not an image, not a directory")
+    argv = [command, "p.toml", *extra]
+    rc = check_contract(argv, tmp_path, firmware_libs, " ".join(argv))
+    assert rc == 2, f"{argv} was accepted"
+
+
+# ---------------------------------------------------------------------------------------
 # Outputs and blame (hostile.OUTPUT_CASES, hostile.BLAME_CASES): output paths refused before
 # any work, and overflows that name the extreme input or fault.
 

@@ -14,16 +14,23 @@ int board_init(void);
 int board_uart_read(uint8_t *byte);
 /* Send n bytes (waits for the transmitter, at most n bytes long). */
 void board_uart_write(const uint8_t *data, size_t n);
-/* The core clock in Hz after board_init (the SysTick counts it). */
+/* The core clock in Hz after board_init (the tick timer counts it). */
 uint32_t board_clock_hz(void);
-/* Interrupts off/on around data shared with the SysTick handler. */
+/* Interrupts off/on around data shared with the tick timer's handler. */
 void board_irq_disable(void);
 void board_irq_enable(void);
 /* Wait for an interrupt (or return at once). */
 void board_idle(void);
 
-/* Called by board_app.c: the vector table's SysTick entry. */
-void board_systick_handler(void);
+/* The tick timer, counting processor cycles: an interrupt that calls board_timer_handler()
+ * every reload + 1 cycles (the SysTick on most Cortex-M parts; a peripheral timer where the
+ * core has none). */
+void board_timer_start(uint32_t reload);
+/* Cycles since the timer's last interrupt: 0..reload. */
+uint32_t board_timer_elapsed(void);
+
+/* Defined by board_app.c: the tick timer's interrupt calls it. */
+void board_timer_handler(void);
 /* The application, called by the start-up code after .data/.bss are set up. */
 int board_main(void);
 

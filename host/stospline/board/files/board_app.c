@@ -5,13 +5,17 @@
  *
  * Two tick sources (board_config.h, BOARD_PACED):
  *   1 (paced, the HIL default, and what QEMU runs): a tick is the arrival of a STATE frame;
- *     the step runs at once and its COMMAND frame goes back. The SysTick still runs at
+ *     the step runs at once and its COMMAND frame goes back. The tick timer still runs at
  *     tick_hz and measures: a step that takes longer than one tick period counts an overrun,
  *     and no STATE frame for BOARD_TIMEOUT_TICKS tick periods during a run applies u_hold and
  *     sends an EVENT frame (BOARD_STATUS_TIMEOUT).
- *   0 (real time): the SysTick interrupt at tick_hz is the tick: it steps with the newest
+ *   0 (real time): the tick-timer interrupt at tick_hz is the tick: it steps with the newest
  *     STATE frame, which must have arrived since the previous tick (else u_hold,
  *     BOARD_STATUS_TIMEOUT); the COMMAND frame is queued and sent by the main loop.
+ * A BATCH frame carries the states of up to BOARD_BATCH paths at one tick: BOARD_BATCH
+ * controller instances on the same table step them, one each, and one BATCH_COMMANDS frame
+ * answers. It multiplies the paths a serial line carries per second (the HIL throughput in an
+ * emulator, whose UART costs per received byte); it drives no actuator.
  * The protocol and the mapping to a real board: docs/guide/board.md. */
 #include <stddef.h>
 #include <stdint.h>
@@ -29,23 +33,27 @@
 #define BOARD_STATUS_NOT_RUNNING 5u /* a STATE frame before RESET: u_hold applied */
 #define BOARD_STATUS_BAD_TYPE 6u    /* a frame of an unknown type: ignored */
 
-/* Cortex-M SysTick (the same on every Cortex-M core). */
-#define SYST_CSR (*(volatile uint32_t *)0xE000E010u)
-#define SYST_RVR (*(volatile uint32_t *)0xE000E014u)
-#define SYST_CVR (*(volatile uint32_t *)0xE000E018u)
-#define SYST_CSR_ENABLE 0x1u
-#define SYST_CSR_TICKINT 0x2u
-#define SYST_CSR_CLKSOURCE 0x4u /* the processor clock */
 
 #define SCALAR_BYTES ((uint32_t)sizeof(stsp_scalar_t))
 #define STATE_PAYLOAD (4u + BOARD_NX * SCALAR_BYTES)
 #define COMMAND_PAYLOAD (6u + BOARD_NU * SCALAR_BYTES + 8u)
+/* BATCH: tick (u32), b (u8), b states; BATCH_COMMANDS: tick, b, board status, b x (status,
+ * nu commands), the counters. */
+#define BATCH_PAYLOAD(b) (5u + (b) * BOARD_NX * SCALAR_BYTES)
+#define BATCH_ENTRY (1u + BOARD_NU * SCALAR_BYTES)
+#define BATCH_COMMANDS_PAYLOAD(b) (6u + (b) * BATCH_ENTRY + 8u)
 
 /* Compile-time check: the table's states and commands fit a frame (STSP_FRAME_MAX_PAYLOAD). */
 typedef char board_frames_fit[(STATE_PAYLOAD <= STSP_FRAME_MAX_PAYLOAD &&
-                               COMMAND_PAYLOAD <= STSP_FRAME_MAX_PAYLOAD) ? 1 : -1];
+                               COMMAND_PAYLOAD <= STSP_FRAME_MAX_PAYLOAD &&
+                               BOARD_BATCH >= 1u && BOARD_BATCH <= 255u &&
+                               BATCH_PAYLOAD(BOARD_BATCH) <= STSP_FRAME_MAX_PAYLOAD &&
+                               BATCH_COMMANDS_PAYLOAD(BOARD_BATCH) <= STSP_FRAME_MAX_PAYLOAD)
+                                  ? 1
+                                  : -1];
 
-static stsp_ctrl_t ctrl;
+/* ctrl[0] runs the STATE frames; all BOARD_BATCH run a BATCH frame's paths. */
+static stsp_ctrl_t ctrl[BOARD_BATCH];
 static stsp_frame_parser_t parser;
 static stsp_status_t init_status;
 static stsp_status_t verify_status;
@@ -58,9 +66,9 @@ static uint32_t ticks_since_verify;
 /* Counters since the last RESET (saturate at 0xFFFF in the frames). */
 static uint32_t overruns, timeouts, bad_frames, lost_frames;
 static stsp_scalar_t applied[BOARD_NU];
-/* SysTick interrupts since boot (BOARD_SYSTICK_PER_TICK per tick period). */
-static volatile uint32_t systicks;
-static volatile uint32_t last_state_systick;
+/* Tick-timer interrupts since boot (BOARD_TIMER_PER_TICK per tick period). */
+static volatile uint32_t timer_irqs;
+static volatile uint32_t last_state_irq;
 
 static void put_u16(uint8_t *b, uint32_t v)
 {
@@ -110,7 +118,7 @@ static void apply_hold(void)
 
 static void send_hello(void)
 {
-    uint8_t b[28];
+    uint8_t b[29];
     b[0] = STSP_FRAME_PROTOCOL;
     b[1] = BOARD_ARITH_CODE;
     b[2] = (uint8_t)BOARD_NX;
@@ -124,6 +132,7 @@ static void send_hello(void)
     b[19] = (uint8_t)((BOARD_PACED ? 1u : 0u) | (clock_failed ? 2u : 0u));
     stsp_frame_put_u32(b + 20, board_clock_hz());
     stsp_frame_put_u32(b + 24, BOARD_CYCLES_PER_TICK);
+    b[28] = (uint8_t)BOARD_BATCH;
     send(STSP_FRAME_HELLO, b, sizeof b);
 }
 
@@ -146,17 +155,36 @@ static void send_event(uint8_t board_status, stsp_status_t st)
     send(STSP_FRAME_EVENT, b, sizeof b);
 }
 
-/* Processor cycles since boot, read consistently with the SysTick count. */
+/* Processor cycles since boot, read consistently with the tick-timer interrupt count. */
 static uint32_t cycles_now(void)
 {
     uint32_t s0, s1, v;
-    s0 = systicks;
-    v = SYST_CVR;
-    s1 = systicks;
+    s0 = timer_irqs;
+    v = board_timer_elapsed();
+    s1 = timer_irqs;
     if (s1 != s0) {
-        v = SYST_CVR;
+        v = board_timer_elapsed();
     }
-    return s1 * (BOARD_SYSTICK_RELOAD + 1u) + (BOARD_SYSTICK_RELOAD - v);
+    return s1 * (BOARD_TIMER_RELOAD + 1u) + v;
+}
+
+/* One controller step: the command into u (the table's u_hold on a negative status); a step
+ * longer than a tick period counts an overrun. */
+static stsp_status_t step_one(stsp_ctrl_t *c, uint32_t tick, const stsp_scalar_t *x,
+                              stsp_scalar_t *u)
+{
+    const uint32_t start = cycles_now();
+    const stsp_status_t st = stsp_step(c, tick, x, u);
+    uint32_t i;
+    if (st < 0) {
+        for (i = 0u; i < BOARD_NU; ++i) {
+            u[i] = BOARD_TABLE.u_hold[i];
+        }
+    }
+    if (cycles_now() - start > BOARD_CYCLES_PER_TICK) {
+        ++overruns;
+    }
+    return st;
 }
 
 /* One tick: step the controller with the state of a STATE frame and answer. */
@@ -164,21 +192,12 @@ static void run_tick(uint32_t tick, const stsp_scalar_t *x, uint8_t board_status
 {
     uint8_t b[COMMAND_PAYLOAD];
     stsp_scalar_t u[BOARD_NU];
-    stsp_status_t st;
-    const uint32_t start = cycles_now();
     uint32_t i;
-    st = stsp_step(&ctrl, tick, x, u);
-    if (st < 0) {
-        apply_hold();
-    } else {
-        for (i = 0u; i < BOARD_NU; ++i) {
-            applied[i] = u[i];
-        }
+    const stsp_status_t st = step_one(&ctrl[0], tick, x, u);
+    for (i = 0u; i < BOARD_NU; ++i) {
+        applied[i] = u[i];
     }
     /* board-specific: write applied[] to the actuators here (a real board's PWM, DAC, ...) */
-    if (cycles_now() - start > BOARD_CYCLES_PER_TICK) {
-        ++overruns;
-    }
     stsp_frame_put_u32(b, tick);
     b[4] = (uint8_t)(int8_t)st;
     b[5] = board_status;
@@ -188,9 +207,38 @@ static void run_tick(uint32_t tick, const stsp_scalar_t *x, uint8_t board_status
     ++ticks_since_verify;
 }
 
+/* One tick of b paths: instance i steps the i-th state of a BATCH frame; one answer. */
+static void run_batch(uint32_t tick, uint32_t b, uint8_t board_status)
+{
+    uint8_t out[BATCH_COMMANDS_PAYLOAD(BOARD_BATCH)];
+    stsp_scalar_t x[BOARD_NX];
+    stsp_scalar_t u[BOARD_NU];
+    uint32_t i;
+    stsp_frame_put_u32(out, tick);
+    out[4] = (uint8_t)b;
+    out[5] = board_status;
+    for (i = 0u; i < b; ++i) {
+        uint8_t *e = out + 6u + i * BATCH_ENTRY;
+        get_scalars(x, parser.payload + BATCH_PAYLOAD(i), BOARD_NX);
+        e[0] = (uint8_t)(int8_t)step_one(&ctrl[i], tick, x, u);
+        put_scalars(e + 1, u, BOARD_NU);
+    }
+    fill_counters(out + 6u + b * BATCH_ENTRY);
+    send(STSP_FRAME_BATCH_COMMANDS, out, BATCH_COMMANDS_PAYLOAD(b));
+    ++ticks_since_verify;
+}
+
+/* Every instance checks the table and its own copy of the header; the first error counts. */
 static void verify_now(void)
 {
-    verify_status = stsp_verify(&ctrl);
+    uint32_t i;
+    verify_status = STSP_OK;
+    for (i = 0u; i < BOARD_BATCH; ++i) {
+        const stsp_status_t st = stsp_verify(&ctrl[i]);
+        if (verify_status == STSP_OK) {
+            verify_status = st;
+        }
+    }
     ticks_since_verify = 0u;
 }
 
@@ -206,16 +254,19 @@ static void on_frame(void)
     if (parser.type == STSP_FRAME_QUERY) {
         send_hello();
     } else if (parser.type == STSP_FRAME_RESET) {
+        uint32_t i;
         verify_now();
-        (void)stsp_reset(&ctrl);
+        for (i = 0u; i < BOARD_BATCH; ++i) {
+            (void)stsp_reset(&ctrl[i]);
+        }
         overruns = timeouts = bad_frames = lost_frames = 0u;
         apply_hold();
         running = 1;
-        last_state_systick = systicks;
+        last_state_irq = timer_irqs;
         send_hello();
     } else if (parser.type == STSP_FRAME_STATE) {
         stsp_scalar_t x[BOARD_NX];
-        last_state_systick = systicks;
+        last_state_irq = timer_irqs;
         if (parser.len != STATE_PAYLOAD) {
             apply_hold();
             send_event(BOARD_STATUS_BAD_STATE, STSP_OK);
@@ -229,27 +280,45 @@ static void on_frame(void)
                 verify_now(); /* between two ticks: the next STATE frame waits */
             }
         }
+    } else if (parser.type == STSP_FRAME_BATCH) {
+        const uint32_t b = (parser.len >= 5u) ? parser.payload[4] : 0u;
+        last_state_irq = timer_irqs;
+        if (b < 1u || b > BOARD_BATCH || parser.len != BATCH_PAYLOAD(b)) {
+            send_event(BOARD_STATUS_BAD_STATE, STSP_OK);
+        } else if (!running) {
+            send_event(BOARD_STATUS_NOT_RUNNING, STSP_OK);
+        } else {
+            run_batch(stsp_frame_get_u32(parser.payload), b, board_status);
+            if (ticks_since_verify >= BOARD_VERIFY_TICKS) {
+                verify_now();
+            }
+        }
     } else {
         send_event(BOARD_STATUS_BAD_TYPE, STSP_OK);
     }
 }
 
-void board_systick_handler(void)
+void board_timer_handler(void)
 {
-    systicks = systicks + 1u;
+    timer_irqs = timer_irqs + 1u;
 }
 
 int board_main(void)
 {
     uint8_t byte;
+    uint32_t i;
     clock_failed = board_init();
     stsp_frame_reset(&parser);
-    init_status = stsp_init(&ctrl, &BOARD_TABLE);
-    verify_status = stsp_verify(&ctrl);
+    init_status = STSP_OK;
+    for (i = 0u; i < BOARD_BATCH; ++i) {
+        const stsp_status_t st = stsp_init(&ctrl[i], &BOARD_TABLE);
+        if (init_status == STSP_OK) {
+            init_status = st;
+        }
+    }
+    verify_now();
     apply_hold();
-    SYST_RVR = BOARD_SYSTICK_RELOAD;
-    SYST_CVR = 0u;
-    SYST_CSR = SYST_CSR_ENABLE | SYST_CSR_TICKINT | SYST_CSR_CLKSOURCE;
+    board_timer_start(BOARD_TIMER_RELOAD);
     send_hello();
     for (;;) {
         /* At most one frame's worth of bytes per pass, so the timeout check below runs. */
@@ -265,11 +334,10 @@ int board_main(void)
                 send_event(BOARD_STATUS_BAD_FRAME, STSP_OK);
             }
         }
-        if (running && systicks - last_state_systick >
-                           BOARD_TIMEOUT_TICKS * BOARD_SYSTICK_PER_TICK) {
+        if (running && timer_irqs - last_state_irq > BOARD_TIMEOUT_TICKS * BOARD_TIMER_PER_TICK) {
             ++timeouts;
             apply_hold();
-            last_state_systick = systicks;
+            last_state_irq = timer_irqs;
             send_event(BOARD_STATUS_TIMEOUT, STSP_OK);
         }
         if (budget == STSP_FRAME_MAX_BYTES) {

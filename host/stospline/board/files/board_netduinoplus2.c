@@ -34,8 +34,15 @@
 #define USART_CR1_RXNEIE 0x20u
 #define NVIC_ISER1 REG(0xE000E104u)
 #define USART1_IRQ 37u /* board-specific: the USART's interrupt number */
-#define RX_RING 256u   /* received bytes not yet read by the loop (a power of two) */
+#define RX_RING 512u   /* received bytes not yet read by the loop (a power of two, > a frame) */
 #define SCB_CPACR REG(0xE000ED88u)
+/* The core's SysTick: the tick timer. */
+#define SYST_CSR REG(0xE000E010u)
+#define SYST_RVR REG(0xE000E014u)
+#define SYST_CVR REG(0xE000E018u)
+#define SYST_CSR_ENABLE 0x1u
+#define SYST_CSR_TICKINT 0x2u
+#define SYST_CSR_CLKSOURCE 0x4u /* the processor clock */
 
 #define BOARD_CLOCK_HZ 168000000u /* board-specific: SYSCLK after clock_init() */
 #define BOARD_HSE_HZ 25000000u    /* board-specific: the Netduino Plus 2's crystal */
@@ -141,6 +148,18 @@ void board_uart_write(const uint8_t *data, size_t n)
     }
 }
 
+void board_timer_start(uint32_t reload)
+{
+    SYST_RVR = reload;
+    SYST_CVR = 0u;
+    SYST_CSR = SYST_CSR_ENABLE | SYST_CSR_TICKINT | SYST_CSR_CLKSOURCE;
+}
+
+uint32_t board_timer_elapsed(void)
+{
+    return SYST_RVR - SYST_CVR; /* the SysTick counts down from the reload */
+}
+
 void board_irq_disable(void)
 {
     __asm__ volatile("cpsid i" ::: "memory");
@@ -178,7 +197,7 @@ void Fault_Handler(void)
 
 void SysTick_Handler(void)
 {
-    board_systick_handler();
+    board_timer_handler();
 }
 
 void Reset_Handler(void)

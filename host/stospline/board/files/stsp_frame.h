@@ -18,19 +18,21 @@
 
 #define STSP_FRAME_SYNC0 0xA5u
 #define STSP_FRAME_SYNC1 0x5Au
-#define STSP_FRAME_MAX_PAYLOAD 160u
+#define STSP_FRAME_MAX_PAYLOAD 252u
 #define STSP_FRAME_OVERHEAD 7u /* sync (2), type, seq, len, crc (2) */
 #define STSP_FRAME_MAX_BYTES (STSP_FRAME_MAX_PAYLOAD + STSP_FRAME_OVERHEAD)
-#define STSP_FRAME_PROTOCOL 1u
+#define STSP_FRAME_PROTOCOL 2u
 
 /* Frame types. Host to board: */
 #define STSP_FRAME_QUERY 0x51u /* 'Q': empty; the board answers HELLO */
 #define STSP_FRAME_RESET 0x52u /* 'R': empty; verify the table, reset the controller (a new run) */
 #define STSP_FRAME_STATE 0x53u /* 'S': tick (u32), then nx states (the table's scalar type) */
+#define STSP_FRAME_BATCH 0x42u /* 'B': tick (u32), b (u8), then b x nx states */
 /* Board to host: */
 #define STSP_FRAME_HELLO 0x48u   /* 'H': what the board runs (board_app.c, send_hello) */
 #define STSP_FRAME_COMMAND 0x43u /* 'C': the answer to a STATE frame (board_app.c) */
 #define STSP_FRAME_EVENT 0x45u   /* 'E': a board status without a state (timeout, bad frame) */
+#define STSP_FRAME_BATCH_COMMANDS 0x44u /* 'D': the answer to a BATCH frame (board_app.c) */
 
 /* What stsp_frame_push() reports for one byte. */
 typedef enum {

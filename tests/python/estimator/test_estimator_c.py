@@ -1,0 +1,113 @@
+"""The firmware's estimator controller (stsp_est_step) through the host-compiled C: its tables'
+CRC and C text, bit for bit against the float32 specification (`estimator.spec`), and a Monte
+Carlo of the sensor loop through the C against the exact moments of the implemented tables."""
+import copy
+
+import numpy as np
+import pytest
+
+from conftest import EXAMPLES, GAINS
+from stospline.estimator.ctable import estimator_c, estimator_crc32, estimator_table
+from stospline.estimator.oracle import evaluate_estimator
+from stospline.estimator.spec import EstimatorSpec
+from stospline.harness.estimator_loop import build_estimator_controller, simulate_estimator
+from stospline.harness.montecarlo import compare_to_oracle
+from stospline.pipeline import design_problem
+from stospline.problem.reader import parse_problem
+from stospline import load_problem
+
+from test_estimator_oracle import DOC
+
+
+@pytest.fixture(scope="module")
+def robot_sensor(tmp_path_factory):
+    problem = load_problem(EXAMPLES / "robot_position_sensor.toml")
+    d = design_problem(problem)
+    et = estimator_table(problem, d.table)
+    ctl = build_estimator_controller(problem, d.table, et,
+                                     build_dir=tmp_path_factory.mktemp("est_build"))
+    return problem, d, et, ctl
+
+
+def test_crc_and_the_shipped_text(robot_sensor):
+    problem, d, et, ctl = robot_sensor
+    c_table = ctl.lib.harness_est_table()
+    assert ctl.lib.stsp_est_table_crc32(c_table) == estimator_crc32(et) == c_table.crc32
+    header, source = estimator_c(et, "robot_position_sensor")
+    assert source in (GAINS / "robot_position_sensor.c").read_text()
+    assert header.strip() in (GAINS / "robot_position_sensor.h").read_text()
+    # one predictor map per (time-invariant) stage, one gain per sample
+    assert len(et.model) == 2 and len(et.gain) == -(-d.table.n_ticks // et.every)
+
+
+def test_c_equals_the_float32_specification_bit_for_bit(robot_sensor):
+    """Every command and every prediction over the whole plan, with noisy readings, one missing
+    reading (y NULL) and the latch of stage 1, for several paths."""
+    problem, d, et, ctl = robot_sensor
+    paths, rng = 6, np.random.default_rng(20261128)
+    step, spec = ctl.stepper(paths), EstimatorSpec(d.table, et, paths)
+    X = np.tile(problem.x0, (paths, 1))
+    for j in range(d.table.n_ticks):
+        Y = None
+        if j % et.every == 0 and j != 1000:
+            Y = (X @ problem.measurement.C.T + 0.02 * rng.standard_normal((paths, 2)))
+            Y = Y.astype(np.float32)
+        U, status = step(j, Y)
+        want = spec.step(j, Y)
+        assert np.array_equal(U, want), j            # == : a zero's sign may differ
+        assert np.array_equal(step.xhat(), spec.xhat), j
+        expect = 6 if (j == 1000) else 0              # STSP_WARN_NO_MEASUREMENT
+        assert np.all(status == expect), (j, status)
+        X = spec.xhat + 0.01 * rng.standard_normal(X.shape)   # a plant near the estimate
+
+
+@pytest.fixture(scope="module")
+def sensed(tmp_path_factory):
+    problem = parse_problem(copy.deepcopy(DOC))
+    d = design_problem(problem)
+    et = estimator_table(problem, d.table)
+    ctl = build_estimator_controller(problem, d.table, et,
+                                     build_dir=tmp_path_factory.mktemp("sensed_build"))
+    return problem, d, et, ctl
+
+
+def test_monte_carlo_through_c_agrees_with_the_oracle_of_the_implemented_tables(sensed):
+    """The three numbers: the oracle of the designed (double) filter, the oracle of the float32
+    tables as flashed, and 40 000 paths through the compiled C (sensor with additive and
+    state-proportional noise every other tick, uncertain start, input noise). Cost, every knot
+    mean and variance jointly within a Bonferroni-corrected 99.9 % band of the sample's own
+    standard errors (compare_to_oracle); fixed seed."""
+    problem, d, et, ctl = sensed
+    substeps = 4
+    designed = evaluate_estimator(problem, d.table)
+    gains, pred = et.per_tick()
+    flashed = evaluate_estimator(problem, d.table, gains=gains, predictor=pred,
+                                 propagator="euler", substeps=substeps)
+    exact_flashed = evaluate_estimator(problem, d.table, gains=gains, predictor=pred)
+    assert exact_flashed.moments.J == pytest.approx(designed.moments.J, rel=1e-6)
+    mc, rec = simulate_estimator(problem, ctl, paths=40_000, seed=20261128, substeps=substeps,
+                                 record=3)
+    assert mc.worst_status == 0
+    a = compare_to_oracle(mc, flashed.moments.J, flashed.moments.knot_mean, confidence=0.999,
+                          knot_covs=flashed.moments.knot_cov)
+    assert a.ok, (a.verdict, mc.cost_mean_ci(), flashed.moments.J)
+    # the recorded estimate is the controller's: per state, its error is of the filter's size
+    err = rec["x"][1:] - rec["xhat"][1:]
+    sigma = np.sqrt(np.diagonal(designed.error_cov, axis1=1, axis2=2).max(axis=0))
+    assert np.all(np.abs(err).max(axis=(0, 1)) < 10 * sigma), (np.abs(err).max(axis=(0, 1)), sigma)
+
+
+def test_a_wrong_filter_is_caught_by_the_same_comparison(sensed, tmp_path):
+    """Mutation: the C run with gains one sample late (what an index slip in the firmware
+    would do) fails the comparison that the right tables pass."""
+    problem, d, et, ctl = sensed
+    import dataclasses
+    late = dataclasses.replace(et, gain=np.roll(et.gain, 1, axis=0))
+    bad = build_estimator_controller(problem, d.table, late, build_dir=tmp_path)
+    gains, pred = et.per_tick()
+    flashed = evaluate_estimator(problem, d.table, gains=gains, predictor=pred,
+                                 propagator="euler", substeps=4)
+    mc, _ = simulate_estimator(problem, bad, paths=40_000, seed=20261128, substeps=4)
+    a = compare_to_oracle(mc, flashed.moments.J, flashed.moments.knot_mean, confidence=0.999,
+                          knot_covs=flashed.moments.knot_cov)
+    assert not a.ok

@@ -111,3 +111,15 @@ def test_a_wrong_filter_is_caught_by_the_same_comparison(sensed, tmp_path):
     a = compare_to_oracle(mc, flashed.moments.J, flashed.moments.knot_mean, confidence=0.999,
                           knot_covs=flashed.moments.knot_cov)
     assert not a.ok
+
+
+def test_the_c_tests_expected_values_are_the_specifications():
+    """tests/c/estimator_expected.h (what test_estimator.c checks the C against) is what the
+    specification gives today: regenerate with tests/c/estimator_reference.py."""
+    import importlib.util
+    from conftest import REPO
+    path = REPO / "tests" / "c" / "estimator_reference.py"
+    spec = importlib.util.spec_from_file_location("estimator_reference", path)
+    ref = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ref)
+    assert ref.expected() == (REPO / "tests" / "c" / "estimator_expected.h").read_text()

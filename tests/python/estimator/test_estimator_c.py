@@ -40,6 +40,20 @@ def test_crc_and_the_shipped_text(robot_sensor):
     assert len(et.model) == 2 and len(et.gain) == -(-d.table.n_ticks // et.every)
 
 
+def test_the_flashed_filter_keeps_the_knot_means_to_float32_precision(robot_sensor):
+    """The rounded predictor map biases the estimate by its rounding error: the knot means of
+    the loop with the flashed tables stay within float32's relative precision of the state's
+    size of the designed filter's (which are the full-state loop's)."""
+    problem, d, et, ctl = robot_sensor
+    designed = evaluate_estimator(problem, d.table)
+    gains, pred = et.per_tick()
+    flashed = evaluate_estimator(problem, d.table, gains=gains, predictor=pred)
+    scale = 4 * np.finfo(np.float32).eps * np.abs(problem.x0).max()
+    for k in range(len(problem.knots)):
+        gap = np.abs(flashed.moments.knot_mean[k] - designed.moments.knot_mean[k]).max()
+        assert 0 < gap < scale, (k, gap, scale)
+
+
 def test_c_equals_the_float32_specification_bit_for_bit(robot_sensor):
     """Every command and every prediction over the whole plan, with noisy readings, one missing
     reading (y NULL) and the latch of stage 1, for several paths."""

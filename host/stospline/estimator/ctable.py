@@ -9,7 +9,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from stospline.errors import ProblemError
 from stospline.estimator.oracle import evaluate_estimator
+from stospline.limits import MAX_NY
 from stospline.table.codegen import _array, _f32_literal, _sha_initializer
 from stospline.table.format import SCALAR_FLOAT32, positive_zeros
 
@@ -134,9 +136,14 @@ const stsp_est_table_t {p}_estimator = {{
 def with_estimator(header: str, source: str, problem, table, prefix: str | None = None
                    ) -> tuple[str, str]:
     """`generate_c`'s text with the estimator tables added (a problem with [measurement] and
-    a table the estimator loop runs; otherwise unchanged)."""
+    a table the estimator loop runs; otherwise unchanged). Raises ProblemError for a sensor
+    with more outputs than the firmware takes."""
     if problem.measurement is None:
         return header, source
+    if problem.measurement.p > MAX_NY:
+        raise ProblemError("measurement.C", f"has {problem.measurement.p} rows (sensor "
+                           f"outputs); the firmware's estimator takes at most {MAX_NY} "
+                           f"(STSP_MAX_NY)")
     try:
         et = estimator_table(problem, table)
     except ValueError:                 # a delay or band table: no estimator form (summary)

@@ -137,3 +137,24 @@ def test_the_c_tests_expected_values_are_the_specifications():
     ref = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(ref)
     assert ref.expected() == (REPO / "tests" / "c" / "estimator_expected.h").read_text()
+
+
+def test_a_sensor_wider_than_the_firmware_is_refused_in_one_line(tmp_path, capsys):
+    """More outputs than STSP_MAX_NY: `stospline design` names measurement.C, status 2, and
+    writes nothing."""
+    import sys
+    sys.path.insert(0, str(EXAMPLES.parent / "tests" / "python" / "cli"))
+    from hostile import to_toml
+    from stospline.cli import main
+    from stospline.limits import MAX_NY
+    doc = copy.deepcopy(DOC)
+    p = MAX_NY + 1
+    doc["measurement"] = {"C": [[1.0, 0.1 * i] for i in range(p)],
+                          "V": np.diag(np.full(p, 0.01)).tolist()}
+    path = tmp_path / "wide.toml"
+    path.write_text(to_toml(doc))
+    out = tmp_path / "out"
+    assert main(["design", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "measurement.C" in err and "STSP_MAX_NY" in err, err
+    assert not out.exists() or not any(out.iterdir())

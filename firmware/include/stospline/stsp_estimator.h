@@ -108,7 +108,9 @@ uint32_t stsp_est_table_crc32(const stsp_est_table_t *est);
 
 /**
  * Bind the gain table (stsp_init(), whose status is returned when not STSP_OK) and the
- * estimator table to an instance, x̂ = xhat0 at tick 0. Errors (instance not ready):
+ * estimator table to an instance, x̂ = xhat0 at tick 0. Precondition (as for stsp_init()):
+ * each array is as long as the header says (ny and every size C and gain, and only the CRC
+ * can tell them wrong). Errors (instance not ready):
  * STSP_ERR_NULL (a NULL pointer, also an array of the estimator table), STSP_ERR_BAD_MAGIC,
  * STSP_ERR_BAD_VERSION (format or scalar kind), STSP_ERR_BAD_DIMS (nx, nu, n_stages or
  * n_ticks not the gain table's, ny outside 1 .. STSP_MAX_NY, every == 0, model_start not 0 then

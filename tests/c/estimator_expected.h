@@ -19,6 +19,12 @@ static const uint32_t est_checked_u[EST_N_CHECKED][2] = {
     {0xBFC231B9u, 0x3F0A9329u},
     {0xBE35431Bu, 0xC006731Cu},
 };
+#define EST_SKIP_FROM 22u
+#define EST_SKIP_TO 45u
+static const uint32_t est_skipped_u[2][2] = {
+    {0x40212CAEu, 0x3C860DBEu},
+    {0x4020EF3Fu, 0x3C86334Eu},
+};
 static const uint32_t est_y[300][2] = {
     {0xC09F97C0u, 0x3F7D364Bu},
     {0xC09F65B6u, 0x3F802CF4u},

@@ -146,11 +146,19 @@ static void test_ticks_repeated_skipped_backwards(void **state)
     assert_memory_equal(again, u, sizeof u);
     assert_int_equal(stsp_est_step(&e, 18u, NULL, again), STSP_ERR_TICK_ORDER);
     assert_true((again[0] == T->u_hold[0]) && (again[1] == T->u_hold[1]));
-    /* a skip predicts over the missed ticks with the last command held */
+    /* a skip predicts over the missed ticks with the last command held: the specification's
+     * commands at the tick skipped to and the one after it */
     f = e;
-    assert_int_equal(stsp_est_step(&e, 25u, NULL, u), STSP_WARN_TICK_SKIPPED);
-    assert_true(isfinite(u[0]) && isfinite(u[1]));
-    assert_int_equal(stsp_est_step(&e, 26u, NULL, u), STSP_OK);
+    assert_int_equal(stsp_est_reset(&e), STSP_OK);
+    for (j = 0u; j < EST_SKIP_FROM; ++j) {
+        assert_int_equal(step_recorded(&e, j, u), STSP_OK);
+    }
+    assert_int_equal(stsp_est_step(&e, EST_SKIP_TO, NULL, u), STSP_WARN_TICK_SKIPPED);
+    assert_int_equal(bits_of(u[0]), est_skipped_u[0][0]);
+    assert_int_equal(bits_of(u[1]), est_skipped_u[0][1]);
+    assert_int_equal(stsp_est_step(&e, EST_SKIP_TO + 1u, NULL, u), STSP_OK);
+    assert_int_equal(bits_of(u[0]), est_skipped_u[1][0]);
+    assert_int_equal(bits_of(u[1]), est_skipped_u[1][1]);
     /* a skip into stage 1 predicts over 3980 ticks and latches there */
     assert_int_equal(stsp_est_step(&f, 4000u, NULL, u), STSP_WARN_TICK_SKIPPED);
     assert_true(isfinite(u[0]) && isfinite(u[1]));

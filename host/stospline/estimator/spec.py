@@ -1,8 +1,9 @@
 """The specification of the firmware's estimator controller (``stsp_est_step``,
 firmware/include/stospline/stsp_estimator.h) in numpy float32: the same operations in the same
 order, one rounding per multiply and per add, so that the compiled C must agree bit for bit
-(up to the sign of a zero command). Batched over paths. Per-tick gain tables, in order ticks
-only (no skips, repeats or errors: the C tests cover those)."""
+(up to the sign of a zero command). Batched over paths. Per-tick gain tables; ticks in order
+or skipped ahead (the missed ticks predicted with the last command held), no repeats or errors
+(the C tests cover those)."""
 from __future__ import annotations
 
 import numpy as np
@@ -25,6 +26,8 @@ class EstimatorSpec:
         self.xhat = np.tile(et.xhat0.astype(f32), (paths, 1))
         self.v = np.zeros((paths, nl), f32)
         self.pred = self._maps()
+        self.next = 0
+        self.u_last = np.tile(np.asarray(table.u_hold, f32), (paths, 1))
         self.K, self.k0, self.L, self.Lambda, self.lambda0, self.u_min, self.u_max = (
             np.asarray(a, f32) for a in (table.K, table.k0, table.L, table.Lambda,
                                          table.lambda0, table.u_min, table.u_max))
@@ -42,6 +45,8 @@ class EstimatorSpec:
         t, et = self.t, self.et
         n, m, nl = t.dims
         x = self.xhat.copy()
+        for missed in range(self.next, j):
+            x = self._predict(missed, x, self.u_last)
         if j % et.every == 0 and Y is not None:
             F = et.gain[j // et.every]
             e = np.empty((x.shape[0], et.ny), f32)
@@ -70,6 +75,12 @@ class EstimatorSpec:
             for c in range(nl):
                 acc = acc + self.L[j][i, c] * self.v[:, c]
             U[:, i] = np.minimum(np.maximum(-acc, self.u_min[i]), self.u_max[i])
+        self.xhat = self._predict(j, x, U)
+        self.u_last, self.next = U, j + 1
+        return U
+
+    def _predict(self, j: int, x: np.ndarray, U: np.ndarray) -> np.ndarray:
+        n, m = self.t.dims[:2]
         P = self.pred[j]
         xn = np.empty_like(x)
         for r in range(n):
@@ -79,5 +90,4 @@ class EstimatorSpec:
             for c in range(m):
                 acc = acc + P[r, n + c] * U[:, c]
             xn[:, r] = acc
-        self.xhat = xn
-        return U
+        return xn

@@ -158,3 +158,27 @@ def test_a_sensor_wider_than_the_firmware_is_refused_in_one_line(tmp_path, capsy
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "measurement.C" in err and "STSP_MAX_NY" in err, err
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_time_varying_plant_data_get_a_predictor_map_per_tick(tmp_path):
+    """With time-varying dynamics each stage's tables hold one predictor map per tick (the
+    plant's exact mean map of that tick), and the C runs them bit for bit as specified."""
+    doc = copy.deepcopy(DOC)
+    doc["dynamics"]["A"] = {"t": [0, 2], "values": [[[0, 1], [0, -0.2]], [[0, 1], [0, -1.0]]]}
+    doc["stages"] = [{"cost": {"R": [[2]]}}, {"cost": {"R": [[1]]}}]
+    problem = parse_problem(doc)
+    d = design_problem(problem)
+    et = estimator_table(problem, d.table)
+    T = d.table.n_ticks
+    assert len(et.model) == T and list(et.model_start) == [0, int(d.table.stage_start[1]), T]
+    assert not np.array_equal(et.model[0], et.model[-1])
+    ctl = build_estimator_controller(problem, d.table, et, build_dir=tmp_path)
+    paths, rng = 4, np.random.default_rng(5)
+    step, spec = ctl.stepper(paths), EstimatorSpec(d.table, et, paths)
+    for j in range(T):
+        Y = None
+        if j % et.every == 0:
+            Y = (spec.xhat[:, :1] + 0.05 * rng.standard_normal((paths, 1))).astype(np.float32)
+        U, status = step(j, Y)
+        assert np.array_equal(U, spec.step(j, Y)) and np.all(status == 0), j
+        assert np.array_equal(step.xhat(), spec.xhat), j

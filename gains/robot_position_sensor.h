@@ -20,4 +20,13 @@
  * stsp_controller.h; +-3.4028235e+38f = +-FLT_MAX: unlimited). */
 extern const stsp_table_t robot_position_sensor_table;
 
+/* The filter on the sensor (stsp_estimator.h): y = C x at every tick j with j % EVERY == 0. */
+#include "stospline/stsp_estimator.h"
+
+#define ROBOT_POSITION_SENSOR_NY 2u
+#define ROBOT_POSITION_SENSOR_EVERY 20u
+/* Layout model[map][r*(NX + NU + 1) + c] = [Ad | Bd | fd], C[i*NX + j],
+ * gain[sample][r*NY + i], xhat0[j] (see stsp_estimator.h). */
+extern const stsp_est_table_t robot_position_sensor_estimator;
+
 #endif /* ROBOT_POSITION_SENSOR_GAINS_H */

@@ -265,6 +265,24 @@ FAULTS = [
           "            if (!(W[(i * q) + j] == W[(j * q) + i])) {\n                sym = 1u;"),
     Fault("F60", "band solver, non-symmetric W: an overflowed solution accepted", CTL,
           "            if ((r[row] - r[row]) != 0.0) {", "            if ((r[row] - r[row]) > 1.0) {"),
+    # The controller on a sensor (stsp_estimator.c; tests/c/test_estimator.c).
+    Fault("F73", "estimator: a NaN or infinite reading not refused (the update runs on it)", CTL,
+          "        } else if (stsp_est_finite(y, e->ny) == 0) {",
+          "        } else if (stsp_est_finite(y, e->ny) < 0) {"),
+    Fault("F74", "estimator: the next sample's gain (index slip)", CTL,
+          "            stsp_est_update(e, tick / e->every, y, xh);",
+          "            stsp_est_update(e, (tick / e->every) + 1u, y, xh);"),
+    Fault("F75", "estimator: the prediction made with the safe command, not the one written",
+          CTL, "    stsp_est_predict(est, stage_start, stage, tick, xh, cmd);",
+          "    stsp_est_predict(est, stage_start, stage, tick, xh, est->ctrl.hold);"),
+    Fault("F76", "estimator: the CRC leaves out the gains", CTL,
+          "    crc = stsp_crc32_f32s(crc, est->gain, stsp_est_samples(est) * nx * est->ny);\n", ""),
+    Fault("F77", "estimator: a skip does not predict over the missed ticks", CTL,
+          "    for (j = est->next_tick; j < tick; ++j) {", "    for (j = tick; j < tick; ++j) {"),
+    Fault("F78", "estimator: a refused reading still updates the estimate", CTL,
+          "            return stsp_est_hold(est, u, STSP_ERR_NONFINITE_MEASUREMENT);",
+          "            stsp_est_update(e, tick / e->every, y, est->xhat);\n"
+          "            return stsp_est_hold(est, u, STSP_ERR_NONFINITE_MEASUREMENT);"),
 ]
 
 

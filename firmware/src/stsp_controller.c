@@ -903,6 +903,8 @@ const char *stsp_status_str(stsp_status_t status)
     case STSP_ERR_BAD_PROBLEM: text = "table made from another problem file"; break;
     case STSP_ERR_BAD_VALUES: text = "table values not finite or limits invalid"; break;
     case STSP_ERR_TABLE_CHANGED: text = "table header changed since init"; break;
+    case STSP_WARN_NO_MEASUREMENT: text = "no reading at a sampling tick: predicted"; break;
+    case STSP_ERR_NONFINITE_MEASUREMENT: text = "measurement not finite"; break;
     default: text = "unknown status"; break;
     }
     return text;

@@ -28,7 +28,8 @@ STATUS = {                                     # stsp_status_t, without the STSP
     "ERR_BAD_CRC": -6, "ERR_TICK_RANGE": -7, "ERR_TICK_ORDER": -8,
     "WARN_SATURATED": 3, "ERR_NONFINITE_STATE": -9, "ERR_NONFINITE_OUTPUT": -10,
     "ERR_BAD_VALUES": -11, "WARN_STATE_CLAMPED": 4, "WARN_BAND_FALLBACK": 5,
-    "ERR_BAD_PROBLEM": -12, "ERR_TABLE_CHANGED": -13,
+    "ERR_BAD_PROBLEM": -12, "ERR_TABLE_CHANGED": -13, "WARN_NO_MEASUREMENT": 6,
+    "ERR_NONFINITE_MEASUREMENT": -14,
 }
 
 _DEFINE = re.compile(r"^\s*#\s*define\s+(STSP_\w+)\s+(0x[0-9A-Fa-f]+|\d+)u?\b", re.MULTILINE)

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["MAX_NX", "MAX_NU", "MAX_LATCH", "MAX_STAGES", "BANDQP_MAX", "Q_EXP_MAX",
+__all__ = ["MAX_NX", "MAX_NU", "MAX_LATCH", "MAX_STAGES", "BANDQP_MAX", "Q_EXP_MAX", "MAX_NY",
            "MAX_TICKS", "MAX_ARRAY_BYTES", "HEADER_MACROS", "read_header_limits",
            "check_state", "check_mode", "check_problem", "check_stage_count", "check_table",
            "latch_width"]
@@ -28,6 +28,7 @@ MAX_NU = 16           # STSP_MAX_NU: inputs
 MAX_LATCH = 16        # STSP_MAX_LATCH: latched multipliers (the table's n_latch)
 MAX_STAGES = 256      # STSP_MAX_STAGES: stages (knots, including the bands of [[regions]])
 BANDQP_MAX = 8        # STSP_BANDQP_MAX: band rows the on-target dual solver takes
+MAX_NY = 8            # STSP_MAX_NY (stsp_estimator.h): the sensor's outputs
 Q_EXP_MAX = 60        # STSP_Q_EXP_MAX: fixed-point scale exponents within +-60
 MAX_TICKS = 2**32 - 1  # n_ticks and every table offset are uint32_t
 # The largest array a C compiler for a 32-bit target accepts is PTRDIFF_MAX = 2^31 - 1 bytes
@@ -38,7 +39,7 @@ F32_MAX = float(np.finfo(np.float32).max)   # table entries and the measured sta
 # Python name -> the macro it mirrors, for `read_header_limits` and the test.
 HEADER_MACROS = {"MAX_NX": "STSP_MAX_NX", "MAX_NU": "STSP_MAX_NU", "MAX_LATCH": "STSP_MAX_LATCH",
                  "MAX_STAGES": "STSP_MAX_STAGES", "BANDQP_MAX": "STSP_BANDQP_MAX",
-                 "Q_EXP_MAX": "STSP_Q_EXP_MAX"}
+                 "Q_EXP_MAX": "STSP_Q_EXP_MAX", "MAX_NY": "STSP_MAX_NY"}
 
 _DEFINE = re.compile(r"^\s*#\s*define\s+(STSP_\w+)\s+(\d+)u?\b", re.MULTILINE)
 

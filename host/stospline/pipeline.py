@@ -437,6 +437,9 @@ def design_files(d: Designed, source_name: str, arith: str = "float32", *,
     if not with_c:
         return {f"{n}.json": text}, summary
     header, source = generate_c(table, source_name=source_name)
+    if arith == "float32":               # the filter's tables, with a [measurement] table
+        from stospline.estimator.ctable import with_estimator
+        header, source = with_estimator(header, source, d.problem, table)
     return {f"{n}.h": header, f"{n}.c": source, f"{n}.json": text}, summary
 
 

@@ -114,6 +114,8 @@ typedef enum {
                                          data times x0 overflowed, or a multiplier is beyond
                                          FLT_MAX: latched the design's affine map
                                          Lambda x + lambda0 instead */
+    STSP_WARN_NO_MEASUREMENT = 6,   /**< stsp_est_step(): a sampling tick without a reading
+                                         (y NULL): the law ran on the prediction */
     STSP_ERR_NULL = -1,             /**< a pointer argument is NULL */
     STSP_ERR_NOT_INITIALIZED = -2,  /**< step/reset before a successful init, or after
                                          stsp_verify() stopped the instance */
@@ -137,10 +139,11 @@ typedef enum {
                                          tick) */
     STSP_ERR_BAD_PROBLEM = -12,     /**< stsp_init_problem(): the table's problem_sha256 is not
                                          the expected one (tables from another problem file) */
-    STSP_ERR_TABLE_CHANGED = -13    /**< stsp_verify(): the table header (magic, version, kind,
+    STSP_ERR_TABLE_CHANGED = -13,   /**< stsp_verify(): the table header (magic, version, kind,
                                          a dimension, an array address, the band dual's or
                                          the spline's header) is not the one stsp_init()
                                          validated */
+    STSP_ERR_NONFINITE_MEASUREMENT = -14 /**< stsp_est_step(): y holds NaN or +-Inf */
 } stsp_status_t;
 
 #ifdef __cplusplus

@@ -66,7 +66,8 @@ def _check(problem: Problem, table: GainTable, meas) -> None:
 
 def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
                        propagator: str = "exact", substeps: int = 4,
-                       path: bool = False) -> EstimatorLoop:
+                       path: bool = False, gains: np.ndarray | None = None,
+                       predictor: np.ndarray | None = None) -> EstimatorLoop:
     """Filter gains and exact moments of `table`'s law run on the filter's estimate.
 
     Parameters
@@ -81,6 +82,11 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         As in `oracle.evaluate.evaluate_table` ("euler": the Monte Carlo plant scheme's moments).
     path : bool
         Also keep the true state's mean and variance at every tick.
+    gains, predictor : ndarray, optional
+        The filter as implemented (`estimator.ctable.EstimatorTable.per_tick`: float32 gains
+        and predictor maps, per tick): the loop's exact moments with these in place of the
+        LMMSE gains and the plant's exact mean map. A predictor that is not the plant's mean
+        map (rounded to float32) biases the estimate by its error.
 
     Returns
     -------
@@ -102,7 +108,7 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
     keep = np.r_[0:d - 1, d - 1 + p]        # z inside z_r
     J = 0.0
     means, covs, cons, err_knot, est_knot = [], [], [], [], []
-    gains = np.zeros((table.n_ticks, n, p))
+    gain_out = np.zeros((table.n_ticks, n, p))
     predict = np.zeros((table.n_ticks, n, n + m + 1))
     err_cov = np.zeros((table.n_ticks, n, n))
     rec = _PathRecord(x0, path)
@@ -120,7 +126,8 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         relatch = k == 0 or table.stage_n_latch[k] > 0
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             if meas.samples_at(j):
-                M = _update(M, meas, C, gains, j, n, xs, hs, rs, keep, d, p)
+                M = _update(M, meas, C, gain_out, j, n, xs, hs, rs, keep, d, p,
+                            None if gains is None else gains[j])
             E = M[xs, xs] - M[xs, hs] - M[hs, xs] + M[hs, hs]
             err_cov[j] = 0.5 * (E + E.T)
             if relatch and j == table.stage_start[k]:
@@ -145,7 +152,7 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
             J += dJ
             predict[j] = Fmean
             Ta = np.zeros((d - n, d))           # passengers a = [x̂'; v; 1]
-            Ta[:n] = Fmean @ Th
+            Ta[:n] = (Fmean if predictor is None else predictor[j]) @ Th
             Ta[n:] = eye[2 * n:]
             Mn = np.empty_like(M)
             Mn[xs, xs] = Mw[:n, :n]
@@ -163,18 +170,18 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         err_knot.append(0.5 * (E + E.T))
         est_knot.append(M[hs, -1].copy())
     mom = rec.moments(J, means, covs, cons, problem.t0, h, table.n_ticks)
-    return EstimatorLoop(mom, gains, predict, err_cov, err_knot, est_knot)
+    return EstimatorLoop(mom, gain_out, predict, err_cov, err_knot, est_knot)
 
 
-def _update(M, meas, C, gains, j, n, xs, hs, rs, keep, d, p):
-    """The measurement update of tick j on ``E zz'``: the LMMSE gain from these moments
-    (stored in ``gains[j]``), then ``x̂ += Lf (C x + r - C x̂)`` with the sensor noise ``r``
+def _update(M, meas, C, gains, j, n, xs, hs, rs, keep, d, p, given=None):
+    """The measurement update of tick j on ``E zz'``: the LMMSE gain from these moments, or
+    `given` (stored in ``gains[j]``), then ``x̂ += Lf (C x + r - C x̂)`` with the sensor noise ``r``
     appended (uncorrelated with z) and dropped again."""
     Mxx = M[xs, xs]
     P = Mxx - M[xs, hs] - M[hs, xs] + M[hs, hs]
     P = 0.5 * (P + P.T)
     R = meas.noise_cov(Mxx)
-    Lf = lmmse_gain(P, C, R)
+    Lf = lmmse_gain(P, C, R) if given is None else np.asarray(given, dtype=float)
     gains[j] = Lf
     D = d + p
     Mr = np.zeros((D, D))

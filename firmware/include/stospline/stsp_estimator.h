@@ -1,0 +1,160 @@
+/**
+ * @file stsp_estimator.h
+ * @brief The controller on a sensor: a linear filter's estimate x̂ feeds the latched law.
+ *
+ * For a problem with a [measurement] table (docs/theory/estimator.md): the sensor reads
+ * y = C x + noise at every tick j with j % every == 0, and the controller runs, at tick j,
+ *
+ *     update    x̂+ = x̂ + F[j / every] (y - C x̂)       (a sampling tick with a reading)
+ *     law       u  = stsp_step(tick j, x̂+)              (latch and law of stsp_controller.h)
+ *     predict   x̂  = Ad x̂+ + Bd u + fd                  (the plant's mean map over the tick)
+ *
+ * starting from the table's prior mean x̂ = xhat0 at tick 0. u is the command written (after
+ * the clamp to the actuator limits): the one the plant holds over the tick.
+ *
+ * float32 only (a Q15/Q31 build has no estimator). Does not use malloc, recursion or VLAs;
+ * every loop is bounded by the validated dimensions (nx <= STSP_MAX_NX, nu <= STSP_MAX_NU,
+ * ny <= STSP_MAX_NY) or, for skipped ticks, by n_ticks.
+ *
+ * Evaluation order (fixed, binary32, no fused multiply-add: -ffp-contract=off), with
+ * acc -= a b meaning acc = acc - (a b) rounded twice:
+ *     innovation  e[i] = y[i]; e[i] -= C[i][j] x̂[j] for j = 0 .. nx-1
+ *     update      x̂[r] += F[r][i] e[i] for i = 0 .. ny-1, each step acc = acc + (F e)
+ *     predict     acc = fd[r]; acc += Ad[r][j] x̂+[j] for j = 0 .. nx-1, then
+ *                 acc += Bd[r][i] u[i] for i = 0 .. nu-1; x̂[r] = acc
+ * (host/stospline/estimator/spec.py is the same arithmetic in numpy, checked bit for bit).
+ *
+ * Buffers: stsp_est_t holds a stsp_ctrl_t, the validated copy of the estimator table's
+ * header, STSP_MAX_NX + STSP_MAX_NU scalars (x̂ and the last command) and 12 bytes of state:
+ * 1004 bytes with the default limits (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_est_t)).
+ * stsp_est_step() uses 2 STSP_MAX_NX + STSP_MAX_NY + STSP_MAX_NU scalars of stack plus
+ * stsp_step()'s.
+ */
+#ifndef STSP_ESTIMATOR_H
+#define STSP_ESTIMATOR_H
+
+#include "stospline/stsp_controller.h"
+
+#ifdef STSP_ARITH_FIXED_POINT
+#error "stsp_estimator.h: the estimator runs in float32 builds only"
+#endif
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** Estimator table magic, "STSE" as a little-endian u32. */
+#define STSP_EST_MAGIC 0x45535453u
+/** Estimator table format understood by this firmware. */
+#define STSP_EST_FORMAT_VERSION 1u
+/** Upper bound on the sensor's outputs, checked by stsp_est_init(). */
+#ifndef STSP_MAX_NY
+#define STSP_MAX_NY 8u
+#endif
+
+#define stsp_est_init STSP_NAME(stsp_est_init)
+#define stsp_est_reset STSP_NAME(stsp_est_reset)
+#define stsp_est_verify STSP_NAME(stsp_est_verify)
+#define stsp_est_step STSP_NAME(stsp_est_step)
+#define stsp_est_table_crc32 STSP_NAME(stsp_est_table_crc32)
+
+/**
+ * The filter's tables (generated next to the gain table, same problem file). Layouts
+ * (row-major): model[k][r*(nx + nu + 1) + c] = [Ad | Bd | fd] row r of predictor map k;
+ * stage s uses maps model_start[s] .. model_start[s+1] - 1: one for every tick of the stage
+ * (a time-invariant stage) or one per tick (a time-varying one); C[i*nx + j];
+ * gain[s][r*ny + i] = F of sample s, at tick s * every, for s < ceil(n_ticks / every);
+ * xhat0[nx] the prior mean.
+ */
+typedef struct {
+    uint32_t magic;              /**< STSP_EST_MAGIC */
+    uint16_t format_version;     /**< STSP_EST_FORMAT_VERSION */
+    uint16_t scalar_kind;        /**< STSP_SCALAR_FLOAT32 */
+    uint16_t nx;                 /**< states: the gain table's nx */
+    uint16_t nu;                 /**< inputs: the gain table's nu */
+    uint16_t ny;                 /**< sensor outputs, 1 .. STSP_MAX_NY */
+    uint16_t n_stages;           /**< the gain table's n_stages */
+    uint32_t n_ticks;            /**< the gain table's n_ticks */
+    uint32_t every;              /**< a sample every `every` ticks (>= 1), from tick 0 */
+    const uint32_t *model_start; /**< [n_stages + 1] */
+    const stsp_f32_t *model;     /**< [model_start[n_stages]][nx][nx + nu + 1] */
+    const stsp_f32_t *C;         /**< [ny][nx] */
+    const stsp_f32_t *gain;      /**< [ceil(n_ticks / every)][nx][ny] */
+    const stsp_f32_t *xhat0;     /**< [nx] */
+    uint32_t crc32;              /**< see stsp_est_table_crc32() */
+    uint8_t problem_sha256[32];  /**< the gain table's problem_sha256 */
+} stsp_est_table_t;
+
+/** One estimator-controller instance, caller-owned; all fields private but `ctrl`'s
+ *  read-only ones (stsp_controller.h). */
+typedef struct {
+    stsp_ctrl_t ctrl;                  /**< the law on x̂+ */
+    const stsp_est_table_t *table;
+    stsp_est_table_t checked;          /**< the validated header (private) */
+    uint32_t ready;                    /**< a magic value after a successful init (private) */
+    uint32_t next_tick;                /**< the tick x̂ is the prediction for (private) */
+    uint32_t stage;                    /**< the stage of tick next_tick (private) */
+    stsp_f32_t xhat[STSP_MAX_NX];      /**< the prediction for next_tick (private) */
+    stsp_f32_t u_last[STSP_MAX_NU];    /**< the last command written (private) */
+} stsp_est_t;
+
+/**
+ * CRC-32 (as stsp_table_crc32) of nx, nu, ny, n_stages, n_ticks, every and
+ * model_start[n_stages] as little-endian u32, model_start as u32 each, then model, C, gain,
+ * xhat0 as little-endian binary32 bit patterns, then the 32 bytes of problem_sha256. The
+ * dimensions and pointers must be valid (stsp_est_init() checks them first).
+ */
+uint32_t stsp_est_table_crc32(const stsp_est_table_t *est);
+
+/**
+ * Bind the gain table (stsp_init(), whose status is returned when not STSP_OK) and the
+ * estimator table to an instance, x̂ = xhat0 at tick 0. Precondition (as for stsp_init()):
+ * each array is as long as the header says (ny and every size C and gain, and only the CRC
+ * can tell them wrong). Errors (instance not ready):
+ * STSP_ERR_NULL (a NULL pointer, also an array of the estimator table), STSP_ERR_BAD_MAGIC,
+ * STSP_ERR_BAD_VERSION (format or scalar kind), STSP_ERR_BAD_DIMS (nx, nu, n_stages or
+ * n_ticks not the gain table's, ny outside 1 .. STSP_MAX_NY, every == 0, model_start not 0 then
+ * one or a stage's ticks per stage), STSP_ERR_BAD_CRC, STSP_ERR_BAD_PROBLEM (problem_sha256 not
+ * the gain table's: tables from different problem files), STSP_ERR_BAD_VALUES (a NaN or
+ * infinite entry).
+ */
+stsp_status_t stsp_est_init(stsp_est_t *est, const stsp_table_t *table,
+                            const stsp_est_table_t *est_table);
+
+/** Restart at tick 0 with x̂ = xhat0 (stsp_reset() of the law). */
+stsp_status_t stsp_est_reset(stsp_est_t *est);
+
+/**
+ * stsp_verify() of the gain table, then the same for the estimator table: a changed header
+ * (STSP_ERR_TABLE_CHANGED) or CRC (STSP_ERR_BAD_CRC) stops the instance (every later step
+ * STSP_ERR_NOT_INITIALIZED with u = u_hold) until a new init.
+ */
+stsp_status_t stsp_est_verify(stsp_est_t *est);
+
+/**
+ * The command for tick `tick` from the sensor's reading y[ny]; writes u[nu].
+ * y is read only at a sampling tick (tick % every == 0); y == NULL there (the reading is
+ * missing) runs the law on the prediction: STSP_WARN_NO_MEASUREMENT, unless stsp_step() has
+ * a warning to report. Ticks:
+ *   tick == next expected: update, law, predict (the statuses of stsp_step());
+ *   tick  > next expected: x̂ is first predicted over the missed ticks with the last command
+ *          held (u_hold before the first step), without their samples; then as above
+ *          (STSP_WARN_TICK_SKIPPED);
+ *   tick == the last one stepped: u is the command written then, STSP_WARN_TICK_REPEATED,
+ *          nothing changes;
+ *   earlier: STSP_ERR_TICK_ORDER; tick >= n_ticks: STSP_ERR_TICK_RANGE.
+ * A NaN or infinite y[i] is STSP_ERR_NONFINITE_MEASUREMENT. On every negative status u is
+ * u_hold (not written when u is NULL, nor before a successful init) and the instance is
+ * unchanged: the same tick may be stepped again (with y == NULL, to run on the prediction).
+ * An update that overflows gives STSP_ERR_NONFINITE_STATE (from stsp_step()); a prediction
+ * that overflows is kept, and every later step returns STSP_ERR_NONFINITE_STATE until a reset.
+ * y and u must not overlap the instance or the tables; y may overlap u.
+ */
+stsp_status_t stsp_est_step(stsp_est_t *est, uint32_t tick, const stsp_f32_t *y,
+                            stsp_f32_t *u);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* STSP_ESTIMATOR_H */

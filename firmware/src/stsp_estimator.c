@@ -1,0 +1,363 @@
+/* The controller on a sensor: see stospline/stsp_estimator.h for the contract. The filter
+ * (update, predict) is here; the law and the latch are stsp_step()'s, on the estimate. Every
+ * tick works on local copies and commits only when the law succeeded, so a refused step leaves
+ * the instance as it was. float32 builds only. */
+#include "stospline/stsp_types.h"
+
+#ifndef STSP_ARITH_FIXED_POINT
+
+#include "stospline/stsp_estimator.h"
+#include "stsp_crc32.h"
+#include "stsp_f32bits.h"
+
+#include <string.h>
+
+#define STSP_EST_READY 0x45005300u
+#define STSP_EST_STOPPED 0x45015301u
+
+static uint32_t stsp_est_samples(const stsp_est_table_t *e)
+{
+    return (e->n_ticks / e->every) + (((e->n_ticks % e->every) != 0u) ? 1u : 0u);
+}
+
+static uint32_t stsp_est_models(const stsp_est_table_t *e)
+{
+    return e->model_start[e->n_stages];
+}
+
+static uint32_t stsp_est_row(const stsp_est_table_t *e)
+{
+    return (uint32_t)e->nx + (uint32_t)e->nu + 1u;
+}
+
+uint32_t stsp_est_table_crc32(const stsp_est_table_t *est)
+{
+    const uint32_t nx = est->nx;
+    uint32_t crc = stsp_crc32_begin();
+    crc = stsp_crc32_u32(crc, nx);
+    crc = stsp_crc32_u32(crc, est->nu);
+    crc = stsp_crc32_u32(crc, est->ny);
+    crc = stsp_crc32_u32(crc, est->n_stages);
+    crc = stsp_crc32_u32(crc, est->n_ticks);
+    crc = stsp_crc32_u32(crc, est->every);
+    crc = stsp_crc32_u32(crc, stsp_est_models(est));
+    crc = stsp_crc32_u32s(crc, est->model_start, (uint32_t)est->n_stages + 1u);
+    crc = stsp_crc32_f32s(crc, est->model, stsp_est_models(est) * nx * stsp_est_row(est));
+    crc = stsp_crc32_f32s(crc, est->C, (uint32_t)est->ny * nx);
+    crc = stsp_crc32_f32s(crc, est->gain, stsp_est_samples(est) * nx * est->ny);
+    crc = stsp_crc32_f32s(crc, est->xhat0, nx);
+    crc = stsp_crc32_bytes(crc, est->problem_sha256, 32u);
+    return stsp_crc32_end(crc);
+}
+
+static int stsp_est_finite(const stsp_f32_t *a, uint32_t count)
+{
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        if (stsp_isfinite_f32(a[i]) == 0) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* The estimator table against the validated gain table (h): everything but the CRC. */
+static stsp_status_t stsp_est_check(const stsp_est_table_t *e, const stsp_header_t *h)
+{
+    uint32_t s;
+    if ((e->model_start == NULL) || (e->model == NULL) || (e->C == NULL) ||
+        (e->gain == NULL) || (e->xhat0 == NULL)) {
+        return STSP_ERR_NULL;
+    }
+    if (e->magic != STSP_EST_MAGIC) {
+        return STSP_ERR_BAD_MAGIC;
+    }
+    if ((e->format_version != STSP_EST_FORMAT_VERSION) ||
+        (e->scalar_kind != STSP_SCALAR_FLOAT32)) {
+        return STSP_ERR_BAD_VERSION;
+    }
+    if ((e->nx != h->nx) || (e->nu != h->nu) || (e->n_stages != h->n_stages) ||
+        (e->n_ticks != h->n_ticks) || (e->ny == 0u) || (e->ny > STSP_MAX_NY) ||
+        (e->every == 0u) || (e->model_start[0] != 0u)) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    for (s = 0u; s < e->n_stages; ++s) {
+        const uint32_t maps = e->model_start[s + 1u] - e->model_start[s];
+        const uint32_t ticks = h->stage_start[s + 1u] - h->stage_start[s];
+        if ((e->model_start[s + 1u] < e->model_start[s]) || ((maps != 1u) && (maps != ticks))) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    return STSP_OK;
+}
+
+static int stsp_est_values_finite(const stsp_est_table_t *e)
+{
+    const uint32_t nx = e->nx;
+    return stsp_est_finite(e->model, stsp_est_models(e) * nx * stsp_est_row(e)) &
+           stsp_est_finite(e->C, (uint32_t)e->ny * nx) &
+           stsp_est_finite(e->gain, stsp_est_samples(e) * nx * e->ny) &
+           stsp_est_finite(e->xhat0, nx);
+}
+
+static stsp_status_t stsp_est_refuse(stsp_est_t *est, stsp_status_t status)
+{
+    (void)memset(est, 0, sizeof *est);
+    return status;
+}
+
+static void stsp_est_start(stsp_est_t *est)
+{
+    uint32_t j;
+    est->next_tick = 0u;
+    est->stage = 0u;
+    for (j = 0u; j < est->checked.nx; ++j) {
+        est->xhat[j] = est->checked.xhat0[j];
+    }
+    for (j = 0u; j < est->checked.nu; ++j) {
+        est->u_last[j] = est->ctrl.hold[j];
+    }
+}
+
+stsp_status_t stsp_est_init(stsp_est_t *est, const stsp_table_t *table,
+                            const stsp_est_table_t *est_table)
+{
+    stsp_status_t st;
+    if (est == NULL) {
+        return STSP_ERR_NULL;
+    }
+    (void)memset(est, 0, sizeof *est);
+    if (est_table == NULL) {
+        return STSP_ERR_NULL;
+    }
+    st = stsp_init(&est->ctrl, table);
+    if (st != STSP_OK) {
+        return stsp_est_refuse(est, st);
+    }
+    est->checked = *est_table;
+    st = stsp_est_check(&est->checked, &est->ctrl.checked);
+    if (st != STSP_OK) {
+        return stsp_est_refuse(est, st);
+    }
+    if (stsp_est_table_crc32(&est->checked) != est->checked.crc32) {
+        return stsp_est_refuse(est, STSP_ERR_BAD_CRC);
+    }
+    if (memcmp(est->checked.problem_sha256, table->problem_sha256, 32u) != 0) {
+        return stsp_est_refuse(est, STSP_ERR_BAD_PROBLEM);
+    }
+    if (stsp_est_values_finite(&est->checked) == 0) {
+        return stsp_est_refuse(est, STSP_ERR_BAD_VALUES);
+    }
+    est->table = est_table;
+    stsp_est_start(est);
+    est->ready = STSP_EST_READY;
+    return STSP_OK;
+}
+
+stsp_status_t stsp_est_reset(stsp_est_t *est)
+{
+    stsp_status_t st;
+    if (est == NULL) {
+        return STSP_ERR_NULL;
+    }
+    if (est->ready != STSP_EST_READY) {
+        return STSP_ERR_NOT_INITIALIZED;
+    }
+    st = stsp_reset(&est->ctrl);
+    if (st == STSP_OK) {
+        stsp_est_start(est);
+    }
+    return st;
+}
+
+/* 1 when the table's header is no longer the validated copy. */
+static int stsp_est_header_changed(const stsp_est_table_t *a, const stsp_est_table_t *b)
+{
+    return ((a->magic != b->magic) || (a->format_version != b->format_version) ||
+            (a->scalar_kind != b->scalar_kind) || (a->nx != b->nx) || (a->nu != b->nu) ||
+            (a->ny != b->ny) || (a->n_stages != b->n_stages) || (a->n_ticks != b->n_ticks) ||
+            (a->every != b->every) || (a->model_start != b->model_start) ||
+            (a->model != b->model) || (a->C != b->C) || (a->gain != b->gain) ||
+            (a->xhat0 != b->xhat0)) ? 1 : 0;
+}
+
+stsp_status_t stsp_est_verify(stsp_est_t *est)
+{
+    stsp_status_t st;
+    stsp_est_table_t now;
+    if (est == NULL) {
+        return STSP_ERR_NULL;
+    }
+    if (est->ready != STSP_EST_READY) {
+        return STSP_ERR_NOT_INITIALIZED;
+    }
+    st = stsp_verify(&est->ctrl);
+    if (st == STSP_OK) {
+        if (stsp_est_header_changed(&est->checked, est->table) != 0) {
+            st = STSP_ERR_TABLE_CHANGED;
+        } else {
+            /* The validated header, the table's CRC field and hash: what init checked. */
+            now = est->checked;
+            now.crc32 = est->table->crc32;
+            (void)memcpy(now.problem_sha256, est->table->problem_sha256, 32u);
+            if ((stsp_est_table_crc32(&now) != now.crc32) ||
+                (memcmp(now.problem_sha256, est->checked.problem_sha256, 32u) != 0)) {
+                st = STSP_ERR_BAD_CRC;
+            }
+        }
+    }
+    if (st != STSP_OK) {
+        est->ready = STSP_EST_STOPPED;
+    }
+    return st;
+}
+
+/* x̂ = Ad x̂+ + Bd u + fd with tick j's map (stage s); in place of xh (nx). */
+static void stsp_est_predict(const stsp_est_t *est, const uint32_t *stage_start, uint32_t s,
+                             uint32_t j, stsp_f32_t *xh, const stsp_f32_t *u)
+{
+    const stsp_est_table_t *e = &est->checked;
+    const uint32_t nx = e->nx;
+    const uint32_t nu = e->nu;
+    const uint32_t w = stsp_est_row(e);
+    uint32_t k = e->model_start[s];
+    stsp_f32_t xp[STSP_MAX_NX];
+    uint32_t r;
+    uint32_t c;
+    if ((e->model_start[s + 1u] - k) > 1u) {
+        k += j - stage_start[s];
+    }
+    for (c = 0u; c < nx; ++c) {
+        xp[c] = xh[c];
+    }
+    for (r = 0u; r < nx; ++r) {
+        const stsp_f32_t *row = &e->model[((k * nx) + r) * w];
+        stsp_f32_t acc = row[nx + nu];
+        for (c = 0u; c < nx; ++c) {
+            acc = acc + (row[c] * xp[c]);
+        }
+        for (c = 0u; c < nu; ++c) {
+            acc = acc + (row[nx + c] * u[c]);
+        }
+        xh[r] = acc;
+    }
+}
+
+/* x̂ += F (y - C x̂) with sample `sample`'s gain; in place of xh (nx). */
+static void stsp_est_update(const stsp_est_table_t *e, uint32_t sample, const stsp_f32_t *y,
+                            stsp_f32_t *xh)
+{
+    const uint32_t nx = e->nx;
+    const uint32_t ny = e->ny;
+    const stsp_f32_t *F = &e->gain[sample * nx * ny];
+    stsp_f32_t innov[STSP_MAX_NY];
+    uint32_t i;
+    uint32_t j;
+    for (i = 0u; i < ny; ++i) {
+        stsp_f32_t acc = y[i];
+        for (j = 0u; j < nx; ++j) {
+            acc = acc - (e->C[(i * nx) + j] * xh[j]);
+        }
+        innov[i] = acc;
+    }
+    for (j = 0u; j < nx; ++j) {
+        stsp_f32_t acc = xh[j];
+        for (i = 0u; i < ny; ++i) {
+            acc = acc + (F[(j * ny) + i] * innov[i]);
+        }
+        xh[j] = acc;
+    }
+}
+
+static stsp_status_t stsp_est_hold(const stsp_est_t *est, stsp_f32_t *u, stsp_status_t st)
+{
+    uint32_t i;
+    for (i = 0u; i < est->checked.nu; ++i) {
+        u[i] = est->ctrl.hold[i];
+    }
+    return st;
+}
+
+stsp_status_t stsp_est_step(stsp_est_t *est, uint32_t tick, const stsp_f32_t *y,
+                            stsp_f32_t *u)
+{
+    const stsp_est_table_t *e;
+    const uint32_t *stage_start;
+    stsp_f32_t xh[STSP_MAX_NX];
+    stsp_f32_t cmd[STSP_MAX_NU];
+    stsp_status_t st;
+    stsp_status_t mine = STSP_OK;
+    uint32_t stage;
+    uint32_t j;
+    if ((est == NULL) || (u == NULL)) {
+        return STSP_ERR_NULL;
+    }
+    if (est->ready != STSP_EST_READY) {
+        if (est->ready == STSP_EST_STOPPED) {
+            return stsp_est_hold(est, u, STSP_ERR_NOT_INITIALIZED);
+        }
+        return STSP_ERR_NOT_INITIALIZED;
+    }
+    e = &est->checked;
+    stage_start = est->ctrl.checked.stage_start;
+    if (tick >= e->n_ticks) {
+        return stsp_est_hold(est, u, STSP_ERR_TICK_RANGE);
+    }
+    if (tick < est->next_tick) {
+        if ((tick + 1u) != est->next_tick) {
+            return stsp_est_hold(est, u, STSP_ERR_TICK_ORDER);
+        }
+        for (j = 0u; j < e->nu; ++j) {
+            u[j] = est->u_last[j];
+        }
+        return STSP_WARN_TICK_REPEATED;
+    }
+    for (j = 0u; j < e->nx; ++j) {
+        xh[j] = est->xhat[j];
+    }
+    /* Missed ticks: the plant held the last command; their samples are lost. */
+    stage = est->stage;
+    for (j = est->next_tick; j < tick; ++j) {
+        while ((stage + 1u) < e->n_stages && j >= stage_start[stage + 1u]) {
+            ++stage;
+        }
+        stsp_est_predict(est, stage_start, stage, j, xh, est->u_last);
+    }
+    while ((stage + 1u) < e->n_stages && tick >= stage_start[stage + 1u]) {
+        ++stage;
+    }
+    if ((tick % e->every) == 0u) {
+        if (y == NULL) {
+            mine = STSP_WARN_NO_MEASUREMENT;
+        } else if (stsp_est_finite(y, e->ny) == 0) {
+            return stsp_est_hold(est, u, STSP_ERR_NONFINITE_MEASUREMENT);
+        } else {
+            stsp_est_update(e, tick / e->every, y, xh);
+        }
+    }
+    st = stsp_step(&est->ctrl, tick, xh, cmd);
+    if (st < STSP_OK) {
+        return stsp_est_hold(est, u, st);
+    }
+    if (st == STSP_OK) {
+        st = mine;
+    }
+    for (j = 0u; j < e->nu; ++j) {
+        est->u_last[j] = cmd[j];
+    }
+    stsp_est_predict(est, stage_start, stage, tick, xh, cmd);
+    for (j = 0u; j < e->nx; ++j) {
+        est->xhat[j] = xh[j];
+    }
+    est->stage = stage;
+    est->next_tick = tick + 1u;
+    for (j = 0u; j < e->nu; ++j) {
+        u[j] = cmd[j];
+    }
+    return st;
+}
+
+#else
+/* A fixed-point build has no estimator; ISO C wants a declaration in every translation unit. */
+typedef int stsp_estimator_float32_only;
+#endif

@@ -1,0 +1,153 @@
+"""The filter's flash tables (`stsp_est_table_t`, firmware/include/stospline/stsp_estimator.h):
+float32 gains at the sampling ticks, the predictor's mean maps per stage (or per tick of a
+time-varying stage), the sensor's C and the prior mean; their CRC-32 and C text."""
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from stospline.errors import ProblemError
+from stospline.estimator.oracle import evaluate_estimator
+from stospline.limits import MAX_NY
+from stospline.table.codegen import _array, _f32_literal, _sha_initializer
+from stospline.table.format import SCALAR_FLOAT32, positive_zeros
+
+__all__ = ["EstimatorTable", "estimator_table", "estimator_crc32", "estimator_c",
+           "with_estimator", "EST_MAGIC", "EST_FORMAT_VERSION"]
+
+EST_MAGIC = 0x45535453            # STSP_EST_MAGIC, "STSE"
+EST_FORMAT_VERSION = 1            # STSP_EST_FORMAT_VERSION
+
+
+@dataclass(frozen=True)
+class EstimatorTable:
+    """What `stsp_est_table_t` holds; the arrays float32 (model_start uint32).
+
+    ``model[k]`` is ``[Ad | Bd | fd]`` (nx x (nx + nu + 1)); stage s uses maps
+    ``model_start[s] .. model_start[s+1] - 1``, one per stage or one per tick. ``gain[s]`` (nx x
+    ny) is the update gain of tick ``s * every``."""
+    nx: int
+    nu: int
+    ny: int
+    n_ticks: int
+    every: int
+    stage_start: np.ndarray
+    model_start: np.ndarray
+    model: np.ndarray
+    C: np.ndarray
+    gain: np.ndarray
+    xhat0: np.ndarray
+    problem_sha256: str | None
+
+    @property
+    def n_stages(self) -> int:
+        return len(self.model_start) - 1
+
+    def per_tick(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(gains, predictor)`` per tick as float64: the gains zero between samples (for
+        `evaluate_estimator`'s ``gains=``/``predictor=``: the oracle of these tables)."""
+        gains = np.zeros((self.n_ticks, self.nx, self.ny))
+        gains[::self.every] = self.gain
+        pred = np.empty((self.n_ticks, self.nx, self.model.shape[2]))
+        for s in range(self.n_stages):
+            a, b = int(self.stage_start[s]), int(self.stage_start[s + 1])
+            maps = self.model[int(self.model_start[s]):int(self.model_start[s + 1])]
+            pred[a:b] = maps if len(maps) == b - a else maps[0]
+        return gains, pred.astype(float)
+
+
+def estimator_table(problem, table, loop=None) -> EstimatorTable:
+    """The float32 filter tables of `table`'s law on `problem`'s sensor: the LMMSE gains and
+    the plant's exact mean maps of `evaluate_estimator` (`loop`, computed when not given)."""
+    meas = problem.measurement
+    loop = evaluate_estimator(problem, table) if loop is None else loop
+    n, m, _ = table.dims
+    starts, maps = [0], []
+    for k in range(table.n_stages):
+        a, b = int(table.stage_start[k]), int(table.stage_start[k + 1])
+        per_tick = problem.stages[k].varying is not None and b - a > 1
+        maps.extend(loop.predict[a:b] if per_tick else loop.predict[a:a + 1])
+        starts.append(len(maps))
+    f32 = lambda a: positive_zeros(np.asarray(a, dtype=np.float32))  # noqa: E731
+    return EstimatorTable(
+        n, m, meas.p, table.n_ticks, meas.every, np.asarray(table.stage_start, np.uint32),
+        np.asarray(starts, np.uint32), f32(np.array(maps).reshape(-1, n, n + m + 1)),
+        f32(meas.C), f32(loop.gain[::meas.every]), f32(problem.x0), table.problem_sha256)
+
+
+def estimator_crc32(et: EstimatorTable) -> int:
+    """The firmware's ``stsp_est_table_crc32``: nx, nu, ny, n_stages, n_ticks, every and the
+    number of maps as little-endian u32, model_start as u32, then model, C, gain, xhat0 as
+    binary32 bit patterns, then the problem file's SHA-256 (zeros when unknown)."""
+    parts = [struct.pack("<7I", et.nx, et.nu, et.ny, et.n_stages, et.n_ticks, et.every,
+                         int(et.model_start[-1])),
+             np.asarray(et.model_start, "<u4").tobytes()]
+    parts += [positive_zeros(np.asarray(a, "<f4")).tobytes()
+              for a in (et.model, et.C, et.gain, et.xhat0)]
+    parts.append(bytes.fromhex(et.problem_sha256 or "0" * 64))
+    crc = 0
+    for part in parts:
+        crc = zlib.crc32(part, crc)
+    return crc & 0xFFFFFFFF
+
+
+def estimator_c(et: EstimatorTable, prefix: str) -> tuple[str, str]:
+    """``(header, source)`` fragments: the header's declarations of ``<prefix>_estimator``
+    and its macros, the source's arrays and the `stsp_est_table_t`."""
+    p, name = prefix, prefix.upper()
+    u32 = lambda x: f"{int(x)}u"  # noqa: E731
+    w = et.nx + et.nu + 1
+    header = f"""
+/* The filter on the sensor (stsp_estimator.h): y = C x at every tick j with j % EVERY == 0. */
+#include "stospline/stsp_estimator.h"
+
+#define {name}_NY {et.ny}u
+#define {name}_EVERY {et.every}u
+/* Layout model[map][r*(NX + NU + 1) + c] = [Ad | Bd | fd], C[i*NX + j],
+ * gain[sample][r*NY + i], xhat0[j] (see stsp_estimator.h). */
+extern const stsp_est_table_t {p}_estimator;
+"""
+    arrays = [
+        _array("uint32_t", f"{p}_est_model_start", et.model_start, u32,
+               "[n_stages + 1]: each stage's predictor maps in model[]"),
+        _array("stsp_f32_t", f"{p}_est_model", et.model, _f32_literal,
+               f"[maps][nx][nx + nu + 1] = [{len(et.model)}][{et.nx}][{w}]: [Ad | Bd | fd]"),
+        _array("stsp_f32_t", f"{p}_est_C", et.C, _f32_literal, f"[ny][nx] = [{et.ny}][{et.nx}]"),
+        _array("stsp_f32_t", f"{p}_est_gain", et.gain, _f32_literal,
+               f"[samples][nx][ny] = [{len(et.gain)}][{et.nx}][{et.ny}]: update gains"),
+        _array("stsp_f32_t", f"{p}_est_xhat0", et.xhat0, _f32_literal, "[nx] prior mean"),
+    ]
+    sha = et.problem_sha256 or "0" * 64
+    source = "\n" + "\n".join(arrays) + f"""
+const stsp_est_table_t {p}_estimator = {{
+    0x{EST_MAGIC:08X}u, {EST_FORMAT_VERSION}u, {SCALAR_FLOAT32}u,
+    {et.nx}u, {et.nu}u, {et.ny}u, {et.n_stages}u, {et.n_ticks}u, {et.every}u,
+    {p}_est_model_start, {p}_est_model, {p}_est_C, {p}_est_gain, {p}_est_xhat0,
+    0x{estimator_crc32(et):08X}u,
+    {_sha_initializer(sha)}
+}};
+"""
+    return header, source
+
+
+def with_estimator(header: str, source: str, problem, table, prefix: str | None = None
+                   ) -> tuple[str, str]:
+    """`generate_c`'s text with the estimator tables added (a problem with [measurement] and
+    a table the estimator loop runs; otherwise unchanged). Raises ProblemError for a sensor
+    with more outputs than the firmware takes."""
+    if problem.measurement is None:
+        return header, source
+    if problem.measurement.p > MAX_NY:
+        raise ProblemError("measurement.C", f"has {problem.measurement.p} rows (sensor "
+                           f"outputs); the firmware's estimator takes at most {MAX_NY} "
+                           f"(STSP_MAX_NY)")
+    try:
+        et = estimator_table(problem, table)
+    except ValueError:                 # a delay or band table: no estimator form (summary)
+        return header, source
+    h, c = estimator_c(et, prefix or table.name)
+    body, guard = header.rsplit("#endif", 1)
+    return body + h.lstrip("\n") + "\n#endif" + guard, source + c

@@ -1,0 +1,115 @@
+#!/usr/bin/env python3
+"""Report: instructions per stsp_est_step call (the controller on a sensor) on Cortex-M4F under
+QEMU, for the robot with a position sensor (gains/robot_position_sensor.*).
+
+    python3 tools/arm/count_estimator.py [--build DIR]
+
+Compiles tools/arm/estimator_bench_main.c with firmware/src/*.c and the robot's tables
+(arm-none-eabi-gcc -O2, -mcpu=cortex-m4 hard float, -ffp-contract=off, the generic build:
+the estimator is not specialised by STSP_FIXED_*), runs it in qemu-system-arm mps2-an386 with
+the method of tools/arm/count_instructions.py (-singlestep, -d exec,nochain, -dfilter on
+stsp_est_step, everything it calls and the caller bench_step; every traced address checked
+against the disassembly) and prints instructions per call by kind of tick. Instructions, not
+cycles. Standard library only.
+"""
+from __future__ import annotations
+
+import argparse
+import re
+import statistics
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from count_instructions import BRANCH, ROOT, callees, disassemble, run, symbols  # noqa: E402
+
+FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-std=c99",
+         "-O2", "-ffp-contract=off", "-ffunction-sections", "-fdata-sections", "-Wall",
+         "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"]
+
+
+def build(out: Path) -> Path:
+    elf = out / "bench_estimator.elf"
+    arm = ROOT / "tools" / "arm"
+    run(["arm-none-eabi-gcc", *FLAGS, f"-I{ROOT / 'firmware/include'}",
+         f"-I{ROOT / 'firmware/src'}", f"-I{ROOT / 'gains'}",
+         *sorted(str(p) for p in (ROOT / "firmware/src").glob("*.c")),
+         str(ROOT / "gains/robot_position_sensor.c"), str(arm / "estimator_bench_main.c"),
+         str(arm / "startup.c"), "--specs=rdimon.specs", "-T", str(arm / "mps2-an386.ld"),
+         "-Wl,--gc-sections", "-o", str(elf)])
+    return elf
+
+
+def count(elf: Path) -> tuple[list[dict], int]:
+    syms = symbols(elf)
+    funcs = callees(elf, syms, "stsp_est_step_f32")
+    ranges = {n: syms[n] for n in funcs + ["bench_step"]}
+    insns: dict[int, str] = {}
+    for a, s in ranges.values():
+        insns.update(disassemble(elf, a, s))
+    addrs = sorted(insns)
+    following = dict(zip(addrs, addrs[1:]))
+    trace = elf.with_suffix(".trace")
+    out = run(["timeout", "600", "qemu-system-arm", "-M", "mps2-an386", "-nographic",
+               "-monitor", "none", "-semihosting-config", "enable=on,target=native",
+               "-kernel", str(elf), "-singlestep", "-d", "exec,nochain", "-D", str(trace),
+               "-dfilter", ",".join(f"{a:#x}+{s:#x}" for a, s in ranges.values())])
+    calls = [{"tick": int(m[0]), "status": int(m[1]), "reading": m[2] == "1"}
+             for m in re.findall(r"call \d+ tick (\d+) status (-?\d+) reading (\d)", out)]
+    size = int(re.search(r"sizeof (\d+)", out).group(1))
+    entry = syms["stsp_est_step_f32"][0]
+    lo, n = ranges["bench_step"]
+    counts, current, prev = [], None, None
+    pat = re.compile(r"Trace \d+: 0x[0-9a-f]+ \[[0-9a-f]+/([0-9a-f]+)/")
+    with trace.open() as fh:
+        for line in fh:
+            m = pat.match(line)
+            if not m:
+                continue
+            pc = int(m.group(1), 16)
+            if pc not in insns:
+                raise SystemExit(f"count: traced pc {pc:#x} is not an instruction boundary")
+            if prev is not None and pc != following.get(prev) and not BRANCH.match(insns[prev]):
+                raise SystemExit(f"count: {prev:#x} -> {pc:#x}: an instruction ran untraced")
+            prev = pc
+            if pc == entry:
+                current = 0
+            if lo <= pc < lo + n:
+                if current is not None:
+                    counts.append(current)
+                    current = None
+            elif current is not None:
+                current += 1
+    if len(counts) != len(calls):
+        raise SystemExit(f"count: {len(counts)} calls traced, the bench reports {len(calls)}")
+    for c, k in zip(calls, counts):
+        c["insns"] = k
+    return calls, size
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--build", type=Path, default=ROOT / "build" / "arm-estimator")
+    args = ap.parse_args()
+    args.build.mkdir(parents=True, exist_ok=True)
+    calls, size = count(build(args.build))
+    every = 20
+    kinds = {
+        "tick 0: reading, latch of stage 0": lambda c: c["tick"] == 0,
+        "ordinary tick, no reading (predict only)":
+            lambda c: 0 < c["tick"] < 3000 and c["tick"] % every and c["status"] == 0,
+        "ordinary tick with a reading": lambda c: 0 < c["tick"] < 2999 and not c["tick"] % every,
+        "skip to 2999 (predicts over 2957 ticks)": lambda c: c["tick"] == 2999,
+        "tick 3000: reading, latch of stage 1": lambda c: c["tick"] == 3000,
+    }
+    print("| stsp_est_step, Cortex-M4F (QEMU) | calls | instructions (median) | min-max |")
+    print("|---|---|---|---|")
+    for name, sel in kinds.items():
+        k = [c["insns"] for c in calls if sel(c)]
+        print(f"| {name} | {len(k)} | {statistics.median(k):.0f} | {min(k)}-{max(k)} |")
+    print(f"\nsizeof(stsp_est_t) = {size} bytes")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -12,13 +12,14 @@ The design ignores the table: the law it designs runs on the estimate ``x̂`` of
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from stospline.errors import ProblemError
+from stospline.problem.fields import check_keys as _check_keys, integer as _int, join as _join
+from stospline.problem.fields import kind as _kind, matrix as _matrix
 from stospline.limits import MAX_NX
 
 __all__ = ["Measurement", "parse_measurement", "MEASUREMENT_KEYS"]
@@ -74,65 +75,6 @@ class Measurement:
         if self.x0_cov is not None:
             out["x0_cov"] = self.x0_cov.tolist()
         return out
-
-
-# Field checks with the reader's messages. The reader calls this module, so these are its
-# own, as `faults.py` has its own (an import of the reader's would be a cycle).
-
-def _join(path: str, key: str) -> str:
-    return f"{path}.{key}"
-
-
-def _kind(value: Any) -> str:
-    for types, name in ((bool, "a boolean"), ((int, float), "a number"), (str, "a string"),
-                        (list, "an array"), (dict, "a table")):
-        if isinstance(value, types):
-            return name
-    return "a date/time"
-
-
-def _check_keys(table: Any, path: str, allowed: set[str], required: set[str]) -> dict:
-    if not isinstance(table, dict):
-        raise ProblemError(path, f"must be a table, got {_kind(table)}")
-    for key in table:
-        if key not in allowed:
-            raise ProblemError(_join(path, key), f"unknown key (allowed here: "
-                                                 f"{', '.join(sorted(allowed))})")
-    for key in sorted(required - set(table)):
-        raise ProblemError(_join(path, key), "is required")
-    return table
-
-
-def _int(value: Any, path: str, lo: int, hi: int, what: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-        raise ProblemError(path, f"must be {what}, an integer in {lo}..{hi}, got {value!r}")
-    return value
-
-
-def _number(value: Any, path: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ProblemError(path, f"must be a number, got {_kind(value)} ({value!r})")
-    if not math.isfinite(value):
-        raise ProblemError(path, f"must be finite, got {value} (NaN and Inf are not allowed)")
-    return float(value)
-
-
-def _matrix(value: Any, path: str, shape: tuple, why: tuple[str, str]) -> np.ndarray:
-    if (not isinstance(value, list) or not value
-            or not all(isinstance(r, list) and r for r in value)):
-        raise ProblemError(path, "must be a matrix: a non-empty array of non-empty rows, "
-                                 f"e.g. [[1, 0], [0, 1]]; got {value!r}")
-    widths = {len(r) for r in value}
-    if len(widths) != 1:
-        raise ProblemError(path, f"rows have different lengths {sorted(widths)}")
-    out = np.array([[_number(v, f"{path}[{i}][{j}]") for j, v in enumerate(row)]
-                    for i, row in enumerate(value)])
-    for axis, (got, want) in enumerate(zip(out.shape, shape)):
-        if want is not None and got != want:
-            what = "rows" if axis == 0 else "columns"
-            raise ProblemError(path, f"has {got} {what}, expected {want}{why[axis]} "
-                                     f"(shape {out.shape[0]}x{out.shape[1]})")
-    return out
 
 
 def _bounded(M: np.ndarray, path: str) -> None:

@@ -5,7 +5,6 @@ and says why, so a user can fix the file without reading this code.
 """
 from __future__ import annotations
 
-import difflib
 import hashlib
 import math
 import re
@@ -20,6 +19,9 @@ from stospline.firmware_interface import ARITHS
 from stospline.limits import check_problem, check_stage_count, check_state
 from stospline.table_options import TABLE_KINDS, check_spline_tolerance
 from stospline.problem.faults import parse_faults
+from stospline.problem.fields import check_keys, join as _join, kind as _kind
+from stospline.problem.fields import integer as _int, matrix as _matrix, number as _number
+from stospline.problem.fields import vector as _vector
 from stospline.problem.measurement import parse_measurement
 from stospline.problem.inputfile import decode_problem, read_problem_file
 from stospline.problem.corridors import Corridor
@@ -61,39 +63,15 @@ _MAX_CORRIDOR_OUTPUTS, _MAX_CORRIDOR_WALLS = 32, 256
 # Parsing helpers: each takes the raw value and its field path, returns a checked value.
 
 def _check_keys(table: Any, path: str, allowed: set[str], required: set[str]) -> dict:
-    if not isinstance(table, dict):
-        raise ProblemError(path or "<file>", f"must be a table, got {_kind(table)}")
-    for key in table:
-        if key not in allowed:
-            close = difflib.get_close_matches(key, allowed, n=1)
-            hint = f"did you mean '{close[0]}'? " if close else ""
-            if path and key in _TOP_KEYS:
-                hint += "top-level keys go before the first [table] header; "
-            raise ProblemError(_join(path, key), f"unknown key ({hint}allowed here: "
-                                                 f"{', '.join(sorted(allowed))})")
-    for key in sorted(required):
-        if key not in table:
-            raise ProblemError(_join(path, key), "is required")
-    return table
+    return check_keys(table, path, allowed, required, hint=_top_key_hint(path))
 
 
-def _join(path: str, key: str) -> str:
-    return f"{path}.{key}" if path else key
-
-
-def _kind(value: Any) -> str:
-    """The TOML name of a decoded value's type, for messages."""
-    if isinstance(value, bool):
-        return "a boolean"
-    if isinstance(value, (int, float)):
-        return "a number"
-    if isinstance(value, str):
-        return "a string"
-    if isinstance(value, list):
-        return "an array"
-    if isinstance(value, dict):
-        return "a table"
-    return "a date/time"  # the only other TOML type
+def _top_key_hint(path: str):
+    """Inside a table, a top-level key is a misplaced line: say where it goes."""
+    def hint(key: str) -> str:
+        return ("top-level keys go before the first [table] header; "
+                if path and key in _TOP_KEYS else "")
+    return hint
 
 
 def _plain(value: Any) -> Any:
@@ -109,49 +87,6 @@ def _plain(value: Any) -> Any:
     if isinstance(value, np.generic):
         return value.item()
     return value
-
-
-def _number(value: Any, path: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ProblemError(path, f"must be a number, got {_kind(value)} ({value!r})")
-    if not math.isfinite(value):
-        raise ProblemError(path, f"must be finite, got {value} (NaN and Inf are not allowed)")
-    return float(value)
-
-
-def _int(value: Any, path: str, lo: int, hi: int, what: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-        raise ProblemError(path, f"must be {what}, an integer in {lo}..{hi}, got {value!r}")
-    return value
-
-
-def _matrix(value: Any, path: str, shape: tuple[int | None, int | None],
-            why: tuple[str, str] = ("", "")) -> np.ndarray:
-    if (not isinstance(value, list) or not value
-            or not all(isinstance(r, list) and r for r in value)):
-        raise ProblemError(path, "must be a matrix: a non-empty array of non-empty rows, "
-                                 f"e.g. [[1, 0], [0, 1]]; got {value!r}")
-    widths = {len(r) for r in value}
-    if len(widths) != 1:
-        raise ProblemError(path, f"rows have different lengths {sorted(widths)}")
-    out = np.array([[_number(v, f"{path}[{i}][{j}]") for j, v in enumerate(row)]
-                    for i, row in enumerate(value)])
-    for axis, (got, want) in enumerate(zip(out.shape, shape)):
-        if want is not None and got != want:
-            what = "rows" if axis == 0 else "columns"
-            raise ProblemError(path, f"has {got} {what}, expected {want}{why[axis]} "
-                                     f"(shape {out.shape[0]}x{out.shape[1]})")
-    return out
-
-
-def _vector(value: Any, path: str, length: int | None, why: str = "") -> np.ndarray:
-    if not isinstance(value, list) or not value:
-        raise ProblemError(path, f"must be a non-empty array of numbers (a vector), "
-                                 f"got {value!r}")
-    out = np.array([_number(v, f"{path}[{i}]") for i, v in enumerate(value)])
-    if length is not None and out.shape[0] != length:
-        raise ProblemError(path, f"has length {out.shape[0]}, expected {length}{why}")
-    return out
 
 
 def _tol(M: np.ndarray) -> float:

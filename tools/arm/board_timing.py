@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="where the images and traces go (default: a temporary directory)")
     ap.add_argument("--only", default=None, help="one table of gains/ (its stem)")
     args = ap.parse_args(argv)
-    tables = sorted((ROOT / "gains").glob("*.c"))
+    tables = sorted(p for p in (ROOT / "gains").glob("*.c") if not p.stem.endswith("_params"))
     if args.only is not None:
         tables = [t for t in tables if t.stem == args.only]
         if not tables:

@@ -36,8 +36,11 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tools" / "arm"))
 import count_instructions as ci  # noqa: E402
 
-CPU_FLAGS = ci.CPU_FLAGS
-MACHINE = ci.MACHINE
+# The micro:bit's Cortex-M0 code runs on QEMU's mps2-an385 (a Cortex-M3, as for the M0+ in
+# count_instructions.py): the ARMv6-M instructions are the same on an ARMv7-M core, so their
+# count is, and the trace runs under the same semihosting start-up as the M4F's.
+CPU_FLAGS = {**ci.CPU_FLAGS, "cortex-m0": ["-mcpu=cortex-m0", "-mthumb", "-mfloat-abi=soft"]}
+MACHINE = {**ci.MACHINE, "cortex-m0": "mps2-an385"}
 HEADER = re.compile(r"#define ([A-Z0-9_]+)_(NX|NU|N_LATCH|N_TICKS|TICK_HZ|ARITH_Q15|ARITH_Q31) "
                     r"([0-9]+)u?$")
 
@@ -67,6 +70,7 @@ def build_image(table_c: Path, dims: dict, cpu: str, out: Path) -> Path:
          "-Wall", "-Wextra", "-Werror",
          f"-DSTSP_FIXED_NX={dims['NX']}u", f"-DSTSP_FIXED_NU={dims['NU']}u",
          f"-DSTSP_FIXED_N_LATCH={dims['N_LATCH']}u",
+         *([f"-DSTSP_ARITH_{arith_of(dims).upper()}"] if arith_of(dims) != "float32" else []),
          f"-I{fw / 'include'}", f"-I{fw / 'src'}", f"-I{table_c.parent}",
          "-include", str(table_c.with_suffix(".h")), f"-DPLAN_TABLE={name}_table",
          f"-DPLAN_NX={up}_NX", f"-DPLAN_NU={up}_NU", f"-DPLAN_TICKS={up}_N_TICKS",

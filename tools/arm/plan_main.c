@@ -22,11 +22,11 @@ typedef struct {
 static plan_call_t calls[PLAN_TICKS];
 
 /* Not inlined: the trace ends a call at the first instruction back in here. */
-__attribute__((noinline)) void bench_step(stsp_ctrl_t *c, uint32_t tick, const stsp_f32_t *x);
+__attribute__((noinline)) void bench_step(stsp_ctrl_t *c, uint32_t tick, const stsp_scalar_t *x);
 
-void bench_step(stsp_ctrl_t *c, uint32_t tick, const stsp_f32_t *x)
+void bench_step(stsp_ctrl_t *c, uint32_t tick, const stsp_scalar_t *x)
 {
-    stsp_f32_t u[PLAN_NU];
+    stsp_scalar_t u[PLAN_NU];
     const uint16_t stage_before = c->stage;
     const uint16_t latched_before = c->latched;
     const stsp_status_t st = stsp_step(c, tick, x, u);
@@ -40,7 +40,7 @@ void bench_step(stsp_ctrl_t *c, uint32_t tick, const stsp_f32_t *x)
 int main(void)
 {
     static stsp_ctrl_t ctrl;
-    stsp_f32_t x[PLAN_NX];
+    stsp_scalar_t x[PLAN_NX];
     uint32_t i;
     stsp_status_t st = stsp_init(&ctrl, &PLAN_TABLE);
     if (st != STSP_OK) {
@@ -48,7 +48,11 @@ int main(void)
         return 1;
     }
     for (i = 0u; i < PLAN_NX; ++i) {
+#ifdef STSP_Q_FRAC_BITS
+        x[i] = (stsp_scalar_t)(1L << (STSP_Q_FRAC_BITS - 1)); /* half the Q range */
+#else
         x[i] = 0.5f;
+#endif
     }
     for (i = 0u; i < PLAN_TICKS; ++i) {
         bench_step(&ctrl, i, x);

@@ -318,12 +318,12 @@ stsp_status_t stsp_est_step(stsp_est_t *est, uint32_t tick, const stsp_f32_t *y,
     /* Missed ticks: the plant held the last command; their samples are lost. */
     stage = est->stage;
     for (j = est->next_tick; j < tick; ++j) {
-        while ((stage + 1u) < e->n_stages && j >= stage_start[stage + 1u]) {
+        while (((stage + 1u) < e->n_stages) && (j >= stage_start[stage + 1u])) {
             ++stage;
         }
         stsp_est_predict(est, stage_start, stage, j, xh, est->u_last);
     }
-    while ((stage + 1u) < e->n_stages && tick >= stage_start[stage + 1u]) {
+    while (((stage + 1u) < e->n_stages) && (tick >= stage_start[stage + 1u])) {
         ++stage;
     }
     if ((tick % e->every) == 0u) {

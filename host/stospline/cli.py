@@ -278,6 +278,8 @@ def _simulate(args) -> int:
     from stospline.report.summary_text import saturation_warning, simulation_summary_text
     problem = _load_with_faults(args)
     opts = _design_options(args, problem)
+    if problem.measurement is not None:
+        return _simulate_sensor(args, problem, opts)
     x0 = args.x0
     _check_faults_runnable(args, problem, opts)
     _check_budget(args, problem, opts, "simulate")
@@ -292,6 +294,68 @@ def _simulate(args) -> int:
     s = simulation_summary(d, mc, seed=args.seed)
     # Flushed: the saturation warning (stderr) comes after the numbers it qualifies.
     print(dumps(s) + "\n" if args.json else simulation_summary_text(s), end="", flush=True)
+    warning = saturation_warning(s)
+    if warning:
+        print(f"stospline: warning: {warning}", file=sys.stderr)
+    return 0 if (s["verdict"]["agree"] or not args.check) else EXIT_DISAGREE
+
+
+SENSOR_MAX_PATHS = 10 ** 7    # the sensor loop holds every path's state at once
+
+
+def _sensor_refusal(args, problem, opts) -> None:
+    """Refuse, before the design, what the sensor loop's Monte Carlo does not run (one line
+    naming the option, or the file's field)."""
+    def named(option: str, key: str, field: str) -> str:
+        return option if getattr(args, key, None) not in (None, False, []) else field
+    why = "a problem with [measurement] runs the sensor loop, which"
+    if problem.faults.any:
+        raise ProblemError(named("--fault", "fault", "faults"),
+                           f"{why} takes no faults (the sensor's noise is the measurement "
+                           f"table's)")
+    if args.x0 is not None:
+        raise ProblemError("--x0", f"{why} starts from the file's x0 and x0_cov (the filter's "
+                                   f"prior mean is flashed with the tables)")
+    if args.scheduler is not None:
+        raise ProblemError("--scheduler", f"{why} runs in this process")
+    if args.paths > SENSOR_MAX_PATHS:
+        raise ProblemError("--paths", f"{why} holds every path in memory: at most "
+                                      f"{SENSOR_MAX_PATHS}, got {args.paths}")
+    for key, bad, what in (("delay_ticks", 1, "has no estimator form for a one-tick delay"),
+                           ("table", "spline", "runs the per-tick table"),
+                           ("arith", "q15", "runs float32 tables"),
+                           ("arith", "q31", "runs float32 tables")):
+        if getattr(opts, key) == bad:
+            raise ProblemError(named(f"--{key.replace('_', '-')}", key, f"design.{key}"),
+                               f"{why} {what}")
+    for k, stage in enumerate(problem.stages):
+        if stage.varying is not None:
+            key = stage.varying.keys[0]
+            section = "dynamics" if key in ("A", "B", "f", "noise") else "cost"
+            raise ProblemError(f"{section}.{key}", f"is time-varying (stage {k}); {why} runs "
+                                                   f"constant stage data only")
+
+
+def _simulate_sensor(args, problem, opts) -> int:
+    """`simulate` of a problem with [measurement]: the law on the filter's estimate, through
+    the compiled C estimator controller (`harness.estimator_run`)."""
+    from stospline.harness.estimator_run import run_sensor_loop, sensor_loop_unsupported
+    from stospline.pipeline import check_implementable, design_problem
+    from stospline.report.sensor_simulation import (sensor_simulation_summary,
+                                                    sensor_simulation_text)
+    from stospline.report.summary_text import saturation_warning
+    _sensor_refusal(args, problem, opts)
+    _check_budget(args, problem, opts, "simulate",
+                  substeps=1 if args.substeps == "auto" else args.substeps)
+    d = design_problem(problem, options=opts, **_limits(args))
+    check_implementable(d)
+    why = sensor_loop_unsupported(d.problem, d.table)
+    if why:
+        raise ProblemError(*why)
+    run = run_sensor_loop(d.problem, d.table, paths=args.paths, seed=args.seed,
+                          substeps=args.substeps)
+    s = sensor_simulation_summary(d, run, seed=args.seed)
+    print(dumps(s) + "\n" if args.json else sensor_simulation_text(s), end="", flush=True)
     warning = saturation_warning(s)
     if warning:
         print(f"stospline: warning: {warning}", file=sys.stderr)

@@ -57,7 +57,8 @@ def sensor_loop_unsupported(problem, table) -> tuple[str, str] | None:
         return "table", ("the sensor loop runs the per-tick table (the estimator's firmware "
                          "takes no spline table)")
     if table.band_qp is not None:
-        return "bands", "the band latch solves a QP from the estimate, which is not simulated"
+        return "knots", ("a band constraint (lower/upper) latches by a QP on the estimate, "
+                         "which the sensor loop does not run")
     if getattr(table, "arith", "float32") != "float32":
         return "arith", "the estimator's firmware is float32"
     return None

@@ -313,7 +313,7 @@ def _sensor_refusal(args, problem, opts) -> None:
         raise ProblemError(named("--fault", "fault", "faults"),
                            f"{why} takes no faults (the sensor's noise is the measurement "
                            f"table's)")
-    if args.x0 is not None:
+    if getattr(args, "x0", None) is not None:
         raise ProblemError("--x0", f"{why} starts from the file's x0 and x0_cov (the filter's "
                                    f"prior mean is flashed with the tables)")
     if args.scheduler is not None:
@@ -336,16 +336,14 @@ def _sensor_refusal(args, problem, opts) -> None:
                                                    f"constant stage data only")
 
 
-def _simulate_sensor(args, problem, opts) -> int:
-    """`simulate` of a problem with [measurement]: the law on the filter's estimate, through
-    the compiled C estimator controller (`harness.estimator_run`)."""
+def _sensor_run(args, problem, opts, command: str, record: int = 0):
+    """``(d, run, summary)`` of the loop on the problem's sensor: the law on the filter's
+    estimate, through the compiled C estimator controller (`harness.estimator_run`)."""
     from stospline.harness.estimator_run import run_sensor_loop, sensor_loop_unsupported
     from stospline.pipeline import check_implementable, design_problem
-    from stospline.report.sensor_simulation import (sensor_simulation_summary,
-                                                    sensor_simulation_text)
-    from stospline.report.summary_text import saturation_warning
+    from stospline.report.sensor_simulation import sensor_simulation_summary
     _sensor_refusal(args, problem, opts)
-    _check_budget(args, problem, opts, "simulate",
+    _check_budget(args, problem, opts, command, record=record,
                   substeps=1 if args.substeps == "auto" else args.substeps)
     d = design_problem(problem, options=opts, **_limits(args))
     check_implementable(d)
@@ -353,8 +351,15 @@ def _simulate_sensor(args, problem, opts) -> int:
     if why:
         raise ProblemError(*why)
     run = run_sensor_loop(d.problem, d.table, paths=args.paths, seed=args.seed,
-                          substeps=args.substeps)
-    s = sensor_simulation_summary(d, run, seed=args.seed)
+                          substeps=args.substeps, record=record)
+    return d, run, sensor_simulation_summary(d, run, seed=args.seed)
+
+
+def _simulate_sensor(args, problem, opts) -> int:
+    """`simulate` of a problem with [measurement] (`_sensor_run`)."""
+    from stospline.report.sensor_simulation import sensor_simulation_text
+    from stospline.report.summary_text import saturation_warning
+    _, _, s = _sensor_run(args, problem, opts, "simulate")
     print(dumps(s) + "\n" if args.json else sensor_simulation_text(s), end="", flush=True)
     warning = saturation_warning(s)
     if warning:
@@ -408,7 +413,11 @@ def _report(args) -> int:
     from stospline.atomic import write_file
     from stospline.pipeline import (fault_sweep, fault_sweep_runs, fault_table_unavailable,
                                     simulation_summary)
+    from stospline.atomic import check_file_target
     from stospline.report.html import report_html
+    check_file_target(args.out, [args.problem])        # before the file is read
+    if load_problem(args.problem).measurement is not None:
+        return _report_sensor(args)
     runs = fault_sweep_runs()
     d, mc = _monte_carlo(args, "report", record=REPORT_RECORD, extra_paths=runs * args.fault_paths)
     summary = simulation_summary(d, mc, seed=args.seed)
@@ -421,6 +430,24 @@ def _report(args) -> int:
         rows = fault_sweep(d, paths=args.fault_paths, seed=args.seed, substeps=mc.substeps,
                            workers=_workers(args), scheduler=args.scheduler)
     page = report_html(d, mc, summary, rows, why_not if args.fault_paths else None)
+    write_file(args.out, lambda tmp: Path(tmp).write_text(page, encoding="utf-8"),
+               [args.problem])
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _report_sensor(args) -> int:
+    """`report` of a problem with [measurement]: the page of the sensor loop
+    (`report.sensor_html`); no fault table (the sensor loop runs without faults)."""
+    from stospline.atomic import check_file_target, write_file
+    from stospline.report.sensor_html import sensor_report_html
+    check_file_target(args.out, [args.problem])
+    problem = _load_with_faults(args)
+    opts = _design_options(args, problem)
+    d, run, summary = _sensor_run(args, problem, opts, "report", record=REPORT_RECORD)
+    if args.fault_paths:
+        progress.note("no fault table: the sensor loop runs without faults")
+    page = sensor_report_html(d, run, summary)
     write_file(args.out, lambda tmp: Path(tmp).write_text(page, encoding="utf-8"),
                [args.problem])
     print(f"wrote {args.out}")

@@ -102,7 +102,7 @@ def run_sensor_loop(problem, table, *, paths: int, seed: int, substeps: int | st
     designed = evaluate_estimator(problem, table)
     tables = estimator_table(problem, table, designed)
     gains, pred = tables.per_tick()
-    exact = evaluate_estimator(problem, table, gains=gains, predictor=pred)
+    exact = evaluate_estimator(problem, table, gains=gains, predictor=pred, path=True)
     ctl = build_estimator_controller(problem, table, tables, build_dir=build_dir)
     choice = None
     if substeps == "auto":

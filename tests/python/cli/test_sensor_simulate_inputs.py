@@ -47,3 +47,26 @@ def test_a_problem_without_measurement_keeps_the_full_state_path(tmp_path, monke
     assert main(["simulate", "p.toml", "--paths", "200", "--json", "--quiet"]) == 0
     s = json.loads(capsys.readouterr().out)
     assert "measurement" not in s and "estimation_error" not in s["knots"][0]
+
+
+def test_the_report_of_a_sensor_loop_shows_the_estimate_and_its_error_band(tmp_path, monkeypatch,
+                                                                          capsys):
+    doc, _, _ = sensor_simulate_doc("valid")
+    (tmp_path / "p.toml").write_text(to_toml(doc))
+    monkeypatch.chdir(tmp_path)
+    assert main(["report", "p.toml", "--out", "page.html", "--paths", "200", "--quiet"]) == 0
+    page = (tmp_path / "page.html").read_text()
+    for part in ('id="sensor"', 'id="estimation-error"', 'alt="true state and estimate"',
+                 'alt="estimation error band"', 'id="verdict"'):
+        assert part in page, part
+    assert page.count("data:image/png;base64,") == 3
+
+
+def test_a_refused_sensor_report_writes_nothing(tmp_path, monkeypatch, capsys):
+    doc, extra, field = sensor_simulate_doc("fault_option")
+    (tmp_path / "p.toml").write_text(to_toml(doc))
+    monkeypatch.chdir(tmp_path)
+    assert main(["report", "p.toml", "--out", "page.html", "--paths", "200", *extra]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and len(err.strip().splitlines()) == 1 and f"{field}:" in err
+    assert not (tmp_path / "page.html").exists()

@@ -84,3 +84,22 @@ def test_the_same_comparison_rejects_a_noisier_sensors_error(run):
     worst = max(np.abs(_error_z(r, k, np.zeros(2), wrong.knot_error_cov[k])).max()
                 for k in range(knots))
     assert worst > limit, (worst, limit)
+
+
+def test_the_quadrotor_on_its_barometer_agrees(tmp_path):
+    """examples/quadrotor_altimeter.toml (gravity as a drift the predictor carries, actuator
+    limits, 50 Hz altitude): never saturated, and the run agrees with the oracle."""
+    from stospline import load_problem
+    from conftest import EXAMPLES
+    problem = load_problem(EXAMPLES / "quadrotor_altimeter.toml")
+    d = design_problem(problem)
+    r = run_sensor_loop(problem, d.table, paths=4000, seed=SEED, substeps=1,
+                        build_dir=tmp_path)
+    s = sensor_simulation_summary(d, r, seed=SEED, confidence=CONFIDENCE)
+    assert s["saturation"]["tick_fraction"] == 0 and s["worst_status"] == 0
+    assert s["verdict"]["agree"], s["verdict"]
+    knots = len(problem.knots)
+    limit = z_value(CONFIDENCE, 2 * 2 * knots)
+    for k in range(knots):
+        z = _error_z(r, k, np.zeros(2), r.exact.knot_error_cov[k])
+        assert np.abs(z).max() < limit, (k, z)

@@ -12,6 +12,9 @@
 # x0 (host/stospline/table/spline/restore.py). robot_patrol_60s has only its spline table,
 # its file's [design] table;
 # and the robot's fixed-point spline tables (<name>_q15_spline.*, <name>_q31_spline.*).
+# The examples with a [measurement] sensor (robot_position_sensor, quadrotor_altimeter) get
+# their filter's tables in <name>.{c,h} from the first loop (float32, per-tick: the estimator
+# takes no spline or fixed-point table).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"

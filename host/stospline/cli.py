@@ -278,6 +278,8 @@ def _simulate(args) -> int:
     from stospline.report.summary_text import saturation_warning, simulation_summary_text
     problem = _load_with_faults(args)
     opts = _design_options(args, problem)
+    if problem.measurement is not None:
+        return _simulate_sensor(args, problem, opts)
     x0 = args.x0
     _check_faults_runnable(args, problem, opts)
     _check_budget(args, problem, opts, "simulate")
@@ -292,6 +294,73 @@ def _simulate(args) -> int:
     s = simulation_summary(d, mc, seed=args.seed)
     # Flushed: the saturation warning (stderr) comes after the numbers it qualifies.
     print(dumps(s) + "\n" if args.json else simulation_summary_text(s), end="", flush=True)
+    warning = saturation_warning(s)
+    if warning:
+        print(f"stospline: warning: {warning}", file=sys.stderr)
+    return 0 if (s["verdict"]["agree"] or not args.check) else EXIT_DISAGREE
+
+
+SENSOR_MAX_PATHS = 10 ** 7    # the sensor loop holds every path's state at once
+
+
+def _sensor_refusal(args, problem, opts) -> None:
+    """Refuse, before the design, what the sensor loop's Monte Carlo does not run (one line
+    naming the option, or the file's field)."""
+    def named(option: str, key: str, field: str) -> str:
+        return option if getattr(args, key, None) not in (None, False, []) else field
+    why = "a problem with [measurement] runs the sensor loop, which"
+    if problem.faults.any:
+        raise ProblemError(named("--fault", "fault", "faults"),
+                           f"{why} takes no faults (the sensor's noise is the measurement "
+                           f"table's)")
+    if getattr(args, "x0", None) is not None:
+        raise ProblemError("--x0", f"{why} starts from the file's x0 and x0_cov (the filter's "
+                                   f"prior mean is flashed with the tables)")
+    if args.scheduler is not None:
+        raise ProblemError("--scheduler", f"{why} runs in this process")
+    if args.paths > SENSOR_MAX_PATHS:
+        raise ProblemError("--paths", f"{why} holds every path in memory: at most "
+                                      f"{SENSOR_MAX_PATHS}, got {args.paths}")
+    for key, bad, what in (("delay_ticks", 1, "has no estimator form for a one-tick delay"),
+                           ("table", "spline", "runs the per-tick table"),
+                           ("arith", "q15", "runs float32 tables"),
+                           ("arith", "q31", "runs float32 tables")):
+        if getattr(opts, key) == bad:
+            raise ProblemError(named(f"--{key.replace('_', '-')}", key, f"design.{key}"),
+                               f"{why} {what}")
+    for k, stage in enumerate(problem.stages):
+        if stage.varying is not None:
+            key = stage.varying.keys[0]
+            section = "dynamics" if key in ("A", "B", "f", "noise") else "cost"
+            raise ProblemError(f"{section}.{key}", f"is time-varying (stage {k}); {why} runs "
+                                                   f"constant stage data only")
+
+
+def _sensor_run(args, problem, opts, command: str, record: int = 0):
+    """``(d, run, summary)`` of the loop on the problem's sensor: the law on the filter's
+    estimate, through the compiled C estimator controller (`harness.estimator_run`)."""
+    from stospline.harness.estimator_run import run_sensor_loop, sensor_loop_unsupported
+    from stospline.pipeline import check_implementable, design_problem
+    from stospline.report.sensor_simulation import sensor_simulation_summary
+    _sensor_refusal(args, problem, opts)
+    _check_budget(args, problem, opts, command, record=record,
+                  substeps=1 if args.substeps == "auto" else args.substeps)
+    d = design_problem(problem, options=opts, **_limits(args))
+    check_implementable(d)
+    why = sensor_loop_unsupported(d.problem, d.table)
+    if why:
+        raise ProblemError(*why)
+    run = run_sensor_loop(d.problem, d.table, paths=args.paths, seed=args.seed,
+                          substeps=args.substeps, record=record)
+    return d, run, sensor_simulation_summary(d, run, seed=args.seed)
+
+
+def _simulate_sensor(args, problem, opts) -> int:
+    """`simulate` of a problem with [measurement] (`_sensor_run`)."""
+    from stospline.report.sensor_simulation import sensor_simulation_text
+    from stospline.report.summary_text import saturation_warning
+    _, _, s = _sensor_run(args, problem, opts, "simulate")
+    print(dumps(s) + "\n" if args.json else sensor_simulation_text(s), end="", flush=True)
     warning = saturation_warning(s)
     if warning:
         print(f"stospline: warning: {warning}", file=sys.stderr)
@@ -344,7 +413,11 @@ def _report(args) -> int:
     from stospline.atomic import write_file
     from stospline.pipeline import (fault_sweep, fault_sweep_runs, fault_table_unavailable,
                                     simulation_summary)
+    from stospline.atomic import check_file_target
     from stospline.report.html import report_html
+    check_file_target(args.out, [args.problem])        # before the file is read
+    if load_problem(args.problem).measurement is not None:
+        return _report_sensor(args)
     runs = fault_sweep_runs()
     d, mc = _monte_carlo(args, "report", record=REPORT_RECORD, extra_paths=runs * args.fault_paths)
     summary = simulation_summary(d, mc, seed=args.seed)
@@ -357,6 +430,24 @@ def _report(args) -> int:
         rows = fault_sweep(d, paths=args.fault_paths, seed=args.seed, substeps=mc.substeps,
                            workers=_workers(args), scheduler=args.scheduler)
     page = report_html(d, mc, summary, rows, why_not if args.fault_paths else None)
+    write_file(args.out, lambda tmp: Path(tmp).write_text(page, encoding="utf-8"),
+               [args.problem])
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _report_sensor(args) -> int:
+    """`report` of a problem with [measurement]: the page of the sensor loop
+    (`report.sensor_html`); no fault table (the sensor loop runs without faults)."""
+    from stospline.atomic import check_file_target, write_file
+    from stospline.report.sensor_html import sensor_report_html
+    check_file_target(args.out, [args.problem])
+    problem = _load_with_faults(args)
+    opts = _design_options(args, problem)
+    d, run, summary = _sensor_run(args, problem, opts, "report", record=REPORT_RECORD)
+    if args.fault_paths:
+        progress.note("no fault table: the sensor loop runs without faults")
+    page = sensor_report_html(d, run, summary)
     write_file(args.out, lambda tmp: Path(tmp).write_text(page, encoding="utf-8"),
                [args.problem])
     print(f"wrote {args.out}")

@@ -38,7 +38,8 @@ class EstimatorLoop:
     ``gain[j]`` (n x p) is the update gain at tick j (zero where the sensor does not sample),
     ``predict[j]`` the mean map ``[Ad, Bd, fd]`` (n x (n + m + 1)) of tick j, ``x0`` and
     ``x0_cov`` the filter's start. ``error_cov[j]`` is the covariance of ``x - x̂+`` after the
-    update of tick j; ``knot_error_cov[k]`` that of ``x - x̂`` at knot k (the prediction).
+    update of tick j, ``prior_error_cov[j]`` before it (the prediction the controller holds
+    when tick j starts); ``knot_error_cov[k]`` that of ``x - x̂`` at knot k (the prediction).
     ``moments`` are the cost, knot means and covariances of the true state ``x``.
     """
     moments: Moments
@@ -47,6 +48,7 @@ class EstimatorLoop:
     error_cov: np.ndarray
     knot_error_cov: list[np.ndarray] = field(default_factory=list)
     knot_estimate_mean: list[np.ndarray] = field(default_factory=list)
+    prior_error_cov: np.ndarray | None = None
 
 
 def _check(problem: Problem, table: GainTable, meas) -> None:
@@ -111,6 +113,7 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
     gain_out = np.zeros((table.n_ticks, n, p))
     predict = np.zeros((table.n_ticks, n, n + m + 1))
     err_cov = np.zeros((table.n_ticks, n, n))
+    prior_cov = np.zeros((table.n_ticks, n, n))
     rec = _PathRecord(x0, path)
     eye = np.eye(d)
     Tw = np.zeros((n + m + 1, d))           # w = [x; u; 1] = Tw z
@@ -125,6 +128,8 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         maps = None
         relatch = k == 0 or table.stage_n_latch[k] > 0
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
+            E = M[xs, xs] - M[xs, hs] - M[hs, xs] + M[hs, hs]
+            prior_cov[j] = 0.5 * (E + E.T)
             if meas.samples_at(j):
                 M = _update(M, meas, C, gain_out, j, n, xs, hs, rs, keep, d, p,
                             None if gains is None else gains[j])
@@ -170,7 +175,7 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         err_knot.append(0.5 * (E + E.T))
         est_knot.append(M[hs, -1].copy())
     mom = rec.moments(J, means, covs, cons, problem.t0, h, table.n_ticks)
-    return EstimatorLoop(mom, gain_out, predict, err_cov, err_knot, est_knot)
+    return EstimatorLoop(mom, gain_out, predict, err_cov, err_knot, est_knot, prior_cov)
 
 
 def _update(M, meas, C, gains, j, n, xs, hs, rs, keep, d, p, given=None):

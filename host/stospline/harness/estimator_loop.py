@@ -18,7 +18,9 @@ from stospline.estimator.ctable import EstimatorTable, estimator_c
 from stospline.firmware_interface import check_header
 from stospline.harness.controller import (_CFLAGS, _PLANT_H, _PLANT_PROTOTYPE, CompiledController,
                                           firmware_dir)
+from stospline.firmware_interface import STATUS
 from stospline.harness.montecarlo import MonteCarloResult, _zoh
+from stospline.harness.path_stats import COST_SAMPLE, Moments
 from stospline.table.codegen import generate_c
 
 __all__ = ["build_estimator_controller", "EstimatorController", "simulate_estimator"]
@@ -158,15 +160,17 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
     """`paths` paths of the loop: the start drawn from ``N(x0, x0_cov)``, the sensor's noise
     from numpy (seeded), the plant's from the harness's C generator; constant stage data.
 
-    Returns the Monte Carlo result (cost, knot states, one path, the mean path) and
-    ``{"x": (ticks + 1, record, n), "xhat": (ticks + 1, record, n), "u": (ticks, record, m)}``
-    for the first `record` paths: the true state at each tick, the controller's prediction of
-    it (before that tick's update) and the commands."""
+    Returns the Monte Carlo result (cost, knot states, one path, the mean path, saturation)
+    and ``{"x": (ticks + 1, record, n), "xhat": (ticks + 1, record, n), "u": (ticks, record,
+    m), "knot_error": [Moments]}``: for the first `record` paths the true state at each tick,
+    the controller's prediction of it (before that tick's update) and the commands; over all
+    paths the moments of the estimation error ``x - x̂`` at each knot (x̂ the prediction the
+    controller holds for the knot's tick)."""
     table, meas = ctl.table, problem.measurement
     n, m, _ = table.dims
     h = 1.0 / table.tick_hz
     dt = h / substeps
-    ss = np.random.SeedSequence(seed)
+    ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
     plant_seed, sensor_seed = ss.spawn(2)
     rng = np.random.default_rng(sensor_seed)
     helpers = ctl.plant_helpers
@@ -182,7 +186,9 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
     D = meas.D if meas.D.size and meas.D.any() else None
     step = ctl.stepper(paths)
     cost = np.zeros(paths)
-    knots, worst = [], 0
+    knots, knot_error, worst = [], [], 0
+    saturated = np.zeros(paths, np.int64)
+    u_low, u_high = np.full(m, np.inf), np.full(m, -np.inf)
     x_sum = np.empty((table.n_ticks + 1, n))
     x_sum[0] = X.sum(axis=0)
     sample_x = np.empty((table.n_ticks + 1, n))
@@ -209,6 +215,8 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
                 Y = Y.astype(np.float32)
             U, status = step(j, Y)
             worst = min(worst, int(status.min()))
+            saturated += status == STATUS["WARN_SATURATED"]
+            u_low, u_high = np.minimum(u_low, U.min(axis=0)), np.maximum(u_high, U.max(axis=0))
             fill()
             helpers.plant_tick(plant, dZ, U, X, cost)
             x_sum[j + 1] = X.sum(axis=0)
@@ -220,8 +228,12 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
         if knot.penalty is not None:
             r = X @ knot.penalty.C.T - knot.penalty.target
             cost += knot.penalty.weight * np.einsum("pi,pi->p", r, r)
-        knots.append(X.copy())
+        knots.append(Moments.of(X))
+        knot_error.append(Moments.of(X - step.xhat()))
     t = problem.t0 + h * np.arange(table.n_ticks + 1)
-    mc = MonteCarloResult(cost, knots, t, sample_x, sample_u, x_sum / paths, worst,
-                          substeps=substeps)
+    mc = MonteCarloResult(paths, Moments.of(cost), knots, t, sample_x, sample_u, x_sum / paths,
+                          worst, int(saturated.sum()), int(np.count_nonzero(saturated)),
+                          u_low, u_high, substeps, record_x=rec["x"].astype(np.float32),
+                          record_u=rec["u"], cost_sample=cost[:COST_SAMPLE].copy())
+    rec["knot_error"] = knot_error
     return mc, rec

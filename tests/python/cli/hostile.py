@@ -586,6 +586,40 @@ def m_parameters(doc, draw):
 
 MUTATIONS["parameters"] = m_parameters
 
+# ---------------------------------------------------------------------------------------
+# Sensor loop: `simulate` of a problem with [measurement] runs the law on the filter's
+# estimate through the compiled C; what that loop does not run is refused with exit status 2,
+# one line naming the option or the file's key, nothing on stdout or disk. Each case is
+# (base, edit of the document with a sensor, extra arguments, the field named); a field of
+# None: the control case, accepted.
+
+SENSOR_SIMULATE_CASES = {
+    "valid": ("noisy", {}, [], None),
+    "faults_in_file": ("noisy", {"faults": {"actuator_noise": 0.1}}, [], "faults"),
+    "fault_option": ("noisy", {}, ["--fault", "actuator_noise=0.1"], "--fault"),
+    "x0_option": ("noisy", {}, ["--x0=0.1,0"], "--x0"),
+    "scheduler_option": ("noisy", {}, ["--scheduler", "local"], "--scheduler"),
+    "paths_beyond_memory": ("noisy", {}, ["--paths", str(10**7 + 1)], "--paths"),
+    "delay_option": ("noisy", {}, ["--delay-ticks", "1"], "--delay-ticks"),
+    "delay_in_file": ("noisy", {"design": {"delay_ticks": 1}}, [], "design.delay_ticks"),
+    "spline_option": ("noisy", {}, ["--table", "spline"], "--table"),
+    "spline_in_file": ("noisy", {"design": {"table": "spline"}}, [], "design.table"),
+    "q15_in_file": ("noisy", {"design": {"arith": "q31"}}, [], "design.arith"),
+    "time_varying": ("varying", {}, [], "dynamics.A"),
+    "band_latch": ("bands", {"design": {"mode": "joint"}}, [], "knots"),
+}
+
+
+def sensor_simulate_doc(name: str) -> tuple[dict, list[str], str | None]:
+    """The problem document, extra arguments and expected field of a sensor-loop case."""
+    base, edit, extra, field = SENSOR_SIMULATE_CASES[name]
+    doc = copy.deepcopy(BASES[base])
+    n = len(doc["x0"])
+    doc["measurement"] = {"C": [[1.0] + [0.0] * (n - 1)], "V": [[1e-4]], "every": 2}
+    doc.update(copy.deepcopy(edit))
+    return doc, list(extra), field
+
+
 # Board and HIL: options, files and serial peers of `stospline board` and `stospline hil`.
 # Each case is refused with exit status 2, one line naming the option (or key) and nothing on
 # disk; `None` instead of the words: the control case, accepted. The test's placeholders:

@@ -1,0 +1,117 @@
+"""One Monte Carlo run of the loop on a sensor, with the exact numbers it is compared with:
+the flashed float32 filter tables (`estimator.ctable`), the compiled C controller that runs
+them (`estimator_loop`), the plant steps per tick, and the estimator oracle of those tables
+with the exact plant and with the plant scheme.
+
+The plant steps per tick are chosen as `plant_scheme.choose_substeps` chooses them: the
+fewest (a power of two) whose exact bias in the expected cost is at most `TOLERANCE` Monte
+Carlo standard errors of the run, the standard error predicted by a pilot on a stream of its
+own.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from stospline.estimator.ctable import EstimatorTable, estimator_table
+from stospline.estimator.oracle import EstimatorLoop, evaluate_estimator
+from stospline.harness.estimator_loop import build_estimator_controller, simulate_estimator
+from stospline.harness.montecarlo import MonteCarloResult
+from stospline.harness.plant_scheme import PILOT_PATHS, TOLERANCE, SubstepChoice
+
+__all__ = ["SensorRun", "run_sensor_loop", "sensor_loop_unsupported"]
+
+_SAFETY = 0.8            # as plant_scheme's: the pilot's spread has a sampling error
+_PILOT_STREAM = 2**32 - 1
+SUBSTEP_LIMIT = 1024
+
+
+@dataclass
+class SensorRun:
+    """``mc`` the run; ``record`` the recorded paths and the knot estimation errors
+    (`simulate_estimator`); ``exact`` and ``scheme`` the estimator oracle of the flashed
+    tables with the exact plant and with the run's plant scheme; ``tables`` the filter's."""
+    mc: MonteCarloResult
+    record: dict
+    exact: EstimatorLoop
+    scheme: EstimatorLoop
+    tables: EstimatorTable
+
+
+def sensor_loop_unsupported(problem, table) -> tuple[str, str] | None:
+    """``(field, reason)`` when the sensor loop's Monte Carlo cannot run `table` on
+    `problem`, else None."""
+    if problem.faults.any:
+        return "faults", ("a loop with a [measurement] sensor is simulated without faults "
+                          "(the sensor's noise is the measurement table's)")
+    varying = [k for k, st in enumerate(problem.stages) if st.varying is not None]
+    if varying:
+        return "stages", (f"stage {varying[0]} has time-varying data; the sensor loop's Monte "
+                          f"Carlo runs constant stage data only")
+    if getattr(table, "delay_ticks", 0):
+        return "delay_ticks", ("a table designed for a one-tick delay has no estimator form; "
+                               "the sensor loop runs without a delay")
+    if table.spline is not None:
+        return "table", ("the sensor loop runs the per-tick table (the estimator's firmware "
+                         "takes no spline table)")
+    if table.band_qp is not None:
+        return "knots", ("a band constraint (lower/upper) latches by a QP on the estimate, "
+                         "which the sensor loop does not run")
+    if getattr(table, "arith", "float32") != "float32":
+        return "arith", "the estimator's firmware is float32"
+    return None
+
+
+def _choose(problem, ctl, tables_loop, gains, pred, table, *, paths: int,
+            seed: int) -> tuple[SubstepChoice, EstimatorLoop]:
+    pilot_paths = min(paths, PILOT_PATHS)
+    pilot_seed = np.random.SeedSequence(seed, spawn_key=(_PILOT_STREAM,))
+    pilot, _ = simulate_estimator(problem, ctl, paths=pilot_paths, seed=pilot_seed, substeps=1)
+    stderr = (pilot.cost_std() if pilot_paths > 1 else 0.0) / math.sqrt(paths)
+    exact_J = tables_loop.moments.J
+    target = max(TOLERANCE * _SAFETY * stderr, 1e-9 * max(1.0, abs(exact_J)))
+
+    def scheme(s: int) -> EstimatorLoop:
+        return evaluate_estimator(problem, table, gains=gains, predictor=pred,
+                                  propagator="euler", substeps=s)
+    substeps, loop = 1, scheme(1)
+    if abs(loop.moments.J - exact_J) > target:
+        # The bias falls as 1/substeps: jump to the predicted power of two, then double.
+        substeps = min(SUBSTEP_LIMIT, 2 ** math.ceil(math.log2(
+            abs(loop.moments.J - exact_J) / target)))
+        loop = scheme(substeps)
+        while abs(loop.moments.J - exact_J) > target and substeps < SUBSTEP_LIMIT:
+            substeps = min(SUBSTEP_LIMIT, 2 * substeps)
+            loop = scheme(substeps)
+    bias = loop.moments.J - exact_J
+    return SubstepChoice(substeps, bias, target, stderr, pilot_paths, abs(bias) <= target,
+                         loop.moments), loop
+
+
+def run_sensor_loop(problem, table, *, paths: int, seed: int, substeps: int | str = "auto",
+                    record: int = 0, build_dir=None) -> SensorRun:
+    """`paths` paths of `table`'s law on the estimate of the filter of
+    ``problem.measurement``, through the compiled C, with the oracle of the flashed tables.
+
+    Raises ValueError (`sensor_loop_unsupported`) for a loop the run does not support."""
+    why = sensor_loop_unsupported(problem, table)
+    if why:
+        raise ValueError(f"{why[0]}: {why[1]}")
+    designed = evaluate_estimator(problem, table)
+    tables = estimator_table(problem, table, designed)
+    gains, pred = tables.per_tick()
+    exact = evaluate_estimator(problem, table, gains=gains, predictor=pred, path=True)
+    ctl = build_estimator_controller(problem, table, tables, build_dir=build_dir)
+    choice = None
+    if substeps == "auto":
+        choice, scheme = _choose(problem, ctl, exact, gains, pred, table, paths=paths, seed=seed)
+        substeps = choice.substeps
+    else:
+        scheme = evaluate_estimator(problem, table, gains=gains, predictor=pred,
+                                    propagator="euler", substeps=int(substeps))
+    mc, rec = simulate_estimator(problem, ctl, paths=paths, seed=seed, substeps=int(substeps),
+                                 record=record)
+    mc.substep_choice = choice
+    return SensorRun(mc, rec, exact, scheme, tables)

@@ -1,0 +1,122 @@
+"""The summary of a Monte Carlo run of the loop on a sensor (``stospline simulate`` for a
+problem with ``[measurement]``): the keys of `simulation_summary.simulation_summary` with the
+estimator oracle of the flashed filter tables as the exact numbers, plus the sensor and the
+estimation error ``x - x̂`` at each knot, Monte Carlo beside the oracle; and its text.
+
+``d`` is a `stospline.pipeline.Designed`; ``run`` a `harness.estimator_run.SensorRun`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from stospline import strict
+from stospline.precision import verbatim
+from stospline.report.design_summary import actuator_limits
+from stospline.report.json_numbers import rounded
+from stospline.report.simulation_summary import predicted_cost, verdict
+from stospline.report.summary_text import simulation_summary_text
+from stospline.harness.montecarlo import z_value
+
+__all__ = ["sensor_simulation_summary", "sensor_simulation_text"]
+
+_ZERO_SE = ("every path gave the same value: the Monte Carlo standard error is 0 up to "
+            "rounding, so the ratio is undefined")
+
+
+def _substep_choice(mc) -> dict:
+    c = mc.substep_choice
+    if c is None:
+        return {"substeps_chosen": "given"}
+    return {"substeps_chosen": "auto", "target": c.target, "predicted_stderr": c.stderr,
+            "pilot_paths": c.pilot_paths, "target_met": c.met}
+
+
+def sensor_simulation_summary(d, run, *, seed: int, confidence: float = 0.99) -> dict:
+    """Monte Carlo statistics of the sensor loop beside the estimator oracle of the flashed
+    tables (cost, knot means and covariances, z-scores, the verdict of
+    `simulation_summary.verdict`), the plant scheme's bias, saturation, and per knot the
+    estimation error: its Monte Carlo mean and covariance beside the oracle's (the oracle's
+    mean is ``E x - E x̂``, zero up to the float32 predictor's rounding)."""
+    mc, exact, scheme = run.mc, run.exact.moments, run.scheme.moments
+    meas = d.problem.measurement
+    mean, hw95 = mc.cost_mean_ci(0.95)
+    _, hw99 = mc.cost_mean_ci(0.99)
+    se = hw95 / z_value(0.95)
+    se_z = 0.0 if mc.cost_moments.alike()[0] else se
+    cost_z, cost_why = strict.ratio_or_null(mean - exact.J, se_z, _ZERO_SE)
+    bias_z, bias_why = strict.ratio_or_null(scheme.J - exact.J, se_z, _ZERO_SE)
+    knots = []
+    for k, kn in enumerate(d.problem.knots):
+        m, s = mc.knot_mean_se(k)
+        alike = mc.knot_moments[k].alike()
+        z, why = strict.ratio_or_null(m - exact.knot_mean[k], np.where(alike, 0.0, s), _ZERO_SE)
+        err = run.record["knot_error"][k]
+        cov = err.cov()
+        knots.append({
+            "t": verbatim(kn.t),
+            "mc_mean": m, "mc_mean_stderr": s, "mc_cov": mc.knot_cov(k),
+            "oracle_mean": exact.knot_mean[k], "oracle_cov": exact.knot_cov[k],
+            "z": z, **({"z_undefined": why} if why else {}),
+            "estimation_error": {
+                "mc_mean": err.mean, "mc_mean_stderr": err.mean_se(),
+                "mc_cov": cov[0, 0] if cov.shape == (1, 1) else cov,
+                "oracle_mean": exact.knot_mean[k] - run.exact.knot_estimate_mean[k],
+                "oracle_cov": run.exact.knot_error_cov[k],
+            },
+        })
+    summary = rounded({
+        "name": d.problem.name, "paths": mc.paths, "seed": seed, "substeps": mc.substeps,
+        "x0": verbatim(d.problem.x0),
+        "tick_hz": d.table.tick_hz, "worst_status": mc.worst_status,
+        "measurement": {
+            **verbatim(meas.as_dict()),
+            "loop": ("the law on the estimate of the filter's float32 tables as flashed, "
+                     "through the compiled C estimator controller"),
+            "full_state_oracle": d.implemented.J,
+        },
+        "cost": {
+            "mc_mean": mean, "mc_stderr": se,
+            "ci95": [mean - hw95, mean + hw95], "ci99": [mean - hw99, mean + hw99],
+            "oracle_implemented": exact.J, "predicted_J0": predicted_cost(d),
+            "z": cost_z, **({"z_undefined": cost_why} if cost_why else {}),
+        },
+        "simulation_bias": {
+            "cost": scheme.J - exact.J,
+            "cost_over_stderr": bias_z,
+            **({"cost_over_stderr_undefined": bias_why} if bias_why else {}),
+            **_substep_choice(mc),
+            "knot_cov_max_abs": [float(np.abs(scheme.knot_cov[k] - exact.knot_cov[k]).max())
+                                 for k in range(len(d.problem.knots))],
+        },
+        "knots": knots,
+        "saturation": {
+            "limited": d.table.limited,
+            "tick_fraction": mc.saturated_fraction,
+            "path_fraction": mc.saturated_path_fraction,
+            "u_low": [float(v) for v in mc.u_low], "u_high": [float(v) for v in mc.u_high],
+        },
+        **actuator_limits(d),
+    })
+    summary["verdict"] = verdict(summary, confidence)
+    strict.check_summary_finite(d.problem, summary, "simulated numbers")
+    return summary
+
+
+def sensor_simulation_text(s: dict) -> str:
+    """`simulation_summary_text` of `s` with the sensor and, per knot, the standard
+    deviations of the estimation error (Monte Carlo and oracle) before the verdict."""
+    base = simulation_summary_text(s).rstrip("\n").split("\n")
+    meas = s["measurement"]
+    every = meas.get("every", 1)
+    sensor = (f"  sensor: y = C x + noise, {len(meas['C'])} output(s) every {every} tick(s) "
+              f"({s['tick_hz'] / every:g} Hz); the law runs on the estimate (the oracle: the "
+              f"flashed filter tables; full-state oracle {meas['full_state_oracle']:.6g})")
+    fmt = lambda v: "[" + ", ".join(f"{x:.5f}" for x in v) + "]"  # noqa: E731
+    errors = []
+    for k, kn in enumerate(s["knots"]):
+        e = kn["estimation_error"]
+        sd = lambda c: np.sqrt(np.maximum(np.diag(np.atleast_2d(c)), 0.0))  # noqa: E731
+        errors.append(f"  knot {k} estimation error x - x̂: sd MC {fmt(sd(e['mc_cov']))}, "
+                      f"oracle {fmt(sd(e['oracle_cov']))}; mean MC "
+                      f"{'[' + ', '.join(f'{x:+.2e}' for x in e['mc_mean']) + ']'}")
+    return "\n".join([base[0], sensor, *base[1:-1], *errors, base[-1]]) + "\n"

@@ -315,6 +315,19 @@ stsp_status_t stsp_param_step(stsp_param_t *pc, uint32_t tick, const stsp_f32_t 
         stsp_hold(ctrl, u);
         return STSP_ERR_NULL;
     }
+    /* An ordinary tick (the expected one inside the latched stage, as stsp_step() tells it):
+     * the law on the multipliers kept, no plan. */
+    if ((tick == ctrl->next_tick) && (tick < ctrl->stage_end)) {
+        status = stsp_param_law(pc, tick, x, ctrl->v, y, &mask);
+        if (status < STSP_OK) {
+            stsp_hold(ctrl, u);
+            return status;
+        }
+        stsp_copy(u, y, ctrl->checked.nu);
+        ctrl->sat_mask = mask;
+        ctrl->next_tick = tick + 1u;
+        return status;
+    }
     stsp_zero(v_new, STSP_MAX_LATCH);
     status = stsp_plan_tick(ctrl, tick, x, v_new, &plan);
     if (status >= STSP_OK) {

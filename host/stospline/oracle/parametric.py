@@ -17,8 +17,8 @@ from stospline.oracle.evaluate import Moments, evaluate_table
 from stospline.problem.parameters import problem_at
 from stospline.table.parametric import ParametricTable, parametric_table
 
-__all__ = ["ParametricDesign", "design_parametric", "evaluate_at", "cost_quadratic",
-           "parametric_c_files"]
+__all__ = ["ParametricDesign", "check_parametric_options", "design_parametric", "evaluate_at",
+           "cost_quadratic", "parametric_c_files"]
 
 
 @dataclass
@@ -100,14 +100,25 @@ def cost_quadratic(problem, table: ParametricTable, *, quantize: bool = False):
     return J0, g, H
 
 
-def parametric_c_files(problem, source_name: str = "") -> dict[str, str]:
+def parametric_c_files(problem, source_name: str = "", options=None) -> dict[str, str]:
     """``{"<name>_params.h": ..., "<name>_params.c": ...}``: the sensitivity columns of the
-    problem's design with its ``[design]`` options (mode, discretization, delay) as C text
+    problem's design with `options` (`stospline.options.DesignOptions`; default its
+    ``[design]`` options: mode, discretization, delay) as C text
     (`stospline.table.parametric_c`), beside the ``<name>.{c,h}`` that `stospline design`
     writes for the nominal."""
-    from stospline.options import resolve_options
     from stospline.table.parametric_c import generate_parametric_c
-    opts = resolve_options(problem)
+    opts = check_parametric_options(problem, options)
+    pd = design_parametric(problem, discretization=opts.discretization, mode=opts.mode,
+                           delay_ticks=opts.delay_ticks)
+    header, source = generate_parametric_c(pd.table, source_name=source_name)
+    return {f"{problem.name}_params.h": header, f"{problem.name}_params.c": source}
+
+
+def check_parametric_options(problem, options=None):
+    """`options` (default the problem's resolved ``[design]``), or DesignError naming the
+    option when the table they ask for has no sensitivity columns."""
+    from stospline.options import resolve_options
+    opts = options if options is not None else resolve_options(problem)
     # The columns are those of the float32 per-tick law: a spline table re-solves its latch
     # for its own gains, and fixed-point tables scale k0; neither has columns yet.
     for key, plain in (("table", "per-tick"), ("arith", "float32")):
@@ -115,7 +126,4 @@ def parametric_c_files(problem, source_name: str = "") -> dict[str, str]:
             raise DesignError(f"design.{key}", f"runtime parameters have sensitivity columns "
                                                f"for {key} = \"{plain}\" only, got "
                                                f"{getattr(opts, key)!r}")
-    pd = design_parametric(problem, discretization=opts.discretization, mode=opts.mode,
-                           delay_ticks=opts.delay_ticks)
-    header, source = generate_parametric_c(pd.table, source_name=source_name)
-    return {f"{problem.name}_params.h": header, f"{problem.name}_params.c": source}
+    return opts

@@ -1,11 +1,12 @@
 """A problem with runtime parameters: its nominal design with the sensitivity columns
 (`design_parametric`), the exact moments of the table at any parameter vector
-(`evaluate_at`), and the exact expected cost as a quadratic in the parameters
+(`evaluate_at`) or with the parameters changed at a stage start (`evaluate_switched`), and the
+exact expected cost as a quadratic in the parameters
 (`cost_quadratic`).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -18,7 +19,7 @@ from stospline.problem.parameters import problem_at
 from stospline.table.parametric import ParametricTable, parametric_table
 
 __all__ = ["ParametricDesign", "check_parametric_options", "design_parametric", "evaluate_at",
-           "cost_quadratic", "parametric_c_files"]
+           "evaluate_switched", "cost_quadratic", "parametric_c_files"]
 
 
 @dataclass
@@ -65,6 +66,22 @@ def evaluate_at(problem, table: ParametricTable, theta, *, quantize: bool = Fals
     `theta` (its targets, constraint values, drift and start set to them)."""
     return evaluate_table(problem_at(problem, theta), table.at(theta, quantize=quantize),
                           path=path)
+
+
+def evaluate_switched(problem, table: ParametricTable, theta, stage: int, theta2, *,
+                      quantize: bool = False) -> Moments:
+    """Exact moments and cost of the table with the parameters `theta` until stage `stage`
+    and `theta2` set just before its first tick (the firmware's stsp_set_params() then: the
+    feed-forward of that tick on and the latches of that stage on at `theta2`), run on the
+    problem at `theta` up to that stage and at `theta2` from it."""
+    a, b = table.at(theta, quantize=quantize), table.at(theta2, quantize=quantize)
+    j = int(a.stage_start[stage])
+    mixed = replace(a, k0=np.concatenate([a.k0[:j], b.k0[j:]]),
+                    lambda0=np.concatenate([a.lambda0[:stage], b.lambda0[stage:]]))
+    pa, pb = problem_at(problem, theta), problem_at(problem, theta2)
+    p = replace(pa, stages=pa.stages[:stage] + pb.stages[stage:],
+                knots=pa.knots[:stage] + pb.knots[stage:])
+    return evaluate_table(p, mixed, path=False)
 
 
 def cost_quadratic(problem, table: ParametricTable, *, quantize: bool = False):

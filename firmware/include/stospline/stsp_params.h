@@ -37,8 +37,9 @@
  * STSP_ERR_BAD_VERSION; a fixed-point build has no parameters (the header errors).
  *
  * Does not use malloc, recursion or VLAs; every loop is bounded by the validated dimensions
- * (n_params <= STSP_MAX_PARAMS). Buffers: stsp_param_t holds a stsp_ctrl_t, the validated copy
- * of the parameter table's header and STSP_MAX_PARAMS scalars of d. stsp_param_step() uses
+ * (n_params <= STSP_MAX_PARAMS, 32 by default). Buffers: stsp_param_t holds a stsp_ctrl_t, the validated copy
+ * of the parameter table's header and STSP_MAX_PARAMS scalars of d: 928 bytes with the default
+ * limits (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_param_t)). stsp_param_step() uses
  * STSP_MAX_LATCH + STSP_MAX_NU scalars of stack. Every tick of a parametric instance is
  * evaluated by this file (not stsp_step()'s ordinary tick): the extra cost per tick is nu P
  * multiply-adds and the plan's range and stage checks.
@@ -60,9 +61,9 @@ extern "C" {
 #define STSP_PARAMS_MAGIC 0x52505453u
 /** Parameter table format understood by this firmware. */
 #define STSP_PARAMS_FORMAT_VERSION 1u
-/** Upper bound on the parameters, checked by stsp_param_init(). */
+/** Upper bound on the parameters, checked by stsp_param_init() (the problem file allows 32). */
 #ifndef STSP_MAX_PARAMS
-#define STSP_MAX_PARAMS 16u
+#define STSP_MAX_PARAMS 32u
 #endif
 
 #define stsp_param_init STSP_NAME(stsp_param_init)

@@ -37,12 +37,13 @@
  * STSP_ERR_BAD_VERSION; a fixed-point build has no parameters (the header errors).
  *
  * Does not use malloc, recursion or VLAs; every loop is bounded by the validated dimensions
- * (n_params <= STSP_MAX_PARAMS, 32 by default). Buffers: stsp_param_t holds a stsp_ctrl_t, the validated copy
- * of the parameter table's header and STSP_MAX_PARAMS scalars of d: 928 bytes with the default
- * limits (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_param_t)). stsp_param_step() uses
- * STSP_MAX_LATCH + STSP_MAX_NU scalars of stack. Every tick of a parametric instance is
- * evaluated by this file (not stsp_step()'s ordinary tick): the extra cost per tick is nu P
- * multiply-adds and the plan's range and stage checks.
+ * (n_params <= STSP_MAX_PARAMS, 32 by default). Buffers: stsp_param_t holds a stsp_ctrl_t,
+ * the validated copy of the parameter table's header and STSP_MAX_PARAMS scalars of d: 928
+ * bytes with the default limits (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_param_t)).
+ * stsp_param_step() uses STSP_MAX_LATCH + STSP_MAX_NU scalars of stack. Every tick of a
+ * parametric instance is evaluated by this file in plain C loops (not stsp_step()'s ordinary
+ * tick): nu P more multiply-adds per tick, and the generic loop overhead
+ * (tools/arm/count_params.py, docs/guide/firmware.md).
  */
 #ifndef STSP_PARAMS_H
 #define STSP_PARAMS_H

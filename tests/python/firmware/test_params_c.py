@@ -40,7 +40,8 @@ def test_specification_is_the_parametric_law():
         if j == int(table.stage_start[k]) and (k == 0 or table.stage_n_latch[k] > 0):
             v = np.where(np.arange(nl) < table.stage_n_latch[k],
                          exact.lambda0[k] + exact.Lambda[k] @ x[0], 0.0)
-        terms = np.abs(exact.k0[j]) + np.abs(exact.K[j]) @ np.abs(x[0]) + np.abs(exact.L[j]) @ np.abs(v)
+        terms = (np.abs(exact.k0[j]) + np.abs(exact.K[j]) @ np.abs(x[0])
+                 + np.abs(exact.L[j]) @ np.abs(v))
         want = np.clip(-(exact.k0[j] + exact.K[j] @ x[0] + exact.L[j] @ v),
                        table.u_min, table.u_max)
         worst = max(worst, float(np.max(np.abs(u - want) / (terms + 1e-30))))

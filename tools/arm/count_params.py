@@ -10,7 +10,10 @@ Compiles tools/arm/params_bench_main.c with firmware/src/*.c and the robot's tab
 runs it in qemu-system-arm mps2-an386 with the method of tools/arm/count_instructions.py
 (-singlestep, -d exec,nochain, -dfilter on both entry points, everything they call and the
 bench callers; every traced address checked against the disassembly) and prints instructions
-per call by kind of tick. Instructions, not cycles. Standard library only.
+per call by kind of tick. Instructions, not cycles. Then, built with -DBENCH_HASH, the same
+image runs the three runs of tests/c/test_params.c on the target and their command hashes must
+be tests/c/params_expected.h's (the float32 specification's, bit for bit), else exit status 1.
+Standard library only.
 """
 from __future__ import annotations
 
@@ -30,11 +33,12 @@ ENTRIES = ("stsp_step_f32", "stsp_param_step_f32")
 CALLERS = ("bench_plain", "bench_param")
 
 
-def build(out: Path) -> Path:
-    elf = out / "bench_params.elf"
+def build(out: Path, hashes: bool = False) -> Path:
+    elf = out / ("hash_params.elf" if hashes else "bench_params.elf")
     arm = ROOT / "tools" / "arm"
-    run(["arm-none-eabi-gcc", *FLAGS, f"-I{ROOT / 'firmware/include'}",
-         f"-I{ROOT / 'firmware/src'}", f"-I{ROOT / 'gains'}",
+    run(["arm-none-eabi-gcc", *FLAGS, *(["-DBENCH_HASH"] if hashes else []),
+         f"-I{ROOT / 'firmware/include'}", f"-I{ROOT / 'firmware/src'}", f"-I{ROOT / 'gains'}",
+         f"-I{ROOT / 'tests/c'}",
          *sorted(str(p) for p in (ROOT / "firmware/src").glob("*.c")),
          str(ROOT / "gains/robot_goal.c"), str(ROOT / "gains/robot_goal_params.c"),
          str(arm / "params_bench_main.c"), str(arm / "startup.c"), "--specs=rdimon.specs",
@@ -88,6 +92,20 @@ def count(elf: Path) -> list[dict]:
     return calls
 
 
+def check_hashes(out: Path) -> bool:
+    """Runs A, B, C on the target against tests/c/params_expected.h; prints each."""
+    elf = build(out, hashes=True)
+    got = dict(re.findall(r"hash ([ABC]) (0x[0-9A-F]{8})", run(
+        ["timeout", "600", "qemu-system-arm", "-M", "mps2-an386", "-nographic", "-monitor",
+         "none", "-semihosting-config", "enable=on,target=native", "-kernel", str(elf)])))
+    want = dict(re.findall(r"#define PAR_HASH_([ABC]) (0x[0-9A-F]{8})u",
+                           (ROOT / "tests/c/params_expected.h").read_text()))
+    for k in "ABC":
+        print(f"run {k}: M4F 0x{int(got.get(k, '0'), 16):08X}, specification {want[k]}"
+              f" {'ok' if got.get(k) == want[k] else 'DIFFERS'}")
+    return got == want
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--build", type=Path, default=ROOT / "build" / "arm-params")
@@ -106,7 +124,8 @@ def main() -> int:
         med = [statistics.median([c["insns"] for c in calls if sel(c) and c["kind"] == k])
                for k in (0, 1)]
         print(f"| {name} | {med[0]:.0f} | {med[1]:.0f} |")
-    return 0
+    print()
+    return 0 if check_hashes(args.build) else 1
 
 
 if __name__ == "__main__":

@@ -248,8 +248,10 @@ static void stsp_param_latch(const stsp_param_t *pc, uint16_t stage, const stsp_
     }
 }
 
-/* The law at `tick` with k0' and multipliers v into y; returns 0, or the error of a
- * non-finite command. Clamps y to the limits (bits of *mask; STSP_WARN_SATURATED). */
+/* The law at `tick` with k0' and multipliers v into y; returns STSP_OK, or the error of a
+ * non-finite command, or STSP_WARN_SATURATED after clamping y to the limits (bits of *mask).
+ * One compare pair per input tells a command inside the limits (false for NaN and +-Inf: the
+ * limits are finite) from one that needs the finiteness check and the clamp. */
 static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick, const stsp_f32_t *x,
                                     const stsp_f32_t *v, stsp_f32_t *y, uint16_t *mask)
 {
@@ -258,20 +260,36 @@ static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick, const
     const uint32_t nu = h->nu;
     const uint32_t n_latch = h->n_latch;
     const uint32_t n = pc->checked.n_params;
+    const stsp_f32_t *K = &h->K[tick * (nu * nx)];
+    const stsp_f32_t *k0 = &h->k0[tick * nu];
+    const stsp_f32_t *S = &pc->checked.S_k0[tick * (nu * n)];
+    /* L may be NULL when n_latch == 0: no pointer arithmetic on it then. */
+    const stsp_f32_t *L = (n_latch > 0u) ? &h->L[tick * (nu * n_latch)] : h->L;
     uint32_t i;
     uint32_t m = 0u;
+    uint32_t alarm = 0u;
     for (i = 0u; i < nu; ++i) {
-        const uint32_t row = (tick * nu) + i;
-        const stsp_f32_t *K = &h->K[row * nx];
-        stsp_f32_t acc = -stsp_param_shift(h->k0[row], &pc->checked.S_k0[row * n], pc->d, n);
+        stsp_f32_t acc = -stsp_param_shift(k0[i], S, pc->d, n);
         uint32_t j;
         for (j = 0u; j < nx; ++j) {
             acc = stsp_mls(acc, K[j], x[j]);
         }
-        for (j = 0u; j < n_latch; ++j) {
-            acc = stsp_mls(acc, h->L[(row * n_latch) + j], v[j]);
+        if (n_latch > 0u) {
+            for (j = 0u; j < n_latch; ++j) {
+                acc = stsp_mls(acc, L[j], v[j]);
+            }
+            L = &L[n_latch];
         }
+        S = &S[n];
+        K = &K[nx];
         y[i] = acc;
+        if (!((acc >= h->u_min[i]) && (acc <= h->u_max[i]))) {
+            alarm = 1u;
+        }
+    }
+    *mask = 0u;
+    if (alarm == 0u) {
+        return STSP_OK;
     }
     if (stsp_all_finite(y, nu) == 0) {
         return (stsp_all_finite(x, nx) == 0) ? STSP_ERR_NONFINITE_STATE

@@ -4,6 +4,7 @@
 #define ROBOT_GOAL_PARAMS_H
 
 #include "robot_goal.h"
+#include "stospline/stsp_params.h"
 
 #define ROBOT_GOAL_N_PARAMS 2u
 #define ROBOT_GOAL_PARAM_GOAL_X 0u
@@ -18,5 +19,7 @@ extern const float robot_goal_param_lower[2];
 extern const float robot_goal_param_upper[2];
 extern const float robot_goal_S_k0[2400];
 extern const float robot_goal_S_lambda0[16];
+/* For stsp_param_init(&pc, &robot_goal_table, &robot_goal_params). */
+extern const stsp_params_table_t robot_goal_params;
 
 #endif /* ROBOT_GOAL_PARAMS_H */

@@ -283,6 +283,19 @@ FAULTS = [
           "            return stsp_est_hold(est, u, STSP_ERR_NONFINITE_MEASUREMENT);",
           "            stsp_est_update(e, tick / e->every, y, est->xhat);\n"
           "            return stsp_est_hold(est, u, STSP_ERR_NONFINITE_MEASUREMENT);"),
+    # Runtime parameters (stsp_params.c; tests/c/test_params.c).
+    Fault("F79", "params: a NaN theta accepted (the range check written as two rejections)",
+          CTL, "        if (!((theta[i] >= p->lower[i]) && (theta[i] <= p->upper[i]))) {",
+          "        if ((theta[i] < p->lower[i]) || (theta[i] > p->upper[i])) {"),
+    Fault("F80", "params: the latch without the parameters' offsets", CTL,
+          "S_lambda0[row * n], pc->d, n);", "S_lambda0[row * n], pc->d, 0u * n);"),
+    Fault("F81", "params: the CRC leaves out the feed-forward columns", CTL,
+          "    crc = stsp_crc32_f32s(crc, params->S_k0, stsp_param_k0_len(params));\n", ""),
+    Fault("F82", "params: the sensitivity rows not moved on per input (index slip)", CTL,
+          "        S = &S[n];\n", ""),
+    Fault("F83", "params: the problem hash not compared", CTL,
+          "    if (memcmp(pc->checked.problem_sha256, table->problem_sha256, 32u) != 0) {",
+          "    if (memcmp(pc->checked.problem_sha256, table->problem_sha256, 0u) != 0) {"),
 ]
 
 

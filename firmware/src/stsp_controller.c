@@ -905,6 +905,7 @@ const char *stsp_status_str(stsp_status_t status)
     case STSP_ERR_TABLE_CHANGED: text = "table header changed since init"; break;
     case STSP_WARN_NO_MEASUREMENT: text = "no reading at a sampling tick: predicted"; break;
     case STSP_ERR_NONFINITE_MEASUREMENT: text = "measurement not finite"; break;
+    case STSP_ERR_PARAM_RANGE: text = "parameter not finite or outside its range"; break;
     default: text = "unknown status"; break;
     }
     return text;

@@ -87,13 +87,17 @@ def _design(args) -> int:
     problem = load_problem(args.problem)
     opts = _design_options(args, problem)
     names = table_files(problem.name, opts.arith, opts.spline)
+    params = _parameter_names(args, problem, opts) if args.out else []
     if args.out:
-        check_target(args.out, names, inputs)
+        check_target(args.out, params + names, inputs)
     _check_budget(args, problem, opts, "design", arith=opts.arith)
     d = design_problem(problem, options=opts, **_limits(args))
     _note_tables(d, "formatting")
     files, summary = design_files(d, Path(args.problem).name, opts.arith,
                                   with_c=bool(args.out))
+    if params:                                  # written with the tables, as one set
+        from stospline.oracle.parametric import parametric_c_files
+        files.update(parametric_c_files(problem, Path(args.problem).name, opts))
     if args.out:
         written = write_outputs(args.out, files, inputs)
     if args.json:
@@ -107,6 +111,23 @@ def _design(args) -> int:
 
 
 @quiet_numerics
+def _parameter_names(args, problem, opts) -> list[str]:
+    """``<name>_params.{h,c}`` for a problem with [[parameters]] ([] without), or ProblemError
+    naming the option (``--arith``/``--table``, else ``design.*``) whose table has no
+    sensitivity columns."""
+    from stospline.oracle.parametric import check_parametric_options
+    if not problem.parameters:
+        return []
+    try:
+        check_parametric_options(problem, opts)
+    except ProblemError as exc:
+        key = exc.field.removeprefix("design.")
+        if getattr(args, key, None) is not None:
+            raise ProblemError(f"--{key}", exc.reason) from None
+        raise
+    return [f"{problem.name}_params.h", f"{problem.name}_params.c"]
+
+
 def _corridor_design(args) -> int:
     """Search the (w, wv) grid for the cheapest design that meets the corridor's epsilon
     (`stospline.corridor_search`); write the designed problem file, its tables and the

@@ -29,7 +29,7 @@ STATUS = {                                     # stsp_status_t, without the STSP
     "WARN_SATURATED": 3, "ERR_NONFINITE_STATE": -9, "ERR_NONFINITE_OUTPUT": -10,
     "ERR_BAD_VALUES": -11, "WARN_STATE_CLAMPED": 4, "WARN_BAND_FALLBACK": 5,
     "ERR_BAD_PROBLEM": -12, "ERR_TABLE_CHANGED": -13, "WARN_NO_MEASUREMENT": 6,
-    "ERR_NONFINITE_MEASUREMENT": -14,
+    "ERR_NONFINITE_MEASUREMENT": -14, "ERR_PARAM_RANGE": -15,
 }
 
 _DEFINE = re.compile(r"^\s*#\s*define\s+(STSP_\w+)\s+(0x[0-9A-Fa-f]+|\d+)u?\b", re.MULTILINE)

@@ -143,7 +143,9 @@ typedef enum {
                                          a dimension, an array address, the band dual's or
                                          the spline's header) is not the one stsp_init()
                                          validated */
-    STSP_ERR_NONFINITE_MEASUREMENT = -14 /**< stsp_est_step(): y holds NaN or +-Inf */
+    STSP_ERR_NONFINITE_MEASUREMENT = -14, /**< stsp_est_step(): y holds NaN or +-Inf */
+    STSP_ERR_PARAM_RANGE = -15      /**< stsp_set_params(): a parameter is NaN, +-Inf or
+                                         outside its declared range (the old ones kept) */
 } stsp_status_t;
 
 #ifdef __cplusplus

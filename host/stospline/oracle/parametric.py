@@ -1,11 +1,12 @@
 """A problem with runtime parameters: its nominal design with the sensitivity columns
 (`design_parametric`), the exact moments of the table at any parameter vector
-(`evaluate_at`), and the exact expected cost as a quadratic in the parameters
+(`evaluate_at`) or with the parameters changed at a stage start (`evaluate_switched`), and the
+exact expected cost as a quadratic in the parameters
 (`cost_quadratic`).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -17,8 +18,8 @@ from stospline.oracle.evaluate import Moments, evaluate_table
 from stospline.problem.parameters import problem_at
 from stospline.table.parametric import ParametricTable, parametric_table
 
-__all__ = ["ParametricDesign", "design_parametric", "evaluate_at", "cost_quadratic",
-           "parametric_c_files"]
+__all__ = ["ParametricDesign", "check_parametric_options", "design_parametric", "evaluate_at",
+           "evaluate_switched", "cost_quadratic", "parametric_c_files"]
 
 
 @dataclass
@@ -67,6 +68,22 @@ def evaluate_at(problem, table: ParametricTable, theta, *, quantize: bool = Fals
                           path=path)
 
 
+def evaluate_switched(problem, table: ParametricTable, theta, stage: int, theta2, *,
+                      quantize: bool = False) -> Moments:
+    """Exact moments and cost of the table with the parameters `theta` until stage `stage`
+    and `theta2` set just before its first tick (the firmware's stsp_set_params() then: the
+    feed-forward of that tick on and the latches of that stage on at `theta2`), run on the
+    problem at `theta` up to that stage and at `theta2` from it."""
+    a, b = table.at(theta, quantize=quantize), table.at(theta2, quantize=quantize)
+    j = int(a.stage_start[stage])
+    mixed = replace(a, k0=np.concatenate([a.k0[:j], b.k0[j:]]),
+                    lambda0=np.concatenate([a.lambda0[:stage], b.lambda0[stage:]]))
+    pa, pb = problem_at(problem, theta), problem_at(problem, theta2)
+    p = replace(pa, stages=pa.stages[:stage] + pb.stages[stage:],
+                knots=pa.knots[:stage] + pb.knots[stage:])
+    return evaluate_table(p, mixed, path=False)
+
+
 def cost_quadratic(problem, table: ParametricTable, *, quantize: bool = False):
     """``(J_nom, g, H)`` with the exact expected cost of the table at ``theta`` equal to
     ``J_nom + 2 g'd + d'H d``, ``d = theta - theta_nom``.
@@ -100,14 +117,25 @@ def cost_quadratic(problem, table: ParametricTable, *, quantize: bool = False):
     return J0, g, H
 
 
-def parametric_c_files(problem, source_name: str = "") -> dict[str, str]:
+def parametric_c_files(problem, source_name: str = "", options=None) -> dict[str, str]:
     """``{"<name>_params.h": ..., "<name>_params.c": ...}``: the sensitivity columns of the
-    problem's design with its ``[design]`` options (mode, discretization, delay) as C text
+    problem's design with `options` (`stospline.options.DesignOptions`; default its
+    ``[design]`` options: mode, discretization, delay) as C text
     (`stospline.table.parametric_c`), beside the ``<name>.{c,h}`` that `stospline design`
     writes for the nominal."""
-    from stospline.options import resolve_options
     from stospline.table.parametric_c import generate_parametric_c
-    opts = resolve_options(problem)
+    opts = check_parametric_options(problem, options)
+    pd = design_parametric(problem, discretization=opts.discretization, mode=opts.mode,
+                           delay_ticks=opts.delay_ticks)
+    header, source = generate_parametric_c(pd.table, source_name=source_name)
+    return {f"{problem.name}_params.h": header, f"{problem.name}_params.c": source}
+
+
+def check_parametric_options(problem, options=None):
+    """`options` (default the problem's resolved ``[design]``), or DesignError naming the
+    option when the table they ask for has no sensitivity columns."""
+    from stospline.options import resolve_options
+    opts = options if options is not None else resolve_options(problem)
     # The columns are those of the float32 per-tick law: a spline table re-solves its latch
     # for its own gains, and fixed-point tables scale k0; neither has columns yet.
     for key, plain in (("table", "per-tick"), ("arith", "float32")):
@@ -115,7 +143,4 @@ def parametric_c_files(problem, source_name: str = "") -> dict[str, str]:
             raise DesignError(f"design.{key}", f"runtime parameters have sensitivity columns "
                                                f"for {key} = \"{plain}\" only, got "
                                                f"{getattr(opts, key)!r}")
-    pd = design_parametric(problem, discretization=opts.discretization, mode=opts.mode,
-                           delay_ticks=opts.delay_ticks)
-    header, source = generate_parametric_c(pd.table, source_name=source_name)
-    return {f"{problem.name}_params.h": header, f"{problem.name}_params.c": source}
+    return opts

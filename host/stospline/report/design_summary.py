@@ -50,7 +50,17 @@ def design_summary(d) -> dict:
         **_band_terms(d),
         **actuator_limits(d),
         **_estimator(d),
+        **_parameters(d),
     })
+
+
+def _parameters(d) -> dict:
+    """With [[parameters]]: each one's name, nominal and range, in the columns' order (the
+    ``<name>_params.c`` index macros); ``{}`` otherwise (summaries stay unchanged)."""
+    if not d.problem.parameters:
+        return {}
+    return {"parameters": [{"name": q.name, "nominal": q.nominal, "lower": q.lower,
+                            "upper": q.upper} for q in d.problem.parameters]}
 
 
 def _estimator(d) -> dict:

@@ -8,18 +8,58 @@ They hold, as float32 in flash, each parameter's nominal value and range and the
     k0[j][i]      + sum_p S_k0[(j*NU + i)*N_PARAMS + p]          * (theta[p] - nominal[p])
     lambda0[s][c] + sum_p S_lambda0[(s*N_LATCH + c)*N_PARAMS + p] * (theta[p] - nominal[p])
 
-(the columns of a parameter are contiguous per entry, so one entry's update reads one row).
-No firmware routine reads them yet: this is the data a setter takes.
+(the columns of a parameter are contiguous per entry, so one entry's update reads one row),
+and ``<prefix>_params``, the ``stsp_params_table_t`` that ``stsp_param_init()``
+(firmware/include/stospline/stsp_params.h) checks: dimensions, CRC-32 (`params_crc32`) and the
+gain table's problem hash.
 """
 from __future__ import annotations
 
+import struct
+import zlib
+
 import numpy as np
 
-from stospline.table.codegen import GENERATOR, _array, _f32_literal
-from stospline.table.format import _to_float32
+from stospline.table.codegen import GENERATOR, _array, _f32_literal, _sha_initializer
+from stospline.table.format import SCALAR_FLOAT32, _to_float32, positive_zeros
 from stospline.table.parametric import ParametricTable
 
-__all__ = ["generate_parametric_c"]
+__all__ = ["PARAMS_MAGIC", "PARAMS_FORMAT_VERSION", "flash_columns", "generate_parametric_c",
+           "params_crc32"]
+
+PARAMS_MAGIC = 0x52505453         # STSP_PARAMS_MAGIC, "STPR"
+PARAMS_FORMAT_VERSION = 1         # STSP_PARAMS_FORMAT_VERSION
+
+
+def flash_columns(ptable: ParametricTable) -> dict[str, np.ndarray]:
+    """The float32 arrays the C holds (zeros +0.0): nominal, lower, upper, S_k0, S_lambda0."""
+    P = len(ptable.parameters)
+    # Rounded column by column: `_to_float32` flushes round-off below 1e-12 of an array's
+    # largest entry, and columns of parameters in different units differ in scale.
+    cols = lambda S: np.stack([_to_float32(S[..., j]) for j in range(P)], -1)  # noqa: E731
+    f32 = lambda a: positive_zeros(np.asarray(a, dtype=np.float32))  # noqa: E731
+    return {
+        "nominal": f32([q.nominal for q in ptable.parameters]),
+        "lower": f32([q.lower for q in ptable.parameters]),
+        "upper": f32([q.upper for q in ptable.parameters]),
+        "S_k0": f32(cols(ptable.S_k0)),
+        "S_lambda0": f32(cols(ptable.S_lambda0)),
+    }
+
+
+def params_crc32(ptable: ParametricTable) -> int:
+    """CRC-32 (zlib's) of the parameter table as ``stsp_params_table_crc32`` serializes it:
+    n_params, nu, n_latch, n_stages, n_ticks as little-endian u32, nominal, lower, upper, S_k0
+    and (when n_latch > 0) S_lambda0 as little-endian binary32, then the problem's SHA-256."""
+    t = ptable.table
+    a = flash_columns(ptable)
+    n_latch = t.dims[2]
+    parts = [struct.pack("<5I", len(ptable.parameters), t.dims[1], n_latch, t.n_stages,
+                         t.n_ticks)]
+    names = ["nominal", "lower", "upper", "S_k0"] + (["S_lambda0"] if n_latch > 0 else [])
+    parts += [np.asarray(a[k], "<f4").tobytes() for k in names]
+    parts.append(bytes.fromhex(t.problem_sha256 or "0" * 64))
+    return zlib.crc32(b"".join(parts)) & 0xFFFFFFFF
 
 
 def _extern(ctype: str, name: str, values, dims: str) -> str:
@@ -46,6 +86,7 @@ def generate_parametric_c(ptable: ParametricTable, *, prefix: str | None = None,
 #define {name}_PARAMS_H
 
 #include "{p}.h"
+#include "stospline/stsp_params.h"
 
 #define {name}_N_PARAMS {P}u
 {index}
@@ -59,24 +100,28 @@ extern const float {p}_param_lower[{P}];
 extern const float {p}_param_upper[{P}];
 extern const float {p}_S_k0[{max(T * m * P, 1)}];
 extern const float {p}_S_lambda0[{max(S * n_latch * P, 1)}];
+/* For stsp_param_init(&pc, &{p}_table, &{p}_params). */
+extern const stsp_params_table_t {p}_params;
 
 #endif /* {name}_PARAMS_H */
 """
-    f32 = lambda a: np.asarray(a, dtype=np.float32)  # noqa: E731
-    # Rounded column by column: `_to_float32` flushes round-off below 1e-12 of an array's
-    # largest entry, and columns of parameters in different units differ in scale.
-    cols = lambda S: np.stack([_to_float32(S[..., j]) for j in range(P)], -1)  # noqa: E731
+    a = flash_columns(ptable)
     arrays = [
-        _extern("float", f"{p}_param_nominal", f32([q.nominal for q in ptable.parameters]),
-                "[n_params] the design's values"),
-        _extern("float", f"{p}_param_lower", f32([q.lower for q in ptable.parameters]),
-                "[n_params]"),
-        _extern("float", f"{p}_param_upper", f32([q.upper for q in ptable.parameters]),
-                "[n_params]"),
-        _extern("float", f"{p}_S_k0", cols(ptable.S_k0),
-                f"[n_ticks][nu][n_params] = [{T}][{m}][{P}]"),
-        _extern("float", f"{p}_S_lambda0", cols(ptable.S_lambda0),
+        _extern("float", f"{p}_param_nominal", a["nominal"], "[n_params] the design's values"),
+        _extern("float", f"{p}_param_lower", a["lower"], "[n_params]"),
+        _extern("float", f"{p}_param_upper", a["upper"], "[n_params]"),
+        _extern("float", f"{p}_S_k0", a["S_k0"], f"[n_ticks][nu][n_params] = [{T}][{m}][{P}]"),
+        _extern("float", f"{p}_S_lambda0", a["S_lambda0"],
                 f"[n_stages][n_latch][n_params] = [{S}][{n_latch}][{P}]"),
     ]
-    source = banner + f'#include "{p}_params.h"\n\n' + "\n".join(arrays)
+    struct_text = f"""
+const stsp_params_table_t {p}_params = {{
+    0x{PARAMS_MAGIC:08X}u, {PARAMS_FORMAT_VERSION}u, {SCALAR_FLOAT32}u,
+    {P}u, {m}u, {n_latch}u, {S}u, {T}u,
+    {p}_param_nominal, {p}_param_lower, {p}_param_upper, {p}_S_k0, {p}_S_lambda0,
+    0x{params_crc32(ptable):08X}u,
+    {_sha_initializer(sha)}
+}};
+"""
+    source = banner + f'#include "{p}_params.h"\n\n' + "\n".join(arrays) + struct_text
     return header, source

@@ -1,0 +1,164 @@
+/**
+ * @file stsp_params.h
+ * @brief Runtime parameters: one flashed table, the plan for any parameter vector in a range.
+ *
+ * For a problem with [[parameters]] (docs/theory/parameters.md) the feed-forward k0 and the
+ * latch offsets lambda0 are affine in the parameters theta, and K, L, Lambda do not depend on
+ * them. The parameter table (generated as <name>_params.c beside the gain table) holds the
+ * nominal values, the declared range and the sensitivity columns; with d = theta - nominal
+ * (binary32, computed once by stsp_set_params()) the law of stsp_controller.h runs with
+ *
+ *     k0'[j][i]      = k0[j][i]      + S_k0[j][i][0] d[0] + ... + S_k0[j][i][P-1] d[P-1]
+ *     lambda0'[s][c] = lambda0[s][c] + S_lambda0[s][c][0] d[0] + ...
+ *
+ * When a new theta takes effect (stsp_set_params() between two steps):
+ *   k0'      from the next step on (the next tick);
+ *   lambda0' at the next latch (the next stage start with stage_n_latch > 0, or tick 0 after
+ *            a reset); the multipliers latched before are kept until then.
+ * A change at a stage start of a stage-wise design is therefore the design at the new theta
+ * from that stage on (each stage re-plans from the measured state). A change inside a stage
+ * steers with the new feed-forward and the old multipliers until the next latch: a defined,
+ * finite plan that stays within the actuator limits, but not the design at either theta; set
+ * the parameters before the stage start they should apply to.
+ *
+ * Evaluation order (fixed, binary32, no fused multiply-add: -ffp-contract=off):
+ *     d[p]   = theta[p] - nominal[p]                              (stsp_set_params)
+ *     e      = k0[i];  e = e + (S_k0[i][p] d[p]) for p = 0 .. P-1
+ *     u[i]   = -e; u[i] = u[i] - (K[i][j] x[j]) for j = 0 .. nx-1, then
+ *              u[i] = u[i] - (L[i][c] v[c]) for c = 0 .. n_latch-1, then the clamp
+ *     latch  e = lambda0[c]; e = e + (S_lambda0[c][p] d[p]) for p = 0 .. P-1;
+ *            v[c] = e; v[c] = v[c] + (Lambda[c][j] x[j]) for j = 0 .. nx-1
+ * each step rounded twice (product, then sum). At theta = nominal (d = 0) the commands are
+ * stsp_step()'s bit for bit, up to the sign of a zero (host/stospline/table/params_spec.py is
+ * the same arithmetic in numpy, checked bit for bit).
+ *
+ * Per-tick float32 gain tables only: a spline table or one with a band dual is refused at
+ * init (STSP_ERR_BAD_DIMS), and a Q15/Q31 parameter table (scalar_kind) is refused with
+ * STSP_ERR_BAD_VERSION; a fixed-point build has no parameters (the header errors).
+ *
+ * Does not use malloc, recursion or VLAs; every loop is bounded by the validated dimensions
+ * (n_params <= STSP_MAX_PARAMS, 32 by default). Buffers: stsp_param_t holds a stsp_ctrl_t,
+ * the validated copy of the parameter table's header and STSP_MAX_PARAMS scalars of d: 928
+ * bytes with the default limits (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_param_t)).
+ * stsp_param_step() uses STSP_MAX_LATCH + STSP_MAX_NU scalars of stack. Every tick of a
+ * parametric instance is evaluated by this file in plain C loops (not stsp_step()'s ordinary
+ * tick): nu P more multiply-adds per tick, and the generic loop overhead
+ * (tools/arm/count_params.py, docs/guide/firmware.md).
+ */
+#ifndef STSP_PARAMS_H
+#define STSP_PARAMS_H
+
+#include "stospline/stsp_controller.h"
+
+#ifdef STSP_ARITH_FIXED_POINT
+#error "stsp_params.h: runtime parameters run in float32 builds only"
+#endif
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** Parameter table magic, "STPR" as a little-endian u32. */
+#define STSP_PARAMS_MAGIC 0x52505453u
+/** Parameter table format understood by this firmware. */
+#define STSP_PARAMS_FORMAT_VERSION 1u
+/** Upper bound on the parameters, checked by stsp_param_init() (the problem file allows 32). */
+#ifndef STSP_MAX_PARAMS
+#define STSP_MAX_PARAMS 32u
+#endif
+
+#define stsp_param_init STSP_NAME(stsp_param_init)
+#define stsp_set_params STSP_NAME(stsp_set_params)
+#define stsp_param_reset STSP_NAME(stsp_param_reset)
+#define stsp_param_verify STSP_NAME(stsp_param_verify)
+#define stsp_param_step STSP_NAME(stsp_param_step)
+#define stsp_params_table_crc32 STSP_NAME(stsp_params_table_crc32)
+
+/**
+ * The parameter table (generated: <name>_params.c). Layouts (row-major):
+ * S_k0[tick][i][p] = S_k0[(tick*nu + i)*n_params + p],
+ * S_lambda0[stage][c][p] = S_lambda0[(stage*n_latch + c)*n_params + p].
+ */
+typedef struct {
+    uint32_t magic;              /**< STSP_PARAMS_MAGIC */
+    uint16_t format_version;     /**< STSP_PARAMS_FORMAT_VERSION */
+    uint16_t scalar_kind;        /**< STSP_SCALAR_FLOAT32 */
+    uint16_t n_params;           /**< 1 .. STSP_MAX_PARAMS */
+    uint16_t nu;                 /**< the gain table's nu */
+    uint16_t n_latch;            /**< the gain table's n_latch */
+    uint16_t n_stages;           /**< the gain table's n_stages */
+    uint32_t n_ticks;            /**< the gain table's n_ticks */
+    const stsp_f32_t *nominal;   /**< [n_params] the design's values */
+    const stsp_f32_t *lower;     /**< [n_params] */
+    const stsp_f32_t *upper;     /**< [n_params] */
+    const stsp_f32_t *S_k0;      /**< [n_ticks][nu][n_params] */
+    const stsp_f32_t *S_lambda0; /**< [n_stages][n_latch][n_params] (may be NULL when
+                                      n_latch == 0) */
+    uint32_t crc32;              /**< see stsp_params_table_crc32() */
+    uint8_t problem_sha256[32];  /**< the gain table's problem_sha256 */
+} stsp_params_table_t;
+
+/** One parametric controller instance, caller-owned; all fields private but `ctrl`'s
+ *  read-only ones (stsp_controller.h). Step it only through stsp_param_step(). */
+typedef struct {
+    stsp_ctrl_t ctrl;                 /**< the gain table's instance */
+    const stsp_params_table_t *params;
+    stsp_params_table_t checked;      /**< the validated header (private) */
+    uint32_t ready;                   /**< a magic value after a successful init (private) */
+    stsp_f32_t d[STSP_MAX_PARAMS];    /**< theta - nominal in use (private) */
+} stsp_param_t;
+
+/**
+ * CRC-32 (as stsp_table_crc32) of n_params, nu, n_latch, n_stages, n_ticks as little-endian
+ * u32, then nominal, lower, upper, S_k0 and (when n_latch > 0) S_lambda0 as little-endian
+ * binary32 bit patterns, then the 32 bytes of problem_sha256. The dimensions and pointers must
+ * be valid (stsp_param_init() checks them first).
+ */
+uint32_t stsp_params_table_crc32(const stsp_params_table_t *params);
+
+/**
+ * Bind the gain table (stsp_init(), whose status is returned when not STSP_OK) and its
+ * parameter table to an instance, theta = nominal. Precondition (as for stsp_init()): each
+ * array is as long as the header says. Errors (instance not ready): STSP_ERR_NULL (a NULL
+ * pointer, also an array of the parameter table), STSP_ERR_BAD_MAGIC, STSP_ERR_BAD_VERSION
+ * (format, or a scalar kind other than float32), STSP_ERR_BAD_DIMS (n_params outside
+ * 1 .. STSP_MAX_PARAMS, nu, n_latch, n_stages or n_ticks not the gain table's, a spline
+ * table or one with a band dual), STSP_ERR_BAD_CRC, STSP_ERR_BAD_PROBLEM (problem_sha256 not
+ * the gain table's), STSP_ERR_BAD_VALUES (a NaN or infinite entry, or not lower <= nominal <=
+ * upper).
+ */
+stsp_status_t stsp_param_init(stsp_param_t *pc, const stsp_table_t *table,
+                              const stsp_params_table_t *params);
+
+/**
+ * Set the parameters theta[n_params] (see above for when they take effect). Every theta[p]
+ * must be finite and within [lower[p], upper[p]]; otherwise STSP_ERR_PARAM_RANGE and the
+ * parameters in use are unchanged (the whole vector is checked before any is taken).
+ * STSP_ERR_NULL, STSP_ERR_NOT_INITIALIZED as usual. Not to be called while a step of the same
+ * instance runs (from an interrupt, say).
+ */
+stsp_status_t stsp_set_params(stsp_param_t *pc, const stsp_f32_t *theta);
+
+/** Restart the plan at tick 0 (stsp_reset()); the parameters are kept. */
+stsp_status_t stsp_param_reset(stsp_param_t *pc);
+
+/**
+ * stsp_verify() of the gain table, then the same for the parameter table: a changed header
+ * (STSP_ERR_TABLE_CHANGED) or CRC (STSP_ERR_BAD_CRC) stops the instance (every later step
+ * STSP_ERR_NOT_INITIALIZED with u = u_hold) until a new init.
+ */
+stsp_status_t stsp_param_verify(stsp_param_t *pc);
+
+/**
+ * The command for tick `tick` from the measured state x[nx]; writes u[nu]. The ticks,
+ * statuses and the command on an error are stsp_step()'s (stsp_controller.h), with k0' and
+ * lambda0' in the law. x and u may overlap.
+ */
+stsp_status_t stsp_param_step(stsp_param_t *pc, uint32_t tick, const stsp_f32_t *x,
+                              stsp_f32_t *u);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* STSP_PARAMS_H */

@@ -1,0 +1,373 @@
+/* Runtime parameters: see stospline/stsp_params.h for the contract. The tick reuses the
+ * controller's plan and commit (stsp_plan_tick, stsp_commit_tick: range, order, stage and
+ * latch decisions), and evaluates the law itself with k0' and lambda0'. */
+#include "stospline/stsp_types.h"
+
+#ifndef STSP_ARITH_FIXED_POINT
+
+#include "stospline/stsp_params.h"
+#include "stsp_crc32.h"
+#include "stsp_internal.h"
+
+#include <string.h>
+
+#define STSP_PARAM_READY 0x50005300u
+#define STSP_PARAM_STOPPED 0x50015301u
+
+static uint32_t stsp_param_k0_len(const stsp_params_table_t *p)
+{
+    return p->n_ticks * (uint32_t)p->nu * (uint32_t)p->n_params;
+}
+
+static uint32_t stsp_param_lambda_len(const stsp_params_table_t *p)
+{
+    return (uint32_t)p->n_stages * (uint32_t)p->n_latch * (uint32_t)p->n_params;
+}
+
+uint32_t stsp_params_table_crc32(const stsp_params_table_t *params)
+{
+    const uint32_t n = params->n_params;
+    uint32_t crc = stsp_crc32_begin();
+    crc = stsp_crc32_u32(crc, n);
+    crc = stsp_crc32_u32(crc, params->nu);
+    crc = stsp_crc32_u32(crc, params->n_latch);
+    crc = stsp_crc32_u32(crc, params->n_stages);
+    crc = stsp_crc32_u32(crc, params->n_ticks);
+    crc = stsp_crc32_f32s(crc, params->nominal, n);
+    crc = stsp_crc32_f32s(crc, params->lower, n);
+    crc = stsp_crc32_f32s(crc, params->upper, n);
+    crc = stsp_crc32_f32s(crc, params->S_k0, stsp_param_k0_len(params));
+    if (params->n_latch > 0u) {
+        crc = stsp_crc32_f32s(crc, params->S_lambda0, stsp_param_lambda_len(params));
+    }
+    crc = stsp_crc32_bytes(crc, params->problem_sha256, 32u);
+    return stsp_crc32_end(crc);
+}
+
+/* The parameter table against the validated gain table (h): everything but the CRC and the
+ * values. */
+static stsp_status_t stsp_param_check(const stsp_params_table_t *p, const stsp_header_t *h)
+{
+    if ((p->nominal == NULL) || (p->lower == NULL) || (p->upper == NULL) || (p->S_k0 == NULL) ||
+        ((p->n_latch > 0u) && (p->S_lambda0 == NULL))) {
+        return STSP_ERR_NULL;
+    }
+    if (p->magic != STSP_PARAMS_MAGIC) {
+        return STSP_ERR_BAD_MAGIC;
+    }
+    if ((p->format_version != STSP_PARAMS_FORMAT_VERSION) ||
+        (p->scalar_kind != STSP_SCALAR_FLOAT32)) {
+        return STSP_ERR_BAD_VERSION;
+    }
+    if ((p->n_params == 0u) || (p->n_params > STSP_MAX_PARAMS) || (p->nu != h->nu) ||
+        (p->n_latch != h->n_latch) || (p->n_stages != h->n_stages) ||
+        (p->n_ticks != h->n_ticks)) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    /* The parametric law is the per-tick one; a spline's k0 or a band dual's latch would
+     * need sensitivities of their own. */
+    if ((h->spline != NULL) || (h->band_qp != NULL)) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    return STSP_OK;
+}
+
+/* 1 when every value is finite and lower <= nominal <= upper. */
+static int stsp_param_values_ok(const stsp_params_table_t *p)
+{
+    uint32_t i;
+    if ((stsp_all_finite(p->nominal, p->n_params) == 0) ||
+        (stsp_all_finite(p->lower, p->n_params) == 0) ||
+        (stsp_all_finite(p->upper, p->n_params) == 0) ||
+        (stsp_all_finite(p->S_k0, stsp_param_k0_len(p)) == 0) ||
+        ((p->n_latch > 0u) && (stsp_all_finite(p->S_lambda0, stsp_param_lambda_len(p)) == 0))) {
+        return 0;
+    }
+    for (i = 0u; i < p->n_params; ++i) {
+        if (!((p->lower[i] <= p->nominal[i]) && (p->nominal[i] <= p->upper[i]))) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+static stsp_status_t stsp_param_refuse(stsp_param_t *pc, stsp_status_t status)
+{
+    (void)memset(pc, 0, sizeof *pc);
+    return status;
+}
+
+stsp_status_t stsp_param_init(stsp_param_t *pc, const stsp_table_t *table,
+                              const stsp_params_table_t *params)
+{
+    stsp_status_t st;
+    if (pc == NULL) {
+        return STSP_ERR_NULL;
+    }
+    (void)memset(pc, 0, sizeof *pc);
+    if (params == NULL) {
+        return STSP_ERR_NULL;
+    }
+    st = stsp_init(&pc->ctrl, table);
+    if (st != STSP_OK) {
+        return stsp_param_refuse(pc, st);
+    }
+    pc->checked = *params;
+    st = stsp_param_check(&pc->checked, &pc->ctrl.checked);
+    if (st != STSP_OK) {
+        return stsp_param_refuse(pc, st);
+    }
+    if (stsp_params_table_crc32(&pc->checked) != pc->checked.crc32) {
+        return stsp_param_refuse(pc, STSP_ERR_BAD_CRC);
+    }
+    if (memcmp(pc->checked.problem_sha256, table->problem_sha256, 32u) != 0) {
+        return stsp_param_refuse(pc, STSP_ERR_BAD_PROBLEM);
+    }
+    if (stsp_param_values_ok(&pc->checked) == 0) {
+        return stsp_param_refuse(pc, STSP_ERR_BAD_VALUES);
+    }
+    pc->params = params;
+    pc->ready = STSP_PARAM_READY; /* d all zero: theta = nominal */
+    return STSP_OK;
+}
+
+stsp_status_t stsp_set_params(stsp_param_t *pc, const stsp_f32_t *theta)
+{
+    const stsp_params_table_t *p;
+    stsp_f32_t d[STSP_MAX_PARAMS];
+    uint32_t i;
+    if ((pc == NULL) || (theta == NULL)) {
+        return STSP_ERR_NULL;
+    }
+    if (pc->ready != STSP_PARAM_READY) {
+        return STSP_ERR_NOT_INITIALIZED;
+    }
+    p = &pc->checked;
+    /* The whole vector first: a refused one leaves the parameters in use as they were. The
+     * compares are false for NaN; a finite range excludes +-Inf. */
+    for (i = 0u; i < p->n_params; ++i) {
+        if (!((theta[i] >= p->lower[i]) && (theta[i] <= p->upper[i]))) {
+            return STSP_ERR_PARAM_RANGE;
+        }
+        d[i] = theta[i] - p->nominal[i];
+    }
+    for (i = 0u; i < p->n_params; ++i) {
+        pc->d[i] = d[i];
+    }
+    return STSP_OK;
+}
+
+stsp_status_t stsp_param_reset(stsp_param_t *pc)
+{
+    if (pc == NULL) {
+        return STSP_ERR_NULL;
+    }
+    if (pc->ready != STSP_PARAM_READY) {
+        return STSP_ERR_NOT_INITIALIZED;
+    }
+    return stsp_reset(&pc->ctrl);
+}
+
+/* 1 when the table's header is no longer the validated copy. */
+static int stsp_param_header_changed(const stsp_params_table_t *a, const stsp_params_table_t *b)
+{
+    return ((a->magic != b->magic) || (a->format_version != b->format_version) ||
+            (a->scalar_kind != b->scalar_kind) || (a->n_params != b->n_params) ||
+            (a->nu != b->nu) || (a->n_latch != b->n_latch) || (a->n_stages != b->n_stages) ||
+            (a->n_ticks != b->n_ticks) || (a->nominal != b->nominal) ||
+            (a->lower != b->lower) || (a->upper != b->upper) || (a->S_k0 != b->S_k0) ||
+            (a->S_lambda0 != b->S_lambda0)) ? 1 : 0;
+}
+
+stsp_status_t stsp_param_verify(stsp_param_t *pc)
+{
+    stsp_status_t st;
+    stsp_params_table_t now;
+    if (pc == NULL) {
+        return STSP_ERR_NULL;
+    }
+    if (pc->ready != STSP_PARAM_READY) {
+        return STSP_ERR_NOT_INITIALIZED;
+    }
+    st = stsp_verify(&pc->ctrl);
+    if (st == STSP_OK) {
+        if (stsp_param_header_changed(&pc->checked, pc->params) != 0) {
+            st = STSP_ERR_TABLE_CHANGED;
+        } else {
+            /* The validated header, the table's CRC field and hash: what init checked. */
+            now = pc->checked;
+            now.crc32 = pc->params->crc32;
+            (void)memcpy(now.problem_sha256, pc->params->problem_sha256, 32u);
+            if ((stsp_params_table_crc32(&now) != now.crc32) ||
+                (memcmp(now.problem_sha256, pc->checked.problem_sha256, 32u) != 0)) {
+                st = STSP_ERR_BAD_CRC;
+            }
+        }
+    }
+    if (st != STSP_OK) {
+        pc->ready = STSP_PARAM_STOPPED;
+        pc->ctrl.ready = STSP_CTRL_STOPPED; /* its steps write u_hold from now on */
+    }
+    return st;
+}
+
+/* e = c; e = e + (S[p] d[p]) for p = 0 .. n-1: a constant term at the parameters in use. */
+static stsp_f32_t stsp_param_shift(stsp_f32_t c, const stsp_f32_t *S, const stsp_f32_t *d,
+                                   uint32_t n)
+{
+    stsp_f32_t e = c;
+    uint32_t p;
+    for (p = 0u; p < n; ++p) {
+        e = stsp_mla(e, S[p], d[p]);
+    }
+    return e;
+}
+
+/* The fresh latch of `stage` into v_new, with lambda0' (stsp_params.h's order). */
+static void stsp_param_latch(const stsp_param_t *pc, uint16_t stage, const stsp_f32_t *x,
+                             stsp_f32_t *v_new)
+{
+    const stsp_header_t *h = &pc->ctrl.checked;
+    const uint32_t nx = h->nx;
+    const uint32_t n_latch = h->n_latch;
+    const uint32_t n = pc->checked.n_params;
+    const uint32_t n_stage = h->stage_n_latch[stage];
+    uint32_t c;
+    for (c = 0u; c < n_latch; ++c) {
+        stsp_f32_t acc = 0.0f;
+        if (c < n_stage) {
+            const uint32_t row = ((uint32_t)stage * n_latch) + c;
+            const stsp_f32_t *lam = &h->Lambda[row * nx];
+            uint32_t j;
+            acc = stsp_param_shift(h->lambda0[row], &pc->checked.S_lambda0[row * n], pc->d, n);
+            for (j = 0u; j < nx; ++j) {
+                acc = stsp_mla(acc, lam[j], x[j]);
+            }
+        }
+        v_new[c] = acc;
+    }
+}
+
+/* The law at `tick` with k0' and multipliers v into y; returns STSP_OK, or the error of a
+ * non-finite command, or STSP_WARN_SATURATED after clamping y to the limits (bits of *mask).
+ * One compare pair per input tells a command inside the limits (false for NaN and +-Inf: the
+ * limits are finite) from one that needs the finiteness check and the clamp. */
+static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick, const stsp_f32_t *x,
+                                    const stsp_f32_t *v, stsp_f32_t *y, uint16_t *mask)
+{
+    const stsp_header_t *h = &pc->ctrl.checked;
+    const uint32_t nx = h->nx;
+    const uint32_t nu = h->nu;
+    const uint32_t n_latch = h->n_latch;
+    const uint32_t n = pc->checked.n_params;
+    const stsp_f32_t *K = &h->K[tick * (nu * nx)];
+    const stsp_f32_t *k0 = &h->k0[tick * nu];
+    const stsp_f32_t *S = &pc->checked.S_k0[tick * (nu * n)];
+    /* L may be NULL when n_latch == 0: no pointer arithmetic on it then. */
+    const stsp_f32_t *L = (n_latch > 0u) ? &h->L[tick * (nu * n_latch)] : h->L;
+    uint32_t i;
+    uint32_t m = 0u;
+    uint32_t alarm = 0u;
+    for (i = 0u; i < nu; ++i) {
+        stsp_f32_t acc = -stsp_param_shift(k0[i], S, pc->d, n);
+        uint32_t j;
+        for (j = 0u; j < nx; ++j) {
+            acc = stsp_mls(acc, K[j], x[j]);
+        }
+        if (n_latch > 0u) {
+            for (j = 0u; j < n_latch; ++j) {
+                acc = stsp_mls(acc, L[j], v[j]);
+            }
+            L = &L[n_latch];
+        }
+        S = &S[n];
+        K = &K[nx];
+        y[i] = acc;
+        if (!((acc >= h->u_min[i]) && (acc <= h->u_max[i]))) {
+            alarm = 1u;
+        }
+    }
+    *mask = 0u;
+    if (alarm == 0u) {
+        return STSP_OK;
+    }
+    if (stsp_all_finite(y, nu) == 0) {
+        return (stsp_all_finite(x, nx) == 0) ? STSP_ERR_NONFINITE_STATE
+                                             : STSP_ERR_NONFINITE_OUTPUT;
+    }
+    for (i = 0u; i < nu; ++i) {
+        if (y[i] > h->u_max[i]) {
+            y[i] = h->u_max[i];
+            m |= (uint32_t)1u << i;
+        } else if (y[i] < h->u_min[i]) {
+            y[i] = h->u_min[i];
+            m |= (uint32_t)1u << i;
+        } else {
+            /* within the limits */
+        }
+    }
+    *mask = (uint16_t)m;
+    return (m != 0u) ? STSP_WARN_SATURATED : STSP_OK;
+}
+
+stsp_status_t stsp_param_step(stsp_param_t *pc, uint32_t tick, const stsp_f32_t *x,
+                              stsp_f32_t *u)
+{
+    stsp_ctrl_t *ctrl;
+    stsp_f32_t v_new[STSP_MAX_LATCH];
+    stsp_f32_t y[STSP_MAX_NU];
+    stsp_plan_t plan = {0u, 0u};
+    stsp_status_t status;
+    uint16_t mask = 0u;
+    if ((u == NULL) || (pc == NULL)) {
+        return STSP_ERR_NULL;
+    }
+    ctrl = &pc->ctrl;
+    if ((pc->ready != STSP_PARAM_READY) || (ctrl->ready != STSP_CTRL_READY)) {
+        if (pc->ready == STSP_PARAM_STOPPED) {
+            stsp_hold(ctrl, u);
+        }
+        return STSP_ERR_NOT_INITIALIZED;
+    }
+    if (x == NULL) {
+        stsp_hold(ctrl, u);
+        return STSP_ERR_NULL;
+    }
+    /* An ordinary tick (the expected one inside the latched stage, as stsp_step() tells it):
+     * the law on the multipliers kept, no plan. */
+    if ((tick == ctrl->next_tick) && (tick < ctrl->stage_end)) {
+        status = stsp_param_law(pc, tick, x, ctrl->v, y, &mask);
+        if (status < STSP_OK) {
+            stsp_hold(ctrl, u);
+            return status;
+        }
+        stsp_copy(u, y, ctrl->checked.nu);
+        ctrl->sat_mask = mask;
+        ctrl->next_tick = tick + 1u;
+        return status;
+    }
+    stsp_zero(v_new, STSP_MAX_LATCH);
+    status = stsp_plan_tick(ctrl, tick, x, v_new, &plan);
+    if (status >= STSP_OK) {
+        stsp_status_t st;
+        if (plan.relatch != 0u) {
+            stsp_param_latch(pc, plan.stage, x, v_new);
+        }
+        st = stsp_param_law(pc, tick, x, v_new, y, &mask);
+        if (st != STSP_OK) {
+            status = st; /* an error, or STSP_WARN_SATURATED over a tick warning */
+        }
+    }
+    if (status < STSP_OK) {
+        stsp_hold(ctrl, u);
+        return status;
+    }
+    stsp_copy(u, y, ctrl->checked.nu);
+    ctrl->sat_mask = mask;
+    stsp_commit_tick(ctrl, tick, &plan, v_new);
+    /* stsp_step() is not called on this instance: its ordinary tick's state (stage_end, the
+     * kept rows) is left as stsp_commit_tick() sets it and never read. */
+    return status;
+}
+
+#endif /* STSP_ARITH_FIXED_POINT */

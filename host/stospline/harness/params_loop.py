@@ -1,0 +1,193 @@
+"""Monte Carlo of a table with runtime parameters through the compiled C: the firmware's
+``stsp_set_params`` and ``stsp_param_step`` (stsp_params.h) drive the harness's plant
+(plant.c) on the problem at the parameters in force, set once before tick 0 or changed at a
+stage start.
+
+Build and run are separate steps: `build_params_controller` compiles ``firmware/src/*.c``
+with the generated gain table and its parameter table; `simulate_params` runs paths through it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from stospline.cache import cached_build, compile_cffi, load_module, source_key
+from stospline.firmware_interface import check_header
+from stospline.harness.controller import (_CFLAGS, _PLANT_H, _PLANT_PROTOTYPE, CompiledController,
+                                          firmware_dir)
+from stospline.harness.montecarlo import _zoh, joint_verdict
+from stospline.problem.parameters import problem_at
+from stospline.table.codegen import generate_c
+from stospline.table.parametric_c import generate_parametric_c
+
+__all__ = ["build_params_controller", "ParamsController", "ParamsRun", "simulate_params"]
+
+_CDEF = _PLANT_PROTOTYPE + """
+typedef int... stsp_status_t;
+typedef struct { ...; } stsp_param_t;
+const char *stsp_status_str(stsp_status_t status);
+int harness_param_init(stsp_param_t *pc, size_t count);
+int harness_param_set(stsp_param_t *pc, size_t count, const float *theta);
+int harness_param_step(stsp_param_t *pc, size_t count, uint32_t tick, const float *X,
+                       float *U);
+"""
+
+# Harness-only C: every path's instance in one call. Init validates instance 0 (both tables'
+# CRCs) and copies it: the instances hold no pointer into themselves.
+_BATCH = """
+#include "plant.h"
+#include "%(p)s_params.h"
+int harness_param_init(stsp_param_t *pc, size_t count) {
+    size_t i;
+    stsp_status_t st = stsp_param_init(&pc[0], &%(p)s_table, &%(p)s_params);
+    for (i = 1; i < count; ++i) pc[i] = pc[0];
+    return (int)st;
+}
+int harness_param_set(stsp_param_t *pc, size_t count, const float *theta) {
+    size_t i;
+    int worst = 0;
+    for (i = 0; i < count; ++i) {
+        const stsp_status_t st = stsp_set_params(&pc[i], theta);
+        if ((int)st < worst) worst = (int)st;
+    }
+    return worst;
+}
+/* X (count x nx) float32 states, U (count x nu); returns the worst status. */
+int harness_param_step(stsp_param_t *pc, size_t count, uint32_t tick, const float *X,
+                       float *U) {
+    size_t i;
+    int worst = 0;
+    for (i = 0; i < count; ++i) {
+        const stsp_status_t st = stsp_param_step(&pc[i], tick, &X[i * %(P)s_NX],
+                                                 &U[i * %(P)s_NU]);
+        if ((int)st < worst) worst = (int)st;
+    }
+    return worst;
+}
+"""
+
+
+@dataclass
+class ParamsController:
+    """The compiled parametric controller; `plant_helpers` the harness's plant and normals."""
+    ffi: object
+    lib: object
+    table: object
+
+    @property
+    def plant_helpers(self) -> CompiledController:
+        return CompiledController(self.ffi, self.lib, self.table)
+
+    def status_str(self, status: int) -> str:
+        return self.ffi.string(self.lib.stsp_status_str(status)).decode()
+
+
+@dataclass
+class ParamsRun:
+    """Each path's realised cost (paths,), its states at the knots (knot: (paths, n)) and the
+    worst status the controller returned."""
+    cost: np.ndarray
+    knots: list
+    worst_status: int
+
+    def agreement(self, J: float, knot_means, confidence: float = 0.99):
+        """`joint_verdict` of the cost and every knot-mean component against exact values,
+        z-scores from the sample's own standard errors (Bonferroni over all of them)."""
+        def z(sample, exact):
+            se = sample.std(ddof=1) / np.sqrt(sample.size)
+            return (None if se == 0 else float((sample.mean() - exact) / se),
+                    float(sample.mean()), float(exact))
+        stats = [("cost", *z(self.cost, J))]
+        for k, (X, mean) in enumerate(zip(self.knots, knot_means)):
+            stats += [(f"knot {k} mean[{i}]", *z(X[:, i], mean[i])) for i in range(X.shape[1])]
+        return joint_verdict(stats, confidence)
+
+
+def build_params_controller(ptable, table, *, build_dir=None,
+                            quiet: bool = True) -> ParamsController:
+    """Compile the firmware with `table`'s (the float32 gain table) and `ptable`'s
+    (`stospline.table.parametric.ParametricTable`) generated C, cached by a hash of every
+    input as `harness.controller.build_controller`."""
+    name = table.name
+    header, source = generate_c(table)
+    ph, pc = generate_parametric_c(ptable, prefix=name)
+    n, m, _ = table.dims
+    cflags = _CFLAGS + [f"-DHARNESS_N={n}", f"-DHARNESS_M={m}"]
+    fw = firmware_dir()
+    check_header(fw / "include")
+    fw_sources = sorted((fw / "src").glob("*.c"))
+    here = Path(__file__).parent
+    harness = [here / "plant.c", here / "normals.c"]
+    batch = _BATCH % {"p": name, "P": name.upper()}
+    key = source_key([header, source, ph, pc, _CDEF, batch, " ".join(cflags)]
+                     + [p.read_bytes() for p in sorted(fw.rglob("*.[ch]")) + harness
+                        + [_PLANT_H, here / "ziggurat_tables.h"]])
+    modname = f"_stsp_par_{name}_{key}"
+
+    def build(out: Path) -> Path:
+        for fname, text in ((f"{name}.h", header), (f"{name}.c", source),
+                            (f"{name}_params.h", ph), (f"{name}_params.c", pc)):
+            (out / fname).write_text(text)
+        return compile_cffi(out, modname, _CDEF, batch,
+                            sources=[*fw_sources, out / f"{name}.c", out / f"{name}_params.c",
+                                     *harness],
+                            include_dirs=[fw / "include", fw / "src", out, here],
+                            cflags=cflags, quiet=quiet)
+
+    mod = load_module(cached_build(key, modname, build, root=build_dir))
+    return ParamsController(mod.ffi, mod.lib, table)
+
+
+def simulate_params(problem, ctl: ParamsController, theta, *, paths: int, seed: int,
+                    substeps: int = 4, change=None) -> ParamsRun:
+    """`paths` paths from the problem's x0 with the parameters `theta` set before tick 0 and,
+    with ``change=(stage, theta2)``, `theta2` set just before that stage's first tick. Each
+    stage's plant and each knot's penalty are the problem's at the parameters in force there
+    (`problem_at`); the plant's noise from the harness's C generator (seeded); constant stage
+    data."""
+    table = ctl.table
+    n, m, _ = table.dims
+    dt = 1.0 / table.tick_hz / substeps
+    helpers = ctl.plant_helpers
+    normals = helpers.normals(np.random.SeedSequence(seed))
+    ffi, lib = ctl.ffi, ctl.lib
+    inst = ffi.new("stsp_param_t[]", paths)
+    st = lib.harness_param_init(inst, paths)
+    if st < 0:
+        raise RuntimeError(f"stsp_param_init failed: {ctl.status_str(st)}")
+    X = np.ascontiguousarray(np.tile(problem.x0, (paths, 1)), dtype=float)
+    Xf = np.zeros((paths, n), np.float32)
+    U = np.zeros((paths, m), np.float32)
+    px, pu = ffi.from_buffer("float[]", Xf), ffi.from_buffer("float[]", U)
+    cost = np.zeros(paths)
+    knots, worst = [], 0
+    first, later = problem_at(problem, theta), None
+    if change is not None:
+        later = problem_at(problem, change[1])
+    for k in range(table.n_stages):
+        p = later if change is not None and k >= change[0] else first
+        at = theta if p is first else change[1]
+        if k == 0 or (change is not None and k == change[0]):
+            st = lib.harness_param_set(inst, paths, ffi.from_buffer(
+                "float[]", np.ascontiguousarray(at, np.float32)))
+            if st < 0:
+                raise ValueError(f"stsp_set_params refused {list(at)}: {ctl.status_str(st)}")
+        stage = p.stages[k]
+        if stage.varying is not None:
+            raise ValueError("simulate_params: time-varying plant data are not simulated")
+        plant = helpers.plant(stage, *_zoh(stage, dt), dt, substeps)
+        dZ = np.empty((paths, substeps, stage.G.shape[2]))
+        fill = normals(dZ)
+        for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
+            Xf[...] = X
+            worst = min(worst, int(lib.harness_param_step(inst, paths, j, px, pu)))
+            fill()
+            helpers.plant_tick(plant, dZ, U, X, cost)
+        knot = p.knots[k]
+        if knot.penalty is not None:
+            r = X @ knot.penalty.C.T - knot.penalty.target
+            cost += knot.penalty.weight * np.einsum("pi,pi->p", r, r)
+        knots.append(X.copy())
+    return ParamsRun(cost, knots, worst)

@@ -1,0 +1,194 @@
+/* libFuzzer target: runtime parameters (stsp_params.h) on the robot_goal tables, with the
+ * fuzzer choosing a corrupted parameter table (a header field, or column words with or without
+ * a matching CRC) and a run of operations: theta of any bit pattern (NaN, Inf, huge, inside
+ * the range), steps (ticks forward, repeated, backwards or past the plan; states of any bit
+ * pattern), resets and verifies. Invariants: every status is a defined one; a refused theta
+ * leaves the commands those of the parameters before (checked against a twin instance that
+ * never saw it); a refused init leaves every step STSP_ERR_NOT_INITIALIZED; a negative step
+ * status writes u_hold, a non-negative one a finite command within the limits; nothing is read
+ * or written outside the arrays (ASan, UBSan). */
+#include <math.h>
+#include <string.h>
+
+#include "fuzz_input.h"
+#include "robot_goal_params.h"
+
+#define NX ROBOT_GOAL_NX
+#define NU ROBOT_GOAL_NU
+#define NP ROBOT_GOAL_N_PARAMS
+#define N_COLS (ROBOT_GOAL_N_TICKS * NU * NP)
+
+/* A corrupted n_params (up to STSP_MAX_PARAMS, beyond that refused before any read)
+ * lengthens every array: the copies are as long as the largest the header can describe. */
+static float cols[ROBOT_GOAL_N_TICKS * NU * STSP_MAX_PARAMS];
+static float lam[ROBOT_GOAL_N_STAGES * ROBOT_GOAL_N_LATCH * STSP_MAX_PARAMS];
+static float nominal[STSP_MAX_PARAMS], lower[STSP_MAX_PARAMS], upper[STSP_MAX_PARAMS];
+
+static int init_status_ok(stsp_status_t st)
+{
+    return (st == STSP_OK) || (st == STSP_ERR_NULL) || (st == STSP_ERR_BAD_MAGIC) ||
+           (st == STSP_ERR_BAD_VERSION) || (st == STSP_ERR_BAD_DIMS) ||
+           (st == STSP_ERR_BAD_CRC) || (st == STSP_ERR_BAD_PROBLEM) ||
+           (st == STSP_ERR_BAD_VALUES);
+}
+
+static int step_status_ok(stsp_status_t st)
+{
+    return (st == STSP_OK) || (st == STSP_WARN_TICK_SKIPPED) ||
+           (st == STSP_WARN_TICK_REPEATED) || (st == STSP_WARN_SATURATED) ||
+           (st == STSP_ERR_TICK_RANGE) || (st == STSP_ERR_TICK_ORDER) ||
+           (st == STSP_ERR_NONFINITE_STATE) || (st == STSP_ERR_NONFINITE_OUTPUT) ||
+           (st == STSP_ERR_NOT_INITIALIZED);
+}
+
+/* A copy of the parameter table with one header field or some column words changed. */
+static void corrupt(fuzz_in_t *in, stsp_params_table_t *c)
+{
+    const uint32_t what = fuzz_u8(in) % 12u;
+    const uint32_t v = fuzz_u32(in);
+    uint32_t k;
+    switch (what) {
+    case 0: c->magic = v; break;
+    case 1: c->format_version = (uint16_t)v; break;
+    case 2: c->scalar_kind = (uint16_t)v; break;
+    case 3: c->n_params = (uint16_t)v; break;
+    case 4: c->nu = (uint16_t)v; break;
+    case 5: c->n_latch = (uint16_t)v; break;
+    case 6: c->n_stages = (uint16_t)v; break;
+    case 7: c->n_ticks = v; break;
+    case 8: c->problem_sha256[v % 32u] ^= (uint8_t)(1u + (v >> 8) % 255u); break;
+    case 9: /* a range word (lower or upper), with a matching CRC */
+        memcpy(((v & 1u) != 0u) ? &lower[(v >> 1) % NP] : &upper[(v >> 1) % NP], &v, 4u);
+        c->crc32 = stsp_params_table_crc32(c);
+        break;
+    default: /* column words, then (case 11) a CRC that matches them */
+        for (k = 0u; k < 1u + (v % 4u); ++k) {
+            const uint32_t bits = fuzz_u32(in);
+            memcpy(&cols[fuzz_u32(in) % N_COLS], &bits, sizeof bits);
+        }
+        if (what == 11u) {
+            c->crc32 = stsp_params_table_crc32(c);
+        }
+        break;
+    }
+}
+
+/* The tables as shipped, validated once (a plain struct: it holds no pointer into itself). */
+static stsp_param_t shipped;
+static stsp_status_t shipped_status = STSP_ERR_NOT_INITIALIZED;
+
+static void check_command(stsp_status_t init, stsp_status_t s, const float *u)
+{
+    uint32_t i;
+    if (init != STSP_OK) {
+        fuzz_check(s == STSP_ERR_NOT_INITIALIZED);
+        fuzz_check((u[0] == 1234.5f) && (u[1] == -1234.5f)); /* nu unknown: untouched */
+    } else if (s < STSP_OK) {
+        fuzz_check(memcmp(u, robot_goal_table.u_hold, NU * sizeof u[0]) == 0);
+    } else {
+        for (i = 0u; i < NU; ++i) {
+            fuzz_check(isfinite(u[i]) && (u[i] >= robot_goal_table.u_min[i]) &&
+                       (u[i] <= robot_goal_table.u_max[i]));
+        }
+    }
+}
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+    static stsp_params_table_t c;
+    fuzz_in_t in = {data, size};
+    stsp_param_t e;
+    stsp_param_t twin;
+    stsp_status_t st;
+    const stsp_params_table_t *in_use = &robot_goal_params;
+    uint32_t next = 0u;
+    uint32_t i;
+    if (shipped_status != STSP_OK) {
+        shipped_status = stsp_param_init(&shipped, &robot_goal_table, &robot_goal_params);
+        fuzz_check(shipped_status == STSP_OK);
+    }
+    if ((fuzz_u8(&in) % 4u) == 0u) {
+        c = robot_goal_params;
+        memcpy(cols, robot_goal_S_k0, N_COLS * sizeof cols[0]);
+        memcpy(lam, robot_goal_S_lambda0, sizeof robot_goal_S_lambda0);
+        memcpy(nominal, robot_goal_param_nominal, NP * sizeof nominal[0]);
+        memcpy(lower, robot_goal_param_lower, NP * sizeof lower[0]);
+        memcpy(upper, robot_goal_param_upper, NP * sizeof upper[0]);
+        c.S_k0 = cols;
+        c.S_lambda0 = lam;
+        c.nominal = nominal;
+        c.lower = lower;
+        c.upper = upper;
+        corrupt(&in, &c);
+        st = stsp_param_init(&e, &robot_goal_table, &c);
+        in_use = &c;
+    } else {
+        e = shipped;
+        st = STSP_OK;
+    }
+    fuzz_check(init_status_ok(st));
+    twin = e;
+    for (i = 0u; i < 64u && in.n > 0u; ++i) {
+        const uint32_t op = fuzz_u8(&in);
+        float x[NX];
+        float u[NU] = {1234.5f, -1234.5f};
+        float w[NU] = {1234.5f, -1234.5f};
+        stsp_status_t s;
+        stsp_status_t t;
+        uint32_t tick;
+        uint32_t j;
+        if (op == 0xFDu) {
+            float theta[NP];
+            for (j = 0u; j < NP; ++j) {
+                const uint32_t bits = fuzz_u32(&in);
+                memcpy(&theta[j], &bits, sizeof bits);
+            }
+            s = stsp_set_params(&e, theta);
+            fuzz_check((s == STSP_OK) || (s == STSP_ERR_PARAM_RANGE) ||
+                       (s == STSP_ERR_NOT_INITIALIZED));
+            if (s == STSP_OK) { /* only a finite theta inside the range is taken */
+                for (j = 0u; j < NP; ++j) {
+                    fuzz_check(isfinite(theta[j]) && (theta[j] >= in_use->lower[j]) &&
+                               (theta[j] <= in_use->upper[j]));
+                }
+                fuzz_check(stsp_set_params(&twin, theta) == STSP_OK);
+            }
+            continue;
+        }
+        if (op == 0xFEu) {
+            s = stsp_param_reset(&e);
+            t = stsp_param_reset(&twin);
+            fuzz_check((s == t) && ((s == STSP_OK) || (s == STSP_ERR_NOT_INITIALIZED)));
+            next = 0u;
+            continue;
+        }
+        if (op == 0xFFu) {
+            s = stsp_param_verify(&e);
+            fuzz_check((s == STSP_OK) || (s == STSP_ERR_NOT_INITIALIZED));
+            (void)stsp_param_verify(&twin);
+            continue;
+        }
+        switch (op & 3u) {
+        case 0: tick = next; break;                            /* in order */
+        case 1: tick = next + (fuzz_u8(&in) % 50u); break;     /* a skip */
+        case 2: tick = next - 1u - (fuzz_u8(&in) % 3u); break; /* repeat, backwards, wrap */
+        default: tick = fuzz_u32(&in); break;
+        }
+        for (j = 0u; j < NX; ++j) {
+            uint32_t bits = fuzz_u32(&in);
+            if ((op & 4u) != 0u) { /* a moderate state, mostly: commands within range */
+                bits = 0x3F800000u ^ (bits & 0x807FFFFFu);
+            }
+            memcpy(&x[j], &bits, sizeof bits);
+        }
+        s = stsp_param_step(&e, tick, x, u);
+        t = stsp_param_step(&twin, tick, x, w);
+        fuzz_check(step_status_ok(s));
+        fuzz_check((s == t) && (memcmp(u, w, sizeof u) == 0)); /* refused thetas changed nothing */
+        check_command(st, s, u);
+        if ((st == STSP_OK) && (s >= STSP_OK) && (tick >= next)) {
+            next = tick + 1u;
+        }
+    }
+    return 0;
+}

@@ -1,0 +1,132 @@
+#!/usr/bin/env python3
+"""Report: instructions per tick on Cortex-M4F under QEMU for the robot with its goal as a
+runtime parameter (gains/robot_goal*), through stsp_step() (no parameters) and through
+stsp_param_step() (theta set inside the range).
+
+    python3 tools/arm/count_params.py [--build DIR]
+
+Compiles tools/arm/params_bench_main.c with firmware/src/*.c and the robot's tables
+(arm-none-eabi-gcc -O2, -mcpu=cortex-m4 hard float, -ffp-contract=off, the generic build),
+runs it in qemu-system-arm mps2-an386 with the method of tools/arm/count_instructions.py
+(-singlestep, -d exec,nochain, -dfilter on both entry points, everything they call and the
+bench callers; every traced address checked against the disassembly) and prints instructions
+per call by kind of tick. Instructions, not cycles. Then, built with -DBENCH_HASH, the same
+image runs the three runs of tests/c/test_params.c on the target and their command hashes must
+be tests/c/params_expected.h's (the float32 specification's, bit for bit), else exit status 1.
+Standard library only.
+"""
+from __future__ import annotations
+
+import argparse
+import re
+import statistics
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from count_instructions import BRANCH, ROOT, callees, disassemble, run, symbols  # noqa: E402
+
+FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-std=c99",
+         "-O2", "-ffp-contract=off", "-ffunction-sections", "-fdata-sections", "-Wall",
+         "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"]
+ENTRIES = ("stsp_step_f32", "stsp_param_step_f32")
+CALLERS = ("bench_plain", "bench_param")
+
+
+def build(out: Path, hashes: bool = False) -> Path:
+    elf = out / ("hash_params.elf" if hashes else "bench_params.elf")
+    arm = ROOT / "tools" / "arm"
+    run(["arm-none-eabi-gcc", *FLAGS, *(["-DBENCH_HASH"] if hashes else []),
+         f"-I{ROOT / 'firmware/include'}", f"-I{ROOT / 'firmware/src'}", f"-I{ROOT / 'gains'}",
+         f"-I{ROOT / 'tests/c'}",
+         *sorted(str(p) for p in (ROOT / "firmware/src").glob("*.c")),
+         str(ROOT / "gains/robot_goal.c"), str(ROOT / "gains/robot_goal_params.c"),
+         str(arm / "params_bench_main.c"), str(arm / "startup.c"), "--specs=rdimon.specs",
+         "-T", str(arm / "mps2-an386.ld"), "-Wl,--gc-sections", "-o", str(elf)])
+    return elf
+
+
+def count(elf: Path) -> list[dict]:
+    syms = symbols(elf)
+    funcs = sorted({f for e in ENTRIES for f in callees(elf, syms, e)})
+    ranges = {n: syms[n] for n in funcs + list(CALLERS)}
+    insns: dict[int, str] = {}
+    for a, s in ranges.values():
+        insns.update(disassemble(elf, a, s))
+    addrs = sorted(insns)
+    following = dict(zip(addrs, addrs[1:]))
+    trace = elf.with_suffix(".trace")
+    out = run(["timeout", "600", "qemu-system-arm", "-M", "mps2-an386", "-nographic",
+               "-monitor", "none", "-semihosting-config", "enable=on,target=native",
+               "-kernel", str(elf), "-singlestep", "-d", "exec,nochain", "-D", str(trace),
+               "-dfilter", ",".join(f"{a:#x}+{s:#x}" for a, s in ranges.values())])
+    calls = [{"kind": int(m[0]), "tick": int(m[1]), "status": int(m[2])}
+             for m in re.findall(r"call \d+ kind (\d) tick (\d+) status (-?\d+)", out)]
+    entries = {syms[e][0] for e in ENTRIES}
+    callers = [ranges[c] for c in CALLERS]
+    counts, current, prev = [], None, None
+    pat = re.compile(r"Trace \d+: 0x[0-9a-f]+ \[[0-9a-f]+/([0-9a-f]+)/")
+    with trace.open() as fh:
+        for line in fh:
+            m = pat.match(line)
+            if not m:
+                continue
+            pc = int(m.group(1), 16)
+            if pc not in insns:
+                raise SystemExit(f"count: traced pc {pc:#x} is not an instruction boundary")
+            if prev is not None and pc != following.get(prev) and not BRANCH.match(insns[prev]):
+                raise SystemExit(f"count: {prev:#x} -> {pc:#x}: an instruction ran untraced")
+            prev = pc
+            if pc in entries and current is None:
+                current = 0
+            if any(lo <= pc < lo + n for lo, n in callers):
+                if current is not None:
+                    counts.append(current)
+                    current = None
+            elif current is not None:
+                current += 1
+    if len(counts) != len(calls):
+        raise SystemExit(f"count: {len(counts)} calls traced, the bench reports {len(calls)}")
+    for c, k in zip(calls, counts):
+        c["insns"] = k
+    return calls
+
+
+def check_hashes(out: Path) -> bool:
+    """Runs A, B, C on the target against tests/c/params_expected.h; prints each."""
+    elf = build(out, hashes=True)
+    got = dict(re.findall(r"hash ([ABC]) (0x[0-9A-F]{8})", run(
+        ["timeout", "600", "qemu-system-arm", "-M", "mps2-an386", "-nographic", "-monitor",
+         "none", "-semihosting-config", "enable=on,target=native", "-kernel", str(elf)])))
+    want = dict(re.findall(r"#define PAR_HASH_([ABC]) (0x[0-9A-F]{8})u",
+                           (ROOT / "tests/c/params_expected.h").read_text()))
+    for k in "ABC":
+        print(f"run {k}: M4F 0x{int(got.get(k, '0'), 16):08X}, specification {want[k]}"
+              f" {'ok' if got.get(k) == want[k] else 'DIFFERS'}")
+    return got == want
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--build", type=Path, default=ROOT / "build" / "arm-params")
+    args = ap.parse_args()
+    args.build.mkdir(parents=True, exist_ok=True)
+    calls = count(build(args.build))
+    kinds = {
+        "tick 0 (latch of stage 0)": lambda c: c["tick"] == 0,
+        "ordinary tick": lambda c: 0 < c["tick"] < 21 and c["status"] == 0,
+        "skip to the tick before stage 1": lambda c: c["tick"] == 299,
+        "stage-1 switch (latch)": lambda c: c["tick"] == 300,
+    }
+    print("| robot_goal, Cortex-M4F (QEMU) | stsp_step (median) | stsp_param_step (median) |")
+    print("|---|---|---|")
+    for name, sel in kinds.items():
+        med = [statistics.median([c["insns"] for c in calls if sel(c) and c["kind"] == k])
+               for k in (0, 1)]
+        print(f"| {name} | {med[0]:.0f} | {med[1]:.0f} |")
+    print()
+    return 0 if check_hashes(args.build) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

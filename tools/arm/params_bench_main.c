@@ -1,0 +1,139 @@
+/* Instruction-count bench of runtime parameters (tools/arm/count_params.py, QEMU mps2-an386,
+ * Cortex-M4F) on gains/robot_goal*: BENCH_REPS times, the same ticks through stsp_step()
+ * (bench_plain) and through stsp_param_step() with theta set inside the range (bench_param):
+ * ticks 0 .. 20 in order (tick 0 latches stage 0), then a skip to the tick before stage 1,
+ * the switch tick (the latch of stage 1) and the one after it. Prints one line per call:
+ *     call <index> kind <0 plain|1 param> tick <tick> status <status>
+ * Built with -DBENCH_HASH instead: runs A, B and C of tests/c/params_reference.py (the states,
+ * thetas and changes of tests/c/test_params.c) and prints the hash of each run's commands,
+ *     hash <A|B|C> 0x<FNV-1a>
+ * for the bit-exact comparison with the float32 specification on the target. */
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "robot_goal_params.h"
+#ifdef BENCH_HASH
+#include "params_expected.h"
+#endif
+
+#define BENCH_REPS 4u
+#define BENCH_TICKS 21u
+#define BENCH_CALLS (2u * BENCH_REPS * (BENCH_TICKS + 3u))
+
+#ifdef BENCH_HASH
+static uint32_t fnv1a(uint32_t h, float v)
+{
+    uint32_t w, i;
+    v = v + 0.0f; /* a zero as +0, as the specification's hash */
+    memcpy(&w, &v, sizeof w);
+    for (i = 0u; i < 4u; ++i) {
+        h = (h ^ ((w >> (8u * i)) & 0xFFu)) * 0x01000193u;
+    }
+    return h;
+}
+
+/* One run as tests/c/test_params.c's run(): theta0 before tick 0, theta1 before tick `at`. */
+static uint32_t run(const float *theta0, uint32_t at, const float *theta1)
+{
+    static stsp_param_t pc;
+    float x[ROBOT_GOAL_NX], u[ROBOT_GOAL_NU];
+    uint32_t h = 0x811C9DC5u, j, c;
+    if (stsp_param_init(&pc, &robot_goal_table, &robot_goal_params) != STSP_OK) {
+        return 0u;
+    }
+    if ((theta0 != NULL) && (stsp_set_params(&pc, theta0) != STSP_OK)) {
+        return 0u;
+    }
+    for (j = 0u; j < ROBOT_GOAL_N_TICKS; ++j) {
+        if ((theta1 != NULL) && (j == at) && (stsp_set_params(&pc, theta1) != STSP_OK)) {
+            return 0u;
+        }
+        for (c = 0u; c < ROBOT_GOAL_NX; ++c) {
+            x[c] = (float)((7u * j + 13u * c) % 41u) * 0.05f - 1.0f;
+        }
+        if (stsp_param_step(&pc, j, x, u) < 0) {
+            return 0u;
+        }
+        h = fnv1a(fnv1a(h, u[0]), u[1]);
+    }
+    return h;
+}
+
+int main(void)
+{
+    static const float a[2] = PAR_THETA_A;
+    static const float b[2] = PAR_THETA_B;
+    printf("hash A 0x%08X\n", (unsigned)run(a, 0u, NULL));
+    printf("hash B 0x%08X\n", (unsigned)run(NULL, robot_goal_table.stage_start[1], b));
+    printf("hash C 0x%08X\n", (unsigned)run(a, PAR_MID, b));
+    return 0;
+}
+#else
+typedef struct {
+    uint32_t tick;
+    int16_t status;
+    uint8_t kind;
+} bench_call_t;
+
+static bench_call_t calls[BENCH_CALLS];
+static uint32_t n_calls;
+
+static void record(uint32_t tick, stsp_status_t st, uint8_t kind)
+{
+    if (n_calls < BENCH_CALLS) {
+        bench_call_t *rec = &calls[n_calls++];
+        rec->tick = tick;
+        rec->status = (int16_t)st;
+        rec->kind = kind;
+    }
+}
+
+__attribute__((noinline, noclone)) static void bench_plain(stsp_ctrl_t *c, uint32_t tick,
+                                                           const stsp_f32_t *x)
+{
+    stsp_f32_t u[ROBOT_GOAL_NU];
+    record(tick, stsp_step(c, tick, x, u), 0u);
+}
+
+__attribute__((noinline, noclone)) static void bench_param(stsp_param_t *p, uint32_t tick,
+                                                           const stsp_f32_t *x)
+{
+    stsp_f32_t u[ROBOT_GOAL_NU];
+    record(tick, stsp_param_step(p, tick, x, u), 1u);
+}
+
+int main(void)
+{
+    static stsp_ctrl_t ctrl;
+    static stsp_param_t pc;
+    static const stsp_f32_t theta[ROBOT_GOAL_N_PARAMS] = {-0.7f, 5.3f};
+    const uint32_t sw = robot_goal_table.stage_start[1];
+    stsp_f32_t x[ROBOT_GOAL_NX] = {-1.0f, 5.0f, 0.0f, 0.0f};
+    uint32_t rep, k;
+    if ((stsp_init(&ctrl, &robot_goal_table) != STSP_OK) ||
+        (stsp_param_init(&pc, &robot_goal_table, &robot_goal_params) != STSP_OK) ||
+        (stsp_set_params(&pc, theta) != STSP_OK)) {
+        printf("bench: init failed\n");
+        return 1;
+    }
+    for (rep = 0u; rep < BENCH_REPS; ++rep) {
+        (void)stsp_reset(&ctrl);
+        (void)stsp_param_reset(&pc);
+        x[0] = -1.0f + 0.01f * (float)rep;
+        for (k = 0u; k < BENCH_TICKS; ++k) {
+            bench_plain(&ctrl, k, x);
+            bench_param(&pc, k, x);
+        }
+        for (k = sw - 1u; k <= sw + 1u; ++k) {
+            bench_plain(&ctrl, k, x);
+            bench_param(&pc, k, x);
+        }
+    }
+    for (k = 0u; k < n_calls; ++k) {
+        printf("call %u kind %u tick %u status %d\n", (unsigned)k, (unsigned)calls[k].kind,
+               (unsigned)calls[k].tick, (int)calls[k].status);
+    }
+    return 0;
+}
+#endif

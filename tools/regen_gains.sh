@@ -14,7 +14,8 @@
 # and the robot's fixed-point spline tables (<name>_q15_spline.*, <name>_q31_spline.*).
 # The examples with a [measurement] sensor (robot_position_sensor, quadrotor_altimeter) get
 # their filter's tables in <name>.{c,h} from the first loop (float32, per-tick: the estimator
-# takes no spline or fixed-point table).
+# takes no spline or fixed-point table); those with [[parameters]] (robot_goal) their
+# sensitivity columns in <name>_params.{c,h}, from the same loop.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -32,5 +33,3 @@ for arith in q15 q31; do
   "$root/.venv/bin/stospline" design examples/robot_corridor.toml --arith "$arith" --table spline \
     --out gains/
 done
-# The sensitivity columns of the examples with [[parameters]] (gains/<name>_params.{c,h}).
-"$root/.venv/bin/python" tools/params_tables.py --out gains/

@@ -632,12 +632,13 @@ def sensor_simulate_doc(name: str) -> tuple[dict, list[str], str | None]:
 # The hil cases that get past the options to the serial line say --paths 2 (a short reference
 # run of the host-compiled controller first); the test runs those in a child process.
 
-def _hello(crc32: int, payload_len: int = 28) -> bytes:
-    """A HELLO frame from a float32 board with NOISY's shape (nx 2, nu 1, 40 ticks at 20 Hz)."""
+def _hello(crc32: int, payload_len: int = 29) -> bytes:
+    """A HELLO frame from a float32 board with NOISY's shape (nx 2, nu 1, 40 ticks at 20 Hz),
+    stepping one path a frame."""
     import struct
     from stospline.board import frames
-    payload = struct.pack("<BBBBIIIbbBBII", frames.PROTOCOL, 0, 2, 1, 40, 20, crc32, 0, 0, 1,
-                          1, 168_000_000, 8_400_000)
+    payload = struct.pack("<BBBBIIIbbBBIIB", frames.PROTOCOL, 0, 2, 1, 40, 20, crc32, 0, 0, 1,
+                          1, 168_000_000, 8_400_000, 1)
     return frames.encode(frames.HELLO, 0, payload[:payload_len])
 
 
@@ -652,7 +653,7 @@ def _short_command(crc32: int) -> bytes:
 BOARD_PEERS = {
     "hangup": None,
     "garbage": bytes(range(256)) * 4,                   # no frame: the 5 s timeout
-    "short_hello": _hello(0, 27),                       # a HELLO of the wrong length
+    "short_hello": _hello(0, 28),                       # a HELLO of the wrong length
     "other_table": _hello(0xDEADBEEF),                  # another table's CRC
     "short_command": _short_command,
 }

@@ -7,10 +7,10 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[3]
 
 
-def test_presets_are_the_four_targets():
+def test_presets_are_the_five_targets():
     presets = json.loads((REPO / "CMakePresets.json").read_text(encoding="utf-8"))
     visible = [p["name"] for p in presets["configurePresets"] if not p.get("hidden")]
-    assert visible == ["host-gcc", "host-clang", "arm-m4f", "arm-m0plus"]
+    assert visible == ["host-gcc", "host-clang", "arm-m4f", "arm-m0plus", "arm-m0"]
     arm = {p["name"]: p for p in presets["configurePresets"]}
     assert arm["arm-base"]["toolchainFile"].endswith("tools/arm/arm-none-eabi.cmake")
 

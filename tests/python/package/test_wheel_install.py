@@ -19,6 +19,8 @@ from pathlib import Path
 
 import pytest
 
+import stospline
+
 from conftest import EXAMPLES, REPO
 
 VERSION = (REPO / "VERSION").read_text().strip()
@@ -57,6 +59,9 @@ def wheel(tmp_path_factory):
     return whl, sdist, whl2
 
 
+PACKAGE = Path(stospline.__file__).parent
+
+
 def test_wheel_and_sdist_carry_the_firmware(wheel):
     whl, sdist, whl2 = wheel
     for w in (whl, whl2):
@@ -69,6 +74,15 @@ def test_wheel_and_sdist_carry_the_firmware(wheel):
         assert "stospline/table/qspline_kernel.c" in names
         assert "stospline/table/literal_kernel.c" in names
         assert "stospline/report/templates/report.html.j2" in names     # the report page
+        # Every module of the source tree is in the wheel (a package missing from the build's
+        # list would install and then fail at its first import).
+        source = {f"stospline/{p.relative_to(PACKAGE).as_posix()}"
+                  for p in PACKAGE.rglob("*.py") if "_firmware" not in p.parts}
+        assert sorted(source - set(names)) == [], w.name
+        data = {f"stospline/{p.relative_to(PACKAGE).as_posix()}"
+                for p in PACKAGE.rglob("*") if p.suffix in (".c", ".h", ".j2", ".ld")
+                and "_firmware" not in p.parts}
+        assert sorted(data - set(names)) == [], w.name
     with tarfile.open(sdist) as tar:
         members = [m.split("stospline/_firmware/", 1)[1] for m in tar.getnames()
                    if "stospline/_firmware/" in m and m.endswith((".c", ".h"))]

@@ -99,9 +99,12 @@ def test_design_doubles_perturbed_by_ulps_change_no_byte(tmp_path, monkeypatch, 
     rng = np.random.default_rng(seed)
     # Where the designs hand their results to the tables and the summary, and the oracle's
     # moments (also computed by `oracle.state_range` for the fixed-point scales).
-    for name in ("design_zoh", "design_continuous", "design_bands", "evaluate_table",
-                 "evaluate_continuous"):
-        monkeypatch.setattr(pipeline, name, _perturbing(getattr(pipeline, name), rng))
+    from stospline import design_method
+    from stospline.design import continuous
+    for module, name in ((design_method, "design_zoh"), (continuous, "design_continuous"),
+                         (design_method, "design_bands"), (pipeline, "evaluate_table"),
+                         (pipeline, "evaluate_continuous")):
+        monkeypatch.setattr(module, name, _perturbing(getattr(module, name), rng))
     monkeypatch.setattr(oracle, "evaluate_table", _perturbing(oracle.evaluate_table, rng))
     _regenerate(tmp_path)
     _assert_same_as_gains(tmp_path)

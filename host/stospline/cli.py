@@ -34,8 +34,16 @@ __all__ = ["main"]
 
 
 def load_problem(path):
+    from stospline.nonlinear.iterate import has_plant, load_plant_problem
     from stospline.problem.reader import load_problem as load
-    return load(path)
+    if not has_plant(path):
+        return load(path)
+    problem, fit = load_plant_problem(path)        # the linearisation along its mean path
+    _PLANT_FIT[:] = [fit]
+    return problem
+
+
+_PLANT_FIT: list = []    # how the last [plant] problem loaded converged, for the text summary
 
 
 def dumps(obj) -> str:
@@ -101,6 +109,8 @@ def _design(args) -> int:
     else:
         from stospline.report.summary_text import design_run_text
         print(design_run_text(d, opts.arith, summary), end="")
+        for fit in _PLANT_FIT:
+            print(f"  {fit.text()}")
         for path in written if args.out else []:
             print(f"wrote {path}")
     return 0

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from stospline.design.linearise import linearise
-from stospline.errors import DesignError, ProblemError
+from stospline.errors import ProblemError
 from stospline.nonlinear.linear_problem import linear_doc
 from stospline.nonlinear.path import MeanPath, path_change
 from stospline.problem.fields import kind, vector
@@ -121,14 +121,16 @@ def fit_plant(doc: dict, base_dir: str | Path, source_sha256: str = ""):
     for i in range(spec.max_iterations):
         lin = linearise(model, t[idx], path.x[idx], path.u[uidx])
         fit.derivative_error = max(fit.derivative_error, lin.error)
-        problem = parse_problem(linear_doc(doc, lin, t[idx], stages), source_sha256=sha)
         try:
+            problem = parse_problem(linear_doc(doc, lin, t[idx], stages), source_sha256=sha)
             new = _design_path(problem)
-        except DesignError as exc:
-            where = "plant.guess" if i == 0 else "plant"
-            raise ProblemError(where, f"the design on the linearisation of iteration {i + 1} "
-                                      f"failed ({exc}); give plant.guess, a path nearer the "
-                                      f"solution") from None
+        except ProblemError as exc:
+            if exc.field.startswith("plant."):
+                raise
+            # The fault is the model's (or the path's), not the generated sample's field.
+            raise ProblemError("plant", f"the design on the model linearised along path "
+                                        f"{i + 1} failed: {exc.reason} (if the first path is "
+                                        f"far from the solution, give plant.guess)") from None
         fit.changes.append(path_change(path, new))
         if fit.changes[-1] <= spec.tolerance:
             fit.path = path

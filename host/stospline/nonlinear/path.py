@@ -26,9 +26,9 @@ class MeanPath:
         gt, gx, gu = guess
         x = np.stack([np.interp(t, gt, gx[:, i]) for i in range(gx.shape[1])], axis=1)
         x[0] = x0
-        mid = (t[:-1] + t[1:]) / 2
-        u = np.zeros((mid.size, m)) if gu is None else \
-            np.stack([np.interp(mid, gt, gu[:, j]) for j in range(m)], axis=1)
+        starts = t[:-1]           # a tick's command: the guess at the tick's start
+        u = np.zeros((starts.size, m)) if gu is None else \
+            np.stack([np.interp(starts, gt, gu[:, j]) for j in range(m)], axis=1)
         return cls(t, x, u)
 
     def points(self, index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

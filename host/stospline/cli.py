@@ -294,6 +294,8 @@ def _simulate(args) -> int:
     d = design_problem(problem, options=opts, **_limits(args))
     if x0 is not None:
         d = start_from(d, x0)
+    if _PLANT_FIT:                 # the controller against the C model itself
+        return _simulate_plant(args, d)
     _note_tables(d, "compiling")
     substeps = _planned_substeps(args, problem, opts, d, "simulate")
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps,
@@ -667,6 +669,19 @@ def build_parser() -> argparse.ArgumentParser:
                              "is fed [x; the command being applied], docs/guide/firmware.md). "
                              "Default: the file's [design] delay_ticks, else 0")
     return ap
+
+
+def _simulate_plant(args, d) -> int:
+    """`simulate` of a [plant] problem (`stospline.nonlinear.simulate`): Monte Carlo on the
+    model, against the oracle of its linearisation."""
+    from stospline.nonlinear.simulate import plant_simulation, plant_simulation_text
+    if d.problem.faults.as_dict():
+        raise ProblemError("faults", "are not applied around a [plant] model yet")
+    substeps = 4 if args.substeps == "auto" else int(args.substeps)
+    s = plant_simulation(d, _PLANT_FIT[0].model, paths=args.paths, seed=args.seed,
+                         substeps=substeps)
+    print(dumps(s) + "\n" if args.json else plant_simulation_text(s), end="", flush=True)
+    return 0 if (s["verdict"]["agree"] or not args.check) else EXIT_DISAGREE
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -41,6 +41,7 @@ class PlantFit:
     tolerance: float = 0.0
     derivative_error: float = 0.0
     path: MeanPath | None = None
+    model: object = None        # the compiled model (`stospline.problem.plant_c.PlantModel`)
 
     @property
     def iterations(self) -> int:
@@ -116,7 +117,7 @@ def fit_plant(doc: dict, base_dir: str | Path, source_sha256: str = ""):
                              if any(abs(kn.t - ut) < 1e-12 for ut in user_t)]]
     idx, uidx, stages = _grid(skeleton.tick_hz, [0, *ends.tolist()])
     path = MeanPath.from_guess(t, skeleton.x0, model.m, spec.guess)
-    fit = PlantFit(tolerance=spec.tolerance)
+    fit = PlantFit(tolerance=spec.tolerance, model=model)
     mixer = _Anderson()
     for i in range(spec.max_iterations):
         lin = linearise(model, t[idx], path.x[idx], path.u[uidx])

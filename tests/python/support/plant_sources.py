@@ -75,3 +75,28 @@ def the_same_linear_doc() -> dict:
     doc["dynamics"] = {"A": [[0, 1], [0, 0]], "B": [[0], [1]],
                        "noise": [{"state": 1, "G": [[0], [0.3]]}]}
     return doc
+
+
+LINEAR_TOML = """\
+name = "di"
+t0 = 0.0
+x0 = [0.5, 0.0]
+tick_hz = 20
+
+[plant]
+source = "model.c"
+params = [0.3]
+
+[cost]
+Q = [[0.1, 0], [0, 0]]
+R = [[1]]
+
+[[knots]]
+t = 1.0
+penalty = { C = [[1, 0]], target = [1.0], weight = 2.0 }
+constraint = { C = [[1, 0]], value = [1.0] }
+
+[[knots]]
+t = 2.0
+constraint = { C = [[1, 0], [0, 1]], value = [0.0, 0.0] }
+"""   # linear_doc() as a file

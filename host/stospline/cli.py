@@ -36,6 +36,7 @@ __all__ = ["main"]
 def load_problem(path):
     from stospline.nonlinear.iterate import has_plant, load_plant_problem
     from stospline.problem.reader import load_problem as load
+    _PLANT_FIT.clear()
     if not has_plant(path):
         return load(path)
     problem, fit = load_plant_problem(path)        # the linearisation along its mean path
@@ -132,7 +133,10 @@ def _corridor_design(args) -> int:
     if args.seed == args.certify_seed:
         raise ProblemError("--certify-seed", f"must differ from --seed ({args.seed}): "
                                              f"certifying on the screening sample biases it")
-    problem, index = cs.target_corridor(load_problem(args.problem), args.epsilon)
+    problem = load_problem(args.problem)
+    if _PLANT_FIT:      # its certificate would be the linearisation's, not the model's
+        raise ProblemError("plant", "corridor-design does not run on a [plant] model yet")
+    problem, index = cs.target_corridor(problem, args.epsilon)
     resolved = _design_options(args, problem)
     for key, option, bad in (("table", "--table", "spline"), ("delay_ticks", "--delay-ticks", 1)):
         if getattr(resolved, key) == bad:

@@ -28,3 +28,28 @@ def test_each_plant_edit_is_refused_in_one_line_by_the_cli(edit, tmp_path, capsy
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
+
+
+def test_a_plant_file_leaves_nothing_for_the_next_run(tmp_path, capsys):
+    """`main` called again in the same process on a linear file runs the linear harness."""
+    import json
+    from hostile import NOISY
+    files, doc, _ = plant_case("valid")
+    (tmp_path / "model.c").write_text(files["model.c"])
+    (tmp_path / "p.toml").write_text(to_toml(doc))
+    (tmp_path / "lin.toml").write_text(to_toml(NOISY))
+    assert main(["simulate", str(tmp_path / "p.toml"), "--paths", "20", "--json"]) == 0
+    assert "plant" in json.loads(capsys.readouterr().out)
+    assert main(["simulate", str(tmp_path / "lin.toml"), "--paths", "20", "--json"]) == 0
+    assert "plant" not in json.loads(capsys.readouterr().out)
+
+
+def test_corridor_design_refuses_a_plant_in_one_line(tmp_path, capsys):
+    files, doc, _ = plant_case("valid")
+    (tmp_path / "model.c").write_text(files["model.c"])
+    (tmp_path / "p.toml").write_text(to_toml(doc))
+    rc = main(["corridor-design", str(tmp_path / "p.toml"), "--out", str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    assert rc == 2 and captured.out == ""
+    assert len(captured.err.strip().splitlines()) == 1 and ": plant:" in captured.err
+    assert not (tmp_path / "out").exists()

@@ -3,8 +3,8 @@
 At each point ``(t_k, xbar_k, ubar_k)`` of the path
 
     f(t, x, u) ≈ A x + B u + c,        c = f(t, xbar, ubar) - A xbar - B ubar
-    g(t, x, u) ≈ g0 + Σ_i x_i G_i + Σ_j u_j H_j,
-                 G_i = ∂g/∂x_i,  H_j = ∂g/∂u_j,  g0 = g(t, xbar, ubar) - Σ xbar_i G_i - Σ ubar_j H_j
+    g(t, x, u) ≈ g0 + Σ_i x_i G_i + Σ_j u_j H_j,      G_i = ∂g/∂x_i,  H_j = ∂g/∂u_j,
+    g0 = g(t, xbar, ubar) - Σ xbar_i G_i - Σ ubar_j H_j
 
 (the problem's diffusion is ``Σ x_i G_i + Σ u_j H_j``: `g0` is returned so that the caller can
 refuse an additive part it cannot represent).

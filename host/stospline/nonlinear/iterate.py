@@ -98,9 +98,11 @@ def fit_plant(doc: dict, base_dir: str | Path, source_sha256: str = ""):
         On ``plant.<key>`` (a bad model, a failed or unconverged iteration) or any other
         field of the file.
     """
-    if not isinstance(doc.get("x0"), list):
+    if "x0" not in doc:
+        raise ProblemError("x0", "is required")
+    if not isinstance(doc["x0"], list):
         raise ProblemError("x0", f"must be a non-empty array of numbers, got "
-                                 f"{kind(doc.get('x0'))}")
+                                 f"{kind(doc['x0'])}")
     n = vector(doc["x0"], "x0", None).size
     spec = parse_plant(doc["plant"], base_dir, n)
     model = build_plant(spec, n)

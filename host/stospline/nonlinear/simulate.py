@@ -81,6 +81,6 @@ def plant_simulation_text(s: dict) -> str:
                  f"{'agree' if c['agree'] else 'DIFFER'}")
     for i, e in enumerate(s["corridor_exits"]):
         lines.append(f"  corridor {i}: {e['paths']} paths left it ({e['fraction']:.2%})")
-    lines.append(f"  verdict: the plant {'agrees with' if s['verdict']['agree'] else 'differs from'}"
-                 f" the prediction of its linearisation")
+    verb = "agrees with" if s["verdict"]["agree"] else "differs from"
+    lines.append(f"  verdict: the plant {verb} the prediction of its linearisation")
     return "\n".join(lines) + "\n"

@@ -625,6 +625,9 @@ PLANT_EDITS = {
         d["plant"], guess={"t": [0.0, 2.0], "x": [[0.5, 0.0], [0.0, 0.0]],
                            "u": [[0.0, 0.0], [0.0, 0.0]]}), "plant.guess.u"),
     "unknown_key": (lambda d, f: _plant_table(d["plant"], n_noise=1), "plant.n_noise"),
+    "x0_missing": (lambda d, f: d.pop("x0"), "x0"),
+    "x0_not_array": (lambda d, f: d.__setitem__("x0", 0.5), "x0"),
+    "x0_length": (lambda d, f: d.__setitem__("x0", [0.5, 0.0, 0.0]), "plant.source"),
     "with_dynamics": (lambda d, f: d.__setitem__("dynamics", {"A": [[0, 1], [0, 0]],
                                                               "B": [[0], [1]]}), "dynamics"),
     "stage_dynamics": (lambda d, f: d.__setitem__("stages", [

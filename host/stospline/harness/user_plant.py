@@ -8,8 +8,8 @@ Euler–Maruyama with `substeps` steps, the command held:
     x+ = x + f(t, x, u) dt + g(t, x, u) dZ,      dZ ~ N(0, dt I).
 
 Alongside, the same paths are integrated with twice the substeps on the same Brownian path (a
-coarse increment is the sum of two fine ones), each with its own controllers: the difference of
-the two runs' knot means estimates the scheme's error (order 1 in dt for the means), which the
+coarse increment is the sum of two fine ones), each with its own controllers: for a scheme of
+weak order 1, twice the difference of the two runs estimates the coarse run's bias, which the
 verdict reports beside the statistical error. The running cost is the left-point rule per
 substep; knot penalties are added at the knots; corridor exits are watched after every tick.
 """
@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from stospline.errors import ProblemError
 from stospline.harness.controller import STATUS, CorridorWatch
 
 __all__ = ["PlantRun", "simulate_model"]
@@ -27,7 +28,7 @@ __all__ = ["PlantRun", "simulate_model"]
 @dataclass
 class PlantRun:
     """Per path: ``knots[k]`` the state at knot k (paths, n), ``cost`` the realised cost
-    (paths,); ``fine_knot_means[k]`` the knot means with twice the substeps (same Brownian
+    (paths,); ``fine_knots``, ``fine_cost`` the same with twice the substeps (same Brownian
     path); ``exits`` (corridors, paths) the first state tick outside each corridor (-1:
     none); ``worst_status`` the lowest controller status; ``saturated`` commands clipped."""
     paths: int
@@ -35,7 +36,8 @@ class PlantRun:
     substeps: int
     knots: list
     cost: np.ndarray
-    fine_knot_means: list
+    fine_knots: list
+    fine_cost: np.ndarray
     exits: np.ndarray
     worst_status: int
     saturated: int
@@ -56,12 +58,6 @@ def _penalty(knot, X: np.ndarray) -> np.ndarray:
     return knot.penalty.weight * np.sum(r * r, axis=1)
 
 
-def _em(model, t: float, X: np.ndarray, U: np.ndarray, dt: float, dZ: np.ndarray):
-    f = model.drift(t, X, U)
-    g = model.diffusion(t, X, U)
-    return X + f * dt + np.einsum("pij,pj->pi", g, dZ)
-
-
 def simulate_model(problem, controller, model, *, paths: int, seed: int,
                    substeps: int) -> PlantRun:
     """Run `paths` paths of `controller` (built for `problem`'s table) on `model` from x0 with
@@ -71,7 +67,7 @@ def simulate_model(problem, controller, model, *, paths: int, seed: int,
     coarse_step, fine_step = controller.real_stepper(paths), controller.real_stepper(paths)
     X = np.tile(problem.x0, (paths, 1)).astype(float)
     Xf = X.copy()
-    cost = np.zeros(paths)
+    cost, cost_f = np.zeros(paths), np.zeros(paths)
     watch = CorridorWatch.of(problem.corridors, paths, problem.t0, problem.tick_hz)
     watch.check(0, X)
     knot_ticks = np.cumsum(problem.ticks_per_stage)
@@ -87,18 +83,23 @@ def simulate_model(problem, controller, model, *, paths: int, seed: int,
             worst = min(worst, int(status.min()))
             saturated += int(np.sum(status == STATUS["WARN_SATURATED"]))
             cost_stage = stage.at(t + h / 2)
-            for s in range(substeps):
-                dz = rng.standard_normal((2, paths, model.mz)) * np.sqrt(dt / 2)
-                ts = t + s * dt
-                cost += _running_cost(cost_stage, X, U) * dt
-                X = _em(model, ts, X, U, dt, dz[0] + dz[1])
-                Xf = _em(model, ts, Xf, Uf, dt / 2, dz[0])
-                Xf = _em(model, ts + dt / 2, Xf, Uf, dt / 2, dz[1])
+            dz = rng.standard_normal((paths, 2 * substeps, model.mz)) * np.sqrt(dt / 2)
+            xs = model.em_steps(t, dt, X, U, dz[:, 0::2] + dz[:, 1::2])
+            xf = model.em_steps(t, dt / 2, Xf, Uf, dz)
+            for s in range(substeps):       # the left-point rule on every substep
+                cost += _running_cost(cost_stage, xs[:, s], U) * dt
+                cost_f += (_running_cost(cost_stage, xf[:, 2 * s], Uf)
+                           + _running_cost(cost_stage, xf[:, 2 * s + 1], Uf)) * (dt / 2)
             j += 1
+            if not np.all(np.isfinite(X)):
+                raise ProblemError("plant.source", f"the model's state became NaN or "
+                                                   f"infinite on a Monte Carlo path by "
+                                                   f"t = {problem.t0 + j * h:g}")
             watch.check(j, X)
         assert j == knot_ticks[k]
         knots.append(X.copy())
-        fine.append(Xf.mean(axis=0))
+        fine.append(Xf.copy())
         cost += _penalty(problem.knots[k], X)
-    return PlantRun(paths, seed, substeps, knots, cost, fine, watch.exit_tick, worst,
+        cost_f += _penalty(problem.knots[k], Xf)
+    return PlantRun(paths, seed, substeps, knots, cost, fine, cost_f, watch.exit_tick, worst,
                     saturated)

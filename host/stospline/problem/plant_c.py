@@ -32,6 +32,9 @@ int stospline__drift_many(int N, const double *t, const double *x, const double 
                           const double *p, double *f, int *status);
 int stospline__diffusion_many(int N, const double *t, const double *x, const double *u,
                               const double *p, double *g, int *status);
+int stospline__em_steps(int N, int steps, double t, double dt, const double *u,
+                        const double *p, const double *dz, double *x, double *xs,
+                        double *f, double *g, int *status);
 """
 # Batches of points in one call (a linearisation evaluates the model at tens of thousands of
 # points): the index of the first point refused, its status in *status; -1 when all are fine.
@@ -61,6 +64,34 @@ int stospline__diffusion_many(int N, const double *t, const double *x, const dou
     for (int k = 0; k < N; ++k) {
         *status = stospline_plant_diffusion(t[k], x + k * n, u + k * m, p, g + k * n * mz);
         if (*status != 0) return k;
+    }
+    return -1;
+}
+
+/* Euler-Maruyama: `steps` steps of dt from t for each of N paths, u (N, m) held, dz (N, steps,
+ * mz) the Brownian increments; x (N, n) advanced in place, xs (N, steps, n) the state at each
+ * step's start; f (n) and g (n * mz) work space. */
+int stospline__em_steps(int N, int steps, double t, double dt, const double *u,
+                        const double *p, const double *dz, double *x, double *xs,
+                        double *f, double *g, int *status)
+{
+    int n = stospline__dims_(0), m = stospline__dims_(1), mz = stospline__dims_(2);
+    for (int k = 0; k < N; ++k) {
+        double *xk = x + k * n;
+        for (int s = 0; s < steps; ++s) {
+            const double *dzs = dz + (k * steps + s) * mz;
+            double ts = t + s * dt;
+            for (int i = 0; i < n; ++i) xs[(k * steps + s) * n + i] = xk[i];
+            *status = stospline_plant_drift(ts, xk, u + k * m, p, f);
+            if (*status != 0) return k;
+            *status = stospline_plant_diffusion(ts, xk, u + k * m, p, g);
+            if (*status != 0) return k;
+            for (int i = 0; i < n; ++i) {
+                double dx = f[i] * dt;
+                for (int j = 0; j < mz; ++j) dx += g[i * mz + j] * dzs[j];
+                xk[i] += dx;
+            }
+        }
     }
     return -1;
 }
@@ -177,6 +208,28 @@ class PlantModel:
         """g at the points ``(t[k], x[k], u[k])``: shape (N, n, mz)."""
         return self._many(self.lib.stospline__diffusion_many, "stospline_plant_diffusion",
                           self.n * self.mz, t, x, u).reshape(-1, self.n, self.mz)
+
+
+    def em_steps(self, t: float, dt: float, X: np.ndarray, U: np.ndarray,
+                 dz: np.ndarray) -> np.ndarray:
+        """Euler-Maruyama over ``dz.shape[1]`` steps of `dt` from `t` for every path: X (N, n)
+        advanced in place, U (N, m) held, dz (N, steps, mz) the Brownian increments; returns
+        the state at each step's start (N, steps, n)."""
+        N, steps = dz.shape[:2]
+        U = np.ascontiguousarray(U, dtype=float)
+        dz = np.ascontiguousarray(dz, dtype=float)
+        xs = np.empty((N, steps, self.n))
+        work_f, work_g = np.empty(self.n), np.empty(self.n * self.mz)
+        ffi, status = self.ffi, self.ffi.new("int *")
+        buf = ffi.from_buffer
+        bad = self.lib.stospline__em_steps(N, steps, float(t), float(dt), buf("double[]", U),
+                                           self._p, buf("double[]", dz), buf("double[]", X),
+                                           buf("double[]", xs), buf("double[]", work_f),
+                                           buf("double[]", work_g), status)
+        if bad >= 0:
+            raise ProblemError(_FIELD, f"the model returned {status[0]} at t = {t:g} on "
+                                       f"Monte Carlo path {bad}")
+        return xs
 
 
 def build_plant(spec, n: int) -> PlantModel:

@@ -25,9 +25,12 @@ def test_a_linear_model_in_c_meets_its_oracle(linear_plant):
     _, d, model = linear_plant
     s = plant_simulation(d, model, paths=4000, seed=35, substeps=8)
     assert s["verdict"]["agree"], s
-    # The intervals are not vacuous: a tenth of the oracle's knot-1 variance.
+    # The intervals are not vacuous: narrower than 15 % of the oracle's knot-1 variances, so
+    # a noise 10 % too weak (variances 19 % too small) is seen, and the scheme's bias on the
+    # cost is below its statistical interval.
     v = np.array(s["knots"][1]["oracle_variance"])
-    assert np.all(np.array(s["knots"][1]["variance_halfwidth"]) < 0.1 * v + 1e-12)
+    assert np.all(np.array(s["knots"][1]["variance_halfwidth"]) < 0.15 * v)
+    assert s["cost"]["scheme_bias"] < s["cost"]["halfwidth"]
 
 
 def test_simulate_prints_strict_json(linear_plant, capsys):

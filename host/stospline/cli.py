@@ -34,8 +34,17 @@ __all__ = ["main"]
 
 
 def load_problem(path):
+    from stospline.nonlinear.iterate import has_plant, load_plant_problem
     from stospline.problem.reader import load_problem as load
-    return load(path)
+    _PLANT_FIT.clear()
+    if not has_plant(path):
+        return load(path)
+    problem, fit = load_plant_problem(path)        # the linearisation along its mean path
+    _PLANT_FIT[:] = [fit]
+    return problem
+
+
+_PLANT_FIT: list = []    # how the last [plant] problem loaded converged, for the text summary
 
 
 def dumps(obj) -> str:
@@ -105,6 +114,8 @@ def _design(args) -> int:
     else:
         from stospline.report.summary_text import design_run_text
         print(design_run_text(d, opts.arith, summary), end="")
+        for fit in _PLANT_FIT:
+            print(f"  {fit.text()}")
         for path in written if args.out else []:
             print(f"wrote {path}")
     return 0
@@ -143,7 +154,10 @@ def _corridor_design(args) -> int:
     if args.seed == args.certify_seed:
         raise ProblemError("--certify-seed", f"must differ from --seed ({args.seed}): "
                                              f"certifying on the screening sample biases it")
-    problem, index = cs.target_corridor(load_problem(args.problem), args.epsilon)
+    problem = load_problem(args.problem)
+    if _PLANT_FIT:      # its certificate would be the linearisation's, not the model's
+        raise ProblemError("plant", "corridor-design does not run on a [plant] model yet")
+    problem, index = cs.target_corridor(problem, args.epsilon)
     resolved = _design_options(args, problem)
     for key, option, bad in (("table", "--table", "spline"), ("delay_ticks", "--delay-ticks", 1)):
         if getattr(resolved, key) == bad:
@@ -307,6 +321,8 @@ def _simulate(args) -> int:
     d = design_problem(problem, options=opts, **_limits(args))
     if x0 is not None:
         d = start_from(d, x0)
+    if _PLANT_FIT:                 # the controller against the C model itself
+        return _simulate_plant(args, d)
     _note_tables(d, "compiling")
     substeps = _planned_substeps(args, problem, opts, d, "simulate")
     mc = simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps,
@@ -769,6 +785,19 @@ def build_parser() -> argparse.ArgumentParser:
                              "is fed [x; the command being applied], docs/guide/firmware.md). "
                              "Default: the file's [design] delay_ticks, else 0")
     return ap
+
+
+def _simulate_plant(args, d) -> int:
+    """`simulate` of a [plant] problem (`stospline.nonlinear.simulate`): Monte Carlo on the
+    model, against the oracle of its linearisation."""
+    from stospline.nonlinear.simulate import plant_simulation, plant_simulation_text
+    if d.problem.faults.as_dict():
+        raise ProblemError("faults", "are not applied around a [plant] model yet")
+    substeps = 4 if args.substeps == "auto" else int(args.substeps)
+    s = plant_simulation(d, _PLANT_FIT[0].model, paths=args.paths, seed=args.seed,
+                         substeps=substeps)
+    print(dumps(s) + "\n" if args.json else plant_simulation_text(s), end="", flush=True)
+    return 0 if (s["verdict"]["agree"] or not args.check) else EXIT_DISAGREE
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -620,6 +620,67 @@ def sensor_simulate_doc(name: str) -> tuple[dict, list[str], str | None]:
     return doc, list(extra), field
 
 
+# Plant: a [plant] table (a nonlinear model in C, `stospline.nonlinear`) on the noisy double
+# integrator written in C, valid or broken: the table's keys (missing, wrong types, out of
+# range, unknown, [dynamics] beside it), the model file (absent, a directory, not text) and
+# the C (each of `support.plant_sources.BROKEN`). Each case is refused naming its field, by
+# `tests/python/nonlinear/test_plant_sources.py`; "valid" designs.
+
+def _plant_table(p: dict, **edits) -> None:
+    p.update(edits)
+
+
+PLANT_EDITS = {
+    "valid": (lambda d, f: None, None),
+    "not_table": (lambda d, f: d.__setitem__("plant", 3), "plant"),
+    "source_missing": (lambda d, f: d["plant"].pop("source"), "plant.source"),
+    "source_not_string": (lambda d, f: _plant_table(d["plant"], source=5), "plant.source"),
+    "source_absent": (lambda d, f: _plant_table(d["plant"], source="nowhere.c"),
+                      "plant.source"),
+    "source_directory": (lambda d, f: _plant_table(d["plant"], source="."), "plant.source"),
+    "source_not_text": (lambda d, f: f.__setitem__("model.c", "int x = 0; /* \u00e9 */\n"),
+                        "plant.source"),
+    "params_string": (lambda d, f: _plant_table(d["plant"], params="0.3"), "plant.params"),
+    "params_count": (lambda d, f: _plant_table(d["plant"], params=[0.3, 1.0]),
+                     "plant.params"),
+    "params_huge": (lambda d, f: _plant_table(d["plant"], params=[1e308]), "plant"),
+    "tolerance_zero": (lambda d, f: _plant_table(d["plant"], tolerance=0.0),
+                       "plant.tolerance"),
+    "tolerance_string": (lambda d, f: _plant_table(d["plant"], tolerance="1e-6"),
+                         "plant.tolerance"),
+    "max_iterations_zero": (lambda d, f: _plant_table(d["plant"], max_iterations=0),
+                            "plant.max_iterations"),
+    "guess_t_decreasing": (lambda d, f: _plant_table(
+        d["plant"], guess={"t": [2.0, 0.0], "x": [[0.5, 0.0], [0.0, 0.0]]}), "plant.guess.t"),
+    "guess_x_shape": (lambda d, f: _plant_table(
+        d["plant"], guess={"t": [0.0, 2.0], "x": [[0.5], [0.0]]}), "plant.guess.x"),
+    "guess_u_columns": (lambda d, f: _plant_table(
+        d["plant"], guess={"t": [0.0, 2.0], "x": [[0.5, 0.0], [0.0, 0.0]],
+                           "u": [[0.0, 0.0], [0.0, 0.0]]}), "plant.guess.u"),
+    "unknown_key": (lambda d, f: _plant_table(d["plant"], n_noise=1), "plant.n_noise"),
+    "x0_missing": (lambda d, f: d.pop("x0"), "x0"),
+    "x0_not_array": (lambda d, f: d.__setitem__("x0", 0.5), "x0"),
+    "x0_length": (lambda d, f: d.__setitem__("x0", [0.5, 0.0, 0.0]), "plant.source"),
+    "with_dynamics": (lambda d, f: d.__setitem__("dynamics", {"A": [[0, 1], [0, 0]],
+                                                              "B": [[0], [1]]}), "dynamics"),
+    "stage_dynamics": (lambda d, f: d.__setitem__("stages", [
+        {"dynamics": {"A": [[0, 1], [0, 0]]}}, {}]), "stages[0].dynamics"),
+}
+
+
+def plant_case(edit: str) -> tuple[dict, dict, str | None]:
+    """``(files, doc, field)``: the files beside the problem (name -> text), the problem
+    document and the field its refusal names (None: valid) of a key of PLANT_EDITS or of
+    `support.plant_sources.BROKEN` (``"c:" + key``)."""
+    from support.plant_sources import BROKEN, LINEAR, linear_doc
+    files, doc = {"model.c": LINEAR}, linear_doc()
+    if edit.startswith("c:"):
+        files["model.c"] = BROKEN[edit[2:]][0]
+        return files, doc, "plant.source" if edit != "c:dims_params" else "plant.params"
+    how, field = PLANT_EDITS[edit]
+    how(doc, files)
+    return files, doc, field
+
 # Board and HIL: options, files and serial peers of `stospline board` and `stospline hil`.
 # Each case is refused with exit status 2, one line naming the option (or key) and nothing on
 # disk; `None` instead of the words: the control case, accepted. The test's placeholders:

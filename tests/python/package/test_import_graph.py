@@ -20,7 +20,7 @@ PACKAGE = Path(stospline.__file__).parent
 RANK = {"problem": 0, "design": 1, "table": 1, "oracle": 2, "refine": 3, "estimator": 3,
         "harness": 4, "report": 5, "application": 6}
 APPLICATION = {"cli", "pipeline", "design_method", "budget", "gains", "corridor_search",
-               "board", "__init__", "__main__"}
+               "nonlinear", "board", "__init__", "__main__"}
 
 
 def module_name(path: Path) -> str:

@@ -262,14 +262,14 @@ static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick, const
     const uint32_t n = pc->checked.n_params;
     const stsp_f32_t *K = &h->K[tick * (nu * nx)];
     const stsp_f32_t *k0 = &h->k0[tick * nu];
-    const stsp_f32_t *S = &pc->checked.S_k0[tick * (nu * n)];
+    const uint32_t s0 = tick * (nu * n);  /* this tick's rows of S_k0, one of n per input */
     /* L may be NULL when n_latch == 0: no pointer arithmetic on it then. */
     const stsp_f32_t *L = (n_latch > 0u) ? &h->L[tick * (nu * n_latch)] : h->L;
     uint32_t i;
     uint32_t m = 0u;
     uint32_t alarm = 0u;
     for (i = 0u; i < nu; ++i) {
-        stsp_f32_t acc = -stsp_param_shift(k0[i], S, pc->d, n);
+        stsp_f32_t acc = -stsp_param_shift(k0[i], &pc->checked.S_k0[s0 + (i * n)], pc->d, n);
         uint32_t j;
         for (j = 0u; j < nx; ++j) {
             acc = stsp_mls(acc, K[j], x[j]);
@@ -280,7 +280,6 @@ static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick, const
             }
             L = &L[n_latch];
         }
-        S = &S[n];
         K = &K[nx];
         y[i] = acc;
         if (!((acc >= h->u_min[i]) && (acc <= h->u_max[i]))) {

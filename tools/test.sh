@@ -20,7 +20,8 @@ echo "ctest: exit ${c_status} in ${c_s} s"
 
 # --dist loadfile: a test file's tests run in one worker, so its module fixtures are built once.
 start=$SECONDS
-"$root/.venv/bin/python" -m pytest -q -p no:cacheprovider -n "$jobs" --dist loadfile tests/python
+"$root/.venv/bin/python" -m pytest -q -p no:cacheprovider -n "$jobs" --dist loadfile \
+  --durations=15 tests/python
 py_status=$?
 py_s=$((SECONDS - start))
 echo "pytest: exit ${py_status} in ${py_s} s"

@@ -74,8 +74,23 @@ def estimator_table(problem, table, loop=None) -> EstimatorTable:
     f32 = lambda a: positive_zeros(np.asarray(a, dtype=np.float32))  # noqa: E731
     return EstimatorTable(
         n, m, meas.p, table.n_ticks, meas.every, np.asarray(table.stage_start, np.uint32),
-        np.asarray(starts, np.uint32), f32(np.array(maps).reshape(-1, n, n + m + 1)),
-        f32(meas.C), f32(loop.gain[::meas.every]), f32(problem.x0), table.problem_sha256)
+        np.asarray(starts, np.uint32), _flushed_f32(np.array(maps).reshape(-1, n, n + m + 1)),
+        f32(meas.C), _flushed_f32(loop.gain[::meas.every]), f32(problem.x0),
+        table.problem_sha256)
+
+
+# Entries below this fraction of their array's largest are round-off of exact zeros (the
+# cross gains of decoupled axes come out at 1e-15 .. 3e-11 of the largest, with digits that
+# follow the BLAS kernel): flushed, so that the tables are the same on every machine. A real
+# entry that small moves x-hat by less than float32 rounds it.
+_ROUND_OFF = 1e-9
+
+
+def _flushed_f32(a) -> np.ndarray:
+    """`a` in float32 with its round-off zeros flushed to +0.0 (`_ROUND_OFF`)."""
+    a = np.asarray(a, dtype=float)
+    scale = float(np.abs(a).max()) if a.size else 0.0
+    return positive_zeros(np.where(np.abs(a) < _ROUND_OFF * scale, 0.0, a).astype(np.float32))
 
 
 def estimator_crc32(et: EstimatorTable) -> int:

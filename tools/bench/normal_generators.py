@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-SIM = Path(__file__).resolve().parents[2] / "host" / "stospline" / "sim"
+SIM = Path(__file__).resolve().parents[2] / "host" / "stospline" / "harness"
 
 _CDEF = """
 double numpy_normals(void *bitgen, double *out, size_t n);

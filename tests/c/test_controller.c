@@ -651,7 +651,7 @@ static void change_header(stsp_table_t *t, int which, const stsp_bandqp_t *band,
 {
     switch (which) {
     case HDR_NX: t->nx = NX + 1u; break;
-    case HDR_NU: t->nu = NU + 1u; break;          /* the nu 2 -> 3, here 1 -> 2 */
+    case HDR_NU: t->nu = NU + 1u; break;          /* nu 1 -> 2 */
     case HDR_NL: t->n_latch = N_LATCH + 1u; break;
     case HDR_NS: t->n_stages = NS + 1u; break;
     case HDR_NT: t->n_ticks = NT + 1u; break;
@@ -720,7 +720,7 @@ static void test_step_and_verify_after_a_header_change(void **state)
     }
 }
 
-/* The issue's case: table B (nu = 2) changed to nu = 3 after init; u exactly 2 long (a heap
+/* Table B (nu = 2) changed to nu = 3 after init; u exactly 2 long (a heap
  * block: ASan), then a guarded u (every build). */
 static void test_step_writes_only_the_validated_inputs(void **state)
 {

@@ -138,7 +138,7 @@ case "$mode" in
       -DCONSUMER_TABLE="$table"
     build_run_compare
     no_tests_built "$work/build/stospline" "$work/build"
-    # The repository's internal helper also works from a parent (it used to find no sources).
+    # The repository's internal helper also works from a parent project (it finds its sources).
     mkdir -p "$work/parent"
     printf '%s\n' 'cmake_minimum_required(VERSION 3.21)' 'project(parent C)' \
       "add_subdirectory(\"$src\" stospline)" \

@@ -50,7 +50,7 @@ the designer's own law (the unquantized table).
 
 Then ``stospline design`` end to end, a new process per run, on the problem written as a file.
 
-``--previous`` also times the implementation before this change at n = 3 (the designer's
+``--previous`` also times a reference implementation at n = 3 (the designer's
 per-tick Magnus exponential of the d^2 + 1 square moment generator, kernel="numpy", and the
 DOP853 oracle): tens of seconds at n = 12, so only n = 3 by default.
 """

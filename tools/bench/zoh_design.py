@@ -48,7 +48,7 @@ recursion in C (the two loops agree to ~1e-14) and its time with the numpy loop.
 one tick is so short that every tolerance gives tick maps exact to rounding; the baseline's
 cost is the per-tick Python loop plus the integration.
 
-"previous": the package before this change, timed for reference: the Van Loan 2d^2-square
+"previous": a reference implementation timed for comparison: the Van Loan 2d^2-square
 exponential per distinct stage (`moments.exact_tick`) and the numpy tick loop.
 """
 from __future__ import annotations

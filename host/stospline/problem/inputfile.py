@@ -30,7 +30,7 @@ MAX_DEPTH = 32                 # the deepest valid value (time-varying noise G) 
 
 class ProblemFileNotFound(ProblemError, FileNotFoundError):
     """The problem file does not exist (a `ProblemError` on ``<file>`` and a
-    FileNotFoundError, which `load_problem` used to raise)."""
+    FileNotFoundError, so callers catching either see it)."""
 
 
 _KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"),

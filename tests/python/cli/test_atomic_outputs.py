@@ -1,8 +1,8 @@
 """The files of one design appear together or not at all.
 
-The old ``write_outputs`` renamed the files one by one with no journal: a SIGTERM/SIGINT
-between the renames left a new ``.h`` beside an old ``.c``/``.json`` and orphan ``.tmp``
-files, a target that was a directory left a half-replaced set, and nothing was fsynced.
+Renaming the files one by one with no journal would let a SIGTERM/SIGINT between the renames
+leave a new ``.h`` beside an old ``.c``/``.json`` and orphan ``.tmp`` files, and a target that
+is a directory a half-replaced set; and without fsync nothing is durable.
 
 Here every write, fsync, open, rename and unlink of a write is made to fail, or to raise
 SIGTERM, SIGINT or SIGKILL, at each call in turn (`stospline.atomic`), and the directory
@@ -301,8 +301,8 @@ def _cli(*args, **kw):
 
 
 def test_cli_refuses_directory_target_with_one_line(tmp_path, sets):
-    """The issue's case: ``X/robot_corridor.json`` a directory; design wrote .h/.c, kept the
-    old .json and left a .tmp. Now: exit 2, one line, the old files untouched."""
+    """One of the targets (``X/cart.json``) a directory: exit 2, one line, the old files
+    untouched, no .tmp left."""
     old, _ = sets
     out = tmp_path / "X"
     atomic.write_set(out, old)
@@ -321,7 +321,7 @@ def test_cli_refuses_directory_target_with_one_line(tmp_path, sets):
 
 def test_failed_write_removes_the_directories_it_created(tmp_path):
     """A name the file system refuses (253 characters and the suffix): one line, exit 2 and
-    no output directory left behind (the old code created it, then raised OSError)."""
+    no output directory left behind (not created, or removed again)."""
     src = tmp_path / "long.toml"
     src.write_text(CART.format(x0=0.5).replace('name = "cart"', f'name = "{"n" * 253}"'))
     out = tmp_path / "new" / "sub"

@@ -166,8 +166,8 @@ def test_bad_problem_files(capsys, tmp_path):
 
 @pytest.mark.parametrize("kind", ["/dev/zero", "fifo"])
 def test_device_and_fifo_are_refused_without_reading(tmp_path, kind):
-    """In a child with a timeout: /dev/zero used to be read until memory ran out, and a FIFO
-    without a writer blocks an ordinary open."""
+    """In a child with a timeout: /dev/zero, read, would fill memory, and a FIFO without a
+    writer blocks an ordinary open."""
     path = "/dev/zero"
     if kind == "fifo":
         path = str(tmp_path / "fifo.toml")

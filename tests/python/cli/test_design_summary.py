@@ -82,7 +82,7 @@ def test_flash_bytes_match_the_compiled_tables(name, arith, robot_zoh, tmp_path)
         d = design_problem(load_problem(EXAMPLES / "robot_corridor.toml"), table="spline")
         table = fixed_point_spline(d, arith)[0]
         assert table.spline is not None
-        # the target for the Q15 robot table: at most 3 KB in compiled symbols
+        # the target for the Q15 robot table: at most 3 KB in compiled symbols
         if arith == "q15":
             assert flash_bytes(table, arith) <= 3072
     elif name.endswith("_spline"):

@@ -18,7 +18,7 @@ def test_robot_spline_files_and_certificate(capsys, tmp_path, robot_zoh):
     assert sorted(p.name for p in tmp_path.iterdir()) == [
         "robot_corridor_spline.c", "robot_corridor_spline.h", "robot_corridor_spline.json"]
     cert = json.loads((tmp_path / "robot_corridor_spline.json").read_text())["table"]
-    # The issue's targets: <= 4 KB (>= 100x), cost within 1e-6 of the uncompressed law's.
+    # The targets: <= 4 KB (>= 100x), cost within 1e-6 of the uncompressed law's.
     assert cert["kind"] == "spline" and cert["flash_bytes"] <= 4096
     assert cert["per_tick_flash_bytes"] == flash_bytes(robot_zoh.table)
     assert cert["compression_ratio"] >= 100
@@ -32,8 +32,8 @@ def test_robot_spline_files_and_certificate(capsys, tmp_path, robot_zoh):
 @pytest.mark.parametrize("arith", ["q15", "q31"])
 def test_robot_fixed_point_spline_files_and_certificate(capsys, tmp_path, arith):
     """`--arith q15|q31 --table spline`: <name>_<arith>_spline.{c,h,json}; the certificate of
-    the table as the firmware evaluates it, its error bound computed, its flash (the issue's
-    target for Q15: at most 3 KB)."""
+    the table as the firmware evaluates it, its error bound computed, its flash (the target
+    for Q15: at most 3 KB)."""
     assert main(["design", ROBOT, "--arith", arith, "--table", "spline",
                  "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out

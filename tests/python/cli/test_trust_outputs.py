@@ -281,7 +281,7 @@ def _corridor_example(tmp_path, edit) -> Path:
 
 UNSTABLE = CART.replace("A = [[0, 1], [0, 0]]", "A = [[0, 1], [0, 0.5]]")
 
-# A corridor wall of 1e308 no longer overflows: walls are scaled as read
+# A corridor wall of 1e308 does not overflow: walls are scaled as read
 # (`stospline.problem.rows`; tests/python/design/test_row_scale.py).
 OVERFLOW_CASES = {
     "drift_f": (lambda t: t.replace("[cost]", "f = [0, 1e308, 0, 0]\n\n[cost]", 1),

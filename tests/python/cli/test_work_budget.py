@@ -84,8 +84,8 @@ def test_too_many_paths_is_refused_naming_the_option(tmp_path):
 
 
 def test_region_grid_is_bounded_at_parse_time(tmp_path):
-    """200 000 band points: refused while parsing (the old parser scanned every knot for
-    every point: hours), naming the region's grid spacing."""
+    """200 000 band points: refused while parsing (scanning every knot for every point would
+    take hours), naming the region's grid spacing."""
     grid = ("[[regions]]\nt = [0.0, 1.0]\nevery = 5e-6\nC = [[0, 1]]\nlower = [-10.0]\n"
             "upper = [10.0]\n")
     err = refuse(tmp_path, cart(hz=200000, mode="joint", regions=grid))
@@ -94,7 +94,7 @@ def test_region_grid_is_bounded_at_parse_time(tmp_path):
 
 def test_region_grid_beyond_the_stage_limit_is_refused_fast():
     """10 000 band points would be 10 000 stages (the firmware takes 256): refused in seconds,
-    before the points are merged into knots (the old lookup took ~6 min to accept them)."""
+    before the points are merged into knots."""
     import tomllib
     from stospline.problem import ProblemError, parse_problem
     grid = ("[[regions]]\nt = [0.0, 1.0]\nevery = 1e-4\nC = [[0, 1]]\nlower = [-10.0]\n"

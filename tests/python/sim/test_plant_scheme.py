@@ -1,6 +1,6 @@
 """`substeps="auto"` (the default of `simulate_problem` and `stospline simulate`): the plant
 integrator's exact bias in the expected cost stays below 0.1 Monte Carlo standard errors of
-the run itself, at 10 Hz (where the old default of 2 substeps is 2 standard errors off) and
+the run itself, at 10 Hz (where a fixed 2 substeps is 2 standard errors off) and
 at 1 kHz (where one substep is enough), with the fewest substeps that do it."""
 import tomllib
 

@@ -1,10 +1,10 @@
 """Zero Monte Carlo paths must not corrupt memory.
 
-``harness_init_batch`` used to initialise ``ctrls[0]`` whatever the count, so
-``simulate --paths 0`` wrote a whole controller instance into a zero-length cffi array
-(``free(): invalid next size``, SIGSEGV/SIGABRT), and ``harness_step_batch`` read
-``ctrls[0].table``. Now the C helpers touch nothing for count 0, the Python wrappers refuse
-it, and the CLI refuses ``--paths`` below 2 with the one-line error.
+A ``harness_init_batch`` that initialised ``ctrls[0]`` whatever the count would write a whole
+controller instance into a zero-length cffi array (``free(): invalid next size``,
+SIGSEGV/SIGABRT), and ``harness_step_batch`` would read ``ctrls[0].table``. The C helpers touch
+nothing for count 0, the Python wrappers refuse it, and the CLI refuses ``--paths`` below 2
+with the one-line error.
 """
 import subprocess
 import sys
@@ -31,7 +31,7 @@ def controller(cart):
 
 def test_init_batch_writes_nothing_for_count_zero(controller):
     """A one-instance buffer stands for the memory after a zero-length array: count 0 must
-    leave every byte of it as it was (before the fix stsp_init wrote instance 0 there)."""
+    leave every byte of it as it was (no stsp_init of instance 0 there)."""
     ffi, lib = controller.ffi, controller.lib
     guard = ffi.new("stsp_ctrl_t[]", 1)
     raw = ffi.buffer(guard)

@@ -114,7 +114,8 @@ def design_problem(problem: Problem, *, noise: bool = True,
     delay_ticks : {0, 1}, optional
         1: design for a one-tick computation delay (the command computed from the state at
         tick j is applied at tick j+1; exact-zoh only). The table's law is then over ``[x;
-        a]``, ``a`` the command being applied (docs/guide/firmware.md, "A one-tick delay").
+        a]``, ``a`` the command being applied (docs/guide/firmware.md, "A one-tick computation
+        delay").
         Default: the problem's ``[design] delay_ticks``, else 0.
     table : {"per-tick", "spline"}, optional
         The table the firmware runs: one row of gains per tick, or cubic B-splines of the

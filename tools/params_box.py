@@ -70,7 +70,7 @@ def _bands(p, pd) -> None:
 
 
 def _corridor(p, pd, i, c, args, opts) -> None:
-    box = pd.box
+    box = pd.box if pd.box is not None else box_moments(p, pd.table)
     nominal = exit_bounds(c, box.mean @ c.C.T, c.C @ box.cov @ c.C.T, p.t0, p.tick_hz)
     over = exit_bounds_over_box(c, box, p.t0, p.tick_hz)
 

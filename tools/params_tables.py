@@ -33,9 +33,11 @@ def main(argv=None) -> int:
 
 
 def _flash(problem) -> str:
-    from stospline.oracle.parametric import design_parametric
+    from stospline.oracle.parametric import check_parametric_options, design_parametric
     from stospline.table.flash import flash_bytes
-    pt = design_parametric(problem).table
+    opts = check_parametric_options(problem)
+    pt = design_parametric(problem, discretization=opts.discretization, mode=opts.mode,
+                           delay_ticks=opts.delay_ticks).table
     table = flash_bytes(pt.table.quantized())
     P = len(pt.parameters)
     columns = 4 * (3 * P + pt.S_k0.size + pt.S_lambda0.size)

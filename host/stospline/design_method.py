@@ -33,11 +33,16 @@ class DesignedLaw:
     # design (a band design's base law).
     continuous: TickGains
     every_tick: EveryTick | None = None
+    # Bands or regions with runtime parameters: the parametric design whose band rows hold
+    # over the box (`stospline.oracle.parametric.ParametricDesign`, its margins there).
+    over_box: object = None
 
 
 def design(problem: Problem, options: DesignOptions) -> DesignedLaw:
     """Design `problem` with the method its constraints need; DesignError (naming the field)
     when the options cannot meet them."""
+    if problem.parameters and has_bands(problem):
+        return _over_box(problem, options)
     if problem.tick_regions:
         return _every_tick(problem, options)
     if has_bands(problem):
@@ -64,6 +69,20 @@ def _every_tick(problem: Problem, options: DesignOptions) -> DesignedLaw:
     from stospline.refine.every_tick import design_every_tick
     every_tick = design_every_tick(problem, noise=options.noise)
     return DesignedLaw(every_tick.design, every_tick.problem, every_tick.design, every_tick)
+
+
+def _over_box(problem: Problem, options: DesignOptions) -> DesignedLaw:
+    """Bands or regions with runtime parameters: the nominal of the design whose band rows
+    hold over the whole box (`stospline.oracle.parametric`), the regions checked at every
+    tick as for any tick-grid design."""
+    from stospline.oracle.parametric import design_parametric
+    pd = design_parametric(problem, discretization=options.discretization, mode=options.mode,
+                           delay_ticks=options.delay_ticks or 0, noise=options.noise)
+    every_tick = None
+    if problem.tick_regions:
+        from stospline.refine.every_tick import tick_grid
+        every_tick = tick_grid(problem, noise=options.noise, design=pd.design)
+    return DesignedLaw(pd.design, problem, pd.design, every_tick, pd)
 
 
 def _bands(problem: Problem, options: DesignOptions) -> DesignedLaw:

@@ -80,6 +80,9 @@ class Designed:
     every_tick: EveryTick | None = None
     # The options it was designed with (`stospline.options.resolve_options`).
     options: DesignOptions | None = None
+    # Bands or regions with runtime parameters: the parametric design and its band rows'
+    # margins over the parameter box (`stospline.oracle.parametric.ParametricDesign`).
+    over_box: object = None
 
     def gains(self, *, quantized: bool = True):
         """``Gains(t, K, k0, L, Lambda, lambda0, stage_start)`` as numpy arrays: K is
@@ -204,7 +207,7 @@ def _design_problem(problem: Problem, options: DesignOptions) -> Designed:
     table, per_tick, exact = _tables(law, options)
     moments, implemented, compressed = _evaluate(law, table, exact, options)
     d = Designed(law.problem, law.gains, options.discretization, table, moments, implemented,
-                 every_tick=law.every_tick, options=options)
+                 every_tick=law.every_tick, options=options, over_box=law.over_box)
     if options.spline:
         from stospline.refine.spline_certificate import certificate
         d.certificate = certificate(d.problem, table, per_tick, d.design.J0, compressed,

@@ -11,6 +11,13 @@ the design of the problem whose only source is parameter ``j``'s unit (every oth
 zero): the same backward recursion, with the same gains, run on that source alone. No
 difference of two designs is taken, so nothing cancels. ``x0`` is not a source: the law does
 not depend on it (only the cost and the means do).
+
+A problem with bands (knot ``lower``/``upper`` rows, ``[[regions]]``) has a law whose active
+set can change with the parameters. Its parametric design keeps the nominal's active set
+(`stospline.oracle.parametric`): the column of parameter ``j`` is then the design of
+`unit_problem` with the bands dropped, a fixed affine law, and the bands hold over the box
+because the nominal is designed with them tightened by its worst-case shift
+(`stospline.oracle.over_box`).
 """
 from __future__ import annotations
 
@@ -67,7 +74,7 @@ def unit_problem(problem: Problem, j: int) -> Problem:
         if pen is not None:
             pen = replace(pen, target=np.zeros_like(pen.target))
         if con is not None:
-            con = replace(con, value=np.zeros_like(con.value))
+            con = _equalities(con)
         knots.append(replace(kn, penalty=pen, constraint=con))
     f = [np.zeros(n) for _ in problem.stages]
     for t in problem.parameters[j].targets:
@@ -79,7 +86,19 @@ def unit_problem(problem: Problem, j: int) -> Problem:
             f[t.at][t.index] = 1.0
     stages = tuple(_sourced_stage(s, fk) for s, fk in zip(problem.stages, f))
     return replace(problem, knots=tuple(knots), stages=stages, u_hold=None,
-                   x0=np.zeros(n), parameters=())
+                   x0=np.zeros(n), parameters=(), tick_regions=())
+
+
+def _equalities(con):
+    """The equality rows of `con` with value 0 (None if it has none), the band rows dropped
+    (a band constraint has no ``value`` a parameter could set)."""
+    if not con.is_band:
+        return replace(con, value=np.zeros_like(con.value))
+    lo, hi = con.bounds
+    eq = lo == hi
+    if not eq.any():
+        return None
+    return type(con)(con.C[eq], np.zeros(int(eq.sum())))
 
 
 def source_designs(problem: Problem, design: Callable[[Problem], object]) -> list:
@@ -97,12 +116,6 @@ def source_designs(problem: Problem, design: Callable[[Problem], object]) -> lis
 
 
 def check_parametric(problem: Problem) -> None:
-    """DesignError unless the problem's law is affine in its parameters: bands and regions
-    at every tick re-solve an active set (the reader refuses them with parameters; a
-    problem built in Python is checked here)."""
+    """DesignError unless the problem declares runtime parameters."""
     if not problem.parameters:
         raise DesignError("parameters", "the problem declares no runtime parameters")
-    if problem.tick_regions or any(kn.constraint is not None and kn.constraint.is_band
-                                   for kn in problem.knots):
-        raise DesignError("parameters", "bands and regions cannot have runtime parameters: "
-                                        "their active set can change over the range")

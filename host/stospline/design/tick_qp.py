@@ -36,7 +36,7 @@ firmware's band solver takes).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -237,6 +237,13 @@ def _rows(problem: Problem, tick_hz: int, K, ks, stage_of) -> list[TickRow]:
     rows.sort(key=lambda r: (r.tick, ("knot", "region", "between").index(r.kind), r.index,
                              r.row, r.bernstein))
     return rows
+
+
+def _tightened(r: TickRow, tighten) -> TickRow:
+    if r.kind == "between" or r.lower == r.upper:
+        return r
+    up, down = tighten(r)
+    return replace(r, lower=r.lower + down, upper=r.upper - up)
 
 
 def _between_rows(problem: Problem, tick_hz: int, reg, K, ks, stage_of) -> list[TickRow]:
@@ -611,9 +618,14 @@ def _solve(lu, g: _Grid, idx, active, rhs_eq):
 
 
 def design_tick_qp(problem: Problem, *, noise: bool = True,
-                   tick_hz: int | None = None) -> TickQPDesign:
+                   tick_hz: int | None = None, tighten=None) -> TickQPDesign:
     """The joint exact-zero-order-hold design meeting the knots' constraints and every tick
     region at every tick, as one sparse QP on the tick grid (module docstring).
+
+    `tighten`, optional: a function of a band row (`TickRow` of kind "knot" or "region"
+    whose bounds differ) returning ``(up, down)`` >= 0, how far its mean may rise and fall
+    elsewhere (`stospline.oracle.over_box`); the QP then keeps it within ``[lower + down,
+    upper - up]``.
 
     Raises DesignError (naming ``regions`` or a stage) when the QP has no solution, its
     active set does not settle in `MAX_ROUNDS` corrections, or a stage's data vary in
@@ -627,6 +639,8 @@ def design_tick_qp(problem: Problem, *, noise: bool = True,
     tick_hz = problem.tick_hz if tick_hz is None else int(tick_hz)
     K, ks, H, F, stage_of, V0 = _backward(problem, tick_hz, noise)
     rows = _rows(problem, tick_hz, K, ks, stage_of)
+    if tighten is not None:
+        rows = [_tightened(r, tighten) for r in rows]
     g = _Grid(problem, K, ks, H, F, stage_of, rows)
     x0 = np.asarray(problem.x0, float)
     eq = g.lo == g.hi

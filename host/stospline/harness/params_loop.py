@@ -141,12 +141,13 @@ def build_params_controller(ptable, table, *, build_dir=None,
 
 
 def simulate_params(problem, ctl: ParamsController, theta, *, paths: int, seed: int,
-                    substeps: int = 4, change=None) -> ParamsRun:
+                    substeps: int = 4, change=None, observe=None) -> ParamsRun:
     """`paths` paths from the problem's x0 with the parameters `theta` set before tick 0 and,
     with ``change=(stage, theta2)``, `theta2` set just before that stage's first tick. Each
     stage's plant and each knot's penalty are the problem's at the parameters in force there
     (`problem_at`); the plant's noise from the harness's C generator (seeded); constant stage
-    data."""
+    data. `observe`, optional, is called with ``(tick, X)`` after each tick (X: the states
+    at the tick's end, (paths, n); the callback must not keep it)."""
     table = ctl.table
     n, m, _ = table.dims
     dt = 1.0 / table.tick_hz / substeps
@@ -185,6 +186,8 @@ def simulate_params(problem, ctl: ParamsController, theta, *, paths: int, seed: 
             worst = min(worst, int(lib.harness_param_step(inst, paths, j, px, pu)))
             fill()
             helpers.plant_tick(plant, dZ, U, X, cost)
+            if observe is not None:
+                observe(j + 1, X)
         knot = p.knots[k]
         if knot.penalty is not None:
             r = X @ knot.penalty.C.T - knot.penalty.target

@@ -14,6 +14,10 @@ A point outside the union of the polygons is outside each of them, so per tick
 bound over rows); over the ticks of ``[a, b]``, ``P(exit at some tick) <= min(1, sum_j ...)``
 (a union bound over time, loose when the tick events are strongly correlated, which at a
 fine tick rate they are). Both tails are reported; only the Cantelli sum is a certificate.
+
+With runtime parameters, `exit_bounds_over_box` bounds the same sums for every parameter
+vector of the box at once (the smallest margin and the largest spread over the box per tick
+and wall).
 """
 from __future__ import annotations
 
@@ -23,7 +27,7 @@ import numpy as np
 
 from stospline.problem.corridors import Corridor, corridor_ticks
 
-__all__ = ["ExitBound", "wall_tails", "exit_bounds", "corridor_outputs"]
+__all__ = ["ExitBound", "wall_tails", "exit_bounds", "exit_bounds_over_box", "corridor_outputs"]
 
 
 def wall_tails(a: np.ndarray, b: np.ndarray, mean: np.ndarray, cov: np.ndarray
@@ -34,9 +38,13 @@ def wall_tails(a: np.ndarray, b: np.ndarray, mean: np.ndarray, cov: np.ndarray
     A variance that rounding made slightly negative counts as 0; with no spread the event is
     certain (``d < 0``) or impossible (``d >= 0``: the wall is ``a' y <= b``, so a point on it
     is inside)."""
+    return _tails(b[None, :] - mean @ a.T, np.einsum("wp,tpq,wq->tw", a, cov, a))
+
+
+def _tails(d: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`wall_tails` from the margins `d` and variances `var` (ticks, walls)."""
     from scipy.special import ndtr     # lazy, as the rest of scipy here
-    d = b[None, :] - mean @ a.T                                   # margins
-    var = np.maximum(np.einsum("wp,tpq,wq->tw", a, cov, a), 0.0)
+    var = np.maximum(var, 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         cant = np.where(d > 0, var / (var + d * d), 1.0)
         gauss = np.where(var > 0, ndtr(-d / np.sqrt(var)), (d < 0).astype(float))
@@ -101,6 +109,26 @@ def exit_bounds(corridor: Corridor, y_mean: np.ndarray, y_cov: np.ndarray, t0: f
     lo, hi = corridor_ticks(corridor, t0, tick_hz)
     mean, cov = y_mean[lo:hi + 1], y_cov[lo:hi + 1]
     cant, gauss = wall_tails(corridor.A, corridor.b, mean, cov)
+    return {"cantelli": _bound(corridor, cant, "cantelli", (lo, hi)),
+            "gaussian": _bound(corridor, gauss, "gaussian", (lo, hi))}
+
+
+def exit_bounds_over_box(corridor: Corridor, box, t0: float,
+                         tick_hz: int) -> dict[str, ExitBound]:
+    """`exit_bounds` that hold for every parameter vector in the box of a table with runtime
+    parameters, from its moments over the box `box` (`stospline.oracle.over_box.BoxMoments`).
+
+    Per tick and wall, the Cantelli tail ``s^2 / (s^2 + d^2)`` rises with the spread and falls
+    with the margin, so it is bounded over the box by its value at the smallest margin (the
+    nominal's less the wall's largest mean shift over the box: exact, the mean is affine in
+    the parameters) and the largest spread (an interval bound on the quadratic covariance,
+    `BoxMoments.variance_bound`); the union bounds over rows and ticks then follow as for one
+    parameter vector. The Gaussian tail is likewise evaluated there (an estimate, as ever)."""
+    lo, hi = corridor_ticks(corridor, t0, tick_hz)
+    walls = corridor.A @ corridor.C                               # walls in the state
+    rise = box.shift(walls)[0][lo:hi + 1]
+    d = corridor.b[None, :] - box.mean[lo:hi + 1] @ walls.T - rise
+    cant, gauss = _tails(d, box.variance_bound(walls)[lo:hi + 1])
     return {"cantelli": _bound(corridor, cant, "cantelli", (lo, hi)),
             "gaussian": _bound(corridor, gauss, "gaussian", (lo, hi))}
 

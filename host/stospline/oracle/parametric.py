@@ -3,32 +3,53 @@
 (`evaluate_at`) or with the parameters changed at a stage start (`evaluate_switched`), and the
 exact expected cost as a quadratic in the parameters
 (`cost_quadratic`).
+
+A problem with bands (knot ``lower``/``upper`` rows, ``[[regions]]``) is designed so that every
+band row holds for every parameter vector in the box: the tick-grid QP
+(`stospline.design.tick_qp`, joint, exact zero-order hold) with the nominal's rows tightened
+by their worst-case shift over the box (`stospline.oracle.over_box`), the columns those of the
+problem without its bands (a fixed affine law: the nominal's active set is kept over the box).
+The shifts of parameters that set ``x0`` go through the nominal's latch of the state, which
+the tightening changes, so the design repeats (at most `BOX_ROUNDS` times) until the oracle's
+margins over the box all hold, else DesignError naming the row and the parameter that moves
+it most.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from stospline.design.bands import has_bands
 from stospline.design.continuous import design_continuous
 from stospline.design.sensitivity import check_parametric, source_designs
 from stospline.design.zoh import check_delay, design_zoh
 from stospline.errors import DesignError
 from stospline.oracle.evaluate import Moments, evaluate_table
+from stospline.oracle.over_box import (band_margins, box_moments, check_bands, check_swing,
+                                       quadratic_fit)
 from stospline.problem.parameters import problem_at
 from stospline.table.parametric import ParametricTable, parametric_table
 
-__all__ = ["ParametricDesign", "check_parametric_options", "design_parametric", "evaluate_at",
+__all__ = ["BOX_ROUNDS", "ParametricDesign", "check_parametric_options", "design_parametric", "evaluate_at",
            "evaluate_switched", "cost_quadratic", "parametric_c_files"]
 
 
 @dataclass
 class ParametricDesign:
-    """The nominal design and the table with its sensitivity columns."""
+    """The nominal design and the table with its sensitivity columns; for a problem with
+    bands, the moments over the box (`stospline.oracle.over_box.BoxMoments`) and every band
+    row's margins over it."""
     problem: object
     design: object
     table: ParametricTable
     discretization: str
+    box: object = None
+    margins: list = field(default_factory=list)
+
+
+# Designs of a problem with bands before its margins over the box must hold.
+BOX_ROUNDS = 4
 
 
 def design_parametric(problem, *, discretization: str = "exact-zoh", mode: str = "stagewise",
@@ -44,6 +65,9 @@ def design_parametric(problem, *, discretization: str = "exact-zoh", mode: str =
     """
     check_parametric(problem)
     delay = check_delay(problem, delay_ticks, discretization)
+    if has_bands(problem):
+        return _design_over_box(problem, discretization=discretization, mode=mode,
+                                delay_ticks=delay, noise=noise)
     if discretization == "exact-zoh":
         def designer(p):
             return design_zoh(p, noise=noise, mode=mode, delay_ticks=delay)
@@ -58,6 +82,68 @@ def design_parametric(problem, *, discretization: str = "exact-zoh", mode: str =
     table = parametric_table(problem, hz, stages, source_designs(problem, designer),
                              delay_ticks=delay)
     return ParametricDesign(problem, nominal, table, discretization)
+
+
+def _design_over_box(problem, *, discretization: str, mode: str, delay_ticks: int,
+                     noise: bool) -> ParametricDesign:
+    """The design of a problem with bands whose rows hold over the box (module docstring)."""
+    from stospline.design.tick_qp import design_tick_qp
+    for key, value, want in (("design.mode", mode, "joint"),
+                             ("design.discretization", discretization, "exact-zoh"),
+                             ("design.delay_ticks", delay_ticks, 0)):
+        if value != want:
+            raise DesignError(key, f"bands or regions with runtime parameters are met over the "
+                                   f"box by the joint exact-zoh tick-grid design without "
+                                   f"delay: set {key.split('.')[1]} = {want!r}, got {value!r}")
+
+    def designer(p):
+        return design_tick_qp(p, noise=noise)
+
+    columns = source_designs(problem, designer)
+    tighten = None
+    margins: list = []
+    for _ in range(BOX_ROUNDS):
+        try:
+            nominal = design_tick_qp(problem, noise=noise, tighten=tighten)
+        except DesignError as exc:
+            if tighten is None:
+                raise
+            # The tightened rows leave no room: name the row the last design broke most.
+            w = min(margins, key=lambda m: m.worst)
+            raise DesignError(w.field, f"row {w.row} cannot stay in its band for every "
+                                       f"parameter in the box: tightened by its shift over "
+                                       f"the box the design has no solution ({exc.field}: "
+                                       f"{exc.reason}); untightened it leaves the band by "
+                                       f"{-w.worst:.3g} at t = {w.t:g}, where {w.parameter} "
+                                       f"moves it most ({w.moved:.3g}); narrow the ranges or "
+                                       f"widen the band") from None
+        hz, stages = nominal.tick_gains()
+        table = parametric_table(problem, hz, stages, columns)
+        box = box_moments(problem, table)
+        margins = band_margins(problem, box)
+        if all(m.holds for m in margins):
+            return ParametricDesign(problem, nominal, table, discretization, box, margins)
+        check_swing(problem, box)
+        tighten = _tightening(problem, box)
+    check_bands(margins)
+    raise DesignError("parameters", "the band rows' margins over the box did not settle in "
+                                    f"{BOX_ROUNDS} designs")
+
+
+def _tightening(problem, box):
+    """The `design_tick_qp` tightening of every band row: its rise and fall over the box at
+    its tick."""
+    shifts = {}
+    for k, kn in enumerate(problem.knots):
+        if kn.constraint is not None and kn.constraint.is_band:
+            shifts["knot", k] = box.shift(kn.constraint.C)[:2]
+    for reg in problem.tick_regions:
+        shifts["region", reg.index] = box.shift(reg.C)[:2]
+
+    def tighten(row):
+        rise, fall = shifts[row.kind, row.index]
+        return float(rise[row.tick, row.row]), float(fall[row.tick, row.row])
+    return tighten
 
 
 def evaluate_at(problem, table: ParametricTable, theta, *, quantize: bool = False,
@@ -89,32 +175,17 @@ def cost_quadratic(problem, table: ParametricTable, *, quantize: bool = False):
     ``J_nom + 2 g'd + d'H d``, ``d = theta - theta_nom``.
 
     The cost of an affine law is a quadratic in the parameters (the means are affine in
-    them, the covariances do not depend on them), so it is fixed by its values at the
-    nominal, at ``+-s_i e_i`` and at ``s_i e_i + s_j e_j`` (``s_i`` the half-width of the
-    range, towards its far end): ``1 + 2P + P(P-1)/2`` oracle runs."""
-    nom = np.array([p.nominal for p in table.parameters])
-    P = nom.size
-    step = np.array([max(p.upper - p.nominal, p.nominal - p.lower) for p in table.parameters])
-    step *= np.where(nom + step <= [p.upper for p in table.parameters], 1.0, -1.0)
+    them, the second moments quadratic), so it is fixed by its values at the nominal, at
+    ``s_i e_i`` and ``s_i e_i / 2`` and at ``s_i e_i + s_j e_j`` (``s_i`` the longer side of
+    the range from the nominal, towards its far end): ``1 + 2P + P(P-1)/2`` oracle runs
+    (`stospline.oracle.over_box.quadratic_fit`)."""
+    nom = table.nominal
 
     def J(d):
         return evaluate_at(problem, table, nom + d, quantize=quantize).J
 
-    J0 = J(np.zeros(P))
-    plus = [J(np.eye(P)[i] * step[i]) for i in range(P)]
-    g = np.zeros(P)
-    H = np.zeros((P, P))
-    for i in range(P):
-        # J(s e_i) = J0 + 2 g_i s + H_ii s^2 and J(-s e_i) would need -s inside the range:
-        # use J(s e_i / 2) instead, also inside.
-        half = J(np.eye(P)[i] * step[i] / 2)
-        H[i, i] = 2 * (plus[i] - 2 * half + J0) / step[i] ** 2
-        g[i] = (plus[i] - J0 - H[i, i] * step[i] ** 2) / (2 * step[i])
-    for i in range(P):
-        for j in range(i + 1, P):
-            d = np.zeros(P); d[i], d[j] = step[i], step[j]
-            H[i, j] = H[j, i] = (J(d) - plus[i] - plus[j] + J0) / (2 * step[i] * step[j])
-    return J0, g, H
+    J0, g, H = quadratic_fit(J, table.parameters)
+    return float(J0), g, H
 
 
 def parametric_c_files(problem, source_name: str = "", options=None) -> dict[str, str]:

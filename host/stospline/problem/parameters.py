@@ -14,7 +14,8 @@ a knot penalty's ``target[i]``, the affine drift ``f[i]`` (constant, at the top 
 ``[[stages]]`` entry) and the start state ``x0[i]``. The feedback does not depend on any of
 them and the feed-forward is affine in them (`stospline.design.sensitivity`). Band limits,
 tracking paths and time-varying drift are refused: a band's active set, and so its law, can
-change over a range.
+change over a range. A problem with bands or ``[[regions]]`` keeps its nominal active set
+over the range, and its bands are met over the whole box (`stospline.oracle.over_box`).
 """
 from __future__ import annotations
 
@@ -157,11 +158,6 @@ def parse_parameters(raw: Any, doc: dict, problem, *, check_keys, number,
                                          f"([[parameters]]), got {_kind(raw)}")
     if len(raw) > MAX_PARAMETERS:
         raise ProblemError("parameters", f"has {len(raw)} entries; at most {MAX_PARAMETERS}")
-    if "regions" in doc or any(kn.constraint is not None and kn.constraint.is_band
-                               for kn in problem.knots):
-        raise ProblemError("parameters", "a problem with bands ([[regions]] or lower/upper "
-                                         "constraints) cannot have runtime parameters: the "
-                                         "band's active set can change over the range")
     out: list[Parameter] = []
     names: set[str] = set()
     seen: dict[Target, str] = {}

@@ -290,11 +290,14 @@ def design_every_tick(problem: Problem, *, noise: bool = True,
 
 
 def tick_grid(problem: Problem, *, noise: bool = True, iterations: int = 0,
-              history: list | None = None, start: float | None = None) -> EveryTick:
-    """The every-tick design as the sparse QP on the tick grid (`design_tick_qp`), checked
-    at every tick by the oracle on its law in double precision."""
+              history: list | None = None, start: float | None = None,
+              design: TickQPDesign | None = None) -> EveryTick:
+    """The every-tick design as the sparse QP on the tick grid (`design_tick_qp`; `design`
+    if given, e.g. one with its rows tightened), checked at every tick by the oracle on its
+    law in double precision."""
     start = time.perf_counter() if start is None else start
-    design = design_tick_qp(problem, noise=noise)
+    if design is None:
+        design = design_tick_qp(problem, noise=noise)
     path = evaluate_table(problem, table_of(design, quantize=False), path=True).path_mean
     cuts = _cuts(problem, path)
     if cuts:      # the KKT loop met every row to TOLERANCE: the oracle must agree

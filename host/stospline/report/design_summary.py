@@ -59,8 +59,30 @@ def _parameters(d) -> dict:
     ``<name>_params.c`` index macros); ``{}`` otherwise (summaries stay unchanged)."""
     if not d.problem.parameters:
         return {}
-    return {"parameters": [{"name": q.name, "nominal": q.nominal, "lower": q.lower,
-                            "upper": q.upper} for q in d.problem.parameters]}
+    out = {"parameters": [{"name": q.name, "nominal": q.nominal, "lower": q.lower,
+                           "upper": q.upper} for q in d.problem.parameters]}
+    if getattr(d, "over_box", None) is not None:
+        out["over_box"] = over_box_terms(d.problem, d.over_box)
+    return out
+
+
+def over_box_terms(problem, pd) -> dict:
+    """What a design with bands and runtime parameters guarantees over the box: every band
+    row's margins (nominal, worst case over the box, where and which parameter moves it most)
+    and each corridor's Cantelli and Gaussian exit bounds at the nominal and over the box, over
+    its ticks (``total``) and at its worst tick (`stospline.oracle.over_box`, `stospline.oracle.exit_bound.exit_bounds_over_box`)."""
+    from stospline.oracle.exit_bound import exit_bounds, exit_bounds_over_box
+    corridors = []
+    for c in problem.corridors:
+        nominal = exit_bounds(c, pd.box.mean @ c.C.T, c.C @ pd.box.cov @ c.C.T, problem.t0,
+                              problem.tick_hz)
+        box = exit_bounds_over_box(c, pd.box, problem.t0, problem.tick_hz)
+        corridors.append({"epsilon": c.epsilon,
+                          "nominal": {k: {"total": b.total, "worst_tick": b.worst_tick}
+                                      for k, b in nominal.items()},
+                          "over_box": {k: {"total": b.total, "worst_tick": b.worst_tick}
+                                       for k, b in box.items()}})
+    return {"bands": [m.as_dict() for m in pd.margins], "corridors": corridors}
 
 
 def _estimator(d) -> dict:

@@ -237,19 +237,33 @@ def test_columns_only_for_float32_per_tick_tables(key, value):
     assert err.value.field == f"design.{key}"
 
 
-def test_bands_are_refused_for_a_problem_built_in_python():
-    """The reader refuses bands with parameters; a problem assembled in Python is refused by
-    the designer, naming parameters."""
+def test_a_knot_band_built_in_python_holds_at_every_vertex_of_the_box():
+    """A band at a knot (a problem assembled in Python) with parameters: the design keeps the
+    band for every parameter vector of the box, checked by the oracle at every vertex; a band
+    narrower than the parameters move the row over is refused, naming the knot and the
+    parameter that moves it most."""
     from dataclasses import replace
     from stospline.errors import DesignError
+    from stospline.oracle.over_box import vertices
     from stospline.problem.model import Constraint
     p = parse_problem(robot_goal_doc(20))
     kn = p.knots[0]
-    band = Constraint(kn.constraint.C, None, kn.constraint.value - 1, kn.constraint.value + 1)
-    q = replace(p, knots=(replace(kn, constraint=band),) + p.knots[1:])
+
+    def banded(half):
+        band = Constraint(kn.constraint.C, None, kn.constraint.value - half,
+                          kn.constraint.value + half)
+        return replace(p, knots=(replace(kn, constraint=band),) + p.knots[1:])
+    q = banded(0.5)
+    pd = design_parametric(q, mode="joint")
+    assert pd.margins and all(m.holds for m in pd.margins), pd.margins
+    for v in vertices(q.parameters):
+        y = evaluate_at(q, pd.table, v).knot_constraint[0]
+        assert np.all(y >= -0.5 - 1e-9) and np.all(y <= 0.5 + 1e-9), (v, y)
+    # The goal and the bend target move the row over 0.67 at the knot: a band 0.4 wide cannot
+    # hold over the box.
     with pytest.raises(DesignError) as err:
-        design_parametric(q, mode="joint")
-    assert err.value.field == "parameters"
+        design_parametric(banded(0.2), mode="joint")
+    assert err.value.field == "knots[0].constraint" and "bend_x" in err.value.reason
 
 
 def test_float32_table_at_theta_costs_what_a_fresh_float32_table_costs():

@@ -141,8 +141,6 @@ BAD = [
      "nominal value 0.5"),
     ("range_beyond_float32", _set(P0 + ("range",), [0.0, 1e39]), "parameters[0].range",
      "float32"),
-    ("bands", _set(("knots", 1, "constraint"), {"C": [[1, 0]], "lower": [-1], "upper": [1]}),
-     "parameters", "bands"),
 ]
 
 

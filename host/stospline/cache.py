@@ -17,10 +17,11 @@ import os
 from pathlib import Path
 from typing import Callable, Iterable
 
-from stospline.errors import StosplineError
+from stospline.errors import KernelBuildError, StosplineError
 
 __all__ = ["cache_root", "source_key", "cached_build", "compile_cffi", "load_module",
-           "build_source_module", "CompilerMissing", "FallbackWarning", "c_compiler"]
+           "build_source_module", "build_kernel_sources", "CompilerMissing", "FallbackWarning",
+           "c_compiler"]
 
 
 class CompilerMissing(StosplineError, RuntimeError):
@@ -158,3 +159,17 @@ def build_source_module(prefix: str, source: bytes, cdef: str, cflags: list[str]
         return compile_cffi(out, modname, cdef, source.decode(), cflags=cflags, quiet=quiet)
 
     return cached_build(key, modname, build, root=root)
+
+
+def build_kernel_sources(prefix: str, sources: Iterable[Path], cdef: str, cflags: list[str], *,
+                         root: str | Path | None = None, quiet: bool = True) -> Path:
+    """`build_source_module` of the C files `sources` joined into one text: the host kernels
+    of the designer, the oracle and the table layer. Any failure (a missing file, no
+    compiler, no cffi) is a `KernelBuildError` that names the files."""
+    sources = list(sources)
+    try:
+        source = b"\n".join(p.read_bytes() for p in sources)
+        return build_source_module(prefix, source, cdef, cflags, root=root, quiet=quiet)
+    except Exception as exc:  # noqa: BLE001 - any failure here means "no compiled kernel"
+        names = ", ".join(p.name for p in sources)
+        raise KernelBuildError(f"cannot build {names}: {exc}") from exc

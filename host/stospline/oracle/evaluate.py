@@ -134,7 +134,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             rec.extend(xm, xv, um, uv)
             progress.advance(len(ticks))
             ticks = range(0)
-        elif kernel is not None:           # the same loop in C (oracle_kernel.c)
+        elif kernel is not None:           # the same loop in C (oracle/tick_kernel.c)
             sl = slice(ticks.start, ticks.stop)
             Phi_x, cost = _packed_maps(stage, n, m, h, propagator, substeps)
             M, J, *tick_path = kernel(table.K[sl], table.L[sl], table.k0[sl], Phi_x, cost,

@@ -243,10 +243,10 @@ def _stage_maps(stage, varying: bool, n: int, m: int, t0: float, h: float, propa
 
 
 def _packed_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int):
-    """`kernels.pack_oracle_maps` of `_tick_maps` (cached alongside it)."""
+    """`kernel.pack_oracle_maps` of `_tick_maps` (cached alongside it)."""
     _, (prop, cost_row, _), extra = _tick_entry(stage, n, m, h, propagator, substeps)
     if "packed" not in extra:
-        from stospline.design.kernels import pack_oracle_maps
+        from stospline.oracle.kernel import pack_oracle_maps
         extra["packed"] = pack_oracle_maps(prop.Phi, cost_row, n)
     return extra["packed"]
 
@@ -256,13 +256,13 @@ def _has_drift(problem: Problem) -> bool:
 
 
 def _c_kernel():
-    """`kernels.oracle_stage_ticks`, or None: ``STOSPLINE_ORACLE_KERNEL=numpy`` asks for the
+    """`kernel.oracle_stage_ticks`, or None: ``STOSPLINE_ORACLE_KERNEL=numpy`` asks for the
     numpy loop (the reference), and so does a host where the kernel cannot be built."""
     if os.environ.get("STOSPLINE_ORACLE_KERNEL", "c") == "numpy":
         return None
-    from stospline.design.kernels import KernelBuildError, load_kernels, oracle_stage_ticks
+    from stospline.oracle.kernel import KernelBuildError, load_kernel, oracle_stage_ticks
     try:
-        load_kernels()
+        load_kernel()
     except KernelBuildError:
         return None
     return oracle_stage_ticks

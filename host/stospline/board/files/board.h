@@ -1,5 +1,5 @@
 /* The board support a generated project needs: one file per board (board_<name>.c) defines
- * these, plus its vector table and start-up. Everything else (board_app.c, stsp_frame.c) is
+ * these, plus its vector table. Everything else (board_start.c, board_app.c, stsp_frame.c) is
  * the same on every board. */
 #ifndef BOARD_H
 #define BOARD_H
@@ -28,6 +28,12 @@ void board_idle(void);
 void board_timer_start(uint32_t reload);
 /* Cycles since the timer's last interrupt: 0..reload. */
 uint32_t board_timer_elapsed(void);
+
+/* Defined by board_start.c, named by the board's vector table: the start-up, which calls
+ * board_main(), and the handler of every fault. __StackTop: the initial stack pointer (<board>.ld). */
+void Reset_Handler(void);
+void Fault_Handler(void);
+extern uint32_t __StackTop[];
 
 /* Defined by board_app.c: the tick timer's interrupt calls it. */
 void board_timer_handler(void);

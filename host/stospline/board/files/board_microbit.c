@@ -1,5 +1,5 @@
 /* Board support for the BBC micro:bit (nRF51822, Cortex-M0 at 16 MHz), as QEMU 7.2's
- * `microbit` machine emulates it: vector table, start-up, clock, UART0 (P0.24 TX, P0.25 RX:
+ * `microbit` machine emulates it: vector table, clock, UART0 (P0.24 TX, P0.25 RX:
  * the interface chip's USB serial, 115200 8N1), the first `-serial` of QEMU, and TIMER0 as
  * the tick timer: the nRF51's Cortex-M0 has no SysTick.
  *
@@ -192,43 +192,7 @@ void board_idle(void)
     __asm__ volatile("wfi" ::: "memory");
 }
 
-/* Start-up. */
-extern uint32_t __data_start__[];
-extern uint32_t __data_end__[];
-extern uint32_t __data_load__[];
-extern uint32_t __bss_start__[];
-extern uint32_t __bss_end__[];
-extern uint32_t __StackTop[];
-void Reset_Handler(void);
-void Fault_Handler(void);
-
-/* A fault stops the core here; the actuators keep their last command: on a real board set
- * them to the safe command (board-specific) before spinning. */
-void Fault_Handler(void)
-{
-    for (;;) {
-    }
-}
-
-void Reset_Handler(void)
-{
-    volatile uint32_t *data = __data_start__;
-    volatile uint32_t *bss = __bss_start__;
-    const volatile uint32_t *load = __data_load__;
-    const uint32_t nd = (uint32_t)(((uintptr_t)__data_end__ - (uintptr_t)__data_start__) / 4u);
-    const uint32_t nb = (uint32_t)(((uintptr_t)__bss_end__ - (uintptr_t)__bss_start__) / 4u);
-    uint32_t i;
-    for (i = 0u; i < nd; ++i) {
-        data[i] = load[i];
-    }
-    for (i = 0u; i < nb; ++i) {
-        bss[i] = 0u;
-    }
-    (void)board_main();
-    for (;;) {
-    }
-}
-
+/* The vector table: Reset_Handler and Fault_Handler are board_start.c's. */
 typedef void (*vector_t)(void);
 typedef struct {
     uint32_t *initial_sp;

@@ -1,5 +1,5 @@
 /* Board support for the Netduino Plus 2 (STM32F405RG, Cortex-M4F, 168 MHz), as QEMU 7.2's
- * `netduinoplus2` machine emulates it: vector table, start-up, clock, USART1 (PA9 TX,
+ * `netduinoplus2` machine emulates it: vector table, clock, USART1 (PA9 TX,
  * PA10 RX, 115200 8N1), the first `-serial` of QEMU.
  *
  * Board-specific (change these for another STM32F4 board): BOARD_HSE_HZ and the PLL factors
@@ -35,7 +35,6 @@
 #define NVIC_ISER1 REG(0xE000E104u)
 #define USART1_IRQ 37u /* board-specific: the USART's interrupt number */
 #define RX_RING 512u   /* received bytes not yet read by the loop (a power of two, > a frame) */
-#define SCB_CPACR REG(0xE000ED88u)
 /* The core's SysTick: the tick timer. */
 #define SYST_CSR REG(0xE000E010u)
 #define SYST_RVR REG(0xE000E014u)
@@ -176,51 +175,13 @@ void board_idle(void)
     __asm__ volatile("wfi" ::: "memory");
 }
 
-/* Start-up. */
-extern uint32_t __data_start__[];
-extern uint32_t __data_end__[];
-extern uint32_t __data_load__[];
-extern uint32_t __bss_start__[];
-extern uint32_t __bss_end__[];
-extern uint32_t __StackTop[];
-void Reset_Handler(void);
-void Fault_Handler(void);
 void SysTick_Handler(void);
-
-/* A fault stops the core here; the actuators keep their last command: on a real board set
- * them to the safe command (board-specific) before spinning. */
-void Fault_Handler(void)
-{
-    for (;;) {
-    }
-}
-
 void SysTick_Handler(void)
 {
     board_timer_handler();
 }
 
-void Reset_Handler(void)
-{
-    volatile uint32_t *data = __data_start__;
-    volatile uint32_t *bss = __bss_start__;
-    const volatile uint32_t *load = __data_load__;
-    const uint32_t nd = (uint32_t)(((uintptr_t)__data_end__ - (uintptr_t)__data_start__) / 4u);
-    const uint32_t nb = (uint32_t)(((uintptr_t)__bss_end__ - (uintptr_t)__bss_start__) / 4u);
-    uint32_t i;
-    for (i = 0u; i < nd; ++i) {
-        data[i] = load[i];
-    }
-    for (i = 0u; i < nb; ++i) {
-        bss[i] = 0u;
-    }
-    SCB_CPACR |= 0xFu << 20; /* FPU: CP10, CP11 full access, before any float instruction */
-    __asm__ volatile("dsb\n\tisb" ::: "memory");
-    (void)board_main();
-    for (;;) {
-    }
-}
-
+/* The vector table: Reset_Handler and Fault_Handler are board_start.c's. */
 typedef void (*vector_t)(void);
 typedef struct {
     uint32_t *initial_sp;

@@ -2,8 +2,10 @@
 baseline of a compiled kernel switched on for a block, the example problem files."""
 from __future__ import annotations
 
+import argparse
 import os
 import statistics
+import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -39,3 +41,17 @@ def example_path(name: str) -> Path | None:
     """The problem file `name`: a path, else a file of examples/; None where neither is."""
     path = Path(name) if Path(name).exists() else ROOT / "examples" / name
     return path if path.is_file() else None
+
+
+def example_args(tool: str, doc: str, argv: list[str] | None, examples: list[str],
+                 repeat: int):
+    """The arguments of a bench over example problems (``EXAMPLE.toml ... [--repeat N]``), or
+    None after one line naming the field where ``--repeat`` is below 1."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
+    ap.add_argument("examples", nargs="*", default=examples)
+    ap.add_argument("--repeat", type=int, default=repeat)
+    args = ap.parse_args(argv)
+    if args.repeat < 1:
+        print(f"{tool}: --repeat must be at least 1", file=sys.stderr)
+        return None
+    return args

@@ -12,7 +12,6 @@ size of C text a large time-varying design writes.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -20,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_util import example_path, median_time, numpy_baseline  # noqa: E402
+from bench_util import example_args, example_path, median_time, numpy_baseline  # noqa: E402
 
 
 def _numbers(table) -> int:
@@ -39,12 +38,8 @@ def _dense_table(base):
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("examples", nargs="*", default=["robot_corridor.toml", "coupled_axes.toml"])
-    ap.add_argument("--repeat", type=int, default=5)
-    args = ap.parse_args(argv)
-    if args.repeat < 1:
-        print("c_text: --repeat must be at least 1", file=sys.stderr)
+    args = example_args("c_text", __doc__, argv, ["robot_corridor.toml", "coupled_axes.toml"], 5)
+    if args is None:
         return 2
     from stospline import design_problem, load_problem
     from stospline.table import codegen, kernels

@@ -8,24 +8,19 @@ tables; the two ranges must agree to rounding.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_util import example_path, median_time, numpy_baseline  # noqa: E402
+from bench_util import example_args, example_path, median_time, numpy_baseline  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("examples", nargs="*",
-                    default=["robot_corridor.toml", "robot_patrol_60s.toml"])
-    ap.add_argument("--repeat", type=int, default=3)
-    args = ap.parse_args(argv)
-    if args.repeat < 1:
-        print("state_range: --repeat must be at least 1", file=sys.stderr)
+    args = example_args("state_range", __doc__, argv,
+                        ["robot_corridor.toml", "robot_patrol_60s.toml"], 3)
+    if args is None:
         return 2
     from stospline import design_problem, load_problem
     from stospline.oracle import evaluate as oracle

@@ -9,12 +9,11 @@ kernel (`stospline.oracle.kernel`).
 """
 from __future__ import annotations
 
-import threading
 from pathlib import Path
 
 import numpy as np
 
-from stospline.cache import build_kernel_sources, load_module
+from stospline.cache import LoadOnce, build_kernel_sources
 from stospline.errors import KernelBuildError
 
 __all__ = ["build_kernels", "load_kernels", "zoh_stage_ticks", "KernelBuildError"]
@@ -50,26 +49,21 @@ int stsp_tv_euler_oracle_ticks(int n, int m, int n_latch, long T, const double *
                                double *xm, double *xv, double *um, double *uv, double *work,
                                int *iwork);
 """
-_CFLAGS = ["-std=c99", "-O3", "-Wall", "-Wextra"]
 _ERR_NOT_PD, _ERR_DIMS = -1, -2
-_loaded = None
-_load_lock = threading.Lock()
 
 
 def build_kernels(build_dir: str | Path | None = None, *, quiet: bool = True) -> Path:
     """Compile the kernels (if not cached) and return the path of the extension module."""
-    return build_kernel_sources("_stsp_kernels", _SOURCES, _CDEF, _CFLAGS, root=build_dir,
-                                quiet=quiet)
+    return build_kernel_sources("_stsp_kernels", _SOURCES, _CDEF, root=build_dir, quiet=quiet)
 
 
 def load_kernels():
     """The loaded cffi module (``.ffi``, ``.lib``), built on first use (once, whichever
     thread asks first)."""
-    global _loaded
-    with _load_lock:
-        if _loaded is None:
-            _loaded = load_module(build_kernels())
-    return _loaded
+    return _load()
+
+
+_load = LoadOnce(lambda: build_kernels())
 
 
 def _c(a: np.ndarray) -> np.ndarray:

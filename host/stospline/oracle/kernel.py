@@ -9,12 +9,11 @@ the tick loop of `oracle.evaluate_table` over one time-invariant stage on the ma
 """
 from __future__ import annotations
 
-import threading
 from pathlib import Path
 
 import numpy as np
 
-from stospline.cache import build_kernel_sources, load_module
+from stospline.cache import LoadOnce, build_kernel_sources
 from stospline.errors import KernelBuildError
 
 __all__ = ["build_kernel", "load_kernel", "oracle_stage_ticks", "pack_oracle_maps",
@@ -28,25 +27,21 @@ int stsp_oracle_stage_ticks(int n, int m, int n_latch, long T, const double *K, 
                             const double *Fmean, double *M, double *J, double *work,
                             double *xm, double *xv, double *um, double *uv);
 """
-_CFLAGS = ["-std=c99", "-O3", "-Wall", "-Wextra"]
-_loaded = None
-_load_lock = threading.Lock()
 
 
 def build_kernel(build_dir: str | Path | None = None, *, quiet: bool = True) -> Path:
     """Compile the kernel (if not cached) and return the path of the extension module."""
-    return build_kernel_sources("_stsp_oracle_kernel", _SOURCES, _CDEF, _CFLAGS,
-                                root=build_dir, quiet=quiet)
+    return build_kernel_sources("_stsp_oracle_kernel", _SOURCES, _CDEF, root=build_dir,
+                                quiet=quiet)
 
 
 def load_kernel():
     """The loaded cffi module (``.ffi``, ``.lib``), built on first use (once, whichever
     thread asks first)."""
-    global _loaded
-    with _load_lock:
-        if _loaded is None:
-            _loaded = load_module(build_kernel())
-    return _loaded
+    return _load()
+
+
+_load = LoadOnce(lambda: build_kernel())
 
 
 def pack_oracle_maps(Phi: np.ndarray, cost_row: np.ndarray, n: int):

@@ -13,7 +13,7 @@ from stospline import strict
 from stospline.precision import verbatim
 from stospline.report.design_summary import actuator_limits
 from stospline.report.json_numbers import rounded
-from stospline.report.simulation_summary import cost_and_bias, knot_entry, verdict
+from stospline.report.simulation_summary import cost_and_bias, knot_entry, saturation, verdict
 from stospline.report.summary_text import simulation_summary_text
 
 __all__ = ["sensor_simulation_summary", "sensor_simulation_text"]
@@ -57,12 +57,8 @@ def sensor_simulation_summary(d, run, *, seed: int, confidence: float = 0.99) ->
         "cost": cost,
         "simulation_bias": bias,
         "knots": knots,
-        "saturation": {
-            "limited": d.table.limited,
-            "tick_fraction": mc.saturated_fraction,
-            "path_fraction": mc.saturated_path_fraction,
-            "u_low": [float(v) for v in mc.u_low], "u_high": [float(v) for v in mc.u_high],
-        },
+        "saturation": saturation(d, mc, {"u_low": [float(v) for v in mc.u_low],
+                                         "u_high": [float(v) for v in mc.u_high]}),
         **actuator_limits(d),
     })
     summary["verdict"] = verdict(summary, confidence)

@@ -18,7 +18,7 @@ from stospline.oracle.evaluate import Moments
 from stospline.harness.plant_scheme import scheme_moments
 
 __all__ = ["simulation_summary", "verdict", "loop_moments", "predicted_cost", "knot_entry",
-           "cost_and_bias"]
+           "cost_and_bias", "saturation"]
 
 # Why a z-score (or another ratio to a Monte Carlo standard error) is null.
 _ZERO_SE = ("every path gave the same value (a problem without noise, or a deterministic "
@@ -87,6 +87,13 @@ def cost_and_bias(d, mc: MonteCarloResult, exact: Moments, scheme: Moments,
     return cost, bias
 
 
+def saturation(d, mc: MonteCarloResult, commands: dict) -> dict:
+    """The summary's ``saturation`` entry: whether the table limits the command, the fraction
+    of steps and of paths the controller saturated, and the range of `commands` issued."""
+    return {"limited": d.table.limited, "tick_fraction": mc.saturated_fraction,
+            "path_fraction": mc.saturated_path_fraction, **commands}
+
+
 def simulation_summary(d, mc: MonteCarloResult, *, seed: int,
                        confidence: float = 0.99) -> dict:
     """Monte Carlo statistics beside the oracle's exact numbers, the plant scheme's bias, and
@@ -123,12 +130,7 @@ def simulation_summary(d, mc: MonteCarloResult, *, seed: int,
         },
         "simulation_bias": bias,
         "knots": knots,
-        "saturation": {
-            "limited": d.table.limited,
-            "tick_fraction": mc.saturated_fraction,
-            "path_fraction": mc.saturated_path_fraction,
-            **_command_range(mc),
-        },
+        "saturation": saturation(d, mc, _command_range(mc)),
         **actuator_limits(d),
         **_corridors(d, mc),
     })

@@ -39,7 +39,6 @@ long stsp_f32_array_text(long N, const float *x, long per_line, char *out, long 
                          long *flagged, long *n_flagged);
 """
 _LITERAL_SLOT = 16   # literal_kernel.c's STSP_LITERAL_SLOT
-_CFLAGS = ["-std=c99", "-O3", "-Wall", "-Wextra"]
 _loaded = None
 _failed = False
 _load_lock = threading.Lock()
@@ -47,8 +46,8 @@ _load_lock = threading.Lock()
 
 def build_kernel(build_dir: str | Path | None = None, *, quiet: bool = True) -> Path:
     """Compile the kernel (if not cached) and return the path of the extension module."""
-    return build_kernel_sources("_stsp_table_kernel", _SOURCES, _CDEF, _CFLAGS,
-                                root=build_dir, quiet=quiet)
+    return build_kernel_sources("_stsp_table_kernel", _SOURCES, _CDEF, root=build_dir,
+                                quiet=quiet)
 
 
 def _kernel():

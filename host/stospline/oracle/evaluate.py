@@ -24,7 +24,7 @@ from stospline.oracle.faults import evaluate_delayed_table
 from stospline.oracle.tick_moments import (_MAPS, Moments, _c_kernel, _euler_varying_maps,  # noqa: F401
                                         _has_drift, _knot_terms, _latch_transform,
                                         _packed_maps, _PathRecord, _plant_tick, _stage_maps,
-                                        _tick_maps, _tick_varying)
+                                        _tick_maps, _tick_varying, _w_map)
 from stospline.table.format import GainTable
 from stospline.table.qformat import DEFAULT_SIGMAS, scalable_ranges
 
@@ -85,7 +85,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
                                       substeps=substeps, path=path)
     n, m, n_latch = table.dims
     h = 1.0 / table.tick_hz
-    d_y, d_w = n + n_latch + 1, n + m + 1
+    d_y = n + n_latch + 1
     x0 = problem.x0
     y0 = np.concatenate([x0, np.zeros(n_latch), [1.0]])
     M = np.outer(y0, y0)
@@ -114,9 +114,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             M = T @ M @ T.T
         varying = stage.varying is not None
         maps = None if varying else _tick_maps(stage, n, m, h, propagator, substeps)
-        Tw = np.zeros((d_w, d_y))
-        Tw[:n, :n] = np.eye(n)
-        Tw[-1, -1] = 1.0
+        Tw = _w_map(n, m, d_y, slice(0, n))
         ticks = range(int(table.stage_start[k]), int(table.stage_start[k + 1]))
         # The C loop carries the mean map without the constant column: not with a drift.
         kernel = (None if varying or Cy is not None or _has_drift(problem)
@@ -134,7 +132,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             rec.extend(xm, xv, um, uv)
             progress.advance(len(ticks))
             ticks = range(0)
-        elif kernel is not None:           # the same loop in C (oracle_kernel.c)
+        elif kernel is not None:           # the same loop in C (oracle/tick_kernel.c)
             sl = slice(ticks.start, ticks.stop)
             Phi_x, cost = _packed_maps(stage, n, m, h, propagator, substeps)
             M, J, *tick_path = kernel(table.K[sl], table.L[sl], table.k0[sl], Phi_x, cost,
@@ -265,10 +263,7 @@ def _closed_loop_parts(sd, n: int, m: int, d: int):
     Geff0 = np.zeros((d,) + sd.G.shape[1:])
     Geff0[:n] = sd.G
     Lb = running_cost_matrix(sd, n, m, n + m + 1, n)
-    Tw = np.zeros((n + m + 1, d))
-    Tw[:n, :n] = np.eye(n)
-    Tw[-1, -1] = 1.0
-    return Abar0, Geff0, Lb, Tw
+    return Abar0, Geff0, Lb, _w_map(n, m, d, slice(0, n))
 
 
 def state_range(problem: Problem, table: GainTable, *, sigmas: float = DEFAULT_SIGMAS

@@ -242,11 +242,40 @@ def _stage_maps(stage, varying: bool, n: int, m: int, t0: float, h: float, propa
     return None
 
 
+def _w_map(n: int, m: int, d: int, xs) -> np.ndarray:
+    """The map ``z -> w = [x; u; 1]`` of a loop state `z` (`d` entries, the constant last;
+    the state at `xs`), with its `m` input rows left to fill."""
+    Tw = np.zeros((n + m + 1, d))
+    Tw[:n, xs] = np.eye(n)
+    Tw[-1, -1] = 1.0
+    return Tw
+
+
+class _StagePlant:
+    """One stage's plant over its ticks (`_plant_tick`): its maps computed at the first tick
+    for constant data, at every tick for time-varying data (`_stage_maps`)."""
+
+    def __init__(self, stage, n: int, m: int, t0: float, h: float, propagator: str,
+                 substeps: int):
+        self.stage, self.n, self.m, self.t0, self.h = stage, n, m, t0, h
+        self.propagator, self.substeps = propagator, substeps
+        self.varying = stage.varying is not None
+        self.maps = None
+
+    def tick(self, Mw: np.ndarray, j: int):
+        """`_plant_tick` of tick `j`: the moments of ``w`` after it, its cost and mean map."""
+        t = self.t0 + j * self.h
+        if self.maps is None or self.varying:
+            self.maps = _stage_maps(self.stage, self.varying, self.n, self.m, t, self.h,
+                                    self.propagator, self.substeps)
+        return _plant_tick(self.stage, self.maps, Mw, t, self.h, self.n, self.m)
+
+
 def _packed_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int):
-    """`kernels.pack_oracle_maps` of `_tick_maps` (cached alongside it)."""
+    """`kernel.pack_oracle_maps` of `_tick_maps` (cached alongside it)."""
     _, (prop, cost_row, _), extra = _tick_entry(stage, n, m, h, propagator, substeps)
     if "packed" not in extra:
-        from stospline.design.kernels import pack_oracle_maps
+        from stospline.oracle.kernel import pack_oracle_maps
         extra["packed"] = pack_oracle_maps(prop.Phi, cost_row, n)
     return extra["packed"]
 
@@ -256,13 +285,13 @@ def _has_drift(problem: Problem) -> bool:
 
 
 def _c_kernel():
-    """`kernels.oracle_stage_ticks`, or None: ``STOSPLINE_ORACLE_KERNEL=numpy`` asks for the
+    """`kernel.oracle_stage_ticks`, or None: ``STOSPLINE_ORACLE_KERNEL=numpy`` asks for the
     numpy loop (the reference), and so does a host where the kernel cannot be built."""
     if os.environ.get("STOSPLINE_ORACLE_KERNEL", "c") == "numpy":
         return None
-    from stospline.design.kernels import KernelBuildError, load_kernels, oracle_stage_ticks
+    from stospline.oracle.kernel import KernelBuildError, load_kernel, oracle_stage_ticks
     try:
-        load_kernels()
+        load_kernel()
     except KernelBuildError:
         return None
     return oracle_stage_ticks

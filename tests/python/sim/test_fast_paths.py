@@ -1,5 +1,5 @@
 """The fast paths of the CLI agree with their references: the numpy matrix exponential with
-scipy's, and the C tick loop of the oracle (oracle_kernel.c) with the numpy loop."""
+scipy's, and the C tick loop of the oracle (oracle/tick_kernel.c) with the numpy loop."""
 import numpy as np
 import pytest
 import scipy.linalg

@@ -231,11 +231,13 @@ def _corridors(summary: dict) -> list[dict]:
     return out
 
 
-def report_html(d, mc, summary: dict, fault_rows=None, no_fault_table: str | None = None
-                ) -> str:
+def report_html(d, mc, summary: dict, fault_rows=None, no_fault_table: str | None = None,
+                plant: dict | None = None) -> str:
     """The page for design `d` (`pipeline.Designed`), its Monte Carlo run `mc` and that
     run's `pipeline.simulation_summary`; `fault_rows` (`harness.fault_sweep.fault_table`) adds
-    the fault table, `no_fault_table` says why there is none."""
+    the fault table, `no_fault_table` says why there is none. `plant`: of a [plant] problem
+    (`d` and `mc` its linearisation's), the Monte Carlo on the model itself
+    (`nonlinear.simulate.plant_simulation`), shown first."""
     from stospline.oracle.faults import evaluate_with_faults
     from stospline.oracle.evaluate import evaluate_table
     p = d.problem
@@ -257,4 +259,20 @@ def report_html(d, mc, summary: dict, fault_rows=None, no_fault_table: str | Non
         faults=_faults(summary), corridors=_corridors(summary), layout=layout, images=images,
         regions=_regions_check(d) if p.tick_regions else None,
         fault_table=_fault_table(fault_rows),
-        no_fault_table=no_fault_table)
+        no_fault_table=no_fault_table, plant=plant, plant_rows=_plant_rows(plant))
+
+
+def _plant_rows(plant: dict | None) -> list[dict]:
+    """One row per knot and state of the model's Monte Carlo: mean and variance with their
+    intervals (widened by the scheme's bias), the linearisation's oracle, and whether each is
+    inside."""
+    rows = []
+    for k, kn in enumerate(plant["knots"] if plant else []):
+        for i, mean in enumerate(kn["mean"]):
+            hw = kn["mean_halfwidth"][i] + kn["scheme_bias"][i]
+            vhw = kn["variance_halfwidth"][i] + kn["scheme_bias_variance"][i]
+            var, o, ov = kn["variance"][i], kn["oracle_mean"][i], kn["oracle_variance"][i]
+            rows.append({"knot": k, "t": kn["t"], "state": i, "mean": mean, "hw": hw,
+                         "oracle": o, "mean_ok": abs(mean - o) <= hw, "variance": var,
+                         "vhw": vhw, "oracle_variance": ov, "variance_ok": abs(var - ov) <= vhw})
+    return rows

@@ -22,9 +22,10 @@ from stospline.problem.model import Problem
 from stospline.oracle.faults import evaluate_delayed_table
 # The tick loops' building blocks; the private names stay importable from here.
 from stospline.oracle.tick_moments import (_MAPS, Moments, _c_kernel, _euler_varying_maps,  # noqa: F401
-                                        _has_drift, _knot_terms, _latch_transform,
-                                        _packed_maps, _PathRecord, _plant_tick, _stage_maps,
-                                        _tick_maps, _tick_varying)
+                                        _factored_kernel, _factored_maps, _has_drift,
+                                        _knot_terms, _latch_transform, _packed_maps,
+                                        _PathRecord, _plant_tick, _stage_maps, _tick_maps,
+                                        _tick_varying)
 from stospline.table.format import GainTable
 from stospline.table.qformat import DEFAULT_SIGMAS, scalable_ranges
 
@@ -136,8 +137,13 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             ticks = range(0)
         elif kernel is not None:           # the same loop in C (oracle_kernel.c)
             sl = slice(ticks.start, ticks.stop)
-            Phi_x, cost = _packed_maps(stage, n, m, h, propagator, substeps)
-            M, J, *tick_path = kernel(table.K[sl], table.L[sl], table.k0[sl], Phi_x, cost,
+            factored = _factored_maps(stage, n, m, h, propagator, substeps)
+            if factored is not None and _factored_kernel() is not None:
+                # Without noise: M+ = F M F' per tick (factored_kernel.c), O(n d²).
+                kernel, tick_map = _factored_kernel(), factored
+            else:
+                tick_map = _packed_maps(stage, n, m, h, propagator, substeps)
+            M, J, *tick_path = kernel(table.K[sl], table.L[sl], table.k0[sl], *tick_map,
                                       np.ascontiguousarray(maps[2][:, :n + m]), M, J,
                                       path=path)
             if path:

@@ -16,7 +16,7 @@ import numpy as np
 from stospline.expm import require_finite
 
 from stospline import progress
-from stospline.design.continuous import ContinuousDesign
+from stospline.design.continuous import ContinuousDesign, HamiltonianSolution
 from stospline.design.moments import running_cost_matrix
 from stospline.problem.model import Problem
 from stospline.oracle.faults import evaluate_delayed_table
@@ -202,6 +202,19 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
             keep = np.r_[0:n, M.shape[0] - 1]
             M = M[np.ix_(keep, keep)]
 
+        if (isinstance(st._sol, HamiltonianSolution) and stage is st.stage
+                and not points_per_stage and not stage.noise_tensor.any()):
+            # The law of an exactly solved stage on its own noise-free plant: the closed loop
+            # is the Hamiltonian flow's, exact (HamiltonianSolution.closed_loop).
+            order = np.r_[0:n, d - 1, n:n + p]               # y = [x; v; 1] -> [x; 1; v]
+            Ma, dJ = st._sol.closed_loop(M[np.ix_(order, order)])
+            M = np.empty_like(Ma)
+            M[np.ix_(order, order)] = Ma
+            J += dJ
+            pen, mean, cov, con = _knot_terms(problem, k, M, n)
+            J += pen
+            means.append(mean); covs.append(cov); cons.append(con)
+            continue
         rhs = _moment_rhs(problem, st, stage, d)
         t_eval = (np.linspace(st.t_start, st.t_end, points_per_stage)
                   if points_per_stage else None)

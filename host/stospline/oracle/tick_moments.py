@@ -281,18 +281,6 @@ def _factored_maps(stage, n: int, m: int, h: float, propagator: str, substeps: i
     return extra["factored"]
 
 
-def _factored_kernel():
-    """`factored.factored_stage_ticks`, or None (as `_c_kernel`)."""
-    if os.environ.get("STOSPLINE_ORACLE_KERNEL", "c") == "numpy":
-        return None
-    from stospline.oracle.factored import factored_stage_ticks, load_factored
-    try:
-        load_factored()
-    except KernelBuildError:
-        return None
-    return factored_stage_ticks
-
-
 def _has_drift(problem: Problem) -> bool:
     return any(st.f is not None for st in problem.stages)
 
@@ -300,11 +288,22 @@ def _has_drift(problem: Problem) -> bool:
 def _c_kernel():
     """`kernels.oracle_stage_ticks`, or None: ``STOSPLINE_ORACLE_KERNEL=numpy`` asks for the
     numpy loop (the reference), and so does a host where the kernel cannot be built."""
+    from stospline.design.kernels import load_kernels, oracle_stage_ticks
+    return _compiled(load_kernels, oracle_stage_ticks)
+
+
+def _factored_kernel():
+    """`factored.factored_stage_ticks`, or None (as `_c_kernel`)."""
+    from stospline.oracle.factored import factored_stage_ticks, load_factored
+    return _compiled(load_factored, factored_stage_ticks)
+
+
+def _compiled(load, loop):
+    """`loop`, or None when ``STOSPLINE_ORACLE_KERNEL=numpy`` or `load` cannot build it."""
     if os.environ.get("STOSPLINE_ORACLE_KERNEL", "c") == "numpy":
         return None
-    from stospline.design.kernels import KernelBuildError, load_kernels, oracle_stage_ticks
     try:
-        load_kernels()
+        load()
     except KernelBuildError:
         return None
-    return oracle_stage_ticks
+    return loop

@@ -12,6 +12,9 @@ Backward on each stage ``[t_k, t_{k+1}]``, with ``K = R^-1 (P B + S)'`` and ``Ac
 
 At the stage start the controller latches ``v = W^-1 (N' x + m)`` and applies
 ``u = -K x - R^-1 (B'p + r) - R^-1 B' N v`` until the next stage start.
+
+A stage whose data are constant and whose equations carry no noise is solved exactly from the
+exponential of its Hamiltonian (`HamiltonianSolution`); the others are integrated with DOP853.
 """
 from __future__ import annotations
 
@@ -27,8 +30,8 @@ from stospline.design.stage_values import (StageStart, StageValues, check_group,
 from stospline.errors import DesignError, ProblemError
 from stospline.problem.model import Problem, Stage, ticks_per_stage
 
-__all__ = ["DesignError", "StageSolution", "ContinuousDesign", "design_continuous",
-           "noise_operator"]
+__all__ = ["DesignError", "StageSolution", "ContinuousDesign", "HamiltonianSolution",
+           "design_continuous", "noise_operator"]
 
 
 def noise_operator(G: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -422,7 +425,8 @@ def design_continuous(problem: Problem, *, noise: bool = True, mode: str = "stag
         Stage-wise latched multipliers (re-planned at every stage start), or one multiplier
         vector for all knots latched at t0 (the constraints exactly as problem (1) states).
     rtol, atol : float
-        Tolerances of the DOP853 integration of the backward equations.
+        Tolerances of the DOP853 integration of the backward equations (a stage solved
+        exactly, `HamiltonianSolution`, has none).
 
     Returns
     -------

@@ -1,14 +1,20 @@
 """Exact moment oracle: mean, covariance and expected cost of a latched affine law.
 
-The oracle never looks at Riccati solutions. It takes a law (a continuous design's gain
-functions, or a quantized per-tick `GainTable`) and propagates the first and second moments
-of the augmented state ``y = [x; v; 1]`` (``v`` the latched multiplier, constant on a stage)
-through the Ito moment equation
+The oracle never looks at Riccati solutions (one exception below). It takes a law (a
+continuous design's gain functions, or a quantized per-tick `GainTable`) and propagates the
+first and second moments of the augmented state ``y = [x; v; 1]`` (``v`` the latched
+multiplier, constant on a stage) through the Ito moment equation
 
     d/dt M = Abar M + M Abar' + sum_ij M_ij Gbar_i Gbar_j'
 
 For a table the control is held over each tick, so one tick is an exact linear map of the
 moments of ``z = [x; u; v; 1]`` (computed once per stage with a block matrix exponential).
+
+The exception: a continuous design's stage solved exactly (`HamiltonianSolution`: constant
+data, no noise), evaluated on its own noise-free plant, takes the closed loop from the same
+Hamiltonian flow (`HamiltonianSolution.closed_loop`). That is the law's exact cost, equal to
+the design's J0 to rounding, not an independent integration; the table's oracle is, and
+``tests/python/design/test_hamiltonian_stage.py`` checks the flow against the moment ODE.
 """
 from __future__ import annotations
 

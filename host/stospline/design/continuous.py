@@ -243,7 +243,8 @@ class HamiltonianSolution:
     gives ``Pa(t) = Y X^-1`` exactly, and ``X(t)`` is the closed loop's transition of ``a``
     from ``s`` to ``t``. The solution is kept at nodes a whole number of ticks apart, at most
     ``0.5 / |Hm|_1`` s (each step's exponential is then well conditioned); between nodes the
-    exponential at a multiple of the tick is a power of the tick's."""
+    exponential at a multiple of the tick is a power of the tick's. A stage stiff for one tick
+    (``|Hm|_1 h > 2``) is not solved (`usable` False): the design integrates it."""
 
     def __init__(self, stage: Stage, n: int, p: int, Pa_end: np.ndarray, t0: float, t1: float,
                  tick_hz: int):
@@ -264,6 +265,11 @@ class HamiltonianSolution:
         self.norm = float(np.abs(Hm).sum(axis=0).max())
         self.stage, self.Aa, self.Ba, self.Qa, self.Sa, self.Rinv = stage, Aa, Ba, Qa, Sa, Rinv
         h = 1.0 / tick_hz
+        # Stiff for one tick (|Hm| h > 2): the step's exponential would amplify rounding;
+        # the caller integrates instead.
+        self.usable = self.norm * h <= 2.0
+        if not self.usable:
+            return
         ticks = max(1, int(round((t1 - t0) * tick_hz)))
         per = max(1, min(ticks, _MAX_PER, int(0.5 / max(self.norm * h, 1e-300))))
         node_ticks = np.unique(np.r_[0:ticks:per, ticks])
@@ -459,9 +465,10 @@ def design_continuous(problem: Problem, *, noise: bool = True, mode: str = "stag
                 NT[:, sl] += knot.constraint.C.T
                 mT[sl] -= knot.constraint.value
         y_end = np.concatenate([PT.ravel(), pT, [cT], NT.ravel(), WT.ravel(), mT])
-        if _solved_exactly(stage, noise):
-            sol = HamiltonianSolution(stage, n, p, _augmented_end(PT, pT, cT, NT, WT, mT),
-                                      times[k], times[k + 1], problem.tick_hz)
+        sol = (HamiltonianSolution(stage, n, p, _augmented_end(PT, pT, cT, NT, WT, mT),
+                                   times[k], times[k + 1], problem.tick_hz)
+               if _solved_exactly(stage, noise) else None)
+        if sol is not None and sol.usable:
             res = _Solved(sol, sol(times[k]))
         else:
             with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported below

@@ -76,3 +76,16 @@ def test_a_noisy_plant_is_integrated(monkeypatch):
     assert isinstance(d.stages[0]._sol, continuous.HamiltonianSolution)
     m = oracle.evaluate_continuous(noisy, d)
     assert m.J > d.J0 * (1 + 1e-6)       # the diffusion costs: the moments saw it
+
+
+def test_a_stage_stiff_for_one_tick_is_integrated(monkeypatch):
+    """|Hm| h > 2 (fast dynamics, a slow tick): the stage is integrated (DOP853), as before."""
+    rng = np.random.default_rng(3)
+    n = 3
+    p = problem_from_arrays(x0=np.ones(n), A=-40.0 * np.eye(n) + rng.normal(size=(n, n)),
+                            B=np.eye(n), R=np.eye(n), Q=np.eye(n), tick_hz=10,
+                            knots=[{"t": 1.0, "penalty": {"C": np.eye(n), "target": np.zeros(n),
+                                                          "weight": 1.0}}])
+    d = continuous.design_continuous(p)
+    assert not isinstance(d.stages[0]._sol, continuous.HamiltonianSolution)
+    assert d.J0 == pytest.approx(_integrated(p, monkeypatch).J0, rel=1e-15)

@@ -405,6 +405,21 @@ def _augmented_end(PT, pT, cT, NT, WT, mT) -> np.ndarray:
                      [NT.T, mT[:, None], -WT]])
 
 
+def _solve_exactly(stage: Stage, n: int, p: int, Pa_end: np.ndarray, t0: float, t1: float,
+                   tick_hz: int):
+    """`_Solved` by a `HamiltonianSolution`, or None: stiff for one tick, or numbers that are
+    not finite (the integration then reports the overflow)."""
+    try:
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            sol = HamiltonianSolution(stage, n, p, Pa_end, t0, t1, tick_hz)
+            if not sol.usable:
+                return None
+            y0 = sol(t0)
+    except np.linalg.LinAlgError:
+        return None
+    return _Solved(sol, y0) if np.all(np.isfinite(y0)) else None
+
+
 @dataclass
 class _Solved:
     """`solve_ivp`'s result as the design reads it, for a `HamiltonianSolution`."""
@@ -464,18 +479,17 @@ def design_continuous(problem: Problem, *, noise: bool = True, mode: str = "stag
                 sl = slice(o, o + knot.n_constraints)
                 NT[:, sl] += knot.constraint.C.T
                 mT[sl] -= knot.constraint.value
-        y_end = np.concatenate([PT.ravel(), pT, [cT], NT.ravel(), WT.ravel(), mT])
-        sol = (HamiltonianSolution(stage, n, p, _augmented_end(PT, pT, cT, NT, WT, mT),
-                                   times[k], times[k + 1], problem.tick_hz)
+        y_end = require_finite(np.concatenate([PT.ravel(), pT, [cT], NT.ravel(), WT.ravel(),
+                                               mT]))
+        res = (_solve_exactly(stage, n, p, _augmented_end(PT, pT, cT, NT, WT, mT), times[k],
+                              times[k + 1], problem.tick_hz)
                if _solved_exactly(stage, noise) else None)
-        if sol is not None and sol.usable:
-            res = _Solved(sol, sol(times[k]))
-        else:
+        if res is None:            # integrated (and overflow reported) as any other stage
+            from scipy.integrate import solve_ivp   # lazy: a slow import the CLI rarely needs
             with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported below
-                from scipy.integrate import solve_ivp   # lazy: a slow import the CLI rarely needs
                 res = solve_ivp(_stage_rhs(stage, n, p, noise), (times[k + 1], times[k]),
-                                require_finite(y_end),
-                                method="DOP853", rtol=rtol, atol=atol, dense_output=True)
+                                y_end, method="DOP853", rtol=rtol, atol=atol,
+                                dense_output=True)
         if res.status != 0 or not np.all(np.isfinite(res.y[:, -1])):
             # With [[Q, S], [S', R]] >= 0 (checked by the parser) P is squeezed between 0 and
             # the cost of any fixed linear law, which solves a linear ODE: no true finite

@@ -40,7 +40,8 @@ def test_exact_stages_equal_the_tight_integration(seed, mode, monkeypatch):
     assert exact.J0 == pytest.approx(ref.J0, rel=1e-12)
     for a, b in zip(exact.tick_gains()[1], ref.tick_gains()[1]):
         for x, y in zip(a, b):
-            np.testing.assert_allclose(x, y, rtol=0, atol=1e-11 * max(1.0, np.abs(y).max(initial=0.0)))
+            scale = max(1.0, np.abs(y).max(initial=0.0))
+            np.testing.assert_allclose(x, y, rtol=0, atol=1e-11 * scale)
     # between ticks too (the oracle's steps): gains_at against the dense output
     for st, sr in zip(exact.stages, ref.stages):
         for t in np.linspace(st.t_start, st.t_end, 7)[:-1] + 1.3e-3:
@@ -89,3 +90,15 @@ def test_a_stage_stiff_for_one_tick_is_integrated(monkeypatch):
     d = continuous.design_continuous(p)
     assert not isinstance(d.stages[0]._sol, continuous.HamiltonianSolution)
     assert d.J0 == pytest.approx(_integrated(p, monkeypatch).J0, rel=1e-15)
+
+
+def test_overflow_is_reported_as_before():
+    """A mode the input cannot reach grows beyond floating point: the exact solution is not
+    finite, so the stage is integrated and the DesignError names the knot as before."""
+    from stospline.errors import DesignError
+    p = problem_from_arrays(x0=np.ones(2), A=np.diag([400.0, 0.0]), B=[[0.0], [1.0]],
+                            R=np.eye(1), Q=np.eye(2), tick_hz=10000,
+                            knots=[{"t": 3.0, "penalty": {"C": [[1.0, 0.0]], "target": [0.0],
+                                                          "weight": 1.0}}])
+    with pytest.raises(DesignError, match="no bounded solution"):
+        continuous.design_continuous(p)

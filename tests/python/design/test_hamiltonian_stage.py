@@ -80,7 +80,7 @@ def test_a_noisy_plant_is_integrated(monkeypatch):
 
 
 def test_a_stage_stiff_for_one_tick_is_integrated(monkeypatch):
-    """|Hm| h > 2 (fast dynamics, a slow tick): the stage is integrated (DOP853), as before."""
+    """|Hm| h > 2 (fast dynamics, a slow tick): the stage is integrated (DOP853)."""
     rng = np.random.default_rng(3)
     n = 3
     p = problem_from_arrays(x0=np.ones(n), A=-40.0 * np.eye(n) + rng.normal(size=(n, n)),
@@ -94,7 +94,7 @@ def test_a_stage_stiff_for_one_tick_is_integrated(monkeypatch):
 
 def test_overflow_is_reported_as_before():
     """A mode the input cannot reach grows beyond floating point: the exact solution is not
-    finite, so the stage is integrated and the DesignError names the knot as before."""
+    finite, so the stage is integrated and the DesignError names the knot, as for any stage."""
     from stospline.errors import DesignError
     p = problem_from_arrays(x0=np.ones(2), A=np.diag([400.0, 0.0]), B=[[0.0], [1.0]],
                             R=np.eye(1), Q=np.eye(2), tick_hz=10000,

@@ -13,16 +13,17 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def median_time(fn, repeat: int, *, warm_up: bool = False):
-    """``(seconds, result)``: the median wall time of `repeat` calls of `fn` (after one
-    untimed call with `warm_up`) and the last call's result."""
+def median_time(fn, repeat: int, *, warm_up: bool = False, clock=time.perf_counter):
+    """``(seconds, result)``: the median time of `repeat` calls of `fn` (after one untimed
+    call with `warm_up`) and the last call's result; wall time, or `clock`
+    (``time.process_time``: CPU time, which load from other processes inflates least)."""
     if warm_up:
         fn()
     times, out = [], None
     for _ in range(repeat):
-        t = time.perf_counter()
+        t = clock()
         out = fn()
-        times.append(time.perf_counter() - t)
+        times.append(clock() - t)
     return statistics.median(times), out
 
 

@@ -1,14 +1,20 @@
 """Exact moment oracle: mean, covariance and expected cost of a latched affine law.
 
-The oracle never looks at Riccati solutions. It takes a law (a continuous design's gain
-functions, or a quantized per-tick `GainTable`) and propagates the first and second moments
-of the augmented state ``y = [x; v; 1]`` (``v`` the latched multiplier, constant on a stage)
-through the Ito moment equation
+The oracle never looks at Riccati solutions (one exception below). It takes a law (a
+continuous design's gain functions, or a quantized per-tick `GainTable`) and propagates the
+first and second moments of the augmented state ``y = [x; v; 1]`` (``v`` the latched
+multiplier, constant on a stage) through the Ito moment equation
 
     d/dt M = Abar M + M Abar' + sum_ij M_ij Gbar_i Gbar_j'
 
 For a table the control is held over each tick, so one tick is an exact linear map of the
 moments of ``z = [x; u; v; 1]`` (computed once per stage with a block matrix exponential).
+
+The exception: a continuous design's stage solved exactly (`HamiltonianSolution`: constant
+data, no noise), evaluated on its own noise-free plant, takes the closed loop from the same
+Hamiltonian flow (`HamiltonianSolution.closed_loop`). That is the law's exact cost, equal to
+the design's J0 to rounding, not an independent integration; the table's oracle is, and
+``tests/python/design/test_hamiltonian_stage.py`` checks the flow against the moment ODE.
 """
 from __future__ import annotations
 
@@ -16,15 +22,16 @@ import numpy as np
 from stospline.expm import require_finite
 
 from stospline import progress
-from stospline.design.continuous import ContinuousDesign
+from stospline.design.continuous import ContinuousDesign, HamiltonianSolution
 from stospline.design.moments import running_cost_matrix
 from stospline.problem.model import Problem
 from stospline.oracle.faults import evaluate_delayed_table
 # The tick loops' building blocks; the private names stay importable from here.
 from stospline.oracle.tick_moments import (_MAPS, Moments, _c_kernel, _euler_varying_maps,  # noqa: F401
-                                        _has_drift, _knot_terms, _latch_transform,
-                                        _packed_maps, _PathRecord, _plant_tick, _stage_maps,
-                                        _tick_maps, _tick_varying, _w_map)
+                                        _factored_kernel, _factored_maps, _has_drift,
+                                        _knot_terms, _latch_transform, _packed_maps,
+                                        _PathRecord, _plant_tick, _stage_maps, _tick_maps,
+                                        _tick_varying, _w_map)
 from stospline.table.format import GainTable
 from stospline.table.qformat import DEFAULT_SIGMAS, scalable_ranges
 
@@ -134,8 +141,13 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             ticks = range(0)
         elif kernel is not None:           # the same loop in C (oracle/tick_kernel.c)
             sl = slice(ticks.start, ticks.stop)
-            Phi_x, cost = _packed_maps(stage, n, m, h, propagator, substeps)
-            M, J, *tick_path = kernel(table.K[sl], table.L[sl], table.k0[sl], Phi_x, cost,
+            factored = _factored_maps(stage, n, m, h, propagator, substeps)
+            if factored is not None and _factored_kernel() is not None:
+                # Without noise: M+ = F M F' per tick (factored_kernel.c), O(n d²).
+                kernel, tick_map = _factored_kernel(), factored
+            else:
+                tick_map = _packed_maps(stage, n, m, h, propagator, substeps)
+            M, J, *tick_path = kernel(table.K[sl], table.L[sl], table.k0[sl], *tick_map,
                                       np.ascontiguousarray(maps[2][:, :n + m]), M, J,
                                       path=path)
             if path:
@@ -194,6 +206,19 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
             keep = np.r_[0:n, M.shape[0] - 1]
             M = M[np.ix_(keep, keep)]
 
+        if (isinstance(st._sol, HamiltonianSolution) and stage is st.stage
+                and not points_per_stage and not stage.noise_tensor.any()):
+            # The law of an exactly solved stage on its own noise-free plant: the closed loop
+            # is the Hamiltonian flow's, exact (HamiltonianSolution.closed_loop).
+            order = np.r_[0:n, d - 1, n:n + p]               # y = [x; v; 1] -> [x; 1; v]
+            Ma, dJ = st._sol.closed_loop(M[np.ix_(order, order)])
+            M = np.empty_like(Ma)
+            M[np.ix_(order, order)] = Ma
+            J += dJ
+            pen, mean, cov, con = _knot_terms(problem, k, M, n)
+            J += pen
+            means.append(mean); covs.append(cov); cons.append(con)
+            continue
         rhs = _moment_rhs(problem, st, stage, d)
         t_eval = (np.linspace(st.t_start, st.t_end, points_per_stage)
                   if points_per_stage else None)

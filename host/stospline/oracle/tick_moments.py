@@ -12,6 +12,7 @@ from stospline.expm import expm, require_finite
 
 from stospline.design.moments import (TickPropagator, augmented_drift, euler_tick, exact_tick,
                                       running_cost_matrix)
+from stospline.errors import KernelBuildError
 from stospline.problem.model import Problem
 
 __all__ = ["Moments"]
@@ -194,12 +195,29 @@ def _tick_entry(stage, n: int, m: int, h: float, propagator: str, substeps: int)
     return entry
 
 
+class FactoredTick:
+    """The moment map of a noise-free tick, ``M+ = F M F'`` with ``F = exp(Ahat h)``: `factor`
+    is F; `Phi`, the same map on ``vec M`` (``F ⊗ F``, d² x d²), is formed on first use only
+    (the numpy loop's reference product); `Psi` is not formed (None)."""
+
+    Psi = None
+
+    def __init__(self, factor: np.ndarray):
+        self.factor = factor
+        self._kron = None
+
+    @property
+    def Phi(self) -> np.ndarray:
+        if self._kron is None:
+            self._kron = np.kron(self.factor, self.factor)
+        return self._kron
+
+
 def _noise_free_tick(stage, n: int, m: int, h: float):
     """`exact_tick`'s moment map and cost row for a stage without noise, from d-square
     exponentials instead of a 2d²-square one: M+ = Phi M Phi' with ``Phi = exp(Ahat h)``, so
-    the map is ``Phi ⊗ Phi``, and the cost ``∫ <Lb, Phi(s) M Phi(s)'> ds = <C, M>`` with ``C
-    = ∫ Phi(s)' Lb Phi(s) ds`` from Van Loan's 2d-square exponential. (Psi, the integrated
-    map itself, is not formed: None.)"""
+    the map is ``Phi ⊗ Phi`` (`FactoredTick`), and the cost ``∫ <Lb, Phi(s) M Phi(s)'> ds =
+    <C, M>`` with ``C = ∫ Phi(s)' Lb Phi(s) ds`` from Van Loan's 2d-square exponential."""
     d = n + m + 1
     Ahat = augmented_drift(stage, m + 1)
     Lb = running_cost_matrix(stage, n, m, d, n)
@@ -207,7 +225,7 @@ def _noise_free_tick(stage, n: int, m: int, h: float):
     big[:d, :d], big[:d, d:], big[d:, d:] = -Ahat.T * h, Lb * h, Ahat * h
     E = expm(big)
     Phi = E[d:, d:]
-    return TickPropagator(np.kron(Phi, Phi), None), (Phi.T @ E[:d, d:]).ravel()
+    return FactoredTick(Phi), (Phi.T @ E[:d, d:]).ravel()
 
 
 def _euler_varying_maps(stage, n: int, m: int, t0: float, h: float, substeps: int):
@@ -280,6 +298,18 @@ def _packed_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int
     return extra["packed"]
 
 
+def _factored_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int):
+    """``(F, cost)`` of a noise-free stage's exact tick for `factored.factored_stage_ticks`
+    (cached alongside `_tick_maps`), or None when the stage's map is not factored."""
+    _, (prop, cost_row, _), extra = _tick_entry(stage, n, m, h, propagator, substeps)
+    if not isinstance(prop, FactoredTick):
+        return None
+    if "factored" not in extra:
+        from stospline.oracle.factored import pack_cost
+        extra["factored"] = (np.ascontiguousarray(prop.factor), pack_cost(cost_row))
+    return extra["factored"]
+
+
 def _has_drift(problem: Problem) -> bool:
     return any(st.f is not None for st in problem.stages)
 
@@ -287,11 +317,23 @@ def _has_drift(problem: Problem) -> bool:
 def _c_kernel():
     """`kernel.oracle_stage_ticks`, or None: ``STOSPLINE_ORACLE_KERNEL=numpy`` asks for the
     numpy loop (the reference), and so does a host where the kernel cannot be built."""
+    from stospline.oracle.kernel import load_kernel, oracle_stage_ticks
+    return _compiled(load_kernel, oracle_stage_ticks)
+
+
+def _factored_kernel():
+    """`factored.factored_stage_ticks`, or None (as `_c_kernel`)."""
+    from stospline.oracle.factored import factored_stage_ticks, load_factored
+    return _compiled(load_factored, factored_stage_ticks)
+
+
+def _compiled(load, loop):
+    """`loop`, or None when ``STOSPLINE_ORACLE_KERNEL=numpy`` or `load` cannot build it."""
     if os.environ.get("STOSPLINE_ORACLE_KERNEL", "c") == "numpy":
         return None
-    from stospline.oracle.kernel import KernelBuildError, load_kernel, oracle_stage_ticks
+    from stospline.errors import KernelBuildError
     try:
-        load_kernel()
+        load()
     except KernelBuildError:
         return None
-    return oracle_stage_ticks
+    return loop

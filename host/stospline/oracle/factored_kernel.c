@@ -1,7 +1,7 @@
 /* Host-side kernel of the exact moment oracle for a noise-free, time-invariant stage
  * (stospline.oracle.evaluate.evaluate_table): the forward second-moment recursion over the
  * controller ticks with the tick's moment map in factored form.  Not firmware: it runs on
- * the design host, in double precision, called through cffi (stospline.oracle.factored).
+ * the design host, in double precision, called through cffi (stospline.oracle.kernel).
  *
  * Without noise one tick maps E w w' (w = [x; u; 1], u held) to Phi E w w' Phi' with
  * Phi = exp(Ahat h) (d_w x d_w), so the tick costs O(n d_w^2) products instead of the

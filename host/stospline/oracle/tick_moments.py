@@ -299,13 +299,13 @@ def _packed_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int
 
 
 def _factored_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int):
-    """``(F, cost)`` of a noise-free stage's exact tick for `factored.factored_stage_ticks`
+    """``(F, cost)`` of a noise-free stage's exact tick for `kernel.factored_stage_ticks`
     (cached alongside `_tick_maps`), or None when the stage's map is not factored."""
     _, (prop, cost_row, _), extra = _tick_entry(stage, n, m, h, propagator, substeps)
     if not isinstance(prop, FactoredTick):
         return None
     if "factored" not in extra:
-        from stospline.oracle.factored import pack_cost
+        from stospline.oracle.kernel import pack_cost
         extra["factored"] = (np.ascontiguousarray(prop.factor), pack_cost(cost_row))
     return extra["factored"]
 
@@ -322,9 +322,9 @@ def _c_kernel():
 
 
 def _factored_kernel():
-    """`factored.factored_stage_ticks`, or None (as `_c_kernel`)."""
-    from stospline.oracle.factored import factored_stage_ticks, load_factored
-    return _compiled(load_factored, factored_stage_ticks)
+    """`kernel.factored_stage_ticks`, or None (as `_c_kernel`)."""
+    from stospline.oracle.kernel import factored_stage_ticks, load_kernel
+    return _compiled(load_kernel, factored_stage_ticks)
 
 
 def _compiled(load, loop):

@@ -59,7 +59,7 @@ from stospline.harness.montecarlo import default_workers, simulate  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 SUBSTEPS = 2
-SIM = ROOT / "host" / "stospline" / "sim"
+SIM = ROOT / "host" / "stospline" / "harness"
 BLOCK = 512                 # paths per block, as the harness's BLOCK_PATHS
 
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from stospline.cache import cached_build, compile_cffi, load_module, source_key
 from stospline.firmware_interface import STATUS, check_header
+from stospline.harness.plant_spec import plant_source
 from stospline.table.codegen import generate_c
 from stospline.table.format import GainTable
 
@@ -189,6 +190,7 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
     const size_t n = PLANT_N, m = PLANT_M, dz_stride = pl->substeps * pl->mz;
     float xf[STSP_MAX_NX], uf[STSP_MAX_NU];
     double ud[STSP_MAX_NU];
+    plant_prep_t pp;
     size_t p, i;
     int worst = 0;
     if (n + (f != NULL && f->feed_held ? m : 0u) > STSP_MAX_NX || m > STSP_MAX_NU
@@ -197,6 +199,7 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
     }
     for (i = 0; i < n_cor; ++i) if (cor[i].p > 32u) return (int)STSP_ERR_BAD_DIMS;
     for (i = 0; i < n; ++i) x_sum[i] = 0.0;
+    plant_prepare(pl, &pp);
     for (p = 0; p < count; ++p) {
         double *x = X + p * n;
         const int run = f == NULL || !(miss_u != NULL && miss_u[p] < f->miss_probability);
@@ -228,7 +231,7 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
             for (i = 0; i < m; ++i) ud[i] += f->actuator_std[i] * actuator_z[p * m + i];
         }
         if (p < n_rec) for (i = 0; i < m; ++i) u_rec[p * m + i] = (float)ud[i];
-        cost[p] += plant_path(pl, ud, dZ + p * dz_stride, x);
+        cost[p] += plant_step(pl, &pp, ud, dZ + p * dz_stride, x);
         for (i = 0; i < n; ++i) x_sum[i] += x[i];
         for (i = 0; i < n_cor; ++i) {             /* the state after the tick: tick + 1 */
             const harness_corridor_t *c = &cor[i];
@@ -395,6 +398,16 @@ class CompiledController:
     ffi: object
     lib: object
     table: GainTable
+    plant_source: str | None = None     # the plant step compiled in (`plant_spec`), if any
+    fixed_shape: bool = True
+
+    def for_plant(self, problem) -> "CompiledController":
+        """This controller in a module whose plant step is compiled for `problem`
+        (`build_controller`'s `plant`): itself when it already is."""
+        spec = plant_source(problem, self.table.tick_hz)
+        if spec is None or spec == self.plant_source:
+            return self
+        return build_controller(self.table, fixed_shape=self.fixed_shape, plant=problem)
 
     @property
     def arith(self) -> str:
@@ -777,7 +790,8 @@ def _table_sources(table) -> tuple[str, str]:
 
 
 def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
-                     quiet: bool = True, fixed_shape: bool = True) -> CompiledController:
+                     quiet: bool = True, fixed_shape: bool = True,
+                     plant=None) -> CompiledController:
     """Compile ``firmware/src/*.c`` with the table's generated C into a cffi module and load it.
 
     Builds are cached in `build_dir` (default: `stospline.cache.cache_root`) under a hash of
@@ -795,6 +809,10 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
         (``STSP_FIXED_NX/NU/N_LATCH``, the fastest; it refuses a table of another shape).
         False: the generic build, which takes any table within the ``STSP_MAX_*`` limits.
         Both compute the same bits.
+    plant : Problem, optional
+        The plant the Monte Carlo harness will run: its step is compiled for it
+        (`stospline.harness.plant_spec`: its zero and unit coefficients and noise entries
+        built in), the same bits as the generic step, which still serves any other plant.
 
     Returns
     -------
@@ -824,12 +842,15 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     if fixed_shape:
         cflags += [f"-DSTSP_FIXED_NX={n}u", f"-DSTSP_FIXED_NU={m}u",
                    f"-DSTSP_FIXED_N_LATCH={n_latch}u"]
+    spec = None if plant is None else plant_source(plant, table.tick_hz)
+    if spec is not None:
+        cflags.append("-DHARNESS_PLANT_SPEC")
     fw = firmware_dir()
     check_header(fw / "include")   # the shared constants are still the header's
     fw_sources = sorted((fw / "src").glob("*.c"))
     here = Path(__file__).parent
     harness = [here / "normals.c"]      # the harness's own C (plant.c: included by _BATCH)
-    key = source_key([header, source, cdef, _BATCH, " ".join(cflags)]
+    key = source_key([header, source, cdef, _BATCH, " ".join(cflags), spec or ""]
                      + [p.read_bytes() for p in sorted(fw.rglob("*.[ch]")) + harness
                         + [_PLANT_H, here / "plant.c", here / "ziggurat_tables.h"]])
     modname = f"_stsp_{table.name}_{key}"
@@ -837,6 +858,8 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     def build(out: Path) -> Path:
         (out / f"{table.name}.h").write_text(header)
         (out / f"{table.name}.c").write_text(source)
+        if spec is not None:
+            (out / "plant_spec.h").write_text(spec)
         return compile_cffi(
             out, modname, cdef,
             f'#include "stospline/stsp_controller.h"\n#include "{table.name}.h"\n'
@@ -846,4 +869,4 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
             quiet=quiet)
 
     mod = load_module(cached_build(key, modname, build, root=build_dir))
-    return CompiledController(mod.ffi, mod.lib, table)
+    return CompiledController(mod.ffi, mod.lib, table, spec, fixed_shape)

@@ -213,6 +213,13 @@ double harness_plant_path(const harness_plant_t *pl, const double *u, const doub
     return plant_step(pl, &pp, u, dz, x);
 }
 
+int harness_plant_compiled(const harness_plant_t *pl)
+{
+    plant_prep_t pp;
+    plant_prepare(pl, &pp);
+    return pp.spec;
+}
+
 void harness_plant_tick(const harness_plant_t *pl, size_t paths, const double *dZ,
                         const float *U, double *X, double *cost)
 {

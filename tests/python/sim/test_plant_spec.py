@@ -41,10 +41,12 @@ def _states(problem, rng):
 
 
 def _run(ctl, plant, X, U, dZ, ticks=20):
-    X, cost = X.copy(), np.zeros(len(X))
+    """The states and costs after every tick (a sign of zero may not last many ticks)."""
+    X, cost, out = X.copy(), np.zeros(len(X)), []
     for j in range(ticks):
         ctl.plant_tick(plant, dZ[j], U, X, cost)
-    return X, cost
+        out.append(X.copy())
+    return np.stack(out), cost
 
 
 @pytest.mark.parametrize("substeps", [1, 3])

@@ -20,7 +20,8 @@ All simulate the robot corridor (examples/robot_corridor.toml, 6000 ticks at 1 k
   tick (CPU time per path-tick), and where the harness's time goes per path-tick: the
   corridor watch (a run without the corridor), the normal numbers (``harness_normals``
   alone), the controller (``stsp_step`` over a block, ``harness_step_batch``), the plant
-  (``harness_plant_tick``), the rest (the loop, the statistics);
+  (``harness_plant_tick``, the step compiled for the problem, and beside it the step generic
+  in the stage data), the rest (the loop, the statistics);
 * **the whole command** ``stospline simulate examples/robot_corridor.toml --paths N --json``
   (imports, design, oracle, substep pilot, Monte Carlo on every core, corridor bounds):
   wall time, path-ticks per second of wall time.
@@ -202,6 +203,13 @@ def part_seconds(problem, ctl, paths: int) -> dict:
     for _ in range(calls):
         ctl.plant_tick(plant, dZ, us, Xd, cost)
     out["plant (1 step)"] = time.process_time() - t
+    # the step generic in the stage data, for comparison (not part of the harness's time)
+    generic = build_controller(table)
+    plant = generic.plant(stage, *_zoh(stage, h), h, 1)
+    t = time.process_time()
+    for _ in range(calls):
+        generic.plant_tick(plant, dZ, us, Xd, cost)
+    out["generic plant step"] = time.process_time() - t
     return out
 
 
@@ -250,12 +258,14 @@ def one_core_and_baseline(problem, d, ctl, paths: int, repeat: int) -> None:
     print("where the harness's time goes per path-tick (parts run apart, ns):")
     known = watch
     print(f"  {'corridor watch':30s} {watch:6.1f}")
+    generic = parts.pop("generic plant step") / work * 1e9
     for name, sec in parts.items():
         ns = sec / work * 1e9
         known += ns
         print(f"  {name:30s} {ns:6.1f}")
     print(f"  {'the rest (loop, statistics)':30s} {whole - known:6.1f}")
     print(f"  {'total':30s} {whole:6.1f}")
+    print(f"  (the plant step generic in the stage data instead: {generic:.1f})")
 
 
 def main() -> None:
@@ -272,7 +282,7 @@ def main() -> None:
 
     problem = load_problem(ROOT / "examples" / "robot_corridor.toml")
     d = design_problem(problem)
-    ctl = build_controller(d.table)
+    ctl = build_controller(d.table, plant=problem)   # the plant step compiled for it
     ticks = d.table.n_ticks
     print(f"robot corridor, {ticks} ticks, {SUBSTEPS} plant steps per tick; stospline on "
           f"{workers} worker process(es), numpy in one; {os.cpu_count()} CPUs reported")

@@ -67,6 +67,7 @@ int harness_run_ticks(stsp_ctrl_t *ctrls, size_t count, uint32_t j0, uint32_t j1
                       const harness_corridor_t *cor, size_t n_cor, double *sample_x,
                       double *sample_u, float *rec_x, float *rec_u, size_t n_keep);
 int harness_init_batch(stsp_ctrl_t *ctrls, size_t count, const stsp_table_t *table);
+int harness_corridor_compiled(const harness_corridor_t *c, size_t k, size_t n);
 int harness_step_batch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
                        const stsp_scalar_t *x, stsp_scalar_t *u, int *status);
 int harness_pair_batch(const stsp_ctrl_t *proto, size_t count, const uint32_t *t_latch,
@@ -147,6 +148,29 @@ static inline int corridor_inside(const harness_corridor_t *c, size_t n, const d
     }
     return inside;
 }
+/* corridor_inside, by the corridor compiled into the module when bit i of `fit` says it is
+ * corridor i (plant_spec.py: the same outcome). */
+#if defined(__GNUC__)
+__attribute__((always_inline))
+#endif
+static inline int corridor_test(uint32_t fit, size_t i, const harness_corridor_t *c, size_t n,
+                                const double *x) {
+#if defined(HARNESS_PLANT_SPEC) && CORRIDOR_SPEC_COUNT > 0
+    if (i < 32u && (fit >> i & 1u) != 0u) return corridor_spec_inside(i, x);
+#else
+    (void)fit; (void)i;
+#endif
+    return corridor_inside(c, n, x);
+}
+/* 1 when corridor c (n states), the run's corridor k, is tested by the compiled one. */
+int harness_corridor_compiled(const harness_corridor_t *c, size_t k, size_t n) {
+#if defined(HARNESS_PLANT_SPEC) && CORRIDOR_SPEC_COUNT > 0
+    return k < CORRIDOR_SPEC_COUNT && corridor_spec_fits(c, k, n);
+#else
+    (void)c; (void)k; (void)n;
+    return 0;
+#endif
+}
 /* The wall a state x (n) leaves corridor c through, -1 inside (plant.h's rule). */
 static int corridor_wall(const harness_corridor_t *c, size_t n, const double *x) {
     double y[32], best = 0.0;
@@ -191,6 +215,7 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
     float xf[STSP_MAX_NX], uf[STSP_MAX_NU];
     double ud[STSP_MAX_NU];
     plant_prep_t pp;
+    uint32_t cor_fit = 0u;     /* bit i: corridor i is the module's compiled corridor i */
     size_t p, i;
     int worst = 0;
     if (n + (f != NULL && f->feed_held ? m : 0u) > STSP_MAX_NX || m > STSP_MAX_NU
@@ -200,6 +225,11 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
     for (i = 0; i < n_cor; ++i) if (cor[i].p > 32u) return (int)STSP_ERR_BAD_DIMS;
     for (i = 0; i < n; ++i) x_sum[i] = 0.0;
     plant_prepare(pl, &pp);
+#if defined(HARNESS_PLANT_SPEC) && CORRIDOR_SPEC_COUNT > 0
+    for (i = 0; i < n_cor && i < CORRIDOR_SPEC_COUNT; ++i) {
+        if (corridor_spec_fits(&cor[i], i, n)) cor_fit |= (uint32_t)1u << i;
+    }
+#endif
     for (p = 0; p < count; ++p) {
         double *x = X + p * n;
         const int run = f == NULL || !(miss_u != NULL && miss_u[p] < f->miss_probability);
@@ -236,7 +266,7 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
         for (i = 0; i < n_cor; ++i) {             /* the state after the tick: tick + 1 */
             const harness_corridor_t *c = &cor[i];
             if (tick + 1u >= c->first && tick + 1u <= c->last && c->exit_tick[p] < 0
-                    && !corridor_inside(c, n, x)) {
+                    && !corridor_test(cor_fit, i, c, n, x)) {
                 const int w = corridor_wall(c, n, x);
                 if (w >= 0) { c->exit_tick[p] = (int32_t)(tick + 1u); c->exit_wall[p] = w; }
             }

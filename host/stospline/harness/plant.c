@@ -190,6 +190,22 @@ static void plant_prepare(const harness_plant_t *pl, plant_prep_t *pp)
 #endif
 }
 
+#if defined(HARNESS_PLANT_SPEC) && CORRIDOR_SPEC_COUNT > 0
+/* Whether corridor c (n states) is compiled corridor k: the same outputs and walls. */
+static int corridor_spec_fits(const harness_corridor_t *c, size_t k, size_t n)
+{
+    const harness_corridor_t *s = &corridor_spec[k];
+    size_t i, walls;
+    if (k >= CORRIDOR_SPEC_COUNT || c->p != s->p || c->n_poly != s->n_poly) return 0;
+    for (i = 0; i <= s->n_poly; ++i) if (c->row_start[i] != s->row_start[i]) return 0;
+    walls = s->row_start[s->n_poly];
+    for (i = 0; i < s->p * n; ++i) if (c->C[i] != s->C[i]) return 0;
+    for (i = 0; i < walls * s->p; ++i) if (c->A[i] != s->A[i]) return 0;
+    for (i = 0; i < walls; ++i) if (c->b[i] != s->b[i]) return 0;
+    return 1;
+}
+#endif
+
 /* One path's tick: the compiled step when pl fits it, else the generic one. */
 #if defined(__GNUC__)
 __attribute__((always_inline))

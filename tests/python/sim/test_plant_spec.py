@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from stospline.harness import controller as controller_module
-from stospline.harness.controller import build_controller
+from stospline.harness.controller import CorridorWatch, build_controller
 from stospline.harness.montecarlo import _zoh, simulate
 from stospline.pipeline import design_problem
 from stospline.problem import load_problem
@@ -86,17 +86,26 @@ def test_other_data_run_the_generic_step(modules):
     assert Xg.tobytes() == Xc.tobytes() and cg.tobytes() == cc.tobytes()
 
 
-def test_simulate_numbers_do_not_depend_on_the_compiled_step(monkeypatch):
+@pytest.mark.parametrize("example", ["robot_corridor", "robot_corridor_eps01"])
+def test_simulate_numbers_do_not_depend_on_the_compiled_step(example, monkeypatch):
     """The whole fused run (controller, plant, corridor watch, statistics) with the compiled
-    step equals the run with the generic one."""
-    problem = load_problem(EXAMPLES / "robot_corridor.toml")
+    step and corridor equals the run with the generic ones, exits included."""
+    problem = load_problem(EXAMPLES / f"{example}.toml")
     generic = build_controller(design_problem(problem).table)
-    runs = [simulate(problem, generic, paths=600, seed=3, substeps=2, workers=1,
+    compiled = generic.for_plant(problem)
+    watch = CorridorWatch.of(problem.corridors, 1, problem.t0, generic.table.tick_hz)
+    for ctl, expected in ((compiled, 1), (generic, 0)):
+        cors, _ = watch.c_structs(ctl.ffi)
+        for k in range(len(problem.corridors)):
+            assert ctl.lib.harness_corridor_compiled(cors + k, k, problem.n) == expected
+    runs = [simulate(problem, generic, paths=1000, seed=3, substeps=2, workers=1,
                      per_path=True)]
     monkeypatch.setattr(controller_module, "plant_source", lambda *args: None)
-    runs.append(simulate(problem, generic, paths=600, seed=3, substeps=2, workers=1,
+    runs.append(simulate(problem, generic, paths=1000, seed=3, substeps=2, workers=1,
                          per_path=True))
     a, b = runs
+    assert np.count_nonzero(a.exit_tick >= 0) > 0        # exits to compare
     assert a.cost.tobytes() == b.cost.tobytes()
     assert all(x.tobytes() == y.tobytes() for x, y in zip(a.knot_states, b.knot_states))
     assert a.exit_tick.tobytes() == b.exit_tick.tobytes()
+    assert a.exit_wall.tobytes() == b.exit_wall.tobytes()

@@ -192,7 +192,7 @@ static void plant_prepare(const harness_plant_t *pl, plant_prep_t *pp)
 
 #if defined(HARNESS_PLANT_SPEC) && CORRIDOR_SPEC_COUNT > 0
 /* Whether corridor c (n states) is compiled corridor k: the same outputs and walls. */
-static int corridor_spec_fits(const harness_corridor_t *c, size_t k, size_t n)
+static inline int corridor_spec_fits(const harness_corridor_t *c, size_t k, size_t n)
 {
     const harness_corridor_t *s = &corridor_spec[k];
     size_t i, walls;

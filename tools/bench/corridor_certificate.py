@@ -9,9 +9,9 @@ choose for that run, once with the plant step and corridor watch compiled for th
 baseline, in the same run). Each run's time is extrapolated to the certificate's
 `--certify-paths` (default 3·10^6: a design whose exit probability is near eps needs that many
 for a one-sided 99 % bound below it), also at the steps per tick chosen for that many paths
-(the scheme's bias must then be smaller), measured on fewer paths. Prints wall and CPU time (the command and its
-workers; wall time is meaningless on a loaded machine, CPU time over the cores is what idle
-cores would take) and what a run under 10 minutes needs per path-tick.
+(the scheme's bias must then be smaller), measured on fewer paths. Prints wall and CPU time
+(the command and its workers; wall time is meaningless on a loaded machine, CPU time over
+the cores is what idle cores would take) and what a run under 10 minutes needs per path-tick.
 
     PYTHONPATH=host .venv/bin/python tools/bench/corridor_certificate.py [--paths 100000]
         [--certify-paths 3000000] [--workers N] [--seed 1]

@@ -31,7 +31,8 @@ def _blocks(stage, dt: float):
     Ad, Bd, fd = _zoh(stage, dt)
     return [("R", np.asarray(stage.R, float).ravel()), ("r", 2.0 * np.asarray(stage.r, float)),
             ("Q", np.asarray(stage.Q, float).ravel()),
-            ("S", 2.0 * np.asarray(stage.S, float).ravel()), ("q", 2.0 * np.asarray(stage.q, float)),
+            ("S", 2.0 * np.asarray(stage.S, float).ravel()),
+            ("q", 2.0 * np.asarray(stage.q, float)),
             ("Ad", Ad.ravel()), ("Bd", Bd.ravel()), ("fd", np.zeros(n) if fd is None else fd),
             ("g", stage.noise_tensor[tuple(np.argwhere(stage.noise_tensor != 0).T)])]
 

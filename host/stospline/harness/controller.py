@@ -106,6 +106,15 @@ const stsp_table_t *harness_table(void) { return &%(p)s_table; }
  * controller measures [x; held[p]], the command being applied; the statistics count the commands the controllers computed,
  * u_rec the applied ones. Returns the worst status. Inlined into both entry points, so the
  * fault-free one compiles without the fault branches. */
+/* 1 when corridor c (n states), the run's corridor k, is tested by the compiled one. */
+int harness_corridor_compiled(const harness_corridor_t *c, size_t k, size_t n) {
+#if defined(HARNESS_PLANT_SPEC) && CORRIDOR_SPEC_COUNT > 0
+    return k < CORRIDOR_SPEC_COUNT && corridor_spec_fits(c, k, n);
+#else
+    (void)c; (void)k; (void)n;
+    return 0;
+#endif
+}
 #ifndef STSP_ARITH_FIXED_POINT
 /* Whether x (n) is inside corridor c by corridor_wall's rule (a polygon whose largest
  * a y - b is not > 0), without branches on the data: the outcome varies from path to path,
@@ -161,15 +170,6 @@ static inline int corridor_test(uint32_t fit, size_t i, const harness_corridor_t
     (void)fit; (void)i;
 #endif
     return corridor_inside(c, n, x);
-}
-/* 1 when corridor c (n states), the run's corridor k, is tested by the compiled one. */
-int harness_corridor_compiled(const harness_corridor_t *c, size_t k, size_t n) {
-#if defined(HARNESS_PLANT_SPEC) && CORRIDOR_SPEC_COUNT > 0
-    return k < CORRIDOR_SPEC_COUNT && corridor_spec_fits(c, k, n);
-#else
-    (void)c; (void)k; (void)n;
-    return 0;
-#endif
 }
 /* The wall a state x (n) leaves corridor c through, -1 inside (plant.h's rule). */
 static int corridor_wall(const harness_corridor_t *c, size_t n, const double *x) {

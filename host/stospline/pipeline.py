@@ -542,7 +542,7 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
     from stospline.harness.montecarlo import simulate
     from stospline.harness.plant_scheme import choose_substeps
     from stospline.report.simulation_summary import loop_moments
-    ctl = build_controller(d.table, build_dir=build_dir)
+    ctl = build_controller(d.table, build_dir=build_dir, plant=d.problem)
     faults = d.problem.faults if faults is None else faults
     if substeps == "auto":
         choice = choose_substeps(d.problem, ctl, loop_moments(d, faults).J, paths=paths,
@@ -599,7 +599,7 @@ def plan_substeps(d: Designed, *, paths: int, seed: int, build_dir=None,
     from stospline.harness.controller import build_controller
     from stospline.harness.plant_scheme import choose_substeps
     check_implementable(d)
-    ctl = build_controller(d.table, build_dir=build_dir)
+    ctl = build_controller(d.table, build_dir=build_dir, plant=d.problem)
     faults = d.problem.faults if faults is None else faults
     return choose_substeps(d.problem, ctl, loop_moments(d, faults).J, paths=paths, seed=seed,
                            faults=faults)

@@ -18,9 +18,11 @@ All simulate the robot corridor (examples/robot_corridor.toml, 6000 ticks at 1 k
   the multiplicative velocity noise and the running cost, written for this problem only; with
   and without drawing the normal numbers. Beside it the harness on one core, 1 plant step per
   tick (CPU time per path-tick), and where the harness's time goes per path-tick: the
-  corridor watch (a run without the corridor), the normal numbers (``harness_normals``
+  corridor watch (a run without the corridor; and the generic watch, a corridor the module
+  was not compiled for), the normal numbers (``harness_normals``
   alone), the controller (``stsp_step`` over a block, ``harness_step_batch``), the plant
-  (``harness_plant_tick``), the rest (the loop, the statistics);
+  (``harness_plant_tick``, the step compiled for the problem, and beside it the step generic
+  in the stage data), the rest (the loop, the statistics);
 * **the whole command** ``stospline simulate examples/robot_corridor.toml --paths N --json``
   (imports, design, oracle, substep pilot, Monte Carlo on every core, corridor bounds):
   wall time, path-ticks per second of wall time.
@@ -202,6 +204,13 @@ def part_seconds(problem, ctl, paths: int) -> dict:
     for _ in range(calls):
         ctl.plant_tick(plant, dZ, us, Xd, cost)
     out["plant (1 step)"] = time.process_time() - t
+    # the step generic in the stage data, for comparison (not part of the harness's time)
+    generic = build_controller(table)
+    plant = generic.plant(stage, *_zoh(stage, h), h, 1)
+    t = time.process_time()
+    for _ in range(calls):
+        generic.plant_tick(plant, dZ, us, Xd, cost)
+    out["generic plant step"] = time.process_time() - t
     return out
 
 
@@ -225,15 +234,23 @@ def one_core_and_baseline(problem, d, ctl, paths: int, repeat: int) -> None:
     ticks = d.table.n_ticks
     work = paths * ticks
     bare = replace(problem, corridors=())
+    # the same corridor to the last bit of C but one: not the module's compiled corridor, so
+    # the generic watch runs (with the module's compiled plant step)
+    cor = problem.corridors[0]
+    other = replace(problem, corridors=(replace(cor, C=cor.C * (1 + 2.0**-52)),))
+    same = replace(ctl)
+    same.for_plant = lambda _problem: same
     with tempfile.TemporaryDirectory() as tmp:
         ffi, lib = build_c_loop(tmp)
         c_loop_seconds(ffi, lib, problem, d.table, BLOCK, True)          # warm
         simulate(problem, ctl, paths=BLOCK, seed=1, substeps=1, workers=1)
         rows = {"harness": [], "harness without the corridor": [],
+                "harness, generic corridor watch": [],
                 "hand-written C, normals drawn": [], "hand-written C, no normals": []}
         for _ in range(repeat):
             rows["harness"].append(harness_seconds(problem, ctl, paths))
             rows["harness without the corridor"].append(harness_seconds(bare, ctl, paths))
+            rows["harness, generic corridor watch"].append(harness_seconds(other, same, paths))
             rows["hand-written C, normals drawn"].append(
                 c_loop_seconds(ffi, lib, problem, d.table, paths, True))
             rows["hand-written C, no normals"].append(
@@ -250,12 +267,17 @@ def one_core_and_baseline(problem, d, ctl, paths: int, repeat: int) -> None:
     print("where the harness's time goes per path-tick (parts run apart, ns):")
     known = watch
     print(f"  {'corridor watch':30s} {watch:6.1f}")
+    generic = parts.pop("generic plant step") / work * 1e9
     for name, sec in parts.items():
         ns = sec / work * 1e9
         known += ns
         print(f"  {name:30s} {ns:6.1f}")
     print(f"  {'the rest (loop, statistics)':30s} {whole - known:6.1f}")
     print(f"  {'total':30s} {whole:6.1f}")
+    generic_watch = (med["harness, generic corridor watch"]
+                     - med["harness without the corridor"]) / work * 1e9
+    print(f"  (the plant step generic in the stage data instead: {generic:.1f}; the generic "
+          f"corridor watch: {generic_watch:.1f})")
 
 
 def main() -> None:
@@ -272,7 +294,7 @@ def main() -> None:
 
     problem = load_problem(ROOT / "examples" / "robot_corridor.toml")
     d = design_problem(problem)
-    ctl = build_controller(d.table)
+    ctl = build_controller(d.table, plant=problem)   # the plant step compiled for it
     ticks = d.table.n_ticks
     print(f"robot corridor, {ticks} ticks, {SUBSTEPS} plant steps per tick; stospline on "
           f"{workers} worker process(es), numpy in one; {os.cpu_count()} CPUs reported")

@@ -15,6 +15,7 @@ import numpy as np
 
 from stospline.cache import cached_build, compile_cffi, load_module, source_key
 from stospline.firmware_interface import STATUS, check_header
+from stospline.harness.plant_spec import plant_source
 from stospline.table.codegen import generate_c
 from stospline.table.format import GainTable
 
@@ -66,6 +67,7 @@ int harness_run_ticks(stsp_ctrl_t *ctrls, size_t count, uint32_t j0, uint32_t j1
                       const harness_corridor_t *cor, size_t n_cor, double *sample_x,
                       double *sample_u, float *rec_x, float *rec_u, size_t n_keep);
 int harness_init_batch(stsp_ctrl_t *ctrls, size_t count, const stsp_table_t *table);
+int harness_corridor_compiled(const harness_corridor_t *c, size_t k, size_t n);
 int harness_step_batch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
                        const stsp_scalar_t *x, stsp_scalar_t *u, int *status);
 int harness_pair_batch(const stsp_ctrl_t *proto, size_t count, const uint32_t *t_latch,
@@ -104,6 +106,15 @@ const stsp_table_t *harness_table(void) { return &%(p)s_table; }
  * controller measures [x; held[p]], the command being applied; the statistics count the commands the controllers computed,
  * u_rec the applied ones. Returns the worst status. Inlined into both entry points, so the
  * fault-free one compiles without the fault branches. */
+/* 1 when corridor c (n states), the run's corridor k, is tested by the compiled one. */
+int harness_corridor_compiled(const harness_corridor_t *c, size_t k, size_t n) {
+#if defined(HARNESS_PLANT_SPEC) && CORRIDOR_SPEC_COUNT > 0
+    return k < CORRIDOR_SPEC_COUNT && corridor_spec_fits(c, k, n);
+#else
+    (void)c; (void)k; (void)n;
+    return 0;
+#endif
+}
 #ifndef STSP_ARITH_FIXED_POINT
 /* Whether x (n) is inside corridor c by corridor_wall's rule (a polygon whose largest
  * a y - b is not > 0), without branches on the data: the outcome varies from path to path,
@@ -145,6 +156,20 @@ static inline int corridor_inside(const harness_corridor_t *c, size_t n, const d
         inside |= !(worst > 0.0);
     }
     return inside;
+}
+/* corridor_inside, by the corridor compiled into the module when bit i of `fit` says it is
+ * corridor i (plant_spec.py: the same outcome). */
+#if defined(__GNUC__)
+__attribute__((always_inline))
+#endif
+static inline int corridor_test(uint32_t fit, size_t i, const harness_corridor_t *c, size_t n,
+                                const double *x) {
+#if defined(HARNESS_PLANT_SPEC) && CORRIDOR_SPEC_COUNT > 0
+    if (i < 32u && (fit >> i & 1u) != 0u) return corridor_spec_inside(i, x);
+#else
+    (void)fit; (void)i;
+#endif
+    return corridor_inside(c, n, x);
 }
 /* The wall a state x (n) leaves corridor c through, -1 inside (plant.h's rule). */
 static int corridor_wall(const harness_corridor_t *c, size_t n, const double *x) {
@@ -189,6 +214,8 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
     const size_t n = PLANT_N, m = PLANT_M, dz_stride = pl->substeps * pl->mz;
     float xf[STSP_MAX_NX], uf[STSP_MAX_NU];
     double ud[STSP_MAX_NU];
+    plant_prep_t pp;
+    uint32_t cor_fit = 0u;     /* bit i: corridor i is the module's compiled corridor i */
     size_t p, i;
     int worst = 0;
     if (n + (f != NULL && f->feed_held ? m : 0u) > STSP_MAX_NX || m > STSP_MAX_NU
@@ -197,6 +224,12 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
     }
     for (i = 0; i < n_cor; ++i) if (cor[i].p > 32u) return (int)STSP_ERR_BAD_DIMS;
     for (i = 0; i < n; ++i) x_sum[i] = 0.0;
+    plant_prepare(pl, &pp);
+#if defined(HARNESS_PLANT_SPEC) && CORRIDOR_SPEC_COUNT > 0
+    for (i = 0; i < n_cor && i < CORRIDOR_SPEC_COUNT; ++i) {
+        if (corridor_spec_fits(&cor[i], i, n)) cor_fit |= (uint32_t)1u << i;
+    }
+#endif
     for (p = 0; p < count; ++p) {
         double *x = X + p * n;
         const int run = f == NULL || !(miss_u != NULL && miss_u[p] < f->miss_probability);
@@ -228,12 +261,12 @@ static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
             for (i = 0; i < m; ++i) ud[i] += f->actuator_std[i] * actuator_z[p * m + i];
         }
         if (p < n_rec) for (i = 0; i < m; ++i) u_rec[p * m + i] = (float)ud[i];
-        cost[p] += plant_path(pl, ud, dZ + p * dz_stride, x);
+        cost[p] += plant_step(pl, &pp, ud, dZ + p * dz_stride, x);
         for (i = 0; i < n; ++i) x_sum[i] += x[i];
         for (i = 0; i < n_cor; ++i) {             /* the state after the tick: tick + 1 */
             const harness_corridor_t *c = &cor[i];
             if (tick + 1u >= c->first && tick + 1u <= c->last && c->exit_tick[p] < 0
-                    && !corridor_inside(c, n, x)) {
+                    && !corridor_test(cor_fit, i, c, n, x)) {
                 const int w = corridor_wall(c, n, x);
                 if (w >= 0) { c->exit_tick[p] = (int32_t)(tick + 1u); c->exit_wall[p] = w; }
             }
@@ -395,6 +428,16 @@ class CompiledController:
     ffi: object
     lib: object
     table: GainTable
+    plant_source: str | None = None     # the plant step compiled in (`plant_spec`), if any
+    fixed_shape: bool = True
+
+    def for_plant(self, problem) -> "CompiledController":
+        """This controller in a module whose plant step is compiled for `problem`
+        (`build_controller`'s `plant`): itself when it already is."""
+        spec = plant_source(problem, self.table.tick_hz)
+        if spec is None or spec == self.plant_source:
+            return self
+        return build_controller(self.table, fixed_shape=self.fixed_shape, plant=problem)
 
     @property
     def arith(self) -> str:
@@ -777,7 +820,8 @@ def _table_sources(table) -> tuple[str, str]:
 
 
 def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
-                     quiet: bool = True, fixed_shape: bool = True) -> CompiledController:
+                     quiet: bool = True, fixed_shape: bool = True,
+                     plant=None) -> CompiledController:
     """Compile ``firmware/src/*.c`` with the table's generated C into a cffi module and load it.
 
     Builds are cached in `build_dir` (default: `stospline.cache.cache_root`) under a hash of
@@ -795,6 +839,10 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
         (``STSP_FIXED_NX/NU/N_LATCH``, the fastest; it refuses a table of another shape).
         False: the generic build, which takes any table within the ``STSP_MAX_*`` limits.
         Both compute the same bits.
+    plant : Problem, optional
+        The plant the Monte Carlo harness will run: its step is compiled for it
+        (`stospline.harness.plant_spec`: its zero and unit coefficients and noise entries
+        built in), the same bits as the generic step, which still serves any other plant.
 
     Returns
     -------
@@ -824,12 +872,15 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     if fixed_shape:
         cflags += [f"-DSTSP_FIXED_NX={n}u", f"-DSTSP_FIXED_NU={m}u",
                    f"-DSTSP_FIXED_N_LATCH={n_latch}u"]
+    spec = None if plant is None else plant_source(plant, table.tick_hz)
+    if spec is not None:
+        cflags.append("-DHARNESS_PLANT_SPEC")
     fw = firmware_dir()
     check_header(fw / "include")   # the shared constants are still the header's
     fw_sources = sorted((fw / "src").glob("*.c"))
     here = Path(__file__).parent
     harness = [here / "normals.c"]      # the harness's own C (plant.c: included by _BATCH)
-    key = source_key([header, source, cdef, _BATCH, " ".join(cflags)]
+    key = source_key([header, source, cdef, _BATCH, " ".join(cflags), spec or ""]
                      + [p.read_bytes() for p in sorted(fw.rglob("*.[ch]")) + harness
                         + [_PLANT_H, here / "plant.c", here / "ziggurat_tables.h"]])
     modname = f"_stsp_{table.name}_{key}"
@@ -837,6 +888,8 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     def build(out: Path) -> Path:
         (out / f"{table.name}.h").write_text(header)
         (out / f"{table.name}.c").write_text(source)
+        if spec is not None:
+            (out / "plant_spec.h").write_text(spec)
         return compile_cffi(
             out, modname, cdef,
             f'#include "stospline/stsp_controller.h"\n#include "{table.name}.h"\n'
@@ -846,4 +899,4 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
             quiet=quiet)
 
     mod = load_module(cached_build(key, modname, build, root=build_dir))
-    return CompiledController(mod.ffi, mod.lib, table)
+    return CompiledController(mod.ffi, mod.lib, table, spec, fixed_shape)

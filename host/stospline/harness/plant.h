@@ -25,6 +25,9 @@ typedef struct {
  * the running cost over the tick; 0 and x unchanged when n > 64 or m > 32. */
 double harness_plant_path(const harness_plant_t *pl, const double *u, const double *dz,
                           double *x);
+/* 1 when pl runs the step compiled for the module's problem (plant_spec.py), 0 when it runs
+ * the generic one (a module without one, or data that do not fit it): the same bits. */
+int harness_plant_compiled(const harness_plant_t *pl);
 /* Every path: X (paths, n) in place, U (paths, m) float32 commands, dZ (paths, substeps, mz),
  * cost (paths) accumulated. */
 void harness_plant_tick(const harness_plant_t *pl, size_t paths, const double *dZ,

@@ -27,12 +27,12 @@ import os
 from dataclasses import dataclass, field
 
 import numpy as np
-from stospline.expm import expm
 
 from stospline import progress
 from stospline.problem.faults import Faults
 from stospline.harness.controller import (STATUS, CompiledController, CorridorWatch, FaultDraws,
                                       TickStats)
+from stospline.harness.plant_spec import zoh_step as _zoh
 from stospline.harness.path_stats import COST_SAMPLE, CorridorExits, Moments, RunStats
 from stospline.errors import ProblemError
 from stospline.problem.model import Problem
@@ -124,18 +124,6 @@ class MonteCarloResult:
     def exit_count(self, corridor: int) -> int:
         """Paths that left corridor `corridor` (`problem.corridors`)."""
         return int(self.exits.count[corridor])
-
-
-def _zoh(stage, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """``(Ad, Bd, fd)`` of one plant step of length dt: ``x+ = Ad x + Bd u + fd`` in the mean
-    (fd None without a drift)."""
-    n, m = stage.B.shape
-    big = np.zeros((n + m + 1, n + m + 1))
-    big[:n, :n], big[:n, n:n + m] = stage.A, stage.B
-    if stage.f is not None:
-        big[:n, -1] = stage.f
-    E = expm(big * dt)
-    return E[:n, :n], E[:n, n:n + m], (None if stage.f is None else E[:n, -1])
 
 
 # Paths per random stream. Block 0 draws from the seed's own stream, block i >= 1 from child

@@ -168,12 +168,17 @@ static void plant_prepare(const harness_plant_t *pl, plant_prep_t *pp)
     {
         const size_t n = PLANT_N, m = PLANT_M;
         const unsigned char *kind = plant_spec_kind;
-        size_t used = 0, k;
+        size_t used = 0;
         int fits = pl->n == n && pl->m == m && pl->mz == PLANT_SPEC_MZ
                    && pl->g_count == PLANT_SPEC_G && pl->state_cost == PLANT_SPEC_STATE_COST;
-        for (k = 0; fits && k < 3u * PLANT_SPEC_G; ++k) {
-            fits = pl->g_index[k] == plant_spec_g_index[k];
+#if PLANT_SPEC_G > 0  /* a noise-free plant has no entries (and k < 0u would warn) */
+        {
+            size_t k;
+            for (k = 0; fits && k < 3u * PLANT_SPEC_G; ++k) {
+                fits = pl->g_index[k] == plant_spec_g_index[k];
+            }
         }
+#endif
         fits = fits && plant_spec_take(pp, &used, &kind, pl->R, m * m, 1.0)
                && plant_spec_take(pp, &used, &kind, pl->r, m, 2.0);
         if (PLANT_SPEC_STATE_COST) {

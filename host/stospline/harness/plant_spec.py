@@ -17,7 +17,21 @@ from __future__ import annotations
 
 import numpy as np
 
+from stospline.expm import expm
+
 __all__ = ["plant_source"]
+
+def zoh_step(stage, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """``(Ad, Bd, fd)`` of one plant step of length dt: ``x+ = Ad x + Bd u + fd`` in the mean
+    (fd None without a drift)."""
+    n, m = stage.B.shape
+    big = np.zeros((n + m + 1, n + m + 1))
+    big[:n, :n], big[:n, n:n + m] = stage.A, stage.B
+    if stage.f is not None:
+        big[:n, -1] = stage.f
+    E = expm(big * dt)
+    return E[:n, :n], E[:n, n:n + m], (None if stage.f is None else E[:n, -1])
+
 
 # Kinds of a coefficient (plant.c's PLANT_SPEC_* constants).
 _ZERO, _ONE, _VALUE, _PLUS_ZERO = 0, 1, 2, 3
@@ -26,9 +40,8 @@ _ZERO, _ONE, _VALUE, _PLUS_ZERO = 0, 1, 2, 3
 def _blocks(stage, dt: float):
     """The stage's coefficients in the loader's order (plant.c, plant_spec_load), with the
     factors of 2 applied as the generic step applies them (exact)."""
-    from stospline.harness.montecarlo import _zoh
     n, m = stage.B.shape
-    Ad, Bd, fd = _zoh(stage, dt)
+    Ad, Bd, fd = zoh_step(stage, dt)
     return [("R", np.asarray(stage.R, float).ravel()), ("r", 2.0 * np.asarray(stage.r, float)),
             ("Q", np.asarray(stage.Q, float).ravel()),
             ("S", 2.0 * np.asarray(stage.S, float).ravel()),
@@ -105,7 +118,10 @@ def plant_source(problem, tick_hz: int) -> str | None:
     lines += [f"    double xs{i} = x[{i}];" for i in range(n)]
     lines.append("    size_t s;")
     lines.append("    for (s = 0; s < pp->substeps; ++s) {")
-    lines.append("        const double *dzs = dz + s * PLANT_SPEC_MZ;")
+    if len(index[0]):
+        lines.append("        const double *dzs = dz + s * PLANT_SPEC_MZ;")
+    else:                                  # a noise-free plant reads no increments
+        lines.insert(0, "    (void)dz;")
     if state_cost[0]:
         lx = []
         for i in range(n):

@@ -46,7 +46,8 @@ static inline void plant_noise(const harness_plant_t *pl, size_t n, const double
 }
 
 /* The body of harness_plant_path, inlined where the harness's tick loop is compiled with
- * it (harness/controller.py includes this file), so the compiler schedules it with the loop. */
+ * it (harness/controller_c.py's loop includes this file), so the compiler schedules it with
+ * the loop. */
 #if defined(__GNUC__)
 __attribute__((always_inline))
 #endif

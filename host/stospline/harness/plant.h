@@ -1,5 +1,5 @@
 /* Harness-only plant integrator (not firmware), shared by plant.c, the harness's C around the
- * controller (harness/controller.py) and the cffi declarations (read from this file).
+ * controller (harness/controller_c.py) and the cffi declarations (read from this file).
  *
  * With u held over a tick, each of `substeps` steps is the exponential Euler-Maruyama step
  *     x+ = Ad x + Bd u + fd + sum_i w_i G_i dZ,      dZ ~ N(0, dt I)  (supplied by the caller)

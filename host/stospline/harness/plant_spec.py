@@ -183,7 +183,7 @@ def _hex(v: float) -> str:
 
 def _corridor_source(corridors, n: int) -> tuple[list[str], list[str]]:
     """The corridors' data (to check the run's against) and `corridor_spec_inside`: whether
-    x is inside corridor k by corridor_inside's rule (controller.py) with the walls as
+    x is inside corridor k by corridor_inside's rule (controller_c.py) with the walls as
     constants, zero coefficients dropped and unit ones not multiplied. The outputs y are the
     same bits (a sum from +0.0); a wall's a y - b may differ in the sign of a zero, which no
     comparison sees, so every path is inside or outside as with the generic test."""

@@ -109,3 +109,22 @@ def test_simulate_numbers_do_not_depend_on_the_compiled_step(example, monkeypatc
     assert all(x.tobytes() == y.tobytes() for x, y in zip(a.knot_states, b.knot_states))
     assert a.exit_tick.tobytes() == b.exit_tick.tobytes()
     assert a.exit_wall.tobytes() == b.exit_wall.tobytes()
+
+
+@pytest.mark.parametrize("noise", [True, False])
+def test_compiled_module_builds_without_warnings(noise, tmp_path, monkeypatch):
+    """The module with the compiled step and corridors builds under the harness's flags plus
+    -Werror, for a noisy plant and for a noise-free one (no increments to read)."""
+    from stospline.harness import build as build_module
+    text = (EXAMPLES / "robot_corridor.toml").read_text()
+    if not noise:
+        start = text.index("noise = [")
+        text = text[:start] + text[text.index("]\n", text.index("state = 3")) + 2:]
+    src = tmp_path / "p.toml"
+    src.write_text(text)
+    problem = load_problem(src)
+    assert bool(np.any(problem.stages[0].G)) == noise
+    monkeypatch.setattr(build_module, "HARNESS_CFLAGS", build_module.HARNESS_CFLAGS + ["-Werror"])
+    table = design_problem(problem).table
+    ctl = build_controller(table, build_dir=tmp_path / "build", plant=problem)
+    assert ctl.plant_source is not None

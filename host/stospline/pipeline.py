@@ -568,8 +568,9 @@ def simulation_estimate(d: Designed, *, paths: int, substeps: int, workers: int 
                                  seconds=budget.BASE_SECONDS))
     est.terms.append(budget.Term("C text of the tables, compiled", "tick_hz",
                                  seconds=(budget.CODEGEN_NUMBER + budget.COMPILE_NUMBER)
-                                 * numbers,
-                                 bytes=(budget.CODEGEN_BYTES + budget.COMPILE_BYTES) * numbers))
+                                 * numbers, bytes=budget.CODEGEN_BYTES * numbers))
+    est.terms.append(budget.Term("the C compiler on the tables", "tick_hz",
+                                 bytes=budget.COMPILE_BYTES * numbers, transient=True))
     est.terms += budget.monte_carlo_terms(d.problem, paths=paths, substeps=substeps,
                                           workers=workers, record=record,
                                           n_latch=t.dims[2],

@@ -552,9 +552,20 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
     mc = simulate(d.problem, ctl, paths=paths, seed=seed,
                   substeps=choice.substeps if choice is not None else substeps, workers=workers,
                   record=record, scheduler=scheduler, faults=faults, force_workers=True,
-                  per_path=per_path)
+                  per_path=per_path, alongside=lambda: _summary_ahead(d))
     mc.substep_choice = choice
     return mc
+
+
+def _summary_ahead(d: Designed) -> None:
+    """What `simulation_summary` needs besides the run, done while the paths run: the
+    quantile functions' module loaded, and the corridors' output moments for their exit
+    bounds (one oracle pass, kept by `harness.exit_stats.corridor_outputs_of`; a table
+    designed for a delay has none)."""
+    from stospline.harness.exit_stats import clopper_pearson_upper, corridor_outputs_of
+    clopper_pearson_upper(0, 1)            # imports scipy.special (~0.3 s of CPU)
+    if d.problem.corridors and not getattr(d.table, "delay_ticks", 0):
+        corridor_outputs_of(d.problem, d.table)
 
 
 def simulation_estimate(d: Designed, *, paths: int, substeps: int, workers: int = 1,

@@ -32,7 +32,7 @@ must stay flat: time linear in paths). The numpy baseline runs up to 10^4 paths 
 time is linear too and only costs minutes).
 
     PYTHONPATH=host .venv/bin/python tools/bench/harness_throughput.py [--paths 1000,10000,100000]
-        [--workers N] [--command-paths 20000] [--repeat 3]
+        [--workers N] [--command-paths 20000] [--repeat 3] [--command-only]
 
 Add 1000000 to --paths for the 10^6-path point (about 5 minutes on 2 cores).
 """
@@ -214,19 +214,68 @@ def part_seconds(problem, ctl, paths: int) -> dict:
     return out
 
 
+# The commands run as an installed package runs: with its modules' bytecode compiled (pip
+# compiles it; here into a directory of its own, PYTHONPYCACHEPREFIX), not from source.
+_PYC = tempfile.mkdtemp(prefix="stospline-bench-pyc-")
+
+
+def _command_env() -> dict:
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "host"), "PYTHONPYCACHEPREFIX": _PYC}
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    return env
+
+
 def command_seconds(paths: int) -> tuple[float, float]:
     """Wall and CPU seconds (user + system, the command and its workers) of the whole
     `stospline simulate` command."""
     import resource
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "host")}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     subprocess.run([sys.executable, "-m", "stospline", "simulate",
                     str(ROOT / "examples" / "robot_corridor.toml"), "--paths", str(paths),
-                    "--json"], check=True, env=env, stdout=subprocess.DEVNULL)
+                    "--json"], check=True, env=_command_env(), stdout=subprocess.DEVNULL)
     wall = time.perf_counter() - t
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def alongside_seconds() -> float:
+    """CPU seconds, in a fresh process, of what the command does while its paths run
+    (`pipeline._summary_ahead`: scipy.special imported, the corridor's exit-bound oracle
+    pass): the serial part of the command is its CPU with 2 paths less this."""
+    code = ("import time\n"
+            "from stospline.pipeline import _summary_ahead, design_problem\n"
+            "from stospline.problem import load_problem\n"
+            f"d = design_problem(load_problem({str(ROOT / 'examples' / 'robot_corridor.toml')!r}))\n"
+            "t = time.process_time()\n"
+            "_summary_ahead(d)\n"
+            "print(time.process_time() - t)\n")
+    out = subprocess.run([sys.executable, "-c", code], check=True, env=_command_env(),
+                         capture_output=True, text=True).stdout
+    return float(out.split()[-1])
+
+
+def whole_command(paths: int, workers: int, repeat: int, ticks: int) -> None:
+    """The whole command's wall and CPU time, and from them its wall on idle cores."""
+    command_seconds(2)                      # warm the caches (the compiled controller)
+    runs = [command_seconds(paths) for _ in range(repeat)]
+    wall = statistics.median(r[0] for r in runs)
+    cpu = statistics.median(r[1] for r in runs)
+    small = statistics.median(command_seconds(2)[1] for _ in range(repeat))
+    ahead = statistics.median(alongside_seconds() for _ in range(repeat))
+    serial = small - ahead
+    work = paths * ticks
+    print(f"\nwhole command, stospline simulate examples/robot_corridor.toml --paths "
+          f"{paths} --json (median of {repeat}):")
+    print(f"  {wall:.2f} s wall, {work / wall:.3e} path-ticks/s of wall time")
+    print(f"  {cpu:.2f} s CPU (command and workers); with 2 paths {small:.2f} s, of which "
+          f"{ahead:.2f} s run beside the paths (scipy.special, the exit bounds' oracle)")
+    print(f"  in series: S = {small:.2f} - {ahead:.2f} = {serial:.2f} s (imports, design, "
+          f"substep pilot and plant-scheme oracle, the summary)")
+    print(f"  per path-tick: {(cpu - small) / work * 1e9:.1f} ns of CPU (workers)")
+    idle = serial + (cpu - serial) / workers
+    print(f"  on {workers} idle cores: S + (CPU - S) / {workers} = {idle:.2f} s wall, "
+          f"{work / idle:.3e} path-ticks/s")
 
 
 def one_core_and_baseline(problem, d, ctl, paths: int, repeat: int) -> None:
@@ -288,6 +337,8 @@ def main() -> None:
     ap.add_argument("--command-paths", type=int, default=20000)
     ap.add_argument("--baseline-paths", type=int, default=4096)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--command-only", action="store_true",
+                    help="only the whole command's figures (a minute or two)")
     args = ap.parse_args()
     counts = [int(v) for v in args.paths.split(",")]
     workers = args.workers or default_workers()
@@ -296,6 +347,9 @@ def main() -> None:
     d = design_problem(problem)
     ctl = build_controller(d.table, plant=problem)   # the plant step compiled for it
     ticks = d.table.n_ticks
+    if args.command_only:
+        whole_command(args.command_paths, workers, args.repeat, ticks)
+        return
     print(f"robot corridor, {ticks} ticks, {SUBSTEPS} plant steps per tick; stospline on "
           f"{workers} worker process(es), numpy in one; {os.cpu_count()} CPUs reported")
     print(f"{'paths':>9} {'stospline':>16} {'numpy':>16} {'ratio':>6} "
@@ -318,20 +372,7 @@ def main() -> None:
               f"{t_ours / paths * 1e3:14.3f} ms  {mc.cost_mean_ci()[0]:.4f}{base_cost}")
     one_core_and_baseline(problem, d, ctl, args.baseline_paths, args.repeat)
     if args.command_paths:
-        command_seconds(2)                      # warm the caches (the compiled controller)
-        runs = [command_seconds(args.command_paths) for _ in range(args.repeat)]
-        wall = statistics.median(r[0] for r in runs)
-        cpu = statistics.median(r[1] for r in runs)
-        fixed = statistics.median(command_seconds(2)[1] for _ in range(args.repeat))
-        work = args.command_paths * ticks
-        print(f"\nwhole command, stospline simulate examples/robot_corridor.toml --paths "
-              f"{args.command_paths} --json (median of {args.repeat}):")
-        print(f"  {wall:.2f} s wall, {work / wall:.3e} path-ticks/s of wall time")
-        print(f"  {cpu:.2f} s CPU (command and workers), of which {fixed:.2f} s the command "
-              f"with 2 paths (imports, design, oracle, bounds, in series)")
-        idle = fixed + (cpu - fixed) / workers
-        print(f"  on {workers} idle cores: ~{idle:.2f} s wall, {work / idle:.3e} path-ticks/s "
-              f"(the rest of the CPU time spread over the cores)")
+        whole_command(args.command_paths, workers, args.repeat, ticks)
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ from stospline.oracle.exit_bound import exit_bounds
 from stospline.harness.path_stats import EXIT_EXAMPLES, CorridorExits
 
 __all__ = ["clopper_pearson_upper", "clopper_pearson_lower", "corridor_report",
-           "CONFIDENCE", "TIME_BINS"]
+           "corridor_outputs_of", "CONFIDENCE", "TIME_BINS"]
 
 CONFIDENCE = 0.99      # one-sided
 TIME_BINS = 6          # equal bins of the corridor's ticks in the reports
@@ -36,6 +36,24 @@ def clopper_pearson_lower(k: int, n: int, confidence: float = CONFIDENCE) -> flo
     return 0.0 if k <= 0 else float(betaincinv(k, n - k + 1, 1 - confidence))
 
 
+# The last problem's and table's corridor outputs: (problem, table, outputs), held so that
+# their ids are not reused while kept.
+_OUTPUTS: list = []
+
+
+def corridor_outputs_of(problem, table):
+    """`exit_bound.corridor_outputs` of `problem` and `table`, kept for the same two objects
+    (the last pair): `pipeline.simulate_problem` computes them while the paths run, and the
+    run's summary (`corridor_report`) finds them."""
+    from stospline.oracle.exit_bound import corridor_outputs
+    hit = _OUTPUTS[0] if _OUTPUTS else None
+    if hit is not None and hit[0] is problem and hit[1] is table:
+        return hit[2]
+    out = corridor_outputs(problem, table)
+    _OUTPUTS[:] = [(problem, table, out)]
+    return out
+
+
 def _counted(k: int, n: int) -> dict:
     return {"exits": int(k), "estimate": k / n, "upper99": clopper_pearson_upper(k, n)}
 
@@ -52,9 +70,8 @@ def corridor_report(problem, table, exits: "CorridorExits | None", *, outputs=No
     `with_bounds` False: no oracle bounds (``bound`` None; a table designed for a delay has
     no output moments)."""
     from stospline.problem.corridors import corridor_ticks
-    from stospline.oracle.exit_bound import corridor_outputs
     if with_bounds and outputs is None:
-        outputs = corridor_outputs(problem, table)
+        outputs = corridor_outputs_of(problem, table)
     h = 1.0 / problem.tick_hz
     out = []
     for i, c in enumerate(problem.corridors):

@@ -52,8 +52,12 @@ DEFAULT_MAX_BYTES = 4 * 1024 ** 3    # 4 GiB
 DEFAULT_MAX_GIB = DEFAULT_MAX_BYTES / 1024 ** 3     # the library's max_memory, in GiB
 
 # --- measured constants (tools/bench/calibrate_budget.py) --------------------------------------
-BASE_BYTES = 200e6          # interpreter, numpy, scipy, cffi modules; a first run compiles the C
-                            # kernels (a cold design of the robot peaks at 150-155 MiB with them)
+BASE_BYTES = 50e6           # interpreter, numpy, cffi, the package (a robot design whose C is
+                            # cached peaks at ~50 MiB, its simulation at ~70 MiB with the workers)
+BUILD_BYTES = 110e6         # a first run's C build (the design's kernels, the controller): cffi's
+                            # build machinery in the process and the compiler's process, freed
+                            # after it; a cold robot design peaks at ~137 MiB, its first
+                            # simulation at ~135 MiB (COMPILE_BYTES: larger tables' compiler)
 BASE_SECONDS = 3.0          # start-up: imports, the cached C kernel
 STAGE_SECONDS = 4e-3        # Python work per stage and oracle pass (maps, latches, knots)
 EXPM_S3 = 1.0e-9            # s: scipy expm of an s-square matrix ~ EXPM_S3 s^3 + EXPM_S2 s^2
@@ -84,18 +88,22 @@ BAND_Q3 = 5e-8              # s per q^3 of the band dual (OSQP on dense W)
 CORRIDOR_WALL = 10e-9       # s per path, tick and corridor wall: the C harness's exit watch
 CORRIDOR_BOUND_WALL = 1e-6  # s per tick and wall of a corridor's exit bounds (report)
 CORRIDOR_BOUND_COPIES = 12  # (ticks, walls) double arrays alive while one corridor is bounded
-WORKER_BYTES = 60e6         # a forked Monte Carlo worker's own memory besides its block
+WORKER_BYTES = 15e6         # a forked Monte Carlo worker's own pages besides its block (it
+                            # shares the rest copy-on-write: ~10 MiB private, ~23 MiB of PSS)
 FIGURE_BYTES = 150e6        # matplotlib and the figures of a plot or report
 FIGURE_SECONDS = 4.0        # importing matplotlib, drawing and encoding the figures
 
 
 @dataclass(frozen=True)
 class Term:
-    """One cost: what it is, the key that drives it, its time (s) and peak memory (bytes)."""
+    """One cost: what it is, the key that drives it, its time (s) and peak memory (bytes);
+    `transient` memory is freed when its step ends (a matrix exponential's workspace, the
+    compiler's), so only the largest such term counts."""
     what: str
     key: str
     seconds: float = 0.0
     bytes: float = 0.0
+    transient: bool = False
 
 
 @dataclass
@@ -110,9 +118,10 @@ class Estimate:
 
     @property
     def bytes(self) -> float:
-        # Tables and text stay resident; one exponential's workspace at a time on top.
-        resident = sum(t.bytes for t in self.terms if not t.what.startswith("tick map"))
-        transient = max([t.bytes for t in self.terms if t.what.startswith("tick map")] + [0])
+        # Tables and text stay resident; one exponential's workspace or one build at a time
+        # on top (a first run builds its C: the kernels, the controller).
+        resident = sum(t.bytes for t in self.terms if not t.transient)
+        transient = max([t.bytes for t in self.terms if t.transient] + [BUILD_BYTES])
         return BASE_BYTES + resident + transient
 
     def top(self, by: str) -> Term:
@@ -230,7 +239,7 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
     else:
         sec, byt = _expm(ds + 1)
         add(Term("tick map of the design (matrix exponential per distinct stage data)", dims,
-                 seconds=distinct * sec, bytes=byt + 4 * 8.0 * D * D))
+                 seconds=distinct * sec, bytes=byt + 4 * 8.0 * D * D, transient=True))
         flops = ds * vs + 2 * qmax * n * d + qmax * qmax * m + m * m * (n + 1 + qmax)
         add(Term("the design's tick recursion", "tick_hz",
                  seconds=KERNEL_FLOP * flops * (T - T_var) + VARYING_TICK * T_var
@@ -239,7 +248,8 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
         add(_tick_qp_term(problem, n, m, T))
     sec, byt = _expm(2 * D)
     add(Term("tick map of the oracle (matrix exponential per stage and pass)", dims,
-             seconds=passes * sec * (S - sum(varying)), bytes=byt + 4 * 8.0 * D * D))
+             seconds=passes * sec * (S - sum(varying)), bytes=byt + 4 * 8.0 * D * D,
+             transient=True))
     add(Term("the oracle's propagation over the ticks", "tick_hz",
              seconds=passes * ((ORACLE_TICK + ORACLE_TICK_D2 * D * D) * (T - T_var)
                                + IVP_TICK * (1 + D / 50) * T_var),
@@ -253,7 +263,9 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
     else:
         add(Term("C text of the tables, compiled", "tick_hz",
                  seconds=(CODEGEN_NUMBER + COMPILE_NUMBER) * numbers,
-                 bytes=(CODEGEN_BYTES + COMPILE_BYTES) * numbers))
+                 bytes=CODEGEN_BYTES * numbers))
+        add(Term("the C compiler on the tables", "tick_hz", bytes=COMPILE_BYTES * numbers,
+                 transient=True))
         est.terms += monte_carlo_terms(problem, paths=paths, substeps=substeps,
                                        workers=workers, record=record, n_latch=n_latch,
                                        delay_ticks=delay_ticks)

@@ -261,7 +261,7 @@ def count_exits(problem, corridor: int, cand: Candidate, *, paths: int, seed: in
     """Monte Carlo of the candidate's compiled C controller with the problem's plant (and
     faults): how many of `paths` paths leave the corridor."""
     d = design_problem(cand.problem(), **design_options)
-    mc = simulate(problem, build_controller(d.table), paths=paths, seed=seed,
+    mc = simulate(problem, build_controller(d.table, plant=problem), paths=paths, seed=seed,
                   substeps=substeps, workers=workers, scheduler=scheduler,
                   force_workers=force_workers)
     return Exits(mc.exit_count(corridor), int(paths), int(seed))

@@ -546,7 +546,7 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
     from stospline.harness.montecarlo import simulate
     from stospline.harness.plant_scheme import choose_substeps
     from stospline.report.simulation_summary import loop_moments
-    ctl = build_controller(d.table, build_dir=build_dir)
+    ctl = build_controller(d.table, build_dir=build_dir, plant=d.problem)
     faults = d.problem.faults if faults is None else faults
     if substeps == "auto":
         choice = choose_substeps(d.problem, ctl, loop_moments(d, faults).J, paths=paths,
@@ -556,9 +556,20 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
     mc = simulate(d.problem, ctl, paths=paths, seed=seed,
                   substeps=choice.substeps if choice is not None else substeps, workers=workers,
                   record=record, scheduler=scheduler, faults=faults, force_workers=True,
-                  per_path=per_path)
+                  per_path=per_path, alongside=lambda: _summary_ahead(d))
     mc.substep_choice = choice
     return mc
+
+
+def _summary_ahead(d: Designed) -> None:
+    """What `simulation_summary` needs besides the run, done while the paths run: the
+    quantile functions' module loaded, and the corridors' output moments for their exit
+    bounds (one oracle pass, kept by `harness.exit_stats.corridor_outputs_of`; a table
+    designed for a delay has none)."""
+    from stospline.harness.exit_stats import clopper_pearson_upper, corridor_outputs_of
+    clopper_pearson_upper(0, 1)            # imports scipy.special (~0.3 s of CPU)
+    if d.problem.corridors and not getattr(d.table, "delay_ticks", 0):
+        corridor_outputs_of(d.problem, d.table)
 
 
 def simulation_estimate(d: Designed, *, paths: int, substeps: int, workers: int = 1,
@@ -572,8 +583,9 @@ def simulation_estimate(d: Designed, *, paths: int, substeps: int, workers: int 
                                  seconds=budget.BASE_SECONDS))
     est.terms.append(budget.Term("C text of the tables, compiled", "tick_hz",
                                  seconds=(budget.CODEGEN_NUMBER + budget.COMPILE_NUMBER)
-                                 * numbers,
-                                 bytes=(budget.CODEGEN_BYTES + budget.COMPILE_BYTES) * numbers))
+                                 * numbers, bytes=budget.CODEGEN_BYTES * numbers))
+    est.terms.append(budget.Term("the C compiler on the tables", "tick_hz",
+                                 bytes=budget.COMPILE_BYTES * numbers, transient=True))
     est.terms += budget.monte_carlo_terms(d.problem, paths=paths, substeps=substeps,
                                           workers=workers, record=record,
                                           n_latch=t.dims[2],
@@ -603,7 +615,7 @@ def plan_substeps(d: Designed, *, paths: int, seed: int, build_dir=None,
     from stospline.harness.controller import build_controller
     from stospline.harness.plant_scheme import choose_substeps
     check_implementable(d)
-    ctl = build_controller(d.table, build_dir=build_dir)
+    ctl = build_controller(d.table, build_dir=build_dir, plant=d.problem)
     faults = d.problem.faults if faults is None else faults
     return choose_substeps(d.problem, ctl, loop_moments(d, faults).J, paths=paths, seed=seed,
                            faults=faults)

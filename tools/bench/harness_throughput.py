@@ -18,9 +18,11 @@ All simulate the robot corridor (examples/robot_corridor.toml, 6000 ticks at 1 k
   the multiplicative velocity noise and the running cost, written for this problem only; with
   and without drawing the normal numbers. Beside it the harness on one core, 1 plant step per
   tick (CPU time per path-tick), and where the harness's time goes per path-tick: the
-  corridor watch (a run without the corridor), the normal numbers (``harness_normals``
+  corridor watch (a run without the corridor; and the generic watch, a corridor the module
+  was not compiled for), the normal numbers (``harness_normals``
   alone), the controller (``stsp_step`` over a block, ``harness_step_batch``), the plant
-  (``harness_plant_tick``), the rest (the loop, the statistics);
+  (``harness_plant_tick``, the step compiled for the problem, and beside it the step generic
+  in the stage data), the rest (the loop, the statistics);
 * **the whole command** ``stospline simulate examples/robot_corridor.toml --paths N --json``
   (imports, design, oracle, substep pilot, Monte Carlo on every core, corridor bounds):
   wall time, path-ticks per second of wall time.
@@ -30,7 +32,7 @@ must stay flat: time linear in paths). The numpy baseline runs up to 10^4 paths 
 time is linear too and only costs minutes).
 
     PYTHONPATH=host .venv/bin/python tools/bench/harness_throughput.py [--paths 1000,10000,100000]
-        [--workers N] [--command-paths 20000] [--repeat 3]
+        [--workers N] [--command-paths 20000] [--repeat 3] [--command-only]
 
 Add 1000000 to --paths for the 10^6-path point (about 5 minutes on 2 cores).
 """
@@ -202,22 +204,78 @@ def part_seconds(problem, ctl, paths: int) -> dict:
     for _ in range(calls):
         ctl.plant_tick(plant, dZ, us, Xd, cost)
     out["plant (1 step)"] = time.process_time() - t
+    # the step generic in the stage data, for comparison (not part of the harness's time)
+    generic = build_controller(table)
+    plant = generic.plant(stage, *_zoh(stage, h), h, 1)
+    t = time.process_time()
+    for _ in range(calls):
+        generic.plant_tick(plant, dZ, us, Xd, cost)
+    out["generic plant step"] = time.process_time() - t
     return out
+
+
+# The commands run as an installed package runs: with its modules' bytecode compiled (pip
+# compiles it; here into a directory of its own, PYTHONPYCACHEPREFIX), not from source.
+_PYC = tempfile.mkdtemp(prefix="stospline-bench-pyc-")
+
+
+def _command_env() -> dict:
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "host"), "PYTHONPYCACHEPREFIX": _PYC}
+    env.pop("PYTHONDONTWRITEBYTECODE", None)
+    return env
 
 
 def command_seconds(paths: int) -> tuple[float, float]:
     """Wall and CPU seconds (user + system, the command and its workers) of the whole
     `stospline simulate` command."""
     import resource
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "host")}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
     subprocess.run([sys.executable, "-m", "stospline", "simulate",
                     str(ROOT / "examples" / "robot_corridor.toml"), "--paths", str(paths),
-                    "--json"], check=True, env=env, stdout=subprocess.DEVNULL)
+                    "--json"], check=True, env=_command_env(), stdout=subprocess.DEVNULL)
     wall = time.perf_counter() - t
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def alongside_seconds() -> float:
+    """CPU seconds, in a fresh process, of what the command does while its paths run
+    (`pipeline._summary_ahead`: scipy.special imported, the corridor's exit-bound oracle
+    pass): the serial part of the command is its CPU with 2 paths less this."""
+    code = ("import time\n"
+            "from stospline.pipeline import _summary_ahead, design_problem\n"
+            "from stospline.problem import load_problem\n"
+            f"d = design_problem(load_problem({str(ROOT / 'examples' / 'robot_corridor.toml')!r}))\n"
+            "t = time.process_time()\n"
+            "_summary_ahead(d)\n"
+            "print(time.process_time() - t)\n")
+    out = subprocess.run([sys.executable, "-c", code], check=True, env=_command_env(),
+                         capture_output=True, text=True).stdout
+    return float(out.split()[-1])
+
+
+def whole_command(paths: int, workers: int, repeat: int, ticks: int) -> None:
+    """The whole command's wall and CPU time, and from them its wall on idle cores."""
+    command_seconds(2)                      # warm the caches (the compiled controller)
+    runs = [command_seconds(paths) for _ in range(repeat)]
+    wall = statistics.median(r[0] for r in runs)
+    cpu = statistics.median(r[1] for r in runs)
+    small = statistics.median(command_seconds(2)[1] for _ in range(repeat))
+    ahead = statistics.median(alongside_seconds() for _ in range(repeat))
+    serial = small - ahead
+    work = paths * ticks
+    print(f"\nwhole command, stospline simulate examples/robot_corridor.toml --paths "
+          f"{paths} --json (median of {repeat}):")
+    print(f"  {wall:.2f} s wall, {work / wall:.3e} path-ticks/s of wall time")
+    print(f"  {cpu:.2f} s CPU (command and workers); with 2 paths {small:.2f} s, of which "
+          f"{ahead:.2f} s run beside the paths (scipy.special, the exit bounds' oracle)")
+    print(f"  in series: S = {small:.2f} - {ahead:.2f} = {serial:.2f} s (imports, design, "
+          f"substep pilot and plant-scheme oracle, the summary)")
+    print(f"  per path-tick: {(cpu - small) / work * 1e9:.1f} ns of CPU (workers)")
+    idle = serial + (cpu - serial) / workers
+    print(f"  on {workers} idle cores: S + (CPU - S) / {workers} = {idle:.2f} s wall, "
+          f"{work / idle:.3e} path-ticks/s")
 
 
 def one_core_and_baseline(problem, d, ctl, paths: int, repeat: int) -> None:
@@ -225,15 +283,23 @@ def one_core_and_baseline(problem, d, ctl, paths: int, repeat: int) -> None:
     ticks = d.table.n_ticks
     work = paths * ticks
     bare = replace(problem, corridors=())
+    # the same corridor to the last bit of C but one: not the module's compiled corridor, so
+    # the generic watch runs (with the module's compiled plant step)
+    cor = problem.corridors[0]
+    other = replace(problem, corridors=(replace(cor, C=cor.C * (1 + 2.0**-52)),))
+    same = replace(ctl)
+    same.for_plant = lambda _problem: same
     with tempfile.TemporaryDirectory() as tmp:
         ffi, lib = build_c_loop(tmp)
         c_loop_seconds(ffi, lib, problem, d.table, BLOCK, True)          # warm
         simulate(problem, ctl, paths=BLOCK, seed=1, substeps=1, workers=1)
         rows = {"harness": [], "harness without the corridor": [],
+                "harness, generic corridor watch": [],
                 "hand-written C, normals drawn": [], "hand-written C, no normals": []}
         for _ in range(repeat):
             rows["harness"].append(harness_seconds(problem, ctl, paths))
             rows["harness without the corridor"].append(harness_seconds(bare, ctl, paths))
+            rows["harness, generic corridor watch"].append(harness_seconds(other, same, paths))
             rows["hand-written C, normals drawn"].append(
                 c_loop_seconds(ffi, lib, problem, d.table, paths, True))
             rows["hand-written C, no normals"].append(
@@ -250,12 +316,17 @@ def one_core_and_baseline(problem, d, ctl, paths: int, repeat: int) -> None:
     print("where the harness's time goes per path-tick (parts run apart, ns):")
     known = watch
     print(f"  {'corridor watch':30s} {watch:6.1f}")
+    generic = parts.pop("generic plant step") / work * 1e9
     for name, sec in parts.items():
         ns = sec / work * 1e9
         known += ns
         print(f"  {name:30s} {ns:6.1f}")
     print(f"  {'the rest (loop, statistics)':30s} {whole - known:6.1f}")
     print(f"  {'total':30s} {whole:6.1f}")
+    generic_watch = (med["harness, generic corridor watch"]
+                     - med["harness without the corridor"]) / work * 1e9
+    print(f"  (the plant step generic in the stage data instead: {generic:.1f}; the generic "
+          f"corridor watch: {generic_watch:.1f})")
 
 
 def main() -> None:
@@ -266,14 +337,19 @@ def main() -> None:
     ap.add_argument("--command-paths", type=int, default=20000)
     ap.add_argument("--baseline-paths", type=int, default=4096)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--command-only", action="store_true",
+                    help="only the whole command's figures (a minute or two)")
     args = ap.parse_args()
     counts = [int(v) for v in args.paths.split(",")]
     workers = args.workers or default_workers()
 
     problem = load_problem(ROOT / "examples" / "robot_corridor.toml")
     d = design_problem(problem)
-    ctl = build_controller(d.table)
+    ctl = build_controller(d.table, plant=problem)   # the plant step compiled for it
     ticks = d.table.n_ticks
+    if args.command_only:
+        whole_command(args.command_paths, workers, args.repeat, ticks)
+        return
     print(f"robot corridor, {ticks} ticks, {SUBSTEPS} plant steps per tick; stospline on "
           f"{workers} worker process(es), numpy in one; {os.cpu_count()} CPUs reported")
     print(f"{'paths':>9} {'stospline':>16} {'numpy':>16} {'ratio':>6} "
@@ -296,20 +372,7 @@ def main() -> None:
               f"{t_ours / paths * 1e3:14.3f} ms  {mc.cost_mean_ci()[0]:.4f}{base_cost}")
     one_core_and_baseline(problem, d, ctl, args.baseline_paths, args.repeat)
     if args.command_paths:
-        command_seconds(2)                      # warm the caches (the compiled controller)
-        runs = [command_seconds(args.command_paths) for _ in range(args.repeat)]
-        wall = statistics.median(r[0] for r in runs)
-        cpu = statistics.median(r[1] for r in runs)
-        fixed = statistics.median(command_seconds(2)[1] for _ in range(args.repeat))
-        work = args.command_paths * ticks
-        print(f"\nwhole command, stospline simulate examples/robot_corridor.toml --paths "
-              f"{args.command_paths} --json (median of {args.repeat}):")
-        print(f"  {wall:.2f} s wall, {work / wall:.3e} path-ticks/s of wall time")
-        print(f"  {cpu:.2f} s CPU (command and workers), of which {fixed:.2f} s the command "
-              f"with 2 paths (imports, design, oracle, bounds, in series)")
-        idle = fixed + (cpu - fixed) / workers
-        print(f"  on {workers} idle cores: ~{idle:.2f} s wall, {work / idle:.3e} path-ticks/s "
-              f"(the rest of the CPU time spread over the cores)")
+        whole_command(args.command_paths, workers, args.repeat, ticks)
 
 
 if __name__ == "__main__":

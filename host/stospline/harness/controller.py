@@ -6,379 +6,21 @@ that goes into the build), and the returned `CompiledController` steps C instanc
 """
 from __future__ import annotations
 
-import re
-
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from stospline.cache import cached_build, compile_cffi, load_module, source_key
-from stospline.firmware_interface import STATUS, check_header
+from stospline.firmware_interface import STATUS
+from stospline.harness.build import build_harness_module, firmware_dir
+from stospline.harness.controller_c import BATCH, VARIANTS, controller_cdef
+from stospline.harness.loop_state import CorridorWatch, FaultDraws, TickStats
+from stospline.harness.plant_spec import plant_source
 from stospline.table.codegen import generate_c
 from stospline.table.format import GainTable
 
-__all__ = ["build_controller", "CompiledController", "CorridorWatch", "firmware_dir", "STATUS"]
-
-
-# The plant's interface (plant.h), for cffi: the header itself, without its comments.
-_PLANT_H = Path(__file__).with_name("plant.h")
-_PLANT_PROTOTYPE = re.sub(r"/\*.*?\*/", "", _PLANT_H.read_text(), flags=re.S)
-
-_CDEF = """%(plant)s
-typedef float stsp_f32_t;
-typedef %(scalar)s stsp_scalar_t;
-typedef int... stsp_status_t;
-typedef struct {
-    uint16_t q; uint16_t nx; const double *Nt; const double *mt; const double *W;
-    const double *lo; const double *hi; ...;
-} stsp_bandqp_t;
-typedef struct { ...; } %(spline_t)s;
-typedef struct {
-    uint32_t magic; uint16_t format_version; uint16_t scalar_kind;
-    uint16_t nx; uint16_t nu; uint16_t n_latch; uint16_t n_stages;
-    uint32_t n_ticks; uint32_t tick_hz;
-    const uint32_t *stage_start; const uint16_t *stage_n_latch;
-    const stsp_scalar_t *K; const stsp_scalar_t *k0; const stsp_scalar_t *L;
-    const stsp_scalar_t *Lambda; const stsp_scalar_t *lambda0;
-    const stsp_scalar_t *u_min; const stsp_scalar_t *u_max; const stsp_scalar_t *u_hold;%(exps)s
-    const stsp_bandqp_t *band_qp; const %(spline_t)s *spline;
-    uint32_t crc32; uint8_t problem_sha256[32];
-} stsp_table_t;
-typedef struct {
-    const stsp_table_t *table; uint32_t next_tick; uint16_t stage; uint16_t latched;
-    uint16_t sat_mask; ...;
-} stsp_ctrl_t;
-uint32_t stsp_table_crc32(const stsp_table_t *table);
-stsp_status_t stsp_init(stsp_ctrl_t *ctrl, const stsp_table_t *table);
-stsp_status_t stsp_init_expect(stsp_ctrl_t *ctrl, const stsp_table_t *table, uint32_t nx,
-                               uint32_t nu);
-stsp_status_t stsp_reset(stsp_ctrl_t *ctrl);
-stsp_status_t stsp_verify(stsp_ctrl_t *ctrl);
-stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x,
-                        stsp_scalar_t *u);
-const char *stsp_status_str(stsp_status_t status);%(conv)s
-const stsp_table_t *harness_table(void);
-int harness_run_ticks(stsp_ctrl_t *ctrls, size_t count, uint32_t j0, uint32_t j1,
-                      const harness_plant_t *pl, uint64_t *rng, double *dZ, double *X,
-                      double *cost, int64_t *saturated, double *u_low, double *u_high,
-                      double *x_sum, float *u_rec, size_t n_rec,
-                      const harness_corridor_t *cor, size_t n_cor, double *sample_x,
-                      double *sample_u, float *rec_x, float *rec_u, size_t n_keep);
-int harness_init_batch(stsp_ctrl_t *ctrls, size_t count, const stsp_table_t *table);
-int harness_step_batch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
-                       const stsp_scalar_t *x, stsp_scalar_t *u, int *status);
-int harness_pair_batch(const stsp_ctrl_t *proto, size_t count, const uint32_t *t_latch,
-                       const stsp_scalar_t *x_latch, const uint32_t *tick,
-                       const stsp_scalar_t *x, stsp_scalar_t *u, int *status);
-int harness_tick(stsp_ctrl_t *ctrls, size_t count, uint32_t tick, const harness_plant_t *pl,
-                 const double *dZ, double *X, double *cost, int64_t *saturated,
-                 double *u_low, double *u_high, double *x_sum, float *u_rec, size_t n_rec);
-int harness_tick_faults(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
-                        const harness_plant_t *pl, const double *dZ, double *X, double *cost,
-                        int64_t *saturated, double *u_low, double *u_high, double *x_sum,
-                        float *u_rec, size_t n_rec, const harness_faults_t *f,
-                        const double *sensor_z, const double *actuator_z, const double *miss_u,
-                        double *held);
-int harness_tick_watch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
-                       const harness_plant_t *pl, const double *dZ, double *X, double *cost,
-                       int64_t *saturated, double *u_low, double *u_high, double *x_sum,
-                       float *u_rec, size_t n_rec, const harness_faults_t *f,
-                       const double *sensor_z, const double *actuator_z, const double *miss_u,
-                       double *held, const harness_corridor_t *cor, size_t n_cor);"""
-
-# Harness-only C: loops over instances so one Python call serves every Monte Carlo path.
-_BATCH = """
-#include <math.h>
-/* The plant in this translation unit, so that its step inlines into the tick loop. */
-#include "plant.c"
-const stsp_table_t *harness_table(void) { return &%(p)s_table; }
-/* One tick of every path, float32 tables only (else STSP_ERR_BAD_DIMS, nothing touched):
- * the controller of path p steps with x = (float)X[p], the plant advances X[p] with the
- * command held (dZ[p]: substeps x mz), and the run's statistics accumulate: saturated ticks
- * per path, the smallest and largest command per input; x_sum is set to the sum of the new
- * states (for the mean path) and u_rec (n_rec x m) to the commands of the first n_rec paths.
- * With faults f (plant.h; NULL: none) the controller measures X[p] + noise, rounded, is not
- * run on a missed tick, and the actuator applies held[p] (the last command, or with a delay
- * the one before it) plus noise; with feed_held (a table designed for the delay) the
- * controller measures [x; held[p]], the command being applied; the statistics count the commands the controllers computed,
- * u_rec the applied ones. Returns the worst status. Inlined into both entry points, so the
- * fault-free one compiles without the fault branches. */
-#ifndef STSP_ARITH_FIXED_POINT
-/* Whether x (n) is inside corridor c by corridor_wall's rule (a polygon whose largest
- * a y - b is not > 0), without branches on the data: the outcome varies from path to path,
- * and mispredicted branches cost more than the few rows. */
-#if defined(__GNUC__)
-__attribute__((always_inline))
-#endif
-static inline int corridor_inside(const harness_corridor_t *c, size_t n, const double *x) {
-    double y[32];
-    size_t i, j, k, r;
-    int inside = 0;
-    if (c->p == 2u) {          /* planar corridors: straight-line code, the same sums */
-        const double *A = c->A, *b = c->b;
-        double y0 = 0.0, y1 = 0.0;
-        for (j = 0; j < n; ++j) y0 += c->C[j] * x[j];
-        for (j = 0; j < n; ++j) y1 += c->C[n + j] * x[j];
-        for (k = 0; k < c->n_poly; ++k) {
-            double worst = 0.0;
-            for (r = c->row_start[k]; r < c->row_start[k + 1]; ++r) {
-                const double e = (-b[r] + A[2u * r] * y0) + A[2u * r + 1u] * y1;
-                worst = (r == c->row_start[k] || e > worst) ? e : worst;
-            }
-            inside |= !(worst > 0.0);
-        }
-        return inside;
-    }
-    for (i = 0; i < c->p; ++i) {
-        double s = 0.0;
-        for (j = 0; j < n; ++j) s += c->C[i * n + j] * x[j];
-        y[i] = s;
-    }
-    for (k = 0; k < c->n_poly; ++k) {
-        double worst = 0.0;
-        for (r = c->row_start[k]; r < c->row_start[k + 1]; ++r) {
-            double e = -c->b[r];
-            for (i = 0; i < c->p; ++i) e += c->A[r * c->p + i] * y[i];
-            worst = (r == c->row_start[k] || e > worst) ? e : worst;
-        }
-        inside |= !(worst > 0.0);
-    }
-    return inside;
-}
-/* The wall a state x (n) leaves corridor c through, -1 inside (plant.h's rule). */
-static int corridor_wall(const harness_corridor_t *c, size_t n, const double *x) {
-    double y[32], best = 0.0;
-    size_t i, j, k, r;
-    int wall = -1;
-    for (i = 0; i < c->p; ++i) {
-        double s = 0.0;
-        for (j = 0; j < n; ++j) s += c->C[i * n + j] * x[j];
-        y[i] = s;
-    }
-    for (k = 0; k < c->n_poly; ++k) {
-        double worst = 0.0;
-        int at = -1;
-        for (r = c->row_start[k]; r < c->row_start[k + 1]; ++r) {
-            double e = -c->b[r];
-            for (i = 0; i < c->p; ++i) e += c->A[r * c->p + i] * y[i];
-            if (at < 0 || e > worst) { worst = e; at = (int)r; }
-        }
-        if (!(worst > 0.0)) return -1;             /* inside polygon k */
-        if (wall < 0 || worst < best) { best = worst; wall = at; }
-    }
-    return wall;
-}
-#endif
-#if defined(__GNUC__)
-__attribute__((always_inline))
-#endif
-static inline int tick_paths(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
-                             const harness_plant_t *pl, const double *dZ, double *X,
-                             double *cost, int64_t *saturated, double *u_low, double *u_high,
-                             double *x_sum, float *u_rec, size_t n_rec,
-                             const harness_faults_t *f, const double *sensor_z,
-                             const double *actuator_z, const double *miss_u, double *held,
-                             const harness_corridor_t *cor, size_t n_cor) {
-#ifdef STSP_ARITH_FIXED_POINT
-    (void)ctrls; (void)count; (void)tick; (void)pl; (void)dZ; (void)X; (void)cost;
-    (void)saturated; (void)u_low; (void)u_high; (void)x_sum; (void)u_rec; (void)n_rec; (void)f;
-    (void)sensor_z; (void)actuator_z; (void)miss_u; (void)held; (void)cor; (void)n_cor;
-    return (int)STSP_ERR_BAD_DIMS;
-#else
-    const size_t n = PLANT_N, m = PLANT_M, dz_stride = pl->substeps * pl->mz;
-    float xf[STSP_MAX_NX], uf[STSP_MAX_NU];
-    double ud[STSP_MAX_NU];
-    size_t p, i;
-    int worst = 0;
-    if (n + (f != NULL && f->feed_held ? m : 0u) > STSP_MAX_NX || m > STSP_MAX_NU
-        || n != pl->n || m != pl->m) {
-        return (int)STSP_ERR_BAD_DIMS;
-    }
-    for (i = 0; i < n_cor; ++i) if (cor[i].p > 32u) return (int)STSP_ERR_BAD_DIMS;
-    for (i = 0; i < n; ++i) x_sum[i] = 0.0;
-    for (p = 0; p < count; ++p) {
-        double *x = X + p * n;
-        const int run = f == NULL || !(miss_u != NULL && miss_u[p] < f->miss_probability);
-        for (i = 0; i < n; ++i) {
-            double xm = x[i];
-            if (f != NULL && f->sensor_std != NULL) xm += f->sensor_std[i] * sensor_z[p * n + i];
-            if (f != NULL && f->quantum != NULL && f->quantum[i] > 0.0) {
-                xm = f->quantum[i] * floor(xm / f->quantum[i] + 0.5);
-            }
-            xf[i] = (float)xm;
-        }
-        if (f != NULL && f->feed_held) {           /* a table designed for the delay */
-            for (i = 0; i < m; ++i) xf[n + i] = (float)held[p * m + i];
-        }
-        if (f != NULL) for (i = 0; i < m; ++i) ud[i] = held[p * m + i];   /* delayed, missed */
-        if (run) {
-            const int st = (int)stsp_step(&ctrls[p], tick, xf, uf);
-            if (st < worst) worst = st;
-            if (st == (int)STSP_WARN_SATURATED) ++saturated[p];
-            for (i = 0; i < m; ++i) {
-                const double c = (double)uf[i];
-                if (c < u_low[i]) u_low[i] = c;
-                if (c > u_high[i]) u_high[i] = c;
-                if (f != NULL) held[p * m + i] = c;
-                if (f == NULL || f->delay_ticks == 0) ud[i] = c;
-            }
-        }
-        if (f != NULL && f->actuator_std != NULL) {
-            for (i = 0; i < m; ++i) ud[i] += f->actuator_std[i] * actuator_z[p * m + i];
-        }
-        if (p < n_rec) for (i = 0; i < m; ++i) u_rec[p * m + i] = (float)ud[i];
-        cost[p] += plant_path(pl, ud, dZ + p * dz_stride, x);
-        for (i = 0; i < n; ++i) x_sum[i] += x[i];
-        for (i = 0; i < n_cor; ++i) {             /* the state after the tick: tick + 1 */
-            const harness_corridor_t *c = &cor[i];
-            if (tick + 1u >= c->first && tick + 1u <= c->last && c->exit_tick[p] < 0
-                    && !corridor_inside(c, n, x)) {
-                const int w = corridor_wall(c, n, x);
-                if (w >= 0) { c->exit_tick[p] = (int32_t)(tick + 1u); c->exit_wall[p] = w; }
-            }
-        }
-    }
-    return worst;
-#endif
-}
-int harness_tick(stsp_ctrl_t *ctrls, size_t count, uint32_t tick, const harness_plant_t *pl,
-                 const double *dZ, double *X, double *cost, int64_t *saturated,
-                 double *u_low, double *u_high, double *x_sum, float *u_rec, size_t n_rec) {
-    return tick_paths(ctrls, count, tick, pl, dZ, X, cost, saturated, u_low, u_high, x_sum,
-                      u_rec, n_rec, NULL, NULL, NULL, NULL, NULL, NULL, 0u);
-}
-int harness_tick_faults(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
-                        const harness_plant_t *pl, const double *dZ, double *X, double *cost,
-                        int64_t *saturated, double *u_low, double *u_high, double *x_sum,
-                        float *u_rec, size_t n_rec, const harness_faults_t *f,
-                        const double *sensor_z, const double *actuator_z, const double *miss_u,
-                        double *held) {
-    if (f == NULL || held == NULL) return (int)STSP_ERR_NULL;
-    return tick_paths(ctrls, count, tick, pl, dZ, X, cost, saturated, u_low, u_high, x_sum,
-                      u_rec, n_rec, f, sensor_z, actuator_z, miss_u, held, NULL, 0u);
-}
-/* harness_tick (f NULL) or harness_tick_faults, watching n_cor corridors (plant.h). */
-int harness_tick_watch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
-                       const harness_plant_t *pl, const double *dZ, double *X, double *cost,
-                       int64_t *saturated, double *u_low, double *u_high, double *x_sum,
-                       float *u_rec, size_t n_rec, const harness_faults_t *f,
-                       const double *sensor_z, const double *actuator_z, const double *miss_u,
-                       double *held, const harness_corridor_t *cor, size_t n_cor) {
-    if ((f != NULL && held == NULL) || (cor == NULL && n_cor > 0u)) return (int)STSP_ERR_NULL;
-    if (f == NULL) {            /* its own inlined copy, without the fault branches */
-        return tick_paths(ctrls, count, tick, pl, dZ, X, cost, saturated, u_low, u_high, x_sum,
-                          u_rec, n_rec, NULL, NULL, NULL, NULL, NULL, cor, n_cor);
-    }
-    return tick_paths(ctrls, count, tick, pl, dZ, X, cost, saturated, u_low, u_high, x_sum,
-                      u_rec, n_rec, f, sensor_z, actuator_z, miss_u, held, cor, n_cor);
-}
-/* Ticks j0 .. j1 - 1 of `count` paths in one call, without faults: per tick the plant's
- * standard normal numbers into dZ (count x substeps x mz) from the generator `rng`
- * (harness_normals), then harness_tick_watch's work, which leaves the sum of the states in
- * row j + 1 of x_sum ((ticks + 1) x n) and the first n_rec (>= 1) paths' commands in u_rec.
- * Path 0's state and command go to row j + 1 of sample_x and row j of sample_u, and the
- * first n_keep (<= n_rec) paths' states (float) to row j + 1 of rec_x ((ticks + 1) x n_keep
- * x n) and their commands to row j of rec_u (ticks x n_keep x m). Returns the worst status. */
-int harness_run_ticks(stsp_ctrl_t *ctrls, size_t count, uint32_t j0, uint32_t j1,
-                      const harness_plant_t *pl, uint64_t *rng, double *dZ, double *X,
-                      double *cost, int64_t *saturated, double *u_low, double *u_high,
-                      double *x_sum, float *u_rec, size_t n_rec,
-                      const harness_corridor_t *cor, size_t n_cor, double *sample_x,
-                      double *sample_u, float *rec_x, float *rec_u, size_t n_keep) {
-    const size_t n = pl->n, m = pl->m, draws = count * pl->substeps * pl->mz;
-    uint32_t j;
-    size_t i;
-    int worst = 0;
-    if ((cor == NULL && n_cor > 0u) || n_rec < 1u || n_keep > n_rec) return (int)STSP_ERR_NULL;
-    for (j = j0; j < j1; ++j) {
-        int st;
-        harness_normals(rng, dZ, draws);
-        st = tick_paths(ctrls, count, j, pl, dZ, X, cost, saturated, u_low, u_high,
-                        x_sum + (size_t)(j + 1u) * n, u_rec, n_rec, NULL, NULL, NULL, NULL,
-                        NULL, cor, n_cor);
-        if (st < worst) worst = st;
-        for (i = 0; i < n; ++i) sample_x[(size_t)(j + 1u) * n + i] = X[i];
-        for (i = 0; i < m; ++i) sample_u[(size_t)j * m + i] = (double)u_rec[i];
-        for (i = 0; i < n_keep * n; ++i) rec_x[((size_t)(j + 1u) * n_keep) * n + i] = (float)X[i];
-        for (i = 0; i < n_keep * m; ++i) rec_u[((size_t)j * n_keep) * m + i] = u_rec[i];
-    }
-    return worst;
-}
-/* Verify the table once (the CRC covers every byte), then clone the fresh instance.
- * count == 0 (or NULL ctrls) touches no memory and returns STSP_ERR_NULL: there is no
- * ctrls[0] to initialise. */
-int harness_init_batch(stsp_ctrl_t *ctrls, size_t count, const stsp_table_t *table) {
-    size_t i; int s;
-    if (ctrls == NULL || count == 0u) return (int)STSP_ERR_NULL;
-    s = (int)stsp_init(&ctrls[0], table);
-    for (i = 1; i < count; ++i) ctrls[i] = ctrls[0];
-    return s;
-}
-int harness_step_batch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
-                       const stsp_scalar_t *x, stsp_scalar_t *u, int *status) {
-    const stsp_table_t *t;
-    size_t i, nx, nu; int worst = 0;
-    if (ctrls == NULL || count == 0u) return (int)STSP_ERR_NULL;   /* no ctrls[0] to read */
-    t = ctrls[0].table;
-    nx = t ? t->nx : 0u; nu = t ? t->nu : 0u;
-    for (i = 0; i < count; ++i) {
-        status[i] = (int)stsp_step(&ctrls[i], tick, x + i * nx, u + i * nu);
-        if (status[i] < worst) worst = status[i];
-    }
-    return worst;
-}
-/* Sample k: a copy of the fresh instance `proto` latches at t_latch[k] from x_latch[k], then
- * steps tick[k] with x[k]; u[k] and the worse of the two statuses are kept. */
-int harness_pair_batch(const stsp_ctrl_t *proto, size_t count, const uint32_t *t_latch,
-                       const stsp_scalar_t *x_latch, const uint32_t *tick,
-                       const stsp_scalar_t *x, stsp_scalar_t *u, int *status) {
-    size_t k, nx, nu; int worst = 0;
-    if (proto == NULL || proto->table == NULL) return (int)STSP_ERR_NULL;
-    nx = proto->table->nx; nu = proto->table->nu;
-    for (k = 0; k < count; ++k) {
-        stsp_ctrl_t c = *proto;
-        int s1 = (int)stsp_step(&c, t_latch[k], x_latch + k * nx, u + k * nu);
-        int s2 = (int)stsp_step(&c, tick[k], x + k * nx, u + k * nu);
-        status[k] = (s1 < 0) ? s1 : s2;
-        if (status[k] < worst) worst = status[k];
-    }
-    return worst;
-}
-"""
-
-# Per variant: C type of stsp_scalar_t, numpy dtype, compile definition.
-VARIANTS = {"float32": ("float", np.float32, []),
-            "q15": ("int16_t", np.int16, ["-DSTSP_ARITH_Q15"]),
-            "q31": ("int32_t", np.int32, ["-DSTSP_ARITH_Q31"])}
-_EXPS = "\n    const int8_t *x_exp; const int8_t *u_exp; const int8_t *v_exp;"
-_CONV = """
-stsp_status_t stsp_state_to_q(const stsp_ctrl_t *ctrl, const stsp_f32_t *x, stsp_scalar_t *x_q);
-stsp_status_t stsp_command_to_f32(const stsp_ctrl_t *ctrl, const stsp_scalar_t *u_q,
-                                  stsp_f32_t *u);"""
-
-
-def _cdef(arith: str) -> str:
-    fixed = arith != "float32"
-    return _CDEF % {"scalar": VARIANTS[arith][0], "exps": _EXPS if fixed else "",
-                    "plant": _PLANT_PROTOTYPE,
-                    # the spline gains' type of the arithmetic (stsp_table_t.spline)
-                    "spline_t": "stsp_qspline_t" if fixed else "stsp_spline_t",
-                    "conv": _CONV if fixed else ""}
-
-# -O3 as the host CMake build (Release); ISO C keeps floating-point contraction off, so the
-# bits are those of any other build. Without the vectorizers: they moved the plant's small
-# fixed-size state through the stack in 16-byte pieces written as 8-byte ones (a failed
-# store-to-load forwarding per path, a third of the plant's time); they reorder no sums.
-_CFLAGS = ["-std=c99", "-O3", "-fno-tree-slp-vectorize", "-fno-tree-loop-vectorize", "-Wall",
-           "-Wextra", "-DSTSP_HOST_MESSAGES"]
-
-
-def firmware_dir() -> Path:
-    """The firmware source tree compiled by the harness (``STOSPLINE_FIRMWARE`` overrides;
-    `stospline.firmware_files`)."""
-    from stospline.firmware_files import firmware_dir as find
-    return find()
+__all__ = ["build_controller", "CompiledController", "CorridorWatch", "FaultDraws", "TickStats",
+           "firmware_dir", "STATUS", "VARIANTS"]
 
 
 def _positive_count(count) -> int:
@@ -395,6 +37,16 @@ class CompiledController:
     ffi: object
     lib: object
     table: GainTable
+    plant_source: str | None = None     # the plant step compiled in (`plant_spec`), if any
+    fixed_shape: bool = True
+
+    def for_plant(self, problem) -> "CompiledController":
+        """This controller in a module whose plant step is compiled for `problem`
+        (`build_controller`'s `plant`): itself when it already is."""
+        spec = plant_source(problem, self.table.tick_hz)
+        if spec is None or spec == self.plant_source:
+            return self
+        return build_controller(self.table, fixed_shape=self.fixed_shape, plant=problem)
 
     @property
     def arith(self) -> str:
@@ -641,123 +293,6 @@ class _Plant:
     keep: list        # the arrays it points into
 
 
-@dataclass
-class FaultDraws:
-    """The faults of a block of paths for `CompiledController.fault_ticker`: levels (None: no
-    such fault), the per-tick random numbers (refilled by `draw`) and the actuator's held
-    commands."""
-    sensor_std: np.ndarray | None
-    quantum: np.ndarray | None
-    actuator_std: np.ndarray | None
-    miss_probability: float
-    delay_ticks: int
-    feed_held: int                   # 1: a table designed for the delay (`GainTable`)
-    sensor_z: np.ndarray | None      # (paths, n) standard normal
-    actuator_z: np.ndarray | None    # (paths, m) standard normal
-    miss_u: np.ndarray | None        # (paths,) uniform in [0, 1)
-    held: np.ndarray                 # (paths, m)
-
-    @classmethod
-    def of(cls, faults, paths: int, n: int, hold: np.ndarray,
-           table_delay: int = 0) -> "FaultDraws":
-        """The draws of `faults` for `paths` paths of n states; the actuator of every path
-        starts on the safe command `hold` (m,). `table_delay` 1: the table is designed for a
-        one-tick delay, so the loop has one (its controller also measures the held command);
-        a delay fault on top of it is refused (ValueError)."""
-        if table_delay and faults.delay_ticks:
-            raise ValueError("a table designed for a one-tick delay runs with that delay; a "
-                             "delay fault on top of it is not simulated")
-        m = len(hold)
-
-        def vec(a):
-            return np.ascontiguousarray(a, dtype=float) if np.any(a) else None
-        sensor, quantum, actuator = (vec(faults.sensor_noise), vec(faults.sensor_quantum),
-                                     vec(faults.actuator_noise))
-        return cls(sensor, quantum, actuator, float(faults.miss_probability),
-                   int(faults.delay_ticks) or int(table_delay), int(table_delay),
-                   np.empty((paths, n)) if sensor is not None else None,
-                   np.empty((paths, m)) if actuator is not None else None,
-                   np.empty(paths) if faults.miss_probability > 0 else None,
-                   np.tile(np.asarray(hold, dtype=float), (paths, 1)))
-
-    def draw(self, rng: np.random.Generator) -> None:
-        """This tick's numbers, from the faults' own stream `rng`."""
-        if self.sensor_z is not None:
-            rng.standard_normal(out=self.sensor_z)
-        if self.actuator_z is not None:
-            rng.standard_normal(out=self.actuator_z)
-        if self.miss_u is not None:
-            rng.random(out=self.miss_u)
-
-
-@dataclass
-class CorridorWatch:
-    """Each path's first exit from each corridor (`stospline.problem.corridors`): the state
-    tick (``exit_tick``, corridors x paths, -1: never) and the wall (``exit_wall``). The C
-    tick (``harness_tick_watch``) fills them; `check` does the same in numpy, for the tick-0
-    state and for runs that step the plant outside that C call."""
-    corridors: tuple
-    ticks: list                    # (first, last) state tick per corridor
-    exit_tick: np.ndarray          # (corridors, paths) int32
-    exit_wall: np.ndarray
-
-    @classmethod
-    def of(cls, corridors, paths: int, t0: float, tick_hz: int) -> "CorridorWatch":
-        from stospline.problem.corridors import corridor_ticks
-        k = len(corridors)
-        return cls(tuple(corridors), [corridor_ticks(c, t0, tick_hz) for c in corridors],
-                   np.full((k, paths), -1, np.int32), np.full((k, paths), -1, np.int32))
-
-    def check(self, state_tick: int, X: np.ndarray) -> None:
-        """Record the paths that are outside at `state_tick` (states X) for the first time."""
-        for i, (c, (lo, hi)) in enumerate(zip(self.corridors, self.ticks)):
-            if lo <= state_tick <= hi:
-                fresh = self.exit_tick[i] < 0
-                wall = c.exit_wall(X[fresh] @ c.C.T)
-                idx = np.flatnonzero(fresh)[wall >= 0]
-                self.exit_tick[i, idx] = state_tick
-                self.exit_wall[i, idx] = wall[wall >= 0]
-
-    def c_structs(self, ffi):
-        """``(harness_corridor_t[], arrays they point into)`` for the C tick."""
-        cors = ffi.new("harness_corridor_t[]", len(self.corridors))
-        keep = []
-
-        def ptr(a, kind):
-            keep.append(a)
-            return ffi.cast(kind, ffi.from_buffer(a))
-        for i, c in enumerate(self.corridors):
-            A, b = c.unit_walls()
-            cs = cors[i]
-            cs.first, cs.last = self.ticks[i]
-            cs.p, cs.n_poly = c.p, len(c.polygons)
-            cs.C = ptr(np.ascontiguousarray(c.C, dtype=float), "const double *")
-            cs.row_start = ptr(np.ascontiguousarray(c.row_start, dtype=np.uintp),
-                               "const size_t *")
-            cs.A = ptr(A, "const double *")
-            cs.b = ptr(b, "const double *")
-            cs.exit_tick = ptr(self.exit_tick[i], "int32_t *")
-            cs.exit_wall = ptr(self.exit_wall[i], "int32_t *")
-        return cors, keep
-
-
-@dataclass
-class TickStats:
-    """What a `CompiledController.ticker` tick accumulates (saturated ticks per path, the
-    extreme commands per input) and writes (the sum of the states after the tick, the
-    commands applied to the first ``len(u_rec)`` paths)."""
-    saturated: np.ndarray
-    u_low: np.ndarray
-    u_high: np.ndarray
-    x_sum: np.ndarray
-    u_rec: np.ndarray           # (recorded paths >= 1, m) float32
-
-    @classmethod
-    def zeros(cls, paths: int, n: int, m: int, record: int = 1) -> "TickStats":
-        return cls(np.zeros(paths, np.int64), np.full(m, np.inf), np.full(m, -np.inf),
-                   np.zeros(n), np.zeros((max(1, min(record, paths)), m), np.float32))
-
-
 # The generated C of recent tables: writing every gain as a shortest float32 literal takes
 # about 0.2 s per 100 000 entries, and a run builds the same table's controller more than
 # once (the substep pilot, then the run). Keyed by the table object's id; the entry holds the
@@ -777,7 +312,8 @@ def _table_sources(table) -> tuple[str, str]:
 
 
 def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
-                     quiet: bool = True, fixed_shape: bool = True) -> CompiledController:
+                     quiet: bool = True, fixed_shape: bool = True,
+                     plant=None) -> CompiledController:
     """Compile ``firmware/src/*.c`` with the table's generated C into a cffi module and load it.
 
     Builds are cached in `build_dir` (default: `stospline.cache.cache_root`) under a hash of
@@ -795,6 +331,10 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
         (``STSP_FIXED_NX/NU/N_LATCH``, the fastest; it refuses a table of another shape).
         False: the generic build, which takes any table within the ``STSP_MAX_*`` limits.
         Both compute the same bits.
+    plant : Problem, optional
+        The plant the Monte Carlo harness will run: its step is compiled for it
+        (`stospline.harness.plant_spec`: its zero and unit coefficients and noise entries
+        built in), the same bits as the generic step, which still serves any other plant.
 
     Returns
     -------
@@ -818,32 +358,20 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
     # plant (HARNESS_N/M) and, by default, of the controller (the firmware's fixed-shape build,
     # which computes the same bits as the generic one; both are tested by ctest and QEMU).
     n, m, n_latch = table.dims
-    cdef = _cdef(arith)
+    cdef = controller_cdef(arith)
     n_plant = n - m * getattr(table, "delay_ticks", 0)   # a delayed law also measures u
-    cflags = _CFLAGS + VARIANTS[arith][2] + [f"-DHARNESS_N={n_plant}", f"-DHARNESS_M={m}"]
+    cflags = VARIANTS[arith][2] + [f"-DHARNESS_N={n_plant}", f"-DHARNESS_M={m}"]
     if fixed_shape:
         cflags += [f"-DSTSP_FIXED_NX={n}u", f"-DSTSP_FIXED_NU={m}u",
                    f"-DSTSP_FIXED_N_LATCH={n_latch}u"]
-    fw = firmware_dir()
-    check_header(fw / "include")   # the shared constants are still the header's
-    fw_sources = sorted((fw / "src").glob("*.c"))
-    here = Path(__file__).parent
-    harness = [here / "normals.c"]      # the harness's own C (plant.c: included by _BATCH)
-    key = source_key([header, source, cdef, _BATCH, " ".join(cflags)]
-                     + [p.read_bytes() for p in sorted(fw.rglob("*.[ch]")) + harness
-                        + [_PLANT_H, here / "plant.c", here / "ziggurat_tables.h"]])
-    modname = f"_stsp_{table.name}_{key}"
-
-    def build(out: Path) -> Path:
-        (out / f"{table.name}.h").write_text(header)
-        (out / f"{table.name}.c").write_text(source)
-        return compile_cffi(
-            out, modname, cdef,
-            f'#include "stospline/stsp_controller.h"\n#include "{table.name}.h"\n'
-            + _BATCH % {"p": table.name},
-            sources=[*fw_sources, out / f"{table.name}.c", *harness],
-            include_dirs=[fw / "include", fw / "src", out, here], cflags=cflags,
-            quiet=quiet)
-
-    mod = load_module(cached_build(key, modname, build, root=build_dir))
-    return CompiledController(mod.ffi, mod.lib, table)
+    spec = None if plant is None else plant_source(plant, table.tick_hz)
+    files = {f"{table.name}.h": header, f"{table.name}.c": source}
+    if spec is not None:
+        cflags.append("-DHARNESS_PLANT_SPEC")
+        files["plant_spec.h"] = spec
+    mod = build_harness_module(
+        f"_stsp_{table.name}", files, cdef,
+        f'#include "stospline/stsp_controller.h"\n#include "{table.name}.h"\n'
+        + BATCH % {"p": table.name}, cflags, plant_included=True, build_dir=build_dir,
+        quiet=quiet)
+    return CompiledController(mod.ffi, mod.lib, table, spec, fixed_shape)

@@ -9,23 +9,21 @@ with the generated gain and estimator tables; `simulate_estimator` runs paths th
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from stospline.cache import cached_build, compile_cffi, load_module, source_key
 from stospline.estimator.ctable import EstimatorTable, estimator_c
-from stospline.firmware_interface import check_header
-from stospline.harness.controller import (_CFLAGS, _PLANT_H, _PLANT_PROTOTYPE, CompiledController,
-                                          firmware_dir)
 from stospline.firmware_interface import STATUS
-from stospline.harness.montecarlo import MonteCarloResult, _zoh
+from stospline.harness.build import PLANT_CDEF, build_harness_module
+from stospline.harness.controller import CompiledController
+from stospline.harness.montecarlo import MonteCarloResult
+from stospline.harness.plant_spec import zoh_step
 from stospline.harness.path_stats import COST_SAMPLE, Moments
 from stospline.table.codegen import generate_c
 
 __all__ = ["build_estimator_controller", "EstimatorController", "simulate_estimator"]
 
-_CDEF = _PLANT_PROTOTYPE + """
+_CDEF = PLANT_CDEF + """
 typedef int... stsp_status_t;
 typedef struct { ...; } stsp_table_t;
 typedef struct { uint32_t crc32; ...; } stsp_est_table_t;
@@ -131,27 +129,10 @@ def build_estimator_controller(problem, table, est: EstimatorTable, *, build_dir
     body, guard = header.rsplit("#endif", 1)
     header, source = body + eh + "\n#endif" + guard, source + ec
     n, m, _ = table.dims
-    cflags = _CFLAGS + [f"-DHARNESS_N={n}", f"-DHARNESS_M={m}"]
-    fw = firmware_dir()
-    check_header(fw / "include")
-    fw_sources = sorted((fw / "src").glob("*.c"))
-    here = Path(__file__).parent
-    harness = [here / "plant.c", here / "normals.c"]
-    batch = _BATCH % {"p": name, "P": name.upper()}
-    key = source_key([header, source, _CDEF, batch, " ".join(cflags)]
-                     + [p.read_bytes() for p in sorted(fw.rglob("*.[ch]")) + harness
-                        + [_PLANT_H, here / "ziggurat_tables.h"]])
-    modname = f"_stsp_est_{name}_{key}"
-
-    def build(out: Path) -> Path:
-        (out / f"{name}.h").write_text(header)
-        (out / f"{name}.c").write_text(source)
-        return compile_cffi(out, modname, _CDEF, batch,
-                            sources=[*fw_sources, out / f"{name}.c", *harness],
-                            include_dirs=[fw / "include", fw / "src", out, here],
-                            cflags=cflags, quiet=quiet)
-
-    mod = load_module(cached_build(key, modname, build, root=build_dir))
+    mod = build_harness_module(f"_stsp_est_{name}", {f"{name}.h": header, f"{name}.c": source},
+                               _CDEF, _BATCH % {"p": name, "P": name.upper()},
+                               [f"-DHARNESS_N={n}", f"-DHARNESS_M={m}"], build_dir=build_dir,
+                               quiet=quiet)
     return EstimatorController(mod.ffi, mod.lib, table, est)
 
 
@@ -203,7 +184,7 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
         st = problem.stages[k]
         if st.varying is not None:
             raise ValueError("simulate_estimator: time-varying plant data are not simulated")
-        plant = helpers.plant(st, *_zoh(st, dt), dt, substeps)
+        plant = helpers.plant(st, *zoh_step(st, dt), dt, substeps)
         dZ = np.empty((paths, substeps, st.G.shape[2]))
         fill = normals(dZ)
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):

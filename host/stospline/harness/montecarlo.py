@@ -24,15 +24,16 @@ which would add about 8 ns to the robot's ~45 ns path-tick (two numbers a tick).
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from stospline.expm import expm
 
 from stospline import progress
 from stospline.problem.faults import Faults
 from stospline.harness.controller import (STATUS, CompiledController, CorridorWatch, FaultDraws,
                                       TickStats)
+from stospline.harness.plant_spec import zoh_step as _zoh
 from stospline.harness.path_stats import COST_SAMPLE, CorridorExits, Moments, RunStats
 from stospline.errors import ProblemError
 from stospline.problem.model import Problem
@@ -46,8 +47,10 @@ __all__ = ["MonteCarloResult", "simulate", "z_value", "Agreement", "compare_to_o
 
 def z_value(confidence: float, comparisons: int = 1) -> float:
     """Two-sided normal quantile; Bonferroni-corrected for `comparisons` joint intervals."""
-    from scipy.stats import norm   # lazy: importing scipy.stats takes longer than a design
-    return float(norm.ppf(1 - (1 - confidence) / (2 * comparisons)))
+    # scipy.stats.norm.ppf's own function (the same bits); importing scipy.stats takes ~1 s,
+    # longer than a design, scipy.special a quarter of it
+    from scipy.special import ndtri
+    return float(ndtri(1 - (1 - confidence) / (2 * comparisons)))
 
 
 @dataclass
@@ -91,6 +94,8 @@ class MonteCarloResult:
     saturated_ticks: np.ndarray | None = None
     exit_tick: np.ndarray | None = None
     exit_wall: np.ndarray | None = None
+    # What simulate's `alongside` returned (its work ran while the paths ran), else None.
+    alongside: object = None
 
     @property
     def saturated_fraction(self) -> float:
@@ -122,18 +127,6 @@ class MonteCarloResult:
     def exit_count(self, corridor: int) -> int:
         """Paths that left corridor `corridor` (`problem.corridors`)."""
         return int(self.exits.count[corridor])
-
-
-def _zoh(stage, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """``(Ad, Bd, fd)`` of one plant step of length dt: ``x+ = Ad x + Bd u + fd`` in the mean
-    (fd None without a drift)."""
-    n, m = stage.B.shape
-    big = np.zeros((n + m + 1, n + m + 1))
-    big[:n, :n], big[:n, n:n + m] = stage.A, stage.B
-    if stage.f is not None:
-        big[:n, -1] = stage.f
-    E = expm(big * dt)
-    return E[:n, :n], E[:n, n:n + m], (None if stage.f is None else E[:n, -1])
 
 
 # Paths per random stream. Block 0 draws from the seed's own stream, block i >= 1 from child
@@ -237,7 +230,8 @@ def check_per_path(problem: Problem, paths: int) -> None:
 def simulate(problem: Problem, controller: CompiledController, *, paths: int, seed: int,
              substeps: int = 4, workers: int | None = None, record: int = 0,
              scheduler: str | None = None, faults: Faults | None = None,
-             force_workers: bool = False, per_path: bool = False) -> MonteCarloResult:
+             force_workers: bool = False, per_path: bool = False,
+             alongside: Callable[[], object] | None = None) -> MonteCarloResult:
     """Run `paths` realisations of the plant with the compiled controller in the loop.
 
     Parameters
@@ -276,6 +270,11 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
         (``cost``, ``knot_states``, ...); refused (ProblemError) beyond
         `PER_PATH_MAX_BYTES`. Without it the run's memory does not grow with `paths`: its
         statistics stream over the blocks (`path_stats`), merged in block order.
+    alongside : callable, optional
+        Work of this process to do while the paths run (e.g. what a summary of the run will
+        need): called without arguments in a thread started once the worker processes are
+        forked (or with the first block run here; the C loop does not hold the GIL); its
+        return value is the result's ``alongside``, its exception is raised after the run.
     """
     check_counts(paths=paths, substeps=substeps)
     if per_path:
@@ -289,25 +288,67 @@ def simulate(problem: Problem, controller: CompiledController, *, paths: int, se
     if faults.any and faults_unsupported(problem, table):
         raise ProblemError("faults", "are simulated for float32 tables designed without a "
                                      "delay, with time-invariant stage data only")
+    # the plant's step compiled for this problem (`plant_spec`; the same bits, built once)
+    controller = controller.for_plant(faults.plant_of(problem))
     blocks = -(-paths // BLOCK_PATHS)
     workers = usable_workers(workers, force_workers)
     parallel = (workers > 1 and blocks > 1
                 and paths * table.n_ticks * substeps >= _PARALLEL_WORK)
     job = _Job(problem, seed, substeps, record, faults, per_path)
     bar = progress.start(f"simulate ({paths} paths)", paths * table.n_ticks, unit="path-tick")
+    side = _Alongside(alongside)
     try:
         if scheduler is not None:
+            side.start()
             parts = _dask_blocks(scheduler, job, controller.table, paths, workers)
         elif parallel:
-            parts = _parallel_blocks(job, controller, paths, workers)
+            parts = _parallel_blocks(job, controller, paths, workers, started=side.start)
         else:
+            side.start()
             parts = (_run_block(job, controller, i, paths) for i in range(blocks))
         run = _Gather(per_path)
         for part in parts:
             run.add(part)
     finally:
         progress.finish(bar)
-    return run.result(problem, table, substeps, faults)
+        done = side.join()
+    mc = run.result(problem, table, substeps, faults)
+    mc.alongside = done()
+    return mc
+
+
+class _Alongside:
+    """`simulate`'s `alongside` work in a thread of its own."""
+
+    def __init__(self, work):
+        self.work, self.thread, self.out, self.error = work, None, None, None
+
+    def start(self) -> None:
+        if self.work is None or self.thread is not None:
+            return
+        import threading
+
+        def run():
+            try:
+                self.out = self.work()
+            except BaseException as exc:     # re-raised in the caller's thread
+                self.error = exc
+        self.thread = threading.Thread(target=run, name="stospline-alongside", daemon=True)
+        self.thread.start()
+
+    def join(self):
+        """Wait for the work's thread; a function that returns its result (running it now
+        if it never started) or raises its exception."""
+        if self.thread is not None:
+            self.thread.join()
+
+        def done():
+            if self.work is not None and self.thread is None:
+                return self.work()
+            if self.error is not None:
+                raise self.error
+            return self.out
+        return done
 
 
 def block_counts(paths: int):
@@ -526,7 +567,8 @@ def _block_job(block: int, paths: int) -> _Block:
 def _dask_block(job: _Job, table, block: int, paths: int) -> _Block:
     """One block on a Dask worker: the controller of `table` from the worker's cache."""
     from stospline.harness.controller import build_controller
-    return _run_block(job, build_controller(table), block, paths, report=False)
+    ctl = build_controller(table, plant=job.faults.plant_of(job.problem))
+    return _run_block(job, ctl, block, paths, report=False)
 
 
 def _in_order(submit, paths: int, ahead: int, ticks: int):
@@ -578,8 +620,10 @@ def _dask_blocks(scheduler: str, job: _Job, table, paths: int, workers: int):
             cluster.close()
 
 
-def _parallel_blocks(job: _Job, controller, paths: int, workers: int):
-    """The blocks on `workers` forked processes, in block order; progress per block."""
+def _parallel_blocks(job: _Job, controller, paths: int, workers: int, *, started=None):
+    """The blocks on `workers` forked processes, in block order; progress per block.
+    `started()` is called once they are forked (the first submission forks them all): a
+    thread it starts is not in them."""
     global _JOB
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
@@ -588,8 +632,13 @@ def _parallel_blocks(job: _Job, controller, paths: int, workers: int):
         ctx = multiprocessing.get_context("fork")
         blocks = -(-paths // BLOCK_PATHS)
         with ProcessPoolExecutor(max_workers=min(workers, blocks), mp_context=ctx) as pool:
-            yield from _in_order(lambda i: pool.submit(_block_job, i, paths), paths,
-                                 _AHEAD_PER_WORKER * workers, controller.table.n_ticks)
+            def submit(i):
+                future = pool.submit(_block_job, i, paths)
+                if started is not None:
+                    started()
+                return future
+            yield from _in_order(submit, paths, _AHEAD_PER_WORKER * workers,
+                                 controller.table.n_ticks)
     finally:
         _JOB = None
 

@@ -9,22 +9,20 @@ with the generated gain table and its parameter table; `simulate_params` runs pa
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from stospline.cache import cached_build, compile_cffi, load_module, source_key
-from stospline.firmware_interface import check_header
-from stospline.harness.controller import (_CFLAGS, _PLANT_H, _PLANT_PROTOTYPE, CompiledController,
-                                          firmware_dir)
-from stospline.harness.montecarlo import _zoh, joint_verdict
+from stospline.harness.build import PLANT_CDEF, build_harness_module
+from stospline.harness.controller import CompiledController
+from stospline.harness.montecarlo import joint_verdict
+from stospline.harness.plant_spec import zoh_step
 from stospline.problem.parameters import problem_at
 from stospline.table.codegen import generate_c
 from stospline.table.parametric_c import generate_parametric_c
 
 __all__ = ["build_params_controller", "ParamsController", "ParamsRun", "simulate_params"]
 
-_CDEF = _PLANT_PROTOTYPE + """
+_CDEF = PLANT_CDEF + """
 typedef int... stsp_status_t;
 typedef struct { ...; } stsp_param_t;
 const char *stsp_status_str(stsp_status_t status);
@@ -114,29 +112,12 @@ def build_params_controller(ptable, table, *, build_dir=None,
     header, source = generate_c(table)
     ph, pc = generate_parametric_c(ptable, prefix=name)
     n, m, _ = table.dims
-    cflags = _CFLAGS + [f"-DHARNESS_N={n}", f"-DHARNESS_M={m}"]
-    fw = firmware_dir()
-    check_header(fw / "include")
-    fw_sources = sorted((fw / "src").glob("*.c"))
-    here = Path(__file__).parent
-    harness = [here / "plant.c", here / "normals.c"]
-    batch = _BATCH % {"p": name, "P": name.upper()}
-    key = source_key([header, source, ph, pc, _CDEF, batch, " ".join(cflags)]
-                     + [p.read_bytes() for p in sorted(fw.rglob("*.[ch]")) + harness
-                        + [_PLANT_H, here / "ziggurat_tables.h"]])
-    modname = f"_stsp_par_{name}_{key}"
-
-    def build(out: Path) -> Path:
-        for fname, text in ((f"{name}.h", header), (f"{name}.c", source),
-                            (f"{name}_params.h", ph), (f"{name}_params.c", pc)):
-            (out / fname).write_text(text)
-        return compile_cffi(out, modname, _CDEF, batch,
-                            sources=[*fw_sources, out / f"{name}.c", out / f"{name}_params.c",
-                                     *harness],
-                            include_dirs=[fw / "include", fw / "src", out, here],
-                            cflags=cflags, quiet=quiet)
-
-    mod = load_module(cached_build(key, modname, build, root=build_dir))
+    files = {f"{name}.h": header, f"{name}.c": source, f"{name}_params.h": ph,
+             f"{name}_params.c": pc}
+    mod = build_harness_module(f"_stsp_par_{name}", files, _CDEF,
+                               _BATCH % {"p": name, "P": name.upper()},
+                               [f"-DHARNESS_N={n}", f"-DHARNESS_M={m}"], build_dir=build_dir,
+                               quiet=quiet)
     return ParamsController(mod.ffi, mod.lib, table)
 
 
@@ -178,7 +159,7 @@ def simulate_params(problem, ctl: ParamsController, theta, *, paths: int, seed: 
         stage = p.stages[k]
         if stage.varying is not None:
             raise ValueError("simulate_params: time-varying plant data are not simulated")
-        plant = helpers.plant(stage, *_zoh(stage, dt), dt, substeps)
+        plant = helpers.plant(stage, *zoh_step(stage, dt), dt, substeps)
         dZ = np.empty((paths, substeps, stage.G.shape[2]))
         fill = normals(dZ)
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):

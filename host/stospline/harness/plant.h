@@ -1,5 +1,5 @@
 /* Harness-only plant integrator (not firmware), shared by plant.c, the harness's C around the
- * controller (harness/controller.py) and the cffi declarations (read from this file).
+ * controller (harness/controller_c.py) and the cffi declarations (read from this file).
  *
  * With u held over a tick, each of `substeps` steps is the exponential Euler-Maruyama step
  *     x+ = Ad x + Bd u + fd + sum_i w_i G_i dZ,      dZ ~ N(0, dt I)  (supplied by the caller)
@@ -25,6 +25,9 @@ typedef struct {
  * the running cost over the tick; 0 and x unchanged when n > 64 or m > 32. */
 double harness_plant_path(const harness_plant_t *pl, const double *u, const double *dz,
                           double *x);
+/* 1 when pl runs the step compiled for the module's problem (plant_spec.py), 0 when it runs
+ * the generic one (a module without one, or data that do not fit it): the same bits. */
+int harness_plant_compiled(const harness_plant_t *pl);
 /* Every path: X (paths, n) in place, U (paths, m) float32 commands, dZ (paths, substeps, mz),
  * cost (paths) accumulated. */
 void harness_plant_tick(const harness_plant_t *pl, size_t paths, const double *dZ,

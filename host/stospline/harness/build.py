@@ -1,0 +1,73 @@
+"""Compile the firmware, generated C and the harness's own C into one cffi module, and load it.
+
+`build_harness_module` is the one build of the harness: the controller (`controller`), the
+estimator loop (`estimator_loop`) and the parametric loop (`params_loop`) each give it their
+generated files, declarations and loop code. The firmware is ``firmware/src/*.c``
+(`firmware_dir`); the harness's plant and normal generator (``plant.c``, ``normals.c``) are
+compiled in, either as their own translation units or included by the loop code. Builds are
+cached under a hash of every input (`stospline.cache.cached_build`).
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from stospline.cache import cached_build, compile_cffi, load_module, source_key
+from stospline.firmware_interface import check_header
+
+__all__ = ["build_harness_module", "firmware_dir", "HARNESS_CFLAGS", "PLANT_CDEF"]
+
+HERE = Path(__file__).parent
+# The plant's interface (plant.h), for cffi: the header itself, without its comments.
+PLANT_H = HERE / "plant.h"
+PLANT_CDEF = re.sub(r"/\*.*?\*/", "", PLANT_H.read_text(), flags=re.S)
+# The harness's C besides the loop code: every build's key covers all of it.
+HARNESS_C = [HERE / "plant.c", HERE / "normals.c", PLANT_H, HERE / "ziggurat_tables.h"]
+
+# -O3 as the host CMake build (Release); ISO C keeps floating-point contraction off, so the
+# bits are those of any other build. Without the vectorizers: they moved the plant's small
+# fixed-size state through the stack in 16-byte pieces written as 8-byte ones (a failed
+# store-to-load forwarding per path, a third of the plant's time); they reorder no sums.
+HARNESS_CFLAGS = ["-std=c99", "-O3", "-fno-tree-slp-vectorize", "-fno-tree-loop-vectorize",
+                  "-Wall", "-Wextra", "-DSTSP_HOST_MESSAGES"]
+
+
+def firmware_dir() -> Path:
+    """The firmware source tree compiled by the harness (``STOSPLINE_FIRMWARE`` overrides;
+    `stospline.firmware_files`)."""
+    from stospline.firmware_files import firmware_dir as find
+    return find()
+
+
+def build_harness_module(modname: str, files: dict[str, str], cdef: str, loop: str,
+                         cflags: list[str], *, plant_included: bool = False,
+                         build_dir: str | Path | None = None, quiet: bool = True):
+    """Compile and load (cached) the module ``{modname}_{key}``.
+
+    `files` are the generated files written beside the build (name -> text; the ``.c`` ones
+    are compiled), `cdef` the declarations cffi sees, `loop` the module's own C (it includes
+    the firmware's and the generated headers it needs), `cflags` the compiler flags after
+    `HARNESS_CFLAGS`. With `plant_included` the loop code includes ``plant.c`` (its step then
+    inlines into the loop), else ``plant.c`` is compiled as its own translation unit.
+    Returns the loaded module (``.ffi``, ``.lib``).
+    """
+    fw = firmware_dir()
+    check_header(fw / "include")   # the shared constants are still the header's
+    fw_sources = sorted((fw / "src").glob("*.c"))
+    flags = HARNESS_CFLAGS + list(cflags)
+    key = source_key([f"{name}\n{text}" for name, text in sorted(files.items())]
+                     + [cdef, loop, " ".join(flags)]
+                     + [p.read_bytes() for p in sorted(fw.rglob("*.[ch]")) + HARNESS_C])
+    full = f"{modname}_{key}"
+    harness = [HERE / "normals.c"] + ([] if plant_included else [HERE / "plant.c"])
+
+    def build(out: Path) -> Path:
+        for name, text in files.items():
+            (out / name).write_text(text)
+        generated = [out / name for name in sorted(files) if name.endswith(".c")]
+        return compile_cffi(out, full, cdef, loop,
+                            sources=[*fw_sources, *generated, *harness],
+                            include_dirs=[fw / "include", fw / "src", out, HERE],
+                            cflags=flags, quiet=quiet)
+
+    return load_module(cached_build(key, full, build, root=build_dir))

@@ -42,7 +42,7 @@ from stospline.problem.parameters import problem_at
 
 __all__ = ["BoxMoments", "RowMargin", "box_moments", "quadratic_fit", "band_margins",
            "check_bands", "check_swing", "vertices", "sides", "mean_paths", "family",
-           "TOLERANCE"]
+           "box_state_range", "TOLERANCE"]
 
 # A row holds over the box when its worst-case margin is above -TOLERANCE times max(1, |its
 # bounds|): the designs meet their rows to ~1e-13 of that scale (as refine.every_tick).
@@ -90,6 +90,21 @@ def mean_paths(problem, table, thetas) -> np.ndarray:
                   for i in range(nom.size)], axis=-1)
     d = np.atleast_2d(np.asarray(thetas, float)) - nom
     return m0[None] + np.einsum("tnp,kp->ktn", S, d)
+
+
+def box_state_range(box: BoxMoments, sigmas: float = 6.0) -> np.ndarray:
+    """Per state, ``max_t |E x_j| + sigmas sd x_j`` over every tick and every parameter vector
+    in the box (n,): the largest mean magnitude over the box (exact, affine) plus `sigmas`
+    times the root of `BoxMoments.variance_bound`. The fixed-point state range of a table
+    with parameters (`stospline.table.qparams`), as `stospline.table.qformat.state_range` is
+    for one parameter vector."""
+    _, up, down = sides(box.parameters)
+    n = box.mean.shape[1]
+    reach = np.maximum(box.S * up, -box.S * down).sum(axis=2)
+    reach_low = np.maximum(-box.S * up, box.S * down).sum(axis=2)
+    peak = np.maximum(np.abs(box.mean + reach), np.abs(box.mean - reach_low))
+    sd = np.sqrt(np.maximum(box.variance_bound(np.eye(n)), 0.0))
+    return (peak + sigmas * sd).max(axis=0)
 
 
 def quadratic_fit(f, parameters):

@@ -12,23 +12,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from conftest import EXAMPLES
-from stospline import design_problem, evaluate_table, load_problem
-from stospline.harness.params_loop import build_params_controller, simulate_params
-from stospline.oracle.parametric import design_parametric, evaluate_at, evaluate_switched
+from stospline import evaluate_table
+from stospline.harness.params_loop import simulate_params
+from stospline.oracle.parametric import evaluate_at, evaluate_switched
 from stospline.problem.parameters import problem_at
 
-PATHS, SEED = 2000, 20261130
-THETA, THETA2 = np.array([-0.7, 5.3]), np.array([-1.4, 4.6])
+from test_params_monte_carlo import PATHS, THETA, THETA2, robot  # noqa: F401 (the fixture)
 
-
-@pytest.fixture(scope="module")
-def robot(tmp_path_factory):
-    problem = load_problem(EXAMPLES / "robot_goal.toml")
-    table = design_problem(problem).table
-    pt = design_parametric(problem).table
-    ctl = build_params_controller(pt, table, build_dir=tmp_path_factory.mktemp("mid"))
-    return problem, pt, ctl
+SEED = 20261130
 
 
 def latched_at_once(problem, pt, stage, tick):

@@ -14,13 +14,18 @@ from __future__ import annotations
 
 import hashlib
 import os
+import threading
 from pathlib import Path
 from typing import Callable, Iterable
 
-from stospline.errors import StosplineError
+from stospline.errors import KernelBuildError, StosplineError
 
 __all__ = ["cache_root", "source_key", "cached_build", "compile_cffi", "load_module",
-           "build_source_module", "CompilerMissing", "FallbackWarning", "c_compiler"]
+           "build_source_module", "build_kernel_sources", "KERNEL_CFLAGS", "LoadOnce",
+           "CompilerMissing", "FallbackWarning", "c_compiler"]
+
+# The flags of the host kernels (double-precision C of the designer, the oracle, the table).
+KERNEL_CFLAGS = ["-std=c99", "-O3", "-Wall", "-Wextra"]
 
 
 class CompilerMissing(StosplineError, RuntimeError):
@@ -158,3 +163,34 @@ def build_source_module(prefix: str, source: bytes, cdef: str, cflags: list[str]
         return compile_cffi(out, modname, cdef, source.decode(), cflags=cflags, quiet=quiet)
 
     return cached_build(key, modname, build, root=root)
+
+
+def build_kernel_sources(prefix: str, sources: Iterable[Path], cdef: str,
+                         cflags: list[str] = KERNEL_CFLAGS, *, root: str | Path | None = None,
+                         quiet: bool = True) -> Path:
+    """`build_source_module` of the C files `sources` joined into one text: the host kernels
+    of the designer, the oracle and the table layer. Any failure (a missing file, no
+    compiler, no cffi) is a `KernelBuildError` that names the files."""
+    sources = list(sources)
+    try:
+        source = b"\n".join(p.read_bytes() for p in sources)
+        return build_source_module(prefix, source, cdef, cflags, root=root, quiet=quiet)
+    except Exception as exc:  # noqa: BLE001 - any failure here means "no compiled kernel"
+        names = ", ".join(p.name for p in sources)
+        raise KernelBuildError(f"cannot build {names}: {exc}") from exc
+
+
+class LoadOnce:
+    """``loader()``: the module at ``build()`` (`load_module`), built and loaded on the first
+    call, once, whichever thread asks first."""
+
+    def __init__(self, build: Callable[[], Path]):
+        self._build = build
+        self._module = None
+        self._lock = threading.Lock()
+
+    def __call__(self):
+        with self._lock:
+            if self._module is None:
+                self._module = load_module(self._build())
+        return self._module

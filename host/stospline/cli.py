@@ -155,9 +155,8 @@ def _corridor_design(args) -> int:
         raise ProblemError("--certify-seed", f"must differ from --seed ({args.seed}): "
                                              f"certifying on the screening sample biases it")
     problem = load_problem(args.problem)
-    if _PLANT_FIT:      # its certificate would be the linearisation's, not the model's
-        raise ProblemError("plant", "corridor-design does not run on a [plant] model yet")
-    problem, index = cs.target_corridor(problem, args.epsilon)
+    plant = _plant_corridor(args, problem) if _PLANT_FIT else None
+    problem, index = cs.target_corridor(problem, args.epsilon, varying=plant is not None)
     resolved = _design_options(args, problem)
     for key, option, bad in (("table", "--table", "spline"), ("delay_ticks", "--delay-ticks", 1)):
         if getattr(resolved, key) == bad:
@@ -165,41 +164,51 @@ def _corridor_design(args) -> int:
                                "corridor-design writes per-tick tables without a delay")
     opts = {"mode": resolved.mode, "discretization": resolved.discretization}
     if args.mode or args.discretization:      # the designed file says how it was designed
-        problem = with_file_options(problem, **{k: v for k, v in opts.items()
-                                                if getattr(args, k)})
+        given = {k: v for k, v in opts.items() if getattr(args, k)}
+        problem = with_file_options(problem, **given)
+        if plant is not None:                 # and its iterations run with them
+            plant.doc["design"] = {**plant.doc.get("design", {}), **given}
     name = problem.name
-    files = corridor_design_files(name)
+    files = corridor_design_files(name) + (list(plant.files()) if plant else [])
     if args.out:
         check_target(args.out, files, [args.problem])
     cs.check_reachable(problem, index, search_paths=args.search, certify_paths=args.certify,
                        epsilon_option=args.epsilon is not None)
     grid = len(args.strip) * len(args.rate)
     workers = _workers(args)
-    est = enforce(cs.work_estimate(problem, grid=grid, search_paths=args.search,
-                                   certify_paths=args.certify, attempts=args.attempts,
-                                   refine=args.refine, workers=workers,
-                                   substeps=args.substeps, **opts),
+    counts = dict(grid=grid, search_paths=args.search, certify_paths=args.certify,
+                  attempts=args.attempts, refine=args.refine, substeps=args.substeps)
+    est = enforce(plant.work_estimate(problem, **counts, **opts) if plant else
+                  cs.work_estimate(problem, workers=workers, **counts, **opts),
                   problem, max_seconds=args.max_time, max_bytes=args.max_memory * 1024 ** 3,
                   workers=workers)
     progress.note(f"corridor-design of {name}: at most ~{format_seconds(est.seconds)} "
                   f"({grid} grid points screened, {args.attempts} certifications)")
     checked = {**opts, "max_memory": None, "max_time": None}    # the whole search is checked
-    result = cs.evaluate_grid(problem, index, strip=args.strip, rate=args.rate, **checked)
+    on_plant = {} if plant is None else {"make": plant.candidate}
+    result = cs.evaluate_grid(problem, index, strip=args.strip, rate=args.rate, **on_plant,
+                              **checked)
+    if plant is not None:
+        on_plant["exits"] = plant.count_exits
     cs.search(problem, index, result, search_paths=args.search, certify_paths=args.certify,
               search_seed=args.seed, certify_seed=args.certify_seed, attempts=args.attempts,
               refine=args.refine, substeps=args.substeps, workers=workers, force_workers=True,
-              scheduler=args.scheduler, **checked)
+              scheduler=args.scheduler, **on_plant, **checked)
     c = result.chosen
     if c is None:                # nothing on stdout: the error line says why
         raise ProblemError(f"corridors[{index}].epsilon", cs.failure_reason(result))
     cert = cs.certificate(result, problem_sha256=result.designed.problem.source_sha256,
                           design_options=opts, substeps=args.substeps)
+    if plant is not None:
+        cert = plant.certificate(cert, args.substeps)
     text = dumps(cert) + "\n"
     written = []
     if args.out:
         out = generated_files(result.designed, f"{name}.toml")
         written = write_outputs(args.out, {f"{name}.toml": c.toml, **out,
-                                           f"{name}_corridor.json": text}, [args.problem])
+                                           f"{name}_corridor.json": text,
+                                           **(plant.files() if plant else {})},
+                                [args.problem])
     if args.json:
         print(text, end="")
     else:
@@ -207,6 +216,15 @@ def _corridor_design(args) -> int:
         for path in written:
             print(f"wrote {path}")
     return 0
+
+
+def _plant_corridor(args, problem):
+    """The search's hooks for a [plant] problem (`stospline.nonlinear.corridor`): grid points
+    designed on their own linearisation, exits counted on the model."""
+    from stospline.nonlinear.corridor import PlantCorridor
+    from stospline.problem.inputfile import decode_problem, read_problem_file
+    doc = decode_problem(read_problem_file(args.problem))
+    return PlantCorridor(doc, Path(args.problem).resolve().parent, _PLANT_FIT[0], problem.name)
 
 
 def _start(arg: str | None):
@@ -453,20 +471,26 @@ def _report(args) -> int:
     from stospline.atomic import check_file_target
     from stospline.report.html import report_html
     check_file_target(args.out, [args.problem])        # before the file is read
-    if load_problem(args.problem).measurement is not None:
+    first = load_problem(args.problem)
+    if first.measurement is not None:
         return _report_sensor(args)
+    if _PLANT_FIT and first.faults.as_dict():       # before any run
+        raise ProblemError("faults", "are not applied around a [plant] model yet")
     runs = fault_sweep_runs()
     d, mc = _monte_carlo(args, "report", record=REPORT_RECORD, extra_paths=runs * args.fault_paths)
     summary = simulation_summary(d, mc, seed=args.seed)
-    rows = None
+    rows, plant = None, None
     why_not = fault_table_unavailable(d)
+    if _PLANT_FIT:              # the run above is the linearisation's: the model's too
+        plant = _plant_run(args, d)
+        why_not = "the fault sweep runs on the linear harness, not on the [plant] model"
     if args.fault_paths and why_not:
         progress.note(f"no fault table: {why_not}")
     elif args.fault_paths:
         progress.note(f"fault table: {runs} runs of {args.fault_paths} paths")
         rows = fault_sweep(d, paths=args.fault_paths, seed=args.seed, substeps=mc.substeps,
                            workers=_workers(args), scheduler=args.scheduler)
-    page = report_html(d, mc, summary, rows, why_not if args.fault_paths else None)
+    page = report_html(d, mc, summary, rows, why_not if args.fault_paths else None, plant)
     write_file(args.out, lambda tmp: Path(tmp).write_text(page, encoding="utf-8"),
                [args.problem])
     print(f"wrote {args.out}")
@@ -787,15 +811,22 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def _simulate_plant(args, d) -> int:
-    """`simulate` of a [plant] problem (`stospline.nonlinear.simulate`): Monte Carlo on the
-    model, against the oracle of its linearisation."""
-    from stospline.nonlinear.simulate import plant_simulation, plant_simulation_text
+def _plant_run(args, d) -> dict:
+    """Monte Carlo of `d` (a [plant] problem's linearisation) on the model itself
+    (`stospline.nonlinear.simulate.plant_simulation`)."""
+    from stospline.nonlinear.simulate import plant_simulation
     if d.problem.faults.as_dict():
         raise ProblemError("faults", "are not applied around a [plant] model yet")
     substeps = 4 if args.substeps == "auto" else int(args.substeps)
-    s = plant_simulation(d, _PLANT_FIT[0].model, paths=args.paths, seed=args.seed,
-                         substeps=substeps)
+    return plant_simulation(d, _PLANT_FIT[0].model, paths=args.paths, seed=args.seed,
+                            substeps=substeps)
+
+
+def _simulate_plant(args, d) -> int:
+    """`simulate` of a [plant] problem (`stospline.nonlinear.simulate`): Monte Carlo on the
+    model, against the oracle of its linearisation."""
+    from stospline.nonlinear.simulate import plant_simulation_text
+    s = _plant_run(args, d)
     print(dumps(s) + "\n" if args.json else plant_simulation_text(s), end="", flush=True)
     return 0 if (s["verdict"]["agree"] or not args.check) else EXIT_DISAGREE
 

@@ -46,7 +46,7 @@ from stospline.oracle.evaluate import evaluate_table
 
 __all__ = ["STRIP_WEIGHTS", "RATE_WEIGHTS", "SEARCH_SEED", "CERTIFY_SEED", "ATTEMPTS",
            "Candidate", "Exits", "SearchResult", "target_corridor", "with_weights", "candidate",
-           "evaluate_grid", "count_exits", "search", "certificate", "work_estimate",
+           "evaluate_grid", "count_exits", "score", "search", "certificate", "work_estimate",
            "summary_text", "failure_reason", "check_reachable", "paths_to_certify"]
 
 STRIP_WEIGHTS = (0.0, 2.0, 5.0, 10.0, 20.0, 40.0)     # w, the centre-line pull
@@ -113,12 +113,13 @@ class SearchResult:
     designed: object = None  # pipeline.Designed of the chosen candidate
 
 
-def target_corridor(problem, epsilon: float | None = None):
+def target_corridor(problem, epsilon: float | None = None, *, varying: bool = False):
     """``(problem, index)``: the problem with the corridor to design for, and its index.
 
     Without `epsilon`: exactly one corridor must carry ``epsilon``. With it (``--epsilon``):
     the problem must have exactly one corridor, whose epsilon it sets. Raises ProblemError
-    naming the field or option otherwise, and for stage data that vary in time."""
+    naming the field or option otherwise, and for stage data that vary in time (unless
+    `varying`: the linearisation of a [plant] model, whose weights the caller adds)."""
     cors = problem.corridors
     if epsilon is not None:
         if not (isinstance(epsilon, float) and 0.0 < epsilon < 1.0):
@@ -142,7 +143,7 @@ def target_corridor(problem, epsilon: float | None = None):
                                f"for one: remove the others' epsilon")
         index = marked[0]
     for k, st in enumerate(problem.stages):
-        if st.varying is not None:
+        if st.varying is not None and not varying:
             raise ProblemError(f"stages[{k}]", "the corridor design adds constant weights to "
                                                "each stage: stage data must not vary in time")
     return problem, index
@@ -210,9 +211,10 @@ def _outputs(problem, table, corridor: int):
 
 
 def evaluate_grid(problem, corridor: int, *, strip=STRIP_WEIGHTS, rate=RATE_WEIGHTS,
-                  **design_options) -> SearchResult:
+                  make=None, **design_options) -> SearchResult:
     """Design the problem and every grid point; the result's candidates sorted by their cost
-    in the original cost functional (ties by w, wv), nothing screened yet."""
+    in the original cost functional (ties by w, wv), nothing screened yet. `make`: how a
+    grid point is made (default `candidate`)."""
     c = problem.corridors[corridor]
     base = design_problem(problem, **design_options)
     J0, ym, _ = _outputs(problem, base.table, corridor)
@@ -222,7 +224,7 @@ def evaluate_grid(problem, corridor: int, *, strip=STRIP_WEIGHTS, rate=RATE_WEIG
     out = []
     try:
         for w, wv in grid:
-            out.append(candidate(problem, corridor, polys, w, wv, **design_options))
+            out.append((make or candidate)(problem, corridor, polys, w, wv, **design_options))
             progress.advance()
     finally:
         progress.finish(bar)
@@ -233,11 +235,19 @@ def evaluate_grid(problem, corridor: int, *, strip=STRIP_WEIGHTS, rate=RATE_WEIG
 def candidate(problem, corridor: int, polys: list[int], w: float, wv: float,
               **design_options) -> Candidate:
     """The design of weights (w, wv) with its exact oracle's numbers (no Monte Carlo)."""
-    c = problem.corridors[corridor]
     text = with_weights(problem, corridor, polys, w, wv)
     cand = Candidate(float(w), float(wv), text, 0.0, 0.0, 0.0, True)
     d = design_problem(cand.problem(), **design_options)
-    J, ym, yc = _outputs(problem, d.table, corridor)
+    return score(cand, problem, corridor, polys, d.table)
+
+
+def score(cand: Candidate, problem, corridor: int, polys: list[int], table,
+          plant=None) -> Candidate:
+    """Set the candidate's oracle numbers: the cost of `table` in `problem`'s cost functional
+    (with the dynamics of `plant`, a problem of the same shape, when given), the union
+    bounds of its exits and whether its mean path keeps the legs `polys`."""
+    c = problem.corridors[corridor]
+    J, ym, yc = _outputs(problem if plant is None else plant, table, corridor)
     b = exit_bounds(c, ym, yc, problem.t0, problem.tick_hz)
     cand.J, cand.cantelli, cand.gaussian = (float(J), b["cantelli"].total,
                                             b["gaussian"].total)
@@ -261,7 +271,7 @@ def search(problem, corridor: int, result: SearchResult, *, search_paths: int,
            certify_paths: int, search_seed: int = SEARCH_SEED,
            certify_seed: int = CERTIFY_SEED, attempts: int = ATTEMPTS, substeps: int = 1,
            workers=None, scheduler=None, refine: int = 0, force_workers: bool = False,
-           **design_options) -> SearchResult:
+           exits=count_exits, make=candidate, **design_options) -> SearchResult:
     """Screen `result.candidates` cheapest first and certify the first that passes (the
     next that passes if certification fails, at most `attempts` certifications). A
     candidate's `screening` already set (e.g. by a full-grid run with the same paths and
@@ -273,7 +283,11 @@ def search(problem, corridor: int, result: SearchResult, *, search_paths: int,
     failed) to P, screening each point; the cheapest point of the segment that passes (in
     the original cost) is certified first, P after it if that fails. Between two grid points
     the cheapest passing design is usually inside the segment, and the grid alone overpays
-    by up to the cost step between them."""
+    by up to the cost step between them.
+
+    `exits` and `make`: how a candidate's exits are counted and a bisection point made, with
+    the signatures of `count_exits` and `candidate` (`stospline.nonlinear.corridor`: on a
+    [plant] model)."""
     eps = result.epsilon
     run = dict(substeps=substeps, workers=workers, scheduler=scheduler,
                force_workers=force_workers, **design_options)
@@ -285,22 +299,23 @@ def search(problem, corridor: int, result: SearchResult, *, search_paths: int,
         if known is None or (known.paths, known.seed) != (search_paths, search_seed):
             progress.note(f"screening w = {cand.w:g}, wv = {cand.wv:g} (J = {cand.J:.6g}, "
                           f"{i + 1} of {len(result.candidates)} by cost): {search_paths} paths")
-            cand.screening = count_exits(problem, corridor, cand, paths=search_paths,
-                                         seed=search_seed, **run)
+            cand.screening = exits(problem, corridor, cand, paths=search_paths,
+                                   seed=search_seed, **run)
         result.screened.append(cand)
         if cand.screening.upper > eps:
             continue
         queue = [cand]
         if refine and not result.refined and len(result.screened) > 1:
             queue = _bisect(problem, corridor, result, result.screened[-2], cand, refine,
-                            search_paths, search_seed, run, design_options) + queue
+                            search_paths, search_seed, run, design_options, exits,
+                            make) + queue
         for q in queue:
             if len(result.certified) >= attempts:
                 break
             progress.note(f"certifying w = {q.w:g}, wv = {q.wv:g}: {certify_paths} fresh "
                           f"paths")
-            q.certification = count_exits(problem, corridor, q, paths=certify_paths,
-                                          seed=certify_seed, **run)
+            q.certification = exits(problem, corridor, q, paths=certify_paths,
+                                    seed=certify_seed, **run)
             result.certified.append(q)
             if q.certification.upper <= eps:
                 result.chosen = q
@@ -310,8 +325,8 @@ def search(problem, corridor: int, result: SearchResult, *, search_paths: int,
 
 
 def _bisect(problem, corridor: int, result: SearchResult, fail: Candidate, ok: Candidate,
-            steps: int, paths: int, seed: int, run: dict, design_options: dict
-            ) -> list[Candidate]:
+            steps: int, paths: int, seed: int, run: dict, design_options: dict,
+            exits, make) -> list[Candidate]:
     """`steps` bisections of the weights between `fail` and `ok`; the points that pass
     screening and cost less than `ok`, cheapest first (each also in ``result.refined``)."""
     lo, hi = 0.0, 1.0
@@ -320,10 +335,10 @@ def _bisect(problem, corridor: int, result: SearchResult, fail: Candidate, ok: C
         th = 0.5 * (lo + hi)
         w = fail.w + th * (ok.w - fail.w)
         wv = fail.wv + th * (ok.wv - fail.wv)
-        q = candidate(problem, corridor, result.polygons, w, wv, **design_options)
+        q = make(problem, corridor, result.polygons, w, wv, **design_options)
         progress.note(f"refining: w = {q.w:.6g}, wv = {q.wv:.6g} (J = {q.J:.6g}): "
                       f"{paths} paths")
-        q.screening = count_exits(problem, corridor, q, paths=paths, seed=seed, **run)
+        q.screening = exits(problem, corridor, q, paths=paths, seed=seed, **run)
         result.refined.append(q)
         if q.screening.upper <= result.epsilon:
             hi = th

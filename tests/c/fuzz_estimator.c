@@ -11,6 +11,8 @@
 #include "fuzz_input.h"
 #include "robot_position_sensor.h"
 
+#include "fuzz_tables.h"
+
 #define NX ROBOT_POSITION_SENSOR_NX
 #define NU ROBOT_POSITION_SENSOR_NU
 #define NY ROBOT_POSITION_SENSOR_NY
@@ -23,14 +25,6 @@
 #define MAX_GAINS (ROBOT_POSITION_SENSOR_N_TICKS * NX * STSP_MAX_NY)
 static float gains[MAX_GAINS];
 static float out_rows[STSP_MAX_NY * NX];
-
-static int init_status_ok(stsp_status_t st)
-{
-    return (st == STSP_OK) || (st == STSP_ERR_NULL) || (st == STSP_ERR_BAD_MAGIC) ||
-           (st == STSP_ERR_BAD_VERSION) || (st == STSP_ERR_BAD_DIMS) ||
-           (st == STSP_ERR_BAD_CRC) || (st == STSP_ERR_BAD_PROBLEM) ||
-           (st == STSP_ERR_BAD_VALUES);
-}
 
 static int step_status_ok(stsp_status_t st)
 {
@@ -46,7 +40,6 @@ static void corrupt(fuzz_in_t *in, stsp_est_table_t *c)
 {
     const uint32_t what = fuzz_u8(in) % 12u;
     const uint32_t v = fuzz_u32(in);
-    uint32_t k;
     switch (what) {
     case 0: c->magic = v; break;
     case 1: c->format_version = (uint16_t)v; break;
@@ -59,10 +52,7 @@ static void corrupt(fuzz_in_t *in, stsp_est_table_t *c)
     case 8: c->every = v; break;
     case 9: c->problem_sha256[v % 32u] ^= (uint8_t)(1u + (v >> 8) % 255u); break;
     default: /* gain words, then (case 11) a CRC that matches them */
-        for (k = 0u; k < 1u + (v % 4u); ++k) {
-            const uint32_t bits = fuzz_u32(in);
-            memcpy(&gains[fuzz_u32(in) % N_GAINS], &bits, sizeof bits);
-        }
+        fuzz_words(in, gains, N_GAINS, v);
         if (what == 11u) {
             c->crc32 = stsp_est_table_crc32(c);
         }
@@ -101,14 +91,13 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         e = shipped;
         st = STSP_OK;
     }
-    fuzz_check(init_status_ok(st));
+    fuzz_check(fuzz_init_status_ok(st));
     for (i = 0u; i < 64u && in.n > 0u; ++i) {
         const uint32_t op = fuzz_u8(&in);
         float y[NY];
         float u[NU] = {1234.5f, -1234.5f};
         stsp_status_t s;
         uint32_t tick;
-        uint32_t j;
         if (op == 0xFEu) {
             s = stsp_est_reset(&e);
             fuzz_check((s == STSP_OK) || (s == STSP_ERR_NOT_INITIALIZED));
@@ -120,16 +109,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             fuzz_check((s == STSP_OK) || (s == STSP_ERR_NOT_INITIALIZED));
             continue;
         }
-        switch (op & 3u) {
-        case 0: tick = next; break;                          /* in order */
-        case 1: tick = next + (fuzz_u8(&in) % 50u); break;   /* a skip */
-        case 2: tick = next - 1u - (fuzz_u8(&in) % 3u); break; /* repeat, backwards, wrap */
-        default: tick = fuzz_u32(&in); break;
-        }
-        for (j = 0u; j < NY; ++j) {
-            const uint32_t bits = fuzz_u32(&in);
-            memcpy(&y[j], &bits, sizeof bits);
-        }
+        tick = fuzz_tick(&in, op, next);
+        fuzz_floats(&in, y, NY, 0);
         s = stsp_est_step(&e, tick, ((op & 4u) != 0u) ? NULL : y, u);
         fuzz_check(step_status_ok(s));
         if (st != STSP_OK) {

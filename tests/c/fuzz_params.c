@@ -13,6 +13,8 @@
 #include "fuzz_input.h"
 #include "robot_goal_params.h"
 
+#include "fuzz_tables.h"
+
 #define NX ROBOT_GOAL_NX
 #define NU ROBOT_GOAL_NU
 #define NP ROBOT_GOAL_N_PARAMS
@@ -23,14 +25,6 @@
 static float cols[ROBOT_GOAL_N_TICKS * NU * STSP_MAX_PARAMS];
 static float lam[ROBOT_GOAL_N_STAGES * ROBOT_GOAL_N_LATCH * STSP_MAX_PARAMS];
 static float nominal[STSP_MAX_PARAMS], lower[STSP_MAX_PARAMS], upper[STSP_MAX_PARAMS];
-
-static int init_status_ok(stsp_status_t st)
-{
-    return (st == STSP_OK) || (st == STSP_ERR_NULL) || (st == STSP_ERR_BAD_MAGIC) ||
-           (st == STSP_ERR_BAD_VERSION) || (st == STSP_ERR_BAD_DIMS) ||
-           (st == STSP_ERR_BAD_CRC) || (st == STSP_ERR_BAD_PROBLEM) ||
-           (st == STSP_ERR_BAD_VALUES);
-}
 
 static int step_status_ok(stsp_status_t st)
 {
@@ -46,7 +40,6 @@ static void corrupt(fuzz_in_t *in, stsp_params_table_t *c)
 {
     const uint32_t what = fuzz_u8(in) % 12u;
     const uint32_t v = fuzz_u32(in);
-    uint32_t k;
     switch (what) {
     case 0: c->magic = v; break;
     case 1: c->format_version = (uint16_t)v; break;
@@ -62,10 +55,7 @@ static void corrupt(fuzz_in_t *in, stsp_params_table_t *c)
         c->crc32 = stsp_params_table_crc32(c);
         break;
     default: /* column words, then (case 11) a CRC that matches them */
-        for (k = 0u; k < 1u + (v % 4u); ++k) {
-            const uint32_t bits = fuzz_u32(in);
-            memcpy(&cols[fuzz_u32(in) % N_COLS], &bits, sizeof bits);
-        }
+        fuzz_words(in, cols, N_COLS, v);
         if (what == 11u) {
             c->crc32 = stsp_params_table_crc32(c);
         }
@@ -126,7 +116,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         e = shipped;
         st = STSP_OK;
     }
-    fuzz_check(init_status_ok(st));
+    fuzz_check(fuzz_init_status_ok(st));
     twin = e;
     for (i = 0u; i < 64u && in.n > 0u; ++i) {
         const uint32_t op = fuzz_u8(&in);
@@ -139,10 +129,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         uint32_t j;
         if (op == 0xFDu) {
             float theta[NP];
-            for (j = 0u; j < NP; ++j) {
-                const uint32_t bits = fuzz_u32(&in);
-                memcpy(&theta[j], &bits, sizeof bits);
-            }
+            fuzz_floats(&in, theta, NP, 0);
             s = stsp_set_params(&e, theta);
             fuzz_check((s == STSP_OK) || (s == STSP_ERR_PARAM_RANGE) ||
                        (s == STSP_ERR_NOT_INITIALIZED));
@@ -168,19 +155,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             (void)stsp_param_verify(&twin);
             continue;
         }
-        switch (op & 3u) {
-        case 0: tick = next; break;                            /* in order */
-        case 1: tick = next + (fuzz_u8(&in) % 50u); break;     /* a skip */
-        case 2: tick = next - 1u - (fuzz_u8(&in) % 3u); break; /* repeat, backwards, wrap */
-        default: tick = fuzz_u32(&in); break;
-        }
-        for (j = 0u; j < NX; ++j) {
-            uint32_t bits = fuzz_u32(&in);
-            if ((op & 4u) != 0u) { /* a moderate state, mostly: commands within range */
-                bits = 0x3F800000u ^ (bits & 0x807FFFFFu);
-            }
-            memcpy(&x[j], &bits, sizeof bits);
-        }
+        tick = fuzz_tick(&in, op, next);
+        fuzz_floats(&in, x, NX, (op & 4u) != 0u); /* moderate: commands within range, mostly */
         s = stsp_param_step(&e, tick, x, u);
         t = stsp_param_step(&twin, tick, x, w);
         fuzz_check(step_status_ok(s));

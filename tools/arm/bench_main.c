@@ -24,6 +24,8 @@
 #include <stdio.h>
 
 #include "stospline/stsp_controller.h"
+
+#include "bench_table_line.h"
 #ifdef BENCH_SPLINE
 #include "spline_bench_table.h"
 #define ROBOT_TABLE spline_bench_table
@@ -175,11 +177,6 @@ int main(void)
     }
     printf("bench: %lu calls, sizeof(stsp_ctrl_t) %lu\n", (unsigned long)n_calls,
            (unsigned long)sizeof(stsp_ctrl_t));
-    printf("table nx %u nu %u n_latch %u stage_n_latch", (unsigned)ROBOT_TABLE.nx,
-           (unsigned)ROBOT_TABLE.nu, (unsigned)ROBOT_TABLE.n_latch);
-    for (i = 0u; i < ROBOT_TABLE.n_stages; ++i) {
-        printf(" %u", (unsigned)ROBOT_TABLE.stage_n_latch[i]);
-    }
-    printf("\n");
+    bench_print_table_line(&ROBOT_TABLE);
     return 0;
 }

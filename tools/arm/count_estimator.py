@@ -21,7 +21,8 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from count_instructions import BRANCH, ROOT, callees, disassemble, run, symbols  # noqa: E402
+from count_instructions import (ROOT, callees, instructions_per_call, run,  # noqa: E402
+                                symbols, trace_run)
 
 FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-std=c99",
          "-O2", "-ffp-contract=off", "-ffunction-sections", "-fdata-sections", "-Wall",
@@ -44,42 +45,13 @@ def count(elf: Path) -> tuple[list[dict], int]:
     syms = symbols(elf)
     funcs = callees(elf, syms, "stsp_est_step_f32")
     ranges = {n: syms[n] for n in funcs + ["bench_step"]}
-    insns: dict[int, str] = {}
-    for a, s in ranges.values():
-        insns.update(disassemble(elf, a, s))
-    addrs = sorted(insns)
-    following = dict(zip(addrs, addrs[1:]))
     trace = elf.with_suffix(".trace")
-    out = run(["timeout", "600", "qemu-system-arm", "-M", "mps2-an386", "-nographic",
-               "-monitor", "none", "-semihosting-config", "enable=on,target=native",
-               "-kernel", str(elf), "-singlestep", "-d", "exec,nochain", "-D", str(trace),
-               "-dfilter", ",".join(f"{a:#x}+{s:#x}" for a, s in ranges.values())])
+    insns, out = trace_run(elf, ranges, trace)
     calls = [{"tick": int(m[0]), "status": int(m[1]), "reading": m[2] == "1"}
              for m in re.findall(r"call \d+ tick (\d+) status (-?\d+) reading (\d)", out)]
     size = int(re.search(r"sizeof (\d+)", out).group(1))
-    entry = syms["stsp_est_step_f32"][0]
-    lo, n = ranges["bench_step"]
-    counts, current, prev = [], None, None
-    pat = re.compile(r"Trace \d+: 0x[0-9a-f]+ \[[0-9a-f]+/([0-9a-f]+)/")
-    with trace.open() as fh:
-        for line in fh:
-            m = pat.match(line)
-            if not m:
-                continue
-            pc = int(m.group(1), 16)
-            if pc not in insns:
-                raise SystemExit(f"count: traced pc {pc:#x} is not an instruction boundary")
-            if prev is not None and pc != following.get(prev) and not BRANCH.match(insns[prev]):
-                raise SystemExit(f"count: {prev:#x} -> {pc:#x}: an instruction ran untraced")
-            prev = pc
-            if pc == entry:
-                current = 0
-            if lo <= pc < lo + n:
-                if current is not None:
-                    counts.append(current)
-                    current = None
-            elif current is not None:
-                current += 1
+    counts = instructions_per_call(trace, insns, {syms["stsp_est_step_f32"][0]},
+                                   [ranges["bench_step"]])
     if len(counts) != len(calls):
         raise SystemExit(f"count: {len(counts)} calls traced, the bench reports {len(calls)}")
     for c, k in zip(calls, counts):

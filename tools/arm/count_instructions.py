@@ -28,6 +28,7 @@ import statistics
 import subprocess
 import sys
 from pathlib import Path
+from typing import Iterator
 
 ROOT = Path(__file__).resolve().parents[2]
 CPU_FLAGS = {
@@ -103,6 +104,65 @@ def callees(elf: Path, syms: dict, root: str) -> list[str]:
     return seen
 
 
+def dfilter(ranges: dict[str, tuple[int, int]]) -> str:
+    """QEMU's -dfilter of the address `ranges` (name -> (start, size))."""
+    return ",".join(f"{a:#x}+{s:#x}" for a, s in ranges.values())
+
+
+def trace_run(elf: Path, ranges: dict[str, tuple[int, int]], trace: Path,
+              machine: str = "mps2-an386", timeout: int = 600) -> tuple[dict[int, str], str]:
+    """Run `elf` in QEMU one instruction a translation block (-singlestep, -d exec,nochain),
+    tracing only the address `ranges` (name -> (start, size)) into `trace`: returns the
+    disassembly of the ranges (address -> instruction) and the image's output."""
+    insns: dict[int, str] = {}
+    for a, s in ranges.values():
+        insns.update(disassemble(elf, a, s))
+    out = run(["timeout", str(timeout), "qemu-system-arm", "-M", machine, "-nographic",
+               "-monitor", "none", "-semihosting-config", "enable=on,target=native",
+               "-kernel", str(elf), "-singlestep", "-d", "exec,nochain", "-D", str(trace),
+               "-dfilter", dfilter(ranges)])
+    return insns, out
+
+
+def traced_pcs(trace: Path, insns: dict[int, str]) -> Iterator[int]:
+    """The program counters of `trace` (`trace_run`) in order, each checked: an instruction
+    boundary of the disassembly, and one line per instruction (control leaves the sequential
+    order only after a branch)."""
+    following = dict(zip(sorted(insns), sorted(insns)[1:]))
+    pat = re.compile(r"Trace \d+: 0x[0-9a-f]+ \[[0-9a-f]+/([0-9a-f]+)/")
+    prev = None
+    with trace.open() as fh:
+        for line in fh:
+            m = pat.match(line)
+            if not m:
+                continue
+            pc = int(m.group(1), 16)
+            if pc not in insns:
+                raise SystemExit(f"count: traced pc {pc:#x} is not an instruction boundary")
+            if prev is not None and pc != following.get(prev) and not BRANCH.match(insns[prev]):
+                raise SystemExit(f"count: {prev:#x} ({insns[prev]}) -> {pc:#x}: an instruction "
+                                 "ran without its own trace line")
+            prev = pc
+            yield pc
+
+
+
+def instructions_per_call(trace: Path, insns: dict[int, str], entries: set[int],
+                          callers: list[tuple[int, int]]) -> list[int]:
+    """Instructions of each call in `trace`: from an address of `entries` (a function's first
+    instruction) until control is back in one of the `callers` (start, size)."""
+    counts, current = [], None
+    for pc in traced_pcs(trace, insns):
+        if pc in entries and current is None:
+            current = 0
+        if any(lo <= pc < lo + n for lo, n in callers):
+            if current is not None:
+                counts.append(current)
+                current = None
+        elif current is not None:
+            current += 1
+    return counts
+
 # The suffix of the controller's external symbols (STSP_NAME: stsp_step_f32, stsp_step_q15, ...)
 # per variant suffix of VARIANTS.
 API_SUFFIX = {"": "_f32", "_q15": "_q15", "_q31": "_q31"}
@@ -129,16 +189,7 @@ def trace_calls(build: Path, image: str, machine: str = "mps2-an386"
     for root in spline:
         funcs += [f for f in callees(elf, syms, root) if f not in funcs]
     ranges = {n: syms[n] for n in funcs + ["bench_step"]}
-    insns: dict[int, str] = {}
-    for n, (a, s) in ranges.items():
-        insns.update(disassemble(elf, a, s))
-    addrs = sorted(insns)
-    following = dict(zip(addrs, addrs[1:]))
-    dfilter = ",".join(f"{a:#x}+{s:#x}" for a, s in ranges.values())
-    out = run(["timeout", "300", "qemu-system-arm", "-M", machine, "-nographic",
-               "-monitor", "none", "-semihosting-config", "enable=on,target=native",
-               "-kernel", str(elf), "-singlestep", "-d", "exec,nochain", "-D", str(trace),
-               "-dfilter", dfilter])
+    insns, out = trace_run(elf, ranges, trace, machine, timeout=300)
     calls = []
     for line in out.splitlines():
         m = re.match(r"call (\d+) table (\d) tick (\d+) stage (\d+) latch (\d) status (-?\d+)"
@@ -149,43 +200,30 @@ def trace_calls(build: Path, image: str, machine: str = "mps2-an386"
                           "status": int(m.group(6)), "span": m.group(7) == "1"})
     entry = syms[step][0]
     in_caller = lambda pc: ranges["bench_step"][0] <= pc < sum(ranges["bench_step"])  # noqa: E731
-    counts, current, lines, prev = [], None, 0, None
+    counts, current, lines = [], None, 0
     # Multiplies: FP (vmul/vmla/vnmla/vfma...) and integer (mul/mla/mls, smull/smlal, smulxy/smlaxy).
     fmul = re.compile(r"(v(n?mul|n?mla|n?mls|fma|fms|fnma|fnms)\.f32|muls?|mla|mls|[su]mull|[su]mlal"
                       r"|smla[bt][bt]|smul[bt][bt]|smlaw[bt]|smulw[bt])(\.[nw])?\b")
-    pat = re.compile(r"Trace \d+: 0x[0-9a-f]+ \[[0-9a-f]+/([0-9a-f]+)/")
-    with trace.open() as fh:
-        for line in fh:
-            m = pat.match(line)
-            if not m:
-                continue
-            lines += 1
-            pc = int(m.group(1), 16)
-            if pc not in insns:
-                raise SystemExit(f"count: traced pc {pc:#x} is not an instruction boundary")
-            # One line per instruction: control leaves the sequential order only after a branch.
-            if prev is not None and pc != following.get(prev) and not BRANCH.match(insns[prev]):
-                raise SystemExit(f"count: {prev:#x} ({insns[prev]}) -> {pc:#x}: an instruction "
-                                 "ran without its own trace line")
-            prev = pc
-            if pc == entry:
-                if current is not None:
-                    raise SystemExit("count: stsp_step re-entered before returning")
-                current = [0, 0]
-            if in_caller(pc):
-                if current is not None:
-                    counts.append(current)
-                    current = None
-            elif current is not None:
-                current[0] += 1
-                current[1] += 1 if fmul.match(insns[pc]) else 0
+    for pc in traced_pcs(trace, insns):
+        lines += 1
+        if pc == entry:
+            if current is not None:
+                raise SystemExit("count: stsp_step re-entered before returning")
+            current = [0, 0]
+        if in_caller(pc):
+            if current is not None:
+                counts.append(current)
+                current = None
+        elif current is not None:
+            current[0] += 1
+            current[1] += 1 if fmul.match(insns[pc]) else 0
     if len(counts) != len(calls):
         raise SystemExit(f"count: {len(counts)} calls in the trace, bench reports {len(calls)}")
     for c, (n, muls) in zip(calls, counts):
         c["insns"], c["fmuls"] = n, muls
     m = re.search(r"sizeof\(stsp_ctrl_t\) (\d+)", out)
     dims = re.search(r"table nx (\d+) nu (\d+) n_latch (\d+) stage_n_latch([ \d]+)", out)
-    return calls, funcs, {"trace_lines": lines, "dfilter": dfilter,
+    return calls, funcs, {"trace_lines": lines, "dfilter": dfilter(ranges),
                           "sizeof_ctrl": int(m.group(1)) if m else None,
                           "nx": int(dims.group(1)), "nu": int(dims.group(2)),
                           "n_latch": int(dims.group(3)),

@@ -46,6 +46,27 @@ function(stsp_add_image name controller tables)
                       -Wl,--gc-sections -Wl,-Map=$<TARGET_FILE_DIR:${name}>/${name}.map)
 endfunction()
 
+# stsp_add_image_pair(<name> <generic controller> <shaped controller> <tables library>
+#                     SOURCES <sources...> [DEFINES <definitions...>]): the images <name> (the
+# generic controller) and <name>_fixed (the controller built for the table's shape) of the
+# same sources and definitions.
+function(stsp_add_image_pair name generic shaped tables)
+  cmake_parse_arguments(arg "" "" "SOURCES;DEFINES" ${ARGN})
+  stsp_add_image(${name} ${generic} ${tables} ${arg_SOURCES})
+  stsp_add_image(${name}_fixed ${shaped} ${tables} ${arg_SOURCES})
+  if(arg_DEFINES)
+    target_compile_definitions(${name} PRIVATE ${arg_DEFINES})
+    target_compile_definitions(${name}_fixed PRIVATE ${arg_DEFINES})
+  endif()
+endfunction()
+set(replay_main "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c")
+set(STSP_REPLAY_PERTURB_COEF "" CACHE STRING
+    "test the test: the spline replay images move this coefficient by one ulp (empty: none)")
+set(perturb "")
+if(NOT STSP_REPLAY_PERTURB_COEF STREQUAL "")
+  set(perturb REPLAY_PERTURB_COEF=${STSP_REPLAY_PERTURB_COEF}u)
+endif()
+
 set(STSP_REPLAY_RECORDS "" CACHE FILEPATH "float32 records (tools/arm/make_replay.py)")
 set(STSP_REPLAY_RECORDS_Q15 "" CACHE FILEPATH "Q15 records (make_replay.py --arith q15)")
 set(STSP_REPLAY_RECORDS_Q31 "" CACHE FILEPATH "Q31 records (make_replay.py --arith q31)")
@@ -70,30 +91,19 @@ foreach(arith float32 q15 q31)
   string(TOUPPER "STSP_REPLAY_RECORDS${sfx}" records_var)
   set(records "${${records_var}}")
   if(records)
-    stsp_add_image(replay${sfx} stsp_${arith} ${tables} "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c"
-                   "${records}")
-    stsp_add_image(replay_fixed${sfx} ${shaped} ${tables}
-                   "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c" "${records}")
+    stsp_add_image(replay${sfx} stsp_${arith} ${tables} "${replay_main}" "${records}")
+    stsp_add_image(replay_fixed${sfx} ${shaped} ${tables} "${replay_main}" "${records}")
   endif()
 endforeach()
 
 # The replay of the robot's spline table (float32 controller, generic and built for the robot's
 # shape; the M0+ runs it in soft float).
 set(STSP_REPLAY_RECORDS_SPLINE "" CACHE FILEPATH "spline records (make_replay.py --table spline)")
-set(STSP_REPLAY_PERTURB_COEF "" CACHE STRING
-    "test the test: the spline replay images move this coefficient by one ulp (empty: none)")
 if(STSP_REPLAY_RECORDS_SPLINE AND TARGET stsp_gains_robot_corridor_spline)
-  stsp_add_image(replay_spline stsp_float32 stsp_gains_robot_corridor_spline
-                 "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c" "${STSP_REPLAY_RECORDS_SPLINE}")
-  stsp_add_image(replay_spline_fixed stsp_fixed_robot_corridor_spline
-                 stsp_gains_robot_corridor_spline "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c"
-                 "${STSP_REPLAY_RECORDS_SPLINE}")
-  foreach(image replay_spline replay_spline_fixed)
-    target_compile_definitions(${image} PRIVATE ROBOT_SPLINE)
-    if(NOT STSP_REPLAY_PERTURB_COEF STREQUAL "")
-      target_compile_definitions(${image} PRIVATE REPLAY_PERTURB_COEF=${STSP_REPLAY_PERTURB_COEF}u)
-    endif()
-  endforeach()
+  stsp_add_image_pair(replay_spline stsp_float32 stsp_fixed_robot_corridor_spline
+                      stsp_gains_robot_corridor_spline
+                      SOURCES "${replay_main}" "${STSP_REPLAY_RECORDS_SPLINE}"
+                      DEFINES ROBOT_SPLINE ${perturb})
 endif()
 
 # The replay of robot_bands' spline table (its band dual re-solved for the spline's gains: the
@@ -101,15 +111,10 @@ endif()
 set(STSP_REPLAY_RECORDS_BANDS_SPLINE "" CACHE FILEPATH
     "robot_bands spline records (make_replay.py --table spline --problem examples/robot_bands.toml)")
 if(STSP_REPLAY_RECORDS_BANDS_SPLINE AND TARGET stsp_gains_robot_bands_spline)
-  stsp_add_image(replay_bands_spline stsp_float32 stsp_gains_robot_bands_spline
-                 "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c"
-                 "${STSP_REPLAY_RECORDS_BANDS_SPLINE}")
-  stsp_add_image(replay_bands_spline_fixed stsp_fixed_robot_bands_spline
-                 stsp_gains_robot_bands_spline "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c"
-                 "${STSP_REPLAY_RECORDS_BANDS_SPLINE}")
-  foreach(image replay_bands_spline replay_bands_spline_fixed)
-    target_compile_definitions(${image} PRIVATE ROBOT_SPLINE ROBOT_BANDS_SPLINE)
-  endforeach()
+  stsp_add_image_pair(replay_bands_spline stsp_float32 stsp_fixed_robot_bands_spline
+                      stsp_gains_robot_bands_spline
+                      SOURCES "${replay_main}" "${STSP_REPLAY_RECORDS_BANDS_SPLINE}"
+                      DEFINES ROBOT_SPLINE ROBOT_BANDS_SPLINE)
 endif()
 
 # The replay of the robot's Q15/Q31 spline tables (gains/robot_corridor_<arith>_spline.c; the
@@ -121,29 +126,20 @@ foreach(arith q15 q31)
       "${ARITH} spline records (make_replay.py --arith ${arith} --table spline)")
   set(records "${STSP_REPLAY_RECORDS_${ARITH}_SPLINE}")
   if(records AND TARGET stsp_gains_robot_corridor_${arith}_spline)
-    stsp_add_image(replay_${arith}_spline stsp_${arith} stsp_gains_robot_corridor_${arith}_spline
-                   "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c" "${records}")
-    stsp_add_image(replay_${arith}_spline_fixed stsp_fixed_robot_corridor_${arith}_spline
-                   stsp_gains_robot_corridor_${arith}_spline
-                   "${PROJECT_SOURCE_DIR}/tests/arm/replay_main.c" "${records}")
-    foreach(image replay_${arith}_spline replay_${arith}_spline_fixed)
-      target_compile_definitions(${image} PRIVATE ROBOT_SPLINE)
-      if(NOT STSP_REPLAY_PERTURB_COEF STREQUAL "")
-        target_compile_definitions(${image} PRIVATE REPLAY_PERTURB_COEF=${STSP_REPLAY_PERTURB_COEF}u)
-      endif()
-    endforeach()
+    stsp_add_image_pair(replay_${arith}_spline stsp_${arith}
+                        stsp_fixed_robot_corridor_${arith}_spline
+                        stsp_gains_robot_corridor_${arith}_spline
+                        SOURCES "${replay_main}" "${records}" DEFINES ROBOT_SPLINE ${perturb})
   endif()
 endforeach()
 # The instruction-count bench (bench_main.c) on the robot's Q15/Q31 spline tables
 # (count_instructions.sh), generic and built for the robot's shape.
 foreach(arith q15 q31)
   if(TARGET stsp_gains_robot_corridor_${arith}_spline)
-    stsp_add_image(bench_${arith}_spline stsp_${arith} stsp_gains_robot_corridor_${arith}_spline
-                   ${arm_dir}/bench_main.c)
-    stsp_add_image(bench_${arith}_spline_fixed stsp_fixed_robot_corridor_${arith}_spline
-                   stsp_gains_robot_corridor_${arith}_spline ${arm_dir}/bench_main.c)
-    target_compile_definitions(bench_${arith}_spline PRIVATE ROBOT_SPLINE)
-    target_compile_definitions(bench_${arith}_spline_fixed PRIVATE ROBOT_SPLINE)
+    stsp_add_image_pair(bench_${arith}_spline stsp_${arith}
+                        stsp_fixed_robot_corridor_${arith}_spline
+                        stsp_gains_robot_corridor_${arith}_spline
+                        SOURCES ${arm_dir}/bench_main.c DEFINES ROBOT_SPLINE)
   endif()
 endforeach()
 # The spline bench: a hand-made spline table of the robot's shape (make_spline_bench_table.py)
@@ -152,8 +148,5 @@ add_library(stsp_spline_bench_table STATIC ${arm_dir}/spline_bench_table.c)
 target_include_directories(stsp_spline_bench_table PUBLIC ${arm_dir}
                            ${PROJECT_SOURCE_DIR}/firmware/include)
 target_compile_options(stsp_spline_bench_table PRIVATE ${STSP_WARNINGS})
-stsp_add_image(bench_spline stsp_float32 stsp_spline_bench_table ${arm_dir}/bench_main.c)
-stsp_add_image(bench_spline_fixed stsp_fixed_robot_corridor stsp_spline_bench_table
-               ${arm_dir}/bench_main.c)
-target_compile_definitions(bench_spline PRIVATE BENCH_SPLINE)
-target_compile_definitions(bench_spline_fixed PRIVATE BENCH_SPLINE)
+stsp_add_image_pair(bench_spline stsp_float32 stsp_fixed_robot_corridor stsp_spline_bench_table
+                    SOURCES ${arm_dir}/bench_main.c DEFINES BENCH_SPLINE)

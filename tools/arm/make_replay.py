@@ -200,6 +200,31 @@ def simulate(problem, table, ticks: set[int], *, seed: int, substeps: int) -> li
     return rows
 
 
+class _Events(dict):
+    """A spline run's call schedule, by tick (`spline_events`, `q_spline_events`)."""
+
+    def add(self, tick: int, kind: str, value=True) -> None:
+        d = self.setdefault(tick, {})
+        if kind == "probe":
+            d.setdefault("probe", []).append(value)
+        else:
+            d[kind] = value
+
+    def skips(self, b0: list[int], b1: list[int]) -> None:
+        """Ticks not stepped: inside a span, across a span boundary, over a whole span (of
+        stage 0, span boundaries `b0`), and in stage 1 (`b1`)."""
+        mid = (b0[4] + b0[5]) // 2
+        for t in [*range(mid, mid + 4), b0[6] - 1, b0[6], *range(b0[8] - 1, b0[9] + 1),
+                  *range(b1[4] - 2, b1[4] + 3)]:
+            self.add(t, "skip")
+
+    def late_entry(self, start: int) -> None:
+        """Stage 1 (first tick `start`) entered, and latched, late: its first ticks skipped."""
+        for t in range(start - 2, start + 2):
+            self.pop(t, None)
+            self.add(t, "skip")
+
+
 def spline_events(table, *, late_stage_entry: bool) -> dict:
     """The call schedule of a spline run, by tick: 'skip' (not stepped), 'repeat' (stepped
     again with another state), 'probe' (a list of states stepped first: non-finite, refused
@@ -213,14 +238,8 @@ def spline_events(table, *, late_stage_entry: bool) -> dict:
         bps.append([start[s] + int(b) for b in U[4:-4]])
     b0, b1 = bps[0], bps[1]
     nan, inf = np.float32(np.nan), np.float32(np.inf)
-    ev: dict[int, dict] = {}
-
-    def add(tick, kind, value=True):
-        d = ev.setdefault(tick, {})
-        if kind == "probe":
-            d.setdefault("probe", []).append(value)
-        else:
-            d[kind] = value
+    ev = _Events()
+    add = ev.add
     # Latch ticks: a NaN state before the first latch (refused: no latch), the stage-0 latch
     # repeated (no new latch); the stage-1 latch after a NaN probe, repeated.
     add(start[0], "probe", {0: nan})
@@ -234,16 +253,7 @@ def spline_events(table, *, late_stage_entry: bool) -> dict:
     add(b0[2], "probe", {2: -inf})
     add((b0[3] + b0[4]) // 2, "probe", {1: inf})
     add(b1[2], "probe", {0: inf, 1: -inf})
-    # Skips: inside a span, across a span boundary, over a whole span (and in stage 1).
-    mid = (b0[4] + b0[5]) // 2
-    for t in range(mid, mid + 4):
-        add(t, "skip")
-    for t in (b0[6] - 1, b0[6]):
-        add(t, "skip")
-    for t in range(b0[8] - 1, b0[9] + 1):
-        add(t, "skip")
-    for t in range(b1[4] - 2, b1[4] + 3):
-        add(t, "skip")
+    ev.skips(b0, b1)
     # Huge finite states: the command overflows (STSP_ERR_NONFINITE_OUTPUT), or the sum of the
     # state overflows while the command (position gains below 1 in stage 1) does not: the
     # spline fast path's false alarm, an enormous command, and the real call a repeat.
@@ -252,9 +262,7 @@ def spline_events(table, *, late_stage_entry: bool) -> dict:
     add(b0[11] + 3, "probe", {1: np.float32(3e38), 3: np.float32(3e38)})
     add(b1[6] + 5, "probe", {0: np.float32(3e38), 2: np.float32(3e38)})
     if late_stage_entry:
-        for t in range(start[1] - 2, start[1] + 2):    # stage 1 entered (and latched) late
-            ev.pop(t, None)
-            add(t, "skip")
+        ev.late_entry(start[1])
     return ev
 
 
@@ -271,14 +279,8 @@ def q_spline_events(table, *, late_stage_entry: bool) -> dict:
         D = 1 << int(sp.span_log2[s])
         bps.append(list(range(start[s] + D, start[s + 1], D)))
     b0, b1 = bps[0], bps[1]
-    ev: dict[int, dict] = {}
-
-    def add(tick, kind, value=True):
-        d = ev.setdefault(tick, {})
-        if kind == "probe":
-            d.setdefault("probe", []).append(value)
-        else:
-            d[kind] = value
+    ev = _Events()
+    add = ev.add
     add(start[0], "repeat")
     add(start[1], "probe", {3: hi})
     add(start[1], "repeat")
@@ -287,19 +289,9 @@ def q_spline_events(table, *, late_stage_entry: bool) -> dict:
     add(b0[2], "probe", {2: lo})
     add((b0[3] + b0[4]) // 2, "probe", {0: hi, 1: lo, 2: hi, 3: lo})
     add(b1[2], "probe", {0: lo, 1: hi})
-    mid = (b0[4] + b0[5]) // 2
-    for t in range(mid, mid + 4):
-        add(t, "skip")
-    for t in (b0[6] - 1, b0[6]):
-        add(t, "skip")
-    for t in range(b0[8] - 1, b0[9] + 1):
-        add(t, "skip")
-    for t in range(b1[4] - 2, b1[4] + 3):
-        add(t, "skip")
+    ev.skips(b0, b1)
     if late_stage_entry:
-        for t in range(start[1] - 2, start[1] + 2):
-            ev.pop(t, None)
-            add(t, "skip")
+        ev.late_entry(start[1])
     return ev
 
 

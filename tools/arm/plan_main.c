@@ -13,6 +13,8 @@
 
 #include "stospline/stsp_controller.h"
 
+#include "bench_table_line.h"
+
 typedef struct {
     int16_t status;
     uint8_t stage;
@@ -62,11 +64,6 @@ int main(void)
                (unsigned long)i, (unsigned)calls[i].stage, (unsigned)calls[i].latch,
                (int)calls[i].status);
     }
-    printf("table nx %u nu %u n_latch %u stage_n_latch", (unsigned)PLAN_TABLE.nx,
-           (unsigned)PLAN_TABLE.nu, (unsigned)PLAN_TABLE.n_latch);
-    for (i = 0u; i < PLAN_TABLE.n_stages; ++i) {
-        printf(" %u", (unsigned)PLAN_TABLE.stage_n_latch[i]);
-    }
-    printf("\n");
+    bench_print_table_line(&PLAN_TABLE);
     return 0;
 }

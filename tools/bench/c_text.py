@@ -5,16 +5,13 @@ tables; the two texts must be the same bytes.
 
     PYTHONPATH=host .venv/bin/python tools/bench/c_text.py [--repeat 5] [EXAMPLE.toml ...]
 
-Per table: float32 numbers written, the median time of `generate_c` each way (numpy's
+Per table: float32 numbers written, the median CPU time of `generate_c` each way (numpy's
 tick loop is not involved: the design is done once, before timing), and the ratio. Also a
 dense per-tick table of 12 states and 4 inputs over 3 441 ticks (random gains, seeded): the
 size of C text a large time-varying design writes.
 """
 from __future__ import annotations
 
-import argparse
-import os
-import statistics
 import sys
 import time
 from dataclasses import replace
@@ -22,16 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _median_time(fn, repeat: int) -> float:
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times)
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_util import example_args, example_path, median_time, numpy_baseline  # noqa: E402
 
 
 def _numbers(table) -> int:
@@ -50,12 +39,8 @@ def _dense_table(base):
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("examples", nargs="*", default=["robot_corridor.toml", "coupled_axes.toml"])
-    ap.add_argument("--repeat", type=int, default=5)
-    args = ap.parse_args(argv)
-    if args.repeat < 1:
-        print("c_text: --repeat must be at least 1", file=sys.stderr)
+    args = example_args("c_text", __doc__, argv, ["robot_corridor.toml", "coupled_axes.toml"], 5)
+    if args is None:
         return 2
     from stospline import design_problem, load_problem
     from stospline.table import codegen, kernels
@@ -64,8 +49,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     tables = []
     for name in args.examples:
-        path = Path(name) if Path(name).exists() else ROOT / "examples" / name
-        if not path.is_file():
+        path = example_path(name)
+        if path is None:
             print(f"c_text: no problem file {name}", file=sys.stderr)
             return 2
         tables.append((path.stem, design_problem(load_problem(path)).table))
@@ -73,13 +58,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'table':<26}{'numbers':>10}{'numpy s':>10}{'kernel s':>10}{'ratio':>8}  same bytes")
     for name, table in tables:
         fast = codegen.generate_c(table)
-        t_fast = _median_time(lambda: codegen.generate_c(table), args.repeat)
-        os.environ["STOSPLINE_TABLE_KERNEL"] = "numpy"
-        try:
+        write = lambda: codegen.generate_c(table)  # noqa: E731
+        t_fast, _ = median_time(write, args.repeat, clock=time.process_time)
+        with numpy_baseline("STOSPLINE_TABLE_KERNEL"):
             slow = codegen.generate_c(table)
-            t_slow = _median_time(lambda: codegen.generate_c(table), args.repeat)
-        finally:
-            del os.environ["STOSPLINE_TABLE_KERNEL"]
+            t_slow, _ = median_time(write, args.repeat, clock=time.process_time)
         print(f"{name:<26}{_numbers(table):>10}{t_slow:>10.3f}{t_fast:>10.3f}"
               f"{t_slow / t_fast:>8.1f}  {fast == slow}")
         if fast != slow:

@@ -8,35 +8,19 @@ tables; the two ranges must agree to rounding.
 """
 from __future__ import annotations
 
-import argparse
-import os
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _median_time(fn, repeat: int):
-    times, out = [], None
-    for _ in range(repeat):
-        t = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times), out
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_util import example_args, example_path, median_time, numpy_baseline  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("examples", nargs="*",
-                    default=["robot_corridor.toml", "robot_patrol_60s.toml"])
-    ap.add_argument("--repeat", type=int, default=3)
-    args = ap.parse_args(argv)
-    if args.repeat < 1:
-        print("state_range: --repeat must be at least 1", file=sys.stderr)
+    args = example_args("state_range", __doc__, argv,
+                        ["robot_corridor.toml", "robot_patrol_60s.toml"], 3)
+    if args is None:
         return 2
     from stospline import design_problem, load_problem
     from stospline.oracle import evaluate as oracle
@@ -45,18 +29,15 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     print(f"{'example':<24}{'ticks':>8}{'numpy s':>10}{'C s':>9}{'ratio':>8}  max rel. diff")
     for name in args.examples:
-        path = Path(name) if Path(name).exists() else ROOT / "examples" / name
-        if not path.is_file():
+        path = example_path(name)
+        if path is None:
             print(f"state_range: no problem file {name}", file=sys.stderr)
             return 2
         problem = load_problem(path)
         table = design_problem(problem, table="per-tick").table
-        t_c, r_c = _median_time(lambda: oracle.state_range(problem, table), args.repeat)
-        os.environ["STOSPLINE_ORACLE_KERNEL"] = "numpy"
-        try:
-            t_np, r_np = _median_time(lambda: oracle.state_range(problem, table), args.repeat)
-        finally:
-            del os.environ["STOSPLINE_ORACLE_KERNEL"]
+        t_c, r_c = median_time(lambda: oracle.state_range(problem, table), args.repeat)
+        with numpy_baseline("STOSPLINE_ORACLE_KERNEL"):
+            t_np, r_np = median_time(lambda: oracle.state_range(problem, table), args.repeat)
         diff = float(np.max(np.abs(r_c - r_np) / np.abs(r_np)))
         print(f"{path.stem:<24}{table.n_ticks:>8}{t_np:>10.3f}{t_c:>9.3f}{t_np / t_c:>8.1f}"
               f"  {diff:.1e}")

@@ -19,8 +19,8 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import statistics  # noqa: E402
-import time  # noqa: E402
+import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -28,15 +28,12 @@ from stospline.table.spline import fixed_point as qspline  # noqa: E402
 from stospline.table.kernels import affine_compose, qspline_stage  # noqa: E402
 from stospline.table.spline.latch import _affine_product_numpy  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_util import median_time  # noqa: E402
+
 
 def _median(work, repeat: int) -> float:
-    work()
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        work()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
+    return median_time(work, repeat, warm_up=True)[0]
 
 
 def main() -> None:

@@ -2,12 +2,16 @@
 
 Usage: .venv/bin/python tools/bench/vs_drake.py [--repeat 3] [--sizes 4,12,24,32]
 
+Times are printed as "CPU s (wall s)".
+
 Drake (``pip install drake``) is an optional benchmark dependency, not a runtime one: when
 ``pydrake`` cannot be imported its column says "not installed" and only stospline is timed.
 Every time is the median of `--repeat` runs after one warm-up run (which also builds the
-cached C kernels), measured with ``time.perf_counter`` in one process, each run cold (the tick
-maps and samples cached by the run before are dropped); BLAS threads are pinned to 1 before
-numpy is imported. Ratios are taken within the run (the machine may be loaded).
+cached C kernels), in one process, each run cold (the tick maps and samples cached by the run
+before are dropped); BLAS threads are pinned to 1 before numpy is imported. Each is given as
+CPU time (``time.process_time``: all threads of the process, what load from other processes
+inflates least) and wall time (``time.perf_counter``); the ratios, taken within the run, are of
+the CPU times (the machine may be loaded).
 
 Problem
 -------
@@ -37,6 +41,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse                                     # noqa: E402
 import sys                                          # noqa: E402
+import time                                         # noqa: E402
 from pathlib import Path                            # noqa: E402
 
 import numpy as np                                  # noqa: E402
@@ -45,7 +50,7 @@ from stospline.pipeline import design_problem       # noqa: E402
 from stospline.problem import parse_problem         # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from varying_design import median_time              # noqa: E402  (cold runs, as there)
+from varying_design import cold                     # noqa: E402  (cold runs, as there)
 
 HORIZON, HZ, WEIGHT = 3.0, 1000, 10.0
 
@@ -111,6 +116,20 @@ def drake_solver(n: int):
     return solve
 
 
+def median_times(fn, repeat: int) -> tuple[float, float]:
+    """``(cpu, wall)``: the medians of `repeat` cold runs of `fn` after a warm-up."""
+    cold()
+    fn()
+    cpu, wall = [], []
+    for _ in range(repeat):
+        cold()
+        c, w = time.process_time(), time.perf_counter()
+        fn()
+        cpu.append(time.process_time() - c)
+        wall.append(time.perf_counter() - w)
+    return float(np.median(cpu)), float(np.median(wall))
+
+
 def same_problem(n: int, drake_result, problem) -> float:
     """The relative difference of the two optimal costs from x0: Drake's ``s0(0)`` (its
     nominal state is x0, so ``x - x0 = 0`` at t = 0) and the continuous design's J0 (the two
@@ -129,20 +148,24 @@ def main() -> None:
     print("| n, m | Drake FH-LQR | exact ZOH, whole | continuous, whole "
           "| Drake / exact ZOH | Drake / continuous | J0 continuous vs Drake |")
     print("|---|---|---|---|---|---|---|")
+
+    def both(t):
+        return f"{t[0]:.3f} s ({t[1]:.3f} s)"
     for n in (int(s) for s in args.sizes.split(",")):
         solve = drake_solver(n)
-        t_drake = median_time(solve, args.repeat) if solve is not None else None
+        t_drake = median_times(solve, args.repeat) if solve is not None else None
         zoh, cont = (stospline_problem(n, d) for d in ("exact-zoh", "continuous"))
-        t_zoh = median_time(lambda: design_problem(zoh), args.repeat)
-        t_cont = median_time(lambda: design_problem(cont, discretization="continuous"),
-                             args.repeat)
+        t_zoh = median_times(lambda: design_problem(zoh), args.repeat)
+        t_cont = median_times(lambda: design_problem(cont, discretization="continuous"),
+                              args.repeat)
         if t_drake is None:
             drake, r_zoh, r_cont, agree = "not installed", "-", "-", "-"
         else:
-            drake = f"{t_drake:.3f} s"
-            r_zoh, r_cont = f"**{t_drake / t_zoh:.2f}x**", f"**{t_drake / t_cont:.2f}x**"
+            drake = both(t_drake)
+            r_zoh = f"**{t_drake[0] / t_zoh[0]:.2f}x**"
+            r_cont = f"**{t_drake[0] / t_cont[0]:.2f}x**"
             agree = f"{same_problem(n, solve(), cont):.1e}"
-        print(f"| {n}, {n // 2} | {drake} | {t_zoh:.3f} s | {t_cont:.3f} s | {r_zoh} "
+        print(f"| {n}, {n // 2} | {drake} | {both(t_zoh)} | {both(t_cont)} | {r_zoh} "
               f"| {r_cont} | {agree} |", flush=True)
 
 

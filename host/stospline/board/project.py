@@ -1,9 +1,10 @@
 """A complete firmware project for a board, from a design's tables.
 
-`project_files` returns every file of the project (flat, one directory): the board's start-up
-and linker script, the controller loop (``board_app.c``), the frame protocol
-(``stsp_frame.c/.h``), ``board_config.h`` (the table, its tick rate and the tick timer's reload at
-the board's clock), the tables, a CMake project with presets that use the installed
+`project_files` returns every file of the project (flat, one directory): the board's support
+file and linker script, what every board shares (``board_common.c``: the receive ring, the
+start-up), the controller loop (``board_app.c``), the frame protocol (``stsp_frame.c/.h``),
+``board_config.h`` (the table, its tick rate and the tick timer's reload at the board's
+clock), the tables, a CMake project with presets that use the installed
 stospline package and its toolchain file, and a README that says which lines are
 board-specific. `write_project` writes them all or none (`stospline.atomic.write_set`).
 """
@@ -108,7 +109,7 @@ option(BOARD_EMULATED "QEMU: skip the clock set-up (the qemu preset)" OFF)
 # The table with the controller compiled for its shape (docs/guide/integration.md).
 stospline_add_gains(board_gains {table.name}.c FIXED_SHAPE)
 
-add_executable(firmware.elf board_app.c stsp_frame.c board_{board.name}.c)
+add_executable(firmware.elf board_common.c board_app.c stsp_frame.c board_{board.name}.c)
 target_include_directories(firmware.elf PRIVATE ${{CMAKE_CURRENT_SOURCE_DIR}})
 target_compile_options(firmware.elf PRIVATE -Wall -Wextra -Wpedantic -Wconversion -Werror)
 if(BOARD_EMULATED)
@@ -169,7 +170,8 @@ On the board: `stospline hil {problem_name} --board {board.name} --port /dev/tty
 
 | file | what | board-specific |
 |---|---|---|
-| `board_{board.name}.c` | vector table, start-up, clock, UART, tick timer | the clock set-up (`clock_init`: crystal, PLL), the UART and its pins (`uart_init`), the baud rate, the tick timer (`board_timer_start`), `Fault_Handler` (set the actuators safe) |
+| `board_{board.name}.c` | vector table, clock, UART, tick timer | the clock set-up (`clock_init`: crystal, PLL), the UART and its pins (`uart_init`), the baud rate, the tick timer (`board_timer_start`) |
+| `board_common.c` | receive ring, interrupts off/on, start-up (`.data`, `.bss`, the FPU), fault handler | `Fault_Handler` (set the actuators safe) |
 | `{board.name}.ld` | linker script | `MEMORY` (flash and RAM of the part), `STACK_SIZE` |
 | `board_app.c` | the loop: frames in, `stsp_step`, frames out; `stsp_verify`; u_hold on any error; overruns | the line marked `board-specific` in `run_tick`: write the command to the actuators |
 | `board_config.h` | the table, the tick timer's reload for {table.tick_hz} Hz at {board.clock_hz} Hz, timeout, verify period | generated: regenerate for another clock or table |
@@ -188,8 +190,8 @@ def project_files(problem_name: str, board: Board, table, table_files: dict[str,
                   timeout_ticks: int = 1000, verify_ticks: int = 1000) -> dict[str, str]:
     """Every file of the project, name -> text."""
     files = {name: (_FILES / name).read_text()
-             for name in ("board.h", "board_app.c", "stsp_frame.c", "stsp_frame.h",
-                          f"board_{board.name}.c", f"{board.name}.ld")}
+             for name in ("board.h", "board_common.c", "board_app.c", "stsp_frame.c",
+                          "stsp_frame.h", f"board_{board.name}.c", f"{board.name}.ld")}
     files.update({k: v for k, v in table_files.items() if k.endswith((".c", ".h"))})
     files["board_config.h"] = board_config(board, table, timeout_ticks=timeout_ticks,
                                            verify_ticks=verify_ticks)

@@ -12,6 +12,9 @@ Backward on each stage ``[t_k, t_{k+1}]``, with ``K = R^-1 (P B + S)'`` and ``Ac
 
 At the stage start the controller latches ``v = W^-1 (N' x + m)`` and applies
 ``u = -K x - R^-1 (B'p + r) - R^-1 B' N v`` until the next stage start.
+
+A stage whose data are constant and whose equations carry no noise is solved exactly from the
+exponential of its Hamiltonian (`HamiltonianSolution`); the others are integrated with DOP853.
 """
 from __future__ import annotations
 
@@ -27,8 +30,8 @@ from stospline.design.stage_values import (StageStart, StageValues, check_group,
 from stospline.errors import DesignError, ProblemError
 from stospline.problem.model import Problem, Stage, ticks_per_stage
 
-__all__ = ["DesignError", "StageSolution", "ContinuousDesign", "design_continuous",
-           "noise_operator"]
+__all__ = ["DesignError", "StageSolution", "ContinuousDesign", "HamiltonianSolution",
+           "design_continuous", "noise_operator"]
 
 
 def noise_operator(G: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -78,6 +81,10 @@ class StageSolution(StageStart):
         right-hand side asks for at every step of its integrator, so the stage's fixed weights
         and ``R^-1`` are computed once (`_fixed_weights`) and the dense output is evaluated at
         a scalar (no stacks)."""
+        if isinstance(self._sol, HamiltonianSolution):     # u = -Ka [x; 1; v]
+            Ka = self._sol.feedback(t)
+            n = self.stage.A.shape[0]
+            return Ka[:, :n], Ka[:, n], Ka[:, n + 1:]
         P, pv, _, N, _, _ = self._unpack(self._sol(t))
         fixed = self._fixed_weights
         if fixed is not None:
@@ -221,6 +228,211 @@ def _stage_rhs(stage: Stage, n: int, p: int, noise: bool):
     return rhs
 
 
+_MAX_PER = 64      # ticks between a HamiltonianSolution's nodes, at most
+
+
+class HamiltonianSolution:
+    """The backward equations of one stage with constant data and no noise the design accounts
+    for, solved exactly instead of integrated: a callable ``y(t)`` with the layout of
+    `_stage_rhs`'s state (as `solve_ivp`'s dense output).
+
+    On the augmented state ``a = [x; 1; v]`` the equations are one Riccati equation (drift
+    ``[[A, f, 0], 0, 0]``, input ``[B; 0; 0]``, weights ``[[Q, q, 0], [q', rho, 0], 0]``, cross
+    weight ``[S; r'; 0]``) whose solution is ``Pa = [[P, p, N], [p', c, m'], [N', m, -W]]``.
+    With the Hamiltonian ``Hm`` of that equation, ``[X; Y](t) = exp(Hm (t - s)) [I; Pa(s)]``
+    gives ``Pa(t) = Y X^-1`` exactly, and ``X(t)`` is the closed loop's transition of ``a``
+    from ``s`` to ``t``. The solution is kept at nodes a whole number of ticks apart, at most
+    ``0.5 / |Hm|_1`` s (each step's exponential is then well conditioned); between nodes the
+    exponential at a multiple of the tick is a power of the tick's. A stage stiff for one tick
+    (``|Hm|_1 h > 2``) is not solved (`usable` False): the design integrates it."""
+
+    def __init__(self, stage: Stage, n: int, p: int, Pa_end: np.ndarray, t0: float, t1: float,
+                 tick_hz: int):
+        from stospline.expm import expm
+        m = stage.B.shape[1]
+        na = n + 1 + p
+        Aa, Ba = np.zeros((na, na)), np.zeros((na, m))
+        Aa[:n, :n], Ba[:n] = stage.A, stage.B
+        if stage.f is not None:
+            Aa[:n, n] = stage.f
+        Qa, Sa = np.zeros((na, na)), np.zeros((na, m))
+        Qa[:n, :n], Qa[:n, n], Qa[n, :n], Qa[n, n] = stage.Q, stage.q, stage.q, stage.rho
+        Sa[:n], Sa[n] = stage.S, stage.r
+        Rinv = np.linalg.inv(stage.R)
+        At = Aa - Ba @ Rinv @ Sa.T
+        Hm = np.block([[At, -Ba @ Rinv @ Ba.T], [-(Qa - Sa @ Rinv @ Sa.T), -At.T]])
+        self.n, self.p, self.na, self.Hm = n, p, na, Hm
+        self.norm = float(np.abs(Hm).sum(axis=0).max())
+        self.stage, self.Aa, self.Ba, self.Qa, self.Sa, self.Rinv = stage, Aa, Ba, Qa, Sa, Rinv
+        h = 1.0 / tick_hz
+        # Stiff for one tick (|Hm| h > 2): the step's exponential would amplify rounding;
+        # the caller integrates instead.
+        self.usable = self.norm * h <= 2.0
+        if not self.usable:
+            return
+        ticks = max(1, int(round((t1 - t0) * tick_hz)))
+        per = max(1, min(ticks, _MAX_PER, int(0.5 / max(self.norm * h, 1e-300))))
+        node_ticks = np.unique(np.r_[0:ticks:per, ticks])
+        self.t0, self.h, self.node_ticks = t0, h, node_ticks
+        self.nodes = t0 + node_ticks * h
+        self.nodes[-1] = t1
+        # exp(-Hm l h) for l = 0 .. per: the steps between nodes and the points between them.
+        step = expm(-Hm * h)
+        powers = [np.eye(2 * na), step]
+        for _ in range(per - 1):
+            powers.append(step @ powers[-1])
+        self.powers = np.array(powers)
+        # Between ticks (at most half a tick from one): exp(-Hm s) Z = sum_k s^k Hk Z with
+        # Hk = (-Hm)^k / k!, as many terms as reach 1e-17 at |Hm| h / 2.
+        terms, bound, norm = [np.eye(2 * na)], 1.0, self.norm * h / 2
+        while len(terms) < 30 and bound > 1e-17:
+            terms.append(-Hm @ terms[-1] / len(terms))
+            bound *= norm / len(terms)
+        self.taylor = np.vstack(terms)
+        Pa = np.empty((len(node_ticks), na, na))
+        Pa[-1] = Pa_end
+        with np.errstate(over="ignore", invalid="ignore"):
+            for i in range(len(node_ticks) - 2, -1, -1):
+                Pa[i] = self._back(self.powers[node_ticks[i + 1] - node_ticks[i]], Pa[i + 1])
+        self.Pa = Pa
+
+    def _back(self, E: np.ndarray, P: np.ndarray) -> np.ndarray:
+        """``Pa`` earlier by the steps ``E = exp(-Hm tau)`` from ``P`` (stacks: (..., 2na, 2na)
+        and (..., na, na))."""
+        na = self.na
+        X = E[..., :na, :na] + E[..., :na, na:] @ P
+        Y = E[..., na:, :na] + E[..., na:, na:] @ P
+        out = np.linalg.solve(np.swapaxes(X, -1, -2), np.swapaxes(Y, -1, -2))  # (Y X^-1)'
+        return 0.5 * (out + np.swapaxes(out, -1, -2))
+
+    def feedback(self, t: float) -> np.ndarray:
+        """``Ka = R^-1 (Ba' Pa + Sa')`` at one time: the law ``u = -Ka [x; 1; v]``."""
+        X, Y = self._flow(t)
+        # Ka = R^-1 (Ba' Y + Sa' X) X^-1
+        return self.Rinv @ np.linalg.solve(X.T, (self.Ba.T @ Y + self.Sa.T @ X).T).T
+
+    def _flow(self, t: float):
+        """``[X; Y] = exp(-Hm tau) [I; Pa(s)]`` from the node ``s`` at or after one time ``t``
+        (``tau = s - t``): a power of the tick's exponential to the nearest tick, then the
+        Taylor series of the rest (at most half a tick)."""
+        import bisect
+        j = min(bisect.bisect_left(self.nodes, t), len(self.nodes) - 1)
+        na, tau = self.na, self.nodes[j] - t
+        whole = min(max(round(tau / self.h), 0), len(self.powers) - 1)
+        rest = tau - whole * self.h
+        E = self.powers[whole]
+        Z = E[:, :na] + E[:, na:] @ self.Pa[j]
+        if rest != 0.0:
+            if abs(rest) * self.norm > 0.5:             # outside the stage (extrapolation)
+                from stospline.expm import expm
+                Z = expm(-self.Hm * rest) @ Z
+            else:
+                k = self.taylor.shape[0] // (2 * na)
+                Z = np.tensordot(rest ** np.arange(k),
+                                 (self.taylor @ Z).reshape(k, 2 * na, na), 1)
+        return Z[:na], Z[na:]
+
+    def augmented(self, t) -> np.ndarray:
+        """``Pa`` at the times `t` (T, na, na)."""
+        if np.ndim(t) == 0 or np.size(t) == 1:          # one time
+            X, Y = self._flow(float(np.ravel(t)[0]))
+            out = np.linalg.solve(X.T, Y.T)
+            return 0.5 * (out + out.T)[None]
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        j = np.clip(np.searchsorted(self.nodes, t, side="left"), 0, len(self.nodes) - 1)
+        lag = (self.nodes[j] - t) / self.h              # ticks before the node, >= 0
+        whole = np.rint(lag).astype(int)
+        exact = ((np.abs(lag - whole) <= 1e-9 * np.maximum(1.0, lag)) & (whole >= 0)
+                 & (whole < len(self.powers)))
+        out = self._back(self.powers[np.where(exact, whole, 0)], self.Pa[j])
+        for i in np.flatnonzero(~exact):                 # between ticks
+            out[i] = self.augmented(t[i])[0]
+        return out
+
+    def closed_loop(self, Ma: np.ndarray):
+        """The second moment of ``a = [x; 1; v]`` at the stage's end from `Ma` at its start,
+        and the expected running cost over the stage, under this solution's law ``u = -Ka(t)
+        a``, ``Ka = R^-1 (Ba' Pa + Sa')``, on the stage's own noise-free plant: between nodes
+        ``a(s_i+1) = X^-1 a(s_i)`` with ``X = [I, 0] exp(-Hm tau) [I; Pa(s_i+1)]``, and the cost
+        ``<Z' C Z, E a a'>`` with ``Z = [I; Pa(s_i+1)]`` and ``C = ∫_0^tau exp(-Hm's) Lz
+        exp(-Hm s) ds`` (Van Loan), ``Lz`` the running cost of ``[a; u]`` as a quadratic in
+        ``Z``."""
+        from stospline.expm import expm
+        na = self.na
+        La = np.block([[self.Qa, self.Sa], [self.Sa.T, self.stage.R]])
+        Mz = np.block([[np.eye(na), np.zeros((na, na))],
+                       [-self.Rinv @ self.Sa.T, -self.Rinv @ self.Ba.T]])
+        Lz = Mz.T @ La @ Mz
+        cost = {}
+        J = 0.0
+        for i in range(len(self.node_ticks) - 1):
+            ticks = int(self.node_ticks[i + 1] - self.node_ticks[i])
+            E = self.powers[ticks]
+            if ticks not in cost:
+                tau = ticks * self.h
+                big = np.block([[self.Hm.T * tau, Lz * tau],
+                                [np.zeros((2 * na, 2 * na)), -self.Hm * tau]])
+                F = expm(big)
+                cost[ticks] = F[2 * na:, 2 * na:].T @ F[:2 * na, 2 * na:]
+            P = self.Pa[i + 1]
+            X = E[:na, :na] + E[:na, na:] @ P
+            Y = np.linalg.solve(X, Ma)
+            Ma = np.linalg.solve(X, Y.T)
+            Ma = 0.5 * (Ma + Ma.T)
+            Z = np.vstack([np.eye(na), P])
+            J += float(np.sum((Z.T @ cost[ticks] @ Z) * Ma))
+        return Ma, J
+
+    def __call__(self, t):
+        Pa = self.augmented(t)
+        n, p = self.n, self.p
+        x, v = slice(0, n), slice(n + 1, n + 1 + p)
+        T = Pa.shape[0]
+        y = np.concatenate([Pa[:, x, x].reshape(T, -1), Pa[:, x, n], Pa[:, n, n][:, None],
+                            Pa[:, x, v].reshape(T, -1), -Pa[:, v, v].reshape(T, -1),
+                            Pa[:, n, v]], axis=1).T
+        return y[:, 0] if np.ndim(t) == 0 else y
+
+
+def _solved_exactly(stage: Stage, noise: bool) -> bool:
+    """Constant data and no noise in the equations: `HamiltonianSolution` solves the stage."""
+    return stage.varying is None and not (noise and stage.noise_tensor.any())
+
+
+def _augmented_end(PT, pT, cT, NT, WT, mT) -> np.ndarray:
+    """``Pa = [[P, p, N], [p', c, m'], [N', m, -W]]`` (`HamiltonianSolution`) at a stage's end."""
+    return np.block([[PT, pT[:, None], NT], [pT[None], np.array([[cT]]), mT[None]],
+                     [NT.T, mT[:, None], -WT]])
+
+
+def _solve_exactly(stage: Stage, n: int, p: int, Pa_end: np.ndarray, t0: float, t1: float,
+                   tick_hz: int):
+    """`_Solved` by a `HamiltonianSolution`, or None: stiff for one tick, or numbers that are
+    not finite (the integration then reports the overflow)."""
+    try:
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            sol = HamiltonianSolution(stage, n, p, Pa_end, t0, t1, tick_hz)
+            if not sol.usable:
+                return None
+            y0 = sol(t0)
+    except np.linalg.LinAlgError:
+        return None
+    return _Solved(sol, y0) if np.all(np.isfinite(y0)) else None
+
+
+@dataclass
+class _Solved:
+    """`solve_ivp`'s result as the design reads it, for a `HamiltonianSolution`."""
+    sol: HamiltonianSolution
+    y_start: np.ndarray
+    status: int = 0
+    message: str = "solved exactly"
+
+    @property
+    def y(self) -> np.ndarray:
+        return self.y_start[:, None]
+
+
 def design_continuous(problem: Problem, *, noise: bool = True, mode: str = "stagewise",
                       rtol: float = 1e-12, atol: float = 1e-13) -> ContinuousDesign:
     """Solve the continuous-time design by integrating the backward equations per stage.
@@ -234,7 +446,8 @@ def design_continuous(problem: Problem, *, noise: bool = True, mode: str = "stag
         Stage-wise latched multipliers (re-planned at every stage start), or one multiplier
         vector for all knots latched at t0 (the constraints exactly as problem (1) states).
     rtol, atol : float
-        Tolerances of the DOP853 integration of the backward equations.
+        Tolerances of the DOP853 integration of the backward equations (a stage solved
+        exactly, `HamiltonianSolution`, has none).
 
     Returns
     -------
@@ -266,12 +479,17 @@ def design_continuous(problem: Problem, *, noise: bool = True, mode: str = "stag
                 sl = slice(o, o + knot.n_constraints)
                 NT[:, sl] += knot.constraint.C.T
                 mT[sl] -= knot.constraint.value
-        y_end = np.concatenate([PT.ravel(), pT, [cT], NT.ravel(), WT.ravel(), mT])
-        with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported below
+        y_end = require_finite(np.concatenate([PT.ravel(), pT, [cT], NT.ravel(), WT.ravel(),
+                                               mT]))
+        res = (_solve_exactly(stage, n, p, _augmented_end(PT, pT, cT, NT, WT, mT), times[k],
+                              times[k + 1], problem.tick_hz)
+               if _solved_exactly(stage, noise) else None)
+        if res is None:            # integrated (and overflow reported) as any other stage
             from scipy.integrate import solve_ivp   # lazy: a slow import the CLI rarely needs
-            res = solve_ivp(_stage_rhs(stage, n, p, noise), (times[k + 1], times[k]),
-                            require_finite(y_end),
-                            method="DOP853", rtol=rtol, atol=atol, dense_output=True)
+            with np.errstate(over="ignore", invalid="ignore"):  # overflow is reported below
+                res = solve_ivp(_stage_rhs(stage, n, p, noise), (times[k + 1], times[k]),
+                                y_end, method="DOP853", rtol=rtol, atol=atol,
+                                dense_output=True)
         if res.status != 0 or not np.all(np.isfinite(res.y[:, -1])):
             # With [[Q, S], [S', R]] >= 0 (checked by the parser) P is squeezed between 0 and
             # the cost of any fixed linear law, which solves a linear ODE: no true finite

@@ -29,7 +29,7 @@ import numpy as np
 
 from stospline.problem.corridors import Corridor
 
-__all__ = ["strips", "stage_polygons", "strip_weights_problem"]
+__all__ = ["strips", "stage_polygons", "strip_weights_problem", "add_strip_cost"]
 
 
 def strips(A: np.ndarray, b: np.ndarray, tol: float = 1e-12) -> list[tuple[np.ndarray, float]]:
@@ -75,11 +75,19 @@ def strip_weights_problem(problem, corridor: Corridor, polygons: list[int], weig
         Q, q, rho = st.Q.copy(), st.q.copy(), float(st.rho)
         rate = corridor.C @ st.A
         Q += rate_weight * rate.T @ rate
-        A, b = corridor.polygons[polygons[k]]
-        for a, c in strips(A, b):
-            g = corridor.C.T @ a
-            Q += weight * np.outer(g, g)
-            q -= weight * c * g
-            rho += weight * c * c
+        rho = add_strip_cost(corridor, polygons[k], weight, Q, q, rho)
         stages.append(replace(st, Q=Q, q=q, rho=rho))
     return replace(problem, stages=tuple(stages))
+
+
+def add_strip_cost(corridor: Corridor, polygon: int, weight: float, Q: np.ndarray,
+                   q: np.ndarray, rho: float) -> float:
+    """Add ``weight * |a'C x - c|^2`` for every strip ``(a, c)`` of the corridor's polygon
+    `polygon` to the cost ``x'Qx + 2q'x + rho``: `Q` and `q` in place; returns the new rho."""
+    A, b = corridor.polygons[polygon]
+    for a, c in strips(A, b):
+        g = corridor.C.T @ a
+        Q += weight * np.outer(g, g)
+        q -= weight * c * g
+        rho += weight * c * c
+    return rho

@@ -123,15 +123,18 @@ def _tick_data(stage: Stage, h: float) -> _TickData:
     ds = iu.size
     pos = np.empty((d, d), dtype=np.intp)
     pos[iu, ju] = pos[ju, iu] = np.arange(ds)
-    rows = moment_generator(augmented_drift(stage, m + 1), stage.noise_tensor).T[iu * d + ju]
-    big = np.zeros((ds + 1, ds + 1))
-    big[:ds, :ds] = (rows[:, iu * d + ju] + (iu != ju) * rows[:, ju * d + iu]) * h
-    big[:ds, ds] = running_cost_matrix(stage, n, m, d, n)[iu, ju] * h
-    E = expm(big)
     rs = np.r_[0:n, d - 1]
     ia, ib = np.triu_indices(n + 1)
-    A2s = E[:ds, pos[rs[ia], rs[ib]]]                 # packed V (on x,1) -> packed H
-    Hcs = E[:ds, ds].copy()
+    if stage.noise_tensor.any():
+        rows = moment_generator(augmented_drift(stage, m + 1), stage.noise_tensor).T[iu * d + ju]
+        big = np.zeros((ds + 1, ds + 1))
+        big[:ds, :ds] = (rows[:, iu * d + ju] + (iu != ju) * rows[:, ju * d + iu]) * h
+        big[:ds, ds] = running_cost_matrix(stage, n, m, d, n)[iu, ju] * h
+        E = expm(big)
+        A2s = E[:ds, pos[rs[ia], rs[ib]]]                 # packed V (on x,1) -> packed H
+        Hcs = E[:ds, ds].copy()
+    else:
+        A2s, Hcs = _noise_free_maps(stage, h, iu, ju, rs, ia, ib)
     # Full forms for the numpy reference: A2 vec(V) for symmetric V (off-diagonal pairs
     # split evenly between V[a, b] and V[b, a]).
     vpos = np.empty((n + 1, n + 1), dtype=np.intp)
@@ -140,6 +143,28 @@ def _tick_data(stage: Stage, h: float) -> _TickData:
     A2 = np.ascontiguousarray(A2s[pos.ravel()][:, vpos.ravel()] * half)
     F = expm(augmented_drift(stage, m + 1) * h)[:n]
     return _TickData(A2, Hcs[pos], F, np.ascontiguousarray(A2s.T), Hcs)
+
+
+def _noise_free_maps(stage: Stage, h: float, iu, ju, rs, ia, ib):
+    """`_tick_data`'s packed value map and packed running cost for a stage without
+    noise, from one 2d-square exponential instead of the (d(d+1)/2 + 1)-square one: with
+    ``Phi = exp(Ahat h)`` the value before the tick is ``H = G' V G + Hc``, ``G = Phi[rs]`` (the
+    rows of x and 1), so a packed ``V`` entry (a, b) maps to ``G_a G_b' + G_b G_a'`` (once on
+    the diagonal); ``Hc = ∫ Phi(s)' Lb Phi(s) ds`` is Van Loan's."""
+    n, m = stage.B.shape
+    d = n + m + 1
+    Ahat = augmented_drift(stage, m + 1)
+    big = np.zeros((2 * d, 2 * d))
+    big[:d, :d], big[:d, d:], big[d:, d:] = (-Ahat.T * h, running_cost_matrix(stage, n, m, d, n)
+                                             * h, Ahat * h)
+    E = expm(big)
+    Phi = E[d:, d:]
+    Hc = Phi.T @ E[:d, d:]
+    G = Phi[rs]
+    Ga, Gb = G[ia], G[ib]
+    A2sT = Ga[:, iu] * Gb[:, ju] + Gb[:, iu] * Ga[:, ju]
+    A2sT[ia == ib] *= 0.5
+    return A2sT.T, (0.5 * (Hc + Hc.T))[iu, ju]
 
 
 def _delayed_tick_data(td: _TickData, n: int, m: int) -> _TickData:

@@ -25,7 +25,7 @@ import numpy as np
 
 from stospline.estimator.gain import lmmse_gain
 from stospline.problem.model import Problem
-from stospline.oracle.tick_moments import Moments, _knot_terms, _PathRecord, _plant_tick, _stage_maps
+from stospline.oracle.tick_moments import Moments, _knot_terms, _PathRecord, _StagePlant, _w_map
 from stospline.table.format import GainTable
 
 __all__ = ["EstimatorLoop", "evaluate_estimator"]
@@ -116,16 +116,10 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
     prior_cov = np.zeros((table.n_ticks, n, n))
     rec = _PathRecord(x0, path)
     eye = np.eye(d)
-    Tw = np.zeros((n + m + 1, d))           # w = [x; u; 1] = Tw z
-    Tw[:n, xs] = np.eye(n)
-    Tw[-1, -1] = 1.0
-    Th = np.zeros((n + m + 1, d))           # [x̂; u; 1]: what the predictor moves
-    Th[:n, hs] = np.eye(n)
-    Th[-1, -1] = 1.0
+    Tw = _w_map(n, m, d, xs)                # w = [x; u; 1] = Tw z
+    Th = _w_map(n, m, d, hs)                # [x̂; u; 1]: what the predictor moves
     for k in range(table.n_stages):
-        stage = problem.stages[k]
-        varying = stage.varying is not None
-        maps = None
+        plant_k = _StagePlant(problem.stages[k], n, m, table.t0, h, propagator, substeps)
         relatch = k == 0 or table.stage_n_latch[k] > 0
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             E = M[xs, xs] - M[xs, hs] - M[hs, xs] + M[hs, hs]
@@ -150,10 +144,7 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
             TM = Tw @ M
             Mw = TM @ Tw.T
             rec.command(Mw, n, m)
-            if maps is None or varying:
-                maps = _stage_maps(stage, varying, n, m, table.t0 + j * h, h, propagator,
-                                   substeps)
-            Mw, dJ, Fmean = _plant_tick(stage, maps, Mw, table.t0 + j * h, h, n, m)
+            Mw, dJ, Fmean = plant_k.tick(Mw, j)
             J += dJ
             predict[j] = Fmean
             Ta = np.zeros((d - n, d))           # passengers a = [x̂'; v; 1]

@@ -194,6 +194,7 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
     sample_x = np.empty((table.n_ticks + 1, n))
     sample_x[0] = X[0]
     sample_u = np.empty((table.n_ticks, m))
+    record = min(record, paths)            # fewer paths than asked to record: record them all
     rec = {"x": np.empty((table.n_ticks + 1, record, n)),
            "u": np.empty((table.n_ticks, record, m), np.float32)}
     rec["xhat"] = np.empty((table.n_ticks + 1, record, n), np.float32)

@@ -11,6 +11,7 @@ design reproduces P_i within the tolerance; after ``plant.max_iterations`` it re
 from __future__ import annotations
 
 import hashlib
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,6 +43,7 @@ class PlantFit:
     derivative_error: float = 0.0
     path: MeanPath | None = None
     model: object = None        # the compiled model (`stospline.problem.plant_c.PlantModel`)
+    seconds: float = 0.0        # CPU time of the iterations
 
     @property
     def iterations(self) -> int:
@@ -120,6 +122,7 @@ def fit_plant(doc: dict, base_dir: str | Path, source_sha256: str = ""):
     idx, uidx, stages = _grid(skeleton.tick_hz, [0, *ends.tolist()])
     path = MeanPath.from_guess(t, skeleton.x0, model.m, spec.guess)
     fit = PlantFit(tolerance=spec.tolerance, model=model)
+    start = time.process_time()
     mixer = _Anderson()
     for i in range(spec.max_iterations):
         lin = linearise(model, t[idx], path.x[idx], path.u[uidx])
@@ -136,7 +139,7 @@ def fit_plant(doc: dict, base_dir: str | Path, source_sha256: str = ""):
                                         f"far from the solution, give plant.guess)") from None
         fit.changes.append(path_change(path, new))
         if fit.changes[-1] <= spec.tolerance:
-            fit.path = path
+            fit.path, fit.seconds = path, time.process_time() - start
             return problem, fit
         path = path.with_vector(mixer.next(path.vector(), new.vector()))
     raise ProblemError("plant.max_iterations", f"the mean path did not converge in "

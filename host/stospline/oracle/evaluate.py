@@ -1,14 +1,20 @@
 """Exact moment oracle: mean, covariance and expected cost of a latched affine law.
 
-The oracle never looks at Riccati solutions. It takes a law (a continuous design's gain
-functions, or a quantized per-tick `GainTable`) and propagates the first and second moments
-of the augmented state ``y = [x; v; 1]`` (``v`` the latched multiplier, constant on a stage)
-through the Ito moment equation
+The oracle never looks at Riccati solutions (one exception below). It takes a law (a
+continuous design's gain functions, or a quantized per-tick `GainTable`) and propagates the
+first and second moments of the augmented state ``y = [x; v; 1]`` (``v`` the latched
+multiplier, constant on a stage) through the Ito moment equation
 
     d/dt M = Abar M + M Abar' + sum_ij M_ij Gbar_i Gbar_j'
 
 For a table the control is held over each tick, so one tick is an exact linear map of the
 moments of ``z = [x; u; v; 1]`` (computed once per stage with a block matrix exponential).
+
+The exception: a continuous design's stage solved exactly (`HamiltonianSolution`: constant
+data, no noise), evaluated on its own noise-free plant, takes the closed loop from the same
+Hamiltonian flow (`HamiltonianSolution.closed_loop`). That is the law's exact cost, equal to
+the design's J0 to rounding, not an independent integration; the table's oracle is, and
+``tests/python/design/test_hamiltonian_stage.py`` checks the flow against the moment ODE.
 """
 from __future__ import annotations
 
@@ -16,15 +22,16 @@ import numpy as np
 from stospline.expm import require_finite
 
 from stospline import progress
-from stospline.design.continuous import ContinuousDesign
+from stospline.design.continuous import ContinuousDesign, HamiltonianSolution
 from stospline.design.moments import running_cost_matrix
 from stospline.problem.model import Problem
 from stospline.oracle.faults import evaluate_delayed_table
 # The tick loops' building blocks; the private names stay importable from here.
 from stospline.oracle.tick_moments import (_MAPS, Moments, _c_kernel, _euler_varying_maps,  # noqa: F401
-                                        _has_drift, _knot_terms, _latch_transform,
-                                        _packed_maps, _PathRecord, _plant_tick, _stage_maps,
-                                        _tick_maps, _tick_varying)
+                                        _factored_kernel, _factored_maps, _has_drift,
+                                        _knot_terms, _latch_transform, _packed_maps,
+                                        _PathRecord, _plant_tick, _stage_maps, _tick_maps,
+                                        _tick_varying, _w_map)
 from stospline.table.format import GainTable
 from stospline.table.qformat import DEFAULT_SIGMAS, scalable_ranges
 
@@ -85,7 +92,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
                                       substeps=substeps, path=path)
     n, m, n_latch = table.dims
     h = 1.0 / table.tick_hz
-    d_y, d_w = n + n_latch + 1, n + m + 1
+    d_y = n + n_latch + 1
     x0 = problem.x0
     y0 = np.concatenate([x0, np.zeros(n_latch), [1.0]])
     M = np.outer(y0, y0)
@@ -114,9 +121,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             M = T @ M @ T.T
         varying = stage.varying is not None
         maps = None if varying else _tick_maps(stage, n, m, h, propagator, substeps)
-        Tw = np.zeros((d_w, d_y))
-        Tw[:n, :n] = np.eye(n)
-        Tw[-1, -1] = 1.0
+        Tw = _w_map(n, m, d_y, slice(0, n))
         ticks = range(int(table.stage_start[k]), int(table.stage_start[k + 1]))
         # The C loop carries the mean map without the constant column: not with a drift.
         kernel = (None if varying or Cy is not None or _has_drift(problem)
@@ -134,10 +139,15 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             rec.extend(xm, xv, um, uv)
             progress.advance(len(ticks))
             ticks = range(0)
-        elif kernel is not None:           # the same loop in C (oracle_kernel.c)
+        elif kernel is not None:           # the same loop in C (oracle/tick_kernel.c)
             sl = slice(ticks.start, ticks.stop)
-            Phi_x, cost = _packed_maps(stage, n, m, h, propagator, substeps)
-            M, J, *tick_path = kernel(table.K[sl], table.L[sl], table.k0[sl], Phi_x, cost,
+            factored = _factored_maps(stage, n, m, h, propagator, substeps)
+            if factored is not None and _factored_kernel() is not None:
+                # Without noise: M+ = F M F' per tick (factored_kernel.c), O(n d²).
+                kernel, tick_map = _factored_kernel(), factored
+            else:
+                tick_map = _packed_maps(stage, n, m, h, propagator, substeps)
+            M, J, *tick_path = kernel(table.K[sl], table.L[sl], table.k0[sl], *tick_map,
                                       np.ascontiguousarray(maps[2][:, :n + m]), M, J,
                                       path=path)
             if path:
@@ -196,6 +206,19 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
             keep = np.r_[0:n, M.shape[0] - 1]
             M = M[np.ix_(keep, keep)]
 
+        if (isinstance(st._sol, HamiltonianSolution) and stage is st.stage
+                and not points_per_stage and not stage.noise_tensor.any()):
+            # The law of an exactly solved stage on its own noise-free plant: the closed loop
+            # is the Hamiltonian flow's, exact (HamiltonianSolution.closed_loop).
+            order = np.r_[0:n, d - 1, n:n + p]               # y = [x; v; 1] -> [x; 1; v]
+            Ma, dJ = st._sol.closed_loop(M[np.ix_(order, order)])
+            M = np.empty_like(Ma)
+            M[np.ix_(order, order)] = Ma
+            J += dJ
+            pen, mean, cov, con = _knot_terms(problem, k, M, n)
+            J += pen
+            means.append(mean); covs.append(cov); cons.append(con)
+            continue
         rhs = _moment_rhs(problem, st, stage, d)
         t_eval = (np.linspace(st.t_start, st.t_end, points_per_stage)
                   if points_per_stage else None)
@@ -265,10 +288,7 @@ def _closed_loop_parts(sd, n: int, m: int, d: int):
     Geff0 = np.zeros((d,) + sd.G.shape[1:])
     Geff0[:n] = sd.G
     Lb = running_cost_matrix(sd, n, m, n + m + 1, n)
-    Tw = np.zeros((n + m + 1, d))
-    Tw[:n, :n] = np.eye(n)
-    Tw[-1, -1] = 1.0
-    return Abar0, Geff0, Lb, Tw
+    return Abar0, Geff0, Lb, _w_map(n, m, d, slice(0, n))
 
 
 def state_range(problem: Problem, table: GainTable, *, sigmas: float = DEFAULT_SIGMAS

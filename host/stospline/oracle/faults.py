@@ -29,8 +29,8 @@ import numpy as np
 from stospline.errors import StosplineError
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem
-from stospline.oracle.tick_moments import (Moments, _knot_terms, _PathRecord, _plant_tick,
-                                        _stage_maps)
+from stospline.oracle.tick_moments import (Moments, _knot_terms, _PathRecord, _StagePlant,
+                                        _w_map)
 from stospline.table.format import GainTable
 
 __all__ = ["evaluate_with_faults", "FaultsNotExact", "has_exact_oracle"]
@@ -115,14 +115,10 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
         Fu_fixed[:, ps] = np.eye(m)
     if len(sig_u):
         Fu_fixed[:, etas] += np.eye(m)
-    Tw = np.zeros((n + m + 1, D))
-    Tw[:n, xs] = np.eye(n)
-    Tw[-1, -1] = 1.0
+    Tw = _w_map(n, m, D, xs)
     Sv = np.eye(D)[vs]
     for k in range(table.n_stages):
-        stage = plant.stages[k]
-        varying = stage.varying is not None
-        maps = None
+        plant_k = _StagePlant(plant.stages[k], n, m, table.t0, h, propagator, substeps)
         relatch = k == 0 or table.stage_n_latch[k] > 0
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             # Append this tick's noises (independent of everything so far).
@@ -149,10 +145,7 @@ def evaluate_with_faults(problem: Problem, table: GainTable, faults: Faults | No
             Mw = TM @ Tw.T
             Mwa = TM @ Ta.T                                   # E [x; u; 1] a'
             rec.command(Mw, n, m)
-            if maps is None or varying:
-                maps = _stage_maps(stage, varying, n, m, table.t0 + j * h, h, propagator,
-                                   substeps)
-            Mw, dJ, Fmean = _plant_tick(stage, maps, Mw, table.t0 + j * h, h, n, m)
+            Mw, dJ, Fmean = plant_k.tick(Mw, j)
             J += dJ
             Ma = Ta @ Me
             M = np.empty((d_z, d_z))

@@ -12,6 +12,7 @@ from stospline.expm import expm, require_finite
 
 from stospline.design.moments import (TickPropagator, augmented_drift, euler_tick, exact_tick,
                                       running_cost_matrix)
+from stospline.errors import KernelBuildError
 from stospline.problem.model import Problem
 
 __all__ = ["Moments"]
@@ -194,12 +195,29 @@ def _tick_entry(stage, n: int, m: int, h: float, propagator: str, substeps: int)
     return entry
 
 
+class FactoredTick:
+    """The moment map of a noise-free tick, ``M+ = F M F'`` with ``F = exp(Ahat h)``: `factor`
+    is F; `Phi`, the same map on ``vec M`` (``F ⊗ F``, d² x d²), is formed on first use only
+    (the numpy loop's reference product); `Psi` is not formed (None)."""
+
+    Psi = None
+
+    def __init__(self, factor: np.ndarray):
+        self.factor = factor
+        self._kron = None
+
+    @property
+    def Phi(self) -> np.ndarray:
+        if self._kron is None:
+            self._kron = np.kron(self.factor, self.factor)
+        return self._kron
+
+
 def _noise_free_tick(stage, n: int, m: int, h: float):
     """`exact_tick`'s moment map and cost row for a stage without noise, from d-square
     exponentials instead of a 2d²-square one: M+ = Phi M Phi' with ``Phi = exp(Ahat h)``, so
-    the map is ``Phi ⊗ Phi``, and the cost ``∫ <Lb, Phi(s) M Phi(s)'> ds = <C, M>`` with ``C
-    = ∫ Phi(s)' Lb Phi(s) ds`` from Van Loan's 2d-square exponential. (Psi, the integrated
-    map itself, is not formed: None.)"""
+    the map is ``Phi ⊗ Phi`` (`FactoredTick`), and the cost ``∫ <Lb, Phi(s) M Phi(s)'> ds =
+    <C, M>`` with ``C = ∫ Phi(s)' Lb Phi(s) ds`` from Van Loan's 2d-square exponential."""
     d = n + m + 1
     Ahat = augmented_drift(stage, m + 1)
     Lb = running_cost_matrix(stage, n, m, d, n)
@@ -207,7 +225,7 @@ def _noise_free_tick(stage, n: int, m: int, h: float):
     big[:d, :d], big[:d, d:], big[d:, d:] = -Ahat.T * h, Lb * h, Ahat * h
     E = expm(big)
     Phi = E[d:, d:]
-    return TickPropagator(np.kron(Phi, Phi), None), (Phi.T @ E[:d, d:]).ravel()
+    return FactoredTick(Phi), (Phi.T @ E[:d, d:]).ravel()
 
 
 def _euler_varying_maps(stage, n: int, m: int, t0: float, h: float, substeps: int):
@@ -242,13 +260,54 @@ def _stage_maps(stage, varying: bool, n: int, m: int, t0: float, h: float, propa
     return None
 
 
+def _w_map(n: int, m: int, d: int, xs) -> np.ndarray:
+    """The map ``z -> w = [x; u; 1]`` of a loop state `z` (`d` entries, the constant last;
+    the state at `xs`), with its `m` input rows left to fill."""
+    Tw = np.zeros((n + m + 1, d))
+    Tw[:n, xs] = np.eye(n)
+    Tw[-1, -1] = 1.0
+    return Tw
+
+
+class _StagePlant:
+    """One stage's plant over its ticks (`_plant_tick`): its maps computed at the first tick
+    for constant data, at every tick for time-varying data (`_stage_maps`)."""
+
+    def __init__(self, stage, n: int, m: int, t0: float, h: float, propagator: str,
+                 substeps: int):
+        self.stage, self.n, self.m, self.t0, self.h = stage, n, m, t0, h
+        self.propagator, self.substeps = propagator, substeps
+        self.varying = stage.varying is not None
+        self.maps = None
+
+    def tick(self, Mw: np.ndarray, j: int):
+        """`_plant_tick` of tick `j`: the moments of ``w`` after it, its cost and mean map."""
+        t = self.t0 + j * self.h
+        if self.maps is None or self.varying:
+            self.maps = _stage_maps(self.stage, self.varying, self.n, self.m, t, self.h,
+                                    self.propagator, self.substeps)
+        return _plant_tick(self.stage, self.maps, Mw, t, self.h, self.n, self.m)
+
+
 def _packed_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int):
-    """`kernels.pack_oracle_maps` of `_tick_maps` (cached alongside it)."""
+    """`kernel.pack_oracle_maps` of `_tick_maps` (cached alongside it)."""
     _, (prop, cost_row, _), extra = _tick_entry(stage, n, m, h, propagator, substeps)
     if "packed" not in extra:
-        from stospline.design.kernels import pack_oracle_maps
+        from stospline.oracle.kernel import pack_oracle_maps
         extra["packed"] = pack_oracle_maps(prop.Phi, cost_row, n)
     return extra["packed"]
+
+
+def _factored_maps(stage, n: int, m: int, h: float, propagator: str, substeps: int):
+    """``(F, cost)`` of a noise-free stage's exact tick for `kernel.factored_stage_ticks`
+    (cached alongside `_tick_maps`), or None when the stage's map is not factored."""
+    _, (prop, cost_row, _), extra = _tick_entry(stage, n, m, h, propagator, substeps)
+    if not isinstance(prop, FactoredTick):
+        return None
+    if "factored" not in extra:
+        from stospline.oracle.kernel import pack_cost
+        extra["factored"] = (np.ascontiguousarray(prop.factor), pack_cost(cost_row))
+    return extra["factored"]
 
 
 def _has_drift(problem: Problem) -> bool:
@@ -256,13 +315,25 @@ def _has_drift(problem: Problem) -> bool:
 
 
 def _c_kernel():
-    """`kernels.oracle_stage_ticks`, or None: ``STOSPLINE_ORACLE_KERNEL=numpy`` asks for the
+    """`kernel.oracle_stage_ticks`, or None: ``STOSPLINE_ORACLE_KERNEL=numpy`` asks for the
     numpy loop (the reference), and so does a host where the kernel cannot be built."""
+    from stospline.oracle.kernel import load_kernel, oracle_stage_ticks
+    return _compiled(load_kernel, oracle_stage_ticks)
+
+
+def _factored_kernel():
+    """`kernel.factored_stage_ticks`, or None (as `_c_kernel`)."""
+    from stospline.oracle.kernel import factored_stage_ticks, load_kernel
+    return _compiled(load_kernel, factored_stage_ticks)
+
+
+def _compiled(load, loop):
+    """`loop`, or None when ``STOSPLINE_ORACLE_KERNEL=numpy`` or `load` cannot build it."""
     if os.environ.get("STOSPLINE_ORACLE_KERNEL", "c") == "numpy":
         return None
-    from stospline.design.kernels import KernelBuildError, load_kernels, oracle_stage_ticks
+    from stospline.errors import KernelBuildError
     try:
-        load_kernels()
+        load()
     except KernelBuildError:
         return None
-    return oracle_stage_ticks
+    return loop

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from typing import Any
 
 import numpy as np
@@ -41,7 +42,7 @@ from stospline.errors import StosplineError
 # `Problem` and `Stage` (stospline.problem.model) are annotations only: the model calls this
 # module (Problem.to_toml), so importing it here, even for type checking, would be a cycle.
 
-__all__ = ["problem_to_toml", "ProblemTomlError"]
+__all__ = ["problem_to_toml", "document_to_toml", "ProblemTomlError"]
 
 
 class ProblemTomlError(StosplineError, ValueError):
@@ -180,6 +181,27 @@ def _parameters(p, top_level: bool) -> list[str]:
         lines += _table("[[parameters]]", {"name": par.name, "sets": sets,
                                            "range": [float(par.lower), float(par.upper)]})
     return lines
+
+
+def document_to_toml(doc: dict) -> str:
+    """A decoded problem file `doc` (tables, arrays, numbers, strings, as `tomllib` gives
+    them) as TOML text that decodes to the same document: its plain keys first, then each
+    table as ``[key]`` and each array of tables as ``[[key]]``, nested tables inline."""
+    def tables(v) -> bool:
+        return isinstance(v, list) and bool(v) and all(isinstance(x, dict) for x in v)
+    lines = [f"{_key(k)} = {_value(v)}" for k, v in doc.items()
+             if not isinstance(v, dict) and not tables(v)]
+    for k, v in doc.items():
+        if isinstance(v, dict):
+            lines += _table(f"[{_key(k)}]", {_key(a): b for a, b in v.items()})
+        elif tables(v):
+            for entry in v:
+                lines += _table(f"[[{_key(k)}]]", {_key(a): b for a, b in entry.items()})
+    return "\n".join(lines) + "\n"
+
+
+def _key(k: str) -> str:
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else json.dumps(k)
 
 
 def problem_to_toml(problem: Problem) -> str:

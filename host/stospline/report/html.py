@@ -43,6 +43,37 @@ def _png(fig) -> str:
     return _data_uri(buf)
 
 
+def _state_band(ax, t, exact, i: int, record, mean, paths: int) -> None:
+    """On `ax`, state `i` against time: the oracle's mean +- 2 sd, the 5-95 % band of the
+    recorded paths `record` (ticks, paths, n; none where None or fewer than 2 paths) and the
+    Monte Carlo `mean` (ticks, n) of `paths` paths."""
+    sd = np.sqrt(exact.path_var[:, i])
+    ax.fill_between(exact.path_t, exact.path_mean[:, i] - 2 * sd,
+                    exact.path_mean[:, i] + 2 * sd, color="tab:orange", alpha=0.25,
+                    label="oracle mean +- 2 sd")
+    if record is not None and record.shape[1] >= 2:
+        lo, hi = np.percentile(record[:, :, i], [5, 95], axis=1)
+        ax.plot(t, lo, ":", color="tab:blue", lw=1,
+                label=f"5-95 % of {record.shape[1]} recorded paths")
+        ax.plot(t, hi, ":", color="tab:blue", lw=1)
+    ax.plot(t, mean[:, i], color="tab:blue", lw=1.5, label=f"mean of {paths} paths")
+
+
+def _label(ax, ylabel: str, legend: bool) -> None:
+    """The y label and grid of one panel, and its legend where `legend`."""
+    ax.set_ylabel(ylabel)
+    ax.grid(alpha=0.3)
+    if legend:
+        ax.legend(fontsize=7, loc="best")
+
+
+def _time_png(fig, axs) -> str:
+    """`_png` of a column of panels against time."""
+    axs[-1, 0].set_xlabel("t [s]")
+    fig.tight_layout()
+    return _png(fig)
+
+
 def _corridor(d, mc, exact) -> str:
     buf = io.BytesIO()
     plot_corridor(d, mc, buf, exact)
@@ -59,22 +90,10 @@ def _states(d, mc, exact):
     t = mc.sample_t
     for i in range(n):
         ax = axs[i, 0]
-        sd = np.sqrt(exact.path_var[:, i])
-        ax.fill_between(exact.path_t, exact.path_mean[:, i] - 2 * sd,
-                        exact.path_mean[:, i] + 2 * sd, color="tab:orange", alpha=0.25,
-                        label="oracle mean +- 2 sd")
-        if mc.record_x is not None and mc.record_x.shape[1] >= 2:
-            lo, hi = np.percentile(mc.record_x[:, :, i], [5, 95], axis=1)
-            ax.plot(t, lo, ":", color="tab:blue", lw=1,
-                    label=f"5-95 % of {mc.record_x.shape[1]} recorded paths")
-            ax.plot(t, hi, ":", color="tab:blue", lw=1)
-        ax.plot(t, mc.mean_x[:, i], color="tab:blue", lw=1.5, label=f"mean of {mc.paths} paths")
+        _state_band(ax, t, exact, i, mc.record_x, mc.mean_x, mc.paths)
         ax.plot(exact.path_t, exact.path_mean[:, i], "--", color="tab:orange", lw=1.2,
                 label="oracle mean")
-        ax.set_ylabel(f"x{i}")
-        ax.grid(alpha=0.3)
-        if i == 0:
-            ax.legend(fontsize=7, loc="best")
+        _label(ax, f"x{i}", i == 0)
     for j in range(m):
         ax = axs[n + j, 0]
         if exact.path_u_mean.shape[0] == len(t) - 1:
@@ -90,13 +109,8 @@ def _states(d, mc, exact):
                     label=f"5-95 % of {mc.record_u.shape[1]} recorded paths")
             ax.plot(t[:-1], hi, ":", color="tab:blue", lw=1)
         ax.plot(t[:-1], mc.sample_u[:, j], color="k", lw=0.6, label="one realisation")
-        ax.set_ylabel(f"u{j + 1}")
-        ax.grid(alpha=0.3)
-        if j == 0:
-            ax.legend(fontsize=7, loc="best")
-    axs[-1, 0].set_xlabel("t [s]")
-    fig.tight_layout()
-    return _png(fig)
+        _label(ax, f"u{j + 1}", j == 0)
+    return _time_png(fig, axs)
 
 
 def _regions(d, mc, exact):
@@ -145,12 +159,8 @@ def _regions(d, mc, exact):
         lo_lim = reg.lower[i] if reg.lower[i] >= lo_y - 2 * pad else lo_y - pad
         hi_lim = reg.upper[i] if reg.upper[i] <= hi_y + 2 * pad else hi_y + pad
         ax.set_ylim(min(lo_lim, lo_y) - 0.1 * pad, max(hi_lim, hi_y) + 0.1 * pad)
-        ax.set_ylabel(f"region {reg.index}, row {i}")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="best")
-    axs[-1, 0].set_xlabel("t [s]")
-    fig.tight_layout()
-    return _png(fig)
+        _label(ax, f"region {reg.index}, row {i}", True)
+    return _time_png(fig, axs)
 
 
 def _regions_check(d) -> dict:
@@ -272,11 +282,13 @@ def _corridors(summary: dict) -> list[dict]:
     return out
 
 
-def report_html(d, mc, summary: dict, fault_rows=None, no_fault_table: str | None = None
-                ) -> str:
+def report_html(d, mc, summary: dict, fault_rows=None, no_fault_table: str | None = None,
+                plant: dict | None = None) -> str:
     """The page for design `d` (`pipeline.Designed`), its Monte Carlo run `mc` and that
     run's `pipeline.simulation_summary`; `fault_rows` (`harness.fault_sweep.fault_table`) adds
-    the fault table, `no_fault_table` says why there is none."""
+    the fault table, `no_fault_table` says why there is none. `plant`: of a [plant] problem
+    (`d` and `mc` its linearisation's), the Monte Carlo on the model itself
+    (`nonlinear.simulate.plant_simulation`), shown first."""
     from stospline.oracle.faults import evaluate_with_faults
     from stospline.oracle.evaluate import evaluate_table
     p = d.problem
@@ -302,4 +314,20 @@ def report_html(d, mc, summary: dict, fault_rows=None, no_fault_table: str | Non
         regions=_regions_check(d) if p.tick_regions else None,
         fault_table=_fault_table(fault_rows),
         parameters=None if family is None else family[1],
-        no_fault_table=no_fault_table)
+        no_fault_table=no_fault_table, plant=plant, plant_rows=_plant_rows(plant))
+
+
+def _plant_rows(plant: dict | None) -> list[dict]:
+    """One row per knot and state of the model's Monte Carlo: mean and variance with their
+    intervals (widened by the scheme's bias), the linearisation's oracle, and whether each is
+    inside."""
+    rows = []
+    for k, kn in enumerate(plant["knots"] if plant else []):
+        for i, mean in enumerate(kn["mean"]):
+            hw = kn["mean_halfwidth"][i] + kn["scheme_bias"][i]
+            vhw = kn["variance_halfwidth"][i] + kn["scheme_bias_variance"][i]
+            var, o, ov = kn["variance"][i], kn["oracle_mean"][i], kn["oracle_variance"][i]
+            rows.append({"knot": k, "t": kn["t"], "state": i, "mean": mean, "hw": hw,
+                         "oracle": o, "mean_ok": abs(mean - o) <= hw, "variance": var,
+                         "vhw": vhw, "oracle_variance": ov, "variance_ok": abs(var - ov) <= vhw})
+    return rows

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stospline.report.html import _histogram, _png, _statistics
+from stospline.report.html import _histogram, _label, _state_band, _statistics, _time_png
 from stospline.report.summary_text import design_summary_text
 
 __all__ = ["sensor_report_html"]
@@ -26,25 +26,12 @@ def _true_and_estimate(d, run):
     t = mc.sample_t
     for i in range(n):
         ax = axs[i, 0]
-        sd = np.sqrt(exact.path_var[:, i])
-        ax.fill_between(exact.path_t, exact.path_mean[:, i] - 2 * sd,
-                        exact.path_mean[:, i] + 2 * sd, color="tab:orange", alpha=0.25,
-                        label="oracle mean +- 2 sd")
-        lo, hi = np.percentile(rec["x"][:, :, i], [5, 95], axis=1)
-        ax.plot(t, lo, ":", color="tab:blue", lw=1,
-                label=f"5-95 % of {rec['x'].shape[1]} recorded paths")
-        ax.plot(t, hi, ":", color="tab:blue", lw=1)
-        ax.plot(t, mc.mean_x[:, i], color="tab:blue", lw=1.5, label=f"mean of {mc.paths} paths")
+        _state_band(ax, t, exact, i, rec["x"], mc.mean_x, mc.paths)
         ax.plot(t, rec["x"][:, 0, i], color="k", lw=0.8, label="one path: true state")
         ax.plot(t, rec["xhat"][:, 0, i], color="tab:red", lw=0.8, ls="--",
                 label="its estimate x̂ (the controller's)")
-        ax.set_ylabel(f"x{i}")
-        ax.grid(alpha=0.3)
-        if i == 0:
-            ax.legend(fontsize=7, loc="best")
-    axs[-1, 0].set_xlabel("t [s]")
-    fig.tight_layout()
-    return _png(fig)
+        _label(ax, f"x{i}", i == 0)
+    return _time_png(fig, axs)
 
 
 def _error_band(d, run):
@@ -67,13 +54,8 @@ def _error_band(d, run):
                 label=f"+- 2 sd of {err.shape[1]} recorded paths")
         ax.plot(t, -2 * sd_mc[:, i], color="tab:blue", lw=1)
         ax.plot(t, err[:, 0, i], color="k", lw=0.6, label="one path")
-        ax.set_ylabel(f"x{i} - x̂{i}")
-        ax.grid(alpha=0.3)
-        if i == 0:
-            ax.legend(fontsize=7, loc="best")
-    axs[-1, 0].set_xlabel("t [s]")
-    fig.tight_layout()
-    return _png(fig)
+        _label(ax, f"x{i} - x̂{i}", i == 0)
+    return _time_png(fig, axs)
 
 
 def _errors(summary: dict) -> list[dict]:

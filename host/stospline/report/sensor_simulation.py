@@ -13,22 +13,13 @@ from stospline import strict
 from stospline.precision import verbatim
 from stospline.report.design_summary import actuator_limits
 from stospline.report.json_numbers import rounded
-from stospline.report.simulation_summary import predicted_cost, verdict
+from stospline.report.simulation_summary import cost_and_bias, knot_entry, saturation, verdict
 from stospline.report.summary_text import simulation_summary_text
-from stospline.harness.montecarlo import z_value
 
 __all__ = ["sensor_simulation_summary", "sensor_simulation_text"]
 
 _ZERO_SE = ("every path gave the same value: the Monte Carlo standard error is 0 up to "
             "rounding, so the ratio is undefined")
-
-
-def _substep_choice(mc) -> dict:
-    c = mc.substep_choice
-    if c is None:
-        return {"substeps_chosen": "given"}
-    return {"substeps_chosen": "auto", "target": c.target, "predicted_stderr": c.stderr,
-            "pilot_paths": c.pilot_paths, "target_met": c.met}
 
 
 def sensor_simulation_summary(d, run, *, seed: int, confidence: float = 0.99) -> dict:
@@ -39,24 +30,13 @@ def sensor_simulation_summary(d, run, *, seed: int, confidence: float = 0.99) ->
     mean is ``E x - E x̂``, zero up to the float32 predictor's rounding)."""
     mc, exact, scheme = run.mc, run.exact.moments, run.scheme.moments
     meas = d.problem.measurement
-    mean, hw95 = mc.cost_mean_ci(0.95)
-    _, hw99 = mc.cost_mean_ci(0.99)
-    se = hw95 / z_value(0.95)
-    se_z = 0.0 if mc.cost_moments.alike()[0] else se
-    cost_z, cost_why = strict.ratio_or_null(mean - exact.J, se_z, _ZERO_SE)
-    bias_z, bias_why = strict.ratio_or_null(scheme.J - exact.J, se_z, _ZERO_SE)
+    cost, bias = cost_and_bias(d, mc, exact, scheme, _ZERO_SE)
     knots = []
     for k, kn in enumerate(d.problem.knots):
-        m, s = mc.knot_mean_se(k)
-        alike = mc.knot_moments[k].alike()
-        z, why = strict.ratio_or_null(m - exact.knot_mean[k], np.where(alike, 0.0, s), _ZERO_SE)
         err = run.record["knot_error"][k]
         cov = err.cov()
         knots.append({
-            "t": verbatim(kn.t),
-            "mc_mean": m, "mc_mean_stderr": s, "mc_cov": mc.knot_cov(k),
-            "oracle_mean": exact.knot_mean[k], "oracle_cov": exact.knot_cov[k],
-            "z": z, **({"z_undefined": why} if why else {}),
+            **knot_entry(mc, exact, k, kn.t, _ZERO_SE),
             "estimation_error": {
                 "mc_mean": err.mean, "mc_mean_stderr": err.mean_se(),
                 "mc_cov": cov[0, 0] if cov.shape == (1, 1) else cov,
@@ -74,27 +54,11 @@ def sensor_simulation_summary(d, run, *, seed: int, confidence: float = 0.99) ->
                      "through the compiled C estimator controller"),
             "full_state_oracle": d.implemented.J,
         },
-        "cost": {
-            "mc_mean": mean, "mc_stderr": se,
-            "ci95": [mean - hw95, mean + hw95], "ci99": [mean - hw99, mean + hw99],
-            "oracle_implemented": exact.J, "predicted_J0": predicted_cost(d),
-            "z": cost_z, **({"z_undefined": cost_why} if cost_why else {}),
-        },
-        "simulation_bias": {
-            "cost": scheme.J - exact.J,
-            "cost_over_stderr": bias_z,
-            **({"cost_over_stderr_undefined": bias_why} if bias_why else {}),
-            **_substep_choice(mc),
-            "knot_cov_max_abs": [float(np.abs(scheme.knot_cov[k] - exact.knot_cov[k]).max())
-                                 for k in range(len(d.problem.knots))],
-        },
+        "cost": cost,
+        "simulation_bias": bias,
         "knots": knots,
-        "saturation": {
-            "limited": d.table.limited,
-            "tick_fraction": mc.saturated_fraction,
-            "path_fraction": mc.saturated_path_fraction,
-            "u_low": [float(v) for v in mc.u_low], "u_high": [float(v) for v in mc.u_high],
-        },
+        "saturation": saturation(d, mc, {"u_low": [float(v) for v in mc.u_low],
+                                         "u_high": [float(v) for v in mc.u_high]}),
         **actuator_limits(d),
     })
     summary["verdict"] = verdict(summary, confidence)

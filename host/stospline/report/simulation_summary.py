@@ -17,7 +17,8 @@ from stospline.harness.montecarlo import MonteCarloResult, joint_verdict, z_valu
 from stospline.oracle.evaluate import Moments
 from stospline.harness.plant_scheme import scheme_moments
 
-__all__ = ["simulation_summary", "verdict", "loop_moments", "predicted_cost"]
+__all__ = ["simulation_summary", "verdict", "loop_moments", "predicted_cost", "knot_entry",
+           "cost_and_bias", "saturation"]
 
 # Why a z-score (or another ratio to a Monte Carlo standard error) is null.
 _ZERO_SE = ("every path gave the same value (a problem without noise, or a deterministic "
@@ -43,6 +44,56 @@ def predicted_cost(d) -> float:
     return d.design.cost_from(d.problem.x0)
 
 
+def knot_entry(mc: MonteCarloResult, exact: Moments, k: int, t, zero_se: str = _ZERO_SE
+               ) -> dict:
+    """Knot `k` (at `t`): the Monte Carlo mean, its standard error and covariance beside the
+    exact ones, and the z-scores of the mean (None, with `zero_se` as the reason, where every
+    path gave the same value)."""
+    m, s = mc.knot_mean_se(k)
+    alike = mc.knot_moments[k].alike()   # s is then 0 or rounding error
+    z, why = strict.ratio_or_null(m - exact.knot_mean[k], np.where(alike, 0.0, s), zero_se)
+    return {"t": verbatim(t),
+            "mc_mean": m, "mc_mean_stderr": s, "mc_cov": mc.knot_cov(k),
+            "oracle_mean": exact.knot_mean[k], "oracle_cov": exact.knot_cov[k],
+            "z": z, **({"z_undefined": why} if why else {})}
+
+
+def cost_and_bias(d, mc: MonteCarloResult, exact: Moments, scheme: Moments,
+                  zero_se: str = _ZERO_SE) -> tuple[dict, dict]:
+    """The summary's ``cost`` (the Monte Carlo mean cost, its standard error and confidence
+    intervals beside the exact and the predicted cost, and its z-score) and
+    ``simulation_bias`` (the plant scheme's moments, `scheme`, against the exact ones) entries.
+    A ratio to a standard error of 0 is None with `zero_se` as the reason."""
+    mean, hw95 = mc.cost_mean_ci(0.95)
+    _, hw99 = mc.cost_mean_ci(0.99)
+    se = hw95 / z_value(0.95)
+    se_z = 0.0 if mc.cost_moments.alike()[0] else se
+    cost_z, cost_why = strict.ratio_or_null(mean - exact.J, se_z, zero_se)
+    bias_z, bias_why = strict.ratio_or_null(scheme.J - exact.J, se_z, zero_se)
+    cost = {
+        "mc_mean": mean, "mc_stderr": se,
+        "ci95": [mean - hw95, mean + hw95], "ci99": [mean - hw99, mean + hw99],
+        "oracle_implemented": exact.J, "predicted_J0": predicted_cost(d),
+        "z": cost_z, **({"z_undefined": cost_why} if cost_why else {}),
+    }
+    bias = {
+        "cost": scheme.J - exact.J,
+        "cost_over_stderr": bias_z,
+        **({"cost_over_stderr_undefined": bias_why} if bias_why else {}),
+        **_substep_choice(mc),
+        "knot_cov_max_abs": [float(np.abs(scheme.knot_cov[k] - exact.knot_cov[k]).max())
+                             for k in range(len(d.problem.knots))],
+    }
+    return cost, bias
+
+
+def saturation(d, mc: MonteCarloResult, commands: dict) -> dict:
+    """The summary's ``saturation`` entry: whether the table limits the command, the fraction
+    of steps and of paths the controller saturated, and the range of `commands` issued."""
+    return {"limited": d.table.limited, "tick_fraction": mc.saturated_fraction,
+            "path_fraction": mc.saturated_path_fraction, **commands}
+
+
 def simulation_summary(d, mc: MonteCarloResult, *, seed: int,
                        confidence: float = 0.99) -> dict:
     """Monte Carlo statistics beside the oracle's exact numbers, the plant scheme's bias, and
@@ -65,54 +116,21 @@ def simulation_summary(d, mc: MonteCarloResult, *, seed: int,
     exact_oracle = has_exact_oracle(d.table, faults)
     euler = (choice.scheme if choice is not None and choice.substeps == substeps
              else scheme_moments(d.problem, d.table, substeps, faults))
-    mean, hw95 = mc.cost_mean_ci(0.95)
-    _, hw99 = mc.cost_mean_ci(0.99)
-    se = hw95 / z_value(0.95)
-    knots = []
-    for k, kn in enumerate(d.problem.knots):
-        m, s = mc.knot_mean_se(k)
-        alike = mc.knot_moments[k].alike()   # s is then 0 or rounding error
-        z, why = strict.ratio_or_null(m - exact.knot_mean[k], np.where(alike, 0.0, s),
-                                      _ZERO_SE)
-        knots.append({
-            "t": verbatim(kn.t),
-            "mc_mean": m, "mc_mean_stderr": s, "mc_cov": mc.knot_cov(k),
-            "oracle_mean": exact.knot_mean[k], "oracle_cov": exact.knot_cov[k],
-            "z": z, **({"z_undefined": why} if why else {}),
-        })
-    se_z = 0.0 if mc.cost_moments.alike()[0] else se
-    cost_z, cost_why = strict.ratio_or_null(mean - exact.J, se_z, _ZERO_SE)
-    bias_z, bias_why = strict.ratio_or_null(euler.J - exact.J, se_z, _ZERO_SE)
+    knots = [knot_entry(mc, exact, k, kn.t) for k, kn in enumerate(d.problem.knots)]
+    cost, bias = cost_and_bias(d, mc, exact, euler)
     summary = rounded({
         "name": d.problem.name, "paths": mc.paths, "seed": seed, "substeps": substeps,
         "x0": verbatim(d.problem.x0),
         "tick_hz": d.table.tick_hz, "worst_status": mc.worst_status,
-        "cost": {
-            "mc_mean": mean, "mc_stderr": se,
-            "ci95": [mean - hw95, mean + hw95], "ci99": [mean - hw99, mean + hw99],
-            "oracle_implemented": exact.J, "predicted_J0": predicted_cost(d),
-            "z": cost_z, **({"z_undefined": cost_why} if cost_why else {}),
-        },
+        "cost": cost,
         "faults": {
             "levels": verbatim(faults.as_dict()), "exact_oracle": exact_oracle,
             "oracle_cost": exact.J if exact_oracle else None,
             "nominal_cost": d.implemented.J,
         },
-        "simulation_bias": {
-            "cost": euler.J - exact.J,
-            "cost_over_stderr": bias_z,
-            **({"cost_over_stderr_undefined": bias_why} if bias_why else {}),
-            **_substep_choice(mc),
-            "knot_cov_max_abs": [float(np.abs(euler.knot_cov[k] - exact.knot_cov[k]).max())
-                                 for k in range(len(d.problem.knots))],
-        },
+        "simulation_bias": bias,
         "knots": knots,
-        "saturation": {
-            "limited": d.table.limited,
-            "tick_fraction": mc.saturated_fraction,
-            "path_fraction": mc.saturated_path_fraction,
-            **_command_range(mc),
-        },
+        "saturation": saturation(d, mc, _command_range(mc)),
         **actuator_limits(d),
         **_corridors(d, mc),
     })

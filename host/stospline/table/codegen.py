@@ -57,6 +57,11 @@ def _f32_body(flat: np.ndarray) -> str | None:
     return kernels.f32_array_text(flat, _PER_LINE)
 
 
+def _u32(x) -> str:
+    """C literal of an unsigned integer."""
+    return f"{int(x)}u"
+
+
 def _sha_initializer(sha: str) -> str:
     """The problem file's SHA-256 as a C initializer of 32 uint8_t."""
     return "{" + ", ".join(f"0x{sha[i:i + 2]}u" for i in range(0, 64, 2)) + "}"
@@ -116,7 +121,6 @@ extern const stsp_table_t {p}_table;
 {v.declarations}
 #endif /* {name}_GAINS_H */
 """
-    u32 = lambda x: f"{int(x)}u"  # noqa: E731
     T, e, lit, neg = table.n_ticks, v.element, v.literal, v.negated
     spline = getattr(table, "spline", None)
     gains = [] if spline is not None else [
@@ -128,8 +132,8 @@ extern const stsp_table_t {p}_table;
     pointers = ("NULL, NULL, NULL" if spline is not None
                 else f"{p}_K, {p}_k0, {p}_L")
     arrays = [
-        _array("uint32_t", f"{p}_stage_start", table.stage_start, u32, "[n_stages + 1]"),
-        _array("uint16_t", f"{p}_stage_n_latch", table.stage_n_latch, u32, "[n_stages]"),
+        _array("uint32_t", f"{p}_stage_start", table.stage_start, _u32, "[n_stages + 1]"),
+        _array("uint16_t", f"{p}_stage_n_latch", table.stage_n_latch, _u32, "[n_stages]"),
         *gains,
         _array(e, f"{p}_Lambda", table.Lambda, lit, "[n_stages][n_latch][nx]"),
         _array(e, f"{p}_lambda0", table.lambda0, lit, "[n_stages][n_latch]"),
@@ -202,22 +206,34 @@ def _float32_variant(table, p: str) -> _Variant:
                     "", extra, declarations, SCALAR_FLOAT32, f" {band}, {spline},")
 
 
+def _spline_array_list(sp, p: str, rows) -> list[str]:
+    """The arrays `rows` of a spline table `sp`: (C type, field of `sp`, literal, comment)."""
+    return [_array(ctype, f"{p}_{field}", getattr(sp, field), literal, dims)
+            for ctype, field, literal, dims in rows]
+
+
+# A spline table's entries: which (stage, input) holds which, and what each one is.
+_ENTRY_ROWS = (
+    ("uint16_t", "row_start", _u32, "[n_stages * nu + 1]: each (stage, input)'s entries in col[]"),
+    ("uint8_t", "col", _u32, "[n_entries]: j < nx: K[i][j]; nx: k0[i]; nx + 1 + c: L[i][c]"))
+
+
+def _coef_rows(ctype: str, literal):
+    """A spline table's coefficients by stage, of C type `ctype` (written by `literal`)."""
+    return (("uint32_t", "coef_start", _u32, "[n_stages + 1]: each stage's coefficients in coef[]"),
+            (ctype, "coef", literal,
+             "[n_coef]: per entry, its stage's spans + 3 B-spline coefficients"))
+
+
 def _spline_arrays(sp, p: str) -> list[str]:
     """The arrays and the `stsp_spline_t` of a spline table (`stospline.table.spline.fit`)."""
-    u32 = lambda x: f"{int(x)}u"  # noqa: E731
     return [
-        _array("uint32_t", f"{p}_knot_start", sp.knot_start, u32,
-               "[n_stages + 1]: each stage's clamped knot vector in knot[]"),
-        _array("stsp_f32_t", f"{p}_knot", sp.knot, _f32_literal,
-               "[n_knots]: knots in ticks from the stage's first tick"),
-        _array("uint16_t", f"{p}_row_start", sp.row_start, u32,
-               "[n_stages * nu + 1]: each (stage, input)'s entries in col[]"),
-        _array("uint8_t", f"{p}_col", sp.col, u32,
-               "[n_entries]: j < nx: K[i][j]; nx: k0[i]; nx + 1 + c: L[i][c]"),
-        _array("uint32_t", f"{p}_coef_start", sp.coef_start, u32,
-               "[n_stages + 1]: each stage's coefficients in coef[]"),
-        _array("stsp_f32_t", f"{p}_coef", sp.coef, _f32_literal,
-               "[n_coef]: per entry, its stage's spans + 3 B-spline coefficients"),
+        *_spline_array_list(sp, p, (
+            ("uint32_t", "knot_start", _u32,
+             "[n_stages + 1]: each stage's clamped knot vector in knot[]"),
+            ("stsp_f32_t", "knot", _f32_literal,
+             "[n_knots]: knots in ticks from the stage's first tick"),
+            *_ENTRY_ROWS, *_coef_rows("stsp_f32_t", _f32_literal))),
         f"/* The gains as cubic B-splines per stage (stsp_table.h, stsp_spline_t); the spline\n"
         f" * code's address (stsp_spline.h) links it with the table. */\n"
         f"static const stsp_spline_t {p}_spline = {{\n    {sp.knot.size}u, {sp.col.size}u, "
@@ -268,21 +284,13 @@ def _fixed_point_variant(table, p: str) -> _Variant:
 def _q_spline_arrays(sp, p: str, arith: str) -> list[str]:
     """The arrays and the `stsp_qspline_t` of a fixed-point spline table
     (`stospline.table.spline.fixed_point.QSplineGains`)."""
-    u32 = lambda x: f"{int(x)}u"  # noqa: E731
     F = 15 if arith == "q15" else 31
     return [
-        _array("uint8_t", f"{p}_span_log2", sp.span_log2, u32,
-               "[n_stages]: each stage's spans are 2^span_log2 ticks"),
-        _array("uint16_t", f"{p}_row_start", sp.row_start, u32,
-               "[n_stages * nu + 1]: each (stage, input)'s entries in col[]"),
-        _array("uint8_t", f"{p}_col", sp.col, u32,
-               "[n_entries]: j < nx: K[i][j]; nx: k0[i]; nx + 1 + c: L[i][c]"),
-        _array("uint8_t", f"{p}_shift", sp.shift, u32,
-               "[n_entries]: each entry's coefficient scale s_e"),
-        _array("uint32_t", f"{p}_coef_start", sp.coef_start, u32,
-               "[n_stages + 1]: each stage's coefficients in coef[]"),
-        _array(f"stsp_{arith}_t", f"{p}_coef", sp.coef, _qlit(F),
-               "[n_coef]: per entry, its stage's spans + 3 B-spline coefficients"),
+        *_spline_array_list(sp, p, (
+            ("uint8_t", "span_log2", _u32, "[n_stages]: each stage's spans are 2^span_log2 ticks"),
+            *_ENTRY_ROWS,
+            ("uint8_t", "shift", _u32, "[n_entries]: each entry's coefficient scale s_e"),
+            *_coef_rows(f"stsp_{arith}_t", _qlit(F)))),
         f"/* The gains as integer cubic B-splines per stage (stsp_table.h, stsp_qspline_t); the\n"
         f" * spline code's address (stsp_spline.h) links it with the table. */\n"
         f"static const stsp_qspline_t {p}_spline = {{\n    {sp.col.size}u, {sp.coef.size}u,\n"

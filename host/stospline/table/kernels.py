@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from stospline.cache import FallbackWarning, build_source_module, load_module
+from stospline.cache import FallbackWarning, build_kernel_sources, load_module
 from stospline.errors import KernelBuildError
 
 __all__ = ["affine_compose", "affine_compose_gains", "qspline_stage", "f32_array_text",
@@ -39,7 +39,6 @@ long stsp_f32_array_text(long N, const float *x, long per_line, char *out, long 
                          long *flagged, long *n_flagged);
 """
 _LITERAL_SLOT = 16   # literal_kernel.c's STSP_LITERAL_SLOT
-_CFLAGS = ["-std=c99", "-O3", "-Wall", "-Wextra"]
 _loaded = None
 _failed = False
 _load_lock = threading.Lock()
@@ -47,13 +46,8 @@ _load_lock = threading.Lock()
 
 def build_kernel(build_dir: str | Path | None = None, *, quiet: bool = True) -> Path:
     """Compile the kernel (if not cached) and return the path of the extension module."""
-    try:
-        source = b"\n".join(p.read_bytes() for p in _SOURCES)
-        return build_source_module("_stsp_table_kernel", source, _CDEF, _CFLAGS,
-                                   root=build_dir, quiet=quiet)
-    except Exception as exc:  # noqa: BLE001 - any failure here means "no compiled kernel"
-        names = " and ".join(p.name for p in _SOURCES)
-        raise KernelBuildError(f"cannot build {names}: {exc}") from exc
+    return build_kernel_sources("_stsp_table_kernel", _SOURCES, _CDEF, root=build_dir,
+                                quiet=quiet)
 
 
 def _kernel():

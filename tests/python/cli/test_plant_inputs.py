@@ -44,12 +44,12 @@ def test_a_plant_file_leaves_nothing_for_the_next_run(tmp_path, capsys):
     assert "plant" not in json.loads(capsys.readouterr().out)
 
 
-def test_corridor_design_refuses_a_plant_in_one_line(tmp_path, capsys):
+def test_corridor_design_of_a_plant_without_a_corridor_is_refused_in_one_line(tmp_path, capsys):
     files, doc, _ = plant_case("valid")
     (tmp_path / "model.c").write_text(files["model.c"])
     (tmp_path / "p.toml").write_text(to_toml(doc))
     rc = main(["corridor-design", str(tmp_path / "p.toml"), "--out", str(tmp_path / "out")])
     captured = capsys.readouterr()
     assert rc == 2 and captured.out == ""
-    assert len(captured.err.strip().splitlines()) == 1 and ": plant:" in captured.err
+    assert len(captured.err.strip().splitlines()) == 1 and ": corridors:" in captured.err
     assert not (tmp_path / "out").exists()

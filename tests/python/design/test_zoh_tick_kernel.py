@@ -79,9 +79,14 @@ def test_random_6_state_c_kernel_matches_numpy_reference(seed, mode):
 
 
 @pytest.mark.parametrize("h", [1e-3, 0.05, 0.5])
-@pytest.mark.parametrize("which", ["robot", "random"])
+@pytest.mark.parametrize("which", ["robot", "random", "noise-free"])
 def test_packed_tick_map_equals_van_loan(robot_problem, which, h):
+    """The packed tick map (from the packed generator's exponential, or without noise from
+    ``Phi = exp(Ahat h)``: ``H = G' V G``) equals Van Loan's 2d²-square exponential."""
     stage = robot_problem.stages[0] if which == "robot" else random_problem(3).stages[0]
+    if which == "noise-free":
+        stage = replace(stage, G=np.zeros_like(stage.G), H=None)
+        assert not stage.noise_tensor.any()
     td = dz._tick_data(stage, h)
     A2, Hc, F = van_loan_tick_data(stage, h)
     n = stage.A.shape[0]

@@ -103,3 +103,12 @@ def test_the_quadrotor_on_its_barometer_agrees(tmp_path):
     for k in range(knots):
         z = _error_z(r, k, np.zeros(2), r.exact.knot_error_cov[k])
         assert np.abs(z).max() < limit, (k, z)
+
+
+def test_fewer_paths_than_the_report_records(tmp_path):
+    """A run of fewer paths than `record` (the report keeps 200) records every path."""
+    problem = parse_problem(copy.deepcopy(DOC))
+    d = design_problem(problem)
+    r = run_sensor_loop(problem, d.table, paths=5, seed=SEED, substeps=1, record=200,
+                        build_dir=tmp_path)
+    assert r.record["x"].shape[1:] == (5, 2) and r.record["xhat"].shape[1:] == (5, 2)

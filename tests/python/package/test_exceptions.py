@@ -59,10 +59,12 @@ def test_every_exception_derives_from_the_base():
     assert outside == []
 
 
-def test_the_design_and_table_kernels_raise_one_build_error():
+def test_the_design_oracle_and_table_kernels_raise_one_build_error():
     from stospline.design import kernels as design_kernels
+    from stospline.oracle import kernel as oracle_kernel
     from stospline.table import kernels as table_kernels
     assert design_kernels.KernelBuildError is table_kernels.KernelBuildError is KernelBuildError
+    assert oracle_kernel.KernelBuildError is KernelBuildError
 
 
 def _raising(exc: BaseException):

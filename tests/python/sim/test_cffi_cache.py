@@ -71,7 +71,9 @@ def test_nothing_appears_in_place_before_the_build_is_complete(what, tmp_path, m
         from stospline.harness.controller import build_controller
         build_controller(robot_zoh.table, build_dir=tmp_path)
         (path,) = tmp_path.glob("*/_stsp_robot_corridor_*.so")
-    assert seen == [[]]
+    # Every compile (with a cold user cache the controller's helper kernels compile too) found
+    # nothing under a final name in the build directory.
+    assert seen and all(names == [] for names in seen), seen
     assert path.is_file() and path.parent.parent == tmp_path
 
 

@@ -1,5 +1,5 @@
 """The fast paths of the CLI agree with their references: the numpy matrix exponential with
-scipy's, and the C tick loop of the oracle (oracle_kernel.c) with the numpy loop."""
+scipy's, and the C tick loop of the oracle (oracle/tick_kernel.c) with the numpy loop."""
 import numpy as np
 import pytest
 import scipy.linalg
@@ -78,3 +78,48 @@ def test_noise_free_tick_maps_equal_the_van_loan_map(seed):
     ref_row = running_cost_matrix(stage, n, m, n + m + 1, n).ravel() @ ref.Psi
     np.testing.assert_allclose(prop.Phi, ref.Phi, rtol=0, atol=1e-14 * np.abs(ref.Phi).max())
     np.testing.assert_allclose(row, ref_row, rtol=0, atol=1e-14 * np.abs(ref_row).max())
+
+
+@pytest.mark.parametrize("path", [False, True])
+@pytest.mark.parametrize("seed", range(2))
+def test_factored_noise_free_loop_equals_the_packed_loop(seed, path, monkeypatch):
+    """Without noise the C loop applies a tick as ``F E ww' F'`` (`factored_kernel.c`):
+    equal to rounding to the packed moment map's loop (`oracle_kernel.c`) and to the numpy
+    loop, with latched multipliers, cross weights and a penalty knot."""
+    from stospline.problem.build import problem_from_arrays
+    rng = np.random.default_rng(seed)
+    n, m = 6, 3
+    Q = rng.normal(size=(n, n))
+    p = problem_from_arrays(
+        x0=rng.normal(size=n), A=rng.normal(size=(n, n)) / 2, B=rng.normal(size=(n, m)),
+        R=np.eye(m), Q=Q @ Q.T + np.eye(n), S=0.1 * rng.normal(size=(n, m)),
+        q=rng.normal(size=n), tick_hz=100,
+        knots=[{"t": 0.5, "constraint": {"C": np.eye(n)[:2], "value": [1.0, -1.0]}},
+               {"t": 1.0, "penalty": {"C": np.eye(n), "target": np.zeros(n), "weight": 3.0}}])
+    assert not any(st.noise_tensor.any() for st in p.stages)
+    table = design_problem(p).table
+    calls = []
+    factored = oracle._factored_kernel()
+    assert factored is not None
+
+    def counted(*args, **kw):
+        calls.append(1)
+        return factored(*args, **kw)
+    monkeypatch.setattr(oracle, "_factored_kernel", lambda: counted)
+    a = oracle.evaluate_table(p, table, path=path)
+    assert len(calls) == len(p.stages)
+    monkeypatch.setattr(oracle, "_factored_kernel", lambda: None)
+    b = oracle.evaluate_table(p, table, path=path)
+    monkeypatch.setenv("STOSPLINE_ORACLE_KERNEL", "numpy")
+    c = oracle.evaluate_table(p, table, path=path)
+    for ref in (b, c):
+        assert a.J == pytest.approx(ref.J, rel=1e-13)
+        for x, y in zip(ref.knot_mean + ref.knot_cov, a.knot_mean + a.knot_cov):
+            np.testing.assert_allclose(y, x, rtol=0, atol=1e-13 * max(1.0, np.abs(x).max()))
+        if path:
+            for name in ("path_mean", "path_var", "path_u_mean", "path_u_var"):
+                x, y = getattr(ref, name), getattr(a, name)
+                assert x.shape == y.shape and x.size, name
+                # variances are differences E x² - (E x)²: scaled by the second moment
+                scale = max(1.0, np.abs(x).max(), np.abs(ref.path_mean).max() ** 2)
+                np.testing.assert_allclose(y, x, rtol=0, atol=1e-13 * scale)

@@ -1,6 +1,7 @@
-/* The board support a generated project needs: one file per board (board_<name>.c) defines
- * these, plus its vector table and start-up. Everything else (board_app.c, stsp_frame.c) is
- * the same on every board. */
+/* The board support a generated project needs: board_common.c (the same on every board)
+ * defines the receive ring, the interrupt switches, board_idle() and the start-up; one file per
+ * board (board_<name>.c) the rest, plus its vector table. board_app.c and stsp_frame.c are the
+ * same on every board. */
 #ifndef BOARD_H
 #define BOARD_H
 
@@ -28,6 +29,16 @@ void board_idle(void);
 void board_timer_start(uint32_t reload);
 /* Cycles since the timer's last interrupt: 0..reload. */
 uint32_t board_timer_elapsed(void);
+
+/* Defined by board_common.c: the UART's receive interrupt puts each byte into the ring that
+ * board_uart_read() reads. */
+void board_rx_put(uint8_t byte);
+/* Defined by board_common.c, named by the board's vector table: the start-up, which calls
+ * board_main(), and the handler of every fault. __StackTop: the initial stack pointer
+ * (<board>.ld). */
+void Reset_Handler(void);
+void Fault_Handler(void);
+extern uint32_t __StackTop[];
 
 /* Defined by board_app.c: the tick timer's interrupt calls it. */
 void board_timer_handler(void);

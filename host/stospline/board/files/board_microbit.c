@@ -1,5 +1,5 @@
 /* Board support for the BBC micro:bit (nRF51822, Cortex-M0 at 16 MHz), as QEMU 7.2's
- * `microbit` machine emulates it: vector table, start-up, clock, UART0 (P0.24 TX, P0.25 RX:
+ * `microbit` machine emulates it: vector table, clock, UART0 (P0.24 TX, P0.25 RX:
  * the interface chip's USB serial, 115200 8N1), the first `-serial` of QEMU, and TIMER0 as
  * the tick timer: the nRF51's Cortex-M0 has no SysTick.
  *
@@ -47,14 +47,10 @@
 #define TIMER0_IRQ 8u
 #define PIN_TXD 24u /* board-specific: the micro:bit's UART pins */
 #define PIN_RXD 25u
-#define RX_RING 512u /* received bytes not yet read by the loop (a power of two, > a frame) */
 
 #define BOARD_CLOCK_HZ 16000000u /* HFCLK: the core, and TIMER0 with prescaler 0 */
 #define WAIT_LIMIT 1000000u      /* bounded waits: the crystal, a byte's transmission */
 
-/* Bytes from the UART interrupt to the loop: one writer (the interrupt), one reader. */
-static volatile uint8_t rx_ring[RX_RING];
-static volatile uint32_t rx_head, rx_tail;
 static uint32_t timer_reload;
 
 /* The 16 MHz crystal for the UART's baud rate. Returns 0, or 1 when it did not start (the
@@ -87,22 +83,14 @@ static void uart_init(void)
     UART_TASKS_STARTTX = 1u;
 }
 
-/* Received bytes into the ring; a byte that finds the ring full is dropped (the frame it
- * belongs to then fails its CRC: BOARD_STATUS_BAD_FRAME). */
+/* Received bytes into the ring (board_rx_put). */
 void UART0_IRQHandler(void);
 void UART0_IRQHandler(void)
 {
     uint32_t i;
     for (i = 0u; i < UART_FIFO && UART_EVENTS_RXDRDY != 0u; ++i) {
-        uint8_t byte;
-        uint32_t head;
         UART_EVENTS_RXDRDY = 0u; /* before RXD: reading it raises the event for the next */
-        byte = (uint8_t)(UART_RXD & 0xFFu);
-        head = rx_head;
-        if (head - rx_tail < RX_RING) {
-            rx_ring[head & (RX_RING - 1u)] = byte;
-            rx_head = head + 1u;
-        }
+        board_rx_put((uint8_t)(UART_RXD & 0xFFu));
     }
 }
 
@@ -152,17 +140,6 @@ uint32_t board_timer_elapsed(void)
     return (v > timer_reload) ? timer_reload : v;
 }
 
-int board_uart_read(uint8_t *byte)
-{
-    const uint32_t tail = rx_tail;
-    if (tail == rx_head) {
-        return 0;
-    }
-    *byte = rx_ring[tail & (RX_RING - 1u)];
-    rx_tail = tail + 1u;
-    return 1;
-}
-
 /* One byte at a time: TXD, then the TXDRDY event (at most WAIT_LIMIT polls a byte). */
 void board_uart_write(const uint8_t *data, size_t n)
 {
@@ -176,59 +153,7 @@ void board_uart_write(const uint8_t *data, size_t n)
     }
 }
 
-void board_irq_disable(void)
-{
-    __asm__ volatile("cpsid i" ::: "memory");
-}
-
-void board_irq_enable(void)
-{
-    __asm__ volatile("cpsie i" ::: "memory");
-}
-
-/* Sleep until an interrupt: a received byte or the tick timer. */
-void board_idle(void)
-{
-    __asm__ volatile("wfi" ::: "memory");
-}
-
-/* Start-up. */
-extern uint32_t __data_start__[];
-extern uint32_t __data_end__[];
-extern uint32_t __data_load__[];
-extern uint32_t __bss_start__[];
-extern uint32_t __bss_end__[];
-extern uint32_t __StackTop[];
-void Reset_Handler(void);
-void Fault_Handler(void);
-
-/* A fault stops the core here; the actuators keep their last command: on a real board set
- * them to the safe command (board-specific) before spinning. */
-void Fault_Handler(void)
-{
-    for (;;) {
-    }
-}
-
-void Reset_Handler(void)
-{
-    volatile uint32_t *data = __data_start__;
-    volatile uint32_t *bss = __bss_start__;
-    const volatile uint32_t *load = __data_load__;
-    const uint32_t nd = (uint32_t)(((uintptr_t)__data_end__ - (uintptr_t)__data_start__) / 4u);
-    const uint32_t nb = (uint32_t)(((uintptr_t)__bss_end__ - (uintptr_t)__bss_start__) / 4u);
-    uint32_t i;
-    for (i = 0u; i < nd; ++i) {
-        data[i] = load[i];
-    }
-    for (i = 0u; i < nb; ++i) {
-        bss[i] = 0u;
-    }
-    (void)board_main();
-    for (;;) {
-    }
-}
-
+/* The vector table: Reset_Handler and Fault_Handler are board_common.c's. */
 typedef void (*vector_t)(void);
 typedef struct {
     uint32_t *initial_sp;

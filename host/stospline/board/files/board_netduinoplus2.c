@@ -1,5 +1,5 @@
 /* Board support for the Netduino Plus 2 (STM32F405RG, Cortex-M4F, 168 MHz), as QEMU 7.2's
- * `netduinoplus2` machine emulates it: vector table, start-up, clock, USART1 (PA9 TX,
+ * `netduinoplus2` machine emulates it: vector table, clock, USART1 (PA9 TX,
  * PA10 RX, 115200 8N1), the first `-serial` of QEMU.
  *
  * Board-specific (change these for another STM32F4 board): BOARD_HSE_HZ and the PLL factors
@@ -34,8 +34,6 @@
 #define USART_CR1_RXNEIE 0x20u
 #define NVIC_ISER1 REG(0xE000E104u)
 #define USART1_IRQ 37u /* board-specific: the USART's interrupt number */
-#define RX_RING 512u   /* received bytes not yet read by the loop (a power of two, > a frame) */
-#define SCB_CPACR REG(0xE000ED88u)
 /* The core's SysTick: the tick timer. */
 #define SYST_CSR REG(0xE000E010u)
 #define SYST_RVR REG(0xE000E014u)
@@ -51,9 +49,6 @@
 #define WAIT_LIMIT 1000000u       /* bounded waits for the oscillators */
 
 static uint32_t clock_hz = 16000000u; /* HSI at reset */
-/* Bytes from the USART interrupt to the loop: one writer (the interrupt), one reader. */
-static volatile uint8_t rx_ring[RX_RING];
-static volatile uint32_t rx_head, rx_tail;
 
 /* HSE 25 MHz -> PLL (M 25, N 336, P 2) = 168 MHz, AHB /1, APB1 /4, APB2 /2, 5 wait states.
  * Returns 0, or 1 when an oscillator did not become ready (the core stays on HSI). */
@@ -100,18 +95,12 @@ static void uart_init(void)
     NVIC_ISER1 = 1u << (USART1_IRQ - 32u);
 }
 
-/* A received byte into the ring; a byte that finds the ring full is dropped (the frame it
- * belongs to then fails its CRC: BOARD_STATUS_BAD_FRAME). */
+/* A received byte into the ring (board_rx_put). */
 void USART1_IRQHandler(void);
 void USART1_IRQHandler(void)
 {
     if ((USART1_SR & USART_SR_RXNE) != 0u) {
-        const uint8_t byte = (uint8_t)(USART1_DR & 0xFFu);
-        const uint32_t head = rx_head;
-        if (head - rx_tail < RX_RING) {
-            rx_ring[head & (RX_RING - 1u)] = byte;
-            rx_head = head + 1u;
-        }
+        board_rx_put((uint8_t)(USART1_DR & 0xFFu));
     }
 }
 
@@ -125,17 +114,6 @@ int board_init(void)
 uint32_t board_clock_hz(void)
 {
     return clock_hz;
-}
-
-int board_uart_read(uint8_t *byte)
-{
-    const uint32_t tail = rx_tail;
-    if (tail == rx_head) {
-        return 0;
-    }
-    *byte = rx_ring[tail & (RX_RING - 1u)];
-    rx_tail = tail + 1u;
-    return 1;
 }
 
 void board_uart_write(const uint8_t *data, size_t n)
@@ -160,67 +138,13 @@ uint32_t board_timer_elapsed(void)
     return SYST_RVR - SYST_CVR; /* the SysTick counts down from the reload */
 }
 
-void board_irq_disable(void)
-{
-    __asm__ volatile("cpsid i" ::: "memory");
-}
-
-void board_irq_enable(void)
-{
-    __asm__ volatile("cpsie i" ::: "memory");
-}
-
-/* Sleep until an interrupt: a received byte or the SysTick. */
-void board_idle(void)
-{
-    __asm__ volatile("wfi" ::: "memory");
-}
-
-/* Start-up. */
-extern uint32_t __data_start__[];
-extern uint32_t __data_end__[];
-extern uint32_t __data_load__[];
-extern uint32_t __bss_start__[];
-extern uint32_t __bss_end__[];
-extern uint32_t __StackTop[];
-void Reset_Handler(void);
-void Fault_Handler(void);
 void SysTick_Handler(void);
-
-/* A fault stops the core here; the actuators keep their last command: on a real board set
- * them to the safe command (board-specific) before spinning. */
-void Fault_Handler(void)
-{
-    for (;;) {
-    }
-}
-
 void SysTick_Handler(void)
 {
     board_timer_handler();
 }
 
-void Reset_Handler(void)
-{
-    volatile uint32_t *data = __data_start__;
-    volatile uint32_t *bss = __bss_start__;
-    const volatile uint32_t *load = __data_load__;
-    const uint32_t nd = (uint32_t)(((uintptr_t)__data_end__ - (uintptr_t)__data_start__) / 4u);
-    const uint32_t nb = (uint32_t)(((uintptr_t)__bss_end__ - (uintptr_t)__bss_start__) / 4u);
-    uint32_t i;
-    for (i = 0u; i < nd; ++i) {
-        data[i] = load[i];
-    }
-    for (i = 0u; i < nb; ++i) {
-        bss[i] = 0u;
-    }
-    SCB_CPACR |= 0xFu << 20; /* FPU: CP10, CP11 full access, before any float instruction */
-    __asm__ volatile("dsb\n\tisb" ::: "memory");
-    (void)board_main();
-    for (;;) {
-    }
-}
-
+/* The vector table: Reset_Handler and Fault_Handler are board_common.c's. */
 typedef void (*vector_t)(void);
 typedef struct {
     uint32_t *initial_sp;

@@ -1,7 +1,7 @@
 /* Host-side kernel of the exact moment oracle (stospline.oracle.evaluate.evaluate_table): the forward
  * second-moment recursion over the controller ticks of one time-invariant stage.  Not
  * firmware: it runs on the design host, in double precision, called through cffi
- * (stospline.design.kernels), and equals the numpy loop of evaluate_table to rounding.
+ * (stospline.oracle.kernel), and equals the numpy loop of evaluate_table to rounding.
  *
  * Notation (oracle.py): n states, m inputs, P latched multipliers, y = [x; v; 1] (d_y =
  * n+P+1), w = [x; u; 1] (d_w = n+m+1), u = -K x - L v - k0 held over the tick.  Per tick j:

@@ -143,7 +143,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
             sl = slice(ticks.start, ticks.stop)
             factored = _factored_maps(stage, n, m, h, propagator, substeps)
             if factored is not None and _factored_kernel() is not None:
-                # Without noise: M+ = F M F' per tick (factored_kernel.c), O(n d²).
+                # Without noise: M+ = F M F' per tick (tick_kernel.c), O(n d²).
                 kernel, tick_map = _factored_kernel(), factored
             else:
                 tick_map = _packed_maps(stage, n, m, h, propagator, substeps)

@@ -1,9 +1,8 @@
 """The oracle's compiled tick loops (double precision C, loaded through cffi).
 
-`build_kernel` compiles ``tick_kernel.c`` and ``factored_kernel.c`` (beside this module) into
-one cffi API-mode module cached as the designer's kernels are (`stospline.cache`: the user
-cache directory, ``STOSPLINE_CACHE_DIR`` overrides, keyed by a hash of the sources,
-declarations and flags); `load_kernel` returns the loaded module, building it on first use.
+`build_kernel` compiles ``tick_kernel.c`` (beside this module) into a cffi API-mode module
+cached as the designer's kernels are (`stospline.cache`: the user cache directory,
+``STOSPLINE_CACHE_DIR`` overrides, keyed by a hash of the source, declarations and flags); `load_kernel` returns the loaded module, building it on first use.
 Both run the tick loop of `oracle.evaluate_table` over one time-invariant stage:
 `oracle_stage_ticks` on the packed moment map `pack_oracle_maps` makes (any stage,
 O(n² d²) per tick), `factored_stage_ticks` on the tick's transition ``Phi`` and the cost row
@@ -21,7 +20,7 @@ from stospline.errors import KernelBuildError
 __all__ = ["build_kernel", "load_kernel", "oracle_stage_ticks", "pack_oracle_maps",
            "factored_stage_ticks", "pack_cost", "KernelBuildError"]
 
-_SOURCES = [Path(__file__).with_name("tick_kernel.c"), Path(__file__).with_name("factored_kernel.c")]
+_SOURCES = [Path(__file__).with_name("tick_kernel.c")]
 _CDEF = """
 size_t stsp_oracle_work_size(int n, int m, int n_latch);
 int stsp_oracle_stage_ticks(int n, int m, int n_latch, long T, const double *K, const double *L,
@@ -91,7 +90,7 @@ def oracle_stage_ticks(K: np.ndarray, L: np.ndarray, k0: np.ndarray, Phi_x: np.n
 def factored_stage_ticks(K: np.ndarray, L: np.ndarray, k0: np.ndarray, Phi: np.ndarray,
                          cost: np.ndarray, Fmean: np.ndarray, M: np.ndarray, J: float, *,
                          path: bool = False):
-    """`oracle_stage_ticks` for a noise-free stage (``factored_kernel.c``): the tick's state
+    """`oracle_stage_ticks` for a noise-free stage (``tick_kernel.c``'s factored loop): the tick's state
     transition ``Phi = exp(Ahat h)`` of ``w = [x; u; 1]`` and its cost row packed by
     `pack_cost` instead of the packed moment map; the same results to rounding."""
     dw = K.shape[2] + K.shape[1] + 1

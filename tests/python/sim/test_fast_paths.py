@@ -83,7 +83,7 @@ def test_noise_free_tick_maps_equal_the_van_loan_map(seed):
 @pytest.mark.parametrize("path", [False, True])
 @pytest.mark.parametrize("seed", range(2))
 def test_factored_noise_free_loop_equals_the_packed_loop(seed, path, monkeypatch):
-    """Without noise the C loop applies a tick as ``F E ww' F'`` (`factored_kernel.c`):
+    """Without noise the C loop applies a tick as ``F E ww' F'`` (`oracle/tick_kernel.c`):
     equal to rounding to the packed moment map's loop (`oracle_kernel.c`) and to the numpy
     loop, with latched multipliers, cross weights and a penalty knot."""
     from stospline.problem.build import problem_from_arrays

@@ -1,7 +1,7 @@
 """Monte Carlo of a table with runtime parameters through the compiled C: the firmware's
 ``stsp_set_params`` and ``stsp_param_step`` (stsp_params.h) drive the harness's plant
-(plant.c) on the problem at the parameters in force, set once before tick 0 or changed at a
-stage start.
+(plant.c) on the problem at the parameters in force, set once before tick 0 or changed during
+the plan (at a stage start or at any tick).
 
 Build and run are separate steps: `build_params_controller` compiles ``firmware/src/*.c``
 with the generated gain table and its parameter table; `simulate_params` runs paths through it.
@@ -124,10 +124,11 @@ def build_params_controller(ptable, table, *, build_dir=None,
 def simulate_params(problem, ctl: ParamsController, theta, *, paths: int, seed: int,
                     substeps: int = 4, change=None, observe=None) -> ParamsRun:
     """`paths` paths from the problem's x0 with the parameters `theta` set before tick 0 and,
-    with ``change=(stage, theta2)``, `theta2` set just before that stage's first tick. Each
-    stage's plant and each knot's penalty are the problem's at the parameters in force there
-    (`problem_at`); the plant's noise from the harness's C generator (seeded); constant stage
-    data. `observe`, optional, is called with ``(tick, X)`` after each tick (X: the states
+    with ``change=(stage, theta2)``, `theta2` set just before that stage's first tick (with
+    ``change=(stage, theta2, tick)``, just before that tick of the stage). Each stage's plant
+    and each knot's penalty are the problem's at `theta`, from the changed stage on at
+    `theta2` (`problem_at`; as `stospline.oracle.parametric.evaluate_switched`); the
+    plant's noise from the harness's C generator (seeded); constant stage data. `observe`, optional, is called with ``(tick, X)`` after each tick (X: the states
     at the tick's end, (paths, n); the callback must not keep it)."""
     table = ctl.table
     n, m, _ = table.dims
@@ -148,14 +149,13 @@ def simulate_params(problem, ctl: ParamsController, theta, *, paths: int, seed: 
     first, later = problem_at(problem, theta), None
     if change is not None:
         later = problem_at(problem, change[1])
+        at_tick = int(table.stage_start[change[0]]) if len(change) < 3 else int(change[2])
+        if not table.stage_start[change[0]] <= at_tick < table.stage_start[change[0] + 1]:
+            raise ValueError(f"simulate_params: tick {at_tick} is not in stage {change[0]}")
     for k in range(table.n_stages):
         p = later if change is not None and k >= change[0] else first
-        at = theta if p is first else change[1]
-        if k == 0 or (change is not None and k == change[0]):
-            st = lib.harness_param_set(inst, paths, ffi.from_buffer(
-                "float[]", np.ascontiguousarray(at, np.float32)))
-            if st < 0:
-                raise ValueError(f"stsp_set_params refused {list(at)}: {ctl.status_str(st)}")
+        if k == 0:
+            _set(ctl, inst, paths, theta)
         stage = p.stages[k]
         if stage.varying is not None:
             raise ValueError("simulate_params: time-varying plant data are not simulated")
@@ -163,6 +163,8 @@ def simulate_params(problem, ctl: ParamsController, theta, *, paths: int, seed: 
         dZ = np.empty((paths, substeps, stage.G.shape[2]))
         fill = normals(dZ)
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
+            if change is not None and j == at_tick:
+                _set(ctl, inst, paths, change[1])
             Xf[...] = X
             worst = min(worst, int(lib.harness_param_step(inst, paths, j, px, pu)))
             fill()
@@ -175,3 +177,10 @@ def simulate_params(problem, ctl: ParamsController, theta, *, paths: int, seed: 
             cost += knot.penalty.weight * np.einsum("pi,pi->p", r, r)
         knots.append(X.copy())
     return ParamsRun(cost, knots, worst)
+
+
+def _set(ctl: ParamsController, inst, paths: int, theta) -> None:
+    st = ctl.lib.harness_param_set(inst, paths, ctl.ffi.from_buffer(
+        "float[]", np.ascontiguousarray(theta, np.float32)))
+    if st < 0:
+        raise ValueError(f"stsp_set_params refused {list(theta)}: {ctl.status_str(st)}")

@@ -41,7 +41,8 @@ from stospline.oracle.evaluate import evaluate_table
 from stospline.problem.parameters import problem_at
 
 __all__ = ["BoxMoments", "RowMargin", "box_moments", "quadratic_fit", "band_margins",
-           "check_bands", "check_swing", "vertices", "sides", "TOLERANCE"]
+           "check_bands", "check_swing", "vertices", "sides", "mean_paths", "family",
+           "box_state_range", "TOLERANCE"]
 
 # A row holds over the box when its worst-case margin is above -TOLERANCE times max(1, |its
 # bounds|): the designs meet their rows to ~1e-13 of that scale (as refine.every_tick).
@@ -60,6 +61,50 @@ def vertices(parameters) -> np.ndarray:
     """The ``2^P`` corners of the box, (2^P, P)."""
     return np.array(list(itertools.product(*[(p.lower, p.upper) for p in parameters])),
                     dtype=float)
+
+
+def family(parameters, *, most: int = 64, seed: int = 20261128) -> tuple[np.ndarray, str]:
+    """``(thetas, what)``: the box's ``2^P`` vertices when there are at most `most` of them,
+    else `most` draws uniform in the box (seeded); `what` says which, in words."""
+    if 2 ** len(parameters) <= most:
+        return vertices(parameters), f"its {2 ** len(parameters)} vertices"
+    lo = np.array([p.lower for p in parameters])
+    hi = np.array([p.upper for p in parameters])
+    return (np.random.default_rng(seed).uniform(lo, hi, size=(most, lo.size)),
+            f"{most} draws uniform in it (seed {seed})")
+
+
+def mean_paths(problem, table, thetas) -> np.ndarray:
+    """The exact mean state at every tick (t0 included) of the parametric `table`
+    (`ParametricTable`, double precision) on the problem at each of `thetas`: (len(thetas),
+    T+1, n). The mean is affine in the parameters (module docstring), so it is fixed by the
+    oracle at the nominal and at one end of each range: ``P + 1`` passes."""
+    nom, up, down = sides(table.parameters)
+    step = np.where(up >= down, up, -down)
+
+    def mean(theta):
+        return evaluate_table(problem_at(problem, theta), table.at(theta), path=True).path_mean
+
+    m0 = mean(nom)
+    S = np.stack([(mean(nom + np.eye(nom.size)[i] * step[i]) - m0) / step[i]
+                  for i in range(nom.size)], axis=-1)
+    d = np.atleast_2d(np.asarray(thetas, float)) - nom
+    return m0[None] + np.einsum("tnp,kp->ktn", S, d)
+
+
+def box_state_range(box: BoxMoments, sigmas: float = 6.0) -> np.ndarray:
+    """Per state, ``max_t |E x_j| + sigmas sd x_j`` over every tick and every parameter vector
+    in the box (n,): the largest mean magnitude over the box (exact, affine) plus `sigmas`
+    times the root of `BoxMoments.variance_bound`. The fixed-point state range of a table
+    with parameters (`stospline.table.qparams`), as `stospline.table.qformat.state_range` is
+    for one parameter vector."""
+    _, up, down = sides(box.parameters)
+    n = box.mean.shape[1]
+    reach = np.maximum(box.S * up, -box.S * down).sum(axis=2)
+    reach_low = np.maximum(-box.S * up, box.S * down).sum(axis=2)
+    peak = np.maximum(np.abs(box.mean + reach), np.abs(box.mean - reach_low))
+    sd = np.sqrt(np.maximum(box.variance_bound(np.eye(n)), 0.0))
+    return (peak + sigmas * sd).max(axis=0)
 
 
 def quadratic_fit(f, parameters):

@@ -1,6 +1,7 @@
 """A problem with runtime parameters: its nominal design with the sensitivity columns
 (`design_parametric`), the exact moments of the table at any parameter vector
-(`evaluate_at`) or with the parameters changed at a stage start (`evaluate_switched`), and the
+(`evaluate_at`) or with the parameters changed during the plan, at any tick
+(`evaluate_switched`), and the
 exact expected cost as a quadratic in the parameters
 (`cost_quadratic`).
 
@@ -155,19 +156,28 @@ def evaluate_at(problem, table: ParametricTable, theta, *, quantize: bool = Fals
 
 
 def evaluate_switched(problem, table: ParametricTable, theta, stage: int, theta2, *,
-                      quantize: bool = False) -> Moments:
-    """Exact moments and cost of the table with the parameters `theta` until stage `stage`
-    and `theta2` set just before its first tick (the firmware's stsp_set_params() then: the
-    feed-forward of that tick on and the latches of that stage on at `theta2`), run on the
-    problem at `theta` up to that stage and at `theta2` from it."""
+                      tick: int | None = None, quantize: bool = False,
+                      path: bool = False) -> Moments:
+    """Exact moments and cost of the table with the parameters `theta` set before tick 0 and
+    `theta2` set just before tick `tick` (default the first tick of stage `stage`; else a tick
+    of that stage), as the firmware applies stsp_set_params() then: the feed-forward at
+    `theta2` from tick `tick` on, the latch offsets at `theta2` from the next latch at or after
+    it (a stage start that latches), the multipliers latched before kept until then. The mean
+    is affine in `theta` before the change and in `theta2` after it, the law piecewise so.
+    The problem is at `theta` up to that stage and at `theta2` from it (its plant and the knot
+    at its end: the device learns of a change in the world at `tick`)."""
     a, b = table.at(theta, quantize=quantize), table.at(theta2, quantize=quantize)
-    j = int(a.stage_start[stage])
+    start, end = int(a.stage_start[stage]), int(a.stage_start[stage + 1])
+    j = start if tick is None else int(tick)
+    if not start <= j < end:
+        raise ValueError(f"tick {j} is not in stage {stage} (ticks {start} .. {end - 1})")
+    later = np.asarray(a.stage_start[:-1]) >= j          # the stages latched after the change
     mixed = replace(a, k0=np.concatenate([a.k0[:j], b.k0[j:]]),
-                    lambda0=np.concatenate([a.lambda0[:stage], b.lambda0[stage:]]))
+                    lambda0=np.where(later[:, None], b.lambda0, a.lambda0))
     pa, pb = problem_at(problem, theta), problem_at(problem, theta2)
     p = replace(pa, stages=pa.stages[:stage] + pb.stages[stage:],
                 knots=pa.knots[:stage] + pb.knots[stage:])
-    return evaluate_table(p, mixed, path=False)
+    return evaluate_table(p, mixed, path=path)
 
 
 def cost_quadratic(problem, table: ParametricTable, *, quantize: bool = False):

@@ -15,7 +15,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from stospline.report.plot import plot_axes, plot_corridor
+from stospline.report.plot import _walls, plot_axes, plot_corridor
 from stospline.report.summary_text import design_summary_text
 
 __all__ = ["report_html"]
@@ -172,6 +172,57 @@ def _regions_check(d) -> dict:
     return {"how": how, "working_set_rows": s["working_set_rows"], "rows": s["regions"]}
 
 
+def _parameter_family(d):
+    """``(png, words)``: the exact mean paths of a problem with runtime parameters at the
+    nominal (thick) and at the box's vertices or a seeded sample of it (thin,
+    `stospline.oracle.over_box.family`), in the plotted plane and against time, with the
+    regions' bounds on the plotted states; None when its table has no sensitivity columns."""
+    import matplotlib.pyplot as plt
+    from stospline.errors import DesignError
+    from stospline.oracle.over_box import family, mean_paths
+    from stospline.oracle.parametric import check_parametric_options, design_parametric
+    p = d.problem
+    if d.over_box is not None:
+        pt = d.over_box.table
+    else:
+        try:
+            opts = check_parametric_options(p, d.options)
+        except DesignError:
+            return None
+        pt = design_parametric(p, discretization=opts.discretization, mode=opts.mode,
+                               delay_ticks=opts.delay_ticks).table
+    thetas, what = family(p.parameters)
+    paths = mean_paths(p, pt, np.vstack([pt.nominal, thetas]))[..., :p.n]
+    t = p.t0 + np.arange(paths.shape[1]) / p.tick_hz
+    axes = plot_axes(p)
+    panels = ([tuple(axes)] if len(axes) == 2 else []) + list(axes)
+    fig, axs = plt.subplots(1, len(panels), figsize=(4.6 * len(panels), 4.2), squeeze=False)
+    for ax, panel in zip(axs[0], panels):
+        if isinstance(panel, tuple):
+            ia, ib = panel
+            xs, ys = paths[..., ia], paths[..., ib]
+            _walls(ax, p)
+            ax.set_xlabel(f"x{ia}"); ax.set_ylabel(f"x{ib}")
+        else:
+            xs, ys = np.broadcast_to(t, paths.shape[:2]), paths[..., panel]
+            ax.set_xlabel("t [s]"); ax.set_ylabel(f"x{panel}")
+            for reg in p.tick_regions:
+                for i, c in enumerate(reg.C):
+                    if np.count_nonzero(c) == 1 and c[panel] != 0:
+                        for bound in (reg.lower[i], reg.upper[i]):
+                            if np.isfinite(bound):
+                                ax.hlines(bound / c[panel], *reg.t, color="k", lw=0.8)
+        for k in range(1, len(paths)):
+            ax.plot(xs[k], ys[k], color="0.45", lw=0.5, alpha=0.7,
+                    label="over the box" if k == 1 else None)
+        ax.plot(xs[0], ys[0], color="tab:orange", lw=2, label="nominal")
+        ax.grid(alpha=0.3)
+    axs[0, 0].legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    names = ", ".join(q.name for q in p.parameters)
+    return _png(fig), {"what": what, "names": names}
+
+
 def _histogram(mc, oracle_J: float):
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(7, 3.2))
@@ -250,6 +301,9 @@ def report_html(d, mc, summary: dict, fault_rows=None, no_fault_table: str | Non
     images = {"corridor": _corridor(d, mc, exact), "states": _states(d, mc, exact)}
     if p.tick_regions:
         images["regions"] = _regions(d, mc, exact)
+    family = _parameter_family(d) if p.parameters else None
+    if family is not None:
+        images["parameters"] = family[0]
     images["histogram"] = _histogram(mc, summary["cost"]["oracle_implemented"])
     return _template().render(
         name=p.name, verdict=summary["verdict"], design_text=design_summary_text(d),
@@ -259,6 +313,7 @@ def report_html(d, mc, summary: dict, fault_rows=None, no_fault_table: str | Non
         faults=_faults(summary), corridors=_corridors(summary), layout=layout, images=images,
         regions=_regions_check(d) if p.tick_regions else None,
         fault_table=_fault_table(fault_rows),
+        parameters=None if family is None else family[1],
         no_fault_table=no_fault_table, plant=plant, plant_rows=_plant_rows(plant))
 
 

@@ -181,3 +181,38 @@ def test_text_from_the_problem_and_the_run_is_escaped():
                     r'id="no-fault-table">No fault table: (.*)\.</p>'):
         shown = re.search(pattern, page).group(1)
         assert shown != HOSTILE and html.unescape(shown) == HOSTILE, pattern
+
+
+def test_report_of_a_problem_with_parameters_draws_the_planned_paths_over_the_box(tmp_path):
+    """robot_goal (two parameters): the page has the family of planned mean paths at the
+    nominal and the box's 4 vertices, and passes the browser check."""
+    page = tmp_path / "report.html"
+    r = run("report", str(EXAMPLES / "robot_goal.toml"), "--out", str(page), "--paths", "200",
+            "--seed", "4")
+    assert r.returncode == 0, r.stderr
+    dom = rendered_dom(page)
+    body = re.search(r"<body([^>]*)>", dom).group(1)
+    assert 'data-images="ok"' in body and 'data-errors="0"' in body, body
+    assert dom.count("<img") == 4
+    assert 'alt="planned paths over the parameter box"' in dom
+    assert re.search(r'id="parameters">[^<]*its 4 vertices of the box of goal_x, goal_y', dom)
+
+
+def test_the_family_is_the_oracle_at_each_parameter_vector():
+    """The affine mean paths the report draws are the oracle's at each vertex."""
+    import numpy as np
+    from stospline import load_problem
+    from stospline.oracle.over_box import family, mean_paths
+    from stospline.oracle.parametric import design_parametric, evaluate_at
+    p = load_problem(EXAMPLES / "robot_goal.toml")
+    pt = design_parametric(p).table
+    thetas, what = family(p.parameters)
+    assert what == "its 4 vertices" and thetas.shape == (4, 2)
+    paths = mean_paths(p, pt, thetas)
+    for theta, path in zip(thetas, paths):
+        exact = evaluate_at(p, pt, theta, path=True).path_mean
+        assert np.abs(path - exact).max() <= 1e-9 * max(1.0, np.abs(exact).max())
+    many, what = family(p.parameters, most=3)
+    assert what.startswith("3 draws") and many.shape == (3, 2)
+    lo, hi = (np.array([getattr(q, k) for q in p.parameters]) for k in ("lower", "upper"))
+    assert np.all(many >= lo) and np.all(many <= hi)

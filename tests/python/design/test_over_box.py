@@ -130,9 +130,9 @@ def test_corridor_bound_over_the_box_covers_every_vertex(drone):
 def test_the_cli_refuses_a_gate_range_beyond_the_ceiling(tmp_path, capsys):
     from stospline.cli import main
     text = (EXAMPLES / "drone_gates.toml").read_text()
-    assert text.count("range = [2.2, 3.0]") == 1
-    path = tmp_path / "wide.toml"         # gate 2 up to 3.2 m, the ceiling at 3.1 m
-    path.write_text(text.replace("range = [2.2, 3.0]", "range = [2.2, 3.2]"))
+    assert text.count("range = [2.1, 3.1]") == 1
+    path = tmp_path / "wide.toml"         # gate 2 up to 3.3 m, the ceiling at 3.2 m
+    path.write_text(text.replace("range = [2.1, 3.1]", "range = [2.1, 3.3]"))
     out = tmp_path / "out"
     assert main(["design", str(path), "--out", str(out)]) == 2
     captured = capsys.readouterr()

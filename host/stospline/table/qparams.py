@@ -1,0 +1,134 @@
+"""Fixed-point (Q15/Q31) scaling of the sensitivity columns and its error bound over the whole
+parameter box: the host side of a fixed-point parametric table (the firmware runs float32
+parameter tables only; stsp_params.h).
+
+The parameters enter the law as ``k0 + S_k0 d`` and ``lambda0 + S_lambda0 d``, ``d = theta -
+nominal``: exactly as ``P`` more states with constant gains. So the columns are scaled as
+states of the fixed-point law (`stospline.table.qformat`, whose notation this follows)::
+
+    d[p] = d_q[p] 2^(d_exp[p] - F),   d_q[p] = rhu(d[p] 2^(F - d_exp[p]))   (once, at set)
+    S_k0_q[t][i][p]     = rhu(-S_k0_ip(t) 2^(d_exp[p] - u_exp[i] + F))     (stored negated)
+    S_lambda0_q[s][c][p] = rhu(S_lambda0_cp 2^(d_exp[p] - v_exp[c] + F))
+
+with ``d_exp[p]`` the smallest exponent with ``|d_q[p]| <= 2^F - 1`` over the whole range
+(``reach_p = max(upper_p - nominal_p, nominal_p - lower_p)``). `quantize_parametric` quantizes
+the augmented table (``K`` and ``Lambda`` with the columns appended, the state range with the
+reaches appended), so ``u_exp`` and ``v_exp`` are chosen with the columns' terms in every row
+sum: for every ``theta`` in the box and every state in the range no sum overflows and no
+command leaves the Q range. The state range must hold over the box too (the means move with
+``theta``): `stospline.oracle.over_box.box_state_range` gives it.
+
+Error bound over the box, per tick and input, in the command's LSB: the augmented table's bound
+(`qformat`: the rounding of every stored entry, the columns' included, and of the latch) plus
+the rounding of ``d`` itself, at most half its LSB::
+
+    bound + sum_p |S_k0s_p| / 2^(F+1) + sum_c |L~_c| / 2^F * sum_p |S_lambda0s_cp| / 2^(F+1)
+
+(``S_k0s``, ``S_lambda0s`` the scaled entries before rounding). It holds for every ``theta`` in
+the box and every state in the range against the double law at that ``theta``
+(`law_double_at`); the commands are `qformat.law_q` of the augmented table with the state
+``[x_q; d_q]``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from stospline.table.qformat import (FRAC_BITS, FixedPointTable, _rhu, quantize_table,
+                                     scaled_entries)
+
+__all__ = ["ParametricFixedPoint", "quantize_parametric", "law_double_at"]
+
+
+@dataclass
+class ParametricFixedPoint:
+    """The fixed-point table of the law over ``[x; d]`` (`augmented`: its K and Lambda hold the
+    columns as their last ``P`` columns), the nominal and ranges, and the bound over the box
+    (``bound_lsb``: (ticks, m), command LSBs)."""
+    augmented: FixedPointTable
+    nominal: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    bound_lsb: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return self.augmented.dims[0] - self.nominal.size
+
+    @property
+    def d_exp(self) -> np.ndarray:
+        return self.augmented.x_exp[self.n:].astype(int)
+
+    @property
+    def bound(self) -> np.ndarray:
+        return self.bound_lsb * self.augmented.u_lsb
+
+    def d_q(self, theta) -> np.ndarray:
+        """The integer parameter deviation the device would store for `theta` ((N, P))."""
+        F = self.augmented.frac_bits
+        d = np.atleast_2d(np.asarray(theta, float)) - self.nominal
+        return _rhu(d * np.ldexp(1.0, F - self.d_exp))
+
+    def column_bytes(self) -> int:
+        """Flash of the columns (S_k0, S_lambda0) and of nominal, lower, upper in this format."""
+        width = 2 if self.augmented.arith == "q15" else 4
+        P = self.nominal.size
+        T, m, _ = self.augmented.K.shape
+        S, c, _ = self.augmented.Lambda.shape
+        return width * (T * m * P + S * c * P) + 4 * 3 * P
+
+
+def quantize_parametric(ptable, arith: str, x_range) -> ParametricFixedPoint:
+    """Q15/Q31 scales, integer entries and error bound over the box of the parametric table
+    `ptable` (`stospline.table.parametric.ParametricTable`, double precision), for states
+    within `x_range` ((n,): magnitudes over the whole box). Raises ValueError as
+    `qformat.quantize_table`."""
+    if arith not in FRAC_BITS:
+        raise ValueError(f"arith must be one of {list(FRAC_BITS)}, got {arith!r}")
+    F = FRAC_BITS[arith]
+    table = ptable.table
+    nom = np.asarray(ptable.nominal, float)
+    lower = np.array([q.lower for q in ptable.parameters], float)
+    upper = np.array([q.upper for q in ptable.parameters], float)
+    reach = np.maximum(upper - nom, nom - lower)
+    # |d| <= reach < 2^d_exp strictly, with room for d_q's rounding: |d_q| <= 2^F - 1.
+    d_range = np.where(reach > 0, reach, 1.0) * (1.0 + 2.0 ** (2 - F))
+    aug = replace(table, K=np.concatenate([np.asarray(table.K, float), ptable.S_k0], axis=2),
+                  Lambda=np.concatenate([np.asarray(table.Lambda, float), ptable.S_lambda0],
+                                        axis=2))
+    x_range = np.concatenate([np.asarray(x_range, float).reshape(-1), d_range])
+    ft = quantize_table(aug, arith, x_range, name=f"{table.name}_params_{arith}")
+    n = table.dims[0]
+    Ks, _, Ls, Lams, _ = scaled_entries(aug, F, ft.x_exp, ft.u_exp, ft.v_exp)
+    half = 2.0 ** -(F + 1)
+    d_law = np.abs(Ks[..., n:]).sum(axis=2) * half                      # (T, m)
+    d_latch = np.abs(Lams[..., n:]).sum(axis=2) * half                  # (S, n_latch)
+    n_latch = table.dims[2]
+    ls = ft.latch_stage(ft.stage_of_tick(np.arange(ft.n_ticks)))
+    live = np.arange(n_latch)[None, :] < np.asarray(table.stage_n_latch)[np.maximum(ls, 0)][:, None]
+    eps_t = np.where((ls >= 0)[:, None] & live, d_latch[np.maximum(ls, 0)], 0.0)
+    bound = ft.bound_lsb + d_law + np.einsum("tic,tc->ti", np.abs(Ls), eps_t) / (1 << F)
+    return ParametricFixedPoint(ft, nom, lower, upper, bound)
+
+
+def law_double_at(ptable, tick, x, x_latch, theta) -> np.ndarray:
+    """The parametric law in double precision at `theta` ((N, P)): ``u = -K x - k0' - L v``,
+    ``v = lambda0' + Lambda x_latch`` at the tick's latch stage (rows beyond stage_n_latch
+    zero), ``k0'``, ``lambda0'`` the columns at `theta` (N, m)."""
+    t = ptable.table
+    tick = np.asarray(tick)
+    d = np.atleast_2d(np.asarray(theta, float)) - ptable.nominal
+    latching = np.where(np.asarray(t.stage_n_latch) > 0, np.arange(t.n_stages), -1)
+    stage = np.searchsorted(t.stage_start, tick, side="right") - 1
+    ls = np.maximum.accumulate(latching)[stage]
+    lsc = np.maximum(ls, 0)
+    n_latch = t.dims[2]
+    v = (np.asarray(t.lambda0, float)[lsc] + np.einsum("ncp,np->nc", ptable.S_lambda0[lsc], d)
+         + np.einsum("ncj,nj->nc", np.asarray(t.Lambda, float)[lsc], x_latch))
+    live = (ls >= 0)[:, None] & (np.arange(n_latch)[None, :]
+                                 < np.asarray(t.stage_n_latch)[lsc][:, None])
+    v = np.where(live, v, 0.0)
+    return -(np.einsum("nij,nj->ni", np.asarray(t.K, float)[tick], x)
+             + np.asarray(t.k0, float)[tick] + np.einsum("nip,np->ni", ptable.S_k0[tick], d)
+             + np.einsum("nic,nc->ni", np.asarray(t.L, float)[tick], v))

@@ -39,6 +39,10 @@ __all__ = ["TailMoments", "TailsMismatch", "evaluate_tails", "tails_unsupported"
 # The second moments from the fourth-moment loop agree with the second-moment oracle's to
 # this, relative to the largest second moment (rounding in two orders of summation).
 CHECK_RTOL = 1e-8
+# The largest loops evaluated: the step's map has C(d + 3, 4) rows (3060 at d = 15), and its
+# expectation 3^channels Gauss-Hermite nodes.
+MAX_DIM = 15
+MAX_CHANNELS = 5
 
 
 class TailsMismatch(StosplineError, RuntimeError):
@@ -85,6 +89,13 @@ def tails_unsupported(problem: Problem, table) -> str | None:
         return "a table designed for a one-tick delay"
     if any(st.varying is not None for st in problem.stages[:table.n_stages]):
         return "time-varying stage data"
+    n, m, n_latch = table.dims
+    if n + m + n_latch + 1 > MAX_DIM:
+        return f"more than {MAX_DIM - 1} states, inputs and multipliers together"
+    channels = max(int(np.count_nonzero(st.noise_tensor.any(axis=(0, 1))))
+                   for st in problem.stages[:table.n_stages])
+    if channels > MAX_CHANNELS:
+        return f"more than {MAX_CHANNELS} noise channels"
     return None
 
 
@@ -121,8 +132,8 @@ class _Sym:
         collapse = sparse.csr_matrix((np.ones(d ** order), (self.of_full, np.arange(d ** order))),
                                      shape=(self.size, d ** order))
         out = np.zeros((self.size, self.size))
-        for start in range(0, self.size, 256):
-            I = self.idx[start:start + 256]
+        for start in range(0, self.size, 64):
+            I = self.idx[start:start + 64]
             for w, M in nodes:
                 R = M[I[:, 0]]
                 for a in range(1, order):
@@ -209,8 +220,18 @@ class _TickOperator:
                 power = step if power is None else power @ step
         self.tick = power.tocsr()
 
-    def apply(self, V: np.ndarray) -> np.ndarray:
-        return self.tick @ V
+        self.s4, self.s2 = s4, s2
+
+    def apply(self, T4: np.ndarray, P: np.ndarray, J2: float, into: np.ndarray,
+              out: np.ndarray):
+        """One tick from ``E y^(x)4``, ``E J y y'`` and ``E J^2``: ``q = into @ y`` (the
+        command and the passengers), the plant steps, then ``y+ = out @ q``."""
+        s4, s2 = self.s4, self.s2
+        V = np.concatenate([s4.compress(_mode(T4, into)), s2.compress(into @ P @ into.T), [J2]])
+        V = self.tick @ V
+        T4 = _mode(s4.expand(V[:s4.size]), out)
+        Pq = s2.expand(V[s4.size:s4.size + s2.size])
+        return T4, out @ Pq @ out.T, float(V[-1])
 
 
 def evaluate_tails(problem: Problem, table, *, substeps: int, check=None) -> TailMoments:
@@ -235,7 +256,8 @@ def evaluate_tails(problem: Problem, table, *, substeps: int, check=None) -> Tai
     Tq = np.zeros((d_q, d_y))
     Tq[:n, :n] = np.eye(n)
     Tq[n + m:, n:] = np.eye(n_latch + 1)
-    back = np.r_[0:n, n + m:d_q]     # y's components in q
+    back = np.zeros((d_y, d_q))      # y's components in q
+    back[np.arange(d_y), np.r_[0:n, n + m:d_q]] = 1.0
     c = d_y - 1
     means, covs, mu4s = [], [], []
     ops: dict = {}
@@ -262,40 +284,43 @@ def evaluate_tails(problem: Problem, table, *, substeps: int, check=None) -> Tai
             Tq[n:n + m, :n] = -table.K[j]
             Tq[n:n + m, n:n + n_latch] = -table.L[j]
             Tq[n:n + m, -1] = -table.k0[j]
-            V = np.concatenate([s4.compress(_mode(T4, Tq)), s2.compress(Tq @ P @ Tq.T), [J2]])
-            V = op.apply(V)
-            T4 = s4.expand(V[:s4.size])[np.ix_(back, back, back, back)]
-            P = s2.expand(V[s4.size:s4.size + s2.size])[np.ix_(back, back)]
-            J2 = float(V[-1])
-        knot = problem.knots[k]
-        if knot.penalty is not None:
-            C, rho, w = knot.penalty.C, knot.penalty.target, knot.penalty.weight
-            Pen = np.zeros((d_y, d_y))
-            Pen[:n, :n] = w * C.T @ C
-            Pen[:n, c] = Pen[c, :n] = -w * C.T @ rho
-            Pen[c, c] = w * rho @ rho
-            J2 += 2.0 * np.sum(Pen * P) + np.einsum("ij,kl,ijkl->", Pen, Pen, T4)
-            P = P + np.einsum("ij,ijab->ab", Pen, T4)
-        mean = T4[:n, c, c, c].copy()
-        M2 = T4[:n, :n, c, c]
-        cov = M2 - np.outer(mean, mean)
-        i = np.arange(n)
-        m3, m4 = T4[i, i, i, c], T4[i, i, i, i]
-        mu4 = m4 - 4 * m3 * mean + 6 * np.diag(M2) * mean ** 2 - 3 * mean ** 4
+            T4, P, J2 = op.apply(T4, P, J2, Tq, back)
+        P, J2, mean, cov, mu4 = knot_step(problem.knots[k], T4, P, J2, n)
         means.append(mean)
-        covs.append(0.5 * (cov + cov.T))
-        mu4s.append(np.maximum(mu4, np.diag(cov) ** 2))
+        covs.append(cov)
+        mu4s.append(mu4)
     J = float(P[c, c])
     out = TailMoments(J, J2 - J * J, means, covs, mu4s, substeps)
     _check(problem, table, out, substeps, check)
     return out
 
 
-def _check(problem, table, tails: TailMoments, substeps: int, check) -> None:
-    if check is None:
-        from stospline.oracle.evaluate import evaluate_table
-        check = evaluate_table(problem, table, propagator="euler", substeps=substeps,
-                               path=False)
+def knot_step(knot, T4: np.ndarray, P: np.ndarray, J2: float, n: int):
+    """At a knot: the penalty added to the cost (``E J y y'`` and ``E J^2`` move; the state's
+    first n components of ``y``, the constant 1 last), and the state's mean, covariance and
+    fourth central moments from ``E y^(x)4``. Returns ``(P, J2, mean, cov, mu4)``."""
+    d = T4.shape[0]
+    c = d - 1
+    if knot.penalty is not None:
+        C, rho, w = knot.penalty.C, knot.penalty.target, knot.penalty.weight
+        Pen = np.zeros((d, d))
+        Pen[:n, :n] = w * C.T @ C
+        Pen[:n, c] = Pen[c, :n] = -w * C.T @ rho
+        Pen[c, c] = w * rho @ rho
+        J2 = J2 + 2.0 * np.sum(Pen * P) + np.einsum("ij,kl,ijkl->", Pen, Pen, T4)
+        P = P + np.einsum("ij,ijab->ab", Pen, T4)
+    mean = T4[:n, c, c, c].copy()
+    M2 = T4[:n, :n, c, c]
+    cov = M2 - np.outer(mean, mean)
+    i = np.arange(n)
+    m3, m4 = T4[i, i, i, c], T4[i, i, i, i]
+    mu4 = m4 - 4 * m3 * mean + 6 * np.diag(M2) * mean ** 2 - 3 * mean ** 4
+    return P, float(J2), mean, 0.5 * (cov + cov.T), np.maximum(mu4, np.diag(cov) ** 2)
+
+
+def check_second_moments(tails: TailMoments, check) -> None:
+    """`TailsMismatch` unless `tails` has the knot means, covariances and cost of `check`
+    (the second-moment oracle's `Moments` of the same loop) to rounding."""
     for k, (mean, cov) in enumerate(zip(tails.knot_mean, tails.knot_cov)):
         scale = max(1.0, float(np.max(np.abs(cov + np.outer(mean, mean)))))
         err = max(float(np.max(np.abs(cov - check.knot_cov[k]), initial=0.0)),
@@ -306,3 +331,11 @@ def _check(problem, table, tails: TailMoments, substeps: int, check) -> None:
     if abs(tails.J - check.J) > CHECK_RTOL * max(1.0, abs(check.J)):
         raise TailsMismatch(f"evaluate_tails: cost {tails.J!r} differs from the oracle's "
                             f"{check.J!r}")
+
+
+def _check(problem, table, tails: TailMoments, substeps: int, check) -> None:
+    if check is None:
+        from stospline.oracle.evaluate import evaluate_table
+        check = evaluate_table(problem, table, propagator="euler", substeps=substeps,
+                               path=False)
+    check_second_moments(tails, check)

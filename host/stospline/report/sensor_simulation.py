@@ -17,7 +17,7 @@ from stospline.report.simulation_summary import predicted_cost, verdict
 from stospline.report.summary_text import simulation_summary_text
 from stospline.harness.montecarlo import z_value
 
-__all__ = ["sensor_simulation_summary", "sensor_simulation_text"]
+__all__ = ["sensor_simulation_summary", "sensor_simulation_text", "exact_standard_errors"]
 
 _ZERO_SE = ("every path gave the same value: the Monte Carlo standard error is 0 up to "
             "rounding, so the ratio is undefined")
@@ -42,20 +42,25 @@ def sensor_simulation_summary(d, run, *, seed: int, confidence: float = 0.99) ->
     mean, hw95 = mc.cost_mean_ci(0.95)
     _, hw99 = mc.cost_mean_ci(0.99)
     se = hw95 / z_value(0.95)
-    se_z = 0.0 if mc.cost_moments.alike()[0] else se
+    tails, tails_why = exact_standard_errors(d, run)
+    se_exact = se if tails is None else tails.cost_mean_se(mc.paths)
+    se_z = 0.0 if mc.cost_moments.alike()[0] else se_exact
     cost_z, cost_why = strict.ratio_or_null(mean - exact.J, se_z, _ZERO_SE)
     bias_z, bias_why = strict.ratio_or_null(scheme.J - exact.J, se_z, _ZERO_SE)
     knots = []
     for k, kn in enumerate(d.problem.knots):
         m, s = mc.knot_mean_se(k)
         alike = mc.knot_moments[k].alike()
-        z, why = strict.ratio_or_null(m - exact.knot_mean[k], np.where(alike, 0.0, s), _ZERO_SE)
+        s_z = s if tails is None else tails.knot_mean_se(k, mc.paths)
+        z, why = strict.ratio_or_null(m - exact.knot_mean[k], np.where(alike, 0.0, s_z),
+                                      _ZERO_SE)
         err = run.record["knot_error"][k]
         cov = err.cov()
         knots.append({
             "t": verbatim(kn.t),
             "mc_mean": m, "mc_mean_stderr": s, "mc_cov": mc.knot_cov(k),
             "oracle_mean": exact.knot_mean[k], "oracle_cov": exact.knot_cov[k],
+            "z_stderr": s_z,
             "z": z, **({"z_undefined": why} if why else {}),
             "estimation_error": {
                 "mc_mean": err.mean, "mc_mean_stderr": err.mean_se(),
@@ -78,7 +83,7 @@ def sensor_simulation_summary(d, run, *, seed: int, confidence: float = 0.99) ->
             "mc_mean": mean, "mc_stderr": se,
             "ci95": [mean - hw95, mean + hw95], "ci99": [mean - hw99, mean + hw99],
             "oracle_implemented": exact.J, "predicted_J0": predicted_cost(d),
-            "z": cost_z, **({"z_undefined": cost_why} if cost_why else {}),
+            "z_stderr": se_exact, "z": cost_z, **({"z_undefined": cost_why} if cost_why else {}),
         },
         "simulation_bias": {
             "cost": scheme.J - exact.J,
@@ -89,6 +94,7 @@ def sensor_simulation_summary(d, run, *, seed: int, confidence: float = 0.99) ->
                                  for k in range(len(d.problem.knots))],
         },
         "knots": knots,
+        "standard_errors": {"used": "sample" if tails is None else "exact", "why": tails_why},
         "saturation": {
             "limited": d.table.limited,
             "tick_fraction": mc.saturated_fraction,
@@ -100,6 +106,24 @@ def sensor_simulation_summary(d, run, *, seed: int, confidence: float = 0.99) ->
     summary["verdict"] = verdict(summary, confidence)
     strict.check_summary_finite(d.problem, summary, "simulated numbers")
     return summary
+
+
+def exact_standard_errors(d, run):
+    """``(tails, why)``: the exact moments up to the fourth of the sensor loop the run
+    simulates (`estimator.tails.evaluate_estimator_tails`, with the run's plant scheme and the
+    flashed filter), and why the z-scores divide by them or by the sample's own (tails None)."""
+    from stospline.estimator.tails import (estimator_tails_unsupported,
+                                           evaluate_estimator_tails)
+    why = estimator_tails_unsupported(d.problem, d.table)
+    if why is not None:
+        return None, f"sample: {why} (no fourth-moment oracle)"
+    if run.mc.cost_moments.alike()[0]:
+        return None, "sample: every path alike (no noise)"
+    _, pred = run.tables.per_tick()
+    tails = evaluate_estimator_tails(d.problem, d.table, run.scheme, predictor=pred,
+                                     substeps=run.mc.substeps)
+    return tails, ("exact: the estimator oracle's cost variance and knot covariances of the "
+                   f"plant scheme ({run.mc.substeps} steps per tick)")
 
 
 def sensor_simulation_text(s: dict) -> str:

@@ -17,7 +17,8 @@ from stospline.harness.montecarlo import MonteCarloResult, joint_verdict, z_valu
 from stospline.oracle.evaluate import Moments
 from stospline.harness.plant_scheme import scheme_moments
 
-__all__ = ["simulation_summary", "verdict", "loop_moments", "predicted_cost"]
+__all__ = ["simulation_summary", "verdict", "loop_moments", "predicted_cost",
+           "exact_standard_errors"]
 
 # Why a z-score (or another ratio to a Monte Carlo standard error) is null.
 _ZERO_SE = ("every path gave the same value (a problem without noise, or a deterministic "
@@ -68,19 +69,23 @@ def simulation_summary(d, mc: MonteCarloResult, *, seed: int,
     mean, hw95 = mc.cost_mean_ci(0.95)
     _, hw99 = mc.cost_mean_ci(0.99)
     se = hw95 / z_value(0.95)
+    tails, tails_why = exact_standard_errors(d, mc, euler)
     knots = []
     for k, kn in enumerate(d.problem.knots):
         m, s = mc.knot_mean_se(k)
         alike = mc.knot_moments[k].alike()   # s is then 0 or rounding error
-        z, why = strict.ratio_or_null(m - exact.knot_mean[k], np.where(alike, 0.0, s),
+        s_z = s if tails is None else tails.knot_mean_se(k, mc.paths)
+        z, why = strict.ratio_or_null(m - exact.knot_mean[k], np.where(alike, 0.0, s_z),
                                       _ZERO_SE)
         knots.append({
             "t": verbatim(kn.t),
             "mc_mean": m, "mc_mean_stderr": s, "mc_cov": mc.knot_cov(k),
             "oracle_mean": exact.knot_mean[k], "oracle_cov": exact.knot_cov[k],
+            "z_stderr": s_z,
             "z": z, **({"z_undefined": why} if why else {}),
         })
-    se_z = 0.0 if mc.cost_moments.alike()[0] else se
+    se_exact = se if tails is None else tails.cost_mean_se(mc.paths)
+    se_z = 0.0 if mc.cost_moments.alike()[0] else se_exact
     cost_z, cost_why = strict.ratio_or_null(mean - exact.J, se_z, _ZERO_SE)
     bias_z, bias_why = strict.ratio_or_null(euler.J - exact.J, se_z, _ZERO_SE)
     summary = rounded({
@@ -91,7 +96,7 @@ def simulation_summary(d, mc: MonteCarloResult, *, seed: int,
             "mc_mean": mean, "mc_stderr": se,
             "ci95": [mean - hw95, mean + hw95], "ci99": [mean - hw99, mean + hw99],
             "oracle_implemented": exact.J, "predicted_J0": predicted_cost(d),
-            "z": cost_z, **({"z_undefined": cost_why} if cost_why else {}),
+            "z_stderr": se_exact, "z": cost_z, **({"z_undefined": cost_why} if cost_why else {}),
         },
         "faults": {
             "levels": verbatim(faults.as_dict()), "exact_oracle": exact_oracle,
@@ -107,6 +112,10 @@ def simulation_summary(d, mc: MonteCarloResult, *, seed: int,
                                  for k in range(len(d.problem.knots))],
         },
         "knots": knots,
+        "standard_errors": {
+            "used": "sample" if tails is None else "exact",
+            "why": tails_why,
+        },
         "saturation": {
             "limited": d.table.limited,
             "tick_fraction": mc.saturated_fraction,
@@ -120,6 +129,25 @@ def simulation_summary(d, mc: MonteCarloResult, *, seed: int,
     strict.check_summary_finite(d.problem, summary, "simulated numbers",
                                 faults if faults.any else None)
     return summary
+
+
+def exact_standard_errors(d, mc: MonteCarloResult, scheme: Moments):
+    """``(tails, why)``: the exact moments up to the fourth (`oracle.tails.evaluate_tails`) of
+    the loop the run simulates, with its plant scheme (`scheme`, the second-moment oracle of
+    the same scheme, checked against them), and why the z-scores divide by them or by the
+    sample's own standard errors (tails None): faults, a delay or time-varying data have no
+    fourth-moment oracle."""
+    from stospline.oracle.tails import evaluate_tails, tails_unsupported
+    if mc.faults.any:
+        return None, "sample: the loop has faults (no fourth-moment oracle)"
+    why = tails_unsupported(d.problem, d.table)
+    if why is not None:
+        return None, f"sample: {why} (no fourth-moment oracle)"
+    if mc.cost_moments.alike()[0]:
+        return None, "sample: every path alike (no noise)"
+    tails = evaluate_tails(d.problem, d.table, substeps=mc.substeps, check=scheme)
+    return tails, ("exact: the oracle's cost variance and knot covariances of the plant "
+                   f"scheme ({mc.substeps} steps per tick)")
 
 
 def _command_range(mc: MonteCarloResult) -> dict:
@@ -166,7 +194,9 @@ def verdict(summary: dict, confidence: float = 0.99) -> dict:
     """Whether the Monte Carlo run agrees with the oracle (`harness.montecarlo.joint_verdict`):
     the mean cost and every knot-mean component, each by its z-score in the summary, within
     the two-sided normal bound Bonferroni-corrected so that a correct controller passes all
-    of them at once with probability `confidence`. Saturation makes the run incomparable: the
+    of them at once with probability `confidence`. The z-scores divide by the exact standard
+    errors where the oracle has the loop's fourth moments (``standard_errors`` says which:
+    `exact_standard_errors`), else by the sample's own. Saturation makes the run incomparable: the
     oracle assumes the law is never clipped."""
     c = summary["cost"]
     stats = [("cost", c["z"], c["mc_mean"], c["oracle_implemented"])]
@@ -186,5 +216,6 @@ def verdict(summary: dict, confidence: float = 0.99) -> dict:
     else:
         agree, reason = True, "every statistic inside the joint interval"
     return {"agree": agree, "confidence": confidence, "correction": "Bonferroni",
+            "standard_errors": summary.get("standard_errors", {}).get("used", "sample"),
             "statistics": v.statistics, "z_limit": v.z_limit, "max_abs_z": v.max_abs_z,
             "max_abs_z_of": v.max_abs_z_of, "reason": reason}

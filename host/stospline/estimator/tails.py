@@ -23,7 +23,7 @@ import itertools
 import numpy as np
 
 from stospline.oracle.tails import (MAX_DIM, TailMoments, _mode, _Sym, _TickOperator,
-                                    check_second_moments, knot_step)
+                                    check_second_moments, knot_step, too_many_channels)
 from stospline.problem.model import Problem
 
 __all__ = ["evaluate_estimator_tails", "estimator_tails_unsupported"]
@@ -36,7 +36,7 @@ def estimator_tails_unsupported(problem: Problem, table) -> str | None:
     n, m, nl = table.dims
     if 2 * n + m + nl + 1 > MAX_DIM:
         return f"more than {MAX_DIM - 1} states, estimates, inputs and multipliers together"
-    return None
+    return too_many_channels(problem, table)
 
 
 def _start(z0: np.ndarray, S: np.ndarray, n: int) -> np.ndarray:

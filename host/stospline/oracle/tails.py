@@ -77,6 +77,7 @@ class TailMoments:
         return np.sqrt(np.maximum(v, 0.0))
 
     def knot_excess_kurtosis(self, k: int) -> np.ndarray:
+        """``mu4 / sigma^4 - 3`` per component at knot k (0 for a component without spread)."""
         v = np.diag(self.knot_cov[k])
         with np.errstate(divide="ignore", invalid="ignore"):
             out = np.where(v > 0, self.knot_mu4[k] / np.where(v > 0, v, 1.0) ** 2 - 3.0, 0.0)
@@ -92,6 +93,12 @@ def tails_unsupported(problem: Problem, table) -> str | None:
     n, m, n_latch = table.dims
     if n + m + n_latch + 1 > MAX_DIM:
         return f"more than {MAX_DIM - 1} states, inputs and multipliers together"
+    return too_many_channels(problem, table)
+
+
+def too_many_channels(problem: Problem, table) -> str | None:
+    """Why the plant's noise has too many channels for the step's quadrature (None: it has
+    not)."""
     channels = max(int(np.count_nonzero(st.noise_tensor.any(axis=(0, 1))))
                    for st in problem.stages[:table.n_stages])
     if channels > MAX_CHANNELS:

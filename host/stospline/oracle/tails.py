@@ -31,7 +31,7 @@ import numpy as np
 from stospline.errors import StosplineError
 from stospline.expm import expm
 from stospline.design.moments import augmented_drift, running_cost_matrix
-from stospline.oracle.tick_moments import _latch_transform
+from stospline.oracle.tick_moments import _table_latch
 from stospline.problem.model import Problem
 
 __all__ = ["TailMoments", "TailsMismatch", "evaluate_tails", "tails_unsupported"]
@@ -271,15 +271,7 @@ def evaluate_tails(problem: Problem, table, *, substeps: int, check=None) -> Tai
     for k in range(table.n_stages):
         stage = problem.stages[k]
         if k == 0 or table.stage_n_latch[k] > 0:
-            Lam = table.Lambda[k].astype(float)
-            lam0 = table.lambda0[k].astype(float)
-            if k == 0 and table.band_qp is not None:
-                from stospline.oracle.band_latch import target_latch
-                Lam = np.zeros_like(Lam)
-                lam0 = np.zeros(n_latch)
-                lam0[:table.band_qp.q] = target_latch(table.band_qp, x0,
-                                                      float32=table.K.dtype == np.float32)
-            T = _latch_transform(n, n_latch, Lam, lam0, d_y)
+            T = _table_latch(table, k, x0, d_y)
             T4 = _mode(T4, T)
             P = T @ P @ T.T
         key = id(stage)

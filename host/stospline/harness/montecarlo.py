@@ -696,12 +696,15 @@ def joint_verdict(stats, confidence: float = 0.99) -> JointVerdict:
 @dataclass
 class Agreement:
     """Monte Carlo vs exact numbers: z-scores (0 where the spread is zero) and the joint
-    verdict at a confidence level."""
+    verdict at a confidence level. `standard_errors` says what the z-scores divide by:
+    "exact" (the oracle's moments up to the fourth, `oracle.tails`) or "sample" (the run's
+    own second and fourth central sums)."""
     confidence: float
     z_limit: float
     cost_z: float
     knot_mean_z: list[np.ndarray]
     verdict: JointVerdict
+    standard_errors: str = "sample"
 
     @property
     def max_abs_z(self) -> float:
@@ -714,29 +717,44 @@ class Agreement:
 
 def compare_to_oracle(mc: MonteCarloResult, J: float, knot_means: list[np.ndarray], *,
                       confidence: float = 0.99,
-                      knot_covs: list[np.ndarray] | None = None) -> Agreement:
-    """Compare the Monte Carlo cost and knot means with exact values (`joint_verdict`): the
-    z-scores use the sample's own standard errors, Bonferroni-corrected so that the *joint*
-    statement (cost and every knot-mean component) holds at `confidence` when the controller
-    is right. With `knot_covs`, every knot variance joins them (its standard error that of
-    the mean of the squared deviations): faults such as sensor noise move the spread, not
-    the mean."""
+                      knot_covs: list[np.ndarray] | None = None,
+                      exact_se=None) -> Agreement:
+    """Compare the Monte Carlo cost and knot means with exact values (`joint_verdict`),
+    Bonferroni-corrected so that the *joint* statement (cost and every knot-mean component)
+    holds at `confidence` when the controller is right. With `knot_covs`, every knot variance
+    joins them: faults such as sensor noise move the spread, not the mean.
+
+    The z-scores divide by the exact standard errors of a run of ``mc.paths`` paths when
+    `exact_se` (an `oracle.tails.TailMoments` of the loop, or anything with its
+    ``cost_mean_se``, ``knot_mean_se`` and ``knot_var_se``) is given: the cost's variance and
+    each knot component's variance and fourth central moment. Else they divide by the sample's
+    own (`path_stats.Moments.mean_se`, ``var_se``), which heavy tails (multiplicative noise)
+    make too small."""
+    N = mc.paths
     mean, _ = mc.cost_mean_ci()
-    se = float(mc.cost_moments.mean_se()[0])
+    alike = bool(mc.cost_moments.alike()[0])
+    if exact_se is None:
+        se = float(mc.cost_moments.mean_se()[0])
+    else:
+        se = 0.0 if alike else exact_se.cost_mean_se(N)
     cost_z = float((mean - J) / se) if se > 0 else None
     stats = [("cost", cost_z, mean, J)]
     zs = []
     for k, exact in enumerate(knot_means):
         m, s = mc.knot_mean_se(k)
+        if exact_se is not None:
+            s = np.where(mc.knot_moments[k].alike(), 0.0, exact_se.knot_mean_se(k, N))
         z = [float((m[i] - exact[i]) / s[i]) if s[i] > 0 else None for i in range(len(m))]
         stats += [(f"knot {k} mean[{i}]", z[i], m[i], exact[i]) for i in range(len(m))]
         zs.append(np.array([0.0 if v is None else v for v in z]))
         if knot_covs is not None:
             var = np.diag(mc.knot_moments[k].cov())
-            se_var = mc.knot_moments[k].var_se()
+            se_var = (mc.knot_moments[k].var_se() if exact_se is None else
+                      np.where(mc.knot_moments[k].alike(), 0.0, exact_se.knot_var_se(k, N)))
             exact_var = np.diag(knot_covs[k])
             stats += [(f"knot {k} var[{i}]",
                        float((var[i] - exact_var[i]) / se_var[i]) if se_var[i] > 0 else None,
                        var[i], exact_var[i]) for i in range(len(m))]
     v = joint_verdict(stats, confidence)
-    return Agreement(confidence, v.z_limit, 0.0 if cost_z is None else cost_z, zs, v)
+    return Agreement(confidence, v.z_limit, 0.0 if cost_z is None else cost_z, zs, v,
+                     "sample" if exact_se is None else "exact")

@@ -30,8 +30,8 @@ from stospline.oracle.faults import evaluate_delayed_table
 from stospline.oracle.tick_moments import (_MAPS, Moments, _c_kernel, _euler_varying_maps,  # noqa: F401
                                         _factored_kernel, _factored_maps, _has_drift,
                                         _knot_terms, _latch_transform, _packed_maps,
-                                        _PathRecord, _plant_tick, _stage_maps, _tick_maps,
-                                        _tick_varying, _w_map)
+                                        _PathRecord, _plant_tick, _stage_maps, _table_latch,
+                                        _tick_maps, _tick_varying, _w_map)
 from stospline.table.format import GainTable
 from stospline.table.qformat import DEFAULT_SIGMAS, scalable_ranges
 
@@ -107,17 +107,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     for k in range(table.n_stages):
         stage = problem.stages[k]
         if k == 0 or table.stage_n_latch[k] > 0:      # else: v latched earlier is kept
-            Lam = table.Lambda[k].astype(float)
-            lam0 = table.lambda0[k].astype(float)
-            if k == 0 and table.band_qp is not None:
-                # The firmware solves the band dual for the (deterministic) start state, in
-                # float32 for a quantized table.
-                from stospline.oracle.band_latch import target_latch
-                Lam = np.zeros_like(Lam)
-                lam0 = np.zeros(n_latch)
-                lam0[:table.band_qp.q] = target_latch(table.band_qp, x0,
-                                                      float32=table.K.dtype == np.float32)
-            T = _latch_transform(n, n_latch, Lam, lam0, d_y)
+            T = _table_latch(table, k, x0, d_y)
             M = T @ M @ T.T
         varying = stage.varying is not None
         maps = None if varying else _tick_maps(stage, n, m, h, propagator, substeps)

@@ -66,6 +66,22 @@ def _latch_transform(n: int, n_latch: int, Lam: np.ndarray, lam0: np.ndarray, d_
     return T
 
 
+def _table_latch(table, k: int, x0: np.ndarray, d_y: int) -> np.ndarray:
+    """The latch transform (`_latch_transform`) of a table's stage k on ``y = [x; v; 1]``:
+    its latch map, or at the first stage of a band table the target the firmware solves the
+    band dual for from the (deterministic) start state, in float32 for a quantized table."""
+    n, _, n_latch = table.dims
+    Lam = table.Lambda[k].astype(float)
+    lam0 = table.lambda0[k].astype(float)
+    if k == 0 and table.band_qp is not None:
+        from stospline.oracle.band_latch import target_latch
+        Lam = np.zeros_like(Lam)
+        lam0 = np.zeros(n_latch)
+        lam0[:table.band_qp.q] = target_latch(table.band_qp, x0,
+                                              float32=table.K.dtype == np.float32)
+    return _latch_transform(n, n_latch, Lam, lam0, d_y)
+
+
 def _tick_varying(stage, Mw: np.ndarray, t0: float, h: float, n: int, m: int,
                   rtol: float = 1e-12, atol: float = 1e-15):
     """One tick of time-varying stage data for ``w = [x; u; 1]`` (u held): integrate the

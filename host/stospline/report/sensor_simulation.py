@@ -16,7 +16,7 @@ from stospline.report.json_numbers import rounded
 from stospline.report.simulation_summary import cost_and_bias, knot_entry, saturation, verdict
 from stospline.report.summary_text import simulation_summary_text
 
-__all__ = ["sensor_simulation_summary", "sensor_simulation_text"]
+__all__ = ["sensor_simulation_summary", "sensor_simulation_text", "exact_standard_errors"]
 
 _ZERO_SE = ("every path gave the same value: the Monte Carlo standard error is 0 up to "
             "rounding, so the ratio is undefined")
@@ -30,13 +30,14 @@ def sensor_simulation_summary(d, run, *, seed: int, confidence: float = 0.99) ->
     mean is ``E x - E x̂``, zero up to the float32 predictor's rounding)."""
     mc, exact, scheme = run.mc, run.exact.moments, run.scheme.moments
     meas = d.problem.measurement
-    cost, bias = cost_and_bias(d, mc, exact, scheme, _ZERO_SE)
+    tails, tails_why = exact_standard_errors(d, run)
+    cost, bias = cost_and_bias(d, mc, exact, scheme, _ZERO_SE, tails=tails)
     knots = []
     for k, kn in enumerate(d.problem.knots):
         err = run.record["knot_error"][k]
         cov = err.cov()
         knots.append({
-            **knot_entry(mc, exact, k, kn.t, _ZERO_SE),
+            **knot_entry(mc, exact, k, kn.t, _ZERO_SE, tails=tails),
             "estimation_error": {
                 "mc_mean": err.mean, "mc_mean_stderr": err.mean_se(),
                 "mc_cov": cov[0, 0] if cov.shape == (1, 1) else cov,
@@ -57,6 +58,7 @@ def sensor_simulation_summary(d, run, *, seed: int, confidence: float = 0.99) ->
         "cost": cost,
         "simulation_bias": bias,
         "knots": knots,
+        "standard_errors": {"used": "sample" if tails is None else "exact", "why": tails_why},
         "saturation": saturation(d, mc, {"u_low": [float(v) for v in mc.u_low],
                                          "u_high": [float(v) for v in mc.u_high]}),
         **actuator_limits(d),
@@ -64,6 +66,24 @@ def sensor_simulation_summary(d, run, *, seed: int, confidence: float = 0.99) ->
     summary["verdict"] = verdict(summary, confidence)
     strict.check_summary_finite(d.problem, summary, "simulated numbers")
     return summary
+
+
+def exact_standard_errors(d, run):
+    """``(tails, why)``: the exact moments up to the fourth of the sensor loop the run
+    simulates (`estimator.tails.evaluate_estimator_tails`, with the run's plant scheme and the
+    flashed filter), and why the z-scores divide by them or by the sample's own (tails None)."""
+    from stospline.estimator.tails import (estimator_tails_unsupported,
+                                           evaluate_estimator_tails)
+    why = estimator_tails_unsupported(d.problem, d.table)
+    if why is not None:
+        return None, f"sample: {why} (no fourth-moment oracle)"
+    if run.mc.cost_moments.alike()[0]:
+        return None, "sample: every path alike (no noise)"
+    _, pred = run.tables.per_tick()
+    tails = evaluate_estimator_tails(d.problem, d.table, run.scheme, predictor=pred,
+                                     substeps=run.mc.substeps)
+    return tails, ("exact: the estimator oracle's cost variance and knot covariances of the "
+                   f"plant scheme ({run.mc.substeps} steps per tick)")
 
 
 def sensor_simulation_text(s: dict) -> str:

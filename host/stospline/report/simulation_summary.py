@@ -18,7 +18,7 @@ from stospline.oracle.evaluate import Moments
 from stospline.harness.plant_scheme import scheme_moments
 
 __all__ = ["simulation_summary", "verdict", "loop_moments", "predicted_cost", "knot_entry",
-           "cost_and_bias", "saturation"]
+           "cost_and_bias", "saturation", "exact_standard_errors"]
 
 # Why a z-score (or another ratio to a Monte Carlo standard error) is null.
 _ZERO_SE = ("every path gave the same value (a problem without noise, or a deterministic "
@@ -44,37 +44,42 @@ def predicted_cost(d) -> float:
     return d.design.cost_from(d.problem.x0)
 
 
-def knot_entry(mc: MonteCarloResult, exact: Moments, k: int, t, zero_se: str = _ZERO_SE
-               ) -> dict:
+def knot_entry(mc: MonteCarloResult, exact: Moments, k: int, t, zero_se: str = _ZERO_SE, *,
+               tails=None) -> dict:
     """Knot `k` (at `t`): the Monte Carlo mean, its standard error and covariance beside the
     exact ones, and the z-scores of the mean (None, with `zero_se` as the reason, where every
-    path gave the same value)."""
+    path gave the same value), dividing by the exact standard error where `tails` (the
+    fourth-moment oracle, `exact_standard_errors`) is given, else by the sample's."""
     m, s = mc.knot_mean_se(k)
     alike = mc.knot_moments[k].alike()   # s is then 0 or rounding error
-    z, why = strict.ratio_or_null(m - exact.knot_mean[k], np.where(alike, 0.0, s), zero_se)
+    s_z = s if tails is None else tails.knot_mean_se(k, mc.paths)
+    z, why = strict.ratio_or_null(m - exact.knot_mean[k], np.where(alike, 0.0, s_z), zero_se)
     return {"t": verbatim(t),
             "mc_mean": m, "mc_mean_stderr": s, "mc_cov": mc.knot_cov(k),
             "oracle_mean": exact.knot_mean[k], "oracle_cov": exact.knot_cov[k],
+            "z_stderr": s_z,
             "z": z, **({"z_undefined": why} if why else {})}
 
 
 def cost_and_bias(d, mc: MonteCarloResult, exact: Moments, scheme: Moments,
-                  zero_se: str = _ZERO_SE) -> tuple[dict, dict]:
+                  zero_se: str = _ZERO_SE, *, tails=None) -> tuple[dict, dict]:
     """The summary's ``cost`` (the Monte Carlo mean cost, its standard error and confidence
     intervals beside the exact and the predicted cost, and its z-score) and
     ``simulation_bias`` (the plant scheme's moments, `scheme`, against the exact ones) entries.
-    A ratio to a standard error of 0 is None with `zero_se` as the reason."""
+    The ratios divide by the exact standard error where `tails` is given, else by the
+    sample's; a ratio to a standard error of 0 is None with `zero_se` as the reason."""
     mean, hw95 = mc.cost_mean_ci(0.95)
     _, hw99 = mc.cost_mean_ci(0.99)
     se = hw95 / z_value(0.95)
-    se_z = 0.0 if mc.cost_moments.alike()[0] else se
+    se_exact = se if tails is None else tails.cost_mean_se(mc.paths)
+    se_z = 0.0 if mc.cost_moments.alike()[0] else se_exact
     cost_z, cost_why = strict.ratio_or_null(mean - exact.J, se_z, zero_se)
     bias_z, bias_why = strict.ratio_or_null(scheme.J - exact.J, se_z, zero_se)
     cost = {
         "mc_mean": mean, "mc_stderr": se,
         "ci95": [mean - hw95, mean + hw95], "ci99": [mean - hw99, mean + hw99],
         "oracle_implemented": exact.J, "predicted_J0": predicted_cost(d),
-        "z": cost_z, **({"z_undefined": cost_why} if cost_why else {}),
+        "z_stderr": se_exact, "z": cost_z, **({"z_undefined": cost_why} if cost_why else {}),
     }
     bias = {
         "cost": scheme.J - exact.J,
@@ -116,8 +121,9 @@ def simulation_summary(d, mc: MonteCarloResult, *, seed: int,
     exact_oracle = has_exact_oracle(d.table, faults)
     euler = (choice.scheme if choice is not None and choice.substeps == substeps
              else scheme_moments(d.problem, d.table, substeps, faults))
-    knots = [knot_entry(mc, exact, k, kn.t) for k, kn in enumerate(d.problem.knots)]
-    cost, bias = cost_and_bias(d, mc, exact, euler)
+    tails, tails_why = exact_standard_errors(d, mc, euler)
+    knots = [knot_entry(mc, exact, k, kn.t, tails=tails) for k, kn in enumerate(d.problem.knots)]
+    cost, bias = cost_and_bias(d, mc, exact, euler, tails=tails)
     summary = rounded({
         "name": d.problem.name, "paths": mc.paths, "seed": seed, "substeps": substeps,
         "x0": verbatim(d.problem.x0),
@@ -130,6 +136,10 @@ def simulation_summary(d, mc: MonteCarloResult, *, seed: int,
         },
         "simulation_bias": bias,
         "knots": knots,
+        "standard_errors": {
+            "used": "sample" if tails is None else "exact",
+            "why": tails_why,
+        },
         "saturation": saturation(d, mc, _command_range(mc)),
         **actuator_limits(d),
         **_corridors(d, mc),
@@ -138,6 +148,25 @@ def simulation_summary(d, mc: MonteCarloResult, *, seed: int,
     strict.check_summary_finite(d.problem, summary, "simulated numbers",
                                 faults if faults.any else None)
     return summary
+
+
+def exact_standard_errors(d, mc: MonteCarloResult, scheme: Moments):
+    """``(tails, why)``: the exact moments up to the fourth (`oracle.tails.evaluate_tails`) of
+    the loop the run simulates, with its plant scheme (`scheme`, the second-moment oracle of
+    the same scheme, checked against them), and why the z-scores divide by them or by the
+    sample's own standard errors (tails None): faults, a delay or time-varying data have no
+    fourth-moment oracle."""
+    from stospline.oracle.tails import evaluate_tails, tails_unsupported
+    if mc.faults.any:
+        return None, "sample: the loop has faults (no fourth-moment oracle)"
+    why = tails_unsupported(d.problem, d.table)
+    if why is not None:
+        return None, f"sample: {why} (no fourth-moment oracle)"
+    if mc.cost_moments.alike()[0]:
+        return None, "sample: every path alike (no noise)"
+    tails = evaluate_tails(d.problem, d.table, substeps=mc.substeps, check=scheme)
+    return tails, ("exact: the oracle's cost variance and knot covariances of the plant "
+                   f"scheme ({mc.substeps} steps per tick)")
 
 
 def _command_range(mc: MonteCarloResult) -> dict:
@@ -184,7 +213,9 @@ def verdict(summary: dict, confidence: float = 0.99) -> dict:
     """Whether the Monte Carlo run agrees with the oracle (`harness.montecarlo.joint_verdict`):
     the mean cost and every knot-mean component, each by its z-score in the summary, within
     the two-sided normal bound Bonferroni-corrected so that a correct controller passes all
-    of them at once with probability `confidence`. Saturation makes the run incomparable: the
+    of them at once with probability `confidence`. The z-scores divide by the exact standard
+    errors where the oracle has the loop's fourth moments (``standard_errors`` says which:
+    `exact_standard_errors`), else by the sample's own. Saturation makes the run incomparable: the
     oracle assumes the law is never clipped."""
     c = summary["cost"]
     stats = [("cost", c["z"], c["mc_mean"], c["oracle_implemented"])]
@@ -204,5 +235,6 @@ def verdict(summary: dict, confidence: float = 0.99) -> dict:
     else:
         agree, reason = True, "every statistic inside the joint interval"
     return {"agree": agree, "confidence": confidence, "correction": "Bonferroni",
+            "standard_errors": summary.get("standard_errors", {}).get("used", "sample"),
             "statistics": v.statistics, "z_limit": v.z_limit, "max_abs_z": v.max_abs_z,
             "max_abs_z_of": v.max_abs_z_of, "reason": reason}

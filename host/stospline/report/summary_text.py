@@ -157,7 +157,8 @@ def simulation_summary_text(s: dict) -> str:
     lines.append(f"  verdict: {'agree' if v['agree'] else 'DISAGREE'}: max |z| "
                  f"{v['max_abs_z']:.3g} ({v['max_abs_z_of']}) against {v['z_limit']:.3g}, "
                  f"{v['correction']} over {v['statistics']} statistics at "
-                 f"{100 * v['confidence']:g}% jointly; {v['reason']}")
+                 f"{100 * v['confidence']:g}% jointly, {v.get('standard_errors', 'sample')} "
+                 f"standard errors; {v['reason']}")
     return "\n".join(lines) + "\n"
 
 

@@ -10,6 +10,7 @@ from conftest import EXAMPLES, GAINS
 from stospline.estimator.ctable import estimator_c, estimator_crc32, estimator_table
 from stospline.estimator.oracle import evaluate_estimator
 from stospline.estimator.spec import EstimatorSpec
+from stospline.estimator.tails import evaluate_estimator_tails
 from stospline.harness.estimator_loop import build_estimator_controller, simulate_estimator
 from stospline.harness.montecarlo import compare_to_oracle
 from stospline.pipeline import design_problem
@@ -90,7 +91,7 @@ def test_monte_carlo_through_c_agrees_with_the_oracle_of_the_implemented_tables(
     tables as flashed, and 40 000 paths through the compiled C (sensor with additive and
     state-proportional noise every other tick, uncertain start, input noise). Cost, every knot
     mean and variance jointly within a Bonferroni-corrected 99.9 % band of the sample's own
-    standard errors (compare_to_oracle); fixed seed."""
+    standard errors and of the exact ones (compare_to_oracle); fixed seed."""
     problem, d, et, ctl = sensed
     substeps = 4
     designed = evaluate_estimator(problem, d.table)
@@ -105,6 +106,15 @@ def test_monte_carlo_through_c_agrees_with_the_oracle_of_the_implemented_tables(
     a = compare_to_oracle(mc, flashed.moments.J, flashed.moments.knot_mean, confidence=0.999,
                           knot_covs=flashed.moments.knot_cov)
     assert a.ok, (a.verdict, mc.cost_mean_ci(), flashed.moments.J)
+    # With the exact standard errors (the loop's fourth moments) too; and the run's cost
+    # variance lies within 4.5 of its sample standard errors of the exact one.
+    tails = evaluate_estimator_tails(problem, d.table, flashed, predictor=pred,
+                                     substeps=substeps)
+    a = compare_to_oracle(mc, flashed.moments.J, flashed.moments.knot_mean, confidence=0.999,
+                          knot_covs=flashed.moments.knot_cov, exact_se=tails)
+    assert a.ok and a.standard_errors == "exact", a.verdict
+    var, var_se = mc.cost_moments.cov()[0, 0], mc.cost_moments.var_se()[0]
+    assert abs(var - tails.cost_var) < 4.5 * var_se, (var, tails.cost_var, var_se)
     # the recorded estimate is the controller's: per state, its error is of the filter's size
     err = rec["x"][1:] - rec["xhat"][1:]
     sigma = np.sqrt(np.diagonal(designed.error_cov, axis1=1, axis2=2).max(axis=0))
@@ -124,6 +134,10 @@ def test_a_wrong_filter_is_caught_by_the_same_comparison(sensed, tmp_path):
     mc, _ = simulate_estimator(problem, bad, paths=40_000, seed=20261128, substeps=4)
     a = compare_to_oracle(mc, flashed.moments.J, flashed.moments.knot_mean, confidence=0.999,
                           knot_covs=flashed.moments.knot_cov)
+    assert not a.ok
+    tails = evaluate_estimator_tails(problem, d.table, flashed, predictor=pred, substeps=4)
+    a = compare_to_oracle(mc, flashed.moments.J, flashed.moments.knot_mean, confidence=0.999,
+                          knot_covs=flashed.moments.knot_cov, exact_se=tails)
     assert not a.ok
 
 

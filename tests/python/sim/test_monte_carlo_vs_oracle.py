@@ -93,3 +93,4 @@ def test_simulation_verdict_rejects_a_wrong_controller(robot_problem, robot, fau
     good = simulation_summary(robot, simulate_problem(robot, paths=1000, seed=SEED,
                                                       substeps=1), seed=SEED)["verdict"]
     assert good["agree"], good
+    assert v["standard_errors"] == good["standard_errors"] == "exact"

@@ -553,23 +553,29 @@ def simulate_problem(d: Designed, *, paths: int, seed: int,
                                  seed=seed, faults=faults)
         if choice.substeps > 1:
             within_budget(choice.substeps)
-    mc = simulate(d.problem, ctl, paths=paths, seed=seed,
-                  substeps=choice.substeps if choice is not None else substeps, workers=workers,
+    steps = choice.substeps if choice is not None else substeps
+    mc = simulate(d.problem, ctl, paths=paths, seed=seed, substeps=steps, workers=workers,
                   record=record, scheduler=scheduler, faults=faults, force_workers=True,
-                  per_path=per_path, alongside=lambda: _summary_ahead(d))
+                  per_path=per_path, alongside=lambda: _summary_ahead(d, steps, faults))
     mc.substep_choice = choice
     return mc
 
 
-def _summary_ahead(d: Designed) -> None:
+def _summary_ahead(d: Designed, substeps: int, faults):
     """What `simulation_summary` needs besides the run, done while the paths run: the
-    quantile functions' module loaded, and the corridors' output moments for their exit
-    bounds (one oracle pass, kept by `harness.exit_stats.corridor_outputs_of`; a table
-    designed for a delay has none)."""
+    quantile functions' module loaded, the corridors' output moments for their exit bounds
+    (one oracle pass, kept by `harness.exit_stats.corridor_outputs_of`; a table designed for
+    a delay has none), and the loop's moments up to the fourth for the verdict's exact
+    standard errors (`oracle.tails`; returned, None where there is no such oracle)."""
     from stospline.harness.exit_stats import clopper_pearson_upper, corridor_outputs_of
+    from stospline.oracle.tails import evaluate_tails, tails_unsupported
     clopper_pearson_upper(0, 1)            # imports scipy.special (~0.3 s of CPU)
     if d.problem.corridors and not getattr(d.table, "delay_ticks", 0):
         corridor_outputs_of(d.problem, d.table)
+    if faults.any or tails_unsupported(d.problem, d.table) is not None:
+        return None
+    # Checked against the second-moment oracle by `simulation_summary`, which has it.
+    return evaluate_tails(d.problem, d.table, substeps=substeps, check=False)
 
 
 def simulation_estimate(d: Designed, *, paths: int, substeps: int, workers: int = 1,

@@ -156,7 +156,8 @@ def exact_standard_errors(d, mc: MonteCarloResult, scheme: Moments):
     the same scheme, checked against them), and why the z-scores divide by them or by the
     sample's own standard errors (tails None): faults, a delay or time-varying data have no
     fourth-moment oracle."""
-    from stospline.oracle.tails import evaluate_tails, tails_unsupported
+    from stospline.oracle.tails import (TailMoments, check_second_moments, evaluate_tails,
+                                        tails_unsupported)
     if mc.faults.any:
         return None, "sample: the loop has faults (no fourth-moment oracle)"
     why = tails_unsupported(d.problem, d.table)
@@ -164,7 +165,11 @@ def exact_standard_errors(d, mc: MonteCarloResult, scheme: Moments):
         return None, f"sample: {why} (no fourth-moment oracle)"
     if mc.cost_moments.alike()[0]:
         return None, "sample: every path alike (no noise)"
-    tails = evaluate_tails(d.problem, d.table, substeps=mc.substeps, check=scheme)
+    tails = mc.alongside             # computed while the paths ran (`simulate_problem`)
+    if isinstance(tails, TailMoments) and tails.substeps == mc.substeps:
+        check_second_moments(tails, scheme)
+    else:
+        tails = evaluate_tails(d.problem, d.table, substeps=mc.substeps, check=scheme)
     return tails, ("exact: the oracle's cost variance and knot covariances of the plant "
                    f"scheme ({mc.substeps} steps per tick)")
 

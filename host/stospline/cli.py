@@ -320,9 +320,13 @@ def _check_faults_runnable(args, problem, opts) -> None:
     """Refuse, before the design, faults the harness cannot run around this problem's table
     (`stospline.pipeline.check_faults_runnable`), naming ``--fault`` when the command line
     set faults."""
+    given = getattr(args, "fault", None) or []
+    if _PLANT_FIT:           # the faults run around the model (`nonlinear.simulate`)
+        from stospline.nonlinear.simulate import check_model_faults
+        check_model_faults(problem.faults, {key for key, _ in given})
+        return
     from stospline.pipeline import check_faults_runnable
-    check_faults_runnable(problem, opts,
-                          field="--fault" if getattr(args, "fault", None) else "faults")
+    check_faults_runnable(problem, opts, field="--fault" if given else "faults")
 
 
 @quiet_numerics
@@ -434,10 +438,13 @@ def _planned_substeps(args, problem, opts, d, command: str, **options):
     return choice
 
 
-def _monte_carlo(args, command: str, record: int = 0, extra_paths: int = 0):
+def _monte_carlo(args, command: str, record: int = 0, extra_paths: int = 0,
+                 model_faults: list | None = None):
     """Design the file's problem and run its Monte Carlo for `plot`/`report`: ``(d, mc)``;
     the output file is checked and the budget estimated first (for the run's paths and
-    `extra_paths` more of the same kind)."""
+    `extra_paths` more of the same kind). A [plant] problem's faults run around the model,
+    not the linearisation: its run here is fault-free, and the faults are appended to
+    `model_faults`."""
     from stospline.atomic import check_file_target
     from stospline.pipeline import design_problem, simulate_problem
     check_file_target(args.out, [args.problem])
@@ -446,6 +453,14 @@ def _monte_carlo(args, command: str, record: int = 0, extra_paths: int = 0):
     _check_faults_runnable(args, problem, opts)
     _check_budget(args, problem, opts, command, paths=args.paths + extra_paths, record=record)
     d = design_problem(problem, options=opts, **_limits(args))
+    if _PLANT_FIT and problem.faults.any:
+        from dataclasses import replace
+        from stospline.problem.faults import Faults
+        if model_faults is not None:
+            model_faults.append(problem.faults)
+        progress.note("the linearisation's Monte Carlo runs without faults (they run around "
+                      "the [plant] model)")
+        d = replace(d, problem=replace(problem, faults=Faults()))
     _note_tables(d, "compiling")
     substeps = _planned_substeps(args, problem, opts, d, command, record=record)
     return d, simulate_problem(d, paths=args.paths, seed=args.seed, substeps=substeps,
@@ -474,15 +489,15 @@ def _report(args) -> int:
     first = load_problem(args.problem)
     if first.measurement is not None:
         return _report_sensor(args)
-    if _PLANT_FIT and first.faults.as_dict():       # before any run
-        raise ProblemError("faults", "are not applied around a [plant] model yet")
     runs = fault_sweep_runs()
-    d, mc = _monte_carlo(args, "report", record=REPORT_RECORD, extra_paths=runs * args.fault_paths)
+    model_faults: list = []
+    d, mc = _monte_carlo(args, "report", record=REPORT_RECORD,
+                         extra_paths=runs * args.fault_paths, model_faults=model_faults)
     summary = simulation_summary(d, mc, seed=args.seed)
     rows, plant = None, None
     why_not = fault_table_unavailable(d)
     if _PLANT_FIT:              # the run above is the linearisation's: the model's too
-        plant = _plant_run(args, d)
+        plant = _plant_run(args, d, model_faults[0] if model_faults else None)
         why_not = "the fault sweep runs on the linear harness, not on the [plant] model"
     if args.fault_paths and why_not:
         progress.note(f"no fault table: {why_not}")
@@ -811,15 +826,14 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def _plant_run(args, d) -> dict:
+def _plant_run(args, d, faults=None) -> dict:
     """Monte Carlo of `d` (a [plant] problem's linearisation) on the model itself
-    (`stospline.nonlinear.simulate.plant_simulation`)."""
+    (`stospline.nonlinear.simulate.plant_simulation`), in a loop with `faults` (default
+    ``d.problem.faults``); ``--substeps auto`` decides the count on the model."""
     from stospline.nonlinear.simulate import plant_simulation
-    if d.problem.faults.as_dict():
-        raise ProblemError("faults", "are not applied around a [plant] model yet")
-    substeps = 4 if args.substeps == "auto" else int(args.substeps)
+    substeps = "auto" if args.substeps == "auto" else int(args.substeps)
     return plant_simulation(d, _PLANT_FIT[0].model, paths=args.paths, seed=args.seed,
-                            substeps=substeps)
+                            substeps=substeps, faults=faults)
 
 
 def _simulate_plant(args, d) -> int:

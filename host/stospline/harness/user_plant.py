@@ -12,6 +12,18 @@ coarse increment is the sum of two fine ones), each with its own controllers: fo
 weak order 1, twice the difference of the two runs estimates the coarse run's bias, which the
 verdict reports beside the statistical error. The running cost is the left-point rule per
 substep; knot penalties are added at the knots; corridor exits are watched after every tick.
+
+With faults (`stospline.problem.faults.Faults`) the loop around the model is the linear
+harness's (``harness_tick_faults``): per tick the controller measures the state plus
+``sensor_noise`` times a standard normal, rounded to ``sensor_quantum``; a missed tick (a
+uniform number below ``miss_probability``) does not run the controller, whose state is left as
+it was, and the actuator holds its command; with ``delay_ticks = 1`` the command is applied
+from the next tick (the safe command ``u_hold`` over tick 0); the model receives the applied
+command plus ``actuator_noise`` times a standard normal; ``plant_noise_scale`` multiplies the
+model's diffusion. The fault numbers are drawn as the harness draws them (`FaultDraws`, sensor
+then actuator then missed ticks, from the stream `fault_seed` of the run's seed), and the coarse
+and the fine run share them. ``plant_A_scale`` and ``plant_B_scale`` have no meaning for a
+model whose drift is not split into A x + B u (`model_faults_unsupported`).
 """
 from __future__ import annotations
 
@@ -20,9 +32,25 @@ from dataclasses import dataclass
 import numpy as np
 
 from stospline.errors import ProblemError
-from stospline.harness.controller import STATUS, CorridorWatch
+from stospline.harness.controller import STATUS, CorridorWatch, FaultDraws
+from stospline.harness.montecarlo import fault_seed
+from stospline.problem.faults import Faults
 
-__all__ = ["PlantRun", "simulate_model"]
+__all__ = ["PlantRun", "simulate_model", "model_faults_unsupported"]
+
+# The faults that scale the linear plant's A and B: a model's drift has no such parts.
+_LINEAR_ONLY = ("plant_A_scale", "plant_B_scale")
+
+
+def model_faults_unsupported(faults: Faults) -> tuple[str, str] | None:
+    """``(key, reason)`` of the first fault the loop around a ``[plant]`` model cannot apply,
+    or None."""
+    for key in _LINEAR_ONLY:
+        if key in faults.as_dict():
+            return key, ("does not apply to a [plant] model: its drift f(t, x, u) is not "
+                         "split into A x + B u to scale (plant_noise_scale scales its "
+                         "diffusion)")
+    return None
 
 
 @dataclass
@@ -41,6 +69,7 @@ class PlantRun:
     exits: np.ndarray
     worst_status: int
     saturated: int
+    faults: Faults = Faults()
 
 
 def _running_cost(stage, X: np.ndarray, U: np.ndarray) -> np.ndarray:
@@ -58,32 +87,93 @@ def _penalty(knot, X: np.ndarray) -> np.ndarray:
     return knot.penalty.weight * np.sum(r * r, axis=1)
 
 
-def simulate_model(problem, controller, model, *, paths: int, seed: int,
-                   substeps: int) -> PlantRun:
+class _Loop:
+    """One of the two runs (coarse or fine) of the loop: its controllers, the actuator's held
+    commands (with faults or a table designed for a delay) and the controllers' memory, kept
+    to undo the step of a missed tick."""
+
+    def __init__(self, controller, paths: int, draws: FaultDraws | None):
+        self.step = controller.real_stepper(paths)
+        self.held = None if draws is None else draws.held.copy()
+        self.memory = None
+        if draws is not None and draws.miss_u is not None:
+            ffi = controller.ffi
+            self.memory = np.frombuffer(ffi.buffer(self.step.instances),
+                                        dtype=np.uint8).reshape(paths, -1)
+
+    def command(self, j: int, X: np.ndarray, draws: FaultDraws | None):
+        """``(applied command (paths, m), status of the paths whose controller ran)``."""
+        if draws is None:
+            U, status = self.step(j, X)
+            return np.asarray(U, dtype=float), status
+        xm = X
+        if draws.sensor_std is not None:
+            xm = X + draws.sensor_std * draws.sensor_z
+        if draws.quantum is not None:
+            q = np.where(draws.quantum > 0, draws.quantum, 1.0)
+            xm = np.where(draws.quantum > 0, q * np.floor(xm / q + 0.5), xm)
+        if draws.feed_held:
+            xm = np.hstack([xm, self.held])
+        run = (slice(None) if draws.miss_u is None
+               else draws.miss_u >= draws.miss_probability)
+        saved = None if self.memory is None else self.memory.copy()
+        U, status = self.step(j, xm)
+        if saved is not None:               # a missed tick leaves the controller untouched
+            missed = ~run
+            self.memory[missed] = saved[missed]
+        c = np.asarray(U, dtype=float)
+        ud = self.held.copy()
+        self.held[run] = c[run]
+        if not draws.delay_ticks:
+            ud[run] = c[run]
+        if draws.actuator_std is not None:
+            ud += draws.actuator_std * draws.actuator_z
+        return ud, np.asarray(status)[run]
+
+
+def simulate_model(problem, controller, model, *, paths: int, seed,
+                   substeps: int, faults: Faults | None = None) -> PlantRun:
     """Run `paths` paths of `controller` (built for `problem`'s table) on `model` from x0 with
-    the generator seeded by `seed` (`numpy.random.default_rng`)."""
-    rng = np.random.default_rng(seed)
+    the generator seeded by `seed` (an integer or a `numpy.random.SeedSequence`), in a loop
+    with `faults` (default none; `model_faults_unsupported` refused with ValueError)."""
+    faults = Faults() if faults is None else faults
+    why = model_faults_unsupported(faults)
+    if why:
+        raise ValueError(f"{why[0]} {why[1]}")
+    stream = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    rng = np.random.default_rng(stream)
     n, h = problem.n, 1.0 / problem.tick_hz
-    coarse_step, fine_step = controller.real_stepper(paths), controller.real_stepper(paths)
+    table = controller.table
+    delayed = int(getattr(table, "delay_ticks", 0))
+    draws = (FaultDraws.of(faults, paths, n, np.asarray(table.u_hold, dtype=float), delayed)
+             if faults.any or delayed else None)
+    fault_rng = (np.random.default_rng(fault_seed(stream))
+                 if draws is not None else None)
+    noise_scale = float(faults.plant_noise_scale)
+    coarse, fine = _Loop(controller, paths, draws), _Loop(controller, paths, draws)
     X = np.tile(problem.x0, (paths, 1)).astype(float)
     Xf = X.copy()
     cost, cost_f = np.zeros(paths), np.zeros(paths)
     watch = CorridorWatch.of(problem.corridors, paths, problem.t0, problem.tick_hz)
     watch.check(0, X)
     knot_ticks = np.cumsum(problem.ticks_per_stage)
-    knots, fine, worst, saturated = [], [], 0, 0
+    knots, fine_knots, worst, saturated = [], [], 0, 0
     dt = h / substeps
     j = 0
     for k, (stage, ticks) in enumerate(zip(problem.stages, problem.ticks_per_stage)):
         for _ in range(ticks):
             t = problem.t0 + j * h
-            U, status = coarse_step(j, X)
-            U = np.asarray(U, dtype=float)
-            Uf = np.asarray(fine_step(j, Xf)[0], dtype=float)
-            worst = min(worst, int(status.min()))
+            if draws is not None:
+                draws.draw(fault_rng)
+            U, status = coarse.command(j, X, draws)
+            Uf = fine.command(j, Xf, draws)[0]
+            if status.size:
+                worst = min(worst, int(status.min()))
             saturated += int(np.sum(status == STATUS["WARN_SATURATED"]))
             cost_stage = stage.at(t + h / 2)
             dz = rng.standard_normal((paths, 2 * substeps, model.mz)) * np.sqrt(dt / 2)
+            if noise_scale != 1.0:
+                dz *= noise_scale
             xs = model.em_steps(t, dt, X, U, dz[:, 0::2] + dz[:, 1::2])
             xf = model.em_steps(t, dt / 2, Xf, Uf, dz)
             for s in range(substeps):       # the left-point rule on every substep
@@ -98,8 +188,8 @@ def simulate_model(problem, controller, model, *, paths: int, seed: int,
             watch.check(j, X)
         assert j == knot_ticks[k]
         knots.append(X.copy())
-        fine.append(Xf.copy())
+        fine_knots.append(Xf.copy())
         cost += _penalty(problem.knots[k], X)
         cost_f += _penalty(problem.knots[k], Xf)
-    return PlantRun(paths, seed, substeps, knots, cost, fine, cost_f, watch.exit_tick, worst,
-                    saturated)
+    return PlantRun(paths, seed, substeps, knots, cost, fine_knots, cost_f, watch.exit_tick,
+                    worst, saturated, faults)

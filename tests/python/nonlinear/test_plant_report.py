@@ -1,6 +1,6 @@
 """``stospline report`` of a [plant] problem: the page shows the Monte Carlo on the model
 itself (the numbers of `plant_simulation` with the same paths and seed) beside the
-linearisation's; faults around the model are refused before any run."""
+linearisation's; a fault the model cannot take is refused before any run."""
 import re
 
 import pytest
@@ -23,6 +23,7 @@ def plant_file(tmp_path):
 def test_the_report_shows_the_model_run(plant_file):
     page = plant_file / "r.html"
     assert main(["report", str(plant_file / "p.toml"), "--paths", "300", "--seed", "7",
+                 "--substeps", "4",
                  "--out", str(page)]) == 0
     text = page.read_text()
     assert 'id="plant-table"' in text and "runs against the model itself" in text
@@ -35,12 +36,12 @@ def test_the_report_shows_the_model_run(plant_file):
         in text
 
 
-def test_faults_around_the_model_are_refused_before_any_run(plant_file, capsys):
+def test_a_linear_only_fault_is_refused_before_any_run(plant_file, capsys):
     doc = linear_doc()
     doc["faults"] = {"plant_B_scale": 0.9}
     (plant_file / "p.toml").write_text(document_to_toml(doc))
     rc = main(["report", str(plant_file / "p.toml"), "--paths", "300",
                "--out", str(plant_file / "r.html")])
     err = capsys.readouterr().err
-    assert rc == 2 and ": faults:" in err and len(err.strip().splitlines()) == 1
+    assert rc == 2 and ": faults.plant_B_scale:" in err and len(err.strip().splitlines()) == 1
     assert not (plant_file / "r.html").exists()

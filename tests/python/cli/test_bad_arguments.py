@@ -74,8 +74,8 @@ OPTION_CASES = [  # (command line after FILE, option named, reason substring)
 
 @pytest.mark.parametrize("argv,option,reason", OPTION_CASES,
                          ids=[" ".join(c[0]) for c in OPTION_CASES])
-def test_bad_option_value_is_one_line(capsys, tmp_path, argv, option, reason):
-    os.chdir(tmp_path)                 # plot --out p.* would land here
+def test_bad_option_value_is_one_line(capsys, tmp_path, monkeypatch, argv, option, reason):
+    monkeypatch.chdir(tmp_path)        # plot --out p.* would land here (restored afterwards)
     code, out, err = run_main(capsys, [argv[0], ROBOT, *argv[1:]])
     prefix = f"stospline: error: {option}" + ("" if option == "--arith" else ": ")
     assert_one_line(code, out, err, prefix)

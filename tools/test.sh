@@ -20,7 +20,7 @@ echo "ctest: exit ${c_status} in ${c_s} s"
 
 # --dist loadfile: a test file's tests run in one worker, so its module fixtures are built once.
 start=$SECONDS
-"$root/.venv/bin/python" -m pytest -q -p no:cacheprovider -n "$jobs" --dist loadfile \
+"$root/.venv/bin/python" -m pytest -q -p no:cacheprovider -n "$jobs" --dist loadfile --no-loadscope-reorder \
   --durations=15 tests/python
 py_status=$?
 py_s=$((SECONDS - start))

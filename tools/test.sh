@@ -18,10 +18,11 @@ c_status=$?
 c_s=$((SECONDS - start))
 echo "ctest: exit ${c_status} in ${c_s} s"
 
-# --dist loadfile: a test file's tests run in one worker, so its module fixtures are built once.
+# --dist loadfile: a test file's tests run in one worker, so its module fixtures are built once;
+# --no-loadscope-reorder: the files in the order of tests/python/conftest.py, the longest first.
 start=$SECONDS
-"$root/.venv/bin/python" -m pytest -q -p no:cacheprovider -n "$jobs" --dist loadfile --no-loadscope-reorder \
-  --durations=15 tests/python
+"$root/.venv/bin/python" -m pytest -q -p no:cacheprovider -n "$jobs" --dist loadfile \
+  --no-loadscope-reorder --durations=15 tests/python
 py_status=$?
 py_s=$((SECONDS - start))
 echo "pytest: exit ${py_status} in ${py_s} s"

@@ -41,16 +41,29 @@ if [ ! -f "$lock" ]; then
   exit 1
 fi
 want="$(cat "$lock" "$root/host/pyproject.toml" | sha256sum | cut -d' ' -f1)"
+
+# The CMake build (no Python in it; its configuration only looks for .venv/bin/python, made
+# first) runs while pip installs the venv, which waits mostly on downloads and unpacking.
+build() {
+  cmake -S "$root" -B "$root/build" -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null &&
+    cmake --build "$root/build" >/dev/null
+}
 if [ ! -x "$venv/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
   echo "setup: Python venv from host/requirements-py$minor.lock"
   rm -rf "$venv"
   python3 -m venv "$venv"
-  "$venv/bin/python" -m pip install -q --disable-pip-version-check --require-hashes \
-    --only-binary=:all: -r "$lock"
-  "$venv/bin/python" -m pip install -q --disable-pip-version-check --no-deps \
-    --no-build-isolation -e "$root/host"
+  build &
+  build_pid=$!
+  pip_status=0
+  { "$venv/bin/python" -m pip install -q --disable-pip-version-check --require-hashes \
+      --only-binary=:all: -r "$lock" &&
+    "$venv/bin/python" -m pip install -q --disable-pip-version-check --no-deps \
+      --no-build-isolation -e "$root/host"; } || pip_status=$?
+  build_status=0
+  wait "$build_pid" || build_status=$?
+  [ "$pip_status" -eq 0 ] || { echo "setup: pip install failed" >&2; exit 1; }
+  [ "$build_status" -eq 0 ] || { echo "setup: the CMake build failed" >&2; exit 1; }
   echo "$want" > "$stamp"
+else
+  build
 fi
-
-cmake -S "$root" -B "$root/build" -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null
-cmake --build "$root/build" >/dev/null

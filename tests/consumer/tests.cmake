@@ -27,9 +27,9 @@ foreach(mode ${consumer_modes})
   set_tests_properties(consumer_${mode} PROPERTIES LABELS consumer TIMEOUT 180)
 endforeach()
 if(TEST consumer_presets)
-  # Four Cortex-M builds, two of them full ones: the longest consumer test, started first under
+  # Cortex-M builds of the library: the longest consumer test, started before the others under
   # `ctest -j` (COST), with room for sharing the cores with the other tests.
-  set_tests_properties(consumer_presets PROPERTIES COST 60 TIMEOUT 600)
+  set_tests_properties(consumer_presets PROPERTIES COST 25 TIMEOUT 600)
 endif()
 set_tests_properties(consumer_install PROPERTIES FIXTURES_SETUP stsp_prefix)
 set_tests_properties(consumer_find_package consumer_find_package_fixed consumer_pkg_config

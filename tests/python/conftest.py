@@ -21,6 +21,42 @@ def gains_stem(example: str) -> str:
     doc = tomllib.loads((EXAMPLES / f"{example}.toml").read_text())
     return example + ("_spline" if doc.get("design", {}).get("table") == "spline" else "")
 
+# The files with the longest tests (seconds of one xdist worker, measured), longest first.
+# tools/test.sh runs pytest with `--dist loadfile --no-loadscope-reorder`: the workers take
+# these first, then the other files by their number of tests (xdist's own order), so that they
+# end on short files together instead of one worker running a long file alone at the end.
+LONGEST_FILES = (
+    "tests/python/sim/test_qspline_monte_carlo.py",
+    "tests/python/cli/test_corridor_design_command.py",
+    "tests/python/board/test_board_hil.py",
+    "tests/python/package/test_library_doc.py",
+    "tests/python/package/test_wheel_install.py",
+    "tests/python/board/test_board_microbit.py",
+    "tests/python/cli/test_hostile_inputs.py",
+    "tests/python/package/test_import_graph.py",
+    "tests/python/cli/test_cli_end_to_end.py",
+    "tests/python/cli/test_report.py",
+    "tests/python/table/test_gains_regenerate_elsewhere.py",
+    "tests/python/cli/test_budget_vs_measured.py",
+)
+_missing = [f for f in LONGEST_FILES if not (REPO / f).is_file()]
+if _missing:
+    raise pytest.UsageError(f"tests/python/conftest.py: LONGEST_FILES: no file {_missing[0]}")
+
+
+@pytest.hookimpl(trylast=True)             # after pytest's own reordering within files
+def pytest_collection_modifyitems(config, items):
+    """`LONGEST_FILES` first, in that order, then the other files by their number of tests,
+    most first; each file's tests stay together and in order."""
+    def file_of(item):
+        return item.nodeid.split("::", 1)[0]
+    count = {}
+    for item in items:
+        count[file_of(item)] = count.get(file_of(item), 0) + 1
+    rank = {f: i for i, f in enumerate(LONGEST_FILES)}
+    items.sort(key=lambda item: (rank.get(file_of(item), len(rank)), -count[file_of(item)]))
+
+
 # cffi builds go to the repository's build tree, never to the user's cache (~/.cache), also in
 # the CLI subprocesses the tests start (they inherit the environment).
 os.environ.setdefault("STOSPLINE_CACHE_DIR", str(REPO / "build" / "cffi"))

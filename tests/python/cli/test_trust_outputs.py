@@ -320,8 +320,11 @@ def test_time_varying_sample_is_named_with_its_size(capsys, tmp_path):
 
 
 def test_all_ticks_missed_is_not_an_overflow(capsys):
+    # One plant step per tick: the commands (none issued) do not depend on the plant's steps,
+    # and "auto" picks the 10000-step ceiling for this open loop.
     rc, out, err = _run(capsys, ["simulate", str(EXAMPLES / "robot_corridor.toml"), "--paths",
-                                 "50", "--fault", "miss_probability=0.999999999", "--json"])
+                                 "50", "--substeps", "1", "--fault",
+                                 "miss_probability=0.999999999", "--json"])
     assert rc == 0, err
     sat = json.loads(out)["saturation"]
     assert sat["u_low"] == [None, None] and sat["u_high"] == [None, None]

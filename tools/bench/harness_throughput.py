@@ -248,7 +248,7 @@ def alongside_seconds() -> float:
             "from stospline.problem import load_problem\n"
             f"d = design_problem(load_problem({str(ROOT / 'examples' / 'robot_corridor.toml')!r}))\n"
             "t = time.process_time()\n"
-            "_summary_ahead(d)\n"
+            "_summary_ahead(d, 1, d.problem.faults)\n"
             "print(time.process_time() - t)\n")
     out = subprocess.run([sys.executable, "-c", code], check=True, env=_command_env(),
                          capture_output=True, text=True).stdout

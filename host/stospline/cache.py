@@ -21,7 +21,7 @@ from typing import Callable, Iterable
 from stospline.errors import KernelBuildError, StosplineError
 
 __all__ = ["cache_root", "source_key", "cached_build", "compile_cffi", "load_module",
-           "build_source_module", "build_kernel_sources", "KERNEL_CFLAGS", "LoadOnce",
+           "compile_objects", "build_source_module", "build_kernel_sources", "KERNEL_CFLAGS", "LoadOnce",
            "CompilerMissing", "FallbackWarning", "c_compiler"]
 
 # The flags of the host kernels (double-precision C of the designer, the oracle, the table).
@@ -83,16 +83,22 @@ def _find(directory: Path, modname: str) -> Path | None:
 
 
 def cached_build(key: str, modname: str, build: Callable[[Path], Path], *,
-                 root: str | Path | None = None) -> Path:
+                 root: str | Path | None = None,
+                 find: Callable[[Path], Path | None] | None = None) -> Path:
     """The path of the extension module `modname` cached under `key`, built on first use.
 
     `build(tmpdir)` compiles into the empty directory `tmpdir` and returns the module's path
     (inside `tmpdir`). It runs only when the key is not cached yet; its directory is renamed
     to ``<root>/<key>`` afterwards, or discarded if another process got there first.
+    `find(directory)` locates the build's product in a cached directory (None: not there);
+    by default the extension module `modname`.
     """
+    if find is None:
+        def find(directory: Path) -> Path | None:
+            return _find(directory, modname)
     base = Path(root) if root is not None else cache_root()
     final = base / key
-    hit = _find(final, modname) if final.is_dir() else None
+    hit = find(final) if final.is_dir() else None
     if hit is not None:
         return hit
     import shutil
@@ -107,7 +113,7 @@ def cached_build(key: str, modname: str, build: Callable[[Path], Path], *,
                 os.rename(tmp, final)      # atomic; fails if `final` exists (not empty)
                 return final / name
             except OSError:
-                hit = _find(final, modname) if final.is_dir() else None
+                hit = find(final) if final.is_dir() else None
                 if hit is not None:        # another process built the same key first
                     return hit
                 shutil.rmtree(final, ignore_errors=True)   # a leftover without a module
@@ -118,15 +124,17 @@ def cached_build(key: str, modname: str, build: Callable[[Path], Path], *,
 
 
 def compile_cffi(out: Path, modname: str, cdef: str, source: str, *, sources=(),
-                 include_dirs=(), cflags=(), quiet: bool = True) -> Path:
+                 include_dirs=(), cflags=(), objects=(), quiet: bool = True) -> Path:
     """Build step of `cached_build`: compile a cffi API-mode module in `out` and return its
     path. `cdef` declares what Python calls, `source` is the C text cffi wraps (its includes),
-    `sources` further C files compiled into the module."""
+    `sources` further C files compiled into the module, `objects` object files linked in
+    (`compile_objects`)."""
     import cffi
     ffib = cffi.FFI()
     ffib.cdef(cdef)
     ffib.set_source(modname, source, sources=[str(s) for s in sources],
-                    include_dirs=[str(d) for d in include_dirs], extra_compile_args=list(cflags))
+                    include_dirs=[str(d) for d in include_dirs], extra_compile_args=list(cflags),
+                    extra_objects=[str(o) for o in objects])
     try:
         return Path(ffib.compile(tmpdir=str(out), verbose=not quiet))
     except Exception:
@@ -134,6 +142,34 @@ def compile_cffi(out: Path, modname: str, cdef: str, source: str, *, sources=(),
         if not found:                # the usual cause on a bare machine: say so plainly
             raise CompilerMissing(compiler) from None
         raise
+
+
+def compile_objects(out: Path, sources, *, include_dirs=(), cflags=()) -> list[Path]:
+    """Compile the C files `sources` into ``out/<stem>.o`` with the compiler, flags and
+    position-independent code of a cffi build (the objects `compile_cffi` would build for
+    them), for linking into several modules (its ``objects=``). Returns their paths, in the
+    order of `sources`."""
+    import cffi._shimmed_dist_utils as dist   # distutils (setuptools' on 3.12+), as cffi's
+    from distutils.ccompiler import new_compiler
+    cc = new_compiler()
+    dist.sysconfig.customize_compiler(cc)
+    objects = []
+    for source in map(Path, sources):
+        try:
+            built = cc.compile([str(source)], output_dir=str(out / "tmp"),
+                               include_dirs=[str(d) for d in include_dirs],
+                               extra_postargs=list(cflags))
+        except Exception:
+            compiler, found = c_compiler()
+            if not found:
+                raise CompilerMissing(compiler) from None
+            raise
+        target = out / f"{source.stem}.o"
+        os.replace(built[0], target)
+        objects.append(target)
+    import shutil
+    shutil.rmtree(out / "tmp", ignore_errors=True)
+    return objects
 
 
 def load_module(path: Path):

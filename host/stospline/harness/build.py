@@ -5,14 +5,17 @@ estimator loop (`estimator_loop`) and the parametric loop (`params_loop`) each g
 generated files, declarations and loop code. The firmware is ``firmware/src/*.c``
 (`firmware_dir`); the harness's plant and normal generator (``plant.c``, ``normals.c``) are
 compiled in, either as their own translation units or included by the loop code. Builds are
-cached under a hash of every input (`stospline.cache.cached_build`).
+cached under a hash of every input (`stospline.cache.cached_build`). The firmware's objects
+depend only on its sources and the flags of its build (arithmetic, fixed shape), not on the
+table or the plant, so they are compiled once per such build and linked into every module
+that shares it (`firmware_objects`).
 """
 from __future__ import annotations
 
 import re
 from pathlib import Path
 
-from stospline.cache import cached_build, compile_cffi, load_module, source_key
+from stospline.cache import cached_build, compile_cffi, compile_objects, load_module, source_key
 from stospline.firmware_interface import check_header
 
 __all__ = ["build_harness_module", "firmware_dir", "HARNESS_CFLAGS", "PLANT_CDEF"]
@@ -53,21 +56,44 @@ def build_harness_module(modname: str, files: dict[str, str], cdef: str, loop: s
     """
     fw = firmware_dir()
     check_header(fw / "include")   # the shared constants are still the header's
-    fw_sources = sorted((fw / "src").glob("*.c"))
     flags = HARNESS_CFLAGS + list(cflags)
     key = source_key([f"{name}\n{text}" for name, text in sorted(files.items())]
                      + [cdef, loop, " ".join(flags)]
                      + [p.read_bytes() for p in sorted(fw.rglob("*.[ch]")) + HARNESS_C])
     full = f"{modname}_{key}"
-    harness = [HERE / "normals.c"] + ([] if plant_included else [HERE / "plant.c"])
+    harness = [] if plant_included else [HERE / "plant.c"]
 
     def build(out: Path) -> Path:
         for name, text in files.items():
             (out / name).write_text(text)
         generated = [out / name for name in sorted(files) if name.endswith(".c")]
-        return compile_cffi(out, full, cdef, loop,
-                            sources=[*fw_sources, *generated, *harness],
+        objects = firmware_objects(fw, flags, build_dir=build_dir)
+        return compile_cffi(out, full, cdef, loop, sources=[*generated, *harness],
                             include_dirs=[fw / "include", fw / "src", out, HERE],
-                            cflags=flags, quiet=quiet)
+                            cflags=flags, objects=objects, quiet=quiet)
 
     return load_module(cached_build(key, full, build, root=build_dir))
+
+
+def firmware_objects(fw: Path, flags: list[str], *,
+                     build_dir: str | Path | None = None) -> list[Path]:
+    """The object files of ``firmware/src/*.c`` and the normal generator for `flags` without
+    the harness's own macros (``-DHARNESS_*``, which the firmware does not read), cached
+    under a hash of those sources and flags."""
+    flags = [f for f in flags if not f.startswith("-DHARNESS_")]
+    sources = sorted((fw / "src").glob("*.c")) + [HERE / "normals.c"]
+    inputs = sorted(fw.rglob("*.[ch]")) + [HERE / "normals.c", PLANT_H, HERE / "ziggurat_tables.h"]
+    key = source_key([" ".join(flags)] + [p.read_bytes() for p in inputs])
+    listing = "objects.txt"
+
+    def build(out: Path) -> Path:
+        objects = compile_objects(out, sources, include_dirs=[fw / "include", fw / "src", HERE],
+                                  cflags=flags)
+        (out / listing).write_text("".join(f"{o.name}\n" for o in objects))
+        return out / listing
+
+    def find(directory: Path) -> Path | None:
+        return directory / listing if (directory / listing).is_file() else None
+
+    done = cached_build(f"fw-{key}", listing, build, root=build_dir, find=find)
+    return [done.parent / name for name in done.read_text().split()]

@@ -365,13 +365,17 @@ def build_controller(table: GainTable, *, build_dir: str | Path | None = None,
         cflags += [f"-DSTSP_FIXED_NX={n}u", f"-DSTSP_FIXED_NU={m}u",
                    f"-DSTSP_FIXED_N_LATCH={n_latch}u"]
     spec = None if plant is None else plant_source(plant, table.tick_hz)
-    files = {f"{table.name}.h": header, f"{table.name}.c": source}
+    loop_files = {}
     if spec is not None:
         cflags.append("-DHARNESS_PLANT_SPEC")
-        files["plant_spec.h"] = spec
+        loop_files["plant_spec.h"] = spec
+    # The loops do not read the table (the module hands it over through harness_table), so
+    # their object serves every table of this shape, arithmetic and plant.
     mod = build_harness_module(
-        f"_stsp_{table.name}", files, cdef,
-        f'#include "stospline/stsp_controller.h"\n#include "{table.name}.h"\n'
-        + BATCH % {"p": table.name}, cflags, plant_included=True, build_dir=build_dir,
-        quiet=quiet)
+        f"_stsp_{table.name}", {f"{table.name}.h": header, f"{table.name}.c": source}, cdef,
+        f'#include "stospline/stsp_controller.h"\n#include "plant.h"\n#include "batch.h"\n'
+        f'#include "{table.name}.h"\n'
+        f"const stsp_table_t *harness_table(void) {{ return &{table.name}_table; }}\n",
+        cflags, loop=('#include "stospline/stsp_controller.h"\n' + BATCH, loop_files),
+        plant_included=True, build_dir=build_dir, quiet=quiet)
     return CompiledController(mod.ffi, mod.lib, table, spec, fixed_shape)

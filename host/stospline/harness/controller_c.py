@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stospline.harness.build import PLANT_CDEF
+from stospline.harness.build import BATCH_CDEF, PLANT_CDEF
 
 __all__ = ["BATCH", "VARIANTS", "controller_cdef"]
 
@@ -43,41 +43,14 @@ stsp_status_t stsp_step(stsp_ctrl_t *ctrl, uint32_t tick, const stsp_scalar_t *x
                         stsp_scalar_t *u);
 const char *stsp_status_str(stsp_status_t status);%(conv)s
 const stsp_table_t *harness_table(void);
-int harness_run_ticks(stsp_ctrl_t *ctrls, size_t count, uint32_t j0, uint32_t j1,
-                      const harness_plant_t *pl, uint64_t *rng, double *dZ, double *X,
-                      double *cost, int64_t *saturated, double *u_low, double *u_high,
-                      double *x_sum, float *u_rec, size_t n_rec,
-                      const harness_corridor_t *cor, size_t n_cor, double *sample_x,
-                      double *sample_u, float *rec_x, float *rec_u, size_t n_keep);
-int harness_init_batch(stsp_ctrl_t *ctrls, size_t count, const stsp_table_t *table);
-int harness_corridor_compiled(const harness_corridor_t *c, size_t k, size_t n);
-int harness_step_batch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
-                       const stsp_scalar_t *x, stsp_scalar_t *u, int *status);
-int harness_pair_batch(const stsp_ctrl_t *proto, size_t count, const uint32_t *t_latch,
-                       const stsp_scalar_t *x_latch, const uint32_t *tick,
-                       const stsp_scalar_t *x, stsp_scalar_t *u, int *status);
-int harness_tick(stsp_ctrl_t *ctrls, size_t count, uint32_t tick, const harness_plant_t *pl,
-                 const double *dZ, double *X, double *cost, int64_t *saturated,
-                 double *u_low, double *u_high, double *x_sum, float *u_rec, size_t n_rec);
-int harness_tick_faults(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
-                        const harness_plant_t *pl, const double *dZ, double *X, double *cost,
-                        int64_t *saturated, double *u_low, double *u_high, double *x_sum,
-                        float *u_rec, size_t n_rec, const harness_faults_t *f,
-                        const double *sensor_z, const double *actuator_z, const double *miss_u,
-                        double *held);
-int harness_tick_watch(stsp_ctrl_t *ctrls, size_t count, uint32_t tick,
-                       const harness_plant_t *pl, const double *dZ, double *X, double *cost,
-                       int64_t *saturated, double *u_low, double *u_high, double *x_sum,
-                       float *u_rec, size_t n_rec, const harness_faults_t *f,
-                       const double *sensor_z, const double *actuator_z, const double *miss_u,
-                       double *held, const harness_corridor_t *cor, size_t n_cor);"""
+%(batch)s"""
 
 # Harness-only C: loops over instances so one Python call serves every Monte Carlo path.
 BATCH = """
 #include <math.h>
 /* The plant in this translation unit, so that its step inlines into the tick loop. */
 #include "plant.c"
-const stsp_table_t *harness_table(void) { return &%(p)s_table; }
+#include "batch.h"
 /* One tick of every path, float32 tables only (else STSP_ERR_BAD_DIMS, nothing touched):
  * the controller of path p steps with x = (float)X[p], the plant advances X[p] with the
  * command held (dZ[p]: substeps x mz), and the run's statistics accumulate: saturated ticks
@@ -385,7 +358,7 @@ def controller_cdef(arith: str) -> str:
     """The declarations cffi sees for a controller module of arithmetic `arith`."""
     fixed = arith != "float32"
     return CDEF % {"scalar": VARIANTS[arith][0], "exps": _EXPS if fixed else "",
-                    "plant": PLANT_CDEF,
+                    "plant": PLANT_CDEF, "batch": BATCH_CDEF,
                     # the spline gains' type of the arithmetic (stsp_table_t.spline)
                     "spline_t": "stsp_qspline_t" if fixed else "stsp_spline_t",
                     "conv": _CONV if fixed else ""}

@@ -72,9 +72,12 @@ def test_nothing_appears_in_place_before_the_build_is_complete(what, tmp_path, m
         build_controller(robot_zoh.table, build_dir=tmp_path)
         (path,) = tmp_path.glob("*/_stsp_robot_corridor_*.so")
     # Every compile (with a cold user cache the controller's helper kernels compile too) found
-    # nothing under a final name in the build directory but the firmware's objects, a build
-    # of their own that is complete (renamed into place) before the module links them.
-    assert seen and all([n for n in names if not n.startswith("fw-")] == [] for names in seen), seen
+    # nothing under a final name in the build directory but the objects of the firmware and
+    # of the loops, builds of their own, complete (renamed into place) before the module
+    # links them.
+    shared = ("fw-", "loop-")
+    assert seen and all([n for n in names if not n.startswith(shared)] == []
+                        for names in seen), seen
     assert path.is_file() and path.parent.parent == tmp_path
 
 
@@ -95,8 +98,7 @@ RACE = textwrap.dedent("""
 
 def test_two_processes_build_the_same_module_at_once(tmp_path):
     """Both start compiling the same key together: both load a working module, one build
-    (and one of the firmware objects it links) stays in the cache, no temporary directory is
-    left."""
+    (and one of each object it links) stays in the cache, no temporary directory is left."""
     root, go = tmp_path / "cache", tmp_path / "go"
     script = tmp_path / "race.py"
     script.write_text(RACE)
@@ -114,8 +116,8 @@ def test_two_processes_build_the_same_module_at_once(tmp_path):
         assert p.returncode == 0, err
         assert out.strip() == "20"
     entries = sorted(p.name for p in root.iterdir())
-    assert len(entries) == 2 and entries[1].startswith("fw-"), entries
-    assert not entries[0].startswith("."), entries
+    assert len(entries) == 3 and entries[1].startswith("fw-"), entries
+    assert entries[2].startswith("loop-") and not entries[0].startswith("."), entries
 
 
 def test_firmware_override_and_checkout(monkeypatch, tmp_path):

@@ -1,5 +1,6 @@
 """The table benches (`tools/bench/spline_tables.py`, `tools/bench/table_kernel.py`) and the
-tick-grid QP's (`tools/bench/tick_qp_osqp.py`) refuse a bad argument with an error line naming
+tick-grid QP's (`tools/bench/tick_qp_osqp.py`) and the harness build's
+(`tools/bench/harness_build.py`) refuse a bad argument with an error line naming
 it (after argparse's usage line) and exit status 2, before any work: no traceback, nothing on
 stdout."""
 import os
@@ -26,6 +27,8 @@ from conftest import REPO
     ("tick_qp_osqp.py", ["--eps", "nan"], "--eps"),
     ("tick_qp_osqp.py", ["--eps", "0"], "--eps"),
     ("tick_qp_osqp.py", ["--example", "nope.toml"], "--example"),
+    ("harness_build.py", ["--runs", "0"], "--runs"),
+    ("harness_build.py", ["nope.toml"], "PROBLEM"),
 ])
 def test_a_bad_argument_is_named_and_refused(script, args, names):
     env = {**os.environ, "PYTHONPATH": str(REPO / "host")}

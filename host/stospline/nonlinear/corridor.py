@@ -11,9 +11,10 @@ stay constant). That file keeps its ``[plant]`` and goes through plan -> lineari
 (`stospline.nonlinear.iterate`), so each candidate's law is designed for its own mean path;
 its cost in the original functional and its union bounds are the exact oracle's on that
 linearisation, which only orders the grid. Screening and certification run the compiled C
-controller against the C model (`stospline.harness.user_plant`, Euler-Maruyama with
-``substeps`` steps per tick), so the certificate's Clopper-Pearson bound is about the plant
-the paths ran on, not about its linearisation.
+controller against the C model (`stospline.harness.user_plant`, exponential
+Euler-Maruyama about the linearisation with ``substeps`` steps per tick), so the
+certificate's Clopper-Pearson bound is about the plant the paths ran on, not about its
+linearisation.
 """
 from __future__ import annotations
 
@@ -164,7 +165,8 @@ class PlantCorridor:
         """`stospline.corridor_search.certificate` with the model the paths ran on."""
         return {**cert, "plant": {
             "source": self.source_name, "sha256": hashlib.sha256(self.source).hexdigest(),
-            "scheme": "Euler-Maruyama", "substeps": substeps},
+            "scheme": "exponential Euler-Maruyama about the linearisation",
+            "substeps": substeps},
             "method": cert["method"].replace(
                 "through the compiled C controller",
                 "through the compiled C controller against the [plant] model itself (each "

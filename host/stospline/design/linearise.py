@@ -14,8 +14,8 @@ that balances truncation, O(h²), against rounding, O(eps/h)); the same differen
 estimates the truncation error: ``|D(2h) - D(h)| / 3``. Where the model is affine in z_i the
 rounding of that step, ~eps^(2/3) relative, is all the error: so each entry is also taken
 with the wide steps ``H_i = max(1, |z_i|)`` and ``2 H_i`` (divided by the step as rounded), and
-where both agree with the narrow one within its error estimate the wide one, exact to a few
-eps, stands. A model linear in x and u thus linearises to its own coefficients to rounding.
+where they agree with each other within the narrow one's error estimate and with the narrow
+one within that and its values' rounding, the wide one, exact to a few eps, stands. A model linear in x and u thus linearises to its own coefficients to rounding.
 The wide points may lie outside the model's domain: a model that refuses one of them
 (`ProblemError`: a status or a value not finite) keeps the narrow differences.
 
@@ -50,9 +50,10 @@ class Linearisation:
 
 
 def _differences(fun, t, z, n: int, width: tuple, step: np.ndarray):
-    """``(D(step), D(2 step))``: the central differences of `fun` along each z_i (shape
-    (nz, N) + width), each divided by its step as rounded, ``(z + s) - (z - s)``, from one
-    batch of ``4 (n + m)`` perturbed copies of the N points."""
+    """``(D(step), D(2 step), rounding of D(step))``: the central differences of `fun` along
+    each z_i (shape (nz, N) + width), each divided by its step as rounded,
+    ``(z + s) - (z - s)``, from one batch of ``4 (n + m)`` perturbed copies of the N points;
+    the rounding is that of the values, ``4 eps (|f(z + s)| + |f(z - s)|) / 2s``."""
     N, nz = z.shape
     batch, spans = [], []
     for i in range(nz):
@@ -66,20 +67,23 @@ def _differences(fun, t, z, n: int, width: tuple, step: np.ndarray):
     vals = fun(np.tile(t, 4 * nz), zz[:, :n], zz[:, n:]).reshape((nz, 2, 2, N) + width)
     span = np.reshape(spans, (nz, 2, N) + (1,) * len(width))
     d = (vals[:, :, 0] - vals[:, :, 1]) / span
-    return d[:, 0], d[:, 1]
+    rounding = 4 * _EPS * (np.abs(vals[:, 0, 0]) + np.abs(vals[:, 0, 1])) / span[:, 0]
+    return d[:, 0], d[:, 1], rounding
 
 
 def _derivatives(fun, t, z, n: int, width: tuple) -> tuple[np.ndarray, np.ndarray]:
     """``∂fun/∂z_i`` for every i (shape (N, n + m) + width) and its error estimate per entry:
     the narrow differences, or the wide ones where the model is affine to rounding."""
-    d1, d2 = _differences(fun, t, z, n, width, _EPS ** (1 / 3) * np.maximum(1.0, np.abs(z)))
+    d1, d2, rounding = _differences(fun, t, z, n, width,
+                                    _EPS ** (1 / 3) * np.maximum(1.0, np.abs(z)))
     err = np.abs(d2 - d1) / 3 + _EPS ** (2 / 3) * (1 + np.abs(d1))
     try:
-        w1, w2 = _differences(fun, t, z, n, width, np.maximum(1.0, np.abs(z)))
+        w1, w2, _ = _differences(fun, t, z, n, width, np.maximum(1.0, np.abs(z)))
     except ProblemError:
         w1 = None
     if w1 is not None:
-        affine = (np.abs(w1 - d1) <= err) & (np.abs(w2 - w1) <= err)
+        # the wide steps' truncation within the narrow error; the two within its rounding
+        affine = (np.abs(w1 - d1) <= err + rounding) & (np.abs(w2 - w1) <= err)
         d1 = np.where(affine, w1, d1)
         err = np.where(affine, np.abs(w2 - w1) / 3 + 4 * _EPS * (1 + np.abs(w1)), err)
     return np.moveaxis(d1, 0, 1), np.moveaxis(err, 0, 1)

@@ -179,7 +179,7 @@ def simulate_model(problem, controller, model, *, paths: int, seed,
                 worst = min(worst, int(status.min()))
             saturated += int(np.sum(status == STATUS["WARN_SATURATED"]))
             cost_stage = stage.at(t + h / 2)
-            lin, lin_fine = steps.at(k, t)
+            lin, lin_fine = steps.at(k, j)
             xs = model.exp_em_steps(t, dt, scale, X, U, lin, streams.z)
             xf = model.exp_em_steps(t, dt / 2, scale_fine, Xf, Uf, lin_fine, streams.z_fine)
             for s in range(substeps):       # the left-point rule on every substep

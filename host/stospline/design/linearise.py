@@ -15,9 +15,10 @@ estimates the truncation error: ``|D(2h) - D(h)| / 3``. Where the model is affin
 rounding of that step, ~eps^(2/3) relative, is all the error: so each entry is also taken
 with the wide steps ``H_i = max(1, |z_i|)`` and ``2 H_i`` (divided by the step as rounded), and
 where they agree with each other within the narrow one's error estimate and with the narrow
-one within that and its values' rounding, the wide one, exact to a few eps, stands. A model linear in x and u thus linearises to its own coefficients to rounding.
-The wide points may lie outside the model's domain: a model that refuses one of them
-(`ProblemError`: a status or a value not finite) keeps the narrow differences.
+one within that and its values' rounding, the wide one, exact to a few eps, stands. A model
+linear in x and u thus linearises to its own coefficients to rounding. The wide points may
+lie outside the model's domain: a model that refuses one of them (`ProblemError`: a status or
+a value not finite) keeps the narrow differences.
 
 A drift constant ``c`` within the rounding of its own terms (``8 eps (|f| + |A||x| + |B||u|)``)
 is zero.

@@ -5,11 +5,12 @@ The model's step is exponential Euler–Maruyama about that linearisation (A, B,
 
     x+ = Ad x + Bd u + fd + dt (f(t, x, u) − A x − B u − c) + g(t, x, u) dZ,
 
-``Ad, Bd, fd`` the exact step of ``dx = (A x + B u + c) dt`` over dt (`plant_spec.zoh_step`, the
-linear harness's). The remainder f − A x − B u − c vanishes on a model linear in x and u (to
-rounding; exactly when the linearisation gives its coefficients), and the step is then the
-linear harness's; otherwise it is Euler–Maruyama's on the remainder: weak order 1, the same
-as plain Euler–Maruyama, with the linear part of the drift integrated exactly.
+``Ad, Bd, fd`` the exact step of ``dx = (A x + B u + c) dt`` over dt (of time-invariant data,
+the linear harness's own: `plant_spec.zoh_step`). The remainder f − A x − B u − c vanishes
+on a model linear in x and u (to rounding; exactly when the linearisation gives its
+coefficients), and the step is then the linear harness's; otherwise it is Euler–Maruyama's on
+the remainder: weak order 1, the same as plain Euler–Maruyama, with the linear part of the
+drift integrated exactly.
 """
 from __future__ import annotations
 

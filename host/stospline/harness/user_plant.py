@@ -6,12 +6,12 @@ the commands of every path from its state; the model is then integrated over the
 `substeps` steps, the command held, by exponential Euler–Maruyama about the linearisation the
 table was designed on (`model_step`):
 
-    x+ = Ad x + Bd u + fd + dt (f(t, x, u) − A x − B u − c) + g(t, x, u) dZ,   dZ ~ N(0, dt I).
+    x+ = Ad x + Bd u + fd + dt (f(t, x, u) − A x − B u − c) + g(t, x, u) dZ.
 
-The normal numbers are the linear harness's (`block_streams`: blocks of 512 paths, each on its
-own stream, drawn by the harness's C generator), so on a model linear in x and u, whose
-remainder f − A x − B u − c is zero, a run is the linear harness's run of the linearisation
-with the same seed: the same paths, to rounding.
+The increments dZ ~ N(0, dt I) come from the linear harness's normal numbers (`block_streams`:
+blocks of 512 paths, each on its own stream, drawn by the harness's C generator), so on a model
+linear in x and u, whose remainder f − A x − B u − c is zero, a run is the linear harness's
+run of the linearisation with the same seed: the same paths, to rounding.
 
 Alongside, the same paths are integrated with twice the substeps on the same Brownian path
 (each coarse increment split in two by a Brownian bridge), each with its own controllers: for a

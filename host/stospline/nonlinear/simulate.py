@@ -200,8 +200,7 @@ def plant_simulation_text(s: dict) -> str:
                + f" <= {p['tolerance']:g} on a {p['pilot_paths']}-path pilot)")
     lines = [f"Monte Carlo on the [plant] model: {p['paths']} paths, seed {p['seed']}, "
              f"{p['substeps']} exponential Euler-Maruyama substeps per tick{how}; "
-             f"intervals "
-             f"{p['confidence']:.0%} joint over {p['joint_comparisons']}"]
+             f"intervals {p['confidence']:.0%} joint over {p['joint_comparisons']}"]
     if f.get("levels"):
         label = " ".join(f"{k}={v}" for k, v in f["levels"].items())
         if f["exact_oracle"]:

@@ -40,8 +40,9 @@ __all__ = ["PlantCorridor", "PlantCandidate", "PATH_TICK_SECONDS", "PATH_STEP_SE
 
 # CPU seconds of `simulate_model` per path and tick: a fixed part (the controller, the
 # bookkeeping) and a part per plant step (the coarse run and its check at twice the steps).
-# The unicycle at 200 Hz, 2000 paths, one core: 0.83 us per path-tick at 1 step, 1.76 at 4.
-PATH_TICK_SECONDS, PATH_STEP_SECONDS = 5.2e-7, 3.1e-7
+# The unicycle at 200 Hz, 2000 paths, one core (tools/bench/model_loop.py): 0.74 us per
+# path-tick at 1 step, 1.82 at 4.
+PATH_TICK_SECONDS, PATH_STEP_SECONDS = 3.8e-7, 3.6e-7
 SAMPLE_SECONDS = 0.01      # the rate term's samples along each stage
 
 

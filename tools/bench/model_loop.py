@@ -15,6 +15,7 @@ import tomllib
 import numpy as np
 from bench_util import ROOT, median_time
 
+from stospline.errors import ProblemError
 from stospline.harness.controller import build_controller
 from stospline.harness.user_plant import simulate_model
 from stospline.nonlinear.iterate import fit_plant
@@ -27,10 +28,18 @@ def main() -> None:
     ap.add_argument("--paths", type=int, default=2000)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
+    for name in ("hz", "paths", "repeat"):
+        if getattr(args, name) < 1:
+            ap.error(f"--{name} must be at least 1, not {getattr(args, name)}")
+    if args.paths > 1_000_000:
+        ap.error(f"--paths {args.paths}: at most 1000000 (the loop holds every path at once)")
     where = ROOT / "examples" / "nonlinear"
     doc = tomllib.loads((where / "robot_unicycle.toml").read_text())
     doc["tick_hz"] = args.hz
-    problem, fit = fit_plant(doc, where)
+    try:
+        problem, fit = fit_plant(doc, where)
+    except ProblemError as exc:
+        ap.error(f"--hz {args.hz}: {exc.field} {exc.reason}")
     d = design_problem(problem)
     controller = build_controller(d.table)
     ticks = int(np.sum(problem.ticks_per_stage))

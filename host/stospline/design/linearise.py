@@ -11,13 +11,25 @@ refuse an additive part it cannot represent).
 
 Derivatives are central differences with the step ``h_i = eps^(1/3) max(1, |z_i|)`` (the step
 that balances truncation, O(h²), against rounding, O(eps/h)); the same difference with ``2h``
-estimates the truncation error: ``|D(2h) - D(h)| / 3``.
+estimates the truncation error: ``|D(2h) - D(h)| / 3``. Where the model is affine in z_i the
+rounding of that step, ~eps^(2/3) relative, is all the error: so each entry is also taken
+with the wide steps ``H_i = max(1, |z_i|)`` and ``2 H_i`` (divided by the step as rounded), and
+where they agree with each other within the narrow one's error estimate and with the narrow
+one within that and its values' rounding, the wide one, exact to a few eps, stands. A model
+linear in x and u thus linearises to its own coefficients to rounding. The wide points may
+lie outside the model's domain: a model that refuses one of them (`ProblemError`: a status or
+a value not finite) keeps the narrow differences.
+
+A drift constant ``c`` within the rounding of its own terms (``8 eps (|f| + |A||x| + |B||u|)``)
+is zero.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+
+from stospline.errors import ProblemError
 
 __all__ = ["Linearisation", "linearise"]
 
@@ -38,24 +50,43 @@ class Linearisation:
     error: float
 
 
-def _derivatives(fun, t, z, n: int, width: tuple) -> tuple[np.ndarray, np.ndarray]:
-    """``∂fun/∂z_i`` for every i (shape (N, n + m) + width) and its error estimate per entry,
-    from one batch of ``4 (n + m)`` perturbed copies of the N points."""
+def _differences(fun, t, z, n: int, width: tuple, step: np.ndarray):
+    """``(D(step), D(2 step), rounding of D(step))``: the central differences of `fun` along
+    each z_i (shape (nz, N) + width), each divided by its step as rounded,
+    ``(z + s) - (z - s)``, from one batch of ``4 (n + m)`` perturbed copies of the N points;
+    the rounding is that of the values, ``4 eps (|f(z + s)| + |f(z - s)|) / 2s``."""
     N, nz = z.shape
-    h = _EPS ** (1 / 3) * np.maximum(1.0, np.abs(z))            # (N, nz)
-    batch = []
+    batch, spans = [], []
     for i in range(nz):
-        for s in (1.0, -1.0, 2.0, -2.0):
-            zi = z.copy()
-            zi[:, i] += s * h[:, i]
-            batch.append(zi)
+        for s in (1.0, 2.0):
+            zp, zm = z.copy(), z.copy()
+            zp[:, i] += s * step[:, i]
+            zm[:, i] -= s * step[:, i]
+            batch += [zp, zm]
+            spans.append(zp[:, i] - zm[:, i])
     zz = np.concatenate(batch)
-    vals = fun(np.tile(t, 4 * nz), zz[:, :n], zz[:, n:]).reshape((4 * nz, N) + width)
-    vals = vals.reshape((nz, 4, N) + width)
-    step = h.T.reshape((nz, N) + (1,) * len(width))
-    d1 = (vals[:, 0] - vals[:, 1]) / (2 * step)
-    d2 = (vals[:, 2] - vals[:, 3]) / (4 * step)
+    vals = fun(np.tile(t, 4 * nz), zz[:, :n], zz[:, n:]).reshape((nz, 2, 2, N) + width)
+    span = np.reshape(spans, (nz, 2, N) + (1,) * len(width))
+    d = (vals[:, :, 0] - vals[:, :, 1]) / span
+    rounding = 4 * _EPS * (np.abs(vals[:, 0, 0]) + np.abs(vals[:, 0, 1])) / span[:, 0]
+    return d[:, 0], d[:, 1], rounding
+
+
+def _derivatives(fun, t, z, n: int, width: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """``∂fun/∂z_i`` for every i (shape (N, n + m) + width) and its error estimate per entry:
+    the narrow differences, or the wide ones where the model is affine to rounding."""
+    d1, d2, rounding = _differences(fun, t, z, n, width,
+                                    _EPS ** (1 / 3) * np.maximum(1.0, np.abs(z)))
     err = np.abs(d2 - d1) / 3 + _EPS ** (2 / 3) * (1 + np.abs(d1))
+    try:
+        w1, w2, _ = _differences(fun, t, z, n, width, np.maximum(1.0, np.abs(z)))
+    except ProblemError:
+        w1 = None
+    if w1 is not None:
+        # the wide steps' truncation within the narrow error; the two within its rounding
+        affine = (np.abs(w1 - d1) <= err + rounding) & (np.abs(w2 - w1) <= err)
+        d1 = np.where(affine, w1, d1)
+        err = np.where(affine, np.abs(w2 - w1) / 3 + 4 * _EPS * (1 + np.abs(w1)), err)
     return np.moveaxis(d1, 0, 1), np.moveaxis(err, 0, 1)
 
 
@@ -85,7 +116,11 @@ def linearise(model, t, xbar, ubar) -> Linearisation:
     Jg, eg = _derivatives(model.diffusion, t, z, n, (n, mz))       # (N, nz, n, mz)
     A = np.swapaxes(Jf[:, :n], 1, 2)
     B = np.swapaxes(Jf[:, n:], 1, 2)
-    c = f0 - np.einsum("kij,kj->ki", A, xbar) - np.einsum("kij,kj->ki", B, ubar)
+    Ax, Bu = np.einsum("kij,kj->ki", A, xbar), np.einsum("kij,kj->ki", B, ubar)
+    c = f0 - Ax - Bu
+    terms = np.abs(f0) + np.einsum("kij,kj->ki", np.abs(A), np.abs(xbar)) \
+        + np.einsum("kij,kj->ki", np.abs(B), np.abs(ubar))
+    c[np.abs(c) <= 8 * _EPS * terms] = 0.0
     G, H = Jg[:, :n], Jg[:, n:]
     g0 = g - np.einsum("kiab,ki->kab", G, xbar) - np.einsum("kjab,kj->kab", H, ubar)
     error = max(float(np.max(ef / (1 + np.abs(Jf)), initial=0.0)),

@@ -49,14 +49,15 @@ class FaultDraws:
                    np.empty(paths) if faults.miss_probability > 0 else None,
                    np.tile(np.asarray(hold, dtype=float), (paths, 1)))
 
-    def draw(self, rng: np.random.Generator) -> None:
-        """This tick's numbers, from the faults' own stream `rng`."""
+    def draw(self, rng: np.random.Generator, rows: slice = slice(None)) -> None:
+        """This tick's numbers of the paths `rows` (default all), from the faults' own stream
+        `rng`."""
         if self.sensor_z is not None:
-            rng.standard_normal(out=self.sensor_z)
+            rng.standard_normal(out=self.sensor_z[rows])
         if self.actuator_z is not None:
-            rng.standard_normal(out=self.actuator_z)
+            rng.standard_normal(out=self.actuator_z[rows])
         if self.miss_u is not None:
-            rng.random(out=self.miss_u)
+            rng.random(out=self.miss_u[rows])
 
 
 @dataclass

@@ -42,7 +42,8 @@ from stospline.problem.model import Problem
 __all__ = ["MonteCarloResult", "simulate", "z_value", "Agreement", "compare_to_oracle",
            "BLOCK_PATHS", "block_seed", "default_workers", "usable_workers", "check_counts",
            "JointVerdict", "joint_verdict", "DETERMINISTIC_RTOL", "faults_unsupported",
-           "per_path_bytes", "check_per_path", "PER_PATH_MAX_BYTES"]
+           "per_path_bytes", "check_per_path", "PER_PATH_MAX_BYTES", "block_counts",
+           "child_stream", "fault_seed"]
 
 
 def z_value(confidence: float, comparisons: int = 1) -> float:
@@ -155,10 +156,15 @@ def block_seed(seed, block: int) -> np.random.SeedSequence:
 _FAULT_STREAM = 2**32 - 2
 
 
+def child_stream(block: np.random.SeedSequence, key: int) -> np.random.SeedSequence:
+    """Child `key` of a block's stream (derived without spawning)."""
+    return np.random.SeedSequence(block.entropy, spawn_key=tuple(block.spawn_key) + (key,),
+                                  pool_size=block.pool_size)
+
+
 def fault_seed(block: np.random.SeedSequence) -> np.random.SeedSequence:
     """The stream of a block's fault draws (`_FAULT_STREAM`)."""
-    return np.random.SeedSequence(block.entropy, spawn_key=tuple(block.spawn_key)
-                                  + (_FAULT_STREAM,), pool_size=block.pool_size)
+    return child_stream(block, _FAULT_STREAM)
 
 
 def faults_unsupported(problem: Problem, table) -> str | None:

@@ -2,16 +2,23 @@
 (`stospline.problem.plant_c.PlantModel`), not its linearisation.
 
 Each tick the controller (the firmware built with the table, `CompiledController`) computes
-the commands of every path from its state; the model is then integrated over the tick by
-Euler–Maruyama with `substeps` steps, the command held:
+the commands of every path from its state; the model is then integrated over the tick with
+`substeps` steps, the command held, by exponential Euler–Maruyama about the linearisation the
+table was designed on (`model_step`):
 
-    x+ = x + f(t, x, u) dt + g(t, x, u) dZ,      dZ ~ N(0, dt I).
+    x+ = Ad x + Bd u + fd + dt (f(t, x, u) − A x − B u − c) + g(t, x, u) dZ.
 
-Alongside, the same paths are integrated with twice the substeps on the same Brownian path (a
-coarse increment is the sum of two fine ones), each with its own controllers: for a scheme of
-weak order 1, twice the difference of the two runs estimates the coarse run's bias, which the
-verdict reports beside the statistical error. The running cost is the left-point rule per
-substep; knot penalties are added at the knots; corridor exits are watched after every tick.
+The increments dZ ~ N(0, dt I) come from the linear harness's normal numbers (`block_streams`:
+blocks of 512 paths, each on its own stream, drawn by the harness's C generator), so on a model
+linear in x and u, whose remainder f − A x − B u − c is zero, a run is the linear harness's
+run of the linearisation with the same seed: the same paths, to rounding.
+
+Alongside, the same paths are integrated with twice the substeps on the same Brownian path
+(each coarse increment split in two by a Brownian bridge), each with its own controllers: for a
+scheme of weak order 1, twice the difference of the two runs estimates the coarse run's bias,
+which the verdict reports beside the statistical error. The running cost is the left-point
+rule per substep; knot penalties are added at the knots; corridor exits are watched after
+every tick.
 
 With faults (`stospline.problem.faults.Faults`) the loop around the model is the linear
 harness's (``harness_tick_faults``): per tick the controller measures the state plus
@@ -21,8 +28,8 @@ it was, and the actuator holds its command; with ``delay_ticks = 1`` the command
 from the next tick (the safe command ``u_hold`` over tick 0); the model receives the applied
 command plus ``actuator_noise`` times a standard normal; ``plant_noise_scale`` multiplies the
 model's diffusion. The fault numbers are drawn as the harness draws them (`FaultDraws`, sensor
-then actuator then missed ticks, from the stream `fault_seed` of the run's seed), and the coarse
-and the fine run share them. ``plant_A_scale`` and ``plant_B_scale`` have no meaning for a
+then actuator then missed ticks, from each block's fault stream), and the coarse and the fine
+run share them. ``plant_A_scale`` and ``plant_B_scale`` have no meaning for a
 model whose drift is not split into A x + B u (`model_faults_unsupported`).
 """
 from __future__ import annotations
@@ -33,7 +40,8 @@ import numpy as np
 
 from stospline.errors import ProblemError
 from stospline.harness.controller import STATUS, CorridorWatch, FaultDraws
-from stospline.harness.montecarlo import fault_seed
+from stospline.harness.block_streams import BlockStreams
+from stospline.harness.model_step import TickSteps
 from stospline.problem.faults import Faults
 
 __all__ = ["PlantRun", "simulate_model", "model_faults_unsupported"]
@@ -56,7 +64,7 @@ def model_faults_unsupported(faults: Faults) -> tuple[str, str] | None:
 @dataclass
 class PlantRun:
     """Per path: ``knots[k]`` the state at knot k (paths, n), ``cost`` the realised cost
-    (paths,); ``fine_knots``, ``fine_cost`` the same with twice the substeps (same Brownian
+    (paths,); ``fine_knots``, ``fine_cost`` the same with half the step (same Brownian
     path); ``exits`` (corridors, paths) the first state tick outside each corridor (-1:
     none); ``worst_status`` the lowest controller status; ``saturated`` commands clipped."""
     paths: int
@@ -133,23 +141,25 @@ class _Loop:
 
 def simulate_model(problem, controller, model, *, paths: int, seed,
                    substeps: int, faults: Faults | None = None) -> PlantRun:
-    """Run `paths` paths of `controller` (built for `problem`'s table) on `model` from x0 with
-    the generator seeded by `seed` (an integer or a `numpy.random.SeedSequence`), in a loop
+    """Run `paths` paths of `controller` (built for `problem`'s table; `problem` the
+    linearisation it was designed on) on `model` from x0 with the random streams of `seed` (an
+    integer or a `numpy.random.SeedSequence`, as the linear harness's `simulate`), in a loop
     with `faults` (default none; `model_faults_unsupported` refused with ValueError)."""
     faults = Faults() if faults is None else faults
     why = model_faults_unsupported(faults)
     if why:
         raise ValueError(f"{why[0]} {why[1]}")
-    stream = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    rng = np.random.default_rng(stream)
     n, h = problem.n, 1.0 / problem.tick_hz
     table = controller.table
     delayed = int(getattr(table, "delay_ticks", 0))
     draws = (FaultDraws.of(faults, paths, n, np.asarray(table.u_hold, dtype=float), delayed)
              if faults.any or delayed else None)
-    fault_rng = (np.random.default_rng(fault_seed(stream))
-                 if draws is not None else None)
-    noise_scale = float(faults.plant_noise_scale)
+    dt = h / substeps
+    noise = float(faults.plant_noise_scale)
+    scale, scale_fine = float(np.sqrt(dt)) * noise, float(np.sqrt(dt / 2)) * noise
+    streams = BlockStreams(controller, seed, paths, substeps, model.mz,
+                           faults=draws is not None)
+    steps = TickSteps(problem, dt)
     coarse, fine = _Loop(controller, paths, draws), _Loop(controller, paths, draws)
     X = np.tile(problem.x0, (paths, 1)).astype(float)
     Xf = X.copy()
@@ -158,24 +168,20 @@ def simulate_model(problem, controller, model, *, paths: int, seed,
     watch.check(0, X)
     knot_ticks = np.cumsum(problem.ticks_per_stage)
     knots, fine_knots, worst, saturated = [], [], 0, 0
-    dt = h / substeps
     j = 0
     for k, (stage, ticks) in enumerate(zip(problem.stages, problem.ticks_per_stage)):
         for _ in range(ticks):
             t = problem.t0 + j * h
-            if draws is not None:
-                draws.draw(fault_rng)
+            streams.draw(draws)
             U, status = coarse.command(j, X, draws)
             Uf = fine.command(j, Xf, draws)[0]
             if status.size:
                 worst = min(worst, int(status.min()))
             saturated += int(np.sum(status == STATUS["WARN_SATURATED"]))
             cost_stage = stage.at(t + h / 2)
-            dz = rng.standard_normal((paths, 2 * substeps, model.mz)) * np.sqrt(dt / 2)
-            if noise_scale != 1.0:
-                dz *= noise_scale
-            xs = model.em_steps(t, dt, X, U, dz[:, 0::2] + dz[:, 1::2])
-            xf = model.em_steps(t, dt / 2, Xf, Uf, dz)
+            lin, lin_fine = steps.at(k, j)
+            xs = model.exp_em_steps(t, dt, scale, X, U, lin, streams.z)
+            xf = model.exp_em_steps(t, dt / 2, scale_fine, Xf, Uf, lin_fine, streams.z_fine)
             for s in range(substeps):       # the left-point rule on every substep
                 cost += _running_cost(cost_stage, xs[:, s], U) * dt
                 cost_f += (_running_cost(cost_stage, xf[:, 2 * s], Uf)

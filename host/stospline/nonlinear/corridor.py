@@ -11,9 +11,10 @@ stay constant). That file keeps its ``[plant]`` and goes through plan -> lineari
 (`stospline.nonlinear.iterate`), so each candidate's law is designed for its own mean path;
 its cost in the original functional and its union bounds are the exact oracle's on that
 linearisation, which only orders the grid. Screening and certification run the compiled C
-controller against the C model (`stospline.harness.user_plant`, Euler-Maruyama with
-``substeps`` steps per tick), so the certificate's Clopper-Pearson bound is about the plant
-the paths ran on, not about its linearisation.
+controller against the C model (`stospline.harness.user_plant`, exponential
+Euler-Maruyama about the linearisation with ``substeps`` steps per tick), so the
+certificate's Clopper-Pearson bound is about the plant the paths ran on, not about its
+linearisation.
 """
 from __future__ import annotations
 
@@ -39,8 +40,9 @@ __all__ = ["PlantCorridor", "PlantCandidate", "PATH_TICK_SECONDS", "PATH_STEP_SE
 
 # CPU seconds of `simulate_model` per path and tick: a fixed part (the controller, the
 # bookkeeping) and a part per plant step (the coarse run and its check at twice the steps).
-# The unicycle at 200 Hz, 2000 paths, one core: 0.83 us per path-tick at 1 step, 1.76 at 4.
-PATH_TICK_SECONDS, PATH_STEP_SECONDS = 5.2e-7, 3.1e-7
+# The unicycle at 200 Hz, 2000 paths, one core (tools/bench/model_loop.py): 0.74 us per
+# path-tick at 1 step, 1.82 at 4.
+PATH_TICK_SECONDS, PATH_STEP_SECONDS = 3.8e-7, 3.6e-7
 SAMPLE_SECONDS = 0.01      # the rate term's samples along each stage
 
 
@@ -164,7 +166,8 @@ class PlantCorridor:
         """`stospline.corridor_search.certificate` with the model the paths ran on."""
         return {**cert, "plant": {
             "source": self.source_name, "sha256": hashlib.sha256(self.source).hexdigest(),
-            "scheme": "Euler-Maruyama", "substeps": substeps},
+            "scheme": "exponential Euler-Maruyama about the linearisation",
+            "substeps": substeps},
             "method": cert["method"].replace(
                 "through the compiled C controller",
                 "through the compiled C controller against the [plant] model itself (each "

@@ -1,7 +1,9 @@
 """The problem file of a linearisation: the user's file with ``[plant]`` replaced by the
 linear model sampled along the path (`[[stages]]` dynamics as samples, linear in between,
 docs/guide/problem-file.md "Time-varying data: samples"), which every designer and the
-oracle accept as they are."""
+oracle accept as they are. A field whose samples over a stage agree to rounding is written as
+one constant (a zero drift not at all), so that a model linear in x and u gives the linear
+problem file it is, time-invariant data and all."""
 from __future__ import annotations
 
 import numpy as np
@@ -14,6 +16,10 @@ __all__ = ["linear_doc", "ADDITIVE_TOLERANCE"]
 # The diffusion's part independent of x and u, relative to its size, above which the model
 # is refused: the problem's noise is Σ x_i G_i + Σ u_j H_j, with no additive term.
 ADDITIVE_TOLERANCE = 1e-7
+# Samples that differ by at most this many eps of the field's largest entry are one
+# constant: the wide differences of a linear model (`stospline.design.linearise`) give its
+# coefficients to a few eps.
+_CONSTANT_EPS = 16
 
 
 def _check_additive(lin: Linearisation, t: np.ndarray) -> None:
@@ -39,8 +45,14 @@ def linear_doc(doc: dict, lin: Linearisation, t: np.ndarray, stages: list[slice]
     out_stages = []
     for k, sl in enumerate(stages):
         def samples(values):
-            return {"t": t[sl], "values": values[sl], "interpolation": "linear"}
-        dyn = {"A": samples(lin.A), "B": samples(lin.B), "f": samples(lin.c)}
+            v = values[sl]
+            scale = np.max(np.abs(v), initial=0.0)
+            if np.all(np.abs(v - v[0]) <= _CONSTANT_EPS * np.finfo(float).eps * scale):
+                return v[0]
+            return {"t": t[sl], "values": v, "interpolation": "linear"}
+        dyn = {"A": samples(lin.A), "B": samples(lin.B)}
+        if np.any(lin.c[sl]):
+            dyn["f"] = samples(lin.c)
         noise = [{"state": i, "G": samples(lin.G[:, i])} for i in state_noise]
         noise += [{"input": j, "G": samples(lin.H[:, j])} for j in input_noise]
         if noise:

@@ -81,7 +81,7 @@ def _bias_ratio(run, paths: int, z: float) -> float:
 def choose_model_substeps(d, model, *, paths: int, seed: int, faults: Faults | None = None,
                           tolerance: float = TOLERANCE, limit: int = MAX_AUTO_SUBSTEPS,
                           controller=None) -> ModelSubsteps:
-    """The fewest Euler-Maruyama substeps per tick (1, 2, 4, ..., at most `limit`) whose bias
+    """The fewest model substeps per tick (1, 2, 4, ..., at most `limit`) whose bias
     on the model, estimated by a pilot of ``min(paths, PILOT_PATHS)`` paths against twice the
     substeps on the same Brownian paths (Richardson, weak order 1), is at most `tolerance`
     standard errors of a `paths`-path run for every knot mean and the cost; the bound is the
@@ -199,8 +199,8 @@ def plant_simulation_text(s: dict) -> str:
         how = (f" (auto: bias / error {tried}"
                + f" <= {p['tolerance']:g} on a {p['pilot_paths']}-path pilot)")
     lines = [f"Monte Carlo on the [plant] model: {p['paths']} paths, seed {p['seed']}, "
-             f"{p['substeps']} Euler-Maruyama substeps per tick{how}; intervals "
-             f"{p['confidence']:.0%} joint over {p['joint_comparisons']}"]
+             f"{p['substeps']} exponential Euler-Maruyama substeps per tick{how}; "
+             f"intervals {p['confidence']:.0%} joint over {p['joint_comparisons']}"]
     if f.get("levels"):
         label = " ".join(f"{k}={v}" for k, v in f["levels"].items())
         if f["exact_oracle"]:

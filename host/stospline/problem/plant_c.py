@@ -32,9 +32,10 @@ int stospline__drift_many(int N, const double *t, const double *x, const double 
                           const double *p, double *f, int *status);
 int stospline__diffusion_many(int N, const double *t, const double *x, const double *u,
                               const double *p, double *g, int *status);
-int stospline__em_steps(int N, int steps, double t, double dt, const double *u,
-                        const double *p, const double *dz, double *x, double *xs,
-                        double *f, double *g, int *status);
+int stospline__exp_em_steps(int N, int steps, double t, double dt, double dz_scale,
+                            const double *u, const double *p, const double *lin,
+                            const double *z, double *x, double *xs, double *work,
+                            int *status);
 """
 # Batches of points in one call (a linearisation evaluates the model at tens of thousands of
 # points): the index of the first point refused, its status in *status; -1 when all are fine.
@@ -68,29 +69,46 @@ int stospline__diffusion_many(int N, const double *t, const double *x, const dou
     return -1;
 }
 
-/* Euler-Maruyama: `steps` steps of dt from t for each of N paths, u (N, m) held, dz (N, steps,
- * mz) the Brownian increments; x (N, n) advanced in place, xs (N, steps, n) the state at each
- * step's start; f (n) and g (n * mz) work space. */
-int stospline__em_steps(int N, int steps, double t, double dt, const double *u,
-                        const double *p, const double *dz, double *x, double *xs,
-                        double *f, double *g, int *status)
+/* Exponential Euler-Maruyama about a linear model (A, B, c) of the drift: `steps` steps of dt
+ * from t for each of N paths, u (N, m) held, z (N, steps, mz) standard normal numbers:
+ *     x+ = Ad x + Bd u + fd + dt (f(t, x, u) - A x - B u - c) + g(t, x, u) dz_scale z,
+ * lin = [Ad (n, n), Bd (n, m), fd (n), A (n, n), B (n, m), c (n)], Ad, Bd, fd the exact step
+ * of the linear model over dt. x (N, n) advanced in place, xs (N, steps, n) the state at each
+ * step's start; work: 2 n + n mz doubles. The linear part is summed in the order of the
+ * harness's plant step (harness/plant.c, from +0.0), so on a model the linear one matches the
+ * remainder is +0.0 and the step is the harness's. */
+int stospline__exp_em_steps(int N, int steps, double t, double dt, double dz_scale,
+                            const double *u, const double *p, const double *lin,
+                            const double *z, double *x, double *xs, double *work,
+                            int *status)
 {
     int n = stospline__dims_(0), m = stospline__dims_(1), mz = stospline__dims_(2);
+    const double *Ad = lin, *Bd = Ad + n * n, *fd = Bd + n * m;
+    const double *A = fd + n, *B = A + n * n, *c = B + n * m;
+    double *f = work, *xn = work + n, *g = work + 2 * n;
     for (int k = 0; k < N; ++k) {
         double *xk = x + k * n;
+        const double *uk = u + k * m;
         for (int s = 0; s < steps; ++s) {
-            const double *dzs = dz + (k * steps + s) * mz;
+            const double *zs = z + (k * steps + s) * mz;
             double ts = t + s * dt;
             for (int i = 0; i < n; ++i) xs[(k * steps + s) * n + i] = xk[i];
-            *status = stospline_plant_drift(ts, xk, u + k * m, p, f);
+            *status = stospline_plant_drift(ts, xk, uk, p, f);
             if (*status != 0) return k;
-            *status = stospline_plant_diffusion(ts, xk, u + k * m, p, g);
+            *status = stospline_plant_diffusion(ts, xk, uk, p, g);
             if (*status != 0) return k;
             for (int i = 0; i < n; ++i) {
-                double dx = f[i] * dt;
-                for (int j = 0; j < mz; ++j) dx += g[i * mz + j] * dzs[j];
-                xk[i] += dx;
+                double acc = 0.0, lin_f = 0.0;
+                for (int j = 0; j < n; ++j) acc += Ad[i * n + j] * xk[j];
+                for (int j = 0; j < m; ++j) acc += Bd[i * m + j] * uk[j];
+                acc += fd[i];
+                for (int j = 0; j < n; ++j) lin_f += A[i * n + j] * xk[j];
+                for (int j = 0; j < m; ++j) lin_f += B[i * m + j] * uk[j];
+                acc += dt * (f[i] - (lin_f + c[i]));
+                for (int j = 0; j < mz; ++j) acc += g[i * mz + j] * (zs[j] * dz_scale);
+                xn[i] = acc;
             }
+            for (int i = 0; i < n; ++i) xk[i] = xn[i];
         }
     }
     return -1;
@@ -210,22 +228,24 @@ class PlantModel:
                           self.n * self.mz, t, x, u).reshape(-1, self.n, self.mz)
 
 
-    def em_steps(self, t: float, dt: float, X: np.ndarray, U: np.ndarray,
-                 dz: np.ndarray) -> np.ndarray:
-        """Euler-Maruyama over ``dz.shape[1]`` steps of `dt` from `t` for every path: X (N, n)
-        advanced in place, U (N, m) held, dz (N, steps, mz) the Brownian increments; returns
-        the state at each step's start (N, steps, n)."""
-        N, steps = dz.shape[:2]
+    def exp_em_steps(self, t: float, dt: float, dz_scale: float, X: np.ndarray,
+                     U: np.ndarray, lin: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """Exponential Euler-Maruyama about the linear model `lin` (``[Ad, Bd, fd, A, B, c]``
+        raveled, ``stospline__exp_em_steps``) over ``z.shape[1]`` steps of `dt` from `t` for
+        every path: X (N, n) advanced in place, U (N, m) held, z (N, steps, mz) standard
+        normal numbers, the Brownian increments ``dz_scale * z``; returns the state at each
+        step's start (N, steps, n)."""
+        N, steps = z.shape[:2]
         U = np.ascontiguousarray(U, dtype=float)
-        dz = np.ascontiguousarray(dz, dtype=float)
         xs = np.empty((N, steps, self.n))
-        work_f, work_g = np.empty(self.n), np.empty(self.n * self.mz)
+        work = np.empty(2 * self.n + self.n * self.mz)
         ffi, status = self.ffi, self.ffi.new("int *")
         buf = ffi.from_buffer
-        bad = self.lib.stospline__em_steps(N, steps, float(t), float(dt), buf("double[]", U),
-                                           self._p, buf("double[]", dz), buf("double[]", X),
-                                           buf("double[]", xs), buf("double[]", work_f),
-                                           buf("double[]", work_g), status)
+        assert X.flags.c_contiguous and z.flags.c_contiguous and lin.flags.c_contiguous
+        bad = self.lib.stospline__exp_em_steps(
+            N, steps, float(t), float(dt), float(dz_scale), buf("double[]", U), self._p,
+            buf("double[]", lin), buf("double[]", z), buf("double[]", X),
+            buf("double[]", xs), buf("double[]", work), status)
         if bad >= 0:
             raise ProblemError(_FIELD, f"the model returned {status[0]} at t = {t:g} on "
                                        f"Monte Carlo path {bad}")

@@ -1,11 +1,13 @@
 """The linearisation of the compiled unicycle (examples/nonlinear/unicycle.c) against its
-analytic Jacobians, at random points of a fixed seed."""
+analytic Jacobians, at random points of a fixed seed; an affine model's to its coefficients,
+to a few eps, unless it refuses the wide differences' points."""
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from stospline.design.linearise import linearise
+from stospline.errors import ProblemError
 from stospline.problem.plant_c import build_plant
 from stospline.problem.plant_model import parse_plant
 
@@ -64,3 +66,49 @@ def test_the_error_estimate_sees_a_kink():
     assert lin.error > 0.01
     smooth = linearise(Kink(), np.zeros(1), np.array([[0.5]]), np.zeros((1, 1)))
     assert smooth.error < 1e-9
+
+
+class _Affine:
+    """dx = (A x + B u + f) dt + Σ x_i G_i dZ, with random coefficients of a fixed seed; with
+    `bound`, refused (as a C model's status is) beyond |x_i| > bound."""
+
+    def __init__(self, bound=None):
+        rng = np.random.default_rng(35)
+        self.A, self.B = rng.normal(size=(3, 3)), rng.normal(size=(3, 2))
+        self.f = rng.normal(size=3)
+        self.G = rng.normal(size=(3, 3, 2))        # G[i] multiplies x_i
+        self.bound = bound
+
+    def _check(self, x):
+        if self.bound is not None and np.any(np.abs(x) > self.bound):
+            raise ProblemError("plant.source", "stospline_plant_drift returned 1")
+
+    def drift(self, t, x, u):
+        self._check(x)
+        return x @ self.A.T + u @ self.B.T + self.f
+
+    def diffusion(self, t, x, u):
+        self._check(x)
+        return np.einsum("ki,iab->kab", x, self.G)
+
+
+def test_an_affine_model_linearises_to_its_coefficients():
+    """The wide differences: a few eps, where the narrow ones alone are off by ~eps^(2/3)."""
+    model, rng = _Affine(), np.random.default_rng(1)
+    x, u = rng.normal(size=(32, 3)), rng.normal(size=(32, 2))
+    lin = linearise(model, np.zeros(32), x, u)
+    assert lin.error < 1e-14
+    for k in range(32):
+        np.testing.assert_allclose(lin.A[k], model.A, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(lin.B[k], model.B, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(lin.c[k], model.f, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(lin.G[k], model.G, rtol=0, atol=1e-14)
+
+
+def test_a_model_that_refuses_the_wide_points_keeps_the_narrow_differences():
+    model, rng = _Affine(bound=1.5), np.random.default_rng(1)
+    x, u = rng.uniform(-1, 1, size=(32, 3)), rng.normal(size=(32, 2))
+    lin = linearise(model, np.zeros(32), x, u)
+    assert 1e-14 < lin.error < 1e-9
+    for k in range(32):
+        np.testing.assert_allclose(lin.A[k], model.A, rtol=0, atol=1e-9)

@@ -1,8 +1,8 @@
-"""The table benches (`tools/bench/spline_tables.py`, `tools/bench/table_kernel.py`) and the
-tick-grid QP's (`tools/bench/tick_qp_osqp.py`) and the harness build's
-(`tools/bench/harness_build.py`) refuse a bad argument with an error line naming
-it (after argparse's usage line) and exit status 2, before any work: no traceback, nothing on
-stdout."""
+"""The table benches (`tools/bench/spline_tables.py`, `tools/bench/table_kernel.py`), the
+tick-grid QP's (`tools/bench/tick_qp_osqp.py`), the model loop's (`tools/bench/model_loop.py`)
+and the harness build's (`tools/bench/harness_build.py`) refuse a bad argument with an error
+line naming it (after argparse's usage line) and exit status 2, before any work: no
+traceback, nothing on stdout."""
 import os
 import subprocess
 import sys
@@ -29,6 +29,10 @@ from conftest import REPO
     ("tick_qp_osqp.py", ["--example", "nope.toml"], "--example"),
     ("harness_build.py", ["--runs", "0"], "--runs"),
     ("harness_build.py", ["nope.toml"], "PROBLEM"),
+    ("model_loop.py", ["--paths", "0"], "--paths"),
+    ("model_loop.py", ["--paths", "2000000"], "--paths"),
+    ("model_loop.py", ["--hz", "0"], "--hz"),
+    ("model_loop.py", ["--repeat", "0"], "--repeat"),
 ])
 def test_a_bad_argument_is_named_and_refused(script, args, names):
     env = {**os.environ, "PYTHONPATH": str(REPO / "host")}

@@ -463,6 +463,7 @@ static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick,
     for (i = 0u; i < nu; ++i) {
         stsp_param_acc_t acc =
             stsp_param_law_first(k0[i], &pc->checked.S_k0[s0 + (i * n)], pc->d, n);
+        stsp_scalar_t out;
         uint32_t j;
         for (j = 0u; j < nx; ++j) {
             acc = stsp_param_law_mac(acc, K[j], x[j]);
@@ -474,8 +475,9 @@ static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick,
             L = &L[n_latch];
         }
         K = &K[nx];
-        y[i] = stsp_param_end(acc, k0[i]);
-        if (!((y[i] >= h->u_min[i]) && (y[i] <= h->u_max[i]))) {
+        out = stsp_param_end(acc, k0[i]);
+        y[i] = out;
+        if (!((out >= h->u_min[i]) && (out <= h->u_max[i]))) {
             alarm = 1u;
         }
     }

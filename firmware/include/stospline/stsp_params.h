@@ -6,7 +6,8 @@
  * latch offsets lambda0 are affine in the parameters theta, and K, L, Lambda do not depend on
  * them. The parameter table (generated as <name>_params.c beside the gain table) holds the
  * nominal values, the declared range and the sensitivity columns; with d = theta - nominal
- * (binary32, computed once by stsp_set_params()) the law of stsp_controller.h runs with
+ * (computed once by stsp_set_params(); in Q format in a Q15/Q31 build, below) the law of
+ * stsp_controller.h runs with
  *
  *     k0'[j][i]      = k0[j][i]      + S_k0[j][i][0] d[0] + ... + S_k0[j][i][P-1] d[P-1]
  *     lambda0'[s][c] = lambda0[s][c] + S_lambda0[s][c][0] d[0] + ...
@@ -21,7 +22,8 @@
  * finite plan that stays within the actuator limits, but not the design at either theta; set
  * the parameters before the stage start they should apply to.
  *
- * Evaluation order (fixed, binary32, no fused multiply-add: -ffp-contract=off):
+ * Evaluation order of a float32 build (fixed, binary32, no fused multiply-add:
+ * -ffp-contract=off):
  *     d[p]   = theta[p] - nominal[p]                              (stsp_set_params)
  *     e      = k0[i];  e = e + (S_k0[i][p] d[p]) for p = 0 .. P-1
  *     u[i]   = -e; u[i] = u[i] - (K[i][j] x[j]) for j = 0 .. nx-1, then
@@ -39,7 +41,8 @@
  * subtraction, the rest exact), and the columns are stored negated and pre-scaled:
  *     S_k0[j][i][p]      = rhu(-S_k0_ip(j) 2^(d_exp[p] - u_exp[i] + F))
  *     S_lambda0[s][c][p] = rhu(S_lambda0_cp 2^(d_exp[p] - v_exp[c] + F))
- * so that, exactly in the accumulator of stsp_step (any order, one rounding),
+ * (the table's stored, negated integers below) so that, exactly in the accumulator of
+ * stsp_step (any order, one rounding),
  *     u_q[i] = k0[i] + floor((sum_j K x_q + sum_p S_k0 d_q + sum_c L v_q) / 2^F + 1/2)
  *     v_q[c] = lambda0[c] + floor((sum_j Lambda x_q + sum_p S_lambda0 d_q) / 2^F + 1/2).
  * stsp_param_init() checks every law row |k0| + sum|K| + sum|S_k0| + sum|L| and latch row
@@ -56,8 +59,8 @@
  * Does not use malloc, recursion or VLAs; every loop is bounded by the validated dimensions
  * (n_params <= STSP_MAX_PARAMS, 32 by default). Buffers: stsp_param_t holds a stsp_ctrl_t,
  * the validated copy of the parameter table's header and STSP_MAX_PARAMS scalars of d: 928
- * bytes with the default limits in a float32 build (arm-none-eabi-gcc -mcpu=cortex-m4,
- * sizeof(stsp_param_t)).
+ * bytes with the default limits in a float32 build, 348 in Q15, 476 in Q31
+ * (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_param_t)).
  * stsp_param_step() uses STSP_MAX_LATCH + STSP_MAX_NU scalars of stack. Every tick of a
  * parametric instance is evaluated by this file in plain C loops (not stsp_step()'s ordinary
  * tick): nu P more multiply-adds per tick, and the generic loop overhead

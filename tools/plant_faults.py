@@ -298,7 +298,7 @@ FAULTS = [
     Fault("F83", "params: the problem hash not compared", CTL,
           "    if (memcmp(pc->checked.problem_sha256, table->problem_sha256, 32u) != 0) {",
           "    if (memcmp(pc->checked.problem_sha256, table->problem_sha256, 0u) != 0) {"),
-    # Runtime parameters in fixed point (stsp_params.c; tests/c/test_params_q.c).
+    # Runtime parameters in fixed point (stsp_params.c; tests/c/test_params.c in Q15/Q31).
     Fault("F84", "params (Q15/Q31): a negative d_q floored, not rounded", CTL,
           "    const double r = y + 0.5;", "    const double r = (y < 0.0) ? y : y + 0.5;"),
     Fault("F85", "params (Q15/Q31): the row bound leaves out the feed-forward columns", CTL,

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Expected values for tests/c/test_params_q.c from the host's bit-exact reference of the
-fixed-point parametric controller (stospline.table.qparams.QParamSpec) on the shipped
-gains/robot_goal_<arith>* tables (tools/params_tables.py --fixed): the runs A, B, C of
+"""Expected values for tests/c/test_params.c in its Q15/Q31 builds from the host's bit-exact
+reference of the fixed-point parametric controller (stospline.table.qparams.QParamSpec) on the
+shipped gains/robot_goal_<arith>* tables (tools/params_tables.py --fixed): the runs A, B, C of
 tests/c/params_reference.py (the same thetas and change ticks) with the integer states of
 params_q_state() (the same formula in the C test), their commands hashed and some ticks'
 commands kept, for Q15 and Q31.

@@ -95,15 +95,17 @@ static stsp_status_t stsp_param_check(const stsp_params_table_t *p, const stsp_h
  * number: exact). */
 static double stsp_param_pow2(int32_t e)
 {
-    const uint64_t bits = ((uint64_t)(uint32_t)(e + 1023)) << 52;
+    const int32_t biased = e + 1023;
+    const uint64_t bits = ((uint64_t)(uint32_t)biased) << 52;
     double value;
     (void)memcpy(&value, &bits, sizeof value);
     return value;
 }
 
-/* *q = floor((theta - nominal[p]) 2^(F - d_exp[p]) + 1/2) in binary64 (the subtraction the
- * only rounding before the one to an integer); 1 when it is within [-(2^F - 1), 2^F - 1], else
- * 0 and *q untouched. Every compare is false for NaN. */
+/* *q = floor((theta - nominal[p]) 2^(F - d_exp[p]) + 1/2) in binary64, the subtraction and the
+ * + 1/2 rounded as binary64 operations (host qparams.ParametricFixedPoint.d_q: the same
+ * operations); 1 when it is within [-(2^F - 1), 2^F - 1], else 0 and *q untouched. Every
+ * compare is false for NaN. A d_exp changed after init still gives a normal 2^e. */
 static int stsp_param_dq(const stsp_params_table_t *p, uint32_t i, double theta,
                          stsp_scalar_t *q)
 {
@@ -163,7 +165,7 @@ static int stsp_param_values_ok(const stsp_params_table_t *p, const stsp_header_
         return 0;
     }
     for (i = 0u; i < p->n_params; ++i) {
-        stsp_scalar_t q = 0;
+        stsp_scalar_t q = (stsp_scalar_t)0;
         if (!((p->lower[i] <= p->nominal[i]) && (p->nominal[i] <= p->upper[i])) ||
             (stsp_param_dq(p, i, p->lower[i], &q) == 0) ||
             (stsp_param_dq(p, i, p->upper[i], &q) == 0)) {

@@ -10,9 +10,9 @@
 #define ROBOT_GOAL_Q31_PARAM_GOAL_X 0u
 #define ROBOT_GOAL_Q31_PARAM_GOAL_Y 1u
 
-/* At parameters theta[N_PARAMS] (each within [lower, upper]), d_q[p] =
- * floor((theta[p] - nominal[p]) 2^(31 - d_exp[p]) + 1/2) (binary64) is P more states of the
- * law: S_k0[(j*NU + i)*N_PARAMS + p] (negated, pre-scaled) beside K[j][i],
+/* At parameters theta[N_PARAMS] (each within [lower, upper]),
+ * d_q[p] = floor((theta[p] - nominal[p]) 2^(31 - d_exp[p]) + 1/2) (binary64) is P more
+ * states of the law: S_k0[(j*NU + i)*N_PARAMS + p] (negated, pre-scaled) beside K[j][i],
  * S_lambda0[(s*N_LATCH + c)*N_PARAMS + p] (pre-scaled) beside Lambda[s][c] (stsp_params.h). */
 extern const double robot_goal_q31_param_nominal[2];
 extern const double robot_goal_q31_param_lower[2];

@@ -180,10 +180,11 @@ def generate_parametric_qc(ptable: ParametricTable, pf, *, prefix: str | None = 
     gh, gc = generate_c(pf.gain_table(p), source_name=source_name)
     P = pf.nominal.size
     T, m, n_latch = ft.n_ticks, ft.dims[1], ft.dims[2]
-    S, e, lit = ft.n_stages, f"stsp_{ft.arith}_t", _qlit(ft.frac_bits)
-    note = f"""/* At parameters theta[N_PARAMS] (each within [lower, upper]), d_q[p] =
- * floor((theta[p] - nominal[p]) 2^({ft.frac_bits} - d_exp[p]) + 1/2) (binary64) is P more states of the
- * law: S_k0[(j*NU + i)*N_PARAMS + p] (negated, pre-scaled) beside K[j][i],
+    F = ft.frac_bits
+    S, e, lit = ft.n_stages, f"stsp_{ft.arith}_t", _qlit(F)
+    note = f"""/* At parameters theta[N_PARAMS] (each within [lower, upper]),
+ * d_q[p] = floor((theta[p] - nominal[p]) 2^({F} - d_exp[p]) + 1/2) (binary64) is P more
+ * states of the law: S_k0[(j*NU + i)*N_PARAMS + p] (negated, pre-scaled) beside K[j][i],
  * S_lambda0[(s*N_LATCH + c)*N_PARAMS + p] (pre-scaled) beside Lambda[s][c] (stsp_params.h). */"""
     decls = [f"extern const double {p}_param_nominal[{P}];",
              f"extern const double {p}_param_lower[{P}];",

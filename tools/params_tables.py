@@ -1,9 +1,13 @@
 """Write gains/<name>_params.{c,h}, the sensitivity columns of every example that declares
 [[parameters]] (stospline.oracle.parametric.parametric_c_files), byte-for-byte reproducible.
 
-    .venv/bin/python tools/params_tables.py [--out gains/] [--bytes]
+    .venv/bin/python tools/params_tables.py [--out gains/] [--bytes] [--fixed]
 
 --bytes prints, per example, the flash of the float32 per-tick table and of its columns.
+--fixed writes, instead, the Q15/Q31 parametric controllers of the examples in FIXED
+(`fixed_point_files`): gains/<name>_<arith>.{c,h}, the gain table quantized with the columns
+over the whole box, and gains/<name>_<arith>_params.{c,h}, its columns; with --bytes it prints
+their columns' flash and error bound.
 """
 import argparse
 import sys
@@ -13,13 +17,25 @@ from stospline.oracle.parametric import parametric_c_files
 from stospline.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[1]
+FIXED = ("robot_goal",)       # the examples with Q15/Q31 parametric controllers in gains/
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(ROOT / "gains"))
     ap.add_argument("--bytes", action="store_true")
+    ap.add_argument("--fixed", action="store_true")
     args = ap.parse_args(argv)
+    if args.fixed:
+        for name in FIXED:
+            for arith, (files, pf) in fixed_point_files(name).items():
+                for fname, text in files.items():
+                    (Path(args.out) / fname).write_text(text)
+                if args.bytes:
+                    print(f"{name} {arith}: columns {pf.column_bytes()} B, error bound "
+                          f"{', '.join(f'{b:.2f}' for b in pf.bound_lsb.max(axis=0))} "
+                          f"command LSB")
+        return 0
     for path in sorted((ROOT / "examples").glob("*.toml")):
         problem = load_problem(path)
         if not problem.parameters:
@@ -30,6 +46,25 @@ def main(argv=None) -> int:
         if args.bytes:
             print(path.stem, _flash(problem))
     return 0
+
+
+def fixed_point_files(name: str) -> dict:
+    """``{arith: (files, pf)}`` for Q15 and Q31: the C of example `name`'s fixed-point
+    parametric controller (`stospline.table.parametric_c.generate_parametric_qc`; the state
+    range the box's, `stospline.oracle.over_box.box_state_range`) and its
+    `stospline.table.qparams.ParametricFixedPoint`."""
+    from stospline.oracle.over_box import box_moments, box_state_range
+    from stospline.oracle.parametric import design_parametric
+    from stospline.table.parametric_c import generate_parametric_qc
+    from stospline.table.qparams import quantize_parametric
+    problem = load_problem(ROOT / "examples" / f"{name}.toml")
+    pt = design_parametric(problem).table
+    x_range = box_state_range(box_moments(problem, pt))
+    out = {}
+    for arith in ("q15", "q31"):
+        pf = quantize_parametric(pt, arith, x_range)
+        out[arith] = (generate_parametric_qc(pt, pf, source_name=f"{name}.toml"), pf)
+    return out
 
 
 def _flash(problem) -> str:

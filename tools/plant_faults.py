@@ -288,14 +288,25 @@ FAULTS = [
           CTL, "        if (!((theta[i] >= p->lower[i]) && (theta[i] <= p->upper[i]))) {",
           "        if ((theta[i] < p->lower[i]) || (theta[i] > p->upper[i])) {"),
     Fault("F80", "params: the latch without the parameters' offsets", CTL,
-          "S_lambda0[row * n], pc->d, n);", "S_lambda0[row * n], pc->d, 0u * n);"),
+          "                                                          pc->d, n);",
+          "                                                          pc->d, 0u * n);"),
     Fault("F81", "params: the CRC leaves out the feed-forward columns", CTL,
-          "    crc = stsp_crc32_f32s(crc, params->S_k0, stsp_param_k0_len(params));\n", ""),
+          "    crc = stsp_crc32_scalars(crc, params->S_k0, stsp_param_k0_len(params));",
+          "    crc = stsp_crc32_scalars(crc, params->S_k0, 0u * stsp_param_k0_len(params));"),
     Fault("F82", "params: the sensitivity rows not moved on per input (index slip)", CTL,
-          "        S = &S[n];\n", ""),
+          "&pc->checked.S_k0[s0 + (i * n)]", "&pc->checked.S_k0[s0]"),
     Fault("F83", "params: the problem hash not compared", CTL,
           "    if (memcmp(pc->checked.problem_sha256, table->problem_sha256, 32u) != 0) {",
           "    if (memcmp(pc->checked.problem_sha256, table->problem_sha256, 0u) != 0) {"),
+    # Runtime parameters in fixed point (stsp_params.c; tests/c/test_params.c in Q15/Q31).
+    Fault("F84", "params (Q15/Q31): a negative d_q floored, not rounded", CTL,
+          "    const double r = y + 0.5;", "    const double r = (y < 0.0) ? y : y + 0.5;"),
+    Fault("F85", "params (Q15/Q31): the row bound leaves out the feed-forward columns", CTL,
+          " +\n                          stsp_q_abs_sum(&p->S_k0[r * n], n);", ";"),
+    Fault("F86", "params (Q15/Q31): the range's ends not checked against the Q range", CTL,
+          "            (stsp_param_dq(p, i, p->lower[i], &q) == 0) ||\n"
+          "            (stsp_param_dq(p, i, p->upper[i], &q) == 0)) {",
+          "            (stsp_param_dq(p, i, p->nominal[i], &q) == 0)) {"),
 ]
 
 
@@ -322,8 +333,10 @@ class Sandbox:
         self.cffi = base / "cffi"
         self.src.mkdir()
         shutil.copy2(ROOT / "CMakeLists.txt", self.src)
+        shutil.copy2(ROOT / "VERSION", self.src)   # the project's version (CMakeLists.txt)
         # Everything the top-level CMakeLists.txt reads (the host benchmark is a target too).
-        for d in ("firmware", "tests/c", "tests/consumer", "gains", "cmake", "tools/bench"):
+        for d in ("firmware", "tests/c", "tests/consumer", "gains", "cmake", "tools/bench",
+                  "host/stospline/board/files"):
             shutil.copytree(ROOT / d, self.src / d)
         self.pristine = {}
 

@@ -15,7 +15,8 @@
 # The examples with a [measurement] sensor (robot_position_sensor, quadrotor_altimeter) get
 # their filter's tables in <name>.{c,h} from the first loop (float32, per-tick: the estimator
 # takes no spline or fixed-point table); those with [[parameters]] (robot_goal) their
-# sensitivity columns in <name>_params.{c,h}, from the same loop.
+# sensitivity columns in <name>_params.{c,h}, from the same loop; robot_goal also its Q15/Q31
+# parametric controllers (<name>_<arith>.* and <name>_<arith>_params.*, tools/params_tables.py).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -33,3 +34,4 @@ for arith in q15 q31; do
   "$root/.venv/bin/stospline" design examples/robot_corridor.toml --arith "$arith" --table spline \
     --out gains/
 done
+"$root/.venv/bin/python" tools/params_tables.py --fixed --out gains/

@@ -261,6 +261,48 @@ static inline stsp_scalar_t stsp_q_round(stsp_uacc_t acc, stsp_scalar_t c)
 }
 #endif /* STSP_ARITH_FIXED_POINT */
 
+#ifdef STSP_ARITH_FIXED_POINT
+/* Sum of |values[0..count)| (count <= STSP_MAX_NX + STSP_MAX_LATCH + STSP_MAX_PARAMS: no
+ * wrap-around, each term at most 2^F). */
+static inline stsp_uacc_t stsp_q_abs_sum(const stsp_scalar_t *values, uint32_t count)
+{
+    stsp_uacc_t sum = 0u;
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        const stsp_acc_t a = values[i];
+        sum += (stsp_uacc_t)((a < 0) ? -a : a);
+    }
+    return sum;
+}
+
+/* Exponents within +-STSP_Q_EXP_MAX (stsp_state_to_q builds 2^(F - x_exp) as a binary32). */
+static inline int stsp_q_exps_ok(const int8_t *e, uint32_t count)
+{
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        if ((e[i] > STSP_Q_EXP_MAX) || (e[i] < -STSP_Q_EXP_MAX)) {
+            return 0;
+        }
+    }
+    return 1;
+}
+#endif
+
+/* 1 when every one of values[0..count) (binary64) is finite, else 0. */
+static inline int stsp_all_finite_f64(const double *values, uint32_t count)
+{
+    const uint64_t exp_mask = 0x7FF0000000000000u; /* the exponent field */
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        uint64_t bits;
+        (void)memcpy(&bits, &values[i], sizeof bits);
+        if ((bits & exp_mask) == exp_mask) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
 /* What a tick other than the ordinary one does: decided before anything is written. */
 typedef struct {
     uint16_t stage;   /* stage of the tick */

@@ -1,10 +1,8 @@
 /* Runtime parameters: see stospline/stsp_params.h for the contract. The tick reuses the
  * controller's plan and commit (stsp_plan_tick, stsp_commit_tick: range, order, stage and
- * latch decisions), and evaluates the law itself with k0' and lambda0'. */
-#include "stospline/stsp_types.h"
-
-#ifndef STSP_ARITH_FIXED_POINT
-
+ * latch decisions), and evaluates the law itself with k0' and lambda0'. One source for every
+ * arithmetic: the rows of the law and of the latch, the values' checks and the CRC's
+ * serialization differ between float32 and Q15/Q31 (the sections below). */
 #include "stospline/stsp_params.h"
 #include "stsp_crc32.h"
 #include "stsp_internal.h"
@@ -33,13 +31,23 @@ uint32_t stsp_params_table_crc32(const stsp_params_table_t *params)
     crc = stsp_crc32_u32(crc, params->n_latch);
     crc = stsp_crc32_u32(crc, params->n_stages);
     crc = stsp_crc32_u32(crc, params->n_ticks);
+#ifdef STSP_ARITH_FIXED_POINT
+    crc = stsp_crc32_u32(crc, params->scalar_kind);
+    crc = stsp_crc32_f64s(crc, params->nominal, n);
+    crc = stsp_crc32_f64s(crc, params->lower, n);
+    crc = stsp_crc32_f64s(crc, params->upper, n);
+#else
     crc = stsp_crc32_f32s(crc, params->nominal, n);
     crc = stsp_crc32_f32s(crc, params->lower, n);
     crc = stsp_crc32_f32s(crc, params->upper, n);
-    crc = stsp_crc32_f32s(crc, params->S_k0, stsp_param_k0_len(params));
+#endif
+    crc = stsp_crc32_scalars(crc, params->S_k0, stsp_param_k0_len(params));
     if (params->n_latch > 0u) {
-        crc = stsp_crc32_f32s(crc, params->S_lambda0, stsp_param_lambda_len(params));
+        crc = stsp_crc32_scalars(crc, params->S_lambda0, stsp_param_lambda_len(params));
     }
+#ifdef STSP_ARITH_FIXED_POINT
+    crc = stsp_crc32_i8s(crc, params->d_exp, n);
+#endif
     crc = stsp_crc32_bytes(crc, params->problem_sha256, 32u);
     return stsp_crc32_end(crc);
 }
@@ -52,11 +60,16 @@ static stsp_status_t stsp_param_check(const stsp_params_table_t *p, const stsp_h
         ((p->n_latch > 0u) && (p->S_lambda0 == NULL))) {
         return STSP_ERR_NULL;
     }
+#ifdef STSP_ARITH_FIXED_POINT
+    if (p->d_exp == NULL) {
+        return STSP_ERR_NULL;
+    }
+#endif
     if (p->magic != STSP_PARAMS_MAGIC) {
         return STSP_ERR_BAD_MAGIC;
     }
     if ((p->format_version != STSP_PARAMS_FORMAT_VERSION) ||
-        (p->scalar_kind != STSP_SCALAR_FLOAT32)) {
+        (p->scalar_kind != STSP_SCALAR_KIND)) {
         return STSP_ERR_BAD_VERSION;
     }
     if ((p->n_params == 0u) || (p->n_params > STSP_MAX_PARAMS) || (p->nu != h->nu) ||
@@ -65,17 +78,154 @@ static stsp_status_t stsp_param_check(const stsp_params_table_t *p, const stsp_h
         return STSP_ERR_BAD_DIMS;
     }
     /* The parametric law is the per-tick one; a spline's k0 or a band dual's latch would
-     * need sensitivities of their own. */
-    if ((h->spline != NULL) || (h->band_qp != NULL)) {
+     * need sensitivities of their own (a fixed-point table has no band dual). */
+    if (h->spline != NULL) {
         return STSP_ERR_BAD_DIMS;
     }
+#ifndef STSP_ARITH_FIXED_POINT
+    if (h->band_qp != NULL) {
+        return STSP_ERR_BAD_DIMS;
+    }
+#endif
     return STSP_OK;
 }
 
-/* 1 when every value is finite and lower <= nominal <= upper. */
-static int stsp_param_values_ok(const stsp_params_table_t *p)
+#ifdef STSP_ARITH_FIXED_POINT
+/* 2^e as a binary64 from its bits, |e| <= STSP_Q_EXP_MAX + STSP_Q_FRAC_BITS (a normal
+ * number: exact). */
+static double stsp_param_pow2(int32_t e)
+{
+    const int32_t biased = e + 1023;
+    const uint64_t bits = ((uint64_t)(uint32_t)biased) << 52;
+    double value;
+    (void)memcpy(&value, &bits, sizeof value);
+    return value;
+}
+
+/* *q = floor((theta - nominal[p]) 2^(F - d_exp[p]) + 1/2) in binary64, the subtraction and the
+ * + 1/2 rounded as binary64 operations (host qparams.ParametricFixedPoint.d_q: the same
+ * operations); 1 when it is within [-(2^F - 1), 2^F - 1], else 0 and *q untouched. Every
+ * compare is false for NaN. A d_exp changed after init still gives a normal 2^e. */
+static int stsp_param_dq(const stsp_params_table_t *p, uint32_t i, double theta,
+                         stsp_scalar_t *q)
+{
+    const double one = stsp_param_pow2(STSP_Q_FRAC_BITS);
+    const double y = (theta - p->nominal[i]) *
+                     stsp_param_pow2((int32_t)STSP_Q_FRAC_BITS - (int32_t)p->d_exp[i]);
+    const double r = y + 0.5;
+    int64_t k;
+    if (!((r > (1.0 - one)) && (r < one))) {
+        return 0; /* floor(r) outside +-(2^F - 1): also keeps the conversion defined */
+    }
+    k = (int64_t)r; /* truncation; a step down for a negative non-integer is floor */
+    if ((double)k > r) {
+        k -= 1;
+    }
+    *q = (stsp_scalar_t)k;
+    return 1;
+}
+
+/* The law rows (every tick and input) and latch rows (every stage and multiplier) with the
+ * columns' entries within 2^F - 1 (stsp_params.h): no sum overflows for any d_q. */
+static int stsp_param_rows_ok(const stsp_params_table_t *p, const stsp_header_t *h)
+{
+    const stsp_uacc_t row_max = (stsp_uacc_t)STSP_Q_ONE - 1u;
+    const uint32_t n = p->n_params;
+    const uint32_t nx = h->nx;
+    const uint32_t n_latch = h->n_latch;
+    uint32_t r;
+    for (r = 0u; r < (h->n_ticks * (uint32_t)h->nu); ++r) {
+        stsp_uacc_t sum = stsp_q_abs_sum(&h->k0[r], 1u) + stsp_q_abs_sum(&h->K[r * nx], nx) +
+                          stsp_q_abs_sum(&p->S_k0[r * n], n);
+        if (n_latch > 0u) {
+            sum += stsp_q_abs_sum(&h->L[r * n_latch], n_latch);
+        }
+        if (sum > row_max) {
+            return 0;
+        }
+    }
+    for (r = 0u; r < ((uint32_t)h->n_stages * n_latch); ++r) {
+        if ((stsp_q_abs_sum(&h->lambda0[r], 1u) + stsp_q_abs_sum(&h->Lambda[r * nx], nx) +
+             stsp_q_abs_sum(&p->S_lambda0[r * n], n)) > row_max) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* 1 when every value is finite, lower <= nominal <= upper, the exponents within range, d_q in
+ * the Q range at both ends of every range, and every row within the bound. */
+static int stsp_param_values_ok(const stsp_params_table_t *p, const stsp_header_t *h)
 {
     uint32_t i;
+    if ((stsp_all_finite_f64(p->nominal, p->n_params) == 0) ||
+        (stsp_all_finite_f64(p->lower, p->n_params) == 0) ||
+        (stsp_all_finite_f64(p->upper, p->n_params) == 0) ||
+        (stsp_q_exps_ok(p->d_exp, p->n_params) == 0)) {
+        return 0;
+    }
+    for (i = 0u; i < p->n_params; ++i) {
+        stsp_scalar_t q = (stsp_scalar_t)0;
+        if (!((p->lower[i] <= p->nominal[i]) && (p->nominal[i] <= p->upper[i])) ||
+            (stsp_param_dq(p, i, p->lower[i], &q) == 0) ||
+            (stsp_param_dq(p, i, p->upper[i], &q) == 0)) {
+            return 0;
+        }
+    }
+    return stsp_param_rows_ok(p, h);
+}
+
+/* The deviations of theta into d (the range checked). */
+static int stsp_param_deviations(const stsp_params_table_t *p, const stsp_f32_t *theta,
+                                 stsp_scalar_t *d)
+{
+    uint32_t i;
+    for (i = 0u; i < p->n_params; ++i) {
+        if (stsp_param_dq(p, i, (double)theta[i], &d[i]) == 0) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* The row primitives (stsp_controller.c's fixed-point law): the accumulator starts from its
+ * bias plus the parameters' terms, every gain is stored negated, and the row's constant is
+ * added after the one rounding. */
+typedef stsp_uacc_t stsp_param_acc_t;
+
+static stsp_param_acc_t stsp_param_terms(const stsp_scalar_t *S, const stsp_scalar_t *d,
+                                         uint32_t n)
+{
+    stsp_uacc_t acc = stsp_q_start();
+    uint32_t p;
+    for (p = 0u; p < n; ++p) {
+        acc = stsp_q_mac(acc, S[p], d[p]);
+    }
+    return acc;
+}
+
+#define stsp_param_law_first(c, S, d, n) stsp_param_terms((S), (d), (n))
+#define stsp_param_latch_first(c, S, d, n) stsp_param_terms((S), (d), (n))
+#define stsp_param_law_mac stsp_q_mac
+#define stsp_param_latch_mac stsp_q_mac
+#define stsp_param_end(acc, c) stsp_q_round((acc), (c))
+
+/* A command outside the limits is an integer: clamped, never an error. */
+static stsp_status_t stsp_param_nonfinite(const stsp_scalar_t *x, const stsp_scalar_t *y,
+                                          uint32_t nx, uint32_t nu)
+{
+    (void)x;
+    (void)y;
+    (void)nx;
+    (void)nu;
+    return STSP_OK;
+}
+#else
+/* 1 when every value is finite and lower <= nominal <= upper. */
+static int stsp_param_values_ok(const stsp_params_table_t *p, const stsp_header_t *h)
+{
+    uint32_t i;
+    (void)h;
     if ((stsp_all_finite(p->nominal, p->n_params) == 0) ||
         (stsp_all_finite(p->lower, p->n_params) == 0) ||
         (stsp_all_finite(p->upper, p->n_params) == 0) ||
@@ -90,6 +240,50 @@ static int stsp_param_values_ok(const stsp_params_table_t *p)
     }
     return 1;
 }
+
+/* d = theta - nominal (the range checked: every theta[i] within [lower[i], upper[i]]). */
+static int stsp_param_deviations(const stsp_params_table_t *p, const stsp_f32_t *theta,
+                                 stsp_f32_t *d)
+{
+    uint32_t i;
+    for (i = 0u; i < p->n_params; ++i) {
+        d[i] = theta[i] - p->nominal[i];
+    }
+    return 1;
+}
+
+/* e = c; e = e + (S[p] d[p]) for p = 0 .. n-1: a constant term at the parameters in use. */
+static stsp_f32_t stsp_param_shift(stsp_f32_t c, const stsp_f32_t *S, const stsp_f32_t *d,
+                                   uint32_t n)
+{
+    stsp_f32_t e = c;
+    uint32_t p;
+    for (p = 0u; p < n; ++p) {
+        e = stsp_mla(e, S[p], d[p]);
+    }
+    return e;
+}
+
+/* The row primitives (stsp_params.h's order): a law row starts from -(k0 + S_k0 d) and
+ * subtracts its terms, a latch row starts from lambda0 + S_lambda0 d and adds them. */
+typedef stsp_f32_t stsp_param_acc_t;
+#define stsp_param_law_first(c, S, d, n) (-stsp_param_shift((c), (S), (d), (n)))
+#define stsp_param_latch_first(c, S, d, n) stsp_param_shift((c), (S), (d), (n))
+#define stsp_param_law_mac stsp_mls
+#define stsp_param_latch_mac stsp_mla
+#define stsp_param_end(acc, c) (acc)
+
+/* The error of a command with a NaN or infinite entry, else STSP_OK. */
+static stsp_status_t stsp_param_nonfinite(const stsp_f32_t *x, const stsp_f32_t *y, uint32_t nx,
+                                          uint32_t nu)
+{
+    if (stsp_all_finite(y, nu) == 0) {
+        return (stsp_all_finite(x, nx) == 0) ? STSP_ERR_NONFINITE_STATE
+                                             : STSP_ERR_NONFINITE_OUTPUT;
+    }
+    return STSP_OK;
+}
+#endif
 
 static stsp_status_t stsp_param_refuse(stsp_param_t *pc, stsp_status_t status)
 {
@@ -123,7 +317,7 @@ stsp_status_t stsp_param_init(stsp_param_t *pc, const stsp_table_t *table,
     if (memcmp(pc->checked.problem_sha256, table->problem_sha256, 32u) != 0) {
         return stsp_param_refuse(pc, STSP_ERR_BAD_PROBLEM);
     }
-    if (stsp_param_values_ok(&pc->checked) == 0) {
+    if (stsp_param_values_ok(&pc->checked, &pc->ctrl.checked) == 0) {
         return stsp_param_refuse(pc, STSP_ERR_BAD_VALUES);
     }
     pc->params = params;
@@ -134,7 +328,7 @@ stsp_status_t stsp_param_init(stsp_param_t *pc, const stsp_table_t *table,
 stsp_status_t stsp_set_params(stsp_param_t *pc, const stsp_f32_t *theta)
 {
     const stsp_params_table_t *p;
-    stsp_f32_t d[STSP_MAX_PARAMS];
+    stsp_scalar_t d[STSP_MAX_PARAMS];
     uint32_t i;
     if ((pc == NULL) || (theta == NULL)) {
         return STSP_ERR_NULL;
@@ -149,7 +343,9 @@ stsp_status_t stsp_set_params(stsp_param_t *pc, const stsp_f32_t *theta)
         if (!((theta[i] >= p->lower[i]) && (theta[i] <= p->upper[i]))) {
             return STSP_ERR_PARAM_RANGE;
         }
-        d[i] = theta[i] - p->nominal[i];
+    }
+    if (stsp_param_deviations(p, theta, d) == 0) {
+        return STSP_ERR_PARAM_RANGE;
     }
     for (i = 0u; i < p->n_params; ++i) {
         pc->d[i] = d[i];
@@ -171,6 +367,11 @@ stsp_status_t stsp_param_reset(stsp_param_t *pc)
 /* 1 when the table's header is no longer the validated copy. */
 static int stsp_param_header_changed(const stsp_params_table_t *a, const stsp_params_table_t *b)
 {
+#ifdef STSP_ARITH_FIXED_POINT
+    if (a->d_exp != b->d_exp) {
+        return 1;
+    }
+#endif
     return ((a->magic != b->magic) || (a->format_version != b->format_version) ||
             (a->scalar_kind != b->scalar_kind) || (a->n_params != b->n_params) ||
             (a->nu != b->nu) || (a->n_latch != b->n_latch) || (a->n_stages != b->n_stages) ||
@@ -211,21 +412,9 @@ stsp_status_t stsp_param_verify(stsp_param_t *pc)
     return st;
 }
 
-/* e = c; e = e + (S[p] d[p]) for p = 0 .. n-1: a constant term at the parameters in use. */
-static stsp_f32_t stsp_param_shift(stsp_f32_t c, const stsp_f32_t *S, const stsp_f32_t *d,
-                                   uint32_t n)
-{
-    stsp_f32_t e = c;
-    uint32_t p;
-    for (p = 0u; p < n; ++p) {
-        e = stsp_mla(e, S[p], d[p]);
-    }
-    return e;
-}
-
 /* The fresh latch of `stage` into v_new, with lambda0' (stsp_params.h's order). */
-static void stsp_param_latch(const stsp_param_t *pc, uint16_t stage, const stsp_f32_t *x,
-                             stsp_f32_t *v_new)
+static void stsp_param_latch(const stsp_param_t *pc, uint16_t stage, const stsp_scalar_t *x,
+                             stsp_scalar_t *v_new)
 {
     const stsp_header_t *h = &pc->ctrl.checked;
     const uint32_t nx = h->nx;
@@ -234,55 +423,63 @@ static void stsp_param_latch(const stsp_param_t *pc, uint16_t stage, const stsp_
     const uint32_t n_stage = h->stage_n_latch[stage];
     uint32_t c;
     for (c = 0u; c < n_latch; ++c) {
-        stsp_f32_t acc = 0.0f;
+        stsp_scalar_t v = (stsp_scalar_t)0;
         if (c < n_stage) {
             const uint32_t row = ((uint32_t)stage * n_latch) + c;
-            const stsp_f32_t *lam = &h->Lambda[row * nx];
+            const stsp_scalar_t *lam = &h->Lambda[row * nx];
+            stsp_param_acc_t acc = stsp_param_latch_first(h->lambda0[row],
+                                                          &pc->checked.S_lambda0[row * n],
+                                                          pc->d, n);
             uint32_t j;
-            acc = stsp_param_shift(h->lambda0[row], &pc->checked.S_lambda0[row * n], pc->d, n);
             for (j = 0u; j < nx; ++j) {
-                acc = stsp_mla(acc, lam[j], x[j]);
+                acc = stsp_param_latch_mac(acc, lam[j], x[j]);
             }
+            v = stsp_param_end(acc, h->lambda0[row]);
         }
-        v_new[c] = acc;
+        v_new[c] = v;
     }
 }
 
 /* The law at `tick` with k0' and multipliers v into y; returns STSP_OK, or the error of a
- * non-finite command, or STSP_WARN_SATURATED after clamping y to the limits (bits of *mask).
- * One compare pair per input tells a command inside the limits (false for NaN and +-Inf: the
- * limits are finite) from one that needs the finiteness check and the clamp. */
-static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick, const stsp_f32_t *x,
-                                    const stsp_f32_t *v, stsp_f32_t *y, uint16_t *mask)
+ * non-finite command (float32), or STSP_WARN_SATURATED after clamping y to the limits (bits
+ * of *mask). One compare pair per input tells a command inside the limits (false for NaN and
+ * +-Inf: the limits are finite) from one that needs the finiteness check and the clamp. */
+static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick,
+                                    const stsp_scalar_t *x, const stsp_scalar_t *v,
+                                    stsp_scalar_t *y, uint16_t *mask)
 {
     const stsp_header_t *h = &pc->ctrl.checked;
     const uint32_t nx = h->nx;
     const uint32_t nu = h->nu;
     const uint32_t n_latch = h->n_latch;
     const uint32_t n = pc->checked.n_params;
-    const stsp_f32_t *K = &h->K[tick * (nu * nx)];
-    const stsp_f32_t *k0 = &h->k0[tick * nu];
+    const stsp_scalar_t *K = &h->K[tick * (nu * nx)];
+    const stsp_scalar_t *k0 = &h->k0[tick * nu];
     const uint32_t s0 = tick * (nu * n);  /* this tick's rows of S_k0, one of n per input */
     /* L may be NULL when n_latch == 0: no pointer arithmetic on it then. */
-    const stsp_f32_t *L = (n_latch > 0u) ? &h->L[tick * (nu * n_latch)] : h->L;
+    const stsp_scalar_t *L = (n_latch > 0u) ? &h->L[tick * (nu * n_latch)] : h->L;
     uint32_t i;
     uint32_t m = 0u;
     uint32_t alarm = 0u;
+    stsp_status_t st;
     for (i = 0u; i < nu; ++i) {
-        stsp_f32_t acc = -stsp_param_shift(k0[i], &pc->checked.S_k0[s0 + (i * n)], pc->d, n);
+        stsp_param_acc_t acc =
+            stsp_param_law_first(k0[i], &pc->checked.S_k0[s0 + (i * n)], pc->d, n);
+        stsp_scalar_t out;
         uint32_t j;
         for (j = 0u; j < nx; ++j) {
-            acc = stsp_mls(acc, K[j], x[j]);
+            acc = stsp_param_law_mac(acc, K[j], x[j]);
         }
         if (n_latch > 0u) {
             for (j = 0u; j < n_latch; ++j) {
-                acc = stsp_mls(acc, L[j], v[j]);
+                acc = stsp_param_law_mac(acc, L[j], v[j]);
             }
             L = &L[n_latch];
         }
         K = &K[nx];
-        y[i] = acc;
-        if (!((acc >= h->u_min[i]) && (acc <= h->u_max[i]))) {
+        out = stsp_param_end(acc, k0[i]);
+        y[i] = out;
+        if (!((out >= h->u_min[i]) && (out <= h->u_max[i]))) {
             alarm = 1u;
         }
     }
@@ -290,9 +487,9 @@ static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick, const
     if (alarm == 0u) {
         return STSP_OK;
     }
-    if (stsp_all_finite(y, nu) == 0) {
-        return (stsp_all_finite(x, nx) == 0) ? STSP_ERR_NONFINITE_STATE
-                                             : STSP_ERR_NONFINITE_OUTPUT;
+    st = stsp_param_nonfinite(x, y, nx, nu);
+    if (st != STSP_OK) {
+        return st;
     }
     for (i = 0u; i < nu; ++i) {
         if (y[i] > h->u_max[i]) {
@@ -309,12 +506,12 @@ static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick, const
     return (m != 0u) ? STSP_WARN_SATURATED : STSP_OK;
 }
 
-stsp_status_t stsp_param_step(stsp_param_t *pc, uint32_t tick, const stsp_f32_t *x,
-                              stsp_f32_t *u)
+stsp_status_t stsp_param_step(stsp_param_t *pc, uint32_t tick, const stsp_scalar_t *x,
+                              stsp_scalar_t *u)
 {
     stsp_ctrl_t *ctrl;
-    stsp_f32_t v_new[STSP_MAX_LATCH];
-    stsp_f32_t y[STSP_MAX_NU];
+    stsp_scalar_t v_new[STSP_MAX_LATCH];
+    stsp_scalar_t y[STSP_MAX_NU];
     stsp_plan_t plan = {0u, 0u};
     stsp_status_t status;
     uint16_t mask = 0u;
@@ -369,4 +566,3 @@ stsp_status_t stsp_param_step(stsp_param_t *pc, uint32_t tick, const stsp_f32_t 
     return status;
 }
 
-#endif /* STSP_ARITH_FIXED_POINT */

@@ -212,30 +212,6 @@ static stsp_status_t stsp_check_dims(const stsp_header_t *t, uint32_t tick_hz, i
 }
 
 #ifdef STSP_ARITH_FIXED_POINT
-/* Sum of |values[0..count)| (count <= STSP_MAX_NX + STSP_MAX_LATCH: no wrap-around). */
-static stsp_uacc_t stsp_q_abs_sum(const stsp_scalar_t *values, uint32_t count)
-{
-    stsp_uacc_t sum = 0u;
-    uint32_t i;
-    for (i = 0u; i < count; ++i) {
-        const stsp_acc_t a = values[i];
-        sum += (stsp_uacc_t)((a < 0) ? -a : a);
-    }
-    return sum;
-}
-
-/* Exponents within +-STSP_Q_EXP_MAX (stsp_state_to_q builds 2^(F - x_exp) as a binary32). */
-static int stsp_q_exps_ok(const int8_t *e, uint32_t count)
-{
-    uint32_t i;
-    for (i = 0u; i < count; ++i) {
-        if ((e[i] > STSP_Q_EXP_MAX) || (e[i] < -STSP_Q_EXP_MAX)) {
-            return 0;
-        }
-    }
-    return 1;
-}
-
 /* Fixed point: exponents in range; every law row (tick, input) with
  * |k0| + sum_j |K| + sum_c |L| <= 2^F - 1 and every latch row with |lambda0| + sum_j |Lambda|
  * <= 2^F - 1, the condition under which stsp_law and the latch cannot overflow or leave the
@@ -295,21 +271,6 @@ uint16_t stsp_has_limits(const stsp_header_t *t)
     return 0u;
 }
 #else
-/* 1 when every one of values[0..count) (binary64) is finite, else 0. */
-static int stsp_all_finite_f64(const double *values, uint32_t count)
-{
-    const uint64_t exp_mask = 0x7FF0000000000000u; /* the exponent field */
-    uint32_t i;
-    for (i = 0u; i < count; ++i) {
-        uint64_t bits;
-        (void)memcpy(&bits, &values[i], sizeof bits);
-        if ((bits & exp_mask) == exp_mask) {
-            return 0;
-        }
-    }
-    return 1;
-}
-
 /* A key of a finite binary64 whose integer order is the numeric order (-0 and +0 equal):
  * lo <= hi without a double-precision compare, which on a core without a double-precision
  * FPU would link the soft-float comparison routines into every program (the band solver's

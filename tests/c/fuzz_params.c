@@ -6,25 +6,86 @@
  * leaves the commands those of the parameters before (checked against a twin instance that
  * never saw it); a refused init leaves every step STSP_ERR_NOT_INITIALIZED; a negative step
  * status writes u_hold, a non-negative one a finite command within the limits; nothing is read
- * or written outside the arrays (ASan, UBSan). */
+ * or written outside the arrays (ASan, UBSan). Built for float32 (gains/robot_goal*) and,
+ * as fuzz_params_q15/_q31, for the fixed-point parametric tables (gains/robot_goal_<arith>*:
+ * states and column words of any integer, d_exp words too). */
 #include <math.h>
 #include <string.h>
 
 #include "fuzz_input.h"
+#if defined(STSP_ARITH_Q15)
+#include "robot_goal_q15_params.h"
+#define G(name) robot_goal_q15_##name
+#define N_TICKS ROBOT_GOAL_Q15_N_TICKS
+#elif defined(STSP_ARITH_Q31)
+#include "robot_goal_q31_params.h"
+#define G(name) robot_goal_q31_##name
+#define N_TICKS ROBOT_GOAL_Q31_N_TICKS
+#else
 #include "robot_goal_params.h"
+#define G(name) robot_goal_##name
+#define N_TICKS ROBOT_GOAL_N_TICKS
+#endif
 
 #include "fuzz_tables.h"
 
-#define NX ROBOT_GOAL_NX
-#define NU ROBOT_GOAL_NU
-#define NP ROBOT_GOAL_N_PARAMS
-#define N_COLS (ROBOT_GOAL_N_TICKS * NU * NP)
+#define NX 4u
+#define NU 2u
+#define NP 2u
+#define N_LATCH 4u
+#define N_STAGES 2u
+#define N_COLS (N_TICKS * NU * NP)
 
 /* A corrupted n_params (up to STSP_MAX_PARAMS, beyond that refused before any read)
  * lengthens every array: the copies are as long as the largest the header can describe. */
-static float cols[ROBOT_GOAL_N_TICKS * NU * STSP_MAX_PARAMS];
-static float lam[ROBOT_GOAL_N_STAGES * ROBOT_GOAL_N_LATCH * STSP_MAX_PARAMS];
-static float nominal[STSP_MAX_PARAMS], lower[STSP_MAX_PARAMS], upper[STSP_MAX_PARAMS];
+static stsp_scalar_t cols[N_TICKS * NU * STSP_MAX_PARAMS];
+static stsp_scalar_t lam[N_STAGES * N_LATCH * STSP_MAX_PARAMS];
+static stsp_param_value_t nominal[STSP_MAX_PARAMS], lower[STSP_MAX_PARAMS],
+    upper[STSP_MAX_PARAMS];
+
+#ifdef STSP_ARITH_FIXED_POINT
+static int8_t d_exp[STSP_MAX_PARAMS];
+#define SENTINEL {1234, -1234}
+#define FINITE(v) 1
+
+/* A range word: the low and high words of the binary64 both v. */
+static void set_word(double *a, uint32_t v)
+{
+    const uint64_t bits = ((uint64_t)v << 32) | v;
+    memcpy(a, &bits, sizeof bits);
+}
+
+/* 1 + (v % 4) entries of a[0..n-1], each of any value at a place the fuzzer chooses. */
+static void set_entries(fuzz_in_t *in, stsp_scalar_t *a, uint32_t n, uint32_t v)
+{
+    uint32_t k;
+    for (k = 0u; k < 1u + (v % 4u); ++k) {
+        const uint32_t bits = fuzz_u32(in);
+        a[fuzz_u32(in) % n] = (stsp_scalar_t)(int32_t)bits;
+    }
+}
+
+/* States of any integer. */
+static void set_state(fuzz_in_t *in, stsp_scalar_t *x, uint32_t n, int moderate)
+{
+    uint32_t j;
+    (void)moderate;
+    for (j = 0u; j < n; ++j) {
+        x[j] = (stsp_scalar_t)(int32_t)fuzz_u32(in);
+    }
+}
+#else
+#define SENTINEL {1234.5f, -1234.5f}
+#define FINITE(v) isfinite(v)
+
+static void set_word(float *a, uint32_t v)
+{
+    memcpy(a, &v, sizeof v);
+}
+
+#define set_entries fuzz_words
+#define set_state fuzz_floats
+#endif
 
 static int step_status_ok(stsp_status_t st)
 {
@@ -50,12 +111,19 @@ static void corrupt(fuzz_in_t *in, stsp_params_table_t *c)
     case 6: c->n_stages = (uint16_t)v; break;
     case 7: c->n_ticks = v; break;
     case 8: c->problem_sha256[v % 32u] ^= (uint8_t)(1u + (v >> 8) % 255u); break;
-    case 9: /* a range word (lower or upper), with a matching CRC */
-        memcpy(((v & 1u) != 0u) ? &lower[(v >> 1) % NP] : &upper[(v >> 1) % NP], &v, 4u);
+    case 9: /* a range word (lower or upper; fixed point: or d_exp), with a matching CRC */
+#ifdef STSP_ARITH_FIXED_POINT
+        if ((v & 2u) != 0u) {
+            d_exp[(v >> 2) % NP] = (int8_t)(v >> 8);
+            c->crc32 = stsp_params_table_crc32(c);
+            break;
+        }
+#endif
+        set_word(((v & 1u) != 0u) ? &lower[(v >> 2) % NP] : &upper[(v >> 2) % NP], v);
         c->crc32 = stsp_params_table_crc32(c);
         break;
     default: /* column words, then (case 11) a CRC that matches them */
-        fuzz_words(in, cols, N_COLS, v);
+        set_entries(in, cols, N_COLS, v);
         if (what == 11u) {
             c->crc32 = stsp_params_table_crc32(c);
         }
@@ -67,18 +135,19 @@ static void corrupt(fuzz_in_t *in, stsp_params_table_t *c)
 static stsp_param_t shipped;
 static stsp_status_t shipped_status = STSP_ERR_NOT_INITIALIZED;
 
-static void check_command(stsp_status_t init, stsp_status_t s, const float *u)
+static void check_command(stsp_status_t init, stsp_status_t s, const stsp_scalar_t *u)
 {
+    static const stsp_scalar_t sentinel[NU] = SENTINEL;
     uint32_t i;
     if (init != STSP_OK) {
         fuzz_check(s == STSP_ERR_NOT_INITIALIZED);
-        fuzz_check((u[0] == 1234.5f) && (u[1] == -1234.5f)); /* nu unknown: untouched */
+        fuzz_check(memcmp(u, sentinel, sizeof sentinel) == 0); /* nu unknown: untouched */
     } else if (s < STSP_OK) {
-        fuzz_check(memcmp(u, robot_goal_table.u_hold, NU * sizeof u[0]) == 0);
+        fuzz_check(memcmp(u, G(table).u_hold, NU * sizeof u[0]) == 0);
     } else {
         for (i = 0u; i < NU; ++i) {
-            fuzz_check(isfinite(u[i]) && (u[i] >= robot_goal_table.u_min[i]) &&
-                       (u[i] <= robot_goal_table.u_max[i]));
+            fuzz_check(FINITE(u[i]) && (u[i] >= G(table).u_min[i]) &&
+                       (u[i] <= G(table).u_max[i]));
         }
     }
 }
@@ -90,27 +159,31 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     stsp_param_t e;
     stsp_param_t twin;
     stsp_status_t st;
-    const stsp_params_table_t *in_use = &robot_goal_params;
+    const stsp_params_table_t *in_use = &G(params);
     uint32_t next = 0u;
     uint32_t i;
     if (shipped_status != STSP_OK) {
-        shipped_status = stsp_param_init(&shipped, &robot_goal_table, &robot_goal_params);
+        shipped_status = stsp_param_init(&shipped, &G(table), &G(params));
         fuzz_check(shipped_status == STSP_OK);
     }
     if ((fuzz_u8(&in) % 4u) == 0u) {
-        c = robot_goal_params;
-        memcpy(cols, robot_goal_S_k0, N_COLS * sizeof cols[0]);
-        memcpy(lam, robot_goal_S_lambda0, sizeof robot_goal_S_lambda0);
-        memcpy(nominal, robot_goal_param_nominal, NP * sizeof nominal[0]);
-        memcpy(lower, robot_goal_param_lower, NP * sizeof lower[0]);
-        memcpy(upper, robot_goal_param_upper, NP * sizeof upper[0]);
+        c = G(params);
+        memcpy(cols, G(S_k0), N_COLS * sizeof cols[0]);
+        memcpy(lam, G(S_lambda0), sizeof G(S_lambda0));
+        memcpy(nominal, G(param_nominal), NP * sizeof nominal[0]);
+        memcpy(lower, G(param_lower), NP * sizeof lower[0]);
+        memcpy(upper, G(param_upper), NP * sizeof upper[0]);
+#ifdef STSP_ARITH_FIXED_POINT
+        memcpy(d_exp, G(param_d_exp), NP * sizeof d_exp[0]);
+        c.d_exp = d_exp;
+#endif
         c.S_k0 = cols;
         c.S_lambda0 = lam;
         c.nominal = nominal;
         c.lower = lower;
         c.upper = upper;
         corrupt(&in, &c);
-        st = stsp_param_init(&e, &robot_goal_table, &c);
+        st = stsp_param_init(&e, &G(table), &c);
         in_use = &c;
     } else {
         e = shipped;
@@ -120,9 +193,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     twin = e;
     for (i = 0u; i < 64u && in.n > 0u; ++i) {
         const uint32_t op = fuzz_u8(&in);
-        float x[NX];
-        float u[NU] = {1234.5f, -1234.5f};
-        float w[NU] = {1234.5f, -1234.5f};
+        stsp_scalar_t x[NX];
+        stsp_scalar_t u[NU] = SENTINEL;
+        stsp_scalar_t w[NU] = SENTINEL;
         stsp_status_t s;
         stsp_status_t t;
         uint32_t tick;
@@ -156,7 +229,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             continue;
         }
         tick = fuzz_tick(&in, op, next);
-        fuzz_floats(&in, x, NX, (op & 4u) != 0u); /* moderate: commands within range, mostly */
+        set_state(&in, x, NX, (op & 4u) != 0u); /* moderate: commands within range, mostly */
         s = stsp_param_step(&e, tick, x, u);
         t = stsp_param_step(&twin, tick, x, w);
         fuzz_check(step_status_ok(s));

@@ -43,7 +43,7 @@ static void fuzz_floats(fuzz_in_t *in, float *x, uint32_t n, int moderate)
 }
 
 /* 1 + (v % 4) words of a[0..n-1], each of any bit pattern at a place the fuzzer chooses. */
-static void fuzz_words(fuzz_in_t *in, float *a, uint32_t n, uint32_t v)
+static inline void fuzz_words(fuzz_in_t *in, float *a, uint32_t n, uint32_t v)
 {
     uint32_t k;
     for (k = 0u; k < 1u + (v % 4u); ++k) {

@@ -3,7 +3,7 @@
 runtime parameter (gains/robot_goal*), through stsp_step() (no parameters) and through
 stsp_param_step() (theta set inside the range).
 
-    python3 tools/arm/count_params.py [--build DIR]
+    python3 tools/arm/count_params.py [--build DIR] [--arith float32|q15|q31]
 
 Compiles tools/arm/params_bench_main.c with firmware/src/*.c and the robot's tables
 (arm-none-eabi-gcc -O2, -mcpu=cortex-m4 hard float, -ffp-contract=off, the generic build),
@@ -13,7 +13,9 @@ bench callers; every traced address checked against the disassembly) and prints 
 per call by kind of tick. Instructions, not cycles. Then, built with -DBENCH_HASH, the same
 image runs the three runs of tests/c/test_params.c on the target and their command hashes must
 be tests/c/params_expected.h's (the float32 specification's, bit for bit), else exit status 1.
-Standard library only.
+With --arith q15 or q31: the fixed-point build on gains/robot_goal_<arith>* (the same ticks,
+states in Q scales), its hashes against tests/c/params_q_expected.h (the host's bit-exact
+reference). Standard library only.
 """
 from __future__ import annotations
 
@@ -30,25 +32,32 @@ from count_instructions import (ROOT, callees, instructions_per_call, run,  # no
 FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-std=c99",
          "-O2", "-ffp-contract=off", "-ffunction-sections", "-fdata-sections", "-Wall",
          "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"]
-ENTRIES = ("stsp_step_f32", "stsp_param_step_f32")
 CALLERS = ("bench_plain", "bench_param")
+SUFFIX = {"float32": "f32", "q15": "q15", "q31": "q31"}
 
 
-def build(out: Path, hashes: bool = False) -> Path:
-    elf = out / ("hash_params.elf" if hashes else "bench_params.elf")
+def entries(arith: str) -> tuple[str, str]:
+    return (f"stsp_step_{SUFFIX[arith]}", f"stsp_param_step_{SUFFIX[arith]}")
+
+
+def build(out: Path, arith: str = "float32", hashes: bool = False) -> Path:
+    elf = out / (f"hash_params_{arith}.elf" if hashes else f"bench_params_{arith}.elf")
     arm = ROOT / "tools" / "arm"
-    run(["arm-none-eabi-gcc", *FLAGS, *(["-DBENCH_HASH"] if hashes else []),
+    name = "robot_goal" if arith == "float32" else f"robot_goal_{arith}"
+    defs = [] if arith == "float32" else [f"-DSTSP_ARITH_{arith.upper()}"]
+    run(["arm-none-eabi-gcc", *FLAGS, *defs, *(["-DBENCH_HASH"] if hashes else []),
          f"-I{ROOT / 'firmware/include'}", f"-I{ROOT / 'firmware/src'}", f"-I{ROOT / 'gains'}",
          f"-I{ROOT / 'tests/c'}",
          *sorted(str(p) for p in (ROOT / "firmware/src").glob("*.c")),
-         str(ROOT / "gains/robot_goal.c"), str(ROOT / "gains/robot_goal_params.c"),
+         str(ROOT / f"gains/{name}.c"), str(ROOT / f"gains/{name}_params.c"),
          str(arm / "params_bench_main.c"), str(arm / "startup.c"), "--specs=rdimon.specs",
          "-T", str(arm / "mps2-an386.ld"), "-Wl,--gc-sections", "-o", str(elf)])
     return elf
 
 
-def count(elf: Path) -> list[dict]:
+def count(elf: Path, arith: str = "float32") -> list[dict]:
     syms = symbols(elf)
+    ENTRIES = entries(arith)
     funcs = sorted({f for e in ENTRIES for f in callees(elf, syms, e)})
     ranges = {n: syms[n] for n in funcs + list(CALLERS)}
     trace = elf.with_suffix(".trace")
@@ -64,16 +73,21 @@ def count(elf: Path) -> list[dict]:
     return calls
 
 
-def check_hashes(out: Path) -> bool:
-    """Runs A, B, C on the target against tests/c/params_expected.h; prints each."""
-    elf = build(out, hashes=True)
+def check_hashes(out: Path, arith: str = "float32") -> bool:
+    """Runs A, B, C on the target against tests/c/params_expected.h (fixed point:
+    tests/c/params_q_expected.h's section of `arith`); prints each."""
+    elf = build(out, arith, hashes=True)
     got = dict(re.findall(r"hash ([ABC]) (0x[0-9A-F]{8})", run(
         ["timeout", "600", "qemu-system-arm", "-M", "mps2-an386", "-nographic", "-monitor",
          "none", "-semihosting-config", "enable=on,target=native", "-kernel", str(elf)])))
-    want = dict(re.findall(r"#define PAR_HASH_([ABC]) (0x[0-9A-F]{8})u",
-                           (ROOT / "tests/c/params_expected.h").read_text()))
+    if arith == "float32":
+        text, what = (ROOT / "tests/c/params_expected.h").read_text(), "specification"
+    else:
+        text, what = (ROOT / "tests/c/params_q_expected.h").read_text(), "host reference"
+        text = text.split(f"defined(STSP_ARITH_{arith.upper()})")[1].split("#e")[0]
+    want = dict(re.findall(r"#define PAR_HASH_([ABC]) (0x[0-9A-F]{8})u", text))
     for k in "ABC":
-        print(f"run {k}: M4F 0x{int(got.get(k, '0'), 16):08X}, specification {want[k]}"
+        print(f"run {k}: M4F 0x{int(got.get(k, '0'), 16):08X}, {what} {want[k]}"
               f" {'ok' if got.get(k) == want[k] else 'DIFFERS'}")
     return got == want
 
@@ -81,23 +95,25 @@ def check_hashes(out: Path) -> bool:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--build", type=Path, default=ROOT / "build" / "arm-params")
+    ap.add_argument("--arith", choices=sorted(SUFFIX), default="float32")
     args = ap.parse_args()
     args.build.mkdir(parents=True, exist_ok=True)
-    calls = count(build(args.build))
+    calls = count(build(args.build, args.arith), args.arith)
     kinds = {
         "tick 0 (latch of stage 0)": lambda c: c["tick"] == 0,
         "ordinary tick": lambda c: 0 < c["tick"] < 21 and c["status"] == 0,
         "skip to the tick before stage 1": lambda c: c["tick"] == 299,
         "stage-1 switch (latch)": lambda c: c["tick"] == 300,
     }
-    print("| robot_goal, Cortex-M4F (QEMU) | stsp_step (median) | stsp_param_step (median) |")
+    print(f"| robot_goal ({args.arith}), Cortex-M4F (QEMU) | stsp_step (median) | "
+          f"stsp_param_step (median) |")
     print("|---|---|---|")
     for name, sel in kinds.items():
         med = [statistics.median([c["insns"] for c in calls if sel(c) and c["kind"] == k])
                for k in (0, 1)]
         print(f"| {name} | {med[0]:.0f} | {med[1]:.0f} |")
     print()
-    return 0 if check_hashes(args.build) else 1
+    return 0 if check_hashes(args.build, args.arith) else 1
 
 
 if __name__ == "__main__":

@@ -7,14 +7,33 @@
  * Built with -DBENCH_HASH instead: runs A, B and C of tests/c/params_reference.py (the states,
  * thetas and changes of tests/c/test_params.c) and prints the hash of each run's commands,
  *     hash <A|B|C> 0x<FNV-1a>
- * for the bit-exact comparison with the float32 specification on the target. */
+ * for the bit-exact comparison with the float32 specification on the target. Built with
+ * STSP_ARITH_Q15 or STSP_ARITH_Q31: the same on gains/robot_goal_<arith>* (the fixed-point
+ * parametric controller), states as Q integers, and with -DBENCH_HASH the runs of
+ * tests/c/params_q_reference.py against the host's bit-exact reference. */
 #include <stdint.h>
 #include <stdio.h>
 #include <string.h>
 
+#if defined(STSP_ARITH_Q15)
+#include "robot_goal_q15_params.h"
+#define G(name) robot_goal_q15_##name
+#elif defined(STSP_ARITH_Q31)
+#include "robot_goal_q31_params.h"
+#define G(name) robot_goal_q31_##name
+#else
 #include "robot_goal_params.h"
+#define G(name) robot_goal_##name
+#endif
+#define NX 4u
+#define NU 2u
+#define N_TICKS 600u
 #ifdef BENCH_HASH
+#ifdef STSP_ARITH_FIXED_POINT
+#include "params_q_expected.h"
+#else
 #include "params_expected.h"
+#endif
 #endif
 
 #define BENCH_REPS 4u
@@ -22,11 +41,15 @@
 #define BENCH_CALLS (2u * BENCH_REPS * (BENCH_TICKS + 3u))
 
 #ifdef BENCH_HASH
-static uint32_t fnv1a(uint32_t h, float v)
+static uint32_t fnv1a(uint32_t h, stsp_scalar_t v)
 {
     uint32_t w, i;
+#ifdef STSP_ARITH_FIXED_POINT
+    w = (uint32_t)(int32_t)v; /* as tests/c/params_q_reference.py */
+#else
     v = v + 0.0f; /* a zero as +0, as the specification's hash */
     memcpy(&w, &v, sizeof w);
+#endif
     for (i = 0u; i < 4u; ++i) {
         h = (h ^ ((w >> (8u * i)) & 0xFFu)) * 0x01000193u;
     }
@@ -37,20 +60,25 @@ static uint32_t fnv1a(uint32_t h, float v)
 static uint32_t run(const float *theta0, uint32_t at, const float *theta1)
 {
     static stsp_param_t pc;
-    float x[ROBOT_GOAL_NX], u[ROBOT_GOAL_NU];
+    stsp_scalar_t x[NX], u[NU];
     uint32_t h = 0x811C9DC5u, j, c;
-    if (stsp_param_init(&pc, &robot_goal_table, &robot_goal_params) != STSP_OK) {
+    if (stsp_param_init(&pc, &G(table), &G(params)) != STSP_OK) {
         return 0u;
     }
     if ((theta0 != NULL) && (stsp_set_params(&pc, theta0) != STSP_OK)) {
         return 0u;
     }
-    for (j = 0u; j < ROBOT_GOAL_N_TICKS; ++j) {
+    for (j = 0u; j < N_TICKS; ++j) {
         if ((theta1 != NULL) && (j == at) && (stsp_set_params(&pc, theta1) != STSP_OK)) {
             return 0u;
         }
-        for (c = 0u; c < ROBOT_GOAL_NX; ++c) {
+        for (c = 0u; c < NX; ++c) {
+#ifdef STSP_ARITH_FIXED_POINT
+            const int32_t step = (int32_t)(((int64_t)1 << STSP_Q_FRAC_BITS) / 20 - 1);
+            x[c] = (stsp_scalar_t)(((int32_t)((7u * j + 13u * c) % 41u) - 20) * step);
+#else
             x[c] = (float)((7u * j + 13u * c) % 41u) * 0.05f - 1.0f;
+#endif
         }
         if (stsp_param_step(&pc, j, x, u) < 0) {
             return 0u;
@@ -65,7 +93,7 @@ int main(void)
     static const float a[2] = PAR_THETA_A;
     static const float b[2] = PAR_THETA_B;
     printf("hash A 0x%08X\n", (unsigned)run(a, 0u, NULL));
-    printf("hash B 0x%08X\n", (unsigned)run(NULL, robot_goal_table.stage_start[1], b));
+    printf("hash B 0x%08X\n", (unsigned)run(NULL, G(table).stage_start[1], b));
     printf("hash C 0x%08X\n", (unsigned)run(a, PAR_MID, b));
     return 0;
 }
@@ -90,16 +118,16 @@ static void record(uint32_t tick, stsp_status_t st, uint8_t kind)
 }
 
 __attribute__((noinline, noclone)) static void bench_plain(stsp_ctrl_t *c, uint32_t tick,
-                                                           const stsp_f32_t *x)
+                                                           const stsp_scalar_t *x)
 {
-    stsp_f32_t u[ROBOT_GOAL_NU];
+    stsp_scalar_t u[NU];
     record(tick, stsp_step(c, tick, x, u), 0u);
 }
 
 __attribute__((noinline, noclone)) static void bench_param(stsp_param_t *p, uint32_t tick,
-                                                           const stsp_f32_t *x)
+                                                           const stsp_scalar_t *x)
 {
-    stsp_f32_t u[ROBOT_GOAL_NU];
+    stsp_scalar_t u[NU];
     record(tick, stsp_param_step(p, tick, x, u), 1u);
 }
 
@@ -107,12 +135,18 @@ int main(void)
 {
     static stsp_ctrl_t ctrl;
     static stsp_param_t pc;
-    static const stsp_f32_t theta[ROBOT_GOAL_N_PARAMS] = {-0.7f, 5.3f};
-    const uint32_t sw = robot_goal_table.stage_start[1];
-    stsp_f32_t x[ROBOT_GOAL_NX] = {-1.0f, 5.0f, 0.0f, 0.0f};
+    static const stsp_f32_t theta[2] = {-0.7f, 5.3f};
+    const uint32_t sw = G(table).stage_start[1];
+#ifdef STSP_ARITH_FIXED_POINT
+    /* x = (-1, 5, 0, 0) in the states' Q scales (x_exp 3, 3, 4, 3) */
+    stsp_scalar_t x[NX] = {(stsp_scalar_t)-(1L << (STSP_Q_FRAC_BITS - 3)),
+                           (stsp_scalar_t)(5L << (STSP_Q_FRAC_BITS - 3)), 0, 0};
+#else
+    stsp_f32_t x[NX] = {-1.0f, 5.0f, 0.0f, 0.0f};
+#endif
     uint32_t rep, k;
-    if ((stsp_init(&ctrl, &robot_goal_table) != STSP_OK) ||
-        (stsp_param_init(&pc, &robot_goal_table, &robot_goal_params) != STSP_OK) ||
+    if ((stsp_init(&ctrl, &G(table)) != STSP_OK) ||
+        (stsp_param_init(&pc, &G(table), &G(params)) != STSP_OK) ||
         (stsp_set_params(&pc, theta) != STSP_OK)) {
         printf("bench: init failed\n");
         return 1;
@@ -120,7 +154,11 @@ int main(void)
     for (rep = 0u; rep < BENCH_REPS; ++rep) {
         (void)stsp_reset(&ctrl);
         (void)stsp_param_reset(&pc);
+#ifdef STSP_ARITH_FIXED_POINT
+        x[0] = (stsp_scalar_t)(x[0] + (stsp_scalar_t)(1L << (STSP_Q_FRAC_BITS - 10)));
+#else
         x[0] = -1.0f + 0.01f * (float)rep;
+#endif
         for (k = 0u; k < BENCH_TICKS; ++k) {
             bench_plain(&ctrl, k, x);
             bench_param(&pc, k, x);

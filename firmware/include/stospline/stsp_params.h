@@ -6,7 +6,8 @@
  * latch offsets lambda0 are affine in the parameters theta, and K, L, Lambda do not depend on
  * them. The parameter table (generated as <name>_params.c beside the gain table) holds the
  * nominal values, the declared range and the sensitivity columns; with d = theta - nominal
- * (binary32, computed once by stsp_set_params()) the law of stsp_controller.h runs with
+ * (computed once by stsp_set_params(); in Q format in a Q15/Q31 build, below) the law of
+ * stsp_controller.h runs with
  *
  *     k0'[j][i]      = k0[j][i]      + S_k0[j][i][0] d[0] + ... + S_k0[j][i][P-1] d[P-1]
  *     lambda0'[s][c] = lambda0[s][c] + S_lambda0[s][c][0] d[0] + ...
@@ -21,7 +22,8 @@
  * finite plan that stays within the actuator limits, but not the design at either theta; set
  * the parameters before the stage start they should apply to.
  *
- * Evaluation order (fixed, binary32, no fused multiply-add: -ffp-contract=off):
+ * Evaluation order of a float32 build (fixed, binary32, no fused multiply-add:
+ * -ffp-contract=off):
  *     d[p]   = theta[p] - nominal[p]                              (stsp_set_params)
  *     e      = k0[i];  e = e + (S_k0[i][p] d[p]) for p = 0 .. P-1
  *     u[i]   = -e; u[i] = u[i] - (K[i][j] x[j]) for j = 0 .. nx-1, then
@@ -32,14 +34,33 @@
  * stsp_step()'s bit for bit, up to the sign of a zero (host/stospline/table/params_spec.py is
  * the same arithmetic in numpy, checked bit for bit).
  *
- * Per-tick float32 gain tables only: a spline table or one with a band dual is refused at
- * init (STSP_ERR_BAD_DIMS), and a Q15/Q31 parameter table (scalar_kind) is refused with
- * STSP_ERR_BAD_VERSION; a fixed-point build has no parameters (the header errors).
+ * Fixed point (Q15/Q31 builds; scalar_kind the build's, host stospline.table.qparams): the
+ * parameters are P more states of the fixed-point law (stsp_table.h). nominal, lower and upper
+ * are binary64; per parameter d_q[p] = floor((theta[p] - nominal[p]) 2^(F - d_exp[p]) + 1/2),
+ * computed once by stsp_set_params() in binary64 (theta[p] converted exactly, one rounded
+ * subtraction, the rest exact), and the columns are stored negated and pre-scaled:
+ *     S_k0[j][i][p]      = rhu(-S_k0_ip(j) 2^(d_exp[p] - u_exp[i] + F))
+ *     S_lambda0[s][c][p] = rhu(S_lambda0_cp 2^(d_exp[p] - v_exp[c] + F))
+ * (the table's stored, negated integers below) so that, exactly in the accumulator of
+ * stsp_step (any order, one rounding),
+ *     u_q[i] = k0[i] + floor((sum_j K x_q + sum_p S_k0 d_q + sum_c L v_q) / 2^F + 1/2)
+ *     v_q[c] = lambda0[c] + floor((sum_j Lambda x_q + sum_p S_lambda0 d_q) / 2^F + 1/2).
+ * stsp_param_init() checks every law row |k0| + sum|K| + sum|S_k0| + sum|L| and latch row
+ * |lambda0| + sum|Lambda| + sum|S_lambda0| <= 2^F - 1, and |d_q| <= 2^F - 1 at both ends of
+ * every range: nothing overflows and no u_q or v_q leaves the Q range for any theta in the
+ * box and any state. The gain table is the one quantized with the columns (its scales cover
+ * the box: stospline.table.parametric_c.generate_parametric_qc), and the commands are
+ * bit for bit qformat.law_q of that table over [x_q; d_q].
+ *
+ * Per-tick gain tables only: a spline table or one with a band dual is refused at init
+ * (STSP_ERR_BAD_DIMS), and a parameter table of another scalar kind than the build's with
+ * STSP_ERR_BAD_VERSION.
  *
  * Does not use malloc, recursion or VLAs; every loop is bounded by the validated dimensions
  * (n_params <= STSP_MAX_PARAMS, 32 by default). Buffers: stsp_param_t holds a stsp_ctrl_t,
  * the validated copy of the parameter table's header and STSP_MAX_PARAMS scalars of d: 928
- * bytes with the default limits (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_param_t)).
+ * bytes with the default limits in a float32 build, 348 in Q15, 476 in Q31
+ * (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_param_t)).
  * stsp_param_step() uses STSP_MAX_LATCH + STSP_MAX_NU scalars of stack. Every tick of a
  * parametric instance is evaluated by this file in plain C loops (not stsp_step()'s ordinary
  * tick): nu P more multiply-adds per tick, and the generic loop overhead
@@ -49,10 +70,6 @@
 #define STSP_PARAMS_H
 
 #include "stospline/stsp_controller.h"
-
-#ifdef STSP_ARITH_FIXED_POINT
-#error "stsp_params.h: runtime parameters run in float32 builds only"
-#endif
 
 #ifdef __cplusplus
 extern "C" {
@@ -79,21 +96,30 @@ extern "C" {
  * S_k0[tick][i][p] = S_k0[(tick*nu + i)*n_params + p],
  * S_lambda0[stage][c][p] = S_lambda0[(stage*n_latch + c)*n_params + p].
  */
+#ifdef STSP_ARITH_FIXED_POINT
+typedef double stsp_param_value_t; /**< nominal, lower, upper: binary64 in a Q15/Q31 build */
+#else
+typedef stsp_f32_t stsp_param_value_t;
+#endif
 typedef struct {
     uint32_t magic;              /**< STSP_PARAMS_MAGIC */
     uint16_t format_version;     /**< STSP_PARAMS_FORMAT_VERSION */
-    uint16_t scalar_kind;        /**< STSP_SCALAR_FLOAT32 */
+    uint16_t scalar_kind;        /**< STSP_SCALAR_KIND of the build */
     uint16_t n_params;           /**< 1 .. STSP_MAX_PARAMS */
     uint16_t nu;                 /**< the gain table's nu */
     uint16_t n_latch;            /**< the gain table's n_latch */
     uint16_t n_stages;           /**< the gain table's n_stages */
     uint32_t n_ticks;            /**< the gain table's n_ticks */
-    const stsp_f32_t *nominal;   /**< [n_params] the design's values */
-    const stsp_f32_t *lower;     /**< [n_params] */
-    const stsp_f32_t *upper;     /**< [n_params] */
-    const stsp_f32_t *S_k0;      /**< [n_ticks][nu][n_params] */
-    const stsp_f32_t *S_lambda0; /**< [n_stages][n_latch][n_params] (may be NULL when
-                                      n_latch == 0) */
+    const stsp_param_value_t *nominal; /**< [n_params] the design's values */
+    const stsp_param_value_t *lower;   /**< [n_params] */
+    const stsp_param_value_t *upper;   /**< [n_params] */
+#ifdef STSP_ARITH_FIXED_POINT
+    const int8_t *d_exp;         /**< [n_params] scale exponents of d (within
+                                      +-STSP_Q_EXP_MAX) */
+#endif
+    const stsp_scalar_t *S_k0;      /**< [n_ticks][nu][n_params] */
+    const stsp_scalar_t *S_lambda0; /**< [n_stages][n_latch][n_params] (may be NULL when
+                                         n_latch == 0) */
     uint32_t crc32;              /**< see stsp_params_table_crc32() */
     uint8_t problem_sha256[32];  /**< the gain table's problem_sha256 */
 } stsp_params_table_t;
@@ -105,13 +131,17 @@ typedef struct {
     const stsp_params_table_t *params;
     stsp_params_table_t checked;      /**< the validated header (private) */
     uint32_t ready;                   /**< a magic value after a successful init (private) */
-    stsp_f32_t d[STSP_MAX_PARAMS];    /**< theta - nominal in use (private) */
+    stsp_scalar_t d[STSP_MAX_PARAMS]; /**< theta - nominal in use, d_q in a Q15/Q31 build
+                                           (private) */
 } stsp_param_t;
 
 /**
  * CRC-32 (as stsp_table_crc32) of n_params, nu, n_latch, n_stages, n_ticks as little-endian
  * u32, then nominal, lower, upper, S_k0 and (when n_latch > 0) S_lambda0 as little-endian
- * binary32 bit patterns, then the 32 bytes of problem_sha256. The dimensions and pointers must
+ * binary32 bit patterns, then the 32 bytes of problem_sha256. Fixed point: scalar_kind as a
+ * u32 after n_ticks, nominal, lower, upper as little-endian binary64 bit patterns, S_k0 and
+ * S_lambda0 as little-endian int16 (Q15) or int32 (Q31), then d_exp one byte each, then the
+ * hash. The dimensions and pointers must
  * be valid (stsp_param_init() checks them first).
  */
 uint32_t stsp_params_table_crc32(const stsp_params_table_t *params);
@@ -121,11 +151,12 @@ uint32_t stsp_params_table_crc32(const stsp_params_table_t *params);
  * parameter table to an instance, theta = nominal. Precondition (as for stsp_init()): each
  * array is as long as the header says. Errors (instance not ready): STSP_ERR_NULL (a NULL
  * pointer, also an array of the parameter table), STSP_ERR_BAD_MAGIC, STSP_ERR_BAD_VERSION
- * (format, or a scalar kind other than float32), STSP_ERR_BAD_DIMS (n_params outside
+ * (format, or a scalar kind other than the build's), STSP_ERR_BAD_DIMS (n_params outside
  * 1 .. STSP_MAX_PARAMS, nu, n_latch, n_stages or n_ticks not the gain table's, a spline
  * table or one with a band dual), STSP_ERR_BAD_CRC, STSP_ERR_BAD_PROBLEM (problem_sha256 not
  * the gain table's), STSP_ERR_BAD_VALUES (a NaN or infinite entry, or not lower <= nominal <=
- * upper).
+ * upper; fixed point also: a d_exp beyond +-STSP_Q_EXP_MAX, a law or latch row with the
+ * columns above 2^F - 1, or |d_q| > 2^F - 1 at an end of a range).
  */
 stsp_status_t stsp_param_init(stsp_param_t *pc, const stsp_table_t *table,
                               const stsp_params_table_t *params);
@@ -133,7 +164,8 @@ stsp_status_t stsp_param_init(stsp_param_t *pc, const stsp_table_t *table,
 /**
  * Set the parameters theta[n_params] (see above for when they take effect). Every theta[p]
  * must be finite and within [lower[p], upper[p]]; otherwise STSP_ERR_PARAM_RANGE and the
- * parameters in use are unchanged (the whole vector is checked before any is taken).
+ * parameters in use are unchanged (the whole vector is checked before any is taken; fixed
+ * point: also a d_q beyond the Q range, which init rules out for an unchanged table).
  * STSP_ERR_NULL, STSP_ERR_NOT_INITIALIZED as usual. Not to be called while a step of the same
  * instance runs (from an interrupt, say).
  */
@@ -150,12 +182,13 @@ stsp_status_t stsp_param_reset(stsp_param_t *pc);
 stsp_status_t stsp_param_verify(stsp_param_t *pc);
 
 /**
- * The command for tick `tick` from the measured state x[nx]; writes u[nu]. The ticks,
+ * The command for tick `tick` from the measured state x[nx] (x_q in a Q15/Q31 build); writes
+ * u[nu] (u_q). The ticks,
  * statuses and the command on an error are stsp_step()'s (stsp_controller.h), with k0' and
  * lambda0' in the law. x and u may overlap.
  */
-stsp_status_t stsp_param_step(stsp_param_t *pc, uint32_t tick, const stsp_f32_t *x,
-                              stsp_f32_t *u);
+stsp_status_t stsp_param_step(stsp_param_t *pc, uint32_t tick, const stsp_scalar_t *x,
+                              stsp_scalar_t *u);
 
 #ifdef __cplusplus
 }

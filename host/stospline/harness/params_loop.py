@@ -5,6 +5,8 @@ the plan (at a stage start or at any tick).
 
 Build and run are separate steps: `build_params_controller` compiles ``firmware/src/*.c``
 with the generated gain table and its parameter table; `simulate_params` runs paths through it.
+`build_params_qcontroller` compiles the Q15/Q31 build with a fixed-point parametric table
+(states and commands as Q integers: `ParamsController.steps` drives it, no plant).
 """
 from __future__ import annotations
 
@@ -13,14 +15,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from stospline.harness.build import PLANT_CDEF, build_harness_module
-from stospline.harness.controller import CompiledController
+from stospline.harness.controller import VARIANTS, CompiledController
 from stospline.harness.montecarlo import joint_verdict
 from stospline.harness.plant_spec import zoh_step
 from stospline.problem.parameters import problem_at
 from stospline.table.codegen import generate_c
-from stospline.table.parametric_c import generate_parametric_c
+from stospline.table.parametric_c import generate_parametric_c, generate_parametric_qc
 
-__all__ = ["build_params_controller", "ParamsController", "ParamsRun", "simulate_params"]
+__all__ = ["build_params_controller", "build_params_qcontroller", "ParamsController",
+           "ParamsRun", "simulate_params"]
 
 _CDEF = PLANT_CDEF + """
 typedef int... stsp_status_t;
@@ -28,8 +31,8 @@ typedef struct { ...; } stsp_param_t;
 const char *stsp_status_str(stsp_status_t status);
 int harness_param_init(stsp_param_t *pc, size_t count);
 int harness_param_set(stsp_param_t *pc, size_t count, const float *theta);
-int harness_param_step(stsp_param_t *pc, size_t count, uint32_t tick, const float *X,
-                       float *U);
+int harness_param_step(stsp_param_t *pc, size_t count, uint32_t tick, const %(s)s *X,
+                       %(s)s *U);
 """
 
 # Harness-only C: every path's instance in one call. Init validates instance 0 (both tables'
@@ -52,9 +55,9 @@ int harness_param_set(stsp_param_t *pc, size_t count, const float *theta) {
     }
     return worst;
 }
-/* X (count x nx) float32 states, U (count x nu); returns the worst status. */
-int harness_param_step(stsp_param_t *pc, size_t count, uint32_t tick, const float *X,
-                       float *U) {
+/* X (count x nx) states, U (count x nu), the build's scalars; returns the worst status. */
+int harness_param_step(stsp_param_t *pc, size_t count, uint32_t tick, const %(s)s *X,
+                       %(s)s *U) {
     size_t i;
     int worst = 0;
     for (i = 0; i < count; ++i) {
@@ -80,6 +83,27 @@ class ParamsController:
 
     def status_str(self, status: int) -> str:
         return self.ffi.string(self.lib.stsp_status_str(status)).decode()
+
+    def steps(self, thetas: dict, X: np.ndarray, dtype=np.float32) -> tuple[np.ndarray, int]:
+        """Every tick in order from 0 for the paths of `X` (ticks, paths, nx), the parameters
+        `thetas[j]` set just before tick j (every path alike; 0 or a missing entry: nominal
+        until the first): the commands (ticks, paths, nu) and the worst status."""
+        T, paths, _ = X.shape
+        ffi, lib = self.ffi, self.lib
+        inst = ffi.new("stsp_param_t[]", paths)
+        st = lib.harness_param_init(inst, paths)
+        if st < 0:
+            raise RuntimeError(f"stsp_param_init failed: {self.status_str(st)}")
+        U = np.zeros((T, paths, self.table.dims[1]), dtype)
+        ctype = "float[]" if dtype == np.float32 else f"{np.dtype(dtype).name}_t[]"
+        worst = 0
+        for j in range(T):
+            if j in thetas:
+                _set(self, inst, paths, thetas[j])
+            x = np.ascontiguousarray(X[j], dtype)
+            worst = min(worst, int(lib.harness_param_step(
+                inst, paths, j, ffi.from_buffer(ctype, x), ffi.from_buffer(ctype, U[j]))))
+        return U, worst
 
 
 @dataclass
@@ -111,13 +135,30 @@ def build_params_controller(ptable, table, *, build_dir=None,
     name = table.name
     header, source = generate_c(table)
     ph, pc = generate_parametric_c(ptable, prefix=name)
-    n, m, _ = table.dims
     files = {f"{name}.h": header, f"{name}.c": source, f"{name}_params.h": ph,
              f"{name}_params.c": pc}
-    mod = build_harness_module(f"_stsp_par_{name}", files, _CDEF,
-                               _BATCH % {"p": name, "P": name.upper()},
-                               [f"-DHARNESS_N={n}", f"-DHARNESS_M={m}"], build_dir=build_dir,
-                               quiet=quiet)
+    return _build(files, name, table, "float32", build_dir, quiet)
+
+
+def build_params_qcontroller(ptable, pf, *, build_dir=None,
+                             quiet: bool = True) -> ParamsController:
+    """Compile the Q15/Q31 firmware with the fixed-point parametric table `pf`
+    (`stospline.table.qparams.quantize_parametric` of `ptable`): its gain table and columns
+    (`stospline.table.parametric_c.generate_parametric_qc`), cached as
+    `build_params_controller`. Its ``table`` is the gain table."""
+    ft = pf.augmented
+    name = f"{ptable.table.name}_{ft.arith}"
+    return _build(generate_parametric_qc(ptable, pf, prefix=name), name, pf.gain_table(name),
+                  ft.arith, build_dir, quiet)
+
+
+def _build(files: dict, name: str, table, arith: str, build_dir, quiet) -> ParamsController:
+    n, m, _ = table.dims
+    scalar, _, defs = VARIANTS[arith]
+    mod = build_harness_module(f"_stsp_par_{name}", files, _CDEF % {"s": scalar},
+                               _BATCH % {"p": name, "P": name.upper(), "s": scalar},
+                               [*defs, f"-DHARNESS_N={n}", f"-DHARNESS_M={m}"],
+                               build_dir=build_dir, quiet=quiet)
     return ParamsController(mod.ffi, mod.lib, table)
 
 

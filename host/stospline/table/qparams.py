@@ -1,12 +1,15 @@
 """Fixed-point (Q15/Q31) scaling of the sensitivity columns and its error bound over the whole
-parameter box: the host side of a fixed-point parametric table (the firmware runs float32
-parameter tables only; stsp_params.h).
+parameter box: the host side of a fixed-point parametric table (the firmware's Q15/Q31
+``stsp_param_step``, stsp_params.h; its C: `stospline.table.parametric_c.generate_parametric_qc`).
 
 The parameters enter the law as ``k0 + S_k0 d`` and ``lambda0 + S_lambda0 d``, ``d = theta -
 nominal``: exactly as ``P`` more states with constant gains. So the columns are scaled as
 states of the fixed-point law (`stospline.table.qformat`, whose notation this follows)::
 
     d[p] = d_q[p] 2^(d_exp[p] - F),   d_q[p] = rhu(d[p] 2^(F - d_exp[p]))   (once, at set)
+
+(``d = theta - nominal`` in binary64, as the firmware computes it: `ParametricFixedPoint.d_q`
+is its arithmetic bit for bit),
     S_k0_q[t][i][p]     = rhu(-S_k0_ip(t) 2^(d_exp[p] - u_exp[i] + F))     (stored negated)
     S_lambda0_q[s][c][p] = rhu(S_lambda0_cp 2^(d_exp[p] - v_exp[c] + F))
 
@@ -20,9 +23,10 @@ command leaves the Q range. The state range must hold over the box too (the mean
 
 Error bound over the box, per tick and input, in the command's LSB: the augmented table's bound
 (`qformat`: the rounding of every stored entry, the columns' included, and of the latch) plus
-the rounding of ``d`` itself, at most half its LSB::
+the rounding of ``d`` itself, at most ``e_d = 1/2 + 2^(F-52)`` of its LSB (half, and the binary64
+subtraction's and the ``+ 1/2``'s roundings, each at most ``2^(F-53)`` as ``|d_q| < 2^F``)::
 
-    bound + sum_p |S_k0s_p| / 2^(F+1) + sum_c |L~_c| / 2^F * sum_p |S_lambda0s_cp| / 2^(F+1)
+    bound + sum_p |S_k0s_p| e_d / 2^F + sum_c |L~_c| / 2^F * sum_p |S_lambda0s_cp| e_d / 2^F
 
 (``S_k0s``, ``S_lambda0s`` the scaled entries before rounding). It holds for every ``theta`` in
 the box and every state in the range against the double law at that ``theta``
@@ -35,10 +39,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from stospline.table.qformat import (FRAC_BITS, FixedPointTable, _rhu, quantize_table,
-                                     scaled_entries)
+from stospline.table.qformat import (FRAC_BITS, FixedPointTable, _rhu, latch_q, law_q,
+                                     quantize_table, scaled_entries)
 
-__all__ = ["ParametricFixedPoint", "quantize_parametric", "law_double_at"]
+__all__ = ["ParametricFixedPoint", "quantize_parametric", "law_double_at", "QParamSpec"]
 
 
 @dataclass
@@ -70,13 +74,32 @@ class ParametricFixedPoint:
         d = np.atleast_2d(np.asarray(theta, float)) - self.nominal
         return _rhu(d * np.ldexp(1.0, F - self.d_exp))
 
+    @property
+    def S_k0(self) -> np.ndarray:
+        """The stored columns of the feed-forward (ticks, m, P): negated, pre-scaled."""
+        return self.augmented.K[..., self.n:]
+
+    @property
+    def S_lambda0(self) -> np.ndarray:
+        """The stored columns of the latch offsets (stages, n_latch, P): pre-scaled."""
+        return self.augmented.Lambda[..., self.n:]
+
+    def gain_table(self, name: str | None = None) -> FixedPointTable:
+        """The gain table the firmware runs with these columns: the augmented table's own
+        ``n`` state columns and scales, with the bound over the box (``bound_lsb``)."""
+        ft, n = self.augmented, self.n
+        return replace(ft, name=name or ft.name, K=ft.K[..., :n], Lambda=ft.Lambda[..., :n],
+                       x_exp=ft.x_exp[:n], x_range=np.asarray(ft.x_range)[:n],
+                       bound_lsb=self.bound_lsb)
+
     def column_bytes(self) -> int:
-        """Flash of the columns (S_k0, S_lambda0) and of nominal, lower, upper in this format."""
+        """Flash of the columns (S_k0, S_lambda0), of nominal, lower, upper (binary64) and of
+        d_exp in this format."""
         width = 2 if self.augmented.arith == "q15" else 4
         P = self.nominal.size
         T, m, _ = self.augmented.K.shape
         S, c, _ = self.augmented.Lambda.shape
-        return width * (T * m * P + S * c * P) + 4 * 3 * P
+        return width * (T * m * P + S * c * P) + 8 * 3 * P + P
 
 
 def quantize_parametric(ptable, arith: str, x_range) -> ParametricFixedPoint:
@@ -101,9 +124,9 @@ def quantize_parametric(ptable, arith: str, x_range) -> ParametricFixedPoint:
     ft = quantize_table(aug, arith, x_range, name=f"{table.name}_params_{arith}")
     n = table.dims[0]
     Ks, _, Ls, Lams, _ = scaled_entries(aug, F, ft.x_exp, ft.u_exp, ft.v_exp)
-    half = 2.0 ** -(F + 1)
-    d_law = np.abs(Ks[..., n:]).sum(axis=2) * half                      # (T, m)
-    d_latch = np.abs(Lams[..., n:]).sum(axis=2) * half                  # (S, n_latch)
+    e_d = (0.5 + 2.0 ** (F - 52)) / (1 << F)     # d_q's error, in the columns' units
+    d_law = np.abs(Ks[..., n:]).sum(axis=2) * e_d                       # (T, m)
+    d_latch = np.abs(Lams[..., n:]).sum(axis=2) * e_d                   # (S, n_latch)
     n_latch = table.dims[2]
     ls = ft.latch_stage(ft.stage_of_tick(np.arange(ft.n_ticks)))
     live = np.arange(n_latch)[None, :] < np.asarray(table.stage_n_latch)[np.maximum(ls, 0)][:, None]
@@ -132,3 +155,29 @@ def law_double_at(ptable, tick, x, x_latch, theta) -> np.ndarray:
     return -(np.einsum("nij,nj->ni", np.asarray(t.K, float)[tick], x)
              + np.asarray(t.k0, float)[tick] + np.einsum("nip,np->ni", ptable.S_k0[tick], d)
              + np.einsum("nic,nc->ni", np.asarray(t.L, float)[tick], v))
+
+
+class QParamSpec:
+    """The firmware's fixed-point ``stsp_set_params`` and ``stsp_param_step`` (stsp_params.h)
+    bit for bit, batched over paths: ``set(theta)`` (binary32 values, the range the C's) and
+    ``step(tick, Xq) -> Uq`` (integer states (paths, n), commands clamped to the limits);
+    ticks in order from 0. The latch at a stage start uses the d_q in force then, and is kept
+    until the next latch."""
+
+    def __init__(self, pf: ParametricFixedPoint, paths: int):
+        self.pf, self.ft = pf, pf.augmented
+        self.dq = np.zeros((paths, pf.nominal.size), np.int64)
+        self.V = np.zeros((paths, self.ft.dims[2]), np.int64)
+
+    def set(self, theta) -> None:
+        theta = np.asarray(np.asarray(theta, np.float32), float)
+        self.dq = np.broadcast_to(self.pf.d_q(theta), self.dq.shape).copy()
+
+    def step(self, j: int, Xq) -> np.ndarray:
+        ft = self.ft
+        Z = np.hstack([np.asarray(Xq, np.int64), self.dq])
+        k = int(ft.stage_of_tick(j))
+        if j == int(ft.stage_start[k]) and (k == 0 or ft.stage_n_latch[k] > 0):
+            self.V = latch_q(ft, np.full(len(Z), k), Z)
+        U = law_q(ft, np.full(len(Z), j), Z, self.V)
+        return np.clip(U, ft.u_min, ft.u_max)

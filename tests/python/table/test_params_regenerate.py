@@ -1,8 +1,11 @@
 """gains/<name>_params.{c,h} of every example with [[parameters]] are regenerated
-byte-for-byte (tools/params_tables.py, run by tools/regen_gains.sh)."""
+byte-for-byte (tools/params_tables.py, run by tools/regen_gains.sh), and so are the Q15/Q31
+parametric controllers of tools/params_tables.py --fixed."""
+import sys
+
 import pytest
 
-from conftest import EXAMPLES, GAINS
+from conftest import EXAMPLES, GAINS, REPO
 
 from stospline.oracle.parametric import parametric_c_files
 from stospline.problem import load_problem
@@ -23,3 +26,16 @@ def test_regenerating_parameter_columns_changes_no_byte(example):
     for name, text in files.items():
         assert (GAINS / name).read_text() == text, \
             f"gains/{name} differs (regenerate with tools/regen_gains.sh)"
+
+
+def test_regenerating_fixed_point_parametric_tables_changes_no_byte():
+    """gains/robot_goal_<arith>.{c,h} and _params.{c,h} (tools/params_tables.py --fixed)."""
+    sys.path.insert(0, str(REPO / "tools"))
+    from params_tables import FIXED, fixed_point_files
+    for example in FIXED:
+        for arith, (files, _) in fixed_point_files(example).items():
+            assert sorted(files) == sorted(f"{example}_{arith}{s}" for s in
+                                           (".c", ".h", "_params.c", "_params.h"))
+            for name, text in files.items():
+                assert (GAINS / name).read_text() == text, \
+                    f"gains/{name} differs (regenerate with tools/regen_gains.sh)"

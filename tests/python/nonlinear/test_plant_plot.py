@@ -1,8 +1,8 @@
 """``stospline plot`` of a [plant] problem draws the Monte Carlo on the model itself beside the
 oracle of the linearisation, and says so: the figure's lines are the model run's mean path
-(`run_on_model`, the same paths, seed and substeps) and the oracle's; with faults, the fault
-oracle and the faults are named; a fault the model cannot take is refused in one line, exit 2,
-nothing written."""
+(`run_on_model`, the same paths, seed and substeps; ``auto`` decided on the model) and the
+oracle's; with faults, the fault oracle and the faults are named; a fault the model cannot
+take is refused in one line, exit 2, nothing written."""
 import numpy as np
 import pytest
 from conftest import EXAMPLES
@@ -62,14 +62,16 @@ def test_the_lines_are_the_model_run_and_the_fault_oracle(tmp_path, figures):
     (tmp_path / "p.toml").write_text(document_to_toml(doc))
     out = tmp_path / "f.svg"
     assert main(["plot", str(tmp_path / "p.toml"), "--paths", "50", "--seed", "4",
-                 "--substeps", "2", "--fault", "delay_ticks=1", "--out", str(out)]) == 0
+                 "--substeps", "auto", "--fault", "delay_ticks=1", "--out", str(out)]) == 0
     assert out.stat().st_size > 0
     (fig,) = figures
-    assert "faults around the model: delay_ticks=1" in fig._suptitle.get_text()
+    title = fig._suptitle.get_text()
+    assert "faults around the model: delay_ticks=1" in title
     problem, fit = fit_plant(doc, tmp_path)
     faults = parse_faults({"delay_ticks": 1}, 2, 1)
     d = design_problem(problem)
-    r = run_on_model(d, fit.model, paths=50, seed=4, substeps=2, faults=faults)
+    r = run_on_model(d, fit.model, paths=50, seed=4, substeps="auto", faults=faults)
+    assert r.choice is not None and f"{r.run.substeps} substeps per tick" in title
     ax = _mean_panel(fig)
     np.testing.assert_allclose(_line(ax, RUN).get_ydata(), r.run.mean_x[:, 1], rtol=1e-12)
     oracle = oracle_with_path(d, faults)

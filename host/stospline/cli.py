@@ -438,21 +438,33 @@ def _planned_substeps(args, problem, opts, d, command: str, **options):
     return choice
 
 
-def _monte_carlo(args, command: str, record: int = 0, extra_paths: int = 0,
-                 model_faults: list | None = None):
-    """Design the file's problem and run its Monte Carlo for `plot`/`report`: ``(d, mc)``;
-    the output file is checked and the budget estimated first (for the run's paths and
-    `extra_paths` more of the same kind). A [plant] problem's faults run around the model,
-    not the linearisation: its run here is fault-free, and the faults are appended to
-    `model_faults`."""
+def _designed(args, command: str, record: int = 0, extra_paths: int = 0):
+    """Design the file's problem for `plot`/`report`: ``(problem, opts, d)``; the output file
+    is checked and the budget estimated first (for the run's paths and `extra_paths` more of
+    the same kind)."""
     from stospline.atomic import check_file_target
-    from stospline.pipeline import design_problem, simulate_problem
+    from stospline.pipeline import design_problem
     check_file_target(args.out, [args.problem])
     problem = _load_with_faults(args)
     opts = _design_options(args, problem)
     _check_faults_runnable(args, problem, opts)
     _check_budget(args, problem, opts, command, paths=args.paths + extra_paths, record=record)
-    d = design_problem(problem, options=opts, **_limits(args))
+    return problem, opts, design_problem(problem, options=opts, **_limits(args))
+
+
+def _monte_carlo(args, command: str, record: int = 0, extra_paths: int = 0,
+                 model_faults: list | None = None):
+    """`_designed`, then `_linear_run`: ``(d, mc)``."""
+    problem, opts, d = _designed(args, command, record, extra_paths)
+    return _linear_run(args, command, problem, opts, d, record, model_faults)
+
+
+def _linear_run(args, command: str, problem, opts, d, record: int = 0,
+                model_faults: list | None = None):
+    """The Monte Carlo of design `d` on the linear harness: ``(d, mc)``. A [plant] problem's
+    faults run around the model, not the linearisation: its run here is fault-free, and the
+    faults are appended to `model_faults`."""
+    from stospline.pipeline import simulate_problem
     if _PLANT_FIT and problem.faults.any:
         from dataclasses import replace
         from stospline.problem.faults import Faults
@@ -472,8 +484,16 @@ def _monte_carlo(args, command: str, record: int = 0, extra_paths: int = 0,
 def _plot(args) -> int:
     from stospline.atomic import write_file
     from stospline.report.plot import plot_corridor
-    d, mc = _monte_carlo(args, "plot")
-    write_file(args.out, lambda tmp: plot_corridor(d, mc, tmp), [args.problem])
+    problem, opts, d = _designed(args, "plot")
+    if not _PLANT_FIT:
+        _, mc = _linear_run(args, "plot", problem, opts, d)
+        write_file(args.out, lambda tmp: plot_corridor(d, mc, tmp), [args.problem])
+    else:                        # the controller against the C model itself
+        from stospline.nonlinear.simulate import plant_summary
+        from stospline.report.plant_plot import plot_plant
+        r = _plant_run(args, d)
+        summary = plant_summary(d, r)
+        write_file(args.out, lambda tmp: plot_plant(d, r, summary, tmp), [args.problem])
     print(f"wrote {args.out}")
     return 0
 
@@ -494,18 +514,26 @@ def _report(args) -> int:
     d, mc = _monte_carlo(args, "report", record=REPORT_RECORD,
                          extra_paths=runs * args.fault_paths, model_faults=model_faults)
     summary = simulation_summary(d, mc, seed=args.seed)
-    rows, plant = None, None
-    why_not = fault_table_unavailable(d)
+    rows, plant, left_out = None, None, []
+    why_not = None if _PLANT_FIT else fault_table_unavailable(d)
     if _PLANT_FIT:              # the run above is the linearisation's: the model's too
-        plant = _plant_run(args, d, model_faults[0] if model_faults else None)
-        why_not = "the fault sweep runs on the linear harness, not on the [plant] model"
+        from stospline.nonlinear.simulate import plant_summary
+        r = _plant_run(args, d, model_faults[0] if model_faults else None)
+        plant = plant_summary(d, r)
     if args.fault_paths and why_not:
         progress.note(f"no fault table: {why_not}")
+    elif args.fault_paths and _PLANT_FIT:
+        from stospline.nonlinear.fault_sweep import model_fault_table
+        progress.note(f"fault table on the [plant] model: at most {runs} runs of "
+                      f"{args.fault_paths} paths")
+        rows, left_out = model_fault_table(d, _PLANT_FIT[0].model, paths=args.fault_paths,
+                                           seed=args.seed, substeps=r.run.substeps)
     elif args.fault_paths:
         progress.note(f"fault table: {runs} runs of {args.fault_paths} paths")
         rows = fault_sweep(d, paths=args.fault_paths, seed=args.seed, substeps=mc.substeps,
                            workers=_workers(args), scheduler=args.scheduler)
-    page = report_html(d, mc, summary, rows, why_not if args.fault_paths else None, plant)
+    page = report_html(d, mc, summary, rows, why_not if args.fault_paths else None, plant,
+                       left_out)
     write_file(args.out, lambda tmp: Path(tmp).write_text(page, encoding="utf-8"),
                [args.problem])
     print(f"wrote {args.out}")
@@ -777,7 +805,8 @@ def build_parser() -> argparse.ArgumentParser:
     for name, text, out_type, out_help, paths, func in (
             ("report", "one self-contained HTML page: design, Monte Carlo, verdict, figures",
              _out_html, "the page, a .html file (its directory must exist)", 2000, _report),
-            ("plot", "figure: corridor, one realisation, MC mean, controls", _out_file,
+            ("plot", "figure: corridor, one realisation, MC mean, controls (of a [plant] "
+                     "problem: on the model)", _out_file,
              "figure file: .png, .pdf or .svg (its directory must exist)", 100, _plot)):
         p = sub.add_parser(name, help=text)
         p.add_argument("problem")
@@ -826,21 +855,21 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def _plant_run(args, d, faults=None) -> dict:
+def _plant_run(args, d, faults=None):
     """Monte Carlo of `d` (a [plant] problem's linearisation) on the model itself
-    (`stospline.nonlinear.simulate.plant_simulation`), in a loop with `faults` (default
+    (`stospline.nonlinear.simulate.run_on_model`), in a loop with `faults` (default
     ``d.problem.faults``); ``--substeps auto`` decides the count on the model."""
-    from stospline.nonlinear.simulate import plant_simulation
+    from stospline.nonlinear.simulate import run_on_model
     substeps = "auto" if args.substeps == "auto" else int(args.substeps)
-    return plant_simulation(d, _PLANT_FIT[0].model, paths=args.paths, seed=args.seed,
-                            substeps=substeps, faults=faults)
+    return run_on_model(d, _PLANT_FIT[0].model, paths=args.paths, seed=args.seed,
+                        substeps=substeps, faults=faults)
 
 
 def _simulate_plant(args, d) -> int:
     """`simulate` of a [plant] problem (`stospline.nonlinear.simulate`): Monte Carlo on the
     model, against the oracle of its linearisation."""
-    from stospline.nonlinear.simulate import plant_simulation_text
-    s = _plant_run(args, d)
+    from stospline.nonlinear.simulate import plant_simulation_text, plant_summary
+    s = plant_summary(d, _plant_run(args, d))
     print(dumps(s) + "\n" if args.json else plant_simulation_text(s), end="", flush=True)
     return 0 if (s["verdict"]["agree"] or not args.check) else EXIT_DISAGREE
 

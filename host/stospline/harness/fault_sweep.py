@@ -23,7 +23,7 @@ from stospline.oracle.evaluate import Moments, state_range
 from stospline.table.format import GainTable
 
 __all__ = ["FaultRow", "default_levels", "fault_table", "fault_table_markdown", "SWEEP_ROWS",
-           "FAULT_COLUMNS", "fault_row_cells"]
+           "FAULT_COLUMNS", "fault_row_cells", "fault_row"]
 
 SWEEP_ROWS = 12      # runs in the standard sweep (`default_levels`), for budget estimates
 
@@ -49,7 +49,8 @@ class FaultRow:
 def default_levels(problem: Problem, table: GainTable, nominal: MonteCarloResult
                    ) -> list[tuple[str, str, Faults]]:
     """``(fault, level, Faults)`` for the standard sweep (the module docstring), starting with
-    the fault-free loop."""
+    the fault-free loop; `nominal`: the fault-free run (its ``u_low`` and ``u_high``, as a
+    model's `user_plant.PlantRun` has them too)."""
     r = state_range(problem, table, sigmas=3.0)
     u = np.maximum(np.abs(nominal.u_low), np.abs(nominal.u_high))
     u = np.where(np.isfinite(u) & (u > 0), u, 1.0)
@@ -119,18 +120,28 @@ def fault_table(problem: Problem, controller: CompiledController, *, paths: int,
         mc = nominal if not faults.any else simulate(
             problem, controller, paths=paths, seed=seed, substeps=substeps, workers=workers,
             scheduler=scheduler, faults=faults)
-        exact: Moments | None = None
-        if has_exact_oracle(table, faults):
-            exact = evaluate_with_faults(problem, table, faults)
-        mean, hw = mc.cost_mean_ci(0.95)
         means = [mc.knot_mean_se(k)[0] for k in range(len(problem.knots))]
         covs = [np.atleast_2d(mc.knot_cov(k)) for k in range(len(problem.knots))]
-        rows.append(FaultRow(
-            fault, level, faults, None if exact is None else exact.J, mean, hw,
-            None if exact is None else _bias(problem, exact.knot_mean), _bias(problem, means),
-            None if exact is None else _variance(problem, exact.knot_cov),
-            _variance(problem, covs), mc.saturated_fraction, mc.paths))
+        rows.append(fault_row(problem, table, fault, level, faults, cost=mc.cost_mean_ci(0.95),
+                              means=means, covs=covs, saturation=mc.saturated_fraction,
+                              paths=mc.paths))
     return rows
+
+
+def fault_row(problem: Problem, table: GainTable, fault: str, level: str, faults: Faults, *,
+              cost: tuple[float, float], means, covs, saturation: float, paths: int
+              ) -> FaultRow:
+    """The row of one run with `faults`: its mean cost with the 95 % half-width (`cost`),
+    knot means and covariances, and saturated fraction, beside the fault oracle of `table` on
+    `problem` where the faults have one."""
+    exact: Moments | None = None
+    if has_exact_oracle(table, faults):
+        exact = evaluate_with_faults(problem, table, faults)
+    return FaultRow(
+        fault, level, faults, None if exact is None else exact.J, cost[0], cost[1],
+        None if exact is None else _bias(problem, exact.knot_mean), _bias(problem, means),
+        None if exact is None else _variance(problem, exact.knot_cov),
+        _variance(problem, covs), saturation, paths)
 
 
 FAULT_COLUMNS = ("fault", "level", "cost (oracle)", "cost (MC, 95% CI)",

@@ -66,7 +66,11 @@ class PlantRun:
     """Per path: ``knots[k]`` the state at knot k (paths, n), ``cost`` the realised cost
     (paths,); ``fine_knots``, ``fine_cost`` the same with half the step (same Brownian
     path); ``exits`` (corridors, paths) the first state tick outside each corridor (-1:
-    none); ``worst_status`` the lowest controller status; ``saturated`` commands clipped."""
+    none); ``worst_status`` the lowest controller status; ``saturated`` commands clipped.
+    For figures, as the linear harness's `MonteCarloResult`: ``sample_t`` the tick times
+    (ticks + 1,), ``mean_x`` the mean path (ticks + 1, n), ``sample_x`` path 0 (ticks + 1, n)
+    and ``sample_u`` the commands applied to it (ticks, m); ``u_low``, ``u_high`` the
+    smallest and largest command applied per input (m,)."""
     paths: int
     seed: int
     substeps: int
@@ -77,6 +81,12 @@ class PlantRun:
     exits: np.ndarray
     worst_status: int
     saturated: int
+    sample_t: np.ndarray
+    mean_x: np.ndarray
+    sample_x: np.ndarray
+    sample_u: np.ndarray
+    u_low: np.ndarray
+    u_high: np.ndarray
     faults: Faults = Faults()
 
 
@@ -168,6 +178,11 @@ def simulate_model(problem, controller, model, *, paths: int, seed,
     watch.check(0, X)
     knot_ticks = np.cumsum(problem.ticks_per_stage)
     knots, fine_knots, worst, saturated = [], [], 0, 0
+    total = int(knot_ticks[-1])
+    mean_x, sample_x = np.empty((total + 1, n)), np.empty((total + 1, n))
+    sample_u = np.empty((total, problem.m))
+    u_low, u_high = np.full(problem.m, np.inf), np.full(problem.m, -np.inf)
+    mean_x[0], sample_x[0] = X.mean(axis=0), X[0]
     j = 0
     for k, (stage, ticks) in enumerate(zip(problem.stages, problem.ticks_per_stage)):
         for _ in range(ticks):
@@ -186,7 +201,10 @@ def simulate_model(problem, controller, model, *, paths: int, seed,
                 cost += _running_cost(cost_stage, xs[:, s], U) * dt
                 cost_f += (_running_cost(cost_stage, xf[:, 2 * s], Uf)
                            + _running_cost(cost_stage, xf[:, 2 * s + 1], Uf)) * (dt / 2)
+            sample_u[j] = U[0]
+            u_low, u_high = np.minimum(u_low, U.min(axis=0)), np.maximum(u_high, U.max(axis=0))
             j += 1
+            mean_x[j], sample_x[j] = X.mean(axis=0), X[0]
             if not np.all(np.isfinite(X)):
                 raise ProblemError("plant.source", f"the model's state became NaN or "
                                                    f"infinite on a Monte Carlo path by "
@@ -198,4 +216,5 @@ def simulate_model(problem, controller, model, *, paths: int, seed,
         cost += _penalty(problem.knots[k], X)
         cost_f += _penalty(problem.knots[k], Xf)
     return PlantRun(paths, seed, substeps, knots, cost, fine_knots, cost_f, watch.exit_tick,
-                    worst, saturated, faults)
+                    worst, saturated, problem.t0 + np.arange(total + 1) * h, mean_x, sample_x,
+                    sample_u, u_low, u_high, faults)

@@ -23,12 +23,13 @@ import numpy as np
 from stospline.errors import ProblemError
 from stospline.harness.controller import build_controller
 from stospline.harness.montecarlo import z_value
-from stospline.harness.user_plant import model_faults_unsupported, simulate_model
+from stospline.harness.user_plant import PlantRun, model_faults_unsupported, simulate_model
 from stospline.oracle.faults import evaluate_with_faults, has_exact_oracle
 from stospline.problem.faults import Faults
 from stospline.report.json_numbers import rounded
 
-__all__ = ["plant_simulation", "plant_simulation_text", "CONFIDENCE", "check_model_faults",
+__all__ = ["plant_simulation", "plant_simulation_text", "run_on_model", "plant_summary",
+           "ModelRun", "CONFIDENCE", "check_model_faults",
            "choose_model_substeps", "ModelSubsteps", "PILOT_PATHS", "TOLERANCE",
            "MAX_AUTO_SUBSTEPS"]
 
@@ -118,12 +119,22 @@ def _variance_se(x: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(m4 - m2 ** 2, 0.0) / x.shape[0])
 
 
-def plant_simulation(d, model, *, paths: int, seed: int, substeps: int | str = 4,
-                     faults: Faults | None = None) -> dict:
-    """Monte Carlo of `d`'s table on `model` against the oracle of the linear problem
-    (``d.implemented``; with `faults`, default ``d.problem.faults``, the fault oracle of the
-    same loop), as a JSON-ready summary; every interval is Bonferroni-joint over the
-    comparisons at `CONFIDENCE`. `substeps` "auto": `choose_model_substeps`."""
+@dataclass(frozen=True)
+class ModelRun:
+    """A Monte Carlo run on the model (`run_on_model`): the paths (`PlantRun`), how its
+    substeps were chosen (None: given), and the prediction it is compared with: the oracle of
+    the linearisation, or with faults that have one, its fault oracle (`exact`)."""
+    run: PlantRun
+    choice: ModelSubsteps | None
+    oracle: object              # `stospline.oracle.evaluate.Moments`
+    exact: bool
+
+
+def run_on_model(d, model, *, paths: int, seed: int, substeps: int | str = 4,
+                 faults: Faults | None = None) -> ModelRun:
+    """Monte Carlo of `d`'s table on `model` in a loop with `faults` (default
+    ``d.problem.faults``), beside the prediction of the linear problem (``d.implemented``,
+    or the fault oracle of the same loop). `substeps` "auto": `choose_model_substeps`."""
     problem = d.problem
     faults = problem.faults if faults is None else faults
     check_model_faults(faults)
@@ -138,6 +149,21 @@ def plant_simulation(d, model, *, paths: int, seed: int, substeps: int | str = 4
         substeps = choice.substeps
     run = simulate_model(problem, controller, model, paths=paths, seed=seed,
                          substeps=int(substeps), faults=faults)
+    return ModelRun(run, choice, oracle, exact)
+
+
+def plant_simulation(d, model, *, paths: int, seed: int, substeps: int | str = 4,
+                     faults: Faults | None = None) -> dict:
+    """`plant_summary` of `run_on_model` with these arguments."""
+    return plant_summary(d, run_on_model(d, model, paths=paths, seed=seed, substeps=substeps,
+                                         faults=faults))
+
+
+def plant_summary(d, r: ModelRun) -> dict:
+    """The model's run `r` against its prediction, as a JSON-ready summary; every interval
+    is Bonferroni-joint over the comparisons at `CONFIDENCE`."""
+    problem, run, choice, oracle, exact = d.problem, r.run, r.choice, r.oracle, r.exact
+    paths, seed, substeps, faults = run.paths, run.seed, run.substeps, run.faults
     n, K = problem.n, len(problem.knots)
     z = z_value(CONFIDENCE, 2 * n * K + 1)
     knots, agree = [], True

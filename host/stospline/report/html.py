@@ -15,7 +15,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from stospline.report.plot import _walls, plot_axes, plot_corridor
+from stospline.report.plot import _walls, oracle_with_path, plot_axes, plot_corridor
 from stospline.report.summary_text import design_summary_text
 
 __all__ = ["report_html"]
@@ -256,14 +256,16 @@ def _faults(summary: dict) -> dict | None:
     return {**f, "levels": ", ".join(f"{k} = {v}" for k, v in f["levels"].items())}
 
 
-def _fault_table(rows) -> dict | None:
-    """The fault sweep (`harness.fault_sweep.fault_table`) as header cells and rows of cells
-    (`fault_row_cells`; the template left-aligns the first two, names)."""
+def _fault_table(rows, left_out, on_model: bool) -> dict | None:
+    """The fault sweep (`harness.fault_sweep.fault_table`, or on a [plant] model
+    `nonlinear.fault_sweep.model_fault_table` with the rows it `left_out`) as header cells and
+    rows of cells (`fault_row_cells`; the template left-aligns the first two, names)."""
     if not rows:
         return None
     from stospline.harness.fault_sweep import FAULT_COLUMNS, fault_row_cells
     return {"columns": FAULT_COLUMNS, "rows": [fault_row_cells(r) for r in rows],
-            "paths": rows[0].paths}
+            "paths": rows[0].paths, "on_model": on_model,
+            "left_out": [f"{r.fault} ({r.level}): {r.reason}" for r in left_out]}
 
 
 def _corridors(summary: dict) -> list[dict]:
@@ -283,18 +285,15 @@ def _corridors(summary: dict) -> list[dict]:
 
 
 def report_html(d, mc, summary: dict, fault_rows=None, no_fault_table: str | None = None,
-                plant: dict | None = None) -> str:
+                plant: dict | None = None, fault_left_out=()) -> str:
     """The page for design `d` (`pipeline.Designed`), its Monte Carlo run `mc` and that
     run's `pipeline.simulation_summary`; `fault_rows` (`harness.fault_sweep.fault_table`) adds
     the fault table, `no_fault_table` says why there is none. `plant`: of a [plant] problem
     (`d` and `mc` its linearisation's), the Monte Carlo on the model itself
-    (`nonlinear.simulate.plant_simulation`), shown first."""
-    from stospline.oracle.faults import evaluate_with_faults
-    from stospline.oracle.evaluate import evaluate_table
+    (`nonlinear.simulate.plant_summary`), shown first; its fault table is the model's, with
+    the rows `fault_left_out` (`nonlinear.fault_sweep.LeftOut`) named."""
     p = d.problem
-    faults = mc.faults
-    exact = (evaluate_with_faults(p, d.table, faults, path=True)
-             if faults.any and summary["faults"]["exact_oracle"] else evaluate_table(p, d.table))
+    exact = oracle_with_path(d, mc.faults)
     axes = plot_axes(p)
     layout = ("state " + str(axes[0]) + " against time" if len(axes) == 1
               else f"phase plane of x{axes[0]} and x{axes[1]}, knot covariance ellipses (2 sd)")
@@ -312,7 +311,7 @@ def report_html(d, mc, summary: dict, fault_rows=None, no_fault_table: str | Non
         statistics=_statistics(summary), saturation=summary["saturation"],
         faults=_faults(summary), corridors=_corridors(summary), layout=layout, images=images,
         regions=_regions_check(d) if p.tick_regions else None,
-        fault_table=_fault_table(fault_rows),
+        fault_table=_fault_table(fault_rows, fault_left_out, plant is not None),
         parameters=None if family is None else family[1],
         no_fault_table=no_fault_table, plant=plant, plant_rows=_plant_rows(plant))
 

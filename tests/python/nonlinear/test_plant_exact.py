@@ -74,3 +74,12 @@ def test_the_model_runs_the_linear_harness_paths(both, raw):
     np.testing.assert_array_equal(run.exits, mc.exit_tick)
     assert 0 < mc.exit_count(0) < PATHS
     assert int(np.sum(run.exits[0] >= 0)) == mc.exit_count(0)
+    # What the figures draw: the mean path, path 0 and (without faults, when the command
+    # path 0's controller computes is the one applied) its commands.
+    np.testing.assert_allclose(run.mean_x, mc.mean_x, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(run.sample_x, mc.sample_x, rtol=RTOL, atol=RTOL)
+    np.testing.assert_allclose(run.sample_t, mc.sample_t, rtol=RTOL)
+    if not faults.any:
+        np.testing.assert_allclose(run.sample_u, mc.sample_u, rtol=1e-6)
+        np.testing.assert_allclose(run.u_low, mc.u_low, rtol=1e-6)
+        np.testing.assert_allclose(run.u_high, mc.u_high, rtol=1e-6)

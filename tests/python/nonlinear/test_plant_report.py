@@ -1,11 +1,13 @@
 """``stospline report`` of a [plant] problem: the page shows the Monte Carlo on the model
 itself (the numbers of `plant_simulation` with the same paths and seed) beside the
-linearisation's; a fault the model cannot take is refused before any run."""
+linearisation's, and the fault table on the model with the row it cannot run named; a fault
+the model cannot take is refused before any run."""
 import re
 
 import pytest
 
 from stospline.cli import main
+from stospline.harness.fault_sweep import SWEEP_ROWS
 from stospline.nonlinear.iterate import fit_plant
 from stospline.nonlinear.simulate import plant_simulation
 from stospline.pipeline import design_problem
@@ -23,7 +25,7 @@ def plant_file(tmp_path):
 def test_the_report_shows_the_model_run(plant_file):
     page = plant_file / "r.html"
     assert main(["report", str(plant_file / "p.toml"), "--paths", "300", "--seed", "7",
-                 "--substeps", "4",
+                 "--substeps", "4", "--fault-paths", "100",
                  "--out", str(page)]) == 0
     text = page.read_text()
     assert 'id="plant-table"' in text and "runs against the model itself" in text
@@ -34,6 +36,11 @@ def test_the_report_shows_the_model_run(plant_file):
     # A linear model in C: the model agrees with its linearisation's oracle.
     assert s["verdict"]["agree"] and 'id="plant-verdict">On the model: the Monte Carlo agrees' \
         in text
+    # The fault table on the model: every level of the sweep but the one it cannot run.
+    assert 'id="fault-table-model"' in text and 'id="no-fault-table"' not in text
+    table = re.search(r'<table id="fault-table">(.*?)</table>', text, flags=re.S).group(1)
+    assert len(re.findall(r"<tr>", table)) == 1 + SWEEP_ROWS - 1
+    assert "Left out: model mismatch (B x 0.9): plant_B_scale does not apply" in text
 
 
 def test_a_linear_only_fault_is_refused_before_any_run(plant_file, capsys):

@@ -29,7 +29,7 @@ from stospline.oracle import evaluate as oracle
 from stospline.cli import main
 from stospline.problem import load_problem
 
-from conftest import EXAMPLES, GAINS, SPLINE_EXAMPLES, gains_stem
+from conftest import EXAMPLES, GAINS, REPO, SPLINE_EXAMPLES, gains_stem
 
 # Examples whose shipped table is per tick (the others ship only their spline table).
 PER_TICK_EXAMPLES = sorted(p.stem for p in EXAMPLES.glob("*.toml") if gains_stem(p.stem) == p.stem)
@@ -61,6 +61,17 @@ def _regenerate(out) -> None:
     for arith in ("q15", "q31"):
         assert main(["design", str(EXAMPLES / "robot_corridor.toml"), "--arith", arith,
                      "--table", "spline", "--out", str(out)]) == 0
+    assert _params_tables().main(["--fixed", "--out", str(out)]) == 0
+
+
+def _params_tables():
+    """tools/params_tables.py (the Q15/Q31 parametric controllers), as a module."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("params_tables",
+                                                  REPO / "tools" / "params_tables.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def _assert_same_as_gains(out) -> None:

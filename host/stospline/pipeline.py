@@ -14,7 +14,6 @@ import numpy as np
 
 from stospline import budget, limits, progress, strict
 from stospline.design.bands import has_bands
-from stospline.design.varying import mean_maps
 from stospline.design.zoh import check_delay
 from stospline.design_method import DesignedLaw, design
 from stospline.errors import DesignError, ProblemError
@@ -229,6 +228,7 @@ def _tables(law: DesignedLaw, options: DesignOptions):
              if options.discretization != "continuous" or options.spline else None)
     if not options.spline:
         return table, table, exact
+    from stospline.design.varying import mean_maps
     from stospline.table.spline import spline_table
     from stospline.table.spline.restore import is_state_latching
     if law.every_tick is not None and not is_state_latching(table):
@@ -390,6 +390,7 @@ def fixed_point_spline(d: Designed, arith: str, *, tolerance: float | None = Non
 
     Raises DesignError naming ``design.table`` for what has no spline table (as for float32)
     or ``design.spline_tolerance`` when a stage cannot meet the tolerance."""
+    from stospline.design.varying import mean_maps
     from stospline.refine.spline_certificate import q_certificate
     from stospline.table.spline import spline_table
     from stospline.table.spline.fixed_point import dequantized

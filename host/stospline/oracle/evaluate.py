@@ -26,7 +26,6 @@ from stospline.expm import require_finite
 from stospline import progress
 from stospline.design.moments import running_cost_matrix
 from stospline.problem.model import Problem
-from stospline.oracle.faults import evaluate_delayed_table
 # The tick loops' building blocks; the private names stay importable from here.
 from stospline.oracle.tick_moments import (_MAPS, Moments, _c_kernel, _euler_varying_maps,  # noqa: F401
                                         _factored_kernel, _factored_maps, _has_drift,
@@ -92,6 +91,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         raise ValueError("evaluate_table: output moments are not recorded for a table "
                          "designed for a one-tick delay")
     if getattr(table, "delay_ticks", 0):
+        from stospline.oracle.faults import evaluate_delayed_table   # a delay table only
         return evaluate_delayed_table(problem, table, propagator=propagator,
                                       substeps=substeps, path=path)
     n, m, n_latch = table.dims

@@ -42,15 +42,13 @@ __all__ = ["__version__", *_EXPORTS]
 
 def _version() -> str:
     """The installed distribution's version: the package metadata is the single source."""
-    from importlib.metadata import PackageNotFoundError, version
-    try:
-        return version("stospline")
-    except PackageNotFoundError:     # a source tree on sys.path without installation
-        return "0+unknown"
+    from stospline.dist_version import installed_version
+    # None: a source tree on sys.path without installation
+    return installed_version() or "0+unknown"
 
 
 def __getattr__(name: str):
-    if name == "__version__":        # read on first use: importlib.metadata is slow to import
+    if name == "__version__":        # read on first use
         globals()["__version__"] = value = _version()
         return value
     module = _EXPORTS.get(name)

@@ -62,7 +62,6 @@ import fcntl
 import hashlib
 import json
 import os
-import secrets
 import shutil
 import signal
 import stat
@@ -235,7 +234,7 @@ def _check_writable(directory: Path, message: str) -> None:
         except OSError as exc:
             if exc.errno not in (errno.EOPNOTSUPP, errno.EISDIR, errno.EINVAL):
                 raise
-            probe = directory / f"{STAGING_PREFIX}probe-{os.getpid()}-{secrets.token_hex(4)}"
+            probe = directory / f"{STAGING_PREFIX}probe-{os.getpid()}-{os.urandom(4).hex()}"
             fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o600)
             os.unlink(probe)
         os.close(fd)
@@ -574,7 +573,7 @@ def _transaction(out: Path, blobs: dict[str, bytes], guard: _SignalGuard, state:
 def _staging_name(out: Path) -> Path:
     """A fresh staging directory's path (not created). The lock serialises writers of `out`
     and recovery removes every earlier staging directory, so a random suffix cannot clash."""
-    return out / f"{STAGING_PREFIX}{os.getpid()}-{secrets.token_hex(6)}"
+    return out / f"{STAGING_PREFIX}{os.getpid()}-{os.urandom(6).hex()}"
 
 
 def write_file(path: str | Path, writer, inputs=()) -> Path:

@@ -34,11 +34,12 @@ __all__ = ["main"]
 
 
 def load_problem(path):
-    from stospline.nonlinear.iterate import has_plant, load_plant_problem
+    from stospline.nonlinear.plant_file import has_plant
     from stospline.problem.reader import load_problem as load
     _PLANT_FIT.clear()
     if not has_plant(path):
         return load(path)
+    from stospline.nonlinear.iterate import load_plant_problem
     problem, fit = load_plant_problem(path)        # the linearisation along its mean path
     _PLANT_FIT[:] = [fit]
     return problem
@@ -126,9 +127,9 @@ def _parameter_names(args, problem, opts) -> list[str]:
     """``<name>_params.{h,c}`` for a problem with [[parameters]] ([] without), or ProblemError
     naming the option (``--arith``/``--table``, else ``design.*``) whose table has no
     sensitivity columns."""
-    from stospline.oracle.parametric import check_parametric_options
     if not problem.parameters:
         return []
+    from stospline.oracle.parametric import check_parametric_options
     try:
         check_parametric_options(problem, opts)
     except ProblemError as exc:
@@ -564,8 +565,7 @@ def _version() -> str:
 
 
 class _VersionAction(argparse.Action):
-    """``--version``: the installed version, looked up only when asked (importlib.metadata
-    is slow to import)."""
+    """``--version``: the installed version, looked up only when asked."""
 
     def __call__(self, parser, namespace, values, option_string=None):
         print(f"{parser.prog} {_version()}")

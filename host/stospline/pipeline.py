@@ -14,7 +14,6 @@ import numpy as np
 
 from stospline import budget, limits, progress, strict
 from stospline.design.bands import has_bands
-from stospline.design.varying import mean_maps
 from stospline.design.zoh import check_delay
 from stospline.design_method import DesignedLaw, design
 from stospline.errors import DesignError, ProblemError
@@ -27,11 +26,11 @@ from stospline.report.json_numbers import rounded
 from stospline.oracle.evaluate import evaluate_continuous, evaluate_table, state_range
 from stospline.table.codegen import generate_c
 from stospline.table.format import GainTable, TickGains, table_of
-from stospline.table.qformat import DEFAULT_SIGMAS, FixedPointTable, quantize_table
-from stospline.table_options import check_spline_tolerance
+from stospline.table_options import DEFAULT_SIGMAS, check_spline_tolerance
 
 if TYPE_CHECKING:
     from stospline.refine.every_tick import EveryTick
+    from stospline.table.qformat import FixedPointTable
     from stospline.harness.montecarlo import MonteCarloResult
     from stospline.oracle.evaluate import Moments
     from stospline.harness.plant_scheme import SubstepChoice
@@ -229,6 +228,7 @@ def _tables(law: DesignedLaw, options: DesignOptions):
              if options.discretization != "continuous" or options.spline else None)
     if not options.spline:
         return table, table, exact
+    from stospline.design.varying import mean_maps
     from stospline.table.spline import spline_table
     from stospline.table.spline.restore import is_state_latching
     if law.every_tick is not None and not is_state_latching(table):
@@ -268,10 +268,39 @@ def _concurrently(evaluations, ticks: int) -> list:
     """Run independent oracle evaluations two at a time (their loops are C or numpy, which
     release the GIL), under one progress bar of `ticks`; results in order, each exactly
     what it would be alone."""
-    from concurrent.futures import ThreadPoolExecutor
-    with progress.shared("oracle", ticks), ThreadPoolExecutor(max_workers=2) as pool:
-        futures = [pool.submit(evaluate) for evaluate in evaluations]
-        return [f.result() for f in futures]
+    # Two plain threads (concurrent.futures would add its import, and logging's, to every
+    # design), each evaluation in a thread's fresh context as a pool would run it.
+    import threading
+    results, errors = [None] * len(evaluations), [None] * len(evaluations)
+    order, lock = iter(range(len(evaluations))), threading.Lock()
+
+    def work():
+        while True:
+            with lock:
+                i = next(order, None)
+            if i is None:
+                return
+            try:
+                results[i] = evaluations[i]()
+            except BaseException as exc:  # noqa: BLE001 - raised below, in order
+                errors[i] = exc
+
+    with progress.shared("oracle", ticks):
+        threads = [threading.Thread(target=work, name=f"stospline-oracle-{k}")
+                   for k in range(min(2, len(evaluations)))]
+        for t in threads:
+            t.start()
+        try:
+            for t in threads:
+                t.join()
+        except BaseException:            # an interrupt: the evaluations end first, as a
+            for t in threads:            # pool's shutdown waits for them
+                t.join()
+            raise
+    for exc in errors:
+        if exc is not None:
+            raise exc
+    return results
 
 
 def start_from(d: Designed, x0) -> Designed:
@@ -339,6 +368,7 @@ def fixed_point_table(d: Designed, arith: str, *, sigmas: float = DEFAULT_SIGMAS
                                                 f"tables only, not {arith}")
     if x_range is None:
         x_range = state_range(d.problem, d.table, sigmas=sigmas)
+    from stospline.table.qformat import quantize_table   # fixed point only
     return quantize_table(double_table(d), arith, x_range)
 
 
@@ -360,9 +390,11 @@ def fixed_point_spline(d: Designed, arith: str, *, tolerance: float | None = Non
 
     Raises DesignError naming ``design.table`` for what has no spline table (as for float32)
     or ``design.spline_tolerance`` when a stage cannot meet the tolerance."""
+    from stospline.design.varying import mean_maps
     from stospline.refine.spline_certificate import q_certificate
     from stospline.table.spline import spline_table
     from stospline.table.spline.fixed_point import dequantized
+    from stospline.table.qformat import quantize_table
     if d.table.delay_ticks:
         raise DesignError("design.delay_ticks", f"a design for a one-tick delay has float32 "
                                                 f"tables only, not {arith}")
@@ -441,7 +473,7 @@ def design_files(d: Designed, source_name: str, arith: str = "float32", *,
     if not with_c:
         return {f"{n}.json": text}, summary
     header, source = generate_c(table, source_name=source_name)
-    if arith == "float32":               # the filter's tables, with a [measurement] table
+    if arith == "float32" and d.problem.measurement is not None:   # the filter's tables
         from stospline.estimator.ctable import with_estimator
         header, source = with_estimator(header, source, d.problem, table)
     return {f"{n}.h": header, f"{n}.c": source, f"{n}.json": text}, summary

@@ -10,9 +10,12 @@ array to a fixed number of digits of its largest entry.
 """
 from __future__ import annotations
 
-from decimal import ROUND_CEILING, Decimal
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from decimal import Decimal
 
 __all__ = ["RoundedUp", "Verbatim", "verbatim", "ceil_significant", "round_to_scale"]
 
@@ -47,6 +50,7 @@ def ceil_significant(x: float | Decimal, digits: int) -> RoundedUp:
     """The smallest decimal with `digits` significant digits that is >= `x` (x > 0), exactly
     (of the binary value: ``ceil_significant(2.928018756, 3)`` is 2.93, of 2.5 is 2.5, of 2.93,
     whose double is 2.93000000000000016, 2.94)."""
+    from decimal import ROUND_CEILING, Decimal   # here: a design's float32 path needs none
     d = Decimal(x)  # exact: a float converts without rounding
     if not d.is_finite() or d <= 0:
         raise ValueError(f"a bound must be positive and finite, got {x}")
@@ -61,6 +65,7 @@ def round_to_scale(a, digits: int) -> np.ndarray:
     big = float(np.abs(a).max()) if a.size else 0.0
     if big == 0.0 or not np.isfinite(big):
         return a + 0.0
+    from decimal import Decimal
     places = digits - 1 - Decimal(big).adjusted()
     # Python's round() of a float is correctly rounded in decimal (numpy's is not).
     return np.array([round(float(v), places) for v in a.ravel()]).reshape(a.shape) + 0.0

@@ -1,5 +1,6 @@
-"""The table kinds a design can be written as, and the spline's error budget: shared by the
-problem file (``[design] table``, ``spline_tolerance``), the command line and the pipeline."""
+"""The table kinds a design can be written as, the spline's error budget and the state range
+of a fixed-point table: shared by the problem file (``[design] table``, ``spline_tolerance``),
+the command line, the pipeline and the oracle."""
 from __future__ import annotations
 
 import math
@@ -7,7 +8,7 @@ import math
 from stospline.errors import ProblemError
 
 __all__ = ["TABLE_KINDS", "DEFAULT_SPLINE_TOLERANCE", "MIN_SPLINE_TOLERANCE",
-           "check_spline_tolerance"]
+           "DEFAULT_SIGMAS", "check_spline_tolerance"]
 
 TABLE_KINDS = ("per-tick", "spline")
 # Largest relative error of any gain entry of the spline (against the entry's largest
@@ -19,6 +20,7 @@ DEFAULT_SPLINE_TOLERANCE = 1e-5
 # whatever the knots (`stospline.table.spline.fit.fit_spline`).
 MIN_SPLINE_TOLERANCE = 2.0 ** -21
 _TOLERANCE_RANGE = (MIN_SPLINE_TOLERANCE, 0.1)
+DEFAULT_SIGMAS = 6.0    # Q15/Q31 state range: mean +- 6 standard deviations over the plan
 
 
 def check_spline_tolerance(value, field: str) -> float:

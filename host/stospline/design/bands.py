@@ -27,13 +27,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from stospline.design.continuous import ContinuousDesign, DesignError, design_continuous
 from stospline.design.zoh import ZohDesign, design_zoh
+from stospline.errors import DesignError
 from stospline.precision import round_to_scale
 from stospline.problem.model import Constraint, Problem
 from stospline.limits import BANDQP_MAX
 
 if TYPE_CHECKING:
+    from stospline.design.continuous import ContinuousDesign
     from stospline.table.format import BandQP
 
 __all__ = ["BandSolution", "BandDesign", "solve_band_dual", "enumerate_active_sets",
@@ -250,6 +251,7 @@ def design_bands(problem: Problem, *, discretization: str = "exact-zoh", noise: 
     if discretization == "exact-zoh":
         base = design_zoh(zero, tick_hz, noise=noise, mode="joint")
     else:
+        from stospline.design.continuous import design_continuous
         base = design_continuous(zero, noise=noise, mode="joint")
     st0 = base.stages[0]
     x0 = problem.x0

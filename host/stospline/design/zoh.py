@@ -28,7 +28,6 @@ from stospline.design.stage_values import StageStart, StageValues, check_group, 
 from stospline.errors import DesignError
 from stospline.design.moments import augmented_drift, moment_generator, running_cost_matrix, varying_tick
 from stospline.design.latch import latch_groups
-from stospline.design.varying import zoh_ticks
 from stospline.problem.model import Knot, Problem, Stage, ticks_per_stage
 
 __all__ = ["ZohStage", "ZohDesign", "design_zoh"]
@@ -458,6 +457,7 @@ def design_zoh(problem: Problem, tick_hz: int | None = None, *, noise: bool = Tr
                     if delay and k == len(problem.knots) - 1:
                         K, k0, L = (np.concatenate([a, b]) for a, b in zip((K, k0, L), last))
                 else:
+                    from stospline.design.varying import zoh_ticks   # time-varying data only
                     varying_ticks = (zoh_ticks if stage_ticks is _stage_ticks_c
                                      else _varying_stage_ticks)
                     K, k0, L, V, N, W, mv = varying_ticks(

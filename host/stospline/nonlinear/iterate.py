@@ -21,6 +21,7 @@ from stospline.design.linearise import linearise
 from stospline.errors import ProblemError
 from stospline.nonlinear.linear_problem import linear_doc
 from stospline.nonlinear.path import MeanPath, path_change
+from stospline.nonlinear.plant_file import has_plant
 from stospline.problem.fields import kind, vector
 from stospline.problem.inputfile import decode_problem, read_problem_file
 from stospline.problem.plant_c import build_plant
@@ -53,16 +54,6 @@ class PlantFit:
         return (f"[plant] linearised along the mean path: converged in {self.iterations} "
                 f"iteration(s), last change {self.changes[-1]:.2g} <= tolerance "
                 f"{self.tolerance:g}; derivatives' estimated error {self.derivative_error:.1g}")
-
-
-def has_plant(path: str | Path) -> bool:
-    """Whether the problem file at `path` has a ``[plant]`` table (False when it cannot be
-    read: the ordinary loader then says why)."""
-    try:
-        doc = decode_problem(read_problem_file(path))
-    except ProblemError:
-        return False
-    return isinstance(doc, dict) and "plant" in doc
 
 
 def _skeleton(doc: dict, n: int, m: int) -> dict:

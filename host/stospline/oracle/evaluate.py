@@ -18,14 +18,14 @@ the design's J0 to rounding, not an independent integration; the table's oracle 
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from stospline.expm import require_finite
 
 from stospline import progress
-from stospline.design.continuous import ContinuousDesign, HamiltonianSolution
 from stospline.design.moments import running_cost_matrix
 from stospline.problem.model import Problem
-from stospline.oracle.faults import evaluate_delayed_table
 # The tick loops' building blocks; the private names stay importable from here.
 from stospline.oracle.tick_moments import (_MAPS, Moments, _c_kernel, _euler_varying_maps,  # noqa: F401
                                         _factored_kernel, _factored_maps, _has_drift,
@@ -33,7 +33,10 @@ from stospline.oracle.tick_moments import (_MAPS, Moments, _c_kernel, _euler_var
                                         _PathRecord, _plant_tick, _stage_maps, _table_latch,
                                         _tick_maps, _tick_varying, _w_map)
 from stospline.table.format import GainTable
-from stospline.table.qformat import DEFAULT_SIGMAS, scalable_ranges
+from stospline.table_options import DEFAULT_SIGMAS
+
+if TYPE_CHECKING:
+    from stospline.design.continuous import ContinuousDesign
 
 __all__ = ["Moments", "evaluate_continuous", "evaluate_table"]
 
@@ -88,6 +91,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         raise ValueError("evaluate_table: output moments are not recorded for a table "
                          "designed for a one-tick delay")
     if getattr(table, "delay_ticks", 0):
+        from stospline.oracle.faults import evaluate_delayed_table   # a delay table only
         return evaluate_delayed_table(problem, table, propagator=propagator,
                                       substeps=substeps, path=path)
     n, m, n_latch = table.dims
@@ -176,6 +180,7 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
                         atol: float = 1e-14, points_per_stage: int = 0) -> Moments:
     """Exact moments of a continuous design's latched law ``u = -K(t)x - k0(t) - L(t) v``
     applied to `problem`'s plant (which may differ from the plant it was designed for)."""
+    from stospline.design.continuous import HamiltonianSolution
     n, m = problem.n, problem.m
     x0 = problem.x0
     J = 0.0
@@ -285,6 +290,7 @@ def state_range(problem: Problem, table: GainTable, *, sigmas: float = DEFAULT_S
                 ) -> np.ndarray:
     """``max_t |E x_j(t)| + sigmas * std x_j(t)`` over every tick of the plan (exact moments of
     the table's law, `evaluate_table`): the state scales of a Q15/Q31 table."""
+    from stospline.table.qformat import scalable_ranges   # fixed point only
     mom = evaluate_table(problem, table, path=True)
     # max(., 0): a zero variance may come out as -1e-18 on another machine (NaN from sqrt).
     r = np.max(np.abs(mom.path_mean) + sigmas * np.sqrt(np.maximum(mom.path_var, 0.0)), axis=0)

@@ -3,7 +3,6 @@ path and returns the value checked, or raises `ProblemError` naming the field. S
 reader and the tables it delegates to (`measurement`), which cannot import the reader."""
 from __future__ import annotations
 
-import difflib
 import math
 from typing import Any, Callable
 
@@ -41,6 +40,7 @@ def check_keys(table: Any, path: str, allowed: set[str], required: set[str], *,
         raise ProblemError(path or "<file>", f"must be a table, got {kind(table)}")
     for key in table:
         if key not in allowed:
+            import difflib               # here: only a misspelt key needs it
             close = difflib.get_close_matches(key, allowed, n=1)
             more = f"did you mean '{close[0]}'? " if close else ""
             more += hint(key) if hint is not None else ""

@@ -5,20 +5,19 @@ Floats are written as the shortest decimal that rounds back to the same binary32
 """
 from __future__ import annotations
 
-from importlib.metadata import PackageNotFoundError, version
 from typing import Callable, NamedTuple
 
 import numpy as np
 
+from stospline.dist_version import installed_version
 from stospline.table import kernels
 from stospline.table.format import FORMAT_VERSION, MAGIC, SCALAR_FLOAT32, GainTable, table_crc32
 
 __all__ = ["generate_c", "GENERATOR"]
 
-try:
-    GENERATOR = f"stospline {version('stospline')}"
-except PackageNotFoundError:  # running from a source tree without installation
-    GENERATOR = "stospline (source tree)"
+_VERSION = installed_version()
+# None: running from a source tree without installation
+GENERATOR = f"stospline {_VERSION}" if _VERSION is not None else "stospline (source tree)"
 
 _PER_LINE = 6
 

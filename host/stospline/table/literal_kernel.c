@@ -10,8 +10,9 @@
  * a power of two): |q - num/den| < num / (2 M den), i.e. 2 M |q den - num| < num.  The p-digit
  * decimals of one decade are multiples of 10^k and the (p+1)-digit ones include them, so the
  * nearest (p+1)-digit decimal is at least as near: reading back is monotone in p, and a
- * bisection over p = 1..9 finds the least (9 digits always read back for binary32).  Of the
- * p-digit decimals inside a symmetric interval the nearest is the one numpy's Dragon4 writes.
+ * search down from p = 8 finds the least (9 digits always read back for binary32; a table's
+ * gains mostly need 7 or 8, so that order tries fewer p than a bisection).  Of the p-digit
+ * decimals inside a symmetric interval the nearest is the one numpy's Dragon4 writes.
  *
  * The values where that argument does not hold, or the integers would not fit 128 bits, are
  * flagged instead of written, for numpy to write: a power
@@ -63,8 +64,14 @@ static stsp_candidate nearest(uint32_t M, int E, int k)
     } else {
         den <<= (unsigned)(k - E);
     }
-    q = num / den;
-    r = num - q * den;
+    if (k <= 0) {          /* den a power of two (most gains): a shift, not a 128-bit division */
+        const unsigned s = E - k >= 0 ? 0u : (unsigned)(k - E);
+        q = num >> s;
+        r = num - (q << s);
+    } else {
+        q = num / den;
+        r = num - q * den;
+    }
     c.tie = (2u * r == den);
     if (2u * r > den) {
         ++q;
@@ -75,16 +82,17 @@ static stsp_candidate nearest(uint32_t M, int E, int k)
     return c;
 }
 
-static int decimal_exponent(uint32_t M, int E, float ax)
+/* floor(log10 x) from log10, then checked exactly: x's 9-digit decimal has 9 digits (or is
+ * 10^9, x rounded up to the next decade).  *nine is that 9-digit decimal at the exponent
+ * returned. */
+static int decimal_exponent(uint32_t M, int E, float ax, stsp_candidate *nine)
 {
-    /* floor(log10 x) from log10, then checked exactly: x's 9-digit decimal has 9 digits (or
-     * is 10^9, x rounded up to the next decade). */
     int e = (int)floor(log10((double)ax));
-    const uint64_t q = nearest(M, E, e - 8).q;
-    if (q < 100000000u) {
-        --e;
-    } else if (q > 1000000000u) {
-        ++e;
+    *nine = nearest(M, E, e - 8);
+    if (nine->q < 100000000u) {
+        *nine = nearest(M, E, --e - 8);
+    } else if (nine->q > 1000000000u) {
+        *nine = nearest(M, E, ++e - 8);
     }
     return e;
 }
@@ -93,39 +101,37 @@ static int decimal_exponent(uint32_t M, int E, float ax)
 static int write_literal(float x, char *slot)
 {
     const float ax = fabsf(x);
-    int E2, e, lo = 1, hi = 9, n = 0, ndig, i;
+    int E2, e, p = 9, n = 0, ndig, i;
     uint32_t M;
     uint64_t q;
     char digits[24];
-    stsp_candidate c;
+    stsp_candidate c, best;
     const float m = frexpf(ax, &E2);   /* ax = m 2^E2, m in [1/2, 1) */
     if (m == 0.5f || ax < 8.67361738e-19f /* 2^-60 */ || ax >= 4194304.0f /* 2^22 */) {
         return 0;
     }
     M = (uint32_t)ldexpf(m, 24);
     E2 -= 24;
-    e = decimal_exponent(M, E2, ax);
-    while (lo < hi) {
-        const int mid = (lo + hi) / 2;
-        c = nearest(M, E2, e - mid + 1);
+    e = decimal_exponent(M, E2, ax, &best);
+    for (i = 8; i >= 1; --i) {                  /* the least p: down until i digits fail */
+        c = nearest(M, E2, e - i + 1);
         if (c.tie) {
             return 0;
         }
-        if (c.inside) {
-            hi = mid;
-        } else {
-            lo = mid + 1;
+        if (!c.inside) {
+            break;
         }
+        best = c;
+        p = i;
     }
-    c = nearest(M, E2, e - lo + 1);
-    if (c.tie || !c.inside) {
+    if (best.tie || !best.inside) {
         return 0;
     }
-    q = c.q;
+    q = best.q;
     for (ndig = 0; q > 0; q /= 10u) {          /* the digits, last first */
         digits[ndig++] = (char)('0' + (int)(q % 10u));
     }
-    e += ndig - lo;                             /* q rounded up to 10^p: one more digit */
+    e += ndig - p;                              /* q rounded up to 10^p: one more digit */
     while (ndig > 1 && digits[0] == '0') {      /* trailing zeros: "1.0", never "1.00" */
         memmove(digits, digits + 1, (size_t)--ndig);
     }

@@ -52,7 +52,7 @@ from stospline import limits
 from stospline.firmware_interface import ARITHS, FRAC_BITS, SCALAR_KIND
 from stospline.precision import RoundedUp, ceil_significant
 from stospline.table.format import F32_MAX, GainTable, TableShape
-from stospline.table.spline.fit import _column_peaks
+from stospline.table_options import DEFAULT_SIGMAS
 
 __all__ = ["FixedPointTable", "quantize_table", "scale_exponents", "scaled_entries",
            "row_sums", "assemble",
@@ -60,7 +60,6 @@ __all__ = ["FixedPointTable", "quantize_table", "scale_exponents", "scaled_entri
            "ARITHS", "FRAC_BITS", "SCALAR_KIND", "EXP_MAX", "DEFAULT_SIGMAS"]
 
 EXP_MAX = limits.Q_EXP_MAX  # the firmware refuses scale exponents beyond +-60
-DEFAULT_SIGMAS = 6.0    # state range: mean +- 6 standard deviations over the plan
 _EXP_SPAN = 24          # a state whose range is tiny gets at least 2^-24 of the largest one
 # The bound as written (summary JSON, generated header): rounded UP to BOUND_DIGITS significant
 # digits after adding a margin of 3 GAIN_AGREEMENT 2^F LSB. Why: the bound adds the rounding
@@ -229,6 +228,7 @@ def scale_exponents(table: GainTable, arith: str, x_range
     sv = np.ldexp(1.0, v_exp)
     # (A column's maximum over the ticks by `_column_peaks`: numpy reduces the first axis of
     # a few columns row by row, 8x slower on the 60 s patrol.)
+    from stospline.table.spline.fit import _column_peaks   # the fitter: not for float32
     r_u = _column_peaks(np.abs(k0) + _abs_times(K, sx)
                         + (_abs_times(L, sv) if n_latch else 0.0))
     # The safe command must be representable too (a hover thrust may exceed every command).

@@ -35,10 +35,27 @@ def test_importing_the_cli_loads_no_numpy_harness_or_plotting():
     assert under(loaded_after("import stospline.cli"), heavy) == []
 
 
-def test_a_design_loads_no_harness_or_plotting():
-    code = ("import contextlib, io\nfrom stospline.cli import main\n"
-            "with contextlib.redirect_stdout(io.StringIO()):\n"
-            f"    assert main(['design', {ROBOT!r}, '--json']) == 0")
+# What a float32 design of a problem without [plant], [measurement] or [[parameters]] does not
+# need either: package metadata (`stospline.dist_version` reads it), a thread pool, the
+# linearisation of a [plant], the estimator's tables, the parametric oracle, the continuous
+# designer, the spline fitter, the fixed-point tables, decimal and difflib.
+PLAIN_DESIGN = ("importlib.metadata", "concurrent.futures", "stospline.nonlinear.iterate",
+                "stospline.estimator", "stospline.oracle.parametric", "stospline.design.continuous",
+                "stospline.table.spline", "stospline.table.qformat", "decimal", "difflib")
+
+
+def _design_modules() -> list[str]:
+    code = ("import contextlib, io, tempfile\nfrom stospline.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()), tempfile.TemporaryDirectory() as d:\n"
+            f"    assert main(['design', {ROBOT!r}, '--json', '--out', d]) == 0")
     modules = loaded_after(code)
     assert "stospline.pipeline" in modules          # the probe ran the design
-    assert under(modules, HARNESS) == []
+    return modules
+
+
+def test_a_design_loads_no_harness_or_plotting():
+    assert under(_design_modules(), HARNESS) == []
+
+
+def test_a_plain_design_loads_only_what_it_uses():
+    assert under(_design_modules(), PLAIN_DESIGN) == []

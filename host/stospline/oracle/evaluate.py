@@ -176,11 +176,17 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
     return rec.moments(J, means, covs, cons, problem.t0, h, table.n_ticks)
 
 
+def _exact_flow(st) -> bool:
+    """Whether the stage solution `st` is a `HamiltonianSolution`: its closed loop is known
+    exactly (the continuous designer, imported only for a continuous design)."""
+    from stospline.design.continuous import HamiltonianSolution
+    return isinstance(st._sol, HamiltonianSolution)
+
+
 def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: float = 1e-12,
                         atol: float = 1e-14, points_per_stage: int = 0) -> Moments:
     """Exact moments of a continuous design's latched law ``u = -K(t)x - k0(t) - L(t) v``
     applied to `problem`'s plant (which may differ from the plant it was designed for)."""
-    from stospline.design.continuous import HamiltonianSolution
     n, m = problem.n, problem.m
     x0 = problem.x0
     J = 0.0
@@ -201,7 +207,7 @@ def evaluate_continuous(problem: Problem, design: ContinuousDesign, *, rtol: flo
             keep = np.r_[0:n, M.shape[0] - 1]
             M = M[np.ix_(keep, keep)]
 
-        if (isinstance(st._sol, HamiltonianSolution) and stage is st.stage
+        if (_exact_flow(st) and stage is st.stage
                 and not points_per_stage and not stage.noise_tensor.any()):
             # The law of an exactly solved stage on its own noise-free plant: the closed loop
             # is the Hamiltonian flow's, exact (HamiltonianSolution.closed_loop).

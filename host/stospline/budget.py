@@ -80,6 +80,11 @@ TICK_QP_ROW_BYTES = 1500    # bytes per row of the QP (the row object, its spars
 SIM_TICK = 10e-6            # s per Monte Carlo tick and block of paths: the Python step
 SIM_BLOCK = 0.5e-3          # s per block of paths: its instances, stream and statistics
 SIM_PATH_TICK = 1.0e-9      # s per path, tick and unit of work (below), on one core
+# CPU seconds of the Monte Carlo on a [plant] model (`harness.user_plant.simulate_model`, in
+# one process) per path and tick: a fixed part (the controller, the bookkeeping) and a part
+# per plant step (the coarse run and its check at twice the steps). The unicycle at 200 Hz,
+# 2000 paths, one core (tools/bench/model_loop.py): 0.74 us per path-tick at 1 step, 1.82 at 4.
+MODEL_PATH_TICK, MODEL_PATH_STEP = 3.8e-7, 3.6e-7
                             # (tools/bench/harness_throughput.py: ~95 ns per robot path-tick)
 SIM_PATH_BYTES = 64         # bytes per path besides states (instances, buffers)
 CONTINUOUS_STAGE = 0.5      # s per stage of the continuous-time design and its oracle
@@ -188,7 +193,7 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
              discretization: str = "exact-zoh", arith: str = "float32", paths: int = 0,
              substeps: int = 2, delay_ticks: int = 0, table: str = "per-tick",
              spline_tolerance: float | None = None, workers: int = 1,
-             record: int = 0) -> Estimate:
+             record: int = 0, model: bool = False) -> Estimate:
     """Estimate the time and peak memory of ``stospline COMMAND`` on `problem`.
 
     A design for a one-tick delay (`delay_ticks` 1) is counted as one of ``n + m`` states.
@@ -204,6 +209,9 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
         Processes that run its blocks of paths at once (each counted with its own memory).
     record : int
         Paths whose states are kept at every tick (a report's percentile bands).
+    model : bool
+        The Monte Carlo runs on the problem's [plant] model (its own loop, one process), not
+        on the linear harness.
     """
     n, m, mz = problem.n, problem.m, problem.mz
     n += m * (delay_ticks == 1)
@@ -268,7 +276,7 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
                  transient=True))
         est.terms += monte_carlo_terms(problem, paths=paths, substeps=substeps,
                                        workers=workers, record=record, n_latch=n_latch,
-                                       delay_ticks=delay_ticks)
+                                       delay_ticks=delay_ticks, model=model)
     if command in ("plot", "report"):
         add(Term("figures (matplotlib)", "--out", seconds=FIGURE_SECONDS, bytes=FIGURE_BYTES))
     return est
@@ -276,7 +284,7 @@ def estimate(problem: Problem, *, command: str = "design", mode: str = "stagewis
 
 def monte_carlo_terms(problem: Problem, *, paths: int, substeps: int = 2, workers: int = 1,
                       record: int = 0, n_latch: int | None = None,
-                      delay_ticks: int = 0) -> list[Term]:
+                      delay_ticks: int = 0, model: bool = False) -> list[Term]:
     """The Monte Carlo run's terms: its paths (with their corridor watch and `workers` forked
     processes, each running a block of `harness.montecarlo.BLOCK_PATHS` paths), the oracle of the
     plant scheme, and the corridors' exit bounds of its summary. Its memory does not grow
@@ -299,9 +307,15 @@ def monte_carlo_terms(problem: Problem, *, paths: int, substeps: int = 2, worker
     per_run = T * 3 * (8 * n + 112.0) + T * min(record, BLOCK_PATHS, paths) * (n + m) * 4.0
     block = min(paths, BLOCK_PATHS) * per_path
     waiting = (_AHEAD_PER_WORKER * workers if workers > 1 else 1) * 8.0 * (T + 1) * n
-    terms = [Term(f"Monte Carlo ({paths} paths)", "--paths",
-                  seconds=(SIM_TICK * T + SIM_BLOCK) * blocks + SIM_PATH_TICK * paths * T * work,
-                  bytes=block + per_run + waiting)]
+    if model:                   # the model's own loop, one process
+        workers = 1
+        terms = [Term(f"Monte Carlo on the [plant] model ({paths} paths)", "--paths",
+                      seconds=paths * T * (MODEL_PATH_TICK + substeps * MODEL_PATH_STEP),
+                      bytes=block + per_run)]
+    else:
+        terms = [Term(f"Monte Carlo ({paths} paths)", "--paths",
+                      seconds=(SIM_TICK * T + SIM_BLOCK) * blocks
+                      + SIM_PATH_TICK * paths * T * work, bytes=block + per_run + waiting)]
     if problem.corridors:
         terms.append(Term(f"the paths' exit watch of {len(problem.corridors)} corridors",
                           "corridors", seconds=CORRIDOR_WALL * paths * watch))

@@ -246,6 +246,8 @@ def _check_budget(args, problem, opts, command: str, **options) -> None:
     paths = options.pop("paths", getattr(args, "paths", 0))
     if command != "design":
         options.setdefault("workers", _workers(args))
+        if _PLANT_FIT:          # the run is on the [plant] model (`_plant_run`)
+            options.setdefault("model", True)
     est = check(problem, command=command, max_seconds=args.max_time,
                 max_bytes=args.max_memory * 1024 ** 3, **opts.workload(),
                 paths=paths,

@@ -27,6 +27,7 @@ import numpy as np
 
 from stospline.budget import BASE_SECONDS, Estimate, Term
 from stospline.corridor_search import Candidate, Exits, score
+from stospline.budget import MODEL_PATH_STEP, MODEL_PATH_TICK
 from stospline.design.corridor_design import add_strip_cost
 from stospline.errors import ProblemError
 from stospline.harness.controller import build_controller
@@ -36,13 +37,8 @@ from stospline.pipeline import design_problem
 from stospline.problem.inputfile import decode_problem
 from stospline.problem.toml_writer import document_to_toml
 
-__all__ = ["PlantCorridor", "PlantCandidate", "PATH_TICK_SECONDS", "PATH_STEP_SECONDS"]
+__all__ = ["PlantCorridor", "PlantCandidate"]
 
-# CPU seconds of `simulate_model` per path and tick: a fixed part (the controller, the
-# bookkeeping) and a part per plant step (the coarse run and its check at twice the steps).
-# The unicycle at 200 Hz, 2000 paths, one core (tools/bench/model_loop.py): 0.74 us per
-# path-tick at 1 step, 1.82 at 4.
-PATH_TICK_SECONDS, PATH_STEP_SECONDS = 3.8e-7, 3.6e-7
 SAMPLE_SECONDS = 0.01      # the rate term's samples along each stage
 
 
@@ -147,7 +143,7 @@ class PlantCorridor:
         grid += refine
 
         def mc(paths):
-            return paths * ticks * (PATH_TICK_SECONDS + substeps * PATH_STEP_SECONDS)
+            return paths * ticks * (MODEL_PATH_TICK + substeps * MODEL_PATH_STEP)
 
         est = Estimate("corridor-design")
         est.terms += [

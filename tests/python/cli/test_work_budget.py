@@ -144,6 +144,37 @@ def test_robot_estimate_is_plausible():
     assert 1 < est.seconds < 30 and 50e6 < est.bytes < 1e9
 
 
+def test_a_plant_model_run_is_estimated_at_the_model_loop_rate():
+    """A Monte Carlo on a [plant] model runs its own loop in one process, several times
+    slower per path-tick than the linear harness: its estimate is the model loop's
+    (tools/bench/model_loop.py), whatever --workers says."""
+    from stospline.problem import load_problem
+    p = load_problem(EXAMPLES / "robot_corridor.toml")
+    linear = budget.estimate(p, command="simulate", paths=10 ** 5, substeps=2, workers=2)
+    model = budget.estimate(p, command="simulate", paths=10 ** 5, substeps=2, workers=2,
+                            model=True)
+    run = model.top("seconds")
+    assert "[plant] model" in run.what
+    T = int(np.sum(p.ticks_per_stage))
+    assert run.seconds == pytest.approx(
+        10 ** 5 * T * (budget.MODEL_PATH_TICK + 2 * budget.MODEL_PATH_STEP))
+    assert model.seconds > 3 * linear.seconds
+
+
+def test_a_long_model_run_is_refused_before_the_fit(tmp_path):
+    """`simulate` on the unicycle model with 10^5 paths: ~11 min at the model loop's rate,
+    refused at --max-time 60 naming --paths."""
+    import shutil
+    for name in ("robot_unicycle.toml", "unicycle.c"):
+        shutil.copy(EXAMPLES / "nonlinear" / name, tmp_path / name)
+    r = subprocess.run([sys.executable, "-m", "stospline.cli", "simulate",
+                        str(tmp_path / "robot_unicycle.toml"), "--paths", "100000",
+                        "--substeps", "2", "--max-time", "60"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and r.stdout == "", r.stderr
+    assert "--paths" in r.stderr and "[plant] model" in r.stderr, r.stderr
+
+
 class _Tty(io.StringIO):
     def isatty(self):
         return True

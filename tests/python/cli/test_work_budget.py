@@ -161,7 +161,7 @@ def test_a_plant_model_run_is_estimated_at_the_model_loop_rate():
     assert model.seconds > 3 * linear.seconds
 
 
-def test_a_long_model_run_is_refused_before_the_fit(tmp_path):
+def test_a_long_model_run_is_refused_before_it_starts(tmp_path):
     """`simulate` on the unicycle model with 10^5 paths: ~11 min at the model loop's rate,
     refused at --max-time 60 naming --paths."""
     import shutil

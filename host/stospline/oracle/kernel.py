@@ -1,9 +1,11 @@
 """The oracle's compiled tick loops (double precision C, loaded through cffi).
 
-`build_kernel` compiles ``tick_kernel.c`` (beside this module) into a cffi API-mode module
-cached as the designer's kernels are (`stospline.cache`: the user cache directory,
-``STOSPLINE_CACHE_DIR`` overrides, keyed by a hash of the source, declarations and flags); `load_kernel` returns the loaded module, building it on first use.
-Both run the tick loop of `oracle.evaluate_table` over one time-invariant stage:
+`build_kernel` compiles ``tick_kernel.c`` and ``tails_kernel.c`` (beside this module; the
+latter the fourth-moment oracle's, `oracle.tails_kernel`) into a cffi API-mode module cached
+as the designer's kernels are (`stospline.cache`: the user cache directory,
+``STOSPLINE_CACHE_DIR`` overrides, keyed by a hash of the source, declarations and flags);
+`load_kernel` returns the loaded module, building it on first use.
+Two run the tick loop of `oracle.evaluate_table` over one time-invariant stage:
 `oracle_stage_ticks` on the packed moment map `pack_oracle_maps` makes (any stage,
 O(n² d²) per tick), `factored_stage_ticks` on the tick's transition ``Phi`` and the cost row
 `pack_cost` makes (a noise-free stage: ``Phi E ww' Phi'``, O(n d²) per tick).
@@ -20,7 +22,7 @@ from stospline.errors import KernelBuildError
 __all__ = ["build_kernel", "load_kernel", "oracle_stage_ticks", "pack_oracle_maps",
            "factored_stage_ticks", "pack_cost", "KernelBuildError"]
 
-_SOURCES = [Path(__file__).with_name("tick_kernel.c")]
+_SOURCES = [Path(__file__).with_name(f) for f in ("tick_kernel.c", "tails_kernel.c")]
 _CDEF = """
 size_t stsp_oracle_work_size(int n, int m, int n_latch);
 int stsp_oracle_stage_ticks(int n, int m, int n_latch, long T, const double *K, const double *L,
@@ -32,6 +34,15 @@ int stsp_oracle_factored_ticks(int n, int m, int P, long T, const double *K, con
                                const double *k0, const double *Phi, const double *cost,
                                const double *Fmean, double *M, double *J, double *work,
                                double *xm, double *xv, double *um, double *uv);
+int stsp_tails_operator(int d, int o, long size, long row0, long rows, const int64_t *idx,
+                        long nodes, const double *M, const double *w, const int64_t *of_full,
+                        double *out, double *work, int64_t *iwork);
+size_t stsp_tails_ticks_work(int m, int dy, long D4, long D2);
+int stsp_tails_ticks(int n, int m, int P, long T, const double *K, const double *L,
+                     const double *k0, long D4, long D2, const int64_t *rowptr,
+                     const int64_t *colidx, const double *val, int substeps,
+                     const int64_t *src4, const int64_t *src2, const int64_t *back4,
+                     const int64_t *back2, double *Y4, double *Y2, double *J2, double *work);
 """
 
 

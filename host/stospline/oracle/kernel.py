@@ -41,8 +41,9 @@ size_t stsp_tails_ticks_work(int m, int dy, long D4, long D2);
 int stsp_tails_ticks(int n, int m, int P, long T, const double *K, const double *L,
                      const double *k0, long D4, long D2, const int64_t *rowptr,
                      const int64_t *colidx, const double *val, int substeps,
-                     const int64_t *src4, const int64_t *src2, const int64_t *back4,
-                     const int64_t *back2, double *Y4, double *Y2, double *J2, double *work);
+                     const int64_t *ins, const int64_t *src4, const int64_t *src2,
+                     const int64_t *back4, const int64_t *back2, double *Y4, double *Y2,
+                     double *J2, double *work);
 """
 
 

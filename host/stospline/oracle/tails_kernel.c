@@ -95,53 +95,72 @@ int stsp_tails_operator(int d, int o, long size, long row0, long rows, const int
     return 0;
 }
 
-/* The staged contraction of a full symmetric tensor W_0 of order o on R^{d_y} with the
- * command's rows: W_k[a_1..a_k][r_{k+1}..r_o] = sum_j Tu[a_k, j] W_{k-1}[a_1..a_{k-1}][j,
- * r_{k+1}..r_o], the levels one after another in buf (W_0 first, d_y^o entries, then m d_y^(o-1),
- * ...): every moment of q is an entry of some level (`src`). */
-static void tails_levels(double *buf, const double *Tu, int m, int dy, int o)
+/* C(dy + s - 1, s): the multisets of s indices out of dy. */
+static long tails_multisets(int dy, int s)
 {
-    long below = 1, blocks = 1, A, j, r;
-    double *prev = buf, *next;
-    int k, a;
-    for (k = 0; k < o; ++k) {
-        below *= dy;
+    long c = 1;
+    int i;
+    for (i = 1; i <= s; ++i) {
+        c = c * (dy + i - 1) / i;
     }
-    next = buf + below;
-    for (k = 1; k <= o; ++k) {                     /* blocks = m^(k-1) of `below` entries */
-        const long outer = below / dy;
+    return c;
+}
+
+/* Where the insertion table of multisets of size s starts in `ins` (sizes 1, 2, ... in turn,
+ * each dy x C(dy + s - 2, s - 1)). */
+static long tails_ins_offset(int dy, int s)
+{
+    long off = 0;
+    int r;
+    for (r = 1; r < s; ++r) {
+        off += (long)dy * tails_multisets(dy, r - 1);
+    }
+    return off;
+}
+
+/* The staged contraction of a symmetric tensor W_0 of order o on R^{d_y} (compressed) with
+ * the command's rows: W_k[a_1..a_k][t] = sum_j Tu[a_k, j] W_{k-1}[a_1..a_{k-1}][{j} + t] over
+ * the multisets t of o-k indices, the levels one after another in buf (W_0 first, then m
+ * blocks of the next size, m^2 of the next, ...): every moment of q is an entry of some level
+ * (`src`).  ins[s]: the number of the multiset {j} + t of size s, per j and t of size s-1. */
+static void tails_levels(double *buf, const double *Tu, const int64_t *ins, int m, int dy,
+                         int o)
+{
+    double *prev = buf, *next = buf + tails_multisets(dy, o);
+    long blocks = 1, A, t;
+    int k, a, j;
+    for (k = 1; k <= o; ++k) {
+        const long cp = tails_multisets(dy, o - k + 1), cn = tails_multisets(dy, o - k);
+        const int64_t *tab = ins + tails_ins_offset(dy, o - k + 1);
         for (A = 0; A < blocks; ++A) {
+            const double *src = prev + A * cp;
             for (a = 0; a < m; ++a) {
-                double *dst = next + (A * m + a) * outer;
+                double *dst = next + (A * m + a) * cn;
                 const double *row = Tu + a * dy;
-                for (r = 0; r < outer; ++r) {
-                    dst[r] = 0.0;
+                for (t = 0; t < cn; ++t) {
+                    dst[t] = 0.0;
                 }
                 for (j = 0; j < dy; ++j) {
-                    const double t = row[j];
-                    const double *srow = prev + A * below + j * outer;
-                    for (r = 0; r < outer; ++r) {
-                        dst[r] += t * srow[r];
+                    const double c = row[j];
+                    const int64_t *put = tab + (long)j * cn;
+                    for (t = 0; t < cn; ++t) {
+                        dst[t] += c * src[put[t]];
                     }
                 }
             }
         }
         prev = next;
         blocks *= m;
-        next += blocks * outer;
-        below = outer;
+        next += blocks * cn;
     }
 }
 
 static long tails_level_size(int m, int dy, int o)
 {
-    long total = 0, mk = 1, k, e, rest;
+    long total = 0, mk = 1;
+    int k;
     for (k = 0; k <= o; ++k) {
-        rest = 1;
-        for (e = k; e < o; ++e) {
-            rest *= dy;
-        }
-        total += mk * rest;
+        total += mk * tails_multisets(dy, o - k);
         mk *= m;
     }
     return total;
@@ -156,18 +175,19 @@ size_t stsp_tails_ticks_work(int m, int dy, long D4, long D2)
 /* The ticks of one stage: per tick j, Tu from the gains, the moments of q gathered from the
  * levels of E y^(x)4 and E J y y' (src4, src2 into the levels of order 4 and 2), the step's
  * map (CSR: rowptr, colidx, val; D4 + D2 + 1 square, on [E q^(x)4; E J q q'; E J^2]
- * compressed) applied `substeps` times, and y's full moments gathered back (back4 (d_y^4),
- * back2 (d_y^2): the numbers of y's full indices among q's multisets).
- * K (T x m x n), L (T x m x P), k0 (T x m); Y4 (d_y^4), Y2 (d_y^2), J2 in/out; work:
- * stsp_tails_ticks_work doubles. */
+ * compressed) applied `substeps` times, and y's moments gathered back (back4, back2: the
+ * numbers of y's multisets among q's).  ins: the insertion tables of `tails_levels` for sizes
+ * 1 to 4.  K (T x m x n), L (T x m x P), k0 (T x m); Y4 (C(d_y + 3, 4)), Y2 (C(d_y + 1, 2)),
+ * compressed, and J2 in/out; work: stsp_tails_ticks_work doubles. */
 int stsp_tails_ticks(int n, int m, int P, long T, const double *K, const double *L,
                      const double *k0, long D4, long D2, const int64_t *rowptr,
                      const int64_t *colidx, const double *val, int substeps,
-                     const int64_t *src4, const int64_t *src2, const int64_t *back4,
-                     const int64_t *back2, double *Y4, double *Y2, double *J2, double *work)
+                     const int64_t *ins, const int64_t *src4, const int64_t *src2,
+                     const int64_t *back4, const int64_t *back2, double *Y4, double *Y2,
+                     double *J2, double *work)
 {
     const int dy = n + P + 1;
-    const long dy2 = (long)dy * dy, dy4 = dy2 * dy2, D = D4 + D2 + 1;
+    const long c2 = tails_multisets(dy, 2), c4 = tails_multisets(dy, 4), D = D4 + D2 + 1;
     double *b4 = work, *b2 = b4 + tails_level_size(m, dy, 4);
     double *V = b2 + tails_level_size(m, dy, 2), *Vn = V + D, *Tu = Vn + D;
     long j, r, i;
@@ -175,10 +195,10 @@ int stsp_tails_ticks(int n, int m, int P, long T, const double *K, const double 
     if (n < 1 || m < 1 || P < 0 || T < 0 || D4 < 1 || D2 < 1 || substeps < 1) {
         return -2;
     }
-    for (i = 0; i < dy4; ++i) {
+    for (i = 0; i < c4; ++i) {
         b4[i] = Y4[i];
     }
-    for (i = 0; i < dy2; ++i) {
+    for (i = 0; i < c2; ++i) {
         b2[i] = Y2[i];
     }
     V[D - 1] = *J2;
@@ -193,8 +213,8 @@ int stsp_tails_ticks(int n, int m, int P, long T, const double *K, const double 
             }
             row[dy - 1] = -k0[j * m + a];
         }
-        tails_levels(b4, Tu, m, dy, 4);
-        tails_levels(b2, Tu, m, dy, 2);
+        tails_levels(b4, Tu, ins, m, dy, 4);
+        tails_levels(b2, Tu, ins, m, dy, 2);
         for (r = 0; r < D4; ++r) {
             V[r] = b4[src4[r]];
         }
@@ -214,17 +234,17 @@ int stsp_tails_ticks(int n, int m, int P, long T, const double *K, const double 
             V = Vn;
             Vn = swap;
         }
-        for (i = 0; i < dy4; ++i) {
+        for (i = 0; i < c4; ++i) {
             b4[i] = V[back4[i]];
         }
-        for (i = 0; i < dy2; ++i) {
+        for (i = 0; i < c2; ++i) {
             b2[i] = V[D4 + back2[i]];
         }
     }
-    for (i = 0; i < dy4; ++i) {
+    for (i = 0; i < c4; ++i) {
         Y4[i] = b4[i];
     }
-    for (i = 0; i < dy2; ++i) {
+    for (i = 0; i < c2; ++i) {
         Y2[i] = b2[i];
     }
     *J2 = V[D - 1];

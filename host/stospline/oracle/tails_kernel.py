@@ -38,29 +38,52 @@ def compiled_tails(n: int, m: int, n_latch: int, s4, s2) -> "CompiledTails | Non
     return CompiledTails(mod, n, m, n_latch, s4, s2)
 
 
-def _sources(s, n: int, m: int, dy: int) -> np.ndarray:
+def _number(sy: dict, size: int, flat: np.ndarray) -> np.ndarray:
+    """The numbers of multisets of `size` y-indices given by a full index of each (row-major;
+    the empty multiset is number 0)."""
+    return np.zeros_like(flat) if size == 0 else sy[size].of_full[flat]
+
+
+def _insertions(sy: dict, dy: int) -> np.ndarray:
+    """``tails_kernel.c``'s ``ins``: for sizes s = 1 to 4 in turn, the number of the multiset
+    {j} + t of s y-indices, per j (rows) and multiset t of s - 1 (columns)."""
+    tables = []
+    for s in range(1, 5):
+        rest = sy[s - 1].rep if s > 1 else np.zeros(1, dtype=np.intp)
+        tables.append(_number(sy, s, np.arange(dy)[:, None] * dy ** (s - 1) + rest[None, :]))
+    return np.ascontiguousarray(np.concatenate([t.ravel() for t in tables]), dtype=np.int64)
+
+
+def _sources(s, sy: dict, n: int, m: int, dy: int) -> np.ndarray:
     """Where each multiset of q-indices of `s` sits among the contraction levels of order
     ``s.order`` (``tails_kernel.c``'s ``tails_levels``): level k (k commands among the
-    indices) after the lower ones, its u-indices in order, then the other indices as y's."""
+    indices) after the lower ones, its u-indices in order, then the number of the multiset
+    of the other indices, as y's."""
     o = s.order
     idx = s.idx
     is_u = (idx >= n) & (idx < n + m)
     k = is_u.sum(axis=1)
-    base = np.cumsum([0] + [m ** j * dy ** (o - j) for j in range(o)])
+    count = [len(sy[o - j].idx) if o > j else 1 for j in range(o + 1)]
+    base = np.cumsum([0] + [m ** j * count[j] for j in range(o)])
     A = np.zeros(len(idx), dtype=np.int64)
     R = np.zeros(len(idx), dtype=np.int64)
     for t in range(o):
         col, u = idx[:, t], is_u[:, t]
         A = np.where(u, A * m + (col - n), A)
         R = np.where(u, R, R * dy + np.where(col < n, col, col - m))
-    return np.ascontiguousarray(base[k] + A * dy ** (o - k) + R, dtype=np.int64)
+    rest = np.zeros(len(idx), dtype=np.int64)
+    for j in range(o + 1):
+        rows = k == j
+        rest[rows] = _number(sy, o - j, R[rows])
+    return np.ascontiguousarray(base[k] + A * np.take(count, k) + rest, dtype=np.int64)
 
 
-def _back(s, n: int, m: int, dq: int) -> np.ndarray:
-    """The multiset number among q's of each full index of y (row-major, ``d_y^order``)."""
-    yq = np.r_[0:n, n + m:dq]
-    full = s.of_full.reshape((dq,) * s.order)[np.ix_(*[yq] * s.order)]
-    return np.ascontiguousarray(full.ravel(), dtype=np.int64)
+def _back(s, sy: dict, n: int, m: int) -> np.ndarray:
+    """The number among q's multisets of each of y's (of the order of `s`)."""
+    q = sy[s.order].idx
+    q = np.where(q < n, q, q + m)
+    flat = np.ravel_multi_index(tuple(q.T), (s.d,) * s.order)
+    return np.ascontiguousarray(s.of_full[flat], dtype=np.int64)
 
 
 class CompiledTails:
@@ -69,9 +92,12 @@ class CompiledTails:
     def __init__(self, mod, n: int, m: int, n_latch: int, s4, s2):
         self.mod, self.n, self.m, self.n_latch = mod, n, m, n_latch
         self.s4, self.s2 = s4, s2
-        dq, self.dy = n + m + n_latch + 1, n + n_latch + 1
-        self.src4, self.src2 = (_sources(s, n, m, self.dy) for s in (s4, s2))
-        self.back4, self.back2 = (_back(s, n, m, dq) for s in (s4, s2))
+        self.dy = dy = n + n_latch + 1
+        from stospline.oracle.tails import _Sym
+        self.sy = sy = {size: _Sym(dy, size) for size in range(1, 5)}
+        self.ins = _insertions(sy, dy)
+        self.src4, self.src2 = (_sources(s, sy, n, m, dy) for s in (s4, s2))
+        self.back4, self.back2 = (_back(s, sy, n, m) for s in (s4, s2))
 
     def operator(self, s, nodes) -> np.ndarray:
         """`_Sym.operator` of `s` over `nodes` ``(w, M)``, summed in the same order."""
@@ -109,21 +135,22 @@ class CompiledTails:
         ffi, lib = self.mod.ffi, self.mod.lib
         rowptr, cols, vals, substeps = step
         K, L, k0 = (np.ascontiguousarray(a, dtype=np.float64) for a in (K, L, k0))
-        T4 = np.array(T4, dtype=np.float64, order="C")
-        P = np.array(P, dtype=np.float64, order="C")
+        T4, P = np.asarray(T4, dtype=np.float64), np.asarray(P, dtype=np.float64)
         T, dy = len(K), self.dy
         want = [(K, (T, self.m, self.n)), (L, (T, self.m, self.n_latch)), (k0, (T, self.m)),
                 (T4, (dy,) * 4), (P, (dy, dy))]
         if any(a.shape != shape for a, shape in want):
             raise ValueError("CompiledTails.ticks: arrays of the wrong shapes")
+        Y4 = np.ascontiguousarray(self.sy[4].compress(T4))
+        Y2 = np.ascontiguousarray(self.sy[2].compress(P))
         D4, D2 = self.s4.size, self.s2.size
         work = np.empty(int(lib.stsp_tails_ticks_work(self.m, self.dy, D4, D2)))
         J2p = ffi.new("double *", float(J2))
         buf = [ffi.from_buffer("int64_t[]" if a.dtype == np.int64 else "double[]", a)
-               for a in (K, L, k0, rowptr, cols, vals, self.src4, self.src2, self.back4,
-                         self.back2, T4, P, work)]
+               for a in (K, L, k0, rowptr, cols, vals, self.ins, self.src4, self.src2,
+                         self.back4, self.back2, Y4, Y2, work)]
         status = lib.stsp_tails_ticks(self.n, self.m, self.n_latch, T, *buf[:3], D4, D2,
-                                      *buf[3:6], substeps, *buf[6:12], J2p, buf[12])
+                                      *buf[3:6], substeps, *buf[6:13], J2p, buf[13])
         if status != 0:
             raise ValueError(f"stsp_tails_ticks: bad dimensions (status {status})")
-        return T4, P, float(J2p[0])
+        return self.sy[4].expand(Y4), self.sy[2].expand(Y2), float(J2p[0])

@@ -20,6 +20,9 @@ the expectation over ``xi`` is exact by the three-point Gauss-Hermite rule per n
 a knot adds its penalty. Lower moments are slices of the 4-tensor (the index of the constant
 1 repeated): the second moments and the mean cost are checked against the second-moment
 oracle at every knot (`TailsMismatch` when they differ beyond rounding).
+
+The step's map and the ticks run in C (`oracle.tails_kernel`) where the oracle's module can be
+built; the numpy loop here is their reference and fallback.
 """
 from __future__ import annotations
 

@@ -242,7 +242,8 @@ def command_seconds(paths: int) -> tuple[float, float]:
 def alongside_seconds() -> float:
     """CPU seconds, in a fresh process, of what the command does while its paths run
     (`pipeline._summary_ahead`: scipy.special imported, the corridor's exit-bound oracle
-    pass): the serial part of the command is its CPU with 2 paths less this."""
+    pass, the fourth-moment oracle): the serial part of the command is its CPU with 2 paths
+    less this."""
     code = ("import time\n"
             "from stospline.pipeline import _summary_ahead, design_problem\n"
             "from stospline.problem import load_problem\n"
@@ -255,21 +256,58 @@ def alongside_seconds() -> float:
     return float(out.split()[-1])
 
 
+_PARTS = ("scipy.special imported", "the exit bounds' oracle pass",
+          "the fourth-moment oracle (C loop)", "the same, numpy loop (not run by the command)")
+
+
+def alongside_parts() -> list[float]:
+    """CPU seconds, in a fresh process, of each part of the work beside the paths, one after
+    another (`_PARTS`), and the fourth-moment oracle's numpy loop for comparison."""
+    code = ("import os, time\n"
+            "from stospline.pipeline import design_problem\n"
+            "from stospline.problem import load_problem\n"
+            "from stospline.harness.exit_stats import clopper_pearson_upper, "
+            "corridor_outputs_of\n"
+            "from stospline.oracle.tails import evaluate_tails\n"
+            f"d = design_problem(load_problem({str(ROOT / 'examples' / 'robot_corridor.toml')!r}))\n"
+            "def cpu(f):\n"
+            "    t = time.process_time(); f(); return time.process_time() - t\n"
+            "tails = lambda: evaluate_tails(d.problem, d.table, substeps=1, check=False)\n"
+            "out = [cpu(lambda: clopper_pearson_upper(0, 1)),\n"
+            "       cpu(lambda: corridor_outputs_of(d.problem, d.table)), cpu(tails)]\n"
+            "os.environ['STOSPLINE_ORACLE_KERNEL'] = 'numpy'\n"
+            "print(*out, cpu(tails))\n")
+    out = subprocess.run([sys.executable, "-c", code], check=True, env=_command_env(),
+                         capture_output=True, text=True).stdout
+    return [float(v) for v in out.split()[-len(_PARTS):]]
+
+
+def _loads(avg) -> str:
+    return ", ".join(f"{v:.2f}" for v in avg)
+
+
 def whole_command(paths: int, workers: int, repeat: int, ticks: int) -> None:
     """The whole command's wall and CPU time, and from them its wall on idle cores."""
     command_seconds(2)                      # warm the caches (the compiled controller)
+    load_before = os.getloadavg()
     runs = [command_seconds(paths) for _ in range(repeat)]
     wall = statistics.median(r[0] for r in runs)
     cpu = statistics.median(r[1] for r in runs)
     small = statistics.median(command_seconds(2)[1] for _ in range(repeat))
     ahead = statistics.median(alongside_seconds() for _ in range(repeat))
+    parts = [statistics.median(v) for v in zip(*(alongside_parts() for _ in range(repeat)))]
     serial = small - ahead
     work = paths * ticks
     print(f"\nwhole command, stospline simulate examples/robot_corridor.toml --paths "
           f"{paths} --json (median of {repeat}):")
     print(f"  {wall:.2f} s wall, {work / wall:.3e} path-ticks/s of wall time")
+    print(f"  load average (1, 5, 15 min) before: {_loads(load_before)}, after: "
+          f"{_loads(os.getloadavg())}")
     print(f"  {cpu:.2f} s CPU (command and workers); with 2 paths {small:.2f} s, of which "
-          f"{ahead:.2f} s run beside the paths (scipy.special, the exit bounds' oracle)")
+          f"{ahead:.2f} s run beside the paths (scipy.special, the exit bounds' oracle, the "
+          f"fourth-moment oracle)")
+    for name, sec in zip(_PARTS, parts):
+        print(f"    {name:48s} {sec:6.3f} s")
     print(f"  in series: S = {small:.2f} - {ahead:.2f} = {serial:.2f} s (imports, design, "
           f"substep pilot and plant-scheme oracle, the summary)")
     print(f"  per path-tick: {(cpu - small) / work * 1e9:.1f} ns of CPU (workers)")

@@ -65,9 +65,9 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         Also keep the mean and variance at every tick (``path_mean``, ``path_var``).
     output : ndarray, optional
         An output matrix ``Cy`` (p x n): also keep the mean and covariance of ``Cy x`` at
-        every tick (``path_y_mean``, ``path_y_cov``; the corridors' exit bounds). The ticks
-        then run in this module's loop, time-varying stages by the DOP853 moment integration
-        (`_tick_varying`) rather than the Gauss-point C loop, which records only variances.
+        every tick (``path_y_mean``, ``path_y_cov``; the corridors' exit bounds). Time-varying
+        stages then run by the DOP853 moment integration (`_tick_varying`) rather than the
+        Gauss-point C loop, which records only variances.
         Not for tables designed for a delay (ValueError).
 
     Returns
@@ -118,8 +118,7 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
         Tw = _w_map(n, m, d_y, slice(0, n))
         ticks = range(int(table.stage_start[k]), int(table.stage_start[k + 1]))
         # The C loop carries the mean map without the constant column: not with a drift.
-        kernel = (None if varying or Cy is not None or _has_drift(problem)
-                  else _c_kernel())
+        kernel = None if varying or _has_drift(problem) else _c_kernel()
         if varying and Cy is None and _c_kernel() is not None:
             # Time-varying data: the Gauss-point Taylor loop in C, or the plant scheme's steps
             # (design.varying).
@@ -143,7 +142,9 @@ def evaluate_table(problem: Problem, table: GainTable, *, propagator="exact",
                 tick_map = _packed_maps(stage, n, m, h, propagator, substeps)
             M, J, *tick_path = kernel(table.K[sl], table.L[sl], table.k0[sl], *tick_map,
                                       np.ascontiguousarray(maps[2][:, :n + m]), M, J,
-                                      path=path)
+                                      path=path, moments=Cy is not None)
+            if Cy is not None:
+                rec.outputs(tick_path.pop())
             if path:
                 xm, xv, um, uv = tick_path
                 rec.extend(xm, xv, um, uv)

@@ -20,6 +20,9 @@ the expectation over ``xi`` is exact by the three-point Gauss-Hermite rule per n
 a knot adds its penalty. Lower moments are slices of the 4-tensor (the index of the constant
 1 repeated): the second moments and the mean cost are checked against the second-moment
 oracle at every knot (`TailsMismatch` when they differ beyond rounding).
+
+The step's map and the ticks run in C (`oracle.tails_kernel`) where the oracle's module can be
+built; the numpy loop here is their reference and fallback.
 """
 from __future__ import annotations
 
@@ -31,6 +34,7 @@ import numpy as np
 from stospline.errors import StosplineError
 from stospline.expm import expm
 from stospline.design.moments import augmented_drift, running_cost_matrix
+from stospline.oracle.tails_kernel import compiled_tails
 from stospline.oracle.tick_moments import _table_latch
 from stospline.problem.model import Problem
 
@@ -186,37 +190,44 @@ def _nodes(A: np.ndarray, N: np.ndarray, dt: float):
     return out
 
 
+def step_matrix(stage, n: int, m: int, n_latch: int, dt: float, s4: _Sym, s2: _Sym,
+                operator=None) -> np.ndarray:
+    """The dense map of ``V = [E q^(x)4; E J q q'; E J^2]`` (compressed) over one plant step
+    of `dt`. `operator(s, nodes)`: `_Sym.operator`'s matrix (None: `_Sym.operator` itself)."""
+    d = n + m + n_latch + 1
+    A, N = _step_maps(stage, n, m, n_latch, dt)
+    nodes = _nodes(A, N, dt)
+    P4 = s4.operator(nodes) if operator is None else operator(s4, nodes)
+    P2 = s2.operator(nodes) if operator is None else operator(s2, nodes)
+    Lw = running_cost_matrix(stage, n, m, n + m + 1, n)
+    w_idx = np.r_[0:n + m, d - 1]
+    L = np.zeros((d, d))
+    L[np.ix_(w_idx, w_idx)] = Lw
+    # E[L(q) q_a q_b] = sum_ij L_ij E q_i q_j q_a q_b, compressed on (a, b).
+    CL = np.zeros((s2.size, s4.size))
+    for r, (a, b) in enumerate(s2.idx):
+        W = np.zeros((d, d, d, d))
+        W[:, :, a, b] = L
+        CL[r] = s4.summed(W)
+    l2 = s2.summed(L)
+    l4 = s4.summed(np.multiply.outer(L, L))
+    D4, D2 = s4.size, s2.size
+    S = np.zeros((D4 + D2 + 1, D4 + D2 + 1))
+    S[:D4, :D4] = P4
+    S[D4:D4 + D2, :D4] = dt * P2 @ CL
+    S[D4:D4 + D2, D4:D4 + D2] = P2
+    S[-1, :D4] = dt * dt * l4
+    S[-1, D4:D4 + D2] = 2.0 * dt * l2
+    S[-1, -1] = 1.0
+    return S
+
+
 class _TickOperator:
     """The linear map of ``V = [E q^(x)4; E J q q'; E J^2]`` (compressed) over one tick of a
     constant stage: `substeps` plant steps."""
 
     def __init__(self, stage, n, m, n_latch, h, substeps, s4: _Sym, s2: _Sym):
-        d = n + m + n_latch + 1
-        dt = h / substeps
-        A, N = _step_maps(stage, n, m, n_latch, dt)
-        nodes = _nodes(A, N, dt)
-        P4 = s4.operator(nodes)
-        P2 = s2.operator(nodes)
-        Lw = running_cost_matrix(stage, n, m, n + m + 1, n)
-        w_idx = np.r_[0:n + m, d - 1]
-        L = np.zeros((d, d))
-        L[np.ix_(w_idx, w_idx)] = Lw
-        # E[L(q) q_a q_b] = sum_ij L_ij E q_i q_j q_a q_b, compressed on (a, b).
-        CL = np.zeros((s2.size, s4.size))
-        for r, (a, b) in enumerate(s2.idx):
-            W = np.zeros((d, d, d, d))
-            W[:, :, a, b] = L
-            CL[r] = s4.summed(W)
-        l2 = s2.summed(L)
-        l4 = s4.summed(np.multiply.outer(L, L))
-        D4, D2 = s4.size, s2.size
-        S = np.zeros((D4 + D2 + 1, D4 + D2 + 1))
-        S[:D4, :D4] = P4
-        S[D4:D4 + D2, :D4] = dt * P2 @ CL
-        S[D4:D4 + D2, D4:D4 + D2] = P2
-        S[-1, :D4] = dt * dt * l4
-        S[-1, D4:D4 + D2] = 2.0 * dt * l2
-        S[-1, -1] = 1.0
+        S = step_matrix(stage, n, m, n_latch, h / substeps, s4, s2)
         # Sparse: an output index of u, v or 1 takes only inputs that carry it.
         from scipy import sparse
         step = sparse.csr_matrix(S)
@@ -269,6 +280,7 @@ def evaluate_tails(problem: Problem, table, *, substeps: int, check=None) -> Tai
     c = d_y - 1
     means, covs, mu4s = [], [], []
     ops: dict = {}
+    loop = compiled_tails(n, m, n_latch, s4, s2)      # None: the numpy loop
     for k in range(table.n_stages):
         stage = problem.stages[k]
         if k == 0 or table.stage_n_latch[k] > 0:
@@ -277,10 +289,14 @@ def evaluate_tails(problem: Problem, table, *, substeps: int, check=None) -> Tai
             P = T @ P @ T.T
         key = id(stage)
         if key not in ops:
-            ops[key] = (stage, _TickOperator(stage, n, m, n_latch, h, substeps, s4, s2))
+            ops[key] = (stage, _TickOperator(stage, n, m, n_latch, h, substeps, s4, s2)
+                        if loop is None else loop.step(stage, h, substeps))
         op = ops[key][1]
         start, stop = int(table.stage_start[k]), int(table.stage_start[k + 1])
-        for j in range(start, stop):
+        if loop is not None:
+            T4, P, J2 = loop.ticks(op, table.K[start:stop], table.L[start:stop],
+                                   table.k0[start:stop], T4, P, J2)
+        for j in range(start, stop) if loop is None else ():
             Tq[n:n + m, :n] = -table.K[j]
             Tq[n:n + m, n:n + n_latch] = -table.L[j]
             Tq[n:n + m, -1] = -table.k0[j]

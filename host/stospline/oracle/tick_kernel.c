@@ -22,6 +22,8 @@
  * J (in/out), work (stsp_oracle_work_size doubles).  The path (all four NULL, or none): xm,
  * xv (T x n) the state's mean and variance after each tick, um, uv (T x m) the command's
  * over it (oracle.evaluate_table's path=True, which the Q scales read at every tick).
+ * xx (T x n x (n+1), or NULL): the state's second moments and mean after each tick, rows
+ * [E x_a x_b (b < n), E x_a] (the moments of an output, oracle.evaluate_table's output=).
  */
 #include <stddef.h>
 
@@ -81,6 +83,18 @@ static void oracle_cross_latch(double *M, const double *Fmean, const double *TM,
     }
 }
 
+/* The state's moments after a tick, n x (n+1) row-major: [E x_a x_b (b < n), E x_a]. */
+static void oracle_record_moments(double *xx, const double *M, int n, int dy)
+{
+    int a, b;
+    for (a = 0; a < n; ++a) {
+        for (b = 0; b < n; ++b) {
+            xx[a * (n + 1) + b] = M[a * dy + b];
+        }
+        xx[a * (n + 1) + n] = M[a * dy + dy - 1];
+    }
+}
+
 size_t stsp_oracle_work_size(int n, int m, int P)
 {
     size_t dy = (size_t)n + (size_t)P + 1u, dw = (size_t)n + (size_t)m + 1u;
@@ -90,7 +104,7 @@ size_t stsp_oracle_work_size(int n, int m, int P)
 int stsp_oracle_stage_ticks(int n, int m, int P, long T, const double *K, const double *L,
                             const double *k0, const double *Phi_x, const double *cost,
                             const double *Fmean, double *M, double *J, double *work,
-                            double *xm, double *xv, double *um, double *uv)
+                            double *xm, double *xv, double *um, double *uv, double *xx)
 {
     const int dy = n + P + 1, dw = n + m + 1, nv = dw * (dw + 1) / 2, nout = n * (n + 1);
     double *Tw = work, *TM = Tw + dw * dy, *vw = TM + dw * dy, *out = vw + nv;
@@ -156,6 +170,9 @@ int stsp_oracle_stage_ticks(int n, int m, int P, long T, const double *K, const 
                 xv[j * n + a] = out[a * (n + 1) + a] - mu * mu;
             }
         }
+        if (xx != NULL) {
+            oracle_record_moments(xx + j * nout, M, n, dy);
+        }
     }
     *J = acc;
     return 0;
@@ -181,7 +198,8 @@ int stsp_oracle_stage_ticks(int n, int m, int P, long T, const double *K, const 
  * cost (d_w(d_w+1)/2: the cost row on the upper triangle, row by row, off-diagonal entries
  * counted twice), Fmean (n x (n+m)), M (d_y x d_y, in/out), J (in/out), work
  * (stsp_oracle_factored_work_size doubles).  The path (all four NULL, or none): xm, xv
- * (T x n) the state's mean and variance after each tick, um, uv (T x m) the command's over it.
+ * (T x n) the state's mean and variance after each tick, um, uv (T x m) the command's over it;
+ * xx as the general loop's.
  */
 
 size_t stsp_oracle_factored_work_size(int n, int m, int P)
@@ -193,7 +211,7 @@ size_t stsp_oracle_factored_work_size(int n, int m, int P)
 int stsp_oracle_factored_ticks(int n, int m, int P, long T, const double *K, const double *L,
                                const double *k0, const double *Phi, const double *cost,
                                const double *Fmean, double *M, double *J, double *work,
-                               double *xm, double *xv, double *um, double *uv)
+                               double *xm, double *xv, double *um, double *uv, double *xx)
 {
     const int dy = n + P + 1, dw = n + m + 1;
     double *Tw = work, *TM = Tw + dw * dy, *Mw = TM + dw * dy, *X = Mw + dw * dw;
@@ -292,6 +310,9 @@ int stsp_oracle_factored_ticks(int n, int m, int P, long T, const double *K, con
                 xm[j * n + a] = mu;
                 xv[j * n + a] = M[a * dy + a] - mu * mu;
             }
+        }
+        if (xx != NULL) {
+            oracle_record_moments(xx + j * n * (n + 1), M, n, dy);
         }
     }
     *J = acc;

@@ -154,6 +154,16 @@ class _PathRecord:
             self.x_mean.extend(x_mean); self.x_var.extend(x_var)
             self.u_mean.extend(u_mean); self.u_var.extend(u_var)
 
+    def outputs(self, xx: np.ndarray) -> None:
+        """The output's moments after many ticks from the state's (`kernel.oracle_stage_ticks`'
+        ``xx``: rows ``[E x_a x_b (b < n), E x_a]``), as `state` forms them tick by tick."""
+        n = xx.shape[1]
+        mu = xx[:, :, n]
+        cov = xx[:, :, :n] - mu[:, :, None] * mu[:, None, :]
+        yc = self.Cy @ cov @ self.Cy.T
+        self.y_mean.extend(mu @ self.Cy.T)
+        self.y_cov.extend(0.5 * (yc + np.swapaxes(yc, 1, 2)))
+
     def state(self, M: np.ndarray, n: int) -> None:
         if self.on:
             mu = M[:n, -1]

@@ -1,5 +1,6 @@
 """The fast paths of the CLI agree with their references: the numpy matrix exponential with
-scipy's, and the C tick loop of the oracle (oracle/tick_kernel.c) with the numpy loop."""
+scipy's, and the C tick loop of the oracle (oracle/tick_kernel.c) with the numpy loop, the
+moments of an output at every tick (the corridors' exit bounds) included."""
 import numpy as np
 import pytest
 import scipy.linalg
@@ -38,10 +39,16 @@ def test_oracle_kernel_matches_numpy(example, mode, propagator, path, monkeypatc
     p = load_problem(EXAMPLES / f"{example}.toml")
     d = design_problem(p, mode=mode)
     runs = {}
+    Cy = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0], [0, 1.0, 0, 1.0]])   # the exit bounds' outputs
     for kernel in ("numpy", "c"):
         monkeypatch.setenv("STOSPLINE_ORACLE_KERNEL", kernel)
-        runs[kernel] = oracle.evaluate_table(p, d.table, path=path, propagator=propagator)
+        runs[kernel] = oracle.evaluate_table(p, d.table, path=path, propagator=propagator,
+                                             output=Cy)
     a, b = runs["numpy"], runs["c"]
+    for name in ("path_y_mean", "path_y_cov"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert x.shape == y.shape and len(x) == d.table.n_ticks + 1, name
+        np.testing.assert_allclose(y, x, rtol=0, atol=1e-11 * max(1.0, np.abs(x).max()))
     if path:     # every tick's state and command moments (the Q scales read them)
         for name in ("path_t", "path_mean", "path_var", "path_u_mean", "path_u_var"):
             x, y = getattr(a, name), getattr(b, name)
@@ -106,14 +113,20 @@ def test_factored_noise_free_loop_equals_the_packed_loop(seed, path, monkeypatch
         calls.append(1)
         return factored(*args, **kw)
     monkeypatch.setattr(oracle, "_factored_kernel", lambda: counted)
-    a = oracle.evaluate_table(p, table, path=path)
+    Cy = np.eye(n)[:3] + 0.5 * np.eye(n, k=1)[:3]
+    a = oracle.evaluate_table(p, table, path=path, output=Cy)
     assert len(calls) == len(p.stages)
     monkeypatch.setattr(oracle, "_factored_kernel", lambda: None)
-    b = oracle.evaluate_table(p, table, path=path)
+    b = oracle.evaluate_table(p, table, path=path, output=Cy)
     monkeypatch.setenv("STOSPLINE_ORACLE_KERNEL", "numpy")
-    c = oracle.evaluate_table(p, table, path=path)
+    c = oracle.evaluate_table(p, table, path=path, output=Cy)
     for ref in (b, c):
         assert a.J == pytest.approx(ref.J, rel=1e-13)
+        for name in ("path_y_mean", "path_y_cov"):
+            x, y = getattr(ref, name), getattr(a, name)
+            assert x.shape == y.shape and len(x) == table.n_ticks + 1, name
+            scale = max(1.0, np.abs(x).max(), np.abs(ref.path_y_mean).max() ** 2)
+            np.testing.assert_allclose(y, x, rtol=0, atol=1e-13 * scale)
         for x, y in zip(ref.knot_mean + ref.knot_cov, a.knot_mean + a.knot_cov):
             np.testing.assert_allclose(y, x, rtol=0, atol=1e-13 * max(1.0, np.abs(x).max()))
         if path:

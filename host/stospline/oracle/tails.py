@@ -280,7 +280,8 @@ def evaluate_tails(problem: Problem, table, *, substeps: int, check=None) -> Tai
     c = d_y - 1
     means, covs, mu4s = [], [], []
     ops: dict = {}
-    loop = compiled_tails(n, m, n_latch, s4, s2)      # None: the numpy loop
+    loop = compiled_tails(n, m, n_latch, s4, s2, sym=_Sym,       # None: the numpy loop
+                          step_matrix=step_matrix)
     for k in range(table.n_stages):
         stage = problem.stages[k]
         if k == 0 or table.stage_n_latch[k] > 0:

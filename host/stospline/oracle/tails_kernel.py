@@ -22,9 +22,12 @@ from stospline.errors import KernelBuildError
 __all__ = ["CompiledTails", "compiled_tails"]
 
 
-def compiled_tails(n: int, m: int, n_latch: int, s4, s2) -> "CompiledTails | None":
+def compiled_tails(n: int, m: int, n_latch: int, s4, s2, *, sym, step_matrix
+                   ) -> "CompiledTails | None":
     """The C loop for a loop of these dimensions (`s4`, `s2`: `tails._Sym` of order 4 and 2
-    on q), or None where the numpy loop runs (see the module docstring)."""
+    on q), or None where the numpy loop runs (see the module docstring). `sym` and
+    `step_matrix` are `tails._Sym` and `tails.step_matrix`, handed in by `oracle.tails`
+    (which imports this module, not the other way round)."""
     if os.environ.get("STOSPLINE_ORACLE_KERNEL", "c") == "numpy":
         return None
     from stospline.oracle.kernel import load_kernel
@@ -35,7 +38,7 @@ def compiled_tails(n: int, m: int, n_latch: int, s4, s2) -> "CompiledTails | Non
         warnings.warn(f"{exc}; the fourth-moment oracle runs its numpy loop (slower)",
                       FallbackWarning, stacklevel=3)
         return None
-    return CompiledTails(mod, n, m, n_latch, s4, s2)
+    return CompiledTails(mod, n, m, n_latch, s4, s2, sym, step_matrix)
 
 
 def _number(sy: dict, size: int, flat: np.ndarray) -> np.ndarray:
@@ -89,12 +92,12 @@ def _back(s, sy: dict, n: int, m: int) -> np.ndarray:
 class CompiledTails:
     """The C loop of `oracle.tails` for one loop's dimensions (see the module docstring)."""
 
-    def __init__(self, mod, n: int, m: int, n_latch: int, s4, s2):
+    def __init__(self, mod, n: int, m: int, n_latch: int, s4, s2, sym, step_matrix):
         self.mod, self.n, self.m, self.n_latch = mod, n, m, n_latch
         self.s4, self.s2 = s4, s2
+        self._step_matrix = step_matrix
         self.dy = dy = n + n_latch + 1
-        from stospline.oracle.tails import _Sym
-        self.sy = sy = {size: _Sym(dy, size) for size in range(1, 5)}
+        self.sy = sy = {size: sym(dy, size) for size in range(1, 5)}
         self.ins = _insertions(sy, dy)
         self.src4, self.src2 = (_sources(s, sy, n, m, dy) for s in (s4, s2))
         self.back4, self.back2 = (_back(s, sy, n, m) for s in (s4, s2))
@@ -121,8 +124,7 @@ class CompiledTails:
 
     def step(self, stage, h: float, substeps: int):
         """One plant step's map (`tails.step_matrix`) in CSR, and the steps per tick."""
-        from stospline.oracle.tails import step_matrix
-        S = step_matrix(stage, self.n, self.m, self.n_latch, h / substeps, self.s4, self.s2,
+        S = self._step_matrix(stage, self.n, self.m, self.n_latch, h / substeps, self.s4, self.s2,
                         operator=self.operator)
         rows, cols = np.nonzero(S)
         rowptr = np.zeros(len(S) + 1, dtype=np.int64)

@@ -89,7 +89,7 @@ def test_operator_equals_numpy(order):
         M[-1] = np.eye(d)[-1]
         nodes.append((rng.random(), M))
     ct = tails_kernel.CompiledTails(kernel.load_kernel(), 2, 1, 2, tails._Sym(d, 4),
-                                    tails._Sym(d, 2))
+                                    tails._Sym(d, 2), tails._Sym, tails.step_matrix)
     np.testing.assert_allclose(ct.operator(s, nodes), s.operator(nodes), rtol=1e-14,
                                atol=1e-15)
 

@@ -862,6 +862,13 @@ def _plant_run(args, d, faults=None):
     (`stospline.nonlinear.simulate.run_on_model`), in a loop with `faults` (default
     ``d.problem.faults``); ``--substeps auto`` decides the count on the model."""
     from stospline.nonlinear.simulate import run_on_model
+    spread = [name for name, given in (("--workers", getattr(args, "workers", None)),
+                                       ("--scheduler", getattr(args, "scheduler", None)))
+              if given is not None]
+    if spread and not getattr(args, "_model_noted", False):
+        args._model_noted = True
+        print(f"stospline: note: the Monte Carlo on the [plant] model runs in this one process; "
+              f"{' and '.join(spread)} do not spread it", file=sys.stderr)
     substeps = "auto" if args.substeps == "auto" else int(args.substeps)
     return run_on_model(d, _PLANT_FIT[0].model, paths=args.paths, seed=args.seed,
                         substeps=substeps, faults=faults)

@@ -45,3 +45,19 @@ def test_simulate_prints_strict_json(linear_plant, capsys):
         raise ValueError(name)
     s = json.loads(out, parse_constant=refuse)
     assert s["plant"]["paths"] == 50 and len(s["knots"]) == 2
+
+
+def test_workers_that_do_not_apply_to_the_model_are_noted(linear_plant, capsys):
+    """The model's run is one process: --workers is said not to spread it (one line on
+    stderr), and the numbers are those of the run without it."""
+    where, _, _ = linear_plant
+    (where / "p.toml").write_text(LINEAR_TOML)
+    args = ["simulate", str(where / "p.toml"), "--paths", "50", "--json"]
+    assert main(args) == 0
+    alone = capsys.readouterr()
+    assert main(args + ["--workers", "2"]) == 0
+    spread = capsys.readouterr()
+    assert spread.out == alone.out
+    notes = [ln for ln in spread.err.splitlines() if "[plant] model" in ln]
+    assert len(notes) == 1 and "--workers do not spread it" in notes[0], spread.err
+    assert "[plant] model" not in alone.err

@@ -85,6 +85,11 @@ SIM_PATH_TICK = 1.0e-9      # s per path, tick and unit of work (below), on one 
 # per plant step (the coarse run and its check at twice the steps). The unicycle at 200 Hz,
 # 2000 paths, one core (tools/bench/model_loop.py): 0.74 us per path-tick at 1 step, 1.82 at 4.
 MODEL_PATH_TICK, MODEL_PATH_STEP = 3.8e-7, 3.6e-7
+# Bytes per path of a run on a [plant] model, which holds every path at once: the two
+# controller instances (the run and its check at half steps) and numpy's temporaries, besides
+# the states, knots and normal numbers counted from the sizes. Measured: the docs' linear
+# model (n = 2, mz = 1, 4 substeps) grows by 2.2 kB per path from 10^4 to 2.10^5 paths.
+MODEL_PATH_BYTES = 2048
                             # (tools/bench/harness_throughput.py: ~95 ns per robot path-tick)
 SIM_PATH_BYTES = 64         # bytes per path besides states (instances, buffers)
 CONTINUOUS_STAGE = 0.5      # s per stage of the continuous-time design and its oracle
@@ -287,9 +292,10 @@ def monte_carlo_terms(problem: Problem, *, paths: int, substeps: int = 2, worker
                       delay_ticks: int = 0, model: bool = False) -> list[Term]:
     """The Monte Carlo run's terms: its paths (with their corridor watch and `workers` forked
     processes, each running a block of `harness.montecarlo.BLOCK_PATHS` paths), the oracle of the
-    plant scheme, and the corridors' exit bounds of its summary. Its memory does not grow
-    with `paths`: one block's paths at a time per process, and the statistics of the blocks
-    handed out ahead (`harness.montecarlo`) waiting to be merged."""
+    plant scheme, and the corridors' exit bounds of its summary. On the linear harness its
+    memory does not grow with `paths`: one block's paths at a time per process, and the
+    statistics of the blocks handed out ahead (`harness.montecarlo`) waiting to be merged.
+    On a [plant] model (`model`) every path is held at once, in one process."""
     from stospline.harness.montecarlo import _AHEAD_PER_WORKER, BLOCK_PATHS
     n, m, mz = problem.n, problem.m, problem.mz
     n += m * (delay_ticks == 1)
@@ -307,11 +313,12 @@ def monte_carlo_terms(problem: Problem, *, paths: int, substeps: int = 2, worker
     per_run = T * 3 * (8 * n + 112.0) + T * min(record, BLOCK_PATHS, paths) * (n + m) * 4.0
     block = min(paths, BLOCK_PATHS) * per_path
     waiting = (_AHEAD_PER_WORKER * workers if workers > 1 else 1) * 8.0 * (T + 1) * n
-    if model:                   # the model's own loop, one process
+    if model:                   # the model's own loop: one process, every path at once
         workers = 1
+        model_path = MODEL_PATH_BYTES + 8.0 * (3 * substeps * mz + n * (2 * S + 4 * substeps + 8))
         terms = [Term(f"Monte Carlo on the [plant] model ({paths} paths)", "--paths",
                       seconds=paths * T * (MODEL_PATH_TICK + substeps * MODEL_PATH_STEP),
-                      bytes=block + per_run)]
+                      bytes=paths * model_path + per_run)]
     else:
         terms = [Term(f"Monte Carlo ({paths} paths)", "--paths",
                       seconds=(SIM_TICK * T + SIM_BLOCK) * blocks

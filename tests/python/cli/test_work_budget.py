@@ -161,6 +161,25 @@ def test_a_plant_model_run_is_estimated_at_the_model_loop_rate():
     assert model.seconds > 3 * linear.seconds
 
 
+
+def test_a_plant_model_run_holds_every_path():
+    """The model's loop keeps every path in memory: the docs' linear model grew by 2.2 kB per
+    path from 10^4 to 2.10^5 paths (max RSS of `stospline simulate --substeps 4`), and the
+    estimate grows by at least that."""
+    from stospline.cli import load_problem
+    import tempfile
+    from pathlib import Path
+    from support.plant_sources import LINEAR, LINEAR_TOML
+    with tempfile.TemporaryDirectory() as where:
+        (Path(where) / "model.c").write_text(LINEAR)
+        (Path(where) / "p.toml").write_text(LINEAR_TOML)
+        p = load_problem(Path(where) / "p.toml")
+    small, big = (budget.estimate(p, command="simulate", paths=paths, substeps=4, model=True)
+                  for paths in (10 ** 4, 2 * 10 ** 5))
+    assert big.bytes - small.bytes >= 1.9e5 * 2.2e3
+    assert big.top("bytes").what.startswith("Monte Carlo on the [plant] model")
+
+
 def test_a_long_model_run_is_refused_before_it_starts(tmp_path):
     """`simulate` on the unicycle model with 10^5 paths: ~11 min at the model loop's rate,
     refused at --max-time 60 naming --paths."""

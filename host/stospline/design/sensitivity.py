@@ -55,10 +55,10 @@ class _Fixed:
         return d
 
 
-def _sourced_stage(stage: Stage, f: np.ndarray) -> Stage:
-    """`stage` with ``q = r = rho = 0`` and drift `f`, constant in time."""
+def _sourced_stage(stage: Stage, f: np.ndarray, q: np.ndarray) -> Stage:
+    """`stage` with ``r = rho = 0``, linear cost term `q` and drift `f`, constant in time."""
     n, m = stage.B.shape
-    fixed = {"q": np.zeros(n), "r": np.zeros(m), "rho": 0.0, "f": f}
+    fixed = {"q": q, "r": np.zeros(m), "rho": 0.0, "f": f}
     varying = None if stage.varying is None else _Fixed(stage.varying, fixed)
     return replace(stage, varying=varying, **fixed)
 
@@ -66,7 +66,9 @@ def _sourced_stage(stage: Stage, f: np.ndarray) -> Stage:
 def unit_problem(problem: Problem, j: int) -> Problem:
     """The problem whose only source is parameter `j` at 1: every knot target and constraint
     value, ``q``, ``r``, ``rho``, ``f`` and the safe command zero, except the values parameter
-    `j` sets, which are 1. Its design's ``k0`` and ``lambda0`` are parameter `j`'s columns."""
+    `j` sets, which are 1. A tracking path's offset ``i`` at 1 is the source
+    ``q = -C'Qy e_i`` (the tracking cost's ``q`` is ``-C'Qy (y0(t) + offset)``; ``Q`` keeps its
+    samples). Its design's ``k0`` and ``lambda0`` are parameter `j`'s columns."""
     n = problem.n
     knots = []
     for kn in problem.knots:
@@ -77,6 +79,7 @@ def unit_problem(problem: Problem, j: int) -> Problem:
             con = _equalities(con)
         knots.append(replace(kn, penalty=pen, constraint=con))
     f = [np.zeros(n) for _ in problem.stages]
+    q = [np.zeros(n) for _ in problem.stages]
     for t in problem.parameters[j].targets:
         if t.kind == "value":
             knots[t.at].constraint.value[t.index] = t.scale   # the row as the reader scaled it
@@ -84,7 +87,10 @@ def unit_problem(problem: Problem, j: int) -> Problem:
             knots[t.at].penalty.target[t.index] = 1.0
         elif t.kind == "f":
             f[t.at][t.index] = 1.0
-    stages = tuple(_sourced_stage(s, fk) for s, fk in zip(problem.stages, f))
+        elif t.kind == "offset":
+            C, Qy, _ = problem.stages[t.at].origin.tracking
+            q[t.at] = q[t.at] - C.T @ Qy[:, t.index]
+    stages = tuple(_sourced_stage(s, fk, qk) for s, fk, qk in zip(problem.stages, f, q))
     return replace(problem, knots=tuple(knots), stages=stages, u_hold=None,
                    x0=np.zeros(n), parameters=(), tick_regions=())
 

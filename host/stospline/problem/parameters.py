@@ -11,10 +11,12 @@ The file's values are the nominal: every value a parameter sets must be equal in
 and the range must contain it. Supported values (`Target`): a knot constraint's equality
 ``value[i]`` (in the row's units as written, whatever scale the reader gives the row),
 a knot penalty's ``target[i]``, the affine drift ``f[i]`` (constant, at the top level or in a
-``[[stages]]`` entry) and the start state ``x0[i]``. The feedback does not depend on any of
-them and the feed-forward is affine in them (`stospline.design.sensitivity`). Band limits,
-tracking paths and time-varying drift are refused: a band's active set, and so its law, can
-change over a range. A problem with bands or ``[[regions]]`` keeps its nominal active set
+``[[stages]]`` entry), a tracking path's constant ``offset[i]`` (``cost.tracking.offset[i]``
+or ``stages[k].cost.tracking.offset[i]``: the path ``y0(t) + offset``, nominal the file's
+``offset``, 0 when not written) and the start state ``x0[i]``. The feedback does not depend on
+any of them and the feed-forward is affine in them (`stospline.design.sensitivity`). Band
+limits, the tracking samples ``y0`` and time-varying drift are refused: a band's active set,
+and so its law, can change over a range. A problem with bands or ``[[regions]]`` keeps its nominal active set
 over the range, and its bands are met over the whole box (`stospline.oracle.over_box`).
 """
 from __future__ import annotations
@@ -22,7 +24,7 @@ from __future__ import annotations
 import copy
 import math
 import re
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field as _field, replace
 from typing import Any
 
 import numpy as np
@@ -35,19 +37,23 @@ __all__ = ["Target", "Parameter", "parse_parameters", "apply_to_doc", "problem_a
 MAX_PARAMETERS = 32          # parameters per problem: a table's sensitivity columns
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,15}")
 _SUPPORTED = ("x0[i], knots[k].constraint.value[i], knots[k].penalty.target[i], "
-              "dynamics.f[i], stages[k].dynamics.f[i]")
+              "dynamics.f[i], stages[k].dynamics.f[i], cost.tracking.offset[i], "
+              "stages[k].cost.tracking.offset[i]")
 
 
 @dataclass(frozen=True)
 class Target:
     """One value a parameter sets: ``kind`` "x0", "value" (knot constraint), "target" (knot
-    penalty) or "f" (a stage's drift); ``at`` the knot or stage (-1 for x0); ``index`` the
+    penalty), "f" (a stage's drift) or "offset" (a stage's tracking-path offset, the problem
+    stage's index); ``at`` the knot or stage (-1 for x0); ``index`` the
     component; ``scale`` the power of two the reader scaled a constraint row by
-    (`stospline.problem.rows`): the problem holds ``scale * theta``."""
+    (`stospline.problem.rows`): the problem holds ``scale * theta``; ``where`` the file's
+    tracking table of an "offset" (``cost.tracking`` or ``stages[k].cost.tracking``)."""
     kind: str
     at: int
     index: int
     scale: float = 1.0
+    where: str = _field(default="", compare=False)   # as written; not part of equality
 
 
 @dataclass(frozen=True)
@@ -96,9 +102,13 @@ def _targets(path: str, field: str, doc: dict, problem) -> list[Target]:
     if shape in (["knots", 0, "constraint", "lower", 0], ["knots", 0, "constraint", "upper", 0]):
         raise ProblemError(field, "band limits cannot be runtime parameters: the band's "
                                   "active set, and so the law, can change over the range")
-    if len(shape) >= 2 and shape[:2] == ["cost", "tracking"]:
-        raise ProblemError(field, "a tracking path cannot be a runtime parameter (supported: "
-                                  f"{_SUPPORTED})")
+    if shape in (["cost", "tracking", "offset", 0],
+                 ["stages", 0, "cost", "tracking", "offset", 0]):
+        return _offset_targets(tok, path, field, doc, problem)
+    if "tracking" in shape:
+        raise ProblemError(field, "of a tracking path only its constant offset can be a "
+                                  "runtime parameter (cost.tracking.offset[i]; the samples "
+                                  f"y0, C and the weight cannot; supported: {_SUPPORTED})")
     if shape == ["x0", 0]:
         if tok[1] >= n:
             raise ProblemError(field, f"x0 has {n} entries, no entry {tok[1]}")
@@ -137,9 +147,31 @@ def _targets(path: str, field: str, doc: dict, problem) -> list[Target]:
                               f"{_SUPPORTED})")
 
 
+def _offset_targets(tok: list, path: str, field: str, doc: dict, problem) -> list[Target]:
+    """``cost.tracking.offset[i]``: one target per problem stage whose tracking cost is the
+    top-level one; ``stages[k].cost.tracking.offset[i]``: the stages of entry k (several when
+    ``[[regions]]`` split it)."""
+    where = "cost.tracking" if tok[0] == "cost" else f"stages[{tok[1]}].cost.tracking"
+    if _get(doc, tok[:-2]) is None:
+        raise ProblemError(field, f"is not a value of the file ({where} does not exist)")
+    ks = [k for k, st in enumerate(problem.stages)
+          if getattr(st.origin, "tracking_path", None) == where]
+    if not ks:
+        raise ProblemError(field, f"no stage takes {where} (every stage overrides "
+                                  f"cost.tracking in [[stages]]): set "
+                                  f"stages[k].cost.tracking.offset[i] instead")
+    ny = problem.stages[ks[0]].origin.tracking[0].shape[0]
+    if tok[-1] >= ny:
+        raise ProblemError(field, f"{where} has {ny} tracked outputs (rows of C), no "
+                                  f"output {tok[-1]}")
+    return [Target("offset", k, tok[-1], where=where) for k in ks]
+
+
 def _nominal_of(problem, t: Target) -> float:
     if t.kind == "x0":
         return float(problem.x0[t.index])
+    if t.kind == "offset":
+        return float(problem.stages[t.at].origin.tracking_offset[t.index])
     if t.kind == "value":
         return float(problem.knots[t.at].constraint.value[t.index]) / t.scale
     if t.kind == "target":
@@ -238,6 +270,10 @@ def apply_to_doc(doc: dict, parameters, theta) -> dict:
                 out["knots"][t.at]["constraint"]["value"][t.index] = float(v)
             elif t.kind == "target":
                 out["knots"][t.at]["penalty"]["target"][t.index] = float(v)
+            elif t.kind == "offset":
+                table = _get(out, _tokens(t.where))
+                ny = len(table["C"])
+                table.setdefault("offset", [0.0] * ny)[t.index] = float(v)
             elif isinstance(stages, list) and "f" in (stages[t.at].get("dynamics") or {}):
                 stages[t.at]["dynamics"]["f"][t.index] = float(v)
             else:
@@ -263,7 +299,19 @@ def problem_at(problem, theta):
                 kn = knots[t.at]
                 tg = kn.penalty.target.copy(); tg[t.index] = v
                 knots[t.at] = replace(kn, penalty=replace(kn.penalty, target=tg))
+            elif t.kind == "offset":
+                stages[t.at] = _with_offset(stages[t.at], t.index, v)
             else:
                 f = stages[t.at].f.copy(); f[t.index] = v
                 stages[t.at] = replace(stages[t.at], f=f)
     return replace(problem, x0=x0, knots=tuple(knots), stages=tuple(stages))
+
+
+def _with_offset(stage, index: int, v: float):
+    """`stage` with its tracking path's offset ``index`` at `v`: ``q`` and ``rho`` (and their
+    samples) rebuilt from the parsed data, every other field kept."""
+    off = stage.origin.tracking_offset.copy()
+    off[index] = v
+    data = replace(stage.origin, tracking_offset=off)
+    built = data.build(stage.A.shape[0], stage.G.shape[2])
+    return replace(stage, q=built.q, rho=built.rho, varying=built.varying, origin=data)

@@ -188,6 +188,8 @@ class _StageData:
     B_path: str
     noise: list[tuple[int, Any, str]]
     tracking: tuple | None = None      # (C, Qy, y0 Series) of an integral tracking cost
+    tracking_path: str | None = None   # "cost.tracking" or "stages[k].cost.tracking"
+    tracking_offset: np.ndarray | None = None   # added to every y0 sample (ny,)
 
     def series(self) -> list[Series]:
         out = [v for v in self.fields.values() if isinstance(v, Series)]
@@ -212,7 +214,7 @@ class _StageData:
         if self.tracking is not None:
             # E |C x - y0(t)|^2_Qy adds C'Qy C to Q, -C'Qy y0 to q and y0'Qy y0 to rho.
             C, Qy, y0s = self.tracking
-            y0 = y0s(t) if t is not None else y0s.values[0]
+            y0 = (y0s(t) if t is not None else y0s.values[0]) + self.tracking_offset
             f["Q"] = f["Q"] + C.T @ Qy @ C
             f["q"] = f["q"] - C.T @ Qy @ y0
             f["rho"] = f["rho"] + float(y0 @ Qy @ y0)
@@ -224,7 +226,7 @@ class _StageData:
              for k, v in self.fields.items() if k in keys}
         if self.tracking is not None:
             C, Qy, y0s = self.tracking
-            y0 = y0s.many(ts)                                   # (T, ny)
+            y0 = y0s.many(ts) + self.tracking_offset           # (T, ny)
             f["Q"] = f["Q"] + C.T @ Qy @ C
             f["q"] = f["q"] - np.array([C.T @ Qy @ y for y in y0])
             f["rho"] = f["rho"] + np.array([float(y @ Qy @ y) for y in y0])
@@ -338,18 +340,25 @@ def _parse_stage(dyn: _Layers, cost: _Layers, n: int,
             raise ProblemError(where, f"[[Q, S], [S', R]] must be positive semidefinite (the "
                                       f"paper's condition (3)){at}, smallest eigenvalue "
                                       f"{h:.6g}; here Q is {Q_path}, S is {S_path}, R is {R_path}")
-    tracking = None
+    tracking = offset = None
     value, tpath = _pick(cost, "tracking")
     if tpath is not None:
         tracking = _parse_tracking(value, tpath, n)
+        ny = tracking[0].shape[0]
+        offset = (np.zeros(ny) if "offset" not in value else
+                  _vector(value["offset"], _join(tpath, "offset"), ny,
+                          " (one entry per row of C)"))
     return _StageData(dict(A=A, B=B, Q=Q, S=S, R=R, q=q, r=r, rho=rho, **drift), B_path, noise,
-                      tracking)
+                      tracking, tpath, offset)
 
 
 def _parse_tracking(value: Any, path: str, n: int) -> tuple:
     """``tracking = {C = (ny x n), weight = Qy (ny x ny) or a number, t = [...], y0 = [[...]],
-    interpolation = "linear"}``: the integral cost ``E int |C x - y0(t)|^2_Qy dt``."""
-    _check_keys(value, path, {"C", "weight", "t", "y0", "interpolation"}, {"C", "t", "y0"})
+    interpolation = "linear", offset = [...]}``: the integral cost
+    ``E int |C x - y0(t) - offset|^2_Qy dt`` (the caller reads ``offset``, a runtime
+    parameter may set it: `stospline.problem.parameters`)."""
+    _check_keys(value, path, {"C", "weight", "t", "y0", "interpolation", "offset"},
+                {"C", "t", "y0"})
     C = _matrix(value["C"], _join(path, "C"), (None, n), (" (one row per tracked output)",
                                                           _N_IS_LEN_X0))
     ny = C.shape[0]

@@ -115,6 +115,8 @@ def _stage_tables(stage: Stage, k: int, mz: int) -> tuple[dict, dict]:
         C, Qy, y0 = origin.tracking
         cost["tracking"] = {"C": C, "weight": Qy, "t": y0.t, "y0": y0.values,
                             "interpolation": y0.interpolation}
+        if origin.tracking_offset is not None and np.any(origin.tracking_offset):
+            cost["tracking"]["offset"] = origin.tracking_offset
     return dyn, cost
 
 
@@ -156,8 +158,8 @@ def _partial_drift(p) -> bool:
     """Some parameter sets the drift of some stages only: the stages are then written one by
     one, so that its paths exist."""
     every = set(range(len(p.stages)))
-    return any({t.at for t in par.targets if t.kind == "f"} not in (set(), every)
-               for par in p.parameters)
+    return any({t.at for t in par.targets if t.kind == kind} not in (set(), every)
+               for par in p.parameters for kind in ("f", "offset"))
 
 
 def _parameters(p, top_level: bool) -> list[str]:
@@ -173,6 +175,9 @@ def _parameters(p, top_level: bool) -> list[str]:
                 path = f"knots[{t.at}].constraint.value[{t.index}]"
             elif t.kind == "target":
                 path = f"knots[{t.at}].penalty.target[{t.index}]"
+            elif t.kind == "offset":
+                path = (f"cost.tracking.offset[{t.index}]" if top_level
+                        else f"stages[{t.at}].cost.tracking.offset[{t.index}]")
             else:
                 path = (f"dynamics.f[{t.index}]" if top_level
                         else f"stages[{t.at}].dynamics.f[{t.index}]")

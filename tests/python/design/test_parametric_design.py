@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from conftest import EXAMPLES
+from support.problems import tracked_cart_doc
 from test_random_problems import random_doc
 from test_time_varying_data import tv_doc
 
@@ -196,6 +197,15 @@ def test_time_varying_data_with_tracking(mode, discretization):
         {"name": "push", "sets": ["dynamics.f[1]"], "range": [-1.0, 0.0]},
         {"name": "start", "sets": ["x0[0]"], "range": [0.5, 1.5]}]
     check_against_fresh(doc, mode=mode, discretization=discretization)
+
+
+@pytest.mark.parametrize("mode", ["stagewise", "joint"])
+@pytest.mark.parametrize("discretization", ["exact-zoh", "continuous"])
+def test_tracking_path_offsets(mode, discretization):
+    """Offsets of two tracking paths (the top-level one on two stages, a stage's own), with a
+    knot value, the drift and the start as parameters."""
+    check_against_fresh(tracked_cart_doc(), mode=mode, discretization=discretization,
+                        draws=3 if discretization == "exact-zoh" else 1)
 
 
 def test_cost_is_the_quadratic_in_theta():

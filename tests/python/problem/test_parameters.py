@@ -7,6 +7,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from support.problems import tracked_cart_doc
+
 from stospline.problem import ProblemError, parse_problem
 from stospline.problem.parameters import MAX_PARAMETERS, apply_to_doc, check_theta, problem_at
 
@@ -117,6 +119,8 @@ BAD = [
      "parameters[0].sets[0]", "band limits"),
     ("tracking", _set(P0 + ("sets",), ["cost.tracking.y0[0][0]"]), "parameters[0].sets[0]",
      "tracking path"),
+    ("no_tracking", _set(P0 + ("sets",), ["cost.tracking.offset[0]"]), "parameters[0].sets[0]",
+     "cost.tracking does not exist"),
     ("weight", _set(P0 + ("sets",), ["knots[0].penalty.weight"]), "parameters[0].sets[0]",
      "cannot be a runtime parameter"),
     ("x0_index", _set(P0 + ("sets",), ["x0[2]"]), "parameters[0].sets[0]", "no entry 2"),
@@ -171,3 +175,74 @@ def test_written_back_reads_the_same_parameters():
     text = p.to_toml()
     assert "[[stages]]" not in text and '"dynamics.f[1]"' in text
     assert parse_problem(tomllib.loads(text)).parameters == p.parameters
+
+
+def test_tracking_offsets_are_read():
+    p = parse_problem(tracked_cart_doc())
+    where = {q.name: [(t.kind, t.at, t.index) for t in q.targets] for q in p.parameters}
+    assert where["shift_x"] == [("offset", 0, 0), ("offset", 2, 0)]   # the top-level path
+    assert where["shift_v"] == [("offset", 0, 1), ("offset", 2, 1)]
+    assert where["late"] == [("offset", 1, 0)]                        # stage 1's own path
+    assert [q.nominal for q in p.parameters[:3]] == [0.1, 0.0, 0.0]   # offset not written: 0
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_problem_at_an_offset_equals_the_substituted_file(seed):
+    doc = tracked_cart_doc()
+    p = parse_problem(doc)
+    rng = np.random.default_rng(seed)
+    theta = rng.uniform([q.lower for q in p.parameters], [q.upper for q in p.parameters])
+    a, b = problem_at(p, theta), parse_problem(apply_to_doc(doc, p.parameters, theta))
+    times = np.linspace(0.0, 3.0, 31)
+    for sa, sb, s0 in zip(a.stages, b.stages, p.stages):
+        da, db = sa.samples(times), sb.samples(times)
+        for key in ("q", "rho", "Q", "f"):
+            np.testing.assert_allclose(da[key], db[key], rtol=1e-14, atol=1e-14)
+        assert not np.array_equal(da["q"], s0.samples(times)["q"])    # the offsets moved q
+    assert doc == tracked_cart_doc()
+
+
+BAD_OFFSETS = [
+    ("output", ["cost.tracking.offset[2]"], "has 2 tracked outputs"),
+    ("stage_has_none", ["stages[0].cost.tracking.offset[0]"], "does not exist"),
+    ("samples", ["cost.tracking.y0[1][0]"], "only its constant offset"),
+    ("weight", ["stages[1].cost.tracking.weight"], "only its constant offset"),
+]
+
+
+@pytest.mark.parametrize("case", BAD_OFFSETS, ids=[c[0] for c in BAD_OFFSETS])
+def test_bad_offsets_name_their_field(case):
+    _, sets, reason = case
+    doc = tracked_cart_doc()
+    doc["parameters"][0]["sets"] = sets
+    with pytest.raises(ProblemError) as err:
+        parse_problem(doc)
+    assert err.value.field == "parameters[0].sets[0]" and reason in err.value.reason, err.value
+
+
+def test_offset_of_a_path_no_stage_takes_and_of_the_wrong_length():
+    doc = tracked_cart_doc()
+    own = doc["stages"][1]["cost"]
+    doc["stages"] = [{"cost": {"tracking": {**own["tracking"], "t": t}}}
+                     for t in ([0, 1], [1, 2], [2, 3])]
+    doc["parameters"] = doc["parameters"][:1]
+    with pytest.raises(ProblemError, match="no stage takes cost.tracking") as err:
+        parse_problem(doc)
+    assert err.value.field == "parameters[0].sets[0]"
+    doc = tracked_cart_doc()
+    doc["cost"]["tracking"]["offset"] = [0.1]
+    with pytest.raises(ProblemError) as err:
+        parse_problem(doc)
+    assert err.value.field == "cost.tracking.offset", err.value
+
+
+def test_offsets_written_back_read_the_same_parameters():
+    import tomllib
+    p = parse_problem(tracked_cart_doc())
+    text = p.to_toml()
+    assert "stages[1].cost.tracking.offset[0]" in text
+    q = parse_problem(tomllib.loads(text))
+    assert q.parameters == p.parameters
+    times = np.linspace(0.0, 3.0, 7)
+    for sa, sb in zip(p.stages, q.stages):
+        np.testing.assert_array_equal(sa.samples(times)["q"], sb.samples(times)["q"])

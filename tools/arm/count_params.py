@@ -1,9 +1,16 @@
 #!/usr/bin/env python3
-"""Report: instructions per tick on Cortex-M4F under QEMU for the robot with its goal as a
-runtime parameter (gains/robot_goal*), through stsp_step() (no parameters) and through
-stsp_param_step() (theta set inside the range).
+"""Report: flash bytes and instructions per tick on Cortex-M4F under QEMU of the examples
+with runtime parameters: the robot with its goal as a parameter (gains/robot_goal*) and the
+drone through gates whose six coordinates are parameters (gains/drone_gates*), through
+stsp_step() (no parameters) and through stsp_param_step() (theta set inside the range).
 
-    python3 tools/arm/count_params.py [--build DIR] [--arith float32|q15|q31]
+    python3 tools/arm/count_params.py [--build DIR] [--example robot_goal|drone_gates|all]
+                                      [--arith float32|q15|q31]
+
+Bytes: the const data of gains/<name>.c (the table) and of gains/<name>_params.c (the columns,
+nominal and range, and the 76-byte stsp_params_table_t), compiled for the M4F
+(arm-none-eabi-size). The default, --example all, prints both examples in float32; Q15/Q31
+tables exist for the robot only (--arith q15 with the drone: exit status 2).
 
 Compiles tools/arm/params_bench_main.c with firmware/src/*.c and the robot's tables
 (arm-none-eabi-gcc -O2, -mcpu=cortex-m4 hard float, -ffp-contract=off, the generic build),
@@ -15,7 +22,8 @@ image runs the three runs of tests/c/test_params.c on the target and their comma
 be tests/c/params_expected.h's (the float32 specification's, bit for bit), else exit status 1.
 With --arith q15 or q31: the fixed-point build on gains/robot_goal_<arith>* (the same ticks,
 states in Q scales), its hashes against tests/c/params_q_expected.h (the host's bit-exact
-reference). Standard library only.
+reference). The drone's hashes are tests/c/params_drone_expected.h's
+(tests/c/params_reference.py --example drone_gates). Standard library only.
 """
 from __future__ import annotations
 
@@ -33,6 +41,7 @@ FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", 
          "-O2", "-ffp-contract=off", "-ffunction-sections", "-fdata-sections", "-Wall",
          "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"]
 CALLERS = ("bench_plain", "bench_param")
+EXAMPLES = ("robot_goal", "drone_gates")     # gains/<name>* with runtime parameters
 SUFFIX = {"float32": "f32", "q15": "q15", "q31": "q31"}
 
 
@@ -40,11 +49,13 @@ def entries(arith: str) -> tuple[str, str]:
     return (f"stsp_step_{SUFFIX[arith]}", f"stsp_param_step_{SUFFIX[arith]}")
 
 
-def build(out: Path, arith: str = "float32", hashes: bool = False) -> Path:
-    elf = out / (f"hash_params_{arith}.elf" if hashes else f"bench_params_{arith}.elf")
+def build(out: Path, arith: str = "float32", hashes: bool = False,
+          example: str = "robot_goal") -> Path:
+    elf = out / (f"hash_{example}_{arith}.elf" if hashes else f"bench_{example}_{arith}.elf")
     arm = ROOT / "tools" / "arm"
-    name = "robot_goal" if arith == "float32" else f"robot_goal_{arith}"
+    name = example if arith == "float32" else f"{example}_{arith}"
     defs = [] if arith == "float32" else [f"-DSTSP_ARITH_{arith.upper()}"]
+    defs += ["-DBENCH_DRONE"] if example == "drone_gates" else []
     run(["arm-none-eabi-gcc", *FLAGS, *defs, *(["-DBENCH_HASH"] if hashes else []),
          f"-I{ROOT / 'firmware/include'}", f"-I{ROOT / 'firmware/src'}", f"-I{ROOT / 'gains'}",
          f"-I{ROOT / 'tests/c'}",
@@ -73,14 +84,30 @@ def count(elf: Path, arith: str = "float32") -> list[dict]:
     return calls
 
 
-def check_hashes(out: Path, arith: str = "float32") -> bool:
+def flash(out: Path, example: str) -> tuple[int, int]:
+    """Bytes of const data of gains/<example>.c and gains/<example>_params.c for the M4F."""
+    sizes = []
+    for stem in (example, f"{example}_params"):
+        obj = out / f"{stem}.o"
+        run(["arm-none-eabi-gcc", *FLAGS, f"-I{ROOT / 'firmware/include'}",
+             f"-I{ROOT / 'gains'}", "-c", str(ROOT / f"gains/{stem}.c"), "-o", str(obj)])
+        sizes.append(sum(int(m) for m in re.findall(r"^\.(?:rodata|data)\S*\s+(\d+)",
+                                                     run(["arm-none-eabi-size", "-A", str(obj)]),
+                                                     re.M)))
+    return sizes[0], sizes[1]
+
+
+def check_hashes(out: Path, arith: str = "float32", example: str = "robot_goal") -> bool:
     """Runs A, B, C on the target against tests/c/params_expected.h (fixed point:
-    tests/c/params_q_expected.h's section of `arith`); prints each."""
-    elf = build(out, arith, hashes=True)
+    tests/c/params_q_expected.h's section of `arith`; the drone: params_drone_expected.h);
+    prints each."""
+    elf = build(out, arith, hashes=True, example=example)
     got = dict(re.findall(r"hash ([ABC]) (0x[0-9A-F]{8})", run(
         ["timeout", "600", "qemu-system-arm", "-M", "mps2-an386", "-nographic", "-monitor",
          "none", "-semihosting-config", "enable=on,target=native", "-kernel", str(elf)])))
-    if arith == "float32":
+    if example == "drone_gates":
+        text, what = (ROOT / "tests/c/params_drone_expected.h").read_text(), "specification"
+    elif arith == "float32":
         text, what = (ROOT / "tests/c/params_expected.h").read_text(), "specification"
     else:
         text, what = (ROOT / "tests/c/params_q_expected.h").read_text(), "host reference"
@@ -92,28 +119,48 @@ def check_hashes(out: Path, arith: str = "float32") -> bool:
     return got == want
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--build", type=Path, default=ROOT / "build" / "arm-params")
-    ap.add_argument("--arith", choices=sorted(SUFFIX), default="float32")
-    args = ap.parse_args()
-    args.build.mkdir(parents=True, exist_ok=True)
-    calls = count(build(args.build, args.arith), args.arith)
+def report(out: Path, example: str, arith: str) -> bool:
+    """Prints `example`'s bytes and instructions per kind of tick; True if its hashes on the
+    target are the reference's."""
+    calls = count(build(out, arith, example=example), arith)
+    sw = max(c["tick"] for c in calls) - 1          # the first tick of stage 1
     kinds = {
         "tick 0 (latch of stage 0)": lambda c: c["tick"] == 0,
         "ordinary tick": lambda c: 0 < c["tick"] < 21 and c["status"] == 0,
-        "skip to the tick before stage 1": lambda c: c["tick"] == 299,
-        "stage-1 switch (latch)": lambda c: c["tick"] == 300,
+        "skip to the tick before stage 1": lambda c: c["tick"] == sw - 1,
+        f"first tick of stage 1 (tick {sw})": lambda c: c["tick"] == sw,
     }
-    print(f"| robot_goal ({args.arith}), Cortex-M4F (QEMU) | stsp_step (median) | "
+    print(f"| {example} ({arith}), Cortex-M4F (QEMU) | stsp_step (median) | "
           f"stsp_param_step (median) |")
     print("|---|---|---|")
     for name, sel in kinds.items():
         med = [statistics.median([c["insns"] for c in calls if sel(c) and c["kind"] == k])
                for k in (0, 1)]
         print(f"| {name} | {med[0]:.0f} | {med[1]:.0f} |")
+    if arith == "float32":
+        table, params = flash(out, example)
+        print(f"\n{example}: table {table:,} B, parameters {params:,} B "
+              f"(+{100 * params / table:.1f} %; gains/{example}.c, gains/{example}_params.c, "
+              f"const data for the M4F)")
     print()
-    return 0 if check_hashes(args.build, args.arith) else 1
+    return check_hashes(out, arith, example)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--build", type=Path, default=ROOT / "build" / "arm-params")
+    ap.add_argument("--example", choices=("all", *EXAMPLES), default="all")
+    ap.add_argument("--arith", choices=sorted(SUFFIX), default="float32")
+    args = ap.parse_args()
+    examples = EXAMPLES if args.example == "all" else (args.example,)
+    if args.arith != "float32" and "drone_gates" in examples:
+        if args.example == "drone_gates":
+            ap.error(f"--arith {args.arith}: gains/ has float32 parameter tables only for "
+                     f"drone_gates")
+        examples = ("robot_goal",)
+    args.build.mkdir(parents=True, exist_ok=True)
+    ok = [report(args.build, ex, args.arith) for ex in examples]
+    return 0 if all(ok) else 1
 
 
 if __name__ == "__main__":

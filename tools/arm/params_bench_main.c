@@ -1,11 +1,13 @@
 /* Instruction-count bench of runtime parameters (tools/arm/count_params.py, QEMU mps2-an386,
- * Cortex-M4F) on gains/robot_goal*: BENCH_REPS times, the same ticks through stsp_step()
+ * Cortex-M4F) on gains/robot_goal* (built with -DBENCH_DRONE: gains/drone_gates*, its six
+ * gate coordinates, float32 only): BENCH_REPS times, the same ticks through stsp_step()
  * (bench_plain) and through stsp_param_step() with theta set inside the range (bench_param):
  * ticks 0 .. 20 in order (tick 0 latches stage 0), then a skip to the tick before stage 1,
  * the switch tick (the latch of stage 1) and the one after it. Prints one line per call:
  *     call <index> kind <0 plain|1 param> tick <tick> status <status>
  * Built with -DBENCH_HASH instead: runs A, B and C of tests/c/params_reference.py (the states,
- * thetas and changes of tests/c/test_params.c) and prints the hash of each run's commands,
+ * thetas and changes of tests/c/test_params.c; the drone's: tests/c/params_drone_expected.h)
+ * and prints the hash of each run's commands,
  *     hash <A|B|C> 0x<FNV-1a>
  * for the bit-exact comparison with the float32 specification on the target. Built with
  * STSP_ARITH_Q15 or STSP_ARITH_Q31: the same on gains/robot_goal_<arith>* (the fixed-point
@@ -15,7 +17,17 @@
 #include <stdio.h>
 #include <string.h>
 
-#if defined(STSP_ARITH_Q15)
+#if defined(BENCH_DRONE)
+#include "drone_gates_params.h"
+#define G(name) drone_gates_##name
+#define NX 6u
+#define NU 3u
+#define NP 6u
+#define N_TICKS 400u
+/* the bench's theta: each gate moved inside its +-0.5 m; the start: rest at (0, 0, 1) */
+#define BENCH_THETA {0.3f, 2.2f, 1.2f, 2.9f, -0.2f, 1.4f}
+#define BENCH_X {0.0f, 0.0f, 0.0f, 0.0f, 1.0f, 0.0f}
+#elif defined(STSP_ARITH_Q15)
 #include "robot_goal_q15_params.h"
 #define G(name) robot_goal_q15_##name
 #elif defined(STSP_ARITH_Q31)
@@ -25,11 +37,18 @@
 #include "robot_goal_params.h"
 #define G(name) robot_goal_##name
 #endif
+#ifndef BENCH_DRONE
 #define NX 4u
 #define NU 2u
+#define NP 2u
 #define N_TICKS 600u
+#define BENCH_THETA {-0.7f, 5.3f}
+#define BENCH_X {-1.0f, 5.0f, 0.0f, 0.0f}
+#endif
 #ifdef BENCH_HASH
-#ifdef STSP_ARITH_FIXED_POINT
+#if defined(BENCH_DRONE)
+#include "params_drone_expected.h"
+#elif defined(STSP_ARITH_FIXED_POINT)
 #include "params_q_expected.h"
 #else
 #include "params_expected.h"
@@ -83,15 +102,17 @@ static uint32_t run(const float *theta0, uint32_t at, const float *theta1)
         if (stsp_param_step(&pc, j, x, u) < 0) {
             return 0u;
         }
-        h = fnv1a(fnv1a(h, u[0]), u[1]);
+        for (c = 0u; c < NU; ++c) {
+            h = fnv1a(h, u[c]);
+        }
     }
     return h;
 }
 
 int main(void)
 {
-    static const float a[2] = PAR_THETA_A;
-    static const float b[2] = PAR_THETA_B;
+    static const float a[NP] = PAR_THETA_A;
+    static const float b[NP] = PAR_THETA_B;
     printf("hash A 0x%08X\n", (unsigned)run(a, 0u, NULL));
     printf("hash B 0x%08X\n", (unsigned)run(NULL, G(table).stage_start[1], b));
     printf("hash C 0x%08X\n", (unsigned)run(a, PAR_MID, b));
@@ -135,14 +156,15 @@ int main(void)
 {
     static stsp_ctrl_t ctrl;
     static stsp_param_t pc;
-    static const stsp_f32_t theta[2] = {-0.7f, 5.3f};
+    static const stsp_f32_t theta[NP] = BENCH_THETA;
     const uint32_t sw = G(table).stage_start[1];
 #ifdef STSP_ARITH_FIXED_POINT
     /* x = (-1, 5, 0, 0) in the states' Q scales (x_exp 3, 3, 4, 3) */
     stsp_scalar_t x[NX] = {(stsp_scalar_t)-(1L << (STSP_Q_FRAC_BITS - 3)),
                            (stsp_scalar_t)(5L << (STSP_Q_FRAC_BITS - 3)), 0, 0};
 #else
-    stsp_f32_t x[NX] = {-1.0f, 5.0f, 0.0f, 0.0f};
+    stsp_f32_t x[NX] = BENCH_X;
+    const stsp_f32_t x0 = x[0];
 #endif
     uint32_t rep, k;
     if ((stsp_init(&ctrl, &G(table)) != STSP_OK) ||
@@ -157,7 +179,7 @@ int main(void)
 #ifdef STSP_ARITH_FIXED_POINT
         x[0] = (stsp_scalar_t)(x[0] + (stsp_scalar_t)(1L << (STSP_Q_FRAC_BITS - 10)));
 #else
-        x[0] = -1.0f + 0.01f * (float)rep;
+        x[0] = x0 + 0.01f * (float)rep;
 #endif
         for (k = 0u; k < BENCH_TICKS; ++k) {
             bench_plain(&ctrl, k, x);

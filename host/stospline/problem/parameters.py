@@ -162,8 +162,8 @@ def _offset_targets(tok: list, path: str, field: str, doc: dict, problem) -> lis
                                   f"stages[k].cost.tracking.offset[i] instead")
     ny = problem.stages[ks[0]].origin.tracking[0].shape[0]
     if tok[-1] >= ny:
-        raise ProblemError(field, f"{where} has {ny} tracked outputs (rows of C), no "
-                                  f"output {tok[-1]}")
+        raise ProblemError(field, f"{where} has {ny} tracked output{'s' * (ny != 1)} (rows "
+                                  f"of C), no output {tok[-1]}")
     return [Target("offset", k, tok[-1], where=where) for k in ks]
 
 

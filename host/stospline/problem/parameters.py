@@ -48,7 +48,8 @@ class Target:
     stage's index); ``at`` the knot or stage (-1 for x0); ``index`` the
     component; ``scale`` the power of two the reader scaled a constraint row by
     (`stospline.problem.rows`): the problem holds ``scale * theta``; ``where`` the file's
-    tracking table of an "offset" (``cost.tracking`` or ``stages[k].cost.tracking``)."""
+    table that holds the value (``knots[k].constraint``, ``stages[k].dynamics``,
+    ``cost.tracking``, ...: ``[[regions]]`` add knots, so the file's indices may differ)."""
     kind: str
     at: int
     index: int
@@ -117,13 +118,14 @@ def _targets(path: str, field: str, doc: dict, problem) -> list[Target]:
         k, i = tok[1], tok[4]
         if k >= len(doc["knots"]) or _get(doc, tok) is None:
             raise ProblemError(field, f"is not a value of the file ({path} does not exist)")
+        kp = _knot_of(doc, problem, k)
         if tok[3] == "target":
-            return [Target("target", k, i)]
-        con = problem.knots[k].constraint
+            return [Target("target", kp, i, where=f"knots[{k}].penalty")]
+        con = problem.knots[kp].constraint
         raw_top = float(np.abs(np.asarray(doc["knots"][k]["constraint"]["C"][i],
                                           dtype=float)).max())
         scale = float(np.abs(con.C[i]).max()) / raw_top if raw_top > 0 else 1.0
-        return [Target("value", k, i, scale)]
+        return [Target("value", kp, i, scale, where=f"knots[{k}].constraint")]
     top_f = shape == ["dynamics", "f", 0]
     if top_f or shape == ["stages", 0, "dynamics", "f", 0]:
         where = "dynamics" if top_f else f"stages[{tok[1]}].dynamics"
@@ -134,17 +136,32 @@ def _targets(path: str, field: str, doc: dict, problem) -> list[Target]:
         if _get(doc, tok) is None:
             raise ProblemError(field, f"is not a value of the file ({path} does not exist; "
                                       f"write {where}.f to make its entries parameters)")
+        entry = _entries(doc, problem)
         if not top_f:
-            return [Target("f", tok[1], tok[-1])]
+            return [Target("f", k, tok[-1], where=where) for k, e in enumerate(entry)
+                    if e == tok[1]]
         over = doc.get("stages")
-        ks = [k for k in range(len(problem.stages))
-              if not (isinstance(over, list) and "f" in (over[k].get("dynamics") or {}))]
+        ks = [k for k, e in enumerate(entry)
+              if not (isinstance(over, list) and "f" in (over[e].get("dynamics") or {}))]
         if not ks:
             raise ProblemError(field, "every stage overrides dynamics.f in [[stages]]: set "
                                       "stages[k].dynamics.f[i] instead")
-        return [Target("f", k, tok[-1]) for k in ks]
+        return [Target("f", k, tok[-1], where=where) for k in ks]
     raise ProblemError(field, f"{path!r} cannot be a runtime parameter (supported: "
                               f"{_SUPPORTED})")
+
+
+def _knot_of(doc: dict, problem, k: int) -> int:
+    """The problem's index of the file's knot `k` (``[[regions]]`` add knots between)."""
+    t = float(doc["knots"][k]["t"])
+    return next(j for j, kn in enumerate(problem.knots) if kn.t == t)
+
+
+def _entries(doc: dict, problem) -> list[int]:
+    """Per stage of the problem, the file's knot (and ``[[stages]]`` entry) whose stage it is
+    part of (``[[regions]]`` split stages, as the reader does)."""
+    user_t = np.array([float(kn["t"]) for kn in doc["knots"]])
+    return [int(np.searchsorted(user_t, kn.t - 1e-12)) for kn in problem.knots]
 
 
 def _offset_targets(tok: list, path: str, field: str, doc: dict, problem) -> list[Target]:
@@ -261,23 +278,20 @@ def apply_to_doc(doc: dict, parameters, theta) -> dict:
     entry of `theta` (a fresh design at `theta` reads this)."""
     th = check_theta(parameters, theta)
     out = copy.deepcopy(doc)
-    stages = out.get("stages")
     for par, v in zip(parameters, th):
         for t in par.targets:
             if t.kind == "x0":
                 out["x0"][t.index] = float(v)
             elif t.kind == "value":
-                out["knots"][t.at]["constraint"]["value"][t.index] = float(v)
+                _get(out, _tokens(t.where))["value"][t.index] = float(v)
             elif t.kind == "target":
-                out["knots"][t.at]["penalty"]["target"][t.index] = float(v)
+                _get(out, _tokens(t.where))["target"][t.index] = float(v)
             elif t.kind == "offset":
                 table = _get(out, _tokens(t.where))
                 ny = len(table["C"])
                 table.setdefault("offset", [0.0] * ny)[t.index] = float(v)
-            elif isinstance(stages, list) and "f" in (stages[t.at].get("dynamics") or {}):
-                stages[t.at]["dynamics"]["f"][t.index] = float(v)
             else:
-                out["dynamics"]["f"][t.index] = float(v)
+                _get(out, _tokens(t.where))["f"][t.index] = float(v)
     return out
 
 

@@ -55,8 +55,35 @@ def test_without_parameters_the_problem_is_unchanged():
     assert replace(parse_problem(base_doc()), parameters=()).to_toml() == q.to_toml()
 
 
+def with_a_region(make):
+    """`make`'s document with a region over [1.2, 1.6] every 0.2 s: its one grid point,
+    t = 1.4, is a band knot that splits the file's stage 1 in two."""
+    def doc():
+        out = make()
+        out["regions"] = [{"t": [1.2, 1.6], "every": 0.2, "C": [[0, 1]], "lower": [-5.0],
+                           "upper": [5.0]}]
+        return out
+    doc.__name__ = f"{make.__name__}_with_a_region"
+    return doc
+
+
+def test_regions_shift_the_problem_indices_of_what_parameters_set():
+    """The file's knot 1 is the problem's knot 2, and the file's stage 1 is the problem's
+    stages 1 and 2."""
+    p = parse_problem(with_a_region(base_doc)())
+    assert [kn.t for kn in p.knots] == [1.0, 1.4, 2.0]
+    at = {q.name: [(t.kind, t.at) for t in q.targets] for q in p.parameters}
+    assert at["rest"] == [("value", 2), ("target", 2)]
+    assert at["grav"] == [("f", 0)] and at["wind"] == [("f", 1), ("f", 2)]
+    p = parse_problem(with_a_region(tracked_cart_doc)())
+    at = {q.name: [(t.kind, t.at) for t in q.targets] for q in p.parameters}
+    assert at["late"] == [("offset", 1), ("offset", 2)] and at["rest"] == [("value", 3)]
+
+
 @pytest.mark.parametrize("seed", range(3))
-@pytest.mark.parametrize("make", [base_doc, tracked_cart_doc])
+@pytest.mark.parametrize("make", [base_doc, tracked_cart_doc, with_a_region(base_doc),
+                                  with_a_region(tracked_cart_doc)],
+                         ids=lambda f: f.__name__)
 def test_problem_at_equals_the_substituted_file(make, seed):
     """Knot values and targets, x0, and every stage's q, rho, Q and f at 31 times (the
     tracking offsets move q and rho)."""

@@ -8,8 +8,8 @@ the gains K, L, Lambda (unchanged), k0 and lambda0, the oracle's cost of the par
 at theta against the fresh design's own J0 (exact ZOH) or the oracle's cost of the fresh
 table (continuous, whose J0 is the continuous law's), and the oracle's knot means. On shipped
 examples (the robot, the quadrotor with gravity as a parameter and a one-tick delay, the
-investment with time-varying interest) and on random problems with stage overrides,
-time-varying data and a drift.
+investment with time-varying interest), on random problems with stage overrides,
+time-varying data and a drift, and on the offsets of tracking paths.
 """
 import tomllib
 

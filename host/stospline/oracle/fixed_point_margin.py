@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import expm
 
-__all__ = ["MeanErrorBound", "mean_error_bound"]
+__all__ = ["MeanErrorBound", "mean_error_bound", "fixed_point_certificate"]
 
 
 class MeanErrorBound:
@@ -40,14 +40,33 @@ class MeanErrorBound:
 
     def rows(self, c) -> np.ndarray:
         c = np.atleast_2d(np.asarray(c, float))
-        T, m = self._b.shape
-        n = c.shape[1]
-        n_latch = self._L.shape[2]
         b = self._b.reshape(-1)
+        out = np.zeros((len(self._steps) + 1, c.shape[0]))
+        for j, Rx in self._responses(len(self._steps)):
+            out[j + 1] = np.abs(c @ Rx) @ b[:Rx.shape[1]]
+        return out
+
+    def attaining(self, c, j: int) -> np.ndarray:
+        """The errors (ticks, m) within the bound that move ``c' E x_j`` (`c` one row) by the
+        whole bound ``rows(c)[j]``: ``b_t`` times the sign of its response, zero from tick
+        `j` on."""
+        e = np.zeros(self._b.size)
+        for _, Rx in self._responses(j):
+            pass
+        if j > 0:
+            w = Rx.shape[1]
+            e[:w] = np.sign(np.asarray(c, float) @ Rx) * self._b.reshape(-1)[:w]
+        return e.reshape(self._b.shape)
+
+    def _responses(self, ticks: int):
+        """``(j, R)`` for j < `ticks`: R (n, (j+1) m) the response of the mean after tick j to
+        the errors of ticks 0 .. j."""
+        T, m = self._b.shape
+        n = self._steps[0][0].shape[0] if self._steps else 0
+        n_latch = self._L.shape[2]
         Rx = np.zeros((n, T * m))       # d E x / d e, all ticks' errors at once
         Rv = np.zeros((n_latch, T * m))
-        out = np.zeros((T + 1, c.shape[0]))
-        for j in range(T):
+        for j in range(ticks):
             w = (j + 1) * m                           # only errors before tick j + 1 matter
             if self._latch[j] is not None:
                 Rv[:, :w] = self._latch[j] @ Rx[:, :w]
@@ -55,8 +74,7 @@ class MeanErrorBound:
             Ru[:, j * m:w] += np.eye(m)
             Ad, Bd = self._steps[j]
             Rx[:, :w] = Ad @ Rx[:, :w] + Bd @ Ru
-            out[j + 1] = np.abs(c @ Rx[:, :w]) @ b[:w]
-        return out
+            yield j, Rx[:, :w]
 
 
 def mean_error_bound(problem, table, bound) -> MeanErrorBound:
@@ -65,6 +83,9 @@ def mean_error_bound(problem, table, bound) -> MeanErrorBound:
     errors within `bound` ((n_ticks, m), real units). ValueError for time-varying plant
     data."""
     n, m, n_latch = table.dims
+    if n != problem.n or len(problem.stages) != table.n_stages:
+        raise ValueError("mean_error_bound: the table's states or stages are not the "
+                         "problem's (a delayed table is not covered)")
     h = 1.0 / table.tick_hz
     start = np.asarray(table.stage_start, int)
     steps, latch = [], []
@@ -83,3 +104,20 @@ def mean_error_bound(problem, table, bound) -> MeanErrorBound:
             latch.append(lam if j == start[k] else None)
     return MeanErrorBound(steps, latch, np.asarray(table.K, float), np.asarray(table.L, float),
                           bound)
+
+
+def fixed_point_certificate(problem, ptable, pf, box=None) -> dict:
+    """What holds over the box for the Q15/Q31 parametric table `pf` as flashed
+    (`stospline.table.qparams.ParametricFixedPoint` of `ptable`), from the double table's
+    moments over the box `box` (default `box_moments` of `ptable`) and the fixed-point error
+    bound propagated to the mean (`mean_error_bound` of `pf.command_error_bound`):
+    ``{"bound": MeanErrorBound, "margins": [RowMargin] (every band row, both margins less
+    the bound), "corridors": [exit bounds per corridor (each wall's margin less the
+    bound; the spread the double table's)]}``."""
+    from stospline.oracle.exit_bound import exit_bounds_over_box
+    from stospline.oracle.over_box import band_margins, box_moments
+    box = box if box is not None else box_moments(problem, ptable)
+    meb = mean_error_bound(problem, ptable.table, pf.command_error_bound(ptable))
+    return {"bound": meb, "margins": band_margins(problem, box, extra=meb.rows),
+            "corridors": [exit_bounds_over_box(c, box, problem.t0, problem.tick_hz,
+                                               extra=meb.rows) for c in problem.corridors]}

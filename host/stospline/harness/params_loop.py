@@ -180,7 +180,9 @@ def simulate_params(problem, ctl: ParamsController, theta, *, paths: int, seed: 
     ``change=(stage, theta2, tick)``, just before that tick of the stage). Each stage's plant
     and each knot's penalty are the problem's at `theta`, from the changed stage on at
     `theta2` (`problem_at`; as `stospline.oracle.parametric.evaluate_switched`); the
-    plant's noise from the harness's C generator (seeded); constant stage data. `observe`, optional, is called with ``(tick, X)`` after each tick (X: the states
+    plant's noise from the harness's C generator (seeded); constant stage data. A Q15/Q31
+    controller (`build_params_qcontroller`) reads each state rounded to its Q format and its
+    integer commands reach the plant times their LSB (`controller.q_io`). `observe`, optional, is called with ``(tick, X)`` after each tick (X: the states
     at the tick's end, (paths, n); the callback must not keep it)."""
     table = ctl.table
     n, m, _ = table.dims

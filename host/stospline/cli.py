@@ -105,19 +105,20 @@ def _design(args) -> int:
     d = design_problem(problem, options=opts, **_limits(args))
     _note_tables(d, "formatting")
     source_name = Path(args.problem).name
-    pfiles, fixed = {}, None
+    pfiles, fixed, terms = {}, None, None
     if fixed_params:                            # the gain table scaled with its columns
         from stospline.oracle.parametric import fixed_parametric
         try:
-            pfiles, pf, _ = fixed_parametric(problem, source_name, opts)
+            pfiles, pf, pd = fixed_parametric(problem, source_name, opts)
         except ValueError as exc:               # scale exponents beyond STSP_Q_EXP_MAX
             raise _parameter_scale_error(problem, opts.arith, exc) from None
         fixed = pf.gain_table(names[0].removesuffix(".h"))
+        terms = _fixed_over_box(problem, pd, pf, opts.arith)
     elif params:
         from stospline.oracle.parametric import parametric_c_files
         pfiles = parametric_c_files(problem, source_name, opts)
     files, summary = design_files(d, source_name, opts.arith, with_c=bool(args.out),
-                                  fixed=fixed)
+                                  fixed=fixed, fixed_terms=terms)
     if args.out:                                # written with the tables, as one set
         files.update(pfiles)
     if args.out:
@@ -132,6 +133,25 @@ def _design(args) -> int:
         for path in written if args.out else []:
             print(f"wrote {path}")
     return 0
+
+
+def _fixed_over_box(problem, pd, pf, arith: str) -> dict:
+    """``{"over_box": ...}`` of the Q15/Q31 parametric table as flashed
+    (`stospline.oracle.fixed_point_margin.fixed_point_certificate`), for its JSON summary; a
+    note on stderr for each band row it does not certify (docs/theory/parameters.md,
+    "Fixed-point columns")."""
+    from stospline.oracle.fixed_point_margin import fixed_point_certificate
+    from stospline.report.design_summary import fixed_over_box_terms
+    try:
+        cert = fixed_point_certificate(problem, pd.table, pf, pd.box)
+    except ValueError:                          # a delay or time-varying data: not covered
+        return {}
+    for m in cert["margins"]:
+        if not m.holds:
+            print(f"stospline: note: {m.field} row {m.row} is not certified for the "
+                  f"{arith.upper()} table over the parameter box: less its error bound it "
+                  f"leaves the band by {-m.worst:.3g} at t = {m.t:g}", file=sys.stderr)
+    return {"over_box": fixed_over_box_terms(problem, cert)}
 
 
 def _parameter_scale_error(problem, arith: str, exc: ValueError) -> ProblemError:

@@ -11,6 +11,7 @@ from conftest import EXAMPLES, GAINS
 from stospline import design_problem, load_problem
 from stospline.cli import main
 from stospline.options import resolve_options
+from stospline.oracle.fixed_point_margin import fixed_point_certificate
 from stospline.oracle.parametric import fixed_parametric
 from stospline.pipeline import fixed_point_table
 
@@ -55,7 +56,7 @@ def test_design_arith_writes_the_fixed_point_parametric_controller(tmp_path, cap
     summary = json.loads(captured.out)
     assert summary == json.loads((out / f"{stem}.json").read_text())
     problem = load_problem(EXAMPLES / "robot_goal.toml")
-    _, pf, _ = fixed_parametric(problem, options=resolve_options(problem, arith=arith))
+    _, pf, pd = fixed_parametric(problem, options=resolve_options(problem, arith=arith))
     table = pf.gain_table()
     fixed = summary["fixed"]
     assert (fixed["x_exp"], fixed["u_exp"], fixed["v_exp"]) == (
@@ -63,6 +64,22 @@ def test_design_arith_writes_the_fixed_point_parametric_controller(tmp_path, cap
     assert fixed["u_error_bound_lsb"] == json.loads(json.dumps(table.written_bound_lsb()))
     plain = fixed_point_table(design_problem(problem), arith)
     assert fixed["u_error_bound_lsb"] != json.loads(json.dumps(plain.written_bound_lsb()))
+    # what the table as flashed guarantees over the box (docs/theory/parameters.md)
+    cert = fixed_point_certificate(problem, pd.table, pf)["corridors"][0]["cantelli"]
+    assert fixed["over_box"]["corridors"][0]["over_box"]["cantelli"]["worst_tick"] == \
+        pytest.approx(cert.worst_tick, rel=1e-9)
+    assert fixed["over_box"]["bands"] == [] and "note" not in captured.err
+
+
+def test_a_band_row_the_fixed_point_table_does_not_certify_is_noted(capsys):
+    """The drone's region touches its ceiling at a vertex of the box (designed so): the Q15
+    error bound takes it beyond, so the summary says it does not hold and stderr says so."""
+    assert main(["design", str(EXAMPLES / "drone_gates.toml"), "--arith", "q15", "--json"]) == 0
+    captured = capsys.readouterr()
+    band, = json.loads(captured.out)["fixed"]["over_box"]["bands"]
+    assert band["field"] == "regions[0]" and not band["holds"] and band["worst_margin"] < -1e-3
+    note, = captured.err.strip().splitlines()
+    assert note.startswith("stospline: note: regions[0] row 0 is not certified for the Q15")
 
 
 def test_fixed_point_columns_out_of_scale_are_refused_naming_the_range(tmp_path, capsys):

@@ -5,7 +5,12 @@ box, and a Monte Carlo of the compiled C at random parameter draws and at the bo
 vertex (docs/theory/parameters.md, "Guarantees over the box").
 
     PYTHONPATH=host .venv/bin/python tools/params_box.py examples/drone_gates.toml \\
-        [--draws 8] [--paths 2000] [--seed 20261128]
+        [--draws 8] [--paths 2000] [--seed 20261128] [--arith q15|q31]
+
+With --arith q15|q31, also what holds for the fixed-point parametric table as flashed (its
+error bound propagated to the mean, `stospline.oracle.fixed_point_margin`): the band rows'
+margins and the corridors' bounds over the box less it, and the Monte Carlo runs that
+controller (docs/theory/parameters.md, "Fixed-point columns").
 """
 import argparse
 import sys
@@ -14,7 +19,8 @@ import time
 import numpy as np
 
 from stospline.harness.exit_stats import clopper_pearson_upper
-from stospline.harness.params_loop import build_params_controller, simulate_params
+from stospline.harness.params_loop import (build_params_controller, build_params_qcontroller,
+                                           simulate_params)
 from stospline.oracle.exit_bound import exit_bounds, exit_bounds_over_box
 from stospline.oracle.over_box import band_margins, box_moments, vertices
 from stospline.oracle.parametric import check_parametric_options, design_parametric, evaluate_at
@@ -28,6 +34,7 @@ def main(argv=None) -> int:
     ap.add_argument("--draws", type=int, default=8)
     ap.add_argument("--paths", type=int, default=2000)
     ap.add_argument("--seed", type=int, default=20261128)
+    ap.add_argument("--arith", choices=("float32", "q15", "q31"), default="float32")
     args = ap.parse_args(argv)
     p = load_problem(args.problem)
     opts = check_parametric_options(p)
@@ -38,9 +45,49 @@ def main(argv=None) -> int:
           f"{len(p.parameters)} parameters, {2 ** len(p.parameters)} vertices")
     if pd.margins:
         _bands(p, pd)
+    pf = _fixed(p, pd, args.arith) if args.arith != "float32" else None
     for i, c in enumerate(p.corridors):
-        _corridor(p, pd, i, c, args, opts)
+        _corridor(p, pd, i, c, args, opts, pf)
     return 0
+
+
+def _fixed(p, pd, arith):
+    """Print the certificate of the Q15/Q31 table as flashed; return its
+    `ParametricFixedPoint`."""
+    from stospline.oracle.evaluate import evaluate_table
+    from stospline.oracle.exit_bound import corridor_ticks
+    from stospline.oracle.fixed_point_margin import fixed_point_certificate
+    from stospline.problem.parameters import problem_at
+    from stospline.oracle.over_box import box_state_range
+    from stospline.table.qparams import quantize_parametric
+    box = pd.box if pd.box is not None else box_moments(p, pd.table)
+    pf = quantize_parametric(pd.table, arith, box_state_range(box))
+    cert = fixed_point_certificate(p, pd.table, pf, box)
+    b = pf.command_error_bound(pd.table)
+    shift = cert["bound"].rows(np.eye(p.n)).max(axis=0)
+    print(f"{arith.upper()} table as flashed: command error bound (real state) "
+          f"{', '.join(f'{v:.3g}' for v in b.max(axis=0))} "
+          f"({', '.join(f'{v:.2f}' for v in (b / pf.augmented.u_lsb).max(axis=0))} LSB); "
+          f"mean moved by at most {', '.join(f'{v:.3g}' for v in shift)} (per state)")
+    for m, d in zip(cert["margins"], pd.margins):
+        print(f"  {m.field} row {m.row}: over the box {d.worst:.2e} (double), {m.worst:.2e} "
+              f"less the bound -> {'holds' if m.holds else 'VIOLATED'}")
+    for i, (c, q) in enumerate(zip(p.corridors, cert["corridors"])):
+        double = exit_bounds_over_box(c, box, p.t0, p.tick_hz)
+        walls = c.A @ c.C
+        flashed, spread = pf.as_flashed(pd.table), 0.0
+        lo, hi = corridor_ticks(c, p.t0, p.tick_hz)
+        for v in vertices(p.parameters):
+            va, vf = (np.einsum("rn,tnm,rm->tr", walls, evaluate_table(
+                problem_at(p, v), t, path=True, output=np.eye(p.n)).path_y_cov[lo:hi + 1],
+                walls) for t in (pd.table.at(v), flashed.at(v, quantize=True)))
+            spread = max(spread, float(np.max(np.abs(np.sqrt(vf) - np.sqrt(va)))))
+        print(f"  corridor {i}: worst tick's Cantelli bound over the box "
+              f"{double['cantelli'].worst_tick:.4g} (double), "
+              f"{q['cantelli'].worst_tick:.4g} (margin less the bound); not covered, the "
+              f"rounding's effect on the spread: at the vertices the flashed table's standard "
+              f"deviation along a wall differs from the double's by {spread:.2g} at most")
+    return pf
 
 
 def _bands(p, pd) -> None:
@@ -69,7 +116,7 @@ def _bands(p, pd) -> None:
           f"{worst[True]:.2e} (float32 table)")
 
 
-def _corridor(p, pd, i, c, args, opts) -> None:
+def _corridor(p, pd, i, c, args, opts, pf=None) -> None:
     box = pd.box if pd.box is not None else box_moments(p, pd.table)
     nominal = exit_bounds(c, box.mean @ c.C.T, c.C @ box.cov @ c.C.T, p.t0, p.tick_hz)
     over = exit_bounds_over_box(c, box, p.t0, p.tick_hz)
@@ -85,9 +132,13 @@ def _corridor(p, pd, i, c, args, opts) -> None:
         print(f"  {name:13s} Cantelli {b['cantelli'].total:.4g} ({b['cantelli'].worst_tick:.4g})"
               f"   Gaussian {b['gaussian'].total:.4g} ({b['gaussian'].worst_tick:.4g})")
     print(f"  worst vertex (Gaussian): {dict(zip([q.name for q in p.parameters], worst_v))}")
-    from stospline import design_problem
-    table = design_problem(p, options=opts).table
-    ctl = build_params_controller(pd.table, table)
+    if pf is None:
+        from stospline import design_problem
+        table = design_problem(p, options=opts).table
+        ctl = build_params_controller(pd.table, table)
+    else:
+        print(f"  Monte Carlo of the compiled {pf.augmented.arith.upper()} controller:")
+        ctl = build_params_qcontroller(pd.table, pf)
     rng = np.random.default_rng(args.seed)
     lo = np.array([q.lower for q in p.parameters])
     hi = np.array([q.upper for q in p.parameters])

@@ -6,8 +6,10 @@
 --bytes prints, per example, the flash of the float32 per-tick table and of its columns.
 --fixed writes, instead, the Q15/Q31 parametric controllers of the examples in FIXED
 (`fixed_point_files`): gains/<name>_<arith>.{c,h}, the gain table quantized with the columns
-over the whole box, and gains/<name>_<arith>_params.{c,h}, its columns; with --bytes it prints
-their columns' flash and error bound.
+over the whole box, and gains/<name>_<arith>_params.{c,h}, its columns, byte for byte what
+`stospline design examples/<name>.toml --arith <arith> --out DIR` writes (the same code,
+`stospline.oracle.parametric.fixed_parametric`); with --bytes it prints their columns' flash
+and error bound.
 """
 import argparse
 import sys
@@ -50,20 +52,17 @@ def main(argv=None) -> int:
 
 def fixed_point_files(name: str) -> dict:
     """``{arith: (files, pf)}`` for Q15 and Q31: the C of example `name`'s fixed-point
-    parametric controller (`stospline.table.parametric_c.generate_parametric_qc`; the state
-    range the box's, `stospline.oracle.over_box.box_state_range`) and its
-    `stospline.table.qparams.ParametricFixedPoint`."""
-    from stospline.oracle.over_box import box_moments, box_state_range
-    from stospline.oracle.parametric import design_parametric
-    from stospline.table.parametric_c import generate_parametric_qc
-    from stospline.table.qparams import quantize_parametric
+    parametric controller and its `stospline.table.qparams.ParametricFixedPoint`, as
+    `stospline design examples/<name>.toml --arith <arith> --out DIR` writes them
+    (`stospline.oracle.parametric.fixed_parametric`)."""
+    from stospline.oracle.parametric import fixed_parametric
+    from stospline.options import resolve_options
     problem = load_problem(ROOT / "examples" / f"{name}.toml")
-    pt = design_parametric(problem).table
-    x_range = box_state_range(box_moments(problem, pt))
     out = {}
     for arith in ("q15", "q31"):
-        pf = quantize_parametric(pt, arith, x_range)
-        out[arith] = (generate_parametric_qc(pt, pf, source_name=f"{name}.toml"), pf)
+        files, pf, _ = fixed_parametric(problem, f"{name}.toml",
+                                        resolve_options(problem, arith=arith))
+        out[arith] = (files, pf)
     return out
 
 

@@ -97,17 +97,30 @@ def _design(args) -> int:
     problem = load_problem(args.problem)
     opts = _design_options(args, problem)
     names = table_files(problem.name, opts.arith, opts.spline)
-    params = _parameter_names(args, problem, opts) if args.out else []
+    fixed_params = bool(problem.parameters) and opts.arith != "float32"
+    params = _parameter_names(args, problem, opts) if args.out or fixed_params else []
     if args.out:
         check_target(args.out, params + names, inputs)
     _check_budget(args, problem, opts, "design", arith=opts.arith)
     d = design_problem(problem, options=opts, **_limits(args))
     _note_tables(d, "formatting")
-    files, summary = design_files(d, Path(args.problem).name, opts.arith,
-                                  with_c=bool(args.out))
-    if params:                                  # written with the tables, as one set
+    source_name = Path(args.problem).name
+    pfiles, fixed, terms = {}, None, None
+    if fixed_params:                            # the gain table scaled with its columns
+        from stospline.oracle.parametric import fixed_parametric
+        try:
+            pfiles, pf, pd = fixed_parametric(problem, source_name, opts)
+        except ValueError as exc:               # scale exponents beyond STSP_Q_EXP_MAX
+            raise _parameter_scale_error(problem, opts.arith, exc) from None
+        fixed = pf.gain_table(names[0].removesuffix(".h"))
+        terms = _fixed_over_box(problem, pd, pf, opts.arith)
+    elif params:
         from stospline.oracle.parametric import parametric_c_files
-        files.update(parametric_c_files(problem, Path(args.problem).name, opts))
+        pfiles = parametric_c_files(problem, source_name, opts)
+    files, summary = design_files(d, source_name, opts.arith, with_c=bool(args.out),
+                                  fixed=fixed, fixed_terms=terms)
+    if args.out:                                # written with the tables, as one set
+        files.update(pfiles)
     if args.out:
         written = write_outputs(args.out, files, inputs)
     if args.json:
@@ -120,6 +133,41 @@ def _design(args) -> int:
         for path in written if args.out else []:
             print(f"wrote {path}")
     return 0
+
+
+def _fixed_over_box(problem, pd, pf, arith: str) -> dict:
+    """``{"over_box": ...}`` of the Q15/Q31 parametric table as flashed
+    (`stospline.oracle.fixed_point_margin.fixed_point_certificate`), for its JSON summary; a
+    note on stderr for each band row it does not certify (docs/theory/parameters.md,
+    "Fixed-point columns")."""
+    from stospline.oracle.fixed_point_margin import fixed_point_certificate
+    from stospline.report.design_summary import fixed_over_box_terms
+    try:
+        cert = fixed_point_certificate(problem, pd.table, pf, pd.box)
+    except ValueError:                          # a delay or time-varying data: not covered
+        return {}
+    for m in cert["margins"]:
+        if not m.holds:
+            print(f"stospline: note: {m.field} row {m.row} is not certified for the "
+                  f"{arith.upper()} table over the parameter box: less its error bound it "
+                  f"leaves the band by {-m.worst:.3g} at t = {m.t:g}", file=sys.stderr)
+    return {"over_box": fixed_over_box_terms(problem, cert)}
+
+
+def _parameter_scale_error(problem, arith: str, exc: ValueError) -> ProblemError:
+    """`strict.fixed_scale_error` of a fixed-point parametric table; when the problem's own
+    data are moderate, naming the range of the parameter that reaches furthest (its
+    deviation is a state of the fixed-point law, and it moves the states over the box)."""
+    from stospline import strict
+    err = strict.fixed_scale_error(problem, arith, exc)
+    if err.field != "design.arith":
+        return err
+    reach = [max(q.upper - q.nominal, q.nominal - q.lower) for q in problem.parameters]
+    j = max(range(len(reach)), key=reach.__getitem__)
+    return ProblemError(f"parameters[{j}].range",
+                        f"no {arith.upper()} table can hold this design over the parameter "
+                        f"box: {exc}; {problem.parameters[j].name} reaches {reach[j]:.3g} "
+                        f"from its nominal; narrow its range or use float32 tables")
 
 
 @quiet_numerics
@@ -137,7 +185,9 @@ def _parameter_names(args, problem, opts) -> list[str]:
         if getattr(args, key, None) is not None:
             raise ProblemError(f"--{key}", exc.reason) from None
         raise
-    return [f"{problem.name}_params.h", f"{problem.name}_params.c"]
+    from stospline.output_names import table_stem
+    stem = table_stem(problem.name, opts.arith)
+    return [f"{stem}_params.h", f"{stem}_params.c"]
 
 
 def _corridor_design(args) -> int:

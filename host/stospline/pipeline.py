@@ -446,9 +446,14 @@ def generated_files(d: Designed, source_name: str, arith: str = "float32", *,
 
 
 def design_files(d: Designed, source_name: str, arith: str = "float32", *,
-                 with_c: bool = True) -> tuple[dict[str, str], dict]:
+                 with_c: bool = True, fixed=None,
+                 fixed_terms: dict | None = None) -> tuple[dict[str, str], dict]:
     """``(files, summary)``: the files of `generated_files` and the JSON summary they hold,
-    as a dict (what the text summary is printed from)."""
+    as a dict (what the text summary is printed from). `fixed`, optional: the Q15/Q31
+    per-tick table to write instead of `fixed_point_table` of the design (a table with
+    runtime parameters: the gain table quantized with its columns,
+    `stospline.oracle.parametric.fixed_parametric`); `fixed_terms`, more entries of its
+    summary (what it guarantees over the parameter box)."""
     check_implementable(d)
     summary = design_summary(d)
     if arith == "float32":
@@ -462,11 +467,12 @@ def design_files(d: Designed, source_name: str, arith: str = "float32", *,
         summary["table"] = q_cert
     else:
         try:
-            table = fixed_point_table(d, arith)
+            table = fixed if fixed is not None else fixed_point_table(d, arith)
         except ValueError as exc:            # scale exponents beyond STSP_Q_EXP_MAX
             raise strict.fixed_scale_error(d.problem, arith, exc) from None
         limits.check_table(table)
-        summary["fixed"] = rounded({**table.summary(), "state_sigmas": DEFAULT_SIGMAS})
+        summary["fixed"] = rounded({**table.summary(), "state_sigmas": DEFAULT_SIGMAS,
+                                    **(fixed_terms or {})})
     strict.check_summary_finite(d.problem, summary)
     n = table_stem(d.problem.name, arith, d.table.spline is not None)
     text = strict.dumps(summary) + "\n"

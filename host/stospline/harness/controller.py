@@ -19,7 +19,7 @@ from stospline.harness.plant_spec import plant_source
 from stospline.table.codegen import generate_c
 from stospline.table.format import GainTable
 
-__all__ = ["build_controller", "CompiledController", "CorridorWatch", "FaultDraws", "TickStats",
+__all__ = ["build_controller", "CompiledController", "q_io", "CorridorWatch", "FaultDraws", "TickStats",
            "firmware_dir", "STATUS", "VARIANTS"]
 
 
@@ -29,6 +29,27 @@ def _positive_count(count) -> int:
         raise ValueError(f"the number of controller instances must be an integer >= 1, "
                          f"got {count!r}")
     return int(count)
+
+
+def q_io(table):
+    """``(to_q, to_real)`` for a Q15/Q31 table (`stospline.table.qformat.FixedPointTable`):
+    ``to_q(X)`` rounds real states X (float64, (count, n)) half up to the table's Q format and
+    saturates them at the Q range (as a quantizing sensor would deliver them), as integers of
+    the table's type; ``to_real(U)`` is the integer commands times their LSB, float32 (exact
+    for Q15, rounded to float32 for Q31), as the harness's plant takes them."""
+    F = table.frac_bits
+    scale = np.ldexp(1.0, F - np.asarray(table.x_exp, dtype=int))
+    lsb = np.asarray(table.u_lsb, dtype=float)
+    lo, hi = -(1 << F), (1 << F) - 1
+    dtype = VARIANTS[table.arith][1]
+
+    def to_q(X: np.ndarray) -> np.ndarray:
+        return np.clip(np.floor(np.asarray(X, dtype=float) * scale + 0.5), lo, hi).astype(dtype)
+
+    def to_real(U: np.ndarray) -> np.ndarray:
+        return (U * lsb).astype(np.float32)
+
+    return to_q, to_real
 
 
 @dataclass
@@ -107,16 +128,11 @@ class CompiledController:
         step = self.stepper(count)
         if self.arith == "float32":
             return step
-        t = self.table
-        F = t.frac_bits
-        to_q = np.ldexp(1.0, F - np.asarray(t.x_exp, dtype=int))
-        lsb = np.asarray(t.u_lsb, dtype=float)
-        lo, hi = -(1 << F), (1 << F) - 1
+        to_q, to_real = q_io(self.table)
 
         def real(tick: int, X: np.ndarray):
-            Xq = np.clip(np.floor(np.asarray(X, dtype=float) * to_q + 0.5), lo, hi)
-            U, status = step(tick, Xq.astype(self.dtype))
-            return (U * lsb).astype(np.float32), status
+            U, status = step(tick, to_q(X))
+            return to_real(U), status
 
         real.instances = step.instances
         return real

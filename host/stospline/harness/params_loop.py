@@ -5,8 +5,10 @@ the plan (at a stage start or at any tick).
 
 Build and run are separate steps: `build_params_controller` compiles ``firmware/src/*.c``
 with the generated gain table and its parameter table; `simulate_params` runs paths through it.
-`build_params_qcontroller` compiles the Q15/Q31 build with a fixed-point parametric table
-(states and commands as Q integers: `ParamsController.steps` drives it, no plant).
+`build_params_qcontroller` compiles the Q15/Q31 build with a fixed-point parametric table:
+`ParamsController.steps` drives it with Q integers (no plant), and `simulate_params` runs it
+on the plant as the Monte Carlo of a Q15/Q31 gain table does (`controller.q_io`: the states
+rounded half up to their Q format and saturated, the integer commands times their LSB).
 """
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from stospline.harness.build import PLANT_CDEF, build_harness_module
-from stospline.harness.controller import VARIANTS, CompiledController
+from stospline.harness.controller import VARIANTS, CompiledController, q_io
 from stospline.harness.montecarlo import joint_verdict
 from stospline.harness.plant_spec import zoh_step
 from stospline.problem.parameters import problem_at
@@ -114,16 +116,25 @@ class ParamsRun:
     knots: list
     worst_status: int
 
-    def agreement(self, J: float, knot_means, confidence: float = 0.99):
+    def agreement(self, J: float | None, knot_means, confidence: float = 0.99, *,
+                  allowance=None):
         """`joint_verdict` of the cost and every knot-mean component against exact values,
-        z-scores from the sample's own standard errors (Bonferroni over all of them)."""
-        def z(sample, exact):
+        z-scores from the sample's own standard errors (Bonferroni over all of them). With
+        `allowance` (per knot, (n,): a bound on how far the run's expected state may be from
+        the exact values, e.g. a fixed-point error bound propagated,
+        `stospline.oracle.fixed_point_margin`), a difference within it counts as none and one
+        beyond it by the excess only. ``J=None`` leaves the cost out."""
+        def z(sample, exact, allow=0.0):
             se = sample.std(ddof=1) / np.sqrt(sample.size)
-            return (None if se == 0 else float((sample.mean() - exact) / se),
-                    float(sample.mean()), float(exact))
-        stats = [("cost", *z(self.cost, J))]
-        for k, (X, mean) in enumerate(zip(self.knots, knot_means)):
-            stats += [(f"knot {k} mean[{i}]", *z(X[:, i], mean[i])) for i in range(X.shape[1])]
+            diff = sample.mean() - exact
+            excess = np.sign(diff) * max(0.0, abs(diff) - allow)
+            return (None if se == 0 else float(excess / se), float(sample.mean()),
+                    float(exact))
+        stats = [] if J is None else [("cost", *z(self.cost, J))]
+        allowance = allowance if allowance is not None else [np.zeros(len(m)) for m in knot_means]
+        for k, (X, mean, allow) in enumerate(zip(self.knots, knot_means, allowance)):
+            stats += [(f"knot {k} mean[{i}]", *z(X[:, i], mean[i], allow[i]))
+                      for i in range(X.shape[1])]
         return joint_verdict(stats, confidence)
 
 
@@ -169,7 +180,9 @@ def simulate_params(problem, ctl: ParamsController, theta, *, paths: int, seed: 
     ``change=(stage, theta2, tick)``, just before that tick of the stage). Each stage's plant
     and each knot's penalty are the problem's at `theta`, from the changed stage on at
     `theta2` (`problem_at`; as `stospline.oracle.parametric.evaluate_switched`); the
-    plant's noise from the harness's C generator (seeded); constant stage data. `observe`, optional, is called with ``(tick, X)`` after each tick (X: the states
+    plant's noise from the harness's C generator (seeded); constant stage data. A Q15/Q31
+    controller (`build_params_qcontroller`) reads each state rounded to its Q format and its
+    integer commands reach the plant times their LSB (`controller.q_io`). `observe`, optional, is called with ``(tick, X)`` after each tick (X: the states
     at the tick's end, (paths, n); the callback must not keep it)."""
     table = ctl.table
     n, m, _ = table.dims
@@ -182,9 +195,14 @@ def simulate_params(problem, ctl: ParamsController, theta, *, paths: int, seed: 
     if st < 0:
         raise RuntimeError(f"stsp_param_init failed: {ctl.status_str(st)}")
     X = np.ascontiguousarray(np.tile(problem.x0, (paths, 1)), dtype=float)
-    Xf = np.zeros((paths, n), np.float32)
-    U = np.zeros((paths, m), np.float32)
-    px, pu = ffi.from_buffer("float[]", Xf), ffi.from_buffer("float[]", U)
+    arith = helpers.arith
+    dtype = helpers.dtype
+    Xs = np.zeros((paths, n), dtype)             # the states the controller reads
+    Us = np.zeros((paths, m), dtype)             # and its commands, in the build's scalar
+    U = Us if arith == "float32" else np.zeros((paths, m), np.float32)
+    ctype = f"{VARIANTS[arith][0]}[]"
+    px, pu = ffi.from_buffer(ctype, Xs), ffi.from_buffer(ctype, Us)
+    to_q, to_real = (None, None) if arith == "float32" else q_io(table)
     cost = np.zeros(paths)
     knots, worst = [], 0
     first, later = problem_at(problem, theta), None
@@ -206,8 +224,10 @@ def simulate_params(problem, ctl: ParamsController, theta, *, paths: int, seed: 
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             if change is not None and j == at_tick:
                 _set(ctl, inst, paths, change[1])
-            Xf[...] = X
+            Xs[...] = X if to_q is None else to_q(X)
             worst = min(worst, int(lib.harness_param_step(inst, paths, j, px, pu)))
+            if to_real is not None:
+                U[...] = to_real(Us)
             fill()
             helpers.plant_tick(plant, dZ, U, X, cost)
             if observe is not None:

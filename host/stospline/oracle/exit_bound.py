@@ -114,7 +114,7 @@ def exit_bounds(corridor: Corridor, y_mean: np.ndarray, y_cov: np.ndarray, t0: f
 
 
 def exit_bounds_over_box(corridor: Corridor, box, t0: float,
-                         tick_hz: int) -> dict[str, ExitBound]:
+                         tick_hz: int, extra=None) -> dict[str, ExitBound]:
     """`exit_bounds` that hold for every parameter vector in the box of a table with runtime
     parameters, from its moments over the box `box` (`stospline.oracle.over_box.BoxMoments`).
 
@@ -123,10 +123,17 @@ def exit_bounds_over_box(corridor: Corridor, box, t0: float,
     nominal's less the wall's largest mean shift over the box: exact, the mean is affine in
     the parameters) and the largest spread (an interval bound on the quadratic covariance,
     `BoxMoments.variance_bound`); the union bounds over rows and ticks then follow as for one
-    parameter vector. The Gaussian tail is likewise evaluated there (an estimate, as ever)."""
+    parameter vector. The Gaussian tail is likewise evaluated there (an estimate, as ever).
+
+    `extra`, optional: ``extra(walls) -> (T+1, r)``, a further shift of each wall's mean
+    (a fixed-point table's error bound propagated to the mean,
+    `stospline.oracle.fixed_point_margin.MeanErrorBound.rows`), taken off the margin; the
+    spread stays the box's."""
     lo, hi = corridor_ticks(corridor, t0, tick_hz)
     walls = corridor.A @ corridor.C                               # walls in the state
     rise = box.shift(walls)[0][lo:hi + 1]
+    if extra is not None:
+        rise = rise + extra(walls)[lo:hi + 1]
     d = corridor.b[None, :] - box.mean[lo:hi + 1] @ walls.T - rise
     cant, gauss = _tails(d, box.variance_bound(walls)[lo:hi + 1])
     return {"cantelli": _bound(corridor, cant, "cantelli", (lo, hi)),

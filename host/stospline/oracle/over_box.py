@@ -237,14 +237,20 @@ def _band_rows(problem):
                    reg.ticks(t0, hz))
 
 
-def band_margins(problem, box: BoxMoments) -> list[RowMargin]:
-    """Every band row's `RowMargin` over the box (module docstring), in the file's order."""
+def band_margins(problem, box: BoxMoments, extra=None) -> list[RowMargin]:
+    """Every band row's `RowMargin` over the box (module docstring), in the file's order.
+    `extra`, optional: ``extra(c) -> (T+1, r)``, a further shift of rows `c` (r, n) either way
+    at every tick (a fixed-point table's error bound propagated to the mean,
+    `stospline.oracle.fixed_point_margin.MeanErrorBound.rows`), taken off both margins."""
     names = [p.name for p in box.parameters]
     out = []
     for field, i, c, lo, hi, ticks in _band_rows(problem):
         y = box.mean[ticks] @ c
         rise, fall, top, bottom = box.shift(c[None, :])
         rise, fall, top, bottom = rise[ticks, 0], fall[ticks, 0], top[ticks, 0], bottom[ticks, 0]
+        if extra is not None:
+            e = extra(c[None, :])[ticks, 0]
+            rise, fall = rise + e, fall + e
         upper, lower = hi - (y + rise), (y - fall) - lo
         nominal = float(np.minimum(hi - y, y - lo).min())
         j = int(np.argmin(np.minimum(upper, lower)))

@@ -33,7 +33,7 @@ from stospline.problem.parameters import problem_at
 from stospline.table.parametric import ParametricTable, parametric_table
 
 __all__ = ["BOX_ROUNDS", "ParametricDesign", "check_parametric_options", "design_parametric", "evaluate_at",
-           "evaluate_switched", "cost_quadratic", "parametric_c_files"]
+           "evaluate_switched", "cost_quadratic", "parametric_c_files", "fixed_parametric"]
 
 
 @dataclass
@@ -206,10 +206,34 @@ def parametric_c_files(problem, source_name: str = "", options=None) -> dict[str
     writes for the nominal."""
     from stospline.table.parametric_c import generate_parametric_c
     opts = check_parametric_options(problem, options)
+    if opts.arith != "float32":
+        return fixed_parametric(problem, source_name, opts)[0]
     pd = design_parametric(problem, discretization=opts.discretization, mode=opts.mode,
                            delay_ticks=opts.delay_ticks)
     header, source = generate_parametric_c(pd.table, source_name=source_name)
     return {f"{problem.name}_params.h": header, f"{problem.name}_params.c": source}
+
+
+def fixed_parametric(problem, source_name: str = "", options=None):
+    """``(files, pf, pd)`` of the problem's Q15/Q31 parametric controller (`options`' arith,
+    `check_parametric_options`): the four files of
+    `stospline.table.parametric_c.generate_parametric_qc` (``<name>_<arith>.{h,c}``, the gain
+    table quantized with the columns, so that its scales hold over the whole box, and
+    ``<name>_<arith>_params.{h,c}``, the columns), the
+    `stospline.table.qparams.ParametricFixedPoint` and the `ParametricDesign`. The state
+    range is the box's (`stospline.oracle.over_box.box_state_range`). ValueError from
+    `quantize_parametric` when no scale holds the design."""
+    from stospline.oracle.over_box import box_state_range
+    from stospline.table.parametric_c import generate_parametric_qc
+    from stospline.table.qparams import quantize_parametric
+    opts = check_parametric_options(problem, options)
+    if opts.arith == "float32":
+        raise ValueError("fixed_parametric: the options' arith is float32")
+    pd = design_parametric(problem, discretization=opts.discretization, mode=opts.mode,
+                           delay_ticks=opts.delay_ticks)
+    box = pd.box if pd.box is not None else box_moments(problem, pd.table)
+    pf = quantize_parametric(pd.table, opts.arith, box_state_range(box))
+    return generate_parametric_qc(pd.table, pf, source_name=source_name), pf, pd
 
 
 def check_parametric_options(problem, options=None):
@@ -217,11 +241,9 @@ def check_parametric_options(problem, options=None):
     option when the table they ask for has no sensitivity columns."""
     from stospline.options import resolve_options
     opts = options if options is not None else resolve_options(problem)
-    # The columns are those of the float32 per-tick law: a spline table re-solves its latch
-    # for its own gains, and fixed-point tables scale k0; neither has columns yet.
-    for key, plain in (("table", "per-tick"), ("arith", "float32")):
-        if getattr(opts, key) != plain:
-            raise DesignError(f"design.{key}", f"runtime parameters have sensitivity columns "
-                                               f"for {key} = \"{plain}\" only, got "
-                                               f"{getattr(opts, key)!r}")
+    # The columns are those of the per-tick law (float32, or Q15/Q31 scaled with the gains,
+    # `fixed_parametric`): a spline table re-solves its latch for its own gains.
+    if opts.table != "per-tick":
+        raise DesignError("design.table", f"runtime parameters have sensitivity columns for "
+                                          f"table = \"per-tick\" only, got {opts.table!r}")
     return opts

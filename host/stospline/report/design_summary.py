@@ -77,12 +77,24 @@ def over_box_terms(problem, pd) -> dict:
         nominal = exit_bounds(c, pd.box.mean @ c.C.T, c.C @ pd.box.cov @ c.C.T, problem.t0,
                               problem.tick_hz)
         box = exit_bounds_over_box(c, pd.box, problem.t0, problem.tick_hz)
-        corridors.append({"epsilon": c.epsilon,
-                          "nominal": {k: {"total": b.total, "worst_tick": b.worst_tick}
-                                      for k, b in nominal.items()},
-                          "over_box": {k: {"total": b.total, "worst_tick": b.worst_tick}
-                                       for k, b in box.items()}})
+        corridors.append({"epsilon": c.epsilon, "nominal": _bound_terms(nominal),
+                          "over_box": _bound_terms(box)})
     return {"bands": [m.as_dict() for m in pd.margins], "corridors": corridors}
+
+
+def fixed_over_box_terms(problem, cert: dict) -> dict:
+    """`over_box_terms` of a Q15/Q31 parametric table as flashed, from its
+    `stospline.oracle.fixed_point_margin.fixed_point_certificate`: every band row's margins
+    and each corridor's exit bounds over the box, less the fixed-point error bound propagated
+    to the mean (the spread the double table's)."""
+    return {"bands": [m.as_dict() for m in cert["margins"]],
+            "corridors": [{"epsilon": c.epsilon, "over_box": _bound_terms(b)}
+                          for c, b in zip(problem.corridors, cert["corridors"])]}
+
+
+def _bound_terms(bounds: dict) -> dict:
+    """Each tail's exit bound over the corridor's ticks and at its worst tick."""
+    return {k: {"total": b.total, "worst_tick": b.worst_tick} for k, b in bounds.items()}
 
 
 def _estimator(d) -> dict:

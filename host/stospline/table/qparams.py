@@ -39,10 +39,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from stospline.problem.parameters import check_theta
+from stospline.table.format import GainTable
+from stospline.table.parametric import ParametricTable
 from stospline.table.qformat import (FRAC_BITS, FixedPointTable, _rhu, latch_q, law_q,
                                      quantize_table, scaled_entries)
 
-__all__ = ["ParametricFixedPoint", "quantize_parametric", "law_double_at", "QParamSpec"]
+__all__ = ["ParametricFixedPoint", "FlashedParametric", "quantize_parametric", "law_double_at", "QParamSpec"]
 
 
 @dataclass
@@ -92,6 +95,34 @@ class ParametricFixedPoint:
                        x_exp=ft.x_exp[:n], x_range=np.asarray(ft.x_range)[:n],
                        bound_lsb=self.bound_lsb)
 
+    def as_flashed(self, ptable) -> "FlashedParametric":
+        """The law the device runs, in real units: `ptable` (the `ParametricTable` quantized
+        here) with its gains, offsets and columns replaced by the stored integers times their
+        scales (exact in float64, `stospline.table.spline.fixed_point.dequantized`). Its
+        ``at(theta)`` applies the columns at ``theta`` itself (affine in it: the oracle over
+        the box reads this); ``at(theta, quantize=True)`` at the deviation the device stores,
+        ``d_q`` of ``theta`` in binary32 (`QParamSpec.set`). Left out, for the error bound: the
+        rounding of the state to its Q format and of the command's sum."""
+        from stospline.table.spline.fixed_point import dequantized
+        real, n = dequantized(self.augmented), self.n
+        table = replace(ptable.table, K=real.K[..., :n], k0=real.k0, L=real.L,
+                        Lambda=real.Lambda[..., :n], lambda0=real.lambda0)
+        return FlashedParametric(table, real.K[..., n:], real.Lambda[..., n:],
+                                 tuple(ptable.parameters), self)
+
+    def command_error_bound(self, ptable) -> np.ndarray:
+        """The bound (ticks, m), real units, on the device's command against the double law
+        of `ptable` at the same ``theta`` and the *real* state: `bound` (the table's, at the
+        state as the device reads it) plus the state's rounding to its Q format, half an LSB
+        per component, through ``K`` and, latched, through ``L Lambda``. For states within
+        the range (no saturation) and commands within the limits."""
+        t = ptable.table
+        half = self.augmented.x_lsb[:self.n] / 2
+        K, L, Lam = (np.abs(np.asarray(a, float)) for a in (t.K, t.L, t.Lambda))
+        ls = self.augmented.latch_stage(self.augmented.stage_of_tick(np.arange(t.n_ticks)))
+        latch = np.where((ls >= 0)[:, None], (Lam @ half)[np.maximum(ls, 0)], 0.0)
+        return self.bound + K @ half + np.einsum("tic,tc->ti", L, latch)
+
     def column_bytes(self) -> int:
         """Flash of the columns (S_k0, S_lambda0), of nominal, lower, upper (binary64) and of
         d_exp in this format."""
@@ -100,6 +131,22 @@ class ParametricFixedPoint:
         T, m, _ = self.augmented.K.shape
         S, c, _ = self.augmented.Lambda.shape
         return width * (T * m * P + S * c * P) + 8 * 3 * P + P
+
+
+@dataclass(frozen=True)
+class FlashedParametric(ParametricTable):
+    """`ParametricFixedPoint.as_flashed`: a `ParametricTable` of the stored integers in real
+    units; ``at(theta, quantize=True)`` rounds the deviation as the device does."""
+    fixed: ParametricFixedPoint = None
+
+    def at(self, theta, *, quantize: bool = False) -> GainTable:
+        d = check_theta(self.parameters, theta) - self.nominal
+        if quantize:
+            pf = self.fixed
+            dq = pf.d_q(np.asarray(np.asarray(theta, np.float32), float))[0]
+            d = dq * np.ldexp(1.0, pf.d_exp - pf.augmented.frac_bits)
+        return replace(self.table, k0=self.table.k0 + self.S_k0 @ d,
+                       lambda0=self.table.lambda0 + self.S_lambda0 @ d)
 
 
 def quantize_parametric(ptable, arith: str, x_range) -> ParametricFixedPoint:

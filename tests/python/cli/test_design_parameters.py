@@ -1,11 +1,19 @@
 """`stospline design --out` of a problem with [[parameters]] writes the sensitivity columns
 ``<name>_params.{h,c}`` with the tables, as one set, and its JSON summary lists the parameters
-with their ranges; a table kind without columns is refused before any work."""
+with their ranges; with ``--arith q15|q31`` the fixed-point parametric controller
+``<name>_<arith>{,_params}.{h,c}``; a table kind without columns is refused before any work."""
 import json
+
+import pytest
 
 from conftest import EXAMPLES, GAINS
 
+from stospline import design_problem, load_problem
 from stospline.cli import main
+from stospline.options import resolve_options
+from stospline.oracle.fixed_point_margin import fixed_point_certificate
+from stospline.oracle.parametric import fixed_parametric
+from stospline.pipeline import fixed_point_table
 
 
 def test_design_writes_the_parameter_files_and_lists_them(tmp_path, capsys):
@@ -31,9 +39,76 @@ def test_a_problem_without_parameters_writes_no_columns(tmp_path, capsys):
     assert not list(out.glob("*_params.*"))
 
 
+@pytest.mark.parametrize("arith", ["q15", "q31"])
+def test_design_arith_writes_the_fixed_point_parametric_controller(tmp_path, capsys, arith):
+    """`--arith q15|q31`: the gain table quantized with the columns and the columns, byte for
+    byte the shipped gains/ (tools/params_tables.py --fixed, the same code), and a summary of
+    the table written (its scales and its error bound over the box, not the plain Q table's)."""
+    out = tmp_path / "out"
+    assert main(["design", str(EXAMPLES / "robot_goal.toml"), "--arith", arith, "--out",
+                 str(out), "--json"]) == 0
+    captured = capsys.readouterr()
+    stem = f"robot_goal_{arith}"
+    assert sorted(p.name for p in out.iterdir()) == [
+        f"{stem}.c", f"{stem}.h", f"{stem}.json", f"{stem}_params.c", f"{stem}_params.h"]
+    for suffix in (".c", ".h", "_params.c", "_params.h"):
+        assert (out / f"{stem}{suffix}").read_text() == (GAINS / f"{stem}{suffix}").read_text()
+    summary = json.loads(captured.out)
+    assert summary == json.loads((out / f"{stem}.json").read_text())
+    problem = load_problem(EXAMPLES / "robot_goal.toml")
+    _, pf, pd = fixed_parametric(problem, options=resolve_options(problem, arith=arith))
+    table = pf.gain_table()
+    fixed = summary["fixed"]
+    assert (fixed["x_exp"], fixed["u_exp"], fixed["v_exp"]) == (
+        table.x_exp.tolist(), table.u_exp.tolist(), table.v_exp.tolist())
+    assert fixed["u_error_bound_lsb"] == json.loads(json.dumps(table.written_bound_lsb()))
+    plain = fixed_point_table(design_problem(problem), arith)
+    assert fixed["u_error_bound_lsb"] != json.loads(json.dumps(plain.written_bound_lsb()))
+    # what the table as flashed guarantees over the box (docs/theory/parameters.md)
+    cert = fixed_point_certificate(problem, pd.table, pf)["corridors"][0]["cantelli"]
+    assert fixed["over_box"]["corridors"][0]["over_box"]["cantelli"]["worst_tick"] == \
+        pytest.approx(cert.worst_tick, rel=1e-9)
+    assert fixed["over_box"]["bands"] == [] and "note" not in captured.err
+
+
+def test_a_band_row_the_fixed_point_table_does_not_certify_is_noted(capsys):
+    """The drone's region touches its ceiling at a vertex of the box (designed so): the Q15
+    error bound takes it beyond, so the summary says it does not hold and stderr says so."""
+    assert main(["design", str(EXAMPLES / "drone_gates.toml"), "--arith", "q15", "--json"]) == 0
+    captured = capsys.readouterr()
+    band, = json.loads(captured.out)["fixed"]["over_box"]["bands"]
+    assert band["field"] == "regions[0]" and not band["holds"] and band["worst_margin"] < -1e-3
+    note, = captured.err.strip().splitlines()
+    assert note.startswith("stospline: note: regions[0] row 0 is not certified for the Q15")
+
+
+def test_fixed_point_columns_out_of_scale_are_refused_naming_the_range(tmp_path, capsys):
+    doc = (EXAMPLES / "robot_goal.toml").read_text()
+    bad = tmp_path / "wide.toml"
+    bad.write_text(doc.replace("range = [-1.5, -0.5]", "range = [-1e30, 1e30]"))
+    out = tmp_path / "out"
+    assert main(["design", str(bad), "--arith", "q31", "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip()
+    assert len(err.splitlines()) == 1 and "parameters[0].range: " in err, err
+    assert captured.out == "" and not out.exists()
+
+
+def test_fixed_point_all_files_or_none(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "robot_goal_q15_params.h").mkdir()
+    assert main(["design", str(EXAMPLES / "robot_goal.toml"), "--arith", "q15",
+                 "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert "robot_goal_q15_params.h" in captured.err and captured.out == ""
+    assert sorted(p.name for p in out.iterdir()) == ["robot_goal_q15_params.h"]
+
+
 def test_a_table_without_columns_is_refused_in_one_line(tmp_path, capsys):
     out = tmp_path / "out"
-    for extra, named in ((["--arith", "q15"], "--arith: "), (["--table", "spline"], "--table: ")):
+    for extra, named in ((["--table", "spline"], "--table: "),
+                         (["--arith", "q15", "--table", "spline"], "--table: ")):
         assert main(["design", str(EXAMPLES / "robot_goal.toml"), "--out", str(out),
                      *extra]) == 2
         captured = capsys.readouterr()

@@ -236,15 +236,20 @@ def test_sensitivity_columns_are_not_differences():
     assert np.abs(a.S_k0[..., 0]).max() > 0 and not a.S_k0[..., 2].any()   # x0: no column
 
 
-@pytest.mark.parametrize("key, value", [("table", "spline"), ("arith", "q15")])
-def test_columns_only_for_float32_per_tick_tables(key, value):
+def test_columns_only_for_per_tick_tables():
+    """A spline table has no columns; a Q15 per-tick table has them, scaled with its gains
+    (`fixed_parametric`: the gain table and the columns)."""
     from stospline.errors import DesignError
     from stospline.oracle.parametric import parametric_c_files
     doc = robot_goal_doc(20)
-    doc["design"] = {key: value}
+    doc["design"] = {"table": "spline"}
     with pytest.raises(DesignError) as err:
         parametric_c_files(parse_problem(doc))
-    assert err.value.field == f"design.{key}"
+    assert err.value.field == "design.table"
+    doc["design"] = {"arith": "q15"}
+    p = parse_problem(doc)
+    assert sorted(parametric_c_files(p)) == sorted(
+        f"{p.name}_q15{s}" for s in (".c", ".h", "_params.c", "_params.h"))
 
 
 def test_a_knot_band_built_in_python_holds_at_every_vertex_of_the_box():

@@ -18,7 +18,7 @@ import numpy as np
 from stospline.expm import NonFiniteMatrix
 from stospline.problem.model import Stage
 
-__all__ = ["POINTS", "TickSamples", "tick_samples", "zoh_ticks",
+__all__ = ["POINTS", "TickSamples", "Segments", "segment_operators", "tick_samples", "zoh_ticks",
            "oracle_ticks", "mean_maps"]
 
 POINTS = 2            # Gauss points per tick (order 4), designer and oracle alike
@@ -26,10 +26,12 @@ MEAN_TERMS = 60        # `mean_maps`: Taylor terms at most (as the C kernel's TV
 CHUNK = 512            # ticks sampled and handed to C at once (bounds the memory)
 
 # How the C loops apply the diffusion (``varying_kernel.c``, noise_lists): "auto" picks the
-# cheapest per tick; "pairs" (nonzero pairs), "columns" (Brownian column by column) and
-# "operator" (the packed na(na+1)/2 x n(n+1)/2 matrix of the diffusion operator) force one,
-# for tests and benchmarks. All give the same numbers to rounding.
-NOISE_PATHS = {"auto": 0, "pairs": 1, "columns": 2, "operator": 3}
+# cheapest per tick; "pairs" (nonzero pairs), "columns" (Brownian column by column),
+# "operator" (the packed na(na+1)/2 x n(n+1)/2 matrix of the diffusion operator, built from G
+# at each point) and "segments" (that operator formed from the three of the point's segment,
+# `segment_operators`; "operator" where there are none) force one, for tests and benchmarks.
+# All give the same numbers to rounding.
+NOISE_PATHS = {"auto": 0, "pairs": 1, "columns": 2, "operator": 3, "segments": 4}
 NOISE_PATH = "auto"
 
 
@@ -59,6 +61,73 @@ class TickSamples:
     act: np.ndarray
     same: np.ndarray
     ar_nz: np.ndarray      # positions in (n, d) where Ar is nonzero at some tick of the chunk
+    segs: "Segments | None" = None   # the diffusion's operators per segment, if affine
+
+
+@dataclass(frozen=True)
+class Segments:
+    """The packed diffusion operators of the segments between the noise's sample times that a
+    chunk's points fall in (`segment_operators`): ``ops`` (S, 3, R, C) and ``ops_t`` (S, 3,
+    C, R) (``R = na(na+1)/2``, ``C = n(n+1)/2``, the oracle's layout and the designer's),
+    ``idx`` (T P) the segment of each point and ``w`` (T P, 3) its three weights."""
+    ops: np.ndarray
+    ops_t: np.ndarray
+    idx: np.ndarray
+    w: np.ndarray
+
+    @property
+    def nbytes(self) -> int:
+        return self.ops.nbytes + self.ops_t.nbytes + self.idx.nbytes + self.w.nbytes
+
+
+OPERATOR_MAX = 1 << 18     # doubles of one packed operator, at most (the C TV_MAX_OPERATOR)
+
+
+def _pair_operator(X: np.ndarray, Y: np.ndarray, rows, cols) -> np.ndarray:
+    """The packed ``B(X, Y)[(p, q), (a, b)] = sum_k X_p[a, k] Y_q[b, k] + X_q[a, k] Y_p[b, k]``
+    (p <= q, a <= b, row by row), X and Y (na, n, mz); ``B(G, G)`` is the C kernel's operator
+    F of G (``build_operator``)."""
+    T4 = np.einsum("pak,qbk->pqab", X, Y)
+    T4 = T4 + T4.transpose(1, 0, 2, 3)
+    return T4[rows[0][:, None], rows[1][:, None], cols[0][None, :], cols[1][None, :]]
+
+
+def segment_operators(stage: Stage, times: np.ndarray, act: np.ndarray, T: int
+                      ) -> Segments | None:
+    """The diffusion operators of the noise segments of `times` (T ticks' points), when the
+    noise is interpolated linearly between sample times (``stage.varying.noise_knots``).
+
+    On a segment between sample times with end values G_L, G_R (the active multipliers
+    `act`), ``G(w) = (1 - w) G_L + w G_R`` and, the operator F being quadratic in G, ``F(w) =
+    (1 - w)^2 F(G_L) + w (1 - w) (B(G_L, G_R) + B(G_R, G_L)) + w^2 F(G_R)``: three operators
+    per segment, built once (``3 mz R C``), and 3 R C to form a point's, instead of building
+    it from G at every point of every tick (``2 mz R C``). None when the noise is not so
+    interpolated, its operator is too large, or the chunk spans more than T/2 segments (the
+    operators would cost more than they save)."""
+    knots = getattr(stage.varying, "noise_knots", None)
+    n, na = stage.B.shape[0], act.size
+    R, C = na * (na + 1) // 2, n * (n + 1) // 2
+    if knots is None or knots.size < 2 or na == 0 or R * C > OPERATOR_MAX:
+        return None
+    seg = np.clip(np.searchsorted(knots, times, side="right") - 1, 0, knots.size - 2)
+    w = np.clip((times - knots[seg]) / (knots[seg + 1] - knots[seg]), 0.0, 1.0)
+    used = np.unique(seg)
+    if 2 * used.size > T:
+        return None
+    ends = np.union1d(used, used + 1)
+    s = stage.samples(knots[ends])
+    GH = s["G"] if s["H"] is None else np.concatenate([s["G"], s["H"]], axis=1)
+    GH = GH[:, act]
+    rows, cols = np.triu_indices(na), np.triu_indices(n)
+    own = [_pair_operator(g, g, rows, cols) for g in GH]
+    ops = np.empty((used.size, 3, R, C))
+    for j, e in enumerate(np.searchsorted(ends, used)):
+        L, Rg = GH[e], GH[e + 1]
+        ops[j, 0], ops[j, 2] = own[e], own[e + 1]
+        ops[j, 1] = _pair_operator(L, Rg, rows, cols) + _pair_operator(Rg, L, rows, cols)
+    weights = np.stack([(1.0 - w) ** 2, w * (1.0 - w), w * w], axis=1)
+    return Segments(ops, np.ascontiguousarray(ops.swapaxes(2, 3)),
+                    np.searchsorted(used, seg).astype(np.intc), np.ascontiguousarray(weights))
 
 
 def _constant(a) -> bool:
@@ -66,9 +135,10 @@ def _constant(a) -> bool:
     return a is None or a.strides[0] == 0
 
 
-def tick_samples(stage: Stage, t_first: float, h: float, T: int, nodes: np.ndarray
-                 ) -> TickSamples:
-    """Sample `stage` at the `nodes` (fractions of a tick) of ticks ``t_first + j h``."""
+def tick_samples(stage: Stage, t_first: float, h: float, T: int, nodes: np.ndarray,
+                 segments: bool = True) -> TickSamples:
+    """Sample `stage` at the `nodes` (fractions of a tick) of ticks ``t_first + j h``; with
+    `segments`, the diffusion's `segment_operators` too when the noise varies."""
     n, m = stage.B.shape
     d = n + m + 1
     P = nodes.size
@@ -106,8 +176,10 @@ def tick_samples(stage: Stage, t_first: float, h: float, T: int, nodes: np.ndarr
         return np.ascontiguousarray(a.reshape(shape + a.shape[1:]))
 
     ar_nz = np.flatnonzero(np.any(Ar != 0.0, axis=0)).astype(np.intc)
+    segs = (segment_operators(stage, times, act, T)
+            if segments and not same[1] and act.size else None)
     return TickSamples(lay(Ar, same[0]), lay(G, same[1]), lay(Lb, same[2]), act,
-                       np.array(same, dtype=np.intc), ar_nz)
+                       np.array(same, dtype=np.intc), ar_nz, segs)
 
 
 # Samples of recent chunks: the oracle evaluates the design's own law and its float32 table
@@ -127,7 +199,8 @@ def cached_samples(stage: Stage, t_first: float, h: float, T: int, nodes: np.nda
     if hit is not None and hit[0] is stage:
         return hit[1]
     smp = tick_samples(stage, t_first, h, T, nodes)
-    size = smp.Ar.nbytes + smp.G.nbytes + smp.Lb.nbytes
+    size = smp.Ar.nbytes + smp.G.nbytes + smp.Lb.nbytes \
+        + (0 if smp.segs is None else smp.segs.nbytes)
     with _CACHE_LOCK:
         while _CACHE and sum(v[2] for v in _CACHE.values()) + size > CACHE_BYTES:
             _CACHE.pop(next(iter(_CACHE)))              # the oldest entry
@@ -163,10 +236,15 @@ def _noise_path() -> int:
     return NOISE_PATHS[NOISE_PATH]
 
 
-def _data_args(ffi, smp: TickSamples):
+def _data_args(ffi, smp: TickSamples, adjoint: bool):
+    """The kernels' data arguments; `adjoint`: the designer's (the operators transposed)."""
+    sg = smp.segs
+    segs = (0, ffi.NULL, ffi.NULL, ffi.NULL) if sg is None else (
+        sg.ops.shape[0], _ptr(ffi, sg.ops_t if adjoint else sg.ops),
+        _ptr(ffi, sg.idx, "int[]"), _ptr(ffi, sg.w))
     return (smp.act.size, smp.G.shape[-1]), (
         _ptr(ffi, smp.act, "int[]"), _ptr(ffi, smp.Ar), _ptr(ffi, smp.G), _ptr(ffi, smp.Lb),
-        _ptr(ffi, smp.same, "int[]"), _ptr(ffi, smp.ar_nz, "int[]"), smp.ar_nz.size)
+        _ptr(ffi, smp.same, "int[]"), _ptr(ffi, smp.ar_nz, "int[]"), smp.ar_nz.size, *segs)
 
 
 def zoh_ticks(stage: Stage, t_start: float, h: float, V, N, W, mv, T: int, m: int):
@@ -183,7 +261,7 @@ def zoh_ticks(stage: Stage, t_start: float, h: float, V, N, W, mv, T: int, m: in
     bad = ffi.new("long *", -1)
     for a, b in reversed(_chunks(T)):
         smp = cached_samples(stage, t_start + a * h, h, b - a, nodes)
-        (na, mz), data = _data_args(ffi, smp)
+        (na, mz), data = _data_args(ffi, smp, True)
         work = np.empty(int(lib.stsp_tv_zoh_work_size(n, m, q, na, mz)))
         iwork = np.empty(int(lib.stsp_tv_iwork_size(n, m, na, mz)), dtype=np.intc)
         status = lib.stsp_tv_zoh_ticks(
@@ -213,7 +291,7 @@ def oracle_ticks(stage: Stage, t_start: float, h: float, K, L, k0, M, J: float,
     rec = [np.empty((T, n)), np.empty((T, n)), np.empty((T, m)), np.empty((T, m))]
     for a, b in _chunks(T):
         smp = cached_samples(stage, t_start + a * h, h, b - a, nodes)
-        (na, mz), data = _data_args(ffi, smp)
+        (na, mz), data = _data_args(ffi, smp, False)
         work = np.empty(int(lib.stsp_tv_oracle_work_size(n, m, n_latch, na, mz)))
         iwork = np.empty(int(lib.stsp_tv_iwork_size(n, m, na, mz)), dtype=np.intc)
         out = [_ptr(ffi, x[a:b]) if record else ffi.NULL for x in rec]
@@ -244,7 +322,7 @@ def euler_oracle_ticks(stage: Stage, t_start: float, h: float, substeps: int, K,
     rec = [np.empty((T, n)), np.empty((T, n)), np.empty((T, m)), np.empty((T, m))]
     d = n + m + 1
     for a, b in _chunks(T):
-        smp = tick_samples(stage, t_start + a * h, h, b - a, mid)
+        smp = tick_samples(stage, t_start + a * h, h, b - a, mid, segments=False)
         Ahat = np.zeros(smp.Ar.shape[:2] + (d, d))
         Ahat[..., :n, :] = smp.Ar
         Ad = expm_many(Ahat.reshape(-1, d, d) * dt)

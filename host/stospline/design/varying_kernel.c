@@ -35,7 +35,8 @@ enum { TV_FORWARD = 0, TV_ADJOINT = 1, TV_MEAN = 2, TV_MEAN_ADJ = 3 };
 enum { TV_MAX_POINTS = 3, TV_MAX_TERMS = 60, TV_MAX_SUB = 1 << 16, TV_MAX_DIM = 256 };
 enum { TV_OK = 0, TV_ERR_NOT_PD = -1, TV_ERR_DIMS = -2, TV_ERR_SERIES = -3 };
 /* How the diffusion term is applied (see noise_lists); TV_NOISE_AUTO picks the cheapest. */
-enum { TV_NOISE_AUTO = 0, TV_NOISE_PAIRS = 1, TV_NOISE_COLUMNS = 2, TV_NOISE_OPERATOR = 3 };
+enum { TV_NOISE_AUTO = 0, TV_NOISE_PAIRS = 1, TV_NOISE_COLUMNS = 2, TV_NOISE_OPERATOR = 3,
+       TV_NOISE_SEGMENTS = 4 };
 enum { TV_TERMS_GUESS = 8 };          /* noisy series terms per sub-step, for the cost model */
 #define TV_MAX_OPERATOR ((size_t)1 << 18)  /* doubles of one point's operator matrix, at most */
 
@@ -48,6 +49,21 @@ typedef struct {
     double *gram, *gcol;       /* scratch of build_operator: (na n)^2 and mz na n */
     int points;                /* points held (0: none yet) */
 } tv_ops;
+
+/* The diffusion of a chunk whose noise is affine in time between sample times (linear
+ * interpolation): on a segment with end values G_L, G_R, G(w) = (1 - w) G_L + w G_R, so the
+ * packed operator is a quadratic in w, (1 - w)^2 F(G_L) + w(1 - w) C + w^2 F(G_R), C the
+ * cross operator (F with G_L in one factor and G_R in the other, both ways).  ops holds the
+ * three operators of each of the chunk's segments (nseg x 3 x R x C: F's layout for the
+ * oracle, Ft's for the designer), idx[t*P + i] the segment of point i of tick t and
+ * w[(t*P + i)*3 + j] the three weights there.  Forming a point's operator costs 3 R C,
+ * instead of mz R C (twice) to build it from G. */
+typedef struct {
+    const double *ops;
+    const int *idx;
+    const double *w;
+    int nseg;
+} tv_segs;
 
 /* The data of one tick at its P points, and which of them are known to be the same at every
  * point (the caller passes a field that is constant over the chunk once, with stride 0). */
@@ -71,6 +87,8 @@ typedef struct {
     const double *nz_g;
     const double *ga, *gf;   /* columns: G point by point, [a][k][p] and [p][k][a] */
     const tv_ops *ops;       /* operator: the packed operator of each point */
+    const int *seg_idx;      /* this tick's segment per point (tv_segs), NULL: none */
+    const double *seg_w;     /* and its three weights per point */
 } tv_tick;
 
 /* One sub-step's generator as a polynomial in r in [0, 1]: the coefficient of r^l is
@@ -296,6 +314,24 @@ static void build_operator(const tv_tick *v, int points, tv_ops *ops)
     }
 }
 
+/* The operator of each point of the tick from its segment's three (tv_segs), into Ft (the
+ * designer, `adjoint`) or F (the oracle): 3 R C per point.  What ops held before is lost. */
+static void form_operator(const tv_tick *v, int points, const tv_segs *sg, int adjoint,
+                          tv_ops *ops)
+{
+    const size_t len = op_rows(v->na) * op_cols(v->n);
+    size_t e;
+    int i;
+    for (i = 0; i < points; ++i) {
+        const double *restrict s0 = sg->ops + (size_t)v->seg_idx[i] * 3u * len;
+        const double *restrict s1 = s0 + len, *restrict s2 = s1 + len;
+        const double w0 = v->seg_w[3 * i], w1 = v->seg_w[3 * i + 1], w2 = v->seg_w[3 * i + 2];
+        double *restrict out = (adjoint ? ops->Ft : ops->F) + (size_t)i * len;
+        for (e = 0; e < len; ++e) out[e] = w0 * s0[e] + w1 * s1[e] + w2 * s2[e];
+    }
+    ops->points = 0;                       /* not the operator of any G: build_operator rebuilds */
+}
+
 /* The diffusion term of point i on X, compactly: FORWARD the n x n block
  * sum_pq X[act p, act q] G_p G_q' (on the x rows and columns), ADJOINT the na x na block
  * tr(G_p' X G_q) (at act p, act q); O(mz na n (n + na)) per call.  Every Brownian column at
@@ -311,7 +347,7 @@ static void point_noise(int kind, const tv_tick *v, int i, const double *X, doub
     const size_t blk = (size_t)na * n * mz;
     const double *ga = v->ga + (size_t)i * blk, *gf = v->gf + (size_t)i * blk;
     int k, a, b, p, q;
-    if (v->path == TV_NOISE_OPERATOR) {
+    if (v->path == TV_NOISE_OPERATOR || v->path == TV_NOISE_SEGMENTS) {
         operator_noise(kind, v, i, X, out, tmp);
         return;
     }
@@ -413,11 +449,17 @@ static void pair_noise(int kind, const tv_tick *v, int i, double w, const double
  *             diffusion differs from the last tick's, spread over the tick's terms (guessed
  *             TV_TERMS_GUESS per sub-step; over the chunk's `ticks` when the diffusion is
  *             the same for all of them).  Only with `ops` (NULL: never).
- * The pairs are taken whenever they cost at most na n (n + na) mz. */
+ *   SEGMENTS  na^2 n^2 / 4, plus 3 na^2 n^2 / 4 to form it (`form_operator`) from the
+ *             operators of the tick's segments: only when the caller gave them (`sg`, for
+ *             noise interpolated linearly) and with `ops`; forced without them, OPERATOR.
+ * The pairs are taken whenever they cost at most na n (n + na) mz and no segments are given.
+ * `adjoint`: the designer's direction (the operator formed is Ft). */
 static void noise_lists(tv_tick *v, int *start, int *np_, int *na_, double *g, tv_ops *ops,
-                        int force, int sub, long ticks)
+                        int force, int sub, long ticks, const tv_segs *sg, int adjoint)
 {
     const int n = v->n, na = v->na, mz = v->mz, points = v->g_same ? 1 : v->P;
+    const int fits = ops != NULL && op_fits(n, na);
+    const int segs = fits && sg != NULL && v->seg_idx != NULL;
     long pairs = 0, dense = (long)na * n * (n + na) * mz;
     int i, k, p, a, e = 0;
     for (i = 0; i < points; ++i)
@@ -436,9 +478,26 @@ static void noise_lists(tv_tick *v, int *start, int *np_, int *na_, double *g, t
     v->ops = ops;
     v->path = force != TV_NOISE_AUTO ? force
               : pairs <= dense * points ? TV_NOISE_PAIRS : TV_NOISE_COLUMNS;
-    if (v->path == TV_NOISE_OPERATOR && (ops == NULL || !op_fits(n, na)))
-        v->path = TV_NOISE_COLUMNS;
-    if (v->path != TV_NOISE_PAIRS) {
+    if (v->path == TV_NOISE_SEGMENTS && !segs) v->path = TV_NOISE_OPERATOR;
+    if (v->path == TV_NOISE_OPERATOR && !fits) v->path = TV_NOISE_COLUMNS;
+    if (force == TV_NOISE_AUTO && fits) {
+        const double terms = (double)TV_TERMS_GUESS * sub, op = (double)op_rows(na) * op_cols(n);
+        const size_t len = (size_t)points * na * n * mz;
+        size_t at = 0;
+        double build = (2.0 * mz + 1.0) * op * points, best;
+        if (ops->points == points)
+            for (at = 0; at < len && ops->src[at] == v->G[at]; ++at) {}
+        if (at == len && ops->points == points) build = 0.0;
+        else if (v->g_const) build /= (double)ticks;     /* built once for the chunk */
+        best = v->path == TV_NOISE_PAIRS ? terms * (double)pairs
+               : terms * 0.75 * (double)dense * points;
+        if (v->path == TV_NOISE_COLUMNS && terms * op * points + build < best) {
+            v->path = TV_NOISE_OPERATOR;
+            best = terms * op * points + build;
+        }
+        if (segs && (terms + 3.0) * op * points < best) v->path = TV_NOISE_SEGMENTS;
+    }
+    if (v->path == TV_NOISE_COLUMNS) {
         const size_t blk = (size_t)na * n * mz, cap = TV_MAX_POINTS * blk;
         double *ga = g + cap, *gf = ga + cap;
         for (i = 0; i < points; ++i)
@@ -451,18 +510,8 @@ static void noise_lists(tv_tick *v, int *start, int *np_, int *na_, double *g, t
                     }
         v->ga = ga; v->gf = gf;
     }
-    if (force == TV_NOISE_AUTO && v->path == TV_NOISE_COLUMNS && ops != NULL && op_fits(n, na)) {
-        const double terms = (double)TV_TERMS_GUESS * sub, op = (double)op_rows(na) * op_cols(n);
-        const size_t len = (size_t)points * na * n * mz;
-        size_t at = 0;
-        double build = (2.0 * mz + 1.0) * op;
-        if (ops->points == points)
-            for (at = 0; at < len && ops->src[at] == v->G[at]; ++at) {}
-        if (at == len && ops->points == points) build = 0.0;
-        else if (v->g_const) build /= (double)ticks;     /* built once for the chunk */
-        if (terms * op + build < terms * 0.75 * (double)dense) v->path = TV_NOISE_OPERATOR;
-    }
     if (v->path == TV_NOISE_OPERATOR) build_operator(v, points, ops);
+    if (v->path == TV_NOISE_SEGMENTS) form_operator(v, points, sg, adjoint, ops);
 }
 
 /* acc += the drift part of G_(l) on X (d x cols; MEAN reads only its first `rows` rows, the
@@ -656,7 +705,7 @@ static int sub_steps(const tv_tick *v, const double *coef, double h, tv_blend *b
 
 static tv_tick tick_of(int n, int d, int na, int mz, int P, const int *act, const double *Ar,
                        const double *G, const double *Lb, const int *same, const int *ar_nz,
-                       int ar_cnt, long t)
+                       int ar_cnt, const tv_segs *sg, long t)
 {
     tv_tick v;
     int i;
@@ -670,6 +719,11 @@ static tv_tick tick_of(int n, int d, int na, int mz, int P, const int *act, cons
     v.lb_const = same[2];
     v.g_const = same[1];
     v.ar_nz = ar_nz; v.ar_cnt = ar_cnt;
+    v.seg_idx = NULL; v.seg_w = NULL;
+    if (sg != NULL && sg->nseg > 0 && !same[1]) {
+        v.seg_idx = sg->idx + (size_t)t * (size_t)P;
+        v.seg_w = sg->w + (size_t)t * (size_t)P * 3u;
+    }
     for (i = 0; i < (v.g_same ? 1 : P); ++i) v.gb[i] = noise_bound(&v, i);
     return v;
 }
@@ -683,11 +737,11 @@ size_t stsp_tv_iwork_size(int n, int m, int na, int mz)
 }
 
 static void lists_of(tv_tick *v, int *iwork, double *gwork, tv_ops *ops, int force, int sub,
-                     long ticks)
+                     long ticks, const tv_segs *sg, int adjoint)
 {
     const size_t cap = TV_MAX_POINTS * (size_t)v->na * v->n * v->mz;
     int *start = iwork, *p = start + TV_MAX_POINTS * v->mz + 1, *a = p + cap;
-    noise_lists(v, start, p, a, gwork, ops, force, sub, ticks);
+    noise_lists(v, start, p, a, gwork, ops, force, sub, ticks, sg, adjoint);
 }
 
 /* The Lb nonzero lists of `bl` at the end of the integer work. */
@@ -711,6 +765,25 @@ static double *blend_at(tv_blend *bl, double *at, int *iwork, int n, int m, int 
     return at + blend_size(n, m);
 }
 
+/* The segment operators of a chunk (tv_segs) checked and bound into *sg: nseg >= 0; with
+ * nseg > 0, the operator of one point fits TV_MAX_OPERATOR, the pointers are not NULL, and
+ * every index is in [0, nseg) and every weight finite.  nseg = 0: none (pointers unused). */
+static int segments_ok(int n, int na, long T, int P, int nseg, const double *ops,
+                       const int *idx, const double *w, tv_segs *sg)
+{
+    size_t e;
+    sg->nseg = 0; sg->ops = NULL; sg->idx = NULL; sg->w = NULL;
+    if (nseg < 0) return 0;
+    if (nseg == 0) return 1;
+    if (!op_fits(n, na) || ops == NULL || idx == NULL || w == NULL) return 0;
+    for (e = 0; e < (size_t)T * (size_t)P; ++e) {
+        if (idx[e] < 0 || idx[e] >= nseg) return 0;
+        if (!(fabs(w[3 * e]) + fabs(w[3 * e + 1]) + fabs(w[3 * e + 2]) < HUGE_VAL)) return 0;
+    }
+    sg->nseg = nseg; sg->ops = ops; sg->idx = idx; sg->w = w;
+    return 1;
+}
+
 size_t stsp_tv_zoh_work_size(int n, int m, int q, int na, int mz)
 {
     const size_t d = (size_t)n + (size_t)m + 1u, r = (size_t)n + 1u;
@@ -727,7 +800,8 @@ size_t stsp_tv_zoh_work_size(int n, int m, int q, int na, int mz)
 int stsp_tv_zoh_ticks(int n, int m, int q, long T, int P, int na, int mz, const double *coef,
                       double h, const int *act, const double *Ar, const double *G,
                       const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
-                      double *V, double *N, double *W,
+                      int nseg, const double *seg_ops, const int *seg_idx,
+                      const double *seg_w, double *V, double *N, double *W,
                       double *mv, double *K, double *k0, double *L, double *work,
                       int *iwork, int noise_path, long *bad_tick)
 {
@@ -735,11 +809,13 @@ int stsp_tv_zoh_ticks(int n, int m, int q, long T, int P, int na, int mz, const 
     double *Y, *U, *Hl, *vp, *up, *tw, *gw;
     tv_blend bl;
     tv_ops ops;
+    tv_segs sg;
     long t;
     int a, b, p, l, j, st;
     if (n < 1 || m < 1 || q < 0 || T < 0 || P < 1 || P > TV_MAX_POINTS || na < 0 ||
         na > n + m || mz < 0 || d > TV_MAX_DIM || ar_cnt < 0 || ar_cnt > n * d ||
-        noise_path < TV_NOISE_AUTO || noise_path > TV_NOISE_OPERATOR)
+        noise_path < TV_NOISE_AUTO || noise_path > TV_NOISE_SEGMENTS ||
+        !segments_ok(n, na, T, P, nseg, seg_ops, seg_idx, seg_w, &sg))
         return TV_ERR_DIMS;
     Y = work; U = Y + (size_t)d * d; Hl = U + (size_t)d * q; vp = Hl + (size_t)q * d;
     up = vp + (size_t)r * (r + 1) / 2; tw = up + stsp_zoh_update_size(n, m, q);
@@ -749,10 +825,10 @@ int stsp_tv_zoh_ticks(int n, int m, int q, long T, int P, int na, int mz, const 
     for (a = 0, p = 0; a < r; ++a)
         for (b = a; b < r; ++b, ++p) vp[p] = 0.5 * (V[a * r + b] + V[b * r + a]);
     for (t = T - 1; t >= 0; --t) {
-        tv_tick v = tick_of(n, d, na, mz, P, act, Ar, G, Lb, same, ar_nz, ar_cnt, t);
+        tv_tick v = tick_of(n, d, na, mz, P, act, Ar, G, Lb, same, ar_nz, ar_cnt, &sg, t);
         const int sub = sub_steps(&v, coef, h, &bl);
         if (sub == 0) return TV_ERR_SERIES;
-        lists_of(&v, iwork, gw, &ops, noise_path, sub, T);
+        lists_of(&v, iwork, gw, &ops, noise_path, sub, T, &sg, 1);
         for (a = 0; a < d * d; ++a) Y[a] = 0.0;
         for (a = 0, p = 0; a < r; ++a)
             for (b = a; b < r; ++b, ++p) Y[RS(a) * d + RS(b)] = Y[RS(b) * d + RS(a)] = vp[p];
@@ -859,7 +935,8 @@ int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, con
                          const double *k0, int P, int na, int mz, const double *coef,
                          double h, const int *act, const double *Ar, const double *G,
                          const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
-                         double *M, double *J, double *xm,
+                         int nseg, const double *seg_ops, const int *seg_idx,
+                         const double *seg_w, double *M, double *J, double *xm,
                          double *xv, double *um, double *uv, double *work, int *iwork,
                          int noise_path)
 {
@@ -867,19 +944,21 @@ int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, con
     double *TM, *Mw, *Xv, *tw, *gw;
     tv_blend bl;
     tv_ops ops;
+    tv_segs sg;
     double acc = *J;
     long t;
     int a, j, st;
     if (n < 1 || m < 1 || n_latch < 0 || T < 0 || P < 1 || P > TV_MAX_POINTS || na < 0 ||
         na > n + m || mz < 0 || dw > TV_MAX_DIM || ar_cnt < 0 || ar_cnt > n * dw ||
-        noise_path < TV_NOISE_AUTO || noise_path > TV_NOISE_OPERATOR)
+        noise_path < TV_NOISE_AUTO || noise_path > TV_NOISE_SEGMENTS ||
+        !segments_ok(n, na, T, P, nseg, seg_ops, seg_idx, seg_w, &sg))
         return TV_ERR_DIMS;
     TM = work; Mw = TM + (size_t)dw * dy; Xv = Mw + (size_t)dw * dw;
     tw = Xv + (size_t)dw * nl;
     gw = blend_at(&bl, tw + taylor_size(n, m, na, mz, nl), iwork, n, m, na, mz);
     ops_at(&ops, gw + 3u * TV_MAX_POINTS * (size_t)na * n * mz, n, na, mz);
     for (t = 0; t < T; ++t) {
-        tv_tick v = tick_of(n, dw, na, mz, P, act, Ar, G, Lb, same, ar_nz, ar_cnt, t);
+        tv_tick v = tick_of(n, dw, na, mz, P, act, Ar, G, Lb, same, ar_nz, ar_cnt, &sg, t);
         int sub;
         command_moments(n, m, nl, K + (size_t)t * m * n, L + (size_t)t * m * nl,
                         k0 + (size_t)t * m, M, TM, Mw, um ? um + t * m : NULL,
@@ -888,7 +967,7 @@ int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, con
             for (j = 0; j < nl; ++j) Xv[a * nl + j] = TM[a * dy + n + j];
         sub = sub_steps(&v, coef, h, &bl);
         if (sub == 0) return TV_ERR_SERIES;
-        lists_of(&v, iwork, gw, &ops, noise_path, sub, T);
+        lists_of(&v, iwork, gw, &ops, noise_path, sub, T, &sg, 0);
         for (j = 0; j < sub; ++j) {
             if (sub > 1) blend(&v, coef, j, sub, &bl);
             st = taylor(TV_FORWARD, &v, &bl, h / sub, Mw, dw, &acc, tw);
@@ -935,7 +1014,7 @@ int stsp_tv_euler_oracle_ticks(int n, int m, int n_latch, long T, const double *
         for (i = 0; i < sub; ++i) {
             const double *A = Ad + (size_t)(t * sub + i) * D;
             const int same_all[3] = {1, same[1], same[2]};
-            tv_tick v = tick_of(n, dw, na, mz, 1, act, Ad, G, Lb, same_all, &no_ar, 0,
+            tv_tick v = tick_of(n, dw, na, mz, 1, act, Ad, G, Lb, same_all, &no_ar, 0, NULL,
                                 t * sub + i);
             double cost = 0.0;
             for (e = 0; e < D; ++e) cost += v.Lb[e] * Mw[e];
@@ -958,7 +1037,7 @@ int stsp_tv_euler_oracle_ticks(int n, int m, int n_latch, long T, const double *
                     Mn[a * dw + b] = Mn[b * dw + a] = s;
                 }
             if (na > 0) {                              /* + dt sum Mw[p,q] G_p G_q' */
-                lists_of(&v, iwork, gw, NULL, TV_NOISE_AUTO, 1, 1);
+                lists_of(&v, iwork, gw, NULL, TV_NOISE_AUTO, 1, 1, NULL, 0);
                 if (v.path == TV_NOISE_PAIRS) {
                     pair_noise(TV_FORWARD, &v, 0, dt, Mw, Mn);
                 } else {

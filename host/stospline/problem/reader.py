@@ -254,6 +254,13 @@ class _SampledData:
                  has_H: bool):
         self.data, self.keys, self.noisy = data, keys, noisy
         self.n, self.m, self.mz, self.has_H = n, m, mz, has_H
+        # Between two consecutive sample times of the noise (every series' merged), G and H
+        # are affine in t when every noise series is interpolated linearly: the designer
+        # builds its diffusion operators per such segment (`stospline.design.varying`).
+        series = [g for _, g, _ in data.noise if isinstance(g, Series)]
+        self.noise_knots = (np.unique(np.concatenate([g.t for g in series]))
+                            if series and all(g.interpolation == "linear" for g in series)
+                            else None)
 
     def __call__(self, t: float) -> dict:
         f = self.data._fields_at(t)

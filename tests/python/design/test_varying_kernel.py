@@ -88,7 +88,7 @@ def test_dense_noise_paths_equal_the_pair_formulation(varying_noise, monkeypatch
     rounding."""
     problem = parse_problem(_dense_noise_doc(varying_noise))
     results = {}
-    for path in ("pairs", "columns", "operator", "auto"):
+    for path in ("pairs", "columns", "operator", "segments", "auto"):
         monkeypatch.setattr(varying, "NOISE_PATH", path)
         d = design_zoh(problem)
         table = table_of(d, quantize=False)

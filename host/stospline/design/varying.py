@@ -66,10 +66,14 @@ class TickSamples:
 
 @dataclass(frozen=True)
 class Segments:
-    """The packed diffusion operators of the segments between the noise's sample times that a
-    chunk's points fall in (`segment_operators`): ``ops`` (S, 3, R, C) and ``ops_t`` (S, 3,
-    C, R) (``R = na(na+1)/2``, ``C = n(n+1)/2``, the oracle's layout and the designer's),
-    ``idx`` (T P) the segment of each point and ``w`` (T P, 3) its three weights."""
+    """The noise of a chunk by segments between the noise's sample times (`segment_operators`):
+    ``act`` the active multipliers, ``ends`` (S, 2, na, n, mz) the diffusion at the two ends
+    of each segment the chunk's points fall in, ``ops`` (S, 3, R, C) and ``ops_t`` (S, 3, C,
+    R) their three packed operators (``R = na(na+1)/2``, ``C = n(n+1)/2``; the oracle's
+    layout and the designer's), ``idx`` (T P) the segment of each point and ``w`` (T P) its
+    place in it, in [0, 1]."""
+    act: np.ndarray
+    ends: np.ndarray
     ops: np.ndarray
     ops_t: np.ndarray
     idx: np.ndarray
@@ -77,7 +81,7 @@ class Segments:
 
     @property
     def nbytes(self) -> int:
-        return self.ops.nbytes + self.ops_t.nbytes + self.idx.nbytes + self.w.nbytes
+        return sum(a.nbytes for a in (self.ends, self.ops, self.ops_t, self.idx, self.w))
 
 
 OPERATOR_MAX = 1 << 18     # doubles of one packed operator, at most (the C TV_MAX_OPERATOR)
@@ -92,42 +96,47 @@ def _pair_operator(X: np.ndarray, Y: np.ndarray, rows, cols) -> np.ndarray:
     return T4[rows[0][:, None], rows[1][:, None], cols[0][None, :], cols[1][None, :]]
 
 
-def segment_operators(stage: Stage, times: np.ndarray, act: np.ndarray, T: int
-                      ) -> Segments | None:
-    """The diffusion operators of the noise segments of `times` (T ticks' points), when the
-    noise is interpolated linearly between sample times (``stage.varying.noise_knots``).
+def segment_operators(stage: Stage, times: np.ndarray, T: int) -> Segments | None:
+    """The noise at `times` (T ticks' points) by segments, when it is interpolated linearly
+    between sample times (``stage.varying.noise_knots``).
 
-    On a segment between sample times with end values G_L, G_R (the active multipliers
-    `act`), ``G(w) = (1 - w) G_L + w G_R`` and, the operator F being quadratic in G, ``F(w) =
-    (1 - w)^2 F(G_L) + w (1 - w) (B(G_L, G_R) + B(G_R, G_L)) + w^2 F(G_R)``: three operators
-    per segment, built once (``3 mz R C``), and 3 R C to form a point's, instead of building
-    it from G at every point of every tick (``2 mz R C``). None when the noise is not so
-    interpolated, its operator is too large, or the chunk spans more than T/2 segments (the
-    operators would cost more than they save)."""
+    On a segment between sample times with end values G_L, G_R, ``G(w) = (1 - w) G_L + w
+    G_R`` and, the operator F being quadratic in G, ``F(w) = (1 - w)^2 F(G_L) + w (1 - w)
+    (B(G_L, G_R) + B(G_R, G_L)) + w^2 F(G_R)``: three operators per segment, built once
+    (``3 mz R C``), then 3 R C to form a point's, instead of 2 mz R C to build it from G at
+    every point of every tick; and G is not sampled at the points (the C loops interpolate
+    it). The active multipliers are those nonzero at an end of a segment. None when the noise
+    is not so interpolated, is zero, its operator is too large, or the chunk spans more than
+    T/2 segments (the operators would cost more than they save)."""
     knots = getattr(stage.varying, "noise_knots", None)
-    n, na = stage.B.shape[0], act.size
-    R, C = na * (na + 1) // 2, n * (n + 1) // 2
-    if knots is None or knots.size < 2 or na == 0 or R * C > OPERATOR_MAX:
+    if knots is None or knots.size < 2:
         return None
     seg = np.clip(np.searchsorted(knots, times, side="right") - 1, 0, knots.size - 2)
-    w = np.clip((times - knots[seg]) / (knots[seg + 1] - knots[seg]), 0.0, 1.0)
     used = np.unique(seg)
     if 2 * used.size > T:
         return None
-    ends = np.union1d(used, used + 1)
-    s = stage.samples(knots[ends])
+    n = stage.B.shape[0]
+    at = np.union1d(used, used + 1)
+    s = stage.samples(knots[at])
     GH = s["G"] if s["H"] is None else np.concatenate([s["G"], s["H"]], axis=1)
+    act = np.flatnonzero(GH.any(axis=(0, 2, 3))).astype(np.intc)
+    na = act.size
+    R, C = na * (na + 1) // 2, n * (n + 1) // 2
+    if na == 0 or R * C > OPERATOR_MAX:
+        return None
     GH = GH[:, act]
     rows, cols = np.triu_indices(na), np.triu_indices(n)
     own = [_pair_operator(g, g, rows, cols) for g in GH]
     ops = np.empty((used.size, 3, R, C))
-    for j, e in enumerate(np.searchsorted(ends, used)):
+    left = np.searchsorted(at, used)
+    for j, e in enumerate(left):
         L, Rg = GH[e], GH[e + 1]
         ops[j, 0], ops[j, 2] = own[e], own[e + 1]
         ops[j, 1] = _pair_operator(L, Rg, rows, cols) + _pair_operator(Rg, L, rows, cols)
-    weights = np.stack([(1.0 - w) ** 2, w * (1.0 - w), w * w], axis=1)
-    return Segments(ops, np.ascontiguousarray(ops.swapaxes(2, 3)),
-                    np.searchsorted(used, seg).astype(np.intc), np.ascontiguousarray(weights))
+    ends = np.ascontiguousarray(np.stack([GH[left], GH[left + 1]], axis=1))
+    w = np.clip((times - knots[seg]) / (knots[seg + 1] - knots[seg]), 0.0, 1.0)
+    return Segments(act, ends, ops, np.ascontiguousarray(ops.swapaxes(2, 3)),
+                    np.searchsorted(used, seg).astype(np.intc), np.ascontiguousarray(w))
 
 
 def _constant(a) -> bool:
@@ -143,8 +152,9 @@ def tick_samples(stage: Stage, t_first: float, h: float, T: int, nodes: np.ndarr
     d = n + m + 1
     P = nodes.size
     times = (t_first + h * (np.arange(T)[:, None] + nodes[None, :])).ravel()
-    s = stage.samples(times)
-    same = [all(_constant(s[k]) for k in keys)
+    segs = segment_operators(stage, times, T) if segments else None
+    s = stage.samples(times, noise=segs is None)
+    same = [all(_constant(s[k]) for k in keys) and not (segs is not None and keys[0] == "G")
             for keys in (("A", "B", "f"), ("G", "H"), ("Q", "S", "R", "q", "r", "rho"))]
     pick = [slice(0, 1) if c else slice(None) for c in same]
     first = {k: (None if v is None else v[pick[i]])
@@ -156,12 +166,16 @@ def tick_samples(stage: Stage, t_first: float, h: float, T: int, nodes: np.ndarr
              np.zeros((TA, n, 1)) if first["f"] is None
              else np.broadcast_to(first["f"], (TA, n))[:, :, None]]
     Ar = np.concatenate(drift, axis=2)
-    # The diffusion of the multipliers that are nonzero somewhere in the chunk, gathered
-    # from G (state multipliers) and H (input multipliers) without stacking them first.
-    parts = [(first["G"], 0)] + ([(first["H"], n)] if first["H"] is not None else [])
-    live = [(np.flatnonzero(g.any(axis=(0, 2, 3))), g, o) for g, o in parts]
-    act = np.concatenate([rows + o for rows, _, o in live]).astype(np.intc)
-    G = np.concatenate([g[:, rows] for rows, g, _ in live], axis=1)
+    if segs is None:
+        # The diffusion of the multipliers that are nonzero somewhere in the chunk, gathered
+        # from G (state multipliers) and H (input multipliers) without stacking them first.
+        parts = [(first["G"], 0)] + ([(first["H"], n)] if first["H"] is not None else [])
+        live = [(np.flatnonzero(g.any(axis=(0, 2, 3))), g, o) for g, o in parts]
+        act = np.concatenate([rows + o for rows, _, o in live]).astype(np.intc)
+        G = np.concatenate([g[:, rows] for rows, g, _ in live], axis=1)
+    else:                   # not sampled: the C loops interpolate it from the segments' ends
+        act = segs.act
+        G = np.empty((0, 0) + segs.ends.shape[2:])
     TL = first["Q"].shape[0]
     Lb = np.zeros((TL, d, d))
     Lb[:, :n, :n], Lb[:, n:n + m, n:n + m] = first["Q"], first["R"]
@@ -176,10 +190,8 @@ def tick_samples(stage: Stage, t_first: float, h: float, T: int, nodes: np.ndarr
         return np.ascontiguousarray(a.reshape(shape + a.shape[1:]))
 
     ar_nz = np.flatnonzero(np.any(Ar != 0.0, axis=0)).astype(np.intc)
-    segs = (segment_operators(stage, times, act, T)
-            if segments and not same[1] and act.size else None)
-    return TickSamples(lay(Ar, same[0]), lay(G, same[1]), lay(Lb, same[2]), act,
-                       np.array(same, dtype=np.intc), ar_nz, segs)
+    return TickSamples(lay(Ar, same[0]), G if segs is not None else lay(G, same[1]),
+                       lay(Lb, same[2]), act, np.array(same, dtype=np.intc), ar_nz, segs)
 
 
 # Samples of recent chunks: the oracle evaluates the design's own law and its float32 table
@@ -239,8 +251,8 @@ def _noise_path() -> int:
 def _data_args(ffi, smp: TickSamples, adjoint: bool):
     """The kernels' data arguments; `adjoint`: the designer's (the operators transposed)."""
     sg = smp.segs
-    segs = (0, ffi.NULL, ffi.NULL, ffi.NULL) if sg is None else (
-        sg.ops.shape[0], _ptr(ffi, sg.ops_t if adjoint else sg.ops),
+    segs = (0, ffi.NULL, ffi.NULL, ffi.NULL, ffi.NULL) if sg is None else (
+        sg.ops.shape[0], _ptr(ffi, sg.ops_t if adjoint else sg.ops), _ptr(ffi, sg.ends),
         _ptr(ffi, sg.idx, "int[]"), _ptr(ffi, sg.w))
     return (smp.act.size, smp.G.shape[-1]), (
         _ptr(ffi, smp.act, "int[]"), _ptr(ffi, smp.Ar), _ptr(ffi, smp.G), _ptr(ffi, smp.Lb),

@@ -55,13 +55,15 @@ typedef struct {
  * packed operator is a quadratic in w, (1 - w)^2 F(G_L) + w(1 - w) C + w^2 F(G_R), C the
  * cross operator (F with G_L in one factor and G_R in the other, both ways).  ops holds the
  * three operators of each of the chunk's segments (nseg x 3 x R x C: F's layout for the
- * oracle, Ft's for the designer), idx[t*P + i] the segment of point i of tick t and
- * w[(t*P + i)*3 + j] the three weights there.  Forming a point's operator costs 3 R C,
- * instead of mz R C (twice) to build it from G. */
+ * oracle, Ft's for the designer), ends their end values (nseg x 2 x na x n x mz), idx[t*P + i]
+ * the segment of point i of tick t and w[t*P + i] its place in it.  A point's G is
+ * interpolated into gpt (P x na x n x mz, work) and its operator formed in 3 R C, instead of
+ * 2 mz R C to build it from G; the caller samples no G at the points. */
 typedef struct {
-    const double *ops;
+    const double *ops, *ends;
     const int *idx;
     const double *w;
+    double *gpt;
     int nseg;
 } tv_segs;
 
@@ -254,17 +256,32 @@ static void operator_noise(int kind, const tv_tick *v, int i, const double *X, d
     const double *M = (kind == TV_FORWARD ? v->ops->F : v->ops->Ft) + (size_t)i * R * C;
     const size_t len = kind == TV_FORWARD ? C : R;
     double *restrict acc = tmp;
+    double c[4];
+    const double *rw[4];
     size_t e, r;
-    int a, b;
+    int a, b, h = 0;
     for (e = 0; e < len; ++e) acc[e] = 0.0;
+    /* Four rows at a time: acc is read and written once per four rows of the operator. */
     for (a = 0, r = 0; a < in; ++a)
         for (b = a; b < in; ++b, ++r) {
             const double x = kind == TV_FORWARD ? X[v->act[a] * d + v->act[b]] : X[a * d + b];
-            const double c = a == b ? 0.5 * x : x;
-            const double *restrict row = M + r * len;
-            if (c != 0.0)
-                for (e = 0; e < len; ++e) acc[e] += c * row[e];
+            if (x == 0.0) continue;
+            c[h] = a == b ? 0.5 * x : x;
+            rw[h++] = M + r * len;
+            if (h == 4) {
+                const double c0 = c[0], c1 = c[1], c2 = c[2], c3 = c[3];
+                const double *restrict r0 = rw[0], *restrict r1 = rw[1], *restrict r2 = rw[2],
+                             *restrict r3 = rw[3];
+                for (e = 0; e < len; ++e)
+                    acc[e] += c0 * r0[e] + c1 * r1[e] + c2 * r2[e] + c3 * r3[e];
+                h = 0;
+            }
         }
+    while (h > 0) {
+        const double ch = c[--h];
+        const double *restrict row = rw[h];
+        for (e = 0; e < len; ++e) acc[e] += ch * row[e];
+    }
     for (a = 0, e = 0; a < side; ++a)
         for (b = a; b < side; ++b, ++e) out[a * side + b] = out[b * side + a] = acc[e];
 }
@@ -325,7 +342,7 @@ static void form_operator(const tv_tick *v, int points, const tv_segs *sg, int a
     for (i = 0; i < points; ++i) {
         const double *restrict s0 = sg->ops + (size_t)v->seg_idx[i] * 3u * len;
         const double *restrict s1 = s0 + len, *restrict s2 = s1 + len;
-        const double w0 = v->seg_w[3 * i], w1 = v->seg_w[3 * i + 1], w2 = v->seg_w[3 * i + 2];
+        const double w = v->seg_w[i], w0 = (1.0 - w) * (1.0 - w), w1 = w * (1.0 - w), w2 = w * w;
         double *restrict out = (adjoint ? ops->Ft : ops->F) + (size_t)i * len;
         for (e = 0; e < len; ++e) out[e] = w0 * s0[e] + w1 * s1[e] + w2 * s2[e];
     }
@@ -462,18 +479,16 @@ static void noise_lists(tv_tick *v, int *start, int *np_, int *na_, double *g, t
     const int segs = fits && sg != NULL && v->seg_idx != NULL;
     long pairs = 0, dense = (long)na * n * (n + na) * mz;
     int i, k, p, a, e = 0;
-    for (i = 0; i < points; ++i)
-        for (k = 0; k < mz; ++k) {
-            const int lo = e;
-            start[i * mz + k] = e;
-            for (p = 0; p < na; ++p)
-                for (a = 0; a < n; ++a) {
-                    const double x = v->G[(((size_t)i * na + p) * n + a) * mz + k];
-                    if (x != 0.0) { np_[e] = p; na_[e] = a; g[e] = x; ++e; }
-                }
-            pairs += (long)(e - lo) * (e - lo);
-        }
-    start[points * mz] = e;
+    /* The nonzeros of each Brownian column (in start, as counts), for the cost of the pairs;
+     * their lists below only if the pairs are taken. */
+    for (i = 0; i < points * mz; ++i) start[i] = 0;
+    for (i = 0; i < points; ++i) {
+        const double *restrict Gi = v->G + (size_t)i * na * n * mz;
+        int *restrict cnt = start + i * mz;
+        for (p = 0; p < na * n; ++p)
+            for (k = 0; k < mz; ++k) cnt[k] += Gi[(size_t)p * mz + k] != 0.0;
+    }
+    for (i = 0; i < points * mz; ++i) pairs += (long)start[i] * start[i];
     v->nz_start = start; v->nz_p = np_; v->nz_a = na_; v->nz_g = g;
     v->ops = ops;
     v->path = force != TV_NOISE_AUTO ? force
@@ -496,6 +511,18 @@ static void noise_lists(tv_tick *v, int *start, int *np_, int *na_, double *g, t
             best = terms * op * points + build;
         }
         if (segs && (terms + 3.0) * op * points < best) v->path = TV_NOISE_SEGMENTS;
+    }
+    if (v->path == TV_NOISE_PAIRS) {
+        for (i = 0; i < points; ++i)
+            for (k = 0; k < mz; ++k) {
+                start[i * mz + k] = e;
+                for (p = 0; p < na; ++p)
+                    for (a = 0; a < n; ++a) {
+                        const double x = v->G[(((size_t)i * na + p) * n + a) * mz + k];
+                        if (x != 0.0) { np_[e] = p; na_[e] = a; g[e] = x; ++e; }
+                    }
+            }
+        start[points * mz] = e;
     }
     if (v->path == TV_NOISE_COLUMNS) {
         const size_t blk = (size_t)na * n * mz, cap = TV_MAX_POINTS * blk;
@@ -712,18 +739,28 @@ static tv_tick tick_of(int n, int d, int na, int mz, int P, const int *act, cons
     v.n = n; v.d = d; v.na = na; v.mz = mz; v.P = P; v.act = act;
     v.Ar = same[0] ? Ar : Ar + (size_t)t * P * n * d;
     v.G = same[1] ? G : G + (size_t)t * P * na * n * mz;
+    v.seg_idx = NULL; v.seg_w = NULL;
+    if (sg != NULL && sg->nseg > 0) {                 /* G at the points, from the segments */
+        const size_t blk = (size_t)na * (size_t)n * (size_t)mz;
+        v.seg_idx = sg->idx + (size_t)t * (size_t)P;
+        v.seg_w = sg->w + (size_t)t * (size_t)P;
+        for (i = 0; i < P; ++i) {
+            const double w = v.seg_w[i];
+            const double *restrict gl = sg->ends + (size_t)v.seg_idx[i] * 2u * blk;
+            const double *restrict gr = gl + blk;
+            double *restrict out = sg->gpt + (size_t)i * blk;
+            size_t e;
+            for (e = 0; e < blk; ++e) out[e] = gl[e] * (1.0 - w) + gr[e] * w;
+        }
+        v.G = sg->gpt;
+    }
     v.Lb = same[2] ? Lb : Lb + (size_t)t * P * d * d;
     v.ar_same = same[0] || same_points(v.Ar, P, (size_t)n * d);
-    v.g_same = same[1] || same_points(v.G, P, (size_t)na * n * mz);
+    v.g_same = (same[1] && v.seg_idx == NULL) || same_points(v.G, P, (size_t)na * n * mz);
     v.lb_same = same[2] || same_points(v.Lb, P, (size_t)d * d);
     v.lb_const = same[2];
-    v.g_const = same[1];
+    v.g_const = same[1] && v.seg_idx == NULL;
     v.ar_nz = ar_nz; v.ar_cnt = ar_cnt;
-    v.seg_idx = NULL; v.seg_w = NULL;
-    if (sg != NULL && sg->nseg > 0 && !same[1]) {
-        v.seg_idx = sg->idx + (size_t)t * (size_t)P;
-        v.seg_w = sg->w + (size_t)t * (size_t)P * 3u;
-    }
     for (i = 0; i < (v.g_same ? 1 : P); ++i) v.gb[i] = noise_bound(&v, i);
     return v;
 }
@@ -765,22 +802,21 @@ static double *blend_at(tv_blend *bl, double *at, int *iwork, int n, int m, int 
     return at + blend_size(n, m);
 }
 
-/* The segment operators of a chunk (tv_segs) checked and bound into *sg: nseg >= 0; with
- * nseg > 0, the operator of one point fits TV_MAX_OPERATOR, the pointers are not NULL, and
- * every index is in [0, nseg) and every weight finite.  nseg = 0: none (pointers unused). */
+/* The segments of a chunk (tv_segs) checked and bound into *sg: nseg >= 0; with nseg > 0,
+ * the operator of one point fits TV_MAX_OPERATOR, the pointers are not NULL, every index is
+ * in [0, nseg) and every place w in [0, 1].  nseg = 0: none (the pointers are not read). */
 static int segments_ok(int n, int na, long T, int P, int nseg, const double *ops,
-                       const int *idx, const double *w, tv_segs *sg)
+                       const double *ends, const int *idx, const double *w, tv_segs *sg)
 {
     size_t e;
-    sg->nseg = 0; sg->ops = NULL; sg->idx = NULL; sg->w = NULL;
+    sg->nseg = 0; sg->ops = NULL; sg->ends = NULL; sg->idx = NULL; sg->w = NULL;
+    sg->gpt = NULL;
     if (nseg < 0) return 0;
     if (nseg == 0) return 1;
-    if (!op_fits(n, na) || ops == NULL || idx == NULL || w == NULL) return 0;
-    for (e = 0; e < (size_t)T * (size_t)P; ++e) {
-        if (idx[e] < 0 || idx[e] >= nseg) return 0;
-        if (!(fabs(w[3 * e]) + fabs(w[3 * e + 1]) + fabs(w[3 * e + 2]) < HUGE_VAL)) return 0;
-    }
-    sg->nseg = nseg; sg->ops = ops; sg->idx = idx; sg->w = w;
+    if (!op_fits(n, na) || ops == NULL || ends == NULL || idx == NULL || w == NULL) return 0;
+    for (e = 0; e < (size_t)T * (size_t)P; ++e)
+        if (idx[e] < 0 || idx[e] >= nseg || !(w[e] >= 0.0 && w[e] <= 1.0)) return 0;
+    sg->nseg = nseg; sg->ops = ops; sg->ends = ends; sg->idx = idx; sg->w = w;
     return 1;
 }
 
@@ -789,7 +825,7 @@ size_t stsp_tv_zoh_work_size(int n, int m, int q, int na, int mz)
     const size_t d = (size_t)n + (size_t)m + 1u, r = (size_t)n + 1u;
     return d * d + d * (size_t)q + (size_t)q * d + r * (r + 1u) / 2u
            + stsp_zoh_update_size(n, m, q) + taylor_size(n, m, na, mz, q) + blend_size(n, m)
-           + 3u * TV_MAX_POINTS * (size_t)na * n * mz + ops_size(n, na, mz);
+           + 4u * TV_MAX_POINTS * (size_t)na * n * mz + ops_size(n, na, mz);
 }
 
 /* The T ticks of one chunk of a time-varying stage, backward (as stsp_zoh_stage_ticks): the
@@ -800,8 +836,8 @@ size_t stsp_tv_zoh_work_size(int n, int m, int q, int na, int mz)
 int stsp_tv_zoh_ticks(int n, int m, int q, long T, int P, int na, int mz, const double *coef,
                       double h, const int *act, const double *Ar, const double *G,
                       const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
-                      int nseg, const double *seg_ops, const int *seg_idx,
-                      const double *seg_w, double *V, double *N, double *W,
+                      int nseg, const double *seg_ops, const double *seg_ends,
+                      const int *seg_idx, const double *seg_w, double *V, double *N, double *W,
                       double *mv, double *K, double *k0, double *L, double *work,
                       int *iwork, int noise_path, long *bad_tick)
 {
@@ -815,12 +851,12 @@ int stsp_tv_zoh_ticks(int n, int m, int q, long T, int P, int na, int mz, const 
     if (n < 1 || m < 1 || q < 0 || T < 0 || P < 1 || P > TV_MAX_POINTS || na < 0 ||
         na > n + m || mz < 0 || d > TV_MAX_DIM || ar_cnt < 0 || ar_cnt > n * d ||
         noise_path < TV_NOISE_AUTO || noise_path > TV_NOISE_SEGMENTS ||
-        !segments_ok(n, na, T, P, nseg, seg_ops, seg_idx, seg_w, &sg))
+        !segments_ok(n, na, T, P, nseg, seg_ops, seg_ends, seg_idx, seg_w, &sg))
         return TV_ERR_DIMS;
     Y = work; U = Y + (size_t)d * d; Hl = U + (size_t)d * q; vp = Hl + (size_t)q * d;
     up = vp + (size_t)r * (r + 1) / 2; tw = up + stsp_zoh_update_size(n, m, q);
     gw = blend_at(&bl, tw + taylor_size(n, m, na, mz, q), iwork, n, m, na, mz);
-    ops_at(&ops, gw + 3u * TV_MAX_POINTS * (size_t)na * n * mz, n, na, mz);
+    sg.gpt = ops_at(&ops, gw + 3u * TV_MAX_POINTS * (size_t)na * n * mz, n, na, mz);
 #define RS(a) ((a) < n ? (a) : d - 1)
     for (a = 0, p = 0; a < r; ++a)
         for (b = a; b < r; ++b, ++p) vp[p] = 0.5 * (V[a * r + b] + V[b * r + a]);
@@ -923,7 +959,7 @@ size_t stsp_tv_oracle_work_size(int n, int m, int n_latch, int na, int mz)
 {
     const size_t dw = (size_t)n + (size_t)m + 1u, dy = (size_t)n + (size_t)n_latch + 1u;
     return dw * dy + dw * dw + dw * (size_t)n_latch + taylor_size(n, m, na, mz, n_latch)
-           + blend_size(n, m) + 3u * TV_MAX_POINTS * (size_t)na * n * mz + ops_size(n, na, mz);
+           + blend_size(n, m) + 4u * TV_MAX_POINTS * (size_t)na * n * mz + ops_size(n, na, mz);
 }
 
 /* The T ticks of one chunk of a time-varying stage, forward (as stsp_oracle_stage_ticks, M
@@ -935,8 +971,9 @@ int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, con
                          const double *k0, int P, int na, int mz, const double *coef,
                          double h, const int *act, const double *Ar, const double *G,
                          const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
-                         int nseg, const double *seg_ops, const int *seg_idx,
-                         const double *seg_w, double *M, double *J, double *xm,
+                         int nseg, const double *seg_ops, const double *seg_ends,
+                         const int *seg_idx, const double *seg_w, double *M, double *J,
+                         double *xm,
                          double *xv, double *um, double *uv, double *work, int *iwork,
                          int noise_path)
 {
@@ -951,12 +988,12 @@ int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, con
     if (n < 1 || m < 1 || n_latch < 0 || T < 0 || P < 1 || P > TV_MAX_POINTS || na < 0 ||
         na > n + m || mz < 0 || dw > TV_MAX_DIM || ar_cnt < 0 || ar_cnt > n * dw ||
         noise_path < TV_NOISE_AUTO || noise_path > TV_NOISE_SEGMENTS ||
-        !segments_ok(n, na, T, P, nseg, seg_ops, seg_idx, seg_w, &sg))
+        !segments_ok(n, na, T, P, nseg, seg_ops, seg_ends, seg_idx, seg_w, &sg))
         return TV_ERR_DIMS;
     TM = work; Mw = TM + (size_t)dw * dy; Xv = Mw + (size_t)dw * dw;
     tw = Xv + (size_t)dw * nl;
     gw = blend_at(&bl, tw + taylor_size(n, m, na, mz, nl), iwork, n, m, na, mz);
-    ops_at(&ops, gw + 3u * TV_MAX_POINTS * (size_t)na * n * mz, n, na, mz);
+    sg.gpt = ops_at(&ops, gw + 3u * TV_MAX_POINTS * (size_t)na * n * mz, n, na, mz);
     for (t = 0; t < T; ++t) {
         tv_tick v = tick_of(n, dw, na, mz, P, act, Ar, G, Lb, same, ar_nz, ar_cnt, &sg, t);
         int sub;

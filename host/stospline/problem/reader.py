@@ -273,9 +273,16 @@ class _SampledData:
         return out
 
     def many(self, ts) -> dict:
+        return self._many(ts, True)
+
+    def many_noise_free(self, ts) -> dict:
+        """`many` without G and H (`Stage.samples` with ``noise=False``): not sampled."""
+        return self._many(ts, False)
+
+    def _many(self, ts, noise: bool) -> dict:
         ts = np.asarray(ts, dtype=float)
         out = self.data._fields_many(self.keys, ts)
-        if self.noisy:
+        if self.noisy and noise:
             GHt = self.data._noise_many(self.n, self.m, self.mz, ts)
             out["G"] = GHt[:, :self.n]
             if self.has_H:

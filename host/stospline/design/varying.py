@@ -91,9 +91,10 @@ def _pair_operator(X: np.ndarray, Y: np.ndarray, rows, cols) -> np.ndarray:
     """The packed ``B(X, Y)[(p, q), (a, b)] = sum_k X_p[a, k] Y_q[b, k] + X_q[a, k] Y_p[b, k]``
     (p <= q, a <= b, row by row), X and Y (na, n, mz); ``B(G, G)`` is the C kernel's operator
     F of G (``build_operator``)."""
-    T4 = np.einsum("pak,qbk->pqab", X, Y)
-    T4 = T4 + T4.transpose(1, 0, 2, 3)
-    return T4[rows[0][:, None], rows[1][:, None], cols[0][None, :], cols[1][None, :]]
+    na, n, mz = X.shape
+    gram = (X.reshape(-1, mz) @ Y.reshape(-1, mz).T).reshape(na, n, na, n)   # [p, a, q, b]
+    return (gram[rows[0][:, None], cols[0][None, :], rows[1][:, None], cols[1][None, :]]
+            + gram[rows[1][:, None], cols[0][None, :], rows[0][:, None], cols[1][None, :]])
 
 
 def segment_operators(stage: Stage, times: np.ndarray, T: int) -> Segments | None:

@@ -157,24 +157,34 @@ static void shift_coefficients(int P, const double *coef, int j, int sub, double
  * the entries at once would be na or n times larger: more sub-steps and terms for nothing.) */
 static double noise_bound(const tv_tick *v, int i)
 {
-    const double *G = v->G + (size_t)i * v->na * v->n * v->mz;
-    double out = 0.0;
-    int k, p, a;
-    for (p = 0; p < v->na; ++p) {                      /* max_p sum_k s_pk^2 */
+    enum { KB = 8 };                      /* Brownian columns summed at once (contiguous) */
+    const int n = v->n, na = v->na, mz = v->mz;
+    const double *G = v->G + (size_t)i * na * n * mz;
+    double out = 0.0, acc[KB];
+    int k0, k, p, a, kb;
+    for (p = 0; p < na; ++p) {                         /* max_p sum_k s_pk^2 */
         double row = 0.0;
-        for (k = 0; k < v->mz; ++k) {
-            double s = 0.0;
-            for (a = 0; a < v->n; ++a) s += abs_d(G[((size_t)p * v->n + a) * v->mz + k]);
-            row += s * s;
+        for (k0 = 0; k0 < mz; k0 += KB) {
+            kb = mz - k0 < KB ? mz - k0 : KB;
+            for (k = 0; k < kb; ++k) acc[k] = 0.0;
+            for (a = 0; a < n; ++a) {
+                const double *g = G + ((size_t)p * n + a) * mz + k0;
+                for (k = 0; k < kb; ++k) acc[k] += abs_d(g[k]);
+            }
+            for (k = 0; k < kb; ++k) row += acc[k] * acc[k];
         }
         out = row > out ? row : out;
     }
-    for (a = 0; a < v->n; ++a) {                       /* max_a sum_k c_ak^2 */
+    for (a = 0; a < n; ++a) {                          /* max_a sum_k c_ak^2 */
         double col = 0.0;
-        for (k = 0; k < v->mz; ++k) {
-            double c = 0.0;
-            for (p = 0; p < v->na; ++p) c += abs_d(G[((size_t)p * v->n + a) * v->mz + k]);
-            col += c * c;
+        for (k0 = 0; k0 < mz; k0 += KB) {
+            kb = mz - k0 < KB ? mz - k0 : KB;
+            for (k = 0; k < kb; ++k) acc[k] = 0.0;
+            for (p = 0; p < na; ++p) {
+                const double *g = G + ((size_t)p * n + a) * mz + k0;
+                for (k = 0; k < kb; ++k) acc[k] += abs_d(g[k]);
+            }
+            for (k = 0; k < kb; ++k) col += acc[k] * acc[k];
         }
         out = col > out ? col : out;
     }
@@ -332,19 +342,36 @@ static void build_operator(const tv_tick *v, int points, tv_ops *ops)
 }
 
 /* The operator of each point of the tick from its segment's three (tv_segs), into Ft (the
- * designer, `adjoint`) or F (the oracle): 3 R C per point.  What ops held before is lost. */
+ * designer, `adjoint`) or F (the oracle): 3 R C per point, two points in the same segment in
+ * one pass over its operators.  What ops held before is lost. */
 static void form_operator(const tv_tick *v, int points, const tv_segs *sg, int adjoint,
                           tv_ops *ops)
 {
     const size_t len = op_rows(v->na) * op_cols(v->n);
+    double wt[TV_MAX_POINTS][3];
     size_t e;
     int i;
     for (i = 0; i < points; ++i) {
+        const double w = v->seg_w[i];
+        wt[i][0] = (1.0 - w) * (1.0 - w); wt[i][1] = w * (1.0 - w); wt[i][2] = w * w;
+    }
+    for (i = 0; i < points; ++i) {
         const double *restrict s0 = sg->ops + (size_t)v->seg_idx[i] * 3u * len;
         const double *restrict s1 = s0 + len, *restrict s2 = s1 + len;
-        const double w = v->seg_w[i], w0 = (1.0 - w) * (1.0 - w), w1 = w * (1.0 - w), w2 = w * w;
+        const double a0 = wt[i][0], a1 = wt[i][1], a2 = wt[i][2];
         double *restrict out = (adjoint ? ops->Ft : ops->F) + (size_t)i * len;
-        for (e = 0; e < len; ++e) out[e] = w0 * s0[e] + w1 * s1[e] + w2 * s2[e];
+        if (i + 1 < points && v->seg_idx[i + 1] == v->seg_idx[i]) {
+            const double b0 = wt[i + 1][0], b1 = wt[i + 1][1], b2 = wt[i + 1][2];
+            double *restrict nxt = out + len;
+            for (e = 0; e < len; ++e) {
+                const double x0 = s0[e], x1 = s1[e], x2 = s2[e];
+                out[e] = a0 * x0 + a1 * x1 + a2 * x2;
+                nxt[e] = b0 * x0 + b1 * x1 + b2 * x2;
+            }
+            ++i;
+        } else {
+            for (e = 0; e < len; ++e) out[e] = a0 * s0[e] + a1 * s1[e] + a2 * s2[e];
+        }
     }
     ops->points = 0;                       /* not the operator of any G: build_operator rebuilds */
 }

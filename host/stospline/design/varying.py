@@ -85,6 +85,22 @@ class Segments:
 
 
 OPERATOR_MAX = 1 << 18     # doubles of one packed operator, at most (the C TV_MAX_OPERATOR)
+SEGMENT_DOUBLES = 1 << 21  # doubles of a chunk's segment operators (each layout), at most
+TERMS_GUESS = 8            # noisy series terms per tick, for the cost model (as the C kernel's)
+
+
+def _segments_pay(GH: np.ndarray, R: int, C: int) -> bool:
+    """Whether forming each point's operator from its segment's (``(K + 3) R C`` per point, K
+    series terms) is cheaper than the way the C loops would otherwise apply the diffusion
+    (``noise_lists``: nonzero pairs or Brownian columns), with the nonzero pattern of the
+    segments' ends `GH` (ends, na, n, mz); always when the path is forced to "segments"."""
+    if NOISE_PATH == "segments":
+        return True
+    _, na, n, mz = GH.shape
+    nnz = (GH != 0.0).any(axis=0).sum(axis=(0, 1)).astype(float)    # per Brownian column
+    pairs, dense = float(nnz @ nnz), float(na * n * (n + na) * mz)
+    other = TERMS_GUESS * (pairs if pairs <= dense else 0.75 * dense)
+    return (TERMS_GUESS + 3) * R * C < other
 
 
 def _pair_operator(X: np.ndarray, Y: np.ndarray, rows, cols) -> np.ndarray:
@@ -107,10 +123,11 @@ def segment_operators(stage: Stage, times: np.ndarray, T: int) -> Segments | Non
     (``3 mz R C``), then 3 R C to form a point's, instead of 2 mz R C to build it from G at
     every point of every tick; and G is not sampled at the points (the C loops interpolate
     it). The active multipliers are those nonzero at an end of a segment. None when the noise
-    is not so interpolated, is zero, its operator is too large, or the chunk spans more than
-    T/2 segments (the operators would cost more than they save)."""
+    is not so interpolated, is zero, its operator is too large, the chunk spans more than T/2
+    segments or their operators more than `SEGMENT_DOUBLES`, the diffusion is cheaper
+    applied otherwise (`_segments_pay`: sparse noise), or the path is forced to another."""
     knots = getattr(stage.varying, "noise_knots", None)
-    if knots is None or knots.size < 2:
+    if knots is None or knots.size < 2 or NOISE_PATH not in ("auto", "segments"):
         return None
     seg = np.clip(np.searchsorted(knots, times, side="right") - 1, 0, knots.size - 2)
     used = np.unique(seg)
@@ -123,9 +140,11 @@ def segment_operators(stage: Stage, times: np.ndarray, T: int) -> Segments | Non
     act = np.flatnonzero(GH.any(axis=(0, 2, 3))).astype(np.intc)
     na = act.size
     R, C = na * (na + 1) // 2, n * (n + 1) // 2
-    if na == 0 or R * C > OPERATOR_MAX:
+    if na == 0 or R * C > OPERATOR_MAX or 3 * used.size * R * C > SEGMENT_DOUBLES:
         return None
     GH = GH[:, act]
+    if not _segments_pay(GH, R, C):
+        return None
     rows, cols = np.triu_indices(na), np.triu_indices(n)
     own = [_pair_operator(g, g, rows, cols) for g in GH]
     ops = np.empty((used.size, 3, R, C))
@@ -206,7 +225,7 @@ CACHE_BYTES = 128 << 20
 def cached_samples(stage: Stage, t_first: float, h: float, T: int, nodes: np.ndarray
                    ) -> TickSamples:
     """`tick_samples`, remembered for the next call with the same arguments."""
-    key = (id(stage), float(t_first), float(h), int(T), nodes.tobytes())
+    key = (id(stage), float(t_first), float(h), int(T), nodes.tobytes(), NOISE_PATH)
     with _CACHE_LOCK:
         hit = _CACHE.get(key)
     if hit is not None and hit[0] is stage:

@@ -494,8 +494,10 @@ static void pair_noise(int kind, const tv_tick *v, int i, double w, const double
  *             TV_TERMS_GUESS per sub-step; over the chunk's `ticks` when the diffusion is
  *             the same for all of them).  Only with `ops` (NULL: never).
  *   SEGMENTS  na^2 n^2 / 4, plus 3 na^2 n^2 / 4 to form it (`form_operator`) from the
- *             operators of the tick's segments: only when the caller gave them (`sg`, for
- *             noise interpolated linearly) and with `ops`; forced without them, OPERATOR.
+ *             operators of the tick's segments, whenever the caller gave them (`sg`, for
+ *             noise interpolated linearly, only where they cost less than the pairs or the
+ *             columns: stospline.design.varying._segments_pay) and with `ops`; forced
+ *             without them, OPERATOR.
  * The pairs are taken whenever they cost at most na n (n + na) mz and no segments are given.
  * `adjoint`: the designer's direction (the operator formed is Ft). */
 static void noise_lists(tv_tick *v, int *start, int *np_, int *na_, double *g, tv_ops *ops,
@@ -506,6 +508,13 @@ static void noise_lists(tv_tick *v, int *start, int *np_, int *na_, double *g, t
     const int segs = fits && sg != NULL && v->seg_idx != NULL;
     long pairs = 0, dense = (long)na * n * (n + na) * mz;
     int i, k, p, a, e = 0;
+    v->nz_start = start; v->nz_p = np_; v->nz_a = na_; v->nz_g = g;
+    v->ops = ops;
+    if (force == TV_NOISE_AUTO && segs) {      /* given only where they pay (the caller's model) */
+        v->path = TV_NOISE_SEGMENTS;
+        form_operator(v, points, sg, adjoint, ops);
+        return;
+    }
     /* The nonzeros of each Brownian column (in start, as counts), for the cost of the pairs;
      * their lists below only if the pairs are taken. */
     for (i = 0; i < points * mz; ++i) start[i] = 0;
@@ -516,8 +525,6 @@ static void noise_lists(tv_tick *v, int *start, int *np_, int *na_, double *g, t
             for (k = 0; k < mz; ++k) cnt[k] += Gi[(size_t)p * mz + k] != 0.0;
     }
     for (i = 0; i < points * mz; ++i) pairs += (long)start[i] * start[i];
-    v->nz_start = start; v->nz_p = np_; v->nz_a = na_; v->nz_g = g;
-    v->ops = ops;
     v->path = force != TV_NOISE_AUTO ? force
               : pairs <= dense * points ? TV_NOISE_PAIRS : TV_NOISE_COLUMNS;
     if (v->path == TV_NOISE_SEGMENTS && !segs) v->path = TV_NOISE_OPERATOR;
@@ -533,11 +540,8 @@ static void noise_lists(tv_tick *v, int *start, int *np_, int *na_, double *g, t
         else if (v->g_const) build /= (double)ticks;     /* built once for the chunk */
         best = v->path == TV_NOISE_PAIRS ? terms * (double)pairs
                : terms * 0.75 * (double)dense * points;
-        if (v->path == TV_NOISE_COLUMNS && terms * op * points + build < best) {
+        if (v->path == TV_NOISE_COLUMNS && terms * op * points + build < best)
             v->path = TV_NOISE_OPERATOR;
-            best = terms * op * points + build;
-        }
-        if (segs && (terms + 3.0) * op * points < best) v->path = TV_NOISE_SEGMENTS;
     }
     if (v->path == TV_NOISE_PAIRS) {
         for (i = 0; i < points; ++i)

@@ -257,6 +257,15 @@ static int op_fits(int n, int na) { return op_rows(na) * op_cols(n) <= TV_MAX_OP
 /* point_noise from the packed operator of point i, O(na^2 n^2 / 4) whatever mz: ADJOINT
  * out[p,q] = sum_{a<=b} F[(p,q),(a,b)] X~[a,b], FORWARD out[a,b] = sum_{p<=q} F[(p,q),(a,b)]
  * X~[act p, act q], X~ the upper triangle with its diagonal halved (F counts it twice). */
+#if defined(__GNUC__) && defined(__x86_64__) && defined(__GLIBC__) && !defined(__clang__)
+/* Also compiled for AVX2, picked at load time where the CPU has it: element-wise loops only
+ * and no FMA (GCC's avx2 target does not enable it), so both give the same numbers. */
+#define TV_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define TV_CLONES
+#endif
+
+TV_CLONES
 static void operator_noise(int kind, const tv_tick *v, int i, const double *X, double *out,
                            double *tmp)
 {
@@ -344,6 +353,7 @@ static void build_operator(const tv_tick *v, int points, tv_ops *ops)
 /* The operator of each point of the tick from its segment's three (tv_segs), into Ft (the
  * designer, `adjoint`) or F (the oracle): 3 R C per point, two points in the same segment in
  * one pass over its operators.  What ops held before is lost. */
+TV_CLONES
 static void form_operator(const tv_tick *v, int points, const tv_segs *sg, int adjoint,
                           tv_ops *ops)
 {

@@ -874,6 +874,7 @@ size_t stsp_tv_zoh_work_size(int n, int m, int q, int na, int mz)
  * MEAN_ADJ series started at [N; 0], both in the backward variable 1 - s (coef); then the
  * Riccati step.  Data of tick t at Ar + t*P*n*d, G + t*P*na*n*mz, Lb + t*P*d*d, or, for a field
  * with same[f] set, one point for every tick. */
+TV_CLONES
 int stsp_tv_zoh_ticks(int n, int m, int q, long T, int P, int na, int mz, const double *coef,
                       double h, const int *act, const double *Ar, const double *G,
                       const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
@@ -1008,6 +1009,7 @@ size_t stsp_tv_oracle_work_size(int n, int m, int n_latch, int na, int mz)
  * E x+ v' from the MEAN series on E w v'.  xm, xv (T x n): mean and variance of x after each
  * tick; um, uv (T x m): of the command over it (all four NULL: not recorded).  Data as in
  * stsp_tv_zoh_ticks, coef in the forward variable s. */
+TV_CLONES
 int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, const double *L,
                          const double *k0, int P, int na, int mz, const double *coef,
                          double h, const int *act, const double *Ar, const double *G,

@@ -155,40 +155,36 @@ static void shift_coefficients(int P, const double *coef, int j, int sub, double
  * |(sum_pq X[p,q] G_p G_q')[a,b]| <= |X|max sum_k c_ak c_bk with c_ak = sum_p |G_p[a,k]|; by
  * Cauchy-Schwarz both are at most max(max_p sum_k s_pk^2, max_a sum_k c_ak^2).  (A bound of all
  * the entries at once would be na or n times larger: more sub-steps and terms for nothing.) */
-static double noise_bound(const tv_tick *v, int i)
+/* max over o < outer of sum_k (sum_{j < inner} |G[o so + j si + k]|)^2, the columns k summed
+ * KB at a time over contiguous entries. */
+static double square_sums(const double *G, int outer, int inner, size_t so, size_t si, int mz)
 {
-    enum { KB = 8 };                      /* Brownian columns summed at once (contiguous) */
-    const int n = v->n, na = v->na, mz = v->mz;
-    const double *G = v->G + (size_t)i * na * n * mz;
+    enum { KB = 8 };
     double out = 0.0, acc[KB];
-    int k0, k, p, a, kb;
-    for (p = 0; p < na; ++p) {                         /* max_p sum_k s_pk^2 */
-        double row = 0.0;
+    int o, j, k, k0, kb;
+    for (o = 0; o < outer; ++o) {
+        double sum = 0.0;
         for (k0 = 0; k0 < mz; k0 += KB) {
             kb = mz - k0 < KB ? mz - k0 : KB;
             for (k = 0; k < kb; ++k) acc[k] = 0.0;
-            for (a = 0; a < n; ++a) {
-                const double *g = G + ((size_t)p * n + a) * mz + k0;
+            for (j = 0; j < inner; ++j) {
+                const double *g = G + (size_t)o * so + (size_t)j * si + (size_t)k0;
                 for (k = 0; k < kb; ++k) acc[k] += abs_d(g[k]);
             }
-            for (k = 0; k < kb; ++k) row += acc[k] * acc[k];
+            for (k = 0; k < kb; ++k) sum += acc[k] * acc[k];
         }
-        out = row > out ? row : out;
-    }
-    for (a = 0; a < n; ++a) {                          /* max_a sum_k c_ak^2 */
-        double col = 0.0;
-        for (k0 = 0; k0 < mz; k0 += KB) {
-            kb = mz - k0 < KB ? mz - k0 : KB;
-            for (k = 0; k < kb; ++k) acc[k] = 0.0;
-            for (p = 0; p < na; ++p) {
-                const double *g = G + ((size_t)p * n + a) * mz + k0;
-                for (k = 0; k < kb; ++k) acc[k] += abs_d(g[k]);
-            }
-            for (k = 0; k < kb; ++k) col += acc[k] * acc[k];
-        }
-        out = col > out ? col : out;
+        out = sum > out ? sum : out;
     }
     return out;
+}
+
+static double noise_bound(const tv_tick *v, int i)
+{
+    const int n = v->n, na = v->na, mz = v->mz;
+    const double *G = v->G + (size_t)i * na * n * mz;                /* G[(p n + a) mz + k] */
+    const double rows = square_sums(G, na, n, (size_t)n * mz, (size_t)mz, mz);  /* s_pk */
+    const double cols = square_sums(G, n, na, (size_t)mz, (size_t)n * mz, mz);  /* c_ak */
+    return rows > cols ? rows : cols;
 }
 
 /* Data equal at every point are taken as they are: the weights of the constant coefficient sum

@@ -253,8 +253,8 @@ static int op_fits(int n, int na) { return op_rows(na) * op_cols(n) <= TV_MAX_OP
 /* point_noise from the packed operator of point i, O(na^2 n^2 / 4) whatever mz: ADJOINT
  * out[p,q] = sum_{a<=b} F[(p,q),(a,b)] X~[a,b], FORWARD out[a,b] = sum_{p<=q} F[(p,q),(a,b)]
  * X~[act p, act q], X~ the upper triangle with its diagonal halved (F counts it twice). */
-#if defined(__GNUC__) && defined(__x86_64__) && defined(__GLIBC__) && !defined(__clang__) \
-    && !defined(STSP_TV_NO_CLONES)
+#if defined(__GNUC__) && __GNUC__ >= 6 && defined(__x86_64__) && defined(__GLIBC__) \
+    && !defined(__clang__) && !defined(STSP_TV_NO_CLONES)
 /* Also compiled for AVX2, picked at load time where the CPU has it: element-wise loops only
  * and no FMA (GCC's avx2 target does not enable it), so both give the same numbers
  * (tools/bench/varying_clones.py compares them; STSP_TV_NO_CLONES builds the default only). */

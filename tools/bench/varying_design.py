@@ -185,6 +185,7 @@ def riccati_baseline(problem) -> np.ndarray:
 def cold():
     """Forget the samples and tick maps cached by earlier runs, as a new process would."""
     varying._CACHE.clear()
+    varying._PAYS.clear()
     oracle._MAPS.clear()
 
 

@@ -113,6 +113,34 @@ def _pair_operator(X: np.ndarray, Y: np.ndarray, rows, cols) -> np.ndarray:
             + gram[rows[1][:, None], cols[0][None, :], rows[0][:, None], cols[1][None, :]])
 
 
+# Whether segments pay for a stage's noise at all (`_stage_pays`), per stage object (the entry
+# holds the stage, so its id cannot be reused while kept) and path; the oldest dropped.
+_PAYS: dict = {}
+PAYS_KEPT = 64
+
+
+def _stage_pays(stage: Stage, knots: np.ndarray) -> bool:
+    """`_segments_pay` on the nonzero pattern of the noise at every knot of `stage` (an upper
+    bound of any chunk's): sparse noise is told once per stage, without sampling its knots
+    chunk by chunk."""
+    key = id(stage)
+    with _CACHE_LOCK:
+        hit = _PAYS.get(key)
+    if hit is not None and hit[0] is stage and hit[1] == NOISE_PATH:
+        return hit[2]
+    s = stage.samples(knots)
+    GH = s["G"] if s["H"] is None else np.concatenate([s["G"], s["H"]], axis=1)
+    GH = GH[:, GH.any(axis=(0, 2, 3))]
+    na, n = GH.shape[1], stage.B.shape[0]
+    R, C = na * (na + 1) // 2, n * (n + 1) // 2
+    pays = 0 < na and R * C <= OPERATOR_MAX and _segments_pay(GH, R, C)
+    with _CACHE_LOCK:
+        while len(_PAYS) >= PAYS_KEPT:
+            _PAYS.pop(next(iter(_PAYS)))
+        _PAYS[key] = (stage, NOISE_PATH, pays)
+    return pays
+
+
 def segment_operators(stage: Stage, times: np.ndarray, T: int) -> Segments | None:
     """The noise at `times` (T ticks' points) by segments, when it is interpolated linearly
     between sample times (``stage.varying.noise_knots``).
@@ -127,7 +155,8 @@ def segment_operators(stage: Stage, times: np.ndarray, T: int) -> Segments | Non
     segments or their operators more than `SEGMENT_DOUBLES`, the diffusion is cheaper
     applied otherwise (`_segments_pay`: sparse noise), or the path is forced to another."""
     knots = getattr(stage.varying, "noise_knots", None)
-    if knots is None or knots.size < 2 or NOISE_PATH not in ("auto", "segments"):
+    if (knots is None or knots.size < 2 or NOISE_PATH not in ("auto", "segments")
+            or not _stage_pays(stage, knots)):
         return None
     seg = np.clip(np.searchsorted(knots, times, side="right") - 1, 0, knots.size - 2)
     used = np.unique(seg)

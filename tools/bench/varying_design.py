@@ -4,8 +4,9 @@ Usage: .venv/bin/python tools/bench/varying_design.py [--repeat 3] [--accuracy] 
        [--dense-only]
 
 Every time is the median of `--repeat` runs after one warm-up run (which also builds the
-cached C kernels), measured with ``time.perf_counter`` on one core: BLAS threads are pinned to
-1 before numpy is imported. Figures are in docs/evidence/performance.md.
+cached C kernels), measured with ``time.perf_counter``, the dense case also in CPU time
+(``time.process_time``, every thread); BLAS threads are pinned to 1 before numpy is imported.
+Figures are in docs/evidence/performance.md.
 
 Problem
 -------
@@ -184,19 +185,27 @@ def riccati_baseline(problem) -> np.ndarray:
 def cold():
     """Forget the samples and tick maps cached by earlier runs, as a new process would."""
     varying._CACHE.clear()
+    varying._PAYS.clear()
     oracle._MAPS.clear()
 
 
-def median_time(fn, repeat: int) -> float:
+def median_times(fn, repeat: int) -> tuple[float, float]:
+    """Median wall time and median CPU time (every thread of the process) of `repeat` cold
+    runs after a warm-up."""
     cold()
     fn()
-    times = []
+    walls, cpus = [], []
     for _ in range(repeat):
         cold()
-        t = time.perf_counter()
+        c, t = time.process_time(), time.perf_counter()
         fn()
-        times.append(time.perf_counter() - t)
-    return float(np.median(times))
+        walls.append(time.perf_counter() - t)
+        cpus.append(time.process_time() - c)
+    return float(np.median(walls)), float(np.median(cpus))
+
+
+def median_time(fn, repeat: int) -> float:
+    return median_times(fn, repeat)[0]
 
 
 def speed(repeat: int) -> None:
@@ -217,19 +226,30 @@ def speed(repeat: int) -> None:
 
 
 def dense(repeat: int) -> None:
-    """The dense case: the whole design against the baseline, timed in the same run."""
+    """The dense case: the whole design against the baseline, timed in the same run, in wall
+    time and in CPU time (the whole runs its two oracle passes in two threads: on a loaded
+    machine its wall time depends on the other jobs more than the baseline's does). The whole
+    and the baseline are timed in turn, run by run, so that a change of load falls on both;
+    the ratios are the medians of the runs' ratios."""
     print("\n| dense problem (n 12, m 4, 16 noise terms, mz 8, 3 441 ticks at 1 kHz) | design "
-          "| whole (`design_problem`) | solve_ivp baseline | baseline / whole |")
-    print("|---|---|---|---|---|")
+          "| whole (`design_problem`) | solve_ivp baseline | baseline / whole "
+          "| the same in CPU time |")
+    print("|---|---|---|---|---|---|")
     for varying_noise in (False, True):
         p = dense_chain(varying_noise)
-        t_design = median_time(lambda: design_zoh(p), repeat)
-        t_whole = median_time(lambda: design_problem(p), repeat)
-        t_base = median_time(lambda: riccati_baseline(p), repeat)
+        t_design, c_design = median_times(lambda: design_zoh(p), repeat)
+        pairs = [(median_times(lambda: design_problem(p), 1),
+                  median_times(lambda: riccati_baseline(p), 1)) for _ in range(repeat)]
+        (t_whole, c_whole), (t_base, c_base) = (
+            tuple(float(np.median([r[i][j] for r in pairs])) for j in (0, 1)) for i in (0, 1))
+        wall = float(np.median([b[0] / w[0] for w, b in pairs]))
+        cpu = float(np.median([b[1] / w[1] for w, b in pairs]))
         ticks = int(round(DENSE_HORIZON * 1000))
         print(f"| noise {'varying' if varying_noise else 'constant'} | {t_design * 1e3:.0f} ms "
-              f"({t_design / ticks * 1e6:.0f} us/tick) | {t_whole * 1e3:.0f} ms "
-              f"| {t_base * 1e3:.0f} ms | **{t_base / t_whole:.2f}x** |", flush=True)
+              f"({t_design / ticks * 1e6:.0f} us/tick; CPU {c_design * 1e3:.0f} ms) "
+              f"| {t_whole * 1e3:.0f} ms (CPU {c_whole * 1e3:.0f} ms) "
+              f"| {t_base * 1e3:.0f} ms (CPU {c_base * 1e3:.0f} ms) "
+              f"| **{wall:.2f}x** | **{cpu:.2f}x** |", flush=True)
 
 
 def end_to_end(repeat: int) -> None:

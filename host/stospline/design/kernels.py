@@ -30,7 +30,8 @@ size_t stsp_tv_iwork_size(int n, int m, int na, int mz);
 int stsp_tv_zoh_ticks(int n, int m, int q, long T, int P, int na, int mz, const double *coef,
                       double h, const int *act, const double *Ar, const double *G,
                       const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
-                      double *V, double *N, double *W,
+                      int nseg, const double *seg_ops, const double *seg_ends,
+                      const int *seg_idx, const double *seg_w, double *V, double *N, double *W,
                       double *mv, double *K, double *k0, double *L, double *work,
                       int *iwork, int noise_path, long *bad_tick);
 size_t stsp_tv_oracle_work_size(int n, int m, int n_latch, int na, int mz);
@@ -38,7 +39,9 @@ int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, con
                          const double *k0, int P, int na, int mz, const double *coef,
                          double h, const int *act, const double *Ar, const double *G,
                          const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
-                         double *M, double *J, double *xm,
+                         int nseg, const double *seg_ops, const double *seg_ends,
+                         const int *seg_idx, const double *seg_w, double *M, double *J,
+                         double *xm,
                          double *xv, double *um, double *uv, double *work, int *iwork,
                          int noise_path);
 size_t stsp_tv_euler_work_size(int n, int m, int n_latch, int na, int mz);

@@ -18,7 +18,7 @@ import numpy as np
 from stospline.expm import NonFiniteMatrix
 from stospline.problem.model import Stage
 
-__all__ = ["POINTS", "TickSamples", "tick_samples", "zoh_ticks",
+__all__ = ["POINTS", "TickSamples", "Segments", "segment_operators", "tick_samples", "zoh_ticks",
            "oracle_ticks", "mean_maps"]
 
 POINTS = 2            # Gauss points per tick (order 4), designer and oracle alike
@@ -26,10 +26,12 @@ MEAN_TERMS = 60        # `mean_maps`: Taylor terms at most (as the C kernel's TV
 CHUNK = 512            # ticks sampled and handed to C at once (bounds the memory)
 
 # How the C loops apply the diffusion (``varying_kernel.c``, noise_lists): "auto" picks the
-# cheapest per tick; "pairs" (nonzero pairs), "columns" (Brownian column by column) and
-# "operator" (the packed na(na+1)/2 x n(n+1)/2 matrix of the diffusion operator) force one,
-# for tests and benchmarks. All give the same numbers to rounding.
-NOISE_PATHS = {"auto": 0, "pairs": 1, "columns": 2, "operator": 3}
+# cheapest per tick; "pairs" (nonzero pairs), "columns" (Brownian column by column),
+# "operator" (the packed na(na+1)/2 x n(n+1)/2 matrix of the diffusion operator, built from G
+# at each point) and "segments" (that operator formed from the three of the point's segment,
+# `segment_operators`; "operator" where there are none) force one, for tests and benchmarks.
+# All give the same numbers to rounding.
+NOISE_PATHS = {"auto": 0, "pairs": 1, "columns": 2, "operator": 3, "segments": 4}
 NOISE_PATH = "auto"
 
 
@@ -59,6 +61,131 @@ class TickSamples:
     act: np.ndarray
     same: np.ndarray
     ar_nz: np.ndarray      # positions in (n, d) where Ar is nonzero at some tick of the chunk
+    segs: "Segments | None" = None   # the diffusion's operators per segment, if affine
+
+
+@dataclass(frozen=True)
+class Segments:
+    """The noise of a chunk by segments between the noise's sample times (`segment_operators`):
+    ``act`` the active multipliers, ``ends`` (S, 2, na, n, mz) the diffusion at the two ends
+    of each segment the chunk's points fall in, ``ops`` (S, 3, R, C) and ``ops_t`` (S, 3, C,
+    R) their three packed operators (``R = na(na+1)/2``, ``C = n(n+1)/2``; the oracle's
+    layout and the designer's), ``idx`` (T P) the segment of each point and ``w`` (T P) its
+    place in it, in [0, 1]."""
+    act: np.ndarray
+    ends: np.ndarray
+    ops: np.ndarray
+    ops_t: np.ndarray
+    idx: np.ndarray
+    w: np.ndarray
+
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in (self.ends, self.ops, self.ops_t, self.idx, self.w))
+
+
+OPERATOR_MAX = 1 << 18     # doubles of one packed operator, at most (the C TV_MAX_OPERATOR)
+SEGMENT_DOUBLES = 1 << 21  # doubles of a chunk's segment operators (each layout), at most
+TERMS_GUESS = 8            # noisy series terms per tick, for the cost model (as the C kernel's)
+
+
+def _segments_pay(GH: np.ndarray, R: int, C: int) -> bool:
+    """Whether forming each point's operator from its segment's (``(K + 3) R C`` per point, K
+    series terms) is cheaper than the way the C loops would otherwise apply the diffusion
+    (``noise_lists``: nonzero pairs or Brownian columns), with the nonzero pattern of the
+    segments' ends `GH` (ends, na, n, mz); always when the path is forced to "segments"."""
+    if NOISE_PATH == "segments":
+        return True
+    _, na, n, mz = GH.shape
+    nnz = (GH != 0.0).any(axis=0).sum(axis=(0, 1)).astype(float)    # per Brownian column
+    pairs, dense = float(nnz @ nnz), float(na * n * (n + na) * mz)
+    other = TERMS_GUESS * (pairs if pairs <= dense else 0.75 * dense)
+    return (TERMS_GUESS + 3) * R * C < other
+
+
+def _pair_operator(X: np.ndarray, Y: np.ndarray, rows, cols) -> np.ndarray:
+    """The packed ``B(X, Y)[(p, q), (a, b)] = sum_k X_p[a, k] Y_q[b, k] + X_q[a, k] Y_p[b, k]``
+    (p <= q, a <= b, row by row), X and Y (na, n, mz); ``B(G, G)`` is the C kernel's operator
+    F of G (``build_operator``)."""
+    na, n, mz = X.shape
+    gram = (X.reshape(-1, mz) @ Y.reshape(-1, mz).T).reshape(na, n, na, n)   # [p, a, q, b]
+    return (gram[rows[0][:, None], cols[0][None, :], rows[1][:, None], cols[1][None, :]]
+            + gram[rows[1][:, None], cols[0][None, :], rows[0][:, None], cols[1][None, :]])
+
+
+# Whether segments pay for a stage's noise at all (`_stage_pays`), per stage object (the entry
+# holds the stage, so its id cannot be reused while kept) and path; the oldest dropped.
+_PAYS: dict = {}
+PAYS_KEPT = 64
+
+
+def _stage_pays(stage: Stage, knots: np.ndarray) -> bool:
+    """`_segments_pay` on the nonzero pattern of the noise at every knot of `stage` (an upper
+    bound of any chunk's): sparse noise is told once per stage, without sampling its knots
+    chunk by chunk."""
+    key = id(stage)
+    with _CACHE_LOCK:
+        hit = _PAYS.get(key)
+    if hit is not None and hit[0] is stage and hit[1] == NOISE_PATH:
+        return hit[2]
+    s = stage.samples(knots)
+    GH = s["G"] if s["H"] is None else np.concatenate([s["G"], s["H"]], axis=1)
+    GH = GH[:, GH.any(axis=(0, 2, 3))]
+    na, n = GH.shape[1], stage.B.shape[0]
+    R, C = na * (na + 1) // 2, n * (n + 1) // 2
+    pays = 0 < na and R * C <= OPERATOR_MAX and _segments_pay(GH, R, C)
+    with _CACHE_LOCK:
+        while len(_PAYS) >= PAYS_KEPT:
+            _PAYS.pop(next(iter(_PAYS)))
+        _PAYS[key] = (stage, NOISE_PATH, pays)
+    return pays
+
+
+def segment_operators(stage: Stage, times: np.ndarray, T: int) -> Segments | None:
+    """The noise at `times` (T ticks' points) by segments, when it is interpolated linearly
+    between sample times (``stage.varying.noise_knots``).
+
+    On a segment between sample times with end values G_L, G_R, ``G(w) = (1 - w) G_L + w
+    G_R`` and, the operator F being quadratic in G, ``F(w) = (1 - w)^2 F(G_L) + w (1 - w)
+    (B(G_L, G_R) + B(G_R, G_L)) + w^2 F(G_R)``: three operators per segment, built once
+    (``3 mz R C``), then 3 R C to form a point's, instead of 2 mz R C to build it from G at
+    every point of every tick; and G is not sampled at the points (the C loops interpolate
+    it). The active multipliers are those nonzero at an end of a segment. None when the noise
+    is not so interpolated, is zero, its operator is too large, the chunk spans more than T/2
+    segments or their operators more than `SEGMENT_DOUBLES`, the diffusion is cheaper
+    applied otherwise (`_segments_pay`: sparse noise), or the path is forced to another."""
+    knots = getattr(stage.varying, "noise_knots", None)
+    if (knots is None or knots.size < 2 or NOISE_PATH not in ("auto", "segments")
+            or not _stage_pays(stage, knots)):
+        return None
+    seg = np.clip(np.searchsorted(knots, times, side="right") - 1, 0, knots.size - 2)
+    used = np.unique(seg)
+    if 2 * used.size > T:
+        return None
+    n = stage.B.shape[0]
+    at = np.union1d(used, used + 1)
+    s = stage.samples(knots[at])
+    GH = s["G"] if s["H"] is None else np.concatenate([s["G"], s["H"]], axis=1)
+    act = np.flatnonzero(GH.any(axis=(0, 2, 3))).astype(np.intc)
+    na = act.size
+    R, C = na * (na + 1) // 2, n * (n + 1) // 2
+    if na == 0 or R * C > OPERATOR_MAX or 3 * used.size * R * C > SEGMENT_DOUBLES:
+        return None
+    GH = GH[:, act]
+    if not _segments_pay(GH, R, C):
+        return None
+    rows, cols = np.triu_indices(na), np.triu_indices(n)
+    own = [_pair_operator(g, g, rows, cols) for g in GH]
+    ops = np.empty((used.size, 3, R, C))
+    left = np.searchsorted(at, used)
+    for j, e in enumerate(left):
+        L, Rg = GH[e], GH[e + 1]
+        ops[j, 0], ops[j, 2] = own[e], own[e + 1]
+        ops[j, 1] = _pair_operator(L, Rg, rows, cols) + _pair_operator(Rg, L, rows, cols)
+    ends = np.ascontiguousarray(np.stack([GH[left], GH[left + 1]], axis=1))
+    w = np.clip((times - knots[seg]) / (knots[seg + 1] - knots[seg]), 0.0, 1.0)
+    return Segments(act, ends, ops, np.ascontiguousarray(ops.swapaxes(2, 3)),
+                    np.searchsorted(used, seg).astype(np.intc), np.ascontiguousarray(w))
 
 
 def _constant(a) -> bool:
@@ -66,15 +193,17 @@ def _constant(a) -> bool:
     return a is None or a.strides[0] == 0
 
 
-def tick_samples(stage: Stage, t_first: float, h: float, T: int, nodes: np.ndarray
-                 ) -> TickSamples:
-    """Sample `stage` at the `nodes` (fractions of a tick) of ticks ``t_first + j h``."""
+def tick_samples(stage: Stage, t_first: float, h: float, T: int, nodes: np.ndarray,
+                 segments: bool = True) -> TickSamples:
+    """Sample `stage` at the `nodes` (fractions of a tick) of ticks ``t_first + j h``; with
+    `segments`, the diffusion's `segment_operators` too when the noise varies."""
     n, m = stage.B.shape
     d = n + m + 1
     P = nodes.size
     times = (t_first + h * (np.arange(T)[:, None] + nodes[None, :])).ravel()
-    s = stage.samples(times)
-    same = [all(_constant(s[k]) for k in keys)
+    segs = segment_operators(stage, times, T) if segments else None
+    s = stage.samples(times, noise=segs is None)
+    same = [all(_constant(s[k]) for k in keys) and not (segs is not None and keys[0] == "G")
             for keys in (("A", "B", "f"), ("G", "H"), ("Q", "S", "R", "q", "r", "rho"))]
     pick = [slice(0, 1) if c else slice(None) for c in same]
     first = {k: (None if v is None else v[pick[i]])
@@ -86,12 +215,16 @@ def tick_samples(stage: Stage, t_first: float, h: float, T: int, nodes: np.ndarr
              np.zeros((TA, n, 1)) if first["f"] is None
              else np.broadcast_to(first["f"], (TA, n))[:, :, None]]
     Ar = np.concatenate(drift, axis=2)
-    # The diffusion of the multipliers that are nonzero somewhere in the chunk, gathered
-    # from G (state multipliers) and H (input multipliers) without stacking them first.
-    parts = [(first["G"], 0)] + ([(first["H"], n)] if first["H"] is not None else [])
-    live = [(np.flatnonzero(g.any(axis=(0, 2, 3))), g, o) for g, o in parts]
-    act = np.concatenate([rows + o for rows, _, o in live]).astype(np.intc)
-    G = np.concatenate([g[:, rows] for rows, g, _ in live], axis=1)
+    if segs is None:
+        # The diffusion of the multipliers that are nonzero somewhere in the chunk, gathered
+        # from G (state multipliers) and H (input multipliers) without stacking them first.
+        parts = [(first["G"], 0)] + ([(first["H"], n)] if first["H"] is not None else [])
+        live = [(np.flatnonzero(g.any(axis=(0, 2, 3))), g, o) for g, o in parts]
+        act = np.concatenate([rows + o for rows, _, o in live]).astype(np.intc)
+        G = np.concatenate([g[:, rows] for rows, g, _ in live], axis=1)
+    else:                   # not sampled: the C loops interpolate it from the segments' ends
+        act = segs.act
+        G = np.empty((0, 0) + segs.ends.shape[2:])
     TL = first["Q"].shape[0]
     Lb = np.zeros((TL, d, d))
     Lb[:, :n, :n], Lb[:, n:n + m, n:n + m] = first["Q"], first["R"]
@@ -106,8 +239,8 @@ def tick_samples(stage: Stage, t_first: float, h: float, T: int, nodes: np.ndarr
         return np.ascontiguousarray(a.reshape(shape + a.shape[1:]))
 
     ar_nz = np.flatnonzero(np.any(Ar != 0.0, axis=0)).astype(np.intc)
-    return TickSamples(lay(Ar, same[0]), lay(G, same[1]), lay(Lb, same[2]), act,
-                       np.array(same, dtype=np.intc), ar_nz)
+    return TickSamples(lay(Ar, same[0]), G if segs is not None else lay(G, same[1]),
+                       lay(Lb, same[2]), act, np.array(same, dtype=np.intc), ar_nz, segs)
 
 
 # Samples of recent chunks: the oracle evaluates the design's own law and its float32 table
@@ -121,13 +254,14 @@ CACHE_BYTES = 128 << 20
 def cached_samples(stage: Stage, t_first: float, h: float, T: int, nodes: np.ndarray
                    ) -> TickSamples:
     """`tick_samples`, remembered for the next call with the same arguments."""
-    key = (id(stage), float(t_first), float(h), int(T), nodes.tobytes())
+    key = (id(stage), float(t_first), float(h), int(T), nodes.tobytes(), NOISE_PATH)
     with _CACHE_LOCK:
         hit = _CACHE.get(key)
     if hit is not None and hit[0] is stage:
         return hit[1]
     smp = tick_samples(stage, t_first, h, T, nodes)
-    size = smp.Ar.nbytes + smp.G.nbytes + smp.Lb.nbytes
+    size = smp.Ar.nbytes + smp.G.nbytes + smp.Lb.nbytes \
+        + (0 if smp.segs is None else smp.segs.nbytes)
     with _CACHE_LOCK:
         while _CACHE and sum(v[2] for v in _CACHE.values()) + size > CACHE_BYTES:
             _CACHE.pop(next(iter(_CACHE)))              # the oldest entry
@@ -163,10 +297,15 @@ def _noise_path() -> int:
     return NOISE_PATHS[NOISE_PATH]
 
 
-def _data_args(ffi, smp: TickSamples):
+def _data_args(ffi, smp: TickSamples, adjoint: bool):
+    """The kernels' data arguments; `adjoint`: the designer's (the operators transposed)."""
+    sg = smp.segs
+    segs = (0, ffi.NULL, ffi.NULL, ffi.NULL, ffi.NULL) if sg is None else (
+        sg.ops.shape[0], _ptr(ffi, sg.ops_t if adjoint else sg.ops), _ptr(ffi, sg.ends),
+        _ptr(ffi, sg.idx, "int[]"), _ptr(ffi, sg.w))
     return (smp.act.size, smp.G.shape[-1]), (
         _ptr(ffi, smp.act, "int[]"), _ptr(ffi, smp.Ar), _ptr(ffi, smp.G), _ptr(ffi, smp.Lb),
-        _ptr(ffi, smp.same, "int[]"), _ptr(ffi, smp.ar_nz, "int[]"), smp.ar_nz.size)
+        _ptr(ffi, smp.same, "int[]"), _ptr(ffi, smp.ar_nz, "int[]"), smp.ar_nz.size, *segs)
 
 
 def zoh_ticks(stage: Stage, t_start: float, h: float, V, N, W, mv, T: int, m: int):
@@ -183,7 +322,7 @@ def zoh_ticks(stage: Stage, t_start: float, h: float, V, N, W, mv, T: int, m: in
     bad = ffi.new("long *", -1)
     for a, b in reversed(_chunks(T)):
         smp = cached_samples(stage, t_start + a * h, h, b - a, nodes)
-        (na, mz), data = _data_args(ffi, smp)
+        (na, mz), data = _data_args(ffi, smp, True)
         work = np.empty(int(lib.stsp_tv_zoh_work_size(n, m, q, na, mz)))
         iwork = np.empty(int(lib.stsp_tv_iwork_size(n, m, na, mz)), dtype=np.intc)
         status = lib.stsp_tv_zoh_ticks(
@@ -213,7 +352,7 @@ def oracle_ticks(stage: Stage, t_start: float, h: float, K, L, k0, M, J: float,
     rec = [np.empty((T, n)), np.empty((T, n)), np.empty((T, m)), np.empty((T, m))]
     for a, b in _chunks(T):
         smp = cached_samples(stage, t_start + a * h, h, b - a, nodes)
-        (na, mz), data = _data_args(ffi, smp)
+        (na, mz), data = _data_args(ffi, smp, False)
         work = np.empty(int(lib.stsp_tv_oracle_work_size(n, m, n_latch, na, mz)))
         iwork = np.empty(int(lib.stsp_tv_iwork_size(n, m, na, mz)), dtype=np.intc)
         out = [_ptr(ffi, x[a:b]) if record else ffi.NULL for x in rec]
@@ -244,7 +383,7 @@ def euler_oracle_ticks(stage: Stage, t_start: float, h: float, substeps: int, K,
     rec = [np.empty((T, n)), np.empty((T, n)), np.empty((T, m)), np.empty((T, m))]
     d = n + m + 1
     for a, b in _chunks(T):
-        smp = tick_samples(stage, t_start + a * h, h, b - a, mid)
+        smp = tick_samples(stage, t_start + a * h, h, b - a, mid, segments=False)
         Ahat = np.zeros(smp.Ar.shape[:2] + (d, d))
         Ahat[..., :n, :] = smp.Ar
         Ad = expm_many(Ahat.reshape(-1, d, d) * dt)

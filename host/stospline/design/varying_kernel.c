@@ -35,7 +35,8 @@ enum { TV_FORWARD = 0, TV_ADJOINT = 1, TV_MEAN = 2, TV_MEAN_ADJ = 3 };
 enum { TV_MAX_POINTS = 3, TV_MAX_TERMS = 60, TV_MAX_SUB = 1 << 16, TV_MAX_DIM = 256 };
 enum { TV_OK = 0, TV_ERR_NOT_PD = -1, TV_ERR_DIMS = -2, TV_ERR_SERIES = -3 };
 /* How the diffusion term is applied (see noise_lists); TV_NOISE_AUTO picks the cheapest. */
-enum { TV_NOISE_AUTO = 0, TV_NOISE_PAIRS = 1, TV_NOISE_COLUMNS = 2, TV_NOISE_OPERATOR = 3 };
+enum { TV_NOISE_AUTO = 0, TV_NOISE_PAIRS = 1, TV_NOISE_COLUMNS = 2, TV_NOISE_OPERATOR = 3,
+       TV_NOISE_SEGMENTS = 4 };
 enum { TV_TERMS_GUESS = 8 };          /* noisy series terms per sub-step, for the cost model */
 #define TV_MAX_OPERATOR ((size_t)1 << 18)  /* doubles of one point's operator matrix, at most */
 
@@ -48,6 +49,23 @@ typedef struct {
     double *gram, *gcol;       /* scratch of build_operator: (na n)^2 and mz na n */
     int points;                /* points held (0: none yet) */
 } tv_ops;
+
+/* The diffusion of a chunk whose noise is affine in time between sample times (linear
+ * interpolation): on a segment with end values G_L, G_R, G(w) = (1 - w) G_L + w G_R, so the
+ * packed operator is a quadratic in w, (1 - w)^2 F(G_L) + w(1 - w) C + w^2 F(G_R), C the
+ * cross operator (F with G_L in one factor and G_R in the other, both ways).  ops holds the
+ * three operators of each of the chunk's segments (nseg x 3 x R x C: F's layout for the
+ * oracle, Ft's for the designer), ends their end values (nseg x 2 x na x n x mz), idx[t*P + i]
+ * the segment of point i of tick t and w[t*P + i] its place in it.  A point's G is
+ * interpolated into gpt (P x na x n x mz, work) and its operator formed in 3 R C, instead of
+ * 2 mz R C to build it from G; the caller samples no G at the points. */
+typedef struct {
+    const double *ops, *ends;
+    const int *idx;
+    const double *w;
+    double *gpt;
+    int nseg;
+} tv_segs;
 
 /* The data of one tick at its P points, and which of them are known to be the same at every
  * point (the caller passes a field that is constant over the chunk once, with stride 0). */
@@ -71,6 +89,8 @@ typedef struct {
     const double *nz_g;
     const double *ga, *gf;   /* columns: G point by point, [a][k][p] and [p][k][a] */
     const tv_ops *ops;       /* operator: the packed operator of each point */
+    const int *seg_idx;      /* this tick's segment per point (tv_segs), NULL: none */
+    const double *seg_w;     /* and its three weights per point */
 } tv_tick;
 
 /* One sub-step's generator as a polynomial in r in [0, 1]: the coefficient of r^l is
@@ -135,30 +155,36 @@ static void shift_coefficients(int P, const double *coef, int j, int sub, double
  * |(sum_pq X[p,q] G_p G_q')[a,b]| <= |X|max sum_k c_ak c_bk with c_ak = sum_p |G_p[a,k]|; by
  * Cauchy-Schwarz both are at most max(max_p sum_k s_pk^2, max_a sum_k c_ak^2).  (A bound of all
  * the entries at once would be na or n times larger: more sub-steps and terms for nothing.) */
-static double noise_bound(const tv_tick *v, int i)
+/* max over o < outer of sum_k (sum_{j < inner} |G[o so + j si + k]|)^2, the columns k summed
+ * KB at a time over contiguous entries. */
+static double square_sums(const double *G, int outer, int inner, size_t so, size_t si, int mz)
 {
-    const double *G = v->G + (size_t)i * v->na * v->n * v->mz;
-    double out = 0.0;
-    int k, p, a;
-    for (p = 0; p < v->na; ++p) {                      /* max_p sum_k s_pk^2 */
-        double row = 0.0;
-        for (k = 0; k < v->mz; ++k) {
-            double s = 0.0;
-            for (a = 0; a < v->n; ++a) s += abs_d(G[((size_t)p * v->n + a) * v->mz + k]);
-            row += s * s;
+    enum { KB = 8 };
+    double out = 0.0, acc[KB];
+    int o, j, k, k0, kb;
+    for (o = 0; o < outer; ++o) {
+        double sum = 0.0;
+        for (k0 = 0; k0 < mz; k0 += KB) {
+            kb = mz - k0 < KB ? mz - k0 : KB;
+            for (k = 0; k < kb; ++k) acc[k] = 0.0;
+            for (j = 0; j < inner; ++j) {
+                const double *g = G + (size_t)o * so + (size_t)j * si + (size_t)k0;
+                for (k = 0; k < kb; ++k) acc[k] += abs_d(g[k]);
+            }
+            for (k = 0; k < kb; ++k) sum += acc[k] * acc[k];
         }
-        out = row > out ? row : out;
-    }
-    for (a = 0; a < v->n; ++a) {                       /* max_a sum_k c_ak^2 */
-        double col = 0.0;
-        for (k = 0; k < v->mz; ++k) {
-            double c = 0.0;
-            for (p = 0; p < v->na; ++p) c += abs_d(G[((size_t)p * v->n + a) * v->mz + k]);
-            col += c * c;
-        }
-        out = col > out ? col : out;
+        out = sum > out ? sum : out;
     }
     return out;
+}
+
+static double noise_bound(const tv_tick *v, int i)
+{
+    const int n = v->n, na = v->na, mz = v->mz;
+    const double *G = v->G + (size_t)i * na * n * mz;                /* G[(p n + a) mz + k] */
+    const double rows = square_sums(G, na, n, (size_t)n * mz, (size_t)mz, mz);  /* s_pk */
+    const double cols = square_sums(G, n, na, (size_t)mz, (size_t)n * mz, mz);  /* c_ak */
+    return rows > cols ? rows : cols;
 }
 
 /* Data equal at every point are taken as they are: the weights of the constant coefficient sum
@@ -227,6 +253,17 @@ static int op_fits(int n, int na) { return op_rows(na) * op_cols(n) <= TV_MAX_OP
 /* point_noise from the packed operator of point i, O(na^2 n^2 / 4) whatever mz: ADJOINT
  * out[p,q] = sum_{a<=b} F[(p,q),(a,b)] X~[a,b], FORWARD out[a,b] = sum_{p<=q} F[(p,q),(a,b)]
  * X~[act p, act q], X~ the upper triangle with its diagonal halved (F counts it twice). */
+#if defined(__GNUC__) && __GNUC__ >= 6 && defined(__x86_64__) && defined(__GLIBC__) \
+    && !defined(__clang__) && !defined(STSP_TV_NO_CLONES)
+/* Also compiled for AVX2, picked at load time where the CPU has it: element-wise loops only
+ * and no FMA (GCC's avx2 target does not enable it), so both give the same numbers
+ * (tools/bench/varying_clones.py compares them; STSP_TV_NO_CLONES builds the default only). */
+#define TV_CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define TV_CLONES
+#endif
+
+TV_CLONES
 static void operator_noise(int kind, const tv_tick *v, int i, const double *X, double *out,
                            double *tmp)
 {
@@ -236,17 +273,32 @@ static void operator_noise(int kind, const tv_tick *v, int i, const double *X, d
     const double *M = (kind == TV_FORWARD ? v->ops->F : v->ops->Ft) + (size_t)i * R * C;
     const size_t len = kind == TV_FORWARD ? C : R;
     double *restrict acc = tmp;
+    double c[4];
+    const double *rw[4];
     size_t e, r;
-    int a, b;
+    int a, b, h = 0;
     for (e = 0; e < len; ++e) acc[e] = 0.0;
+    /* Four rows at a time: acc is read and written once per four rows of the operator. */
     for (a = 0, r = 0; a < in; ++a)
         for (b = a; b < in; ++b, ++r) {
             const double x = kind == TV_FORWARD ? X[v->act[a] * d + v->act[b]] : X[a * d + b];
-            const double c = a == b ? 0.5 * x : x;
-            const double *restrict row = M + r * len;
-            if (c != 0.0)
-                for (e = 0; e < len; ++e) acc[e] += c * row[e];
+            if (x == 0.0) continue;
+            c[h] = a == b ? 0.5 * x : x;
+            rw[h++] = M + r * len;
+            if (h == 4) {
+                const double c0 = c[0], c1 = c[1], c2 = c[2], c3 = c[3];
+                const double *restrict r0 = rw[0], *restrict r1 = rw[1], *restrict r2 = rw[2],
+                             *restrict r3 = rw[3];
+                for (e = 0; e < len; ++e)
+                    acc[e] += c0 * r0[e] + c1 * r1[e] + c2 * r2[e] + c3 * r3[e];
+                h = 0;
+            }
         }
+    while (h > 0) {
+        const double ch = c[--h];
+        const double *restrict row = rw[h];
+        for (e = 0; e < len; ++e) acc[e] += ch * row[e];
+    }
     for (a = 0, e = 0; a < side; ++a)
         for (b = a; b < side; ++b, ++e) out[a * side + b] = out[b * side + a] = acc[e];
 }
@@ -296,6 +348,42 @@ static void build_operator(const tv_tick *v, int points, tv_ops *ops)
     }
 }
 
+/* The operator of each point of the tick from its segment's three (tv_segs), into Ft (the
+ * designer, `adjoint`) or F (the oracle): 3 R C per point, two points in the same segment in
+ * one pass over its operators.  What ops held before is lost. */
+TV_CLONES
+static void form_operator(const tv_tick *v, int points, const tv_segs *sg, int adjoint,
+                          tv_ops *ops)
+{
+    const size_t len = op_rows(v->na) * op_cols(v->n);
+    double wt[TV_MAX_POINTS][3];
+    size_t e;
+    int i;
+    for (i = 0; i < points; ++i) {
+        const double w = v->seg_w[i];
+        wt[i][0] = (1.0 - w) * (1.0 - w); wt[i][1] = w * (1.0 - w); wt[i][2] = w * w;
+    }
+    for (i = 0; i < points; ++i) {
+        const double *restrict s0 = sg->ops + (size_t)v->seg_idx[i] * 3u * len;
+        const double *restrict s1 = s0 + len, *restrict s2 = s1 + len;
+        const double a0 = wt[i][0], a1 = wt[i][1], a2 = wt[i][2];
+        double *restrict out = (adjoint ? ops->Ft : ops->F) + (size_t)i * len;
+        if (i + 1 < points && v->seg_idx[i + 1] == v->seg_idx[i]) {
+            const double b0 = wt[i + 1][0], b1 = wt[i + 1][1], b2 = wt[i + 1][2];
+            double *restrict nxt = out + len;
+            for (e = 0; e < len; ++e) {
+                const double x0 = s0[e], x1 = s1[e], x2 = s2[e];
+                out[e] = a0 * x0 + a1 * x1 + a2 * x2;
+                nxt[e] = b0 * x0 + b1 * x1 + b2 * x2;
+            }
+            ++i;
+        } else {
+            for (e = 0; e < len; ++e) out[e] = a0 * s0[e] + a1 * s1[e] + a2 * s2[e];
+        }
+    }
+    ops->points = 0;                       /* not the operator of any G: build_operator rebuilds */
+}
+
 /* The diffusion term of point i on X, compactly: FORWARD the n x n block
  * sum_pq X[act p, act q] G_p G_q' (on the x rows and columns), ADJOINT the na x na block
  * tr(G_p' X G_q) (at act p, act q); O(mz na n (n + na)) per call.  Every Brownian column at
@@ -311,7 +399,7 @@ static void point_noise(int kind, const tv_tick *v, int i, const double *X, doub
     const size_t blk = (size_t)na * n * mz;
     const double *ga = v->ga + (size_t)i * blk, *gf = v->gf + (size_t)i * blk;
     int k, a, b, p, q;
-    if (v->path == TV_NOISE_OPERATOR) {
+    if (v->path == TV_NOISE_OPERATOR || v->path == TV_NOISE_SEGMENTS) {
         operator_noise(kind, v, i, X, out, tmp);
         return;
     }
@@ -413,32 +501,69 @@ static void pair_noise(int kind, const tv_tick *v, int i, double w, const double
  *             diffusion differs from the last tick's, spread over the tick's terms (guessed
  *             TV_TERMS_GUESS per sub-step; over the chunk's `ticks` when the diffusion is
  *             the same for all of them).  Only with `ops` (NULL: never).
- * The pairs are taken whenever they cost at most na n (n + na) mz. */
+ *   SEGMENTS  na^2 n^2 / 4, plus 3 na^2 n^2 / 4 to form it (`form_operator`) from the
+ *             operators of the tick's segments, whenever the caller gave them (`sg`, for
+ *             noise interpolated linearly, only where they cost less than the pairs or the
+ *             columns: stospline.design.varying._segments_pay) and with `ops`; forced
+ *             without them, OPERATOR.
+ * The pairs are taken whenever they cost at most na n (n + na) mz and no segments are given.
+ * `adjoint`: the designer's direction (the operator formed is Ft). */
 static void noise_lists(tv_tick *v, int *start, int *np_, int *na_, double *g, tv_ops *ops,
-                        int force, int sub, long ticks)
+                        int force, int sub, long ticks, const tv_segs *sg, int adjoint)
 {
     const int n = v->n, na = v->na, mz = v->mz, points = v->g_same ? 1 : v->P;
+    const int fits = ops != NULL && op_fits(n, na);
+    const int segs = fits && sg != NULL && v->seg_idx != NULL;
     long pairs = 0, dense = (long)na * n * (n + na) * mz;
     int i, k, p, a, e = 0;
-    for (i = 0; i < points; ++i)
-        for (k = 0; k < mz; ++k) {
-            const int lo = e;
-            start[i * mz + k] = e;
-            for (p = 0; p < na; ++p)
-                for (a = 0; a < n; ++a) {
-                    const double x = v->G[(((size_t)i * na + p) * n + a) * mz + k];
-                    if (x != 0.0) { np_[e] = p; na_[e] = a; g[e] = x; ++e; }
-                }
-            pairs += (long)(e - lo) * (e - lo);
-        }
-    start[points * mz] = e;
     v->nz_start = start; v->nz_p = np_; v->nz_a = na_; v->nz_g = g;
     v->ops = ops;
+    if (force == TV_NOISE_AUTO && segs) {      /* given only where they pay (the caller's model) */
+        v->path = TV_NOISE_SEGMENTS;
+        form_operator(v, points, sg, adjoint, ops);
+        return;
+    }
+    /* The nonzeros of each Brownian column (in start, as counts), for the cost of the pairs;
+     * their lists below only if the pairs are taken. */
+    for (i = 0; i < points * mz; ++i) start[i] = 0;
+    for (i = 0; i < points; ++i) {
+        const double *restrict Gi = v->G + (size_t)i * na * n * mz;
+        int *restrict cnt = start + i * mz;
+        for (p = 0; p < na * n; ++p)
+            for (k = 0; k < mz; ++k) cnt[k] += Gi[(size_t)p * mz + k] != 0.0;
+    }
+    for (i = 0; i < points * mz; ++i) pairs += (long)start[i] * start[i];
     v->path = force != TV_NOISE_AUTO ? force
               : pairs <= dense * points ? TV_NOISE_PAIRS : TV_NOISE_COLUMNS;
-    if (v->path == TV_NOISE_OPERATOR && (ops == NULL || !op_fits(n, na)))
-        v->path = TV_NOISE_COLUMNS;
-    if (v->path != TV_NOISE_PAIRS) {
+    if (v->path == TV_NOISE_SEGMENTS && !segs) v->path = TV_NOISE_OPERATOR;
+    if (v->path == TV_NOISE_OPERATOR && !fits) v->path = TV_NOISE_COLUMNS;
+    if (force == TV_NOISE_AUTO && fits) {
+        const double terms = (double)TV_TERMS_GUESS * sub, op = (double)op_rows(na) * op_cols(n);
+        const size_t len = (size_t)points * na * n * mz;
+        size_t at = 0;
+        double build = (2.0 * mz + 1.0) * op * points, best;
+        if (ops->points == points)
+            for (at = 0; at < len && ops->src[at] == v->G[at]; ++at) {}
+        if (at == len && ops->points == points) build = 0.0;
+        else if (v->g_const) build /= (double)ticks;     /* built once for the chunk */
+        best = v->path == TV_NOISE_PAIRS ? terms * (double)pairs
+               : terms * 0.75 * (double)dense * points;
+        if (v->path == TV_NOISE_COLUMNS && terms * op * points + build < best)
+            v->path = TV_NOISE_OPERATOR;
+    }
+    if (v->path == TV_NOISE_PAIRS) {
+        for (i = 0; i < points; ++i)
+            for (k = 0; k < mz; ++k) {
+                start[i * mz + k] = e;
+                for (p = 0; p < na; ++p)
+                    for (a = 0; a < n; ++a) {
+                        const double x = v->G[(((size_t)i * na + p) * n + a) * mz + k];
+                        if (x != 0.0) { np_[e] = p; na_[e] = a; g[e] = x; ++e; }
+                    }
+            }
+        start[points * mz] = e;
+    }
+    if (v->path == TV_NOISE_COLUMNS) {
         const size_t blk = (size_t)na * n * mz, cap = TV_MAX_POINTS * blk;
         double *ga = g + cap, *gf = ga + cap;
         for (i = 0; i < points; ++i)
@@ -451,18 +576,8 @@ static void noise_lists(tv_tick *v, int *start, int *np_, int *na_, double *g, t
                     }
         v->ga = ga; v->gf = gf;
     }
-    if (force == TV_NOISE_AUTO && v->path == TV_NOISE_COLUMNS && ops != NULL && op_fits(n, na)) {
-        const double terms = (double)TV_TERMS_GUESS * sub, op = (double)op_rows(na) * op_cols(n);
-        const size_t len = (size_t)points * na * n * mz;
-        size_t at = 0;
-        double build = (2.0 * mz + 1.0) * op;
-        if (ops->points == points)
-            for (at = 0; at < len && ops->src[at] == v->G[at]; ++at) {}
-        if (at == len && ops->points == points) build = 0.0;
-        else if (v->g_const) build /= (double)ticks;     /* built once for the chunk */
-        if (terms * op + build < terms * 0.75 * (double)dense) v->path = TV_NOISE_OPERATOR;
-    }
     if (v->path == TV_NOISE_OPERATOR) build_operator(v, points, ops);
+    if (v->path == TV_NOISE_SEGMENTS) form_operator(v, points, sg, adjoint, ops);
 }
 
 /* acc += the drift part of G_(l) on X (d x cols; MEAN reads only its first `rows` rows, the
@@ -656,19 +771,34 @@ static int sub_steps(const tv_tick *v, const double *coef, double h, tv_blend *b
 
 static tv_tick tick_of(int n, int d, int na, int mz, int P, const int *act, const double *Ar,
                        const double *G, const double *Lb, const int *same, const int *ar_nz,
-                       int ar_cnt, long t)
+                       int ar_cnt, const tv_segs *sg, long t)
 {
     tv_tick v;
     int i;
     v.n = n; v.d = d; v.na = na; v.mz = mz; v.P = P; v.act = act;
     v.Ar = same[0] ? Ar : Ar + (size_t)t * P * n * d;
     v.G = same[1] ? G : G + (size_t)t * P * na * n * mz;
+    v.seg_idx = NULL; v.seg_w = NULL;
+    if (sg != NULL && sg->nseg > 0) {                 /* G at the points, from the segments */
+        const size_t blk = (size_t)na * (size_t)n * (size_t)mz;
+        v.seg_idx = sg->idx + (size_t)t * (size_t)P;
+        v.seg_w = sg->w + (size_t)t * (size_t)P;
+        for (i = 0; i < P; ++i) {
+            const double w = v.seg_w[i];
+            const double *restrict gl = sg->ends + (size_t)v.seg_idx[i] * 2u * blk;
+            const double *restrict gr = gl + blk;
+            double *restrict out = sg->gpt + (size_t)i * blk;
+            size_t e;
+            for (e = 0; e < blk; ++e) out[e] = gl[e] * (1.0 - w) + gr[e] * w;
+        }
+        v.G = sg->gpt;
+    }
     v.Lb = same[2] ? Lb : Lb + (size_t)t * P * d * d;
     v.ar_same = same[0] || same_points(v.Ar, P, (size_t)n * d);
-    v.g_same = same[1] || same_points(v.G, P, (size_t)na * n * mz);
+    v.g_same = (same[1] && v.seg_idx == NULL) || same_points(v.G, P, (size_t)na * n * mz);
     v.lb_same = same[2] || same_points(v.Lb, P, (size_t)d * d);
     v.lb_const = same[2];
-    v.g_const = same[1];
+    v.g_const = same[1] && v.seg_idx == NULL;
     v.ar_nz = ar_nz; v.ar_cnt = ar_cnt;
     for (i = 0; i < (v.g_same ? 1 : P); ++i) v.gb[i] = noise_bound(&v, i);
     return v;
@@ -683,11 +813,11 @@ size_t stsp_tv_iwork_size(int n, int m, int na, int mz)
 }
 
 static void lists_of(tv_tick *v, int *iwork, double *gwork, tv_ops *ops, int force, int sub,
-                     long ticks)
+                     long ticks, const tv_segs *sg, int adjoint)
 {
     const size_t cap = TV_MAX_POINTS * (size_t)v->na * v->n * v->mz;
     int *start = iwork, *p = start + TV_MAX_POINTS * v->mz + 1, *a = p + cap;
-    noise_lists(v, start, p, a, gwork, ops, force, sub, ticks);
+    noise_lists(v, start, p, a, gwork, ops, force, sub, ticks, sg, adjoint);
 }
 
 /* The Lb nonzero lists of `bl` at the end of the integer work. */
@@ -711,12 +841,30 @@ static double *blend_at(tv_blend *bl, double *at, int *iwork, int n, int m, int 
     return at + blend_size(n, m);
 }
 
+/* The segments of a chunk (tv_segs) checked and bound into *sg: nseg >= 0; with nseg > 0,
+ * the operator of one point fits TV_MAX_OPERATOR, the pointers are not NULL, every index is
+ * in [0, nseg) and every place w in [0, 1].  nseg = 0: none (the pointers are not read). */
+static int segments_ok(int n, int na, long T, int P, int nseg, const double *ops,
+                       const double *ends, const int *idx, const double *w, tv_segs *sg)
+{
+    size_t e;
+    sg->nseg = 0; sg->ops = NULL; sg->ends = NULL; sg->idx = NULL; sg->w = NULL;
+    sg->gpt = NULL;
+    if (nseg < 0) return 0;
+    if (nseg == 0) return 1;
+    if (!op_fits(n, na) || ops == NULL || ends == NULL || idx == NULL || w == NULL) return 0;
+    for (e = 0; e < (size_t)T * (size_t)P; ++e)
+        if (idx[e] < 0 || idx[e] >= nseg || !(w[e] >= 0.0 && w[e] <= 1.0)) return 0;
+    sg->nseg = nseg; sg->ops = ops; sg->ends = ends; sg->idx = idx; sg->w = w;
+    return 1;
+}
+
 size_t stsp_tv_zoh_work_size(int n, int m, int q, int na, int mz)
 {
     const size_t d = (size_t)n + (size_t)m + 1u, r = (size_t)n + 1u;
     return d * d + d * (size_t)q + (size_t)q * d + r * (r + 1u) / 2u
            + stsp_zoh_update_size(n, m, q) + taylor_size(n, m, na, mz, q) + blend_size(n, m)
-           + 3u * TV_MAX_POINTS * (size_t)na * n * mz + ops_size(n, na, mz);
+           + 4u * TV_MAX_POINTS * (size_t)na * n * mz + ops_size(n, na, mz);
 }
 
 /* The T ticks of one chunk of a time-varying stage, backward (as stsp_zoh_stage_ticks): the
@@ -724,10 +872,12 @@ size_t stsp_tv_zoh_work_size(int n, int m, int q, int na, int mz)
  * MEAN_ADJ series started at [N; 0], both in the backward variable 1 - s (coef); then the
  * Riccati step.  Data of tick t at Ar + t*P*n*d, G + t*P*na*n*mz, Lb + t*P*d*d, or, for a field
  * with same[f] set, one point for every tick. */
+TV_CLONES
 int stsp_tv_zoh_ticks(int n, int m, int q, long T, int P, int na, int mz, const double *coef,
                       double h, const int *act, const double *Ar, const double *G,
                       const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
-                      double *V, double *N, double *W,
+                      int nseg, const double *seg_ops, const double *seg_ends,
+                      const int *seg_idx, const double *seg_w, double *V, double *N, double *W,
                       double *mv, double *K, double *k0, double *L, double *work,
                       int *iwork, int noise_path, long *bad_tick)
 {
@@ -735,24 +885,26 @@ int stsp_tv_zoh_ticks(int n, int m, int q, long T, int P, int na, int mz, const 
     double *Y, *U, *Hl, *vp, *up, *tw, *gw;
     tv_blend bl;
     tv_ops ops;
+    tv_segs sg;
     long t;
     int a, b, p, l, j, st;
     if (n < 1 || m < 1 || q < 0 || T < 0 || P < 1 || P > TV_MAX_POINTS || na < 0 ||
         na > n + m || mz < 0 || d > TV_MAX_DIM || ar_cnt < 0 || ar_cnt > n * d ||
-        noise_path < TV_NOISE_AUTO || noise_path > TV_NOISE_OPERATOR)
+        noise_path < TV_NOISE_AUTO || noise_path > TV_NOISE_SEGMENTS ||
+        !segments_ok(n, na, T, P, nseg, seg_ops, seg_ends, seg_idx, seg_w, &sg))
         return TV_ERR_DIMS;
     Y = work; U = Y + (size_t)d * d; Hl = U + (size_t)d * q; vp = Hl + (size_t)q * d;
     up = vp + (size_t)r * (r + 1) / 2; tw = up + stsp_zoh_update_size(n, m, q);
     gw = blend_at(&bl, tw + taylor_size(n, m, na, mz, q), iwork, n, m, na, mz);
-    ops_at(&ops, gw + 3u * TV_MAX_POINTS * (size_t)na * n * mz, n, na, mz);
+    sg.gpt = ops_at(&ops, gw + 3u * TV_MAX_POINTS * (size_t)na * n * mz, n, na, mz);
 #define RS(a) ((a) < n ? (a) : d - 1)
     for (a = 0, p = 0; a < r; ++a)
         for (b = a; b < r; ++b, ++p) vp[p] = 0.5 * (V[a * r + b] + V[b * r + a]);
     for (t = T - 1; t >= 0; --t) {
-        tv_tick v = tick_of(n, d, na, mz, P, act, Ar, G, Lb, same, ar_nz, ar_cnt, t);
+        tv_tick v = tick_of(n, d, na, mz, P, act, Ar, G, Lb, same, ar_nz, ar_cnt, &sg, t);
         const int sub = sub_steps(&v, coef, h, &bl);
         if (sub == 0) return TV_ERR_SERIES;
-        lists_of(&v, iwork, gw, &ops, noise_path, sub, T);
+        lists_of(&v, iwork, gw, &ops, noise_path, sub, T, &sg, 1);
         for (a = 0; a < d * d; ++a) Y[a] = 0.0;
         for (a = 0, p = 0; a < r; ++a)
             for (b = a; b < r; ++b, ++p) Y[RS(a) * d + RS(b)] = Y[RS(b) * d + RS(a)] = vp[p];
@@ -847,7 +999,7 @@ size_t stsp_tv_oracle_work_size(int n, int m, int n_latch, int na, int mz)
 {
     const size_t dw = (size_t)n + (size_t)m + 1u, dy = (size_t)n + (size_t)n_latch + 1u;
     return dw * dy + dw * dw + dw * (size_t)n_latch + taylor_size(n, m, na, mz, n_latch)
-           + blend_size(n, m) + 3u * TV_MAX_POINTS * (size_t)na * n * mz + ops_size(n, na, mz);
+           + blend_size(n, m) + 4u * TV_MAX_POINTS * (size_t)na * n * mz + ops_size(n, na, mz);
 }
 
 /* The T ticks of one chunk of a time-varying stage, forward (as stsp_oracle_stage_ticks, M
@@ -855,11 +1007,14 @@ size_t stsp_tv_oracle_work_size(int n, int m, int n_latch, int na, int mz)
  * E x+ v' from the MEAN series on E w v'.  xm, xv (T x n): mean and variance of x after each
  * tick; um, uv (T x m): of the command over it (all four NULL: not recorded).  Data as in
  * stsp_tv_zoh_ticks, coef in the forward variable s. */
+TV_CLONES
 int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, const double *L,
                          const double *k0, int P, int na, int mz, const double *coef,
                          double h, const int *act, const double *Ar, const double *G,
                          const double *Lb, const int *same, const int *ar_nz, int ar_cnt,
-                         double *M, double *J, double *xm,
+                         int nseg, const double *seg_ops, const double *seg_ends,
+                         const int *seg_idx, const double *seg_w, double *M, double *J,
+                         double *xm,
                          double *xv, double *um, double *uv, double *work, int *iwork,
                          int noise_path)
 {
@@ -867,19 +1022,21 @@ int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, con
     double *TM, *Mw, *Xv, *tw, *gw;
     tv_blend bl;
     tv_ops ops;
+    tv_segs sg;
     double acc = *J;
     long t;
     int a, j, st;
     if (n < 1 || m < 1 || n_latch < 0 || T < 0 || P < 1 || P > TV_MAX_POINTS || na < 0 ||
         na > n + m || mz < 0 || dw > TV_MAX_DIM || ar_cnt < 0 || ar_cnt > n * dw ||
-        noise_path < TV_NOISE_AUTO || noise_path > TV_NOISE_OPERATOR)
+        noise_path < TV_NOISE_AUTO || noise_path > TV_NOISE_SEGMENTS ||
+        !segments_ok(n, na, T, P, nseg, seg_ops, seg_ends, seg_idx, seg_w, &sg))
         return TV_ERR_DIMS;
     TM = work; Mw = TM + (size_t)dw * dy; Xv = Mw + (size_t)dw * dw;
     tw = Xv + (size_t)dw * nl;
     gw = blend_at(&bl, tw + taylor_size(n, m, na, mz, nl), iwork, n, m, na, mz);
-    ops_at(&ops, gw + 3u * TV_MAX_POINTS * (size_t)na * n * mz, n, na, mz);
+    sg.gpt = ops_at(&ops, gw + 3u * TV_MAX_POINTS * (size_t)na * n * mz, n, na, mz);
     for (t = 0; t < T; ++t) {
-        tv_tick v = tick_of(n, dw, na, mz, P, act, Ar, G, Lb, same, ar_nz, ar_cnt, t);
+        tv_tick v = tick_of(n, dw, na, mz, P, act, Ar, G, Lb, same, ar_nz, ar_cnt, &sg, t);
         int sub;
         command_moments(n, m, nl, K + (size_t)t * m * n, L + (size_t)t * m * nl,
                         k0 + (size_t)t * m, M, TM, Mw, um ? um + t * m : NULL,
@@ -888,7 +1045,7 @@ int stsp_tv_oracle_ticks(int n, int m, int n_latch, long T, const double *K, con
             for (j = 0; j < nl; ++j) Xv[a * nl + j] = TM[a * dy + n + j];
         sub = sub_steps(&v, coef, h, &bl);
         if (sub == 0) return TV_ERR_SERIES;
-        lists_of(&v, iwork, gw, &ops, noise_path, sub, T);
+        lists_of(&v, iwork, gw, &ops, noise_path, sub, T, &sg, 0);
         for (j = 0; j < sub; ++j) {
             if (sub > 1) blend(&v, coef, j, sub, &bl);
             st = taylor(TV_FORWARD, &v, &bl, h / sub, Mw, dw, &acc, tw);
@@ -935,7 +1092,7 @@ int stsp_tv_euler_oracle_ticks(int n, int m, int n_latch, long T, const double *
         for (i = 0; i < sub; ++i) {
             const double *A = Ad + (size_t)(t * sub + i) * D;
             const int same_all[3] = {1, same[1], same[2]};
-            tv_tick v = tick_of(n, dw, na, mz, 1, act, Ad, G, Lb, same_all, &no_ar, 0,
+            tv_tick v = tick_of(n, dw, na, mz, 1, act, Ad, G, Lb, same_all, &no_ar, 0, NULL,
                                 t * sub + i);
             double cost = 0.0;
             for (e = 0; e < D; ++e) cost += v.Lb[e] * Mw[e];
@@ -958,7 +1115,7 @@ int stsp_tv_euler_oracle_ticks(int n, int m, int n_latch, long T, const double *
                     Mn[a * dw + b] = Mn[b * dw + a] = s;
                 }
             if (na > 0) {                              /* + dt sum Mw[p,q] G_p G_q' */
-                lists_of(&v, iwork, gw, NULL, TV_NOISE_AUTO, 1, 1);
+                lists_of(&v, iwork, gw, NULL, TV_NOISE_AUTO, 1, 1, NULL, 0);
                 if (v.path == TV_NOISE_PAIRS) {
                     pair_noise(TV_FORWARD, &v, 0, dt, Mw, Mn);
                 } else {

@@ -59,14 +59,16 @@ class Stage:
     def has_control_noise(self) -> bool:
         return self.H is not None and bool(np.any(self.H))
 
-    def samples(self, times) -> dict:
+    def samples(self, times, noise: bool = True) -> dict:
         """Every field at every time of `times`, stacked on a first axis (``f`` and ``H`` may
         be None): vectorised when the varying data offer ``many(times)`` (samples read from a
-        file do), else one call per time."""
+        file do), else one call per time. `noise` False: ``G`` and ``H`` None, not sampled."""
         times = np.asarray(times, dtype=float)
         names = ("A", "B", "G", "H", "Q", "S", "R", "q", "r", "rho", "f")
-        varied = {} if self.varying is None else sample_varying(self.varying, times)
-        out = {}
+        varied = {} if self.varying is None else sample_varying(self.varying, times, noise)
+        out = {"G": None, "H": None}
+        if not noise:
+            names = tuple(k for k in names if k not in ("G", "H"))
         for k in names:
             v = varied.get(k, getattr(self, k))
             if v is None:

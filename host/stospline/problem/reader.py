@@ -256,6 +256,13 @@ class _SampledData:
                  has_H: bool):
         self.data, self.keys, self.noisy = data, keys, noisy
         self.n, self.m, self.mz, self.has_H = n, m, mz, has_H
+        # Between two consecutive sample times of the noise (every series' merged), G and H
+        # are affine in t when every noise series is interpolated linearly: the designer
+        # builds its diffusion operators per such segment (`stospline.design.varying`).
+        series = [g for _, g, _ in data.noise if isinstance(g, Series)]
+        self.noise_knots = (np.unique(np.concatenate([g.t for g in series]))
+                            if series and all(g.interpolation == "linear" for g in series)
+                            else None)
 
     def __call__(self, t: float) -> dict:
         f = self.data._fields_at(t)
@@ -268,9 +275,16 @@ class _SampledData:
         return out
 
     def many(self, ts) -> dict:
+        return self._many(ts, True)
+
+    def many_noise_free(self, ts) -> dict:
+        """`many` without G and H (`Stage.samples` with ``noise=False``): not sampled."""
+        return self._many(ts, False)
+
+    def _many(self, ts, noise: bool) -> dict:
         ts = np.asarray(ts, dtype=float)
         out = self.data._fields_many(self.keys, ts)
-        if self.noisy:
+        if self.noisy and noise:
             GHt = self.data._noise_many(self.n, self.m, self.mz, ts)
             out["G"] = GHt[:, :self.n]
             if self.has_H:

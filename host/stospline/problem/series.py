@@ -50,12 +50,17 @@ class Series:
         return out.reshape((times.size,) + vals.shape[1:])
 
 
-def sample_varying(varying, times) -> dict:
+def sample_varying(varying, times, noise: bool = True) -> dict:
     """``Stage.varying`` at every time of `times`, each field stacked on a first axis: its
-    ``many(times)`` where it has one (vectorised), else one call per time."""
+    ``many(times)`` where it has one (vectorised), else one call per time. `noise` False:
+    without G and H (not sampled where the data offer ``many_noise_free``)."""
     many = getattr(varying, "many", None)
+    if not noise and getattr(varying, "many_noise_free", None) is not None:
+        return varying.many_noise_free(times)
     if many is not None:
-        return many(times)
-    calls = [varying(t) for t in times]
-    return {k: np.stack([np.asarray(c[k], dtype=float) for c in calls])
-            for k in (calls[0] if calls else {}) if calls[0][k] is not None}
+        out = many(times)
+    else:
+        calls = [varying(t) for t in times]
+        out = {k: np.stack([np.asarray(c[k], dtype=float) for c in calls])
+               for k in (calls[0] if calls else {}) if calls[0][k] is not None}
+    return out if noise else {k: v for k, v in out.items() if k not in ("G", "H")}

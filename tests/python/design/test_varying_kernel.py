@@ -88,7 +88,7 @@ def test_dense_noise_paths_equal_the_pair_formulation(varying_noise, monkeypatch
     rounding."""
     problem = parse_problem(_dense_noise_doc(varying_noise))
     results = {}
-    for path in ("pairs", "columns", "operator", "auto"):
+    for path in ("pairs", "columns", "operator", "segments", "auto"):
         monkeypatch.setattr(varying, "NOISE_PATH", path)
         d = design_zoh(problem)
         table = table_of(d, quantize=False)
@@ -243,3 +243,69 @@ def test_overflowing_varying_data_is_named_not_a_traceback(tmp_path):
     lines = run.stderr.strip().splitlines()
     assert len(lines) == 1 and "dynamics.A" in lines[0] and "overflow" in lines[0], run.stderr
     assert not out.exists()
+
+
+def test_noise_knots_mark_where_the_noise_is_affine():
+    """`noise_knots`: the merged sample times of linearly interpolated noise (none for held
+    noise); `Stage.samples(noise=False)` samples the rest alike and no G or H."""
+    doc = _dense_noise_doc(True)
+    doc["dynamics"]["noise"][1]["G"]["t"] = [0.0, 0.5, 2.0, 2.5]
+    stage = parse_problem(doc).stages[0]
+    np.testing.assert_array_equal(stage.varying.noise_knots, [0.0, 0.5, 0.7, 1.4, 2.0, 2.5])
+    ts = np.linspace(0.1, 0.9, 7)
+    full, bare = stage.samples(ts), stage.samples(ts, noise=False)
+    assert bare["G"] is None and bare["H"] is None
+    for k in ("A", "B", "Q", "R", "S", "q", "r", "rho"):
+        np.testing.assert_array_equal(bare[k], full[k], k)
+    doc["dynamics"]["noise"][1]["G"]["interpolation"] = "zoh"
+    assert parse_problem(doc).stages[0].varying.noise_knots is None
+    assert parse_problem(_dense_noise_doc(False)).stages[0].varying.noise_knots is None
+
+
+def test_segment_operators_are_the_operator_of_the_interpolated_noise():
+    """Between two noise knots the three operators of a segment, weighted (1-w)^2, w(1-w), w^2,
+    give the packed diffusion operator of G at that time, and the segment's ends
+    interpolate G there."""
+    problem = parse_problem(_dense_noise_doc(True))
+    stage = problem.stages[0]
+    times = np.linspace(0.05, 0.95, 10)
+    segs = varying.segment_operators(stage, times, T=5)
+    s = stage.samples(times)
+    GH = np.concatenate([s["G"], s["H"]], axis=1)[:, segs.act]
+    n, na = GH.shape[2], segs.act.size
+    rows, cols = np.triu_indices(na), np.triu_indices(n)
+    for j, t in enumerate(times):
+        w, ops = segs.w[j], segs.ops[segs.idx[j]]
+        formed = (1 - w) ** 2 * ops[0] + w * (1 - w) * ops[1] + w * w * ops[2]
+        direct = varying._pair_operator(GH[j], GH[j], rows, cols)
+        np.testing.assert_allclose(formed, direct, rtol=0, atol=1e-14 * np.abs(direct).max())
+        np.testing.assert_allclose(segs.ops_t[segs.idx[j]], ops.swapaxes(1, 2))
+        ends = segs.ends[segs.idx[j]]
+        np.testing.assert_allclose((1 - w) * ends[0] + w * ends[1], GH[j], rtol=0, atol=1e-15)
+    assert varying.segment_operators(stage, times, T=3) is None      # 2 segments > T/2
+
+
+@pytest.mark.parametrize("bad", ["index", "place"])
+def test_bad_segments_are_refused_by_the_c_loops(bad, monkeypatch):
+    """A segment index out of range or a place outside [0, 1]: both loops return their
+    dimensions status (-2), which `zoh_ticks` and `oracle_ticks` raise as a bug."""
+    problem = parse_problem(_dense_noise_doc(True))
+    table = table_of(design_zoh(problem), quantize=False)
+    real = varying.segment_operators
+
+    def broken(*args):
+        segs = real(*args)
+        idx, w = segs.idx.copy(), segs.w.copy()
+        if bad == "index":
+            idx[-1] = segs.ops.shape[0]
+        else:
+            w[0] = 1.5
+        return varying.Segments(segs.act, segs.ends, segs.ops, segs.ops_t, idx, w)
+
+    monkeypatch.setattr(varying, "segment_operators", broken)
+    varying._CACHE.clear()
+    with pytest.raises(RuntimeError, match="stsp_tv_zoh_ticks: status -2"):
+        design_zoh(problem)
+    with pytest.raises(RuntimeError, match="stsp_tv_oracle_ticks: status -2"):
+        evaluate_table(problem, table, path=False)
+    varying._CACHE.clear()

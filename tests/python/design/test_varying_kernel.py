@@ -309,3 +309,28 @@ def test_bad_segments_are_refused_by_the_c_loops(bad, monkeypatch):
     with pytest.raises(RuntimeError, match="stsp_tv_oracle_ticks: status -2"):
         evaluate_table(problem, table, path=False)
     varying._CACHE.clear()
+
+
+def test_avx2_clones_give_the_default_copys_bits(monkeypatch):
+    """The C loops' AVX2 copies (picked at load time on a CPU that has AVX2) against the kernels
+    built with the default copy only, as a CPU without AVX2 runs them: the same bits for the
+    design and the oracle, on every noise path. (On a CPU without AVX2 both are the default.)"""
+    from stospline.cache import KERNEL_CFLAGS, build_kernel_sources, load_module
+    from stospline.design import kernels
+
+    plain = load_module(build_kernel_sources("_stsp_kernels", kernels._SOURCES, kernels._CDEF,
+                                             KERNEL_CFLAGS + ["-DSTSP_TV_NO_CLONES"]))
+    problem = parse_problem(_dense_noise_doc(True))
+
+    def bits(module, path):
+        monkeypatch.setattr(kernels, "_load", lambda: module)
+        monkeypatch.setattr(varying, "NOISE_PATH", path)
+        varying._CACHE.clear()
+        d = design_zoh(problem)
+        c = evaluate_table(problem, table_of(d, quantize=False), path=True)
+        return (b"".join(s.K.tobytes() + s.k0.tobytes() for s in d.stages)
+                + np.float64(c.J).tobytes() + c.path_var.tobytes())
+
+    clones = kernels.load_kernels()
+    for path in ("columns", "operator", "segments"):
+        assert bits(plain, path) == bits(clones, path), path

@@ -1,0 +1,101 @@
+"""A parametric table in spline form, and what it guarantees over the box.
+
+`spline_parametric` fits the sensitivity columns of a parametric design on its spline gain
+table's knots (`stospline.table.spline.params`), re-solves the latch offsets' columns for the
+spline's law, and returns the parametric table *as flashed*: the spline table's float32 gains
+and latch maps, the columns as the firmware evaluates them. `certify_over_box` runs the
+over-the-box oracle (`stospline.oracle.over_box`) on that table, so that its margins and
+exit bounds are those of the spline law with its columns, not of the per-tick design: the
+compression's error enters through the table itself, exactly, rather than as a bound added
+afterwards. The arithmetic is double precision on the stored values (the float32 rounding of
+each product and sum in the firmware is not counted, as for every table's certificate).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from stospline.design.sensitivity import unit_problem
+from stospline.errors import DesignError
+from stospline.oracle.over_box import band_margins, box_moments
+from stospline.table.format import _to_float32
+from stospline.table.parametric import ParametricTable
+from stospline.table.spline.latch import resolve_latch
+from stospline.table.spline.params import SplineColumns, box_error, fit_columns
+from stospline.table.spline.restore import is_state_latching
+
+__all__ = ["SplineParametric", "spline_parametric", "certify_over_box"]
+
+
+@dataclass(frozen=True)
+class SplineParametric:
+    """``table`` the float32 spline gain table, ``columns`` its `SplineColumns`, ``flashed``
+    the `ParametricTable` of both (what the oracle evaluates), ``per_tick`` the design's."""
+    table: object
+    columns: SplineColumns
+    flashed: ParametricTable
+    per_tick: ParametricTable
+
+
+def _latch_columns(problem, stable, evaluated: np.ndarray, P: int) -> np.ndarray:
+    """The latch offsets' columns re-solved for the spline's gains: parameter p's source
+    alone under the spline's K, L and the column's feed-forward as evaluated."""
+    S = np.zeros(np.shape(stable.lambda0) + (P,))
+    if stable.dims[2] == 0 or is_state_latching(stable):
+        return S
+    for p in range(P):
+        t = stable.with_arrays(k0=evaluated[..., p])
+        S[..., p] = resolve_latch(unit_problem(problem, p), t)[1]
+    return S
+
+
+def spline_parametric(problem, ptable: ParametricTable, stable) -> SplineParametric:
+    """The spline form of parametric table `ptable` on the spline gain table `stable`
+    (`stospline.table.spline.spline_table` of ``ptable.table``, float32).
+
+    Raises
+    ------
+    DesignError
+        ``design.table`` for a spline table with a band dual (its dual would need columns of
+        its own) or a fixed-point one.
+    """
+    if getattr(stable, "spline", None) is None or getattr(stable, "arith", "float32") \
+            != "float32":
+        raise DesignError("design.table", "spline columns need a float32 spline table")
+    if stable.band_qp is not None:
+        raise DesignError("design.table", "a spline table with a band dual has no spline "
+                                          "columns (its dual would need columns of its own)")
+    P = len(ptable.parameters)
+    coef, evaluated, error = fit_columns(stable.spline, stable.stage_start, ptable.S_k0,
+                                         ptable.parameters)
+    S_lam = _latch_columns(problem, stable, evaluated, P)
+    S_lam32 = np.stack([_to_float32(S_lam[..., j]) for j in range(P)], -1) if P else S_lam
+    cols = SplineColumns(coef, evaluated, np.asarray(S_lam32, np.float32), error,
+                         box_error(evaluated, ptable.S_k0, ptable.parameters))
+    flashed = ParametricTable(
+        replace(stable, K=np.asarray(stable.K, float), k0=np.asarray(stable.k0, float),
+                L=np.asarray(stable.L, float), Lambda=np.asarray(stable.Lambda, float),
+                lambda0=np.asarray(stable.lambda0, float)),
+        evaluated.astype(float), cols.S_lambda0.astype(float), ptable.parameters)
+    return SplineParametric(stable, cols, flashed, ptable)
+
+
+def certify_over_box(problem, sp: SplineParametric) -> dict:
+    """The guarantees of the flashed spline parametric table over the box: every band row's
+    worst margin over the box (`band_margins`), every corridor's Cantelli bound over the box
+    (`stospline.oracle.exit_bound.exit_bounds_over_box`: the largest per tick, and the sum),
+    the same of the per-tick design for comparison, and the columns' errors."""
+    from stospline.oracle.exit_bound import exit_bounds_over_box
+    out = {"column_error": sp.columns.error.tolist(),
+           "column_box_error": sp.columns.box_error.tolist()}
+    for key, table in (("spline", sp.flashed), ("per_tick", sp.per_tick)):
+        box = box_moments(problem, table)
+        margins = band_margins(problem, box)
+        entry = {"worst_band_margin": min((m.worst for m in margins), default=None),
+                 "bands_hold": all(m.holds for m in margins), "corridors": []}
+        for c in problem.corridors:
+            b = exit_bounds_over_box(c, box, problem.t0, problem.tick_hz)["cantelli"]
+            entry["corridors"].append({"worst_tick": b.worst_tick, "total": b.total})
+        out[key] = entry
+    return out

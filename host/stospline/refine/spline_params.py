@@ -25,7 +25,7 @@ from stospline.table.spline.latch import resolve_latch
 from stospline.table.spline.params import SplineColumns, box_error, fit_columns
 from stospline.table.spline.restore import is_state_latching
 
-__all__ = ["SplineParametric", "spline_parametric", "certify_over_box"]
+__all__ = ["SplineParametric", "spline_parametric", "spline_parametric_of", "certify_over_box"]
 
 
 @dataclass(frozen=True)
@@ -79,6 +79,20 @@ def spline_parametric(problem, ptable: ParametricTable, stable) -> SplineParamet
                 lambda0=np.asarray(stable.lambda0, float)),
         evaluated.astype(float), cols.S_lambda0.astype(float), ptable.parameters)
     return SplineParametric(stable, cols, flashed, ptable)
+
+
+def spline_parametric_of(problem) -> SplineParametric:
+    """`spline_parametric` of a problem with parameters: its parametric design with the
+    file's ``[design]`` options, the float32 spline table at its ``spline_tolerance``."""
+    from stospline.oracle.parametric import design_parametric
+    from stospline.options import resolve_options
+    from stospline.table.spline import spline_table
+    opts = resolve_options(problem)
+    pt = design_parametric(problem, discretization=opts.discretization, mode=opts.mode,
+                           delay_ticks=opts.delay_ticks).table
+    stable = spline_table(problem, pt.table, opts.spline_tolerance,
+                          per_tick=pt.table.quantized())
+    return spline_parametric(problem, pt, stable)
 
 
 def certify_over_box(problem, sp: SplineParametric) -> dict:

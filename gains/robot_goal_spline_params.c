@@ -62,15 +62,15 @@ const float robot_goal_spline_S_k0[224] = {
 /* [n_stages][n_latch][n_params] = [2][4][2] */
 const float robot_goal_spline_S_lambda0[16] = {
     5.27491e-01f, 5.27491e-01f, 0.0e+00f, 0.0e+00f, 0.0e+00f, 0.0e+00f,
-    0.0e+00f, 0.0e+00f, -1.0411701e+00f, 0.0e+00f, 8.401733e-01f, 0.0e+00f,
-    0.0e+00f, -1.0411701e+00f, 0.0e+00f, 8.401733e-01f,
+    0.0e+00f, 0.0e+00f, -1.0411701e+00f, 0.0e+00f, 8.4017336e-01f, 0.0e+00f,
+    0.0e+00f, -1.04117e+00f, 0.0e+00f, 8.401735e-01f,
 };
 
 const stsp_params_table_t robot_goal_spline_params = {
     0x52505453u, 2u, 1u,
     2u, 2u, 4u, 2u, 600u,
     robot_goal_spline_param_nominal, robot_goal_spline_param_lower, robot_goal_spline_param_upper, robot_goal_spline_S_k0, robot_goal_spline_S_lambda0,
-    0xC0C0FE35u,
+    0xD8A7A6D2u,
     {0xe5u, 0xe5u, 0x83u, 0x7du, 0x7du, 0x33u, 0xfeu, 0x5au, 0x12u, 0x36u, 0xb1u, 0x1du, 0xa8u, 0x73u, 0x74u, 0xa5u, 0x19u, 0xb6u, 0xbfu, 0x90u, 0x78u, 0xcbu, 0xe3u, 0x38u, 0xbfu, 0xdcu, 0xe1u, 0x1eu, 0xafu, 0xfcu, 0x63u, 0x89u},
     224u
 };

@@ -6,8 +6,8 @@
 #define PSP_THETA_B {-1.4f, 4.6f}
 #define PSP_MID 150u
 #define PSP_HASH_A 0xBD6CEC1Du
-#define PSP_HASH_B 0x53041C47u
-#define PSP_HASH_C 0x66128E5Au
+#define PSP_HASH_B 0x1DFF045Cu
+#define PSP_HASH_C 0x9F7DAE79u
 #define PSP_HASH_NOMINAL 0x86154AAFu
 #define PSP_N_CHECKED 7u
 static const uint32_t psp_checked[PSP_N_CHECKED] = {0u, 1u, 150u, 299u, 300u, 301u, 599u};

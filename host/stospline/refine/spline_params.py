@@ -21,7 +21,7 @@ from stospline.errors import DesignError
 from stospline.oracle.over_box import band_margins, box_moments
 from stospline.table.format import _to_float32
 from stospline.table.parametric import ParametricTable
-from stospline.table.spline.latch import resolve_latch
+from stospline.table.spline.latch import _groups
 from stospline.table.spline.params import SplineColumns, box_error, fit_columns
 from stospline.table.spline.restore import is_state_latching
 
@@ -38,15 +38,41 @@ class SplineParametric:
     per_tick: ParametricTable
 
 
-def _latch_columns(problem, stable, evaluated: np.ndarray, P: int) -> np.ndarray:
-    """The latch offsets' columns re-solved for the spline's gains: parameter p's source
-    alone under the spline's K, L and the column's feed-forward as evaluated."""
+def _latch_columns(problem, stable, evaluated: np.ndarray, P: int, *, rounded: bool = True
+                   ) -> np.ndarray:
+    """The latch offsets' columns re-solved for the spline's law: parameter p's source alone
+    (`unit_problem`, from x0 = 0: the shift of the mean per unit of d_p) under the spline's
+    K, L, its stored (float32) Lambda and the column's feed-forward as evaluated. At each
+    latch, in order, the column puts the shift of the latch group's constraints on the shift
+    of their values, for the mean the earlier columns give at the latch tick (the stored
+    Lambda acts on it: its rounding is compensated). `rounded`: each column rounded to
+    float32 on the grid of its largest entry before the next latch's mean is taken (the
+    table as flashed)."""
+    from stospline.oracle.evaluate import evaluate_table
+    n = stable.dims[0]
     S = np.zeros(np.shape(stable.lambda0) + (P,))
     if stable.dims[2] == 0 or is_state_latching(stable):
         return S
+    Lam = np.asarray(stable.Lambda, float)
     for p in range(P):
-        t = stable.with_arrays(k0=evaluated[..., p])
-        S[..., p] = resolve_latch(unit_problem(problem, p), t)[1]
+        unit = unit_problem(problem, p)
+        law = replace(stable, k0=np.asarray(evaluated[..., p], float),
+                      Lambda=Lam, lambda0=np.zeros(np.shape(stable.lambda0)))
+        for latch, width, _, _, CW, zeta in _groups(unit, law, None, None):
+            if latch is None:
+                continue
+            tick = int(stable.stage_start[latch])
+            x = evaluate_table(unit, replace(law, lambda0=S[..., p]), path=True,
+                               output=np.eye(n)).path_mean[tick] if tick > 0 else np.zeros(n)
+            G = CW[:, n:n + width]
+            col = np.linalg.solve(G, zeta - CW[:, -1] - (CW[:, :n] + G @ Lam[latch, :width]) @ x)
+            if rounded:
+                # on the float32 grid of the column's largest entry (as the gains'
+                # coefficients, `fit._coefficients`): an exact zero that the solve leaves at
+                # 1e-10 keeps none of the digits that move with the design's last bits
+                q = np.ldexp(1.0, np.frexp(np.abs(col).max())[1] - 24)
+                col = (np.rint(col / q) * q).astype(np.float32)
+            S[latch, :width, p] = col
     return S
 
 

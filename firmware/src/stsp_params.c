@@ -474,11 +474,6 @@ static void stsp_param_latch(const stsp_param_t *pc, uint16_t stage, const stsp_
     }
 }
 
-/* The law at `tick` (of `stage`) with k0' and multipliers v into y; returns STSP_OK, or the
- * error of a non-finite command (float32), or STSP_WARN_SATURATED after clamping y to the
- * limits (bits of *mask). One compare pair per input tells a command inside the limits (false
- * for NaN and +-Inf: the limits are finite) from one that needs the finiteness check and the
- * clamp. A spline table's command comes from the spline code (stsp_spline_ops.param_law). */
 /* The per-tick law's rows at `tick` with k0' and multipliers v into y; returns nonzero when
  * some command is outside its limits (or not finite). */
 static uint32_t stsp_param_rows(const stsp_param_t *pc, uint32_t tick, const stsp_scalar_t *x,
@@ -520,43 +515,21 @@ static uint32_t stsp_param_rows(const stsp_param_t *pc, uint32_t tick, const sts
     return alarm;
 }
 
-/* The law at `tick` (of `stage`) with k0' and multipliers v into y; returns STSP_OK, or the
- * error of a non-finite command (float32), or STSP_WARN_SATURATED after clamping y to the
- * limits (bits of *mask). One compare pair per input tells a command inside the limits (false
- * for NaN and +-Inf: the limits are finite) from one that needs the finiteness check and the
- * clamp. A spline table's command comes from the spline code (stsp_spline_ops.param_law). */
-static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick, uint16_t stage,
-                                    const stsp_scalar_t *x, const stsp_scalar_t *v,
-                                    stsp_scalar_t *y, uint16_t *mask)
+/* The commands y, computed with `alarm` set when one is outside its limits (or not finite):
+ * STSP_OK, or the error of a non-finite command (float32), or STSP_WARN_SATURATED after
+ * clamping y to the limits (bits of *mask). */
+static stsp_status_t stsp_param_finish(const stsp_header_t *h, const stsp_scalar_t *x,
+                                       stsp_scalar_t *y, uint32_t alarm, uint16_t *mask)
 {
-    const stsp_header_t *h = &pc->ctrl.checked;
-    const uint32_t nx = h->nx;
     const uint32_t nu = h->nu;
     uint32_t i;
     uint32_t m = 0u;
-    uint32_t alarm = 0u;
     stsp_status_t st;
-#ifndef STSP_ARITH_FIXED_POINT
-    if (stsp_param_is_spline(&pc->checked) != 0) {
-        h->sp.ops->param_law(h, (uint32_t)stage, tick, x, v, pc->checked.S_k0,
-                             pc->checked.n_spline_coef, pc->d, pc->checked.n_params, y);
-        for (i = 0u; i < nu; ++i) {
-            if (!((y[i] >= h->u_min[i]) && (y[i] <= h->u_max[i]))) {
-                alarm = 1u;
-            }
-        }
-    } else {
-        alarm = stsp_param_rows(pc, tick, x, v, y);
-    }
-#else
-    (void)stage;
-    alarm = stsp_param_rows(pc, tick, x, v, y);
-#endif
     *mask = 0u;
     if (alarm == 0u) {
         return STSP_OK;
     }
-    st = stsp_param_nonfinite(x, y, nx, nu);
+    st = stsp_param_nonfinite(x, y, h->nx, nu);
     if (st != STSP_OK) {
         return st;
     }
@@ -573,6 +546,36 @@ static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick, uint1
     }
     *mask = (uint16_t)m;
     return (m != 0u) ? STSP_WARN_SATURATED : STSP_OK;
+}
+
+/* The law at `tick` (of `stage`) with k0' and multipliers v into y, then stsp_param_finish.
+ * One compare pair per input tells a command inside the limits (false for NaN and +-Inf: the
+ * limits are finite) from one that needs the finiteness check and the clamp. A spline
+ * table's command comes from the spline code (stsp_spline_ops.param_law). */
+static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick, uint16_t stage,
+                                    const stsp_scalar_t *x, const stsp_scalar_t *v,
+                                    stsp_scalar_t *y, uint16_t *mask)
+{
+    const stsp_header_t *h = &pc->ctrl.checked;
+    uint32_t alarm = 0u;
+#ifndef STSP_ARITH_FIXED_POINT
+    if (stsp_param_is_spline(&pc->checked) != 0) {
+        uint32_t i;
+        h->sp.ops->param_law(h, (uint32_t)stage, tick, x, v, pc->checked.S_k0,
+                             pc->checked.n_spline_coef, pc->d, pc->checked.n_params, y);
+        for (i = 0u; i < h->nu; ++i) {
+            if (!((y[i] >= h->u_min[i]) && (y[i] <= h->u_max[i]))) {
+                alarm = 1u;
+            }
+        }
+    } else {
+        alarm = stsp_param_rows(pc, tick, x, v, y);
+    }
+#else
+    (void)stage;
+    alarm = stsp_param_rows(pc, tick, x, v, y);
+#endif
+    return stsp_param_finish(h, x, y, alarm, mask);
 }
 
 stsp_status_t stsp_param_step(stsp_param_t *pc, uint32_t tick, const stsp_scalar_t *x,

@@ -3,7 +3,7 @@
 runtime parameter (gains/robot_goal*), through stsp_step() (no parameters) and through
 stsp_param_step() (theta set inside the range).
 
-    python3 tools/arm/count_params.py [--build DIR] [--arith float32|q15|q31]
+    python3 tools/arm/count_params.py [--build DIR] [--arith float32|q15|q31|spline]
 
 Compiles tools/arm/params_bench_main.c with firmware/src/*.c and the robot's tables
 (arm-none-eabi-gcc -O2, -mcpu=cortex-m4 hard float, -ffp-contract=off, the generic build),
@@ -15,7 +15,9 @@ image runs the three runs of tests/c/test_params.c on the target and their comma
 be tests/c/params_expected.h's (the float32 specification's, bit for bit), else exit status 1.
 With --arith q15 or q31: the fixed-point build on gains/robot_goal_<arith>* (the same ticks,
 states in Q scales), its hashes against tests/c/params_q_expected.h (the host's bit-exact
-reference). Standard library only.
+reference. With --arith spline: the float32 build on gains/robot_goal_spline* (the spline
+table with its spline columns, tools/params_tables.py --spline), its hashes against
+tests/c/params_spline_expected.h. Standard library only.
 """
 from __future__ import annotations
 
@@ -33,7 +35,7 @@ FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", 
          "-O2", "-ffp-contract=off", "-ffunction-sections", "-fdata-sections", "-Wall",
          "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"]
 CALLERS = ("bench_plain", "bench_param")
-SUFFIX = {"float32": "f32", "q15": "q15", "q31": "q31"}
+SUFFIX = {"float32": "f32", "q15": "q15", "q31": "q31", "spline": "f32"}
 
 
 def entries(arith: str) -> tuple[str, str]:
@@ -44,7 +46,8 @@ def build(out: Path, arith: str = "float32", hashes: bool = False) -> Path:
     elf = out / (f"hash_params_{arith}.elf" if hashes else f"bench_params_{arith}.elf")
     arm = ROOT / "tools" / "arm"
     name = "robot_goal" if arith == "float32" else f"robot_goal_{arith}"
-    defs = [] if arith == "float32" else [f"-DSTSP_ARITH_{arith.upper()}"]
+    defs = {"float32": [], "spline": ["-DPARAMS_SPLINE"]}.get(
+        arith, [f"-DSTSP_ARITH_{arith.upper()}"])
     run(["arm-none-eabi-gcc", *FLAGS, *defs, *(["-DBENCH_HASH"] if hashes else []),
          f"-I{ROOT / 'firmware/include'}", f"-I{ROOT / 'firmware/src'}", f"-I{ROOT / 'gains'}",
          f"-I{ROOT / 'tests/c'}",
@@ -58,7 +61,11 @@ def build(out: Path, arith: str = "float32", hashes: bool = False) -> Path:
 def count(elf: Path, arith: str = "float32") -> list[dict]:
     syms = symbols(elf)
     ENTRIES = entries(arith)
-    funcs = sorted({f for e in ENTRIES for f in callees(elf, syms, e)})
+    # A spline table's code is reached through its ops pointer (blx to a register, which
+    # callees cannot follow): when linked, its tick and the parameters' law are roots too.
+    roots = list(ENTRIES) + [n for n in syms if n.split(".")[0] in ("stsp_spline_step",
+                                                                    "stsp_spline_param_law")]
+    funcs = sorted({f for e in roots for f in callees(elf, syms, e)})
     ranges = {n: syms[n] for n in funcs + list(CALLERS)}
     trace = elf.with_suffix(".trace")
     insns, out = trace_run(elf, ranges, trace)
@@ -82,6 +89,9 @@ def check_hashes(out: Path, arith: str = "float32") -> bool:
          "none", "-semihosting-config", "enable=on,target=native", "-kernel", str(elf)])))
     if arith == "float32":
         text, what = (ROOT / "tests/c/params_expected.h").read_text(), "specification"
+    elif arith == "spline":
+        text, what = (ROOT / "tests/c/params_spline_expected.h").read_text(), "specification"
+        text = text.replace("PSP_", "PAR_")
     else:
         text, what = (ROOT / "tests/c/params_q_expected.h").read_text(), "host reference"
         text = text.split(f"defined(STSP_ARITH_{arith.upper()})")[1].split("#e")[0]

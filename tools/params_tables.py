@@ -9,7 +9,8 @@
 spline_tolerance, and gains/<name>_spline_params.{c,h}, its columns as B-splines on the same
 knots (format 2); with --bytes it prints, for every example with [[parameters]], the bytes of
 the per-tick and the spline forms (table and columns), the columns' largest fit error and
-their effect on the command over the box.
+their effect on the command over the box; with --certify, the guarantees over the box of the
+spline table as flashed against the per-tick design's (stospline.refine.spline_params).
 --fixed writes, instead, the Q15/Q31 parametric controllers of the examples in FIXED
 (`fixed_point_files`): gains/<name>_<arith>.{c,h}, the gain table quantized with the columns
 over the whole box, and gains/<name>_<arith>_params.{c,h}, its columns; with --bytes it prints
@@ -35,6 +36,7 @@ def main(argv=None) -> int:
     ap.add_argument("--bytes", action="store_true")
     ap.add_argument("--fixed", action="store_true")
     ap.add_argument("--spline", action="store_true")
+    ap.add_argument("--certify", action="store_true")
     args = ap.parse_args(argv)
     if args.spline:
         for path in sorted((ROOT / "examples").glob("*.toml")):
@@ -47,6 +49,8 @@ def main(argv=None) -> int:
                     (Path(args.out) / fname).write_text(text)
             if args.bytes:
                 print(path.stem, _spline_flash(sp))
+            if args.certify:
+                print(path.stem, _certificate(problem, sp))
         return 0
     if args.fixed:
         for name in FIXED:
@@ -118,6 +122,22 @@ def _spline_flash(sp) -> str:
             f"smaller); columns' largest error {sp.columns.error.max():.3g} "
             f"({rel:.2g} of the column's peak), on the command over the box "
             f"{sp.columns.box_error.max():.3g}")
+
+
+def _certificate(problem, sp) -> str:
+    from stospline.refine.spline_params import certify_over_box
+    c = certify_over_box(problem, sp)
+    parts = []
+    for key in ("per_tick", "per_tick_float32", "spline"):
+        e = c[key]
+        band = ("no bands" if e["worst_band_margin"] is None else
+                f"worst band margin over the box {e['worst_band_margin']:.3g} "
+                f"({'holds' if e['bands_hold'] else 'BROKEN'})")
+        cor = "; ".join(f"corridor {k}: Cantelli over the box, worst tick "
+                        f"{b['worst_tick']:.9f}, sum {b['total']:.3g}"
+                        for k, b in enumerate(e["corridors"]))
+        parts.append(f"{key}: {band}" + (f"; {cor}" if cor else ""))
+    return " | ".join(parts)
 
 
 def _flash(problem) -> str:

@@ -128,7 +128,7 @@ def _certificate(problem, sp) -> str:
     from stospline.refine.spline_params import certify_over_box
     c = certify_over_box(problem, sp)
     parts = []
-    for key in ("per_tick", "per_tick_float32", "spline"):
+    for key in ("per_tick", "per_tick_float32", "spline_design_columns", "spline"):
         e = c[key]
         band = ("no bands" if e["worst_band_margin"] is None else
                 f"worst band margin over the box {e['worst_band_margin']:.3g} "

@@ -125,16 +125,18 @@ def certify_over_box(problem, sp: SplineParametric) -> dict:
     """The guarantees of the flashed spline parametric table over the box: every band row's
     worst margin over the box (`band_margins`), every corridor's Cantelli bound over the box
     (`stospline.oracle.exit_bound.exit_bounds_over_box`: the largest per tick, and the sum),
-    the same of the per-tick design in double precision and of its float32 table (the gains
-    and columns as the per-tick firmware stores them) for comparison, and the columns'
-    errors."""
+    the same of the per-tick design in double precision, of its float32 table (the gains
+    and columns as the per-tick firmware stores them) and of the spline's gains with the
+    design's exact columns, for comparison, and the columns' errors."""
     from stospline.oracle.exit_bound import exit_bounds_over_box
     out = {"column_error": sp.columns.error.tolist(),
            "column_box_error": sp.columns.box_error.tolist()}
     pt = sp.per_tick
     f32 = ParametricTable(pt.table.quantized(), pt.S_k0.astype(np.float32).astype(float),
                           pt.S_lambda0.astype(np.float32).astype(float), pt.parameters)
-    for key, table in (("spline", sp.flashed), ("per_tick", pt), ("per_tick_float32", f32)):
+    design_columns = ParametricTable(sp.flashed.table, pt.S_k0, pt.S_lambda0, pt.parameters)
+    for key, table in (("spline", sp.flashed), ("per_tick", pt), ("per_tick_float32", f32),
+                       ("spline_design_columns", design_columns)):
         box = box_moments(problem, table)
         margins = band_margins(problem, box)
         entry = {"worst_band_margin": min((m.worst for m in margins), default=None),

@@ -29,65 +29,9 @@
 static const stsp_table_t *const T = &robot_goal_spline_table;
 static const stsp_params_table_t *const P = &robot_goal_spline_params;
 
-/* A binary32's bits, a zero as +0 (the reference's convention). */
-static uint32_t word(float v)
-{
-    uint32_t b;
-    v = v + 0.0f;
-    memcpy(&b, &v, sizeof b);
-    return b;
-}
-
-static uint32_t fnv1a(uint32_t h, uint32_t w)
-{
-    uint32_t i;
-    for (i = 0u; i < 4u; ++i) {
-        h = (h ^ ((w >> (8u * i)) & 0xFFu)) * 0x01000193u;
-    }
-    return h;
-}
-
-/* The state of tick j, as params_reference.params_state(). */
-static void state(uint32_t j, float x[NX])
-{
-    uint32_t c;
-    for (c = 0u; c < NX; ++c) {
-        x[c] = (float)((7u * j + 13u * c) % 41u) * 0.05f - 1.0f;
-    }
-}
-
-/* A run over every tick: theta0 before tick 0 (NULL: the nominal), theta1 before tick `at`
- * (NULL: none); the hash of the commands, run A's checked ticks into checked. */
-static uint32_t run(const float *theta0, uint32_t at, const float *theta1,
-                    uint32_t checked[PSP_N_CHECKED][2])
-{
-    stsp_param_t pc;
-    float x[NX];
-    float u[NU];
-    uint32_t h = 0x811C9DC5u;
-    uint32_t j;
-    uint32_t k = 0u;
-    assert_int_equal(stsp_param_init(&pc, T, P), STSP_OK);
-    if (theta0 != NULL) {
-        assert_int_equal(stsp_set_params(&pc, theta0), STSP_OK);
-    }
-    for (j = 0u; j < N_TICKS; ++j) {
-        stsp_status_t st;
-        if ((theta1 != NULL) && (j == at)) {
-            assert_int_equal(stsp_set_params(&pc, theta1), STSP_OK);
-        }
-        state(j, x);
-        st = stsp_param_step(&pc, j, x, u);
-        assert_true((st == STSP_OK) || (st == STSP_WARN_SATURATED));
-        h = fnv1a(fnv1a(h, word(u[0])), word(u[1]));
-        if ((checked != NULL) && (k < PSP_N_CHECKED) && (psp_checked[k] == j)) {
-            checked[k][0] = word(u[0]);
-            checked[k][1] = word(u[1]);
-            ++k;
-        }
-    }
-    return h;
-}
+#define N_CHECKED PSP_N_CHECKED
+#define CHECKED_TICKS psp_checked
+#include "params_run.h"
 
 static void test_runs_match_reference(void **state_)
 {

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from stospline.table.format import positive_zeros
+from stospline.table.params_spec import ParamSpec
 from stospline.table.spline.fit import (_Bases, _basis, _combine, _coefficients,
                                         _ill_conditioned, _min_norm, _normal_rhs,
                                         _solve_banded)
@@ -155,39 +156,22 @@ def command(table, cols: SplineColumns, tick: int, x, v, d) -> np.ndarray:
     return u
 
 
-class ParamSplineSpec:
-    """``set(theta)`` and ``step(tick, x) -> u`` of one ``stsp_param_step`` instance with a
-    spline table, ticks in order from 0 (float32, bit for bit): the latch as the per-tick
-    specification's (`stospline.table.params_spec.ParamSpec`), the command `command`, the
-    clamp."""
+class ParamSplineSpec(ParamSpec):
+    """`ParamSpec` (``set(theta)``, ``step(tick, X) -> U`` for `paths` instances, ticks in
+    order from 0, float32 bit for bit) of ``stsp_param_step`` with a spline table and its
+    spline columns: the latch as for a per-tick table, the command `command`, the clamp."""
 
-    def __init__(self, table, cols: SplineColumns, nominal):
-        self.t, self.cols = table, cols
-        self.nominal = np.asarray(nominal, f32)
+    def __init__(self, table, cols: SplineColumns, nominal, paths: int = 1):
+        self.t, self.spline_cols = table, cols
         self.Lambda = np.asarray(table.Lambda, f32)
         self.lambda0 = np.asarray(table.lambda0, f32)
-        self.S_lambda0 = np.asarray(cols.S_lambda0, f32)
-        self.d = np.zeros(self.nominal.size, f32)
-        self.v = np.zeros(table.dims[2], f32)
+        self.u_min, self.u_max = (np.asarray(a, f32) for a in (table.u_min, table.u_max))
+        self.cols = {"nominal": np.asarray(nominal, f32),
+                     "S_lambda0": np.asarray(cols.S_lambda0, f32)}
+        self.d = np.zeros(self.cols["nominal"].size, f32)
+        self.v = np.zeros((paths, table.dims[2]), f32)
 
-    def set(self, theta) -> None:
-        self.d = np.asarray(theta, f32) - self.nominal
-
-    def step(self, j: int, x) -> np.ndarray:
-        t = self.t
-        n, m, nl = t.dims
-        x = np.asarray(x, f32)
-        k = t.stage_of_tick(j)
-        if j == int(t.stage_start[k]) and (k == 0 or t.stage_n_latch[k] > 0):
-            for c in range(nl):
-                if c >= t.stage_n_latch[k]:
-                    self.v[c] = f32(0)
-                    continue
-                e = self.lambda0[k][c]
-                for p in range(self.d.size):
-                    e = f32(e + f32(self.S_lambda0[k, c, p] * self.d[p]))
-                for col in range(n):
-                    e = f32(e + f32(self.Lambda[k][c, col] * x[col]))
-                self.v[c] = e
-        u = command(t, self.cols, j, x, self.v, self.d)
-        return np.minimum(np.maximum(u, np.asarray(t.u_min, f32)), np.asarray(t.u_max, f32))
+    def _command(self, j: int, X: np.ndarray) -> np.ndarray:
+        U = np.stack([command(self.t, self.spline_cols, j, x, v, self.d)
+                      for x, v in zip(X, self.v)])
+        return np.minimum(np.maximum(U, self.u_min), self.u_max)

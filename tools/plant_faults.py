@@ -314,8 +314,8 @@ FAULTS = [
     Fault("F88", "params (spline): the CRC of format 2 leaves out n_spline_coef", CTL,
           "        crc = stsp_crc32_u32(crc, params->n_spline_coef);\n", ""),
     Fault("F89", "params (spline): every input's gains of x from the stage's first entry", CTL,
-          "for (e = (i > 0u) ? p.row_end[i - 1u] : 0u; e < p.k_end[i]; ++e) {",
-          "for (e = 0u; e < p.k_end[i]; ++e) {"),
+          "for (e = (i > 0u) ? p->row_end[i - 1u] : 0u; e < p->k_end[i]; ++e) {",
+          "for (e = 0u; e < p->k_end[i]; ++e) {"),
 ]
 
 

@@ -102,10 +102,14 @@ static stsp_status_t stsp_param_check(const stsp_params_table_t *p, const stsp_h
     }
     /* Per-tick columns with a per-tick table, spline columns with a spline table; a band
      * dual's latch would need sensitivities of its own (a fixed-point table has none). */
+#ifdef STSP_ARITH_FIXED_POINT
+    if (h->spline != NULL) { /* (format 2 was refused above) */
+        return STSP_ERR_BAD_DIMS;
+    }
+#else
     if ((spline == 0) && (h->spline != NULL)) {
         return STSP_ERR_BAD_DIMS;
     }
-#ifndef STSP_ARITH_FIXED_POINT
     if (spline != 0) {
         /* the spline's layout was validated by stsp_init(): n_knots >= 8 n_stages */
         const uint32_t per_stage = (uint32_t)p->nu * (uint32_t)p->n_params;

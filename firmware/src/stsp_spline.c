@@ -958,6 +958,23 @@ static uint32_t stsp_spline_crc(uint32_t crc, const stsp_spline_t *sp, uint32_t 
 #endif
 
 #ifndef STSP_ARITH_FIXED_POINT
+/* acc less input i's gains of x times their states, in stored order (stsp_spline_law's
+ * order), the span p's coefficients of its first entry at coef. */
+static stsp_f32_t stsp_spline_x_terms(const stsp_header_t *h, const stsp_span_t *p,
+                                      const stsp_f32_t *coef, const stsp_f32_t *n,
+                                      const stsp_f32_t *x, uint32_t i, stsp_f32_t acc)
+{
+    const uint32_t nx = stsp_nx(h);
+    stsp_f32_t out = acc;
+    uint32_t e;
+    for (e = (i > 0u) ? p->row_end[i - 1u] : 0u; e < p->k_end[i]; ++e) {
+        const uint32_t col = p->col[e];
+        out = stsp_mls(out, stsp_spline_gain(&coef[e * p->stride], n),
+                       x[(col < nx) ? col : (nx - 1u)]);
+    }
+    return out;
+}
+
 /* stsp_params.c's tick of a spline table with spline columns (stsp_params.h, format 2): the
  * span of `tick` in stage s as the cold path finds it (bounded by the validated lengths), its
  * basis, and per input the fold of stsp_spline_fold continued with the columns' terms, its
@@ -969,7 +986,6 @@ static void stsp_spline_param_law(const stsp_header_t *h, uint32_t s, uint32_t t
                                   const stsp_f32_t *cols, uint32_t n_cols, const stsp_f32_t *d,
                                   uint32_t n_params, stsp_f32_t *y)
 {
-    const uint32_t nx = stsp_nx(h);
     const uint32_t nu = stsp_nu(h);
     const uint32_t ks = h->sp.knot_start[s];
     const uint32_t per_stage = nu * n_params;
@@ -978,35 +994,31 @@ static void stsp_spline_param_law(const stsp_header_t *h, uint32_t s, uint32_t t
     stsp_f32_t fold[4u * STSP_MAX_NU];
     uint32_t off = 0u;
     uint32_t use_cols = 0u;
+    uint32_t in_stage;
     uint32_t i;
     stsp_spline_span(h, s, 0u, tick, stsp_stage_end(h, (uint16_t)s), &p);
-    stsp_spline_basis(p.knot, p.inv, (stsp_f32_t)(tick - p.first), n);
+    in_stage = tick - p.first;
+    stsp_spline_basis(p.knot, p.inv, (stsp_f32_t)in_stage, n);
     stsp_spline_fold(h, &p, p.coef, v, fold);
     if ((ks >= (4u * s)) && ((ks - (4u * s)) <= (n_cols / per_stage))) {
         off = per_stage * (ks - (4u * s));
-        use_cols = ((per_stage * p.stride) <= (n_cols - off)) ? 1u : 0u;
+        if ((per_stage * p.stride) <= (n_cols - off)) {
+            use_cols = 1u;
+        }
     }
     for (i = 0u; i < nu; ++i) {
         stsp_f32_t *f = &fold[4u * i];
-        stsp_f32_t acc;
-        uint32_t e;
-        uint32_t r;
         if (use_cols != 0u) {
             uint32_t q;
             for (q = 0u; q < n_params; ++q) {
                 const stsp_f32_t *cs = &cols[off + ((((i * n_params) + q) * p.stride) + p.span)];
+                uint32_t r;
                 for (r = 0u; r < 4u; ++r) {
                     f[r] = stsp_mls(f[r], cs[r], d[q]);
                 }
             }
         }
-        acc = stsp_spline_gain(f, n);
-        for (e = (i > 0u) ? p.row_end[i - 1u] : 0u; e < p.k_end[i]; ++e) {
-            const uint32_t col = p.col[e];
-            acc = stsp_mls(acc, stsp_spline_gain(&p.coef[e * p.stride], n),
-                           x[(col < nx) ? col : (nx - 1u)]);
-        }
-        y[i] = acc;
+        y[i] = stsp_spline_x_terms(h, &p, p.coef, n, x, i, stsp_spline_gain(f, n));
     }
 }
 #endif

@@ -84,7 +84,7 @@ def spline_parametric(problem, ptable: ParametricTable, stable) -> SplineParamet
     ------
     DesignError
         ``design.table`` for a spline table with a band dual (its dual would need columns of
-        its own) or a fixed-point one.
+        its own) or a fixed-point one, a design for a delay, time-varying stage data.
     """
     if getattr(stable, "spline", None) is None or getattr(stable, "arith", "float32") \
             != "float32":
@@ -92,6 +92,10 @@ def spline_parametric(problem, ptable: ParametricTable, stable) -> SplineParamet
     if stable.band_qp is not None:
         raise DesignError("design.table", "a spline table with a band dual has no spline "
                                           "columns (its dual would need columns of its own)")
+    if getattr(stable, "delay_ticks", 0) or any(st.varying is not None
+                                                for st in problem.stages):
+        raise DesignError("design.table", "spline columns are re-solved for designs without a "
+                                          "delay and with constant stage data only")
     P = len(ptable.parameters)
     coef, evaluated, error = fit_columns(stable.spline, stable.stage_start, ptable.S_k0,
                                          ptable.parameters)

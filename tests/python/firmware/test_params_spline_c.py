@@ -96,3 +96,15 @@ def test_resolved_latch_columns_hold_the_constraints(goal):
                              sp.flashed.parameters)
     good, bad = _knot_shift(problem, resolved, theta), _knot_shift(problem, design, theta)
     assert good < 1e-10 and bad > 30 * good, (good, bad)
+
+
+def test_tables_without_spline_columns_are_refused(goal):
+    from dataclasses import replace
+    from stospline.errors import DesignError
+    from stospline.refine.spline_params import spline_parametric
+    problem, sp = goal
+    for bad, what in ((replace(sp.table, spline=None), "float32 spline table"),
+                      (replace(sp.table, delay_ticks=1), "delay")):
+        with pytest.raises(DesignError, match=what) as info:
+            spline_parametric(problem, sp.per_tick, bad)
+        assert info.value.field == "design.table"

@@ -1,9 +1,16 @@
 """Write gains/<name>_params.{c,h}, the sensitivity columns of every example that declares
 [[parameters]] (stospline.oracle.parametric.parametric_c_files), byte-for-byte reproducible.
 
-    .venv/bin/python tools/params_tables.py [--out gains/] [--bytes] [--fixed]
+    .venv/bin/python tools/params_tables.py [--out gains/] [--bytes] [--fixed] [--spline]
 
 --bytes prints, per example, the flash of the float32 per-tick table and of its columns.
+--spline writes, instead, the spline parametric controllers of the examples in SPLINE
+(`spline_files`): gains/<name>_spline.{c,h}, the float32 spline gain table at the file's
+spline_tolerance, and gains/<name>_spline_params.{c,h}, its columns as B-splines on the same
+knots (format 2); with --bytes it prints, for every example with [[parameters]], the bytes of
+the per-tick and the spline forms (table and columns), the columns' largest fit error and
+their effect on the command over the box; with --certify, the guarantees over the box of the
+spline table as flashed against the per-tick design's (stospline.refine.spline_params).
 --fixed writes, instead, the Q15/Q31 parametric controllers of the examples in FIXED
 (`fixed_point_files`): gains/<name>_<arith>.{c,h}, the gain table quantized with the columns
 over the whole box, and gains/<name>_<arith>_params.{c,h}, its columns, byte for byte what
@@ -15,11 +22,14 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from stospline.oracle.parametric import parametric_c_files
 from stospline.problem import load_problem
 
 ROOT = Path(__file__).resolve().parents[1]
 FIXED = ("robot_goal",)       # the examples with Q15/Q31 parametric controllers in gains/
+SPLINE = ("robot_goal",)      # the examples with spline parametric controllers in gains/
 
 
 def main(argv=None) -> int:
@@ -27,7 +37,23 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "gains"))
     ap.add_argument("--bytes", action="store_true")
     ap.add_argument("--fixed", action="store_true")
+    ap.add_argument("--spline", action="store_true")
+    ap.add_argument("--certify", action="store_true")
     args = ap.parse_args(argv)
+    if args.spline:
+        for path in sorted((ROOT / "examples").glob("*.toml")):
+            problem = load_problem(path)
+            if not problem.parameters or (path.stem not in SPLINE and not args.bytes):
+                continue
+            files, sp = spline_files(problem, path.name)
+            if path.stem in SPLINE:
+                for fname, text in files.items():
+                    (Path(args.out) / fname).write_text(text)
+            if args.bytes:
+                print(path.stem, _spline_flash(sp))
+            if args.certify:
+                print(path.stem, _certificate(problem, sp))
+        return 0
     if args.fixed:
         for name in FIXED:
             for arith, (files, pf) in fixed_point_files(name).items():
@@ -64,6 +90,53 @@ def fixed_point_files(name: str) -> dict:
                                         resolve_options(problem, arith=arith))
         out[arith] = (files, pf)
     return out
+
+
+def spline_files(problem, source_name: str):
+    """``(files, sp)``: the C of the spline gain table and of its spline columns."""
+    from stospline.refine.spline_params import spline_parametric_of
+    from stospline.table.codegen import generate_c
+    from stospline.table.parametric_c import generate_spline_parametric_c
+    sp = spline_parametric_of(problem)
+    gh, gc = generate_c(sp.table, source_name=source_name)
+    ph, pc = generate_spline_parametric_c(sp.table, sp.columns, sp.per_tick.parameters,
+                                          source_name=source_name)
+    n = sp.table.name
+    return {f"{n}.h": gh, f"{n}.c": gc, f"{n}_params.h": ph, f"{n}_params.c": pc}, sp
+
+
+def _spline_flash(sp) -> str:
+    from stospline.table.flash import flash_bytes
+    pt = sp.per_tick
+    P = len(pt.parameters)
+    tick_table = flash_bytes(pt.table.quantized())
+    tick_cols = 4 * (3 * P + pt.S_k0.size + pt.S_lambda0.size)
+    spl_table = flash_bytes(sp.table)
+    spl_cols = 4 * (3 * P + sp.columns.coef.size + sp.columns.S_lambda0.size)
+    peak = np.abs(pt.S_k0).max(axis=0)
+    rel = float((sp.columns.error / np.where(peak > 0, peak, 1.0)).max())
+    return (f"per-tick: table {tick_table} B + columns {tick_cols} B = "
+            f"{tick_table + tick_cols} B; spline: table {spl_table} B + columns {spl_cols} B = "
+            f"{spl_table + spl_cols} B ({(tick_table + tick_cols) / (spl_table + spl_cols):.1f}x "
+            f"smaller); columns' largest error {sp.columns.error.max():.3g} "
+            f"({rel:.2g} of the column's peak), on the command over the box "
+            f"{sp.columns.box_error.max():.3g}")
+
+
+def _certificate(problem, sp) -> str:
+    from stospline.refine.spline_params import certify_over_box
+    c = certify_over_box(problem, sp)
+    parts = []
+    for key in ("per_tick", "per_tick_float32", "spline_design_columns", "spline"):
+        e = c[key]
+        band = ("no bands" if e["worst_band_margin"] is None else
+                f"worst band margin over the box {e['worst_band_margin']:.3g} "
+                f"({'holds' if e['bands_hold'] else 'BROKEN'})")
+        cor = "; ".join(f"corridor {k}: Cantelli over the box, worst tick "
+                        f"{b['worst_tick']:.9f}, sum {b['total']:.3g}"
+                        for k, b in enumerate(e["corridors"]))
+        parts.append(f"{key}: {band}" + (f"; {cor}" if cor else ""))
+    return " | ".join(parts)
 
 
 def _flash(problem) -> str:

@@ -307,6 +307,15 @@ FAULTS = [
           "            (stsp_param_dq(p, i, p->lower[i], &q) == 0) ||\n"
           "            (stsp_param_dq(p, i, p->upper[i], &q) == 0)) {",
           "            (stsp_param_dq(p, i, p->nominal[i], &q) == 0)) {"),
+    # Spline columns (stsp_params.h format 2; stsp_spline.c's param_law, tests/c/
+    # test_params_spline.c and its reference hashes).
+    Fault("F87", "params (spline): the columns' coefficients from the stage's first span", CTL,
+          "(((i * n_params) + q) * p.stride) + p.span)]", "(((i * n_params) + q) * p.stride))]"),
+    Fault("F88", "params (spline): the CRC of format 2 leaves out n_spline_coef", CTL,
+          "        crc = stsp_crc32_u32(crc, params->n_spline_coef);\n", ""),
+    Fault("F89", "params (spline): every input's gains of x from the stage's first entry", CTL,
+          "for (e = (i > 0u) ? p->row_end[i - 1u] : 0u; e < p->k_end[i]; ++e) {",
+          "for (e = 0u; e < p->k_end[i]; ++e) {"),
 ]
 
 

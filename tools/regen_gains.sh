@@ -16,7 +16,9 @@
 # their filter's tables in <name>.{c,h} from the first loop (float32, per-tick: the estimator
 # takes no spline or fixed-point table); those with [[parameters]] (robot_goal) their
 # sensitivity columns in <name>_params.{c,h}, from the same loop; robot_goal also its Q15/Q31
-# parametric controllers (<name>_<arith>.* and <name>_<arith>_params.*, tools/params_tables.py).
+# parametric controllers (<name>_<arith>.* and <name>_<arith>_params.*, tools/params_tables.py),
+# and its spline parametric controller (<name>_spline.* and <name>_spline_params.*: the spline
+# columns, tools/params_tables.py --spline).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -35,3 +37,4 @@ for arith in q15 q31; do
     --out gains/
 done
 "$root/.venv/bin/python" tools/params_tables.py --fixed --out gains/
+"$root/.venv/bin/python" tools/params_tables.py --spline --out gains/

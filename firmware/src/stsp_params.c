@@ -12,8 +12,19 @@
 #define STSP_PARAM_READY 0x50005300u
 #define STSP_PARAM_STOPPED 0x50015301u
 
+/* 1 for a parameter table with spline columns (format 2). */
+static int stsp_param_is_spline(const stsp_params_table_t *p)
+{
+    return (p->format_version == STSP_PARAMS_FORMAT_SPLINE) ? 1 : 0;
+}
+
+/* The length of S_k0: per tick, or n_spline_coef (format 2, checked against the gain
+ * table's spline by stsp_param_check()). */
 static uint32_t stsp_param_k0_len(const stsp_params_table_t *p)
 {
+    if (stsp_param_is_spline(p) != 0) {
+        return p->n_spline_coef;
+    }
     return p->n_ticks * (uint32_t)p->nu * (uint32_t)p->n_params;
 }
 
@@ -31,6 +42,10 @@ uint32_t stsp_params_table_crc32(const stsp_params_table_t *params)
     crc = stsp_crc32_u32(crc, params->n_latch);
     crc = stsp_crc32_u32(crc, params->n_stages);
     crc = stsp_crc32_u32(crc, params->n_ticks);
+    if (stsp_param_is_spline(params) != 0) {
+        crc = stsp_crc32_u32(crc, params->format_version);
+        crc = stsp_crc32_u32(crc, params->n_spline_coef);
+    }
 #ifdef STSP_ARITH_FIXED_POINT
     crc = stsp_crc32_u32(crc, params->scalar_kind);
     crc = stsp_crc32_f64s(crc, params->nominal, n);
@@ -56,7 +71,9 @@ uint32_t stsp_params_table_crc32(const stsp_params_table_t *params)
  * values. */
 static stsp_status_t stsp_param_check(const stsp_params_table_t *p, const stsp_header_t *h)
 {
-    if ((p->nominal == NULL) || (p->lower == NULL) || (p->upper == NULL) || (p->S_k0 == NULL) ||
+    const int spline = stsp_param_is_spline(p);
+    if ((p->nominal == NULL) || (p->lower == NULL) || (p->upper == NULL) ||
+        (p->S_k0 == NULL) ||
         ((p->n_latch > 0u) && (p->S_lambda0 == NULL))) {
         return STSP_ERR_NULL;
     }
@@ -68,20 +85,41 @@ static stsp_status_t stsp_param_check(const stsp_params_table_t *p, const stsp_h
     if (p->magic != STSP_PARAMS_MAGIC) {
         return STSP_ERR_BAD_MAGIC;
     }
-    if ((p->format_version != STSP_PARAMS_FORMAT_VERSION) ||
+    if (((p->format_version != STSP_PARAMS_FORMAT_VERSION) &&
+         (p->format_version != STSP_PARAMS_FORMAT_SPLINE)) ||
         (p->scalar_kind != STSP_SCALAR_KIND)) {
         return STSP_ERR_BAD_VERSION;
     }
+#ifdef STSP_ARITH_FIXED_POINT
+    if (spline != 0) {
+        return STSP_ERR_BAD_VERSION; /* spline columns are float32 only */
+    }
+#endif
     if ((p->n_params == 0u) || (p->n_params > STSP_MAX_PARAMS) || (p->nu != h->nu) ||
         (p->n_latch != h->n_latch) || (p->n_stages != h->n_stages) ||
         (p->n_ticks != h->n_ticks)) {
         return STSP_ERR_BAD_DIMS;
     }
-    /* The parametric law is the per-tick one; a spline's k0 or a band dual's latch would
-     * need sensitivities of their own (a fixed-point table has no band dual). */
-    if (h->spline != NULL) {
+    /* Per-tick columns with a per-tick table, spline columns with a spline table; a band
+     * dual's latch would need sensitivities of its own (a fixed-point table has none). */
+#ifdef STSP_ARITH_FIXED_POINT
+    if (h->spline != NULL) { /* (format 2 was refused above) */
         return STSP_ERR_BAD_DIMS;
     }
+#else
+    if ((spline == 0) && (h->spline != NULL)) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    if (spline != 0) {
+        /* the spline's layout was validated by stsp_init(): n_knots >= 8 n_stages */
+        const uint32_t per_stage = (uint32_t)p->nu * (uint32_t)p->n_params;
+        const uint32_t knots = h->sp.n_knots - (4u * (uint32_t)h->n_stages);
+        if ((h->spline == NULL) || (h->sp.ops == NULL) || (h->sp.ops->param_law == NULL) ||
+            (knots > (UINT32_MAX / per_stage)) || (p->n_spline_coef != (per_stage * knots))) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+#endif
 #ifndef STSP_ARITH_FIXED_POINT
     if (h->band_qp != NULL) {
         return STSP_ERR_BAD_DIMS;
@@ -377,7 +415,7 @@ static int stsp_param_header_changed(const stsp_params_table_t *a, const stsp_pa
             (a->nu != b->nu) || (a->n_latch != b->n_latch) || (a->n_stages != b->n_stages) ||
             (a->n_ticks != b->n_ticks) || (a->nominal != b->nominal) ||
             (a->lower != b->lower) || (a->upper != b->upper) || (a->S_k0 != b->S_k0) ||
-            (a->S_lambda0 != b->S_lambda0)) ? 1 : 0;
+            (a->S_lambda0 != b->S_lambda0) || (a->n_spline_coef != b->n_spline_coef)) ? 1 : 0;
 }
 
 stsp_status_t stsp_param_verify(stsp_param_t *pc)
@@ -440,13 +478,10 @@ static void stsp_param_latch(const stsp_param_t *pc, uint16_t stage, const stsp_
     }
 }
 
-/* The law at `tick` with k0' and multipliers v into y; returns STSP_OK, or the error of a
- * non-finite command (float32), or STSP_WARN_SATURATED after clamping y to the limits (bits
- * of *mask). One compare pair per input tells a command inside the limits (false for NaN and
- * +-Inf: the limits are finite) from one that needs the finiteness check and the clamp. */
-static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick,
-                                    const stsp_scalar_t *x, const stsp_scalar_t *v,
-                                    stsp_scalar_t *y, uint16_t *mask)
+/* The per-tick law's rows at `tick` with k0' and multipliers v into y; returns nonzero when
+ * some command is outside its limits (or not finite). */
+static uint32_t stsp_param_rows(const stsp_param_t *pc, uint32_t tick, const stsp_scalar_t *x,
+                                const stsp_scalar_t *v, stsp_scalar_t *y)
 {
     const stsp_header_t *h = &pc->ctrl.checked;
     const uint32_t nx = h->nx;
@@ -459,9 +494,7 @@ static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick,
     /* L may be NULL when n_latch == 0: no pointer arithmetic on it then. */
     const stsp_scalar_t *L = (n_latch > 0u) ? &h->L[tick * (nu * n_latch)] : h->L;
     uint32_t i;
-    uint32_t m = 0u;
     uint32_t alarm = 0u;
-    stsp_status_t st;
     for (i = 0u; i < nu; ++i) {
         stsp_param_acc_t acc =
             stsp_param_law_first(k0[i], &pc->checked.S_k0[s0 + (i * n)], pc->d, n);
@@ -483,11 +516,24 @@ static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick,
             alarm = 1u;
         }
     }
+    return alarm;
+}
+
+/* The commands y, computed with `alarm` set when one is outside its limits (or not finite):
+ * STSP_OK, or the error of a non-finite command (float32), or STSP_WARN_SATURATED after
+ * clamping y to the limits (bits of *mask). */
+static stsp_status_t stsp_param_finish(const stsp_header_t *h, const stsp_scalar_t *x,
+                                       stsp_scalar_t *y, uint32_t alarm, uint16_t *mask)
+{
+    const uint32_t nu = h->nu;
+    uint32_t i;
+    uint32_t m = 0u;
+    stsp_status_t st;
     *mask = 0u;
     if (alarm == 0u) {
         return STSP_OK;
     }
-    st = stsp_param_nonfinite(x, y, nx, nu);
+    st = stsp_param_nonfinite(x, y, h->nx, nu);
     if (st != STSP_OK) {
         return st;
     }
@@ -504,6 +550,36 @@ static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick,
     }
     *mask = (uint16_t)m;
     return (m != 0u) ? STSP_WARN_SATURATED : STSP_OK;
+}
+
+/* The law at `tick` (of `stage`) with k0' and multipliers v into y, then stsp_param_finish.
+ * One compare pair per input tells a command inside the limits (false for NaN and +-Inf: the
+ * limits are finite) from one that needs the finiteness check and the clamp. A spline
+ * table's command comes from the spline code (stsp_spline_ops.param_law). */
+static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick, uint16_t stage,
+                                    const stsp_scalar_t *x, const stsp_scalar_t *v,
+                                    stsp_scalar_t *y, uint16_t *mask)
+{
+    const stsp_header_t *h = &pc->ctrl.checked;
+    uint32_t alarm = 0u;
+#ifndef STSP_ARITH_FIXED_POINT
+    if (stsp_param_is_spline(&pc->checked) != 0) {
+        uint32_t i;
+        h->sp.ops->param_law(h, (uint32_t)stage, tick, x, v, pc->checked.S_k0,
+                             pc->checked.n_spline_coef, pc->d, pc->checked.n_params, y);
+        for (i = 0u; i < h->nu; ++i) {
+            if (!((y[i] >= h->u_min[i]) && (y[i] <= h->u_max[i]))) {
+                alarm = 1u;
+            }
+        }
+    } else {
+        alarm = stsp_param_rows(pc, tick, x, v, y);
+    }
+#else
+    (void)stage;
+    alarm = stsp_param_rows(pc, tick, x, v, y);
+#endif
+    return stsp_param_finish(h, x, y, alarm, mask);
 }
 
 stsp_status_t stsp_param_step(stsp_param_t *pc, uint32_t tick, const stsp_scalar_t *x,
@@ -532,7 +608,7 @@ stsp_status_t stsp_param_step(stsp_param_t *pc, uint32_t tick, const stsp_scalar
     /* An ordinary tick (the expected one inside the latched stage, as stsp_step() tells it):
      * the law on the multipliers kept, no plan. */
     if ((tick == ctrl->next_tick) && (tick < ctrl->stage_end)) {
-        status = stsp_param_law(pc, tick, x, ctrl->v, y, &mask);
+        status = stsp_param_law(pc, tick, ctrl->stage, x, ctrl->v, y, &mask);
         if (status < STSP_OK) {
             stsp_hold(ctrl, u);
             return status;
@@ -549,7 +625,7 @@ stsp_status_t stsp_param_step(stsp_param_t *pc, uint32_t tick, const stsp_scalar
         if (plan.relatch != 0u) {
             stsp_param_latch(pc, plan.stage, x, v_new);
         }
-        st = stsp_param_law(pc, tick, x, v_new, y, &mask);
+        st = stsp_param_law(pc, tick, plan.stage, x, v_new, y, &mask);
         if (st != STSP_OK) {
             status = st; /* an error, or STSP_WARN_SATURATED over a tick warning */
         }

@@ -957,6 +957,72 @@ static uint32_t stsp_spline_crc(uint32_t crc, const stsp_spline_t *sp, uint32_t 
 }
 #endif
 
+#ifndef STSP_ARITH_FIXED_POINT
+/* acc less input i's gains of x times their states, in stored order (stsp_spline_law's
+ * order), the span p's coefficients of its first entry at coef. */
+static stsp_f32_t stsp_spline_x_terms(const stsp_header_t *h, const stsp_span_t *p,
+                                      const stsp_f32_t *coef, const stsp_f32_t *n,
+                                      const stsp_f32_t *x, uint32_t i, stsp_f32_t acc)
+{
+    const uint32_t nx = stsp_nx(h);
+    stsp_f32_t out = acc;
+    uint32_t e;
+    for (e = (i > 0u) ? p->row_end[i - 1u] : 0u; e < p->k_end[i]; ++e) {
+        const uint32_t col = p->col[e];
+        out = stsp_mls(out, stsp_spline_gain(&coef[e * p->stride], n),
+                       x[(col < nx) ? col : (nx - 1u)]);
+    }
+    return out;
+}
+
+/* stsp_params.c's tick of a spline table with spline columns (stsp_params.h, format 2): the
+ * span of `tick` in stage s as the cold path finds it (bounded by the validated lengths), its
+ * basis, and per input the fold of stsp_spline_fold continued with the columns' terms, its
+ * value, less the gains of x (stsp_spline_law's order). The columns of stage s start at
+ * nu P (knot_start[s] - 4 s); a layout that no longer fits cols (a table changed after init)
+ * leaves them out: a wrong command, no access outside the arrays. */
+static void stsp_spline_param_law(const stsp_header_t *h, uint32_t s, uint32_t tick,
+                                  const stsp_f32_t *x, const stsp_f32_t *v,
+                                  const stsp_f32_t *cols, uint32_t n_cols, const stsp_f32_t *d,
+                                  uint32_t n_params, stsp_f32_t *y)
+{
+    const uint32_t nu = stsp_nu(h);
+    const uint32_t ks = h->sp.knot_start[s];
+    const uint32_t per_stage = nu * n_params;
+    stsp_span_t p;
+    stsp_f32_t n[4];
+    stsp_f32_t fold[4u * STSP_MAX_NU];
+    uint32_t off = 0u;
+    uint32_t use_cols = 0u;
+    uint32_t in_stage;
+    uint32_t i;
+    stsp_spline_span(h, s, 0u, tick, stsp_stage_end(h, (uint16_t)s), &p);
+    in_stage = tick - p.first;
+    stsp_spline_basis(p.knot, p.inv, (stsp_f32_t)in_stage, n);
+    stsp_spline_fold(h, &p, p.coef, v, fold);
+    if ((ks >= (4u * s)) && ((ks - (4u * s)) <= (n_cols / per_stage))) {
+        off = per_stage * (ks - (4u * s));
+        if ((per_stage * p.stride) <= (n_cols - off)) {
+            use_cols = 1u;
+        }
+    }
+    for (i = 0u; i < nu; ++i) {
+        stsp_f32_t *f = &fold[4u * i];
+        if (use_cols != 0u) {
+            uint32_t q;
+            for (q = 0u; q < n_params; ++q) {
+                const stsp_f32_t *cs = &cols[off + ((((i * n_params) + q) * p.stride) + p.span)];
+                uint32_t r;
+                for (r = 0u; r < 4u; ++r) {
+                    f[r] = stsp_mls(f[r], cs[r], d[q]);
+                }
+            }
+        }
+        y[i] = stsp_spline_x_terms(h, &p, p.coef, n, x, i, stsp_spline_gain(f, n));
+    }
+}
+#endif
+
 const stsp_spline_ops_t stsp_spline_ops = {
     STSP_SCALAR_KIND, stsp_spline_check_dims,
 #ifdef STSP_ARITH_FIXED_POINT
@@ -964,4 +1030,10 @@ const stsp_spline_ops_t stsp_spline_ops = {
 #else
     NULL, /* float32: init's value checks cover the coefficients (stsp_table.c) */
 #endif
-    stsp_spline_crc, stsp_spline_step};
+    stsp_spline_crc, stsp_spline_step,
+#ifdef STSP_ARITH_FIXED_POINT
+    NULL /* no spline columns in fixed point */
+#else
+    stsp_spline_param_law
+#endif
+};

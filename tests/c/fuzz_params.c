@@ -8,7 +8,9 @@
  * status writes u_hold, a non-negative one a finite command within the limits; nothing is read
  * or written outside the arrays (ASan, UBSan). Built for float32 (gains/robot_goal*) and,
  * as fuzz_params_q15/_q31, for the fixed-point parametric tables (gains/robot_goal_<arith>*:
- * states and column words of any integer, d_exp words too). */
+ * states and column words of any integer, d_exp words too), and as fuzz_params_spline
+ * (PARAMS_SPLINE) for the spline columns on the robot_goal spline table
+ * (gains/robot_goal_spline*: coefficient words and n_spline_coef too). */
 #include <math.h>
 #include <string.h>
 
@@ -21,6 +23,10 @@
 #include "robot_goal_q31_params.h"
 #define G(name) robot_goal_q31_##name
 #define N_TICKS ROBOT_GOAL_Q31_N_TICKS
+#elif defined(PARAMS_SPLINE)
+#include "robot_goal_spline_params.h"
+#define G(name) robot_goal_spline_##name
+#define N_TICKS ROBOT_GOAL_SPLINE_N_TICKS
 #else
 #include "robot_goal_params.h"
 #define G(name) robot_goal_##name
@@ -34,10 +40,13 @@
 #define NP 2u
 #define N_LATCH 4u
 #define N_STAGES 2u
-#define N_COLS (N_TICKS * NU * NP)
+/* S_k0's length: per tick, or the spline columns' coefficients */
+#define N_COLS ((uint32_t)(sizeof G(S_k0) / sizeof G(S_k0)[0]))
 
 /* A corrupted n_params (up to STSP_MAX_PARAMS, beyond that refused before any read)
- * lengthens every array: the copies are as long as the largest the header can describe. */
+ * lengthens every array: the copies are as long as the largest the header can describe (a
+ * spline table's n_spline_coef must match n_params: at most NU STSP_MAX_PARAMS (n_knots - 4
+ * n_stages), below N_TICKS NU STSP_MAX_PARAMS). */
 static stsp_scalar_t cols[N_TICKS * NU * STSP_MAX_PARAMS];
 static stsp_scalar_t lam[N_STAGES * N_LATCH * STSP_MAX_PARAMS];
 static stsp_param_value_t nominal[STSP_MAX_PARAMS], lower[STSP_MAX_PARAMS],
@@ -99,7 +108,7 @@ static int step_status_ok(stsp_status_t st)
 /* A copy of the parameter table with one header field or some column words changed. */
 static void corrupt(fuzz_in_t *in, stsp_params_table_t *c)
 {
-    const uint32_t what = fuzz_u8(in) % 12u;
+    const uint32_t what = fuzz_u8(in) % 13u;
     const uint32_t v = fuzz_u32(in);
     switch (what) {
     case 0: c->magic = v; break;
@@ -111,6 +120,14 @@ static void corrupt(fuzz_in_t *in, stsp_params_table_t *c)
     case 6: c->n_stages = (uint16_t)v; break;
     case 7: c->n_ticks = v; break;
     case 8: c->problem_sha256[v % 32u] ^= (uint8_t)(1u + (v >> 8) % 255u); break;
+    case 12: /* the spline columns' length (and n_params to match, when v says so) */
+        c->n_spline_coef = v;
+        if ((v & 1u) != 0u) {
+            c->n_params = (uint16_t)(1u + (v >> 1) % STSP_MAX_PARAMS);
+            c->n_spline_coef = (uint32_t)NU * c->n_params * (N_COLS / (NU * NP));
+            c->crc32 = stsp_params_table_crc32(c);
+        }
+        break;
     case 9: /* a range word (lower or upper; fixed point: or d_exp), with a matching CRC */
 #ifdef STSP_ARITH_FIXED_POINT
         if ((v & 2u) != 0u) {
@@ -201,7 +218,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         uint32_t tick;
         uint32_t j;
         if (op == 0xFDu) {
-            float theta[NP];
+            float theta[STSP_MAX_PARAMS] = {0.0f}; /* a corrupted n_params reads them all */
             fuzz_floats(&in, theta, NP, 0);
             s = stsp_set_params(&e, theta);
             fuzz_check((s == STSP_OK) || (s == STSP_ERR_PARAM_RANGE) ||

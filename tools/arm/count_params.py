@@ -5,12 +5,12 @@ drone through gates whose six coordinates are parameters (gains/drone_gates*), t
 stsp_step() (no parameters) and through stsp_param_step() (theta set inside the range).
 
     python3 tools/arm/count_params.py [--build DIR] [--example robot_goal|drone_gates|all]
-                                      [--arith float32|q15|q31]
+                                      [--arith float32|q15|q31|spline]
 
 Bytes: the const data of gains/<name>.c (the table) and of gains/<name>_params.c (the columns,
 nominal and range, and the 76-byte stsp_params_table_t), compiled for the M4F
 (arm-none-eabi-size). The default, --example all, prints both examples in float32; Q15/Q31
-tables exist for the robot only (--arith q15 with the drone: exit status 2).
+and spline tables exist for the robot only (--arith q15 with the drone: exit status 2).
 
 Compiles tools/arm/params_bench_main.c with firmware/src/*.c and the robot's tables
 (arm-none-eabi-gcc -O2, -mcpu=cortex-m4 hard float, -ffp-contract=off, the generic build),
@@ -22,7 +22,9 @@ image runs the three runs of tests/c/test_params.c on the target and their comma
 be tests/c/params_expected.h's (the float32 specification's, bit for bit), else exit status 1.
 With --arith q15 or q31: the fixed-point build on gains/robot_goal_<arith>* (the same ticks,
 states in Q scales), its hashes against tests/c/params_q_expected.h (the host's bit-exact
-reference). The drone's hashes are tests/c/params_drone_expected.h's
+reference). With --arith spline: the float32 build on gains/robot_goal_spline* (the spline
+table with its spline columns, tools/params_tables.py --spline), its hashes against
+tests/c/params_spline_expected.h. The drone's hashes are tests/c/params_drone_expected.h's
 (tests/c/params_reference.py --example drone_gates). Standard library only.
 """
 from __future__ import annotations
@@ -42,19 +44,25 @@ FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", 
          "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"]
 CALLERS = ("bench_plain", "bench_param")
 EXAMPLES = ("robot_goal", "drone_gates")     # gains/<name>* with runtime parameters
-SUFFIX = {"float32": "f32", "q15": "q15", "q31": "q31"}
+SUFFIX = {"float32": "f32", "q15": "q15", "q31": "q31", "spline": "f32"}
 
 
 def entries(arith: str) -> tuple[str, str]:
     return (f"stsp_step_{SUFFIX[arith]}", f"stsp_param_step_{SUFFIX[arith]}")
 
 
+def table_name(example: str, arith: str) -> str:
+    """gains/<name>.c of `example`'s table in `arith` (spline: float32 spline columns)."""
+    return example if arith == "float32" else f"{example}_{arith}"
+
+
 def build(out: Path, arith: str = "float32", hashes: bool = False,
           example: str = "robot_goal") -> Path:
     elf = out / (f"hash_{example}_{arith}.elf" if hashes else f"bench_{example}_{arith}.elf")
     arm = ROOT / "tools" / "arm"
-    name = example if arith == "float32" else f"{example}_{arith}"
-    defs = [] if arith == "float32" else [f"-DSTSP_ARITH_{arith.upper()}"]
+    name = table_name(example, arith)
+    defs = {"float32": [], "spline": ["-DPARAMS_SPLINE"]}.get(
+        arith, [f"-DSTSP_ARITH_{arith.upper()}"])
     defs += ["-DBENCH_DRONE"] if example == "drone_gates" else []
     run(["arm-none-eabi-gcc", *FLAGS, *defs, *(["-DBENCH_HASH"] if hashes else []),
          f"-I{ROOT / 'firmware/include'}", f"-I{ROOT / 'firmware/src'}", f"-I{ROOT / 'gains'}",
@@ -69,7 +77,11 @@ def build(out: Path, arith: str = "float32", hashes: bool = False,
 def count(elf: Path, arith: str = "float32") -> list[dict]:
     syms = symbols(elf)
     ENTRIES = entries(arith)
-    funcs = sorted({f for e in ENTRIES for f in callees(elf, syms, e)})
+    # A spline table's code is reached through its ops pointer (blx to a register, which
+    # callees cannot follow): when linked, its tick and the parameters' law are roots too.
+    roots = list(ENTRIES) + [n for n in syms if n.split(".")[0] in ("stsp_spline_step",
+                                                                    "stsp_spline_param_law")]
+    funcs = sorted({f for e in roots for f in callees(elf, syms, e)})
     ranges = {n: syms[n] for n in funcs + list(CALLERS)}
     trace = elf.with_suffix(".trace")
     insns, out = trace_run(elf, ranges, trace)
@@ -109,6 +121,9 @@ def check_hashes(out: Path, arith: str = "float32", example: str = "robot_goal")
         text, what = (ROOT / "tests/c/params_drone_expected.h").read_text(), "specification"
     elif arith == "float32":
         text, what = (ROOT / "tests/c/params_expected.h").read_text(), "specification"
+    elif arith == "spline":
+        text, what = (ROOT / "tests/c/params_spline_expected.h").read_text(), "specification"
+        text = text.replace("PSP_", "PAR_")
     else:
         text, what = (ROOT / "tests/c/params_q_expected.h").read_text(), "host reference"
         text = text.split(f"defined(STSP_ARITH_{arith.upper()})")[1].split("#e")[0]
@@ -137,10 +152,11 @@ def report(out: Path, example: str, arith: str) -> bool:
         med = [statistics.median([c["insns"] for c in calls if sel(c) and c["kind"] == k])
                for k in (0, 1)]
         print(f"| {name} | {med[0]:.0f} | {med[1]:.0f} |")
-    if arith == "float32":
-        table, params = flash(out, example)
-        print(f"\n{example}: table {table:,} B, parameters {params:,} B "
-              f"(+{100 * params / table:.1f} %; gains/{example}.c, gains/{example}_params.c, "
+    if arith in ("float32", "spline"):
+        name = table_name(example, arith)
+        table, params = flash(out, name)
+        print(f"\n{name}: table {table:,} B, parameters {params:,} B "
+              f"(+{100 * params / table:.1f} %; gains/{name}.c, gains/{name}_params.c, "
               f"const data for the M4F)")
     print()
     return check_hashes(out, arith, example)
@@ -155,8 +171,8 @@ def main() -> int:
     examples = EXAMPLES if args.example == "all" else (args.example,)
     if args.arith != "float32" and "drone_gates" in examples:
         if args.example == "drone_gates":
-            ap.error(f"--arith {args.arith}: gains/ has float32 parameter tables only for "
-                     f"drone_gates")
+            ap.error(f"--arith {args.arith}: gains/ has float32 per-tick parameter tables "
+                     f"only for drone_gates")
         examples = ("robot_goal",)
     args.build.mkdir(parents=True, exist_ok=True)
     ok = [report(args.build, ex, args.arith) for ex in examples]

@@ -12,7 +12,9 @@
  * for the bit-exact comparison with the float32 specification on the target. Built with
  * STSP_ARITH_Q15 or STSP_ARITH_Q31: the same on gains/robot_goal_<arith>* (the fixed-point
  * parametric controller), states as Q integers, and with -DBENCH_HASH the runs of
- * tests/c/params_q_reference.py against the host's bit-exact reference. */
+ * tests/c/params_q_reference.py against the host's bit-exact reference. Built with
+ * PARAMS_SPLINE (float32): the same on gains/robot_goal_spline* (spline columns, format 2),
+ * with -DBENCH_HASH the runs of tests/c/params_spline_reference.py. */
 #include <stdint.h>
 #include <stdio.h>
 #include <string.h>
@@ -33,6 +35,9 @@
 #elif defined(STSP_ARITH_Q31)
 #include "robot_goal_q31_params.h"
 #define G(name) robot_goal_q31_##name
+#elif defined(PARAMS_SPLINE)
+#include "robot_goal_spline_params.h"
+#define G(name) robot_goal_spline_##name
 #else
 #include "robot_goal_params.h"
 #define G(name) robot_goal_##name
@@ -50,6 +55,11 @@
 #include "params_drone_expected.h"
 #elif defined(STSP_ARITH_FIXED_POINT)
 #include "params_q_expected.h"
+#elif defined(PARAMS_SPLINE)
+#include "params_spline_expected.h"
+#define PAR_THETA_A PSP_THETA_A
+#define PAR_THETA_B PSP_THETA_B
+#define PAR_MID PSP_MID
 #else
 #include "params_expected.h"
 #endif

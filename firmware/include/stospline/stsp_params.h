@@ -52,16 +52,33 @@
  * the box: stospline.table.parametric_c.generate_parametric_qc), and the commands are
  * bit for bit qformat.law_q of that table over [x_q; d_q].
  *
- * Per-tick gain tables only: a spline table or one with a band dual is refused at init
- * (STSP_ERR_BAD_DIMS), and a parameter table of another scalar kind than the build's with
- * STSP_ERR_BAD_VERSION.
+ * Spline gain tables (float32, format 2, host stospline.table.spline.params): the columns
+ * are cubic B-splines on the gain spline's knots, S_s + 3 coefficients per stage, input and
+ * parameter (S_k0, format 2). At tick j of stage s, in span sigma with the basis N of
+ * stsp_spline.h, per input i the fold of the feed-forward with the latch (stsp_spline.h:
+ * f[r] = ((+0 - c_k0[r]) - c_L1[r] v_1) - ... over the row's entries after its gains of x)
+ * goes on with the columns, f[r] = f[r] - (c_p[r] d[p]) for p = 0 .. P-1 (coefficients
+ * sigma .. sigma + 3 of the column); then
+ *     u[i] = ((N0 f0 + N1 f1) + N2 f2) + N3 f3, u[i] = u[i] - (g_e x[col_e]) over the row's
+ *            gains of x in stored order (g_e = ((N0 c0 + N1 c1) + N2 c2) + N3 c3),
+ * then the checks and the clamp of the per-tick law; the latch as above. At d = 0 the
+ * commands are stsp_step()'s on the spline table bit for bit (up to the sign of a zero).
+ * Every tick of a spline table goes through the plan (no span cache): about the cold path's
+ * cost at every tick.
+ *
+ * A per-tick parameter table (format 1) with a spline gain table, a spline one (format 2)
+ * with a per-tick table, and a gain table with a band dual are refused at init
+ * (STSP_ERR_BAD_DIMS); format 2 in a Q15/Q31 build, or a parameter table of another scalar
+ * kind than the build's, with STSP_ERR_BAD_VERSION.
  *
  * Does not use malloc, recursion or VLAs; every loop is bounded by the validated dimensions
  * (n_params <= STSP_MAX_PARAMS, 32 by default). Buffers: stsp_param_t holds a stsp_ctrl_t,
  * the validated copy of the parameter table's header and STSP_MAX_PARAMS scalars of d: 928
  * bytes with the default limits in a float32 build, 348 in Q15, 476 in Q31
  * (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_param_t)).
- * stsp_param_step() uses STSP_MAX_LATCH + STSP_MAX_NU scalars of stack. Every tick of a
+ * stsp_param_step() uses STSP_MAX_LATCH + STSP_MAX_NU scalars of stack; with a spline table
+ * its call of the spline code also a span record (stsp_span_t) and 4 STSP_MAX_NU + 4
+ * scalars. Every tick of a
  * parametric instance is evaluated by this file in plain C loops (not stsp_step()'s ordinary
  * tick): nu P more multiply-adds per tick, and the generic loop overhead
  * (tools/arm/count_params.py, docs/guide/firmware.md).
@@ -77,8 +94,10 @@ extern "C" {
 
 /** Parameter table magic, "STPR" as a little-endian u32. */
 #define STSP_PARAMS_MAGIC 0x52505453u
-/** Parameter table format understood by this firmware. */
+/** Parameter table format understood by this firmware: columns per tick. */
 #define STSP_PARAMS_FORMAT_VERSION 1u
+/** The other format understood (float32 builds only): spline columns of a spline table. */
+#define STSP_PARAMS_FORMAT_SPLINE 2u
 /** Upper bound on the parameters, checked by stsp_param_init() (the problem file allows 32). */
 #ifndef STSP_MAX_PARAMS
 #define STSP_MAX_PARAMS 32u
@@ -117,11 +136,18 @@ typedef struct {
     const int8_t *d_exp;         /**< [n_params] scale exponents of d (within
                                       +-STSP_Q_EXP_MAX) */
 #endif
-    const stsp_scalar_t *S_k0;      /**< [n_ticks][nu][n_params] */
+    const stsp_scalar_t *S_k0;      /**< [n_ticks][nu][n_params]; format 2 (spline columns):
+                                         [nu n_params (sp.n_knots - 4 n_stages)], stage s,
+                                         input i, parameter p, coefficient r at
+                                         nu n_params (knot_start[s] - 4 s)
+                                         + (i n_params + p)(S_s + 3) + r */
     const stsp_scalar_t *S_lambda0; /**< [n_stages][n_latch][n_params] (may be NULL when
                                          n_latch == 0) */
     uint32_t crc32;              /**< see stsp_params_table_crc32() */
     uint8_t problem_sha256[32];  /**< the gain table's problem_sha256 */
+    uint32_t n_spline_coef;      /**< format 2: the length of S_k0, nu n_params (sp.n_knots
+                                      - 4 n_stages) of the gain table's spline; format 1: 0
+                                      (unread) */
 } stsp_params_table_t;
 
 /** One parametric controller instance, caller-owned; all fields private but `ctrl`'s
@@ -138,7 +164,8 @@ typedef struct {
 /**
  * CRC-32 (as stsp_table_crc32) of n_params, nu, n_latch, n_stages, n_ticks as little-endian
  * u32, then nominal, lower, upper, S_k0 and (when n_latch > 0) S_lambda0 as little-endian
- * binary32 bit patterns, then the 32 bytes of problem_sha256. Fixed point: scalar_kind as a
+ * binary32 bit patterns, then the 32 bytes of problem_sha256. Format 2: format_version and
+ * n_spline_coef as u32 after n_ticks (S_k0 is n_spline_coef long). Fixed point: scalar_kind as a
  * u32 after n_ticks, nominal, lower, upper as little-endian binary64 bit patterns, S_k0 and
  * S_lambda0 as little-endian int16 (Q15) or int32 (Q31), then d_exp one byte each, then the
  * hash. The dimensions and pointers must
@@ -153,9 +180,10 @@ uint32_t stsp_params_table_crc32(const stsp_params_table_t *params);
  * pointer, also an array of the parameter table), STSP_ERR_BAD_MAGIC, STSP_ERR_BAD_VERSION
  * (format, or a scalar kind other than the build's), STSP_ERR_BAD_DIMS (n_params outside
  * 1 .. STSP_MAX_PARAMS, nu, n_latch, n_stages or n_ticks not the gain table's, a spline
- * table or one with a band dual), STSP_ERR_BAD_CRC, STSP_ERR_BAD_PROBLEM (problem_sha256 not
- * the gain table's), STSP_ERR_BAD_VALUES (a NaN or infinite entry, or not lower <= nominal <=
- * upper; fixed point also: a d_exp beyond +-STSP_Q_EXP_MAX, a law or latch row with the
+ * gain table with format 1 or a per-tick one with format 2, n_spline_coef not the spline's
+ * length, or a table with a band dual), STSP_ERR_BAD_CRC, STSP_ERR_BAD_PROBLEM (problem_sha256 not
+ * the gain table's), STSP_ERR_BAD_VALUES (a NaN or infinite entry, the spline columns' included,
+ * or not lower <= nominal <= upper; fixed point also: a d_exp beyond +-STSP_Q_EXP_MAX, a law or latch row with the
  * columns above 2^F - 1, or |d_q| > 2^F - 1 at an end of a range).
  */
 stsp_status_t stsp_param_init(stsp_param_t *pc, const stsp_table_t *table,

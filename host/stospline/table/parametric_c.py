@@ -31,11 +31,13 @@ from stospline.table.codegen import (GENERATOR, _array, _f32_literal, _f64_liter
 from stospline.table.format import SCALAR_FLOAT32, _to_float32, positive_zeros
 from stospline.table.parametric import ParametricTable
 
-__all__ = ["PARAMS_MAGIC", "PARAMS_FORMAT_VERSION", "flash_columns", "generate_parametric_c",
-           "params_crc32", "generate_parametric_qc", "params_crc32_q"]
+__all__ = ["PARAMS_MAGIC", "PARAMS_FORMAT_VERSION", "PARAMS_FORMAT_SPLINE", "flash_columns",
+           "generate_parametric_c", "params_crc32", "generate_parametric_qc", "params_crc32_q",
+           "generate_spline_parametric_c", "params_crc32_spline"]
 
 PARAMS_MAGIC = 0x52505453         # STSP_PARAMS_MAGIC, "STPR"
 PARAMS_FORMAT_VERSION = 1         # STSP_PARAMS_FORMAT_VERSION
+PARAMS_FORMAT_SPLINE = 2          # STSP_PARAMS_FORMAT_SPLINE: spline columns
 
 
 def flash_columns(ptable: ParametricTable) -> dict[str, np.ndarray]:
@@ -80,11 +82,13 @@ def _extern(ctype: str, name: str, values, dims: str, fmt=_f32_literal) -> str:
 
 
 def _params_files(t, parameters, p: str, source_name: str, decls: list[str],
-                  arrays: list[str], pointers: str, kind: int, crc: int, note: str
+                  arrays: list[str], pointers: str, kind: int, crc: int, note: str,
+                  *, version: int = PARAMS_FORMAT_VERSION, n_spline_coef: int = 0
                   ) -> tuple[str, str]:
     """``(header, source)`` of a parameter table: the banner, the parameters' indices,
     `decls` (the arrays' declarations, `note` above them) and the `arrays`, then the
-    ``stsp_params_table_t`` of scalar `kind` with the array initializers `pointers`."""
+    ``stsp_params_table_t`` of scalar `kind`, format `version`, with the array initializers
+    `pointers` (and `n_spline_coef`, format 2's length of S_k0)."""
     name = p.upper()
     P = len(parameters)
     sha = t.problem_sha256 or "0" * 64
@@ -112,11 +116,12 @@ extern const stsp_params_table_t {p}_params;
 """
     struct_text = f"""
 const stsp_params_table_t {p}_params = {{
-    0x{PARAMS_MAGIC:08X}u, {PARAMS_FORMAT_VERSION}u, {kind}u,
+    0x{PARAMS_MAGIC:08X}u, {version}u, {kind}u,
     {P}u, {t.dims[1]}u, {t.dims[2]}u, {t.n_stages}u, {t.n_ticks}u,
     {pointers},
     0x{crc:08X}u,
-    {_sha_initializer(sha)}
+    {_sha_initializer(sha)},
+    {n_spline_coef}u
 }};
 """
     source = banner + f'#include "{p}_params.h"\n\n' + "\n".join(arrays) + struct_text
@@ -209,3 +214,61 @@ def generate_parametric_qc(ptable: ParametricTable, pf, *, prefix: str | None = 
     ph, pc = _params_files(ft, ptable.parameters, p, source_name, decls, arrays, pointers,
                            ft.scalar_kind, params_crc32_q(pf), note)
     return {f"{p}.h": gh, f"{p}.c": gc, f"{p}_params.h": ph, f"{p}_params.c": pc}
+
+
+def params_crc32_spline(stable, cols, parameters) -> int:
+    """CRC-32 of a parameter table with spline columns (format 2) as
+    ``stsp_params_table_crc32`` serializes it: the dimensions, format 2 and the length of the
+    coefficients as u32, nominal, lower, upper, the coefficients and (when n_latch > 0)
+    S_lambda0 as binary32, then the hash."""
+    a = _spline_arrays(cols, parameters)
+    names = ["nominal", "lower", "upper", "coef"] + (["S_lambda0"] if stable.dims[2] > 0
+                                                     else [])
+    return _crc(stable, len(parameters), [PARAMS_FORMAT_SPLINE, a["coef"].size],
+                [np.asarray(a[k], "<f4").tobytes() for k in names])
+
+
+def _spline_arrays(cols, parameters) -> dict[str, np.ndarray]:
+    f32 = lambda v: positive_zeros(np.asarray(v, dtype=np.float32))  # noqa: E731
+    return {"nominal": f32([q.nominal for q in parameters]),
+            "lower": f32([q.lower for q in parameters]),
+            "upper": f32([q.upper for q in parameters]),
+            "coef": f32(cols.coef), "S_lambda0": f32(cols.S_lambda0)}
+
+
+def generate_spline_parametric_c(stable, cols, parameters, *, prefix: str | None = None,
+                                 source_name: str = "") -> tuple[str, str]:
+    """``(header, source)`` of the spline columns `cols`
+    (`stospline.table.spline.params.SplineColumns`) of the float32 spline gain table `stable`:
+    a format-2 ``stsp_params_table_t`` whose S_k0 holds the columns' B-spline coefficients on
+    the gain spline's knots (``stsp_params.h``)."""
+    p = prefix or stable.name
+    P = len(parameters)
+    n_latch, S = stable.dims[2], stable.n_stages
+    a = _spline_arrays(cols, parameters)
+    nc = int(a["coef"].size)
+    note = """/* At parameters theta[N_PARAMS] (each within [lower, upper]), d = theta - nominal:
+ * the feed-forward of input i at a tick of stage s, in span sigma of the gain spline, moves by
+ *   sum_p (sum_r N_r S_k0[NU*N_PARAMS*(knot_start[s] - 4 s) + (i*N_PARAMS + p)*(S_s + 3)
+ *                                                          + sigma + r]) d[p]
+ * (the gain spline's knots and basis N), the latch offsets as per tick:
+ *   lambda0[s][c] += sum_p S_lambda0[(s*N_LATCH + c)*N_PARAMS + p] * d[p] */"""
+    decls = [f"extern const float {p}_param_nominal[{P}];",
+             f"extern const float {p}_param_lower[{P}];",
+             f"extern const float {p}_param_upper[{P}];",
+             f"extern const float {p}_S_k0[{max(nc, 1)}];",
+             f"extern const float {p}_S_lambda0[{max(S * n_latch * P, 1)}];"]
+    arrays = [
+        _extern("float", f"{p}_param_nominal", a["nominal"], "[n_params] the design's values"),
+        _extern("float", f"{p}_param_lower", a["lower"], "[n_params]"),
+        _extern("float", f"{p}_param_upper", a["upper"], "[n_params]"),
+        _extern("float", f"{p}_S_k0", a["coef"],
+                f"[{nc}] B-spline coefficients: stage, input, parameter, span + 3"),
+        _extern("float", f"{p}_S_lambda0", a["S_lambda0"],
+                f"[n_stages][n_latch][n_params] = [{S}][{n_latch}][{P}]"),
+    ]
+    pointers = (f"{p}_param_nominal, {p}_param_lower, {p}_param_upper, {p}_S_k0, "
+                f"{p}_S_lambda0")
+    return _params_files(stable, parameters, p, source_name, decls, arrays, pointers,
+                         SCALAR_FLOAT32, params_crc32_spline(stable, cols, parameters), note,
+                         version=PARAMS_FORMAT_SPLINE, n_spline_coef=nc)

@@ -40,9 +40,14 @@ class ParamSpec:
         return e
 
     def step(self, j: int, X: np.ndarray) -> np.ndarray:
-        t = self.t
-        n, m, nl = t.dims
         X = np.asarray(X, f32)
+        self._latch(j, X)
+        return self._command(j, X)
+
+    def _latch(self, j: int, X: np.ndarray) -> None:
+        """At a latching tick, ``v = lambda0' + Lambda x`` (stsp_params.h's order)."""
+        t = self.t
+        n, _, nl = t.dims
         k = t.stage_of_tick(j)
         if j == int(t.stage_start[k]) and (k == 0 or t.stage_n_latch[k] > 0):
             for c in range(nl):
@@ -54,6 +59,11 @@ class ParamSpec:
                 for col in range(n):
                     acc = acc + self.Lambda[k][c, col] * X[:, col]
                 self.v[:, c] = acc
+
+    def _command(self, j: int, X: np.ndarray) -> np.ndarray:
+        """The clamped commands of tick j (per-tick rows)."""
+        t = self.t
+        n, m, nl = t.dims
         U = np.empty((X.shape[0], m), f32)
         for i in range(m):
             acc = np.full(X.shape[0], -self._shift(self.k0[j][i], self.cols["S_k0"][j, i]), f32)

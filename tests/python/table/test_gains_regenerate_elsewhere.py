@@ -62,10 +62,11 @@ def _regenerate(out) -> None:
         assert main(["design", str(EXAMPLES / "robot_corridor.toml"), "--arith", arith,
                      "--table", "spline", "--out", str(out)]) == 0
     assert _params_tables().main(["--fixed", "--out", str(out)]) == 0
+    assert _params_tables().main(["--spline", "--out", str(out)]) == 0
 
 
 def _params_tables():
-    """tools/params_tables.py (the Q15/Q31 parametric controllers), as a module."""
+    """tools/params_tables.py (the Q15/Q31 and spline parametric controllers), as a module."""
     import importlib.util
     spec = importlib.util.spec_from_file_location("params_tables",
                                                   REPO / "tools" / "params_tables.py")

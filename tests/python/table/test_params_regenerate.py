@@ -1,6 +1,6 @@
 """gains/<name>_params.{c,h} of every example with [[parameters]] are regenerated
 byte-for-byte (tools/params_tables.py, run by tools/regen_gains.sh), and so are the Q15/Q31
-parametric controllers of tools/params_tables.py --fixed."""
+parametric controllers of tools/params_tables.py --fixed and the spline ones of --spline."""
 import sys
 
 import pytest
@@ -39,3 +39,17 @@ def test_regenerating_fixed_point_parametric_tables_changes_no_byte():
             for name, text in files.items():
                 assert (GAINS / name).read_text() == text, \
                     f"gains/{name} differs (regenerate with tools/regen_gains.sh)"
+
+
+def test_regenerating_spline_parametric_tables_changes_no_byte():
+    """gains/robot_goal_spline.{c,h} and _spline_params.{c,h} (tools/params_tables.py
+    --spline)."""
+    sys.path.insert(0, str(REPO / "tools"))
+    from params_tables import SPLINE, spline_files
+    for example in SPLINE:
+        files, _ = spline_files(load_problem(EXAMPLES / f"{example}.toml"), f"{example}.toml")
+        assert sorted(files) == sorted(f"{example}_spline{s}" for s in
+                                       (".c", ".h", "_params.c", "_params.h"))
+        for name, text in files.items():
+            assert (GAINS / name).read_text() == text, \
+                f"gains/{name} differs (regenerate with tools/regen_gains.sh)"

@@ -23,12 +23,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from stospline.errors import ProblemError
 from stospline.estimator.gain import lmmse_gain
+from stospline.problem.faults import Faults
 from stospline.problem.model import Problem
 from stospline.oracle.tick_moments import Moments, _knot_terms, _PathRecord, _StagePlant, _w_map
 from stospline.table.format import GainTable
 
-__all__ = ["EstimatorLoop", "evaluate_estimator"]
+__all__ = ["EstimatorLoop", "evaluate_estimator", "estimator_faults_unsupported"]
 
 
 @dataclass
@@ -66,10 +68,29 @@ def _check(problem: Problem, table: GainTable, meas) -> None:
                          f"sensor {meas.C.shape[1]}, the problem {n}")
 
 
+def estimator_faults_unsupported(faults: Faults) -> tuple[str, str] | None:
+    """``(field, reason)`` for a fault that the loop on a sensor does not run, else None.
+
+    Sensor noise, actuator noise and model mismatch keep the loop linear and compose with the
+    filter (docs/theory/estimator.md, "Faults"); a missed tick, a computation delay and the
+    sensor quantizer are refused."""
+    why = "with a [measurement] sensor the loop"
+    if faults.miss_probability:
+        return "faults.miss_probability", (f"{why} does not run missed ticks (the filter's "
+                                           f"skipped predictions are not modelled yet)")
+    if faults.delay_ticks:
+        return "faults.delay_ticks", f"{why} has no estimator form for a one-tick delay"
+    if np.any(faults.sensor_quantum):
+        return "faults.sensor_quantum", (f"{why} does not quantize the reading (nonlinear; "
+                                         f"give the converter's step as measurement.V)")
+    return None
+
+
 def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
                        propagator: str = "exact", substeps: int = 4,
                        path: bool = False, gains: np.ndarray | None = None,
-                       predictor: np.ndarray | None = None) -> EstimatorLoop:
+                       predictor: np.ndarray | None = None,
+                       faults: Faults | None = None) -> EstimatorLoop:
     """Filter gains and exact moments of `table`'s law run on the filter's estimate.
 
     Parameters
@@ -89,6 +110,14 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         and predictor maps, per tick): the loop's exact moments with these in place of the
         LMMSE gains and the plant's exact mean map. A predictor that is not the plant's mean
         map (rounded to float32) biases the estimate by its error.
+    faults : Faults, optional
+        Faults of the loop around the filter (``problem.faults`` is not read by default: the
+        filter is designed without them). ``sensor_noise`` is noise on the state the sensor
+        reads, ``y = C (x + nu) + r``; ``actuator_noise`` is added to the command the plant
+        holds, not to the one the filter predicts with; model mismatch changes the plant, not
+        the predictor. The filter is the nominal one (its LMMSE gains and mean maps, unless
+        `gains`/`predictor` are given). Raises ProblemError for the faults that
+        `estimator_faults_unsupported` names.
 
     Returns
     -------
@@ -96,6 +125,21 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
     """
     meas = problem.measurement if measurement is None else measurement
     _check(problem, table, meas)
+    faulty = faults is not None and faults.any
+    if faulty:
+        why = estimator_faults_unsupported(faults)
+        if why:
+            raise ProblemError(*why)
+        if gains is None or predictor is None:
+            nominal = evaluate_estimator(problem, table, meas, propagator=propagator,
+                                         substeps=substeps, gains=gains, predictor=predictor)
+            gains = nominal.gain if gains is None else gains
+            predictor = nominal.predict if predictor is None else predictor
+    plant = faults.plant_of(problem) if faulty else problem
+    sig_x = faults.sensor_noise if faulty and np.any(faults.sensor_noise) else None
+    act_cov = (np.diag(faults.actuator_noise ** 2)
+               if faulty and np.any(faults.actuator_noise) else None)
+    extra_R = None if sig_x is None else (meas.C * sig_x ** 2) @ meas.C.T
     n, m, nl = table.dims
     p = meas.p
     h = 1.0 / table.tick_hz
@@ -119,14 +163,14 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
     Tw = _w_map(n, m, d, xs)                # w = [x; u; 1] = Tw z
     Th = _w_map(n, m, d, hs)                # [x̂; u; 1]: what the predictor moves
     for k in range(table.n_stages):
-        plant_k = _StagePlant(problem.stages[k], n, m, table.t0, h, propagator, substeps)
+        plant_k = _StagePlant(plant.stages[k], n, m, table.t0, h, propagator, substeps)
         relatch = k == 0 or table.stage_n_latch[k] > 0
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             E = M[xs, xs] - M[xs, hs] - M[hs, xs] + M[hs, hs]
             prior_cov[j] = 0.5 * (E + E.T)
             if meas.samples_at(j):
                 M = _update(M, meas, C, gain_out, j, n, xs, hs, rs, keep, d, p,
-                            None if gains is None else gains[j])
+                            None if gains is None else gains[j], table.t0 + j * h, extra_R)
             E = M[xs, xs] - M[xs, hs] - M[hs, xs] + M[hs, hs]
             err_cov[j] = 0.5 * (E + E.T)
             if relatch and j == table.stage_start[k]:
@@ -143,6 +187,8 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
             Th[n:n + m] = Fu
             TM = Tw @ M
             Mw = TM @ Tw.T
+            if act_cov is not None:    # u + eta: eta independent of z (so E x+ a' as without)
+                Mw[n:n + m, n:n + m] += act_cov
             rec.command(Mw, n, m)
             Mw, dJ, Fmean = plant_k.tick(Mw, j)
             J += dJ
@@ -169,15 +215,19 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
     return EstimatorLoop(mom, gain_out, predict, err_cov, err_knot, est_knot, prior_cov)
 
 
-def _update(M, meas, C, gains, j, n, xs, hs, rs, keep, d, p, given=None):
-    """The measurement update of tick j on ``E zz'``: the LMMSE gain from these moments, or
-    `given` (stored in ``gains[j]``), then ``x̂ += Lf (C x + r - C x̂)`` with the sensor noise ``r``
-    appended (uncorrelated with z) and dropped again."""
+def _update(M, meas, C, gains, j, n, xs, hs, rs, keep, d, p, given=None, t=None,
+            extra_R=None):
+    """The measurement update of tick j (at time `t`) on ``E zz'``: the LMMSE gain from these
+    moments, or `given` (stored in ``gains[j]``), then ``x̂ += Lf (C x + r - C x̂)`` with the
+    sensor noise ``r`` appended (uncorrelated with z) and dropped again; `extra_R` is a
+    fault's noise in ``r`` that the LMMSE gain is not told about."""
     Mxx = M[xs, xs]
     P = Mxx - M[xs, hs] - M[hs, xs] + M[hs, hs]
     P = 0.5 * (P + P.T)
-    R = meas.noise_cov(Mxx)
+    R = meas.noise_cov(Mxx, t)
     Lf = lmmse_gain(P, C, R) if given is None else np.asarray(given, dtype=float)
+    if extra_R is not None:
+        R = R + extra_R
     gains[j] = Lf
     D = d + p
     Mr = np.zeros((D, D))

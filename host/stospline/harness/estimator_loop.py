@@ -13,10 +13,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from stospline.estimator.ctable import EstimatorTable, estimator_c
+from stospline.estimator.oracle import estimator_faults_unsupported
 from stospline.firmware_interface import STATUS
 from stospline.harness.build import PLANT_CDEF, build_harness_module
 from stospline.harness.controller import CompiledController
+from stospline.errors import ProblemError
 from stospline.harness.montecarlo import MonteCarloResult
+from stospline.harness.montecarlo import _plant_tick as plant_tick
 from stospline.harness.plant_spec import zoh_step
 from stospline.harness.path_stats import COST_SAMPLE, Moments
 from stospline.table.codegen import generate_c
@@ -139,7 +142,15 @@ def build_estimator_controller(problem, table, est: EstimatorTable, *, build_dir
 def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: int,
                        substeps: int = 4, record: int = 0) -> tuple[MonteCarloResult, dict]:
     """`paths` paths of the loop: the start drawn from ``N(x0, x0_cov)``, the sensor's noise
-    from numpy (seeded), the plant's from the harness's C generator; constant stage data.
+    from numpy (seeded), the plant's from the harness's C generator. Time-varying stage data
+    are frozen at each plant step's midpoint (as `harness.montecarlo` runs them); a
+    time-varying ``V`` is taken at each sampling tick's time.
+
+    The faults of ``problem.faults`` that `estimator.oracle.estimator_faults_unsupported` accepts compose with
+    the sensor (docs/theory/estimator.md, "Faults"): ``sensor_noise`` (per state) is noise on
+    the state the sensor reads, ``y = C (x + nu) + r``; ``actuator_noise`` is added to the
+    command the plant receives (the filter predicts with the command it wrote); model mismatch
+    changes the plant, not the filter's predictor.
 
     Returns the Monte Carlo result (cost, knot states, one path, the mean path, saturation)
     and ``{"x": (ticks + 1, record, n), "xhat": (ticks + 1, record, n), "u": (ticks, record,
@@ -151,9 +162,17 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
     n, m, _ = table.dims
     h = 1.0 / table.tick_hz
     dt = h / substeps
+    faults = problem.faults
+    why = estimator_faults_unsupported(faults)
+    if why:
+        raise ProblemError(*why)
+    plant_of = faults.plant_of(problem)
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    plant_seed, sensor_seed = ss.spawn(2)
+    plant_seed, sensor_seed, fault_seed = ss.spawn(3)  # the first two as without faults
     rng = np.random.default_rng(sensor_seed)
+    fault_rng = np.random.default_rng(fault_seed)
+    sig_x = faults.sensor_noise if np.any(faults.sensor_noise) else None
+    sig_u = faults.actuator_noise if np.any(faults.actuator_noise) else None
     helpers = ctl.plant_helpers
     normals = helpers.normals(plant_seed)
     X = np.tile(problem.x0, (paths, 1)).astype(float)
@@ -162,8 +181,6 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
         w, Q = np.linalg.eigh(S0)
         X += rng.standard_normal((paths, n)) @ (Q * np.sqrt(np.maximum(w, 0.0))).T
     X = np.ascontiguousarray(X)
-    wv, Qv = np.linalg.eigh(meas.V)
-    sqV = Qv * np.sqrt(np.maximum(wv, 0.0))
     D = meas.D if meas.D.size and meas.D.any() else None
     step = ctl.stepper(paths)
     cost = np.zeros(paths)
@@ -181,26 +198,32 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
     rec["xhat"] = np.empty((table.n_ticks + 1, record, n), np.float32)
     rec["x"][0], rec["xhat"][0] = X[:record], step.xhat()[:record]
     for k in range(table.n_stages):
-        st = problem.stages[k]
-        if st.varying is not None:
-            raise ValueError("simulate_estimator: time-varying plant data are not simulated")
-        plant = helpers.plant(st, *zoh_step(st, dt), dt, substeps)
+        st = plant_of.stages[k]
+        plant = None if st.varying is not None else helpers.plant(st, *zoh_step(st, dt), dt,
+                                                                  substeps)
         dZ = np.empty((paths, substeps, st.G.shape[2]))
         fill = normals(dZ)
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             Y = None
             if meas.samples_at(j):
+                sqV = _sqrt_psd(meas.V_at(problem.t0 + j * h))
                 Y = X @ meas.C.T + rng.standard_normal((paths, meas.p)) @ sqV.T
                 if D is not None:
                     nu = rng.standard_normal((paths, D.shape[2]))
                     Y += np.einsum("Pa,apk,Pk->Pp", X, D, nu)
+                if sig_x is not None:
+                    Y += (fault_rng.standard_normal((paths, n)) * sig_x) @ meas.C.T
                 Y = Y.astype(np.float32)
             U, status = step(j, Y)
             worst = min(worst, int(status.min()))
             saturated += status == STATUS["WARN_SATURATED"]
             u_low, u_high = np.minimum(u_low, U.min(axis=0)), np.maximum(u_high, U.max(axis=0))
             fill()
-            helpers.plant_tick(plant, dZ, U, X, cost)
+            applied = U
+            if sig_u is not None:
+                applied = np.ascontiguousarray(
+                    (U + fault_rng.standard_normal((paths, m)) * sig_u).astype(np.float32))
+            plant_tick(helpers, problem, plant, st, j, h, dt, substeps, dZ, applied, X, cost)
             x_sum[j + 1] = X.sum(axis=0)
             sample_x[j + 1], sample_u[j] = X[0], U[0]
             rec["x"][j + 1], rec["u"][j] = X[:record], U[:record]
@@ -219,3 +242,10 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
                           record_u=rec["u"], cost_sample=cost[:COST_SAMPLE].copy())
     rec["knot_error"] = knot_error
     return mc, rec
+
+
+def _sqrt_psd(V: np.ndarray) -> np.ndarray:
+    """``S`` with ``S S' = V`` for a positive semidefinite `V`."""
+    w, Q = np.linalg.eigh(V)
+    return Q * np.sqrt(np.maximum(w, 0.0))
+

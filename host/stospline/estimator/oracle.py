@@ -166,13 +166,11 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         plant_k = _StagePlant(plant.stages[k], n, m, table.t0, h, propagator, substeps)
         relatch = k == 0 or table.stage_n_latch[k] > 0
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
-            E = M[xs, xs] - M[xs, hs] - M[hs, xs] + M[hs, hs]
-            prior_cov[j] = 0.5 * (E + E.T)
+            prior_cov[j] = _error_cov(M, xs, hs)
             if meas.samples_at(j):
                 M = _update(M, meas, C, gain_out, j, n, xs, hs, rs, keep, d, p,
                             None if gains is None else gains[j], table.t0 + j * h, extra_R)
-            E = M[xs, xs] - M[xs, hs] - M[hs, xs] + M[hs, hs]
-            err_cov[j] = 0.5 * (E + E.T)
+            err_cov[j] = _error_cov(M, xs, hs)
             if relatch and j == table.stage_start[k]:
                 T = eye.copy()
                 T[vs] = 0.0
@@ -208,11 +206,19 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         pen, mean, cov, con = _knot_terms(problem, k, M[np.ix_(sub, sub)], n)
         J += pen
         means.append(mean); covs.append(cov); cons.append(con)
-        E = M[xs, xs] - M[xs, hs] - M[hs, xs] + M[hs, hs]
-        err_knot.append(0.5 * (E + E.T))
+        err_knot.append(_error_cov(M, xs, hs))
         est_knot.append(M[hs, -1].copy())
     mom = rec.moments(J, means, covs, cons, problem.t0, h, table.n_ticks)
     return EstimatorLoop(mom, gain_out, predict, err_cov, err_knot, est_knot, prior_cov)
+
+
+def _error_cov(M, xs, hs) -> np.ndarray:
+    """The covariance of ``e = x - x̂`` from ``E zz'``: its second moment less ``E e E e'``
+    (E e = 0 for the plant's exact mean map; not for a rounded or mismatched one)."""
+    E = M[xs, xs] - M[xs, hs] - M[hs, xs] + M[hs, hs]
+    e = M[xs, -1] - M[hs, -1]
+    E = E - np.outer(e, e)
+    return 0.5 * (E + E.T)
 
 
 def _update(M, meas, C, gains, j, n, xs, hs, rs, keep, d, p, given=None, t=None,

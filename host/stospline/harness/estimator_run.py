@@ -33,12 +33,14 @@ SUBSTEP_LIMIT = 1024
 class SensorRun:
     """``mc`` the run; ``record`` the recorded paths and the knot estimation errors
     (`simulate_estimator`); ``exact`` and ``scheme`` the estimator oracle of the flashed
-    tables with the exact plant and with the run's plant scheme; ``tables`` the filter's."""
+    tables with the exact plant and with the run's plant scheme; ``tables`` the filter's;
+    with faults, ``nominal`` the exact oracle of the flashed tables without them."""
     mc: MonteCarloResult
     record: dict
     exact: EstimatorLoop
     scheme: EstimatorLoop
     tables: EstimatorTable
+    nominal: EstimatorLoop | None = None
 
 
 def sensor_loop_unsupported(problem, table) -> tuple[str, str] | None:
@@ -114,4 +116,6 @@ def run_sensor_loop(problem, table, *, paths: int, seed: int, substeps: int | st
     mc, rec = simulate_estimator(problem, ctl, paths=paths, seed=seed, substeps=int(substeps),
                                  record=record)
     mc.substep_choice = choice
-    return SensorRun(mc, rec, exact, scheme, tables)
+    nominal = (evaluate_estimator(problem, table, gains=gains, predictor=pred)
+               if problem.faults.any else None)
+    return SensorRun(mc, rec, exact, scheme, tables, nominal)

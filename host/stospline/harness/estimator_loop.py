@@ -146,11 +146,11 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
     are frozen at each plant step's midpoint (as `harness.montecarlo` runs them); a
     time-varying ``V`` is taken at each sampling tick's time.
 
-    The faults of ``problem.faults`` that `estimator.oracle.estimator_faults_unsupported` accepts compose with
-    the sensor (docs/theory/estimator.md, "Faults"): ``sensor_noise`` (per state) is noise on
-    the state the sensor reads, ``y = C (x + nu) + r``; ``actuator_noise`` is added to the
-    command the plant receives (the filter predicts with the command it wrote); model mismatch
-    changes the plant, not the filter's predictor.
+    The faults of ``problem.faults`` that `estimator.oracle.estimator_faults_unsupported`
+    accepts compose with the sensor (docs/theory/estimator.md, "Faults"): ``sensor_noise``
+    (per state) is noise on the state the sensor reads, ``y = C (x + nu) + r``;
+    ``actuator_noise`` is added to the command the plant receives (the filter predicts with
+    the command it wrote); model mismatch changes the plant, not the filter's predictor.
 
     Returns the Monte Carlo result (cost, knot states, one path, the mean path, saturation)
     and ``{"x": (ticks + 1, record, n), "xhat": (ticks + 1, record, n), "u": (ticks, record,

@@ -2,9 +2,9 @@
 
     y_j = C x(t_j) + sum_i x_i(t_j) D_i nu_j + v_j        at the ticks j = 0, every, 2 every, ...
 
-with ``v_j ~ N(0, V(t_j))`` and ``nu_j ~ N(0, I)`` independent of each other, of the plant's noise and
-from tick to tick; ``D_i`` (p x mnu) scales a noise proportional to the state ``x_i`` (a range
-sensor's error grows with the range). ``x0_cov`` is the covariance of the start around ``x0``,
+with ``v_j ~ N(0, V(t_j))`` and ``nu_j ~ N(0, I)`` independent of each other, of the plant's
+noise and from tick to tick; ``D_i`` (p x mnu) scales a noise proportional to the state ``x_i``
+(a range sensor's error grows with the range). ``x0_cov`` is the covariance of the start around ``x0``,
 which the controller does not know exactly once it estimates the state (zero by default).
 ``V`` may be given as samples over time (``{t = [...], values = [...], interpolation = ...}``,
 as the stages' data, `problem.series`): the filter's gains then follow it tick by tick. ``C``

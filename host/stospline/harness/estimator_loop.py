@@ -36,7 +36,7 @@ const char *stsp_status_str(stsp_status_t status);
 const stsp_est_table_t *harness_est_table(void);
 int harness_est_init(stsp_est_t *e, size_t count);
 int harness_est_step(stsp_est_t *e, size_t count, uint32_t tick, const float *Y, float *U,
-                     int *status);
+                     int *status, const unsigned char *run);
 void harness_est_xhat(const stsp_est_t *e, size_t count, float *out);
 """
 
@@ -53,14 +53,17 @@ int harness_est_init(stsp_est_t *e, size_t count) {
     for (i = 1; i < count; ++i) e[i] = e[0];
     return (int)st;
 }
-/* Y (count x ny) or NULL (no reading this tick); U (count x nu); status per path. */
+/* Y (count x ny) or NULL (no reading this tick); U (count x nu); status per path; run NULL
+ * (every path) or per path 0 for a missed tick: not stepped, U and status left as they are. */
 int harness_est_step(stsp_est_t *e, size_t count, uint32_t tick, const float *Y, float *U,
-                     int *status) {
+                     int *status, const unsigned char *run) {
     size_t i;
     int worst = 0;
     for (i = 0; i < count; ++i) {
         const float *y = (Y == NULL) ? NULL : &Y[i * %(P)s_NY];
-        const stsp_status_t st = stsp_est_step(&e[i], tick, y, &U[i * %(P)s_NU]);
+        stsp_status_t st;
+        if (run != NULL && run[i] == 0u) continue;
+        st = stsp_est_step(&e[i], tick, y, &U[i * %(P)s_NU]);
         status[i] = (int)st;
         if ((int)st < worst) worst = (int)st;
     }
@@ -91,22 +94,28 @@ class EstimatorController:
         return self.ffi.string(self.lib.stsp_status_str(status)).decode()
 
     def stepper(self, count: int):
-        """``step(tick, Y) -> (U, status)`` over `count` fresh instances; Y (count, ny)
-        float32 or None (no reading)."""
+        """``step(tick, Y, run=None) -> (U, status)`` over `count` fresh instances; Y (count,
+        ny) float32 or None (no reading); `run` (count,) bool or None (every path): a path
+        with False misses the tick (not stepped; U keeps its last command, u_hold at first,
+        and its status is 0)."""
         ffi, lib = self.ffi, self.lib
         inst = ffi.new("stsp_est_t[]", count)
         st = lib.harness_est_init(inst, count)
         if st < 0:
             raise RuntimeError(f"stsp_est_init failed: {self.status_str(st)}")
         m = self.table.dims[1]
-        U = np.zeros((count, m), np.float32)
+        U = np.tile(np.asarray(self.table.u_hold, np.float32), (count, 1))
         S = np.zeros(count, np.intc)
         pu, ps = ffi.from_buffer("float[]", U), ffi.from_buffer("int[]", S)
 
-        def step(tick: int, Y):
+        def step(tick: int, Y, run=None):
             py = ffi.NULL if Y is None else ffi.from_buffer(
                 "float[]", np.ascontiguousarray(Y, np.float32))
-            lib.harness_est_step(inst, count, tick, py, pu, ps)
+            pr = ffi.NULL
+            if run is not None:
+                S[:] = 0
+                pr = ffi.from_buffer("unsigned char[]", np.ascontiguousarray(run, np.uint8))
+            lib.harness_est_step(inst, count, tick, py, pu, ps, pr)
             return U, S
 
         n = self.table.dims[0]
@@ -150,7 +159,9 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
     accepts compose with the sensor (docs/theory/estimator.md, "Faults"): ``sensor_noise``
     (per state) is noise on the state the sensor reads, ``y = C (x + nu) + r``;
     ``actuator_noise`` is added to the command the plant receives (the filter predicts with
-    the command it wrote); model mismatch changes the plant, not the filter's predictor.
+    the command it wrote); model mismatch changes the plant, not the filter's predictor; a
+    missed tick (``miss_probability``, per path and tick) does not step the path's
+    controller, whose command the plant keeps holding.
 
     Returns the Monte Carlo result (cost, knot states, one path, the mean path, saturation)
     and ``{"x": (ticks + 1, record, n), "xhat": (ticks + 1, record, n), "u": (ticks, record,
@@ -173,6 +184,7 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
     fault_rng = np.random.default_rng(fault_seed)
     sig_x = faults.sensor_noise if np.any(faults.sensor_noise) else None
     sig_u = faults.actuator_noise if np.any(faults.actuator_noise) else None
+    miss = float(faults.miss_probability)
     helpers = ctl.plant_helpers
     normals = helpers.normals(plant_seed)
     X = np.tile(problem.x0, (paths, 1)).astype(float)
@@ -197,6 +209,21 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
            "u": np.empty((table.n_ticks, record, m), np.float32)}
     rec["xhat"] = np.empty((table.n_ticks + 1, record, n), np.float32)
     rec["x"][0], rec["xhat"][0] = X[:record], step.xhat()[:record]
+    next_tick = np.zeros(paths, np.int64)     # each path's controller: its next tick
+    pred = ctl.est.per_tick()[1] if miss else None
+
+    def estimate(tick: int) -> np.ndarray:
+        """Each path's prediction for `tick`: the controller's, carried over the ticks it
+        missed with its held command as its next step will (the firmware's maps)."""
+        xh = step.xhat()
+        if pred is None:
+            return xh
+        xh = xh.astype(float)
+        for t in range(int(next_tick.min()), tick):
+            late = next_tick <= t
+            P = pred[t]
+            xh[late] = xh[late] @ P[:, :n].T + U[late] @ P[:, n:n + m].T + P[:, -1]
+        return xh
     for k in range(table.n_stages):
         st = plant_of.stages[k]
         plant = None if st.varying is not None else helpers.plant(st, *zoh_step(st, dt), dt,
@@ -214,7 +241,10 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
                 if sig_x is not None:
                     Y += (fault_rng.standard_normal((paths, n)) * sig_x) @ meas.C.T
                 Y = Y.astype(np.float32)
-            U, status = step(j, Y)
+            ran = None if not miss else fault_rng.random(paths) >= miss
+            U, status = step(j, Y, ran)
+            if ran is not None:
+                next_tick[ran] = j + 1
             worst = min(worst, int(status.min()))
             saturated += status == STATUS["WARN_SATURATED"]
             u_low, u_high = np.minimum(u_low, U.min(axis=0)), np.maximum(u_high, U.max(axis=0))
@@ -228,13 +258,13 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
             sample_x[j + 1], sample_u[j] = X[0], U[0]
             rec["x"][j + 1], rec["u"][j] = X[:record], U[:record]
             if record:
-                rec["xhat"][j + 1] = step.xhat()[:record]
+                rec["xhat"][j + 1] = estimate(j + 1)[:record]
         knot = problem.knots[k]
         if knot.penalty is not None:
             r = X @ knot.penalty.C.T - knot.penalty.target
             cost += knot.penalty.weight * np.einsum("pi,pi->p", r, r)
         knots.append(Moments.of(X))
-        knot_error.append(Moments.of(X - step.xhat()))
+        knot_error.append(Moments.of(X - estimate(int(table.stage_start[k + 1]))))
     t = problem.t0 + h * np.arange(table.n_ticks + 1)
     mc = MonteCarloResult(paths, Moments.of(cost), knots, t, sample_x, sample_u, x_sum / paths,
                           worst, int(saturated.sum()), int(np.count_nonzero(saturated)),

@@ -595,13 +595,12 @@ MUTATIONS["parameters"] = m_parameters
 
 SENSOR_SIMULATE_CASES = {
     "valid": ("noisy", {}, [], None),
-    "faults_in_file": ("noisy", {"faults": {"miss_probability": 0.1}}, [],
-                       "faults.miss_probability"),
+    "faults_in_file": ("noisy", {"faults": {"delay_ticks": 1}}, [], "faults.delay_ticks"),
     "quantum_in_file": ("noisy", {"faults": {"sensor_quantum": 0.01}}, [],
                         "faults.sensor_quantum"),
-    "fault_option": ("noisy", {}, ["--fault", "miss_probability=0.1"], "--fault"),
-    "linear_faults": ("noisy", {"faults": {"actuator_noise": 0.1, "sensor_noise": 0.01,
-                                           "plant_B_scale": 0.9}}, [], None),
+    "fault_option": ("noisy", {}, ["--fault", "delay_ticks=1"], "--fault"),
+    "faults": ("noisy", {"faults": {"actuator_noise": 0.1, "sensor_noise": 0.01,
+                                    "plant_B_scale": 0.9, "miss_probability": 0.1}}, [], None),
     "x0_option": ("noisy", {}, ["--x0=0.1,0"], "--x0"),
     "scheduler_option": ("noisy", {}, ["--scheduler", "local"], "--scheduler"),
     "paths_beyond_memory": ("noisy", {}, ["--paths", str(10**7 + 1)], "--paths"),

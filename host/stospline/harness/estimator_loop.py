@@ -166,7 +166,8 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
     Returns the Monte Carlo result (cost, knot states, one path, the mean path, saturation)
     and ``{"x": (ticks + 1, record, n), "xhat": (ticks + 1, record, n), "u": (ticks, record,
     m), "knot_error": [Moments]}``: for the first `record` paths the true state at each tick,
-    the controller's prediction of it (before that tick's update) and the commands; over all
+    the controller's prediction of it (before that tick's update; after missed ticks, carried
+    over them as the controller's next step will) and the commands; over all
     paths the moments of the estimation error ``x - x̂`` at each knot (x̂ the prediction the
     controller holds for the knot's tick)."""
     table, meas = ctl.table, problem.measurement

@@ -421,10 +421,12 @@ def _sensor_refusal(args, problem, opts) -> None:
     def named(option: str, key: str, field: str) -> str:
         return option if getattr(args, key, None) not in (None, False, []) else field
     why = "a problem with [measurement] runs the sensor loop, which"
-    if problem.faults.any:
-        raise ProblemError(named("--fault", "fault", "faults"),
-                           f"{why} takes no faults (the sensor's noise is the measurement "
-                           f"table's)")
+    from stospline.estimator.oracle import estimator_faults_unsupported
+    bad = estimator_faults_unsupported(problem.faults)
+    if bad and getattr(args, "fault", None):
+        raise ProblemError("--fault", f"{bad[0].split('.')[-1]}: {bad[1]}")
+    if bad:
+        raise ProblemError(*bad)
     if getattr(args, "x0", None) is not None:
         raise ProblemError("--x0", f"{why} starts from the file's x0 and x0_cov (the filter's "
                                    f"prior mean is flashed with the tables)")
@@ -440,12 +442,6 @@ def _sensor_refusal(args, problem, opts) -> None:
         if getattr(opts, key) == bad:
             raise ProblemError(named(f"--{key.replace('_', '-')}", key, f"design.{key}"),
                                f"{why} {what}")
-    for k, stage in enumerate(problem.stages):
-        if stage.varying is not None:
-            key = stage.varying.keys[0]
-            section = "dynamics" if key in ("A", "B", "f", "noise") else "cost"
-            raise ProblemError(f"{section}.{key}", f"is time-varying (stage {k}); {why} runs "
-                                                   f"constant stage data only")
 
 
 def _sensor_run(args, problem, opts, command: str, record: int = 0):

@@ -23,12 +23,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from stospline.errors import ProblemError
 from stospline.estimator.gain import lmmse_gain
+from stospline.problem.faults import Faults
 from stospline.problem.model import Problem
 from stospline.oracle.tick_moments import Moments, _knot_terms, _PathRecord, _StagePlant, _w_map
 from stospline.table.format import GainTable
 
-__all__ = ["EstimatorLoop", "evaluate_estimator"]
+__all__ = ["EstimatorLoop", "evaluate_estimator", "estimator_faults_unsupported"]
 
 
 @dataclass
@@ -66,10 +68,26 @@ def _check(problem: Problem, table: GainTable, meas) -> None:
                          f"sensor {meas.C.shape[1]}, the problem {n}")
 
 
+def estimator_faults_unsupported(faults: Faults) -> tuple[str, str] | None:
+    """``(field, reason)`` for a fault that the loop on a sensor does not run, else None.
+
+    Sensor noise, actuator noise, missed ticks and model mismatch compose with the filter
+    (docs/theory/estimator.md, "Faults"); a computation delay and the sensor quantizer are
+    refused."""
+    why = "with a [measurement] sensor the loop"
+    if faults.delay_ticks:
+        return "faults.delay_ticks", f"{why} has no estimator form for a one-tick delay"
+    if np.any(faults.sensor_quantum):
+        return "faults.sensor_quantum", (f"{why} does not quantize the reading (nonlinear; "
+                                         f"give the converter's step as measurement.V)")
+    return None
+
+
 def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
                        propagator: str = "exact", substeps: int = 4,
                        path: bool = False, gains: np.ndarray | None = None,
-                       predictor: np.ndarray | None = None) -> EstimatorLoop:
+                       predictor: np.ndarray | None = None,
+                       faults: Faults | None = None) -> EstimatorLoop:
     """Filter gains and exact moments of `table`'s law run on the filter's estimate.
 
     Parameters
@@ -89,6 +107,17 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         and predictor maps, per tick): the loop's exact moments with these in place of the
         LMMSE gains and the plant's exact mean map. A predictor that is not the plant's mean
         map (rounded to float32) biases the estimate by its error.
+    faults : Faults, optional
+        Faults of the loop around the filter (``problem.faults`` is not read by default: the
+        filter is designed without them). ``sensor_noise`` is noise on the state the sensor
+        reads, ``y = C (x + nu) + r``; ``actuator_noise`` is added to the command the plant
+        holds, not to the one the filter predicts with; model mismatch changes the plant, not
+        the predictor; a missed tick (``miss_probability``) runs no controller: the plant
+        holds the last command, the reading is lost, the filter predicts over it with that
+        command on its next run, and a stage entered late latches at its first tick run
+        (``stsp_est_step``). The filter is the nominal one (its LMMSE gains and mean maps, unless
+        `gains`/`predictor` are given). Raises ProblemError for the faults that
+        `estimator_faults_unsupported` names.
 
     Returns
     -------
@@ -96,15 +125,33 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
     """
     meas = problem.measurement if measurement is None else measurement
     _check(problem, table, meas)
+    faulty = faults is not None and faults.any
+    if faulty:
+        why = estimator_faults_unsupported(faults)
+        if why:
+            raise ProblemError(*why)
+        if gains is None or predictor is None:
+            nominal = evaluate_estimator(problem, table, meas, propagator=propagator,
+                                         substeps=substeps, gains=gains, predictor=predictor)
+            gains = nominal.gain if gains is None else gains
+            predictor = nominal.predict if predictor is None else predictor
+    plant = faults.plant_of(problem) if faulty else problem
+    sig_x = faults.sensor_noise if faulty and np.any(faults.sensor_noise) else None
+    act_cov = (np.diag(faults.actuator_noise ** 2)
+               if faulty and np.any(faults.actuator_noise) else None)
+    extra_R = None if sig_x is None else (meas.C * sig_x ** 2) @ meas.C.T
     n, m, nl = table.dims
     p = meas.p
     h = 1.0 / table.tick_hz
     C = meas.C
+    miss = float(faults.miss_probability) if faulty else 0.0
+    mu = m if miss else 0                   # the command held on a missed tick
     xs, hs, vs = slice(0, n), slice(n, 2 * n), slice(2 * n, 2 * n + nl)
-    d = 2 * n + nl + 1                      # z = [x; x̂; v; 1]
-    rs = slice(d - 1, d - 1 + p)            # during an update: z_r = [x; x̂; v; r; 1]
+    ls = slice(2 * n + nl, 2 * n + nl + mu)
+    d = 2 * n + nl + mu + 1                 # z = [x; x̂; v; u_last (missed ticks); 1]
+    rs = slice(d - 1, d - 1 + p)            # during an update: z_r = [x; x̂; v; u_last; r; 1]
     x0 = problem.x0
-    z0 = np.concatenate([x0, x0, np.zeros(nl), [1.0]])
+    z0 = np.concatenate([x0, x0, np.zeros(nl), np.asarray(table.u_hold, float)[:mu], [1.0]])
     M = np.outer(z0, z0)
     M[xs, xs] += meas.prior_cov(n)
     keep = np.r_[0:d - 1, d - 1 + p]        # z inside z_r
@@ -118,66 +165,134 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
     eye = np.eye(d)
     Tw = _w_map(n, m, d, xs)                # w = [x; u; 1] = Tw z
     Th = _w_map(n, m, d, hs)                # [x̂; u; 1]: what the predictor moves
+    Fu_miss = np.zeros((m, d))              # a missed tick: the plant holds u_last
+    Fu_miss[:, ls] = np.eye(m)[:, :mu]
+
+    def tick(M, j, k, Fu, ran):
+        """One tick of the plant and the predictor from E zz' = M with ``u = Fu z``: the
+        moments after it, the expected cost and ``E ww'`` (`ran`: u_last becomes u)."""
+        Tw[n:n + m] = Fu
+        Th[n:n + m] = Fu
+        TM = Tw @ M
+        Mw = TM @ Tw.T
+        if act_cov is not None:    # u + eta: eta independent of z (so E x+ a' as without)
+            Mw[n:n + m, n:n + m] += M[-1, -1] * act_cov
+        Mw_in = Mw
+        Mw, dJ, Fmean = plants[k].tick(Mw, j)
+        predict[j] = Fmean
+        Ta = np.zeros((d - n, d))           # passengers a = [x̂'; v; u_last'; 1]
+        Ta[:n] = (Fmean if predictor is None else predictor[j]) @ Th
+        Ta[n:] = eye[2 * n:]
+        if ran and mu:
+            Ta[nl + n:nl + n + mu] = Fu
+        Mn = np.empty_like(M)
+        Mn[xs, xs] = Mw[:n, :n]
+        Mn[xs, n:] = Fmean @ TM @ Ta.T      # E x+ a' (the plant's noise is uncorrelated)
+        Mn[n:, xs] = Mn[xs, n:].T
+        Mn[n:, n:] = Ta @ M @ Ta.T
+        Mn[xs, -1] = Mn[-1, xs] = Mw[:n, -1]
+        return 0.5 * (Mn + Mn.T), dJ, Mw_in
+
+    def run(M, j, k, latch):
+        """The controller runs at tick j: update, latch (`latch`), command, tick. Returns the
+        moments after the tick, the cost, ``E ww'`` and the moments after the update."""
+        if meas.samples_at(j):
+            M = _update(M, meas, C, gain_out, j, n, xs, hs, rs, keep, d, p,
+                        None if gains is None else gains[j], table.t0 + j * h, extra_R)
+        updated = M
+        if latch:
+            T = eye.copy()
+            T[vs] = 0.0
+            T[vs, hs] = table.Lambda[k].astype(float)
+            T[vs, -1] = table.lambda0[k].astype(float)
+            M = T @ M @ T.T
+        Fu = np.zeros((m, d))               # u = Fu z
+        Fu[:, hs] = -table.K[j].astype(float)
+        Fu[:, vs] = -table.L[j].astype(float)
+        Fu[:, -1] = -table.k0[j].astype(float)
+        return (*tick(M, j, k, Fu, True), updated)
+
+    # With missed ticks the moments are kept apart (unnormalised, E[zz' 1{branch}]) for the
+    # paths that have latched the current stage ("L") and those that have not run in it yet
+    # ("U": a stage entered late latches at its first tick run, stsp_est_step); the branch of
+    # a tick (run with probability 1 - miss) is independent of z, so each is linear.
+    plants = [_StagePlant(plant.stages[k], n, m, table.t0, h, propagator, substeps)
+              for k in range(table.n_stages)]
+    M_L, M_U = M, None
     for k in range(table.n_stages):
-        plant_k = _StagePlant(problem.stages[k], n, m, table.t0, h, propagator, substeps)
-        relatch = k == 0 or table.stage_n_latch[k] > 0
+        if k == 0 or table.stage_n_latch[k] > 0:
+            M_L, M_U = None, _add(M_U, M_L, 1.0)
+        else:
+            M_L, M_U = _add(M_L, M_U, 1.0), None
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
-            E = M[xs, xs] - M[xs, hs] - M[hs, xs] + M[hs, hs]
-            prior_cov[j] = 0.5 * (E + E.T)
-            if meas.samples_at(j):
-                M = _update(M, meas, C, gain_out, j, n, xs, hs, rs, keep, d, p,
-                            None if gains is None else gains[j])
-            E = M[xs, xs] - M[xs, hs] - M[hs, xs] + M[hs, hs]
-            err_cov[j] = 0.5 * (E + E.T)
-            if relatch and j == table.stage_start[k]:
-                T = eye.copy()
-                T[vs] = 0.0
-                T[vs, hs] = table.Lambda[k].astype(float)
-                T[vs, -1] = table.lambda0[k].astype(float)
-                M = T @ M @ T.T
-            Fu = np.zeros((m, d))               # u = Fu z
-            Fu[:, hs] = -table.K[j].astype(float)
-            Fu[:, vs] = -table.L[j].astype(float)
-            Fu[:, -1] = -table.k0[j].astype(float)
-            Tw[n:n + m] = Fu
-            Th[n:n + m] = Fu
-            TM = Tw @ M
-            Mw = TM @ Tw.T
-            rec.command(Mw, n, m)
-            Mw, dJ, Fmean = plant_k.tick(Mw, j)
-            J += dJ
-            predict[j] = Fmean
-            Ta = np.zeros((d - n, d))           # passengers a = [x̂'; v; 1]
-            Ta[:n] = (Fmean if predictor is None else predictor[j]) @ Th
-            Ta[n:] = eye[2 * n:]
-            Mn = np.empty_like(M)
-            Mn[xs, xs] = Mw[:n, :n]
-            Mn[xs, n:] = Fmean @ TM @ Ta.T      # E x+ a' (the plant's noise is uncorrelated)
-            Mn[n:, xs] = Mn[xs, n:].T
-            Mn[n:, n:] = Ta @ M @ Ta.T
-            Mn[xs, -1] = Mn[-1, xs] = Mw[:n, -1]
-            M = 0.5 * (Mn + Mn.T)
-            rec.state(M, n)
+            total = _add(M_L, M_U, 1.0)
+            prior_cov[j] = _error_cov(total, xs, hs)
+            L_next = U_next = Mw_all = after = None
+            for Mb, latch in ((M_L, False), (M_U, True)):
+                if Mb is None or Mb[-1, -1] == 0.0:
+                    continue
+                Mr, dJ, Mw, upd = run(Mb, j, k, latch)
+                J += (1.0 - miss) * dJ
+                L_next = _add(L_next, Mr, 1.0 - miss)
+                Mw_all = _add(Mw_all, Mw, 1.0 - miss)
+                after = _add(after, upd, 1.0 - miss)
+                if miss:
+                    Mm, dJ, Mw = tick(Mb, j, k, Fu_miss, False)
+                    J += miss * dJ
+                    Mw_all = _add(Mw_all, Mw, miss)
+                    after = _add(after, Mb, miss)
+                    if latch:
+                        U_next = _add(U_next, Mm, miss)
+                    else:
+                        L_next = _add(L_next, Mm, miss)
+            err_cov[j] = _error_cov(after, xs, hs)
+            rec.command(Mw_all, n, m)
+            M_L, M_U = L_next, U_next
+            rec.state(_add(M_L, M_U, 1.0), n)
+        M = _add(M_L, M_U, 1.0)
         sub = np.r_[0:n, d - 1]
         pen, mean, cov, con = _knot_terms(problem, k, M[np.ix_(sub, sub)], n)
         J += pen
         means.append(mean); covs.append(cov); cons.append(con)
-        E = M[xs, xs] - M[xs, hs] - M[hs, xs] + M[hs, hs]
-        err_knot.append(0.5 * (E + E.T))
+        err_knot.append(_error_cov(M, xs, hs))
         est_knot.append(M[hs, -1].copy())
     mom = rec.moments(J, means, covs, cons, problem.t0, h, table.n_ticks)
     return EstimatorLoop(mom, gain_out, predict, err_cov, err_knot, est_knot, prior_cov)
 
 
-def _update(M, meas, C, gains, j, n, xs, hs, rs, keep, d, p, given=None):
-    """The measurement update of tick j on ``E zz'``: the LMMSE gain from these moments, or
-    `given` (stored in ``gains[j]``), then ``x̂ += Lf (C x + r - C x̂)`` with the sensor noise ``r``
-    appended (uncorrelated with z) and dropped again."""
+def _add(acc, M, w: float):
+    """``acc + w M`` with None for zero (`w` 1: M itself, no rounding)."""
+    if M is None:
+        return acc
+    term = M if w == 1.0 else w * M
+    return term if acc is None else acc + term
+
+
+def _error_cov(M, xs, hs) -> np.ndarray:
+    """The covariance of ``e = x - x̂`` from ``E zz'``: its second moment less ``E e E e'``
+    (E e = 0 for the plant's exact mean map; not for a rounded or mismatched one)."""
+    E = M[xs, xs] - M[xs, hs] - M[hs, xs] + M[hs, hs]
+    e = M[xs, -1] - M[hs, -1]
+    E = E - np.outer(e, e)
+    return 0.5 * (E + E.T)
+
+
+def _update(M, meas, C, gains, j, n, xs, hs, rs, keep, d, p, given=None, t=None,
+            extra_R=None):
+    """The measurement update of tick j (at time `t`) on ``E zz'``: the LMMSE gain from these
+    moments, or `given` (stored in ``gains[j]``), then ``x̂ += Lf (C x + r - C x̂)`` with the
+    sensor noise ``r`` appended (uncorrelated with z) and dropped again; `extra_R` is a
+    fault's noise in ``r`` that the LMMSE gain is not told about."""
     Mxx = M[xs, xs]
     P = Mxx - M[xs, hs] - M[hs, xs] + M[hs, hs]
     P = 0.5 * (P + P.T)
-    R = meas.noise_cov(Mxx)
+    w = M[-1, -1]                  # the branch's probability (1 without missed ticks)
+    R = meas.noise_cov(Mxx, t)
+    if w != 1.0:                   # E[rr' 1{branch}]: the additive parts scale with it
+        R = R + (w - 1.0) * meas.V_at(t)
     Lf = lmmse_gain(P, C, R) if given is None else np.asarray(given, dtype=float)
+    if extra_R is not None:
+        R = R + w * extra_R
     gains[j] = Lf
     D = d + p
     Mr = np.zeros((D, D))

@@ -33,6 +33,10 @@ def estimator_tails_unsupported(problem: Problem, table) -> str | None:
     """Why `evaluate_estimator_tails` cannot evaluate the loop (None: it can)."""
     if any(st.varying is not None for st in problem.stages[:table.n_stages]):
         return "time-varying stage data"
+    if problem.measurement is not None and problem.measurement.V_series is not None:
+        return "a time-varying measurement.V"
+    if problem.faults.any:
+        return "faults"
     n, m, nl = table.dims
     if 2 * n + m + nl + 1 > MAX_DIM:
         return f"more than {MAX_DIM - 1} states, estimates, inputs and multipliers together"

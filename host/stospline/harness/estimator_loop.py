@@ -13,10 +13,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from stospline.estimator.ctable import EstimatorTable, estimator_c
+from stospline.estimator.oracle import estimator_faults_unsupported
 from stospline.firmware_interface import STATUS
 from stospline.harness.build import PLANT_CDEF, build_harness_module
 from stospline.harness.controller import CompiledController
+from stospline.errors import ProblemError
 from stospline.harness.montecarlo import MonteCarloResult
+from stospline.harness.montecarlo import _plant_tick as plant_tick
 from stospline.harness.plant_spec import zoh_step
 from stospline.harness.path_stats import COST_SAMPLE, Moments
 from stospline.table.codegen import generate_c
@@ -33,7 +36,7 @@ const char *stsp_status_str(stsp_status_t status);
 const stsp_est_table_t *harness_est_table(void);
 int harness_est_init(stsp_est_t *e, size_t count);
 int harness_est_step(stsp_est_t *e, size_t count, uint32_t tick, const float *Y, float *U,
-                     int *status);
+                     int *status, const unsigned char *run);
 void harness_est_xhat(const stsp_est_t *e, size_t count, float *out);
 """
 
@@ -50,14 +53,17 @@ int harness_est_init(stsp_est_t *e, size_t count) {
     for (i = 1; i < count; ++i) e[i] = e[0];
     return (int)st;
 }
-/* Y (count x ny) or NULL (no reading this tick); U (count x nu); status per path. */
+/* Y (count x ny) or NULL (no reading this tick); U (count x nu); status per path; run NULL
+ * (every path) or per path 0 for a missed tick: not stepped, U and status left as they are. */
 int harness_est_step(stsp_est_t *e, size_t count, uint32_t tick, const float *Y, float *U,
-                     int *status) {
+                     int *status, const unsigned char *run) {
     size_t i;
     int worst = 0;
     for (i = 0; i < count; ++i) {
         const float *y = (Y == NULL) ? NULL : &Y[i * %(P)s_NY];
-        const stsp_status_t st = stsp_est_step(&e[i], tick, y, &U[i * %(P)s_NU]);
+        stsp_status_t st;
+        if (run != NULL && run[i] == 0u) continue;
+        st = stsp_est_step(&e[i], tick, y, &U[i * %(P)s_NU]);
         status[i] = (int)st;
         if ((int)st < worst) worst = (int)st;
     }
@@ -88,22 +94,28 @@ class EstimatorController:
         return self.ffi.string(self.lib.stsp_status_str(status)).decode()
 
     def stepper(self, count: int):
-        """``step(tick, Y) -> (U, status)`` over `count` fresh instances; Y (count, ny)
-        float32 or None (no reading)."""
+        """``step(tick, Y, run=None) -> (U, status)`` over `count` fresh instances; Y (count,
+        ny) float32 or None (no reading); `run` (count,) bool or None (every path): a path
+        with False misses the tick (not stepped; U keeps its last command, u_hold at first,
+        and its status is 0)."""
         ffi, lib = self.ffi, self.lib
         inst = ffi.new("stsp_est_t[]", count)
         st = lib.harness_est_init(inst, count)
         if st < 0:
             raise RuntimeError(f"stsp_est_init failed: {self.status_str(st)}")
         m = self.table.dims[1]
-        U = np.zeros((count, m), np.float32)
+        U = np.tile(np.asarray(self.table.u_hold, np.float32), (count, 1))
         S = np.zeros(count, np.intc)
         pu, ps = ffi.from_buffer("float[]", U), ffi.from_buffer("int[]", S)
 
-        def step(tick: int, Y):
+        def step(tick: int, Y, run=None):
             py = ffi.NULL if Y is None else ffi.from_buffer(
                 "float[]", np.ascontiguousarray(Y, np.float32))
-            lib.harness_est_step(inst, count, tick, py, pu, ps)
+            pr = ffi.NULL
+            if run is not None:
+                S[:] = 0
+                pr = ffi.from_buffer("unsigned char[]", np.ascontiguousarray(run, np.uint8))
+            lib.harness_est_step(inst, count, tick, py, pu, ps, pr)
             return U, S
 
         n = self.table.dims[0]
@@ -139,21 +151,41 @@ def build_estimator_controller(problem, table, est: EstimatorTable, *, build_dir
 def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: int,
                        substeps: int = 4, record: int = 0) -> tuple[MonteCarloResult, dict]:
     """`paths` paths of the loop: the start drawn from ``N(x0, x0_cov)``, the sensor's noise
-    from numpy (seeded), the plant's from the harness's C generator; constant stage data.
+    from numpy (seeded), the plant's from the harness's C generator. Time-varying stage data
+    are frozen at each plant step's midpoint (as `harness.montecarlo` runs them); a
+    time-varying ``V`` is taken at each sampling tick's time.
+
+    The faults of ``problem.faults`` that `estimator.oracle.estimator_faults_unsupported`
+    accepts compose with the sensor (docs/theory/estimator.md, "Faults"): ``sensor_noise``
+    (per state) is noise on the state the sensor reads, ``y = C (x + nu) + r``;
+    ``actuator_noise`` is added to the command the plant receives (the filter predicts with
+    the command it wrote); model mismatch changes the plant, not the filter's predictor; a
+    missed tick (``miss_probability``, per path and tick) does not step the path's
+    controller, whose command the plant keeps holding.
 
     Returns the Monte Carlo result (cost, knot states, one path, the mean path, saturation)
     and ``{"x": (ticks + 1, record, n), "xhat": (ticks + 1, record, n), "u": (ticks, record,
     m), "knot_error": [Moments]}``: for the first `record` paths the true state at each tick,
-    the controller's prediction of it (before that tick's update) and the commands; over all
+    the controller's prediction of it (before that tick's update; after missed ticks, carried
+    over them as the controller's next step will) and the commands; over all
     paths the moments of the estimation error ``x - x̂`` at each knot (x̂ the prediction the
     controller holds for the knot's tick)."""
     table, meas = ctl.table, problem.measurement
     n, m, _ = table.dims
     h = 1.0 / table.tick_hz
     dt = h / substeps
+    faults = problem.faults
+    why = estimator_faults_unsupported(faults)
+    if why:
+        raise ProblemError(*why)
+    plant_of = faults.plant_of(problem)
     ss = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    plant_seed, sensor_seed = ss.spawn(2)
+    plant_seed, sensor_seed, fault_seed = ss.spawn(3)  # the first two as without faults
     rng = np.random.default_rng(sensor_seed)
+    fault_rng = np.random.default_rng(fault_seed)
+    sig_x = faults.sensor_noise if np.any(faults.sensor_noise) else None
+    sig_u = faults.actuator_noise if np.any(faults.actuator_noise) else None
+    miss = float(faults.miss_probability)
     helpers = ctl.plant_helpers
     normals = helpers.normals(plant_seed)
     X = np.tile(problem.x0, (paths, 1)).astype(float)
@@ -162,8 +194,6 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
         w, Q = np.linalg.eigh(S0)
         X += rng.standard_normal((paths, n)) @ (Q * np.sqrt(np.maximum(w, 0.0))).T
     X = np.ascontiguousarray(X)
-    wv, Qv = np.linalg.eigh(meas.V)
-    sqV = Qv * np.sqrt(np.maximum(wv, 0.0))
     D = meas.D if meas.D.size and meas.D.any() else None
     step = ctl.stepper(paths)
     cost = np.zeros(paths)
@@ -180,38 +210,62 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
            "u": np.empty((table.n_ticks, record, m), np.float32)}
     rec["xhat"] = np.empty((table.n_ticks + 1, record, n), np.float32)
     rec["x"][0], rec["xhat"][0] = X[:record], step.xhat()[:record]
+    next_tick = np.zeros(paths, np.int64)     # each path's controller: its next tick
+    pred = ctl.est.per_tick()[1] if miss else None
+
+    def estimate(tick: int) -> np.ndarray:
+        """Each path's prediction for `tick`: the controller's, carried over the ticks it
+        missed with its held command as its next step will (the firmware's maps)."""
+        xh = step.xhat()
+        if pred is None:
+            return xh
+        xh = xh.astype(float)
+        for t in range(int(next_tick.min()), tick):
+            late = next_tick <= t
+            P = pred[t]
+            xh[late] = xh[late] @ P[:, :n].T + U[late] @ P[:, n:n + m].T + P[:, -1]
+        return xh
     for k in range(table.n_stages):
-        st = problem.stages[k]
-        if st.varying is not None:
-            raise ValueError("simulate_estimator: time-varying plant data are not simulated")
-        plant = helpers.plant(st, *zoh_step(st, dt), dt, substeps)
+        st = plant_of.stages[k]
+        plant = None if st.varying is not None else helpers.plant(st, *zoh_step(st, dt), dt,
+                                                                  substeps)
         dZ = np.empty((paths, substeps, st.G.shape[2]))
         fill = normals(dZ)
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             Y = None
             if meas.samples_at(j):
+                sqV = _sqrt_psd(meas.V_at(problem.t0 + j * h))
                 Y = X @ meas.C.T + rng.standard_normal((paths, meas.p)) @ sqV.T
                 if D is not None:
                     nu = rng.standard_normal((paths, D.shape[2]))
                     Y += np.einsum("Pa,apk,Pk->Pp", X, D, nu)
+                if sig_x is not None:
+                    Y += (fault_rng.standard_normal((paths, n)) * sig_x) @ meas.C.T
                 Y = Y.astype(np.float32)
-            U, status = step(j, Y)
+            ran = None if not miss else fault_rng.random(paths) >= miss
+            U, status = step(j, Y, ran)
+            if ran is not None:
+                next_tick[ran] = j + 1
             worst = min(worst, int(status.min()))
             saturated += status == STATUS["WARN_SATURATED"]
             u_low, u_high = np.minimum(u_low, U.min(axis=0)), np.maximum(u_high, U.max(axis=0))
             fill()
-            helpers.plant_tick(plant, dZ, U, X, cost)
+            applied = U
+            if sig_u is not None:
+                applied = np.ascontiguousarray(
+                    (U + fault_rng.standard_normal((paths, m)) * sig_u).astype(np.float32))
+            plant_tick(helpers, problem, plant, st, j, h, dt, substeps, dZ, applied, X, cost)
             x_sum[j + 1] = X.sum(axis=0)
             sample_x[j + 1], sample_u[j] = X[0], U[0]
             rec["x"][j + 1], rec["u"][j] = X[:record], U[:record]
             if record:
-                rec["xhat"][j + 1] = step.xhat()[:record]
+                rec["xhat"][j + 1] = estimate(j + 1)[:record]
         knot = problem.knots[k]
         if knot.penalty is not None:
             r = X @ knot.penalty.C.T - knot.penalty.target
             cost += knot.penalty.weight * np.einsum("pi,pi->p", r, r)
         knots.append(Moments.of(X))
-        knot_error.append(Moments.of(X - step.xhat()))
+        knot_error.append(Moments.of(X - estimate(int(table.stage_start[k + 1]))))
     t = problem.t0 + h * np.arange(table.n_ticks + 1)
     mc = MonteCarloResult(paths, Moments.of(cost), knots, t, sample_x, sample_u, x_sum / paths,
                           worst, int(saturated.sum()), int(np.count_nonzero(saturated)),
@@ -219,3 +273,10 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
                           record_u=rec["u"], cost_sample=cost[:COST_SAMPLE].copy())
     rec["knot_error"] = knot_error
     return mc, rec
+
+
+def _sqrt_psd(V: np.ndarray) -> np.ndarray:
+    """``S`` with ``S S' = V`` for a positive semidefinite `V`."""
+    w, Q = np.linalg.eigh(V)
+    return Q * np.sqrt(np.maximum(w, 0.0))
+

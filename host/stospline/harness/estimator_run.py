@@ -16,7 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from stospline.estimator.ctable import EstimatorTable, estimator_table
-from stospline.estimator.oracle import EstimatorLoop, evaluate_estimator
+from stospline.estimator.oracle import (EstimatorLoop, estimator_faults_unsupported,
+                                        evaluate_estimator)
 from stospline.harness.estimator_loop import build_estimator_controller, simulate_estimator
 from stospline.harness.montecarlo import MonteCarloResult
 from stospline.harness.plant_scheme import PILOT_PATHS, TOLERANCE, SubstepChoice
@@ -32,24 +33,22 @@ SUBSTEP_LIMIT = 1024
 class SensorRun:
     """``mc`` the run; ``record`` the recorded paths and the knot estimation errors
     (`simulate_estimator`); ``exact`` and ``scheme`` the estimator oracle of the flashed
-    tables with the exact plant and with the run's plant scheme; ``tables`` the filter's."""
+    tables with the exact plant and with the run's plant scheme; ``tables`` the filter's;
+    with faults, ``nominal`` the exact oracle of the flashed tables without them."""
     mc: MonteCarloResult
     record: dict
     exact: EstimatorLoop
     scheme: EstimatorLoop
     tables: EstimatorTable
+    nominal: EstimatorLoop | None = None
 
 
 def sensor_loop_unsupported(problem, table) -> tuple[str, str] | None:
     """``(field, reason)`` when the sensor loop's Monte Carlo cannot run `table` on
     `problem`, else None."""
-    if problem.faults.any:
-        return "faults", ("a loop with a [measurement] sensor is simulated without faults "
-                          "(the sensor's noise is the measurement table's)")
-    varying = [k for k, st in enumerate(problem.stages) if st.varying is not None]
-    if varying:
-        return "stages", (f"stage {varying[0]} has time-varying data; the sensor loop's Monte "
-                          f"Carlo runs constant stage data only")
+    why = estimator_faults_unsupported(problem.faults)
+    if why:
+        return why
     if getattr(table, "delay_ticks", 0):
         return "delay_ticks", ("a table designed for a one-tick delay has no estimator form; "
                                "the sensor loop runs without a delay")
@@ -75,7 +74,7 @@ def _choose(problem, ctl, tables_loop, gains, pred, table, *, paths: int,
 
     def scheme(s: int) -> EstimatorLoop:
         return evaluate_estimator(problem, table, gains=gains, predictor=pred,
-                                  propagator="euler", substeps=s)
+                                  propagator="euler", substeps=s, faults=problem.faults)
     substeps, loop = 1, scheme(1)
     if abs(loop.moments.J - exact_J) > target:
         # The bias falls as 1/substeps: jump to the predicted power of two, then double.
@@ -93,16 +92,18 @@ def _choose(problem, ctl, tables_loop, gains, pred, table, *, paths: int,
 def run_sensor_loop(problem, table, *, paths: int, seed: int, substeps: int | str = "auto",
                     record: int = 0, build_dir=None) -> SensorRun:
     """`paths` paths of `table`'s law on the estimate of the filter of
-    ``problem.measurement``, through the compiled C, with the oracle of the flashed tables.
+    ``problem.measurement``, through the compiled C, with the oracle of the flashed tables
+    (in the loop with ``problem.faults``, which the filter is designed without).
 
     Raises ValueError (`sensor_loop_unsupported`) for a loop the run does not support."""
     why = sensor_loop_unsupported(problem, table)
     if why:
         raise ValueError(f"{why[0]}: {why[1]}")
-    designed = evaluate_estimator(problem, table)
+    designed = evaluate_estimator(problem, table)       # the filter knows no faults
     tables = estimator_table(problem, table, designed)
     gains, pred = tables.per_tick()
-    exact = evaluate_estimator(problem, table, gains=gains, predictor=pred, path=True)
+    exact = evaluate_estimator(problem, table, gains=gains, predictor=pred, path=True,
+                               faults=problem.faults)
     ctl = build_estimator_controller(problem, table, tables, build_dir=build_dir)
     choice = None
     if substeps == "auto":
@@ -110,8 +111,11 @@ def run_sensor_loop(problem, table, *, paths: int, seed: int, substeps: int | st
         substeps = choice.substeps
     else:
         scheme = evaluate_estimator(problem, table, gains=gains, predictor=pred,
-                                    propagator="euler", substeps=int(substeps))
+                                    propagator="euler", substeps=int(substeps),
+                                    faults=problem.faults)
     mc, rec = simulate_estimator(problem, ctl, paths=paths, seed=seed, substeps=int(substeps),
                                  record=record)
     mc.substep_choice = choice
-    return SensorRun(mc, rec, exact, scheme, tables)
+    nominal = (evaluate_estimator(problem, table, gains=gains, predictor=pred)
+               if problem.faults.any else None)
+    return SensorRun(mc, rec, exact, scheme, tables, nominal)

@@ -2,10 +2,13 @@
 
     y_j = C x(t_j) + sum_i x_i(t_j) D_i nu_j + v_j        at the ticks j = 0, every, 2 every, ...
 
-with ``v_j ~ N(0, V)`` and ``nu_j ~ N(0, I)`` independent of each other, of the plant's noise and
-from tick to tick; ``D_i`` (p x mnu) scales a noise proportional to the state ``x_i`` (a range
-sensor's error grows with the range). ``x0_cov`` is the covariance of the start around ``x0``,
+with ``v_j ~ N(0, V(t_j))`` and ``nu_j ~ N(0, I)`` independent of each other, of the plant's
+noise and from tick to tick; ``D_i`` (p x mnu) scales a noise proportional to the state ``x_i``
+(a range sensor's error grows with the range). ``x0_cov`` is the covariance of the start around ``x0``,
 which the controller does not know exactly once it estimates the state (zero by default).
+``V`` may be given as samples over time (``{t = [...], values = [...], interpolation = ...}``,
+as the stages' data, `problem.series`): the filter's gains then follow it tick by tick. ``C``
+is constant (the firmware's estimator table holds one C); so are ``D`` and ``every``.
 
 The design ignores the table: the law it designs runs on the estimate ``x̂`` of the filter of
 `stospline.estimator` (docs/theory/estimator.md).
@@ -20,6 +23,7 @@ import numpy as np
 from stospline.errors import ProblemError
 from stospline.problem.fields import check_keys as _check_keys, integer as _int, join as _join
 from stospline.problem.fields import kind as _kind, matrix as _matrix
+from stospline.problem.series import Series, series_or
 from stospline.limits import MAX_NX
 
 __all__ = ["Measurement", "parse_measurement", "MEASUREMENT_KEYS"]
@@ -38,6 +42,7 @@ class Measurement:
     every: int = 1
     D: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 0)))
     x0_cov: np.ndarray | None = None    # (n, n); None: the start is known exactly
+    V_series: Series | None = None      # V sampled over time (V is then its first sample)
 
     def __eq__(self, other) -> bool:
         return isinstance(other, Measurement) and self.as_dict() == other.as_dict()
@@ -52,12 +57,21 @@ class Measurement:
     def prior_cov(self, n: int) -> np.ndarray:
         return np.zeros((n, n)) if self.x0_cov is None else self.x0_cov
 
-    def noise_cov(self, Mxx: np.ndarray) -> np.ndarray:
-        """``E rr'`` of the sensor's noise ``r = y - C x`` given ``E xx' = Mxx``:
-        ``V + sum_ab E[x_a x_b] D_a D_b'`` (the state-proportional part is linear in Mxx)."""
+    def V_at(self, t: float | None) -> np.ndarray:
+        """The additive noise's covariance at time `t` (the constant V when not sampled)."""
+        if self.V_series is None or t is None:
+            return self.V
+        V = self.V_series(t)
+        return 0.5 * (V + V.T)
+
+    def noise_cov(self, Mxx: np.ndarray, t: float | None = None) -> np.ndarray:
+        """``E rr'`` of the sensor's noise ``r = y - C x`` at time `t` given ``E xx' = Mxx``:
+        ``V(t) + sum_ab E[x_a x_b] D_a D_b'`` (the state-proportional part is linear in
+        Mxx)."""
+        V = self.V_at(t)
         if not self.D.size:
-            return self.V.copy()
-        R = self.V + np.einsum("ab,apk,bqk->pq", Mxx, self.D, self.D)
+            return V.copy()
+        R = V + np.einsum("ab,apk,bqk->pq", Mxx, self.D, self.D)
         return 0.5 * (R + R.T)
 
     def samples_at(self, tick: int) -> bool:
@@ -66,6 +80,10 @@ class Measurement:
     def as_dict(self) -> dict[str, Any]:
         """The ``[measurement]`` table that reads back as this model."""
         out: dict[str, Any] = {"C": self.C.tolist(), "V": self.V.tolist()}
+        if self.V_series is not None:
+            vs = self.V_series
+            out["V"] = {"t": vs.t.tolist(), "values": vs.values.tolist(),
+                        "interpolation": vs.interpolation}
         if self.every != 1:
             out["every"] = self.every
         noise = [{"state": i, "D": self.D[i].tolist()} for i in range(self.D.shape[0])
@@ -137,6 +155,11 @@ def parse_measurement(raw: Any, n: int, *, path: str = "measurement") -> Measure
         Naming the key (``measurement.V``, ``measurement.noise[0].D[1][0]``) and the reason.
     """
     raw = _check_keys(raw, path, MEASUREMENT_KEYS, {"C", "V"})
+    for key in ("C", "every", "noise"):
+        if isinstance(raw.get(key), dict):
+            raise ProblemError(_join(path, key), "must be constant: only measurement.V may be "
+                                                 "given as samples over time (the firmware's "
+                                                 "estimator table holds one C)")
     C = _matrix(raw["C"], _join(path, "C"), (None, n), ("", " (n, the length of x0)"))
     _bounded(C, _join(path, "C"))
     p = C.shape[0]
@@ -147,11 +170,14 @@ def parse_measurement(raw: Any, n: int, *, path: str = "measurement") -> Measure
     if zero.size:
         raise ProblemError(f"{path}.C[{int(zero[0])}]", "is a zero row: that output measures "
                                                         "nothing; remove it")
-    V = _covariance(raw["V"], _join(path, "V"), p, " (p, the rows of measurement.C)")
+    V = series_or(raw["V"], _join(path, "V"), _covariance, p, " (p, the rows of measurement.C)")
+    V_series = None
+    if isinstance(V, Series):
+        V_series, V = V, V.values[0]
     every = (_int(raw["every"], _join(path, "every"), 1, _U32_MAX,
                   "the ticks between two samples") if "every" in raw else 1)
     D = (_parse_noise(raw["noise"], _join(path, "noise"), n, p) if "noise" in raw
          else np.zeros((0, 0, 0)))
     x0_cov = (_covariance(raw["x0_cov"], _join(path, "x0_cov"), n, " (n, the length of x0)")
               if "x0_cov" in raw else None)
-    return Measurement(C, V, every, D, x0_cov)
+    return Measurement(C, V, every, D, x0_cov, V_series)

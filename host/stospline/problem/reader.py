@@ -22,6 +22,7 @@ from stospline.problem.faults import parse_faults
 from stospline.problem.fields import check_keys, join as _join, kind as _kind
 from stospline.problem.fields import integer as _int, matrix as _matrix, number as _number
 from stospline.problem.fields import vector as _vector
+from stospline.problem.series import series_or
 from stospline.problem.measurement import parse_measurement
 from stospline.problem.inputfile import decode_problem, read_problem_file
 from stospline.problem.corridors import Corridor
@@ -145,29 +146,8 @@ def _parse_noise(value: Any, path: str, n: int, m: int) -> list[tuple[int, np.nd
 
 
 def _series_or(value: Any, path: str, parse, *args):
-    """A constant parsed by `parse`, or ``{t = [...], values = [...], interpolation = ...}``."""
-    if not isinstance(value, dict):
-        return parse(value, path, *args)
-    _check_keys(value, path, {"t", "values", "interpolation"}, {"t", "values"})
-    t = _vector(value["t"], _join(path, "t"), None)
-    if np.any(np.diff(t) <= 0):
-        raise ProblemError(_join(path, "t"), "sample times must increase strictly")
-    vals = value["values"]
-    if not isinstance(vals, list) or len(vals) != len(t):
-        raise ProblemError(_join(path, "values"), f"must be an array of {len(t)} samples, one "
-                                                  f"per entry of {_join(path, 't')}")
-    samples = [parse(v, f"{path}.values[{i}]", *args) for i, v in enumerate(vals)]
-    for i, sample in enumerate(samples[1:], start=1):
-        if np.shape(sample) != np.shape(samples[0]):
-            raise ProblemError(f"{path}.values[{i}]", f"has shape {np.shape(sample)} but "
-                                                      f"values[0] has {np.shape(samples[0])}: "
-                                                      f"every sample must have the same shape")
-    parsed = np.array(samples)
-    interp = value.get("interpolation", "linear")
-    if interp not in ("linear", "zoh"):
-        raise ProblemError(_join(path, "interpolation"), f"must be \"linear\" or \"zoh\", "
-                                                         f"got {interp!r}")
-    return Series(t, parsed, interp, path)
+    """`series.series_or` with the reader's hint for a misplaced top-level key."""
+    return series_or(value, path, parse, *args, hint=_top_key_hint(path))
 
 
 def _each(value, path: str):

@@ -3,9 +3,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from typing import Any
+
 import numpy as np
 
-__all__ = ["Series", "sample_varying"]
+from stospline.errors import ProblemError
+from stospline.problem.fields import check_keys, join, vector
+
+__all__ = ["Series", "sample_varying", "series_or"]
 
 
 @dataclass(frozen=True)
@@ -64,3 +69,30 @@ def sample_varying(varying, times, noise: bool = True) -> dict:
         out = {k: np.stack([np.asarray(c[k], dtype=float) for c in calls])
                for k in (calls[0] if calls else {}) if calls[0][k] is not None}
     return out if noise else {k: v for k, v in out.items() if k not in ("G", "H")}
+
+
+def series_or(value: Any, path: str, parse, *args, hint=None):
+    """A constant parsed by `parse`, or ``{t = [...], values = [...], interpolation = ...}``
+    (a `Series` of samples each parsed by `parse`); `hint` as `fields.check_keys`'s."""
+    if not isinstance(value, dict):
+        return parse(value, path, *args)
+    check_keys(value, path, {"t", "values", "interpolation"}, {"t", "values"}, hint=hint)
+    t = vector(value["t"], join(path, "t"), None)
+    if np.any(np.diff(t) <= 0):
+        raise ProblemError(join(path, "t"), "sample times must increase strictly")
+    vals = value["values"]
+    if not isinstance(vals, list) or len(vals) != len(t):
+        raise ProblemError(join(path, "values"), f"must be an array of {len(t)} samples, one "
+                                                  f"per entry of {join(path, 't')}")
+    samples = [parse(v, f"{path}.values[{i}]", *args) for i, v in enumerate(vals)]
+    for i, sample in enumerate(samples[1:], start=1):
+        if np.shape(sample) != np.shape(samples[0]):
+            raise ProblemError(f"{path}.values[{i}]", f"has shape {np.shape(sample)} but "
+                                                      f"values[0] has {np.shape(samples[0])}: "
+                                                      f"every sample must have the same shape")
+    parsed = np.array(samples)
+    interp = value.get("interpolation", "linear")
+    if interp not in ("linear", "zoh"):
+        raise ProblemError(join(path, "interpolation"), f"must be \"linear\" or \"zoh\", "
+                                                         f"got {interp!r}")
+    return Series(t, parsed, interp, path)

@@ -56,6 +56,7 @@ def sensor_simulation_summary(d, run, *, seed: int, confidence: float = 0.99) ->
             "full_state_oracle": d.implemented.J,
         },
         "cost": cost,
+        **_faults_entry(d, run),
         "simulation_bias": bias,
         "knots": knots,
         "standard_errors": {"used": "sample" if tails is None else "exact", "why": tails_why},
@@ -66,6 +67,17 @@ def sensor_simulation_summary(d, run, *, seed: int, confidence: float = 0.99) ->
     summary["verdict"] = verdict(summary, confidence)
     strict.check_summary_finite(d.problem, summary, "simulated numbers")
     return summary
+
+
+def _faults_entry(d, run) -> dict:
+    """``{"faults": ...}`` as the full-state summary's (levels, the exact oracle of the loop
+    with them, the fault-free one), or nothing without faults."""
+    faults = d.problem.faults
+    if not faults.any or run.nominal is None:
+        return {}
+    return {"faults": {"levels": verbatim(faults.as_dict()), "exact_oracle": True,
+                       "oracle_cost": run.exact.moments.J,
+                       "nominal_cost": run.nominal.moments.J}}
 
 
 def exact_standard_errors(d, run):

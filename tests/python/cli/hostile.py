@@ -595,8 +595,12 @@ MUTATIONS["parameters"] = m_parameters
 
 SENSOR_SIMULATE_CASES = {
     "valid": ("noisy", {}, [], None),
-    "faults_in_file": ("noisy", {"faults": {"actuator_noise": 0.1}}, [], "faults"),
-    "fault_option": ("noisy", {}, ["--fault", "actuator_noise=0.1"], "--fault"),
+    "faults_in_file": ("noisy", {"faults": {"delay_ticks": 1}}, [], "faults.delay_ticks"),
+    "quantum_in_file": ("noisy", {"faults": {"sensor_quantum": 0.01}}, [],
+                        "faults.sensor_quantum"),
+    "fault_option": ("noisy", {}, ["--fault", "delay_ticks=1"], "--fault"),
+    "faults": ("noisy", {"faults": {"actuator_noise": 0.1, "sensor_noise": 0.01,
+                                    "plant_B_scale": 0.9, "miss_probability": 0.1}}, [], None),
     "x0_option": ("noisy", {}, ["--x0=0.1,0"], "--x0"),
     "scheduler_option": ("noisy", {}, ["--scheduler", "local"], "--scheduler"),
     "paths_beyond_memory": ("noisy", {}, ["--paths", str(10**7 + 1)], "--paths"),
@@ -605,7 +609,11 @@ SENSOR_SIMULATE_CASES = {
     "spline_option": ("noisy", {}, ["--table", "spline"], "--table"),
     "spline_in_file": ("noisy", {"design": {"table": "spline"}}, [], "design.table"),
     "q15_in_file": ("noisy", {"design": {"arith": "q31"}}, [], "design.arith"),
-    "time_varying": ("varying", {}, [], "dynamics.A"),
+    "time_varying": ("varying", {}, ["--substeps", "1"], None),
+    "varying_V": ("noisy", {"measurement": {"C": [[1.0, 0.0]], "every": 2, "V": {
+        "t": [0.0, 1.0], "values": [[[1e-2]], [[1e-4]]]}}}, [], None),
+    "varying_C": ("noisy", {"measurement": {"V": [[1e-4]], "every": 2, "C": {
+        "t": [0.0, 1.0], "values": [[[1.0, 0.0]], [[1.0, 0.1]]]}}}, [], "measurement.C"),
     "band_latch": ("bands", {"design": {"mode": "joint"}}, [], "knots"),
 }
 

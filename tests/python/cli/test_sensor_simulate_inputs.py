@@ -31,6 +31,10 @@ def test_each_sensor_loop_case_is_run_or_refused_by_name(name, tmp_path, monkeyp
             e = kn["estimation_error"]
             assert set(e) >= {"mc_mean", "mc_cov", "oracle_mean", "oracle_cov"}
         assert s["verdict"]["statistics"] >= 1
+        if "faults" in doc:           # the verdict is against the oracle of the faulty loop
+            f = s["faults"]
+            assert set(f["levels"]) == set(doc["faults"]) and f["exact_oracle"]
+            assert f["oracle_cost"] == s["cost"]["oracle_implemented"] != f["nominal_cost"]
         return
     assert rc == 2 and out == "", (rc, out, err)
     lines = err.strip().splitlines()

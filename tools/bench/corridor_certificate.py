@@ -31,11 +31,18 @@ script starts as a user would, each its own process (``dask scheduler --port 0``
 `--scheduler ADDR` uses a running cluster instead. The cluster's numbers (exits by tick, the
 cost's and knot states' moments, the mean path) are compared with the local run's, bit for bit.
 
+`--exit-bias`: the exits (and the oracle's expected-cost bias) of each `--runs` entry
+(scheme:steps) on `--problem-file` (default examples/robot_corridor.toml) at `--hz` ticks per
+second, `--paths` paths each, one seed: how each scheme's exit probability moves with its
+steps per tick, which `choose_substeps` does not bound (it bounds the cost's bias).
+
     PYTHONPATH=host .venv/bin/python tools/bench/corridor_certificate.py [--paths 100000]
         [--certify-paths 3000000] [--workers N] [--seed 1] [--scheme euler|weak2]
     PYTHONPATH=host nice .venv/bin/python tools/bench/corridor_certificate.py --certify
         --scheme weak2 [--certify-paths 3000000] [--cluster 3] [--cluster-only]
         [--scheduler ADDR] [--substeps S] [--epsilon 1e-4]
+    PYTHONPATH=host .venv/bin/python tools/bench/corridor_certificate.py --exit-bias --hz 10
+        --paths 40000 [--problem-file F] [--runs euler:1,euler:8,weak2:1,...]
 """
 from __future__ import annotations
 
@@ -258,6 +265,39 @@ def certify(problem, d, args, workers: int) -> None:
                                              else "DIFFER in " + ", ".join(differ)))
 
 
+def exit_bias(args, workers: int) -> None:
+    """Exits and expected-cost bias of each scheme and step count of `--runs` on
+    `--problem-file` at `--hz` ticks per second (the same seed for every run)."""
+    import tomllib
+    from stospline.oracle.evaluate import evaluate_table
+    from stospline.problem import parse_problem
+    doc = tomllib.loads((ROOT / args.problem_file).read_text())
+    if args.hz:
+        doc["tick_hz"] = args.hz
+    problem = parse_problem(doc)
+    d = design_problem(problem)
+    ctl = build_controller(d.table)
+    exact = d.implemented.J
+    print(f"{args.problem_file} at {doc['tick_hz']} Hz, {d.table.n_ticks} ticks, "
+          f"{args.paths} paths a run, seed {args.seed}; exact expected cost {exact:.6g}")
+    print(f"{'scheme':>7s} {'steps':>5s} {'exits':>7s} {'P(exit)':>8s} {'+- 1 se':>8s} "
+          f"{'cost bias (oracle)':>19s} {'CPU s':>6s} {'ns/path-tick':>12s}")
+    for item in args.runs.split(","):
+        scheme, steps = item.split(":")
+        steps = int(steps)
+        run = scheme_problem(problem, steps, scheme)
+        c = cpu_seconds()
+        mc = simulate(run, ctl, paths=args.paths, seed=args.seed, substeps=steps,
+                      workers=workers)
+        cpu = cpu_seconds() - c
+        k = mc.exit_count(0)
+        p = k / args.paths
+        bias = evaluate_table(run, d.table, propagator="euler", substeps=steps,
+                              path=False).J - exact
+        print(f"{scheme:>7s} {steps:5d} {k:7d} {p:8.5f} {np.sqrt(p * (1 - p) / args.paths):8.5f} "
+              f"{bias:+19.3e} {cpu:6.1f} {cpu / (args.paths * d.table.n_ticks) * 1e9:12.1f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--paths", type=int, default=100_000)
@@ -271,8 +311,15 @@ def main() -> None:
     ap.add_argument("--cluster", type=int, default=0)
     ap.add_argument("--cluster-only", action="store_true")
     ap.add_argument("--scheduler", default=None)
+    ap.add_argument("--exit-bias", action="store_true")
+    ap.add_argument("--problem-file", default="examples/robot_corridor.toml")
+    ap.add_argument("--hz", type=int, default=0)
+    ap.add_argument("--runs", default="euler:1,euler:2,euler:8,euler:32,weak2:1,weak2:2,weak2:4")
     args = ap.parse_args()
     workers = args.workers or default_workers()
+    if args.exit_bias:
+        exit_bias(args, workers)
+        return
     problem = load_problem(ROOT / "examples" / "robot_corridor_eps01.toml")
     d = design_problem(problem)
     if args.certify:

@@ -651,10 +651,11 @@ def fault_sweep(d: Designed, *, paths: int, seed: int, substeps: int,
 
 
 def plan_substeps(d: Designed, *, paths: int, seed: int, build_dir=None,
-                  faults: Faults | None = None) -> SubstepChoice:
+                  faults: Faults | None = None, scheme: str = "euler") -> SubstepChoice:
     """The plant steps per tick ``simulate_problem(..., substeps="auto")`` would choose for
     this run (`harness.plant_scheme.choose_substeps`); pass the result as its `substeps` to run
-    with it, e.g. after checking that run's cost."""
+    with it, e.g. after checking that run's cost. `scheme` "weak2": the steps per tick of the
+    weak-order-two scheme (`harness.weak_scheme`; run it on its ``scheme_problem``)."""
     from stospline.report.simulation_summary import loop_moments
     from stospline.harness.controller import build_controller
     from stospline.harness.plant_scheme import choose_substeps
@@ -662,7 +663,7 @@ def plan_substeps(d: Designed, *, paths: int, seed: int, build_dir=None,
     ctl = build_controller(d.table, build_dir=build_dir, plant=d.problem)
     faults = d.problem.faults if faults is None else faults
     return choose_substeps(d.problem, ctl, loop_moments(d, faults).J, paths=paths, seed=seed,
-                           faults=faults)
+                           faults=faults, scheme=scheme)
 
 
 def usable_workers(workers: int | None, force: bool = False) -> int:

@@ -16,10 +16,10 @@ ran which block. Per-path records are kept only when asked for (`per_path`).
 
 The plant's standard normal numbers come from a generator in C seeded by the block's stream
 (`CompiledController.normals`, `normals.c`: xoshiro256++ and a ziggurat), not from numpy's C
-library (``libnpyrandom.a``): ``tools/bench/normal_generators.py`` measures 5.3 ns a number
-for ours against 9.5 ns for numpy's ``random_standard_normal`` on its default PCG64 (7.4 ns
+library (``libnpyrandom.a``): ``tools/bench/normal_generators.py`` measures 1.9 ns a number
+for ours against 9.5 ns for numpy's ``random_standard_normal`` on its default PCG64 (7.5 ns
 even fed by our xoshiro256++ through a ``bitgen_t``: the call per word through a pointer),
-which would add about 8 ns to the robot's ~45 ns path-tick (two numbers a tick).
+which would add about 15 ns to the robot's ~25 ns path-tick (two numbers a tick).
 """
 from __future__ import annotations
 

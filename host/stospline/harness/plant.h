@@ -67,6 +67,6 @@ typedef struct {
 
 /* Standard normal numbers (normals.c): xoshiro256++ words through a 256-layer ziggurat,
  * `count` of them into `out`; `state` (4 words, not all zero) is the generator's and
- * advances. About 5 ns a number where numpy's standard_normal takes 12 (this is what the
- * harness spends most of its time on); seeded from numpy.random.SeedSequence. */
+ * advances. About 2 ns a number where numpy's C library takes 7.5-9.5
+ * (tools/bench/normal_generators.py); seeded from numpy.random.SeedSequence. */
 void harness_normals(uint64_t *state, double *out, size_t count);

@@ -75,3 +75,79 @@ def test_the_committed_tables_are_the_generators():
                        capture_output=True, text=True, check=True)
     committed = (Path(stospline.__file__).parent / "harness" / "ziggurat_tables.h").read_text()
     assert r.stdout == committed
+
+
+def _tables():
+    """harness_zig_k, harness_zig_w, harness_zig_f and R from the committed header."""
+    import re
+    text = (Path(stospline.__file__).parent / "harness" / "ziggurat_tables.h").read_text()
+    body = {name: text.split(name, 1)[1].split("{", 1)[1].split("}", 1)[0]
+            for name in ("harness_zig_k", "harness_zig_w", "harness_zig_f")}
+    k = [int(v) for v in re.findall(r"(\d+)u", body["harness_zig_k"])]
+    w, f = ([float.fromhex(v) for v in re.findall(r"-?0x[0-9a-fA-Fp.+-]+", body[name])]
+            for name in ("harness_zig_w", "harness_zig_f"))
+    r = float.fromhex(re.search(r"HARNESS_ZIG_R (\S+)", text).group(1))
+    return k, w, f, r
+
+
+def _reference_normals(state, count):
+    """normals.c's algorithm written plainly (one word per draw; the wedge and the tail
+    draw further words): the numbers the C generator must give, bit for bit."""
+    k, w, f, big_r = _tables()
+    mask = (1 << 64) - 1
+    s = [int(v) for v in state]
+
+    def rotl(x, r):
+        return ((x << r) | (x >> (64 - r))) & mask
+
+    def word():
+        out = (rotl((s[0] + s[3]) & mask, 23) + s[0]) & mask
+        t = (s[1] << 17) & mask
+        s[2] ^= s[0]
+        s[3] ^= s[1]
+        s[1] ^= s[2]
+        s[0] ^= s[3]
+        s[2] ^= t
+        s[3] = rotl(s[3], 45)
+        return out
+
+    def unit():
+        return (word() >> 11) * 2.0**-53
+
+    out = []
+    while len(out) < count:
+        r = word()
+        layer, negative, mag = r & 0xFF, (r >> 8) & 1, (r >> 9) & ((1 << 52) - 1)
+        x = mag * w[layer]
+        if mag < k[layer]:
+            pass
+        elif layer == 0:
+            while True:
+                xx = -math.log1p(-unit()) / big_r
+                yy = -math.log1p(-unit())
+                if not yy + yy <= xx * xx:
+                    break
+            x = big_r + xx
+        elif not f[layer] + unit() * (f[layer + 1] - f[layer]) < math.exp(-0.5 * x * x):
+            continue
+        out.append(-x if negative else x)
+    return np.array(out), np.array(s, dtype=np.uint64)
+
+
+def test_the_numbers_are_the_algorithms(robot):
+    """The C generator (its fast path written out, the state in registers, the sign as a bit
+    flip) gives the algorithm's numbers and state bit for bit, the wedge and tail draws
+    included, over calls of several sizes."""
+    ctl = build_controller(robot.table)
+    into = ctl.normals(np.random.SeedSequence(20261128))
+    start = into.state.copy()
+    got = []
+    for size in (1, 7, 4096, 25_000):
+        out = np.empty(size)
+        into(out)()
+        got.append(out)
+    got = np.concatenate(got)
+    want, state = _reference_normals(start, len(got))
+    assert (np.abs(want) > _tables()[3]).sum() >= 3          # the tail sampler ran
+    np.testing.assert_array_equal(got.view(np.uint64), want.view(np.uint64))
+    np.testing.assert_array_equal(into.state, state)

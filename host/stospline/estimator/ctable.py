@@ -65,18 +65,25 @@ def estimator_table(problem, table, loop=None) -> EstimatorTable:
     meas = problem.measurement
     loop = evaluate_estimator(problem, table) if loop is None else loop
     n, m, _ = table.dims
+    starts, maps = stage_maps(problem, table, loop)
+    f32 = lambda a: positive_zeros(np.asarray(a, dtype=np.float32))  # noqa: E731
+    return EstimatorTable(
+        n, m, meas.p, table.n_ticks, meas.every, np.asarray(table.stage_start, np.uint32),
+        starts, _flushed_f32(maps), f32(meas.C), _flushed_f32(loop.gain[::meas.every]),
+        f32(problem.x0), table.problem_sha256)
+
+
+def stage_maps(problem, table, loop) -> tuple[np.ndarray, np.ndarray]:
+    """``(model_start, model)``: the predictor maps ``[Ad | Bd | fd]`` of `loop` (double), one
+    per stage, or one per tick of a time-varying stage, and each stage's first map."""
+    n, m, _ = table.dims
     starts, maps = [0], []
     for k in range(table.n_stages):
         a, b = int(table.stage_start[k]), int(table.stage_start[k + 1])
         per_tick = problem.stages[k].varying is not None and b - a > 1
         maps.extend(loop.predict[a:b] if per_tick else loop.predict[a:a + 1])
         starts.append(len(maps))
-    f32 = lambda a: positive_zeros(np.asarray(a, dtype=np.float32))  # noqa: E731
-    return EstimatorTable(
-        n, m, meas.p, table.n_ticks, meas.every, np.asarray(table.stage_start, np.uint32),
-        np.asarray(starts, np.uint32), _flushed_f32(np.array(maps).reshape(-1, n, n + m + 1)),
-        f32(meas.C), _flushed_f32(loop.gain[::meas.every]), f32(problem.x0),
-        table.problem_sha256)
+    return np.asarray(starts, np.uint32), np.array(maps).reshape(-1, n, n + m + 1)
 
 
 # Entries below this fraction of their array's largest are round-off of exact zeros (the
@@ -88,9 +95,14 @@ _ROUND_OFF = 1e-9
 
 def _flushed_f32(a) -> np.ndarray:
     """`a` in float32 with its round-off zeros flushed to +0.0 (`_ROUND_OFF`)."""
+    return positive_zeros(flushed(a).astype(np.float32))
+
+
+def flushed(a) -> np.ndarray:
+    """`a` (float64) with its round-off zeros (`_ROUND_OFF`) set to +0.0."""
     a = np.asarray(a, dtype=float)
     scale = float(np.abs(a).max()) if a.size else 0.0
-    return positive_zeros(np.where(np.abs(a) < _ROUND_OFF * scale, 0.0, a).astype(np.float32))
+    return np.where(np.abs(a) < _ROUND_OFF * scale, 0.0, a) + 0.0
 
 
 def estimator_crc32(et: EstimatorTable) -> int:

@@ -41,6 +41,10 @@ class EstimatorLoop:
     update of tick j, ``prior_error_cov[j]`` before it (the prediction the controller holds
     when tick j starts); ``knot_error_cov[k]`` that of ``x - x̂`` at knot k (the prediction).
     ``moments`` are the cost, knot means and covariances of the true state ``x``.
+    ``innovation_cov[j]`` is ``E ee'`` of the innovation ``e = y - C x̂`` at tick j (zero where
+    the sensor does not sample; its mean is zero), ``output_cov[j]`` the second moment
+    ``E yy'`` of the reading, ``estimate_ms[j]`` the largest of ``E x̂_i^2`` before and after
+    tick j's update: what the fixed-point scales of `estimator.qformat` need.
     """
     moments: Moments
     gain: np.ndarray
@@ -49,6 +53,9 @@ class EstimatorLoop:
     knot_error_cov: list[np.ndarray] = field(default_factory=list)
     knot_estimate_mean: list[np.ndarray] = field(default_factory=list)
     prior_error_cov: np.ndarray | None = None
+    innovation_cov: np.ndarray | None = None
+    output_cov: np.ndarray | None = None
+    estimate_ms: np.ndarray | None = None
 
 
 def _check(problem: Problem, table: GainTable, meas) -> None:
@@ -114,6 +121,9 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
     predict = np.zeros((table.n_ticks, n, n + m + 1))
     err_cov = np.zeros((table.n_ticks, n, n))
     prior_cov = np.zeros((table.n_ticks, n, n))
+    innov_cov = np.zeros((table.n_ticks, p, p))
+    out_cov = np.zeros((table.n_ticks, p, p))
+    est_ms = np.zeros((table.n_ticks, n))
     rec = _PathRecord(x0, path)
     eye = np.eye(d)
     Tw = _w_map(n, m, d, xs)                # w = [x; u; 1] = Tw z
@@ -124,11 +134,16 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             E = M[xs, xs] - M[xs, hs] - M[hs, xs] + M[hs, hs]
             prior_cov[j] = 0.5 * (E + E.T)
+            est_ms[j] = np.diag(M[hs, hs])
             if meas.samples_at(j):
+                R = meas.noise_cov(M[xs, xs])
+                innov_cov[j] = C @ prior_cov[j] @ C.T + R
+                out_cov[j] = C @ M[xs, xs] @ C.T + R
                 M = _update(M, meas, C, gain_out, j, n, xs, hs, rs, keep, d, p,
                             None if gains is None else gains[j])
             E = M[xs, xs] - M[xs, hs] - M[hs, xs] + M[hs, hs]
             err_cov[j] = 0.5 * (E + E.T)
+            est_ms[j] = np.maximum(est_ms[j], np.diag(M[hs, hs]))
             if relatch and j == table.stage_start[k]:
                 T = eye.copy()
                 T[vs] = 0.0
@@ -166,7 +181,8 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         err_knot.append(0.5 * (E + E.T))
         est_knot.append(M[hs, -1].copy())
     mom = rec.moments(J, means, covs, cons, problem.t0, h, table.n_ticks)
-    return EstimatorLoop(mom, gain_out, predict, err_cov, err_knot, est_knot, prior_cov)
+    return EstimatorLoop(mom, gain_out, predict, err_cov, err_knot, est_knot, prior_cov,
+                         innov_cov, out_cov, est_ms)
 
 
 def _update(M, meas, C, gains, j, n, xs, hs, rs, keep, d, p, given=None):

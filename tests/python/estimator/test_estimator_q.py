@@ -156,3 +156,12 @@ def test_a_bound_without_the_prediction_rounding_fails(q_tables, sensor_loop, mo
     monkeypatch.undo()
     ex, _ = _measured(ft, qt, sensor_loop[2], 200, paths=8)
     assert np.any(ex > planted)
+
+
+def test_the_c_tests_expected_values_are_the_references():
+    """tests/c/estimator_q_expected.h (what test_estimator_q.c checks the C against) is what
+    the integer reference gives today: regenerate with tests/c/estimator_q_reference.py."""
+    import runpy
+    from conftest import REPO
+    expected = runpy.run_path(str(REPO / "tests" / "c" / "estimator_q_reference.py"))["expected"]
+    assert expected() == (REPO / "tests" / "c" / "estimator_q_expected.h").read_text()

@@ -161,14 +161,13 @@ static int stsp_est_values_ok(const stsp_est_table_t *e)
         return 0;
     }
     for (i = 0u; i < (ny + (2u * nx)); ++i) {
-        if (e->shift[i] >= F) {
+        if ((e->shift[i] < 1u) || (e->shift[i] > (STSP_EST_ACC_BITS - F))) {
             return 0;
         }
     }
     for (i = 0u; i < ny; ++i) {
-        /* the reading's coefficient 2^up, up = F - s + y_exp - e_exp in [0, 61 - F] */
-        const int32_t up = ((int32_t)F - (int32_t)e->shift[i]) + ((int32_t)e->y_exp[i] -
-                                                                   (int32_t)e->e_exp[i]);
+        /* the reading's coefficient 2^up, up = k + y_exp - e_exp in [0, 61 - F] */
+        const int32_t up = (int32_t)e->shift[i] + ((int32_t)e->y_exp[i] - (int32_t)e->e_exp[i]);
         if ((e->e_exp[i] > e->y_exp[i]) || (up > ((int32_t)STSP_EST_ACC_BITS - (int32_t)F)) ||
             (stsp_est_rows_ok(&e->C[i * nx], 1u, nx, UINT64_C(1) << (uint32_t)up) == 0)) {
             return 0;
@@ -176,17 +175,28 @@ static int stsp_est_values_ok(const stsp_est_table_t *e)
     }
     for (k = 0u; k < stsp_est_samples(e); ++k) {
         for (i = 0u; i < nx; ++i) {
-            const uint64_t pass = UINT64_C(1) << (F - (uint32_t)e->shift[ny + i]);
+            const uint64_t pass = UINT64_C(1) << e->shift[ny + i];
             if (stsp_est_rows_ok(&e->gain[((k * nx) + i) * ny], 1u, ny, pass) == 0) {
                 return 0;
             }
         }
     }
-    /* a predictor row: [Ad | Bd | fd], fd weighted 2^F in the sum, counted as |fd| */
-    return stsp_est_rows_ok(e->model, stsp_est_models(e) * nx, stsp_est_row(e), 0u);
+    /* a predictor row: [Ad - I | Bd | fd], fd weighted 2^F in the sum (counted as |fd|), the
+     * pass-through x̂_q 2^k */
+    for (k = 0u; k < stsp_est_models(e); ++k) {
+        for (i = 0u; i < nx; ++i) {
+            const uint64_t pass = UINT64_C(1) << e->shift[ny + nx + i];
+            if (stsp_est_rows_ok(&e->model[((k * nx) + i) * stsp_est_row(e)], 1u,
+                                 stsp_est_row(e), pass) == 0) {
+                return 0;
+            }
+        }
+    }
+    return 1;
 }
 
-/* The accumulator's start: 2^62 (keeps a valid sum positive) + 2^(k-1) (rounding), k >= 1. */
+/* The accumulator's start: 2^62 (keeps a valid sum positive) + 2^(k-1) (rounding), 1 <= k <=
+ * 61 - F. */
 static uint64_t stsp_est_acc(uint32_t k)
 {
     return (UINT64_C(1) << 62) + (UINT64_C(1) << (k - 1u));
@@ -408,7 +418,7 @@ static int stsp_est_reading_ok(const stsp_est_table_t *e, const stsp_f32_t *y)
     return stsp_est_finite(y, e->ny);
 }
 #else
-/* x̂ = Ad x̂+ + Bd u + fd in Q (stsp_estimator.h); in place of xh (nx). */
+/* x̂ = x̂+ + (Ad - I) x̂+ + Bd u + fd in Q (stsp_estimator.h); in place of xh (nx). */
 static void stsp_est_predict(const stsp_est_t *est, const uint32_t *stage_start, uint32_t s,
                              uint32_t j, stsp_scalar_t *xh, const stsp_scalar_t *u,
                              uint32_t *clamped)
@@ -427,8 +437,9 @@ static void stsp_est_predict(const stsp_est_t *est, const uint32_t *stage_start,
     }
     for (r = 0u; r < nx; ++r) {
         const stsp_scalar_t *row = &map[r * w];
-        const uint32_t k = F - (uint32_t)e->shift[(uint32_t)e->ny + nx + r];
-        uint64_t acc = stsp_est_mac(stsp_est_acc(k), row[nx + nu], (int64_t)1 << F);
+        const uint32_t k = e->shift[(uint32_t)e->ny + nx + r];
+        uint64_t acc = stsp_est_mac(stsp_est_acc(k), xp[r], (int64_t)1 << k);
+        acc = stsp_est_mac(acc, row[nx + nu], (int64_t)1 << F);
         for (c = 0u; c < nx; ++c) {
             acc = stsp_est_mac(acc, row[c], xp[c]);
         }
@@ -445,13 +456,12 @@ static void stsp_est_update(const stsp_est_table_t *e, uint32_t sample, const st
 {
     const uint32_t nx = e->nx;
     const uint32_t ny = e->ny;
-    const uint32_t F = (uint32_t)STSP_Q_FRAC_BITS;
     const stsp_scalar_t *G = &e->gain[sample * nx * ny];
     stsp_scalar_t innov[STSP_MAX_NY];
     uint32_t i;
     uint32_t j;
     for (i = 0u; i < ny; ++i) {
-        const uint32_t k = F - (uint32_t)e->shift[i];
+        const uint32_t k = e->shift[i];
         const uint32_t up = (uint32_t)((int32_t)k + ((int32_t)e->y_exp[i] - (int32_t)e->e_exp[i]));
         uint64_t acc = stsp_est_mac(stsp_est_acc(k), y[i], (int64_t)(UINT64_C(1) << up));
         for (j = 0u; j < nx; ++j) {
@@ -460,7 +470,7 @@ static void stsp_est_update(const stsp_est_table_t *e, uint32_t sample, const st
         innov[i] = stsp_est_round(acc, k, clamped);
     }
     for (j = 0u; j < nx; ++j) {
-        const uint32_t k = F - (uint32_t)e->shift[ny + j];
+        const uint32_t k = e->shift[ny + j];
         uint64_t acc = stsp_est_mac(stsp_est_acc(k), xh[j], (int64_t)1 << k);
         for (i = 0u; i < ny; ++i) {
             acc = stsp_est_mac(acc, G[(j * ny) + i], innov[i]);

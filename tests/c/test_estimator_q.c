@@ -200,10 +200,16 @@ static void test_corrupt_tables_are_refused(void **state)
     gain_copy[17] = (stsp_q15_t)(gain_copy[17] ^ 1);
     c = *E; c.gain = gain_copy;
     assert_int_equal(init_copy(&c), STSP_ERR_BAD_CRC);
-    /* a shift of F or more (CRC right): the values */
+    /* a shift outside 1 .. 61 - F (CRC right): the values */
     memcpy(shift_copy, E->shift, sizeof shift_copy);
-    shift_copy[NY + 1u] = 15u;
+    shift_copy[NY + 1u] = 0u;
     c = *E; c.shift = shift_copy;
+    assert_int_equal(refit(&c), STSP_ERR_BAD_VALUES);
+    shift_copy[NY + 1u] = 47u;
+    assert_int_equal(refit(&c), STSP_ERR_BAD_VALUES);
+    /* a prediction row whose sum could overflow: its pass-through 2^k alone at the limit */
+    memcpy(shift_copy, E->shift, sizeof shift_copy);
+    shift_copy[NY + NX] = 46u;
     assert_int_equal(refit(&c), STSP_ERR_BAD_VALUES);
     /* an innovation finer than the reading's by too much: the reading's coefficient 2^up with
      * up beyond 61 - F, and an exponent beyond STSP_Q_EXP_MAX */

@@ -30,13 +30,15 @@
  * x̂ = x̂_q 2^(x_exp - F) (stsp_table_t.x_exp), the reading is y = y_q 2^(y_exp - F) and the
  * innovation e = e_q 2^(e_exp - F). Each row (innovation i, update r, prediction r) is one
  * exact sum in a 64-bit accumulator, then rounded half up by a shift and saturated:
- *     innovation  acc = y_q[i] 2^(F - s + y_exp[i] - e_exp[i]) + sum_j C[i][j] x̂_q[j]
- *     update      acc = x̂_q[r] 2^(F - s) + sum_i F[r][i] e_q[i]
- *     predict     acc = fd[r] 2^F + sum_j Ad[r][j] x̂+_q[j] + sum_i Bd[r][i] u_q[i]
- *     out_q = floor(acc / 2^(F - s) + 1/2), saturated to [-2^F, 2^F - 1]
- * with s = shift[row] (0 .. F-1) and the entries stored scaled by 2^(z_exp - out_exp + F - s)
- * (C stored negated: -C). stsp_est_init() requires every row's absolute sum, the pass-through
- * coefficient and 2^F-weighted constant included, to be at most 2^(61 - F): then |acc| <= 2^61
+ *     innovation  acc = y_q[i] 2^(k + y_exp[i] - e_exp[i]) + sum_j C[i][j] x̂_q[j]
+ *     update      acc = x̂_q[r] 2^k + sum_i F[r][i] e_q[i]
+ *     predict     acc = x̂+_q[r] 2^k + fd[r] 2^F + sum_j (Ad - I)[r][j] x̂+_q[j]
+ *                       + sum_i Bd[r][i] u_q[i]
+ *     out_q = floor(acc / 2^k + 1/2), saturated to [-2^F, 2^F - 1]
+ * with k = shift[row] (1 .. 61 - F) and the entries stored scaled by 2^(z_exp - out_exp + k),
+ * fd by 2^(k - x_exp) (C stored negated: -C; the predictor's map as its increment Ad - I).
+ * stsp_est_init() requires every row's absolute sum, the pass-through coefficient and the
+ * 2^F-weighted constant included, to be at most 2^(61 - F): then |acc| <= 2^61
  * for all inputs, the sums are exact and only the result can leave its Q range, which the step
  * reports as STSP_WARN_STATE_CLAMPED (the innovation or the estimate saturated).
  *
@@ -72,7 +74,8 @@ extern "C" {
 
 /**
  * The filter's tables (generated next to the gain table, same problem file). Layouts
- * (row-major): model[k][r*(nx + nu + 1) + c] = [Ad | Bd | fd] row r of predictor map k;
+ * (row-major): model[k][r*(nx + nu + 1) + c] = [Ad | Bd | fd] row r of predictor map k
+ * (fixed point: [Ad - I | Bd | fd]);
  * stage s uses maps model_start[s] .. model_start[s+1] - 1: one for every tick of the stage
  * (a time-invariant stage) or one per tick (a time-varying one); C[i*nx + j];
  * gain[s][r*ny + i] = F of sample s, at tick s * every, for s < ceil(n_ticks / every);
@@ -100,7 +103,7 @@ typedef struct {
 #ifdef STSP_ARITH_FIXED_POINT
     const int8_t *y_exp;         /**< [ny]: reading scale exponents */
     const int8_t *e_exp;         /**< [ny]: innovation scale exponents, <= y_exp */
-    const uint8_t *shift;        /**< [ny + 2 nx]: row shifts, each <= F - 1 */
+    const uint8_t *shift;        /**< [ny + 2 nx]: row shifts k, each 1 .. 61 - F */
 #endif
 } stsp_est_table_t;
 
@@ -137,7 +140,7 @@ uint32_t stsp_est_table_crc32(const stsp_est_table_t *est);
  * one or a stage's ticks per stage), STSP_ERR_BAD_CRC, STSP_ERR_BAD_PROBLEM (problem_sha256 not
  * the gain table's: tables from different problem files), STSP_ERR_BAD_VALUES (a NaN or
  * infinite entry; fixed point: an exponent beyond +-STSP_Q_EXP_MAX, e_exp > y_exp, a shift
- * above F - 1, or a row whose absolute sum exceeds 2^(61 - F)).
+ * outside 1 .. 61 - F, or a row whose absolute sum exceeds 2^(61 - F)).
  */
 stsp_status_t stsp_est_init(stsp_est_t *est, const stsp_table_t *table,
                             const stsp_est_table_t *est_table);

@@ -7,16 +7,18 @@ is ``y = y_q 2^(y_exp - F)`` and the innovation ``e = y - C x̂`` is held as
 ``e_q 2^(e_exp - F)``. Every filter row (innovation i, update r, prediction r) is one sum in a
 64-bit accumulator::
 
-    acc = c_q 2^F + p z_q + sum_j G_q[j] z_q[j],    out_q = sat(floor(acc / 2^(F - s) + 1/2))
+    acc = c_q 2^F + p z_q + sum_j G_q[j] z_q[j],    out_q = sat(floor(acc / 2^k + 1/2))
 
-with ``G_q = rhu(G 2^(z_exp[j] - out_exp + F - s))`` the row's stored entries, ``c_q =
-rhu(c 2^(F - out_exp - s))`` its constant (the prediction's fd) and ``p = 2^(z_exp - out_exp +
-F - s)`` the exact coefficient of its pass-through input (the reading y_q in the innovation,
-``x̂_q`` itself in the update). The row's shift ``s`` (0 .. F - 1, one per row over every map or
-sample) is the smallest that keeps every stored entry in ``[-2^F, 2^F - 1]`` and the row's
-absolute sum ``|c_q| + p + sum |G_q|`` at most ``2^(61 - F)``: then ``|acc| <= 2^61`` for any
-inputs in their Q ranges, nothing overflows, and the rounding is exact integer arithmetic.
-``sat`` saturates to ``[-2^F, 2^F - 1]`` (the firmware reports it, STSP_WARN_STATE_CLAMPED).
+with ``G_q = rhu(G 2^(z_exp[j] - out_exp + k))`` the row's stored entries, ``c_q =
+rhu(c 2^(k - out_exp))`` its constant (the prediction's fd) and ``p = 2^(z_exp - out_exp + k)``
+the exact coefficient of its pass-through input: the reading y_q in the innovation, ``x̂_q``
+itself in the update and in the prediction, which stores ``[Ad - I | Bd | fd]`` (the identity
+is exact, and the small increments keep their digits). The row's shift ``k`` (1 .. 61 - F,
+one per row over every map or sample) is the largest that keeps every stored entry in
+``[-2^F, 2^F - 1]`` and the row's absolute sum ``|c_q| + p + sum |G_q|`` at most
+``2^(61 - F)``: then ``|acc| <= 2^61`` for any inputs in their Q ranges, nothing overflows, and
+the rounding is exact integer arithmetic. ``sat`` saturates to ``[-2^F, 2^F - 1]`` (the
+firmware reports it, STSP_WARN_STATE_CLAMPED).
 
 Scales (`quantize_estimator`): ``x_exp``, ``u_exp`` are the law table's (whose state ranges must
 cover the estimate: `estimator_state_range`). ``y_exp[i] = ceil(log2(max_t |E y_i| + sigmas
@@ -62,8 +64,9 @@ def _rhu(y) -> np.ndarray:
 @dataclass(frozen=True)
 class QEstimatorTable:
     """What a fixed-point `stsp_est_table_t` holds (integers in int64 arrays), with the double
-    filter it came from. ``C`` is ``-C`` scaled (the innovation is a plain sum), ``shift`` the
-    rows' shifts ``[innovation rows (ny), update rows (nx), prediction rows (nx)]``."""
+    filter it came from. ``C`` is ``-C`` scaled (the innovation is a plain sum), ``model`` holds
+    ``[Ad - I | Bd | fd]`` scaled, ``shift`` the rows' shifts k ``[innovation rows (ny), update
+    rows (nx), prediction rows (nx)]``."""
     arith: str
     nx: int
     nu: int
@@ -103,15 +106,15 @@ class QEstimatorTable:
         `double`): what the firmware's sums multiply by."""
         F = self.frac_bits
         n, m, p = self.nx, self.nu, self.ny
-        s_e, s_g, s_p = (self.shift[:p].astype(int), self.shift[p:p + n].astype(int),
+        k_e, k_g, k_p = (self.shift[:p].astype(int), self.shift[p:p + n].astype(int),
                          self.shift[p + n:].astype(int))
         xe, ue, ee = self.x_exp.astype(int), self.u_exp.astype(int), self.e_exp.astype(int)
-        C = -self.C * np.ldexp(1.0, ee[:, None] - xe[None, :] - F + s_e[:, None])
-        G = self.gain * np.ldexp(1.0, xe[:, None] - ee[None, :] - F + s_g[:, None])
+        C = -self.C * np.ldexp(1.0, ee[:, None] - xe[None, :] - k_e[:, None])
+        G = self.gain * np.ldexp(1.0, xe[:, None] - ee[None, :] - k_g[:, None])
         zexp = np.concatenate([xe, ue])
-        A = self.model[:, :, :n + m] * np.ldexp(
-            1.0, xe[:, None] - zexp[None, :] - F + s_p[:, None])
-        c = self.model[:, :, n + m] * np.ldexp(1.0, xe - F + s_p)
+        A = self.model[:, :, :n + m] * np.ldexp(1.0, xe[:, None] - zexp[None, :] - k_p[:, None])
+        A[:, :, :n] += np.eye(n)
+        c = self.model[:, :, n + m] * np.ldexp(1.0, xe - k_p)
         return {"C": C, "gain": G, "model": np.concatenate([A, c[:, :, None]], axis=2),
                 "xhat0": self.xhat0 * np.ldexp(1.0, xe - F)}
 
@@ -136,22 +139,20 @@ def estimator_state_range(problem, table, loop, *, sigmas: float = DEFAULT_SIGMA
     return scalable_ranges(np.maximum(rx, rh))
 
 
-def _row_shift(G, c, p_exp, F: int):
-    """The smallest shift s (0 .. F-1) of a row family G (k, cols) with constants c (k,) and a
-    pass-through coefficient 2^(p_exp - s) (None: none) that fits (module docstring), with its
-    entries; None when no shift does."""
+def _row_shift(G, c, p_off: int, F: int):
+    """The largest shift k (1 .. 61 - F) of a row family G (rows, cols) and constants c (rows,)
+    given at k = 0, with a pass-through coefficient 2^(k + p_off), that fits (module
+    docstring): ``(k, G_q, c_q)``, or None when no shift does."""
     qmax, limit = (1 << F) - 1, 1 << (ACC_BITS - F)
-    for s in range(F):
-        Gq, cq = _rhu(np.ldexp(G, -s)), _rhu(np.ldexp(c, -s))
+    for k in range(ACC_BITS - F, 0, -1):
+        Gq, cq = _rhu(np.ldexp(G, k)), _rhu(np.ldexp(c, k))
         if max(int(np.abs(Gq).max(initial=0)), int(np.abs(cq).max(initial=0))) > qmax:
             continue
-        if int(np.min(cq, initial=0)) < -(qmax + 1):
+        if not 0 <= k + p_off <= ACC_BITS - F:
             continue
-        if p_exp is not None and not 0 <= p_exp - s <= ACC_BITS - F:
-            continue
-        total = np.abs(Gq).sum(axis=-1) + np.abs(cq) + (0 if p_exp is None else 1 << (p_exp - s))
+        total = np.abs(Gq).sum(axis=-1) + np.abs(cq) + (1 << (k + p_off))
         if int(np.max(total, initial=0)) <= limit:
-            return s, Gq, cq
+            return k, Gq, cq
     return None
 
 
@@ -188,8 +189,8 @@ def quantize_estimator(problem, ft: FixedPointTable, loop, *, sigmas: float = DE
     Cq = np.zeros((p, n), np.int64)
     for i in range(p):
         while True:
-            G = -C[i] * np.ldexp(1.0, xe - e_exp[i] + F)
-            got = _row_shift(G[None, :], np.zeros(1), F + y_exp[i] - e_exp[i], F)
+            G = -C[i] * np.ldexp(1.0, xe - e_exp[i])
+            got = _row_shift(G[None, :], np.zeros(1), y_exp[i] - e_exp[i], F)
             if got is not None:
                 break
             if e_exp[i] >= y_exp[i]:
@@ -198,16 +199,17 @@ def quantize_estimator(problem, ft: FixedPointTable, loop, *, sigmas: float = DE
         shift[i], Cq[i] = got[0], got[1][0]
     Gq = np.zeros((len(gains), n, p), np.int64)
     for r in range(n):
-        got = _row_shift(gains[:, r, :] * np.ldexp(1.0, e_exp - xe[r] + F),
-                         np.zeros(len(gains)), F, F)
+        got = _row_shift(gains[:, r, :] * np.ldexp(1.0, e_exp - xe[r]),
+                         np.zeros(len(gains)), 0, F)
         if got is None:
             raise ValueError(f"the filter gains of state {r} fit no {ft.arith} scale")
         shift[p + r], Gq[:, r, :] = got[0], got[1]
     Mq = np.zeros(maps.shape, np.int64)
     zexp = np.concatenate([xe, ue])
+    increment = maps[:, :, :n + m] - np.eye(n, n + m)[None]     # x̂ passes through exactly
     for r in range(n):
-        got = _row_shift(maps[:, r, :n + m] * np.ldexp(1.0, zexp - xe[r] + F),
-                         maps[:, r, n + m] * np.ldexp(1.0, F - xe[r]), None, F)
+        got = _row_shift(increment[:, r, :] * np.ldexp(1.0, zexp - xe[r]),
+                         maps[:, r, n + m] * np.ldexp(1.0, -xe[r]), 0, F)
         if got is None:
             raise ValueError(f"the predictor row of state {r} fits no {ft.arith} scale")
         shift[p + n + r], Mq[:, r, :n + m], Mq[:, r, n + m] = got
@@ -259,9 +261,9 @@ class QEstimatorSpec:
         qt, F = self.qt, self.F
         n = qt.nx
         P = qt.model[self.map_of[j]]
-        s = qt.shift[qt.ny + n:].astype(np.int64)
-        acc = (P[None, :, -1] << F) + X @ P[:, :n].T + U @ P[:, n:-1].T
-        return self._sat(_round_shift(acc, F - s), clamped)
+        k = qt.shift[qt.ny + n:].astype(np.int64)
+        acc = (X << k) + (P[None, :, -1] << F) + X @ P[:, :n].T + U @ P[:, n:-1].T
+        return self._sat(_round_shift(acc, k), clamped)
 
     def step(self, j: int, Yq):
         ft, qt, F = self.ft, self.qt, self.F
@@ -272,13 +274,13 @@ class QEstimatorSpec:
         for missed in range(self.next, j):
             X = self._predict(missed, X, self.u_last, clamped)
         if j % qt.every == 0 and Yq is not None:
-            s = qt.shift[:p].astype(np.int64)
-            up = F - s + qt.y_exp.astype(np.int64) - qt.e_exp.astype(np.int64)
+            k = qt.shift[:p].astype(np.int64)
+            up = k + qt.y_exp.astype(np.int64) - qt.e_exp.astype(np.int64)
             acc = np.asarray(Yq, np.int64) * (np.int64(1) << up) + X @ qt.C.T
-            E = self._sat(_round_shift(acc, F - s), clamped)
-            s = qt.shift[p:p + n].astype(np.int64)
-            acc = X * (np.int64(1) << (F - s)) + E @ qt.gain[j // qt.every].T
-            X = self._sat(_round_shift(acc, F - s), clamped)
+            E = self._sat(_round_shift(acc, k), clamped)
+            k = qt.shift[p:p + n].astype(np.int64)
+            acc = X * (np.int64(1) << k) + E @ qt.gain[j // qt.every].T
+            X = self._sat(_round_shift(acc, k), clamped)
         k = int(ft.stage_of_tick(j))
         if j == int(ft.stage_start[k]) and (k == 0 or ft.stage_n_latch[k] > 0):
             from stospline.table.qformat import latch_q

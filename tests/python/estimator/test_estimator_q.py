@@ -38,14 +38,14 @@ def test_rows_fit_the_accumulator_and_ranges_cover_the_loop(q_tables, sensor_loo
     problem, ft, qt = q_tables
     F, n, m, p = ft.frac_bits, qt.nx, qt.nu, qt.ny
     lim, qmax = 1 << (ACC_BITS - F), (1 << F) - 1
-    s = qt.shift.astype(int)
-    assert s.max() <= F - 1 and np.all(qt.e_exp <= qt.y_exp)
+    k = qt.shift.astype(int)
+    assert 1 <= k.min() and k.max() <= ACC_BITS - F and np.all(qt.e_exp <= qt.y_exp)
     for a in (qt.model, qt.C, qt.gain, qt.xhat0):
         assert np.abs(a).max() <= qmax + 1
-    up = F - s[:p] + qt.y_exp.astype(int) - qt.e_exp.astype(int)
+    up = k[:p] + qt.y_exp.astype(int) - qt.e_exp.astype(int)
     assert np.all(np.abs(qt.C).sum(1) + (1 << up) <= lim)
-    assert np.all(np.abs(qt.gain).sum(2) + (1 << (F - s[p:p + n]))[None, :] <= lim)
-    assert np.all(np.abs(qt.model).sum(2) <= lim)
+    assert np.all(np.abs(qt.gain).sum(2) + (1 << k[p:p + n])[None, :] <= lim)
+    assert np.all(np.abs(qt.model).sum(2) + (1 << k[p + n:])[None, :] <= lim)
     # the state scales cover the loop's state and estimate, which the full-state range does not
     _, d, loop, x_range = sensor_loop
     assert np.all(np.ldexp(1.0, ft.x_exp.astype(int)) >= x_range)

@@ -355,61 +355,54 @@ static const stsp_scalar_t *stsp_est_map(const stsp_est_table_t *e, const uint32
     return &e->model[k * (uint32_t)e->nx * stsp_est_row(e)];
 }
 
+/* The rows of the filter, per arithmetic (stsp_estimator.h gives both orders of evaluation):
+ * innovation i from reading y_i and x̂; update of x̂_r from row r of the gain; prediction of
+ * x̂_r from row r of the map, x̂+ and u. The fixed-point rows set *clamped when they
+ * saturate. */
 #ifndef STSP_ARITH_FIXED_POINT
-/* x̂ = Ad x̂+ + Bd u + fd with tick j's map (stage s); in place of xh (nx). */
-static void stsp_est_predict(const stsp_est_t *est, const uint32_t *stage_start, uint32_t s,
-                             uint32_t j, stsp_f32_t *xh, const stsp_f32_t *u, uint32_t *clamped)
+static stsp_f32_t stsp_est_innovation(const stsp_est_table_t *e, uint32_t i, stsp_f32_t y,
+                                      const stsp_f32_t *xh, uint32_t *clamped)
 {
-    const stsp_est_table_t *e = &est->checked;
-    const uint32_t nx = e->nx;
-    const uint32_t nu = e->nu;
-    const uint32_t w = stsp_est_row(e);
-    const stsp_f32_t *map = stsp_est_map(e, stage_start, s, j);
-    stsp_f32_t xp[STSP_MAX_NX];
-    uint32_t r;
-    uint32_t c;
-    (void)clamped;
-    for (c = 0u; c < nx; ++c) {
-        xp[c] = xh[c];
-    }
-    for (r = 0u; r < nx; ++r) {
-        const stsp_f32_t *row = &map[r * w];
-        stsp_f32_t acc = row[nx + nu];
-        for (c = 0u; c < nx; ++c) {
-            acc = acc + (row[c] * xp[c]);
-        }
-        for (c = 0u; c < nu; ++c) {
-            acc = acc + (row[nx + c] * u[c]);
-        }
-        xh[r] = acc;
-    }
-}
-
-/* x̂ += F (y - C x̂) with sample `sample`'s gain; in place of xh (nx). */
-static void stsp_est_update(const stsp_est_table_t *e, uint32_t sample, const stsp_f32_t *y,
-                            stsp_f32_t *xh, uint32_t *clamped)
-{
-    const uint32_t nx = e->nx;
-    const uint32_t ny = e->ny;
-    const stsp_f32_t *F = &e->gain[sample * nx * ny];
-    stsp_f32_t innov[STSP_MAX_NY];
-    uint32_t i;
+    const stsp_f32_t *C = &e->C[i * (uint32_t)e->nx];
+    stsp_f32_t acc = y;
     uint32_t j;
     (void)clamped;
-    for (i = 0u; i < ny; ++i) {
-        stsp_f32_t acc = y[i];
-        for (j = 0u; j < nx; ++j) {
-            acc = acc - (e->C[(i * nx) + j] * xh[j]);
-        }
-        innov[i] = acc;
+    for (j = 0u; j < e->nx; ++j) {
+        acc = acc - (C[j] * xh[j]);
     }
-    for (j = 0u; j < nx; ++j) {
-        stsp_f32_t acc = xh[j];
-        for (i = 0u; i < ny; ++i) {
-            acc = acc + (F[(j * ny) + i] * innov[i]);
-        }
-        xh[j] = acc;
+    return acc;
+}
+
+static stsp_f32_t stsp_est_corrected(const stsp_est_table_t *e, uint32_t r, const stsp_f32_t *F,
+                                     const stsp_f32_t *innov, stsp_f32_t x, uint32_t *clamped)
+{
+    stsp_f32_t acc = x;
+    uint32_t i;
+    (void)r;
+    (void)clamped;
+    for (i = 0u; i < e->ny; ++i) {
+        acc = acc + (F[i] * innov[i]);
     }
+    return acc;
+}
+
+static stsp_f32_t stsp_est_predicted(const stsp_est_table_t *e, uint32_t r,
+                                     const stsp_f32_t *row, const stsp_f32_t *xp,
+                                     const stsp_f32_t *u, uint32_t *clamped)
+{
+    const uint32_t nx = e->nx;
+    const uint32_t nu = e->nu;
+    stsp_f32_t acc = row[nx + nu];
+    uint32_t c;
+    (void)r;
+    (void)clamped;
+    for (c = 0u; c < nx; ++c) {
+        acc = acc + (row[c] * xp[c]);
+    }
+    for (c = 0u; c < nu; ++c) {
+        acc = acc + (row[nx + c] * u[c]);
+    }
+    return acc;
 }
 
 /* A reading the filter can take: every y[i] finite. */
@@ -418,65 +411,51 @@ static int stsp_est_reading_ok(const stsp_est_table_t *e, const stsp_f32_t *y)
     return stsp_est_finite(y, e->ny);
 }
 #else
-/* x̂ = x̂+ + (Ad - I) x̂+ + Bd u + fd in Q (stsp_estimator.h); in place of xh (nx). */
-static void stsp_est_predict(const stsp_est_t *est, const uint32_t *stage_start, uint32_t s,
-                             uint32_t j, stsp_scalar_t *xh, const stsp_scalar_t *u,
-                             uint32_t *clamped)
+static stsp_scalar_t stsp_est_innovation(const stsp_est_table_t *e, uint32_t i, stsp_scalar_t y,
+                                         const stsp_scalar_t *xh, uint32_t *clamped)
 {
-    const stsp_est_table_t *e = &est->checked;
-    const uint32_t nx = e->nx;
-    const uint32_t nu = e->nu;
-    const uint32_t w = stsp_est_row(e);
-    const uint32_t F = (uint32_t)STSP_Q_FRAC_BITS;
-    const stsp_scalar_t *map = stsp_est_map(e, stage_start, s, j);
-    stsp_scalar_t xp[STSP_MAX_NX];
-    uint32_t r;
-    uint32_t c;
-    for (c = 0u; c < nx; ++c) {
-        xp[c] = xh[c];
+    const stsp_scalar_t *C = &e->C[i * (uint32_t)e->nx];
+    const uint32_t k = e->shift[i];
+    const uint32_t up = (uint32_t)((int32_t)k + ((int32_t)e->y_exp[i] - (int32_t)e->e_exp[i]));
+    uint64_t acc = stsp_est_mac(stsp_est_acc(k), y, (int64_t)(UINT64_C(1) << up));
+    uint32_t j;
+    for (j = 0u; j < e->nx; ++j) {
+        acc = stsp_est_mac(acc, C[j], xh[j]);
     }
-    for (r = 0u; r < nx; ++r) {
-        const stsp_scalar_t *row = &map[r * w];
-        const uint32_t k = e->shift[(uint32_t)e->ny + nx + r];
-        uint64_t acc = stsp_est_mac(stsp_est_acc(k), xp[r], (int64_t)1 << k);
-        acc = stsp_est_mac(acc, row[nx + nu], (int64_t)1 << F);
-        for (c = 0u; c < nx; ++c) {
-            acc = stsp_est_mac(acc, row[c], xp[c]);
-        }
-        for (c = 0u; c < nu; ++c) {
-            acc = stsp_est_mac(acc, row[nx + c], u[c]);
-        }
-        xh[r] = stsp_est_round(acc, k, clamped);
-    }
+    return stsp_est_round(acc, k, clamped);
 }
 
-/* x̂ += F (y - C x̂) in Q (stsp_estimator.h); in place of xh (nx). */
-static void stsp_est_update(const stsp_est_table_t *e, uint32_t sample, const stsp_scalar_t *y,
-                            stsp_scalar_t *xh, uint32_t *clamped)
+static stsp_scalar_t stsp_est_corrected(const stsp_est_table_t *e, uint32_t r,
+                                        const stsp_scalar_t *F, const stsp_scalar_t *innov,
+                                        stsp_scalar_t x, uint32_t *clamped)
+{
+    const uint32_t k = e->shift[(uint32_t)e->ny + r];
+    uint64_t acc = stsp_est_mac(stsp_est_acc(k), x, (int64_t)1 << k);
+    uint32_t i;
+    for (i = 0u; i < e->ny; ++i) {
+        acc = stsp_est_mac(acc, F[i], innov[i]);
+    }
+    return stsp_est_round(acc, k, clamped);
+}
+
+/* x̂+_r 2^k + fd 2^F + (Ad - I) x̂+ + Bd u: the stored map is the increment. */
+static stsp_scalar_t stsp_est_predicted(const stsp_est_table_t *e, uint32_t r,
+                                        const stsp_scalar_t *row, const stsp_scalar_t *xp,
+                                        const stsp_scalar_t *u, uint32_t *clamped)
 {
     const uint32_t nx = e->nx;
-    const uint32_t ny = e->ny;
-    const stsp_scalar_t *G = &e->gain[sample * nx * ny];
-    stsp_scalar_t innov[STSP_MAX_NY];
-    uint32_t i;
-    uint32_t j;
-    for (i = 0u; i < ny; ++i) {
-        const uint32_t k = e->shift[i];
-        const uint32_t up = (uint32_t)((int32_t)k + ((int32_t)e->y_exp[i] - (int32_t)e->e_exp[i]));
-        uint64_t acc = stsp_est_mac(stsp_est_acc(k), y[i], (int64_t)(UINT64_C(1) << up));
-        for (j = 0u; j < nx; ++j) {
-            acc = stsp_est_mac(acc, e->C[(i * nx) + j], xh[j]);
-        }
-        innov[i] = stsp_est_round(acc, k, clamped);
+    const uint32_t nu = e->nu;
+    const uint32_t k = e->shift[(uint32_t)e->ny + nx + r];
+    uint64_t acc = stsp_est_mac(stsp_est_acc(k), xp[r], (int64_t)1 << k);
+    uint32_t c;
+    acc = stsp_est_mac(acc, row[nx + nu], (int64_t)1 << (uint32_t)STSP_Q_FRAC_BITS);
+    for (c = 0u; c < nx; ++c) {
+        acc = stsp_est_mac(acc, row[c], xp[c]);
     }
-    for (j = 0u; j < nx; ++j) {
-        const uint32_t k = e->shift[ny + j];
-        uint64_t acc = stsp_est_mac(stsp_est_acc(k), xh[j], (int64_t)1 << k);
-        for (i = 0u; i < ny; ++i) {
-            acc = stsp_est_mac(acc, G[(j * ny) + i], innov[i]);
-        }
-        xh[j] = stsp_est_round(acc, k, clamped);
+    for (c = 0u; c < nu; ++c) {
+        acc = stsp_est_mac(acc, row[nx + c], u[c]);
     }
+    return stsp_est_round(acc, k, clamped);
 }
 
 /* Every integer reading is one the filter takes. */
@@ -487,6 +466,42 @@ static int stsp_est_reading_ok(const stsp_est_table_t *e, const stsp_scalar_t *y
     return 1;
 }
 #endif
+
+/* x̂ = Ad x̂+ + Bd u + fd with tick j's map (stage s); in place of xh (nx). */
+static void stsp_est_predict(const stsp_est_t *est, const uint32_t *stage_start, uint32_t s,
+                             uint32_t j, stsp_scalar_t *xh, const stsp_scalar_t *u,
+                             uint32_t *clamped)
+{
+    const stsp_est_table_t *e = &est->checked;
+    const uint32_t w = stsp_est_row(e);
+    const stsp_scalar_t *map = stsp_est_map(e, stage_start, s, j);
+    stsp_scalar_t xp[STSP_MAX_NX];
+    uint32_t r;
+    for (r = 0u; r < e->nx; ++r) {
+        xp[r] = xh[r];
+    }
+    for (r = 0u; r < e->nx; ++r) {
+        xh[r] = stsp_est_predicted(e, r, &map[r * w], xp, u, clamped);
+    }
+}
+
+/* x̂ += F (y - C x̂) with sample `sample`'s gain; in place of xh (nx). */
+static void stsp_est_update(const stsp_est_table_t *e, uint32_t sample, const stsp_scalar_t *y,
+                            stsp_scalar_t *xh, uint32_t *clamped)
+{
+    const uint32_t nx = e->nx;
+    const uint32_t ny = e->ny;
+    const stsp_scalar_t *F = &e->gain[sample * nx * ny];
+    stsp_scalar_t innov[STSP_MAX_NY];
+    uint32_t i;
+    uint32_t r;
+    for (i = 0u; i < ny; ++i) {
+        innov[i] = stsp_est_innovation(e, i, y[i], xh, clamped);
+    }
+    for (r = 0u; r < nx; ++r) {
+        xh[r] = stsp_est_corrected(e, r, &F[r * ny], innov, xh[r], clamped);
+    }
+}
 
 static stsp_status_t stsp_est_hold(const stsp_est_t *est, stsp_scalar_t *u, stsp_status_t st)
 {

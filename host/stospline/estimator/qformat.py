@@ -52,7 +52,7 @@ from stospline.table.qformat import DEFAULT_SIGMAS, FixedPointTable, scaled_entr
 
 __all__ = ["QEstimatorTable", "quantize_estimator", "estimator_state_range",
            "QEstimatorSpec", "estimator_q_crc32", "estimator_q_c", "error_bound",
-           "double_loop", "ACC_BITS"]
+           "double_loop", "measured_error", "ACC_BITS"]
 
 ACC_BITS = 61            # |acc| <= 2^61 for inputs in their Q ranges (stsp_estimator.c)
 
@@ -320,6 +320,33 @@ def double_loop(ft: FixedPointTable, qt: QEstimatorTable, Y: np.ndarray):
         P = d["model"][spec.map_of[j]]
         x = x @ P[:, :n].T + u @ P[:, n:-1].T + P[:, -1]
     return xs, us
+
+
+def measured_error(ft: FixedPointTable, qt: QEstimatorTable, innovation_cov, ticks: int, *,
+                   paths: int = 16, seed: int = 7) -> tuple[np.ndarray, np.ndarray, bool]:
+    """``(x_err (ticks, nx), u_err (ticks, nu), clamped)``: per tick, the largest
+    ``|x̂+_q - x̂+_d|`` and ``|u_q - u_d|`` over `paths` paths of readings drawn around the Q
+    loop's prediction with the innovation covariance (`EstimatorLoop.innovation_cov`),
+    quantized to y_q and fed to both loops (`double_loop`); ``clamped`` whether anything
+    saturated (then the bound does not apply)."""
+    rng = np.random.default_rng(seed)
+    spec = QEstimatorSpec(ft, qt, paths)
+    ylsb, xlsb, ulsb = qt.lsb(qt.y_exp), qt.lsb(ft.x_exp), qt.lsb(ft.u_exp)
+    Y = np.zeros((ticks, paths, qt.ny))
+    xq, uq = np.zeros((ticks, paths, qt.nx)), np.zeros((ticks, paths, qt.nu))
+    clamped = False
+    for j in range(ticks):
+        Yq = None
+        if j % qt.every == 0:
+            chol = np.linalg.cholesky(innovation_cov[j])
+            y = (spec.xhat * xlsb) @ qt.double["C"].T + rng.standard_normal((paths, qt.ny)) @ chol.T
+            Yq = np.floor(y / ylsb + 0.5).astype(np.int64)
+            Y[j] = Yq * ylsb
+        U, cl = spec.step(j, Yq)
+        clamped |= bool(cl.any())
+        xq[j], uq[j] = spec.xhat_plus * xlsb, U * ulsb
+    xs, us = double_loop(ft, qt, Y)
+    return np.abs(xq - xs).max(axis=1), np.abs(uq - us).max(axis=1), clamped
 
 
 def error_bound(ft: FixedPointTable, qt: QEstimatorTable, *, ticks: int | None = None,

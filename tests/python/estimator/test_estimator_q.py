@@ -9,9 +9,9 @@ import pytest
 from conftest import EXAMPLES, GAINS
 from stospline import load_problem
 from stospline.estimator.oracle import evaluate_estimator
-from stospline.estimator.qformat import (ACC_BITS, QEstimatorSpec, double_loop, error_bound,
-                                         estimator_q_c, estimator_q_crc32,
-                                         estimator_state_range, quantize_estimator)
+from stospline.estimator.qformat import (ACC_BITS, QEstimatorSpec, error_bound, estimator_q_c,
+                                         estimator_q_crc32, estimator_state_range,
+                                         measured_error, quantize_estimator)
 from stospline.harness.estimator_loop import build_estimator_q
 from stospline.pipeline import design_problem, double_table, fixed_point_table
 
@@ -103,26 +103,10 @@ def test_c_equals_the_integer_reference_bit_for_bit(q_tables):
     assert {0, 1, 4, 6} <= seen          # OK, TICK_SKIPPED, STATE_CLAMPED, NO_MEASUREMENT
 
 
-def _measured(ft, qt, loop, ticks, paths=16, seed=7):
-    """Per tick, the largest |x̂+_q - x̂+_d| and |u_q - u_d| over `paths` paths of readings drawn
-    around the Q prediction with the loop's innovation covariance, fed to both loops."""
-    rng = np.random.default_rng(seed)
-    spec = QEstimatorSpec(ft, qt, paths)
-    ylsb, xlsb, ulsb = qt.lsb(qt.y_exp), qt.lsb(ft.x_exp), qt.lsb(ft.u_exp)
-    Y = np.zeros((ticks, paths, qt.ny))
-    xq, uq = np.zeros((ticks, paths, qt.nx)), np.zeros((ticks, paths, qt.nu))
-    for j in range(ticks):
-        Yq = None
-        if j % qt.every == 0:
-            chol = np.linalg.cholesky(loop.innovation_cov[j])
-            y = (spec.xhat * xlsb) @ qt.double["C"].T + rng.standard_normal((paths, qt.ny)) @ chol.T
-            Yq = np.floor(y / ylsb + 0.5).astype(np.int64)
-            Y[j] = Yq * ylsb
-        U, clamped = spec.step(j, Yq)
-        assert not clamped.any()
-        xq[j], uq[j] = spec.xhat_plus * xlsb, U * ulsb
-    xs, us = double_loop(ft, qt, Y)
-    return np.abs(xq - xs).max(axis=1), np.abs(uq - us).max(axis=1)
+def _measured(ft, qt, loop, ticks, paths=16):
+    x_err, u_err, clamped = measured_error(ft, qt, loop.innovation_cov, ticks, paths=paths)
+    assert not clamped
+    return x_err, u_err
 
 
 def test_error_within_the_bound_and_the_bound_not_loose(q_tables, sensor_loop):

@@ -44,7 +44,8 @@
  *
  * Buffers: stsp_est_t holds a stsp_ctrl_t, the validated copy of the estimator table's
  * header, STSP_MAX_NX + STSP_MAX_NU scalars (x̂ and the last command) and 12 bytes of state:
- * 1004 bytes with the default limits (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_est_t)).
+ * 1004 bytes with the default limits (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_est_t);
+ * Q15 400 bytes).
  * stsp_est_step() uses 2 STSP_MAX_NX + STSP_MAX_NY + STSP_MAX_NU scalars of stack plus
  * stsp_step()'s.
  */

@@ -2,7 +2,7 @@
 """Report: instructions per stsp_est_step call (the controller on a sensor) on Cortex-M4F under
 QEMU, for the robot with a position sensor (gains/robot_position_sensor.*).
 
-    python3 tools/arm/count_estimator.py [--build DIR] [--arith float32|q15]
+    python3 tools/arm/count_estimator.py [--build DIR] [--arith float32|q15] [--replay-only]
 
 Compiles tools/arm/estimator_bench_main.c with firmware/src/*.c and the robot's tables
 (arm-none-eabi-gcc -O2, -mcpu=cortex-m4 hard float, -ffp-contract=off, the generic build:
@@ -13,8 +13,8 @@ against the disassembly) and prints instructions per call by kind of tick. Instr
 cycles. With --arith q15: the Q15 build on gains/robot_position_sensor_q15.*, and then the
 whole plan replayed on the target (built with -DBENCH_HASH) with the readings of
 tests/c/estimator_q_expected.h: its hash of every command and prediction must be that file's
-EST_Q_HASH (the host's integer reference, bit for bit), else exit status 1. Standard library
-only.
+EST_Q_HASH (the host's integer reference, bit for bit), else exit status 1; --replay-only
+does that alone (the ctest arm_estimator_q15_replay). Standard library only.
 """
 from __future__ import annotations
 
@@ -74,8 +74,14 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--build", type=Path, default=ROOT / "build" / "arm-estimator")
     ap.add_argument("--arith", choices=sorted(SUFFIX), default="float32")
+    ap.add_argument("--replay-only", action="store_true",
+                    help="only the whole-plan replay against the host reference (fixed point)")
     args = ap.parse_args()
     args.build.mkdir(parents=True, exist_ok=True)
+    if args.replay_only:
+        if args.arith == "float32":
+            ap.error("--replay-only replays a fixed-point build: give --arith q15")
+        return check_hash(args.build, args.arith)
     calls, size = count(build(args.build, args.arith), args.arith)
     every = 20
     kinds = {

@@ -378,57 +378,56 @@ def error_bound(ft: FixedPointTable, qt: QEstimatorTable, *, ticks: int | None =
     eps_v = (0.5 + np.abs(ft.lambda0 - lam0s) + np.abs(ft.Lambda - Lams).sum(2)) * vlsb
     spec = QEstimatorSpec(ft, qt, 1)
     dim, q = n + nl, 2 * n + nl + m                     # xi = [dx; dv], eta = [a; rv; eu; p]
-    eye = np.eye(n)
-    xb = np.zeros((T, n))
-    ub = np.zeros((T, m))
+    D = dim + q
+    ticks = np.arange(T)
+    sampled = ticks % qt.every == 0
+    # Per tick, all at once: the maps of [xi; eta] to dx+ (Wp), dv' (Wv), du (Wu), dx' (Wx)
+    # and the local error bounds eta.
+    Fg = np.zeros((T, n, p))
+    Fg[sampled] = d["gain"][ticks[sampled] // qt.every]
+    eta = np.zeros((T, q))
+    eta[sampled, :n] = (np.abs(Fg[sampled]) @ (dC @ xbar + elsb / 2)
+                        + dG[ticks[sampled] // qt.every] @ ebar + xlsb / 2)
+    Wp = np.zeros((T, n, D))
+    Wp[:, :, :n] = np.eye(n) - Fg @ d["C"]
+    Wp[:, :, dim:dim + n] = np.eye(n)
+    stage = ft.stage_of_tick(ticks)
+    latch = (ticks == ft.stage_start[stage]) & ((stage == 0) | (ft.stage_n_latch[stage] > 0))
+    keep = np.arange(nl)[None, :] < ft.stage_n_latch[stage][:, None]          # (T, nl)
+    Lam = np.asarray(src.Lambda, float)[stage] * keep[:, :, None]
+    Wv = np.zeros((T, nl, D))
+    Wv[:, :, n:dim] = np.eye(nl)
+    Wv[latch] = Lam[latch] @ Wp[latch]
+    Wv[latch, :, dim + n:dim + n + nl] = np.eye(nl)
+    eta[latch, n:n + nl] = np.where(keep[latch], eps_v[stage[latch]], 0.0)
+    K, L = np.asarray(src.K, float)[:T], np.asarray(src.L, float)[:T]
+    Wu = -(K @ Wp) - L @ Wv
+    Wu[:, :, dim + n + nl:dim + n + nl + m] += np.eye(m)
+    eta[:, n + nl:n + nl + m] = eps_u[:T]
+    P = d["model"][spec.map_of[:T]]
+    Wx = P[:, :, :n] @ Wp + P[:, :, n:-1] @ Wu
+    Wx[:, :, dim + n + nl + m:] += np.eye(n)
+    eta[:, n + nl + m:] = dM[spec.map_of[:T]] @ np.concatenate([xbar, ubar, [1.0]]) + xlsb / 2
+    O = np.concatenate([Wp, Wu], axis=1)                # outputs of tick j from xi_j, eta_j
+    G, aH = O[:, :, :dim], np.abs(O[:, :, dim:])
+    MN = np.concatenate([Wx, Wv], axis=1)               # xi_{j+1} = M_j xi_j + N_j eta_j
+    Ms, Ns = MN[:, :, :dim], MN[:, :, dim:]
+    out = np.einsum("toq,tq->to", aH, eta)
     b = np.zeros(dim)
     b[:n] = np.abs(re["xhat0"] - d["xhat0"])
-    Phi0 = np.eye(dim)                                  # Phi(J, B)
-    stack = np.zeros((0, dim, q))                       # Phi(J, j+1) N_j, B <= j < J
-    etas = np.zeros((0, q))
-    for j in range(T):
-        if j % block == 0 and j > 0:
-            b = np.abs(Phi0) @ b + np.einsum("kdq,kq->d", np.abs(stack), etas)
-            Phi0, stack, etas = np.eye(dim), np.zeros((0, dim, q)), np.zeros((0, q))
-        eta = np.zeros(q)
-        Fg = np.zeros((n, p))
-        if j % qt.every == 0:
-            s = j // qt.every
-            Fg = d["gain"][s]
-            eta[:n] = np.abs(Fg) @ (dC @ xbar + elsb / 2) + dG[s] @ ebar + xlsb / 2
-        k = int(ft.stage_of_tick(j))
-        latch = j == int(ft.stage_start[k]) and (k == 0 or ft.stage_n_latch[k] > 0)
-        # Maps of [xi; eta] -> dx+, dv', du, dx'.
-        Wp = np.zeros((n, dim + q))
-        Wp[:, :n] = eye - Fg @ d["C"]
-        Wp[:, dim:dim + n] = eye
-        Wv = np.zeros((nl, dim + q))
-        if latch:
-            Lam = np.asarray(src.Lambda[k], float).copy()
-            Lam[int(ft.stage_n_latch[k]):] = 0.0
-            Wv = Lam @ Wp
-            Wv[:, dim + n:dim + n + nl] = np.eye(nl)
-            eta[n:n + nl] = np.where(np.arange(nl) < ft.stage_n_latch[k], eps_v[k], 0.0)
-        else:
-            Wv[:, n:dim] = np.eye(nl)
-        Wu = -np.asarray(src.K[j], float) @ Wp - np.asarray(src.L[j], float) @ Wv
-        Wu[:, dim + n + nl:dim + n + nl + m] += np.eye(m)
-        eta[n + nl:n + nl + m] = eps_u[j]
-        P = d["model"][spec.map_of[j]]
-        Wx = P[:, :n] @ Wp + P[:, n:-1] @ Wu
-        Wx[:, dim + n + nl + m:] += eye
-        eta[n + nl + m:] = dM[spec.map_of[j]] @ np.concatenate([xbar, ubar, [1.0]]) + xlsb / 2
-        # Outputs of tick j: from xi_j (Phi0 b + stack) and eta_j.
-        O = np.vstack([Wp, Wu])
-        G, H = O[:, :dim], O[:, dim:]
-        out = (np.abs(G @ Phi0) @ b + np.einsum("okq,kq->o", np.abs(np.einsum(
-            "od,kdq->okq", G, stack)), etas) + np.abs(H) @ eta)
-        xb[j], ub[j] = out[:n], out[n:]
-        Mj = np.vstack([Wx[:, :dim], Wv[:, :dim]])
-        Nj = np.vstack([Wx[:, dim:], Wv[:, dim:]])
-        Phi0 = Mj @ Phi0
-        stack = np.concatenate([Mj @ stack, Nj[None]]) if len(stack) else Nj[None]
-        etas = np.concatenate([etas, eta[None]])
+    for B in range(0, T, block):
+        Phi0 = np.eye(dim)                              # Phi(J, B)
+        stack = np.zeros((min(block, T - B), dim, q))   # Phi(J, j+1) N_j, B <= j < J
+        for i, j in enumerate(range(B, min(B + block, T))):
+            Gj = G[j]
+            out[j] += np.abs(Gj @ Phi0) @ b
+            if i:
+                out[j] += (np.abs(Gj @ stack[:i]) * eta[B:j, None, :]).sum(axis=(0, 2))
+                stack[:i] = Ms[j] @ stack[:i]
+            stack[i] = Ns[j]
+            Phi0 = Ms[j] @ Phi0
+        b = np.abs(Phi0) @ b + np.einsum("kdq,kq->d", np.abs(stack), eta[B:B + len(stack)])
+    xb, ub = out[:, :n], out[:, n:]
     return xb, ub
 
 

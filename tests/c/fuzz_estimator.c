@@ -12,17 +12,7 @@
 #include <string.h>
 
 #include "fuzz_input.h"
-#ifdef STSP_ARITH_Q15
-#include "robot_position_sensor_q15.h"
-#define SENSOR(x) ROBOT_POSITION_SENSOR_Q15_##x
-#define TABLE robot_position_sensor_q15_table
-#define ESTIMATOR robot_position_sensor_q15_estimator
-#else
-#include "robot_position_sensor.h"
-#define SENSOR(x) ROBOT_POSITION_SENSOR_##x
-#define TABLE robot_position_sensor_table
-#define ESTIMATOR robot_position_sensor_estimator
-#endif
+#include "estimator_tables.h"
 
 #include "fuzz_tables.h"
 

@@ -13,27 +13,17 @@
 
 #include <cmocka.h>
 
-#include "robot_position_sensor_q15.h"
+#include "estimator_tables.h"
 #include "estimator_q_expected.h"
 
-#define NX ROBOT_POSITION_SENSOR_Q15_NX
-#define NY ROBOT_POSITION_SENSOR_Q15_NY
-#define EVERY ROBOT_POSITION_SENSOR_Q15_EVERY
-#define N_TICKS ROBOT_POSITION_SENSOR_Q15_N_TICKS
+#define NX SENSOR(NX)
+#define NY SENSOR(NY)
+#define EVERY SENSOR(EVERY)
+#define N_TICKS SENSOR(N_TICKS)
 #define N_SAMPLES ((N_TICKS + EVERY - 1u) / EVERY)
 
-static const stsp_table_t *const T = &robot_position_sensor_q15_table;
-static const stsp_est_table_t *const E = &robot_position_sensor_q15_estimator;
-
-static uint32_t fnv1a(uint32_t h, int32_t v)
-{
-    const uint32_t w = (uint32_t)v;
-    uint32_t i;
-    for (i = 0u; i < 4u; ++i) {
-        h = (h ^ ((w >> (8u * i)) & 0xFFu)) * 0x01000193u;
-    }
-    return h;
-}
+static const stsp_table_t *const T = &TABLE;
+static const stsp_est_table_t *const E = &ESTIMATOR;
 
 /* One in-order tick with the recorded reading (none at EST_Q_MISSING). */
 static stsp_status_t step_recorded(stsp_est_t *e, uint32_t j, stsp_q15_t u[2])
@@ -80,9 +70,9 @@ static void test_bit_for_bit_against_the_reference(void **state)
         if (j == EST_Q_SATURATING) {
             assert_int_equal(st, STSP_WARN_STATE_CLAMPED);
         }
-        h = fnv1a(fnv1a(h, u[0]), u[1]);
+        h = est_fnv1a(est_fnv1a(h, (uint32_t)u[0]), (uint32_t)u[1]);
         for (r = 0u; r < NX; ++r) {
-            h = fnv1a(h, e.xhat[r]);
+            h = est_fnv1a(h, (uint32_t)e.xhat[r]);
         }
         if ((c < EST_Q_N_CHECKED) && (est_q_checked[c] == j)) {
             assert_int_equal(u[0], est_q_checked_u[c][0]);

@@ -13,17 +13,9 @@
 #include <stdint.h>
 #include <stdio.h>
 
+#include "estimator_tables.h" /* tests/c: the tables of the build's arithmetic */
 #ifdef STSP_ARITH_Q15
-#include "robot_position_sensor_q15.h"
 #include "estimator_q_expected.h"
-#define SENSOR(x) ROBOT_POSITION_SENSOR_Q15_##x
-#define TABLE robot_position_sensor_q15_table
-#define ESTIMATOR robot_position_sensor_q15_estimator
-#else
-#include "robot_position_sensor.h"
-#define SENSOR(x) ROBOT_POSITION_SENSOR_##x
-#define TABLE robot_position_sensor_table
-#define ESTIMATOR robot_position_sensor_estimator
 #endif
 
 #define BENCH_REPS 4u
@@ -90,16 +82,6 @@ int main(void)
     return 0;
 }
 #else
-static uint32_t fnv1a(uint32_t h, int32_t v)
-{
-    const uint32_t w = (uint32_t)v;
-    uint32_t i;
-    for (i = 0u; i < 4u; ++i) {
-        h = (h ^ ((w >> (8u * i)) & 0xFFu)) * 0x01000193u;
-    }
-    return h;
-}
-
 int main(void)
 {
     static stsp_est_t est;
@@ -118,9 +100,9 @@ int main(void)
             y[1] = est_q_y[j / EVERY][1];
         }
         (void)stsp_est_step(&est, j, (sampled && (j != EST_Q_MISSING)) ? y : NULL, u);
-        h = fnv1a(fnv1a(h, u[0]), u[1]);
+        h = est_fnv1a(est_fnv1a(h, (uint32_t)u[0]), (uint32_t)u[1]);
         for (r = 0u; r < SENSOR(NX); ++r) {
-            h = fnv1a(h, est.xhat[r]);
+            h = est_fnv1a(h, (uint32_t)est.xhat[r]);
         }
     }
     printf("hash 0x%08X\n", (unsigned)h);

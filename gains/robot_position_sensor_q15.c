@@ -18088,7 +18088,7 @@ static const uint32_t robot_position_sensor_q15_est_model_start[3] = {
     0u, 1u, 2u,
 };
 
-/* [maps][nx][nx + nu + 1] = [2][4][7]: [Ad | Bd | fd] scaled */
+/* [maps][nx][nx + nu + 1] = [2][4][7]: [Ad - I | Bd | fd] scaled */
 static const stsp_q15_t robot_position_sensor_q15_est_model[56] = {
     0, 16777, 0, 0, 67, 0,
     0, 0, 0, 0, 0, 16777,

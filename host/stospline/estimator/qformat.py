@@ -38,14 +38,12 @@ sum_{B <= j < J} |Phi(J, j+1) N_j| eta_j`` (B the block's first tick, b_B the bo
 """
 from __future__ import annotations
 
-import struct
-import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from stospline.estimator.ctable import (EST_FORMAT_VERSION, EST_MAGIC, flushed,
-                                        stage_maps)
+from stospline.estimator.ctable import (flushed, stage_maps, table_arrays, table_crc32,
+                                        table_source)
 from stospline.firmware_interface import FRAC_BITS, SCALAR_KIND
 from stospline.limits import Q_EXP_MAX
 from stospline.table.qformat import DEFAULT_SIGMAS, FixedPointTable, scaled_entries
@@ -435,29 +433,19 @@ def estimator_q_crc32(qt: QEstimatorTable) -> int:
     """``stsp_est_table_crc32`` of a Q15/Q31 build: the float32 serialization with the arrays
     as little-endian int16/int32, then y_exp, e_exp (int8) and shift (uint8), then the hash."""
     dt = "<i2" if qt.arith == "q15" else "<i4"
-    parts = [struct.pack("<7I", qt.nx, qt.nu, qt.ny, qt.n_stages, qt.n_ticks, qt.every,
-                         int(qt.model_start[-1])),
-             np.asarray(qt.model_start, "<u4").tobytes()]
-    parts += [np.asarray(a).astype(dt).tobytes() for a in (qt.model, qt.C, qt.gain, qt.xhat0)]
-    parts += [np.asarray(qt.y_exp, np.int8).tobytes(), np.asarray(qt.e_exp, np.int8).tobytes(),
-              np.asarray(qt.shift, np.uint8).tobytes()]
-    parts.append(bytes.fromhex(qt.problem_sha256 or "0" * 64))
-    crc = 0
-    for part in parts:
-        crc = zlib.crc32(part, crc)
-    return crc & 0xFFFFFFFF
+    return table_crc32(qt, lambda a: np.asarray(a).astype(dt).tobytes(),
+                       (np.asarray(qt.y_exp, np.int8).tobytes(),
+                        np.asarray(qt.e_exp, np.int8).tobytes(),
+                        np.asarray(qt.shift, np.uint8).tobytes()))
 
 
 def estimator_q_c(qt: QEstimatorTable, prefix: str) -> tuple[str, str]:
     """``(header, source)`` fragments of ``<prefix>_estimator`` in a Q15/Q31 build."""
-    from stospline.table.codegen import _array, _sha_initializer
+    from stospline.table.codegen import _array
     p, name = prefix, prefix.upper()
-    u32 = lambda x: f"{int(x)}u"  # noqa: E731
     i32 = lambda x: f"{int(x)}" if int(x) > -(1 << 31) else "INT32_MIN"  # noqa: E731
     elem = "stsp_q15_t" if qt.arith == "q15" else "stsp_q31_t"
-    kind = SCALAR_KIND[qt.arith]
     F = qt.frac_bits
-    w = qt.nx + qt.nu + 1
     header = f"""
 /* The filter on the sensor (stsp_estimator.h), {qt.arith.upper()}: y = y_q 2^(y_exp - {F}),
  * innovation e = e_q 2^(e_exp - {F}), x̂ in the law's x_exp. */
@@ -469,29 +457,13 @@ def estimator_q_c(qt: QEstimatorTable, prefix: str) -> tuple[str, str]:
  * (predicted ranges y [{", ".join(f"{r:.4g}" for r in qt.y_range)}], e [{", ".join(f"{r:.4g}" for r in qt.e_range)}]). */
 extern const stsp_est_table_t {p}_estimator;
 """
-    arrays = [
-        _array("uint32_t", f"{p}_est_model_start", qt.model_start, u32,
-               "[n_stages + 1]: each stage's predictor maps in model[]"),
-        _array(elem, f"{p}_est_model", qt.model, i32,
-               f"[maps][nx][nx + nu + 1] = [{len(qt.model)}][{qt.nx}][{w}]: [Ad | Bd | fd] scaled"),
-        _array(elem, f"{p}_est_C", qt.C, i32, f"[ny][nx] = [{qt.ny}][{qt.nx}]: -C scaled"),
-        _array(elem, f"{p}_est_gain", qt.gain, i32,
-               f"[samples][nx][ny] = [{len(qt.gain)}][{qt.nx}][{qt.ny}]: update gains scaled"),
-        _array(elem, f"{p}_est_xhat0", qt.xhat0, i32, "[nx] prior mean (x_exp)"),
+    arrays = table_arrays(qt, p, elem, i32, ("[Ad - I | Bd | fd] scaled", "-C scaled",
+                                             "update gains scaled", "prior mean (x_exp)")) + [
         _array("int8_t", f"{p}_est_y_exp", qt.y_exp, str, "[ny] reading scale exponents"),
         _array("int8_t", f"{p}_est_e_exp", qt.e_exp, str, "[ny] innovation scale exponents"),
-        _array("uint8_t", f"{p}_est_shift", qt.shift, u32,
+        _array("uint8_t", f"{p}_est_shift", qt.shift, lambda x: f"{int(x)}u",
                "[ny + 2 nx]: row shifts (innovation, update, prediction)"),
     ]
-    sha = qt.problem_sha256 or "0" * 64
-    source = "\n" + "\n".join(arrays) + f"""
-const stsp_est_table_t {p}_estimator = {{
-    0x{EST_MAGIC:08X}u, {EST_FORMAT_VERSION}u, {kind}u,
-    {qt.nx}u, {qt.nu}u, {qt.ny}u, {qt.n_stages}u, {qt.n_ticks}u, {qt.every}u,
-    {p}_est_model_start, {p}_est_model, {p}_est_C, {p}_est_gain, {p}_est_xhat0,
-    0x{estimator_q_crc32(qt):08X}u,
-    {_sha_initializer(sha)},
-    {p}_est_y_exp, {p}_est_e_exp, {p}_est_shift
-}};
-"""
-    return header, source
+    tail = f",\n    {p}_est_y_exp, {p}_est_e_exp, {p}_est_shift"
+    return header, table_source(qt, p, arrays, SCALAR_KIND[qt.arith], estimator_q_crc32(qt),
+                                tail)

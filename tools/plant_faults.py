@@ -284,7 +284,7 @@ FAULTS = [
           "            return stsp_est_hold(est, u, STSP_ERR_NONFINITE_MEASUREMENT);",
           "            stsp_est_update(e, tick / e->every, y, est->xhat, &clamped);\n"
           "            return stsp_est_hold(est, u, STSP_ERR_NONFINITE_MEASUREMENT);"),
-    # The estimator in fixed point (stsp_estimator.c; tests/c/test_estimator_q.c in Q15).
+    # The estimator in fixed point (stsp_estimator.c; tests/c/test_estimator.c built for Q15).
     Fault("F87", "estimator (Q15/Q31): a row's rounding bias dropped (rounds down)", CTL,
           "    return (UINT64_C(1) << 62) + (UINT64_C(1) << (k - 1u));",
           "    return (UINT64_C(1) << 62) + ((UINT64_C(1) << (k - 1u)) * 0u);"),

@@ -13,7 +13,7 @@ against the disassembly) and prints instructions per call by kind of tick. Instr
 cycles. With --arith q15: the Q15 build on gains/robot_position_sensor_q15.*, and then the
 whole plan replayed on the target (built with -DBENCH_HASH) with the readings of
 tests/c/estimator_q_expected.h: its hash of every command and prediction must be that file's
-EST_Q_HASH (the host's integer reference, bit for bit), else exit status 1; --replay-only
+EST_HASH (the host's integer reference, bit for bit), else exit status 1; --replay-only
 does that alone (the ctest arm_estimator_q15_replay). Standard library only.
 """
 from __future__ import annotations
@@ -103,12 +103,12 @@ def main() -> int:
 
 
 def check_hash(out: Path, arith: str) -> int:
-    """The whole plan on the target against tests/c/estimator_q_expected.h's EST_Q_HASH."""
+    """The whole plan on the target against tests/c/estimator_q_expected.h's EST_HASH."""
     elf = build(out, arith, hashes=True)
     got = re.search(r"hash (0x[0-9A-F]{8})", run(
         ["timeout", "600", "qemu-system-arm", "-M", "mps2-an386", "-nographic", "-monitor",
          "none", "-semihosting-config", "enable=on,target=native", "-kernel", str(elf)]))
-    want = re.search(r"#define EST_Q_HASH (0x[0-9A-F]{8})u",
+    want = re.search(r"#define EST_HASH (0x[0-9A-F]{8})u",
                      (ROOT / "tests/c/estimator_q_expected.h").read_text()).group(1)
     ok = got is not None and got.group(1) == want
     print(f"whole plan replayed: M4F {got.group(1) if got else 'none'}, host reference {want} "

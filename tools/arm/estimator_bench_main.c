@@ -7,9 +7,9 @@
  * stage 1) and the one after it. Prints one line per stsp_est_step call, in call order:
  *     call <index> tick <tick> status <status> reading <0|1> sizeof <sizeof(stsp_est_t)>
  * With BENCH_HASH (Q15 only) instead: the whole plan with the readings of
- * tests/c/estimator_q_expected.h (the one of EST_Q_MISSING withheld), printing
+ * tests/c/estimator_q_expected.h (the one of EST_MISSING withheld), printing
  *     hash 0x<FNV-1a over every tick's u_q and prediction x̂_q>
- * which must be that file's EST_Q_HASH (the host's integer reference, bit for bit). */
+ * which must be that file's EST_HASH (the host's integer reference, bit for bit). */
 #include <stdint.h>
 #include <stdio.h>
 
@@ -50,7 +50,7 @@ int main(void)
     static stsp_est_t est;
     const uint32_t sw = TABLE.stage_start[1];
 #ifdef STSP_ARITH_Q15
-    stsp_scalar_t y[2] = {est_q_y[0][0], est_q_y[0][1]};
+    stsp_scalar_t y[2] = {est_y[0][0], est_y[0][1]};
 #else
     stsp_scalar_t y[2] = {-5.0f, 1.0f};
 #endif
@@ -63,7 +63,7 @@ int main(void)
     for (rep = 0u; rep < BENCH_REPS; ++rep) {
         (void)stsp_est_reset(&est);
 #ifdef STSP_ARITH_Q15
-        y[0] = (stsp_scalar_t)(est_q_y[0][0] + (int32_t)rep);
+        y[0] = (stsp_scalar_t)(est_y[0][0] + (int32_t)rep);
 #else
         y[0] = -5.0f + 0.01f * (float)rep;
 #endif
@@ -96,10 +96,10 @@ int main(void)
     for (j = 0u; j < SENSOR(N_TICKS); ++j) {
         const int sampled = (j % EVERY) == 0u;
         if (sampled) {
-            y[0] = est_q_y[j / EVERY][0];
-            y[1] = est_q_y[j / EVERY][1];
+            y[0] = est_y[j / EVERY][0];
+            y[1] = est_y[j / EVERY][1];
         }
-        (void)stsp_est_step(&est, j, (sampled && (j != EST_Q_MISSING)) ? y : NULL, u);
+        (void)stsp_est_step(&est, j, (sampled && (j != EST_MISSING)) ? y : NULL, u);
         h = est_fnv1a(est_fnv1a(h, (uint32_t)u[0]), (uint32_t)u[1]);
         for (r = 0u; r < SENSOR(NX); ++r) {
             h = est_fnv1a(h, (uint32_t)est.xhat[r]);

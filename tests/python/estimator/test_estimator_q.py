@@ -143,7 +143,7 @@ def test_a_bound_without_the_prediction_rounding_fails(q_tables, sensor_loop, mo
 
 
 def test_the_c_tests_expected_values_are_the_references():
-    """tests/c/estimator_q_expected.h (what test_estimator_q.c checks the C against) is what
+    """tests/c/estimator_q_expected.h (what test_estimator.c checks its Q15 build against) is what
     the integer reference gives today: regenerate with tests/c/estimator_q_reference.py."""
     import runpy
     from conftest import REPO

@@ -49,14 +49,19 @@ class EstimatorTable:
     def per_tick(self) -> tuple[np.ndarray, np.ndarray]:
         """``(gains, predictor)`` per tick as float64: the gains zero between samples (for
         `evaluate_estimator`'s ``gains=``/``predictor=``: the oracle of these tables)."""
+        gain, model = self.filter_values()
         gains = np.zeros((self.n_ticks, self.nx, self.ny))
-        gains[::self.every] = self.gain
-        pred = np.empty((self.n_ticks, self.nx, self.model.shape[2]))
+        gains[::self.every] = gain
+        pred = np.empty((self.n_ticks, self.nx, model.shape[2]))
         for s in range(self.n_stages):
             a, b = int(self.stage_start[s]), int(self.stage_start[s + 1])
-            maps = self.model[int(self.model_start[s]):int(self.model_start[s + 1])]
+            maps = model[int(self.model_start[s]):int(self.model_start[s + 1])]
             pred[a:b] = maps if len(maps) == b - a else maps[0]
         return gains, pred.astype(float)
+
+    def filter_values(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(gain, model)`` as the real numbers the firmware computes with."""
+        return self.gain, self.model
 
 
 def estimator_table(problem, table, loop=None) -> EstimatorTable:

@@ -42,8 +42,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from stospline.estimator.ctable import (flushed, stage_maps, table_arrays, table_crc32,
-                                        table_source)
+from stospline.estimator.ctable import (EstimatorTable, flushed, stage_maps, table_arrays,
+                                        table_crc32, table_source)
 from stospline.firmware_interface import FRAC_BITS, SCALAR_KIND
 from stospline.limits import Q_EXP_MAX
 from stospline.table.qformat import DEFAULT_SIGMAS, FixedPointTable, scaled_entries
@@ -60,29 +60,17 @@ def _rhu(y) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class QEstimatorTable:
+class QEstimatorTable(EstimatorTable):
     """What a fixed-point `stsp_est_table_t` holds (integers in int64 arrays), with the double
     filter it came from. ``C`` is ``-C`` scaled (the innovation is a plain sum), ``model`` holds
     ``[Ad - I | Bd | fd]`` scaled, ``shift`` the rows' shifts k ``[innovation rows (ny), update
-    rows (nx), prediction rows (nx)]``."""
-    arith: str
-    nx: int
-    nu: int
-    ny: int
-    n_ticks: int
-    every: int
-    stage_start: np.ndarray
-    model_start: np.ndarray
-    model: np.ndarray
-    C: np.ndarray
-    gain: np.ndarray
-    xhat0: np.ndarray
-    y_exp: np.ndarray
-    e_exp: np.ndarray
-    shift: np.ndarray
-    x_exp: np.ndarray
-    u_exp: np.ndarray
-    problem_sha256: str | None
+    rows (nx), prediction rows (nx)]``; the law's ``x_exp``, ``u_exp``."""
+    arith: str = "q15"
+    y_exp: np.ndarray = None
+    e_exp: np.ndarray = None
+    shift: np.ndarray = None
+    x_exp: np.ndarray = None
+    u_exp: np.ndarray = None
     # The double filter: model (maps, nx, nx+nu+1), C (ny, nx), gain (samples, nx, ny), x0.
     double: dict = field(repr=False, default_factory=dict)
     y_range: np.ndarray = field(repr=False, default=None)
@@ -91,10 +79,6 @@ class QEstimatorTable:
     @property
     def frac_bits(self) -> int:
         return FRAC_BITS[self.arith]
-
-    @property
-    def n_stages(self) -> int:
-        return len(self.model_start) - 1
 
     def lsb(self, exps) -> np.ndarray:
         return np.ldexp(1.0, np.asarray(exps, int) - self.frac_bits)
@@ -115,6 +99,12 @@ class QEstimatorTable:
         c = self.model[:, :, n + m] * np.ldexp(1.0, xe - k_p)
         return {"C": C, "gain": G, "model": np.concatenate([A, c[:, :, None]], axis=2),
                 "xhat0": self.xhat0 * np.ldexp(1.0, xe - F)}
+
+    def filter_values(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(gain, model)`` as real numbers (`real_entries`): `per_tick` then gives
+        `evaluate_estimator` the filter as stored."""
+        re = self.real_entries()
+        return re["gain"], re["model"]
 
     def summary(self) -> dict:
         return {"arith": self.arith, "y_exp": self.y_exp.tolist(),
@@ -217,9 +207,9 @@ def quantize_estimator(problem, ft: FixedPointTable, loop, *, sigmas: float = DE
     x0q = np.clip(_rhu(np.asarray(problem.x0, float) * np.ldexp(1.0, F - xe)),
                   -(1 << F), (1 << F) - 1)
     return QEstimatorTable(
-        ft.arith, n, m, p, ft.n_ticks, meas.every, np.asarray(ft.stage_start, np.uint32),
-        starts, Mq, Cq, Gq, x0q, y_exp.astype(np.int8), e_exp.astype(np.int8),
-        shift.astype(np.uint8), ft.x_exp, ft.u_exp, ft.problem_sha256,
+        n, m, p, ft.n_ticks, meas.every, np.asarray(ft.stage_start, np.uint32), starts, Mq, Cq,
+        Gq, x0q, ft.problem_sha256, ft.arith, y_exp.astype(np.int8), e_exp.astype(np.int8),
+        shift.astype(np.uint8), ft.x_exp, ft.u_exp,
         {"model": maps, "C": C, "gain": gains, "xhat0": np.asarray(problem.x0, float)},
         y_range, e_range)
 

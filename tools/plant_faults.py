@@ -298,8 +298,8 @@ FAULTS = [
     Fault("F91", "estimator (Q15/Q31): verify does not compare the innovation exponents' address",
           CTL, "(a->e_exp != b->e_exp) || ", ""),
     Fault("F92", "estimator (Q15/Q31): the reading's coefficient without y_exp - e_exp", CTL,
-          "    const uint32_t up = (uint32_t)((int32_t)k + ((int32_t)e->y_exp[i] - (int32_t)e->e_exp[i]));",
-          "    const uint32_t up = k;"),
+          "    const int32_t up = (int32_t)k + ((int32_t)e->y_exp[i] - (int32_t)e->e_exp[i]);",
+          "    const int32_t up = (int32_t)k;"),
     # Runtime parameters (stsp_params.c; tests/c/test_params.c).
     Fault("F79", "params: a NaN theta accepted (the range check written as two rejections)",
           CTL, "        if (!((theta[i] >= p->lower[i]) && (theta[i] <= p->upper[i]))) {",

@@ -123,7 +123,7 @@ static int stsp_est_values_ok(const stsp_est_table_t *e)
 
 static uint64_t stsp_est_abs(stsp_scalar_t a)
 {
-    const int64_t w = a;
+    const int64_t w = (int64_t)a;
     return (w < 0) ? (uint64_t)(-w) : (uint64_t)w;
 }
 
@@ -206,15 +206,24 @@ static uint64_t stsp_est_acc(uint32_t k)
  * 2^31 in magnitude, or a pass-through power of two checked by init). */
 static uint64_t stsp_est_mac(uint64_t acc, int64_t a, int64_t b)
 {
-    return acc + (uint64_t)(a * b);
+    const int64_t product = a * b;
+    return acc + (uint64_t)product;
+}
+
+/* 2^k as an int64 (k <= 62). */
+static int64_t stsp_est_pow2(uint32_t k)
+{
+    const uint64_t p = UINT64_C(1) << k;
+    return (int64_t)p;
 }
 
 /* floor(sum / 2^k + 1/2) of acc = stsp_est_acc(k) + sum (|sum| <= 2^61: a positive acc below
  * 2^63, an exact shift), saturated to [-2^F, 2^F - 1]; *clamped set when it saturated. */
 static stsp_scalar_t stsp_est_round(uint64_t acc, uint32_t k, uint32_t *clamped)
 {
-    const int64_t q = (int64_t)(acc >> k) - (int64_t)(UINT64_C(1) << (62u - k));
-    const int64_t one = (int64_t)1 << (uint32_t)STSP_Q_FRAC_BITS;
+    const uint64_t shifted = acc >> k;
+    const int64_t q = (int64_t)shifted - stsp_est_pow2(62u - k);
+    const int64_t one = stsp_est_pow2((uint32_t)STSP_Q_FRAC_BITS);
     int64_t out = q;
     if (q > (one - 1)) {
         out = one - 1;
@@ -416,8 +425,8 @@ static stsp_scalar_t stsp_est_innovation(const stsp_est_table_t *e, uint32_t i, 
 {
     const stsp_scalar_t *C = &e->C[i * (uint32_t)e->nx];
     const uint32_t k = e->shift[i];
-    const uint32_t up = (uint32_t)((int32_t)k + ((int32_t)e->y_exp[i] - (int32_t)e->e_exp[i]));
-    uint64_t acc = stsp_est_mac(stsp_est_acc(k), y, (int64_t)(UINT64_C(1) << up));
+    const int32_t up = (int32_t)k + ((int32_t)e->y_exp[i] - (int32_t)e->e_exp[i]);
+    uint64_t acc = stsp_est_mac(stsp_est_acc(k), y, stsp_est_pow2((uint32_t)up));
     uint32_t j;
     for (j = 0u; j < e->nx; ++j) {
         acc = stsp_est_mac(acc, C[j], xh[j]);
@@ -430,7 +439,7 @@ static stsp_scalar_t stsp_est_corrected(const stsp_est_table_t *e, uint32_t r,
                                         stsp_scalar_t x, uint32_t *clamped)
 {
     const uint32_t k = e->shift[(uint32_t)e->ny + r];
-    uint64_t acc = stsp_est_mac(stsp_est_acc(k), x, (int64_t)1 << k);
+    uint64_t acc = stsp_est_mac(stsp_est_acc(k), x, stsp_est_pow2(k));
     uint32_t i;
     for (i = 0u; i < e->ny; ++i) {
         acc = stsp_est_mac(acc, F[i], innov[i]);
@@ -446,9 +455,9 @@ static stsp_scalar_t stsp_est_predicted(const stsp_est_table_t *e, uint32_t r,
     const uint32_t nx = e->nx;
     const uint32_t nu = e->nu;
     const uint32_t k = e->shift[(uint32_t)e->ny + nx + r];
-    uint64_t acc = stsp_est_mac(stsp_est_acc(k), xp[r], (int64_t)1 << k);
+    uint64_t acc = stsp_est_mac(stsp_est_acc(k), xp[r], stsp_est_pow2(k));
     uint32_t c;
-    acc = stsp_est_mac(acc, row[nx + nu], (int64_t)1 << (uint32_t)STSP_Q_FRAC_BITS);
+    acc = stsp_est_mac(acc, row[nx + nu], stsp_est_pow2((uint32_t)STSP_Q_FRAC_BITS));
     for (c = 0u; c < nx; ++c) {
         acc = stsp_est_mac(acc, row[c], xp[c]);
     }

@@ -1,14 +1,16 @@
 /* The controller on a sensor: see stospline/stsp_estimator.h for the contract. The filter
  * (update, predict) is here; the law and the latch are stsp_step()'s, on the estimate. Every
  * tick works on local copies and commits only when the law succeeded, so a refused step leaves
- * the instance as it was. float32 builds only. */
+ * the instance as it was. One source for float32, Q15 and Q31: the arithmetic of the filter's
+ * rows and the checks of the table's values differ (STSP_ARITH_FIXED_POINT), the rest is
+ * shared. */
 #include "stospline/stsp_types.h"
-
-#ifndef STSP_ARITH_FIXED_POINT
-
 #include "stospline/stsp_estimator.h"
 #include "stsp_crc32.h"
+#include "stsp_internal.h"
+#ifndef STSP_ARITH_FIXED_POINT
 #include "stsp_f32bits.h"
+#endif
 
 #include <string.h>
 
@@ -42,14 +44,20 @@ uint32_t stsp_est_table_crc32(const stsp_est_table_t *est)
     crc = stsp_crc32_u32(crc, est->every);
     crc = stsp_crc32_u32(crc, stsp_est_models(est));
     crc = stsp_crc32_u32s(crc, est->model_start, (uint32_t)est->n_stages + 1u);
-    crc = stsp_crc32_f32s(crc, est->model, stsp_est_models(est) * nx * stsp_est_row(est));
-    crc = stsp_crc32_f32s(crc, est->C, (uint32_t)est->ny * nx);
-    crc = stsp_crc32_f32s(crc, est->gain, stsp_est_samples(est) * nx * est->ny);
-    crc = stsp_crc32_f32s(crc, est->xhat0, nx);
+    crc = stsp_crc32_scalars(crc, est->model, stsp_est_models(est) * nx * stsp_est_row(est));
+    crc = stsp_crc32_scalars(crc, est->C, (uint32_t)est->ny * nx);
+    crc = stsp_crc32_scalars(crc, est->gain, stsp_est_samples(est) * nx * est->ny);
+    crc = stsp_crc32_scalars(crc, est->xhat0, nx);
+#ifdef STSP_ARITH_FIXED_POINT
+    crc = stsp_crc32_i8s(crc, est->y_exp, est->ny);
+    crc = stsp_crc32_i8s(crc, est->e_exp, est->ny);
+    crc = stsp_crc32_bytes(crc, est->shift, (uint32_t)est->ny + (2u * nx));
+#endif
     crc = stsp_crc32_bytes(crc, est->problem_sha256, 32u);
     return stsp_crc32_end(crc);
 }
 
+#ifndef STSP_ARITH_FIXED_POINT
 static int stsp_est_finite(const stsp_f32_t *a, uint32_t count)
 {
     uint32_t i;
@@ -60,6 +68,7 @@ static int stsp_est_finite(const stsp_f32_t *a, uint32_t count)
     }
     return 1;
 }
+#endif
 
 /* The estimator table against the validated gain table (h): everything but the CRC. */
 static stsp_status_t stsp_est_check(const stsp_est_table_t *e, const stsp_header_t *h)
@@ -69,11 +78,16 @@ static stsp_status_t stsp_est_check(const stsp_est_table_t *e, const stsp_header
         (e->gain == NULL) || (e->xhat0 == NULL)) {
         return STSP_ERR_NULL;
     }
+#ifdef STSP_ARITH_FIXED_POINT
+    if ((e->y_exp == NULL) || (e->e_exp == NULL) || (e->shift == NULL)) {
+        return STSP_ERR_NULL;
+    }
+#endif
     if (e->magic != STSP_EST_MAGIC) {
         return STSP_ERR_BAD_MAGIC;
     }
     if ((e->format_version != STSP_EST_FORMAT_VERSION) ||
-        (e->scalar_kind != STSP_SCALAR_FLOAT32)) {
+        (e->scalar_kind != STSP_SCALAR_KIND)) {
         return STSP_ERR_BAD_VERSION;
     }
     if ((e->nx != h->nx) || (e->nu != h->nu) || (e->n_stages != h->n_stages) ||
@@ -91,7 +105,8 @@ static stsp_status_t stsp_est_check(const stsp_est_table_t *e, const stsp_header
     return STSP_OK;
 }
 
-static int stsp_est_values_finite(const stsp_est_table_t *e)
+#ifndef STSP_ARITH_FIXED_POINT
+static int stsp_est_values_ok(const stsp_est_table_t *e)
 {
     const uint32_t nx = e->nx;
     return stsp_est_finite(e->model, stsp_est_models(e) * nx * stsp_est_row(e)) &
@@ -99,6 +114,129 @@ static int stsp_est_values_finite(const stsp_est_table_t *e)
            stsp_est_finite(e->gain, stsp_est_samples(e) * nx * e->ny) &
            stsp_est_finite(e->xhat0, nx);
 }
+#else
+/* Fixed point (stsp_estimator.h): |acc| <= 2^STSP_EST_ACC_BITS for inputs in their Q ranges
+ * when every row's absolute sum (entries, 2^F-weighted constant as |c|, pass-through
+ * coefficient) is at most 2^(STSP_EST_ACC_BITS - F). */
+#define STSP_EST_ACC_BITS 61u
+#define STSP_EST_ROW_MAX (UINT64_C(1) << (STSP_EST_ACC_BITS - (uint32_t)STSP_Q_FRAC_BITS))
+
+static uint64_t stsp_est_abs(stsp_scalar_t a)
+{
+    const int64_t w = (int64_t)a;
+    return (w < 0) ? (uint64_t)(-w) : (uint64_t)w;
+}
+
+/* Sum of |a[0..count)|, count <= STSP_MAX_NX + STSP_MAX_NU + 1: no wrap-around. */
+static uint64_t stsp_est_abs_sum(const stsp_scalar_t *a, uint32_t count)
+{
+    uint64_t sum = 0u;
+    uint32_t i;
+    for (i = 0u; i < count; ++i) {
+        sum += stsp_est_abs(a[i]);
+    }
+    return sum;
+}
+
+/* 1 when each of `rows` rows of `width` entries (stride `width`), plus `pass`, fits. */
+static int stsp_est_rows_ok(const stsp_scalar_t *a, uint32_t rows, uint32_t width, uint64_t pass)
+{
+    uint32_t r;
+    for (r = 0u; r < rows; ++r) {
+        if ((stsp_est_abs_sum(&a[r * width], width) + pass) > STSP_EST_ROW_MAX) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+static int stsp_est_values_ok(const stsp_est_table_t *e)
+{
+    const uint32_t nx = e->nx;
+    const uint32_t ny = e->ny;
+    const uint32_t F = (uint32_t)STSP_Q_FRAC_BITS;
+    uint32_t i;
+    uint32_t k;
+    if ((stsp_q_exps_ok(e->y_exp, ny) == 0) || (stsp_q_exps_ok(e->e_exp, ny) == 0)) {
+        return 0;
+    }
+    for (i = 0u; i < (ny + (2u * nx)); ++i) {
+        if ((e->shift[i] < 1u) || (e->shift[i] > (STSP_EST_ACC_BITS - F))) {
+            return 0;
+        }
+    }
+    for (i = 0u; i < ny; ++i) {
+        /* the reading's coefficient 2^up, up = k + y_exp - e_exp in [0, 61 - F] */
+        const int32_t up = (int32_t)e->shift[i] + ((int32_t)e->y_exp[i] - (int32_t)e->e_exp[i]);
+        if ((e->e_exp[i] > e->y_exp[i]) || (up > ((int32_t)STSP_EST_ACC_BITS - (int32_t)F)) ||
+            (stsp_est_rows_ok(&e->C[i * nx], 1u, nx, UINT64_C(1) << (uint32_t)up) == 0)) {
+            return 0;
+        }
+    }
+    for (k = 0u; k < stsp_est_samples(e); ++k) {
+        for (i = 0u; i < nx; ++i) {
+            const uint64_t pass = UINT64_C(1) << e->shift[ny + i];
+            if (stsp_est_rows_ok(&e->gain[((k * nx) + i) * ny], 1u, ny, pass) == 0) {
+                return 0;
+            }
+        }
+    }
+    /* a predictor row: [Ad - I | Bd | fd], fd weighted 2^F in the sum (counted as |fd|), the
+     * pass-through x̂_q 2^k */
+    for (k = 0u; k < stsp_est_models(e); ++k) {
+        for (i = 0u; i < nx; ++i) {
+            const uint64_t pass = UINT64_C(1) << e->shift[ny + nx + i];
+            if (stsp_est_rows_ok(&e->model[((k * nx) + i) * stsp_est_row(e)], 1u,
+                                 stsp_est_row(e), pass) == 0) {
+                return 0;
+            }
+        }
+    }
+    return 1;
+}
+
+/* The accumulator's start: 2^62 (keeps a valid sum positive) + 2^(k-1) (rounding), 1 <= k <=
+ * 61 - F. */
+static uint64_t stsp_est_acc(uint32_t k)
+{
+    return (UINT64_C(1) << 62) + (UINT64_C(1) << (k - 1u));
+}
+
+/* acc + a b modulo 2^64: exact for |a b| <= 2^62 (no signed overflow: each factor is at most
+ * 2^31 in magnitude, or a pass-through power of two checked by init). */
+static uint64_t stsp_est_mac(uint64_t acc, int64_t a, int64_t b)
+{
+    const int64_t product = a * b;
+    return acc + (uint64_t)product;
+}
+
+/* 2^k as an int64 (k <= 62). */
+static int64_t stsp_est_pow2(uint32_t k)
+{
+    const uint64_t p = UINT64_C(1) << k;
+    return (int64_t)p;
+}
+
+/* floor(sum / 2^k + 1/2) of acc = stsp_est_acc(k) + sum (|sum| <= 2^61: a positive acc below
+ * 2^63, an exact shift), saturated to [-2^F, 2^F - 1]; *clamped set when it saturated. */
+static stsp_scalar_t stsp_est_round(uint64_t acc, uint32_t k, uint32_t *clamped)
+{
+    const uint64_t shifted = acc >> k;
+    const int64_t q = (int64_t)shifted - stsp_est_pow2(62u - k);
+    const int64_t one = stsp_est_pow2((uint32_t)STSP_Q_FRAC_BITS);
+    int64_t out = q;
+    if (q > (one - 1)) {
+        out = one - 1;
+        *clamped = 1u;
+    } else if (q < -one) {
+        out = -one;
+        *clamped = 1u;
+    } else {
+        /* in range */
+    }
+    return (stsp_scalar_t)out;
+}
+#endif
 
 static stsp_status_t stsp_est_refuse(stsp_est_t *est, stsp_status_t status)
 {
@@ -145,7 +283,7 @@ stsp_status_t stsp_est_init(stsp_est_t *est, const stsp_table_t *table,
     if (memcmp(est->checked.problem_sha256, table->problem_sha256, 32u) != 0) {
         return stsp_est_refuse(est, STSP_ERR_BAD_PROBLEM);
     }
-    if (stsp_est_values_finite(&est->checked) == 0) {
+    if (stsp_est_values_ok(&est->checked) == 0) {
         return stsp_est_refuse(est, STSP_ERR_BAD_VALUES);
     }
     est->table = est_table;
@@ -178,6 +316,9 @@ static int stsp_est_header_changed(const stsp_est_table_t *a, const stsp_est_tab
             (a->ny != b->ny) || (a->n_stages != b->n_stages) || (a->n_ticks != b->n_ticks) ||
             (a->every != b->every) || (a->model_start != b->model_start) ||
             (a->model != b->model) || (a->C != b->C) || (a->gain != b->gain) ||
+#ifdef STSP_ARITH_FIXED_POINT
+            (a->y_exp != b->y_exp) || (a->e_exp != b->e_exp) || (a->shift != b->shift) ||
+#endif
             (a->xhat0 != b->xhat0)) ? 1 : 0;
 }
 
@@ -212,64 +353,166 @@ stsp_status_t stsp_est_verify(stsp_est_t *est)
     return st;
 }
 
-/* x̂ = Ad x̂+ + Bd u + fd with tick j's map (stage s); in place of xh (nx). */
-static void stsp_est_predict(const stsp_est_t *est, const uint32_t *stage_start, uint32_t s,
-                             uint32_t j, stsp_f32_t *xh, const stsp_f32_t *u)
+/* The map of tick j (stage s). */
+static const stsp_scalar_t *stsp_est_map(const stsp_est_table_t *e, const uint32_t *stage_start,
+                                         uint32_t s, uint32_t j)
 {
-    const stsp_est_table_t *e = &est->checked;
-    const uint32_t nx = e->nx;
-    const uint32_t nu = e->nu;
-    const uint32_t w = stsp_est_row(e);
     uint32_t k = e->model_start[s];
-    stsp_f32_t xp[STSP_MAX_NX];
-    uint32_t r;
-    uint32_t c;
     if ((e->model_start[s + 1u] - k) > 1u) {
         k += j - stage_start[s];
     }
-    for (c = 0u; c < nx; ++c) {
-        xp[c] = xh[c];
+    return &e->model[k * (uint32_t)e->nx * stsp_est_row(e)];
+}
+
+/* The rows of the filter, per arithmetic (stsp_estimator.h gives both orders of evaluation):
+ * innovation i from reading y_i and x̂; update of x̂_r from row r of the gain; prediction of
+ * x̂_r from row r of the map, x̂+ and u. The fixed-point rows set *clamped when they
+ * saturate. */
+#ifndef STSP_ARITH_FIXED_POINT
+static stsp_f32_t stsp_est_innovation(const stsp_est_table_t *e, uint32_t i, stsp_f32_t y,
+                                      const stsp_f32_t *xh, uint32_t *clamped)
+{
+    const stsp_f32_t *C = &e->C[i * (uint32_t)e->nx];
+    stsp_f32_t acc = y;
+    uint32_t j;
+    (void)clamped;
+    for (j = 0u; j < e->nx; ++j) {
+        acc = acc - (C[j] * xh[j]);
     }
-    for (r = 0u; r < nx; ++r) {
-        const stsp_f32_t *row = &e->model[((k * nx) + r) * w];
-        stsp_f32_t acc = row[nx + nu];
-        for (c = 0u; c < nx; ++c) {
-            acc = acc + (row[c] * xp[c]);
-        }
-        for (c = 0u; c < nu; ++c) {
-            acc = acc + (row[nx + c] * u[c]);
-        }
-        xh[r] = acc;
+    return acc;
+}
+
+static stsp_f32_t stsp_est_corrected(const stsp_est_table_t *e, uint32_t r, const stsp_f32_t *F,
+                                     const stsp_f32_t *innov, stsp_f32_t x, uint32_t *clamped)
+{
+    stsp_f32_t acc = x;
+    uint32_t i;
+    (void)r;
+    (void)clamped;
+    for (i = 0u; i < e->ny; ++i) {
+        acc = acc + (F[i] * innov[i]);
+    }
+    return acc;
+}
+
+static stsp_f32_t stsp_est_predicted(const stsp_est_table_t *e, uint32_t r,
+                                     const stsp_f32_t *row, const stsp_f32_t *xp,
+                                     const stsp_f32_t *u, uint32_t *clamped)
+{
+    const uint32_t nx = e->nx;
+    const uint32_t nu = e->nu;
+    stsp_f32_t acc = row[nx + nu];
+    uint32_t c;
+    (void)r;
+    (void)clamped;
+    for (c = 0u; c < nx; ++c) {
+        acc = acc + (row[c] * xp[c]);
+    }
+    for (c = 0u; c < nu; ++c) {
+        acc = acc + (row[nx + c] * u[c]);
+    }
+    return acc;
+}
+
+/* A reading the filter can take: every y[i] finite. */
+static int stsp_est_reading_ok(const stsp_est_table_t *e, const stsp_f32_t *y)
+{
+    return stsp_est_finite(y, e->ny);
+}
+#else
+static stsp_scalar_t stsp_est_innovation(const stsp_est_table_t *e, uint32_t i, stsp_scalar_t y,
+                                         const stsp_scalar_t *xh, uint32_t *clamped)
+{
+    const stsp_scalar_t *C = &e->C[i * (uint32_t)e->nx];
+    const uint32_t k = e->shift[i];
+    const int32_t up = (int32_t)k + ((int32_t)e->y_exp[i] - (int32_t)e->e_exp[i]);
+    uint64_t acc = stsp_est_mac(stsp_est_acc(k), y, stsp_est_pow2((uint32_t)up));
+    uint32_t j;
+    for (j = 0u; j < e->nx; ++j) {
+        acc = stsp_est_mac(acc, C[j], xh[j]);
+    }
+    return stsp_est_round(acc, k, clamped);
+}
+
+static stsp_scalar_t stsp_est_corrected(const stsp_est_table_t *e, uint32_t r,
+                                        const stsp_scalar_t *F, const stsp_scalar_t *innov,
+                                        stsp_scalar_t x, uint32_t *clamped)
+{
+    const uint32_t k = e->shift[(uint32_t)e->ny + r];
+    uint64_t acc = stsp_est_mac(stsp_est_acc(k), x, stsp_est_pow2(k));
+    uint32_t i;
+    for (i = 0u; i < e->ny; ++i) {
+        acc = stsp_est_mac(acc, F[i], innov[i]);
+    }
+    return stsp_est_round(acc, k, clamped);
+}
+
+/* x̂+_r 2^k + fd 2^F + (Ad - I) x̂+ + Bd u: the stored map is the increment. */
+static stsp_scalar_t stsp_est_predicted(const stsp_est_table_t *e, uint32_t r,
+                                        const stsp_scalar_t *row, const stsp_scalar_t *xp,
+                                        const stsp_scalar_t *u, uint32_t *clamped)
+{
+    const uint32_t nx = e->nx;
+    const uint32_t nu = e->nu;
+    const uint32_t k = e->shift[(uint32_t)e->ny + nx + r];
+    uint64_t acc = stsp_est_mac(stsp_est_acc(k), xp[r], stsp_est_pow2(k));
+    uint32_t c;
+    acc = stsp_est_mac(acc, row[nx + nu], stsp_est_pow2((uint32_t)STSP_Q_FRAC_BITS));
+    for (c = 0u; c < nx; ++c) {
+        acc = stsp_est_mac(acc, row[c], xp[c]);
+    }
+    for (c = 0u; c < nu; ++c) {
+        acc = stsp_est_mac(acc, row[nx + c], u[c]);
+    }
+    return stsp_est_round(acc, k, clamped);
+}
+
+/* Every integer reading is one the filter takes. */
+static int stsp_est_reading_ok(const stsp_est_table_t *e, const stsp_scalar_t *y)
+{
+    (void)e;
+    (void)y;
+    return 1;
+}
+#endif
+
+/* x̂ = Ad x̂+ + Bd u + fd with tick j's map (stage s); in place of xh (nx). */
+static void stsp_est_predict(const stsp_est_t *est, const uint32_t *stage_start, uint32_t s,
+                             uint32_t j, stsp_scalar_t *xh, const stsp_scalar_t *u,
+                             uint32_t *clamped)
+{
+    const stsp_est_table_t *e = &est->checked;
+    const uint32_t w = stsp_est_row(e);
+    const stsp_scalar_t *map = stsp_est_map(e, stage_start, s, j);
+    stsp_scalar_t xp[STSP_MAX_NX];
+    uint32_t r;
+    for (r = 0u; r < e->nx; ++r) {
+        xp[r] = xh[r];
+    }
+    for (r = 0u; r < e->nx; ++r) {
+        xh[r] = stsp_est_predicted(e, r, &map[r * w], xp, u, clamped);
     }
 }
 
 /* x̂ += F (y - C x̂) with sample `sample`'s gain; in place of xh (nx). */
-static void stsp_est_update(const stsp_est_table_t *e, uint32_t sample, const stsp_f32_t *y,
-                            stsp_f32_t *xh)
+static void stsp_est_update(const stsp_est_table_t *e, uint32_t sample, const stsp_scalar_t *y,
+                            stsp_scalar_t *xh, uint32_t *clamped)
 {
     const uint32_t nx = e->nx;
     const uint32_t ny = e->ny;
-    const stsp_f32_t *F = &e->gain[sample * nx * ny];
-    stsp_f32_t innov[STSP_MAX_NY];
+    const stsp_scalar_t *F = &e->gain[sample * nx * ny];
+    stsp_scalar_t innov[STSP_MAX_NY];
     uint32_t i;
-    uint32_t j;
+    uint32_t r;
     for (i = 0u; i < ny; ++i) {
-        stsp_f32_t acc = y[i];
-        for (j = 0u; j < nx; ++j) {
-            acc = acc - (e->C[(i * nx) + j] * xh[j]);
-        }
-        innov[i] = acc;
+        innov[i] = stsp_est_innovation(e, i, y[i], xh, clamped);
     }
-    for (j = 0u; j < nx; ++j) {
-        stsp_f32_t acc = xh[j];
-        for (i = 0u; i < ny; ++i) {
-            acc = acc + (F[(j * ny) + i] * innov[i]);
-        }
-        xh[j] = acc;
+    for (r = 0u; r < nx; ++r) {
+        xh[r] = stsp_est_corrected(e, r, &F[r * ny], innov, xh[r], clamped);
     }
 }
 
-static stsp_status_t stsp_est_hold(const stsp_est_t *est, stsp_f32_t *u, stsp_status_t st)
+static stsp_status_t stsp_est_hold(const stsp_est_t *est, stsp_scalar_t *u, stsp_status_t st)
 {
     uint32_t i;
     for (i = 0u; i < est->checked.nu; ++i) {
@@ -278,15 +521,16 @@ static stsp_status_t stsp_est_hold(const stsp_est_t *est, stsp_f32_t *u, stsp_st
     return st;
 }
 
-stsp_status_t stsp_est_step(stsp_est_t *est, uint32_t tick, const stsp_f32_t *y,
-                            stsp_f32_t *u)
+stsp_status_t stsp_est_step(stsp_est_t *est, uint32_t tick, const stsp_scalar_t *y,
+                            stsp_scalar_t *u)
 {
     const stsp_est_table_t *e;
     const uint32_t *stage_start;
-    stsp_f32_t xh[STSP_MAX_NX];
-    stsp_f32_t cmd[STSP_MAX_NU];
+    stsp_scalar_t xh[STSP_MAX_NX];
+    stsp_scalar_t cmd[STSP_MAX_NU];
     stsp_status_t st;
     stsp_status_t mine = STSP_OK;
+    uint32_t clamped = 0u;
     uint32_t stage;
     uint32_t j;
     if ((est == NULL) || (u == NULL)) {
@@ -321,7 +565,7 @@ stsp_status_t stsp_est_step(stsp_est_t *est, uint32_t tick, const stsp_f32_t *y,
         while (((stage + 1u) < e->n_stages) && (j >= stage_start[stage + 1u])) {
             ++stage;
         }
-        stsp_est_predict(est, stage_start, stage, j, xh, est->u_last);
+        stsp_est_predict(est, stage_start, stage, j, xh, est->u_last, &clamped);
     }
     while (((stage + 1u) < e->n_stages) && (tick >= stage_start[stage + 1u])) {
         ++stage;
@@ -329,23 +573,26 @@ stsp_status_t stsp_est_step(stsp_est_t *est, uint32_t tick, const stsp_f32_t *y,
     if ((tick % e->every) == 0u) {
         if (y == NULL) {
             mine = STSP_WARN_NO_MEASUREMENT;
-        } else if (stsp_est_finite(y, e->ny) == 0) {
+        } else if (stsp_est_reading_ok(e, y) == 0) {
             return stsp_est_hold(est, u, STSP_ERR_NONFINITE_MEASUREMENT);
         } else {
-            stsp_est_update(e, tick / e->every, y, xh);
+            stsp_est_update(e, tick / e->every, y, xh, &clamped);
         }
     }
     st = stsp_step(&est->ctrl, tick, xh, cmd);
     if (st < STSP_OK) {
         return stsp_est_hold(est, u, st);
     }
-    if (st == STSP_OK) {
-        st = mine;
-    }
     for (j = 0u; j < e->nu; ++j) {
         est->u_last[j] = cmd[j];
     }
-    stsp_est_predict(est, stage_start, stage, tick, xh, cmd);
+    stsp_est_predict(est, stage_start, stage, tick, xh, cmd, &clamped);
+    if ((mine == STSP_OK) && (clamped != 0u)) {
+        mine = STSP_WARN_STATE_CLAMPED; /* fixed point only: the float32 rows never clamp */
+    }
+    if (st == STSP_OK) {
+        st = mine;
+    }
     for (j = 0u; j < e->nx; ++j) {
         est->xhat[j] = xh[j];
     }
@@ -357,7 +604,3 @@ stsp_status_t stsp_est_step(stsp_est_t *est, uint32_t tick, const stsp_f32_t *y,
     return st;
 }
 
-#else
-/* A fixed-point build has no estimator; ISO C wants a declaration in every translation unit. */
-typedef int stsp_estimator_float32_only;
-#endif

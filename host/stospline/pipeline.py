@@ -24,6 +24,7 @@ from stospline.problem.model import Problem
 from stospline.report.design_summary import design_summary
 from stospline.report.json_numbers import rounded
 from stospline.oracle.evaluate import evaluate_continuous, evaluate_table, state_range
+from stospline.precision import ceil_significant
 from stospline.table.codegen import generate_c
 from stospline.table.format import GainTable, TickGains, table_of
 from stospline.table_options import DEFAULT_SIGMAS, check_spline_tolerance
@@ -372,6 +373,33 @@ def fixed_point_table(d: Designed, arith: str, *, sigmas: float = DEFAULT_SIGMAS
     return quantize_table(double_table(d), arith, x_range)
 
 
+def fixed_point_estimator(d: Designed, arith: str, *, sigmas: float = DEFAULT_SIGMAS
+                          ) -> tuple[FixedPointTable, tuple]:
+    """The Q15/Q31 law and filter of a problem with [measurement]
+    (`stospline.estimator.qformat`): ``(law, (filter, summary))``. The law's state scales
+    cover the true state and the estimate of the sensor loop (`estimator_state_range`); the
+    summary holds the filter's scales and the written error bounds (max over the plan, rounded
+    up to 3 digits) on x̂ and u against the double loop. Raises ValueError as
+    `fixed_point_table`, and for a table with no estimator form (a delay, a band latch)."""
+    from stospline.estimator.oracle import evaluate_estimator
+    from stospline.estimator.qformat import (error_bound, estimator_state_range,
+                                             quantize_estimator)
+    if d.table.delay_ticks or d.table.band_qp is not None or d.table.spline is not None:
+        raise ValueError("the fixed-point estimator takes per-tick tables without a delay or "
+                         "a band latch")
+    exact = double_table(d)
+    loop = evaluate_estimator(d.problem, exact, path=True)
+    x_range = estimator_state_range(d.problem, exact, loop, sigmas=sigmas)
+    ft = fixed_point_table(d, arith, x_range=x_range)
+    qt = quantize_estimator(d.problem, ft, loop, sigmas=sigmas)
+    summary = {**qt.summary(), "error_bound": "none (actuator limits)"}
+    if not ft.limited:
+        xb, ub = error_bound(ft, qt)
+        summary["error_bound"] = {"xhat": [ceil_significant(b, 3) for b in xb.max(0)],
+                                  "u": [ceil_significant(b, 3) for b in ub.max(0)]}
+    return ft, (qt, summary)
+
+
 def fixed_point_spline(d: Designed, arith: str, *, tolerance: float | None = None,
                        sigmas: float = DEFAULT_SIGMAS, x_range=None
                        ) -> tuple[FixedPointTable, dict]:
@@ -456,6 +484,7 @@ def design_files(d: Designed, source_name: str, arith: str = "float32", *,
     summary (what it guarantees over the parameter box)."""
     check_implementable(d)
     summary = design_summary(d)
+    q_est = None
     if arith == "float32":
         table = d.table
     elif d.table.spline is not None:
@@ -466,13 +495,21 @@ def design_files(d: Designed, source_name: str, arith: str = "float32", *,
         summary["fixed"] = rounded({**table.summary(), "state_sigmas": DEFAULT_SIGMAS})
         summary["table"] = q_cert
     else:
+        q_est = None
         try:
-            table = fixed if fixed is not None else fixed_point_table(d, arith)
+            if fixed is not None:
+                table = fixed
+            elif d.problem.measurement is not None:     # the Q law and filter on the estimate
+                table, q_est = fixed_point_estimator(d, arith)
+            else:
+                table = fixed_point_table(d, arith)
         except ValueError as exc:            # scale exponents beyond STSP_Q_EXP_MAX
             raise strict.fixed_scale_error(d.problem, arith, exc) from None
         limits.check_table(table)
         summary["fixed"] = rounded({**table.summary(), "state_sigmas": DEFAULT_SIGMAS,
                                     **(fixed_terms or {})})
+        if q_est is not None:
+            summary["fixed"]["estimator"] = rounded(q_est[1])
     strict.check_summary_finite(d.problem, summary)
     n = table_stem(d.problem.name, arith, d.table.spline is not None)
     text = strict.dumps(summary) + "\n"
@@ -482,6 +519,11 @@ def design_files(d: Designed, source_name: str, arith: str = "float32", *,
     if arith == "float32" and d.problem.measurement is not None:   # the filter's tables
         from stospline.estimator.ctable import with_estimator
         header, source = with_estimator(header, source, d.problem, table)
+    elif q_est is not None:
+        from stospline.estimator.qformat import estimator_q_c
+        eh, ec = estimator_q_c(q_est[0], table.name)
+        body, guard = header.rsplit("#endif", 1)
+        header, source = body + eh.lstrip("\n") + "\n#endif" + guard, source + ec
     return {f"{n}.h": header, f"{n}.c": source, f"{n}.json": text}, summary
 
 

@@ -30,7 +30,7 @@ static uint32_t fuzz_tick(fuzz_in_t *in, uint32_t op, uint32_t next)
 
 /* n floats of any bit pattern (NaN, Inf, huge); with `moderate`, mostly of magnitude about 1
  * (the exponent of 1.0f, any sign and mantissa). */
-static void fuzz_floats(fuzz_in_t *in, float *x, uint32_t n, int moderate)
+static inline void fuzz_floats(fuzz_in_t *in, float *x, uint32_t n, int moderate)
 {
     uint32_t j;
     for (j = 0u; j < n; ++j) {

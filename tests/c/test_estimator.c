@@ -3,7 +3,11 @@
  * tests/c/estimator_reference.py), and every bad input's status: readings NaN/Inf or missing,
  * ticks repeated, skipped, backwards or past the plan, NULL pointers, corrupt or mismatched
  * estimator tables (magic, version, sizes, CRC, values, problem hash), tables changed after
- * init (verify). Built against the generic controller and under ASan + UBSan. */
+ * init (verify). Built against the generic controller and under ASan + UBSan.
+ * Built with STSP_ARITH_Q15 (estimator_q15*): the same on robot_position_sensor_q15.*, bit for
+ * bit against the integer reference (estimator_q_expected.h, from
+ * tests/c/estimator_q_reference.py; every prediction hashed too), a saturating reading
+ * (STSP_WARN_STATE_CLAMPED) and corrupt exponents, shifts and row sums. */
 #include <math.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -13,18 +17,41 @@
 
 #include <cmocka.h>
 
-#include "robot_position_sensor.h"
+#include "estimator_tables.h"
+#ifdef STSP_ARITH_FIXED_POINT
+#include "estimator_q_expected.h"
+#else
 #include "estimator_expected.h"
+#endif
 
-#define NX ROBOT_POSITION_SENSOR_NX
-#define NY ROBOT_POSITION_SENSOR_NY
-#define EVERY ROBOT_POSITION_SENSOR_EVERY
-#define N_TICKS ROBOT_POSITION_SENSOR_N_TICKS
+#define NX SENSOR(NX)
+#define NY SENSOR(NY)
+#define EVERY SENSOR(EVERY)
+#define N_TICKS SENSOR(N_TICKS)
 #define N_SAMPLES ((N_TICKS + EVERY - 1u) / EVERY)
 
-static const stsp_table_t *const T = &robot_position_sensor_table;
-static const stsp_est_table_t *const E = &robot_position_sensor_estimator;
+static const stsp_table_t *const T = &TABLE;
+static const stsp_est_table_t *const E = &ESTIMATOR;
 
+#ifdef STSP_ARITH_FIXED_POINT
+/* A value as the expected values hold it: the integer's 32-bit two's complement. */
+static uint32_t bits_of(stsp_scalar_t v)
+{
+    return (uint32_t)(int32_t)v;
+}
+
+static void reading(uint32_t tick, stsp_scalar_t y[2])
+{
+    y[0] = est_y[tick / EVERY][0];
+    y[1] = est_y[tick / EVERY][1];
+}
+
+/* A changed table entry (one bit). */
+static stsp_scalar_t flipped(stsp_scalar_t v)
+{
+    return (stsp_scalar_t)(v ^ 1);
+}
+#else
 static uint32_t bits_of(float v)
 {
     uint32_t b;
@@ -39,19 +66,16 @@ static void reading(uint32_t tick, float y[2])
     memcpy(&y[1], &est_y[tick / EVERY][1], sizeof y[1]);
 }
 
-static uint32_t fnv1a(uint32_t h, uint32_t w)
+static float flipped(float v)
 {
-    uint32_t i;
-    for (i = 0u; i < 4u; ++i) {
-        h = (h ^ ((w >> (8u * i)) & 0xFFu)) * 0x01000193u;
-    }
-    return h;
+    return -v;
 }
+#endif
 
 /* One in-order tick with the recorded reading (none at EST_MISSING). */
-static stsp_status_t step_recorded(stsp_est_t *e, uint32_t j, float u[2])
+static stsp_status_t step_recorded(stsp_est_t *e, uint32_t j, stsp_scalar_t u[2])
 {
-    float y[2];
+    stsp_scalar_t y[2];
     if ((j % EVERY) != 0u) {
         return stsp_est_step(e, j, NULL, u);
     }
@@ -63,25 +87,41 @@ static void test_crc_and_header(void **state)
 {
     (void)state;
     assert_int_equal(stsp_est_table_crc32(E), E->crc32);
+    assert_int_equal(E->scalar_kind, STSP_SCALAR_KIND);
     assert_int_equal(E->ny, NY);
     assert_int_equal(E->every, EVERY);
     assert_int_equal(E->nx, NX);
     assert_memory_equal(E->problem_sha256, T->problem_sha256, 32u);
 }
 
-static void test_bit_for_bit_against_the_specification(void **state)
+/* The whole plan with the recorded readings: FNV-1a over every command (fixed point: and
+ * every prediction), the commands at the checked ticks, each tick's status (*clamped counts
+ * STSP_WARN_STATE_CLAMPED, fixed point only). */
+static uint32_t run_plan(stsp_est_t *e, uint32_t *clamped)
 {
-    stsp_est_t e;
-    float u[2];
+    stsp_scalar_t u[2];
     uint32_t j;
     uint32_t c = 0u;
     uint32_t h = 0x811C9DC5u;
-    (void)state;
-    assert_int_equal(stsp_est_init(&e, T, E), STSP_OK);
+    *clamped = 0u;
     for (j = 0u; j < N_TICKS; ++j) {
-        const stsp_status_t st = step_recorded(&e, j, u);
-        assert_int_equal(st, (j == EST_MISSING) ? STSP_WARN_NO_MEASUREMENT : STSP_OK);
-        h = fnv1a(fnv1a(h, bits_of(u[0])), bits_of(u[1]));
+        const stsp_status_t st = step_recorded(e, j, u);
+        if (j == EST_MISSING) {
+            assert_int_equal(st, STSP_WARN_NO_MEASUREMENT);
+        } else if (st == STSP_WARN_STATE_CLAMPED) {
+            ++*clamped;
+        } else {
+            assert_int_equal(st, STSP_OK);
+        }
+        h = est_fnv1a(est_fnv1a(h, bits_of(u[0])), bits_of(u[1]));
+#ifdef STSP_ARITH_FIXED_POINT
+        {
+            uint32_t r;
+            for (r = 0u; r < NX; ++r) {
+                h = est_fnv1a(h, bits_of(e->xhat[r]));
+            }
+        }
+#endif
         if ((c < EST_N_CHECKED) && (est_checked[c] == j)) {
             assert_int_equal(bits_of(u[0]), est_checked_u[c][0]);
             assert_int_equal(bits_of(u[1]), est_checked_u[c][1]);
@@ -89,19 +129,31 @@ static void test_bit_for_bit_against_the_specification(void **state)
         }
     }
     assert_int_equal(c, EST_N_CHECKED);
-    assert_int_equal(h, EST_HASH);
+    return h;
+}
+
+static void test_bit_for_bit_against_the_specification(void **state)
+{
+    stsp_est_t e;
+    stsp_scalar_t u[2];
+    uint32_t clamped;
+    (void)state;
+    assert_int_equal(stsp_est_init(&e, T, E), STSP_OK);
+    assert_int_equal(run_plan(&e, &clamped), EST_HASH);
+#ifdef STSP_ARITH_FIXED_POINT
+    assert_int_equal(clamped, EST_N_CLAMPED); /* the saturating reading's tick among them */
+    assert_true(EST_N_CLAMPED >= 1u);
+#else
+    assert_int_equal(clamped, 0u);
+#endif
     assert_int_equal(stsp_est_step(&e, N_TICKS, NULL, u), STSP_ERR_TICK_RANGE);
     assert_true((u[0] == T->u_hold[0]) && (u[1] == T->u_hold[1]));
     /* reset: the same plan again, the same commands */
     assert_int_equal(stsp_est_reset(&e), STSP_OK);
-    h = 0x811C9DC5u;
-    for (j = 0u; j < N_TICKS; ++j) {
-        (void)step_recorded(&e, j, u);
-        h = fnv1a(fnv1a(h, bits_of(u[0])), bits_of(u[1]));
-    }
-    assert_int_equal(h, EST_HASH);
+    assert_int_equal(run_plan(&e, &clamped), EST_HASH);
 }
 
+#ifndef STSP_ARITH_FIXED_POINT
 /* A NaN or infinite reading is refused with the safe command and changes nothing: the same
  * tick stepped again with the good reading gives the specification's command. */
 static void test_nonfinite_reading(void **state)
@@ -129,13 +181,14 @@ static void test_nonfinite_reading(void **state)
     assert_int_equal(stsp_est_step(&e, 1u, y, u), STSP_OK);
     assert_int_equal(bits_of(u[0]), est_checked_u[1][0]);
 }
+#endif
 
 static void test_ticks_repeated_skipped_backwards(void **state)
 {
     stsp_est_t e;
     stsp_est_t f;
-    float u[2];
-    float again[2];
+    stsp_scalar_t u[2];
+    stsp_scalar_t again[2];
     uint32_t j;
     (void)state;
     assert_int_equal(stsp_est_init(&e, T, E), STSP_OK);
@@ -161,19 +214,21 @@ static void test_ticks_repeated_skipped_backwards(void **state)
     assert_int_equal(bits_of(u[1]), est_skipped_u[1][1]);
     /* a skip into stage 1 predicts over 3980 ticks and latches there */
     assert_int_equal(stsp_est_step(&f, 4000u, NULL, u), STSP_WARN_TICK_SKIPPED);
+#ifndef STSP_ARITH_FIXED_POINT
     assert_true(isfinite(u[0]) && isfinite(u[1]));
+#endif
     assert_int_equal(f.ctrl.stage, 1u);
 }
 
 static void test_null_and_uninitialized(void **state)
 {
     stsp_est_t e;
-    float y[2] = {0.0f, 0.0f};
-    float u[2] = {3.0f, 3.0f};
+    stsp_scalar_t y[2] = {(stsp_scalar_t)0, (stsp_scalar_t)0};
+    stsp_scalar_t u[2] = {(stsp_scalar_t)3, (stsp_scalar_t)3};
     (void)state;
     memset(&e, 0, sizeof e);
     assert_int_equal(stsp_est_step(&e, 0u, y, u), STSP_ERR_NOT_INITIALIZED);
-    assert_true(u[0] == 3.0f); /* nu unknown: not written */
+    assert_true(u[0] == (stsp_scalar_t)3); /* nu unknown: not written */
     assert_int_equal(stsp_est_reset(&e), STSP_ERR_NOT_INITIALIZED);
     assert_int_equal(stsp_est_verify(&e), STSP_ERR_NOT_INITIALIZED);
     assert_int_equal(stsp_est_init(NULL, T, E), STSP_ERR_NULL);
@@ -191,13 +246,59 @@ static stsp_status_t init_copy(stsp_est_table_t *c)
     stsp_est_t e;
     const stsp_status_t st = stsp_est_init(&e, T, c);
     if (st != STSP_OK) { /* refused: the instance is not ready */
-        float u[2];
+        stsp_scalar_t u[2];
         assert_int_equal(stsp_est_step(&e, 0u, NULL, u), STSP_ERR_NOT_INITIALIZED);
     }
     return st;
 }
 
-static float gain_copy[N_SAMPLES * NX * NY];
+static stsp_scalar_t gain_copy[N_SAMPLES * NX * NY];
+#ifdef STSP_ARITH_FIXED_POINT
+static int8_t exp_copy[NY];
+static uint8_t shift_copy[NY + 2u * NX];
+
+/* A copy of E with one changed array and its CRC recomputed: the values check's status. */
+static stsp_status_t refit(stsp_est_table_t *c)
+{
+    c->crc32 = stsp_est_table_crc32(c);
+    return init_copy(c);
+}
+
+/* Exponents, shifts and row sums: the fixed-point values check (CRC right). */
+static void corrupt_fixed_point(void)
+{
+    stsp_est_table_t c;
+    c = *E; c.scalar_kind = STSP_SCALAR_Q31;
+    assert_int_equal(init_copy(&c), STSP_ERR_BAD_VERSION);
+    c = *E; c.shift = NULL;
+    assert_int_equal(init_copy(&c), STSP_ERR_NULL);
+    c = *E; c.y_exp = NULL;
+    assert_int_equal(init_copy(&c), STSP_ERR_NULL);
+    c = *E; c.e_exp = NULL;
+    assert_int_equal(init_copy(&c), STSP_ERR_NULL);
+    /* a shift outside 1 .. 61 - F */
+    memcpy(shift_copy, E->shift, sizeof shift_copy);
+    shift_copy[NY + 1u] = 0u;
+    c = *E; c.shift = shift_copy;
+    assert_int_equal(refit(&c), STSP_ERR_BAD_VALUES);
+    shift_copy[NY + 1u] = 47u;
+    assert_int_equal(refit(&c), STSP_ERR_BAD_VALUES);
+    /* a prediction row whose sum could overflow: its pass-through 2^k alone at the limit */
+    memcpy(shift_copy, E->shift, sizeof shift_copy);
+    shift_copy[NY + NX] = 46u;
+    assert_int_equal(refit(&c), STSP_ERR_BAD_VALUES);
+    /* an innovation finer than the reading's by too much (the reading's coefficient 2^up with
+     * up beyond 61 - F), an exponent beyond STSP_Q_EXP_MAX, e_exp above y_exp */
+    memcpy(exp_copy, E->e_exp, sizeof exp_copy);
+    exp_copy[0] = -40;
+    c = *E; c.e_exp = exp_copy;
+    assert_int_equal(refit(&c), STSP_ERR_BAD_VALUES);
+    exp_copy[0] = -61;
+    assert_int_equal(refit(&c), STSP_ERR_BAD_VALUES);
+    exp_copy[0] = (int8_t)(E->y_exp[0] + 1);
+    assert_int_equal(refit(&c), STSP_ERR_BAD_VALUES);
+}
+#endif
 
 static void test_corrupt_tables_are_refused(void **state)
 {
@@ -208,7 +309,11 @@ static void test_corrupt_tables_are_refused(void **state)
     assert_int_equal(init_copy(&c), STSP_ERR_BAD_MAGIC);
     c = *E; c.format_version = 2u;
     assert_int_equal(init_copy(&c), STSP_ERR_BAD_VERSION);
+#ifdef STSP_ARITH_FIXED_POINT
+    c = *E; c.scalar_kind = STSP_SCALAR_FLOAT32;
+#else
     c = *E; c.scalar_kind = STSP_SCALAR_Q15;
+#endif
     assert_int_equal(init_copy(&c), STSP_ERR_BAD_VERSION);
     c = *E; c.ny = 0u;
     assert_int_equal(init_copy(&c), STSP_ERR_BAD_DIMS);
@@ -228,13 +333,17 @@ static void test_corrupt_tables_are_refused(void **state)
     assert_int_equal(init_copy(&c), STSP_ERR_NULL);
     /* one flipped bit of a gain: the CRC */
     memcpy(gain_copy, E->gain, sizeof gain_copy);
-    gain_copy[17] = -gain_copy[17];
+    gain_copy[17] = flipped(gain_copy[17]);
     c = *E; c.gain = gain_copy;
     assert_int_equal(init_copy(&c), STSP_ERR_BAD_CRC);
+#ifdef STSP_ARITH_FIXED_POINT
+    corrupt_fixed_point();
+#else
     /* a NaN gain with a matching CRC: the values */
     gain_copy[17] = NAN;
     c.crc32 = stsp_est_table_crc32(&c);
     assert_int_equal(init_copy(&c), STSP_ERR_BAD_VALUES);
+#endif
     /* tables of another problem file (CRC right for the changed hash) */
     c = *E; c.problem_sha256[0] ^= 1u;
     c.crc32 = stsp_est_table_crc32(&c);
@@ -247,14 +356,14 @@ static void test_verify_stops_on_a_changed_table(void **state)
 {
     stsp_est_table_t c = *E;
     stsp_est_t e;
-    float u[2];
+    stsp_scalar_t u[2];
     (void)state;
     memcpy(gain_copy, E->gain, sizeof gain_copy);
     c.gain = gain_copy;
     assert_int_equal(stsp_est_init(&e, T, &c), STSP_OK);
     assert_int_equal(stsp_est_verify(&e), STSP_OK);
     assert_int_equal(step_recorded(&e, 0u, u), STSP_OK);
-    gain_copy[3] = gain_copy[3] + 1.0f; /* the data: the CRC */
+    gain_copy[3] = flipped(gain_copy[3]); /* the data: the CRC */
     assert_int_equal(stsp_est_verify(&e), STSP_ERR_BAD_CRC);
     assert_int_equal(stsp_est_step(&e, 1u, NULL, u), STSP_ERR_NOT_INITIALIZED);
     assert_true((u[0] == T->u_hold[0]) && (u[1] == T->u_hold[1]));
@@ -263,6 +372,13 @@ static void test_verify_stops_on_a_changed_table(void **state)
     c.every = 10u; /* the header: changed, no array read through it */
     assert_int_equal(stsp_est_verify(&e), STSP_ERR_TABLE_CHANGED);
     assert_int_equal(stsp_est_reset(&e), STSP_ERR_NOT_INITIALIZED);
+#ifdef STSP_ARITH_FIXED_POINT
+    c.every = E->every; /* an exponent array moved: the header too */
+    assert_int_equal(stsp_est_init(&e, T, &c), STSP_OK);
+    memcpy(exp_copy, E->e_exp, sizeof exp_copy);
+    c.e_exp = exp_copy;
+    assert_int_equal(stsp_est_verify(&e), STSP_ERR_TABLE_CHANGED);
+#endif
 }
 
 int main(void)
@@ -270,7 +386,9 @@ int main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_crc_and_header),
         cmocka_unit_test(test_bit_for_bit_against_the_specification),
+#ifndef STSP_ARITH_FIXED_POINT
         cmocka_unit_test(test_nonfinite_reading),
+#endif
         cmocka_unit_test(test_ticks_repeated_skipped_backwards),
         cmocka_unit_test(test_null_and_uninitialized),
         cmocka_unit_test(test_corrupt_tables_are_refused),

@@ -2,7 +2,7 @@
 """Report: instructions per stsp_est_step call (the controller on a sensor) on Cortex-M4F under
 QEMU, for the robot with a position sensor (gains/robot_position_sensor.*).
 
-    python3 tools/arm/count_estimator.py [--build DIR]
+    python3 tools/arm/count_estimator.py [--build DIR] [--arith float32|q15] [--replay-only]
 
 Compiles tools/arm/estimator_bench_main.c with firmware/src/*.c and the robot's tables
 (arm-none-eabi-gcc -O2, -mcpu=cortex-m4 hard float, -ffp-contract=off, the generic build:
@@ -10,7 +10,11 @@ the estimator is not specialised by STSP_FIXED_*), runs it in qemu-system-arm mp
 the method of tools/arm/count_instructions.py (-singlestep, -d exec,nochain, -dfilter on
 stsp_est_step, everything it calls and the caller bench_step; every traced address checked
 against the disassembly) and prints instructions per call by kind of tick. Instructions, not
-cycles. Standard library only.
+cycles. With --arith q15: the Q15 build on gains/robot_position_sensor_q15.*, and then the
+whole plan replayed on the target (built with -DBENCH_HASH) with the readings of
+tests/c/estimator_q_expected.h: its hash of every command and prediction must be that file's
+EST_HASH (the host's integer reference, bit for bit), else exit status 1; --replay-only
+does that alone (the ctest arm_estimator_q15_replay). Standard library only.
 """
 from __future__ import annotations
 
@@ -29,28 +33,35 @@ FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", 
          "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"]
 
 
-def build(out: Path) -> Path:
-    elf = out / "bench_estimator.elf"
+SUFFIX = {"float32": "f32", "q15": "q15"}
+
+
+def build(out: Path, arith: str = "float32", hashes: bool = False) -> Path:
+    elf = out / f"{'hash' if hashes else 'bench'}_estimator_{arith}.elf"
     arm = ROOT / "tools" / "arm"
-    run(["arm-none-eabi-gcc", *FLAGS, f"-I{ROOT / 'firmware/include'}",
-         f"-I{ROOT / 'firmware/src'}", f"-I{ROOT / 'gains'}",
+    name = "robot_position_sensor" + ("" if arith == "float32" else f"_{arith}")
+    defs = [] if arith == "float32" else [f"-DSTSP_ARITH_{arith.upper()}"]
+    run(["arm-none-eabi-gcc", *FLAGS, *defs, *(["-DBENCH_HASH"] if hashes else []),
+         f"-I{ROOT / 'firmware/include'}", f"-I{ROOT / 'firmware/src'}", f"-I{ROOT / 'gains'}",
+         f"-I{ROOT / 'tests/c'}",
          *sorted(str(p) for p in (ROOT / "firmware/src").glob("*.c")),
-         str(ROOT / "gains/robot_position_sensor.c"), str(arm / "estimator_bench_main.c"),
+         str(ROOT / f"gains/{name}.c"), str(arm / "estimator_bench_main.c"),
          str(arm / "startup.c"), "--specs=rdimon.specs", "-T", str(arm / "mps2-an386.ld"),
          "-Wl,--gc-sections", "-o", str(elf)])
     return elf
 
 
-def count(elf: Path) -> tuple[list[dict], int]:
+def count(elf: Path, arith: str = "float32") -> tuple[list[dict], int]:
     syms = symbols(elf)
-    funcs = callees(elf, syms, "stsp_est_step_f32")
+    entry = f"stsp_est_step_{SUFFIX[arith]}"
+    funcs = callees(elf, syms, entry)
     ranges = {n: syms[n] for n in funcs + ["bench_step"]}
     trace = elf.with_suffix(".trace")
     insns, out = trace_run(elf, ranges, trace)
     calls = [{"tick": int(m[0]), "status": int(m[1]), "reading": m[2] == "1"}
              for m in re.findall(r"call \d+ tick (\d+) status (-?\d+) reading (\d)", out)]
     size = int(re.search(r"sizeof (\d+)", out).group(1))
-    counts = instructions_per_call(trace, insns, {syms["stsp_est_step_f32"][0]},
+    counts = instructions_per_call(trace, insns, {syms[entry][0]},
                                    [ranges["bench_step"]])
     if len(counts) != len(calls):
         raise SystemExit(f"count: {len(counts)} calls traced, the bench reports {len(calls)}")
@@ -62,9 +73,16 @@ def count(elf: Path) -> tuple[list[dict], int]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--build", type=Path, default=ROOT / "build" / "arm-estimator")
+    ap.add_argument("--arith", choices=sorted(SUFFIX), default="float32")
+    ap.add_argument("--replay-only", action="store_true",
+                    help="only the whole-plan replay against the host reference (fixed point)")
     args = ap.parse_args()
     args.build.mkdir(parents=True, exist_ok=True)
-    calls, size = count(build(args.build))
+    if args.replay_only:
+        if args.arith == "float32":
+            ap.error("--replay-only replays a fixed-point build: give --arith q15")
+        return check_hash(args.build, args.arith)
+    calls, size = count(build(args.build, args.arith), args.arith)
     every = 20
     kinds = {
         "tick 0: reading, latch of stage 0": lambda c: c["tick"] == 0,
@@ -74,13 +92,28 @@ def main() -> int:
         "skip to 2999 (predicts over 2957 ticks)": lambda c: c["tick"] == 2999,
         "tick 3000: reading, latch of stage 1": lambda c: c["tick"] == 3000,
     }
-    print("| stsp_est_step, Cortex-M4F (QEMU) | calls | instructions (median) | min-max |")
+    print(f"| stsp_est_step ({args.arith}), Cortex-M4F (QEMU) | calls | instructions (median) "
+          f"| min-max |")
     print("|---|---|---|---|")
     for name, sel in kinds.items():
         k = [c["insns"] for c in calls if sel(c)]
         print(f"| {name} | {len(k)} | {statistics.median(k):.0f} | {min(k)}-{max(k)} |")
     print(f"\nsizeof(stsp_est_t) = {size} bytes")
-    return 0
+    return 0 if args.arith == "float32" else check_hash(args.build, args.arith)
+
+
+def check_hash(out: Path, arith: str) -> int:
+    """The whole plan on the target against tests/c/estimator_q_expected.h's EST_HASH."""
+    elf = build(out, arith, hashes=True)
+    got = re.search(r"hash (0x[0-9A-F]{8})", run(
+        ["timeout", "600", "qemu-system-arm", "-M", "mps2-an386", "-nographic", "-monitor",
+         "none", "-semihosting-config", "enable=on,target=native", "-kernel", str(elf)]))
+    want = re.search(r"#define EST_HASH (0x[0-9A-F]{8})u",
+                     (ROOT / "tests/c/estimator_q_expected.h").read_text()).group(1)
+    ok = got is not None and got.group(1) == want
+    print(f"whole plan replayed: M4F {got.group(1) if got else 'none'}, host reference {want} "
+          f"{'ok' if ok else 'DIFFERS'}")
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":

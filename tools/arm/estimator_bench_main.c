@@ -1,19 +1,28 @@
 /* Instruction-count bench of the estimator controller (tools/arm/count_estimator.py, QEMU
- * mps2-an386, Cortex-M4F) on gains/robot_position_sensor.*: BENCH_REPS times, reset, then
+ * mps2-an386, Cortex-M4F) on gains/robot_position_sensor.* (float32) or, built with
+ * STSP_ARITH_Q15, gains/robot_position_sensor_q15.*: BENCH_REPS times, reset, then
  * ticks 0 .. 2 EVERY + 1 in order (tick 0: reading and latch of stage 0; EVERY, 2 EVERY:
  * readings; the others predict only), then, by a skip to the tick before stage 1 (the skip's
  * prediction over the missed ticks is its own line), the switch tick (reading and latch of
  * stage 1) and the one after it. Prints one line per stsp_est_step call, in call order:
- *     call <index> tick <tick> status <status> reading <0|1> sizeof <sizeof(stsp_est_t)> */
+ *     call <index> tick <tick> status <status> reading <0|1> sizeof <sizeof(stsp_est_t)>
+ * With BENCH_HASH (Q15 only) instead: the whole plan with the readings of
+ * tests/c/estimator_q_expected.h (the one of EST_MISSING withheld), printing
+ *     hash 0x<FNV-1a over every tick's u_q and prediction x̂_q>
+ * which must be that file's EST_HASH (the host's integer reference, bit for bit). */
 #include <stdint.h>
 #include <stdio.h>
 
-#include "robot_position_sensor.h"
+#include "estimator_tables.h" /* tests/c: the tables of the build's arithmetic */
+#ifdef STSP_ARITH_Q15
+#include "estimator_q_expected.h"
+#endif
 
 #define BENCH_REPS 4u
-#define EVERY ROBOT_POSITION_SENSOR_EVERY
+#define EVERY SENSOR(EVERY)
 #define BENCH_CALLS (BENCH_REPS * (2u * EVERY + 5u))
 
+#ifndef BENCH_HASH
 typedef struct {
     uint32_t tick;
     int16_t status;
@@ -24,9 +33,9 @@ static bench_call_t calls[BENCH_CALLS];
 static uint32_t n_calls;
 
 __attribute__((noinline, noclone)) static void bench_step(stsp_est_t *e, uint32_t tick,
-                                                          const stsp_f32_t *y)
+                                                          const stsp_scalar_t *y)
 {
-    stsp_f32_t u[ROBOT_POSITION_SENSOR_NU];
+    stsp_scalar_t u[SENSOR(NU)];
     const stsp_status_t st = stsp_est_step(e, tick, y, u);
     if (n_calls < BENCH_CALLS) {
         bench_call_t *rec = &calls[n_calls++];
@@ -39,18 +48,25 @@ __attribute__((noinline, noclone)) static void bench_step(stsp_est_t *e, uint32_
 int main(void)
 {
     static stsp_est_t est;
-    const uint32_t sw = robot_position_sensor_table.stage_start[1];
-    stsp_f32_t y[2] = {-5.0f, 1.0f};
+    const uint32_t sw = TABLE.stage_start[1];
+#ifdef STSP_ARITH_Q15
+    stsp_scalar_t y[2] = {est_y[0][0], est_y[0][1]};
+#else
+    stsp_scalar_t y[2] = {-5.0f, 1.0f};
+#endif
     uint32_t rep, k;
-    const stsp_status_t st = stsp_est_init(&est, &robot_position_sensor_table,
-                                           &robot_position_sensor_estimator);
+    const stsp_status_t st = stsp_est_init(&est, &TABLE, &ESTIMATOR);
     if (st != STSP_OK) {
         printf("bench: stsp_est_init returned %d\n", (int)st);
         return 1;
     }
     for (rep = 0u; rep < BENCH_REPS; ++rep) {
         (void)stsp_est_reset(&est);
+#ifdef STSP_ARITH_Q15
+        y[0] = (stsp_scalar_t)(est_y[0][0] + (int32_t)rep);
+#else
         y[0] = -5.0f + 0.01f * (float)rep;
+#endif
         for (k = 0u; k <= 2u * EVERY + 1u; ++k) {
             bench_step(&est, k, y);
         }
@@ -65,3 +81,31 @@ int main(void)
     }
     return 0;
 }
+#else
+int main(void)
+{
+    static stsp_est_t est;
+    stsp_scalar_t y[2];
+    stsp_scalar_t u[2];
+    uint32_t h = 0x811C9DC5u;
+    uint32_t j, r;
+    if (stsp_est_init(&est, &TABLE, &ESTIMATOR) != STSP_OK) {
+        printf("bench: stsp_est_init failed\n");
+        return 1;
+    }
+    for (j = 0u; j < SENSOR(N_TICKS); ++j) {
+        const int sampled = (j % EVERY) == 0u;
+        if (sampled) {
+            y[0] = est_y[j / EVERY][0];
+            y[1] = est_y[j / EVERY][1];
+        }
+        (void)stsp_est_step(&est, j, (sampled && (j != EST_MISSING)) ? y : NULL, u);
+        h = est_fnv1a(est_fnv1a(h, (uint32_t)u[0]), (uint32_t)u[1]);
+        for (r = 0u; r < SENSOR(NX); ++r) {
+            h = est_fnv1a(h, (uint32_t)est.xhat[r]);
+        }
+    }
+    printf("hash 0x%08X\n", (unsigned)h);
+    return 0;
+}
+#endif

@@ -12,7 +12,8 @@
  * starting from the table's prior mean x̂ = xhat0 at tick 0. u is the command written (after
  * the clamp to the actuator limits): the one the plant holds over the tick.
  *
- * float32 only (a Q15/Q31 build has no estimator). Does not use malloc, recursion or VLAs;
+ * float32, Q15 and Q31 builds (the fixed-point arithmetic is below). Does not use malloc,
+ * recursion or VLAs;
  * every loop is bounded by the validated dimensions (nx <= STSP_MAX_NX, nu <= STSP_MAX_NU,
  * ny <= STSP_MAX_NY) or, for skipped ticks, by n_ticks.
  *
@@ -24,9 +25,27 @@
  *                 acc += Bd[r][i] u[i] for i = 0 .. nu-1; x̂[r] = acc
  * (host/stospline/estimator/spec.py is the same arithmetic in numpy, checked bit for bit).
  *
+ * Fixed point (STSP_ARITH_Q15/Q31, F = STSP_Q_FRAC_BITS; host/stospline/estimator/qformat.py
+ * is the same arithmetic, checked bit for bit): x̂ is held in the law's state format
+ * x̂ = x̂_q 2^(x_exp - F) (stsp_table_t.x_exp), the reading is y = y_q 2^(y_exp - F) and the
+ * innovation e = e_q 2^(e_exp - F). Each row (innovation i, update r, prediction r) is one
+ * exact sum in a 64-bit accumulator, then rounded half up by a shift and saturated:
+ *     innovation  acc = y_q[i] 2^(k + y_exp[i] - e_exp[i]) + sum_j C[i][j] x̂_q[j]
+ *     update      acc = x̂_q[r] 2^k + sum_i F[r][i] e_q[i]
+ *     predict     acc = x̂+_q[r] 2^k + fd[r] 2^F + sum_j (Ad - I)[r][j] x̂+_q[j]
+ *                       + sum_i Bd[r][i] u_q[i]
+ *     out_q = floor(acc / 2^k + 1/2), saturated to [-2^F, 2^F - 1]
+ * with k = shift[row] (1 .. 61 - F) and the entries stored scaled by 2^(z_exp - out_exp + k),
+ * fd by 2^(k - x_exp) (C stored negated: -C; the predictor's map as its increment Ad - I).
+ * stsp_est_init() requires every row's absolute sum, the pass-through coefficient and the
+ * 2^F-weighted constant included, to be at most 2^(61 - F): then |acc| <= 2^61
+ * for all inputs, the sums are exact and only the result can leave its Q range, which the step
+ * reports as STSP_WARN_STATE_CLAMPED (the innovation or the estimate saturated).
+ *
  * Buffers: stsp_est_t holds a stsp_ctrl_t, the validated copy of the estimator table's
  * header, STSP_MAX_NX + STSP_MAX_NU scalars (x̂ and the last command) and 12 bytes of state:
- * 1004 bytes with the default limits (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_est_t)).
+ * 1004 bytes with the default limits (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_est_t);
+ * Q15 400 bytes).
  * stsp_est_step() uses 2 STSP_MAX_NX + STSP_MAX_NY + STSP_MAX_NU scalars of stack plus
  * stsp_step()'s.
  */
@@ -34,10 +53,6 @@
 #define STSP_ESTIMATOR_H
 
 #include "stospline/stsp_controller.h"
-
-#ifdef STSP_ARITH_FIXED_POINT
-#error "stsp_estimator.h: the estimator runs in float32 builds only"
-#endif
 
 #ifdef __cplusplus
 extern "C" {
@@ -60,16 +75,19 @@ extern "C" {
 
 /**
  * The filter's tables (generated next to the gain table, same problem file). Layouts
- * (row-major): model[k][r*(nx + nu + 1) + c] = [Ad | Bd | fd] row r of predictor map k;
+ * (row-major): model[k][r*(nx + nu + 1) + c] = [Ad | Bd | fd] row r of predictor map k
+ * (fixed point: [Ad - I | Bd | fd]);
  * stage s uses maps model_start[s] .. model_start[s+1] - 1: one for every tick of the stage
  * (a time-invariant stage) or one per tick (a time-varying one); C[i*nx + j];
  * gain[s][r*ny + i] = F of sample s, at tick s * every, for s < ceil(n_ticks / every);
- * xhat0[nx] the prior mean.
+ * xhat0[nx] the prior mean. Fixed point: the entries are scaled as described at the top,
+ * C holds -C, y_exp/e_exp [ny] and shift [ny + 2 nx] (innovation rows, update rows, prediction
+ * rows) follow the problem hash.
  */
 typedef struct {
     uint32_t magic;              /**< STSP_EST_MAGIC */
     uint16_t format_version;     /**< STSP_EST_FORMAT_VERSION */
-    uint16_t scalar_kind;        /**< STSP_SCALAR_FLOAT32 */
+    uint16_t scalar_kind;        /**< STSP_SCALAR_KIND of the build */
     uint16_t nx;                 /**< states: the gain table's nx */
     uint16_t nu;                 /**< inputs: the gain table's nu */
     uint16_t ny;                 /**< sensor outputs, 1 .. STSP_MAX_NY */
@@ -77,12 +95,17 @@ typedef struct {
     uint32_t n_ticks;            /**< the gain table's n_ticks */
     uint32_t every;              /**< a sample every `every` ticks (>= 1), from tick 0 */
     const uint32_t *model_start; /**< [n_stages + 1] */
-    const stsp_f32_t *model;     /**< [model_start[n_stages]][nx][nx + nu + 1] */
-    const stsp_f32_t *C;         /**< [ny][nx] */
-    const stsp_f32_t *gain;      /**< [ceil(n_ticks / every)][nx][ny] */
-    const stsp_f32_t *xhat0;     /**< [nx] */
+    const stsp_scalar_t *model;  /**< [model_start[n_stages]][nx][nx + nu + 1] */
+    const stsp_scalar_t *C;      /**< [ny][nx] (fixed point: -C) */
+    const stsp_scalar_t *gain;   /**< [ceil(n_ticks / every)][nx][ny] */
+    const stsp_scalar_t *xhat0;  /**< [nx] */
     uint32_t crc32;              /**< see stsp_est_table_crc32() */
     uint8_t problem_sha256[32];  /**< the gain table's problem_sha256 */
+#ifdef STSP_ARITH_FIXED_POINT
+    const int8_t *y_exp;         /**< [ny]: reading scale exponents */
+    const int8_t *e_exp;         /**< [ny]: innovation scale exponents, <= y_exp */
+    const uint8_t *shift;        /**< [ny + 2 nx]: row shifts k, each 1 .. 61 - F */
+#endif
 } stsp_est_table_t;
 
 /** One estimator-controller instance, caller-owned; all fields private but `ctrl`'s
@@ -94,14 +117,15 @@ typedef struct {
     uint32_t ready;                    /**< a magic value after a successful init (private) */
     uint32_t next_tick;                /**< the tick x̂ is the prediction for (private) */
     uint32_t stage;                    /**< the stage of tick next_tick (private) */
-    stsp_f32_t xhat[STSP_MAX_NX];      /**< the prediction for next_tick (private) */
-    stsp_f32_t u_last[STSP_MAX_NU];    /**< the last command written (private) */
+    stsp_scalar_t xhat[STSP_MAX_NX];   /**< the prediction for next_tick (private) */
+    stsp_scalar_t u_last[STSP_MAX_NU]; /**< the last command written (private) */
 } stsp_est_t;
 
 /**
  * CRC-32 (as stsp_table_crc32) of nx, nu, ny, n_stages, n_ticks, every and
  * model_start[n_stages] as little-endian u32, model_start as u32 each, then model, C, gain,
- * xhat0 as little-endian binary32 bit patterns, then the 32 bytes of problem_sha256. The
+ * xhat0 as little-endian binary32 bit patterns (fixed point: int16/int32 two's complement,
+ * then y_exp, e_exp and shift one byte each), then the 32 bytes of problem_sha256. The
  * dimensions and pointers must be valid (stsp_est_init() checks them first).
  */
 uint32_t stsp_est_table_crc32(const stsp_est_table_t *est);
@@ -112,11 +136,12 @@ uint32_t stsp_est_table_crc32(const stsp_est_table_t *est);
  * each array is as long as the header says (ny and every size C and gain, and only the CRC
  * can tell them wrong). Errors (instance not ready):
  * STSP_ERR_NULL (a NULL pointer, also an array of the estimator table), STSP_ERR_BAD_MAGIC,
- * STSP_ERR_BAD_VERSION (format or scalar kind), STSP_ERR_BAD_DIMS (nx, nu, n_stages or
+ * STSP_ERR_BAD_VERSION (format or scalar kind not the build's), STSP_ERR_BAD_DIMS (nx, nu, n_stages or
  * n_ticks not the gain table's, ny outside 1 .. STSP_MAX_NY, every == 0, model_start not 0 then
  * one or a stage's ticks per stage), STSP_ERR_BAD_CRC, STSP_ERR_BAD_PROBLEM (problem_sha256 not
  * the gain table's: tables from different problem files), STSP_ERR_BAD_VALUES (a NaN or
- * infinite entry).
+ * infinite entry; fixed point: an exponent beyond +-STSP_Q_EXP_MAX, e_exp > y_exp, a shift
+ * outside 1 .. 61 - F, or a row whose absolute sum exceeds 2^(61 - F)).
  */
 stsp_status_t stsp_est_init(stsp_est_t *est, const stsp_table_t *table,
                             const stsp_est_table_t *est_table);
@@ -143,15 +168,17 @@ stsp_status_t stsp_est_verify(stsp_est_t *est);
  *   tick == the last one stepped: u is the command written then, STSP_WARN_TICK_REPEATED,
  *          nothing changes;
  *   earlier: STSP_ERR_TICK_ORDER; tick >= n_ticks: STSP_ERR_TICK_RANGE.
- * A NaN or infinite y[i] is STSP_ERR_NONFINITE_MEASUREMENT. On every negative status u is
+ * A NaN or infinite y[i] is STSP_ERR_NONFINITE_MEASUREMENT (float32). Fixed point: y is y_q,
+ * u is u_q; an innovation or estimate that saturated is STSP_WARN_STATE_CLAMPED (when
+ * stsp_step() and a missing reading have nothing to report). On every negative status u is
  * u_hold (not written when u is NULL, nor before a successful init) and the instance is
  * unchanged: the same tick may be stepped again (with y == NULL, to run on the prediction).
  * An update that overflows gives STSP_ERR_NONFINITE_STATE (from stsp_step()); a prediction
  * that overflows is kept, and every later step returns STSP_ERR_NONFINITE_STATE until a reset.
  * y and u must not overlap the instance or the tables; y may overlap u.
  */
-stsp_status_t stsp_est_step(stsp_est_t *est, uint32_t tick, const stsp_f32_t *y,
-                            stsp_f32_t *u);
+stsp_status_t stsp_est_step(stsp_est_t *est, uint32_t tick, const stsp_scalar_t *y,
+                            stsp_scalar_t *u);
 
 #ifdef __cplusplus
 }

@@ -108,7 +108,8 @@ typedef enum {
     STSP_WARN_SATURATED = 3,        /**< at least one input was clamped to u_min/u_max; which
                                          ones: stsp_ctrl_t.sat_mask */
     STSP_WARN_STATE_CLAMPED = 4,    /**< fixed point, stsp_state_to_q(): a state entry was
-                                         outside the Q range and was saturated to its end */
+                                         outside the Q range and was saturated to its end;
+                                         stsp_est_step(): the innovation or the estimate was */
     STSP_WARN_BAND_FALLBACK = 5,    /**< the band dual QP found no optimal active set for this
                                          x0 (W not positive definite in double precision), its
                                          data times x0 overflowed, or a multiplier is beyond

@@ -43,6 +43,10 @@ class EstimatorLoop:
     update of tick j, ``prior_error_cov[j]`` before it (the prediction the controller holds
     when tick j starts); ``knot_error_cov[k]`` that of ``x - x̂`` at knot k (the prediction).
     ``moments`` are the cost, knot means and covariances of the true state ``x``.
+    ``innovation_cov[j]`` is ``E ee'`` of the innovation ``e = y - C x̂`` at tick j (zero where
+    the sensor does not sample; its mean is zero), ``output_cov[j]`` the second moment
+    ``E yy'`` of the reading, ``estimate_ms[j]`` the largest of ``E x̂_i^2`` before and after
+    tick j's update: what the fixed-point scales of `estimator.qformat` need.
     """
     moments: Moments
     gain: np.ndarray
@@ -51,6 +55,9 @@ class EstimatorLoop:
     knot_error_cov: list[np.ndarray] = field(default_factory=list)
     knot_estimate_mean: list[np.ndarray] = field(default_factory=list)
     prior_error_cov: np.ndarray | None = None
+    innovation_cov: np.ndarray | None = None
+    output_cov: np.ndarray | None = None
+    estimate_ms: np.ndarray | None = None
 
 
 def _check(problem: Problem, table: GainTable, meas) -> None:
@@ -161,6 +168,9 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
     predict = np.zeros((table.n_ticks, n, n + m + 1))
     err_cov = np.zeros((table.n_ticks, n, n))
     prior_cov = np.zeros((table.n_ticks, n, n))
+    innov_cov = np.zeros((table.n_ticks, p, p))
+    out_cov = np.zeros((table.n_ticks, p, p))
+    est_ms = np.zeros((table.n_ticks, n))
     rec = _PathRecord(x0, path)
     eye = np.eye(d)
     Tw = _w_map(n, m, d, xs)                # w = [x; u; 1] = Tw z
@@ -227,6 +237,14 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         for j in range(int(table.stage_start[k]), int(table.stage_start[k + 1])):
             total = _add(M_L, M_U, 1.0)
             prior_cov[j] = _error_cov(total, xs, hs)
+            est_ms[j] = np.diag(total[hs, hs])
+            if meas.samples_at(j):      # E ee' of the innovation y - C x̂, E yy' of the reading
+                E = total[xs, xs] - total[xs, hs] - total[hs, xs] + total[hs, hs]
+                R = meas.noise_cov(total[xs, xs], table.t0 + j * h)
+                if extra_R is not None:
+                    R = R + extra_R
+                innov_cov[j] = C @ (0.5 * (E + E.T)) @ C.T + R
+                out_cov[j] = C @ total[xs, xs] @ C.T + R
             L_next = U_next = Mw_all = after = None
             for Mb, latch in ((M_L, False), (M_U, True)):
                 if Mb is None or Mb[-1, -1] == 0.0:
@@ -246,6 +264,7 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
                     else:
                         L_next = _add(L_next, Mm, miss)
             err_cov[j] = _error_cov(after, xs, hs)
+            est_ms[j] = np.maximum(est_ms[j], np.diag(after[hs, hs]))
             rec.command(Mw_all, n, m)
             M_L, M_U = L_next, U_next
             rec.state(_add(M_L, M_U, 1.0), n)
@@ -257,7 +276,8 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         err_knot.append(_error_cov(M, xs, hs))
         est_knot.append(M[hs, -1].copy())
     mom = rec.moments(J, means, covs, cons, problem.t0, h, table.n_ticks)
-    return EstimatorLoop(mom, gain_out, predict, err_cov, err_knot, est_knot, prior_cov)
+    return EstimatorLoop(mom, gain_out, predict, err_cov, err_knot, est_knot, prior_cov,
+                         innov_cov, out_cov, est_ms)
 
 
 def _add(acc, M, w: float):

@@ -24,7 +24,8 @@ from stospline.harness.plant_spec import zoh_step
 from stospline.harness.path_stats import COST_SAMPLE, Moments
 from stospline.table.codegen import generate_c
 
-__all__ = ["build_estimator_controller", "EstimatorController", "simulate_estimator"]
+__all__ = ["build_estimator_controller", "EstimatorController", "simulate_estimator",
+           "build_estimator_q"]
 
 _CDEF = PLANT_CDEF + """
 typedef int... stsp_status_t;
@@ -280,3 +281,64 @@ def _sqrt_psd(V: np.ndarray) -> np.ndarray:
     w, Q = np.linalg.eigh(V)
     return Q * np.sqrt(np.maximum(w, 0.0))
 
+
+_QCDEF = """
+typedef struct { ...; } stsp_est_t;
+uint32_t harness_q_crc(int stored);
+int harness_q_init(stsp_est_t *e, size_t count);
+int harness_q_step(stsp_est_t *e, size_t count, uint32_t tick, const int32_t *Y, int32_t *U,
+                   int *status, int32_t *xhat);
+"""
+
+# Harness-only C of a Q15/Q31 estimator controller: readings, commands and each path's
+# prediction as int32 whatever the format (a Q15 value is an int16 widened).
+_QBATCH = """
+#include "plant.h"
+#include "stospline/stsp_estimator.h"
+#include "%(p)s.h"
+uint32_t harness_q_crc(int stored) {
+    return stored ? %(p)s_estimator.crc32 : stsp_est_table_crc32(&%(p)s_estimator);
+}
+int harness_q_init(stsp_est_t *e, size_t count) {
+    size_t i;
+    stsp_status_t st = stsp_est_init(&e[0], &%(p)s_table, &%(p)s_estimator);
+    for (i = 1; i < count; ++i) e[i] = e[0];
+    return (int)st;
+}
+int harness_q_step(stsp_est_t *e, size_t count, uint32_t tick, const int32_t *Y, int32_t *U,
+                   int *status, int32_t *xhat) {
+    size_t i, j;
+    int worst = 0;
+    for (i = 0; i < count; ++i) {
+        stsp_scalar_t y[%(P)s_NY], u[%(P)s_NU];
+        stsp_status_t st;
+        for (j = 0; Y != NULL && j < %(P)s_NY; ++j) y[j] = (stsp_scalar_t)Y[i * %(P)s_NY + j];
+        st = stsp_est_step(&e[i], tick, (Y == NULL) ? NULL : y, u);
+        for (j = 0; j < %(P)s_NU; ++j) U[i * %(P)s_NU + j] = u[j];
+        for (j = 0; j < %(P)s_NX; ++j) xhat[i * %(P)s_NX + j] = e[i].xhat[j];
+        status[i] = (int)st;
+        if ((int)st < worst) worst = (int)st;
+    }
+    return worst;
+}
+"""
+
+
+def build_estimator_q(ft, qt, *, build_dir=None, quiet: bool = True):
+    """Compile the Q15/Q31 estimator controller of the law `ft` (`FixedPointTable`) and the
+    filter `qt` (`estimator.qformat.QEstimatorTable`); returns ``(ffi, lib)`` with
+    ``harness_q_crc``, ``harness_q_init`` and ``harness_q_step`` (int32 readings, commands
+    and predictions)."""
+    from stospline.estimator.qformat import estimator_q_c
+    from stospline.harness.controller_c import VARIANTS
+    name = ft.name
+    header, source = generate_c(ft)
+    eh, ec = estimator_q_c(qt, name)
+    body, guard = header.rsplit("#endif", 1)
+    header, source = body + eh + "\n#endif" + guard, source + ec
+    n, m, _ = ft.dims
+    mod = build_harness_module(f"_stsp_estq_{name}", {f"{name}.h": header, f"{name}.c": source},
+                               PLANT_CDEF + _QCDEF, _QBATCH % {"p": name, "P": name.upper()},
+                               VARIANTS[ft.arith][2] + [f"-DHARNESS_N={n}", f"-DHARNESS_M={m}"],
+                               build_dir=build_dir, quiet=quiet)
+    return mod.ffi, mod.lib

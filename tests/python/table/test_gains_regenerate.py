@@ -28,12 +28,13 @@ def test_regenerating_spline_gains_changes_no_byte(tmp_path, example):
             f"gains/{name} differs from a fresh `stospline design --table spline`"
 
 
-@pytest.mark.parametrize("arith", ["q15", "q31"])
-def test_regenerating_fixed_point_gains_changes_no_byte(tmp_path, arith):
-    assert main(["design", str(EXAMPLES / "robot_corridor.toml"), "--arith", arith,
+@pytest.mark.parametrize("example,arith", [("robot_corridor", "q15"), ("robot_corridor", "q31"),
+                                           ("robot_position_sensor", "q15")])
+def test_regenerating_fixed_point_gains_changes_no_byte(tmp_path, example, arith):
+    assert main(["design", str(EXAMPLES / f"{example}.toml"), "--arith", arith,
                  "--out", str(tmp_path)]) == 0
     for suffix in ("c", "h", "json"):
-        name = f"robot_corridor_{arith}.{suffix}"
+        name = f"{example}_{arith}.{suffix}"
         assert filecmp.cmp(tmp_path / name, GAINS / name, shallow=False), \
             f"gains/{name} differs from a fresh `stospline design --arith {arith}`"
 

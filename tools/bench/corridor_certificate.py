@@ -2,8 +2,9 @@
 """How long the chance-constrained robot's certificate at eps = 1e-4 takes through C, and the
 certificate itself.
 
-examples/robot_corridor_eps01.toml (the robot with running costs and a corridor that carries
-a risk budget), designed as the file says, is simulated through its compiled C controller.
+`--file` (default examples/robot_corridor_eps1e4.toml: the robot with running costs and a
+corridor that carries a risk budget of 1e-4; examples/robot_corridor_eps01.toml carries 0.01),
+designed as the file says, is simulated through its compiled C controller.
 
 Timing (the default): `--paths` paths (default 10^5) with the plant steps per tick that
 `stospline simulate` would choose for that run, once with the plant step and corridor watch
@@ -94,7 +95,7 @@ def timing(problem, d, args, workers: int) -> None:
     run_steps = plan_substeps(d, paths=args.paths, seed=args.seed, scheme=scheme).substeps
     cert_steps = plan_substeps(d, paths=args.certify_paths, seed=args.seed,
                                scheme=scheme).substeps
-    print(f"robot_corridor_eps01, {ticks} ticks; {workers} worker process(es); scheme "
+    print(f"{problem.name}, {ticks} ticks; {workers} worker process(es); scheme "
           f"{scheme}; plant steps per tick chosen: {run_steps} for {args.paths} paths, "
           f"{cert_steps} for {args.certify_paths}")
     ctl = build_controller(d.table)
@@ -215,7 +216,7 @@ def certify(problem, d, args, workers: int) -> None:
     ctl = build_controller(d.table, plant=run_problem)
     simulate(run_problem, ctl, paths=64, seed=args.seed, substeps=steps, workers=1)   # build
     eps_file = problem.corridors[0].epsilon
-    print(f"robot_corridor_eps01, {ticks} ticks, {paths} paths, seed {args.seed}, scheme "
+    print(f"{problem.name}, {ticks} ticks, {paths} paths, seed {args.seed}, scheme "
           f"{scheme}, {steps} plant step(s) per tick ({why}); set-up "
           f"{time.perf_counter() - t:.1f} s")
     runs = {}
@@ -311,6 +312,9 @@ def main() -> None:
     ap.add_argument("--cluster", type=int, default=0)
     ap.add_argument("--cluster-only", action="store_true")
     ap.add_argument("--scheduler", default=None)
+    ap.add_argument("--file", default="examples/robot_corridor_eps1e4.toml",
+                    help="the design timed and certified (default: the robot's corridor "
+                         "designed for eps = 1e-4)")
     ap.add_argument("--exit-bias", action="store_true")
     ap.add_argument("--problem-file", default="examples/robot_corridor.toml")
     ap.add_argument("--hz", type=int, default=0)
@@ -320,7 +324,7 @@ def main() -> None:
     if args.exit_bias:
         exit_bias(args, workers)
         return
-    problem = load_problem(ROOT / "examples" / "robot_corridor_eps01.toml")
+    problem = load_problem(ROOT / args.file)
     d = design_problem(problem)
     if args.certify:
         certify(problem, d, args, workers)

@@ -69,7 +69,8 @@ def _check(problem: Problem, table: GainTable, meas) -> None:
 def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
                        propagator: str = "exact", substeps: int = 4,
                        path: bool = False, gains: np.ndarray | None = None,
-                       predictor: np.ndarray | None = None) -> EstimatorLoop:
+                       predictor: np.ndarray | None = None,
+                       output: np.ndarray | None = None) -> EstimatorLoop:
     """Filter gains and exact moments of `table`'s law run on the filter's estimate.
 
     Parameters
@@ -89,6 +90,10 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         and predictor maps, per tick): the loop's exact moments with these in place of the
         LMMSE gains and the plant's exact mean map. A predictor that is not the plant's mean
         map (rounded to float32) biases the estimate by its error.
+    output : ndarray, optional
+        An output matrix ``Cy``: also the mean and covariance of the true ``Cy x`` at every
+        tick (``moments.path_y_mean``, ``path_y_cov``), as `oracle.evaluate.evaluate_table`'s
+        `output` (a corridor's exit bounds, `oracle.exit_bound`).
 
     Returns
     -------
@@ -114,7 +119,11 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
     predict = np.zeros((table.n_ticks, n, n + m + 1))
     err_cov = np.zeros((table.n_ticks, n, n))
     prior_cov = np.zeros((table.n_ticks, n, n))
-    rec = _PathRecord(x0, path)
+    rec = _PathRecord(x0, path, None if output is None else np.asarray(output, float))
+    if path:                                # the true start's spread (the record assumes none)
+        rec.x_var[0] = np.diag(meas.prior_cov(n)).copy()
+    if output is not None:
+        rec.y_cov[0] = rec.Cy @ meas.prior_cov(n) @ rec.Cy.T
     eye = np.eye(d)
     Tw = _w_map(n, m, d, xs)                # w = [x; u; 1] = Tw z
     Th = _w_map(n, m, d, hs)                # [x̂; u; 1]: what the predictor moves

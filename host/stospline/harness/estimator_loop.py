@@ -16,9 +16,10 @@ from stospline.estimator.ctable import EstimatorTable, estimator_c
 from stospline.firmware_interface import STATUS
 from stospline.harness.build import PLANT_CDEF, build_harness_module
 from stospline.harness.controller import CompiledController
+from stospline.harness.loop_state import CorridorWatch
 from stospline.harness.montecarlo import MonteCarloResult
 from stospline.harness.plant_spec import zoh_step
-from stospline.harness.path_stats import COST_SAMPLE, Moments
+from stospline.harness.path_stats import COST_SAMPLE, CorridorExits, Moments
 from stospline.table.codegen import generate_c
 
 __all__ = ["build_estimator_controller", "EstimatorController", "simulate_estimator"]
@@ -146,7 +147,9 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
     m), "knot_error": [Moments]}``: for the first `record` paths the true state at each tick,
     the controller's prediction of it (before that tick's update) and the commands; over all
     paths the moments of the estimation error ``x - x̂`` at each knot (x̂ the prediction the
-    controller holds for the knot's tick)."""
+    controller holds for the knot's tick). With corridors, the result's ``exits`` are each
+    path's first exit of the *true* state, by tick and wall, as `montecarlo.simulate` counts
+    them (`loop_state.CorridorWatch`)."""
     table, meas = ctl.table, problem.measurement
     n, m, _ = table.dims
     h = 1.0 / table.tick_hz
@@ -180,6 +183,10 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
            "u": np.empty((table.n_ticks, record, m), np.float32)}
     rec["xhat"] = np.empty((table.n_ticks + 1, record, n), np.float32)
     rec["x"][0], rec["xhat"][0] = X[:record], step.xhat()[:record]
+    watch = (CorridorWatch.of(problem.corridors, paths, problem.t0, table.tick_hz)
+             if problem.corridors else None)
+    if watch is not None:
+        watch.check(0, X)
     for k in range(table.n_stages):
         st = problem.stages[k]
         if st.varying is not None:
@@ -201,6 +208,8 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
             u_low, u_high = np.minimum(u_low, U.min(axis=0)), np.maximum(u_high, U.max(axis=0))
             fill()
             helpers.plant_tick(plant, dZ, U, X, cost)
+            if watch is not None:
+                watch.check(j + 1, X)
             x_sum[j + 1] = X.sum(axis=0)
             sample_x[j + 1], sample_u[j] = X[0], U[0]
             rec["x"][j + 1], rec["u"][j] = X[:record], U[:record]
@@ -217,5 +226,9 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
                           worst, int(saturated.sum()), int(np.count_nonzero(saturated)),
                           u_low, u_high, substeps, record_x=rec["x"].astype(np.float32),
                           record_u=rec["u"], cost_sample=cost[:COST_SAMPLE].copy())
+    if watch is not None:
+        mc.exits = CorridorExits.of(watch.exit_tick, watch.exit_wall,
+                                    [len(c.wall_names()) for c in problem.corridors],
+                                    table.n_ticks)
     rec["knot_error"] = knot_error
     return mc, rec

@@ -22,7 +22,7 @@ from stospline.harness.montecarlo import MonteCarloResult
 from stospline.harness.plant_scheme import PILOT_PATHS, TOLERANCE, SubstepChoice
 
 __all__ = ["SensorRun", "run_sensor_loop", "sensor_loop_unsupported", "flashed_filter",
-           "sensor_outputs", "count_sensor_exits"]
+           "sensor_outputs", "sensor_path_mean", "count_sensor_exits"]
 
 _SAFETY = 0.8            # as plant_scheme's: the pilot's spread has a sampling error
 _PILOT_STREAM = 2**32 - 1
@@ -137,6 +137,18 @@ def sensor_outputs(problem, table, C: np.ndarray, flashed=None
     _, gains, pred = flashed if flashed is not None else flashed_filter(problem, table)
     loop = evaluate_estimator(problem, table, gains=gains, predictor=pred, output=C)
     return loop.moments.J, loop.moments.path_y_mean, loop.moments.path_y_cov
+
+
+def sensor_path_mean(problem, table) -> np.ndarray | None:
+    """The true state's mean at every tick (ticks + 1, n) of `table`'s law run on the estimate
+    of the flashed filter of ``problem.measurement`` (`flashed_filter`), for
+    `refine.every_tick.every_tick_check`; None without a sensor or for a table the sensor loop
+    does not run (`sensor_loop_unsupported`)."""
+    if problem.measurement is None or sensor_loop_unsupported(problem, table):
+        return None
+    _, gains, pred = flashed_filter(problem, table)
+    return evaluate_estimator(problem, table, gains=gains, predictor=pred,
+                              path=True).moments.path_mean
 
 
 def count_sensor_exits(problem, table, corridor: int, *, paths: int, seed: int,

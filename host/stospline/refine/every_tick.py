@@ -38,7 +38,7 @@ from stospline.oracle.evaluate import evaluate_table
 from stospline.table.format import table_of
 
 __all__ = ["EveryTick", "design_every_tick", "tick_grid", "every_tick_check", "tick_violation",
-           "between_ticks", "active_ticks", "sensor_path_mean", "MAX_ITERATIONS", "TOLERANCE"]
+           "between_ticks", "active_ticks", "MAX_ITERATIONS", "TOLERANCE"]
 
 MAX_ITERATIONS = 60
 # A tick violates when it is beyond its band by more than this times max(1, |bounds|): the
@@ -324,7 +324,7 @@ def tick_grid(problem: Problem, *, noise: bool = True, iterations: int = 0,
                      time.perf_counter() - start, method="tick-qp")
 
 
-def every_tick_check(d, *, where: bool = False) -> dict:
+def every_tick_check(d, *, where: bool = False, sensor_path: np.ndarray | None = None) -> dict:
     """The every-tick regions of design `d` (`stospline.pipeline.Designed`) checked by the
     oracle: the worst violation at any tick of each
     region (negative: inside by that much) for the design's law in double precision and for
@@ -332,14 +332,15 @@ def every_tick_check(d, *, where: bool = False) -> dict:
     command held). ``where``: also the time of that worst (not in the summary: along an arc
     of contact many times tie, and which one wins differs in the last bits).
 
-    With a [measurement] sensor, also the worst at any tick for the loop the firmware runs:
-    the float32 table on the estimate of the flashed float32 filter (`sensor_path_mean`). The
-    regions bound the mean only, and the filter is unbiased, so the law's mean path is the
-    full-state one; the float32 predictor's rounding moves it by float32 precision."""
+    `sensor_path`: with a [measurement] sensor, the true state's mean at every tick of the loop
+    the firmware runs (`harness.estimator_run.sensor_path_mean`: the float32 table on the
+    estimate of the flashed filter); the worst at any tick for it too. The regions bound the
+    mean only, and the filter is unbiased, so the law's mean path is the full-state one; the
+    float32 predictor's rounding moves it by float32 precision."""
     p = d.problem
     exact = evaluate_table(p, table_of(d.design, quantize=False), path=True)
     implemented = evaluate_table(p, d.table, path=True)
-    sensor = sensor_path_mean(p, d.table)
+    sensor = sensor_path
     regions = []
     for i, (reg, law, imp, gap) in enumerate(zip(
             p.tick_regions, tick_violation(p, exact.path_mean),
@@ -355,21 +356,6 @@ def every_tick_check(d, *, where: bool = False) -> dict:
                         "over_interval_exact": gap["exact"], **extra,
                         **({"worst_over_interval_t": gap["t"]} if where else {})})
     return {**d.every_tick.summary(), "regions": regions}
-
-
-def sensor_path_mean(problem: Problem, table) -> np.ndarray | None:
-    """The true state's mean at every tick (ticks + 1, n) of `table`'s law run on the estimate
-    of the flashed filter of ``problem.measurement`` (`estimator.ctable`, float32 gains and
-    predictor; `estimator.oracle.evaluate_estimator`); None without a sensor, or for a table
-    the estimator does not run (a band QP latch, a one-tick delay, a spline table)."""
-    if (problem.measurement is None or table.band_qp is not None
-            or getattr(table, "delay_ticks", 0) or getattr(table, "spline", None) is not None):
-        return None
-    from stospline.estimator.ctable import estimator_table
-    from stospline.estimator.oracle import evaluate_estimator
-    gains, pred = estimator_table(problem, table).per_tick()
-    return evaluate_estimator(problem, table, gains=gains, predictor=pred,
-                              path=True).moments.path_mean
 
 
 def between_ticks(problem: Problem, path_mean: np.ndarray, u_mean: np.ndarray,

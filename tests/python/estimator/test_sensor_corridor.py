@@ -14,14 +14,16 @@ from stospline.corridor_search import _outputs
 from stospline.estimator.ctable import estimator_table
 from stospline.estimator.oracle import evaluate_estimator
 from stospline.harness.estimator_loop import build_estimator_controller, simulate_estimator
-from stospline.harness.estimator_run import count_sensor_exits, sensor_outputs
+from stospline.harness.estimator_run import (count_sensor_exits, sensor_outputs,
+                                              sensor_path_mean)
 from stospline.harness.exit_stats import clopper_pearson_lower
 from stospline.oracle.evaluate import evaluate_table
 from stospline.oracle.exit_bound import exit_bounds
 from stospline.options import DesignOptions
 from stospline.pipeline import design_problem
 from stospline.problem.reader import parse_problem
-from stospline.refine.every_tick import every_tick_check, sensor_path_mean
+from stospline.refine.every_tick import every_tick_check
+from stospline.report.design_summary import design_summary
 from stospline.table.format import table_of
 
 from test_estimator_oracle import DOC
@@ -63,12 +65,16 @@ def test_every_tick_region_holds_for_the_sensor_loop():
     scale = 4 * np.finfo(np.float32).eps * max(1.0, np.abs(full).max())
     assert 0 < np.abs(flashed - evaluate_table(d.problem, d.table, path=True).path_mean).max() \
         < scale
-    (reg,) = every_tick_check(d)["regions"]
+    (reg,) = every_tick_check(d, sensor_path=flashed)["regions"]
     assert abs(reg["worst_at_ticks_design"]) < 1e-9          # active
     assert reg["worst_at_ticks_sensor_loop"] < scale
+    (shown,) = design_summary(d)["every_tick"]["regions"]     # what `design --json` prints
+    assert shown["worst_at_ticks_sensor_loop"] == pytest.approx(
+        reg["worst_at_ticks_sensor_loop"], rel=1e-2)            # printed to a few digits
     # without a sensor the entry is absent
     bare = design_problem(_problem(regions=[REGION], measurement=None),
                           options=DesignOptions(mode="joint"))
+    assert sensor_path_mean(bare.problem, bare.table) is None
     assert "worst_at_ticks_sensor_loop" not in every_tick_check(bare)["regions"][0]
 
 

@@ -161,3 +161,22 @@ def test_corridor_design_refuses_faults_with_a_sensor(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "faults" in err[0] and "[measurement]" in err[0]
     assert list(tmp_path.iterdir()) == [path]
+
+
+def test_simulate_reports_the_sensor_loops_exits_beside_its_bounds(tmp_path, capsys):
+    """`stospline simulate` of a [measurement] problem with a corridor: the exits are the
+    sensor loop's (the same seed through `count_sensor_exits`), the bounds its own."""
+    doc = copy.deepcopy(DOC)
+    doc["corridors"] = [CORRIDOR]
+    problem = parse_problem(copy.deepcopy(doc))
+    path = tmp_path / "sensed.toml"
+    path.write_text(problem.to_toml())
+    assert main(["simulate", str(path), "--paths", "1000", "--seed", "7", "--substeps", "1",
+                 "--json"]) == 0
+    (c,) = json.loads(capsys.readouterr().out)["corridors"]
+    d = design_problem(problem)
+    assert c["mc"]["exits"] == count_sensor_exits(problem, d.table, 0, paths=1000, seed=7) > 0
+    _, ym, yc = sensor_outputs(problem, d.table, problem.corridors[0].C)
+    want = exit_bounds(problem.corridors[0], ym, yc, problem.t0, problem.tick_hz)
+    assert c["bound"]["gaussian"]["total"] == pytest.approx(want["gaussian"].total, rel=1e-3)
+    assert "true state" in c["bound"]["loop"]

@@ -1,4 +1,4 @@
-"""Corridors and every-tick regions with the estimator in the loop (issue 34): the mean path of
+"""Corridors and every-tick regions with the estimator in the loop: the mean path of
 the sensor loop is the full-state one at every tick (so every-tick regions hold), the corridor's
 exit bounds come from the true state's exact spread under the sensor loop (larger than the
 full-state one), the C harness of the sensor loop counts the true state's exits, and

@@ -42,12 +42,12 @@ def _problem(**more):
 
 
 @pytest.fixture(scope="module")
-def corridor_case(tmp_path_factory):
+def corridor_case():
     problem = _problem(corridors=[CORRIDOR])
     d = design_problem(problem)
     et = estimator_table(problem, d.table)
-    ctl = build_estimator_controller(problem, d.table, et,
-                                     build_dir=tmp_path_factory.mktemp("corridor_build"))
+    # the build cache's copy: the same tables as count_sensor_exits and the CLI runs build
+    ctl = build_estimator_controller(problem, d.table, et)
     return problem, d, et, ctl
 
 

@@ -12,7 +12,8 @@
 # x0 (host/stospline/table/spline/restore.py). robot_patrol_60s has only its spline table,
 # its file's [design] table;
 # and the robot's fixed-point spline tables (<name>_q15_spline.*, <name>_q31_spline.*).
-# The examples with a [measurement] sensor (robot_position_sensor, quadrotor_altimeter) get
+# The examples with a [measurement] sensor (robot_position_sensor, robot_corridor_position_sensor,
+# quadrotor_altimeter) get
 # their filter's tables in <name>.{c,h} from the first loop (float32, per-tick: the estimator
 # takes no spline table), and robot_position_sensor its Q15 law and filter
 # (<name>_q15.*: host/stospline/estimator/qformat.py); those with [[parameters]] (robot_goal) their

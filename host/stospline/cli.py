@@ -213,6 +213,8 @@ def _corridor_design(args) -> int:
         if getattr(resolved, key) == bad:
             raise ProblemError(option if getattr(args, key) is not None else f"design.{key}",
                                "corridor-design writes per-tick tables without a delay")
+    if problem.measurement is not None:
+        _sensor_corridor_refusal(args, problem, resolved, plant is not None)
     opts = {"mode": resolved.mode, "discretization": resolved.discretization}
     if args.mode or args.discretization:      # the designed file says how it was designed
         given = {k: v for k, v in opts.items() if getattr(args, k)}
@@ -267,6 +269,23 @@ def _corridor_design(args) -> int:
         for path in written:
             print(f"wrote {path}")
     return 0
+
+
+def _sensor_corridor_refusal(args, problem, resolved, on_plant: bool) -> None:
+    """What corridor-design's sensor loop (a problem with [measurement]: exits counted on
+    the law run on the filter's estimate) does not run: one line naming the field or
+    option."""
+    why = "a problem with [measurement] screens and certifies on the sensor loop, which"
+    if on_plant:
+        raise ProblemError("measurement", f"{why} runs the linear plant, not a [plant] model")
+    if problem.faults.any:
+        raise ProblemError("faults", f"{why} takes no faults (the sensor's noise is the "
+                                     f"measurement table's)")
+    if args.scheduler is not None:
+        raise ProblemError("--scheduler", f"{why} runs in this process")
+    if resolved.arith != "float32":
+        raise ProblemError("--arith" if getattr(args, "arith", None) else "design.arith",
+                           f"{why} runs float32 tables")
 
 
 def _plant_corridor(args, problem):

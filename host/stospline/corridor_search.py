@@ -205,7 +205,13 @@ def with_weights(problem, corridor: int, polygons: list[int], w: float, wv: floa
 
 
 def _outputs(problem, table, corridor: int):
+    """``(J, y_mean, y_cov)`` of the corridor's outputs at every tick: the exact oracle of the
+    table as run, or, with a [measurement] sensor, of the loop on the flashed filter's
+    estimate (`harness.estimator_run.sensor_outputs`: the same mean, a larger spread)."""
     c = problem.corridors[corridor]
+    if problem.measurement is not None:
+        from stospline.harness.estimator_run import sensor_outputs
+        return sensor_outputs(problem, table, c.C)
     mom = evaluate_table(problem, table, path=False, output=c.C)
     return mom.J, mom.path_y_mean, mom.path_y_cov
 
@@ -259,8 +265,14 @@ def count_exits(problem, corridor: int, cand: Candidate, *, paths: int, seed: in
                 substeps: int = 1, workers=None, scheduler=None, force_workers: bool = False,
                 **design_options) -> Exits:
     """Monte Carlo of the candidate's compiled C controller with the problem's plant (and
-    faults): how many of `paths` paths leave the corridor."""
+    faults): how many of `paths` paths leave the corridor. With a [measurement] sensor, the
+    loop on the filter's estimate (`harness.estimator_run.count_sensor_exits`; one process,
+    `workers` and `scheduler` are not used)."""
     d = design_problem(cand.problem(), **design_options)
+    if problem.measurement is not None:
+        from stospline.harness.estimator_run import count_sensor_exits
+        return Exits(count_sensor_exits(problem, d.table, corridor, paths=paths, seed=seed,
+                                        substeps=substeps), int(paths), int(seed))
     mc = simulate(problem, build_controller(d.table, plant=problem), paths=paths, seed=seed,
                   substeps=substeps, workers=workers, scheduler=scheduler,
                   force_workers=force_workers)

@@ -94,7 +94,8 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
                        propagator: str = "exact", substeps: int = 4,
                        path: bool = False, gains: np.ndarray | None = None,
                        predictor: np.ndarray | None = None,
-                       faults: Faults | None = None) -> EstimatorLoop:
+                       faults: Faults | None = None,
+                       output: np.ndarray | None = None) -> EstimatorLoop:
     """Filter gains and exact moments of `table`'s law run on the filter's estimate.
 
     Parameters
@@ -125,6 +126,10 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         (``stsp_est_step``). The filter is the nominal one (its LMMSE gains and mean maps, unless
         `gains`/`predictor` are given). Raises ProblemError for the faults that
         `estimator_faults_unsupported` names.
+    output : ndarray, optional
+        An output matrix ``Cy``: also the mean and covariance of the true ``Cy x`` at every
+        tick (``moments.path_y_mean``, ``path_y_cov``), as `oracle.evaluate.evaluate_table`'s
+        `output` (a corridor's exit bounds, `oracle.exit_bound`).
 
     Returns
     -------
@@ -171,7 +176,11 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
     innov_cov = np.zeros((table.n_ticks, p, p))
     out_cov = np.zeros((table.n_ticks, p, p))
     est_ms = np.zeros((table.n_ticks, n))
-    rec = _PathRecord(x0, path)
+    rec = _PathRecord(x0, path, None if output is None else np.asarray(output, float))
+    if path:                                # the true start's spread (the record assumes none)
+        rec.x_var[0] = np.diag(meas.prior_cov(n)).copy()
+    if output is not None:
+        rec.y_cov[0] = rec.Cy @ meas.prior_cov(n) @ rec.Cy.T
     eye = np.eye(d)
     Tw = _w_map(n, m, d, xs)                # w = [x; u; 1] = Tw z
     Th = _w_map(n, m, d, hs)                # [x̂; u; 1]: what the predictor moves

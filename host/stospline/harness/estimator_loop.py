@@ -18,10 +18,11 @@ from stospline.firmware_interface import STATUS
 from stospline.harness.build import PLANT_CDEF, build_harness_module
 from stospline.harness.controller import CompiledController
 from stospline.errors import ProblemError
+from stospline.harness.loop_state import CorridorWatch
 from stospline.harness.montecarlo import MonteCarloResult
 from stospline.harness.montecarlo import _plant_tick as plant_tick
 from stospline.harness.plant_spec import zoh_step
-from stospline.harness.path_stats import COST_SAMPLE, Moments
+from stospline.harness.path_stats import COST_SAMPLE, CorridorExits, Moments
 from stospline.table.codegen import generate_c
 
 __all__ = ["build_estimator_controller", "EstimatorController", "simulate_estimator",
@@ -170,7 +171,9 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
     the controller's prediction of it (before that tick's update; after missed ticks, carried
     over them as the controller's next step will) and the commands; over all
     paths the moments of the estimation error ``x - x̂`` at each knot (x̂ the prediction the
-    controller holds for the knot's tick)."""
+    controller holds for the knot's tick). With corridors, the result's ``exits`` are each
+    path's first exit of the *true* state, by tick and wall, as `montecarlo.simulate` counts
+    them (`loop_state.CorridorWatch`)."""
     table, meas = ctl.table, problem.measurement
     n, m, _ = table.dims
     h = 1.0 / table.tick_hz
@@ -226,6 +229,10 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
             P = pred[t]
             xh[late] = xh[late] @ P[:, :n].T + U[late] @ P[:, n:n + m].T + P[:, -1]
         return xh
+    watch = (CorridorWatch.of(problem.corridors, paths, problem.t0, table.tick_hz)
+             if problem.corridors else None)
+    if watch is not None:
+        watch.check(0, X)
     for k in range(table.n_stages):
         st = plant_of.stages[k]
         plant = None if st.varying is not None else helpers.plant(st, *zoh_step(st, dt), dt,
@@ -256,6 +263,8 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
                 applied = np.ascontiguousarray(
                     (U + fault_rng.standard_normal((paths, m)) * sig_u).astype(np.float32))
             plant_tick(helpers, problem, plant, st, j, h, dt, substeps, dZ, applied, X, cost)
+            if watch is not None:
+                watch.check(j + 1, X)
             x_sum[j + 1] = X.sum(axis=0)
             sample_x[j + 1], sample_u[j] = X[0], U[0]
             rec["x"][j + 1], rec["u"][j] = X[:record], U[:record]
@@ -272,6 +281,10 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
                           worst, int(saturated.sum()), int(np.count_nonzero(saturated)),
                           u_low, u_high, substeps, record_x=rec["x"].astype(np.float32),
                           record_u=rec["u"], cost_sample=cost[:COST_SAMPLE].copy())
+    if watch is not None:
+        mc.exits = CorridorExits.of(watch.exit_tick, watch.exit_wall,
+                                    [len(c.wall_names()) for c in problem.corridors],
+                                    table.n_ticks)
     rec["knot_error"] = knot_error
     return mc, rec
 

@@ -22,7 +22,8 @@ from stospline.harness.estimator_loop import build_estimator_controller, simulat
 from stospline.harness.montecarlo import MonteCarloResult
 from stospline.harness.plant_scheme import PILOT_PATHS, TOLERANCE, SubstepChoice
 
-__all__ = ["SensorRun", "run_sensor_loop", "sensor_loop_unsupported"]
+__all__ = ["SensorRun", "run_sensor_loop", "sensor_loop_unsupported", "flashed_filter",
+           "sensor_outputs", "sensor_path_mean", "count_sensor_exits"]
 
 _SAFETY = 0.8            # as plant_scheme's: the pilot's spread has a sampling error
 _PILOT_STREAM = 2**32 - 1
@@ -99,9 +100,7 @@ def run_sensor_loop(problem, table, *, paths: int, seed: int, substeps: int | st
     why = sensor_loop_unsupported(problem, table)
     if why:
         raise ValueError(f"{why[0]}: {why[1]}")
-    designed = evaluate_estimator(problem, table)       # the filter knows no faults
-    tables = estimator_table(problem, table, designed)
-    gains, pred = tables.per_tick()
+    tables, gains, pred = flashed_filter(problem, table)    # the filter knows no faults
     exact = evaluate_estimator(problem, table, gains=gains, predictor=pred, path=True,
                                faults=problem.faults)
     ctl = build_estimator_controller(problem, table, tables, build_dir=build_dir)
@@ -119,3 +118,52 @@ def run_sensor_loop(problem, table, *, paths: int, seed: int, substeps: int | st
     nominal = (evaluate_estimator(problem, table, gains=gains, predictor=pred)
                if problem.faults.any else None)
     return SensorRun(mc, rec, exact, scheme, tables, nominal)
+
+
+def flashed_filter(problem, table) -> tuple[EstimatorTable, np.ndarray, np.ndarray]:
+    """``(tables, gains, predictor)``: the filter of `table`'s loop on ``problem.measurement``
+    as flashed (`estimator.ctable`: LMMSE gains from the loop's exact moments, rounded to
+    float32) and its per-tick gains and predictor maps."""
+    tables = estimator_table(problem, table, evaluate_estimator(problem, table))
+    gains, pred = tables.per_tick()
+    return tables, gains, pred
+
+
+def sensor_outputs(problem, table, C: np.ndarray, flashed=None
+                   ) -> tuple[float, np.ndarray, np.ndarray]:
+    """``(J, y_mean, y_cov)`` of the sensor loop as flashed: its exact cost and the exact mean
+    (ticks + 1, p) and covariance (ticks + 1, p, p) of the *true* output ``C x`` at every
+    tick (`evaluate_estimator` with the flashed gains and predictor), for
+    `oracle.exit_bound.exit_bounds`. The mean is the full-state loop's (the filter is
+    unbiased, docs/theory/estimator.md) up to the float32 predictor's rounding; the spread is
+    the larger one of a loop that acts on an estimate. `flashed`: `flashed_filter`'s result,
+    if already made."""
+    _, gains, pred = flashed if flashed is not None else flashed_filter(problem, table)
+    loop = evaluate_estimator(problem, table, gains=gains, predictor=pred, output=C)
+    return loop.moments.J, loop.moments.path_y_mean, loop.moments.path_y_cov
+
+
+def sensor_path_mean(problem, table) -> np.ndarray | None:
+    """The true state's mean at every tick (ticks + 1, n) of `table`'s law run on the estimate
+    of the flashed filter of ``problem.measurement`` (`flashed_filter`), for
+    `refine.every_tick.every_tick_check`; None without a sensor or for a table the sensor loop
+    does not run (`sensor_loop_unsupported`)."""
+    if problem.measurement is None or sensor_loop_unsupported(problem, table):
+        return None
+    _, gains, pred = flashed_filter(problem, table)
+    return evaluate_estimator(problem, table, gains=gains, predictor=pred,
+                              path=True).moments.path_mean
+
+
+def count_sensor_exits(problem, table, corridor: int, *, paths: int, seed: int,
+                       substeps: int = 1, build_dir=None) -> int:
+    """How many of `paths` paths of the sensor loop (`table`'s law on the flashed filter's
+    estimate, through the compiled C) leave corridor `corridor` of `problem` at some tick of
+    its interval. Raises ValueError (`sensor_loop_unsupported`) as `run_sensor_loop`."""
+    why = sensor_loop_unsupported(problem, table)
+    if why:
+        raise ValueError(f"{why[0]}: {why[1]}")
+    tables, _, _ = flashed_filter(problem, table)
+    ctl = build_estimator_controller(problem, table, tables, build_dir=build_dir)
+    mc, _ = simulate_estimator(problem, ctl, paths=paths, seed=seed, substeps=substeps)
+    return mc.exit_count(corridor)

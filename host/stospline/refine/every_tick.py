@@ -324,26 +324,36 @@ def tick_grid(problem: Problem, *, noise: bool = True, iterations: int = 0,
                      time.perf_counter() - start, method="tick-qp")
 
 
-def every_tick_check(d, *, where: bool = False) -> dict:
+def every_tick_check(d, *, where: bool = False, sensor_path: np.ndarray | None = None) -> dict:
     """The every-tick regions of design `d` (`stospline.pipeline.Designed`) checked by the
     oracle: the worst violation at any tick of each
     region (negative: inside by that much) for the design's law in double precision and for
     the float32 table, and the worst over all of [a, b] with the mean between ticks (the
     command held). ``where``: also the time of that worst (not in the summary: along an arc
-    of contact many times tie, and which one wins differs in the last bits)."""
+    of contact many times tie, and which one wins differs in the last bits).
+
+    `sensor_path`: with a [measurement] sensor, the true state's mean at every tick of the loop
+    the firmware runs (`harness.estimator_run.sensor_path_mean`: the float32 table on the
+    estimate of the flashed filter); the worst at any tick for it too. The regions bound the
+    mean only, and the filter is unbiased, so the law's mean path is the full-state one; the
+    float32 predictor's rounding moves it by float32 precision."""
     p = d.problem
     exact = evaluate_table(p, table_of(d.design, quantize=False), path=True)
     implemented = evaluate_table(p, d.table, path=True)
+    sensor = sensor_path
     regions = []
-    for reg, law, imp, gap in zip(p.tick_regions, tick_violation(p, exact.path_mean),
-                                  tick_violation(p, implemented.path_mean),
-                                  between_ticks(p, exact.path_mean, exact.path_u_mean)):
+    for i, (reg, law, imp, gap) in enumerate(zip(
+            p.tick_regions, tick_violation(p, exact.path_mean),
+            tick_violation(p, implemented.path_mean),
+            between_ticks(p, exact.path_mean, exact.path_u_mean))):
+        extra = {} if sensor is None else {
+            "worst_at_ticks_sensor_loop": float(tick_violation(p, sensor)[i].max())}
         regions.append({"region": reg.index, "ticks": int(reg.ticks(p.t0, p.tick_hz).size),
                         "worst_at_ticks_design": float(law.max()),
                         "worst_at_ticks_implemented": float(imp.max()),
                         "worst_over_interval": gap["worst"],
                         "between_ticks_enforced": bool(reg.between),
-                        "over_interval_exact": gap["exact"],
+                        "over_interval_exact": gap["exact"], **extra,
                         **({"worst_over_interval_t": gap["t"]} if where else {})})
     return {**d.every_tick.summary(), "regions": regions}
 

@@ -135,5 +135,9 @@ def _band_terms(d) -> dict:
         terms["band_qp_rows"] = 0 if d.table.band_qp is None else d.table.band_qp.q
     if d.every_tick is not None:
         from stospline.refine.every_tick import every_tick_check   # loaded when a design has them
-        terms["every_tick"] = every_tick_check(d)
+        sensor = None
+        if d.problem.measurement is not None:     # the loop on the filter's estimate too
+            from stospline.harness.estimator_run import sensor_path_mean
+            sensor = sensor_path_mean(d.problem, d.table)
+        terms["every_tick"] = every_tick_check(d, sensor_path=sensor)
     return terms

@@ -63,6 +63,7 @@ def sensor_simulation_summary(d, run, *, seed: int, confidence: float = 0.99) ->
         "saturation": saturation(d, mc, {"u_low": [float(v) for v in mc.u_low],
                                          "u_high": [float(v) for v in mc.u_high]}),
         **actuator_limits(d),
+        **_corridors(d, run),
     })
     summary["verdict"] = verdict(summary, confidence)
     strict.check_summary_finite(d.problem, summary, "simulated numbers")
@@ -96,6 +97,23 @@ def exact_standard_errors(d, run):
                                      substeps=run.mc.substeps)
     return tails, ("exact: the estimator oracle's cost variance and knot covariances of the "
                    f"plant scheme ({run.mc.substeps} steps per tick)")
+
+
+def _corridors(d, run) -> dict:
+    """``{"corridors": [...]}`` as `simulation_summary`'s, for the sensor loop: the exits of
+    the true state through the C, and the union bounds from the exact per-tick moments of the
+    true output under the loop on the flashed filter (`harness.estimator_run.sensor_outputs`)."""
+    if not d.problem.corridors or run.mc.exits is None:
+        return {}
+    from stospline.harness.estimator_run import sensor_outputs
+    from stospline.harness.exit_stats import corridor_report
+    gains, pred = run.tables.per_tick()
+    outputs = [sensor_outputs(d.problem, d.table, c.C, (run.tables, gains, pred))[1:]
+               for c in d.problem.corridors]
+    rep = corridor_report(d.problem, d.table, run.mc.exits, outputs=outputs)
+    for entry in rep:
+        entry["bound"]["loop"] = "the law on the flashed filter's estimate (true state)"
+    return {"corridors": rep}
 
 
 def sensor_simulation_text(s: dict) -> str:

@@ -495,7 +495,6 @@ def design_files(d: Designed, source_name: str, arith: str = "float32", *,
         summary["fixed"] = rounded({**table.summary(), "state_sigmas": DEFAULT_SIGMAS})
         summary["table"] = q_cert
     else:
-        q_est = None
         try:
             if fixed is not None:
                 table = fixed

@@ -327,12 +327,18 @@ FAULTS = [
     # Spline columns (stsp_params.h format 2; stsp_spline.c's param_law, tests/c/
     # test_params_spline.c and its reference hashes).
     Fault("F87", "params (spline): the columns' coefficients from the stage's first span", CTL,
-          "(((i * n_params) + q) * p.stride) + p.span)]", "(((i * n_params) + q) * p.stride))]"),
+          "(((i * n_params) + q) * p->stride) + p->span)]", "(((i * n_params) + q) * p->stride))]"),
     Fault("F88", "params (spline): the CRC of format 2 leaves out n_spline_coef", CTL,
           "        crc = stsp_crc32_u32(crc, params->n_spline_coef);\n", ""),
     Fault("F89", "params (spline): every input's gains of x from the stage's first entry", CTL,
           "for (e = (i > 0u) ? p->row_end[i - 1u] : 0u; e < p->k_end[i]; ++e) {",
           "for (e = 0u; e < p->k_end[i]; ++e) {"),
+    # The parametric spline tick's span cache (stsp_spline.c, stsp_params.c;
+    # tests/c/test_params_spline.c, test_span_cache_any_order).
+    Fault("F100", "params (spline): the span cache kept across a parameter change", CTL,
+          "    stsp_param_forget_span(pc);\n", ""),
+    Fault("F101", "params (spline): a span record after the tick taken as its span", CTL,
+          "(p->first == first) && (p->knot[2] <= tau))", "(p->first == first) && (tau >= 0.0f))"),
 ]
 
 

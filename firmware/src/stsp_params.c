@@ -363,6 +363,21 @@ stsp_status_t stsp_param_init(stsp_param_t *pc, const stsp_table_t *table,
     return STSP_OK;
 }
 
+/* A spline table's span cache (ctrl.span, which stsp_step() would use and a parametric
+ * instance never passes to it: stsp_spline.c's param_law) folds ctrl.v and d into its record
+ * of a stage: new parameters clear it (next = 0: no record), so that the next tick searches
+ * its span again. A latch needs nothing here: it comes with another stage (stage_start
+ * increases strictly: the record's first tick is not the stage's), or after init and reset,
+ * which clear the record with the instance. */
+static void stsp_param_forget_span(stsp_param_t *pc)
+{
+#ifndef STSP_ARITH_FIXED_POINT
+    pc->ctrl.span.next = 0u;
+#else
+    (void)pc;
+#endif
+}
+
 stsp_status_t stsp_set_params(stsp_param_t *pc, const stsp_f32_t *theta)
 {
     const stsp_params_table_t *p;
@@ -388,6 +403,7 @@ stsp_status_t stsp_set_params(stsp_param_t *pc, const stsp_f32_t *theta)
     for (i = 0u; i < p->n_params; ++i) {
         pc->d[i] = d[i];
     }
+    stsp_param_forget_span(pc);
     return STSP_OK;
 }
 
@@ -555,8 +571,10 @@ static stsp_status_t stsp_param_finish(const stsp_header_t *h, const stsp_scalar
 /* The law at `tick` (of `stage`) with k0' and multipliers v into y, then stsp_param_finish.
  * One compare pair per input tells a command inside the limits (false for NaN and +-Inf: the
  * limits are finite) from one that needs the finiteness check and the clamp. A spline
- * table's command comes from the spline code (stsp_spline_ops.param_law). */
-static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick, uint16_t stage,
+ * table's command comes from the spline code (stsp_spline_ops.param_law), with its span cache
+ * in ctrl.span when v is ctrl.v (the ordinary tick; not the cold path's v_new, which may be a
+ * fresh latch). */
+static stsp_status_t stsp_param_law(stsp_param_t *pc, uint32_t tick, uint16_t stage,
                                     const stsp_scalar_t *x, const stsp_scalar_t *v,
                                     stsp_scalar_t *y, uint16_t *mask)
 {
@@ -565,8 +583,9 @@ static stsp_status_t stsp_param_law(const stsp_param_t *pc, uint32_t tick, uint1
 #ifndef STSP_ARITH_FIXED_POINT
     if (stsp_param_is_spline(&pc->checked) != 0) {
         uint32_t i;
-        h->sp.ops->param_law(h, (uint32_t)stage, tick, x, v, pc->checked.S_k0,
-                             pc->checked.n_spline_coef, pc->d, pc->checked.n_params, y);
+        h->sp.ops->param_law(&pc->ctrl, (uint32_t)stage, tick, x, v, pc->checked.S_k0,
+                             pc->checked.n_spline_coef, pc->d, pc->checked.n_params,
+                             (v == pc->ctrl.v) ? 1u : 0u, y);
         for (i = 0u; i < h->nu; ++i) {
             if (!((y[i] >= h->u_min[i]) && (y[i] <= h->u_max[i]))) {
                 alarm = 1u;

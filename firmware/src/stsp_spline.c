@@ -975,50 +975,90 @@ static stsp_f32_t stsp_spline_x_terms(const stsp_header_t *h, const stsp_span_t 
     return out;
 }
 
-/* stsp_params.c's tick of a spline table with spline columns (stsp_params.h, format 2): the
- * span of `tick` in stage s as the cold path finds it (bounded by the validated lengths), its
- * basis, and per input the fold of stsp_spline_fold continued with the columns' terms, its
- * value, less the gains of x (stsp_spline_law's order). The columns of stage s start at
- * nu P (knot_start[s] - 4 s); a layout that no longer fits cols (a table changed after init)
- * leaves them out: a wrong command, no access outside the arrays. */
-static void stsp_spline_param_law(const stsp_header_t *h, uint32_t s, uint32_t tick,
-                                  const stsp_f32_t *x, const stsp_f32_t *v,
-                                  const stsp_f32_t *cols, uint32_t n_cols, const stsp_f32_t *d,
-                                  uint32_t n_params, stsp_f32_t *y)
+/* The span record of `tick` in stage s for stsp_params.c's tick (format 2) into p: the span
+ * as the cold path finds it from span `from` (stsp_spline_span: bounded by S and by the
+ * validated lengths), and per input the fold of stsp_spline_fold with v continued with the
+ * columns' terms, f[r] = f[r] - (c_p[r] d[p]) for p = 0 .. P-1 (stsp_params.h's order). The
+ * columns of stage s start at nu P (knot_start[s] - 4 s); a layout that no longer fits cols
+ * (a table changed after init) leaves them out: a wrong command, no access outside the
+ * arrays. */
+static void stsp_spline_param_span(const stsp_header_t *h, uint32_t s, uint32_t from,
+                                   uint32_t tick, const stsp_f32_t *v, const stsp_f32_t *cols,
+                                   uint32_t n_cols, const stsp_f32_t *d, uint32_t n_params,
+                                   stsp_span_t *p)
 {
     const uint32_t nu = stsp_nu(h);
     const uint32_t ks = h->sp.knot_start[s];
     const uint32_t per_stage = nu * n_params;
-    stsp_span_t p;
-    stsp_f32_t n[4];
-    stsp_f32_t fold[4u * STSP_MAX_NU];
     uint32_t off = 0u;
     uint32_t use_cols = 0u;
-    uint32_t in_stage;
     uint32_t i;
-    stsp_spline_span(h, s, 0u, tick, stsp_stage_end(h, (uint16_t)s), &p);
-    in_stage = tick - p.first;
-    stsp_spline_basis(p.knot, p.inv, (stsp_f32_t)in_stage, n);
-    stsp_spline_fold(h, &p, p.coef, v, fold);
+    stsp_spline_span(h, s, from, tick, stsp_stage_end(h, (uint16_t)s), p);
+    stsp_spline_fold(h, p, p->coef, v, p->fold);
     if ((ks >= (4u * s)) && ((ks - (4u * s)) <= (n_cols / per_stage))) {
         off = per_stage * (ks - (4u * s));
-        if ((per_stage * p.stride) <= (n_cols - off)) {
+        if ((per_stage * p->stride) <= (n_cols - off)) {
             use_cols = 1u;
         }
     }
-    for (i = 0u; i < nu; ++i) {
-        stsp_f32_t *f = &fold[4u * i];
-        if (use_cols != 0u) {
-            uint32_t q;
-            for (q = 0u; q < n_params; ++q) {
-                const stsp_f32_t *cs = &cols[off + ((((i * n_params) + q) * p.stride) + p.span)];
-                uint32_t r;
-                for (r = 0u; r < 4u; ++r) {
-                    f[r] = stsp_mls(f[r], cs[r], d[q]);
-                }
+    for (i = 0u; (use_cols != 0u) && (i < nu); ++i) {
+        stsp_f32_t *f = &p->fold[4u * i];
+        uint32_t q;
+        for (q = 0u; q < n_params; ++q) {
+            const stsp_f32_t *cs = &cols[off + ((((i * n_params) + q) * p->stride) + p->span)];
+            uint32_t r;
+            for (r = 0u; r < 4u; ++r) {
+                f[r] = stsp_mls(f[r], cs[r], d[q]);
             }
         }
-        y[i] = stsp_spline_x_terms(h, &p, p.coef, n, x, i, stsp_spline_gain(f, n));
+    }
+}
+
+/* 1 when the span record p (its next nonzero: recorded since the last parameter change,
+ * init or reset) is of the stage whose first tick is `first`, and starts at or before tau
+ * (U[sigma + 3] <= tau, the third of the knots it keeps from U[sigma + 1]): a search from its
+ * span then finds the span of a search from 0. */
+static uint32_t stsp_span_before(const stsp_span_t *p, uint32_t first, stsp_f32_t tau)
+{
+    return ((p->next != 0u) && (p->first == first) && (p->knot[2] <= tau)) ? 1u : 0u;
+}
+
+/* stsp_params.c's tick of a spline table with spline columns (stsp_params.h, format 2): the
+ * span record of `tick` in stage s (stsp_spline_param_span), its basis, and per input the
+ * folded spline's value less the gains of x (stsp_spline_law's order). With `kept` (v is
+ * ctrl->v, d the parameters in use: stsp_params.c clears the record, next = 0, on new
+ * parameters; ctrl->v changes only with the stage, or after init and reset, which clear it)
+ * ctrl->span is the span cache, as the spline tick's ordinary path keeps it:
+ * used as it is for a tick inside its span of stage s (the same record, so the same bits as a
+ * fresh one), else searched again from its span when it lies in stage s at or before the tick
+ * (a later tick), from the stage's first span otherwise (another stage, a tick before it, no
+ * record), and recorded. Without it the record is a fresh one on the stack, searched from the
+ * first span (a fresh latch, not yet committed). */
+static void stsp_spline_param_law(stsp_ctrl_t *ctrl, uint32_t s, uint32_t tick,
+                                  const stsp_f32_t *x, const stsp_f32_t *v,
+                                  const stsp_f32_t *cols, uint32_t n_cols, const stsp_f32_t *d,
+                                  uint32_t n_params, uint32_t kept, stsp_f32_t *y)
+{
+    const stsp_header_t *h = &ctrl->checked;
+    const uint32_t nu = stsp_nu(h);
+    const uint32_t first = h->stage_start[s];
+    const stsp_f32_t tau = (stsp_f32_t)(tick - first); /* exact: < 2^24 on a valid table */
+    stsp_span_t fresh;
+    const stsp_span_t *p = &ctrl->span;
+    stsp_f32_t n[4];
+    uint32_t i;
+    if (kept == 0u) {
+        stsp_spline_param_span(h, s, 0u, tick, v, cols, n_cols, d, n_params, &fresh);
+        p = &fresh;
+    } else if ((stsp_span_before(p, first, tau) == 0u) || (tick >= p->next)) {
+        const uint32_t from = (stsp_span_before(p, first, tau) != 0u) ? p->span : 0u;
+        stsp_spline_param_span(h, s, from, tick, v, cols, n_cols, d, n_params, &ctrl->span);
+    } else {
+        /* inside the recorded span */
+    }
+    stsp_spline_basis(p->knot, p->inv, tau, n);
+    for (i = 0u; i < nu; ++i) {
+        y[i] = stsp_spline_x_terms(h, p, p->coef, n, x, i, stsp_spline_gain(&p->fold[4u * i], n));
     }
 }
 #endif

@@ -6,7 +6,8 @@
  * every bad input's status: a per-tick parameter table with a spline gain table and the
  * reverse, a wrong n_spline_coef, a version beyond 2, NULL columns, a changed coefficient
  * (CRC), a NaN coefficient (values), a coefficient changed after init (verify), theta out of
- * its range. Built against the generic controller and under ASan + UBSan. */
+ * its range; the span cache against none for ticks in any order. Built against the generic
+ * controller and under ASan + UBSan. */
 #include <math.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -145,6 +146,104 @@ static void test_bad_theta(void **state_)
     assert_true(pc.d[0] == 0.0f);
 }
 
+/* The span cache (ctrl.span) for any order of ticks: instance a keeps it, instance b has
+ * it cleared before every step (the span searched from the stage's first, as without a
+ * cache); the same status and command bits at every step of a fixed pseudo-random sequence of
+ * the next tick, a repeated one, skips within a span and across spans and stages, ticks
+ * before the last (refused), parameter changes inside a span, resets followed by a jump back
+ * to any tick, and a reset to the same span after a parameter change. */
+static void test_span_cache_any_order(void **state_)
+{
+    stsp_param_t a;
+    stsp_param_t b;
+    float x[NX], ua[NU], ub[NU];
+    uint32_t r = 12345u;
+    uint32_t next = 0u;
+    uint32_t k;
+    uint32_t hits = 0u;
+    (void)state_;
+    assert_int_equal(stsp_param_init(&a, T, P), STSP_OK);
+    assert_int_equal(stsp_param_init(&b, T, P), STSP_OK);
+    for (k = 0u; k < 3000u; ++k) {
+        uint32_t op;
+        uint32_t j = next;
+        stsp_status_t sa;
+        stsp_status_t sb;
+        r = (r * 1103515245u) + 12345u;
+        op = (r >> 16) % 100u;
+        if ((op < 6u) && (next > 0u)) {
+            j = next - 1u;                                   /* repeated */
+        } else if (op < 14u) {
+            j = next + 1u + ((r >> 8) % 40u);                /* skipped */
+        } else if ((op < 18u) && (next > 2u)) {
+            j = (r >> 4) % (next - 1u);                      /* before the last: refused */
+        } else if (op < 23u) {
+            float theta[N_PARAMS];
+            uint32_t q;
+            for (q = 0u; q < N_PARAMS; ++q) {
+                const float w = (float)((r >> (4u + 5u * q)) % 17u) / 16.0f;
+                theta[q] = P->lower[q] + (w * (P->upper[q] - P->lower[q]));
+                if (theta[q] > P->upper[q]) {
+                    theta[q] = P->upper[q];
+                }
+            }
+            assert_int_equal(stsp_set_params(&a, theta), STSP_OK);
+            assert_int_equal(stsp_set_params(&b, theta), STSP_OK);
+        } else if (op < 27u) {
+            assert_int_equal(stsp_param_reset(&a), STSP_OK);
+            assert_int_equal(stsp_param_reset(&b), STSP_OK);
+            j = (r >> 4) % N_TICKS;                          /* back (or on) to any tick */
+        } else {
+            /* the next tick */
+        }
+        if (j >= N_TICKS) {
+            assert_int_equal(stsp_param_reset(&a), STSP_OK);
+            assert_int_equal(stsp_param_reset(&b), STSP_OK);
+            j = 0u;
+        }
+        state(j, x);
+        b.ctrl.span.next = 0u;
+        sa = stsp_param_step(&a, j, x, ua);
+        sb = stsp_param_step(&b, j, x, ub);
+        assert_int_equal(sa, sb);
+        assert_int_equal(word(ua[0]), word(ub[0]));
+        assert_int_equal(word(ua[1]), word(ub[1]));
+        if (sa >= STSP_OK) {
+            ++hits;
+            next = a.ctrl.next_tick;
+        }
+    }
+    assert_true(hits > 2000u);
+    /* A record of a later span than the tick (as after a reset that kept it, or a table
+     * whose instance was copied): searched again from the stage's first span. */
+    assert_int_equal(stsp_param_reset(&a), STSP_OK);
+    assert_int_equal(stsp_param_reset(&b), STSP_OK);
+    for (k = 0u; k < 200u; ++k) {
+        state(k, x);
+        assert_true(stsp_param_step(&a, k, x, ua) >= STSP_OK);
+    }
+    {
+        const stsp_span_t later = a.ctrl.span;
+        assert_int_equal(stsp_param_reset(&a), STSP_OK);
+        for (k = 0u; k < 30u; ++k) {
+            state(k, x);
+            assert_true(stsp_param_step(&a, k, x, ua) >= STSP_OK);
+            assert_true(stsp_param_step(&b, k, x, ub) >= STSP_OK);
+            if (k == 20u) {
+                a.ctrl.span = later;
+            }
+        }
+        for (; k < 60u; ++k) {
+            state(k, x);
+            assert_true(stsp_param_step(&a, k, x, ua) >= STSP_OK);
+            b.ctrl.span.next = 0u;
+            assert_true(stsp_param_step(&b, k, x, ub) >= STSP_OK);
+            assert_int_equal(word(ua[0]), word(ub[0]));
+            assert_int_equal(word(ua[1]), word(ub[1]));
+        }
+    }
+}
+
 int main(void)
 {
     const struct CMUnitTest tests[] = {
@@ -153,6 +252,7 @@ int main(void)
         cmocka_unit_test(test_bad_tables),
         cmocka_unit_test(test_verify),
         cmocka_unit_test(test_bad_theta),
+        cmocka_unit_test(test_span_cache_any_order),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

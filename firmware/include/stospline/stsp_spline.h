@@ -59,12 +59,14 @@ struct stsp_spline_ops_s {
     stsp_status_t (*step)(struct stsp_ctrl *ctrl, uint32_t tick, const stsp_scalar_t *x,
                           stsp_scalar_t *u);
     /** stsp_param_step() of a spline table with spline columns (stsp_params.h, format 2):
-     *  the unclamped command y[nu] at `tick` of stage s from x, the latch v and d[n_params],
-     *  the columns cols[n_cols] (float32 only; NULL in a Q15/Q31 build) */
-    void (*param_law)(const struct stsp_header *h, uint32_t s, uint32_t tick,
+     *  the unclamped command y[nu] at `tick` of stage s of ctrl's table from x, the latch v
+     *  and d[n_params], the columns cols[n_cols] (float32 only; NULL in a Q15/Q31 build).
+     *  kept nonzero: v holds ctrl->v and d the parameters in use, so ctrl->span may serve as
+     *  the span cache (read, and rewritten on a span change); 0 (a fresh latch): not touched */
+    void (*param_law)(struct stsp_ctrl *ctrl, uint32_t s, uint32_t tick,
                       const stsp_scalar_t *x, const stsp_scalar_t *v, const stsp_scalar_t *cols,
                       uint32_t n_cols, const stsp_scalar_t *d, uint32_t n_params,
-                      stsp_scalar_t *y);
+                      uint32_t kept, stsp_scalar_t *y);
 };
 
 /** The spline code of the build's arithmetic (stsp_spline_ops_f32, _q15 or _q31). */

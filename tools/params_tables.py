@@ -93,16 +93,15 @@ def fixed_point_files(name: str) -> dict:
 
 
 def spline_files(problem, source_name: str):
-    """``(files, sp)``: the C of the spline gain table and of its spline columns."""
-    from stospline.refine.spline_params import spline_parametric_of
-    from stospline.table.codegen import generate_c
-    from stospline.table.parametric_c import generate_spline_parametric_c
-    sp = spline_parametric_of(problem)
-    gh, gc = generate_c(sp.table, source_name=source_name)
-    ph, pc = generate_spline_parametric_c(sp.table, sp.columns, sp.per_tick.parameters,
-                                          source_name=source_name)
-    n = sp.table.name
-    return {f"{n}.h": gh, f"{n}.c": gc, f"{n}_params.h": ph, f"{n}_params.c": pc}, sp
+    """``(files, sp)``: the C of the spline gain table and of its spline columns, as
+    `stospline design FILE --table spline --out DIR` writes them (the same code:
+    `stospline.pipeline.design_files` and `spline_parametric_files`)."""
+    from stospline.options import resolve_options
+    from stospline.pipeline import design_files, design_problem, spline_parametric_files
+    d = design_problem(problem, options=resolve_options(problem, table="spline"))
+    files, sp = spline_parametric_files(d, source_name)
+    gains = design_files(d, source_name)[0]
+    return {**{n: t for n, t in gains.items() if not n.endswith(".json")}, **files}, sp
 
 
 def _spline_flash(sp) -> str:

@@ -98,15 +98,19 @@ def _design(args) -> int:
     opts = _design_options(args, problem)
     names = table_files(problem.name, opts.arith, opts.spline)
     fixed_params = bool(problem.parameters) and opts.arith != "float32"
-    params = _parameter_names(args, problem, opts) if args.out or fixed_params else []
+    spline_params = bool(problem.parameters) and opts.spline
+    params = (_parameter_names(args, problem, opts)
+              if args.out or fixed_params or spline_params else [])
     if args.out:
         check_target(args.out, params + names, inputs)
     _check_budget(args, problem, opts, "design", arith=opts.arith)
     d = design_problem(problem, options=opts, **_limits(args))
     _note_tables(d, "formatting")
     source_name = Path(args.problem).name
-    pfiles, fixed, terms = {}, None, None
-    if fixed_params:                            # the gain table scaled with its columns
+    pfiles, fixed, terms, table_terms = {}, None, None, None
+    if spline_params:                           # the spline columns on the designed table
+        pfiles, table_terms = _spline_parametric(args, d, source_name)
+    elif fixed_params:                            # the gain table scaled with its columns
         from stospline.oracle.parametric import fixed_parametric
         try:
             pfiles, pf, pd = fixed_parametric(problem, source_name, opts)
@@ -118,7 +122,7 @@ def _design(args) -> int:
         from stospline.oracle.parametric import parametric_c_files
         pfiles = parametric_c_files(problem, source_name, opts)
     files, summary = design_files(d, source_name, opts.arith, with_c=bool(args.out),
-                                  fixed=fixed, fixed_terms=terms)
+                                  fixed=fixed, fixed_terms=terms, table_terms=table_terms)
     if args.out:                                # written with the tables, as one set
         files.update(pfiles)
     if args.out:
@@ -133,6 +137,29 @@ def _design(args) -> int:
         for path in written if args.out else []:
             print(f"wrote {path}")
     return 0
+
+
+def _spline_parametric(args, d, source_name: str) -> tuple[dict, dict]:
+    """``(files, terms)``: the spline columns ``<name>_spline_params.{h,c}``
+    (`stospline.pipeline.spline_parametric_files`, what tools/params_tables.py --spline
+    writes) and, for the JSON summary's ``table``, what the table as flashed guarantees over
+    the parameter box (`stospline.refine.spline_params.certify_over_box` of the spline table
+    with its columns: ``over_box``); a note on stderr when a band row does not hold there.
+    A spline table the columns cannot follow: ProblemError naming ``--table`` when given."""
+    from stospline.pipeline import spline_parametric_files
+    from stospline.refine.spline_params import certify_over_box
+    try:
+        files, sp = spline_parametric_files(d, source_name)
+    except ProblemError as exc:
+        raise _option_error(args, exc) from None
+    cert = certify_over_box(d.problem, sp, keys=("spline",))
+    flashed = cert.pop("spline")
+    for m in flashed["bands"]:
+        if not m["holds"]:
+            print(f"stospline: note: {m['field']} row {m['row']} does not hold over the "
+                  f"parameter box for the spline table as flashed: it leaves the band by "
+                  f"{-m['worst_margin']:.3g} at t = {m['t']:g}", file=sys.stderr)
+    return files, {"over_box": {**flashed, **cert}}
 
 
 def _fixed_over_box(problem, pd, pf, arith: str) -> dict:
@@ -170,23 +197,29 @@ def _parameter_scale_error(problem, arith: str, exc: ValueError) -> ProblemError
                         f"from its nominal; narrow its range or use float32 tables")
 
 
+def _option_error(args, exc: ProblemError) -> ProblemError:
+    """`exc` naming the command-line option (``--table``, ``--arith``, ``--delay-ticks``...)
+    instead of ``design.<key>`` when the option was given there; else `exc`."""
+    key = exc.field.removeprefix("design.")
+    if key != exc.field and getattr(args, key, None) is not None:
+        return ProblemError(f"--{key.replace('_', '-')}", exc.reason)
+    return exc
+
+
 @quiet_numerics
 def _parameter_names(args, problem, opts) -> list[str]:
-    """``<name>_params.{h,c}`` for a problem with [[parameters]] ([] without), or ProblemError
-    naming the option (``--arith``/``--table``, else ``design.*``) whose table has no
-    sensitivity columns."""
+    """``<name>[_<arith>][_spline]_params.{h,c}`` for a problem with [[parameters]] ([]
+    without), or ProblemError naming the option (``--arith``/``--table``/``--delay-ticks``,
+    else ``design.*`` or the stage) whose table has no sensitivity columns."""
     if not problem.parameters:
         return []
     from stospline.oracle.parametric import check_parametric_options
     try:
         check_parametric_options(problem, opts)
     except ProblemError as exc:
-        key = exc.field.removeprefix("design.")
-        if getattr(args, key, None) is not None:
-            raise ProblemError(f"--{key}", exc.reason) from None
-        raise
+        raise _option_error(args, exc) from None
     from stospline.output_names import table_stem
-    stem = table_stem(problem.name, opts.arith)
+    stem = table_stem(problem.name, opts.arith, opts.spline)
     return [f"{stem}_params.h", f"{stem}_params.c"]
 
 

@@ -39,7 +39,8 @@ if TYPE_CHECKING:
 __all__ = ["Designed", "design_problem", "design_summary", "simulate_problem",
            "simulation_summary", "verdict", "plan_substeps", "write_outputs", "start_from",
            "double_table", "fixed_point_table", "fixed_point_spline", "check_implementable",
-           "generated_files", "design_files", "loop_moments", "fault_sweep",
+           "generated_files", "design_files", "spline_parametric_files", "loop_moments",
+           "fault_sweep",
            "simulation_estimate", "check_faults_runnable", "usable_workers",
            "fault_table_unavailable", "fault_sweep_runs", "table_numbers"]
 
@@ -474,16 +475,20 @@ def generated_files(d: Designed, source_name: str, arith: str = "float32", *,
 
 
 def design_files(d: Designed, source_name: str, arith: str = "float32", *,
-                 with_c: bool = True, fixed=None,
-                 fixed_terms: dict | None = None) -> tuple[dict[str, str], dict]:
+                 with_c: bool = True, fixed=None, fixed_terms: dict | None = None,
+                 table_terms: dict | None = None) -> tuple[dict[str, str], dict]:
     """``(files, summary)``: the files of `generated_files` and the JSON summary they hold,
     as a dict (what the text summary is printed from). `fixed`, optional: the Q15/Q31
     per-tick table to write instead of `fixed_point_table` of the design (a table with
     runtime parameters: the gain table quantized with its columns,
     `stospline.oracle.parametric.fixed_parametric`); `fixed_terms`, more entries of its
-    summary (what it guarantees over the parameter box)."""
+    summary (what it guarantees over the parameter box). `table_terms`, more entries of a
+    float32 spline table's certificate (the JSON key ``table``: what its spline columns
+    guarantee over the box, `spline_parametric_files`)."""
     check_implementable(d)
     summary = design_summary(d)
+    if table_terms:
+        summary["table"] = {**summary["table"], **rounded(table_terms)}
     q_est = None
     if arith == "float32":
         table = d.table
@@ -524,6 +529,29 @@ def design_files(d: Designed, source_name: str, arith: str = "float32", *,
         body, guard = header.rsplit("#endif", 1)
         header, source = body + eh.lstrip("\n") + "\n#endif" + guard, source + ec
     return {f"{n}.h": header, f"{n}.c": source, f"{n}.json": text}, summary
+
+
+def spline_parametric_files(d: Designed, source_name: str = "") -> tuple[dict[str, str], object]:
+    """``(files, sp)``: ``<name>_spline_params.{h,c}``, the spline columns of a design with
+    runtime parameters and a float32 spline table (`design_problem` with ``table="spline"``),
+    fitted on that table's knots (`stospline.refine.spline_params.spline_parametric_of`, the
+    parametric design with `d`'s options), beside the ``<name>_spline.{h,c}`` that
+    `design_files` writes of it; and the `SplineParametric`, what the oracle certifies
+    (``certify_over_box``). ``stospline design --table spline`` and
+    ``tools/params_tables.py --spline`` write them with this.
+
+    Raises DesignError naming the option (`check_parametric_options`) or ``design.table``
+    (a spline table with a band dual)."""
+    from stospline.oracle.parametric import check_parametric_options
+    from stospline.refine.spline_params import spline_parametric_c, spline_parametric_of
+    opts = check_parametric_options(d.problem, _options_of(d))
+    if d.table.spline is None or not d.problem.parameters:
+        raise DesignError("design.table", "spline columns need a design with [[parameters]] "
+                                          "and a float32 spline table")
+    sp = spline_parametric_of(d.problem, opts, stable=d.table,
+                              ptable=d.over_box.table if d.over_box is not None else None)
+    stem = table_stem(d.problem.name, "float32", True)
+    return spline_parametric_c(sp, stem, source_name), sp
 
 
 def check_implementable(d: Designed) -> None:

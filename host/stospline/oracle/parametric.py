@@ -238,12 +238,32 @@ def fixed_parametric(problem, source_name: str = "", options=None):
 
 def check_parametric_options(problem, options=None):
     """`options` (default the problem's resolved ``[design]``), or DesignError naming the
-    option when the table they ask for has no sensitivity columns."""
+    option when the table they ask for has no sensitivity columns: per-tick columns for every
+    arithmetic (float32, or Q15/Q31 scaled with the gains, `fixed_parametric`), spline columns
+    (`stospline.refine.spline_params`, fitted on the spline's knots with the latch re-solved
+    for its gains) for a float32 spline table of a design without a delay and with constant
+    stage data. (A spline table with a band dual is refused once designed, by
+    `stospline.refine.spline_params.spline_parametric`.)"""
     from stospline.options import resolve_options
     opts = options if options is not None else resolve_options(problem)
-    # The columns are those of the per-tick law (float32, or Q15/Q31 scaled with the gains,
-    # `fixed_parametric`): a spline table re-solves its latch for its own gains.
-    if opts.table != "per-tick":
+    if opts.table == "per-tick":
+        return opts
+    if opts.table != "spline":
         raise DesignError("design.table", f"runtime parameters have sensitivity columns for "
-                                          f"table = \"per-tick\" only, got {opts.table!r}")
+                                          f"table = \"per-tick\" or \"spline\", got "
+                                          f"{opts.table!r}")
+    if opts.arith != "float32":
+        raise DesignError("design.table", f"runtime parameters have spline columns in float32 "
+                                          f"only, got arith = {opts.arith!r}: use table = "
+                                          f"\"per-tick\" for {opts.arith.upper()} columns")
+    if opts.delay_ticks:
+        raise DesignError("design.delay_ticks", "spline columns of runtime parameters are "
+                                                "re-solved for designs without a delay: set "
+                                                "delay_ticks = 0 or table = \"per-tick\"")
+    varying = [k for k, st in enumerate(problem.stages) if st.varying is not None]
+    if varying:
+        raise DesignError(f"stages[{varying[0]}]", "spline columns of runtime parameters are "
+                                                   "re-solved for constant stage data only: "
+                                                   "this stage's data vary in time; use "
+                                                   "table = \"per-tick\"")
     return opts

@@ -25,7 +25,8 @@ from stospline.table.spline.latch import _groups
 from stospline.table.spline.params import SplineColumns, box_error, fit_columns
 from stospline.table.spline.restore import is_state_latching
 
-__all__ = ["SplineParametric", "spline_parametric", "spline_parametric_of", "certify_over_box"]
+__all__ = ["CERTIFIED", "SplineParametric", "spline_parametric", "spline_parametric_of",
+           "spline_parametric_c", "certify_over_box"]
 
 
 @dataclass(frozen=True)
@@ -111,40 +112,68 @@ def spline_parametric(problem, ptable: ParametricTable, stable) -> SplineParamet
     return SplineParametric(stable, cols, flashed, ptable)
 
 
-def spline_parametric_of(problem) -> SplineParametric:
-    """`spline_parametric` of a problem with parameters: its parametric design with the
-    file's ``[design]`` options, the float32 spline table at its ``spline_tolerance``."""
+def spline_parametric_of(problem, options=None, *, ptable: ParametricTable | None = None,
+                         stable=None) -> SplineParametric:
+    """`spline_parametric` of a problem with parameters: its parametric design with
+    `options` (`stospline.options.DesignOptions`, default the file's ``[design]``) or
+    `ptable`, the design's `ParametricTable` when already made, on the float32 spline table
+    `stable` (default the spline of the design's table at the options' ``spline_tolerance``;
+    `stospline.pipeline.spline_parametric_files` passes the designed one)."""
     from stospline.oracle.parametric import design_parametric
     from stospline.options import resolve_options
     from stospline.table.spline import spline_table
-    opts = resolve_options(problem)
-    pt = design_parametric(problem, discretization=opts.discretization, mode=opts.mode,
-                           delay_ticks=opts.delay_ticks).table
-    stable = spline_table(problem, pt.table, opts.spline_tolerance,
-                          per_tick=pt.table.quantized())
+    opts = options if options is not None else resolve_options(problem)
+    pt = ptable if ptable is not None else design_parametric(
+        problem, discretization=opts.discretization, mode=opts.mode,
+        delay_ticks=opts.delay_ticks, noise=opts.noise).table
+    if stable is None:
+        stable = spline_table(problem, pt.table, opts.spline_tolerance,
+                              per_tick=pt.table.quantized())
     return spline_parametric(problem, pt, stable)
 
 
-def certify_over_box(problem, sp: SplineParametric) -> dict:
+def spline_parametric_c(sp: SplineParametric, stem: str, source_name: str = ""
+                        ) -> dict[str, str]:
+    """``{"<stem>_params.h": ..., "<stem>_params.c": ...}``: the format-2 parameter table of
+    `sp`'s spline columns (`stospline.table.parametric_c.generate_spline_parametric_c`),
+    beside the spline gain table ``<stem>.{h,c}``."""
+    from stospline.table.parametric_c import generate_spline_parametric_c
+    header, source = generate_spline_parametric_c(sp.table, sp.columns, sp.per_tick.parameters,
+                                                  source_name=source_name)
+    return {f"{stem}_params.h": header, f"{stem}_params.c": source}
+
+
+# The tables `certify_over_box` certifies (its keys), the flashed spline table's first.
+CERTIFIED = ("spline", "per_tick", "per_tick_float32", "spline_design_columns")
+
+
+def certify_over_box(problem, sp: SplineParametric, keys=CERTIFIED) -> dict:
     """The guarantees of the flashed spline parametric table over the box: every band row's
-    worst margin over the box (`band_margins`), every corridor's Cantelli bound over the box
-    (`stospline.oracle.exit_bound.exit_bounds_over_box`: the largest per tick, and the sum),
-    the same of the per-tick design in double precision, of its float32 table (the gains
-    and columns as the per-tick firmware stores them) and of the spline's gains with the
-    design's exact columns, for comparison, and the columns' errors."""
+    worst margin over the box (`band_margins`: ``worst_band_margin``, ``bands_hold``, and
+    each row's `RowMargin.as_dict` in ``bands``), every corridor's Cantelli bound over the
+    box (`stospline.oracle.exit_bound.exit_bounds_over_box`: the largest per tick, and the
+    sum), the same of the per-tick design in double precision, of its float32 table (the
+    gains and columns as the per-tick firmware stores them) and of the spline's gains with
+    the design's exact columns, for comparison (`keys`, a subset of `CERTIFIED`: the tables
+    to certify, each an oracle over the box), and the columns' errors."""
     from stospline.oracle.exit_bound import exit_bounds_over_box
     out = {"column_error": sp.columns.error.tolist(),
            "column_box_error": sp.columns.box_error.tolist()}
     pt = sp.per_tick
-    f32 = ParametricTable(pt.table.quantized(), pt.S_k0.astype(np.float32).astype(float),
-                          pt.S_lambda0.astype(np.float32).astype(float), pt.parameters)
-    design_columns = ParametricTable(sp.flashed.table, pt.S_k0, pt.S_lambda0, pt.parameters)
-    for key, table in (("spline", sp.flashed), ("per_tick", pt), ("per_tick_float32", f32),
-                       ("spline_design_columns", design_columns)):
-        box = box_moments(problem, table)
+    tables = {
+        "spline": lambda: sp.flashed,
+        "per_tick": lambda: pt,
+        "per_tick_float32": lambda: ParametricTable(
+            pt.table.quantized(), pt.S_k0.astype(np.float32).astype(float),
+            pt.S_lambda0.astype(np.float32).astype(float), pt.parameters),
+        "spline_design_columns": lambda: ParametricTable(sp.flashed.table, pt.S_k0,
+                                                         pt.S_lambda0, pt.parameters)}
+    for key in keys:
+        box = box_moments(problem, tables[key]())
         margins = band_margins(problem, box)
         entry = {"worst_band_margin": min((m.worst for m in margins), default=None),
-                 "bands_hold": all(m.holds for m in margins), "corridors": []}
+                 "bands_hold": all(m.holds for m in margins),
+                 "bands": [m.as_dict() for m in margins], "corridors": []}
         for c in problem.corridors:
             b = exit_bounds_over_box(c, box, problem.t0, problem.tick_hz)["cantelli"]
             entry["corridors"].append({"worst_tick": b.worst_tick, "total": b.total})

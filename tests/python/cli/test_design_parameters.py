@@ -1,9 +1,11 @@
 """`stospline design --out` of a problem with [[parameters]] writes the sensitivity columns
 ``<name>_params.{h,c}`` with the tables, as one set, and its JSON summary lists the parameters
 with their ranges; with ``--arith q15|q31`` the fixed-point parametric controller
-``<name>_<arith>{,_params}.{h,c}``; a table kind without columns is refused before any work."""
+``<name>_<arith>{,_params}.{h,c}``, with ``--table spline`` the spline one
+``<name>_spline{,_params}.{h,c}``; a table kind without columns is refused before any work."""
 import json
 
+import numpy as np
 import pytest
 
 from conftest import EXAMPLES, GAINS
@@ -14,6 +16,7 @@ from stospline.options import resolve_options
 from stospline.oracle.fixed_point_margin import fixed_point_certificate
 from stospline.oracle.parametric import fixed_parametric
 from stospline.pipeline import fixed_point_table
+from stospline.refine.spline_params import certify_over_box, spline_parametric_of
 
 
 def test_design_writes_the_parameter_files_and_lists_them(tmp_path, capsys):
@@ -105,16 +108,69 @@ def test_fixed_point_all_files_or_none(tmp_path, capsys):
     assert sorted(p.name for p in out.iterdir()) == ["robot_goal_q15_params.h"]
 
 
-def test_a_table_without_columns_is_refused_in_one_line(tmp_path, capsys):
+def test_design_table_spline_writes_the_spline_parametric_controller(tmp_path, capsys):
+    """`--table spline`: the spline gain table and its spline columns, byte for byte the
+    shipped gains/ (tools/params_tables.py --spline, the same code), and in the summary's
+    ``table`` what the table as flashed guarantees over the box: `certify_over_box` of the
+    spline parametric table made apart (`spline_parametric_of`, its own spline fit)."""
     out = tmp_path / "out"
-    for extra, named in ((["--table", "spline"], "--table: "),
-                         (["--arith", "q15", "--table", "spline"], "--table: ")):
-        assert main(["design", str(EXAMPLES / "robot_goal.toml"), "--out", str(out),
-                     *extra]) == 2
+    assert main(["design", str(EXAMPLES / "robot_goal.toml"), "--table", "spline", "--out",
+                 str(out), "--json"]) == 0
+    captured = capsys.readouterr()
+    stem = "robot_goal_spline"
+    assert sorted(p.name for p in out.iterdir()) == [
+        f"{stem}.c", f"{stem}.h", f"{stem}.json", f"{stem}_params.c", f"{stem}_params.h"]
+    for suffix in (".c", ".h", "_params.c", "_params.h"):
+        assert (out / f"{stem}{suffix}").read_text() == (GAINS / f"{stem}{suffix}").read_text()
+    summary = json.loads(captured.out)
+    assert summary == json.loads((out / f"{stem}.json").read_text())
+    assert summary["parameters"][1]["name"] == "goal_y" and captured.err == ""
+    problem = load_problem(EXAMPLES / "robot_goal.toml")
+    want = certify_over_box(problem, spline_parametric_of(problem),
+                            keys=("spline", "per_tick_float32"))
+    got = summary["table"]["over_box"]
+    assert np.ravel(got["column_error"]) == pytest.approx(np.ravel(want["column_error"]),
+                                                          rel=1e-4)
+    worst = got["corridors"][0]["worst_tick"]
+    assert worst == pytest.approx(want["spline"]["corridors"][0]["worst_tick"], rel=1e-9)
+    # the flashed table's, not the per-tick float32 table's (they differ in the 8th digit)
+    assert worst != pytest.approx(want["per_tick_float32"]["corridors"][0]["worst_tick"],
+                                  rel=1e-9)
+    assert got["bands"] == [] and got["bands_hold"] is True
+
+
+def test_a_table_without_columns_is_refused_in_one_line(tmp_path, capsys):
+    """Refused before any work, naming the option given (else the file's field)."""
+    out = tmp_path / "out"
+    varying = tmp_path / "varying.toml"          # a time-varying rate: no spline columns
+    varying.write_text((EXAMPLES / "investment.toml").read_text() + """
+[[parameters]]
+name = "goal"
+sets = ["knots[1].constraint.value[0]", "knots[1].penalty.target[0]"]
+range = [90.0, 110.0]
+""")
+    goal = str(EXAMPLES / "robot_goal.toml")
+    for problem, extra, named in (
+            (goal, ["--arith", "q15", "--table", "spline"], "--table: "),
+            (goal, ["--table", "spline", "--delay-ticks", "1"], "--delay-ticks: "),
+            (str(varying), ["--table", "spline"], "stages[0]: ")):
+        assert main(["design", problem, "--out", str(out), *extra]) == 2
         captured = capsys.readouterr()
         err = captured.err.strip()
         assert len(err.splitlines()) == 1 and named in err, err
         assert captured.out == "" and not out.exists()
+    assert main(["design", str(varying), "--out", str(out)]) == 0      # per-tick columns
+
+
+def test_spline_all_files_or_none(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "robot_goal_spline_params.c").mkdir()
+    assert main(["design", str(EXAMPLES / "robot_goal.toml"), "--table", "spline",
+                 "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert "robot_goal_spline_params.c" in captured.err and captured.out == ""
+    assert sorted(p.name for p in out.iterdir()) == ["robot_goal_spline_params.c"]
 
 
 def test_all_files_or_none(tmp_path, capsys):

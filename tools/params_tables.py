@@ -7,7 +7,8 @@
 --spline writes, instead, the spline parametric controllers of the examples in SPLINE
 (`spline_files`): gains/<name>_spline.{c,h}, the float32 spline gain table at the file's
 spline_tolerance, and gains/<name>_spline_params.{c,h}, its columns as B-splines on the same
-knots (format 2); with --bytes it prints, for every example with [[parameters]], the bytes of
+knots (format 2), byte for byte what `stospline design examples/<name>.toml --table spline
+--out DIR` writes (the same code, `stospline.pipeline.spline_parametric_files`); with --bytes it prints, for every example with [[parameters]], the bytes of
 the per-tick and the spline forms (table and columns), the columns' largest fit error and
 their effect on the command over the box; with --certify, the guarantees over the box of the
 spline table as flashed against the per-tick design's (stospline.refine.spline_params).

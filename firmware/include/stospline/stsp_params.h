@@ -63,8 +63,13 @@
  *            gains of x in stored order (g_e = ((N0 c0 + N1 c1) + N2 c2) + N3 c3),
  * then the checks and the clamp of the per-tick law; the latch as above. At d = 0 the
  * commands are stsp_step()'s on the spline table bit for bit (up to the sign of a zero).
- * Every tick of a spline table goes through the plan (no span cache): about the cold path's
- * cost at every tick.
+ * The span's record (its basis quotient, coefficients and that fold, v and d folded in) is
+ * kept in ctrl.span, the spline table's span cache, which stsp_step() would use and a
+ * parametric instance never passes to it: an ordinary tick inside the recorded span of its
+ * stage evaluates the basis and the record's fold only; a later one searches again from the
+ * record's span, any other from the stage's first span. stsp_set_params() clears the record,
+ * init and reset clear it with the instance (a latch comes with another stage); the cold path
+ * (maybe a fresh latch) searches from the stage's first span without it.
  *
  * A per-tick parameter table (format 1) with a spline gain table, a spline one (format 2)
  * with a per-tick table, and a gain table with a band dual are refused at init
@@ -77,7 +82,7 @@
  * bytes with the default limits in a float32 build, 348 in Q15, 476 in Q31
  * (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_param_t)).
  * stsp_param_step() uses STSP_MAX_LATCH + STSP_MAX_NU scalars of stack; with a spline table
- * its call of the spline code also a span record (stsp_span_t) and 4 STSP_MAX_NU + 4
+ * its call of the spline code also a span record (stsp_span_t, on the cold path) and 4
  * scalars. Every tick of a
  * parametric instance is evaluated by this file in plain C loops (not stsp_step()'s ordinary
  * tick): nu P more multiply-adds per tick, and the generic loop overhead

@@ -42,22 +42,30 @@ def test_a_problem_without_parameters_writes_no_columns(tmp_path, capsys):
     assert not list(out.glob("*_params.*"))
 
 
-@pytest.mark.parametrize("arith", ["q15", "q31"])
-def test_design_arith_writes_the_fixed_point_parametric_controller(tmp_path, capsys, arith):
-    """`--arith q15|q31`: the gain table quantized with the columns and the columns, byte for
-    byte the shipped gains/ (tools/params_tables.py --fixed, the same code), and a summary of
-    the table written (its scales and its error bound over the box, not the plain Q table's)."""
+def _design_as_shipped(tmp_path, capsys, stem: str, *extra: str):
+    """``(summary, captured)`` of `design robot_goal.toml --out DIR --json` with `extra`,
+    after checking that it wrote ``<stem>{,_params}.{c,h}`` byte for byte as gains/ ships
+    them (tools/params_tables.py writes those with the same code) and ``<stem>.json``."""
     out = tmp_path / "out"
-    assert main(["design", str(EXAMPLES / "robot_goal.toml"), "--arith", arith, "--out",
-                 str(out), "--json"]) == 0
+    assert main(["design", str(EXAMPLES / "robot_goal.toml"), *extra, "--out", str(out),
+                 "--json"]) == 0
     captured = capsys.readouterr()
-    stem = f"robot_goal_{arith}"
     assert sorted(p.name for p in out.iterdir()) == [
         f"{stem}.c", f"{stem}.h", f"{stem}.json", f"{stem}_params.c", f"{stem}_params.h"]
     for suffix in (".c", ".h", "_params.c", "_params.h"):
         assert (out / f"{stem}{suffix}").read_text() == (GAINS / f"{stem}{suffix}").read_text()
     summary = json.loads(captured.out)
     assert summary == json.loads((out / f"{stem}.json").read_text())
+    return summary, captured
+
+
+@pytest.mark.parametrize("arith", ["q15", "q31"])
+def test_design_arith_writes_the_fixed_point_parametric_controller(tmp_path, capsys, arith):
+    """`--arith q15|q31`: the gain table quantized with the columns and the columns, byte for
+    byte the shipped gains/ (tools/params_tables.py --fixed, the same code), and a summary of
+    the table written (its scales and its error bound over the box, not the plain Q table's)."""
+    summary, captured = _design_as_shipped(tmp_path, capsys, f"robot_goal_{arith}",
+                                           "--arith", arith)
     problem = load_problem(EXAMPLES / "robot_goal.toml")
     _, pf, pd = fixed_parametric(problem, options=resolve_options(problem, arith=arith))
     table = pf.gain_table()
@@ -97,33 +105,13 @@ def test_fixed_point_columns_out_of_scale_are_refused_naming_the_range(tmp_path,
     assert captured.out == "" and not out.exists()
 
 
-def test_fixed_point_all_files_or_none(tmp_path, capsys):
-    out = tmp_path / "out"
-    out.mkdir()
-    (out / "robot_goal_q15_params.h").mkdir()
-    assert main(["design", str(EXAMPLES / "robot_goal.toml"), "--arith", "q15",
-                 "--out", str(out)]) == 2
-    captured = capsys.readouterr()
-    assert "robot_goal_q15_params.h" in captured.err and captured.out == ""
-    assert sorted(p.name for p in out.iterdir()) == ["robot_goal_q15_params.h"]
-
-
 def test_design_table_spline_writes_the_spline_parametric_controller(tmp_path, capsys):
     """`--table spline`: the spline gain table and its spline columns, byte for byte the
     shipped gains/ (tools/params_tables.py --spline, the same code), and in the summary's
     ``table`` what the table as flashed guarantees over the box: `certify_over_box` of the
     spline parametric table made apart (`spline_parametric_of`, its own spline fit)."""
-    out = tmp_path / "out"
-    assert main(["design", str(EXAMPLES / "robot_goal.toml"), "--table", "spline", "--out",
-                 str(out), "--json"]) == 0
-    captured = capsys.readouterr()
-    stem = "robot_goal_spline"
-    assert sorted(p.name for p in out.iterdir()) == [
-        f"{stem}.c", f"{stem}.h", f"{stem}.json", f"{stem}_params.c", f"{stem}_params.h"]
-    for suffix in (".c", ".h", "_params.c", "_params.h"):
-        assert (out / f"{stem}{suffix}").read_text() == (GAINS / f"{stem}{suffix}").read_text()
-    summary = json.loads(captured.out)
-    assert summary == json.loads((out / f"{stem}.json").read_text())
+    summary, captured = _design_as_shipped(tmp_path, capsys, "robot_goal_spline",
+                                           "--table", "spline")
     assert summary["parameters"][1]["name"] == "goal_y" and captured.err == ""
     problem = load_problem(EXAMPLES / "robot_goal.toml")
     want = certify_over_box(problem, spline_parametric_of(problem),
@@ -162,23 +150,15 @@ range = [90.0, 110.0]
     assert main(["design", str(varying), "--out", str(out)]) == 0      # per-tick columns
 
 
-def test_spline_all_files_or_none(tmp_path, capsys):
-    out = tmp_path / "out"
-    out.mkdir()
-    (out / "robot_goal_spline_params.c").mkdir()
-    assert main(["design", str(EXAMPLES / "robot_goal.toml"), "--table", "spline",
-                 "--out", str(out)]) == 2
-    captured = capsys.readouterr()
-    assert "robot_goal_spline_params.c" in captured.err and captured.out == ""
-    assert sorted(p.name for p in out.iterdir()) == ["robot_goal_spline_params.c"]
-
-
-def test_all_files_or_none(tmp_path, capsys):
+@pytest.mark.parametrize("extra, blocked", [
+    ([], "robot_goal_params.c"), (["--arith", "q15"], "robot_goal_q15_params.h"),
+    (["--table", "spline"], "robot_goal_spline_params.c")])
+def test_all_files_or_none(tmp_path, capsys, extra, blocked):
     """A parameter file's target that cannot be replaced: nothing written, status 2."""
     out = tmp_path / "out"
     out.mkdir()
-    (out / "robot_goal_params.c").mkdir()
-    assert main(["design", str(EXAMPLES / "robot_goal.toml"), "--out", str(out)]) == 2
+    (out / blocked).mkdir()
+    assert main(["design", str(EXAMPLES / "robot_goal.toml"), "--out", str(out), *extra]) == 2
     captured = capsys.readouterr()
-    assert "robot_goal_params.c" in captured.err and captured.out == ""
-    assert sorted(p.name for p in out.iterdir()) == ["robot_goal_params.c"]
+    assert blocked in captured.err and captured.out == ""
+    assert sorted(p.name for p in out.iterdir()) == [blocked]

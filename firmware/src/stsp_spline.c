@@ -1042,7 +1042,8 @@ static void stsp_spline_param_law(stsp_ctrl_t *ctrl, uint32_t s, uint32_t tick,
     const stsp_header_t *h = &ctrl->checked;
     const uint32_t nu = stsp_nu(h);
     const uint32_t first = h->stage_start[s];
-    const stsp_f32_t tau = (stsp_f32_t)(tick - first); /* exact: < 2^24 on a valid table */
+    const uint32_t in_stage = tick - first;
+    const stsp_f32_t tau = (stsp_f32_t)in_stage; /* exact: < 2^24 on a valid table */
     stsp_span_t fresh;
     const stsp_span_t *p = &ctrl->span;
     stsp_f32_t n[4];

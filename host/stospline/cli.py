@@ -110,7 +110,7 @@ def _design(args) -> int:
     pfiles, fixed, terms, table_terms = {}, None, None, None
     if spline_params:                           # the spline columns on the designed table
         pfiles, table_terms = _spline_parametric(args, d, source_name)
-    elif fixed_params:                            # the gain table scaled with its columns
+    elif fixed_params:                          # the gain table scaled with its columns
         from stospline.oracle.parametric import fixed_parametric
         try:
             pfiles, pf, pd = fixed_parametric(problem, source_name, opts)

@@ -203,9 +203,15 @@ def parametric_c_files(problem, source_name: str = "", options=None) -> dict[str
     problem's design with `options` (`stospline.options.DesignOptions`; default its
     ``[design]`` options: mode, discretization, delay) as C text
     (`stospline.table.parametric_c`), beside the ``<name>.{c,h}`` that `stospline design`
-    writes for the nominal."""
+    writes for the nominal. Per-tick tables only (DesignError naming ``design.table`` for a
+    spline one: `stospline.pipeline.spline_parametric_files`)."""
     from stospline.table.parametric_c import generate_parametric_c
     opts = check_parametric_options(problem, options)
+    if opts.spline:
+        raise DesignError("design.table", "a spline table's columns are splines on its knots, "
+                                          "written with it by stospline.pipeline."
+                                          "spline_parametric_files (stospline design --table "
+                                          "spline); these are per-tick columns")
     if opts.arith != "float32":
         return fixed_parametric(problem, source_name, opts)[0]
     pd = design_parametric(problem, discretization=opts.discretization, mode=opts.mode,

@@ -237,8 +237,9 @@ def test_sensitivity_columns_are_not_differences():
 
 
 def test_columns_only_for_per_tick_tables():
-    """A spline table has no columns; a Q15 per-tick table has them, scaled with its gains
-    (`fixed_parametric`: the gain table and the columns)."""
+    """A spline table has no per-tick columns (its spline columns come from
+    `stospline.pipeline.spline_parametric_files`); a Q15 per-tick table has them, scaled with
+    its gains (`fixed_parametric`: the gain table and the columns)."""
     from stospline.errors import DesignError
     from stospline.oracle.parametric import parametric_c_files
     doc = robot_goal_doc(20)

@@ -33,7 +33,8 @@ from stospline.problem.parameters import problem_at
 from stospline.table.parametric import ParametricTable, parametric_table
 
 __all__ = ["BOX_ROUNDS", "ParametricDesign", "check_parametric_options", "design_parametric", "evaluate_at",
-           "evaluate_switched", "tails_at", "cost_quadratic", "parametric_c_files", "fixed_parametric"]
+           "evaluate_switched", "tails_at", "cost_quadratic", "parametric_c_files",
+           "fixed_parametric"]
 
 
 @dataclass

@@ -33,7 +33,9 @@ import itertools
 import numpy as np
 
 from stospline.oracle.tails import (MAX_DIM, TailMoments, _mode, _Sym, _TickOperator,
-                                    check_second_moments, knot_step, too_many_channels)
+                                    check_second_moments, knot_step, step_matrix,
+                                    too_many_channels)
+from stospline.oracle.tails_kernel import compiled_tails
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem
 
@@ -100,8 +102,13 @@ def _with_noise(T4, P, Rq):
     dr = d + p
     zi = np.r_[0:d - 1, dr - 1]
     ri = np.arange(d - 1, d - 1 + p)
-    B2 = np.einsum("pqkl,ijkl->ijpq", Rq, T4)               # E z_i z_j r_p r_q
-    G = np.einsum("pqij,stkl,ijkl->pqst", Rq, Rq, T4)      # E R_pq R_st
+    if Rq[:, :, :-1].any() or Rq[:, :, -1, :-1].any():
+        B2 = np.einsum("pqkl,ijkl->ijpq", Rq, T4)           # E z_i z_j r_p r_q
+        G = np.einsum("pqij,stkl,ijkl->pqst", Rq, Rq, T4)  # E R_pq R_st
+    else:                                   # R constant: on z's 1 only
+        R0 = Rq[:, :, -1, -1]
+        B2 = np.multiply.outer(T4[:, :, -1, -1], R0)
+        G = T4[-1, -1, -1, -1] * np.multiply.outer(R0, R0)
     B4 = G + np.transpose(G, (0, 2, 1, 3)) + np.transpose(G, (0, 2, 3, 1))
     W = np.zeros((dr,) * 4)
     W[np.ix_(zi, zi, zi, zi)] = T4
@@ -179,6 +186,8 @@ def evaluate_estimator_tails(problem: Problem, table, loop, *, predictor=None,
         Ra = np.zeros((m, m, d, d))
         Ra[:, :, -1, -1] = np.diag(sig_u ** 2)
     ops: dict = {}
+    kernel = compiled_tails(n, m, d - n - 1, s4, s2, sym=_Sym, step_matrix=step_matrix)
+    operator = None if kernel is None else kernel.operator      # the step's map in C
 
     def tick(br, j, op, Fu):
         """The plant and the predictor over tick j from the moments `br` of z (after the
@@ -232,7 +241,8 @@ def evaluate_estimator_tails(problem: Problem, table, loop, *, predictor=None,
     for k in range(table.n_stages):
         stage = plant.stages[k]
         if id(stage) not in ops:
-            ops[id(stage)] = (stage, _TickOperator(stage, n, m, d - n - 1, h, substeps, s4, s2))
+            ops[id(stage)] = (stage, _TickOperator(stage, n, m, d - n - 1, h, substeps, s4, s2,
+                                                   operator))
         op = ops[id(stage)][1]
         if k == 0 or table.stage_n_latch[k] > 0:
             L, U = None, _add(U, L, 1.0)

@@ -24,7 +24,9 @@ have latched the current stage and those that have not run in it yet; each branc
 linear, and a tick adds each branch's image weighted by its probability. The start ``x ~
 N(x0, x0_cov)``, ``x̂ = x0`` is Gaussian too. The filter's gains and predictor are those of the
 second-moment oracle (`evaluate_estimator`), whose knot moments and cost the loop must
-reproduce (`oracle.tails.TailsMismatch`).
+reproduce (`oracle.tails.TailsMismatch`). The plant step's map is built by the oracle's C
+kernel where its module builds (`oracle.tails_kernel`; its numpy reference otherwise); the
+ticks run here in numpy.
 """
 from __future__ import annotations
 

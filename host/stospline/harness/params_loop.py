@@ -117,23 +117,31 @@ class ParamsRun:
     worst_status: int
 
     def agreement(self, J: float | None, knot_means, confidence: float = 0.99, *,
-                  allowance=None):
+                  allowance=None, exact_se=None):
         """`joint_verdict` of the cost and every knot-mean component against exact values,
-        z-scores from the sample's own standard errors (Bonferroni over all of them). With
+        z-scores from the sample's own standard errors (Bonferroni over all of them), or with
+        `exact_se` (`oracle.tails.TailMoments` of the loop run, e.g.
+        `oracle.parametric.tails_at`) from its exact ones, which the heavy tails of
+        multiplicative noise do not make too small. With
         `allowance` (per knot, (n,): a bound on how far the run's expected state may be from
         the exact values, e.g. a fixed-point error bound propagated,
         `stospline.oracle.fixed_point_margin`), a difference within it counts as none and one
         beyond it by the excess only. ``J=None`` leaves the cost out."""
-        def z(sample, exact, allow=0.0):
-            se = sample.std(ddof=1) / np.sqrt(sample.size)
+        N = len(self.cost)
+
+        def z(sample, exact, allow=0.0, se=None):
+            if se is None or np.all(sample == sample[0]):
+                se = sample.std(ddof=1) / np.sqrt(sample.size)
             diff = sample.mean() - exact
             excess = np.sign(diff) * max(0.0, abs(diff) - allow)
             return (None if se == 0 else float(excess / se), float(sample.mean()),
                     float(exact))
-        stats = [] if J is None else [("cost", *z(self.cost, J))]
+        stats = [] if J is None else [("cost", *z(
+            self.cost, J, se=None if exact_se is None else exact_se.cost_mean_se(N)))]
         allowance = allowance if allowance is not None else [np.zeros(len(m)) for m in knot_means]
         for k, (X, mean, allow) in enumerate(zip(self.knots, knot_means, allowance)):
-            stats += [(f"knot {k} mean[{i}]", *z(X[:, i], mean[i], allow[i]))
+            se = [None] * X.shape[1] if exact_se is None else exact_se.knot_mean_se(k, N)
+            stats += [(f"knot {k} mean[{i}]", *z(X[:, i], mean[i], allow[i], se[i]))
                       for i in range(X.shape[1])]
         return joint_verdict(stats, confidence)
 

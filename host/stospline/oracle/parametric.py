@@ -33,7 +33,8 @@ from stospline.problem.parameters import problem_at
 from stospline.table.parametric import ParametricTable, parametric_table
 
 __all__ = ["BOX_ROUNDS", "ParametricDesign", "check_parametric_options", "design_parametric", "evaluate_at",
-           "evaluate_switched", "cost_quadratic", "parametric_c_files", "fixed_parametric"]
+           "evaluate_switched", "tails_at", "cost_quadratic", "parametric_c_files",
+           "fixed_parametric"]
 
 
 @dataclass
@@ -166,6 +167,12 @@ def evaluate_switched(problem, table: ParametricTable, theta, stage: int, theta2
     is affine in `theta` before the change and in `theta2` after it, the law piecewise so.
     The problem is at `theta` up to that stage and at `theta2` from it (its plant and the knot
     at its end: the device learns of a change in the world at `tick`)."""
+    return evaluate_table(*_switched(problem, table, theta, stage, theta2, tick, quantize),
+                          path=path)
+
+
+def _switched(problem, table: ParametricTable, theta, stage: int, theta2, tick, quantize):
+    """The problem and the gain table of `evaluate_switched`'s loop."""
     a, b = table.at(theta, quantize=quantize), table.at(theta2, quantize=quantize)
     start, end = int(a.stage_start[stage]), int(a.stage_start[stage + 1])
     j = start if tick is None else int(tick)
@@ -177,7 +184,22 @@ def evaluate_switched(problem, table: ParametricTable, theta, stage: int, theta2
     pa, pb = problem_at(problem, theta), problem_at(problem, theta2)
     p = replace(pa, stages=pa.stages[:stage] + pb.stages[stage:],
                 knots=pa.knots[:stage] + pb.knots[stage:])
-    return evaluate_table(p, mixed, path=path)
+    return p, mixed
+
+
+def tails_at(problem, table: ParametricTable, theta, *, substeps: int, stage: int | None = None,
+             theta2=None, tick: int | None = None, quantize: bool = False):
+    """The loop's cost variance and knot moments up to the fourth under the Monte Carlo plant
+    scheme with `substeps` steps per tick (`oracle.tails.evaluate_tails`): the standard errors
+    of a run of `harness.params_loop.simulate_params` with `theta` fixed, or changed to
+    `theta2` as `evaluate_switched` (``stage`` and ``tick``). Raises ValueError for what
+    `oracle.tails.tails_unsupported` names."""
+    from stospline.oracle.tails import evaluate_tails
+    if stage is None:
+        return evaluate_tails(problem_at(problem, theta), table.at(theta, quantize=quantize),
+                              substeps=substeps)
+    return evaluate_tails(*_switched(problem, table, theta, stage, theta2, tick, quantize),
+                          substeps=substeps)
 
 
 def cost_quadratic(problem, table: ParametricTable, *, quantize: bool = False):

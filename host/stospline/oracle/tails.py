@@ -224,10 +224,10 @@ def step_matrix(stage, n: int, m: int, n_latch: int, dt: float, s4: _Sym, s2: _S
 
 class _TickOperator:
     """The linear map of ``V = [E q^(x)4; E J q q'; E J^2]`` (compressed) over one tick of a
-    constant stage: `substeps` plant steps."""
+    constant stage: `substeps` plant steps (`operator`: as `step_matrix`'s)."""
 
-    def __init__(self, stage, n, m, n_latch, h, substeps, s4: _Sym, s2: _Sym):
-        S = step_matrix(stage, n, m, n_latch, h / substeps, s4, s2)
+    def __init__(self, stage, n, m, n_latch, h, substeps, s4: _Sym, s2: _Sym, operator=None):
+        S = step_matrix(stage, n, m, n_latch, h / substeps, s4, s2, operator)
         # Sparse: an output index of u, v or 1 takes only inputs that carry it.
         from scipy import sparse
         step = sparse.csr_matrix(S)

@@ -84,19 +84,22 @@ def _faults_entry(d, run) -> dict:
 def exact_standard_errors(d, run):
     """``(tails, why)``: the exact moments up to the fourth of the sensor loop the run
     simulates (`estimator.tails.evaluate_estimator_tails`, with the run's plant scheme and the
-    flashed filter), and why the z-scores divide by them or by the sample's own (tails None)."""
+    flashed filter, in the loop with the problem's faults), and why the z-scores divide by
+    them or by the sample's own (tails None)."""
     from stospline.estimator.tails import (estimator_tails_unsupported,
                                            evaluate_estimator_tails)
-    why = estimator_tails_unsupported(d.problem, d.table)
+    faults = d.problem.faults
+    why = estimator_tails_unsupported(d.problem, d.table, faults)
     if why is not None:
         return None, f"sample: {why} (no fourth-moment oracle)"
     if run.mc.cost_moments.alike()[0]:
         return None, "sample: every path alike (no noise)"
     _, pred = run.tables.per_tick()
     tails = evaluate_estimator_tails(d.problem, d.table, run.scheme, predictor=pred,
-                                     substeps=run.mc.substeps)
+                                     substeps=run.mc.substeps, faults=faults)
     return tails, ("exact: the estimator oracle's cost variance and knot covariances of the "
-                   f"plant scheme ({run.mc.substeps} steps per tick)")
+                   f"plant scheme ({run.mc.substeps} steps per tick"
+                   f"{', with the faults' if faults.any else ''})")
 
 
 def _corridors(d, run) -> dict:

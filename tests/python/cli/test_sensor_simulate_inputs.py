@@ -1,13 +1,16 @@
 """`simulate` of a problem with [measurement] (the sensor loop): every case of the hostile
 generator's sensor family (`hostile.SENSOR_SIMULATE_CASES`) is refused with exit status 2,
 one line naming its option or key, stdout empty and nothing on disk; the control case runs
-and prints strict JSON with the estimation error at every knot."""
+and prints strict JSON with the estimation error at every knot, its verdict by the exact
+standard errors (with faults and a sampled V too; time-varying stage data: the sample's)."""
 import json
 
 import pytest
 from hostile import SENSOR_SIMULATE_CASES, sensor_simulate_doc, to_toml
 
 from stospline.cli import main
+
+BASES_OF = {name: case[0] for name, case in SENSOR_SIMULATE_CASES.items()}
 
 
 def _tree(root):
@@ -31,6 +34,10 @@ def test_each_sensor_loop_case_is_run_or_refused_by_name(name, tmp_path, monkeyp
             e = kn["estimation_error"]
             assert set(e) >= {"mc_mean", "mc_cov", "oracle_mean", "oracle_cov"}
         assert s["verdict"]["statistics"] >= 1
+        # exact standard errors with faults and a sampled V; time-varying stage data: sample
+        varying = "varying" in BASES_OF.get(name, "")
+        assert s["standard_errors"]["used"] == ("sample" if varying else "exact"), (
+            s["standard_errors"])
         if "faults" in doc:           # the verdict is against the oracle of the faulty loop
             f = s["faults"]
             assert set(f["levels"]) == set(doc["faults"]) and f["exact_oracle"]

@@ -4,7 +4,8 @@
 offsets at the next stage start that latches). robot_goal latches at tick 0 and at the
 stage-1 start (tick 300), so a change inside stage 0 is relatched at tick 300 and one inside
 stage 1 never is. Cost and every knot-mean component within their joint 99 % confidence
-limits (Bonferroni, the sample's own standard errors, fixed seed); the same runs disagree with
+limits (Bonferroni, fixed seed; with the sample's own standard errors and with the exact ones
+of the run, `tails_at`); the same runs disagree with
 the oracle of the change applied at the wrong point: the latch offsets at once (relatched at
 the change), or the whole change waiting for the next stage start (the test can fail)."""
 from dataclasses import replace
@@ -14,7 +15,7 @@ import pytest
 
 from stospline import evaluate_table
 from stospline.harness.params_loop import simulate_params
-from stospline.oracle.parametric import evaluate_at, evaluate_switched
+from stospline.oracle.parametric import evaluate_at, evaluate_switched, tails_at
 from stospline.problem.parameters import problem_at
 
 from test_params_monte_carlo import PATHS, THETA, THETA2, robot  # noqa: F401 (the fixture)
@@ -47,8 +48,11 @@ def test_a_change_inside_a_stage_agrees_with_the_oracle_of_that_tick(robot, stag
                           change=(stage, THETA2, tick))
     assert run.worst_status >= 0
     exact = evaluate_switched(problem, pt, THETA, stage, THETA2, tick=tick, quantize=True)
-    verdict = run.agreement(exact.J, exact.knot_mean)
-    assert verdict.agree, verdict
+    tails = tails_at(problem, pt, THETA, substeps=4, stage=stage, theta2=THETA2, tick=tick,
+                     quantize=True)
+    for se in (None, tails):
+        verdict = run.agreement(exact.J, exact.knot_mean, exact_se=se)
+        assert verdict.agree, verdict
     # applied at the wrong point, the oracle disagrees with the same run
     wrong = {"latch offsets at once": latched_at_once(problem, pt, stage, tick)}
     if stage + 1 < pt.table.n_stages:
@@ -59,7 +63,8 @@ def test_a_change_inside_a_stage_agrees_with_the_oracle_of_that_tick(robot, stag
     wrong["at the stage's start"] = evaluate_switched(problem, pt, THETA, stage, THETA2,
                                                       quantize=True)
     for name, m in wrong.items():
-        assert not run.agreement(m.J, m.knot_mean).agree, name
+        for se in (None, tails):
+            assert not run.agreement(m.J, m.knot_mean, exact_se=se).agree, name
 
 
 def test_a_change_inside_stage_1_is_neither_theta_at_the_goal(robot):

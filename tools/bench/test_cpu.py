@@ -8,8 +8,8 @@ Items (default: all):
            directory), then its default fuzz tier (clang_fuzz_step: ctest -L '^fuzz$'), with
            each fuzzer's final coverage (cov, ft), which must not move;
   arm      the Cortex-M0+ cross build of every table and image (ctest arm_m0plus_build:
-           tools/arm/build.sh --preset arm-m0plus into a new directory; arm_qemu_replay builds
-           the same for the M4F);
+           tools/arm/build.sh --preset arm-m0plus into a new directory);
+  arm-m4f  the same for the Cortex-M4F (the build arm_qemu_replay makes);
   records  the host's QEMU replay records (tools/arm/make_replay.py) of the M0+ variants:
            before, arm_m0plus_qemu_replay recorded them again after arm_qemu_replay; now
            arm_replay_records writes them once for both (the base's figure; 0 here);
@@ -69,12 +69,13 @@ def clang(tree: Path, work: Path) -> dict:
             "clang fuzz tier": (cpu_f, wall_f, ", ".join(f"{k} cov {v}" for k, v in cov.items()))}
 
 
-def arm(tree: Path, work: Path) -> dict:
-    build = work / "arm-m0plus"
-    cpu, wall, _ = _timed(["bash", str(tree / "tools/arm/build.sh"), "--preset", "arm-m0plus",
+def arm(tree: Path, work: Path, preset: str = "arm-m0plus") -> dict:
+    build = work / preset
+    cpu, wall, _ = _timed(["bash", str(tree / "tools/arm/build.sh"), "--preset", preset,
                            "--build-dir", str(build)], tree)
     steps = sum(1 for line in (build / ".ninja_log").read_text().splitlines()[1:])
-    return {"M0+ cross build": (cpu, wall, f"{steps} build steps")}
+    name = {"arm-m0plus": "M0+", "arm-m4f": "M4F"}[preset]
+    return {f"{name} cross build": (cpu, wall, f"{steps} build steps")}
 
 
 def records(tree: Path, work: Path, base: bool) -> dict:
@@ -98,8 +99,8 @@ def regen(tree: Path, work: Path) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", default="main", help="baseline revision (default: main)")
-    ap.add_argument("items", nargs="*", choices=["clang", "arm", "records", "regen"],
-                    default=["clang", "arm", "records", "regen"])
+    ap.add_argument("items", nargs="*", choices=["clang", "arm", "arm-m4f", "records", "regen"],
+                    default=["clang", "arm", "arm-m4f", "records", "regen"])
     args = ap.parse_args(argv)
     rows = []
     with tempfile.TemporaryDirectory(prefix="stsp-test-cpu-") as tmp:
@@ -114,8 +115,8 @@ def main(argv: list[str] | None = None) -> int:
             for item in args.items:
                 if item == "clang":
                     got = clang(tree, work)
-                elif item == "arm":
-                    got = arm(tree, work)
+                elif item in ("arm", "arm-m4f"):
+                    got = arm(tree, work, "arm-m0plus" if item == "arm" else item)
                 elif item == "records":
                     got = records(tree, work, tree is base)
                 else:

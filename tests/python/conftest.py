@@ -26,6 +26,9 @@ def gains_stem(example: str) -> str:
 # these first, then the other files by their number of tests (xdist's own order), so that they
 # end on short files together instead of one worker running a long file alone at the end.
 LONGEST_FILES = (
+    # gains/ regenerated in full, three times and four times (in subprocesses): a worker each
+    "tests/python/table/test_gains_regenerate_elsewhere_blas.py",
+    "tests/python/table/test_gains_regenerate_elsewhere.py",
     "tests/python/sim/test_qspline_monte_carlo.py",
     "tests/python/cli/test_corridor_design_command.py",
     "tests/python/board/test_board_hil.py",
@@ -36,7 +39,6 @@ LONGEST_FILES = (
     "tests/python/package/test_import_graph.py",
     "tests/python/cli/test_cli_end_to_end.py",
     "tests/python/cli/test_report.py",
-    "tests/python/table/test_gains_regenerate_elsewhere.py",
     "tests/python/cli/test_budget_vs_measured.py",
 )
 _missing = [f for f in LONGEST_FILES if not (REPO / f).is_file()]

@@ -1,8 +1,8 @@
 # Runnable Cortex-M images of the top-level project's cross build (presets arm-m4f, arm-m0plus
 # with STSP_BUILD_TESTS=ON; tools/arm/build.sh). Included by CMakeLists.txt: the controller
 # variants (stsp_float32, stsp_q15, stsp_q31), the table libraries (stsp_gains_<name>) and the
-# builds for each table's shape (stsp_fixed_<name>) are the ones defined there, the same
-# firmware definition as the host build.
+# builds for each table's shape (stsp_fixed_<name>, compiled once per shape and arithmetic) are
+# the ones defined there, the same firmware definition as the host build.
 #
 # Semihosting for output and exit status: QEMU mps2-an386 (Cortex-M4F) runs the cortex-m4 build;
 # the cortex-m0plus build runs on mps2-an385 (a Cortex-M3: QEMU has no M0+ board; ARMv6-M code

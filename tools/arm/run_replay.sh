@@ -5,7 +5,7 @@
 #
 #   tools/arm/run_replay.sh [--no-setup] [--preset arm-m4f|arm-m0plus] [--build-dir DIR]
 #                           [--arith LIST] [--perturb RECORD] [--perturb-coef N]
-#                           [--fp-contract off|fast]
+#                           [--fp-contract off|fast] [--records-only | --records RDIR]
 #
 # 1. tools/arm/make_replay.py writes DIR/replay_records[_q15|_q31|_spline].c (per call: tick,
 #    host x, status, u, instance fields) for each variant of LIST (default:
@@ -32,7 +32,12 @@
 # table's CRC recomputed on the target), so that their commands differ from the host's (the
 # spline test must then fail); --fp-contract fast lets GCC fuse multiply-adds on the target,
 # with the float law compiled as plain C instead of the VMLS/VNMLA asm that contraction cannot
-# fuse (STSP_ARM_NO_VFP_MAC): the float32 and spline tests then fail too. Without --no-setup,
+# fuse (STSP_ARM_NO_VFP_MAC): the float32 and spline tests then fail too.
+# --records-only stops after step 1 (the records in DIR, nothing built or run); --records RDIR
+# skips step 1 and takes them from RDIR, where a --records-only run with the same --arith
+# variants wrote them (the records are the host's, the same for both presets: ctest's
+# arm_replay_records writes them once for arm_qemu_replay and arm_m0plus_qemu_replay).
+# Without --no-setup,
 # tools/setup.sh runs first (ctest passes --no-setup: it runs inside a configured build). The
 # host side imports this checkout's host/ package (PYTHONPATH), whose harness compiles this
 # checkout's firmware/.
@@ -45,6 +50,8 @@ perturb=()
 perturb_coef=""
 contract=off
 ariths=""
+records_only=0
+records_dir=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --no-setup) setup=0; shift ;;
@@ -54,6 +61,8 @@ while [ $# -gt 0 ]; do
     --perturb) perturb=(--perturb "$2"); shift 2 ;;
     --perturb-coef) perturb_coef="$2"; shift 2 ;;
     --fp-contract) contract="$2"; shift 2 ;;
+    --records-only) records_only=1; shift ;;
+    --records) records_dir="$2"; shift 2 ;;
     *) echo "run_replay: unknown argument $1" >&2; exit 2 ;;
   esac
 done
@@ -63,6 +72,10 @@ case "$preset" in
   *) echo "run_replay: --preset must be arm-m4f or arm-m0plus" >&2; exit 2 ;;
 esac
 : "${build:=$root/build/$preset}"
+if [ -n "$records_dir" ] && { [ "$records_only" -eq 1 ] || [ "${#perturb[@]}" -gt 0 ]; }; then
+  echo "run_replay: --records takes recorded files as they are: not with --records-only or --perturb" >&2
+  exit 2
+fi
 [ "$setup" -eq 0 ] || "$root/tools/setup.sh"
 py="$root/.venv/bin/python"
 [ -x "$py" ] || { echo "run_replay: $py missing: run tools/setup.sh" >&2; exit 2; }
@@ -88,8 +101,14 @@ for arith in ${ariths//,/ }; do
   esac
   [ "$preset" = arm-m4f ] || [ "$arith" != float32 ] || {
     echo "run_replay: no float32 images for $preset" >&2; exit 2; }
-  records="$build/replay_records$sfx.c"
-  "$py" "$root/tools/arm/make_replay.py" "${gen[@]}" --out "$records" "${perturb[@]}"
+  if [ -n "$records_dir" ]; then
+    records="$records_dir/replay_records$sfx.c"
+    [ -f "$records" ] || { echo "run_replay: $records missing (run_replay.sh --records-only)" >&2
+                           exit 2; }
+  else
+    records="$build/replay_records$sfx.c"
+    "$py" "$root/tools/arm/make_replay.py" "${gen[@]}" --out "$records" "${perturb[@]}"
+  fi
   defs+=("-D$var=$records")
   if [ "$arith" = spline ] || [ "$arith" = bands_spline ]; then
     images+=("replay$sfx" "replay${sfx/_spline/}_spline_fixed")
@@ -101,6 +120,7 @@ for arith in ${ariths//,/ }; do
   # float32: also the generic law on every small shape (tests/arm/shapes_main.c).
   [ "$arith" != float32 ] || images+=(shapes)
 done
+[ "$records_only" -eq 0 ] || { echo "run_replay: records in $build"; exit 0; }
 "$root/tools/arm/build.sh" --preset "$preset" --build-dir "$build" \
   "${defs[@]}" -DSTSP_REPLAY_PERTURB_COEF="$perturb_coef" -DSTSP_ARM_FP_CONTRACT="$contract" \
   -DSTSP_ARM_NO_VFP_MAC="$([ "$contract" = off ] && echo OFF || echo ON)" >/dev/null

@@ -10,15 +10,14 @@ not reach (docs/guide/firmware.md, "Reproducible tables"). These tests regenerat
   log-uniformly in [1e-15, 1e-14] (5 to 45 ulps), with a random sign (seeded);
 * the numpy reference tick loop instead of the compiled one (another summation order);
 * other CPUs' OpenBLAS kernels (forced with ``OPENBLAS_CORETYPE``) and one or two BLAS
-  threads (a subprocess each: OpenBLAS reads both at load time).
+  threads (a subprocess each: OpenBLAS reads both at load time), in
+  test_gains_regenerate_elsewhere_blas.py: a file of its own, so that pytest-xdist's
+  ``--dist loadfile`` gives the two files' regenerations to both workers.
 
 `test_no_table_entry_is_near_a_rounding_boundary` makes the first one a proof for the tables:
 no entry of a shipped table is within reach of such a perturbation of its rounding boundary.
 """
 import dataclasses
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -133,6 +132,7 @@ def test_numpy_tick_loop_changes_no_byte(tmp_path, monkeypatch):
 # OpenBLAS picks its kernels for the CPU it runs on; OPENBLAS_CORETYPE forces another one's,
 # so this machine computes as those would (each pair: the kernel asked for, the one OpenBLAS
 # reports, the CPU flag it needs). Zen runs Haswell's kernels; Nehalem's are SSE only.
+# (Used by test_gains_regenerate_elsewhere_blas.py.)
 BLAS_KERNELS = [("Haswell", "Haswell", "avx2", 1), ("SkylakeX", "SkylakeX", "avx512f", 2),
                 ("Sandybridge", "Sandybridge", "avx", 2), ("Zen", "Haswell", "avx2", 1),
                 ("Nehalem", "Nehalem", "sse4_2", 2)]
@@ -160,28 +160,6 @@ def _cpu_flags() -> set[str]:
                          if line.startswith("flags")), set())
     except OSError:
         return set()
-
-
-@pytest.mark.parametrize("coretype,corename,flag,threads", BLAS_KERNELS,
-                         ids=[f"{k[0]}-{k[3]}thread" for k in BLAS_KERNELS])
-def test_other_blas_kernels_change_no_byte(tmp_path, coretype, corename, flag, threads):
-    """gains/ as another CPU's OpenBLAS kernels and thread count compute it, in a subprocess
-    (OpenBLAS reads both when it loads), which reports the kernels it ran so that a kernel
-    silently not taken cannot pass."""
-    if flag not in _cpu_flags():
-        pytest.skip(f"this CPU lacks {flag}: it cannot run OpenBLAS's {coretype} kernels")
-    code = ("import sys; from pathlib import Path; sys.path[:0] = sys.argv[1:3]; "
-            "import test_gains_regenerate_elsewhere as t; t._regenerate(Path(sys.argv[3])); "
-            "exec(t._CORENAMES)")
-    env = {**os.environ, "OPENBLAS_CORETYPE": coretype, "OPENBLAS_NUM_THREADS": str(threads),
-           "OMP_NUM_THREADS": str(threads)}
-    here = os.path.dirname(os.path.abspath(__file__))   # this file's folder and conftest.py's
-    proc = subprocess.run([sys.executable, "-c", code, here, os.path.dirname(here), str(tmp_path)],
-                          env=env, capture_output=True, text=True, timeout=900)
-    assert proc.returncode == 0, proc.stderr
-    ran = [line.split()[1] for line in proc.stdout.splitlines() if line.startswith("corename ")]
-    assert ran and set(ran) == {corename}, f"OpenBLAS ran {ran}, not {corename}"
-    _assert_same_as_gains(tmp_path)
 
 
 def _reach(a: np.ndarray) -> np.ndarray:

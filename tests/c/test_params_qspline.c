@@ -1,0 +1,212 @@
+/* Runtime parameters with spline columns in fixed point (stsp_params.h, format 2 in a
+ * Q15/Q31 build) on the shipped gains/robot_goal_<arith>_spline* tables (tools/params_tables.py
+ * --fixed): bit for bit against the host's reference (params_qspline_expected.h, from
+ * tests/c/params_q_reference.py --spline) for a fixed theta, a change at a stage start and one
+ * inside a stage; at the nominal the commands of stsp_step() on the Q spline table, bit for
+ * bit; every bad input's status: per-tick columns with the spline table and spline columns
+ * with the per-tick table, a wrong n_spline_coef, a version beyond 2, NULL columns, a changed
+ * coefficient (CRC), a scale outside 1..30 and a row beyond 2^F - 1 (values), a coefficient
+ * changed after init (verify), theta out of its range. Built against the generic controller
+ * of each arithmetic and under ASan + UBSan. */
+#include <math.h>
+#include <setjmp.h>
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+
+#include <cmocka.h>
+
+#if defined(STSP_ARITH_Q15)
+#include "robot_goal_q15_params.h"
+#include "robot_goal_q15_spline_params.h"
+#define G(name) robot_goal_q15_##name
+#define GS(name) robot_goal_q15_spline_##name
+#define QMAX INT16_MAX
+#else
+#include "robot_goal_q31_params.h"
+#include "robot_goal_q31_spline_params.h"
+#define G(name) robot_goal_q31_##name
+#define GS(name) robot_goal_q31_spline_##name
+#define QMAX INT32_MAX
+#endif
+#include "params_qspline_expected.h"
+
+#define NX 4u
+#define NU 2u
+#define N_TICKS 600u
+#define N_PARAMS 2u
+#define N_COEF 260u
+
+static const stsp_table_t *const T = &GS(table);
+static const stsp_params_table_t *const P = &GS(params);
+
+#define N_CHECKED PAR_N_CHECKED
+#define CHECKED_TICKS par_checked
+#include "params_run.h"
+
+static void test_runs_match_reference(void **state_)
+{
+    static const float a[N_PARAMS] = PAR_THETA_A;
+    static const float b[N_PARAMS] = PAR_THETA_B;
+    uint32_t checked[PAR_N_CHECKED][2];
+    uint32_t k;
+    (void)state_;
+    assert_int_equal(run(a, 0u, NULL, checked), PAR_HASH_A);
+    for (k = 0u; k < PAR_N_CHECKED; ++k) {
+        assert_int_equal(checked[k][0], (uint32_t)par_checked_u[k][0]);
+        assert_int_equal(checked[k][1], (uint32_t)par_checked_u[k][1]);
+    }
+    assert_int_equal(run(NULL, T->stage_start[1], b, NULL), PAR_HASH_B);
+    assert_int_equal(run(a, PAR_MID, b, NULL), PAR_HASH_C);
+}
+
+/* At the nominal (d_q = 0) the law is stsp_step()'s on the Q spline table, bit for bit, and
+ * so is a tick skipped to. */
+static void test_nominal_is_stsp_step(void **state_)
+{
+    stsp_param_t pc;
+    stsp_ctrl_t ctrl;
+    stsp_scalar_t x[NX], u[NU], w[NU];
+    uint32_t j;
+    (void)state_;
+    assert_int_equal(stsp_param_init(&pc, T, P), STSP_OK);
+    assert_int_equal(stsp_init(&ctrl, T), STSP_OK);
+    for (j = 0u; j < N_TICKS; j += (j < 290u) ? 1u : 7u) {
+        state(j, x);
+        assert_int_equal(stsp_param_step(&pc, j, x, u), stsp_step(&ctrl, j, x, w));
+        assert_int_equal(word(u[0]), word(w[0]));
+        assert_int_equal(word(u[1]), word(w[1]));
+    }
+}
+
+/* A parameter table in RAM: the shipped one with its blocks copied into coef. */
+static stsp_params_table_t copy_of(stsp_scalar_t coef[N_COEF])
+{
+    stsp_params_table_t p = *P;
+    memcpy(coef, P->S_k0, N_COEF * sizeof coef[0]);
+    p.S_k0 = coef;
+    return p;
+}
+
+static void expect_with_crc(stsp_params_table_t *p, stsp_status_t want)
+{
+    stsp_param_t pc;
+    p->crc32 = stsp_params_table_crc32(p);
+    assert_int_equal(stsp_param_init(&pc, T, p), want);
+    if (want != STSP_OK) {
+        assert_int_equal(pc.ready, 0u);
+    }
+}
+
+static void test_bad_tables(void **state_)
+{
+    static stsp_scalar_t coef[N_COEF];
+    stsp_param_t pc;
+    stsp_params_table_t p;
+    (void)state_;
+    assert_int_equal(P->n_spline_coef, N_COEF);
+    /* per-tick columns with the spline table, spline columns with the per-tick table */
+    assert_int_equal(stsp_param_init(&pc, T, &G(params)), STSP_ERR_BAD_DIMS);
+    assert_int_equal(stsp_param_init(&pc, &G(table), P), STSP_ERR_BAD_DIMS);
+    p = copy_of(coef);
+    p.n_spline_coef = N_COEF - 1u;
+    assert_int_equal(stsp_param_init(&pc, T, &p), STSP_ERR_BAD_DIMS);
+    p.n_spline_coef = N_COEF + 1u;
+    assert_int_equal(stsp_param_init(&pc, T, &p), STSP_ERR_BAD_DIMS);
+    p = copy_of(coef);
+    p.format_version = 3u;
+    assert_int_equal(stsp_param_init(&pc, T, &p), STSP_ERR_BAD_VERSION);
+    p = copy_of(coef);
+    p.S_k0 = NULL;
+    assert_int_equal(stsp_param_init(&pc, T, &p), STSP_ERR_NULL);
+    p = copy_of(coef);
+    coef[17] = (stsp_scalar_t)(coef[17] / 2);
+    assert_int_equal(stsp_param_init(&pc, T, &p), STSP_ERR_BAD_CRC);
+    expect_with_crc(&p, STSP_OK);
+    /* a block's scale (its first word) outside 1..30 */
+    p = copy_of(coef);
+    coef[0] = 0;
+    expect_with_crc(&p, STSP_ERR_BAD_VALUES);
+    coef[0] = 31;
+    expect_with_crc(&p, STSP_ERR_BAD_VALUES);
+    /* a column whose gain takes a row beyond 2^F - 1: its coefficients at the format's top,
+     * at the smallest scale */
+    p = copy_of(coef);
+    coef[0] = 1;
+    coef[1] = QMAX;
+    coef[2] = QMAX;
+    coef[3] = QMAX;
+    coef[4] = QMAX;
+    expect_with_crc(&p, STSP_ERR_BAD_VALUES);
+}
+
+/* A coefficient changed after init: verify stops the instance, its steps hold. */
+static void test_verify(void **state_)
+{
+    static stsp_scalar_t coef[N_COEF];
+    stsp_param_t pc;
+    stsp_params_table_t p;
+    stsp_scalar_t x[NX], u[NU];
+    (void)state_;
+    p = copy_of(coef);
+    assert_int_equal(stsp_param_init(&pc, T, &p), STSP_OK);
+    assert_int_equal(stsp_param_verify(&pc), STSP_OK);
+    coef[N_COEF - 1u] = (stsp_scalar_t)(coef[N_COEF - 1u] + 1);
+    assert_int_equal(stsp_param_verify(&pc), STSP_ERR_BAD_CRC);
+    state(0u, x);
+    assert_int_equal(stsp_param_step(&pc, 0u, x, u), STSP_ERR_NOT_INITIALIZED);
+    assert_int_equal(word(u[0]), word(T->u_hold[0]));
+    p = copy_of(coef);
+    assert_int_equal(stsp_param_init(&pc, T, &p), STSP_OK);
+    p.n_spline_coef = 1u; /* the header changed */
+    assert_int_equal(stsp_param_verify(&pc), STSP_ERR_TABLE_CHANGED);
+}
+
+/* A block's scale changed after init, before verify notices: the step reads it unchecked,
+ * a wrong command but a defined one (no undefined shift: UBSan build). */
+static void test_changed_scale_is_defined(void **state_)
+{
+    static stsp_scalar_t coef[N_COEF];
+    stsp_param_t pc;
+    stsp_params_table_t p;
+    stsp_scalar_t x[NX], u[NU];
+    static const float a[N_PARAMS] = PAR_THETA_A;
+    stsp_status_t st;
+    (void)state_;
+    p = copy_of(coef);
+    assert_int_equal(stsp_param_init(&pc, T, &p), STSP_OK);
+    assert_int_equal(stsp_set_params(&pc, a), STSP_OK);
+    coef[0] = -7;
+    state(0u, x);
+    st = stsp_param_step(&pc, 0u, x, u);
+    assert_true((st == STSP_OK) || (st == STSP_WARN_SATURATED));
+}
+
+/* theta outside its range, NaN: refused, the parameters in use kept. */
+static void test_bad_theta(void **state_)
+{
+    stsp_param_t pc;
+    float theta[N_PARAMS];
+    (void)state_;
+    assert_int_equal(stsp_param_init(&pc, T, P), STSP_OK);
+    theta[0] = (float)P->upper[0] + 1.0f;
+    theta[1] = (float)P->nominal[1];
+    assert_int_equal(stsp_set_params(&pc, theta), STSP_ERR_PARAM_RANGE);
+    theta[0] = NAN;
+    assert_int_equal(stsp_set_params(&pc, theta), STSP_ERR_PARAM_RANGE);
+    assert_int_equal(pc.d[0], 0);
+}
+
+int main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_runs_match_reference),
+        cmocka_unit_test(test_nominal_is_stsp_step),
+        cmocka_unit_test(test_bad_tables),
+        cmocka_unit_test(test_verify),
+        cmocka_unit_test(test_changed_scale_is_defined),
+        cmocka_unit_test(test_bad_theta),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}

@@ -37,7 +37,8 @@ import numpy as np
 
 from stospline.errors import DesignError
 from stospline.firmware_interface import FRAC_BITS
-from stospline.table.qformat import EXP_MAX, assemble, row_sums, scale_exponents, scaled_entries, _rhu
+from stospline.table import qformat
+from stospline.table.qformat import EXP_MAX, assemble, row_sums, scale_exponents, scaled_entries
 from stospline.table.qparams import ParametricFixedPoint, augmented, with_deviation_bound
 from stospline.table.spline.fixed_point import (COEF_BITS, FIELD, _fit_q, _fit_uniform,
                                                 _stage_gains)
@@ -115,7 +116,8 @@ def quantize_spline_parametric(ptable, arith: str, x_range, tolerance: float, *,
         gains, Kq, k0q, Lq = _fit_q((scaled[0][..., :n], scaled[1], scaled[2]), start, arith,
                                     tolerance, max_spans)
         coef, G, err, rel = _fit_columns(scaled[0][..., n:], gains, start, arith)
-        q = (np.concatenate([Kq, G], axis=2), k0q, Lq, _rhu(scaled[3]), _rhu(scaled[4]))
+        q = (np.concatenate([Kq, G], axis=2), k0q, Lq, qformat._rhu(scaled[3]),
+             qformat._rhu(scaled[4]))
         law_rows, latch_rows = row_sums(*q)
         over_u = law_rows.max(axis=0, initial=0) > qmax
         over_v = (latch_rows.max(axis=0, initial=0) > qmax if latch_rows.size

@@ -189,7 +189,7 @@ static int stsp_param_rows_ok(const stsp_params_table_t *p, const stsp_header_t 
     uint32_t r;
     if (stsp_param_is_spline(p) != 0) {
         /* the law rows with the spline columns, as evaluated at every tick */
-        if (stsp_qspline_cols_check(&h->sp, h->stage_start, h->n_stages, h->nu, p->S_k0,
+        if (stsp_qspline_rows_check(&h->sp, h->stage_start, h->n_stages, h->nu, p->S_k0,
                                     n) != STSP_OK) {
             return 0;
         }

@@ -154,17 +154,19 @@ static uint32_t stsp_qspline_col_shift(const stsp_scalar_t *block)
     return ((sh >= 1) && (sh <= (int32_t)STSP_QSPLINE_MAX_SHIFT)) ? (uint32_t)sh : 0u;
 }
 
-stsp_status_t stsp_qspline_cols_check(const stsp_qspline_t *sp, const uint32_t *stage_start,
+stsp_status_t stsp_qspline_rows_check(const stsp_qspline_t *sp, const uint32_t *stage_start,
                                       uint32_t n_stages, uint32_t nu,
                                       const stsp_scalar_t *cols, uint32_t n_params)
 {
     const uint64_t row_max = (uint64_t)STSP_Q_ONE - 1u;
-    const uint32_t per_stage = nu * n_params;
+    uint32_t per_stage = 0u;
     uint32_t s;
+    if (cols != NULL) {
+        per_stage = nu * n_params;
+    }
     for (s = 0u; s < n_stages; ++s) {
-        uint32_t width;
-        const stsp_scalar_t *blocks =
-            &cols[stsp_qspline_col_start(sp, stage_start, s, per_stage, &width)];
+        uint32_t width = 0u;
+        const stsp_scalar_t *blocks = cols;
         const uint32_t k = sp->span_log2[s];
         const uint32_t ticks = stage_start[s + 1u] - stage_start[s];
         const uint32_t entries = (uint32_t)sp->row_start[(s + 1u) * nu] - sp->row_start[s * nu];
@@ -173,6 +175,9 @@ stsp_status_t stsp_qspline_cols_check(const stsp_qspline_t *sp, const uint32_t *
                                     : 0u;
         uint32_t tau;
         uint32_t b;
+        if (cols != NULL) {
+            blocks = &cols[stsp_qspline_col_start(sp, stage_start, s, per_stage, &width)];
+        }
         for (b = 0u; b < per_stage; ++b) {
             if (stsp_qspline_col_shift(&blocks[b * width]) == 0u) {
                 return STSP_ERR_BAD_VALUES;
@@ -191,10 +196,11 @@ stsp_status_t stsp_qspline_cols_check(const stsp_qspline_t *sp, const uint32_t *
                 uint32_t q;
                 for (; e < end; ++e) {
                     const int64_t g = stsp_qspline_value(c, p, (3u * k) + sp->shift[e]);
-                    sum += (uint64_t)((g < 0) ? -g : g); /* |g| <= 3 2^31: no wrap */
+                    /* |g| <= 3 2^31: the sum of at most 256 + STSP_MAX_PARAMS cannot wrap */
+                    sum += (uint64_t)((g < 0) ? -g : g);
                     c = &c[stride];
                 }
-                for (q = 0u; q < n_params; ++q) {
+                for (q = 0u; q < (per_stage / nu); ++q) {
                     const stsp_scalar_t *block = &blocks[((i * n_params) + q) * width];
                     const int64_t g = stsp_qspline_value(&block[1u + sigma], p,
                                                          (3u * k) + stsp_qspline_col_shift(block));

@@ -25,7 +25,7 @@
 #define stsp_qspline_check STSP_NAME(stsp_qspline_check)
 #define stsp_qspline_gains STSP_NAME(stsp_qspline_gains)
 #define stsp_qspline_col_start STSP_NAME(stsp_qspline_col_start)
-#define stsp_qspline_cols_check STSP_NAME(stsp_qspline_cols_check)
+#define stsp_qspline_rows_check STSP_NAME(stsp_qspline_rows_check)
 
 #ifdef STSP_ARITH_FIXED_POINT
 
@@ -105,13 +105,15 @@ void stsp_qspline_gains(const stsp_qspline_t *sp, const uint32_t *stage_start, u
 uint64_t stsp_qspline_col_start(const stsp_qspline_t *sp, const uint32_t *stage_start,
                                 uint32_t s, uint32_t per_stage, uint32_t *width);
 
-/* init, for a spline gain table `sp` that passed stsp_qspline_check: every block's scale in
- * [1, 30], and at every tick of every stage every input's row with its columns, sum_e |g_e| +
- * sum_p |g_p| <= 2^F - 1 (the gains as evaluated, exact), so that the parametric law cannot
- * overflow; STSP_OK, else STSP_ERR_BAD_VALUES. The caller checked n_cols ==
- * stsp_qspline_col_start(.., n_stages, nu n_params, ..). One evaluation per entry, column and
- * tick. */
-stsp_status_t stsp_qspline_cols_check(const stsp_qspline_t *sp, const uint32_t *stage_start,
+/* init, for a spline gain table `sp` that passed stsp_qspline_check: at every tick of every
+ * stage every input's law row, the gains as evaluated (exact) with |k0| + sum|K| + sum|L| <=
+ * 2^F - 1, the per-tick format's row bound, so that the spline law cannot overflow and every
+ * gain fits stsp_scalar_t (stsp_init's value check). With spline columns `cols` (a parameter
+ * table's, not NULL): also every block's scale in [1, 30], and each row with its columns,
+ * sum_e |g_e| + sum_p |g_p| <= 2^F - 1, so that the parametric law cannot overflow either
+ * (the caller checked the blocks' length, stsp_qspline_col_start). STSP_OK, else
+ * STSP_ERR_BAD_VALUES. One evaluation per entry, column and tick. */
+stsp_status_t stsp_qspline_rows_check(const stsp_qspline_t *sp, const uint32_t *stage_start,
                                       uint32_t n_stages, uint32_t nu,
                                       const stsp_scalar_t *cols, uint32_t n_params);
 

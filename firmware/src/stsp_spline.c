@@ -428,56 +428,14 @@ static stsp_status_t stsp_spline_check_dims(const stsp_header_t *h)
     return stsp_qspline_check(&h->sp, h->stage_start, h->n_stages, h->nu, nz);
 }
 
-/* Stage s's coefficients per entry, S + 3 (the layout check made the stage's count that
- * times its `entries`), or 0 for a stage without entries. */
-static uint32_t stsp_qspline_stride(const stsp_qspline_t *sp, uint32_t s, uint32_t entries)
-{
-    uint32_t stride = 0u;
-    if (entries > 0u) {
-        stride = (sp->coef_start[s + 1u] - sp->coef_start[s]) / entries;
-    }
-    return stride;
-}
-
 /* Every law row of a fixed-point spline table, at every tick of every stage: the gains as
  * evaluated (exact, stsp_qspline_value) with |k0| + sum|K| + sum|L| <= 2^F - 1, the per-tick
  * format's row bound (stsp_check_values), so that stsp_spline_step's law cannot overflow and
- * every gain fits stsp_scalar_t. One evaluation per stored entry and tick (init only). */
+ * every gain fits stsp_scalar_t (stsp_qspline_rows_check without columns). One evaluation per
+ * stored entry and tick (init only). */
 static stsp_status_t stsp_spline_check_values(const stsp_header_t *h)
 {
-    const stsp_qspline_t *sp = &h->sp;
-    const uint64_t row_max = (uint64_t)STSP_Q_ONE - 1u;
-    const uint32_t nu = h->nu;
-    uint32_t s;
-    for (s = 0u; s < h->n_stages; ++s) {
-        const uint32_t k = sp->span_log2[s];
-        const uint32_t ticks = h->stage_start[s + 1u] - h->stage_start[s];
-        const uint32_t entries = (uint32_t)sp->row_start[(s + 1u) * nu] - sp->row_start[s * nu];
-        const uint32_t stride = stsp_qspline_stride(sp, s, entries);
-        uint32_t tau;
-        for (tau = 0u; tau < ticks; ++tau) {
-            uint32_t p[4];
-            const uint32_t sigma = stsp_qspline_basis(k, tau, p);
-            const stsp_scalar_t *c =
-                (entries > 0u) ? &sp->coef[sp->coef_start[s] + sigma] : sp->coef;
-            uint32_t e = sp->row_start[s * nu];
-            uint32_t i;
-            for (i = 0u; i < nu; ++i) {
-                const uint32_t end = sp->row_start[(s * nu) + i + 1u];
-                uint64_t sum = 0u;
-                for (; e < end; ++e) {
-                    const int64_t g = stsp_qspline_value(c, p, (3u * k) + sp->shift[e]);
-                    /* |g| <= 3 2^31: the sum of at most 256 cannot wrap */
-                    sum += (uint64_t)((g < 0) ? -g : g);
-                    c = &c[stride];
-                }
-                if (sum > row_max) {
-                    return STSP_ERR_BAD_VALUES;
-                }
-            }
-        }
-    }
-    return STSP_OK;
+    return stsp_qspline_rows_check(&h->sp, h->stage_start, h->n_stages, h->nu, NULL, 0u);
 }
 
 /* Stage s's layout at tick tau, re-read from the spline arrays on every tick and bounded by
@@ -683,10 +641,12 @@ static void stsp_qspline_param_law(const stsp_header_t *h, uint32_t s, uint32_t 
     const uint32_t sigma = stsp_qspline_basis(k, tau, p);
     const uint64_t first = stsp_qspline_col_start(sp, h->stage_start, s, nu * n_params, &width);
     const uint64_t words = (uint64_t)nu * (uint64_t)n_params * (uint64_t)width;
-    const uint32_t use = ((k == k_raw) && ((sigma + 4u) < width) &&
-                          (first <= (uint64_t)n_cols) && (words <= ((uint64_t)n_cols - first)))
-                             ? 1u : 0u;
+    uint32_t use = 0u;
     uint32_t i;
+    if ((k == k_raw) && ((sigma + 4u) < width) && (first <= (uint64_t)n_cols) &&
+        (words <= ((uint64_t)n_cols - first))) {
+        use = 1u;
+    }
     for (i = 0u; i < nu; ++i) {
         stsp_uacc_t acc = stsp_q_start();
         if (use != 0u) {

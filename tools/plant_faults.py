@@ -335,7 +335,7 @@ FAULTS = [
           "for (e = 0u; e < p->k_end[i]; ++e) {"),
     # Spline columns in fixed point (format 2 in Q15/Q31; stsp_spline.c's
     # stsp_qspline_param_law, stsp_qspline.c's stsp_qspline_cols_check, tests/c/
-    # test_params_qspline.c and its reference hashes).
+    # test_params_spline.c and its reference hashes).
     Fault("F97", "params (Q spline): the columns' coefficients from the stage's first span", CTL,
           "stsp_qspline_narrow(&block[1u + sigma], p, (3u * k) + sh)",
           "stsp_qspline_narrow(&block[1u], p, (3u * k) + sh)"),

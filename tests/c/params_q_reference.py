@@ -8,7 +8,7 @@ commands kept, for Q15 and Q31.
 Prints tests/c/params_q_expected.h (tests/python/firmware/test_params_q_c.py checks that the
 file is this output):
     PYTHONPATH=host .venv/bin/python tests/c/params_q_reference.py > tests/c/params_q_expected.h
-With --spline, the same for tests/c/test_params_qspline.c on the Q15/Q31 spline parametric
+With --spline, the same for tests/c/test_params_spline.c on the Q15/Q31 spline parametric
 controllers gains/robot_goal_<arith>_spline* (spline columns, format 2):
     PYTHONPATH=host .venv/bin/python tests/c/params_q_reference.py --spline \
         > tests/c/params_qspline_expected.h

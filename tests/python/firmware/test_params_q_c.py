@@ -29,7 +29,7 @@ def test_expected_header_is_the_reference():
 
 
 def test_spline_expected_header_is_the_reference():
-    """tests/c/test_params_qspline.c's expected values: the reference of the Q spline
+    """tests/c/test_params_spline.c's expected values: the reference of the Q spline
     parametric controllers gains/robot_goal_<arith>_spline*."""
     assert (REPO / "tests/c/params_qspline_expected.h").read_text() == \
         params_q_reference.expected(spline=True), \

@@ -16,13 +16,14 @@ import pytest
 
 from conftest import EXAMPLES
 from stospline import load_problem
-from stospline.harness.params_loop import build_params_qspline_controller, simulate_params
+from stospline.harness.params_loop import build_params_qspline_controller
 from stospline.options import resolve_options
 from stospline.oracle.fixed_point_margin import fixed_point_certificate
 from stospline.oracle.over_box import box_moments, box_state_range, vertices
-from stospline.oracle.parametric import design_parametric, evaluate_at, evaluate_switched
+from stospline.oracle.parametric import design_parametric
 from stospline.table.qparams import QParamSpec, law_double_at
 from stospline.table.spline.qparams import quantize_spline_parametric
+from support.params_runs import fixed_and_changed_runs
 
 SEED, PATHS, MC_PATHS, SUBSTEPS = 20261129, 8, 400, 2
 
@@ -84,16 +85,8 @@ def test_monte_carlo_agrees_with_the_oracle_of_the_flashed_table(robot):
     rng = np.random.default_rng(SEED)
     lo, hi = pf.lower, pf.upper
     theta, theta2 = rng.uniform(lo, hi, (2, lo.size))
-    runs = {
-        "fixed": (simulate_params(p, ctl, theta, paths=MC_PATHS, seed=SEED, substeps=SUBSTEPS),
-                  lambda t, **kw: evaluate_at(p, t, theta, **kw),
-                  lambda t, **kw: evaluate_at(p, t, theta2, **kw)),
-        "changed at tick 150": (
-            simulate_params(p, ctl, theta, paths=MC_PATHS, seed=SEED + 1, substeps=SUBSTEPS,
-                            change=(0, theta2, 150)),
-            lambda t, **kw: evaluate_switched(p, t, theta, 0, theta2, tick=150, **kw),
-            lambda t, **kw: evaluate_switched(p, t, theta2, 0, theta, tick=150, **kw)),
-    }
+    runs = fixed_and_changed_runs(p, ctl, theta, theta2, paths=MC_PATHS, seed=SEED,
+                                  substeps=SUBSTEPS)
     for name, (run, right, wrong) in runs.items():
         assert run.worst_status >= 0, name
         own = right(flashed, quantize=True)

@@ -84,35 +84,27 @@ def main(argv=None) -> int:
     return 0
 
 
-def fixed_point_files(name: str) -> dict:
+def fixed_point_files(name: str, spline: bool = False) -> dict:
     """``{arith: (files, pf)}`` for Q15 and Q31: the C of example `name`'s fixed-point
     parametric controller and its `stospline.table.qparams.ParametricFixedPoint`, as
     `stospline design examples/<name>.toml --arith <arith> --out DIR` writes them
-    (`stospline.oracle.parametric.fixed_parametric`)."""
-    from stospline.oracle.parametric import fixed_parametric
+    (`stospline.oracle.parametric.fixed_parametric`); with `spline`, of its fixed-point
+    spline parametric controller, ``pf`` then ``(pf, gains, cols)``
+    (`stospline.oracle.parametric.fixed_spline_parametric`)."""
+    from stospline.oracle.parametric import fixed_parametric, fixed_spline_parametric
     from stospline.options import resolve_options
+    make = fixed_spline_parametric if spline else fixed_parametric
     problem = load_problem(ROOT / "examples" / f"{name}.toml")
     out = {}
     for arith in ("q15", "q31"):
-        files, pf, _ = fixed_parametric(problem, f"{name}.toml",
-                                        resolve_options(problem, arith=arith))
-        out[arith] = (files, pf)
+        files, parts, _ = make(problem, f"{name}.toml", resolve_options(problem, arith=arith))
+        out[arith] = (files, parts)
     return out
 
 
 def fixed_spline_files(name: str) -> dict:
-    """``{arith: (files, (pf, gains, cols))}`` for Q15 and Q31: the C of example `name`'s
-    fixed-point spline parametric controller and its parts
-    (`stospline.oracle.parametric.fixed_spline_parametric`)."""
-    from stospline.oracle.parametric import fixed_spline_parametric
-    from stospline.options import resolve_options
-    problem = load_problem(ROOT / "examples" / f"{name}.toml")
-    out = {}
-    for arith in ("q15", "q31"):
-        files, parts, _ = fixed_spline_parametric(problem, f"{name}.toml",
-                                                  resolve_options(problem, arith=arith))
-        out[arith] = (files, parts)
-    return out
+    """`fixed_point_files` of the fixed-point spline parametric controllers."""
+    return fixed_point_files(name, spline=True)
 
 
 def _qspline_flash(pf, gains, cols) -> str:

@@ -64,8 +64,7 @@ def main(argv=None) -> int:
                     (Path(args.out) / fname).write_text(text)
                 if args.bytes:
                     print(f"{name} {arith}: columns {pf.column_bytes()} B, error bound "
-                          f"{', '.join(f'{b:.2f}' for b in pf.bound_lsb.max(axis=0))} "
-                          f"command LSB")
+                          f"{_bound(pf)}")
             for arith, (files, (pf, gains, cols)) in fixed_spline_files(name).items():
                 for fname, text in files.items():
                     (Path(args.out) / fname).write_text(text)
@@ -114,8 +113,14 @@ def _qspline_flash(pf, gains, cols) -> str:
     cols_b = cols.nbytes + width * pf.S_lambda0.size + 8 * 3 * P + P
     return (f"gain spline {q_spline_bytes(gains)} B, columns {cols_b} B (per-tick columns "
             f"{pf.column_bytes()} B); columns' largest fit error {cols.error.max():.3g} LSB "
-            f"({cols.relative.max():.2g} of the column's peak); error bound "
-            f"{', '.join(f'{b:.2f}' for b in pf.bound_lsb.max(axis=0))} command LSB")
+            f"({cols.relative.max():.2g} of the column's peak); error bound {_bound(pf)}")
+
+
+def _bound(pf) -> str:
+    """The error bound over the box per input: its largest over the ticks, in command LSB
+    and in command units."""
+    return (f"{', '.join(f'{b:.2f}' for b in pf.bound_lsb.max(axis=0))} command LSB "
+            f"({', '.join(f'{b:.2g}' for b in pf.bound.max(axis=0))})")
 
 
 def spline_files(problem, source_name: str):

@@ -94,7 +94,8 @@
  * (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_param_t)).
  * stsp_param_step() uses STSP_MAX_LATCH + STSP_MAX_NU scalars of stack; with a spline table
  * its call of the spline code also a span record (stsp_span_t) and 4 STSP_MAX_NU + 4
- * scalars. Every tick of a
+ * scalars (fixed point: STSP_MAX_NU accumulators and the spline law's STSP_MAX_NX + 1 +
+ * STSP_MAX_LATCH operands). Every tick of a
  * parametric instance is evaluated by this file in plain C loops (not stsp_step()'s ordinary
  * tick): nu P more multiply-adds per tick, and the generic loop overhead
  * (tools/arm/count_params.py, docs/guide/firmware.md).

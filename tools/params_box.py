@@ -5,12 +5,15 @@ box, and a Monte Carlo of the compiled C at random parameter draws and at the bo
 vertex (docs/theory/parameters.md, "Guarantees over the box").
 
     PYTHONPATH=host .venv/bin/python tools/params_box.py examples/drone_gates.toml \\
-        [--draws 8] [--paths 2000] [--seed 20261128] [--arith q15|q31]
+        [--draws 8] [--paths 2000] [--seed 20261128]
+        [--arith q15|q31|q15-spline|q31-spline]
 
 With --arith q15|q31, also what holds for the fixed-point parametric table as flashed (its
 error bound propagated to the mean, `stospline.oracle.fixed_point_margin`): the band rows'
 margins and the corridors' bounds over the box less it, and the Monte Carlo runs that
-controller (docs/theory/parameters.md, "Fixed-point columns").
+controller (docs/theory/parameters.md, "Fixed-point columns"). With q15-spline|q31-spline the
+same for the fixed-point spline parametric table (Q spline gains and spline columns at the
+file's spline_tolerance, `stospline.table.spline.qparams`).
 """
 import argparse
 import sys
@@ -34,7 +37,8 @@ def main(argv=None) -> int:
     ap.add_argument("--draws", type=int, default=8)
     ap.add_argument("--paths", type=int, default=2000)
     ap.add_argument("--seed", type=int, default=20261128)
-    ap.add_argument("--arith", choices=("float32", "q15", "q31"), default="float32")
+    ap.add_argument("--arith", choices=("float32", "q15", "q31", "q15-spline", "q31-spline"),
+                    default="float32")
     args = ap.parse_args(argv)
     p = load_problem(args.problem)
     opts = check_parametric_options(p)
@@ -45,15 +49,16 @@ def main(argv=None) -> int:
           f"{len(p.parameters)} parameters, {2 ** len(p.parameters)} vertices")
     if pd.margins:
         _bands(p, pd)
-    pf = _fixed(p, pd, args.arith) if args.arith != "float32" else None
+    pf = _fixed(p, pd, args.arith, opts) if args.arith != "float32" else None
     for i, c in enumerate(p.corridors):
         _corridor(p, pd, i, c, args, opts, pf)
     return 0
 
 
-def _fixed(p, pd, arith):
-    """Print the certificate of the Q15/Q31 table as flashed; return its
-    `ParametricFixedPoint`."""
+def _fixed(p, pd, arith, opts):
+    """Print the certificate of the Q15/Q31 table as flashed (per tick, or `arith`
+    ``q15-spline``/``q31-spline``: with spline gains and columns); return its
+    `ParametricFixedPoint`, with ``controller`` set to build its compiled controller."""
     from stospline.oracle.evaluate import evaluate_table
     from stospline.oracle.exit_bound import corridor_ticks
     from stospline.oracle.fixed_point_margin import fixed_point_certificate
@@ -61,7 +66,16 @@ def _fixed(p, pd, arith):
     from stospline.oracle.over_box import box_state_range
     from stospline.table.qparams import quantize_parametric
     box = pd.box if pd.box is not None else box_moments(p, pd.table)
-    pf = quantize_parametric(pd.table, arith, box_state_range(box))
+    if arith.endswith("-spline"):
+        from stospline.harness.params_loop import build_params_qspline_controller
+        from stospline.table.spline.qparams import quantize_spline_parametric
+        pf, gains, cols = quantize_spline_parametric(pd.table, arith.split("-")[0],
+                                                     box_state_range(box),
+                                                     opts.spline_tolerance)
+        pf.controller = lambda: build_params_qspline_controller(pd.table, pf, gains, cols)
+    else:
+        pf = quantize_parametric(pd.table, arith, box_state_range(box))
+        pf.controller = lambda: build_params_qcontroller(pd.table, pf)
     cert = fixed_point_certificate(p, pd.table, pf, box)
     b = pf.command_error_bound(pd.table)
     shift = cert["bound"].rows(np.eye(p.n)).max(axis=0)
@@ -138,7 +152,7 @@ def _corridor(p, pd, i, c, args, opts, pf=None) -> None:
         ctl = build_params_controller(pd.table, table)
     else:
         print(f"  Monte Carlo of the compiled {pf.augmented.arith.upper()} controller:")
-        ctl = build_params_qcontroller(pd.table, pf)
+        ctl = pf.controller()
     rng = np.random.default_rng(args.seed)
     lo = np.array([q.lower for q in p.parameters])
     hi = np.array([q.upper for q in p.parameters])

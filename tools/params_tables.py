@@ -16,8 +16,11 @@ spline table as flashed against the per-tick design's (stospline.refine.spline_p
 (`fixed_point_files`): gains/<name>_<arith>.{c,h}, the gain table quantized with the columns
 over the whole box, and gains/<name>_<arith>_params.{c,h}, its columns, byte for byte what
 `stospline design examples/<name>.toml --arith <arith> --out DIR` writes (the same code,
-`stospline.oracle.parametric.fixed_parametric`); with --bytes it prints their columns' flash
-and error bound.
+`stospline.oracle.parametric.fixed_parametric`), and the Q15/Q31 spline parametric controllers
+(`fixed_spline_files`): gains/<name>_<arith>_spline.{c,h}, the Q spline gain table in the
+scales of the law with the columns, and gains/<name>_<arith>_spline_params.{c,h}, its columns
+as integer B-splines on the gain spline's spans (format 2,
+stospline.table.spline.qparams); with --bytes it prints their columns' flash and error bound.
 """
 import argparse
 import sys
@@ -62,8 +65,12 @@ def main(argv=None) -> int:
                     (Path(args.out) / fname).write_text(text)
                 if args.bytes:
                     print(f"{name} {arith}: columns {pf.column_bytes()} B, error bound "
-                          f"{', '.join(f'{b:.2f}' for b in pf.bound_lsb.max(axis=0))} "
-                          f"command LSB")
+                          f"{_bound(pf)}")
+            for arith, (files, (pf, gains, cols)) in fixed_spline_files(name).items():
+                for fname, text in files.items():
+                    (Path(args.out) / fname).write_text(text)
+                if args.bytes:
+                    print(f"{name} {arith} spline: {_qspline_flash(pf, gains, cols)}")
         return 0
     for path in sorted((ROOT / "examples").glob("*.toml")):
         problem = load_problem(path)
@@ -77,20 +84,44 @@ def main(argv=None) -> int:
     return 0
 
 
-def fixed_point_files(name: str) -> dict:
+def fixed_point_files(name: str, spline: bool = False) -> dict:
     """``{arith: (files, pf)}`` for Q15 and Q31: the C of example `name`'s fixed-point
     parametric controller and its `stospline.table.qparams.ParametricFixedPoint`, as
     `stospline design examples/<name>.toml --arith <arith> --out DIR` writes them
-    (`stospline.oracle.parametric.fixed_parametric`)."""
-    from stospline.oracle.parametric import fixed_parametric
+    (`stospline.oracle.parametric.fixed_parametric`); with `spline`, of its fixed-point
+    spline parametric controller, ``pf`` then ``(pf, gains, cols)``
+    (`stospline.oracle.parametric.fixed_spline_parametric`)."""
+    from stospline.oracle.parametric import fixed_parametric, fixed_spline_parametric
     from stospline.options import resolve_options
+    make = fixed_spline_parametric if spline else fixed_parametric
     problem = load_problem(ROOT / "examples" / f"{name}.toml")
     out = {}
     for arith in ("q15", "q31"):
-        files, pf, _ = fixed_parametric(problem, f"{name}.toml",
-                                        resolve_options(problem, arith=arith))
-        out[arith] = (files, pf)
+        files, parts, _ = make(problem, f"{name}.toml", resolve_options(problem, arith=arith))
+        out[arith] = (files, parts)
     return out
+
+
+def fixed_spline_files(name: str) -> dict:
+    """`fixed_point_files` of the fixed-point spline parametric controllers."""
+    return fixed_point_files(name, spline=True)
+
+
+def _qspline_flash(pf, gains, cols) -> str:
+    from stospline.table.spline.fixed_point import q_spline_bytes
+    P = pf.nominal.size
+    width = 2 if pf.augmented.arith == "q15" else 4
+    cols_b = cols.nbytes + width * pf.S_lambda0.size + 8 * 3 * P + P
+    return (f"gain spline {q_spline_bytes(gains)} B, columns {cols_b} B (per-tick columns "
+            f"{pf.column_bytes()} B); columns' largest fit error {cols.error.max():.3g} LSB "
+            f"({cols.relative.max():.2g} of the column's peak); error bound {_bound(pf)}")
+
+
+def _bound(pf) -> str:
+    """The error bound over the box per input: its largest over the ticks, in command LSB
+    and in command units."""
+    return (f"{', '.join(f'{b:.2f}' for b in pf.bound_lsb.max(axis=0))} command LSB "
+            f"({', '.join(f'{b:.2g}' for b in pf.bound.max(axis=0))})")
 
 
 def spline_files(problem, source_name: str):

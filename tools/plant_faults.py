@@ -333,6 +333,19 @@ FAULTS = [
     Fault("F89", "params (spline): every input's gains of x from the stage's first entry", CTL,
           "for (e = (i > 0u) ? p->row_end[i - 1u] : 0u; e < p->k_end[i]; ++e) {",
           "for (e = 0u; e < p->k_end[i]; ++e) {"),
+    # Spline columns in fixed point (format 2 in Q15/Q31; stsp_spline.c's
+    # stsp_qspline_param_law, stsp_qspline.c's stsp_qspline_cols_check, tests/c/
+    # test_params_spline.c and its reference hashes).
+    Fault("F97", "params (Q spline): the columns' coefficients from the stage's first span", CTL,
+          "stsp_qspline_narrow(&block[1u + sigma], p, (3u * k) + sh)",
+          "stsp_qspline_narrow(&block[1u], p, (3u * k) + sh)"),
+    Fault("F98", "params (Q spline): the row bound at init leaves out the columns", CTL,
+          "(3u * k) + stsp_qspline_col_shift(block));\n"
+          "                    sum += (uint64_t)((g < 0) ? -g : g);",
+          "(3u * k) + stsp_qspline_col_shift(block));\n"
+          "                    sum += 0u * (uint64_t)((g < 0) ? -g : g);"),
+    Fault("F99", "params (Q spline): the law's accumulator without the columns' terms", CTL,
+          "        acc0[i] = acc;\n", "        acc0[i] = stsp_q_start();\n"),
     # The parametric spline tick's span cache (stsp_spline.c, stsp_params.c;
     # tests/c/test_params_spline.c, test_span_cache_any_order).
     Fault("F100", "params (spline): the span cache kept across a parameter change", CTL,

@@ -18,7 +18,9 @@
 # takes no spline table), and robot_position_sensor its Q15 law and filter
 # (<name>_q15.*: host/stospline/estimator/qformat.py); those with [[parameters]] (robot_goal) their
 # sensitivity columns in <name>_params.{c,h}, from the same loop; robot_goal also its Q15/Q31
-# parametric controllers (<name>_<arith>.* and <name>_<arith>_params.*, tools/params_tables.py),
+# parametric controllers (<name>_<arith>.* and <name>_<arith>_params.*, and with Q spline gains
+# and spline columns <name>_<arith>_spline.* and <name>_<arith>_spline_params.*:
+# tools/params_tables.py --fixed),
 # and its spline parametric controller (<name>_spline.* and <name>_spline_params.*: the spline
 # columns, tools/params_tables.py --spline).
 set -euo pipefail

@@ -6,6 +6,9 @@
 #include "stospline/stsp_params.h"
 #include "stsp_crc32.h"
 #include "stsp_internal.h"
+#ifdef STSP_ARITH_FIXED_POINT
+#include "stsp_qspline.h"
+#endif
 
 #include <string.h>
 
@@ -67,6 +70,30 @@ uint32_t stsp_params_table_crc32(const stsp_params_table_t *params)
     return stsp_crc32_end(crc);
 }
 
+#ifdef STSP_ARITH_FIXED_POINT
+/* 1 when n_spline_coef is the length of the spline columns' blocks on the gain spline's
+ * spans (stsp_qspline.h: per_stage (S_s + 4) summed over the stages). */
+static int stsp_param_spline_len_ok(const stsp_params_table_t *p, const stsp_header_t *h,
+                                    uint32_t per_stage)
+{
+    uint32_t width;
+    const uint64_t len = stsp_qspline_col_start(&h->sp, h->stage_start, h->n_stages - 1u,
+                                                per_stage, &width) +
+                         ((uint64_t)per_stage * (uint64_t)width);
+    return (len == (uint64_t)p->n_spline_coef) ? 1 : 0;
+}
+#else
+/* 1 when n_spline_coef is the length of the spline columns on the gain spline's knots,
+ * nu P (n_knots - 4 n_stages) (n_knots >= 8 n_stages, validated by stsp_init()). */
+static int stsp_param_spline_len_ok(const stsp_params_table_t *p, const stsp_header_t *h,
+                                    uint32_t per_stage)
+{
+    const uint32_t knots = h->sp.n_knots - (4u * (uint32_t)h->n_stages);
+    return ((knots <= (UINT32_MAX / per_stage)) && (p->n_spline_coef == (per_stage * knots)))
+               ? 1 : 0;
+}
+#endif
+
 /* The parameter table against the validated gain table (h): everything but the CRC and the
  * values. */
 static stsp_status_t stsp_param_check(const stsp_params_table_t *p, const stsp_header_t *h)
@@ -90,11 +117,6 @@ static stsp_status_t stsp_param_check(const stsp_params_table_t *p, const stsp_h
         (p->scalar_kind != STSP_SCALAR_KIND)) {
         return STSP_ERR_BAD_VERSION;
     }
-#ifdef STSP_ARITH_FIXED_POINT
-    if (spline != 0) {
-        return STSP_ERR_BAD_VERSION; /* spline columns are float32 only */
-    }
-#endif
     if ((p->n_params == 0u) || (p->n_params > STSP_MAX_PARAMS) || (p->nu != h->nu) ||
         (p->n_latch != h->n_latch) || (p->n_stages != h->n_stages) ||
         (p->n_ticks != h->n_ticks)) {
@@ -102,24 +124,17 @@ static stsp_status_t stsp_param_check(const stsp_params_table_t *p, const stsp_h
     }
     /* Per-tick columns with a per-tick table, spline columns with a spline table; a band
      * dual's latch would need sensitivities of its own (a fixed-point table has none). */
-#ifdef STSP_ARITH_FIXED_POINT
-    if (h->spline != NULL) { /* (format 2 was refused above) */
-        return STSP_ERR_BAD_DIMS;
-    }
-#else
     if ((spline == 0) && (h->spline != NULL)) {
         return STSP_ERR_BAD_DIMS;
     }
     if (spline != 0) {
-        /* the spline's layout was validated by stsp_init(): n_knots >= 8 n_stages */
+        /* the spline's layout was validated by stsp_init() */
         const uint32_t per_stage = (uint32_t)p->nu * (uint32_t)p->n_params;
-        const uint32_t knots = h->sp.n_knots - (4u * (uint32_t)h->n_stages);
         if ((h->spline == NULL) || (h->sp.ops == NULL) || (h->sp.ops->param_law == NULL) ||
-            (knots > (UINT32_MAX / per_stage)) || (p->n_spline_coef != (per_stage * knots))) {
+            (stsp_param_spline_len_ok(p, h, per_stage) == 0)) {
             return STSP_ERR_BAD_DIMS;
         }
     }
-#endif
 #ifndef STSP_ARITH_FIXED_POINT
     if (h->band_qp != NULL) {
         return STSP_ERR_BAD_DIMS;
@@ -172,7 +187,14 @@ static int stsp_param_rows_ok(const stsp_params_table_t *p, const stsp_header_t 
     const uint32_t nx = h->nx;
     const uint32_t n_latch = h->n_latch;
     uint32_t r;
-    for (r = 0u; r < (h->n_ticks * (uint32_t)h->nu); ++r) {
+    if (stsp_param_is_spline(p) != 0) {
+        /* the law rows with the spline columns, as evaluated at every tick */
+        if (stsp_qspline_rows_check(&h->sp, h->stage_start, h->n_stages, h->nu, p->S_k0,
+                                    n) != STSP_OK) {
+            return 0;
+        }
+    }
+    for (r = 0u; (stsp_param_is_spline(p) == 0) && (r < (h->n_ticks * (uint32_t)h->nu)); ++r) {
         stsp_uacc_t sum = stsp_q_abs_sum(&h->k0[r], 1u) + stsp_q_abs_sum(&h->K[r * nx], nx) +
                           stsp_q_abs_sum(&p->S_k0[r * n], n);
         if (n_latch > 0u) {
@@ -580,7 +602,6 @@ static stsp_status_t stsp_param_law(stsp_param_t *pc, uint32_t tick, uint16_t st
 {
     const stsp_header_t *h = &pc->ctrl.checked;
     uint32_t alarm = 0u;
-#ifndef STSP_ARITH_FIXED_POINT
     if (stsp_param_is_spline(&pc->checked) != 0) {
         uint32_t i;
         h->sp.ops->param_law(&pc->ctrl, (uint32_t)stage, tick, x, v, pc->checked.S_k0,
@@ -594,10 +615,6 @@ static stsp_status_t stsp_param_law(stsp_param_t *pc, uint32_t tick, uint16_t st
     } else {
         alarm = stsp_param_rows(pc, tick, x, v, y);
     }
-#else
-    (void)stage;
-    alarm = stsp_param_rows(pc, tick, x, v, y);
-#endif
     return stsp_param_finish(h, x, y, alarm, mask);
 }
 

@@ -128,4 +128,91 @@ void stsp_qspline_gains(const stsp_qspline_t *sp, const uint32_t *stage_start, u
     }
 }
 
+uint64_t stsp_qspline_col_start(const stsp_qspline_t *sp, const uint32_t *stage_start,
+                                uint32_t s, uint32_t per_stage, uint32_t *width)
+{
+    uint64_t first = 0u;
+    uint32_t w = 0u;
+    uint32_t r;
+    for (r = 0u; r <= s; ++r) {
+        const uint32_t k_raw = sp->span_log2[r];
+        const uint32_t k = (k_raw <= STSP_QSPLINE_MAX_SPAN_LOG2) ? k_raw
+                                                                 : STSP_QSPLINE_MAX_SPAN_LOG2;
+        if (r > 0u) {
+            first += (uint64_t)per_stage * (uint64_t)w;
+        }
+        w = stsp_qspline_spans(stage_start[r + 1u] - stage_start[r], k) + 4u;
+    }
+    *width = w;
+    return first;
+}
+
+/* The scale of a column block: its first word, in [1, 30] when valid (else 0). */
+static uint32_t stsp_qspline_col_shift(const stsp_scalar_t *block)
+{
+    const int32_t sh = (int32_t)block[0];
+    return ((sh >= 1) && (sh <= (int32_t)STSP_QSPLINE_MAX_SHIFT)) ? (uint32_t)sh : 0u;
+}
+
+stsp_status_t stsp_qspline_rows_check(const stsp_qspline_t *sp, const uint32_t *stage_start,
+                                      uint32_t n_stages, uint32_t nu,
+                                      const stsp_scalar_t *cols, uint32_t n_params)
+{
+    const uint64_t row_max = (uint64_t)STSP_Q_ONE - 1u;
+    uint32_t per_stage = 0u;
+    uint32_t s;
+    if (cols != NULL) {
+        per_stage = nu * n_params;
+    }
+    for (s = 0u; s < n_stages; ++s) {
+        uint32_t width = 0u;
+        const stsp_scalar_t *blocks = cols;
+        const uint32_t k = sp->span_log2[s];
+        const uint32_t ticks = stage_start[s + 1u] - stage_start[s];
+        const uint32_t entries = (uint32_t)sp->row_start[(s + 1u) * nu] - sp->row_start[s * nu];
+        const uint32_t stride = (entries > 0u)
+                                    ? ((sp->coef_start[s + 1u] - sp->coef_start[s]) / entries)
+                                    : 0u;
+        uint32_t tau;
+        uint32_t b;
+        if (cols != NULL) {
+            blocks = &cols[stsp_qspline_col_start(sp, stage_start, s, per_stage, &width)];
+        }
+        for (b = 0u; b < per_stage; ++b) {
+            if (stsp_qspline_col_shift(&blocks[b * width]) == 0u) {
+                return STSP_ERR_BAD_VALUES;
+            }
+        }
+        for (tau = 0u; tau < ticks; ++tau) {
+            uint32_t p[4];
+            const uint32_t sigma = stsp_qspline_basis(k, tau, p);
+            const stsp_scalar_t *c =
+                (entries > 0u) ? &sp->coef[sp->coef_start[s] + sigma] : sp->coef;
+            uint32_t e = sp->row_start[s * nu];
+            uint32_t i;
+            for (i = 0u; i < nu; ++i) {
+                const uint32_t end = sp->row_start[(s * nu) + i + 1u];
+                uint64_t sum = 0u;
+                uint32_t q;
+                for (; e < end; ++e) {
+                    const int64_t g = stsp_qspline_value(c, p, (3u * k) + sp->shift[e]);
+                    /* |g| <= 3 2^31: the sum of at most 256 + STSP_MAX_PARAMS cannot wrap */
+                    sum += (uint64_t)((g < 0) ? -g : g);
+                    c = &c[stride];
+                }
+                for (q = 0u; q < (per_stage / nu); ++q) {
+                    const stsp_scalar_t *block = &blocks[((i * n_params) + q) * width];
+                    const int64_t g = stsp_qspline_value(&block[1u + sigma], p,
+                                                         (3u * k) + stsp_qspline_col_shift(block));
+                    sum += (uint64_t)((g < 0) ? -g : g);
+                }
+                if (sum > row_max) {
+                    return STSP_ERR_BAD_VALUES;
+                }
+            }
+        }
+    }
+    return STSP_OK;
+}
+
 #endif /* STSP_ARITH_FIXED_POINT */

@@ -24,6 +24,8 @@
 #define stsp_qspline_value STSP_NAME(stsp_qspline_value)
 #define stsp_qspline_check STSP_NAME(stsp_qspline_check)
 #define stsp_qspline_gains STSP_NAME(stsp_qspline_gains)
+#define stsp_qspline_col_start STSP_NAME(stsp_qspline_col_start)
+#define stsp_qspline_rows_check STSP_NAME(stsp_qspline_rows_check)
 
 #ifdef STSP_ARITH_FIXED_POINT
 
@@ -90,6 +92,30 @@ stsp_status_t stsp_qspline_check(const stsp_qspline_t *sp, const uint32_t *stage
  * Time: the same for every tick of a stage (4 multiply-accumulates per stored entry). */
 void stsp_qspline_gains(const stsp_qspline_t *sp, const uint32_t *stage_start, uint32_t s,
                         uint32_t nu, uint32_t nz, uint32_t tau, stsp_scalar_t *g);
+
+/* Spline columns of a parameter table (stsp_params.h, format 2 in a Q15/Q31 build; host
+ * stospline/table/spline/qparams.py): per stage s, input i and parameter p, one block of
+ * S_s + 4 words, the column's scale s_c (1..30) then its S_s + 3 coefficients, on the gain
+ * spline's spans; the column's gain at tick tau is stsp_qspline_narrow(&block[1 + sigma], P,
+ * 3k + s_c), as an entry's. Blocks stage after stage, (i, p) row-major within a stage. */
+
+/* The first word of stage s's blocks, per_stage (S + 4) summed over stages 0 .. s-1 with
+ * per_stage = nu n_params; *width = S_s + 4. A span_log2 above 9 (a table changed after init)
+ * counts as 9: no undefined shift. In uint64: no wrap for s < 2^16, per_stage <= 2^16. */
+uint64_t stsp_qspline_col_start(const stsp_qspline_t *sp, const uint32_t *stage_start,
+                                uint32_t s, uint32_t per_stage, uint32_t *width);
+
+/* init, for a spline gain table `sp` that passed stsp_qspline_check: at every tick of every
+ * stage every input's law row, the gains as evaluated (exact) with |k0| + sum|K| + sum|L| <=
+ * 2^F - 1, the per-tick format's row bound, so that the spline law cannot overflow and every
+ * gain fits stsp_scalar_t (stsp_init's value check). With spline columns `cols` (a parameter
+ * table's, not NULL): also every block's scale in [1, 30], and each row with its columns,
+ * sum_e |g_e| + sum_p |g_p| <= 2^F - 1, so that the parametric law cannot overflow either
+ * (the caller checked the blocks' length, stsp_qspline_col_start). STSP_OK, else
+ * STSP_ERR_BAD_VALUES. One evaluation per entry, column and tick. */
+stsp_status_t stsp_qspline_rows_check(const stsp_qspline_t *sp, const uint32_t *stage_start,
+                                      uint32_t n_stages, uint32_t nu,
+                                      const stsp_scalar_t *cols, uint32_t n_params);
 
 #endif /* STSP_ARITH_FIXED_POINT */
 #endif /* STSP_QSPLINE_H */

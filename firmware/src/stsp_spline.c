@@ -428,56 +428,14 @@ static stsp_status_t stsp_spline_check_dims(const stsp_header_t *h)
     return stsp_qspline_check(&h->sp, h->stage_start, h->n_stages, h->nu, nz);
 }
 
-/* Stage s's coefficients per entry, S + 3 (the layout check made the stage's count that
- * times its `entries`), or 0 for a stage without entries. */
-static uint32_t stsp_qspline_stride(const stsp_qspline_t *sp, uint32_t s, uint32_t entries)
-{
-    uint32_t stride = 0u;
-    if (entries > 0u) {
-        stride = (sp->coef_start[s + 1u] - sp->coef_start[s]) / entries;
-    }
-    return stride;
-}
-
 /* Every law row of a fixed-point spline table, at every tick of every stage: the gains as
  * evaluated (exact, stsp_qspline_value) with |k0| + sum|K| + sum|L| <= 2^F - 1, the per-tick
  * format's row bound (stsp_check_values), so that stsp_spline_step's law cannot overflow and
- * every gain fits stsp_scalar_t. One evaluation per stored entry and tick (init only). */
+ * every gain fits stsp_scalar_t (stsp_qspline_rows_check without columns). One evaluation per
+ * stored entry and tick (init only). */
 static stsp_status_t stsp_spline_check_values(const stsp_header_t *h)
 {
-    const stsp_qspline_t *sp = &h->sp;
-    const uint64_t row_max = (uint64_t)STSP_Q_ONE - 1u;
-    const uint32_t nu = h->nu;
-    uint32_t s;
-    for (s = 0u; s < h->n_stages; ++s) {
-        const uint32_t k = sp->span_log2[s];
-        const uint32_t ticks = h->stage_start[s + 1u] - h->stage_start[s];
-        const uint32_t entries = (uint32_t)sp->row_start[(s + 1u) * nu] - sp->row_start[s * nu];
-        const uint32_t stride = stsp_qspline_stride(sp, s, entries);
-        uint32_t tau;
-        for (tau = 0u; tau < ticks; ++tau) {
-            uint32_t p[4];
-            const uint32_t sigma = stsp_qspline_basis(k, tau, p);
-            const stsp_scalar_t *c =
-                (entries > 0u) ? &sp->coef[sp->coef_start[s] + sigma] : sp->coef;
-            uint32_t e = sp->row_start[s * nu];
-            uint32_t i;
-            for (i = 0u; i < nu; ++i) {
-                const uint32_t end = sp->row_start[(s * nu) + i + 1u];
-                uint64_t sum = 0u;
-                for (; e < end; ++e) {
-                    const int64_t g = stsp_qspline_value(c, p, (3u * k) + sp->shift[e]);
-                    /* |g| <= 3 2^31: the sum of at most 256 cannot wrap */
-                    sum += (uint64_t)((g < 0) ? -g : g);
-                    c = &c[stride];
-                }
-                if (sum > row_max) {
-                    return STSP_ERR_BAD_VALUES;
-                }
-            }
-        }
-    }
-    return STSP_OK;
+    return stsp_qspline_rows_check(&h->sp, h->stage_start, h->n_stages, h->nu, NULL, 0u);
 }
 
 /* Stage s's layout at tick tau, re-read from the spline arrays on every tick and bounded by
@@ -546,11 +504,13 @@ static STSP_ALWAYS_INLINE uint32_t stsp_qspline_layout(const stsp_header_t *h, u
  * operand index is bounded too (a table changed after init: an index beyond z contributes
  * nothing; a scale outside 1..30 gives a wrong gain, its shifts taken modulo 64 by
  * stsp_qspline_biased, no undefined shift; on a table that passed init neither happens). Returns stsp_law_alarm(). Time: the same at every tick of a stage (its
- * entries), the largest stage's at most. */
+ * entries), the largest stage's at most. acc0: each input's accumulator to start from (the
+ * parametric law's, with its columns' terms: stsp_qspline_param_law), or NULL for
+ * stsp_q_start(). */
 static STSP_ALWAYS_INLINE uint32_t stsp_qspline_law(const stsp_header_t *h, uint32_t s,
                                                     uint32_t tau, const stsp_scalar_t *x,
                                                     const stsp_scalar_t *v, stsp_scalar_t *y,
-                                                    uint32_t limited)
+                                                    uint32_t limited, const stsp_uacc_t *acc0)
 {
     const stsp_qspline_t *sp = &h->sp;
     const uint32_t nx = stsp_nx(h);
@@ -576,7 +536,7 @@ static STSP_ALWAYS_INLINE uint32_t stsp_qspline_law(const stsp_header_t *h, uint
     }
     for (i = 0u; i < nu; ++i) {
         const uint32_t end = (entries > 0u) ? sp->row_start[(s * nu) + i + 1u] : e;
-        stsp_uacc_t acc = stsp_q_start();
+        stsp_uacc_t acc = (acc0 != NULL) ? acc0[i] : stsp_q_start();
         stsp_scalar_t k0 = (stsp_scalar_t)0;
         for (; e < end; ++e) {
             const uint32_t j = col[e];
@@ -611,7 +571,7 @@ static STSP_NOINLINE stsp_status_t stsp_qspline_step_cold(stsp_ctrl_t *ctrl, uin
         return status;
     }
     if (stsp_qspline_law(h, plan.stage, tick - h->stage_start[plan.stage], x, v_new, y,
-                         ctrl->limited) != 0u) {
+                         ctrl->limited, NULL) != 0u) {
         const stsp_status_t st = stsp_limit(h, x, y, &mask);
         if (st != STSP_OK) {
             status = st; /* STSP_WARN_SATURATED over a tick warning */
@@ -645,13 +605,63 @@ static stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const st
         return stsp_qspline_step_cold(ctrl, tick, x, u);
     }
     if (stsp_qspline_law(h, stage, tick - h->stage_start[stage], x, ctrl->v, y,
-                         ctrl->limited) != 0u) {
+                         ctrl->limited, NULL) != 0u) {
         status = stsp_limit(h, x, y, &mask);
     }
     stsp_copy(u, y, stsp_nu(h));
     ctrl->sat_mask = mask;
     ctrl->next_tick = tick + 1u;
     return status;
+}
+
+/* stsp_params.c's tick of a fixed-point spline table with spline columns (stsp_params.h,
+ * format 2; blocks of stsp_qspline.h): per input i the accumulator starts from the bias plus
+ * sum_p g_p d_q[p], g_p the gain of block (s, i, p) at tick `tick` (stsp_qspline_narrow on
+ * the stage's span basis), and the law of stsp_qspline_law goes on over the entries: one
+ * rounding of the whole sum, the per-tick law over [x_q; d_q] bit for bit. The blocks'
+ * place comes from the stage layout as it reads now (stsp_qspline_col_start); a layout that
+ * no longer fits cols[n_cols] (a table changed after init) leaves the columns out, a scale
+ * outside 1..30 gives a wrong gain (its shift taken modulo 64 by stsp_qspline_biased): a wrong
+ * command, no access outside the arrays, no undefined shift. Writes
+ * the unclamped y (stsp_params.c clamps). Time: nu P gains of 4 multiply-adds more than the
+ * plain tick, and the stage search of stsp_qspline_col_start (n_stages at most). */
+static void stsp_qspline_param_law(const stsp_header_t *h, uint32_t s, uint32_t tick,
+                                   const stsp_scalar_t *x, const stsp_scalar_t *v,
+                                   const stsp_scalar_t *cols, uint32_t n_cols,
+                                   const stsp_scalar_t *d, uint32_t n_params, stsp_scalar_t *y)
+{
+    const stsp_qspline_t *sp = &h->sp;
+    const uint32_t nu = stsp_nu(h);
+    const uint32_t tau = tick - h->stage_start[s];
+    const uint32_t k_raw = sp->span_log2[s];
+    const uint32_t k = (k_raw <= STSP_QSPLINE_MAX_SPAN_LOG2) ? k_raw : 0u;
+    stsp_uacc_t acc0[STSP_MAX_NU];
+    uint32_t p[4];
+    uint32_t width;
+    const uint32_t sigma = stsp_qspline_basis(k, tau, p);
+    const uint64_t first = stsp_qspline_col_start(sp, h->stage_start, s, nu * n_params, &width);
+    const uint64_t words = (uint64_t)nu * (uint64_t)n_params * (uint64_t)width;
+    uint32_t use = 0u;
+    uint32_t i;
+    if ((k == k_raw) && ((sigma + 4u) < width) && (first <= (uint64_t)n_cols) &&
+        (words <= ((uint64_t)n_cols - first))) {
+        use = 1u;
+    }
+    for (i = 0u; i < nu; ++i) {
+        stsp_uacc_t acc = stsp_q_start();
+        if (use != 0u) {
+            const stsp_scalar_t *block = &cols[(uint32_t)first + (i * n_params * width)];
+            uint32_t q;
+            for (q = 0u; q < n_params; ++q) {
+                const uint32_t sh = (uint32_t)(int32_t)block[0];
+                acc = stsp_q_mac(acc, stsp_qspline_narrow(&block[1u + sigma], p, (3u * k) + sh),
+                                 d[q]);
+                block = &block[width];
+            }
+        }
+        acc0[i] = acc;
+    }
+    (void)stsp_qspline_law(h, s, tau, x, v, y, 0u, acc0);
 }
 #endif
 
@@ -1073,7 +1083,7 @@ const stsp_spline_ops_t stsp_spline_ops = {
 #endif
     stsp_spline_crc, stsp_spline_step,
 #ifdef STSP_ARITH_FIXED_POINT
-    NULL /* no spline columns in fixed point */
+    stsp_qspline_param_law
 #else
     stsp_spline_param_law
 #endif

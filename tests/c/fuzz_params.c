@@ -10,12 +10,23 @@
  * as fuzz_params_q15/_q31, for the fixed-point parametric tables (gains/robot_goal_<arith>*:
  * states and column words of any integer, d_exp words too), and as fuzz_params_spline
  * (PARAMS_SPLINE) for the spline columns on the robot_goal spline table
- * (gains/robot_goal_spline*: coefficient words and n_spline_coef too). */
+ * (gains/robot_goal_spline*: coefficient words and n_spline_coef too), and as
+ * fuzz_params_q15_spline/_q31_spline (PARAMS_SPLINE in Q15/Q31) for the fixed-point spline
+ * columns (gains/robot_goal_<arith>_spline*: block words, scales included, and
+ * n_spline_coef). */
 #include <math.h>
 #include <string.h>
 
 #include "fuzz_input.h"
-#if defined(STSP_ARITH_Q15)
+#if defined(STSP_ARITH_Q15) && defined(PARAMS_SPLINE)
+#include "robot_goal_q15_spline_params.h"
+#define G(name) robot_goal_q15_spline_##name
+#define N_TICKS ROBOT_GOAL_Q15_SPLINE_N_TICKS
+#elif defined(STSP_ARITH_Q31) && defined(PARAMS_SPLINE)
+#include "robot_goal_q31_spline_params.h"
+#define G(name) robot_goal_q31_spline_##name
+#define N_TICKS ROBOT_GOAL_Q31_SPLINE_N_TICKS
+#elif defined(STSP_ARITH_Q15)
 #include "robot_goal_q15_params.h"
 #define G(name) robot_goal_q15_##name
 #define N_TICKS ROBOT_GOAL_Q15_N_TICKS

@@ -1,13 +1,18 @@
 /* Runtime parameters with spline columns (stsp_params.h, format 2) on the shipped
  * gains/robot_goal_spline* tables (tools/params_tables.py --spline), float32: bit for bit
  * against the float32 specification (params_spline_expected.h, from
- * tests/c/params_spline_reference.py) for a fixed theta, a change at a stage start and one
- * inside a stage; at the nominal the commands of stsp_step() on the spline table, bit for bit;
- * every bad input's status: a per-tick parameter table with a spline gain table and the
- * reverse, a wrong n_spline_coef, a version beyond 2, NULL columns, a changed coefficient
- * (CRC), a NaN coefficient (values), a coefficient changed after init (verify), theta out of
- * its range; the span cache against none for ticks in any order. Built against the generic
- * controller and under ASan + UBSan. */
+ * tests/c/params_spline_reference.py); in Q15/Q31 on gains/robot_goal_<arith>_spline*
+ * (tools/params_tables.py --fixed: Q spline gains, fixed-point spline columns) bit for bit
+ * against the host's reference (params_qspline_expected.h, from tests/c/params_q_reference.py
+ * --spline). For a fixed theta, a change at a stage start and one inside a stage; at the
+ * nominal the commands of stsp_step() on the spline table, bit for bit; every bad input's
+ * status: a per-tick parameter table with a spline gain table and the reverse, a wrong
+ * n_spline_coef, a version beyond 2, NULL columns, a changed coefficient (CRC), a NaN
+ * coefficient (float32) or a block's scale outside 1..30 and a row beyond 2^F - 1 (fixed
+ * point) (values), a coefficient changed after init (verify; fixed point: a scale changed
+ * after init is a defined step), theta out of its range. Built against the generic
+ * controller of each arithmetic and under ASan + UBSan. Float32 only: the span cache against
+ * none for ticks in any order (the Q spline tick keeps no span cache). */
 #include <math.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -17,38 +22,70 @@
 
 #include <cmocka.h>
 
+#if defined(STSP_ARITH_Q15)
+#include "robot_goal_q15_params.h"
+#include "robot_goal_q15_spline_params.h"
+#define G(name) robot_goal_q15_##name
+#define GS(name) robot_goal_q15_spline_##name
+#define QMAX INT16_MAX
+#elif defined(STSP_ARITH_Q31)
+#include "robot_goal_q31_params.h"
+#include "robot_goal_q31_spline_params.h"
+#define G(name) robot_goal_q31_##name
+#define GS(name) robot_goal_q31_spline_##name
+#define QMAX INT32_MAX
+#else
 #include "robot_goal_params.h"
 #include "robot_goal_spline_params.h"
+#define G(name) robot_goal_##name
+#define GS(name) robot_goal_spline_##name
+#endif
+#ifdef STSP_ARITH_FIXED_POINT
+#include "params_qspline_expected.h"
+#define N_COEF 260u
+#else
 #include "params_spline_expected.h"
+#define N_COEF 224u
+#define PAR_THETA_A PSP_THETA_A
+#define PAR_THETA_B PSP_THETA_B
+#define PAR_MID PSP_MID
+#define PAR_HASH_A PSP_HASH_A
+#define PAR_HASH_B PSP_HASH_B
+#define PAR_HASH_C PSP_HASH_C
+#define PAR_N_CHECKED PSP_N_CHECKED
+#define par_checked psp_checked
+#define par_checked_u psp_checked_u
+#endif
 
 #define NX 4u
 #define NU 2u
 #define N_TICKS 600u
 #define N_PARAMS 2u
-#define N_COEF 224u
 
-static const stsp_table_t *const T = &robot_goal_spline_table;
-static const stsp_params_table_t *const P = &robot_goal_spline_params;
+static const stsp_table_t *const T = &GS(table);
+static const stsp_params_table_t *const P = &GS(params);
 
-#define N_CHECKED PSP_N_CHECKED
-#define CHECKED_TICKS psp_checked
+#define N_CHECKED PAR_N_CHECKED
+#define CHECKED_TICKS par_checked
 #include "params_run.h"
 
 static void test_runs_match_reference(void **state_)
 {
-    static const float a[N_PARAMS] = PSP_THETA_A;
-    static const float b[N_PARAMS] = PSP_THETA_B;
-    uint32_t checked[PSP_N_CHECKED][2];
+    static const float a[N_PARAMS] = PAR_THETA_A;
+    static const float b[N_PARAMS] = PAR_THETA_B;
+    uint32_t checked[PAR_N_CHECKED][2];
     uint32_t k;
     (void)state_;
-    assert_int_equal(run(a, 0u, NULL, checked), PSP_HASH_A);
-    for (k = 0u; k < PSP_N_CHECKED; ++k) {
-        assert_int_equal(checked[k][0], psp_checked_u[k][0]);
-        assert_int_equal(checked[k][1], psp_checked_u[k][1]);
+    assert_int_equal(run(a, 0u, NULL, checked), PAR_HASH_A);
+    for (k = 0u; k < PAR_N_CHECKED; ++k) {
+        assert_int_equal(checked[k][0], (uint32_t)par_checked_u[k][0]);
+        assert_int_equal(checked[k][1], (uint32_t)par_checked_u[k][1]);
     }
-    assert_int_equal(run(NULL, T->stage_start[1], b, NULL), PSP_HASH_B);
-    assert_int_equal(run(a, PSP_MID, b, NULL), PSP_HASH_C);
+    assert_int_equal(run(NULL, T->stage_start[1], b, NULL), PAR_HASH_B);
+    assert_int_equal(run(a, PAR_MID, b, NULL), PAR_HASH_C);
+#ifndef STSP_ARITH_FIXED_POINT
     assert_int_equal(run(NULL, 0u, NULL, NULL), PSP_HASH_NOMINAL);
+#endif
 }
 
 /* At the nominal the parametric spline law is stsp_step()'s on the spline table, bit for
@@ -57,7 +94,7 @@ static void test_nominal_is_stsp_step(void **state_)
 {
     stsp_param_t pc;
     stsp_ctrl_t ctrl;
-    float x[NX], u[NU], w[NU];
+    stsp_scalar_t x[NX], u[NU], w[NU];
     uint32_t j;
     (void)state_;
     assert_int_equal(stsp_param_init(&pc, T, P), STSP_OK);
@@ -71,7 +108,7 @@ static void test_nominal_is_stsp_step(void **state_)
 }
 
 /* A parameter table in RAM: the shipped one with its columns copied into coef. */
-static stsp_params_table_t copy_of(float coef[N_COEF])
+static stsp_params_table_t copy_of(stsp_scalar_t coef[N_COEF])
 {
     stsp_params_table_t p = *P;
     memcpy(coef, P->S_k0, N_COEF * sizeof coef[0]);
@@ -79,18 +116,31 @@ static stsp_params_table_t copy_of(float coef[N_COEF])
     return p;
 }
 
+/* init with the CRC recomputed: `want`, and a refused instance not ready. */
+static void expect_with_crc(stsp_params_table_t *p, stsp_status_t want)
+{
+    stsp_param_t pc;
+    p->crc32 = stsp_params_table_crc32(p);
+    assert_int_equal(stsp_param_init(&pc, T, p), want);
+    if (want != STSP_OK) {
+        assert_int_equal(pc.ready, 0u);
+    }
+}
+
 static void test_bad_tables(void **state_)
 {
-    static float coef[N_COEF];
+    static stsp_scalar_t coef[N_COEF];
     stsp_param_t pc;
     stsp_params_table_t p;
     (void)state_;
     assert_int_equal(P->n_spline_coef, N_COEF);
     /* per-tick columns with the spline table, spline columns with the per-tick table */
-    assert_int_equal(stsp_param_init(&pc, T, &robot_goal_params), STSP_ERR_BAD_DIMS);
-    assert_int_equal(stsp_param_init(&pc, &robot_goal_table, P), STSP_ERR_BAD_DIMS);
+    assert_int_equal(stsp_param_init(&pc, T, &G(params)), STSP_ERR_BAD_DIMS);
+    assert_int_equal(stsp_param_init(&pc, &G(table), P), STSP_ERR_BAD_DIMS);
     p = copy_of(coef);
     p.n_spline_coef = N_COEF - 1u;
+    assert_int_equal(stsp_param_init(&pc, T, &p), STSP_ERR_BAD_DIMS);
+    p.n_spline_coef = N_COEF + 1u;
     assert_int_equal(stsp_param_init(&pc, T, &p), STSP_ERR_BAD_DIMS);
     p = copy_of(coef);
     p.format_version = 3u;
@@ -99,28 +149,43 @@ static void test_bad_tables(void **state_)
     p.S_k0 = NULL;
     assert_int_equal(stsp_param_init(&pc, T, &p), STSP_ERR_NULL);
     p = copy_of(coef);
-    coef[17] = coef[17] * 1.5f + 1.0f;
+    coef[17] = (coef[17] != 0) ? (stsp_scalar_t)0 : (stsp_scalar_t)1;
     assert_int_equal(stsp_param_init(&pc, T, &p), STSP_ERR_BAD_CRC);
-    p.crc32 = stsp_params_table_crc32(&p);
-    assert_int_equal(stsp_param_init(&pc, T, &p), STSP_OK);
+    expect_with_crc(&p, STSP_OK);
+#ifdef STSP_ARITH_FIXED_POINT
+    /* a block's scale (its first word) outside 1..30 */
+    p = copy_of(coef);
+    coef[0] = 0;
+    expect_with_crc(&p, STSP_ERR_BAD_VALUES);
+    coef[0] = 31;
+    expect_with_crc(&p, STSP_ERR_BAD_VALUES);
+    /* a column whose gain takes a row beyond 2^F - 1: its coefficients at the format's top,
+     * at the smallest scale */
+    p = copy_of(coef);
+    coef[0] = 1;
+    coef[1] = QMAX;
+    coef[2] = QMAX;
+    coef[3] = QMAX;
+    coef[4] = QMAX;
+    expect_with_crc(&p, STSP_ERR_BAD_VALUES);
+#else
     coef[17] = NAN;
-    p.crc32 = stsp_params_table_crc32(&p);
-    assert_int_equal(stsp_param_init(&pc, T, &p), STSP_ERR_BAD_VALUES);
-    assert_int_equal(pc.ready, 0u);
+    expect_with_crc(&p, STSP_ERR_BAD_VALUES);
+#endif
 }
 
 /* A coefficient changed after init: verify stops the instance, its steps hold. */
 static void test_verify(void **state_)
 {
-    static float coef[N_COEF];
+    static stsp_scalar_t coef[N_COEF];
     stsp_param_t pc;
     stsp_params_table_t p;
-    float x[NX], u[NU];
+    stsp_scalar_t x[NX], u[NU];
     (void)state_;
     p = copy_of(coef);
     assert_int_equal(stsp_param_init(&pc, T, &p), STSP_OK);
     assert_int_equal(stsp_param_verify(&pc), STSP_OK);
-    coef[N_COEF - 1u] += 1.0f;
+    coef[N_COEF - 1u] = (stsp_scalar_t)(coef[N_COEF - 1u] + 1);
     assert_int_equal(stsp_param_verify(&pc), STSP_ERR_BAD_CRC);
     state(0u, x);
     assert_int_equal(stsp_param_step(&pc, 0u, x, u), STSP_ERR_NOT_INITIALIZED);
@@ -131,6 +196,28 @@ static void test_verify(void **state_)
     assert_int_equal(stsp_param_verify(&pc), STSP_ERR_TABLE_CHANGED);
 }
 
+#ifdef STSP_ARITH_FIXED_POINT
+/* A block's scale changed after init, before verify notices: the step reads it unchecked,
+ * a wrong command but a defined one (no undefined shift: the UBSan build). */
+static void test_changed_scale_is_defined(void **state_)
+{
+    static stsp_scalar_t coef[N_COEF];
+    static const float a[N_PARAMS] = PAR_THETA_A;
+    stsp_param_t pc;
+    stsp_params_table_t p;
+    stsp_scalar_t x[NX], u[NU];
+    stsp_status_t st;
+    (void)state_;
+    p = copy_of(coef);
+    assert_int_equal(stsp_param_init(&pc, T, &p), STSP_OK);
+    assert_int_equal(stsp_set_params(&pc, a), STSP_OK);
+    coef[0] = -7;
+    state(0u, x);
+    st = stsp_param_step(&pc, 0u, x, u);
+    assert_true((st == STSP_OK) || (st == STSP_WARN_SATURATED));
+}
+#endif
+
 /* theta outside its range, NaN: refused, the parameters in use kept. */
 static void test_bad_theta(void **state_)
 {
@@ -138,14 +225,15 @@ static void test_bad_theta(void **state_)
     float theta[N_PARAMS];
     (void)state_;
     assert_int_equal(stsp_param_init(&pc, T, P), STSP_OK);
-    theta[0] = P->upper[0] + 1.0f;
-    theta[1] = P->nominal[1];
+    theta[0] = (float)P->upper[0] + 1.0f;
+    theta[1] = (float)P->nominal[1];
     assert_int_equal(stsp_set_params(&pc, theta), STSP_ERR_PARAM_RANGE);
     theta[0] = NAN;
     assert_int_equal(stsp_set_params(&pc, theta), STSP_ERR_PARAM_RANGE);
-    assert_true(pc.d[0] == 0.0f);
+    assert_true(pc.d[0] == 0);
 }
 
+#ifndef STSP_ARITH_FIXED_POINT
 /* The span cache (ctrl.span) for any order of ticks: instance a keeps it, instance b has
  * it cleared before every step (the span searched from the stage's first, as without a
  * cache); the same status and command bits at every step of a fixed pseudo-random sequence of
@@ -243,6 +331,7 @@ static void test_span_cache_any_order(void **state_)
         }
     }
 }
+#endif
 
 int main(void)
 {
@@ -251,8 +340,13 @@ int main(void)
         cmocka_unit_test(test_nominal_is_stsp_step),
         cmocka_unit_test(test_bad_tables),
         cmocka_unit_test(test_verify),
+#ifdef STSP_ARITH_FIXED_POINT
+        cmocka_unit_test(test_changed_scale_is_defined),
+#endif
         cmocka_unit_test(test_bad_theta),
+#ifndef STSP_ARITH_FIXED_POINT
         cmocka_unit_test(test_span_cache_any_order),
+#endif
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

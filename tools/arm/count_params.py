@@ -5,7 +5,7 @@ drone through gates whose six coordinates are parameters (gains/drone_gates*), t
 stsp_step() (no parameters) and through stsp_param_step() (theta set inside the range).
 
     python3 tools/arm/count_params.py [--build DIR] [--example robot_goal|drone_gates|all]
-                                      [--arith float32|q15|q31|spline]
+                                      [--arith float32|q15|q31|spline|q15-spline|q31-spline]
 
 Bytes: the const data of gains/<name>.c (the table) and of gains/<name>_params.c (the columns,
 nominal and range, and the 76-byte stsp_params_table_t), compiled for the M4F
@@ -24,7 +24,10 @@ With --arith q15 or q31: the fixed-point build on gains/robot_goal_<arith>* (the
 states in Q scales), its hashes against tests/c/params_q_expected.h (the host's bit-exact
 reference). With --arith spline: the float32 build on gains/robot_goal_spline* (the spline
 table with its spline columns, tools/params_tables.py --spline), its hashes against
-tests/c/params_spline_expected.h. The drone's hashes are tests/c/params_drone_expected.h's
+tests/c/params_spline_expected.h. With --arith q15-spline or q31-spline: the fixed-point
+build on gains/robot_goal_<arith>_spline* (the Q spline gain table with its fixed-point spline
+columns, tools/params_tables.py --fixed), its hashes against tests/c/params_qspline_expected.h
+(tests/c/params_q_reference.py --spline). The drone's hashes are tests/c/params_drone_expected.h's
 (tests/c/params_reference.py --example drone_gates). Standard library only.
 """
 from __future__ import annotations
@@ -44,7 +47,9 @@ FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", 
          "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"]
 CALLERS = ("bench_plain", "bench_param")
 EXAMPLES = ("robot_goal", "drone_gates")     # gains/<name>* with runtime parameters
-SUFFIX = {"float32": "f32", "q15": "q15", "q31": "q31", "spline": "f32"}
+SUFFIX = {"float32": "f32", "q15": "q15", "q31": "q31", "spline": "f32",
+          "q15-spline": "q15", "q31-spline": "q31"}
+SPLINE = ("spline", "q15-spline", "q31-spline")
 
 
 def entries(arith: str) -> tuple[str, str]:
@@ -53,7 +58,7 @@ def entries(arith: str) -> tuple[str, str]:
 
 def table_name(example: str, arith: str) -> str:
     """gains/<name>.c of `example`'s table in `arith` (spline: float32 spline columns)."""
-    return example if arith == "float32" else f"{example}_{arith}"
+    return example if arith == "float32" else f"{example}_{arith.replace('-', '_')}"
 
 
 def build(out: Path, arith: str = "float32", hashes: bool = False,
@@ -62,7 +67,8 @@ def build(out: Path, arith: str = "float32", hashes: bool = False,
     arm = ROOT / "tools" / "arm"
     name = table_name(example, arith)
     defs = {"float32": [], "spline": ["-DPARAMS_SPLINE"]}.get(
-        arith, [f"-DSTSP_ARITH_{arith.upper()}"])
+        arith, [f"-DSTSP_ARITH_{arith.split('-')[0].upper()}"])
+    defs += ["-DPARAMS_SPLINE"] if arith.endswith("-spline") else []
     defs += ["-DBENCH_DRONE"] if example == "drone_gates" else []
     run(["arm-none-eabi-gcc", *FLAGS, *defs, *(["-DBENCH_HASH"] if hashes else []),
          f"-I{ROOT / 'firmware/include'}", f"-I{ROOT / 'firmware/src'}", f"-I{ROOT / 'gains'}",
@@ -80,7 +86,8 @@ def count(elf: Path, arith: str = "float32") -> list[dict]:
     # A spline table's code is reached through its ops pointer (blx to a register, which
     # callees cannot follow): when linked, its tick and the parameters' law are roots too.
     roots = list(ENTRIES) + [n for n in syms if n.split(".")[0] in ("stsp_spline_step",
-                                                                    "stsp_spline_param_law")]
+                                                                    "stsp_spline_param_law",
+                                                                    "stsp_qspline_param_law")]
     funcs = sorted({f for e in roots for f in callees(elf, syms, e)})
     ranges = {n: syms[n] for n in funcs + list(CALLERS)}
     trace = elf.with_suffix(".trace")
@@ -96,12 +103,13 @@ def count(elf: Path, arith: str = "float32") -> list[dict]:
     return calls
 
 
-def flash(out: Path, example: str) -> tuple[int, int]:
-    """Bytes of const data of gains/<example>.c and gains/<example>_params.c for the M4F."""
+def flash(out: Path, example: str, defs: tuple = ()) -> tuple[int, int]:
+    """Bytes of const data of gains/<example>.c and gains/<example>_params.c for the M4F
+    (compiled with `defs`: a fixed-point table's arithmetic)."""
     sizes = []
     for stem in (example, f"{example}_params"):
         obj = out / f"{stem}.o"
-        run(["arm-none-eabi-gcc", *FLAGS, f"-I{ROOT / 'firmware/include'}",
+        run(["arm-none-eabi-gcc", *FLAGS, *defs, f"-I{ROOT / 'firmware/include'}",
              f"-I{ROOT / 'gains'}", "-c", str(ROOT / f"gains/{stem}.c"), "-o", str(obj)])
         sizes.append(sum(int(m) for m in re.findall(r"^\.(?:rodata|data)\S*\s+(\d+)",
                                                      run(["arm-none-eabi-size", "-A", str(obj)]),
@@ -124,6 +132,9 @@ def check_hashes(out: Path, arith: str = "float32", example: str = "robot_goal")
     elif arith == "spline":
         text, what = (ROOT / "tests/c/params_spline_expected.h").read_text(), "specification"
         text = text.replace("PSP_", "PAR_")
+    elif arith in SPLINE:
+        text, what = (ROOT / "tests/c/params_qspline_expected.h").read_text(), "host reference"
+        text = text.split(f"defined(STSP_ARITH_{SUFFIX[arith].upper()})")[1].split("#e")[0]
     else:
         text, what = (ROOT / "tests/c/params_q_expected.h").read_text(), "host reference"
         text = text.split(f"defined(STSP_ARITH_{arith.upper()})")[1].split("#e")[0]
@@ -152,9 +163,11 @@ def report(out: Path, example: str, arith: str) -> bool:
         med = [statistics.median([c["insns"] for c in calls if sel(c) and c["kind"] == k])
                for k in (0, 1)]
         print(f"| {name} | {med[0]:.0f} | {med[1]:.0f} |")
-    if arith in ("float32", "spline"):
+    if arith in ("float32", *SPLINE):
         name = table_name(example, arith)
-        table, params = flash(out, name)
+        fixed = () if arith in ("float32", "spline") else \
+            (f"-DSTSP_ARITH_{SUFFIX[arith].upper()}",)
+        table, params = flash(out, name, fixed)
         print(f"\n{name}: table {table:,} B, parameters {params:,} B "
               f"(+{100 * params / table:.1f} %; gains/{name}.c, gains/{name}_params.c, "
               f"const data for the M4F)")

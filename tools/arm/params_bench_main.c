@@ -14,7 +14,9 @@
  * parametric controller), states as Q integers, and with -DBENCH_HASH the runs of
  * tests/c/params_q_reference.py against the host's bit-exact reference. Built with
  * PARAMS_SPLINE (float32): the same on gains/robot_goal_spline* (spline columns, format 2),
- * with -DBENCH_HASH the runs of tests/c/params_spline_reference.py. */
+ * with -DBENCH_HASH the runs of tests/c/params_spline_reference.py; with PARAMS_SPLINE and
+ * STSP_ARITH_Q15 or _Q31: gains/robot_goal_<arith>_spline* (fixed-point spline columns), the
+ * runs of tests/c/params_q_reference.py --spline. */
 #include <stdint.h>
 #include <stdio.h>
 #include <string.h>
@@ -29,6 +31,12 @@
 /* the bench's theta: each gate moved inside its +-0.5 m; the start: rest at (0, 0, 1) */
 #define BENCH_THETA {0.3f, 2.2f, 1.2f, 2.9f, -0.2f, 1.4f}
 #define BENCH_X {0.0f, 0.0f, 0.0f, 0.0f, 1.0f, 0.0f}
+#elif defined(STSP_ARITH_Q15) && defined(PARAMS_SPLINE)
+#include "robot_goal_q15_spline_params.h"
+#define G(name) robot_goal_q15_spline_##name
+#elif defined(STSP_ARITH_Q31) && defined(PARAMS_SPLINE)
+#include "robot_goal_q31_spline_params.h"
+#define G(name) robot_goal_q31_spline_##name
 #elif defined(STSP_ARITH_Q15)
 #include "robot_goal_q15_params.h"
 #define G(name) robot_goal_q15_##name
@@ -53,6 +61,8 @@
 #ifdef BENCH_HASH
 #if defined(BENCH_DRONE)
 #include "params_drone_expected.h"
+#elif defined(STSP_ARITH_FIXED_POINT) && defined(PARAMS_SPLINE)
+#include "params_qspline_expected.h"
 #elif defined(STSP_ARITH_FIXED_POINT)
 #include "params_q_expected.h"
 #elif defined(PARAMS_SPLINE)

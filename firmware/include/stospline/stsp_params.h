@@ -71,10 +71,26 @@
  * init and reset clear it with the instance (a latch comes with another stage); the cold path
  * (maybe a fresh latch) searches from the stage's first span without it.
  *
+ * Spline columns in fixed point (Q15/Q31 builds, format 2 with a Q spline gain table; host
+ * stospline.table.spline.qparams): per stage s, input i and parameter p one block of S_s + 4
+ * scalars in S_k0, the column's scale s_c (1 .. 30) then its S_s + 3 integer B-spline
+ * coefficients on the gain spline's spans (S_s = ceil(T_s / 2^k_s), stsp_qspline.h), block
+ * (s, i, p) at nu P sum_{s' < s} (S_{s'} + 4) + (i P + p)(S_s + 4). At tick tau of stage s
+ * the column's gain is g_p = floor((sum_r c[sigma + r] P_r) / 2^(3 k_s + s_c) + 1/2), exact,
+ * as a gain entry's, and
+ *     u_q[i] = k0[i] + floor((sum_e g_e z_q[col_e] + sum_p g_p d_q[p]) / 2^F + 1/2)
+ * (one rounding of the whole sum, z_q = [x_q, 0, v_q]; the latch as per tick above): the
+ * per-tick law over [x_q; d_q] with the splines' gains as evaluated, bit for bit (host
+ * qparams.QParamSpec of stospline.table.spline.qparams.quantize_spline_parametric). Init
+ * checks n_spline_coef against the layout (STSP_ERR_BAD_DIMS), every scale and, at every
+ * tick, every law row with its columns, sum |g| <= 2^F - 1 (STSP_ERR_BAD_VALUES): one
+ * evaluation per entry, column and tick. Each tick also finds its stage's blocks (a sum over
+ * the stages before it).
+ *
  * A per-tick parameter table (format 1) with a spline gain table, a spline one (format 2)
  * with a per-tick table, and a gain table with a band dual are refused at init
- * (STSP_ERR_BAD_DIMS); format 2 in a Q15/Q31 build, or a parameter table of another scalar
- * kind than the build's, with STSP_ERR_BAD_VERSION.
+ * (STSP_ERR_BAD_DIMS); a parameter table of another scalar kind than the build's with
+ * STSP_ERR_BAD_VERSION.
  *
  * Does not use malloc, recursion or VLAs; every loop is bounded by the validated dimensions
  * (n_params <= STSP_MAX_PARAMS, 32 by default). Buffers: stsp_param_t holds a stsp_ctrl_t,
@@ -82,8 +98,9 @@
  * bytes with the default limits in a float32 build, 348 in Q15, 476 in Q31
  * (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_param_t)).
  * stsp_param_step() uses STSP_MAX_LATCH + STSP_MAX_NU scalars of stack; with a spline table
- * its call of the spline code also a span record (stsp_span_t, on the cold path) and 4
- * scalars. Every tick of a
+ * its call of the spline code also, in float32, a span record (stsp_span_t, on the cold
+ * path) and 4 scalars; in fixed point a span record, STSP_MAX_NU accumulators and the spline
+ * law's STSP_MAX_NX + 1 + STSP_MAX_LATCH operands. Every tick of a
  * parametric instance is evaluated by this file in plain C loops (not stsp_step()'s ordinary
  * tick): nu P more multiply-adds per tick, and the generic loop overhead
  * (tools/arm/count_params.py, docs/guide/firmware.md).
@@ -101,7 +118,7 @@ extern "C" {
 #define STSP_PARAMS_MAGIC 0x52505453u
 /** Parameter table format understood by this firmware: columns per tick. */
 #define STSP_PARAMS_FORMAT_VERSION 1u
-/** The other format understood (float32 builds only): spline columns of a spline table. */
+/** The other format understood: spline columns of a spline table (float32, Q15, Q31). */
 #define STSP_PARAMS_FORMAT_SPLINE 2u
 /** Upper bound on the parameters, checked by stsp_param_init() (the problem file allows 32). */
 #ifndef STSP_MAX_PARAMS
@@ -145,13 +162,16 @@ typedef struct {
                                          [nu n_params (sp.n_knots - 4 n_stages)], stage s,
                                          input i, parameter p, coefficient r at
                                          nu n_params (knot_start[s] - 4 s)
-                                         + (i n_params + p)(S_s + 3) + r */
+                                         + (i n_params + p)(S_s + 3) + r; format 2 in
+                                         Q15/Q31: blocks of scale and S_s + 3 coefficients
+                                         (above) */
     const stsp_scalar_t *S_lambda0; /**< [n_stages][n_latch][n_params] (may be NULL when
                                          n_latch == 0) */
     uint32_t crc32;              /**< see stsp_params_table_crc32() */
     uint8_t problem_sha256[32];  /**< the gain table's problem_sha256 */
     uint32_t n_spline_coef;      /**< format 2: the length of S_k0, nu n_params (sp.n_knots
-                                      - 4 n_stages) of the gain table's spline; format 1: 0
+                                      - 4 n_stages) of the gain table's spline (Q15/Q31:
+                                      nu n_params sum_s (S_s + 4)); format 1: 0
                                       (unread) */
 } stsp_params_table_t;
 
@@ -189,7 +209,8 @@ uint32_t stsp_params_table_crc32(const stsp_params_table_t *params);
  * length, or a table with a band dual), STSP_ERR_BAD_CRC, STSP_ERR_BAD_PROBLEM (problem_sha256 not
  * the gain table's), STSP_ERR_BAD_VALUES (a NaN or infinite entry, the spline columns' included,
  * or not lower <= nominal <= upper; fixed point also: a d_exp beyond +-STSP_Q_EXP_MAX, a law or latch row with the
- * columns above 2^F - 1, or |d_q| > 2^F - 1 at an end of a range).
+ * columns above 2^F - 1 (spline columns: at some tick), a spline column's scale outside
+ * 1 .. 30, or |d_q| > 2^F - 1 at an end of a range).
  */
 stsp_status_t stsp_param_init(stsp_param_t *pc, const stsp_table_t *table,
                               const stsp_params_table_t *params);

@@ -24,7 +24,8 @@ from stospline.problem.parameters import problem_at
 from stospline.table.codegen import generate_c
 from stospline.table.parametric_c import generate_parametric_c, generate_parametric_qc
 
-__all__ = ["build_params_controller", "build_params_qcontroller", "ParamsController",
+__all__ = ["build_params_controller", "build_params_qcontroller",
+           "build_params_qspline_controller", "ParamsController",
            "ParamsRun", "simulate_params"]
 
 _CDEF = PLANT_CDEF + """
@@ -169,6 +170,19 @@ def build_params_qcontroller(ptable, pf, *, build_dir=None,
     name = f"{ptable.table.name}_{ft.arith}"
     return _build(generate_parametric_qc(ptable, pf, prefix=name), name, pf.gain_table(name),
                   ft.arith, build_dir, quiet)
+
+
+def build_params_qspline_controller(ptable, pf, gains, cols, *, build_dir=None,
+                                    quiet: bool = True) -> ParamsController:
+    """`build_params_qcontroller` of the Q15/Q31 spline parametric controller
+    (`stospline.table.spline.qparams.quantize_spline_parametric` of `ptable`: `pf`, the gain
+    spline `gains` and the spline columns `cols`, format 2). Its ``table`` is the Q spline
+    gain table."""
+    from stospline.table.spline.qparams import spline_gain_table
+    ft = pf.augmented
+    name = f"{ptable.table.name}_{ft.arith}_spline"
+    files = generate_parametric_qc(ptable, pf, prefix=name, spline=(gains, cols))
+    return _build(files, name, spline_gain_table(pf, gains, name), ft.arith, build_dir, quiet)
 
 
 def _build(files: dict, name: str, table, arith: str, build_dir, quiet) -> ParamsController:

@@ -34,7 +34,7 @@ from stospline.table.parametric import ParametricTable, parametric_table
 
 __all__ = ["BOX_ROUNDS", "ParametricDesign", "check_parametric_options", "design_parametric", "evaluate_at",
            "evaluate_switched", "tails_at", "cost_quadratic", "parametric_c_files",
-           "fixed_parametric"]
+           "fixed_parametric", "fixed_spline_parametric"]
 
 
 @dataclass
@@ -262,6 +262,28 @@ def fixed_parametric(problem, source_name: str = "", options=None):
     box = pd.box if pd.box is not None else box_moments(problem, pd.table)
     pf = quantize_parametric(pd.table, opts.arith, box_state_range(box))
     return generate_parametric_qc(pd.table, pf, source_name=source_name), pf, pd
+
+
+def fixed_spline_parametric(problem, source_name: str = "", options=None):
+    """``(files, (pf, gains, cols), pd)``: `fixed_parametric` with spline columns, the
+    problem's Q15/Q31 spline parametric controller (`options`' arith, their
+    ``spline_tolerance``; `stospline.table.spline.qparams.quantize_spline_parametric` over
+    the box's state range): ``<name>_<arith>_spline.{h,c}`` (the Q spline gain table in the
+    scales of the augmented law) and ``<name>_<arith>_spline_params.{h,c}`` (format 2)."""
+    from stospline.oracle.over_box import box_state_range
+    from stospline.table.parametric_c import generate_parametric_qc
+    from stospline.table.spline.qparams import quantize_spline_parametric
+    opts = check_parametric_options(problem, options)
+    if opts.arith == "float32":
+        raise ValueError("fixed_spline_parametric: the options' arith is float32")
+    pd = design_parametric(problem, discretization=opts.discretization, mode=opts.mode,
+                           delay_ticks=opts.delay_ticks)
+    box = pd.box if pd.box is not None else box_moments(problem, pd.table)
+    pf, gains, cols = quantize_spline_parametric(pd.table, opts.arith, box_state_range(box),
+                                                 opts.spline_tolerance)
+    files = generate_parametric_qc(pd.table, pf, source_name=source_name,
+                                   spline=(gains, cols))
+    return files, (pf, gains, cols), pd
 
 
 def check_parametric_options(problem, options=None):

@@ -160,42 +160,68 @@ def generate_parametric_c(ptable: ParametricTable, *, prefix: str | None = None,
                          SCALAR_FLOAT32, params_crc32(ptable), note)
 
 
-def params_crc32_q(pf) -> int:
+def params_crc32_q(pf, cols=None) -> int:
     """CRC-32 of a fixed-point parameter table (`stospline.table.qparams.ParametricFixedPoint`)
     as ``stsp_params_table_crc32`` of a Q15/Q31 build serializes it: the dimensions and
     scalar_kind as little-endian u32, nominal, lower, upper as binary64, S_k0 and (when
-    n_latch > 0) S_lambda0 as int16 (Q15) or int32 (Q31), d_exp as bytes, then the hash."""
+    n_latch > 0) S_lambda0 as int16 (Q15) or int32 (Q31), d_exp as bytes, then the hash. With
+    `cols` (`stospline.table.spline.qparams.QSplineColumns`, format 2): format 2 and the
+    blocks' length as u32 before scalar_kind, the blocks as S_k0."""
     ft = pf.augmented
     q = "<i2" if ft.arith == "q15" else "<i4"
     body = [np.asarray(a, "<f8").tobytes() for a in (pf.nominal, pf.lower, pf.upper)]
-    body.append(np.asarray(pf.S_k0, q).tobytes())
+    body.append(np.asarray(pf.S_k0 if cols is None else cols.coef, q).tobytes())
     if ft.dims[2] > 0:
         body.append(np.asarray(pf.S_lambda0, q).tobytes())
     body.append(np.asarray(pf.d_exp, np.int8).tobytes())
-    return _crc(ft, pf.nominal.size, [ft.scalar_kind], body)
+    head = [] if cols is None else [PARAMS_FORMAT_SPLINE, int(cols.coef.size)]
+    return _crc(ft, pf.nominal.size, [*head, ft.scalar_kind], body)
 
 
 def generate_parametric_qc(ptable: ParametricTable, pf, *, prefix: str | None = None,
-                           source_name: str = "") -> dict[str, str]:
+                           source_name: str = "", spline=None) -> dict[str, str]:
     """The four files of a fixed-point parametric controller: ``<prefix>.{h,c}``, the gain
     table of `pf` (`stospline.table.qparams.quantize_parametric` of `ptable`), and
-    ``<prefix>_params.{h,c}``, its columns (default prefix: the table's name and arith)."""
+    ``<prefix>_params.{h,c}``, its columns (default prefix: the table's name and arith).
+    With `spline` = ``(gains, cols)`` (`stospline.table.spline.qparams
+    .quantize_spline_parametric`): the Q spline gain table and its spline columns (format 2;
+    default prefix ``<name>_<arith>_spline``)."""
     ft = pf.augmented
-    p = prefix or f"{ptable.table.name}_{ft.arith}"
-    gh, gc = generate_c(pf.gain_table(p), source_name=source_name)
+    p = prefix or f"{ptable.table.name}_{ft.arith}" + ("" if spline is None else "_spline")
+    if spline is None:
+        gt, cols = pf.gain_table(p), None
+    else:
+        from stospline.table.spline.qparams import spline_gain_table
+        gt, cols = spline_gain_table(pf, spline[0], p), spline[1]
+    gh, gc = generate_c(gt, source_name=source_name)
     P = pf.nominal.size
     T, m, n_latch = ft.n_ticks, ft.dims[1], ft.dims[2]
     F = ft.frac_bits
     S, e, lit = ft.n_stages, f"stsp_{ft.arith}_t", _qlit(F)
-    note = f"""/* At parameters theta[N_PARAMS] (each within [lower, upper]),
+    if cols is None:
+        note = f"""/* At parameters theta[N_PARAMS] (each within [lower, upper]),
  * d_q[p] = floor((theta[p] - nominal[p]) 2^({F} - d_exp[p]) + 1/2) (binary64) is P more
  * states of the law: S_k0[(j*NU + i)*N_PARAMS + p] (negated, pre-scaled) beside K[j][i],
  * S_lambda0[(s*N_LATCH + c)*N_PARAMS + p] (pre-scaled) beside Lambda[s][c] (stsp_params.h). */"""
+        k0_len, k0_values = T * m * P, pf.S_k0
+        k0_note = f"-S_k0 scaled, [n_ticks][nu][n_params] = [{T}][{m}][{P}]"
+        extra = {}
+    else:
+        note = f"""/* At parameters theta[N_PARAMS] (each within [lower, upper]),
+ * d_q[p] = floor((theta[p] - nominal[p]) 2^({F} - d_exp[p]) + 1/2) (binary64) is P more
+ * states of the law; the gain of d_q[p] for input i at a tick of stage s is an integer
+ * B-spline on the gain spline's spans: block (s, i, p) of S_k0, S_s + 4 words at
+ * NU N_PARAMS sum_(s' < s) (S_s' + 4) + (i N_PARAMS + p)(S_s + 4), holds its scale, then
+ * S_s + 3 coefficients (stsp_params.h); S_lambda0[(s*N_LATCH + c)*N_PARAMS + p] (pre-scaled)
+ * beside Lambda[s][c]. */"""
+        k0_len, k0_values = int(cols.coef.size), cols.coef
+        k0_note = f"[{k0_len}] per stage, input, parameter: scale, spans + 3 coefficients"
+        extra = {"version": PARAMS_FORMAT_SPLINE, "n_spline_coef": k0_len}
     decls = [f"extern const double {p}_param_nominal[{P}];",
              f"extern const double {p}_param_lower[{P}];",
              f"extern const double {p}_param_upper[{P}];",
              f"extern const int8_t {p}_param_d_exp[{P}];",
-             f"extern const {e} {p}_S_k0[{max(T * m * P, 1)}];",
+             f"extern const {e} {p}_S_k0[{max(k0_len, 1)}];",
              f"extern const {e} {p}_S_lambda0[{max(S * n_latch * P, 1)}];"]
     arrays = [
         _extern("double", f"{p}_param_nominal", pf.nominal, "[n_params] the design's values",
@@ -204,15 +230,14 @@ def generate_parametric_qc(ptable: ParametricTable, pf, *, prefix: str | None = 
         _extern("double", f"{p}_param_upper", pf.upper, "[n_params]", _f64_literal),
         _extern("int8_t", f"{p}_param_d_exp", pf.d_exp, "[n_params] scale exponents of d",
                 lambda v: f"{int(v)}"),
-        _extern(e, f"{p}_S_k0", pf.S_k0, f"-S_k0 scaled, [n_ticks][nu][n_params] = "
-                                         f"[{T}][{m}][{P}]", lit),
+        _extern(e, f"{p}_S_k0", k0_values, k0_note, lit),
         _extern(e, f"{p}_S_lambda0", pf.S_lambda0,
                 f"S_lambda0 scaled, [n_stages][n_latch][n_params] = [{S}][{n_latch}][{P}]", lit),
     ]
     pointers = (f"{p}_param_nominal, {p}_param_lower, {p}_param_upper, {p}_param_d_exp,\n"
                 f"    {p}_S_k0, {p}_S_lambda0")
     ph, pc = _params_files(ft, ptable.parameters, p, source_name, decls, arrays, pointers,
-                           ft.scalar_kind, params_crc32_q(pf), note)
+                           ft.scalar_kind, params_crc32_q(pf, cols), note, **extra)
     return {f"{p}.h": gh, f"{p}.c": gc, f"{p}_params.h": ph, f"{p}_params.c": pc}
 
 

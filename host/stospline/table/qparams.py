@@ -45,7 +45,8 @@ from stospline.table.parametric import ParametricTable
 from stospline.table.qformat import (FRAC_BITS, FixedPointTable, _rhu, latch_q, law_q,
                                      quantize_table, scaled_entries)
 
-__all__ = ["ParametricFixedPoint", "FlashedParametric", "quantize_parametric", "law_double_at", "QParamSpec"]
+__all__ = ["ParametricFixedPoint", "FlashedParametric", "quantize_parametric", "augmented",
+           "with_deviation_bound", "law_double_at", "QParamSpec"]
 
 
 @dataclass
@@ -154,6 +155,15 @@ def quantize_parametric(ptable, arith: str, x_range) -> ParametricFixedPoint:
     `ptable` (`stospline.table.parametric.ParametricTable`, double precision), for states
     within `x_range` ((n,): magnitudes over the whole box). Raises ValueError as
     `qformat.quantize_table`."""
+    aug, x_aug = augmented(ptable, arith, x_range)
+    ft = quantize_table(aug, arith, x_aug, name=f"{ptable.table.name}_params_{arith}")
+    return with_deviation_bound(ptable, aug, ft)
+
+
+def augmented(ptable, arith: str, x_range):
+    """``(aug, x_aug)``: the double law over ``[x; d]`` (``K`` and ``Lambda`` with the columns
+    appended) and its state range (`x_range`, then the parameters' reaches with room for the
+    rounding of ``d_q``: ``|d_q| <= 2^F - 1``)."""
     if arith not in FRAC_BITS:
         raise ValueError(f"arith must be one of {list(FRAC_BITS)}, got {arith!r}")
     F = FRAC_BITS[arith]
@@ -167,8 +177,18 @@ def quantize_parametric(ptable, arith: str, x_range) -> ParametricFixedPoint:
     aug = replace(table, K=np.concatenate([np.asarray(table.K, float), ptable.S_k0], axis=2),
                   Lambda=np.concatenate([np.asarray(table.Lambda, float), ptable.S_lambda0],
                                         axis=2))
-    x_range = np.concatenate([np.asarray(x_range, float).reshape(-1), d_range])
-    ft = quantize_table(aug, arith, x_range, name=f"{table.name}_params_{arith}")
+    return aug, np.concatenate([np.asarray(x_range, float).reshape(-1), d_range])
+
+
+def with_deviation_bound(ptable, aug, ft: FixedPointTable) -> ParametricFixedPoint:
+    """The `ParametricFixedPoint` of `ft`, the fixed-point table of the augmented law `aug`
+    (`augmented`; its integer entries, per tick or a spline's as evaluated), with the rounding
+    of ``d`` added to its bound (the module docstring)."""
+    table = ptable.table
+    F = ft.frac_bits
+    nom = np.asarray(ptable.nominal, float)
+    lower = np.array([q.lower for q in ptable.parameters], float)
+    upper = np.array([q.upper for q in ptable.parameters], float)
     n = table.dims[0]
     Ks, _, Ls, Lams, _ = scaled_entries(aug, F, ft.x_exp, ft.u_exp, ft.v_exp)
     e_d = (0.5 + 2.0 ** (F - 52)) / (1 << F)     # d_q's error, in the columns' units

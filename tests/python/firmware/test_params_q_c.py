@@ -28,6 +28,14 @@ def test_expected_header_is_the_reference():
         "regenerate tests/c/params_q_expected.h with tests/c/params_q_reference.py"
 
 
+def test_spline_expected_header_is_the_reference():
+    """tests/c/test_params_spline.c's expected values: the reference of the Q spline
+    parametric controllers gains/robot_goal_<arith>_spline*."""
+    assert (REPO / "tests/c/params_qspline_expected.h").read_text() == \
+        params_q_reference.expected(spline=True), \
+        "regenerate tests/c/params_qspline_expected.h with tests/c/params_q_reference.py --spline"
+
+
 @pytest.fixture(scope="module")
 def robot():
     p = load_problem(EXAMPLES / "robot_goal.toml")

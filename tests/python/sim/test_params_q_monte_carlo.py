@@ -18,11 +18,12 @@ import pytest
 
 from conftest import EXAMPLES
 from stospline import load_problem
-from stospline.harness.params_loop import build_params_qcontroller, simulate_params
+from stospline.harness.params_loop import build_params_qcontroller
 from stospline.oracle.fixed_point_margin import mean_error_bound
 from stospline.oracle.over_box import box_moments, box_state_range
-from stospline.oracle.parametric import design_parametric, evaluate_at, evaluate_switched
+from stospline.oracle.parametric import design_parametric
 from stospline.table.qparams import quantize_parametric
+from support.params_runs import fixed_and_changed_runs
 
 PATHS, SEED, SUBSTEPS = 1000, 20261201, 2
 
@@ -53,16 +54,8 @@ def test_q_parametric_monte_carlo_agrees_with_the_oracle(robot, arith):
     flashed = pf.as_flashed(pt)
     ctl = build_params_qcontroller(pt, pf)
     allow = _allowance(p, pt, pf)
-    runs = {
-        "fixed": (simulate_params(p, ctl, theta, paths=PATHS, seed=SEED, substeps=SUBSTEPS),
-                  lambda t, **kw: evaluate_at(p, t, theta, **kw),
-                  lambda t, **kw: evaluate_at(p, t, theta2, **kw)),
-        "changed at tick 150": (
-            simulate_params(p, ctl, theta, paths=PATHS, seed=SEED + 1, substeps=SUBSTEPS,
-                            change=(0, theta2, 150)),
-            lambda t, **kw: evaluate_switched(p, t, theta, 0, theta2, tick=150, **kw),
-            lambda t, **kw: evaluate_switched(p, t, theta2, 0, theta, tick=150, **kw)),
-    }
+    runs = fixed_and_changed_runs(p, ctl, theta, theta2, paths=PATHS, seed=SEED,
+                                  substeps=SUBSTEPS)
     for name, (run, right, wrong) in runs.items():
         assert run.worst_status >= 0, name
         own = right(flashed, quantize=True)

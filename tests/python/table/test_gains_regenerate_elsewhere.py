@@ -313,12 +313,15 @@ def test_no_spline_entry_is_near_a_rounding_boundary(monkeypatch, example):
         assert near == 0, f"{near} spline latch entries within reach of a rounding boundary"
 
 
+@pytest.mark.parametrize("example", ["robot_corridor", "robot_goal"])
 @pytest.mark.parametrize("arith", ["q15", "q31"])
-def test_no_fixed_point_spline_entry_is_near_a_rounding_boundary(monkeypatch, arith):
-    """The same for the robot's shipped Q15/Q31 spline tables: every integer coefficient
+def test_no_fixed_point_spline_entry_is_near_a_rounding_boundary(monkeypatch, arith, example):
+    """The same for the robot's shipped Q15/Q31 spline tables and robot_goal's Q15/Q31 spline
+    parametric controllers (their spline columns too): every integer coefficient
     (``floor(c 2^s_e / 6 + 1/2)`` of the least squares fit, with the shift kept), every shift
-    (``floor(log2(...))`` of the entry's peak) and every re-solved latch entry (``_rhu``) is
-    clear of where its rounding changes, for every fit tried (a superset of those kept)."""
+    (``floor(log2(...))`` of the entry's peak) and every re-solved or rounded latch entry
+    (``_rhu``) is clear of where its rounding changes, for every fit tried (a superset of
+    those kept)."""
     from stospline.table import qformat
     from stospline.table.spline import fixed_point as qspline
     fits, shifts, latch = [], [], []
@@ -350,8 +353,14 @@ def test_no_fixed_point_spline_entry_is_near_a_rounding_boundary(monkeypatch, ar
     monkeypatch.setattr(qspline, "_fit_uniform", capture_fit)
     monkeypatch.setattr(qspline, "_shifts", capture_shifts)
     monkeypatch.setattr(qformat, "_rhu", capture_rhu)
-    problem = load_problem(EXAMPLES / "robot_corridor.toml")
-    pipeline.fixed_point_spline(pipeline.design_problem(problem, table="spline"), arith)
+    problem = load_problem(EXAMPLES / f"{example}.toml")
+    if example == "robot_goal":
+        from stospline.oracle.parametric import fixed_spline_parametric
+        from stospline.options import resolve_options
+        monkeypatch.setattr("stospline.table.spline.qparams._fit_uniform", capture_fit)
+        fixed_spline_parametric(problem, options=resolve_options(problem, arith=arith))
+    else:
+        pipeline.fixed_point_spline(pipeline.design_problem(problem, table="spline"), arith)
     kept = [f for f in fits if isinstance(f, tuple)]
     assert kept and shifts and latch
 

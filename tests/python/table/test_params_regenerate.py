@@ -1,6 +1,7 @@
 """gains/<name>_params.{c,h} of every example with [[parameters]] are regenerated
 byte-for-byte (tools/params_tables.py, run by tools/regen_gains.sh), and so are the Q15/Q31
-parametric controllers of tools/params_tables.py --fixed and the spline ones of --spline."""
+parametric controllers of tools/params_tables.py --fixed (per tick and spline) and the spline
+ones of --spline."""
 import sys
 
 import pytest
@@ -29,16 +30,20 @@ def test_regenerating_parameter_columns_changes_no_byte(example):
 
 
 def test_regenerating_fixed_point_parametric_tables_changes_no_byte():
-    """gains/robot_goal_<arith>.{c,h} and _params.{c,h} (tools/params_tables.py --fixed)."""
+    """gains/robot_goal_<arith>.{c,h} and _params.{c,h}, and the spline ones
+    gains/robot_goal_<arith>_spline.{c,h} and _spline_params.{c,h} (tools/params_tables.py
+    --fixed)."""
     sys.path.insert(0, str(REPO / "tools"))
-    from params_tables import FIXED, fixed_point_files
+    from params_tables import FIXED, fixed_point_files, fixed_spline_files
     for example in FIXED:
-        for arith, (files, _) in fixed_point_files(example).items():
-            assert sorted(files) == sorted(f"{example}_{arith}{s}" for s in
-                                           (".c", ".h", "_params.c", "_params.h"))
-            for name, text in files.items():
-                assert (GAINS / name).read_text() == text, \
-                    f"gains/{name} differs (regenerate with tools/regen_gains.sh)"
+        for kind, made in (("", fixed_point_files(example)),
+                           ("_spline", fixed_spline_files(example))):
+            for arith, (files, _) in made.items():
+                assert sorted(files) == sorted(f"{example}_{arith}{kind}{s}" for s in
+                                               (".c", ".h", "_params.c", "_params.h"))
+                for name, text in files.items():
+                    assert (GAINS / name).read_text() == text, \
+                        f"gains/{name} differs (regenerate with tools/regen_gains.sh)"
 
 
 def test_regenerating_spline_parametric_tables_changes_no_byte():

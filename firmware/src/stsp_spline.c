@@ -625,11 +625,13 @@ static stsp_status_t stsp_spline_step(stsp_ctrl_t *ctrl, uint32_t tick, const st
  * command, no access outside the arrays, no undefined shift. Writes
  * the unclamped y (stsp_params.c clamps). Time: nu P gains of 4 multiply-adds more than the
  * plain tick, and the stage search of stsp_qspline_col_start (n_stages at most). */
-static void stsp_qspline_param_law(const stsp_header_t *h, uint32_t s, uint32_t tick,
+static void stsp_qspline_param_law(stsp_ctrl_t *ctrl, uint32_t s, uint32_t tick,
                                    const stsp_scalar_t *x, const stsp_scalar_t *v,
                                    const stsp_scalar_t *cols, uint32_t n_cols,
-                                   const stsp_scalar_t *d, uint32_t n_params, stsp_scalar_t *y)
+                                   const stsp_scalar_t *d, uint32_t n_params, uint32_t kept,
+                                   stsp_scalar_t *y)
 {
+    const stsp_header_t *h = &ctrl->checked;
     const stsp_qspline_t *sp = &h->sp;
     const uint32_t nu = stsp_nu(h);
     const uint32_t tau = tick - h->stage_start[s];
@@ -643,6 +645,7 @@ static void stsp_qspline_param_law(const stsp_header_t *h, uint32_t s, uint32_t 
     const uint64_t words = (uint64_t)nu * (uint64_t)n_params * (uint64_t)width;
     uint32_t use = 0u;
     uint32_t i;
+    (void)kept; /* no span cache in fixed point: every tick evaluates its entries */
     if ((k == k_raw) && ((sigma + 4u) < width) && (first <= (uint64_t)n_cols) &&
         (words <= ((uint64_t)n_cols - first))) {
         use = 1u;

@@ -60,9 +60,11 @@ struct stsp_spline_ops_s {
                           stsp_scalar_t *u);
     /** stsp_param_step() of a spline table with spline columns (stsp_params.h, format 2):
      *  the unclamped command y[nu] at `tick` of stage s of ctrl's table from x, the latch v
-     *  and d[n_params], the columns cols[n_cols] (float32 only; NULL in a Q15/Q31 build).
+     *  and d[n_params], the columns cols[n_cols] (float32 B-spline columns, or Q15/Q31 blocks of scale
+     *  and coefficients).
      *  kept nonzero: v holds ctrl->v and d the parameters in use, so ctrl->span may serve as
-     *  the span cache (read, and rewritten on a span change); 0 (a fresh latch): not touched */
+     *  the span cache (read, and rewritten on a span change); 0 (a fresh latch): not touched.
+     *  Fixed point keeps no span cache and ignores kept */
     void (*param_law)(struct stsp_ctrl *ctrl, uint32_t s, uint32_t tick,
                       const stsp_scalar_t *x, const stsp_scalar_t *v, const stsp_scalar_t *cols,
                       uint32_t n_cols, const stsp_scalar_t *d, uint32_t n_params,

@@ -55,8 +55,9 @@ def _regenerate(out) -> None:
     for arith in ("q15", "q31"):
         assert main(["design", str(EXAMPLES / "robot_corridor.toml"), "--arith", arith,
                      "--out", str(out)]) == 0
-    assert main(["design", str(EXAMPLES / "robot_position_sensor.toml"), "--arith", "q15",
-                 "--out", str(out)]) == 0
+    for arith in ("q15", "q31"):
+        assert main(["design", str(EXAMPLES / "robot_position_sensor.toml"), "--arith", arith,
+                     "--out", str(out)]) == 0
     for example in SPLINE_EXAMPLES:
         assert main(["design", str(EXAMPLES / f"{example}.toml"), "--table", "spline",
                      "--out", str(out)]) == 0

@@ -9,9 +9,13 @@ subprocess reports the kernel OpenBLAS took, so a kernel silently not taken cann
 
     .venv/bin/python tools/check_estimator_blas.py [--coretype Haswell ...] [--setting NAME ...]
 
-Prints one line per (setting, kernel): the files that differ, or "same"; exits 1 if any
-differ. Settings: ``shipped`` (the example as it is), ``3cm_100hz`` (3 cm per axis at
-100 Hz: V = 9e-4, every = 10), ``v1e-3`` (V = 1e-3 at 50 Hz).
+Prints one line per (setting, kernel): the files that differ, or "same", and how far the
+filter's double gains are from this machine's kernel's, those of the numpy loop
+(``STOSPLINE_FILTER_KERNEL=numpy``) and the compiled ones (`stospline.estimator.filter_kernel`),
+the largest difference relative to the largest gain; exits 1 if any file differs. Settings: ``shipped`` (the example as it is), ``3cm_100hz`` (3 cm per axis at
+100 Hz: V = 9e-4, every = 10), ``v1e-3`` (V = 1e-3 at 50 Hz), ``wide_0.5m`` (0.5 m at 50 Hz, the
+start known to 0.5 m: an error covariance that is not a small difference of large moments).
+On the own kernel's line: how far the compiled gains are from the numpy loop's.
 """
 from __future__ import annotations
 
@@ -24,15 +28,22 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "robot_position_sensor.toml"
 
 # name -> (V per axis, every, x0_cov per position axis)
-SETTINGS = {"shipped": None, "3cm_100hz": ("9e-4", 10, "9e-4"), "v1e-3": ("1e-3", 20, "4e-4")}
-# (kernel asked for, kernel OpenBLAS reports, CPU flag it needs, BLAS threads)
-KERNELS = [("Haswell", "Haswell", "avx2", 1), ("SkylakeX", "SkylakeX", "avx512f", 2),
-           ("Sandybridge", "Sandybridge", "avx", 2), ("Zen", "Haswell", "avx2", 1),
-           ("Nehalem", "Nehalem", "sse4_2", 2)]
+SETTINGS = {"shipped": None, "3cm_100hz": ("9e-4", 10, "9e-4"), "v1e-3": ("1e-3", 20, "4e-4"),
+            "wide_0.5m": ("0.25", 20, "0.25")}
+# The kernels of tests/python/table/test_gains_regenerate_elsewhere.py: (kernel asked for,
+# kernel OpenBLAS reports, CPU flag it needs, BLAS threads); with its code that prints the
+# kernels a process ran, and its reading of the CPU's flags.
+sys.path[:0] = [str(REPO / "tests" / "python" / "table"), str(REPO / "tests" / "python")]
+import test_gains_regenerate_elsewhere as elsewhere  # noqa: E402
+
+KERNELS = elsewhere.BLAS_KERNELS
+cpu_flags = elsewhere._cpu_flags
 ARITHS = ("float32", "q15", "q31")
 
 _CHILD = """
@@ -43,19 +54,17 @@ toml, out = sys.argv[2], sys.argv[3]
 for arith in sys.argv[4:]:
     extra = [] if arith == "float32" else ["--arith", arith]
     assert main(["design", toml, "--out", out, "--quiet", *extra]) == 0
-names = []
-for line in open("/proc/self/maps"):
-    path = line.split()[-1]
-    if "openblas" in path and path.endswith(".so") and path not in names:
-        names.append(path)
-for path in names:
-    lib = ctypes.CDLL(path)
-    for sym in ("scipy_openblas_get_corename64_", "scipy_openblas_get_corename",
-                "openblas_get_corename64_", "openblas_get_corename"):
-        if hasattr(lib, sym):
-            fn = getattr(lib, sym); fn.restype = ctypes.c_char_p
-            print("corename", fn().decode()); break
-"""
+# The filter's double gains, compiled and from the numpy loop (the comparison's figures).
+import os
+import numpy as np
+from stospline import pipeline
+from stospline.estimator.oracle import evaluate_estimator
+from stospline.problem import load_problem
+d = pipeline.design_problem(load_problem(toml))
+np.save(out + "/gains_compiled.npy", evaluate_estimator(d.problem, d.table).gain)
+os.environ["STOSPLINE_FILTER_KERNEL"] = "numpy"
+np.save(out + "/gains_numpy.npy", evaluate_estimator(d.problem, d.table).gain)
+""" + elsewhere._CORENAMES
 
 
 def setting_toml(name: str) -> str:
@@ -71,15 +80,6 @@ def setting_toml(name: str) -> str:
             .replace("[0, 0, 4e-4, 0]", f"[0, 0, {x0}, 0]"))
     assert f"V = [[{v}, 0]" in meas and f"every = {every}" in meas, "the example's sensor changed"
     return head + "[measurement]" + meas
-
-
-def cpu_flags() -> set[str]:
-    try:
-        with open("/proc/cpuinfo") as f:
-            return next((set(line.split(":")[1].split()) for line in f
-                         if line.startswith("flags")), set())
-    except OSError:
-        return set()
 
 
 def regenerate(toml: Path, out: Path, coretype: str | None = None, threads: int = 1,
@@ -98,10 +98,23 @@ def regenerate(toml: Path, out: Path, coretype: str | None = None, threads: int 
     if proc.returncode != 0:
         raise RuntimeError(proc.stderr)
     ran = [line.split()[1] for line in proc.stdout.splitlines() if line.startswith("corename ")]
-    digests = {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(out.iterdir())}
+    digests = {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(out.iterdir())
+               if p.suffix != ".npy"}
     cpu = (after.children_user - before.children_user) + (after.children_system
                                                           - before.children_system)
     return digests, ran, cpu
+
+
+def gain_spread(folder: Path, coretype: str) -> str:
+    """How far the double filter gains under `coretype` are from this machine's own kernel's:
+    the numpy loop's and the compiled ones', the largest difference over the plan relative to
+    the largest gain."""
+    out = []
+    for kind in ("numpy", "compiled"):
+        own, other = (np.load(folder / d / f"gains_{kind}.npy") for d in ("own", coretype))
+        diff = np.abs(other - own).max() / np.abs(own).max()
+        out.append(f"{kind} gains {'identical' if diff == 0 else f'differ by {diff:.1e}'}")
+    return ", ".join(out)
 
 
 def main(argv=None) -> int:
@@ -120,8 +133,11 @@ def main(argv=None) -> int:
             toml.parent.mkdir()
             toml.write_text(setting_toml(name))
             ref, ran, cpu = regenerate(toml, Path(tmp) / name / "own")
+            own = Path(tmp) / name / "own"
+            compiled, numpy_loop = (np.load(own / f"gains_{k}.npy") for k in ("compiled", "numpy"))
+            agree = np.abs(compiled - numpy_loop).max() / np.abs(numpy_loop).max()
             print(f"{name:10s} own kernel ({', '.join(ran)}): {len(ref)} files, "
-                  f"{cpu:.1f} s CPU")
+                  f"{cpu:.1f} s CPU; compiled gains differ from the numpy loop's by {agree:.1e}")
             for coretype, corename, flag, threads in kernels:
                 label = f"{name:10s} {coretype}-{threads}thread"
                 if flag not in flags:
@@ -135,7 +151,7 @@ def main(argv=None) -> int:
                 differ = sorted(f for f in ref if got.get(f) != ref[f])
                 bad += bool(differ)
                 print(f"{label}: {'differ: ' + ', '.join(differ) if differ else 'same'}"
-                      f" ({cpu:.1f} s CPU)")
+                      f" ({cpu:.1f} s CPU); {gain_spread(Path(tmp) / name, coretype)}")
     print(f"{'FAIL' if bad else 'ok'}: {bad} of the runs differ ({time.time() - t_start:.0f} s)")
     return 1 if bad else 0
 

@@ -34,6 +34,7 @@
  * would need more than 8 squarings (the caller runs the numpy loop instead).
  */
 #include <stddef.h>
+#include <math.h>
 #include <stdint.h>
 
 #define FK_MAX_SQUARINGS 8
@@ -295,11 +296,11 @@ static void fk_pinv_sym(double *Sp, double *S, double *Q, int p)
                 }
                 rotated = 1;
                 theta = (ajj - aii) / (2.0 * aij);
-                t = 1.0 / (fk_abs(theta) + __builtin_sqrt(theta * theta + 1.0));
+                t = 1.0 / (fk_abs(theta) + sqrt(theta * theta + 1.0));
                 if (theta < 0.0) {
                     t = -t;
                 }
-                c = 1.0 / __builtin_sqrt(t * t + 1.0);
+                c = 1.0 / sqrt(t * t + 1.0);
                 sn = t * c;
                 for (k = 0; k < p; ++k) {          /* S <- J' S J, rotating rows and columns */
                     const double ski = S[k * p + i], skj = S[k * p + j];

@@ -70,9 +70,13 @@ def _regenerate(out) -> None:
 
 def _params_tables():
     """tools/params_tables.py (the Q15/Q31 and spline parametric controllers), as a module."""
+    return tool_module("params_tables")
+
+
+def tool_module(name: str):
+    """tools/<name>.py, as a module."""
     import importlib.util
-    spec = importlib.util.spec_from_file_location("params_tables",
-                                                  REPO / "tools" / "params_tables.py")
+    spec = importlib.util.spec_from_file_location(name, REPO / "tools" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

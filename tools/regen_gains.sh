@@ -15,8 +15,8 @@
 # The examples with a [measurement] sensor (robot_position_sensor, robot_corridor_position_sensor,
 # quadrotor_altimeter) get
 # their filter's tables in <name>.{c,h} from the first loop (float32, per-tick: the estimator
-# takes no spline table), and robot_position_sensor its Q15 law and filter
-# (<name>_q15.*: host/stospline/estimator/qformat.py); those with [[parameters]] (robot_goal) their
+# takes no spline table), and robot_position_sensor its Q15 and Q31 laws and filters
+# (<name>_q15.*, <name>_q31.*: host/stospline/estimator/qformat.py); those with [[parameters]] (robot_goal) their
 # sensitivity columns in <name>_params.{c,h}, from the same loop; robot_goal also its Q15/Q31
 # parametric controllers (<name>_<arith>.* and <name>_<arith>_params.*, and with Q spline gains
 # and spline columns <name>_<arith>_spline.* and <name>_<arith>_spline_params.*:
@@ -32,7 +32,9 @@ done
 for arith in q15 q31; do
   "$root/.venv/bin/stospline" design examples/robot_corridor.toml --arith "$arith" --out gains/
 done
-"$root/.venv/bin/stospline" design examples/robot_position_sensor.toml --arith q15 --out gains/
+for arith in q15 q31; do
+  "$root/.venv/bin/stospline" design examples/robot_position_sensor.toml --arith "$arith" --out gains/
+done
 for f in robot_corridor robot_corridor_eps01 robot_bands investment quadrotor population \
          coupled_axes robot_monotone robot_narrow_corridor; do
   "$root/.venv/bin/stospline" design "examples/$f.toml" --table spline --out gains/

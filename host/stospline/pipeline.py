@@ -382,6 +382,7 @@ def fixed_point_estimator(d: Designed, arith: str, *, sigmas: float = DEFAULT_SI
     summary holds the filter's scales and the written error bounds (max over the plan, rounded
     up to 3 digits) on x̂ and u against the double loop. Raises ValueError as
     `fixed_point_table`, and for a table with no estimator form (a delay, a band latch)."""
+    from stospline.estimator.filter_kernel import with_table_filter
     from stospline.estimator.oracle import evaluate_estimator
     from stospline.estimator.qformat import (error_bound, estimator_state_range,
                                              quantize_estimator)
@@ -389,7 +390,10 @@ def fixed_point_estimator(d: Designed, arith: str, *, sigmas: float = DEFAULT_SI
         raise ValueError("the fixed-point estimator takes per-tick tables without a delay or "
                          "a band latch")
     exact = double_table(d)
-    loop = evaluate_estimator(d.problem, exact, path=True)
+    # The ranges from the double law's loop, the filter the float32 table's (the same bits on
+    # every machine, `with_table_filter`).
+    loop = with_table_filter(evaluate_estimator(d.problem, exact, path=True), d.problem,
+                             d.table)
     x_range = estimator_state_range(d.problem, exact, loop, sigmas=sigmas)
     ft = fixed_point_table(d, arith, x_range=x_range)
     qt = quantize_estimator(d.problem, ft, loop, sigmas=sigmas)

@@ -32,13 +32,14 @@ def fnv1a(words, h: int = 0x811C9DC5) -> int:
 def tables(arith: str = "q15"):
     """The shipped law and filter (`pipeline.fixed_point_estimator` without its bound)."""
     from stospline import design_problem, load_problem
+    from stospline.estimator.filter_kernel import with_table_filter
     from stospline.estimator.oracle import evaluate_estimator
     from stospline.estimator.qformat import estimator_state_range, quantize_estimator
     from stospline.pipeline import double_table, fixed_point_table
     problem = load_problem(ROOT / "examples" / "robot_position_sensor.toml")
     d = design_problem(problem)
     exact = double_table(d)
-    loop = evaluate_estimator(problem, exact, path=True)
+    loop = with_table_filter(evaluate_estimator(problem, exact, path=True), problem, d.table)
     ft = fixed_point_table(d, arith, x_range=estimator_state_range(problem, exact, loop))
     return ft, quantize_estimator(problem, ft, loop)
 

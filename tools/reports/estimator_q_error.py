@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from stospline.estimator.filter_kernel import with_table_filter
 from stospline.estimator.oracle import evaluate_estimator
 from stospline.estimator.qformat import (error_bound, estimator_state_range, measured_error,
                                          quantize_estimator)
@@ -40,7 +41,7 @@ def main() -> int:
     d = design_problem(problem)
     exact = double_table(d)
     t0 = time.process_time()
-    loop = evaluate_estimator(problem, exact, path=True)
+    loop = with_table_filter(evaluate_estimator(problem, exact, path=True), problem, d.table)
     t_oracle = time.process_time() - t0
     x_range = estimator_state_range(problem, exact, loop)
     print("| arith | on | bound (max over the plan) | measured (max) | measured / bound |")

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from stospline.errors import ProblemError
+from stospline.estimator.filter_kernel import filter_gains
 from stospline.estimator.gain import lmmse_gain
 from stospline.problem.faults import Faults
 from stospline.problem.model import Problem
@@ -147,6 +148,13 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
                                          substeps=substeps, gains=gains, predictor=predictor)
             gains = nominal.gain if gains is None else gains
             predictor = nominal.predict if predictor is None else predictor
+    compiled = None
+    if gains is None and predictor is None and not faulty:
+        # The filter itself from the compiled recursion (`estimator.filter_kernel`): the same
+        # bits on every machine; the moments below run on its gains.
+        compiled = filter_gains(problem, table, meas, propagator)
+        if compiled is not None:
+            gains = compiled[0]
     plant = faults.plant_of(problem) if faulty else problem
     sig_x = faults.sensor_noise if faulty and np.any(faults.sensor_noise) else None
     act_cov = (np.diag(faults.actuator_noise ** 2)
@@ -285,6 +293,8 @@ def evaluate_estimator(problem: Problem, table: GainTable, measurement=None, *,
         err_knot.append(_error_cov(M, xs, hs))
         est_knot.append(M[hs, -1].copy())
     mom = rec.moments(J, means, covs, cons, problem.t0, h, table.n_ticks)
+    if compiled is not None:
+        predict = compiled[1]               # equal to the plant's maps above to rounding
     return EstimatorLoop(mom, gain_out, predict, err_cov, err_knot, est_knot, prior_cov,
                          innov_cov, out_cov, est_ms)
 

@@ -253,11 +253,15 @@ def band_margins(problem, box: BoxMoments, extra=None) -> list[RowMargin]:
             rise, fall = rise + e, fall + e
         upper, lower = hi - (y + rise), (y - fall) - lo
         nominal = float(np.minimum(hi - y, y - lo).min())
-        j = int(np.argmin(np.minimum(upper, lower)))
+        scale = max(1.0, abs(lo) if np.isfinite(lo) else 0.0, abs(hi) if np.isfinite(hi) else 0.0)
+        # The worst tick: the first within TOLERANCE of the least margin. An active band ties
+        # at several ticks (drone_gates: 3.52 s and 3.54 s, both -1.9e-14), which round-off
+        # alone would order, and the summary names the tick and the parameter.
+        margin = np.minimum(upper, lower)
+        j = int(np.flatnonzero(margin <= margin.min() + TOLERANCE * scale)[0])
         side = "upper" if upper[j] <= lower[j] else "lower"
         share = top[j] if side == "upper" else bottom[j]
         p = int(np.argmax(share))
-        scale = max(1.0, abs(lo) if np.isfinite(lo) else 0.0, abs(hi) if np.isfinite(hi) else 0.0)
         out.append(RowMargin(field, i, nominal, float(min(upper[j], lower[j])),
                              problem.t0 + int(ticks[j]) / problem.tick_hz, side, names[p],
                              float(share[p]), scale))

@@ -1,5 +1,5 @@
 """The Q15/Q31 estimator controller (`estimator.qformat`, stsp_est_step in a fixed-point build):
-the scales fit the accumulator, the shipped Q15 tables are the generator's, the compiled C
+the scales fit the accumulator, the shipped Q15 and Q31 tables are the generator's, the compiled C
 equals the integer reference bit for bit (readings, missing readings, skips, saturation), and
 the error against the double loop stays within the per-tick bound, which is not loose by more
 than a modest factor."""
@@ -8,6 +8,7 @@ import pytest
 
 from conftest import EXAMPLES, GAINS
 from stospline import load_problem
+from stospline.estimator.filter_kernel import with_table_filter
 from stospline.estimator.oracle import evaluate_estimator
 from stospline.estimator.qformat import (ACC_BITS, QEstimatorSpec, error_bound, estimator_q_c,
                                          estimator_q_crc32, estimator_state_range,
@@ -23,7 +24,7 @@ def sensor_loop():
     problem = load_problem(EXAMPLES / "robot_position_sensor.toml")
     d = design_problem(problem)
     exact = double_table(d)
-    loop = evaluate_estimator(problem, exact, path=True)
+    loop = with_table_filter(evaluate_estimator(problem, exact, path=True), problem, d.table)
     return problem, d, loop, estimator_state_range(problem, exact, loop)
 
 
@@ -54,13 +55,12 @@ def test_rows_fit_the_accumulator_and_ranges_cover_the_loop(q_tables, sensor_loo
 
 
 def test_shipped_tables_are_these(q_tables):
-    """gains/robot_position_sensor_q15.c holds this filter (same scales, entries and CRC)."""
+    """gains/robot_position_sensor_<arith>.c holds this filter (same scales, entries and
+    CRC)."""
     problem, ft, qt = q_tables
-    if ft.arith != "q15":
-        pytest.skip("Q15 is shipped")
     header, source = estimator_q_c(qt, ft.name)
-    assert source in (GAINS / "robot_position_sensor_q15.c").read_text()
-    assert header.strip() in (GAINS / "robot_position_sensor_q15.h").read_text()
+    assert source in (GAINS / f"robot_position_sensor_{ft.arith}.c").read_text()
+    assert header.strip() in (GAINS / f"robot_position_sensor_{ft.arith}.h").read_text()
 
 
 def _readings(rng, spec, qt, ft, paths):

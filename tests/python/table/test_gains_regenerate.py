@@ -29,7 +29,8 @@ def test_regenerating_spline_gains_changes_no_byte(tmp_path, example):
 
 
 @pytest.mark.parametrize("example,arith", [("robot_corridor", "q15"), ("robot_corridor", "q31"),
-                                           ("robot_position_sensor", "q15")])
+                                           ("robot_position_sensor", "q15"),
+                                           ("robot_position_sensor", "q31")])
 def test_regenerating_fixed_point_gains_changes_no_byte(tmp_path, example, arith):
     assert main(["design", str(EXAMPLES / f"{example}.toml"), "--arith", arith,
                  "--out", str(tmp_path)]) == 0

@@ -54,8 +54,9 @@ def _regenerate(out) -> None:
     for arith in ("q15", "q31"):
         assert main(["design", str(EXAMPLES / "robot_corridor.toml"), "--arith", arith,
                      "--out", str(out)]) == 0
-    assert main(["design", str(EXAMPLES / "robot_position_sensor.toml"), "--arith", "q15",
-                 "--out", str(out)]) == 0
+    for arith in ("q15", "q31"):
+        assert main(["design", str(EXAMPLES / "robot_position_sensor.toml"), "--arith", arith,
+                     "--out", str(out)]) == 0
     for example in SPLINE_EXAMPLES:
         assert main(["design", str(EXAMPLES / f"{example}.toml"), "--table", "spline",
                      "--out", str(out)]) == 0
@@ -68,9 +69,13 @@ def _regenerate(out) -> None:
 
 def _params_tables():
     """tools/params_tables.py (the Q15/Q31 and spline parametric controllers), as a module."""
+    return tool_module("params_tables")
+
+
+def tool_module(name: str):
+    """tools/<name>.py, as a module."""
     import importlib.util
-    spec = importlib.util.spec_from_file_location("params_tables",
-                                                  REPO / "tools" / "params_tables.py")
+    spec = importlib.util.spec_from_file_location(name, REPO / "tools" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

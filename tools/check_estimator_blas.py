@@ -2,7 +2,7 @@
 
 Regenerates the float32, Q15 and Q31 tables (`stospline design`, `--arith q15|q31`) of
 examples/robot_position_sensor.toml and of sensor settings where a filter gain once landed on
-a float32 rounding boundary (issue 34), once per OpenBLAS kernel (``OPENBLAS_CORETYPE``, a
+a float32 rounding boundary, once per OpenBLAS kernel (``OPENBLAS_CORETYPE``, a
 subprocess each: OpenBLAS reads it when it loads; one or two BLAS threads), and compares the
 bytes of every written file with those of this machine's own kernel, run first. Each
 subprocess reports the kernel OpenBLAS took, so a kernel silently not taken cannot pass.

@@ -1,7 +1,7 @@
 /* Host-side kernel of the estimator (stospline.estimator.filter_kernel): the filter's LMMSE
  * gains and the predictor's mean maps of the loop oracle.py evaluates, in double precision
  * with every sum in a fixed order and no BLAS or LAPACK, so that the same inputs give the
- * same bits on every CPU, BLAS kernel and thread count (issue 34: the numpy recursion's error
+ * same bits on every CPU, BLAS kernel and thread count (the numpy recursion's error
  * covariance is a difference of second moments ~1e10 times larger, so the BLAS kernel's last
  * bits moved small gains by up to 6e-9 relative, across float32 and Q31 rounding boundaries).
  * Not firmware: it runs on the design host, called through cffi; built with

@@ -3,8 +3,8 @@
 `evaluate_estimator` computes the LMMSE gains from the loop's second moments, and the error
 covariance ``P = E xx' - E xx̂' - E x̂x' + E x̂x̂'`` is a difference of numbers up to ~1e10 times
 larger than it: the last bits in which one BLAS kernel's products differ from another's moved
-small gains by up to 6e-9 relative, across float32 and Q31 rounding boundaries (issue 34;
-`tools/check_estimator_blas.py`). ``filter_kernel.c`` (beside this module) runs the same
+small gains by up to 6e-9 relative, across float32 and Q31 rounding boundaries
+(`tools/check_estimator_blas.py`). ``filter_kernel.c`` (beside this module) runs the same
 recursion and the stages' matrix exponentials with every sum in a fixed order, no BLAS or
 LAPACK and no fused multiply-adds: the written gains and predictor maps depend on the problem
 and the law only. Built and cached as the oracle's kernels are (`stospline.cache`);

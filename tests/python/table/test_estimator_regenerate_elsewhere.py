@@ -1,4 +1,4 @@
-"""The estimator's tables are the same bytes under other BLAS kernels (issue 34).
+"""The estimator's tables are the same bytes under other BLAS kernels.
 
 The filter's gains come from the loop's second moments, and its error covariance is a
 difference of moments up to ~1e10 times larger: computed with numpy, the BLAS kernel's last

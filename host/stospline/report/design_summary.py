@@ -102,8 +102,14 @@ def _estimator(d) -> dict:
     ``{}`` otherwise (summaries stay unchanged)."""
     if d.problem.measurement is None:
         return {}
-    from stospline.estimator.summary import estimator_summary
-    return {"estimator": estimator_summary(d.problem, d.table, cov_digits)}
+    from stospline.estimator.summary import estimator_summary, gain_spline_certificate
+    out = estimator_summary(d.problem, d.table, cov_digits)
+    if d.table.spline is not None and "not_evaluated" not in out:   # the filter's spline
+        from stospline.options import resolve_options
+        options = d.options if d.options is not None else resolve_options(d.problem)
+        out["gain_spline"] = gain_spline_certificate(
+            d.problem, d.table, options.spline_tolerance, cov_digits)
+    return {"estimator": out}
 
 
 def _violation(y: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

@@ -478,7 +478,8 @@ def _sensor_run(args, problem, opts, command: str, record: int = 0):
     if why:
         raise ProblemError(*why)
     run = run_sensor_loop(d.problem, d.table, paths=args.paths, seed=args.seed,
-                          substeps=args.substeps, record=record)
+                          substeps=args.substeps, record=record, spline_tolerance=(
+                              d.options.spline_tolerance if d.table.spline is not None else None))
     return d, run, sensor_simulation_summary(d, run, seed=args.seed)
 
 

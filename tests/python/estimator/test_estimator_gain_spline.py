@@ -143,3 +143,38 @@ def test_the_c_tests_expected_gains_are_the_shipped_splines():
     ref = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(ref)
     assert ref.expected() == (REPO / "tests" / "c" / "estimator_spline_expected.h").read_text()
+
+
+def test_no_shipped_gain_spline_input_is_near_a_rounding_boundary(monkeypatch):
+    """gains/robot_position_sensor_spline.* regenerates byte for byte on other BLAS kernels
+    (test_gains_regenerate_elsewhere.py) because nothing the gain spline rounds is within
+    reach of such last-bit changes (REL there): no gain within reach of the flush of round-off
+    zeros, and every coefficient of every fit (the refinement's discarded ones too) clear of
+    the midpoints of its entry's float32 grid (`spline._coefficients`)."""
+    from stospline import load_problem
+    from stospline.table.spline import fit as spline
+    from conftest import EXAMPLES
+    path = REPO / "tests" / "python" / "table" / "test_gains_regenerate_elsewhere.py"
+    spec = importlib.util.spec_from_file_location("regenerate_elsewhere", path)
+    elsewhere = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(elsewhere)
+    REL, _reach = elsewhere.REL, elsewhere._reach
+    seen = []
+
+    def capture(C, peak):
+        seen.append((np.array(C, dtype=float), np.array(peak, dtype=float)))
+        return coefficients(C, peak)
+    coefficients = spline._coefficients
+    monkeypatch.setattr(spline, "_coefficients", capture)
+    problem = load_problem(EXAMPLES / "robot_position_sensor.toml")
+    d = design_problem(problem)
+    loop = evaluate_estimator(problem, d.table)
+    gains = loop.gain[::problem.measurement.every]
+    flush = 1e-9 * np.abs(gains).max()
+    assert int(np.sum(np.abs(np.abs(gains) - flush) <= _reach(gains))) == 0
+    estimator_table(problem, d.table, loop, spline_tolerance=TOL)
+    assert seen
+    for a, peak in seen:
+        q = np.ldexp(1.0, np.frexp(peak)[1] - 24)[:, None]
+        distance = np.abs(a / q - np.floor(a / q) - 0.5) * q
+        assert int(np.sum(distance <= _reach(a))) == 0, REL

@@ -455,7 +455,6 @@ def _sensor_refusal(args, problem, opts) -> None:
         raise ProblemError("--paths", f"{why} holds every path in memory: at most "
                                       f"{SENSOR_MAX_PATHS}, got {args.paths}")
     for key, bad, what in (("delay_ticks", 1, "has no estimator form for a one-tick delay"),
-                           ("table", "spline", "runs the per-tick table"),
                            ("arith", "q15", "runs float32 tables"),
                            ("arith", "q31", "runs float32 tables")):
         if getattr(opts, key) == bad:

@@ -55,9 +55,9 @@
  * reports as STSP_WARN_STATE_CLAMPED (the innovation or the estimate saturated).
  *
  * Buffers: stsp_est_t holds a stsp_ctrl_t, the validated copy of the estimator table's
- * header, STSP_MAX_NX + STSP_MAX_NU scalars (x̂ and the last command) and 12 bytes of state:
- * 1004 bytes with the default limits (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_est_t);
- * Q15 400 bytes).
+ * header, STSP_MAX_NX + STSP_MAX_NU scalars (x̂ and the last command), 12 bytes of state and
+ * (float32) the bound gain spline's pointer and validated header: 1056 bytes with the default
+ * limits (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_est_t); Q15 400 bytes).
  * stsp_est_step() uses 2 STSP_MAX_NX + STSP_MAX_NY + STSP_MAX_NU scalars of stack plus
  * stsp_step()'s.
  */
@@ -160,8 +160,10 @@ typedef struct {
     uint32_t stage;                    /**< the stage of tick next_tick (private) */
     stsp_scalar_t xhat[STSP_MAX_NX];   /**< the prediction for next_tick (private) */
     stsp_scalar_t u_last[STSP_MAX_NU]; /**< the last command written (private) */
+#ifndef STSP_ARITH_FIXED_POINT
     const stsp_est_gain_spline_t *spline;  /**< the gain spline, or NULL (private) */
     stsp_est_gain_spline_t spline_checked; /**< its validated header (private) */
+#endif
 } stsp_est_t;
 
 /**

@@ -286,8 +286,8 @@ FAULTS = [
           "            return stsp_est_hold(est, u, STSP_ERR_NONFINITE_MEASUREMENT);"),
     # The estimator's gain spline (stsp_estimator.c, float32; tests/c/test_estimator_spline.c).
     Fault("F96", "estimator (spline gains): the sample's abscissa not relative to its stage",
-          CTL, "(tick / e->every) -\n                            stsp_est_first_sample(e, stage_start[s])",
-          "(tick / e->every) -\n                            0u"),
+          CTL, "(tick / e->every) -\n                        stsp_est_first_sample(e, est->ctrl.checked.stage_start[s])",
+          "(tick / e->every) -\n                        0u"),
     # The estimator in fixed point (stsp_estimator.c; tests/c/test_estimator.c built for Q15).
     Fault("F90", "estimator (Q15/Q31): a row's rounding bias dropped (rounds down)", CTL,
           "    return (UINT64_C(1) << 62) + (UINT64_C(1) << (k - 1u));",

@@ -762,6 +762,25 @@ static void stsp_est_gain_row(const stsp_est_gains_t *g, uint32_t r, uint32_t ny
     }
     *next = e;
 }
+
+/* The update's rows with the gains of the spline (stage s, the sample of `tick`); its own
+ * function, not inlined, so that the step's frame on the per-tick tables is what it was. */
+static STSP_NOINLINE void stsp_est_spline_rows(const stsp_est_t *est, uint32_t s, uint32_t tick,
+                                               const stsp_f32_t *innov, stsp_f32_t *xh,
+                                               uint32_t *clamped)
+{
+    const stsp_est_table_t *e = &est->checked;
+    stsp_est_gains_t g;
+    stsp_f32_t F[STSP_MAX_NY];
+    uint32_t next = 0u;
+    uint32_t r;
+    stsp_est_gain_basis(&est->spline_checked, s, (tick / e->every) -
+                        stsp_est_first_sample(e, est->ctrl.checked.stage_start[s]), &g);
+    for (r = 0u; r < e->nx; ++r) {
+        stsp_est_gain_row(&g, r, e->ny, &next, F);
+        xh[r] = stsp_est_corrected(e, r, F, innov, xh[r], clamped);
+    }
+}
 #endif
 
 /* x̂ += F (y - C x̂) with the gain of tick `tick` (stage s: the table's, or the spline's); in
@@ -780,16 +799,7 @@ static void stsp_est_update(const stsp_est_t *est, uint32_t s, uint32_t tick,
     }
 #ifndef STSP_ARITH_FIXED_POINT
     if (est->spline != NULL) {
-        const uint32_t *stage_start = est->ctrl.checked.stage_start;
-        stsp_est_gains_t g;
-        stsp_f32_t F[STSP_MAX_NY];
-        uint32_t next = 0u;
-        stsp_est_gain_basis(&est->spline_checked, s, (tick / e->every) -
-                            stsp_est_first_sample(e, stage_start[s]), &g);
-        for (r = 0u; r < nx; ++r) {
-            stsp_est_gain_row(&g, r, ny, &next, F);
-            xh[r] = stsp_est_corrected(e, r, F, innov, xh[r], clamped);
-        }
+        stsp_est_spline_rows(est, s, tick, innov, xh, clamped);
         return;
     }
 #else

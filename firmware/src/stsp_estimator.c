@@ -791,6 +791,7 @@ static void stsp_est_update(const stsp_est_t *est, uint32_t s, uint32_t tick,
     const stsp_est_table_t *e = &est->checked;
     const uint32_t nx = e->nx;
     const uint32_t ny = e->ny;
+    const stsp_scalar_t *F;
     stsp_scalar_t innov[STSP_MAX_NY];
     uint32_t i;
     uint32_t r;
@@ -805,9 +806,9 @@ static void stsp_est_update(const stsp_est_t *est, uint32_t s, uint32_t tick,
 #else
     (void)s;
 #endif
+    F = &e->gain[(tick / e->every) * nx * ny];
     for (r = 0u; r < nx; ++r) {
-        xh[r] = stsp_est_corrected(e, r, &e->gain[(((tick / e->every) * nx) + r) * ny], innov,
-                                   xh[r], clamped);
+        xh[r] = stsp_est_corrected(e, r, &F[r * ny], innov, xh[r], clamped);
     }
 }
 

@@ -282,7 +282,7 @@ FAULTS = [
           "    for (j = est->next_tick; j < tick; ++j) {", "    for (j = tick; j < tick; ++j) {"),
     Fault("F78", "estimator: a refused reading still updates the estimate", CTL,
           "            return stsp_est_hold(est, u, STSP_ERR_NONFINITE_MEASUREMENT);",
-          "            stsp_est_update(est, stage, tick, y, est->xhat, &clamped);\n"
+          "            stsp_est_update(e, tick / e->every, y, est->xhat, &clamped);\n"
           "            return stsp_est_hold(est, u, STSP_ERR_NONFINITE_MEASUREMENT);"),
     # The estimator's gain spline (stsp_estimator.c, float32; tests/c/test_estimator_spline.c).
     Fault("F96", "estimator (spline gains): the sample's abscissa not relative to its stage",

@@ -671,6 +671,17 @@ static void stsp_est_predict(const stsp_est_t *est, const uint32_t *stage_start,
     }
 }
 
+/* The innovations e[i] = y[i] - C x̂ (ny). */
+static void stsp_est_innovations(const stsp_est_table_t *e, const stsp_scalar_t *y,
+                                 const stsp_scalar_t *xh, stsp_scalar_t *innov,
+                                 uint32_t *clamped)
+{
+    uint32_t i;
+    for (i = 0u; i < e->ny; ++i) {
+        innov[i] = stsp_est_innovation(e, i, y[i], xh, clamped);
+    }
+}
+
 #ifndef STSP_ARITH_FIXED_POINT
 /* A stage's part of the gain spline, as the update reads it. */
 typedef struct {
@@ -763,17 +774,20 @@ static void stsp_est_gain_row(const stsp_est_gains_t *g, uint32_t r, uint32_t ny
     *next = e;
 }
 
-/* The update's rows with the gains of the spline (stage s, the sample of `tick`); its own
- * function, not inlined, so that the step's frame on the per-tick tables is what it was. */
-static STSP_NOINLINE void stsp_est_spline_rows(const stsp_est_t *est, uint32_t s, uint32_t tick,
-                                               const stsp_f32_t *innov, stsp_f32_t *xh,
-                                               uint32_t *clamped)
+/* x̂ += F (y - C x̂) with the gains of the spline at the sample of `tick` (stage s); in place
+ * of xh (nx). Its own function, not inlined, so that the step's frame on per-tick tables is
+ * what it was. */
+static STSP_NOINLINE void stsp_est_update_spline(const stsp_est_t *est, uint32_t s,
+                                                 uint32_t tick, const stsp_f32_t *y,
+                                                 stsp_f32_t *xh, uint32_t *clamped)
 {
     const stsp_est_table_t *e = &est->checked;
     stsp_est_gains_t g;
     stsp_f32_t F[STSP_MAX_NY];
+    stsp_f32_t innov[STSP_MAX_NY];
     uint32_t next = 0u;
     uint32_t r;
+    stsp_est_innovations(e, y, xh, innov, clamped);
     stsp_est_gain_basis(&est->spline_checked, s, (tick / e->every) -
                         stsp_est_first_sample(e, est->ctrl.checked.stage_start[s]), &g);
     for (r = 0u; r < e->nx; ++r) {
@@ -783,30 +797,16 @@ static STSP_NOINLINE void stsp_est_spline_rows(const stsp_est_t *est, uint32_t s
 }
 #endif
 
-/* x̂ += F (y - C x̂) with the gain of tick `tick` (stage s: the table's, or the spline's); in
- * place of xh (nx). */
-static void stsp_est_update(const stsp_est_t *est, uint32_t s, uint32_t tick,
-                            const stsp_scalar_t *y, stsp_scalar_t *xh, uint32_t *clamped)
+/* x̂ += F (y - C x̂) with sample `sample`'s gain; in place of xh (nx). */
+static void stsp_est_update(const stsp_est_table_t *e, uint32_t sample, const stsp_scalar_t *y,
+                            stsp_scalar_t *xh, uint32_t *clamped)
 {
-    const stsp_est_table_t *e = &est->checked;
     const uint32_t nx = e->nx;
     const uint32_t ny = e->ny;
-    const stsp_scalar_t *F;
+    const stsp_scalar_t *F = &e->gain[sample * nx * ny];
     stsp_scalar_t innov[STSP_MAX_NY];
-    uint32_t i;
     uint32_t r;
-    for (i = 0u; i < ny; ++i) {
-        innov[i] = stsp_est_innovation(e, i, y[i], xh, clamped);
-    }
-#ifndef STSP_ARITH_FIXED_POINT
-    if (est->spline != NULL) {
-        stsp_est_spline_rows(est, s, tick, innov, xh, clamped);
-        return;
-    }
-#else
-    (void)s;
-#endif
-    F = &e->gain[(tick / e->every) * nx * ny];
+    stsp_est_innovations(e, y, xh, innov, clamped);
     for (r = 0u; r < nx; ++r) {
         xh[r] = stsp_est_corrected(e, r, &F[r * ny], innov, xh[r], clamped);
     }
@@ -876,7 +876,15 @@ stsp_status_t stsp_est_step(stsp_est_t *est, uint32_t tick, const stsp_scalar_t 
         } else if (stsp_est_reading_ok(e, y) == 0) {
             return stsp_est_hold(est, u, STSP_ERR_NONFINITE_MEASUREMENT);
         } else {
-            stsp_est_update(est, stage, tick, y, xh, &clamped);
+#ifndef STSP_ARITH_FIXED_POINT
+            if (est->spline != NULL) {
+                stsp_est_update_spline(est, stage, tick, y, xh, &clamped);
+            } else {
+                stsp_est_update(e, tick / e->every, y, xh, &clamped);
+            }
+#else
+            stsp_est_update(e, tick / e->every, y, xh, &clamped);
+#endif
         }
     }
     st = stsp_step(&est->ctrl, tick, xh, cmd);

@@ -671,17 +671,6 @@ static void stsp_est_predict(const stsp_est_t *est, const uint32_t *stage_start,
     }
 }
 
-/* The innovations e[i] = y[i] - C x̂ (ny). */
-static void stsp_est_innovations(const stsp_est_table_t *e, const stsp_scalar_t *y,
-                                 const stsp_scalar_t *xh, stsp_scalar_t *innov,
-                                 uint32_t *clamped)
-{
-    uint32_t i;
-    for (i = 0u; i < e->ny; ++i) {
-        innov[i] = stsp_est_innovation(e, i, y[i], xh, clamped);
-    }
-}
-
 #ifndef STSP_ARITH_FIXED_POINT
 /* A stage's part of the gain spline, as the update reads it. */
 typedef struct {
@@ -787,7 +776,9 @@ static STSP_NOINLINE void stsp_est_update_spline(const stsp_est_t *est, uint32_t
     stsp_f32_t innov[STSP_MAX_NY];
     uint32_t next = 0u;
     uint32_t r;
-    stsp_est_innovations(e, y, xh, innov, clamped);
+    for (r = 0u; r < e->ny; ++r) {
+        innov[r] = stsp_est_innovation(e, r, y[r], xh, clamped);
+    }
     stsp_est_gain_basis(&est->spline_checked, s, (tick / e->every) -
                         stsp_est_first_sample(e, est->ctrl.checked.stage_start[s]), &g);
     for (r = 0u; r < e->nx; ++r) {
@@ -805,8 +796,11 @@ static void stsp_est_update(const stsp_est_table_t *e, uint32_t sample, const st
     const uint32_t ny = e->ny;
     const stsp_scalar_t *F = &e->gain[sample * nx * ny];
     stsp_scalar_t innov[STSP_MAX_NY];
+    uint32_t i;
     uint32_t r;
-    stsp_est_innovations(e, y, xh, innov, clamped);
+    for (i = 0u; i < ny; ++i) {
+        innov[i] = stsp_est_innovation(e, i, y[i], xh, clamped);
+    }
     for (r = 0u; r < nx; ++r) {
         xh[r] = stsp_est_corrected(e, r, &F[r * ny], innov, xh[r], clamped);
     }

@@ -276,7 +276,7 @@ FAULTS = [
           CTL, "    stsp_est_predict(est, stage_start, stage, tick, xh, cmd, &clamped);",
           "    stsp_est_predict(est, stage_start, stage, tick, xh, est->ctrl.hold, &clamped);"),
     Fault("F76", "estimator: the CRC leaves out the gains", CTL,
-          "    crc = stsp_crc32_scalars(crc, est->gain, stsp_est_samples(est) * nx * est->ny);\n",
+          "        crc = stsp_crc32_scalars(crc, est->gain, stsp_est_samples(est) * nx * est->ny);\n",
           ""),
     Fault("F77", "estimator: a skip does not predict over the missed ticks", CTL,
           "    for (j = est->next_tick; j < tick; ++j) {", "    for (j = tick; j < tick; ++j) {"),
@@ -284,6 +284,10 @@ FAULTS = [
           "            return stsp_est_hold(est, u, STSP_ERR_NONFINITE_MEASUREMENT);",
           "            stsp_est_update(e, tick / e->every, y, est->xhat, &clamped);\n"
           "            return stsp_est_hold(est, u, STSP_ERR_NONFINITE_MEASUREMENT);"),
+    # The estimator's gain spline (stsp_estimator.c, float32; tests/c/test_estimator_spline.c).
+    Fault("F96", "estimator (spline gains): the sample's abscissa not relative to its stage",
+          CTL, "(tick / e->every) -\n                        stsp_est_first_sample(e, est->ctrl.checked.stage_start[s])",
+          "(tick / e->every) -\n                        0u"),
     # The estimator in fixed point (stsp_estimator.c; tests/c/test_estimator.c built for Q15).
     Fault("F90", "estimator (Q15/Q31): a row's rounding bias dropped (rounds down)", CTL,
           "    return (UINT64_C(1) << 62) + (UINT64_C(1) << (k - 1u));",

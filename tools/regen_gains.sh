@@ -43,5 +43,9 @@ for arith in q15 q31; do
   "$root/.venv/bin/stospline" design examples/robot_corridor.toml --arith "$arith" --table spline \
     --out gains/
 done
+# (That was the per-tick filter.) The robot on its position sensor, spline tables: the law's and
+# the filter's update gains as cubic B-splines (<name>_spline.*: stsp_est_init_spline(),
+# host/stospline/estimator/gain_spline.py).
+"$root/.venv/bin/stospline" design examples/robot_position_sensor.toml --table spline --out gains/
 "$root/.venv/bin/python" tools/params_tables.py --fixed --out gains/
 "$root/.venv/bin/python" tools/params_tables.py --spline --out gains/

@@ -10,6 +10,7 @@
 #include "stsp_internal.h"
 #ifndef STSP_ARITH_FIXED_POINT
 #include "stsp_f32bits.h"
+#include "stsp_knots.h"
 #endif
 
 #include <string.h>
@@ -46,7 +47,9 @@ uint32_t stsp_est_table_crc32(const stsp_est_table_t *est)
     crc = stsp_crc32_u32s(crc, est->model_start, (uint32_t)est->n_stages + 1u);
     crc = stsp_crc32_scalars(crc, est->model, stsp_est_models(est) * nx * stsp_est_row(est));
     crc = stsp_crc32_scalars(crc, est->C, (uint32_t)est->ny * nx);
-    crc = stsp_crc32_scalars(crc, est->gain, stsp_est_samples(est) * nx * est->ny);
+    if (est->gain != NULL) { /* NULL: the gains are a spline (stsp_est_init_spline()) */
+        crc = stsp_crc32_scalars(crc, est->gain, stsp_est_samples(est) * nx * est->ny);
+    }
     crc = stsp_crc32_scalars(crc, est->xhat0, nx);
 #ifdef STSP_ARITH_FIXED_POINT
     crc = stsp_crc32_i8s(crc, est->y_exp, est->ny);
@@ -70,12 +73,14 @@ static int stsp_est_finite(const stsp_f32_t *a, uint32_t count)
 }
 #endif
 
-/* The estimator table against the validated gain table (h): everything but the CRC. */
-static stsp_status_t stsp_est_check(const stsp_est_table_t *e, const stsp_header_t *h)
+/* The estimator table against the validated gain table (h): everything but the CRC. Its
+ * gain is NULL exactly when the gains are a spline (`spline` 1). */
+static stsp_status_t stsp_est_check(const stsp_est_table_t *e, const stsp_header_t *h,
+                                    int spline)
 {
     uint32_t s;
     if ((e->model_start == NULL) || (e->model == NULL) || (e->C == NULL) ||
-        (e->gain == NULL) || (e->xhat0 == NULL)) {
+        ((e->gain == NULL) && (spline == 0)) || (e->xhat0 == NULL)) {
         return STSP_ERR_NULL;
     }
 #ifdef STSP_ARITH_FIXED_POINT
@@ -92,7 +97,7 @@ static stsp_status_t stsp_est_check(const stsp_est_table_t *e, const stsp_header
     }
     if ((e->nx != h->nx) || (e->nu != h->nu) || (e->n_stages != h->n_stages) ||
         (e->n_ticks != h->n_ticks) || (e->ny == 0u) || (e->ny > STSP_MAX_NY) ||
-        (e->every == 0u) || (e->model_start[0] != 0u)) {
+        (e->every == 0u) || (e->model_start[0] != 0u) || ((e->gain != NULL) && (spline != 0))) {
         return STSP_ERR_BAD_DIMS;
     }
     for (s = 0u; s < e->n_stages; ++s) {
@@ -110,9 +115,8 @@ static int stsp_est_values_ok(const stsp_est_table_t *e)
 {
     const uint32_t nx = e->nx;
     return stsp_est_finite(e->model, stsp_est_models(e) * nx * stsp_est_row(e)) &
-           stsp_est_finite(e->C, (uint32_t)e->ny * nx) &
-           stsp_est_finite(e->gain, stsp_est_samples(e) * nx * e->ny) &
-           stsp_est_finite(e->xhat0, nx);
+           ((e->gain == NULL) ? 1 : stsp_est_finite(e->gain, stsp_est_samples(e) * nx * e->ny)) &
+           stsp_est_finite(e->C, (uint32_t)e->ny * nx) & stsp_est_finite(e->xhat0, nx);
 }
 #else
 /* Fixed point (stsp_estimator.h): |acc| <= 2^STSP_EST_ACC_BITS for inputs in their Q ranges
@@ -257,13 +261,12 @@ static void stsp_est_start(stsp_est_t *est)
     }
 }
 
-stsp_status_t stsp_est_init(stsp_est_t *est, const stsp_table_t *table,
-                            const stsp_est_table_t *est_table)
+/* stsp_est_init() up to the values of the estimator table (the instance not ready yet);
+ * `spline` 1 when a gain spline follows. */
+static stsp_status_t stsp_est_bind(stsp_est_t *est, const stsp_table_t *table,
+                                   const stsp_est_table_t *est_table, int spline)
 {
     stsp_status_t st;
-    if (est == NULL) {
-        return STSP_ERR_NULL;
-    }
     (void)memset(est, 0, sizeof *est);
     if (est_table == NULL) {
         return STSP_ERR_NULL;
@@ -273,7 +276,7 @@ stsp_status_t stsp_est_init(stsp_est_t *est, const stsp_table_t *table,
         return stsp_est_refuse(est, st);
     }
     est->checked = *est_table;
-    st = stsp_est_check(&est->checked, &est->ctrl.checked);
+    st = stsp_est_check(&est->checked, &est->ctrl.checked, spline);
     if (st != STSP_OK) {
         return stsp_est_refuse(est, st);
     }
@@ -287,10 +290,158 @@ stsp_status_t stsp_est_init(stsp_est_t *est, const stsp_table_t *table,
         return stsp_est_refuse(est, STSP_ERR_BAD_VALUES);
     }
     est->table = est_table;
+    return STSP_OK;
+}
+
+stsp_status_t stsp_est_init(stsp_est_t *est, const stsp_table_t *table,
+                            const stsp_est_table_t *est_table)
+{
+    stsp_status_t st;
+    if (est == NULL) {
+        return STSP_ERR_NULL;
+    }
+    st = stsp_est_bind(est, table, est_table, 0);
+    if (st == STSP_OK) {
+        stsp_est_start(est);
+        est->ready = STSP_EST_READY;
+    }
+    return st;
+}
+
+#ifndef STSP_ARITH_FIXED_POINT
+/* The samples of stage s, q0(s) .. q0(s + 1) - 1 (the top of stsp_estimator.h). */
+static uint32_t stsp_est_first_sample(const stsp_est_table_t *e, uint32_t tick)
+{
+    return (tick / e->every) + (((tick % e->every) != 0u) ? 1u : 0u);
+}
+
+uint32_t stsp_est_gain_spline_crc32(const stsp_est_gain_spline_t *spline,
+                                    const stsp_est_table_t *est)
+{
+    const uint32_t ns1 = (uint32_t)est->n_stages + 1u;
+    uint32_t crc = stsp_crc32_begin();
+    crc = stsp_crc32_u32(crc, est->n_stages);
+    crc = stsp_crc32_u32(crc, (uint32_t)est->nx * est->ny);
+    crc = stsp_crc32_u32(crc, spline->n_knots);
+    crc = stsp_crc32_u32(crc, spline->n_entries);
+    crc = stsp_crc32_u32(crc, spline->n_coef);
+    crc = stsp_crc32_u32s(crc, spline->knot_start, ns1);
+    crc = stsp_crc32_f32s(crc, spline->knot, spline->n_knots);
+    crc = stsp_crc32_u32s(crc, spline->entry_start, ns1);
+    crc = stsp_crc32_bytes(crc, spline->entry, spline->n_entries);
+    crc = stsp_crc32_u32s(crc, spline->coef_start, ns1);
+    crc = stsp_crc32_f32s(crc, spline->coef, spline->n_coef);
+    crc = stsp_crc32_u32(crc, spline->est_crc32);
+    return stsp_crc32_end(crc);
+}
+
+/* 1 when start[0..ns] runs from 0 to `total`, nondecreasing. */
+static int stsp_est_starts_ok(const uint32_t *start, uint32_t ns, uint32_t total)
+{
+    uint32_t s;
+    if ((start[0] != 0u) || (start[ns] != total)) {
+        return 0;
+    }
+    for (s = 0u; s < ns; ++s) {
+        if (start[s + 1u] < start[s]) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* Stage s of a gain spline whose start arrays are valid: its knots, entries and coefficients
+ * as stsp_est_gain_spline_t says for its samples. */
+static int stsp_est_spline_stage_ok(const stsp_est_gain_spline_t *sp, const stsp_est_table_t *e,
+                                    const uint32_t *stage_start, uint32_t s)
+{
+    const uint32_t T = stsp_est_first_sample(e, stage_start[s + 1u]) -
+                       stsp_est_first_sample(e, stage_start[s]);
+    const uint32_t k0 = sp->knot_start[s];
+    const uint32_t nk = sp->knot_start[s + 1u] - k0;
+    const uint32_t e0 = sp->entry_start[s];
+    const uint32_t ne = sp->entry_start[s + 1u] - e0;
+    const uint32_t nc = sp->coef_start[s + 1u] - sp->coef_start[s];
+    uint32_t i;
+    if (T == 0u) {
+        return ((nk == 0u) && (ne == 0u) && (nc == 0u)) ? 1 : 0;
+    }
+    if ((nk < 8u) || (T >= 16777216u) || ((nc % (nk - 4u)) != 0u) || ((nc / (nk - 4u)) != ne) ||
+        (stsp_knots_ok(&sp->knot[k0], nk, T) == 0)) {
+        return 0;
+    }
+    for (i = 0u; i < ne; ++i) {
+        if ((sp->entry[e0 + i] >= ((uint32_t)e->nx * e->ny)) ||
+            ((i > 0u) && (sp->entry[e0 + i] <= sp->entry[e0 + i - 1u]))) {
+            return 0;
+        }
+    }
+    return 1;
+}
+
+/* The gain spline against the validated estimator table (e): everything but the CRC and the
+ * values. */
+static stsp_status_t stsp_est_spline_check(const stsp_est_gain_spline_t *sp,
+                                           const stsp_est_table_t *e, const uint32_t *stage_start)
+{
+    const uint32_t ns = e->n_stages;
+    uint32_t s;
+    if ((sp->knot_start == NULL) || (sp->knot == NULL) || (sp->entry_start == NULL) ||
+        (sp->entry == NULL) || (sp->coef_start == NULL) || (sp->coef == NULL)) {
+        return STSP_ERR_NULL;
+    }
+    if (sp->magic != STSP_EST_SPLINE_MAGIC) {
+        return STSP_ERR_BAD_MAGIC;
+    }
+    if ((stsp_est_starts_ok(sp->knot_start, ns, sp->n_knots) == 0) ||
+        (stsp_est_starts_ok(sp->entry_start, ns, sp->n_entries) == 0) ||
+        (stsp_est_starts_ok(sp->coef_start, ns, sp->n_coef) == 0)) {
+        return STSP_ERR_BAD_DIMS;
+    }
+    for (s = 0u; s < ns; ++s) {
+        if (stsp_est_spline_stage_ok(sp, e, stage_start, s) == 0) {
+            return STSP_ERR_BAD_DIMS;
+        }
+    }
+    return STSP_OK;
+}
+
+stsp_status_t stsp_est_init_spline(stsp_est_t *est, const stsp_table_t *table,
+                                   const stsp_est_table_t *est_table,
+                                   const stsp_est_gain_spline_t *spline)
+{
+    stsp_status_t st;
+    if (est == NULL) {
+        return STSP_ERR_NULL;
+    }
+    st = stsp_est_bind(est, table, est_table, 1);
+    if (st != STSP_OK) {
+        return st;
+    }
+    if (spline == NULL) {
+        return stsp_est_refuse(est, STSP_ERR_NULL);
+    }
+    est->spline_checked = *spline;
+    st = stsp_est_spline_check(&est->spline_checked, &est->checked, est->ctrl.checked.stage_start);
+    if (st != STSP_OK) {
+        return stsp_est_refuse(est, st);
+    }
+    if (stsp_est_gain_spline_crc32(&est->spline_checked, &est->checked) !=
+        est->spline_checked.crc32) {
+        return stsp_est_refuse(est, STSP_ERR_BAD_CRC);
+    }
+    if (est->spline_checked.est_crc32 != est->checked.crc32) {
+        return stsp_est_refuse(est, STSP_ERR_BAD_PROBLEM);
+    }
+    if (stsp_est_finite(est->spline_checked.coef, est->spline_checked.n_coef) == 0) {
+        return stsp_est_refuse(est, STSP_ERR_BAD_VALUES);
+    }
+    est->spline = spline;
     stsp_est_start(est);
     est->ready = STSP_EST_READY;
     return STSP_OK;
 }
+#endif
 
 stsp_status_t stsp_est_reset(stsp_est_t *est)
 {
@@ -322,6 +473,27 @@ static int stsp_est_header_changed(const stsp_est_table_t *a, const stsp_est_tab
             (a->xhat0 != b->xhat0)) ? 1 : 0;
 }
 
+#ifndef STSP_ARITH_FIXED_POINT
+/* stsp_est_verify() of the bound gain spline: its header as validated, its CRC. */
+static stsp_status_t stsp_est_spline_verify(const stsp_est_t *est)
+{
+    const stsp_est_gain_spline_t *a = &est->spline_checked;
+    const stsp_est_gain_spline_t *b = est->spline;
+    stsp_est_gain_spline_t now;
+    if ((a->magic != b->magic) || (a->n_knots != b->n_knots) || (a->n_entries != b->n_entries) ||
+        (a->n_coef != b->n_coef) || (a->knot_start != b->knot_start) || (a->knot != b->knot) ||
+        (a->entry_start != b->entry_start) || (a->entry != b->entry) ||
+        (a->coef_start != b->coef_start) || (a->coef != b->coef) ||
+        (a->est_crc32 != b->est_crc32)) {
+        return STSP_ERR_TABLE_CHANGED;
+    }
+    now = *a;
+    now.crc32 = b->crc32;
+    return (stsp_est_gain_spline_crc32(&now, &est->checked) != now.crc32) ? STSP_ERR_BAD_CRC
+                                                                         : STSP_OK;
+}
+#endif
+
 stsp_status_t stsp_est_verify(stsp_est_t *est)
 {
     stsp_status_t st;
@@ -347,6 +519,11 @@ stsp_status_t stsp_est_verify(stsp_est_t *est)
             }
         }
     }
+#ifndef STSP_ARITH_FIXED_POINT
+    if ((st == STSP_OK) && (est->spline != NULL)) {
+        st = stsp_est_spline_verify(est);
+    }
+#endif
     if (st != STSP_OK) {
         est->ready = STSP_EST_STOPPED;
     }
@@ -494,6 +671,123 @@ static void stsp_est_predict(const stsp_est_t *est, const uint32_t *stage_start,
     }
 }
 
+#ifndef STSP_ARITH_FIXED_POINT
+/* A stage's part of the gain spline, as the update reads it. */
+typedef struct {
+    const stsp_f32_t *coef;  /* the first coefficient of the span's first entry */
+    const uint8_t *entry;    /* the stage's entries */
+    uint32_t n_entries;
+    uint32_t stride;         /* S + 3 */
+    stsp_f32_t n[4];         /* N[0..3] at the sample */
+} stsp_est_gains_t;
+
+/* The span and basis of sample `sample` in stage s (the top of stsp_estimator.h), into g.
+ * The arrays are read within the lengths init validated whatever they hold now: a stage whose
+ * layout no longer fits them (the table changed after init, until stsp_est_verify() notices)
+ * gets no entries (F = 0: no update), a knot changed to NaN a wrong gain; no access outside
+ * the arrays. */
+static void stsp_est_gain_basis(const stsp_est_gain_spline_t *sp, uint32_t s, uint32_t tau_q,
+                                stsp_est_gains_t *g)
+{
+    const uint32_t k0 = sp->knot_start[s];
+    const uint32_t k1 = sp->knot_start[s + 1u];
+    const uint32_t e0 = sp->entry_start[s];
+    const uint32_t e1 = sp->entry_start[s + 1u];
+    const uint32_t c0 = sp->coef_start[s];
+    const stsp_f32_t tau = (stsp_f32_t)tau_q;
+    const stsp_f32_t *U = &sp->knot[k0];
+    stsp_f32_t left[4];
+    stsp_f32_t right[4];
+    uint32_t lo = 0u;
+    uint32_t hi;
+    uint32_t k;
+    uint32_t r;
+    g->n_entries = 0u;
+    g->entry = sp->entry;
+    g->coef = sp->coef;
+    g->stride = 0u;
+    if ((k1 > sp->n_knots) || (k1 < k0) || ((k1 - k0) < 8u) || (e1 > sp->n_entries) ||
+        (e1 < e0) || (c0 > sp->n_coef) || ((e1 - e0) > ((sp->n_coef - c0) / (k1 - k0 - 4u)))) {
+        return;
+    }
+    hi = k1 - k0 - 8u; /* S - 1 */
+    while (lo < hi) { /* the largest sigma <= S - 1 with U[sigma + 3] <= tau */
+        const uint32_t mid = lo + (((hi - lo) + 1u) / 2u);
+        if (U[mid + 3u] <= tau) {
+            lo = mid;
+        } else {
+            hi = mid - 1u;
+        }
+    }
+    for (k = 1u; k < 4u; ++k) {
+        left[k] = tau - U[lo + 4u - k];
+        right[k] = U[lo + 3u + k] - tau;
+    }
+    g->n[0] = 1.0f;
+    for (k = 1u; k < 4u; ++k) {
+        stsp_f32_t saved = 0.0f;
+        for (r = 0u; r < k; ++r) {
+            const stsp_f32_t temp = g->n[r] / (right[r + 1u] + left[k - r]);
+            g->n[r] = stsp_mla(saved, right[r + 1u], temp);
+            saved = left[k - r] * temp;
+        }
+        g->n[k] = saved;
+    }
+    g->entry = &sp->entry[e0];
+    g->n_entries = e1 - e0;
+    g->stride = k1 - k0 - 4u;
+    g->coef = &sp->coef[c0 + lo];
+}
+
+/* Row r of F (ny gains) from g, the entries from *next on (those of rows before r passed):
+ * ((N0 c0 + N1 c1) + N2 c2) + N3 c3 for a stored entry, +0 else. */
+static void stsp_est_gain_row(const stsp_est_gains_t *g, uint32_t r, uint32_t ny, uint32_t *next,
+                              stsp_f32_t *F)
+{
+    uint32_t i;
+    uint32_t e = *next;
+    for (i = 0u; i < ny; ++i) {
+        F[i] = 0.0f;
+    }
+    while ((e < g->n_entries) && ((g->entry[e] / ny) == r)) {
+        const stsp_f32_t *c = &g->coef[e * g->stride];
+        stsp_f32_t v = g->n[0] * c[0];
+        v = stsp_mla(v, g->n[1], c[1]);
+        v = stsp_mla(v, g->n[2], c[2]);
+        F[g->entry[e] % ny] = stsp_mla(v, g->n[3], c[3]);
+        ++e;
+    }
+    while ((e < g->n_entries) && ((g->entry[e] / ny) < r)) { /* a table changed after init */
+        ++e;
+    }
+    *next = e;
+}
+
+/* x̂ += F (y - C x̂) with the gains of the spline at the sample of `tick` (stage s); in place
+ * of xh (nx). Its own function, not inlined, so that the step's frame on per-tick tables is
+ * what it was. */
+static STSP_NOINLINE void stsp_est_update_spline(const stsp_est_t *est, uint32_t s,
+                                                 uint32_t tick, const stsp_f32_t *y,
+                                                 stsp_f32_t *xh, uint32_t *clamped)
+{
+    const stsp_est_table_t *e = &est->checked;
+    stsp_est_gains_t g;
+    stsp_f32_t F[STSP_MAX_NY];
+    stsp_f32_t innov[STSP_MAX_NY];
+    uint32_t next = 0u;
+    uint32_t r;
+    for (r = 0u; r < e->ny; ++r) {
+        innov[r] = stsp_est_innovation(e, r, y[r], xh, clamped);
+    }
+    stsp_est_gain_basis(&est->spline_checked, s, (tick / e->every) -
+                        stsp_est_first_sample(e, est->ctrl.checked.stage_start[s]), &g);
+    for (r = 0u; r < e->nx; ++r) {
+        stsp_est_gain_row(&g, r, e->ny, &next, F);
+        xh[r] = stsp_est_corrected(e, r, F, innov, xh[r], clamped);
+    }
+}
+#endif
+
 /* x̂ += F (y - C x̂) with sample `sample`'s gain; in place of xh (nx). */
 static void stsp_est_update(const stsp_est_table_t *e, uint32_t sample, const stsp_scalar_t *y,
                             stsp_scalar_t *xh, uint32_t *clamped)
@@ -576,7 +870,15 @@ stsp_status_t stsp_est_step(stsp_est_t *est, uint32_t tick, const stsp_scalar_t 
         } else if (stsp_est_reading_ok(e, y) == 0) {
             return stsp_est_hold(est, u, STSP_ERR_NONFINITE_MEASUREMENT);
         } else {
+#ifndef STSP_ARITH_FIXED_POINT
+            if (est->spline != NULL) {
+                stsp_est_update_spline(est, stage, tick, y, xh, &clamped);
+            } else {
+                stsp_est_update(e, tick / e->every, y, xh, &clamped);
+            }
+#else
             stsp_est_update(e, tick / e->every, y, xh, &clamped);
+#endif
         }
     }
     st = stsp_step(&est->ctrl, tick, xh, cmd);

@@ -11,6 +11,7 @@
 #include "stsp_qspline.h"
 #endif
 #include "stsp_tick.h"
+#include "stsp_knots.h"
 
 #ifndef STSP_ARITH_FIXED_POINT
 /* The law of a spline table (stsp_spline_t, float32 only), included once by stsp_spline.c
@@ -669,28 +670,6 @@ static void stsp_qspline_param_law(stsp_ctrl_t *ctrl, uint32_t s, uint32_t tick,
 #endif
 
 #ifndef STSP_ARITH_FIXED_POINT
-
-/* 1 when the knots k[0..len) are stage s's clamped knot vector for `ticks` ticks (< 2^24, so
- * every integer up to it is a binary32): four 0, then strictly increasing integers in (0,
- * ticks), then four times `ticks`. NaN fails every comparison. */
-static int stsp_knots_ok(const stsp_f32_t *k, uint32_t len, uint32_t ticks)
-{
-    const stsp_f32_t end = (stsp_f32_t)ticks;
-    uint32_t i;
-    for (i = 0u; i < 4u; ++i) {
-        if (!(k[i] == 0.0f) || !(k[len - 4u + i] == end)) {
-            return 0;
-        }
-    }
-    for (i = 4u; i < (len - 4u); ++i) {
-        /* 0 < k[i] < ticks < 2^24 here, so the conversion is defined. */
-        if (!(k[i] > k[i - 1u]) || !(k[i] < end) ||
-            ((stsp_f32_t)(uint32_t)k[i] != k[i])) {
-            return 0;
-        }
-    }
-    return 1;
-}
 
 /* Stage s of a spline table, once knot_start, row_start and coef_start are known to be
  * nondecreasing within their arrays: fewer than 2^24 ticks, S + 3 coefficients for each of its

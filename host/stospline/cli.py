@@ -488,7 +488,6 @@ def _sensor_refusal(args, problem, opts) -> None:
         raise ProblemError("--paths", f"{why} holds every path in memory: at most "
                                       f"{SENSOR_MAX_PATHS}, got {args.paths}")
     for key, bad, what in (("delay_ticks", 1, "has no estimator form for a one-tick delay"),
-                           ("table", "spline", "runs the per-tick table"),
                            ("arith", "q15", "runs float32 tables"),
                            ("arith", "q31", "runs float32 tables")):
         if getattr(opts, key) == bad:
@@ -511,7 +510,8 @@ def _sensor_run(args, problem, opts, command: str, record: int = 0):
     if why:
         raise ProblemError(*why)
     run = run_sensor_loop(d.problem, d.table, paths=args.paths, seed=args.seed,
-                          substeps=args.substeps, record=record)
+                          substeps=args.substeps, record=record, spline_tolerance=(
+                              d.options.spline_tolerance if d.table.spline is not None else None))
     return d, run, sensor_simulation_summary(d, run, seed=args.seed)
 
 

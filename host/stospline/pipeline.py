@@ -526,7 +526,9 @@ def design_files(d: Designed, source_name: str, arith: str = "float32", *,
     header, source = generate_c(table, source_name=source_name)
     if arith == "float32" and d.problem.measurement is not None:   # the filter's tables
         from stospline.estimator.ctable import with_estimator
-        header, source = with_estimator(header, source, d.problem, table)
+        header, source = with_estimator(
+            header, source, d.problem, table, spline_tolerance=(
+                _options_of(d).spline_tolerance if table.spline is not None else None))
     elif q_est is not None:
         from stospline.estimator.qformat import estimator_q_c
         eh, ec = estimator_q_c(q_est[0], table.name)

@@ -11,7 +11,7 @@ GAINS = REPO / "gains"
 # per-tick ones (tools/regen_gains.sh).
 SPLINE_EXAMPLES = ("robot_corridor", "robot_corridor_eps01", "robot_bands", "investment",
                    "quadrotor", "population", "coupled_axes", "robot_monotone",
-                   "robot_narrow_corridor")
+                   "robot_narrow_corridor", "robot_position_sensor")
 
 
 def gains_stem(example: str) -> str:

@@ -25,6 +25,18 @@
  *                 acc += Bd[r][i] u[i] for i = 0 .. nu-1; x̂[r] = acc
  * (host/stospline/estimator/spec.py is the same arithmetic in numpy, checked bit for bit).
  *
+ * Spline gains (float32 only, stsp_est_init_spline()): the table's gain is NULL and F of
+ * sample q = tick / every in stage s is evaluated from stsp_est_gain_spline_t at
+ * tau = (float)(q - q0(s)) (exact), q0(s) = ceil(stage_start[s] / every) the stage's first
+ * sample: the span sigma = the largest in 0 .. S-1 with U[sigma + 3] <= tau (a binary search),
+ * i = sigma + 3, left[k] = tau - U[i+1-k], right[k] = U[i+k] - tau (k = 1..3), N[0] = 1 and for
+ * k = 1..3: saved = +0; for r = 0..k-1: temp = N[r] / (right[r+1] + left[k-r]),
+ * N[r] = saved + right[r+1] temp, saved = left[k-r] temp; then N[k] = saved (The NURBS Book
+ * A2.2, every operation rounded); each stored entry F[r][i] = ((N[0] c[sigma] + N[1]
+ * c[sigma+1]) + N[2] c[sigma+2]) + N[3] c[sigma+3], every entry not stored +0; then the update
+ * above (host/stospline/estimator/gain_spline.py evaluates the same, bit for bit). The basis is
+ * computed once per sample, the gains one row of F at a time (STSP_MAX_NY scalars of stack).
+ *
  * Fixed point (STSP_ARITH_Q15/Q31, F = STSP_Q_FRAC_BITS; host/stospline/estimator/qformat.py
  * is the same arithmetic, checked bit for bit): x̂ is held in the law's state format
  * x̂ = x̂_q 2^(x_exp - F) (stsp_table_t.x_exp), the reading is y = y_q 2^(y_exp - F) and the
@@ -43,9 +55,9 @@
  * reports as STSP_WARN_STATE_CLAMPED (the innovation or the estimate saturated).
  *
  * Buffers: stsp_est_t holds a stsp_ctrl_t, the validated copy of the estimator table's
- * header, STSP_MAX_NX + STSP_MAX_NU scalars (x̂ and the last command) and 12 bytes of state:
- * 1004 bytes with the default limits (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_est_t);
- * Q15 400 bytes).
+ * header, STSP_MAX_NX + STSP_MAX_NU scalars (x̂ and the last command), 12 bytes of state and
+ * (float32) the bound gain spline's pointer and validated header: 1056 bytes with the default
+ * limits (arm-none-eabi-gcc -mcpu=cortex-m4, sizeof(stsp_est_t); Q15 400 bytes).
  * stsp_est_step() uses 2 STSP_MAX_NX + STSP_MAX_NY + STSP_MAX_NU scalars of stack plus
  * stsp_step()'s.
  */
@@ -72,6 +84,11 @@ extern "C" {
 #define stsp_est_verify STSP_NAME(stsp_est_verify)
 #define stsp_est_step STSP_NAME(stsp_est_step)
 #define stsp_est_table_crc32 STSP_NAME(stsp_est_table_crc32)
+#define stsp_est_init_spline STSP_NAME(stsp_est_init_spline)
+#define stsp_est_gain_spline_crc32 STSP_NAME(stsp_est_gain_spline_crc32)
+
+/** Gain spline magic, "STSG" as a little-endian u32. */
+#define STSP_EST_SPLINE_MAGIC 0x47535453u
 
 /**
  * The filter's tables (generated next to the gain table, same problem file). Layouts
@@ -108,6 +125,30 @@ typedef struct {
 #endif
 } stsp_est_table_t;
 
+/**
+ * The update gains as cubic B-splines of the sample (float32 builds; generated next to the
+ * estimator table, whose gain is then NULL): per stage s with T > 0 samples (T = q0(s + 1) -
+ * q0(s), see the top), the clamped knot vector knot[knot_start[s] .. knot_start[s+1]) =
+ * [0,0,0,0, b_1 < ... < b_(S-1), T,T,T,T] (integers, T < 2^24, S >= 1 spans), the stored
+ * entries entry[entry_start[s] .. entry_start[s+1]) (r * ny + i of F[r][i], increasing, below
+ * nx ny) and their coefficients coef[coef_start[s] ..], S + 3 per entry, entry-major; a stage
+ * without samples has no knots, entries or coefficients.
+ */
+typedef struct {
+    uint32_t magic;              /**< STSP_EST_SPLINE_MAGIC */
+    uint32_t n_knots;            /**< knot_start[n_stages] */
+    uint32_t n_entries;          /**< entry_start[n_stages] */
+    uint32_t n_coef;             /**< coef_start[n_stages] */
+    const uint32_t *knot_start;  /**< [n_stages + 1] */
+    const stsp_f32_t *knot;      /**< [n_knots] */
+    const uint32_t *entry_start; /**< [n_stages + 1] */
+    const uint8_t *entry;        /**< [n_entries] */
+    const uint32_t *coef_start;  /**< [n_stages + 1] */
+    const stsp_f32_t *coef;      /**< [n_coef] */
+    uint32_t est_crc32;          /**< the crc32 of the estimator table it belongs to */
+    uint32_t crc32;              /**< see stsp_est_gain_spline_crc32() */
+} stsp_est_gain_spline_t;
+
 /** One estimator-controller instance, caller-owned; all fields private but `ctrl`'s
  *  read-only ones (stsp_controller.h). */
 typedef struct {
@@ -119,12 +160,16 @@ typedef struct {
     uint32_t stage;                    /**< the stage of tick next_tick (private) */
     stsp_scalar_t xhat[STSP_MAX_NX];   /**< the prediction for next_tick (private) */
     stsp_scalar_t u_last[STSP_MAX_NU]; /**< the last command written (private) */
+#ifndef STSP_ARITH_FIXED_POINT
+    const stsp_est_gain_spline_t *spline;  /**< the gain spline, or NULL (private) */
+    stsp_est_gain_spline_t spline_checked; /**< its validated header (private) */
+#endif
 } stsp_est_t;
 
 /**
  * CRC-32 (as stsp_table_crc32) of nx, nu, ny, n_stages, n_ticks, every and
  * model_start[n_stages] as little-endian u32, model_start as u32 each, then model, C, gain,
- * xhat0 as little-endian binary32 bit patterns (fixed point: int16/int32 two's complement,
+ * xhat0 as little-endian binary32 bit patterns (gain not when NULL; fixed point: int16/int32 two's complement,
  * then y_exp, e_exp and shift one byte each), then the 32 bytes of problem_sha256. The
  * dimensions and pointers must be valid (stsp_est_init() checks them first).
  */
@@ -146,11 +191,37 @@ uint32_t stsp_est_table_crc32(const stsp_est_table_t *est);
 stsp_status_t stsp_est_init(stsp_est_t *est, const stsp_table_t *table,
                             const stsp_est_table_t *est_table);
 
+#ifndef STSP_ARITH_FIXED_POINT
+/**
+ * CRC-32 (as stsp_table_crc32) of n_stages, nx ny, n_knots, n_entries and n_coef as
+ * little-endian u32, knot_start (n_stages + 1 u32), knot (binary32), entry_start (u32), entry
+ * (bytes), coef_start (u32), coef (binary32), then est_crc32 (u32). The layout must be valid
+ * (stsp_est_init_spline() checks it first).
+ */
+uint32_t stsp_est_gain_spline_crc32(const stsp_est_gain_spline_t *spline,
+                                    const stsp_est_table_t *est);
+
+/**
+ * stsp_est_init() with the update gains as a spline (float32 builds): the estimator table's
+ * gain must be NULL and its CRC leaves gain out. The statuses of stsp_est_init() (est_table
+ * first), then for the spline: STSP_ERR_NULL (spline or one of its arrays NULL),
+ * STSP_ERR_BAD_DIMS (the table's gain not NULL; start arrays not from 0 to n_knots,
+ * n_entries, n_coef or decreasing; a stage's knots, entries or coefficients not as
+ * stsp_est_gain_spline_t says for its samples), STSP_ERR_BAD_MAGIC, STSP_ERR_BAD_CRC,
+ * STSP_ERR_BAD_PROBLEM (est_crc32 not the estimator table's crc32: a spline of another table),
+ * STSP_ERR_BAD_VALUES (a NaN or infinite coefficient).
+ */
+stsp_status_t stsp_est_init_spline(stsp_est_t *est, const stsp_table_t *table,
+                                   const stsp_est_table_t *est_table,
+                                   const stsp_est_gain_spline_t *spline);
+#endif
+
 /** Restart at tick 0 with x̂ = xhat0 (stsp_reset() of the law). */
 stsp_status_t stsp_est_reset(stsp_est_t *est);
 
 /**
- * stsp_verify() of the gain table, then the same for the estimator table: a changed header
+ * stsp_verify() of the gain table, then the same for the estimator table and its gain
+ * spline (when bound): a changed header
  * (STSP_ERR_TABLE_CHANGED) or CRC (STSP_ERR_BAD_CRC) stops the instance (every later step
  * STSP_ERR_NOT_INITIALIZED with u = u_hold) until a new init.
  */

@@ -34,3 +34,4 @@ def estimator_summary(problem, table, cov_digits: Callable = lambda cov, mean: c
                 lo == hi, y - lo, np.maximum(y - hi, 0) - np.maximum(lo - y, 0))
         knots.append(entry)
     return {"oracle_J": mom.J, "every": problem.measurement.every, "knots": knots}
+

@@ -51,7 +51,7 @@ _BATCH = """
 const stsp_est_table_t *harness_est_table(void) { return &%(p)s_estimator; }
 int harness_est_init(stsp_est_t *e, size_t count) {
     size_t i;
-    stsp_status_t st = stsp_est_init(&e[0], &%(p)s_table, &%(p)s_estimator);
+    stsp_status_t st = %(init)s;
     for (i = 1; i < count; ++i) e[i] = e[0];
     return (int)st;
 }
@@ -136,15 +136,19 @@ class EstimatorController:
 def build_estimator_controller(problem, table, est: EstimatorTable, *, build_dir=None,
                                quiet: bool = True) -> EstimatorController:
     """Compile the firmware with `table`'s and `est`'s generated C (cached by a hash of every
-    input, as `harness.controller.build_controller`)."""
+    input, as `harness.controller.build_controller`); an `est` with a gain spline
+    (`estimator.ctable.SplineEstimatorTable`) is bound by ``stsp_est_init_spline``."""
     name = table.name
     header, source = generate_c(table)
     eh, ec = estimator_c(est, name)
     body, guard = header.rsplit("#endif", 1)
     header, source = body + eh + "\n#endif" + guard, source + ec
     n, m, _ = table.dims
+    init = (f"stsp_est_init_spline(&e[0], &{name}_table, &{name}_estimator, "
+            f"&{name}_est_gain_spline)" if getattr(est, "gain_spline", None) is not None else
+            f"stsp_est_init(&e[0], &{name}_table, &{name}_estimator)")
     mod = build_harness_module(f"_stsp_est_{name}", {f"{name}.h": header, f"{name}.c": source},
-                               _CDEF, _BATCH % {"p": name, "P": name.upper()},
+                               _CDEF, _BATCH % {"p": name, "P": name.upper(), "init": init},
                                [f"-DHARNESS_N={n}", f"-DHARNESS_M={m}"], build_dir=build_dir,
                                quiet=quiet)
     return EstimatorController(mod.ffi, mod.lib, table, est)

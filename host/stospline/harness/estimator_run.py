@@ -53,9 +53,6 @@ def sensor_loop_unsupported(problem, table) -> tuple[str, str] | None:
     if getattr(table, "delay_ticks", 0):
         return "delay_ticks", ("a table designed for a one-tick delay has no estimator form; "
                                "the sensor loop runs without a delay")
-    if table.spline is not None:
-        return "table", ("the sensor loop runs the per-tick table (the estimator's firmware "
-                         "takes no spline table)")
     if table.band_qp is not None:
         return "knots", ("a band constraint (lower/upper) latches by a QP on the estimate, "
                          "which the sensor loop does not run")
@@ -91,16 +88,20 @@ def _choose(problem, ctl, tables_loop, gains, pred, table, *, paths: int,
 
 
 def run_sensor_loop(problem, table, *, paths: int, seed: int, substeps: int | str = "auto",
-                    record: int = 0, build_dir=None) -> SensorRun:
+                    record: int = 0, build_dir=None,
+                    spline_tolerance: float | None = None) -> SensorRun:
     """`paths` paths of `table`'s law on the estimate of the filter of
     ``problem.measurement``, through the compiled C, with the oracle of the flashed tables
-    (in the loop with ``problem.faults``, which the filter is designed without).
+    (in the loop with ``problem.faults``, which the filter is designed without); the filter's
+    gains as a spline fitted to `spline_tolerance` when given (what ``stospline design`` writes
+    for a spline table: `flashed_filter`).
 
     Raises ValueError (`sensor_loop_unsupported`) for a loop the run does not support."""
     why = sensor_loop_unsupported(problem, table)
     if why:
         raise ValueError(f"{why[0]}: {why[1]}")
-    tables, gains, pred = flashed_filter(problem, table)    # the filter knows no faults
+    tables, gains, pred = flashed_filter(problem, table,   # the filter knows no faults
+                                         spline_tolerance=spline_tolerance)
     exact = evaluate_estimator(problem, table, gains=gains, predictor=pred, path=True,
                                faults=problem.faults)
     ctl = build_estimator_controller(problem, table, tables, build_dir=build_dir)
@@ -120,11 +121,14 @@ def run_sensor_loop(problem, table, *, paths: int, seed: int, substeps: int | st
     return SensorRun(mc, rec, exact, scheme, tables, nominal)
 
 
-def flashed_filter(problem, table) -> tuple[EstimatorTable, np.ndarray, np.ndarray]:
+def flashed_filter(problem, table, *, spline_tolerance: float | None = None
+                   ) -> tuple[EstimatorTable, np.ndarray, np.ndarray]:
     """``(tables, gains, predictor)``: the filter of `table`'s loop on ``problem.measurement``
     as flashed (`estimator.ctable`: LMMSE gains from the loop's exact moments, rounded to
-    float32) and its per-tick gains and predictor maps."""
-    tables = estimator_table(problem, table, evaluate_estimator(problem, table))
+    float32, or their spline fitted to `spline_tolerance`) and its per-tick gains and
+    predictor maps."""
+    tables = estimator_table(problem, table, evaluate_estimator(problem, table),
+                             spline_tolerance=spline_tolerance)
     gains, pred = tables.per_tick()
     return tables, gains, pred
 

@@ -103,7 +103,41 @@ def _estimator(d) -> dict:
     if d.problem.measurement is None:
         return {}
     from stospline.estimator.summary import estimator_summary
-    return {"estimator": estimator_summary(d.problem, d.table, cov_digits)}
+    out = estimator_summary(d.problem, d.table, cov_digits)
+    if d.table.spline is not None and "not_evaluated" not in out:   # the filter's spline
+        from stospline.options import resolve_options
+        options = d.options if d.options is not None else resolve_options(d.problem)
+        out["gain_spline"] = _gain_spline_certificate(
+            d.problem, d.table, options.spline_tolerance, cov_digits)
+    return {"estimator": out}
+
+
+def _gain_spline_certificate(problem, table, tolerance: float, cov_digits=cov_digits) -> dict:
+    """The ``estimator.gain_spline`` entry of a spline design's summary: the filter's gains
+    as a spline (`estimator.gain_spline`, fitted to `tolerance`) against the per-tick float32
+    gains, both as flashed (with the flashed predictor): the loop's exact cost with each, the
+    relative change, the largest relative change of a knot covariance (Frobenius, 2 digits),
+    the spline's knot covariances, its spans per stage and its bytes against the per-tick
+    gains'. Raises SplineBudgetError when the tolerance cannot be met."""
+    from stospline.estimator.ctable import estimator_table
+    from stospline.estimator.oracle import evaluate_estimator
+    from stospline.refine.spline_certificate import _cov_change
+    loop = evaluate_estimator(problem, table)
+    per_tick = estimator_table(problem, table, loop)
+    spline = estimator_table(problem, table, loop, spline_tolerance=tolerance)
+    ref, got = (evaluate_estimator(problem, table, gains=g, predictor=p).moments
+                for g, p in (per_tick.per_tick(), spline.per_tick()))
+    return {
+        "spline_tolerance": tolerance,
+        "spans": spline.gain_spline.spans(),
+        "oracle_J": got.J,
+        "per_tick_oracle_J": ref.J,
+        "J_change": (got.J - ref.J) / abs(ref.J) if ref.J else got.J - ref.J,
+        "knot_cov_change": _cov_change(ref, got),
+        "knot_cov": [cov_digits(c, m) for c, m in zip(got.knot_cov, got.knot_mean)],
+        "gain_bytes": spline.gain_spline.nbytes,
+        "per_tick_gain_bytes": int(per_tick.gain.nbytes),
+    }
 
 
 def _violation(y: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

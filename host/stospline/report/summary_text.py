@@ -98,8 +98,17 @@ def design_summary_text(d, arith: str = "float32", q_cert: dict | None = None) -
 def design_run_text(d, arith: str, summary: dict) -> str:
     """What ``stospline design`` prints for `d` written in `arith`, whose JSON summary is
     `summary` (`stospline.pipeline.design_files`): a Q15/Q31 spline table's certificate is
-    there, under ``table``."""
-    return design_summary_text(d, arith, None if arith == "float32" else summary.get("table"))
+    there, under ``table``; a filter's gain spline under ``estimator.gain_spline``."""
+    text = design_summary_text(d, arith, None if arith == "float32" else summary.get("table"))
+    g = summary.get("estimator", {}).get("gain_spline")
+    if g is not None:
+        text += (f"  filter gains as a spline       {g['gain_bytes']:,} B, "
+                 f"{g['per_tick_gain_bytes'] / g['gain_bytes']:.3g}x smaller than per sample "
+                 f"({g['per_tick_gain_bytes']:,} B); spans per stage {g['spans']}\n"
+                 f"  loop on the estimate, J        {g['oracle_J']:.10g}   (estimator oracle, "
+                 f"gains as flashed; {g['J_change']:+.3g} relative to the per-sample gains', "
+                 f"knot covariances within {g['knot_cov_change']:.2g})\n")
+    return text
 
 
 def simulation_summary_text(s: dict) -> str:

@@ -606,8 +606,8 @@ SENSOR_SIMULATE_CASES = {
     "paths_beyond_memory": ("noisy", {}, ["--paths", str(10**7 + 1)], "--paths"),
     "delay_option": ("noisy", {}, ["--delay-ticks", "1"], "--delay-ticks"),
     "delay_in_file": ("noisy", {"design": {"delay_ticks": 1}}, [], "design.delay_ticks"),
-    "spline_option": ("noisy", {}, ["--table", "spline"], "--table"),
-    "spline_in_file": ("noisy", {"design": {"table": "spline"}}, [], "design.table"),
+    # A spline table runs: the law's spline and the filter's gain spline (stsp_est_init_spline).
+    "spline_in_file": ("noisy", {"design": {"table": "spline"}}, [], None),
     "q15_in_file": ("noisy", {"design": {"arith": "q31"}}, [], "design.arith"),
     "time_varying": ("varying", {}, ["--substeps", "1"], None),
     "varying_V": ("noisy", {"measurement": {"C": [[1.0, 0.0]], "every": 2, "V": {

@@ -109,9 +109,8 @@ def fixed_spline_files(name: str) -> dict:
 
 def _qspline_flash(pf, gains, cols) -> str:
     from stospline.table.spline.fixed_point import q_spline_bytes
-    P = pf.nominal.size
-    width = 2 if pf.augmented.arith == "q15" else 4
-    cols_b = cols.nbytes + width * pf.S_lambda0.size + 8 * 3 * P + P
+    from stospline.table.spline.qparams import column_flash_bytes
+    cols_b = column_flash_bytes(pf, cols)
     return (f"gain spline {q_spline_bytes(gains)} B, columns {cols_b} B (per-tick columns "
             f"{pf.column_bytes()} B); columns' largest fit error {cols.error.max():.3g} LSB "
             f"({cols.relative.max():.2g} of the column's peak); error bound {_bound(pf)}")

@@ -250,13 +250,17 @@ def fixed_parametric(problem, source_name: str = "", options=None):
     ``<name>_<arith>_params.{h,c}``, the columns), the
     `stospline.table.qparams.ParametricFixedPoint` and the `ParametricDesign`. The state
     range is the box's (`stospline.oracle.over_box.box_state_range`). ValueError from
-    `quantize_parametric` when no scale holds the design."""
+    `quantize_parametric` when no scale holds the design; DesignError naming
+    ``design.table`` for spline options (`fixed_spline_parametric`)."""
     from stospline.oracle.over_box import box_state_range
     from stospline.table.parametric_c import generate_parametric_qc
     from stospline.table.qparams import quantize_parametric
     opts = check_parametric_options(problem, options)
     if opts.arith == "float32":
         raise ValueError("fixed_parametric: the options' arith is float32")
+    if opts.spline:
+        raise DesignError("design.table", "these are per-tick columns; a spline table's are "
+                                          "written by fixed_spline_parametric")
     pd = design_parametric(problem, discretization=opts.discretization, mode=opts.mode,
                            delay_ticks=opts.delay_ticks)
     box = pd.box if pd.box is not None else box_moments(problem, pd.table)
@@ -269,11 +273,17 @@ def fixed_spline_parametric(problem, source_name: str = "", options=None):
     problem's Q15/Q31 spline parametric controller (`options`' arith, their
     ``spline_tolerance``; `stospline.table.spline.qparams.quantize_spline_parametric` over
     the box's state range): ``<name>_<arith>_spline.{h,c}`` (the Q spline gain table in the
-    scales of the augmented law) and ``<name>_<arith>_spline_params.{h,c}`` (format 2)."""
+    scales of the augmented law) and ``<name>_<arith>_spline_params.{h,c}`` (format 2), what
+    ``stospline design FILE --arith <arith> --table spline --out DIR`` writes. DesignError
+    naming the option (`check_parametric_options` of `options` with a spline table: a delay,
+    time-varying stage data) or as `quantize_spline_parametric`; ValueError when no scale
+    holds the design."""
+    from stospline.options import resolve_options
     from stospline.oracle.over_box import box_state_range
     from stospline.table.parametric_c import generate_parametric_qc
     from stospline.table.spline.qparams import quantize_spline_parametric
-    opts = check_parametric_options(problem, options)
+    opts = check_parametric_options(problem, replace(
+        options if options is not None else resolve_options(problem), table="spline"))
     if opts.arith == "float32":
         raise ValueError("fixed_spline_parametric: the options' arith is float32")
     pd = design_parametric(problem, discretization=opts.discretization, mode=opts.mode,
@@ -290,9 +300,10 @@ def check_parametric_options(problem, options=None):
     """`options` (default the problem's resolved ``[design]``), or DesignError naming the
     option when the table they ask for has no sensitivity columns: per-tick columns for every
     arithmetic (float32, or Q15/Q31 scaled with the gains, `fixed_parametric`), spline columns
+    for a spline table of a design without a delay and with constant stage data: float32
     (`stospline.refine.spline_params`, fitted on the spline's knots with the latch re-solved
-    for its gains) for a float32 spline table of a design without a delay and with constant
-    stage data. (A spline table with a band dual is refused once designed, by
+    for its gains) or Q15/Q31 (`fixed_spline_parametric`, integer B-splines on the Q gain
+    spline's spans). (A spline table with a band dual is refused once designed, by
     `stospline.refine.spline_params.spline_parametric`.)"""
     from stospline.options import resolve_options
     opts = options if options is not None else resolve_options(problem)
@@ -302,10 +313,6 @@ def check_parametric_options(problem, options=None):
         raise DesignError("design.table", f"runtime parameters have sensitivity columns for "
                                           f"table = \"per-tick\" or \"spline\", got "
                                           f"{opts.table!r}")
-    if opts.arith != "float32":
-        raise DesignError("design.table", f"runtime parameters have spline columns in float32 "
-                                          f"only, got arith = {opts.arith!r}: use table = "
-                                          f"\"per-tick\" for {opts.arith.upper()} columns")
     if opts.delay_ticks:
         raise DesignError("design.delay_ticks", "spline columns of runtime parameters are "
                                                 "re-solved for designs without a delay: set "

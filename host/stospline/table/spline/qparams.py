@@ -43,7 +43,8 @@ from stospline.table.qparams import ParametricFixedPoint, augmented, with_deviat
 from stospline.table.spline.fixed_point import (COEF_BITS, FIELD, _fit_q, _fit_uniform,
                                                 _stage_gains)
 
-__all__ = ["QSplineColumns", "quantize_spline_parametric", "column_starts", "spline_gain_table"]
+__all__ = ["QSplineColumns", "quantize_spline_parametric", "column_starts", "spline_gain_table",
+           "column_flash_bytes"]
 
 
 @dataclass(frozen=True)
@@ -145,3 +146,12 @@ def spline_gain_table(pf: ParametricFixedPoint, gains, name: str):
     ft = pf.gain_table(name)
     object.__setattr__(ft, "spline", gains)
     return ft
+
+
+def column_flash_bytes(pf: ParametricFixedPoint, cols: QSplineColumns) -> int:
+    """Flash of the spline columns' arrays (``<name>_<arith>_spline_params.c``): the blocks,
+    ``S_lambda0`` in the table's scalar, nominal, lower and upper (float64) and the scale
+    exponents (int8)."""
+    P = pf.nominal.size
+    width = 2 if pf.augmented.arith == "q15" else 4
+    return cols.nbytes + width * pf.S_lambda0.size + 8 * 3 * P + P

@@ -16,6 +16,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse                                                  # noqa: E402
+import dataclasses                                               # noqa: E402
 import functools                                                 # noqa: E402
 import math                                                      # noqa: E402
 import re                                                        # noqa: E402
@@ -98,26 +99,26 @@ def _design(args) -> int:
     opts = _design_options(args, problem)
     names = table_files(problem.name, opts.arith, opts.spline)
     fixed_params = bool(problem.parameters) and opts.arith != "float32"
-    spline_params = bool(problem.parameters) and opts.spline
+    spline_params = bool(problem.parameters) and opts.spline and not fixed_params
     params = (_parameter_names(args, problem, opts)
               if args.out or fixed_params or spline_params else [])
     if args.out:
         check_target(args.out, params + names, inputs)
     _check_budget(args, problem, opts, "design", arith=opts.arith)
-    d = design_problem(problem, options=opts, **_limits(args))
+    # A Q15/Q31 spline table with parameters is fitted on the per-tick parametric design's
+    # (`fixed_spline_parametric`): the design summarised is the per-tick one, as for Q tables.
+    qspline = fixed_params and opts.spline
+    d = design_problem(problem, options=(dataclasses.replace(opts, table="per-tick")
+                                         if qspline else opts),
+                       **_limits(args))
     _note_tables(d, "formatting")
     source_name = Path(args.problem).name
     pfiles, fixed, terms, table_terms = {}, None, None, None
     if spline_params:                           # the spline columns on the designed table
         pfiles, table_terms = _spline_parametric(args, d, source_name)
     elif fixed_params:                          # the gain table scaled with its columns
-        from stospline.oracle.parametric import fixed_parametric
-        try:
-            pfiles, pf, pd = fixed_parametric(problem, source_name, opts)
-        except ValueError as exc:               # scale exponents beyond STSP_Q_EXP_MAX
-            raise _parameter_scale_error(problem, opts.arith, exc) from None
-        fixed = pf.gain_table(names[0].removesuffix(".h"))
-        terms = _fixed_over_box(problem, pd, pf, opts.arith)
+        pfiles, fixed, terms = _fixed_parametric(args, problem, source_name, opts,
+                                                 names[0].removesuffix(".h"))
     elif params:
         from stospline.oracle.parametric import parametric_c_files
         pfiles = parametric_c_files(problem, source_name, opts)
@@ -162,8 +163,38 @@ def _spline_parametric(args, d, source_name: str) -> tuple[dict, dict]:
     return files, {"over_box": {**flashed, **cert}}
 
 
+def _fixed_parametric(args, problem, source_name: str, opts, stem: str):
+    """``(files, table, terms)`` of a problem's Q15/Q31 parametric controller: the gain table
+    scaled with its per-tick columns (`stospline.oracle.parametric.fixed_parametric`) or, with
+    ``table = "spline"``, the Q spline gain table with its spline columns
+    (`fixed_spline_parametric`, what tools/params_tables.py --fixed writes); the gain table
+    as flashed, for `stospline.pipeline.design_files`; and `_fixed_over_box` of it."""
+    from stospline.oracle.parametric import fixed_parametric, fixed_spline_parametric
+    try:
+        if opts.spline:
+            pfiles, (pf, gains, cols), pd = fixed_spline_parametric(problem, source_name, opts)
+        else:
+            pfiles, pf, pd = fixed_parametric(problem, source_name, opts)
+    except ProblemError as exc:                 # the spline's tolerance or format
+        raise _option_error(args, exc) from None
+    except ValueError as exc:                   # scale exponents beyond STSP_Q_EXP_MAX
+        raise _parameter_scale_error(problem, opts.arith, exc) from None
+    terms = _fixed_over_box(problem, pd, pf, opts.arith + "_spline" * opts.spline)
+    if not opts.spline:
+        return pfiles, pf.gain_table(stem), terms
+    from stospline.table.spline.fixed_point import q_spline_bytes
+    from stospline.table.spline.qparams import column_flash_bytes, spline_gain_table
+    terms["spline"] = {"gain_bytes": q_spline_bytes(gains),
+                       "column_bytes": column_flash_bytes(pf, cols),
+                       "span_ticks": [1 << int(k) for k in gains.span_log2],
+                       "spline_tolerance": opts.spline_tolerance,
+                       "column_fit_error_lsb": float(cols.error.max(initial=0.0))}
+    return pfiles, spline_gain_table(pf, gains, stem), terms
+
+
 def _fixed_over_box(problem, pd, pf, arith: str) -> dict:
-    """``{"over_box": ...}`` of the Q15/Q31 parametric table as flashed
+    """``{"over_box": ...}`` of the Q15/Q31 parametric table (`arith` ``q15``, ``q31``,
+    ``q15_spline`` or ``q31_spline``) as flashed
     (`stospline.oracle.fixed_point_margin.fixed_point_certificate`), for its JSON summary; a
     note on stderr for each band row it does not certify (docs/theory/parameters.md,
     "Fixed-point columns")."""
@@ -176,8 +207,9 @@ def _fixed_over_box(problem, pd, pf, arith: str) -> dict:
     for m in cert["margins"]:
         if not m.holds:
             print(f"stospline: note: {m.field} row {m.row} is not certified for the "
-                  f"{arith.upper()} table over the parameter box: less its error bound it "
-                  f"leaves the band by {-m.worst:.3g} at t = {m.t:g}", file=sys.stderr)
+                  f"{arith.upper().replace('_SPLINE', ' spline')} table over the parameter "
+                  f"box: less its error bound it leaves the band by {-m.worst:.3g} at "
+                  f"t = {m.t:g}", file=sys.stderr)
     return {"over_box": fixed_over_box_terms(problem, cert)}
 
 

@@ -483,9 +483,10 @@ def design_files(d: Designed, source_name: str, arith: str = "float32", *,
                  table_terms: dict | None = None) -> tuple[dict[str, str], dict]:
     """``(files, summary)``: the files of `generated_files` and the JSON summary they hold,
     as a dict (what the text summary is printed from). `fixed`, optional: the Q15/Q31
-    per-tick table to write instead of `fixed_point_table` of the design (a table with
-    runtime parameters: the gain table quantized with its columns,
-    `stospline.oracle.parametric.fixed_parametric`); `fixed_terms`, more entries of its
+    table to write instead of `fixed_point_table` of the design (a table with runtime
+    parameters: the gain table quantized with its columns,
+    `stospline.oracle.parametric.fixed_parametric`, or the Q spline gain table of a per-tick
+    design `d`, `fixed_spline_parametric`, written as ``<name>_<arith>_spline``); `fixed_terms`, more entries of its
     summary (what it guarantees over the parameter box). `table_terms`, more entries of a
     float32 spline table's certificate (the JSON key ``table``: what its spline columns
     guarantee over the box, `spline_parametric_files`)."""
@@ -496,7 +497,7 @@ def design_files(d: Designed, source_name: str, arith: str = "float32", *,
     q_est = None
     if arith == "float32":
         table = d.table
-    elif d.table.spline is not None:
+    elif d.table.spline is not None and fixed is None:
         # The Q15/Q31 spline table (`fixed_point_spline`): its scales and error bound, and its
         # own certificate in place of the float32 spline's.
         table, q_cert = fixed_point_spline(d, arith)
@@ -519,7 +520,8 @@ def design_files(d: Designed, source_name: str, arith: str = "float32", *,
         if q_est is not None:
             summary["fixed"]["estimator"] = rounded(q_est[1])
     strict.check_summary_finite(d.problem, summary)
-    n = table_stem(d.problem.name, arith, d.table.spline is not None)
+    spline = d.table.spline is not None or getattr(fixed, "spline", None) is not None
+    n = table_stem(d.problem.name, arith, spline)
     text = strict.dumps(summary) + "\n"
     if not with_c:
         return {f"{n}.json": text}, summary

@@ -98,8 +98,14 @@ def design_summary_text(d, arith: str = "float32", q_cert: dict | None = None) -
 def design_run_text(d, arith: str, summary: dict) -> str:
     """What ``stospline design`` prints for `d` written in `arith`, whose JSON summary is
     `summary` (`stospline.pipeline.design_files`): a Q15/Q31 spline table's certificate is
-    there, under ``table``; a filter's gain spline under ``estimator.gain_spline``."""
+    there, under ``table``; a Q spline table with parameter columns under ``fixed.spline``; a
+    filter's gain spline under ``estimator.gain_spline``."""
     text = design_summary_text(d, arith, None if arith == "float32" else summary.get("table"))
+    q = summary.get("fixed", {}).get("spline")
+    if q is not None:                           # a Q spline table with parameter columns
+        text += (f"  {arith + ' spline + columns':<31}{q['gain_bytes']:,} B + "
+                 f"{q['column_bytes']:,} B; spans of {q['span_ticks']} ticks, tolerance "
+                 f"{q['spline_tolerance']:g}\n")
     g = summary.get("estimator", {}).get("gain_spline")
     if g is not None:
         text += (f"  filter gains as a spline       {g['gain_bytes']:,} B, "

@@ -2,7 +2,8 @@
 ``<name>_params.{h,c}`` with the tables, as one set, and its JSON summary lists the parameters
 with their ranges; with ``--arith q15|q31`` the fixed-point parametric controller
 ``<name>_<arith>{,_params}.{h,c}``, with ``--table spline`` the spline one
-``<name>_spline{,_params}.{h,c}``; a table kind without columns is refused before any work."""
+``<name>[_<arith>]_spline{,_params}.{h,c}``; a table kind without columns is refused before
+any work."""
 import json
 
 import numpy as np
@@ -14,9 +15,11 @@ from stospline import design_problem, load_problem
 from stospline.cli import main
 from stospline.options import resolve_options
 from stospline.oracle.fixed_point_margin import fixed_point_certificate
-from stospline.oracle.parametric import fixed_parametric
+from stospline.oracle.parametric import fixed_parametric, fixed_spline_parametric
 from stospline.pipeline import fixed_point_table
 from stospline.refine.spline_params import certify_over_box, spline_parametric_of
+from stospline.table.spline.fixed_point import q_spline_bytes
+from stospline.table.spline.qparams import column_flash_bytes, spline_gain_table
 
 
 def test_design_writes_the_parameter_files_and_lists_them(tmp_path, capsys):
@@ -82,6 +85,38 @@ def test_design_arith_writes_the_fixed_point_parametric_controller(tmp_path, cap
     assert fixed["over_box"]["bands"] == [] and "note" not in captured.err
 
 
+@pytest.mark.parametrize("arith", ["q15", "q31"])
+def test_design_arith_table_spline_writes_the_fixed_point_spline_parametric_controller(
+        tmp_path, capsys, arith):
+    """`--arith q15|q31 --table spline`: the Q spline gain table and its integer spline
+    columns, byte for byte the shipped gains/ (tools/params_tables.py --fixed, the same code),
+    and a summary of the table as flashed: its scales, its sizes and, under ``over_box``,
+    `fixed_point_certificate` of the spline law over the box, not the per-tick Q table's."""
+    summary, captured = _design_as_shipped(tmp_path, capsys, f"robot_goal_{arith}_spline",
+                                           "--arith", arith, "--table", "spline")
+    problem = load_problem(EXAMPLES / "robot_goal.toml")
+    _, (pf, gains, cols), pd = fixed_spline_parametric(
+        problem, options=resolve_options(problem, arith=arith))
+    fixed = summary["fixed"]
+    table = spline_gain_table(pf, gains, f"robot_goal_{arith}_spline")
+    assert (fixed["x_exp"], fixed["u_exp"], fixed["v_exp"]) == (
+        table.x_exp.tolist(), table.u_exp.tolist(), table.v_exp.tolist())
+    assert fixed["u_error_bound_lsb"] == json.loads(json.dumps(table.written_bound_lsb()))
+    assert fixed["spline"]["gain_bytes"] == q_spline_bytes(gains)
+    assert fixed["spline"]["column_bytes"] == column_flash_bytes(pf, cols)
+    cert = fixed_point_certificate(problem, pd.table, pf)["corridors"][0]
+    got = fixed["over_box"]["corridors"][0]["over_box"]
+    for tail in ("cantelli", "gaussian"):
+        assert got[tail]["worst_tick"] == pytest.approx(cert[tail].worst_tick, rel=1e-9)
+    if arith == "q15":      # the per-tick Q table's differs in the 4th digit
+        _, tick_pf, tick_pd = fixed_parametric(problem, options=resolve_options(problem,
+                                                                                arith=arith))
+        per_tick = fixed_point_certificate(problem, tick_pd.table, tick_pf)["corridors"][0]
+        assert got["cantelli"]["worst_tick"] != pytest.approx(
+            per_tick["cantelli"].worst_tick, rel=1e-6)
+    assert fixed["over_box"]["bands"] == [] and captured.err == ""
+
+
 def test_a_band_row_the_fixed_point_table_does_not_certify_is_noted(capsys):
     """The drone's region touches its ceiling at a vertex of the box (designed so): the Q15
     error bound takes it beyond, so the summary says it does not hold and stderr says so."""
@@ -139,9 +174,11 @@ range = [90.0, 110.0]
 """)
     goal = str(EXAMPLES / "robot_goal.toml")
     for problem, extra, named in (
-            (goal, ["--arith", "q15", "--table", "spline"], "--table: "),
             (goal, ["--table", "spline", "--delay-ticks", "1"], "--delay-ticks: "),
-            (str(varying), ["--table", "spline"], "stages[0]: ")):
+            (goal, ["--arith", "q15", "--table", "spline", "--delay-ticks", "1"],
+             "--delay-ticks: "),
+            (str(varying), ["--table", "spline"], "stages[0]: "),
+            (str(varying), ["--arith", "q31", "--table", "spline"], "stages[0]: ")):
         assert main(["design", problem, "--out", str(out), *extra]) == 2
         captured = capsys.readouterr()
         err = captured.err.strip()
@@ -152,7 +189,8 @@ range = [90.0, 110.0]
 
 @pytest.mark.parametrize("extra, blocked", [
     ([], "robot_goal_params.c"), (["--arith", "q15"], "robot_goal_q15_params.h"),
-    (["--table", "spline"], "robot_goal_spline_params.c")])
+    (["--table", "spline"], "robot_goal_spline_params.c"),
+    (["--arith", "q15", "--table", "spline"], "robot_goal_q15_spline_params.c")])
 def test_all_files_or_none(tmp_path, capsys, extra, blocked):
     """A parameter file's target that cannot be replaced: nothing written, status 2."""
     out = tmp_path / "out"

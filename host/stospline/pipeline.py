@@ -486,8 +486,8 @@ def design_files(d: Designed, source_name: str, arith: str = "float32", *,
     table to write instead of `fixed_point_table` of the design (a table with runtime
     parameters: the gain table quantized with its columns,
     `stospline.oracle.parametric.fixed_parametric`, or the Q spline gain table of a per-tick
-    design `d`, `fixed_spline_parametric`, written as ``<name>_<arith>_spline``); `fixed_terms`, more entries of its
-    summary (what it guarantees over the parameter box). `table_terms`, more entries of a
+    design `d`, `fixed_spline_parametric`, written as ``<name>_<arith>_spline``);
+    `fixed_terms`, more entries of its summary (what it guarantees over the parameter box). `table_terms`, more entries of a
     float32 spline table's certificate (the JSON key ``table``: what its spline columns
     guarantee over the box, `spline_parametric_files`)."""
     check_implementable(d)

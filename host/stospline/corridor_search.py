@@ -266,13 +266,15 @@ def count_exits(problem, corridor: int, cand: Candidate, *, paths: int, seed: in
                 **design_options) -> Exits:
     """Monte Carlo of the candidate's compiled C controller with the problem's plant (and
     faults): how many of `paths` paths leave the corridor. With a [measurement] sensor, the
-    loop on the filter's estimate (`harness.estimator_run.count_sensor_exits`; one process,
-    `workers` and `scheduler` are not used)."""
+    loop on the filter's estimate (`harness.estimator_run.count_sensor_exits`), spread over
+    `workers` or `scheduler` as the full-state loop is (the same count for any number)."""
     d = design_problem(cand.problem(), **design_options)
     if problem.measurement is not None:
         from stospline.harness.estimator_run import count_sensor_exits
         return Exits(count_sensor_exits(problem, d.table, corridor, paths=paths, seed=seed,
-                                        substeps=substeps), int(paths), int(seed))
+                                        substeps=substeps, workers=workers,
+                                        scheduler=scheduler, force_workers=force_workers),
+                     int(paths), int(seed))
     mc = simulate(problem, build_controller(d.table, plant=problem), paths=paths, seed=seed,
                   substeps=substeps, workers=workers, scheduler=scheduler,
                   force_workers=force_workers)

@@ -406,7 +406,9 @@ def work_estimate(problem, *, grid: int, search_paths: int, certify_paths: int,
                   workers: int = 1, **design_options) -> Estimate:
     """The most the search can take: every grid point designed and screened, `refine`
     bisection points designed and screened, `attempts` certifications. The Monte Carlo terms
-    are path-ticks at the harness throughput measured for `stospline.budget` (one core; `tools/bench/harness_throughput.py`)."""
+    are path-ticks at the harness throughput measured for `stospline.budget` (one core;
+    `tools/bench/harness_throughput.py`), with a [measurement] sensor at the sensor loop's
+    (`budget.SENSOR_PATH_TICK`; `tools/bench/sensor_loop_rate.py`)."""
     opts = {k: v for k, v in design_options.items() if k in ("mode", "discretization")}
     design = estimate(problem, command="design", **opts)
     per_design = sum(t.seconds for t in design.terms

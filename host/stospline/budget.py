@@ -92,6 +92,17 @@ MODEL_PATH_TICK, MODEL_PATH_STEP = 3.8e-7, 3.6e-7
 MODEL_PATH_BYTES = 2048
                             # (tools/bench/harness_throughput.py: ~95 ns per robot path-tick)
 SIM_PATH_BYTES = 64         # bytes per path besides states (instances, buffers)
+# The sensor loop's Monte Carlo (a [measurement] problem: `harness.sensor_blocks`, blocks of
+# SENSOR_BLOCK_PATHS paths; `harness.estimator_loop.simulate_estimator`): per tick and block
+# its numpy and cffi calls, per path and tick its numpy work (the sensor's readings, the exit
+# watch, the sums) and the filter's C step, on top of the C work counted as for the full
+# state (SIM_PATH_TICK, the exit watch). Fitted by ``PYTHONPATH=host .venv/bin/python
+# tools/bench/sensor_loop_rate.py`` (the robot with its position sensor, 6000 ticks, one
+# core, CPU time on a loaded machine): 433 ns per path-tick against 28 ns for the full-state
+# harness timed in the same run (15x); 72 us per tick and block, 274 ns per path-tick beyond
+# the 124 ns of full-state work this module counts (which overstates the full state's 28 ns).
+SENSOR_TICK = 70e-6         # s per tick and block of paths
+SENSOR_PATH_TICK = 275e-9   # s per path and tick beyond the full-state harness's C work
 CONTINUOUS_STAGE = 0.5      # s per stage of the continuous-time design and its oracle
 CONTINUOUS_TICK = 20e-6     # s per tick to sample continuous gains
 BAND_Q3 = 5e-8              # s per q^3 of the band dual (OSQP on dense W)
@@ -295,7 +306,9 @@ def monte_carlo_terms(problem: Problem, *, paths: int, substeps: int = 2, worker
     plant scheme, and the corridors' exit bounds of its summary. On the linear harness its
     memory does not grow with `paths`: one block's paths at a time per process, and the
     statistics of the blocks handed out ahead (`harness.montecarlo`) waiting to be merged.
-    On a [plant] model (`model`) every path is held at once, in one process."""
+    On a [plant] model (`model`) every path is held at once, in one process. With a
+    [measurement] table the paths run the sensor loop (`SENSOR_TICK`, `SENSOR_PATH_TICK`),
+    in blocks of `harness.sensor_blocks.SENSOR_BLOCK_PATHS`."""
     from stospline.harness.montecarlo import _AHEAD_PER_WORKER, BLOCK_PATHS
     n, m, mz = problem.n, problem.m, problem.mz
     n += m * (delay_ticks == 1)
@@ -319,6 +332,13 @@ def monte_carlo_terms(problem: Problem, *, paths: int, substeps: int = 2, worker
         terms = [Term(f"Monte Carlo on the [plant] model ({paths} paths)", "--paths",
                       seconds=paths * T * (MODEL_PATH_TICK + substeps * MODEL_PATH_STEP),
                       bytes=paths * model_path + per_run)]
+    elif getattr(problem, "measurement", None) is not None:
+        from stospline.harness.sensor_blocks import SENSOR_BLOCK_PATHS
+        sensor_blocks = -(-paths // SENSOR_BLOCK_PATHS)
+        terms = [Term(f"Monte Carlo of the sensor loop ({paths} paths)", "--paths",
+                      seconds=(SENSOR_TICK * T + SIM_BLOCK) * sensor_blocks
+                      + (SENSOR_PATH_TICK + SIM_PATH_TICK * work) * paths * T,
+                      bytes=min(paths, SENSOR_BLOCK_PATHS) * per_path + per_run + waiting)]
     else:
         terms = [Term(f"Monte Carlo ({paths} paths)", "--paths",
                       seconds=(SIM_TICK * T + SIM_BLOCK) * blocks

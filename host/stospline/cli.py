@@ -346,8 +346,6 @@ def _sensor_corridor_refusal(args, problem, resolved, on_plant: bool) -> None:
     if problem.faults.any:
         raise ProblemError("faults", f"{why} takes no faults (the sensor's noise is the "
                                      f"measurement table's)")
-    if args.scheduler is not None:
-        raise ProblemError("--scheduler", f"{why} runs in this process")
     if resolved.arith != "float32":
         raise ProblemError("--arith" if getattr(args, "arith", None) else "design.arith",
                            f"{why} runs float32 tables")

@@ -266,13 +266,15 @@ def count_exits(problem, corridor: int, cand: Candidate, *, paths: int, seed: in
                 **design_options) -> Exits:
     """Monte Carlo of the candidate's compiled C controller with the problem's plant (and
     faults): how many of `paths` paths leave the corridor. With a [measurement] sensor, the
-    loop on the filter's estimate (`harness.estimator_run.count_sensor_exits`; one process,
-    `workers` and `scheduler` are not used)."""
+    loop on the filter's estimate (`harness.estimator_run.count_sensor_exits`), spread over
+    `workers` or `scheduler` as the full-state loop is (the same count for any number)."""
     d = design_problem(cand.problem(), **design_options)
     if problem.measurement is not None:
         from stospline.harness.estimator_run import count_sensor_exits
         return Exits(count_sensor_exits(problem, d.table, corridor, paths=paths, seed=seed,
-                                        substeps=substeps), int(paths), int(seed))
+                                        substeps=substeps, workers=workers,
+                                        scheduler=scheduler, force_workers=force_workers),
+                     int(paths), int(seed))
     mc = simulate(problem, build_controller(d.table, plant=problem), paths=paths, seed=seed,
                   substeps=substeps, workers=workers, scheduler=scheduler,
                   force_workers=force_workers)
@@ -404,7 +406,9 @@ def work_estimate(problem, *, grid: int, search_paths: int, certify_paths: int,
                   workers: int = 1, **design_options) -> Estimate:
     """The most the search can take: every grid point designed and screened, `refine`
     bisection points designed and screened, `attempts` certifications. The Monte Carlo terms
-    are path-ticks at the harness throughput measured for `stospline.budget` (one core; `tools/bench/harness_throughput.py`)."""
+    are path-ticks at the harness throughput measured for `stospline.budget` (one core;
+    `tools/bench/harness_throughput.py`), with a [measurement] sensor at the sensor loop's
+    (`budget.SENSOR_PATH_TICK`; `tools/bench/sensor_loop_rate.py`)."""
     opts = {k: v for k, v in design_options.items() if k in ("mode", "discretization")}
     design = estimate(problem, command="design", **opts)
     per_design = sum(t.seconds for t in design.terms

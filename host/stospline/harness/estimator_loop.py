@@ -175,7 +175,8 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
     the controller's prediction of it (before that tick's update; after missed ticks, carried
     over them as the controller's next step will) and the commands; over all
     paths the moments of the estimation error ``x - x̂`` at each knot (x̂ the prediction the
-    controller holds for the knot's tick). With corridors, the result's ``exits`` are each
+    controller holds for the knot's tick), and ``"x_sum"`` (ticks + 1, n), the states summed
+    over the paths at every tick (for merging blocks, `harness.sensor_blocks`). With corridors, the result's ``exits`` are each
     path's first exit of the *true* state, by tick and wall, as `montecarlo.simulate` counts
     them (`loop_state.CorridorWatch`)."""
     table, meas = ctl.table, problem.measurement
@@ -290,6 +291,7 @@ def simulate_estimator(problem, ctl: EstimatorController, *, paths: int, seed: i
                                     [len(c.wall_names()) for c in problem.corridors],
                                     table.n_ticks)
     rec["knot_error"] = knot_error
+    rec["x_sum"] = x_sum          # the states summed over the paths at every tick (exact sums)
     return mc, rec
 
 

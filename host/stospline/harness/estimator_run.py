@@ -21,6 +21,7 @@ from stospline.estimator.oracle import (EstimatorLoop, estimator_faults_unsuppor
 from stospline.harness.estimator_loop import build_estimator_controller, simulate_estimator
 from stospline.harness.montecarlo import MonteCarloResult
 from stospline.harness.plant_scheme import PILOT_PATHS, TOLERANCE, SubstepChoice
+from stospline.harness.sensor_blocks import SENSOR_BLOCK_PATHS, simulate_sensor_blocks
 
 __all__ = ["SensorRun", "run_sensor_loop", "sensor_loop_unsupported", "flashed_filter",
            "sensor_outputs", "sensor_path_mean", "count_sensor_exits"]
@@ -160,14 +161,21 @@ def sensor_path_mean(problem, table) -> np.ndarray | None:
 
 
 def count_sensor_exits(problem, table, corridor: int, *, paths: int, seed: int,
-                       substeps: int = 1, build_dir=None) -> int:
+                       substeps: int = 1, build_dir=None, workers: int | None = None,
+                       scheduler: str | None = None, force_workers: bool = False,
+                       block_paths: int = SENSOR_BLOCK_PATHS) -> int:
     """How many of `paths` paths of the sensor loop (`table`'s law on the flashed filter's
     estimate, through the compiled C) leave corridor `corridor` of `problem` at some tick of
-    its interval. Raises ValueError (`sensor_loop_unsupported`) as `run_sensor_loop`."""
+    its interval. The paths run in blocks of `block_paths`, each with its own stream, on
+    `workers` processes or a Dask `scheduler` (`harness.sensor_blocks`): the count is the
+    same for any number of workers. Raises ValueError (`sensor_loop_unsupported`) as
+    `run_sensor_loop`."""
     why = sensor_loop_unsupported(problem, table)
     if why:
         raise ValueError(f"{why[0]}: {why[1]}")
     tables, _, _ = flashed_filter(problem, table)
     ctl = build_estimator_controller(problem, table, tables, build_dir=build_dir)
-    mc, _ = simulate_estimator(problem, ctl, paths=paths, seed=seed, substeps=substeps)
+    mc = simulate_sensor_blocks(problem, ctl, paths=paths, seed=seed, substeps=substeps,
+                                workers=workers, scheduler=scheduler,
+                                force_workers=force_workers, block_paths=block_paths)
     return mc.exit_count(corridor)

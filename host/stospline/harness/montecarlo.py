@@ -357,10 +357,10 @@ class _Alongside:
         return done
 
 
-def block_counts(paths: int):
+def block_counts(paths: int, block_paths: int = BLOCK_PATHS):
     """``(block, first path, paths)`` of each block of a `paths`-path run, in order."""
-    for i, start in enumerate(range(0, paths, BLOCK_PATHS)):
-        yield i, start, min(BLOCK_PATHS, paths - start)
+    for i, start in enumerate(range(0, paths, block_paths)):
+        yield i, start, min(block_paths, paths - start)
 
 
 @dataclass(frozen=True)
@@ -566,8 +566,8 @@ _JOB: tuple | None = None
 
 
 def _block_job(block: int, paths: int) -> _Block:
-    job, controller = _JOB
-    return _run_block(job, controller, block, paths, report=False)
+    job, controller, run = _JOB
+    return run(job, controller, block, paths, report=False)
 
 
 def _dask_block(job: _Job, table, block: int, paths: int) -> _Block:
@@ -577,11 +577,11 @@ def _dask_block(job: _Job, table, block: int, paths: int) -> _Block:
     return _run_block(job, ctl, block, paths, report=False)
 
 
-def _in_order(submit, paths: int, ahead: int, ticks: int):
+def _in_order(submit, paths: int, ahead: int, ticks: int, block_paths: int = BLOCK_PATHS):
     """Each block's result in block order, with at most `ahead` blocks submitted and not yet
     yielded (`submit(block)` returns a future with ``result()``)."""
     from collections import deque
-    blocks = iter(block_counts(paths))
+    blocks = iter(block_counts(paths, block_paths))
     waiting: deque = deque()
     for _ in range(ahead):
         nxt = next(blocks, None)
@@ -598,8 +598,11 @@ def _in_order(submit, paths: int, ahead: int, ticks: int):
         yield part
 
 
-def _dask_blocks(scheduler: str, job: _Job, table, paths: int, workers: int):
-    """The blocks on a Dask cluster (`scheduler`: an address, or "local"), in block order."""
+def _dask_blocks(scheduler: str, job, table, paths: int, workers: int, *,
+                 run=_dask_block, block_paths: int = BLOCK_PATHS):
+    """The blocks on a Dask cluster (`scheduler`: an address, or "local"), in block order:
+    ``run(job, table, block, paths)`` on a worker (default `_dask_block`, the full-state
+    loop) for each block of `block_paths` paths."""
     from distributed import Client, LocalCluster
     cluster = None
     if scheduler == "local":
@@ -618,25 +621,27 @@ def _dask_blocks(scheduler: str, job: _Job, table, paths: int, workers: int):
             ahead = _AHEAD_PER_WORKER * max(workers, len(client.scheduler_info()["workers"]))
             job_ref = client.scatter(job, broadcast=True)
             table_ref = client.scatter(table, broadcast=True)
-            yield from _in_order(lambda i: client.submit(_dask_block, job_ref, table_ref, i,
-                                                         paths, pure=False),
-                                 paths, ahead, table.n_ticks)
+            yield from _in_order(lambda i: client.submit(run, job_ref, table_ref, i, paths,
+                                                         pure=False),
+                                 paths, ahead, table.n_ticks, block_paths)
     finally:
         if cluster is not None:
             cluster.close()
 
 
-def _parallel_blocks(job: _Job, controller, paths: int, workers: int, *, started=None):
+def _parallel_blocks(job, controller, paths: int, workers: int, *, started=None,
+                     run=_run_block, block_paths: int = BLOCK_PATHS):
     """The blocks on `workers` forked processes, in block order; progress per block.
     `started()` is called once they are forked (the first submission forks them all): a
-    thread it starts is not in them."""
+    thread it starts is not in them. ``run(job, controller, block, paths, report=False)``
+    runs a block of `block_paths` paths (default `_run_block`, the full-state loop)."""
     global _JOB
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
-    _JOB = (job, controller)
+    _JOB = (job, controller, run)
     try:
         ctx = multiprocessing.get_context("fork")
-        blocks = -(-paths // BLOCK_PATHS)
+        blocks = -(-paths // block_paths)
         with ProcessPoolExecutor(max_workers=min(workers, blocks), mp_context=ctx) as pool:
             def submit(i):
                 future = pool.submit(_block_job, i, paths)
@@ -644,7 +649,7 @@ def _parallel_blocks(job: _Job, controller, paths: int, workers: int, *, started
                     started()
                 return future
             yield from _in_order(submit, paths, _AHEAD_PER_WORKER * workers,
-                                 controller.table.n_ticks)
+                                 controller.table.n_ticks, block_paths)
     finally:
         _JOB = None
 

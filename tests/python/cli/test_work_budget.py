@@ -161,6 +161,42 @@ def test_a_plant_model_run_is_estimated_at_the_model_loop_rate():
     assert model.seconds > 3 * linear.seconds
 
 
+def test_a_sensor_run_is_estimated_at_the_sensor_loop_rate(tmp_path, capsys):
+    """A [measurement] problem's Monte Carlo is the sensor loop, ~15x the full-state
+    harness's CPU per path-tick on the robot (tools/bench/sensor_loop_rate.py): its estimate
+    adds the sensor loop's own terms to the full state's, and exceeds the same problem's
+    full-state estimate several times over (the full-state constants overstate its 28 ns
+    per path-tick, so the ratio of the estimates is below the measured 15). corridor-design's
+    bound follows: at --max-time 3000 the full-state estimate of a 10^6-path certification
+    fits and the sensor loop's is refused, naming --certify, before any design."""
+    from stospline import corridor_search as cs
+    from stospline.harness.sensor_blocks import SENSOR_BLOCK_PATHS
+    from stospline.problem import load_problem
+    src = EXAMPLES / "robot_corridor_position_sensor.toml"
+    p = load_problem(src)
+    full = dataclasses.replace(p, measurement=None)
+    paths, T = 10 ** 5, int(np.sum(p.ticks_per_stage))
+    sensor, state = (budget.estimate(q, command="simulate", paths=paths, substeps=1, workers=2)
+                     for q in (p, full))
+    run, base = (next(t for t in e.terms if t.what.startswith("Monte Carlo"))
+                 for e in (sensor, state))
+    assert "sensor loop" in run.what and "sensor" not in base.what
+    blocks = -(-paths // SENSOR_BLOCK_PATHS)
+    c_work = base.seconds - (budget.SIM_TICK * T + budget.SIM_BLOCK) * -(-paths // 512)
+    assert run.seconds == pytest.approx(
+        (budget.SENSOR_TICK * T + budget.SIM_BLOCK) * blocks
+        + budget.SENSOR_PATH_TICK * paths * T + c_work)
+    assert run.seconds > 3 * base.seconds
+    counts = dict(grid=1, search_paths=10000, certify_paths=10 ** 6, workers=2)
+    assert cs.work_estimate(full, **counts).seconds < 3000 < cs.work_estimate(p, **counts).seconds
+    out = tmp_path / "o"
+    assert main(["corridor-design", str(src), "--strip", "40", "--rate", "5", "--search",
+                 "10000", "--certify", "1000000", "--max-time", "3000", "--out",
+                 str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--certify" in err[0], err
+    assert not out.exists()
+
 
 def test_a_plant_model_run_holds_every_path():
     """The model's loop keeps every path in memory: the docs' linear model grew by 2.2 kB per

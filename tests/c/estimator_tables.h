@@ -1,7 +1,8 @@
 /* The robot's position-sensor tables of the build's arithmetic, for the estimator's C tests,
  * its fuzz target and its M4F bench (tools/arm/estimator_bench_main.c): the float32 tables
  * (gains/robot_position_sensor.*) or, with STSP_ARITH_Q15, the Q15 ones
- * (gains/robot_position_sensor_q15.*), or with STSP_EST_SPLINE the spline ones
+ * (gains/robot_position_sensor_q15.*), with STSP_ARITH_Q31 the Q31 ones
+ * (gains/robot_position_sensor_q31.*), or with STSP_EST_SPLINE the spline ones
  * (gains/robot_position_sensor_spline.*: EST_GAIN_SPLINE the filter's gain spline), under one
  * set of names; and the FNV-1a word hash the expected-value headers use. */
 #ifndef ESTIMATOR_TABLES_H
@@ -14,6 +15,11 @@
 #define SENSOR(x) ROBOT_POSITION_SENSOR_Q15_##x
 #define TABLE robot_position_sensor_q15_table
 #define ESTIMATOR robot_position_sensor_q15_estimator
+#elif defined(STSP_ARITH_Q31)
+#include "robot_position_sensor_q31.h"
+#define SENSOR(x) ROBOT_POSITION_SENSOR_Q31_##x
+#define TABLE robot_position_sensor_q31_table
+#define ESTIMATOR robot_position_sensor_q31_estimator
 #elif defined(STSP_EST_SPLINE)
 #include "robot_position_sensor_spline.h"
 #define SENSOR(x) ROBOT_POSITION_SENSOR_SPLINE_##x

@@ -7,7 +7,9 @@
  * Built with STSP_ARITH_Q15 (estimator_q15*): the same on robot_position_sensor_q15.*, bit for
  * bit against the integer reference (estimator_q_expected.h, from
  * tests/c/estimator_q_reference.py; every prediction hashed too), a saturating reading
- * (STSP_WARN_STATE_CLAMPED) and corrupt exponents, shifts and row sums. */
+ * (STSP_WARN_STATE_CLAMPED) and corrupt exponents, shifts and row sums.
+ * Built with STSP_ARITH_Q31 (estimator_q31*): the same on robot_position_sensor_q31.*, against
+ * estimator_q31_expected.h (tests/c/estimator_q_reference.py --arith q31). */
 #include <math.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -18,7 +20,9 @@
 #include <cmocka.h>
 
 #include "estimator_tables.h"
-#ifdef STSP_ARITH_FIXED_POINT
+#if defined(STSP_ARITH_Q31)
+#include "estimator_q31_expected.h"
+#elif defined(STSP_ARITH_FIXED_POINT)
 #include "estimator_q_expected.h"
 #else
 #include "estimator_expected.h"
@@ -267,8 +271,15 @@ static stsp_status_t refit(stsp_est_table_t *c)
 /* Exponents, shifts and row sums: the fixed-point values check (CRC right). */
 static void corrupt_fixed_point(void)
 {
+    /* the row limit 2^(61 - F): a shift's largest value */
+    const uint8_t k_max = (uint8_t)(61 - STSP_Q_FRAC_BITS);
     stsp_est_table_t c;
+    /* tables of the other fixed-point format */
+#ifdef STSP_ARITH_Q31
+    c = *E; c.scalar_kind = STSP_SCALAR_Q15;
+#else
     c = *E; c.scalar_kind = STSP_SCALAR_Q31;
+#endif
     assert_int_equal(init_copy(&c), STSP_ERR_BAD_VERSION);
     c = *E; c.shift = NULL;
     assert_int_equal(init_copy(&c), STSP_ERR_NULL);
@@ -281,11 +292,11 @@ static void corrupt_fixed_point(void)
     shift_copy[NY + 1u] = 0u;
     c = *E; c.shift = shift_copy;
     assert_int_equal(refit(&c), STSP_ERR_BAD_VALUES);
-    shift_copy[NY + 1u] = 47u;
+    shift_copy[NY + 1u] = (uint8_t)(k_max + 1u);
     assert_int_equal(refit(&c), STSP_ERR_BAD_VALUES);
     /* a prediction row whose sum could overflow: its pass-through 2^k alone at the limit */
     memcpy(shift_copy, E->shift, sizeof shift_copy);
-    shift_copy[NY + NX] = 46u;
+    shift_copy[NY + NX] = k_max;
     assert_int_equal(refit(&c), STSP_ERR_BAD_VALUES);
     /* an innovation finer than the reading's by too much (the reading's coefficient 2^up with
      * up beyond 61 - F), an exponent beyond STSP_Q_EXP_MAX, e_exp above y_exp */

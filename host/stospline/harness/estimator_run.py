@@ -94,8 +94,8 @@ def run_sensor_loop(problem, table, *, paths: int, seed: int, substeps: int | st
     """`paths` paths of `table`'s law on the estimate of the filter of
     ``problem.measurement``, through the compiled C, with the oracle of the flashed tables
     (in the loop with ``problem.faults``, which the filter is designed without); the filter's
-    gains as a spline fitted to `spline_tolerance` when given (what ``stospline design`` writes
-    for a spline table: `flashed_filter`).
+    gains as a spline fitted to `spline_tolerance`, by default a spline table's own (what
+    ``stospline design`` writes for it: `flashed_filter`).
 
     Raises ValueError (`sensor_loop_unsupported`) for a loop the run does not support."""
     why = sensor_loop_unsupported(problem, table)
@@ -127,7 +127,13 @@ def flashed_filter(problem, table, *, spline_tolerance: float | None = None
     """``(tables, gains, predictor)``: the filter of `table`'s loop on ``problem.measurement``
     as flashed (`estimator.ctable`: LMMSE gains from the loop's exact moments, rounded to
     float32, or their spline fitted to `spline_tolerance`) and its per-tick gains and
-    predictor maps."""
+    predictor maps. `spline_tolerance` defaults to a spline table's own
+    (``table.spline_tolerance``, the design's ``spline_tolerance``): a spline design flashes
+    its filter's gains as a spline too (`pipeline`), so every consumer of this function (the
+    Monte Carlo run, `sensor_outputs`, `sensor_path_mean`, `count_sensor_exits`) sees that
+    loop; a per-tick table's filter has per-sample gains."""
+    if spline_tolerance is None and getattr(table, "spline", None) is not None:
+        spline_tolerance = getattr(table, "spline_tolerance", None)
     tables = estimator_table(problem, table, evaluate_estimator(problem, table),
                              spline_tolerance=spline_tolerance)
     gains, pred = tables.per_tick()

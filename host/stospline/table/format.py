@@ -142,6 +142,10 @@ class GainTable(TableShape):
     # A spline table of a design that latches the state: how its constraints were restored
     # for the design's x0 (`stospline.table.spline.restore.restore`: rows, active, rounds).
     restored: dict | None = field(default=None, compare=False)
+    # A spline table: the relative tolerance its gains were fitted to (``design.spline_tolerance``),
+    # to which the design fits a [measurement] sensor's filter gains as well (what it flashes:
+    # `harness.estimator_run.flashed_filter`).
+    spline_tolerance: float | None = field(default=None, compare=False)
 
     def __post_init__(self):
         for name in ("K", "k0", "L", "Lambda", "lambda0"):

@@ -142,10 +142,13 @@ def test_a_bound_without_the_prediction_rounding_fails(q_tables, sensor_loop, mo
     assert np.any(ex > planted)
 
 
-def test_the_c_tests_expected_values_are_the_references():
-    """tests/c/estimator_q_expected.h (what test_estimator.c checks its Q15 build against) is what
-    the integer reference gives today: regenerate with tests/c/estimator_q_reference.py."""
+@pytest.mark.parametrize("arith, header", [("q15", "estimator_q_expected.h"),
+                                           ("q31", "estimator_q31_expected.h")])
+def test_the_c_tests_expected_values_are_the_references(arith, header):
+    """tests/c/estimator_q_expected.h and estimator_q31_expected.h (what test_estimator.c checks
+    its Q15 and Q31 builds against) are what the integer reference gives today: regenerate with
+    tests/c/estimator_q_reference.py [--arith q31]."""
     import runpy
     from conftest import REPO
     expected = runpy.run_path(str(REPO / "tests" / "c" / "estimator_q_reference.py"))["expected"]
-    assert expected() == (REPO / "tests" / "c" / "estimator_q_expected.h").read_text()
+    assert expected(arith) == (REPO / "tests" / "c" / header).read_text()

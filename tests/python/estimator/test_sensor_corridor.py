@@ -14,6 +14,7 @@ from stospline.corridor_search import _outputs
 from stospline.estimator.ctable import estimator_table
 from stospline.estimator.oracle import evaluate_estimator
 from stospline.harness.estimator_loop import build_estimator_controller, simulate_estimator
+from stospline import load_problem
 from stospline.harness.estimator_run import (count_sensor_exits, sensor_outputs,
                                               sensor_path_mean)
 from stospline.harness.exit_stats import clopper_pearson_lower
@@ -26,6 +27,7 @@ from stospline.refine.every_tick import every_tick_check
 from stospline.report.design_summary import design_summary
 from stospline.table.format import table_of
 
+from conftest import EXAMPLES, GAINS
 from test_estimator_oracle import DOC
 
 # A 1-D corridor on the position of the small sensed loop (2 s at 20 Hz; the mean runs 0.5 ->
@@ -101,6 +103,36 @@ def test_sensor_outputs_are_the_true_states_with_a_larger_spread(corridor_case):
                         problem.tick_hz)["cantelli"].per_tick
     assert np.all(sensor >= state - 1e-12) and sensor.sum() > state.sum()
     assert _outputs(problem, d.table, 0)[0] == J
+
+
+def test_a_spline_designs_consumers_use_its_flashed_spline_filter():
+    """robot_position_sensor with ``table = "spline"``: its filter as flashed is the gain
+    spline, and the corridor's output moments (`sensor_outputs`, which the corridor search
+    reads) and the every-tick path mean (`sensor_path_mean`) are the oracle's with those gains,
+    not with the per-sample ones: they differ from the latter's by about the shipped
+    certificate's changes (gains/robot_position_sensor_spline.json)."""
+    problem = load_problem(EXAMPLES / "robot_position_sensor.toml")
+    d = design_problem(problem, table="spline")
+    cert = json.loads((GAINS / "robot_position_sensor_spline.json").read_text())
+    cert = cert["estimator"]["gain_spline"]
+    assert d.table.spline_tolerance == cert["spline_tolerance"]
+    loop = evaluate_estimator(problem, d.table)
+    spline = estimator_table(problem, d.table, loop, spline_tolerance=cert["spline_tolerance"])
+    assert spline.gain_spline.spans() == cert["spans"]
+    gains, pred = spline.per_tick()
+    C = problem.corridors[0].C
+    J, ym, yc = sensor_outputs(problem, d.table, C)
+    ref = evaluate_estimator(problem, d.table, gains=gains, predictor=pred, output=C,
+                             path=True).moments
+    assert J == pytest.approx(ref.J, rel=1e-14)
+    np.testing.assert_allclose(yc, ref.path_y_cov, rtol=1e-13, atol=0)
+    np.testing.assert_array_equal(sensor_path_mean(problem, d.table), ref.path_mean)
+    # the per-sample filter of the same law: the certificate's relative changes
+    per = estimator_table(problem, d.table, loop)
+    Jp, _, ycp = sensor_outputs(problem, d.table, C, (per, *per.per_tick()))
+    assert abs((J - Jp) / Jp - cert["J_change"]) <= 0.5e-10        # printed to 1e-10
+    change = (np.linalg.norm(yc - ycp, axis=(1, 2)) / np.linalg.norm(ycp, axis=(1, 2)))[1:]
+    assert cert["knot_cov_change"] / 10 < change.max() < 10 * cert["knot_cov_change"]
 
 
 def test_the_harness_counts_the_true_states_exits_within_the_bound(corridor_case):

@@ -81,7 +81,7 @@ def _float32_table(problem, exact, per_tick, tolerance: float, varying_maps):
         spline, K, k0, L, info = restore(problem, exact, per_tick, tolerance,
                                          varying_maps=varying_maps)
         return replace(per_tick, name=f"{per_tick.name}_spline", K=K, k0=k0, L=L,
-                       spline=spline, restored=info)
+                       spline=spline, restored=info, spline_tolerance=tolerance)
     if band_qp is None and any(kn.constraint is not None and kn.constraint.is_band
                                for kn in problem.knots):
         raise DesignError("design.table", f"a band design with more than {BANDQP_MAX} "
@@ -94,4 +94,4 @@ def _float32_table(problem, exact, per_tick, tolerance: float, varying_maps):
         spline, K, k0, L, Lam, lam0 = compress(problem, exact, per_tick, tolerance,
                                                varying_maps=varying_maps)
     return replace(per_tick, name=f"{per_tick.name}_spline", K=K, k0=k0, L=L, Lambda=Lam,
-                   lambda0=lam0, spline=spline, band_qp=band_qp)
+                   lambda0=lam0, spline=spline, band_qp=band_qp, spline_tolerance=tolerance)

@@ -3,7 +3,8 @@
  * with or without a matching CRC; fixed point also the exponents and shifts) and a run of steps
  * (ticks forward, repeated, backwards or past the plan; readings NULL or any bit pattern: NaN,
  * Inf, huge; fixed point any integer), resets and verifies. Built as fuzz_estimator (float32,
- * robot_position_sensor.*) and fuzz_estimator_q15 (robot_position_sensor_q15.*).
+ * robot_position_sensor.*), fuzz_estimator_q15 (robot_position_sensor_q15.*) and
+ * fuzz_estimator_q31 (robot_position_sensor_q31.*).
  * Invariants: every status is a defined one; a refused init leaves every step
  * STSP_ERR_NOT_INITIALIZED; a negative step status writes u_hold, a non-negative one a finite
  * command; nothing is read or written outside the arrays (ASan, UBSan: no signed overflow in

@@ -2,7 +2,7 @@
 """Report: instructions per stsp_est_step call (the controller on a sensor) on Cortex-M4F under
 QEMU, for the robot with a position sensor (gains/robot_position_sensor.*).
 
-    python3 tools/arm/count_estimator.py [--build DIR] [--arith float32|q15] [--spline]
+    python3 tools/arm/count_estimator.py [--build DIR] [--arith float32|q15|q31] [--spline]
                                          [--replay-only]
 
 Compiles tools/arm/estimator_bench_main.c with firmware/src/*.c and the robot's tables
@@ -15,7 +15,9 @@ cycles. With --arith q15: the Q15 build on gains/robot_position_sensor_q15.*, an
 whole plan replayed on the target (built with -DBENCH_HASH) with the readings of
 tests/c/estimator_q_expected.h: its hash of every command and prediction must be that file's
 EST_HASH (the host's integer reference, bit for bit), else exit status 1; --replay-only
-does that alone (the ctest arm_estimator_q15_replay). With --spline (float32): the spline
+does that alone (the ctest arm_estimator_q15_replay). With --arith q31 the same on
+gains/robot_position_sensor_q31.* against tests/c/estimator_q31_expected.h (the ctest
+arm_estimator_q31_replay). With --spline (float32): the spline
 tables (gains/robot_position_sensor_spline.*: the spline law, the filter's gains from its
 spline, stsp_est_init_spline), counted as above, then the whole plan replayed on the target
 beside a per-tick twin holding the host's evaluation of the spline's gains
@@ -40,7 +42,9 @@ FLAGS = ["-mcpu=cortex-m4", "-mthumb", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", 
          "-Wextra", "-Wpedantic", "-Wconversion", "-Wshadow", "-Werror"]
 
 
-SUFFIX = {"float32": "f32", "q15": "q15"}
+SUFFIX = {"float32": "f32", "q15": "q15", "q31": "q31"}
+# The host's integer reference of each fixed-point build (tests/c/estimator_q_reference.py).
+EXPECTED = {"q15": "estimator_q_expected.h", "q31": "estimator_q31_expected.h"}
 
 
 def build(out: Path, arith: str = "float32", hashes: bool = False, spline: bool = False) -> Path:
@@ -96,7 +100,7 @@ def main() -> int:
         if args.spline:
             return check_spline_replay(args.build)
         if args.arith == "float32":
-            ap.error("--replay-only replays a fixed-point build: give --arith q15 or --spline")
+            ap.error("--replay-only replays a fixed-point build: give --arith q15, q31 or --spline")
         return check_hash(args.build, args.arith)
     calls, size = count(build(args.build, args.arith, spline=args.spline), args.arith)
     every = 20
@@ -136,13 +140,13 @@ def check_spline_replay(out: Path) -> int:
 
 
 def check_hash(out: Path, arith: str) -> int:
-    """The whole plan on the target against tests/c/estimator_q_expected.h's EST_HASH."""
+    """The whole plan on the target against the EST_HASH of tests/c/EXPECTED[arith]."""
     elf = build(out, arith, hashes=True)
     got = re.search(r"hash (0x[0-9A-F]{8})", run(
         ["timeout", "600", "qemu-system-arm", "-M", "mps2-an386", "-nographic", "-monitor",
          "none", "-semihosting-config", "enable=on,target=native", "-kernel", str(elf)]))
     want = re.search(r"#define EST_HASH (0x[0-9A-F]{8})u",
-                     (ROOT / "tests/c/estimator_q_expected.h").read_text()).group(1)
+                     (ROOT / "tests/c" / EXPECTED[arith]).read_text()).group(1)
     ok = got is not None and got.group(1) == want
     print(f"whole plan replayed: M4F {got.group(1) if got else 'none'}, host reference {want} "
           f"{'ok' if ok else 'DIFFERS'}")

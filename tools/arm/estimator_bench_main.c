@@ -1,13 +1,15 @@
 /* Instruction-count bench of the estimator controller (tools/arm/count_estimator.py, QEMU
  * mps2-an386, Cortex-M4F) on gains/robot_position_sensor.* (float32) or, built with
- * STSP_ARITH_Q15, gains/robot_position_sensor_q15.*: BENCH_REPS times, reset, then
+ * STSP_ARITH_Q15 (STSP_ARITH_Q31), gains/robot_position_sensor_q15.* (_q31.*): BENCH_REPS
+ * times, reset, then
  * ticks 0 .. 2 EVERY + 1 in order (tick 0: reading and latch of stage 0; EVERY, 2 EVERY:
  * readings; the others predict only), then, by a skip to the tick before stage 1 (the skip's
  * prediction over the missed ticks is its own line), the switch tick (reading and latch of
  * stage 1) and the one after it. Prints one line per stsp_est_step call, in call order:
  *     call <index> tick <tick> status <status> reading <0|1> sizeof <sizeof(stsp_est_t)>
- * With BENCH_HASH (Q15 only) instead: the whole plan with the readings of
- * tests/c/estimator_q_expected.h (the one of EST_MISSING withheld), printing
+ * With BENCH_HASH (Q15 or Q31) instead: the whole plan with the readings of
+ * tests/c/estimator_q_expected.h (Q31: estimator_q31_expected.h; the one of EST_MISSING
+ * withheld), printing
  *     hash 0x<FNV-1a over every tick's u_q and prediction x̂_q>
  * which must be that file's EST_HASH (the host's integer reference, bit for bit).
  * Built with STSP_EST_SPLINE: the spline tables (gains/robot_position_sensor_spline.*, the
@@ -21,8 +23,10 @@
 #include <stdio.h>
 
 #include "estimator_tables.h" /* tests/c: the tables of the build's arithmetic */
-#ifdef STSP_ARITH_Q15
+#if defined(STSP_ARITH_Q15)
 #include "estimator_q_expected.h"
+#elif defined(STSP_ARITH_Q31)
+#include "estimator_q31_expected.h"
 #endif
 #ifdef STSP_EST_SPLINE
 #include <string.h>
@@ -63,7 +67,7 @@ int main(void)
 {
     static stsp_est_t est;
     const uint32_t sw = TABLE.stage_start[1];
-#ifdef STSP_ARITH_Q15
+#if defined(STSP_ARITH_Q15) || defined(STSP_ARITH_Q31)
     stsp_scalar_t y[2] = {est_y[0][0], est_y[0][1]};
 #else
     stsp_scalar_t y[2] = {-5.0f, 1.0f};
@@ -76,7 +80,7 @@ int main(void)
     }
     for (rep = 0u; rep < BENCH_REPS; ++rep) {
         (void)stsp_est_reset(&est);
-#ifdef STSP_ARITH_Q15
+#if defined(STSP_ARITH_Q15) || defined(STSP_ARITH_Q31)
         y[0] = (stsp_scalar_t)(est_y[0][0] + (int32_t)rep);
 #else
         y[0] = -5.0f + 0.01f * (float)rep;

@@ -98,12 +98,20 @@ def _bound_terms(bounds: dict) -> dict:
 
 
 def _estimator(d) -> dict:
-    """With a [measurement] table: the loop on the filter's estimate (docs/theory/estimator.md);
-    ``{}`` otherwise (summaries stay unchanged)."""
+    """With a [measurement] table: the loop on the filter's estimate (docs/theory/estimator.md),
+    for a spline table with the filter as flashed (its gain spline); ``{}`` otherwise
+    (summaries stay unchanged)."""
     if d.problem.measurement is None:
         return {}
     from stospline.estimator.summary import estimator_summary
-    out = estimator_summary(d.problem, d.table, cov_digits)
+    flashed = None
+    if d.table.spline is not None:      # flashed with the filter's gain spline: that loop
+        from stospline.harness.estimator_run import flashed_filter
+        try:
+            flashed = ("spline", *flashed_filter(d.problem, d.table)[1:])
+        except ValueError:              # the loop cannot run: estimator_summary says why
+            pass
+    out = estimator_summary(d.problem, d.table, cov_digits, flashed=flashed)
     if d.table.spline is not None and "not_evaluated" not in out:   # the filter's spline
         from stospline.options import resolve_options
         options = d.options if d.options is not None else resolve_options(d.problem)

@@ -34,3 +34,26 @@ def test_no_measurement_no_entry_and_a_delay_table_gets_a_reason():
     doc["design"] = {"delay_ticks": 1}
     est = design_summary(design_problem(parse_problem(doc)))["estimator"]
     assert "one-tick delay" in est["not_evaluated"]
+
+
+def test_a_spline_tables_summary_is_the_loop_with_the_filters_gain_spline():
+    """``--table spline``: the entry's figures are the loop as flashed (the filter's gains as
+    their spline, fitted to the table's tolerance), the per-sample filter's cost only as
+    ``per_sample_oracle_J``. A loose tolerance makes the two loops' costs differ far beyond
+    the comparison's tolerance, so the per-sample figures in their place fail it."""
+    from stospline.estimator.ctable import estimator_table
+    problem = parse_problem(copy.deepcopy(DOC))
+    d = design_problem(problem, table="spline", spline_tolerance=1e-2)
+    est = design_summary(d)["estimator"]
+    per_sample = evaluate_estimator(problem, d.table)
+    gains, pred = estimator_table(problem, d.table, per_sample,
+                                  spline_tolerance=1e-2).per_tick()
+    flashed = evaluate_estimator(problem, d.table, gains=gains, predictor=pred)
+    assert abs(flashed.moments.J - per_sample.moments.J) > 1e-6 * per_sample.moments.J
+    assert est["filter_gains"] == "spline"
+    assert est["oracle_J"] == pytest.approx(flashed.moments.J, rel=1e-9)
+    assert est["per_sample_oracle_J"] == pytest.approx(per_sample.moments.J, rel=1e-9)
+    np.testing.assert_allclose(np.asarray(est["knots"][-1]["error_cov"], float),
+                               flashed.knot_error_cov[-1], rtol=1e-6)
+    assert est["gain_spline"]["oracle_J"] == pytest.approx(est["oracle_J"], rel=1e-9)
+    dumps(est)

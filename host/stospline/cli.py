@@ -126,7 +126,6 @@ def _design(args) -> int:
                                   fixed=fixed, fixed_terms=terms, table_terms=table_terms)
     if args.out:                                # written with the tables, as one set
         files.update(pfiles)
-    if args.out:
         written = write_outputs(args.out, files, inputs)
     if args.json:
         print(files[names[-1]], end="")
